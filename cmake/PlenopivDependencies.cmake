@@ -1,0 +1,79 @@
+# Finds every package of the design card (Debian packages); a missing one stops configure
+# with the Debian package to install.
+
+include(FindPkgConfig)
+
+function(plenopiv_missing what debian_package)
+  message(FATAL_ERROR
+    "plenopiv: ${what} not found. Install it with: apt-get install ${debian_package}"
+    " (or run: sudo scripts/setup.sh)")
+endfunction()
+
+macro(plenopiv_find_config pkg debian_package)
+  find_package(${pkg} ${ARGN} CONFIG QUIET)
+  if(NOT ${pkg}_FOUND)
+    plenopiv_missing(${pkg} ${debian_package})
+  endif()
+  message(STATUS "plenopiv: found ${pkg} ${${pkg}_VERSION}")
+endmacro()
+
+macro(plenopiv_find_pkgconfig prefix module debian_package)
+  pkg_check_modules(${prefix} QUIET IMPORTED_TARGET ${module})
+  if(NOT ${prefix}_FOUND)
+    plenopiv_missing("pkg-config module ${module}" ${debian_package})
+  endif()
+  message(STATUS "plenopiv: found ${module} ${${prefix}_VERSION}")
+endmacro()
+
+find_package(PkgConfig QUIET)
+if(NOT PKG_CONFIG_FOUND)
+  plenopiv_missing(pkg-config pkg-config)
+endif()
+
+find_package(Threads REQUIRED)
+
+# Core numerics and file formats
+plenopiv_find_config(yaml-cpp libyaml-cpp-dev)
+plenopiv_find_config(TBB libtbb-dev)
+plenopiv_find_config(spdlog libspdlog-dev)
+plenopiv_find_config(CLI11 libcli11-dev)
+plenopiv_find_config(OpenCV libopencv-dev COMPONENTS core imgproc imgcodecs)
+plenopiv_find_pkgconfig(FFTW3F fftw3f libfftw3-dev)
+find_package(HDF5 QUIET COMPONENTS C)
+if(NOT HDF5_FOUND)
+  plenopiv_missing(HDF5 libhdf5-dev)
+endif()
+message(STATUS "plenopiv: found HDF5 ${HDF5_VERSION}")
+
+# Messaging
+plenopiv_find_pkgconfig(LIBZMQ libzmq libzmq3-dev)
+plenopiv_find_config(cppzmq cppzmq-dev)
+find_package(Protobuf QUIET)
+if(NOT Protobuf_FOUND OR NOT Protobuf_PROTOC_EXECUTABLE)
+  plenopiv_missing("Protobuf (library and protoc)" "libprotobuf-dev protobuf-compiler")
+endif()
+message(STATUS "plenopiv: found Protobuf ${Protobuf_VERSION} (protoc ${Protobuf_PROTOC_EXECUTABLE})")
+
+# Devices and system
+if(PLENOPIV_WITH_ARAVIS)
+  plenopiv_find_pkgconfig(ARAVIS aravis-0.8 libaravis-dev)
+endif()
+if(PLENOPIV_WITH_GPIOD)
+  plenopiv_find_pkgconfig(GPIOD "libgpiod>=1.6" libgpiod-dev)
+  if(GPIOD_VERSION VERSION_GREATER_EQUAL 2.0)
+    message(FATAL_ERROR "plenopiv: libgpiod ${GPIOD_VERSION} found; the trigger driver is written "
+                        "for the v1 API (libgpiod 1.6, Debian 12's libgpiod-dev)")
+  endif()
+endif()
+if(PLENOPIV_WITH_USB)
+  plenopiv_find_pkgconfig(LIBUSB libusb-1.0 libusb-1.0-0-dev)
+endif()
+plenopiv_find_pkgconfig(SYSTEMD libsystemd libsystemd-dev)
+
+if(PLENOPIV_BUILD_TESTS)
+  find_package(GTest QUIET)
+  if(NOT GTest_FOUND)
+    plenopiv_missing(GoogleTest "libgtest-dev libgmock-dev")
+  endif()
+  message(STATUS "plenopiv: found GoogleTest ${GTest_VERSION}")
+endif()

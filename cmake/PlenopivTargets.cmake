@@ -1,0 +1,53 @@
+# Helpers that give every plenopiv target the same requirements: C++20, warnings, an alias.
+
+function(plenopiv_defaults target)
+  target_compile_features(${target} PUBLIC cxx_std_20)
+  target_compile_options(${target} PRIVATE -Wall -Wextra)
+  if(PLENOPIV_WERROR)
+    target_compile_options(${target} PRIVATE -Werror)
+  endif()
+endfunction()
+
+# plenopiv_library(<name> SOURCES ... [PUBLIC_LIBS ...] [PRIVATE_LIBS ...])
+# creates plenopiv_<name> with alias plenopiv::<name>; headers are included as
+# "<folder>/<header>" from the repository root.
+function(plenopiv_library name)
+  cmake_parse_arguments(ARG "" "" "SOURCES;PUBLIC_LIBS;PRIVATE_LIBS" ${ARGN})
+  add_library(plenopiv_${name} ${ARG_SOURCES})
+  add_library(plenopiv::${name} ALIAS plenopiv_${name})
+  target_include_directories(plenopiv_${name} PUBLIC
+    $<BUILD_INTERFACE:${PROJECT_SOURCE_DIR}> $<INSTALL_INTERFACE:include/plenopiv>)
+  target_link_libraries(plenopiv_${name} PUBLIC ${ARG_PUBLIC_LIBS} PRIVATE ${ARG_PRIVATE_LIBS})
+  set_target_properties(plenopiv_${name} PROPERTIES POSITION_INDEPENDENT_CODE ON)
+  plenopiv_defaults(plenopiv_${name})
+endfunction()
+
+# plenopiv_executable(<name> SOURCES ... [LIBS ...]) puts the binary in build/bin.
+function(plenopiv_executable name)
+  cmake_parse_arguments(ARG "" "" "SOURCES;LIBS" ${ARGN})
+  add_executable(${name} ${ARG_SOURCES})
+  target_link_libraries(${name} PRIVATE ${ARG_LIBS})
+  set_target_properties(${name} PROPERTIES RUNTIME_OUTPUT_DIRECTORY ${PROJECT_BINARY_DIR}/bin)
+  plenopiv_defaults(${name})
+endfunction()
+
+# plenopiv_test(<name> LABEL unit|integration|slow SOURCES ... [LIBS ...] [TIMEOUT s])
+function(plenopiv_test name)
+  cmake_parse_arguments(ARG "" "LABEL;TIMEOUT" "SOURCES;LIBS" ${ARGN})
+  if(NOT ARG_LABEL)
+    message(FATAL_ERROR "plenopiv_test(${name}): LABEL unit|integration|slow is required")
+  endif()
+  if(NOT ARG_TIMEOUT)
+    set(ARG_TIMEOUT 300)
+  endif()
+  add_executable(${name} ${ARG_SOURCES})
+  target_link_libraries(${name} PRIVATE ${ARG_LIBS} GTest::gtest GTest::gtest_main)
+  set_target_properties(${name} PROPERTIES RUNTIME_OUTPUT_DIRECTORY ${PROJECT_BINARY_DIR}/tests)
+  target_compile_definitions(${name} PRIVATE
+    PLENOPIV_SOURCE_DIR="${PROJECT_SOURCE_DIR}" PLENOPIV_BINARY_DIR="${PROJECT_BINARY_DIR}")
+  plenopiv_defaults(${name})
+  gtest_discover_tests(${name}
+    WORKING_DIRECTORY ${PROJECT_BINARY_DIR}
+    PROPERTIES LABELS ${ARG_LABEL} TIMEOUT ${ARG_TIMEOUT}
+    DISCOVERY_TIMEOUT 60)
+endfunction()

@@ -1,0 +1,55 @@
+// Regular 3-D grids in object space (mm) and the arrays that live on them: volumes, vector fields.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+namespace plenopiv {
+
+// A regular grid, axes as DESIGN.md: x right, y down, z away from the camera, z = 0 at the
+// nominal focal plane. Arrays on it are [z][y][x], x fastest.
+struct Grid3 {
+  std::array<int, 3> shape{0, 0, 0};            // nx, ny, nz
+  std::array<double, 3> origin_mm{0, 0, 0};     // centre of node [0][0][0]: x, y, z
+  std::array<double, 3> spacing_mm{1, 1, 1};    // dx, dy, dz
+
+  std::size_t count() const { return std::size_t(shape[0]) * shape[1] * shape[2]; }
+  std::size_t index(int x, int y, int z) const {
+    return (std::size_t(z) * shape[1] + y) * shape[0] + x;
+  }
+  double coordinate_mm(int axis, int i) const { return origin_mm[axis] + i * spacing_mm[axis]; }
+  bool operator==(const Grid3&) const = default;
+};
+
+// Reconstructed (or exact) particle intensity, float32.
+struct Volume {
+  Grid3 grid;
+  std::vector<float> data;  // [z][y][x]
+
+  Volume() = default;
+  explicit Volume(const Grid3& g, float fill = 0.f) : grid(g), data(g.count(), fill) {}
+  float& at(int x, int y, int z) { return data[grid.index(x, y, z)]; }
+  float at(int x, int y, int z) const { return data[grid.index(x, y, z)]; }
+};
+
+// Displacements (mm) on their own grid, with validity and correlation quality per node.
+struct VectorField {
+  Grid3 grid;
+  std::vector<float> dx_mm, dy_mm, dz_mm;
+  std::vector<std::uint8_t> valid;
+  std::vector<float> peak_ratio;
+  double dt_s = 0.0;  // pulse separation; velocity = displacement / dt
+
+  VectorField() = default;
+  explicit VectorField(const Grid3& g)
+      : grid(g),
+        dx_mm(g.count(), 0.f),
+        dy_mm(g.count(), 0.f),
+        dz_mm(g.count(), 0.f),
+        valid(g.count(), 0),
+        peak_ratio(g.count(), 0.f) {}
+};
+
+}  // namespace plenopiv

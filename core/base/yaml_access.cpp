@@ -1,0 +1,182 @@
+// Typed access to YAML config files with messages that name the file, the key and the reason.
+#include "core/base/yaml_access.hpp"
+
+#include <cmath>
+#include <fstream>
+#include <sstream>
+
+#include "core/base/errors.hpp"
+
+namespace plenopiv {
+namespace {
+
+std::string line_of(const YAML::Node& node) {
+  const YAML::Mark mark = node.Mark();
+  if (mark.line < 0) return {};
+  return " (line " + std::to_string(mark.line + 1) + ")";
+}
+
+std::string scalar_text(const YAML::Node& node) {
+  if (node.IsScalar()) return "'" + node.Scalar() + "'";
+  if (node.IsMap()) return "a mapping";
+  if (node.IsSequence()) return "a list";
+  return "nothing";
+}
+
+// The unit a key carries in its name (pitch_mm, width_px, dt_s), for error messages.
+std::string unit_hint(std::string_view key) {
+  auto ends = [&](std::string_view suffix) {
+    return key.size() > suffix.size() && key.substr(key.size() - suffix.size()) == suffix;
+  };
+  if (ends("_mm")) return " in millimetres";
+  if (ends("_px")) return " in pixels";
+  if (ends("_s")) return " in seconds";
+  if (ends("_um")) return " in micrometres";
+  return {};
+}
+
+}  // namespace
+
+YAML::Node load_yaml_file(const std::filesystem::path& path) {
+  std::ifstream in(path);
+  if (!in) throw InputError(path.string() + ": cannot open file for reading");
+  std::stringstream text;
+  text << in.rdbuf();
+  return load_yaml_text(text.str(), path.string());
+}
+
+YAML::Node load_yaml_text(const std::string& text, const std::string& source) {
+  try {
+    YAML::Node root = YAML::Load(text);
+    if (!root.IsMap()) throw InputError(source + ": expected a YAML mapping at the top level");
+    return root;
+  } catch (const YAML::Exception& e) {
+    throw InputError(source + ": not valid YAML: " + e.msg + " (line " +
+                     std::to_string(e.mark.line + 1) + ")");
+  }
+}
+
+YamlMap::YamlMap(const YAML::Node& node, std::string source, std::string path)
+    : node_(node), source_(std::move(source)), path_(std::move(path)) {
+  if (!node_.IsMap()) {
+    throw InputError(source_ + ": " + (path_.empty() ? std::string("top level") : path_) +
+                     ": expected a mapping of keys, got " + scalar_text(node_) + line_of(node_));
+  }
+}
+
+std::string YamlMap::key_path(std::string_view key) const {
+  return path_.empty() ? std::string(key) : path_ + "." + std::string(key);
+}
+
+std::string YamlMap::where(std::string_view key) const {
+  return source_ + ": " + key_path(key);
+}
+
+void YamlMap::fail(std::string_view key, const std::string& reason) const {
+  const YAML::Node child = node_[std::string(key)];
+  throw InputError(where(key) + ": " + reason + (child ? line_of(child) : std::string{}));
+}
+
+bool YamlMap::has(std::string_view key) const {
+  const YAML::Node child = node_[std::string(key)];
+  return child && !child.IsNull();
+}
+
+YAML::Node YamlMap::required(std::string_view key) const {
+  const YAML::Node child = node_[std::string(key)];
+  if (!child || child.IsNull()) {
+    throw InputError(where(key) + ": missing (required key)" + line_of(node_));
+  }
+  return child;
+}
+
+YamlMap YamlMap::map(std::string_view key) const {
+  return YamlMap(required(key), source_, key_path(key));
+}
+
+std::optional<YamlMap> YamlMap::optional_map(std::string_view key) const {
+  if (!has(key)) return std::nullopt;
+  return map(key);
+}
+
+double YamlMap::number(std::string_view key) const {
+  const YAML::Node child = required(key);
+  double value = 0;
+  if (!child.IsScalar() || !YAML::convert<double>::decode(child, value)) {
+    fail(key, "expected a number" + unit_hint(key) + ", got " + scalar_text(child));
+  }
+  if (!std::isfinite(value)) fail(key, "expected a finite number, got " + scalar_text(child));
+  return value;
+}
+
+double YamlMap::number_or(std::string_view key, double fallback) const {
+  return has(key) ? number(key) : fallback;
+}
+
+long long YamlMap::integer(std::string_view key) const {
+  const YAML::Node child = required(key);
+  long long value = 0;
+  if (!child.IsScalar() || !YAML::convert<long long>::decode(child, value)) {
+    fail(key, "expected a whole number" + unit_hint(key) + ", got " + scalar_text(child));
+  }
+  return value;
+}
+
+long long YamlMap::integer_or(std::string_view key, long long fallback) const {
+  return has(key) ? integer(key) : fallback;
+}
+
+bool YamlMap::boolean_or(std::string_view key, bool fallback) const {
+  if (!has(key)) return fallback;
+  const YAML::Node child = required(key);
+  bool value = false;
+  if (!child.IsScalar() || !YAML::convert<bool>::decode(child, value)) {
+    fail(key, "expected true or false, got " + scalar_text(child));
+  }
+  return value;
+}
+
+std::string YamlMap::string(std::string_view key) const {
+  const YAML::Node child = required(key);
+  if (!child.IsScalar()) fail(key, "expected a text value, got " + scalar_text(child));
+  return child.Scalar();
+}
+
+std::string YamlMap::string_or(std::string_view key, std::string fallback) const {
+  return has(key) ? string(key) : fallback;
+}
+
+std::string YamlMap::choice(std::string_view key,
+                            std::initializer_list<std::string_view> allowed) const {
+  const std::string value = string(key);
+  std::string list;
+  for (std::string_view a : allowed) {
+    if (a == value) return value;
+    list += (list.empty() ? "" : ", ") + std::string(a);
+  }
+  fail(key, "expected one of " + list + ", got '" + value + "'");
+}
+
+std::string YamlMap::choice_or(std::string_view key,
+                               std::initializer_list<std::string_view> allowed,
+                               std::string fallback) const {
+  return has(key) ? choice(key, allowed) : fallback;
+}
+
+void YamlMap::reject_unknown(std::initializer_list<std::string_view> known) const {
+  for (const auto& entry : node_) {
+    const std::string name = entry.first.as<std::string>();
+    bool found = false;
+    std::string list;
+    for (std::string_view k : known) {
+      found = found || k == name;
+      list += (list.empty() ? "" : ", ") + std::string(k);
+    }
+    if (!found) {
+      throw InputError(where(name) + ": unknown key (known keys here: " + list + ")" +
+                       line_of(entry.first));
+    }
+  }
+}
+
+}  // namespace plenopiv

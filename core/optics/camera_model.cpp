@@ -1,0 +1,158 @@
+// The plenoptic camera: sensor, microlens array and main lens, validated, with derived geometry.
+#include "core/optics/camera_model.hpp"
+
+#include <cmath>
+#include <cstdio>
+#include <sstream>
+
+#include "core/base/errors.hpp"
+
+namespace plenopiv::optics {
+namespace {
+
+// Relative tolerance on f-number matching: lens f-numbers are quoted to two digits.
+constexpr double kFNumberTolerance = 0.02;
+
+std::string fmt(double v) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.6g", v);
+  return buf;
+}
+
+}  // namespace
+
+const char* to_string(LensletLayout layout) {
+  return layout == LensletLayout::hex ? "hex" : "rect";
+}
+
+CameraModel::CameraModel(const CameraSpec& spec, const std::string& source) : spec_(spec) {
+  auto fail = [&](const std::string& key, const std::string& reason) {
+    throw InputError(source + ": " + key + ": " + reason);
+  };
+  auto positive = [&](const std::string& key, double v) {
+    if (!(v > 0) || !std::isfinite(v)) fail(key, "must be a positive number, got " + fmt(v));
+  };
+  const SensorSpec& s = spec_.sensor;
+  const MicrolensSpec& l = spec_.microlens;
+  const MainLensSpec& m = spec_.main_lens;
+
+  if (s.width_px <= 0) fail("sensor.width_px", "must be a positive pixel count, got " + fmt(s.width_px));
+  if (s.height_px <= 0) fail("sensor.height_px", "must be a positive pixel count, got " + fmt(s.height_px));
+  positive("sensor.pixel_pitch_mm", s.pixel_pitch_mm);
+  positive("microlens.pitch_mm", l.pitch_mm);
+  positive("microlens.focal_length_mm", l.focal_length_mm);
+  if (l.count_x <= 0) fail("microlens.count_x", "must be a positive lens count, got " + fmt(l.count_x));
+  if (l.count_y <= 0) fail("microlens.count_y", "must be a positive lens count, got " + fmt(l.count_y));
+  positive("main_lens.focal_length_mm", m.focal_length_mm);
+  positive("main_lens.f_number", m.f_number);
+  if (!std::isfinite(m.magnification) || m.magnification == 0) {
+    fail("main_lens.magnification",
+         "must be non-zero (M = -s_i/s_o; -1 for 1:1 imaging), got " + fmt(m.magnification));
+  }
+  if (m.magnification > 0) {
+    fail("main_lens.magnification",
+         "must be negative: a single main lens forms a real, inverted image (M = -s_i/s_o, eq 6), got " +
+             fmt(m.magnification));
+  }
+
+  if (l.pitch_mm < 2 * s.pixel_pitch_mm) {
+    fail("microlens.pitch_mm", "a microlens must cover at least 2 pixels; pitch " + fmt(l.pitch_mm) +
+                                   " mm with pixel pitch " + fmt(s.pixel_pitch_mm) + " mm");
+  }
+  // The array must fit on the sensor (centred, as assumed before calibration).
+  const double tol = 1e-9;
+  if (array_width_mm() > sensor_width_mm() + tol) {
+    fail("microlens.count_x", fmt(l.count_x) + " lenses of pitch " + fmt(l.pitch_mm) + " mm span " +
+                                  fmt(array_width_mm()) + " mm, wider than the sensor's " +
+                                  fmt(sensor_width_mm()) + " mm");
+  }
+  if (array_height_mm() > sensor_height_mm() + tol) {
+    fail("microlens.count_y", fmt(l.count_y) + " rows of lenses span " + fmt(array_height_mm()) +
+                                  " mm, taller than the sensor's " + fmt(sensor_height_mm()) + " mm");
+  }
+
+  // Thin lens (eq 5) with M = -s_i/s_o (eq 6): s_i = f (1 - M), s_o = f (1 - 1/M).
+  s_i_ = m.focal_length_mm * (1.0 - m.magnification);
+  s_o_ = m.focal_length_mm * (1.0 - 1.0 / m.magnification);
+
+  // F-number matching (eq 7): the image-side f-number must not be below the microlenses',
+  // else neighbouring microlens images overlap and the (u, v) of a pixel is ambiguous.
+  const double image_side = image_side_f_number();
+  const double lenslet = microlens_f_number();
+  if (image_side < lenslet * (1 - kFNumberTolerance)) {
+    fail("main_lens.f_number",
+         "f/" + fmt(m.f_number) + " at M = " + fmt(m.magnification) + " gives an image-side f/" +
+             fmt(image_side) + ", faster than the f/" + fmt(lenslet) +
+             " microlenses: microlens images would overlap (eq 7 requires f/" +
+             fmt(matched_main_f_number()) + " or slower)");
+  }
+  if (image_side > lenslet * (1 + kFNumberTolerance)) {
+    notes_.push_back("main lens f/" + fmt(m.f_number) + " is slower than the matched f/" +
+                     fmt(matched_main_f_number()) + ": each microlens image fills " +
+                     fmt(100.0 * lenslet / image_side) + " % of the pitch");
+  }
+}
+
+double CameraModel::aperture_diameter_mm() const {
+  return spec_.main_lens.focal_length_mm / spec_.main_lens.f_number;
+}
+double CameraModel::image_side_f_number() const {
+  return spec_.main_lens.f_number * (1.0 - spec_.main_lens.magnification);
+}
+double CameraModel::microlens_f_number() const {
+  return spec_.microlens.focal_length_mm / spec_.microlens.pitch_mm;
+}
+double CameraModel::matched_main_f_number() const {
+  return microlens_f_number() / (1.0 - spec_.main_lens.magnification);
+}
+double CameraModel::microlens_image_diameter_px() const {
+  // The cone from the aperture (diameter p_m at distance s_i) projected through a microlens
+  // centre onto the sensor one focal length behind it.
+  return aperture_diameter_mm() * spec_.microlens.focal_length_mm / s_i_ / spec_.sensor.pixel_pitch_mm;
+}
+double CameraModel::pixels_per_microlens() const {
+  return spec_.microlens.pitch_mm / spec_.sensor.pixel_pitch_mm;
+}
+double CameraModel::sensor_width_mm() const { return spec_.sensor.width_px * spec_.sensor.pixel_pitch_mm; }
+double CameraModel::sensor_height_mm() const { return spec_.sensor.height_px * spec_.sensor.pixel_pitch_mm; }
+double CameraModel::row_pitch_mm() const {
+  return spec_.microlens.layout == LensletLayout::hex ? spec_.microlens.pitch_mm * std::sqrt(3.0) / 2
+                                                     : spec_.microlens.pitch_mm;
+}
+double CameraModel::array_width_mm() const {
+  const double rows_shift = spec_.microlens.layout == LensletLayout::hex && spec_.microlens.count_y > 1 ? 0.5 : 0.0;
+  return (spec_.microlens.count_x + rows_shift) * spec_.microlens.pitch_mm;
+}
+double CameraModel::array_height_mm() const {
+  // Each lens occupies one pitch across; rows are row_pitch apart.
+  return (spec_.microlens.count_y - 1) * row_pitch_mm() + spec_.microlens.pitch_mm;
+}
+double CameraModel::field_of_view_x_mm() const {
+  return array_width_mm() / std::abs(spec_.main_lens.magnification);
+}
+double CameraModel::field_of_view_y_mm() const {
+  return array_height_mm() / std::abs(spec_.main_lens.magnification);
+}
+double CameraModel::nominal_voxel_size_mm() const {
+  return spec_.microlens.pitch_mm / std::abs(spec_.main_lens.magnification);
+}
+
+std::string CameraModel::summary() const {
+  std::ostringstream out;
+  out << "sensor        " << sensor().width_px << " x " << sensor().height_px << " px, pitch "
+      << fmt(sensor().pixel_pitch_mm * 1000) << " um (" << fmt(sensor_width_mm()) << " x "
+      << fmt(sensor_height_mm()) << " mm)\n"
+      << "microlenses   " << microlens().count_x << " x " << microlens().count_y << " "
+      << to_string(microlens().layout) << ", pitch " << fmt(microlens().pitch_mm) << " mm ("
+      << fmt(pixels_per_microlens()) << " px), f/" << fmt(microlens_f_number()) << "\n"
+      << "main lens     f = " << fmt(main_lens().focal_length_mm) << " mm, f/"
+      << fmt(main_lens().f_number) << ", M = " << fmt(main_lens().magnification)
+      << " -> s_o = " << fmt(s_o_) << " mm, s_i = " << fmt(s_i_) << " mm, image side f/"
+      << fmt(image_side_f_number()) << "\n"
+      << "field of view " << fmt(field_of_view_x_mm()) << " x " << fmt(field_of_view_y_mm())
+      << " mm, nominal voxel " << fmt(nominal_voxel_size_mm()) << " mm\n";
+  for (const std::string& note : notes_) out << "note          " << note << "\n";
+  return out.str();
+}
+
+}  // namespace plenopiv::optics

@@ -1,0 +1,42 @@
+#!/usr/bin/env bash
+# Installs the Debian packages plenopiv builds and runs with, if any are missing (idempotent).
+# Runs as root, or through sudo; says what it installs.
+set -euo pipefail
+
+packages=(
+  # toolchain
+  g++ cmake ninja-build pkg-config git
+  # design card: camera, USB, GPIO, images, messaging, logging, threads, tests
+  libaravis-dev aravis-tools libusb-1.0-0-dev libgpiod-dev gpiod libopencv-dev
+  libzmq3-dev cppzmq-dev libprotobuf-dev protobuf-compiler libspdlog-dev libtbb-dev
+  libgtest-dev libgmock-dev libbenchmark-dev
+  # numerics and files
+  libfftw3-dev libhdf5-dev libyaml-cpp-dev libcli11-dev libsystemd-dev libtiff-dev
+  # Python subscriber, plots and file checks (Debian's /usr/bin/python3)
+  python3 python3-numpy python3-zmq python3-protobuf python3-h5py python3-matplotlib
+  # systemd unit checks
+  systemd
+)
+
+missing=()
+for p in "${packages[@]}"; do
+  if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then
+    missing+=("$p")
+  fi
+done
+
+if [ ${#missing[@]} -eq 0 ]; then
+  echo "setup: all ${#packages[@]} Debian packages are installed"
+  exit 0
+fi
+
+echo "setup: installing ${#missing[@]} Debian packages: ${missing[*]}"
+sudo_cmd=()
+if [ "$(id -u)" -ne 0 ]; then
+  command -v sudo >/dev/null || { echo "setup: not root and no sudo: run as root" >&2; exit 1; }
+  sudo_cmd=(sudo)
+fi
+export DEBIAN_FRONTEND=noninteractive
+"${sudo_cmd[@]}" apt-get update -qq
+"${sudo_cmd[@]}" apt-get install -y -qq --no-install-recommends "${missing[@]}"
+echo "setup: done"

@@ -1,0 +1,177 @@
+// Camera model: thin-lens geometry, f-number matching (eq 7) and every refused camera file.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <string>
+
+#include "core/base/errors.hpp"
+#include "core/optics/camera_file.hpp"
+
+namespace plenopiv::optics {
+namespace {
+
+const std::string kPaper = R"(
+sensor:    {width_px: 4904, height_px: 3280, pixel_pitch_mm: 0.0074}
+microlens: {pitch_mm: 0.125, focal_length_mm: 0.5, count_x: 289, count_y: 193, layout: rect}
+main_lens: {focal_length_mm: 50, f_number: 2, magnification: -1}
+)";
+
+// Replaces the first occurrence of `from` in the paper's file with `to`.
+std::string paper_with(const std::string& from, const std::string& to) {
+  std::string text = kPaper;
+  const auto at = text.find(from);
+  EXPECT_NE(at, std::string::npos) << from;
+  return text.replace(at, from.size(), to);
+}
+
+// The message of the InputError that parsing `text` throws ("" if none).
+std::string error_of(const std::string& text) {
+  try {
+    parse_camera_yaml(text, "cam.yaml");
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(CameraModel, PaperConfigurationGivesTablesOneAndTwo) {
+  const CameraModel cam = parse_camera_yaml(kPaper, "paper");
+  EXPECT_NEAR(cam.image_distance_mm(), 100.0, 1e-12);   // table 2: s_i
+  EXPECT_NEAR(cam.object_distance_mm(), 100.0, 1e-12);  // table 2: s_o
+  EXPECT_NEAR(cam.pixels_per_microlens(), 0.125 / 0.0074, 1e-12);
+  EXPECT_NEAR(cam.pixels_per_microlens(), 16.89, 0.01);  // sec 3.2
+  EXPECT_NEAR(cam.microlens_f_number(), 4.0, 1e-12);
+  EXPECT_NEAR(cam.image_side_f_number(), 4.0, 1e-12);
+  EXPECT_NEAR(cam.matched_main_f_number(), 2.0, 1e-12);  // eq 7
+  EXPECT_NEAR(cam.aperture_diameter_mm(), 25.0, 1e-12);
+  EXPECT_NEAR(cam.microlens_image_diameter_px(), cam.pixels_per_microlens(), 1e-9);
+  EXPECT_NEAR(cam.field_of_view_x_mm(), 289 * 0.125, 1e-9);
+  EXPECT_NEAR(cam.field_of_view_y_mm(), 193 * 0.125, 1e-9);
+  EXPECT_NEAR(cam.nominal_voxel_size_mm(), 0.125, 1e-12);  // sec 6.1
+  EXPECT_TRUE(cam.notes().empty());
+}
+
+TEST(CameraModel, ThinLensAtOtherMagnifications) {
+  // M = -0.5 with f = 50: s_i = f (1 - M) = 75, s_o = f (1 - 1/M) = 150; 1/75 + 1/150 = 1/50.
+  const CameraModel cam = parse_camera_yaml(
+      paper_with("magnification: -1", "magnification: -0.5").replace(
+          kPaper.find("f_number: 2"), 11, "f_number: 2.667"),
+      "m05");
+  EXPECT_NEAR(cam.image_distance_mm(), 75.0, 1e-9);
+  EXPECT_NEAR(cam.object_distance_mm(), 150.0, 1e-9);
+  EXPECT_NEAR(1 / cam.image_distance_mm() + 1 / cam.object_distance_mm(), 1 / 50.0, 1e-12);
+  EXPECT_NEAR(cam.nominal_voxel_size_mm(), 0.25, 1e-12);
+}
+
+TEST(CameraModel, FNumberMatchingAcceptsF2WithF4MicrolensesAndRefusesAMismatch) {
+  EXPECT_NO_THROW(parse_camera_yaml(kPaper, "paper"));
+  const std::string err = error_of(paper_with("f_number: 2", "f_number: 1.4"));
+  EXPECT_NE(err.find("main_lens.f_number"), std::string::npos) << err;
+  EXPECT_NE(err.find("overlap"), std::string::npos) << err;
+  // A slower lens is legal but leaves each microlens image underfilled: a note, not an error.
+  const CameraModel slow = parse_camera_yaml(paper_with("f_number: 2", "f_number: 2.8"), "slow");
+  ASSERT_EQ(slow.notes().size(), 1u);
+  EXPECT_NE(slow.notes()[0].find("slower than the matched f/2"), std::string::npos);
+  EXPECT_LT(slow.microlens_image_diameter_px(), slow.pixels_per_microlens());
+}
+
+TEST(CameraModel, HexLayoutUsesRowPitchAndHalfLensShift) {
+  const CameraModel cam =
+      parse_camera_yaml(paper_with("layout: rect", "layout: hex").replace(
+                            kPaper.find("count_y: 193"), 12, "count_y: 200"),
+                        "hex");
+  EXPECT_EQ(cam.microlens().layout, LensletLayout::hex);
+  EXPECT_NEAR(cam.row_pitch_mm(), 0.125 * std::sqrt(3.0) / 2, 1e-12);
+  EXPECT_NEAR(cam.array_width_mm(), 289.5 * 0.125, 1e-12);
+  EXPECT_NEAR(cam.array_height_mm(), 199 * cam.row_pitch_mm() + 0.125, 1e-12);
+}
+
+TEST(CameraFile, ShippedDefaultIsThePaperCamera) {
+  const CameraModel cam = load_camera_file(std::string(PLENOPIV_SOURCE_DIR) +
+                                           "/systemd/config/camera-fahringer2015.yaml");
+  EXPECT_EQ(cam.sensor().width_px, 4904);
+  EXPECT_EQ(cam.microlens().count_y, 193);
+  EXPECT_NEAR(cam.image_distance_mm(), 100.0, 1e-12);
+  const CameraModel small =
+      load_camera_file(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml");
+  EXPECT_EQ(small.lens_count(), 2500);
+}
+
+TEST(CameraFile, RoundTripsThroughYaml) {
+  const CameraModel cam = parse_camera_yaml(kPaper, "paper");
+  const CameraModel again = parse_camera_yaml(to_yaml(cam.spec()), "again");
+  EXPECT_EQ(again.sensor().width_px, cam.sensor().width_px);
+  EXPECT_DOUBLE_EQ(again.sensor().pixel_pitch_mm, cam.sensor().pixel_pitch_mm);
+  EXPECT_DOUBLE_EQ(again.microlens().pitch_mm, cam.microlens().pitch_mm);
+  EXPECT_DOUBLE_EQ(again.main_lens().magnification, cam.main_lens().magnification);
+}
+
+struct BadCase {
+  const char* name;
+  std::string text;
+  std::vector<std::string> expected;  // fragments the message must contain
+};
+
+class CameraFileRefuses : public testing::TestWithParam<BadCase> {};
+
+TEST_P(CameraFileRefuses, WithAMessageNamingKeyAndReason) {
+  const BadCase& c = GetParam();
+  const std::string err = error_of(c.text);
+  ASSERT_FALSE(err.empty()) << c.name << " was accepted";
+  EXPECT_EQ(err.rfind("cam.yaml: ", 0), 0u) << err;
+  for (const std::string& fragment : c.expected) {
+    EXPECT_NE(err.find(fragment), std::string::npos) << "'" << fragment << "' not in: " << err;
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    Cases, CameraFileRefuses,
+    testing::Values(
+        BadCase{"missing_key", paper_with("count_x: 289, ", ""), {"microlens.count_x", "missing"}},
+        BadCase{"missing_section",
+                "sensor: {width_px: 4904, height_px: 3280, pixel_pitch_mm: 0.0074}\n"
+                "microlens: {pitch_mm: 0.125, focal_length_mm: 0.5, count_x: 289, count_y: 193}\n",
+                {"main_lens", "missing"}},
+        BadCase{"wrong_type", paper_with("width_px: 4904", "width_px: wide"),
+                {"sensor.width_px", "expected a whole number in pixels", "'wide'"}},
+        BadCase{"unit_in_value", paper_with("pitch_mm: 0.125", "pitch_mm: 0.125 mm"),
+                {"microlens.pitch_mm", "expected a number in millimetres", "'0.125 mm'"}},
+        BadCase{"wrong_unit_key", paper_with("pitch_mm: 0.125", "pitch_um: 125"),
+                {"microlens.pitch_um", "unknown key"}},
+        BadCase{"negative_pitch", paper_with("pitch_mm: 0.125", "pitch_mm: -0.125"),
+                {"microlens.pitch_mm", "positive", "-0.125"}},
+        BadCase{"zero_pixel_pitch", paper_with("pixel_pitch_mm: 0.0074", "pixel_pitch_mm: 0"),
+                {"sensor.pixel_pitch_mm", "positive"}},
+        BadCase{"array_wider_than_sensor", paper_with("count_x: 289", "count_x: 300"),
+                {"microlens.count_x", "wider than the sensor"}},
+        BadCase{"array_taller_than_sensor", paper_with("count_y: 193", "count_y: 200"),
+                {"microlens.count_y", "taller than the sensor"}},
+        BadCase{"magnification_zero", paper_with("magnification: -1", "magnification: 0"),
+                {"main_lens.magnification", "non-zero"}},
+        BadCase{"magnification_positive", paper_with("magnification: -1", "magnification: 1"),
+                {"main_lens.magnification", "negative"}},
+        BadCase{"f_number_mismatch", paper_with("f_number: 2", "f_number: 1.2"),
+                {"main_lens.f_number", "f/2.4", "f/4", "eq 7"}},
+        BadCase{"bad_layout", paper_with("layout: rect", "layout: square"),
+                {"microlens.layout", "rect, hex", "'square'"}},
+        BadCase{"count_not_whole", paper_with("count_x: 289", "count_x: 28.9"),
+                {"microlens.count_x", "whole number"}},
+        BadCase{"section_not_map", paper_with("main_lens: {focal_length_mm: 50, f_number: 2, magnification: -1}",
+                                              "main_lens: 50"),
+                {"main_lens", "expected a mapping"}},
+        BadCase{"not_yaml", "sensor: {width_px: 4904\n", {"not valid YAML"}},
+        BadCase{"lens_smaller_than_two_pixels", paper_with("pitch_mm: 0.125", "pitch_mm: 0.01"),
+                {"microlens.pitch_mm", "at least 2 pixels"}}),
+    [](const testing::TestParamInfo<BadCase>& info) { return std::string(info.param.name); });
+
+TEST(CameraFile, UnreadableFileIsNamed) {
+  try {
+    load_camera_file("/nonexistent/camera.yaml");
+    FAIL() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("/nonexistent/camera.yaml: cannot open"), std::string::npos);
+  }
+}
+
+}  // namespace
+}  // namespace plenopiv::optics
