@@ -1,0 +1,239 @@
+// HDF5 files for volumes and vector fields, laid out as DESIGN.md says (h5py, MATLAB, ParaView).
+#include "core/io/hdf5_files.hpp"
+
+#include <hdf5.h>
+
+#include <array>
+
+#include "core/base/errors.hpp"
+#include "core/io/atomic_file.hpp"
+
+namespace plenopiv::io {
+namespace {
+
+// HDF5 prints its error stack to stderr by default; we report through InputError instead.
+struct QuietHdf5 {
+  QuietHdf5() { H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr); }
+};
+const QuietHdf5 g_quiet;
+
+// Owns one HDF5 identifier and closes it with the matching call.
+class Handle {
+ public:
+  Handle(hid_t id, herr_t (*close)(hid_t)) : id_(id), close_(close) {}
+  ~Handle() {
+    if (id_ >= 0) close_(id_);
+  }
+  Handle(Handle&& other) noexcept : id_(other.id_), close_(other.close_) { other.id_ = -1; }
+  Handle(const Handle&) = delete;
+  Handle& operator=(const Handle&) = delete;
+  hid_t get() const { return id_; }
+  bool ok() const { return id_ >= 0; }
+
+ private:
+  hid_t id_;
+  herr_t (*close_)(hid_t);
+};
+
+void check(herr_t status, const std::filesystem::path& path, const std::string& what) {
+  if (status < 0) throw InputError(path.string() + ": HDF5: cannot " + what);
+}
+
+template <typename T>
+hid_t mem_type() {
+  if constexpr (std::is_same_v<T, float>) return H5T_NATIVE_FLOAT;
+  if constexpr (std::is_same_v<T, double>) return H5T_NATIVE_DOUBLE;
+  if constexpr (std::is_same_v<T, std::uint8_t>) return H5T_NATIVE_UINT8;
+}
+template <typename T>
+hid_t file_type() {
+  if constexpr (std::is_same_v<T, float>) return H5T_IEEE_F32LE;
+  if constexpr (std::is_same_v<T, double>) return H5T_IEEE_F64LE;
+  if constexpr (std::is_same_v<T, std::uint8_t>) return H5T_STD_U8LE;
+}
+
+template <typename T>
+void write_dataset(hid_t parent, const std::filesystem::path& path, const std::string& name,
+                   const std::vector<hsize_t>& dims, const T* data) {
+  Handle space(H5Screate_simple(int(dims.size()), dims.data(), nullptr), H5Sclose);
+  Handle set(H5Dcreate2(parent, name.c_str(), file_type<T>(), space.get(), H5P_DEFAULT,
+                        H5P_DEFAULT, H5P_DEFAULT),
+             H5Dclose);
+  if (!set.ok()) throw InputError(path.string() + ": HDF5: cannot create dataset " + name);
+  check(H5Dwrite(set.get(), mem_type<T>(), H5S_ALL, H5S_ALL, H5P_DEFAULT, data), path,
+        "write dataset " + name);
+}
+
+void write_attribute(hid_t parent, const std::filesystem::path& path, const std::string& name,
+                     const double* values, hsize_t count) {
+  Handle space(H5Screate_simple(1, &count, nullptr), H5Sclose);
+  Handle attr(H5Acreate2(parent, name.c_str(), H5T_IEEE_F64LE, space.get(), H5P_DEFAULT, H5P_DEFAULT),
+              H5Aclose);
+  if (!attr.ok()) throw InputError(path.string() + ": HDF5: cannot create attribute " + name);
+  check(H5Awrite(attr.get(), H5T_NATIVE_DOUBLE, values), path, "write attribute " + name);
+}
+
+std::vector<double> read_attribute(hid_t parent, const std::filesystem::path& path,
+                                   const std::string& owner, const std::string& name,
+                                   hsize_t expected) {
+  if (H5Aexists(parent, name.c_str()) <= 0) {
+    throw InputError(path.string() + ": " + owner + " has no attribute " + name);
+  }
+  Handle attr(H5Aopen(parent, name.c_str(), H5P_DEFAULT), H5Aclose);
+  Handle space(H5Aget_space(attr.get()), H5Sclose);
+  const hssize_t n = H5Sget_simple_extent_npoints(space.get());
+  if (n != hssize_t(expected)) {
+    throw InputError(path.string() + ": " + owner + " attribute " + name + " has " +
+                     std::to_string(n) + " values, expected " + std::to_string(expected));
+  }
+  std::vector<double> values(expected);
+  check(H5Aread(attr.get(), H5T_NATIVE_DOUBLE, values.data()), path, "read attribute " + name);
+  return values;
+}
+
+// Reads a dataset whose shape must be `dims`; wrong shape or a missing dataset names the file.
+template <typename T>
+std::vector<T> read_dataset(hid_t parent, const std::filesystem::path& path, const std::string& name,
+                            std::vector<hsize_t>* dims_out, const std::vector<hsize_t>* expected) {
+  if (H5Lexists(parent, name.c_str(), H5P_DEFAULT) <= 0) {
+    throw InputError(path.string() + ": no dataset " + name);
+  }
+  Handle set(H5Dopen2(parent, name.c_str(), H5P_DEFAULT), H5Dclose);
+  if (!set.ok()) throw InputError(path.string() + ": cannot open dataset " + name);
+  Handle space(H5Dget_space(set.get()), H5Sclose);
+  const int rank = H5Sget_simple_extent_ndims(space.get());
+  std::vector<hsize_t> dims(std::max(rank, 0));
+  H5Sget_simple_extent_dims(space.get(), dims.data(), nullptr);
+  if (expected && dims != *expected) {
+    throw InputError(path.string() + ": dataset " + name + " has the wrong shape");
+  }
+  std::size_t count = 1;
+  for (hsize_t d : dims) count *= d;
+  std::vector<T> data(count);
+  check(H5Dread(set.get(), mem_type<T>(), H5S_ALL, H5S_ALL, H5P_DEFAULT, data.data()), path,
+        "read dataset " + name);
+  if (dims_out) *dims_out = dims;
+  return data;
+}
+
+Handle open_for_reading(const std::filesystem::path& path) {
+  if (!std::filesystem::exists(path)) throw InputError(path.string() + ": no such file");
+  if (H5Fis_hdf5(path.c_str()) <= 0) throw InputError(path.string() + ": not an HDF5 file");
+  Handle file(H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose);
+  if (!file.ok()) throw InputError(path.string() + ": cannot open HDF5 file (corrupt?)");
+  return file;
+}
+
+std::vector<hsize_t> dims_of(const Grid3& g) {
+  return {hsize_t(g.shape[2]), hsize_t(g.shape[1]), hsize_t(g.shape[0])};
+}
+
+void check_grid(const Grid3& g, std::size_t size, const std::string& what) {
+  for (int a = 0; a < 3; ++a) {
+    if (g.shape[a] <= 0) throw InputError(what + ": grid shape must be positive");
+    if (!(g.spacing_mm[a] > 0)) throw InputError(what + ": grid spacing must be positive");
+  }
+  if (size != g.count()) throw InputError(what + ": array size does not match the grid");
+}
+
+}  // namespace
+
+void write_volume_h5(const std::filesystem::path& path, const Volume& volume) {
+  check_grid(volume.grid, volume.data.size(), path.string() + ": volume");
+  write_atomically(path, [&](const std::filesystem::path& tmp) {
+    Handle file(H5Fcreate(tmp.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT), H5Fclose);
+    if (!file.ok()) throw InputError(path.string() + ": cannot create HDF5 file");
+    write_dataset(file.get(), path, "volume", dims_of(volume.grid), volume.data.data());
+    Handle set(H5Dopen2(file.get(), "volume", H5P_DEFAULT), H5Dclose);
+    write_attribute(set.get(), path, "origin_mm", volume.grid.origin_mm.data(), 3);
+    write_attribute(set.get(), path, "spacing_mm", volume.grid.spacing_mm.data(), 3);
+  });
+}
+
+Volume read_volume_h5(const std::filesystem::path& path) {
+  Handle file = open_for_reading(path);
+  std::vector<hsize_t> dims;
+  std::vector<float> data = read_dataset<float>(file.get(), path, "volume", &dims, nullptr);
+  if (dims.size() != 3) throw InputError(path.string() + ": /volume is not 3-D [nz][ny][nx]");
+  Handle set(H5Dopen2(file.get(), "volume", H5P_DEFAULT), H5Dclose);
+  const auto origin = read_attribute(set.get(), path, "/volume", "origin_mm", 3);
+  const auto spacing = read_attribute(set.get(), path, "/volume", "spacing_mm", 3);
+  Volume v;
+  v.grid.shape = {int(dims[2]), int(dims[1]), int(dims[0])};
+  for (int a = 0; a < 3; ++a) {
+    v.grid.origin_mm[a] = origin[a];
+    v.grid.spacing_mm[a] = spacing[a];
+  }
+  v.data = std::move(data);
+  check_grid(v.grid, v.data.size(), path.string() + ": /volume");
+  return v;
+}
+
+void write_vector_field_h5(const std::filesystem::path& path, const VectorField& f,
+                           const std::vector<NamedField>& extra) {
+  const std::string what = path.string() + ": vector field";
+  check_grid(f.grid, f.dx_mm.size(), what);
+  for (const auto* v : {&f.dy_mm, &f.dz_mm, &f.peak_ratio}) check_grid(f.grid, v->size(), what);
+  check_grid(f.grid, f.valid.size(), what);
+  for (const NamedField& e : extra) check_grid(f.grid, e.values.size(), what + " field " + e.name);
+  if (!(f.dt_s > 0)) throw InputError(what + ": dt_s must be > 0 to give velocities");
+
+  write_atomically(path, [&](const std::filesystem::path& tmp) {
+    Handle file(H5Fcreate(tmp.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT), H5Fclose);
+    if (!file.ok()) throw InputError(path.string() + ": cannot create HDF5 file");
+    Handle group(H5Gcreate2(file.get(), "vectors", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT), H5Gclose);
+    const char* axis_names[3] = {"x", "y", "z"};
+    for (int a = 0; a < 3; ++a) {
+      std::vector<double> axis(f.grid.shape[a]);
+      for (int i = 0; i < f.grid.shape[a]; ++i) axis[i] = f.grid.coordinate_mm(a, i);
+      write_dataset(group.get(), path, axis_names[a], {hsize_t(axis.size())}, axis.data());
+    }
+    const auto dims = dims_of(f.grid);
+    write_dataset(group.get(), path, "dx", dims, f.dx_mm.data());
+    write_dataset(group.get(), path, "dy", dims, f.dy_mm.data());
+    write_dataset(group.get(), path, "dz", dims, f.dz_mm.data());
+    // mm / s -> m/s
+    const double scale = 1e-3 / f.dt_s;
+    std::vector<float> velocity(f.grid.count());
+    const std::pair<const char*, const std::vector<float>*> comps[3] = {
+        {"u", &f.dx_mm}, {"v", &f.dy_mm}, {"w", &f.dz_mm}};
+    for (const auto& [name, disp] : comps) {
+      for (std::size_t i = 0; i < velocity.size(); ++i) velocity[i] = float((*disp)[i] * scale);
+      write_dataset(group.get(), path, name, dims, velocity.data());
+    }
+    write_dataset(group.get(), path, "valid", dims, f.valid.data());
+    write_dataset(group.get(), path, "peak_ratio", dims, f.peak_ratio.data());
+    for (const NamedField& e : extra) write_dataset(group.get(), path, e.name, dims, e.values.data());
+    write_attribute(group.get(), path, "dt_s", &f.dt_s, 1);
+    write_attribute(group.get(), path, "origin_mm", f.grid.origin_mm.data(), 3);
+    write_attribute(group.get(), path, "spacing_mm", f.grid.spacing_mm.data(), 3);
+  });
+}
+
+VectorField read_vector_field_h5(const std::filesystem::path& path) {
+  Handle file = open_for_reading(path);
+  if (H5Lexists(file.get(), "vectors", H5P_DEFAULT) <= 0) {
+    throw InputError(path.string() + ": no group /vectors (not a plenopiv vector field file)");
+  }
+  Handle group(H5Gopen2(file.get(), "vectors", H5P_DEFAULT), H5Gclose);
+  VectorField f;
+  const auto origin = read_attribute(group.get(), path, "/vectors", "origin_mm", 3);
+  const auto spacing = read_attribute(group.get(), path, "/vectors", "spacing_mm", 3);
+  f.dt_s = read_attribute(group.get(), path, "/vectors", "dt_s", 1)[0];
+  std::vector<hsize_t> dims;
+  f.dx_mm = read_dataset<float>(group.get(), path, "dx", &dims, nullptr);
+  if (dims.size() != 3) throw InputError(path.string() + ": /vectors/dx is not 3-D");
+  f.grid.shape = {int(dims[2]), int(dims[1]), int(dims[0])};
+  for (int a = 0; a < 3; ++a) {
+    f.grid.origin_mm[a] = origin[a];
+    f.grid.spacing_mm[a] = spacing[a];
+  }
+  f.dy_mm = read_dataset<float>(group.get(), path, "dy", nullptr, &dims);
+  f.dz_mm = read_dataset<float>(group.get(), path, "dz", nullptr, &dims);
+  f.valid = read_dataset<std::uint8_t>(group.get(), path, "valid", nullptr, &dims);
+  f.peak_ratio = read_dataset<float>(group.get(), path, "peak_ratio", nullptr, &dims);
+  check_grid(f.grid, f.dx_mm.size(), path.string() + ": /vectors");
+  return f;
+}
+
+}  // namespace plenopiv::io

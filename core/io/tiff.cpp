@@ -1,0 +1,173 @@
+// Single-channel TIFF images: 8- or 16-bit in, 16-bit (or float32 stacks) out.
+#include "core/io/tiff.hpp"
+
+#include <tiffio.h>
+
+#include <cstdarg>
+#include <cstdio>
+#include <cstring>
+#include <functional>
+#include <memory>
+#include <string>
+
+#include "core/base/errors.hpp"
+#include "core/io/atomic_file.hpp"
+
+namespace plenopiv::io {
+namespace {
+
+// libtiff reports through global handlers; keep its last message for our error text instead of
+// letting it print to stderr.
+thread_local std::string g_last_tiff_message;
+void capture_handler(const char* module, const char* fmt, va_list args) {
+  char buf[512];
+  std::vsnprintf(buf, sizeof buf, fmt, args);
+  g_last_tiff_message = std::string(module ? module : "") + ": " + buf;
+}
+struct QuietLibtiff {
+  QuietLibtiff() {
+    TIFFSetErrorHandler(capture_handler);
+    TIFFSetWarningHandler(nullptr);
+  }
+};
+const QuietLibtiff g_quiet;
+
+struct TiffCloser {
+  void operator()(TIFF* t) const { TIFFClose(t); }
+};
+using TiffPtr = std::unique_ptr<TIFF, TiffCloser>;
+
+TiffPtr open(const std::filesystem::path& path, const char* mode) {
+  g_last_tiff_message.clear();
+  TIFF* t = TIFFOpen(path.c_str(), mode);
+  if (!t) {
+    throw InputError(path.string() + ": cannot open as TIFF" +
+                     (g_last_tiff_message.empty() ? "" : " (" + g_last_tiff_message + ")"));
+  }
+  return TiffPtr(t);
+}
+
+struct PageInfo {
+  uint32_t width = 0, height = 0;
+  uint16_t bits = 0, samples = 1, format = SAMPLEFORMAT_UINT;
+};
+
+PageInfo page_info(TIFF* t) {
+  PageInfo p;
+  TIFFGetField(t, TIFFTAG_IMAGEWIDTH, &p.width);
+  TIFFGetField(t, TIFFTAG_IMAGELENGTH, &p.height);
+  TIFFGetFieldDefaulted(t, TIFFTAG_BITSPERSAMPLE, &p.bits);
+  TIFFGetFieldDefaulted(t, TIFFTAG_SAMPLESPERPIXEL, &p.samples);
+  TIFFGetFieldDefaulted(t, TIFFTAG_SAMPLEFORMAT, &p.format);
+  return p;
+}
+
+void read_rows(TIFF* t, const std::filesystem::path& path, uint32_t height, void* row_buffer,
+               const std::function<void(uint32_t)>& use_row) {
+  for (uint32_t y = 0; y < height; ++y) {
+    if (TIFFReadScanline(t, row_buffer, y, 0) < 0) {
+      throw InputError(path.string() + ": corrupt TIFF: row " + std::to_string(y) +
+                       " cannot be read (" + g_last_tiff_message + ")");
+    }
+    use_row(y);
+  }
+}
+
+void set_page_fields(TIFF* t, int width, int height, uint16_t bits, uint16_t format) {
+  TIFFSetField(t, TIFFTAG_IMAGEWIDTH, uint32_t(width));
+  TIFFSetField(t, TIFFTAG_IMAGELENGTH, uint32_t(height));
+  TIFFSetField(t, TIFFTAG_SAMPLESPERPIXEL, uint16_t(1));
+  TIFFSetField(t, TIFFTAG_BITSPERSAMPLE, bits);
+  TIFFSetField(t, TIFFTAG_SAMPLEFORMAT, format);
+  TIFFSetField(t, TIFFTAG_PHOTOMETRIC, PHOTOMETRIC_MINISBLACK);
+  TIFFSetField(t, TIFFTAG_PLANARCONFIG, PLANARCONFIG_CONTIG);
+  TIFFSetField(t, TIFFTAG_COMPRESSION, COMPRESSION_NONE);
+  TIFFSetField(t, TIFFTAG_ROWSPERSTRIP, uint32_t(std::max(1, 65536 / std::max(1, width * bits / 8))));
+}
+
+void write_row(TIFF* t, const std::filesystem::path& path, const void* row, int y) {
+  if (TIFFWriteScanline(t, const_cast<void*>(row), uint32_t(y), 0) < 0) {
+    throw InputError(path.string() + ": cannot write TIFF row " + std::to_string(y) + " (" +
+                     g_last_tiff_message + ")");
+  }
+}
+
+}  // namespace
+
+ImageU16 read_tiff_u16(const std::filesystem::path& path) {
+  TiffPtr t = open(path, "r");
+  const PageInfo p = page_info(t.get());
+  if (p.samples != 1 || (p.bits != 8 && p.bits != 16) || p.format != SAMPLEFORMAT_UINT) {
+    throw InputError(path.string() + ": expected a single-channel 8- or 16-bit unsigned TIFF, got " +
+                     std::to_string(p.samples) + " channel(s) of " + std::to_string(p.bits) +
+                     "-bit " + (p.format == SAMPLEFORMAT_IEEEFP ? "float" : "integer") + " samples");
+  }
+  if (p.width == 0 || p.height == 0) throw InputError(path.string() + ": TIFF has no pixels");
+  ImageU16 image(int(p.width), int(p.height));
+  std::vector<unsigned char> row(TIFFScanlineSize(t.get()));
+  read_rows(t.get(), path, p.height, row.data(), [&](uint32_t y) {
+    auto out = image.row(int(y));
+    if (p.bits == 16) {
+      std::memcpy(out.data(), row.data(), out.size() * sizeof(uint16_t));
+    } else {
+      for (uint32_t x = 0; x < p.width; ++x) out[x] = row[x];
+    }
+  });
+  return image;
+}
+
+void write_tiff(const std::filesystem::path& path, const ImageU16& image) {
+  write_atomically(path, [&](const std::filesystem::path& tmp) {
+    TiffPtr t = open(tmp, "w");
+    set_page_fields(t.get(), image.width, image.height, 16, SAMPLEFORMAT_UINT);
+    for (int y = 0; y < image.height; ++y) write_row(t.get(), path, image.row(y).data(), y);
+  });
+}
+
+void write_tiff_stack(const std::filesystem::path& path, const std::vector<ImageF>& pages) {
+  write_atomically(path, [&](const std::filesystem::path& tmp) {
+    TiffPtr t = open(tmp, "w");
+    for (std::size_t i = 0; i < pages.size(); ++i) {
+      const ImageF& page = pages[i];
+      set_page_fields(t.get(), page.width, page.height, 32, SAMPLEFORMAT_IEEEFP);
+      TIFFSetField(t.get(), TIFFTAG_SUBFILETYPE, FILETYPE_PAGE);
+      TIFFSetField(t.get(), TIFFTAG_PAGENUMBER, uint16_t(i), uint16_t(pages.size()));
+      for (int y = 0; y < page.height; ++y) write_row(t.get(), path, page.row(y).data(), y);
+      if (!TIFFWriteDirectory(t.get())) {
+        throw InputError(path.string() + ": cannot write TIFF page " + std::to_string(i));
+      }
+    }
+  });
+}
+
+std::vector<ImageF> read_tiff_stack(const std::filesystem::path& path) {
+  TiffPtr t = open(path, "r");
+  std::vector<ImageF> pages;
+  do {
+    const PageInfo p = page_info(t.get());
+    const bool f32 = p.bits == 32 && p.format == SAMPLEFORMAT_IEEEFP;
+    const bool u16 = p.bits == 16 && p.format == SAMPLEFORMAT_UINT;
+    if (p.samples != 1 || !(f32 || u16)) {
+      throw InputError(path.string() + ": page " + std::to_string(pages.size()) +
+                       ": expected single-channel float32 or uint16 samples");
+    }
+    ImageF page(int(p.width), int(p.height));
+    std::vector<unsigned char> row(TIFFScanlineSize(t.get()));
+    read_rows(t.get(), path, p.height, row.data(), [&](uint32_t y) {
+      auto out = page.row(int(y));
+      for (uint32_t x = 0; x < p.width; ++x) {
+        if (f32) {
+          std::memcpy(&out[x], row.data() + 4 * x, 4);
+        } else {
+          uint16_t v;
+          std::memcpy(&v, row.data() + 2 * x, 2);
+          out[x] = v;
+        }
+      }
+    });
+    pages.push_back(std::move(page));
+  } while (TIFFReadDirectory(t.get()));
+  return pages;
+}
+
+}  // namespace plenopiv::io

@@ -1,0 +1,21 @@
+// Single-channel TIFF images: 8- or 16-bit in, 16-bit (or float32 stacks) out.
+#pragma once
+
+#include <filesystem>
+#include <vector>
+
+#include "core/base/image.hpp"
+
+namespace plenopiv::io {
+
+// Reads the first page of an 8- or 16-bit single-channel TIFF (8-bit values are kept as they
+// are, 0-255). Anything else (colour, float, corrupt, missing) is an InputError naming the file.
+ImageU16 read_tiff_u16(const std::filesystem::path& path);
+// Writes a 16-bit single-channel TIFF, atomically.
+void write_tiff(const std::filesystem::path& path, const ImageU16& image);
+// Writes float32 pages (a focal stack, say) as one multi-page TIFF, atomically.
+void write_tiff_stack(const std::filesystem::path& path, const std::vector<ImageF>& pages);
+// Reads every page of a float32 or 16-bit stack as float.
+std::vector<ImageF> read_tiff_stack(const std::filesystem::path& path);
+
+}  // namespace plenopiv::io

@@ -1,0 +1,212 @@
+// File formats: TIFF, HDF5 and VTI round trips, h5py reading our files, refused corrupt inputs.
+#include <gtest/gtest.h>
+
+#include <cstring>
+#include <fstream>
+#include <sstream>
+
+#include "core/base/errors.hpp"
+#include "core/io/atomic_file.hpp"
+#include "core/io/hdf5_files.hpp"
+#include "core/io/tiff.hpp"
+#include "core/io/vtk_files.hpp"
+#include "tests/support/child_process.hpp"
+
+namespace plenopiv::io {
+namespace {
+
+std::filesystem::path temp_dir() {
+  const auto dir = std::filesystem::temp_directory_path() / "plenopiv-io-test";
+  std::filesystem::create_directories(dir);
+  return dir;
+}
+
+std::string message_of(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+Volume ramp_volume() {
+  Grid3 g;
+  g.shape = {5, 4, 3};
+  g.origin_mm = {-1.0, -0.5, -0.25};
+  g.spacing_mm = {0.125, 0.25, 0.5};
+  Volume v(g);
+  for (std::size_t i = 0; i < v.data.size(); ++i) v.data[i] = float(i) * 0.5f;
+  return v;
+}
+
+VectorField some_field() {
+  Grid3 g;
+  g.shape = {3, 2, 2};
+  g.origin_mm = {1, 2, 3};
+  g.spacing_mm = {0.5, 0.5, 1.0};
+  VectorField f(g);
+  for (std::size_t i = 0; i < g.count(); ++i) {
+    f.dx_mm[i] = 0.01f * float(i);
+    f.dy_mm[i] = -0.02f * float(i);
+    f.dz_mm[i] = 0.03f;
+    f.valid[i] = i % 2;
+    f.peak_ratio[i] = 1.5f;
+  }
+  f.dt_s = 1e-3;
+  return f;
+}
+
+TEST(Tiff, SixteenBitRoundTrip) {
+  ImageU16 img(7, 5);
+  for (std::size_t i = 0; i < img.size(); ++i) img.pixels[i] = std::uint16_t(i * 1000);
+  const auto path = temp_dir() / "img.tif";
+  write_tiff(path, img);
+  const ImageU16 back = read_tiff_u16(path);
+  EXPECT_EQ(back.width, 7);
+  EXPECT_EQ(back.height, 5);
+  EXPECT_EQ(back.pixels, img.pixels);
+}
+
+TEST(Tiff, FloatStackRoundTrip) {
+  std::vector<ImageF> pages;
+  for (int p = 0; p < 3; ++p) {
+    ImageF page(4, 3);
+    for (std::size_t i = 0; i < page.size(); ++i) page.pixels[i] = float(p) + 0.25f * float(i);
+    pages.push_back(page);
+  }
+  const auto path = temp_dir() / "stack.tif";
+  write_tiff_stack(path, pages);
+  const auto back = read_tiff_stack(path);
+  ASSERT_EQ(back.size(), 3u);
+  for (int p = 0; p < 3; ++p) EXPECT_EQ(back[p].pixels, pages[p].pixels);
+}
+
+TEST(Tiff, CorruptAndMissingFilesAreNamed) {
+  const auto path = temp_dir() / "corrupt.tif";
+  std::ofstream(path) << "II*\0 this is not a tiff";
+  const std::string corrupt = message_of([&] { read_tiff_u16(path); });
+  EXPECT_NE(corrupt.find(path.string()), std::string::npos) << corrupt;
+  const std::string missing = message_of([&] { read_tiff_u16(temp_dir() / "nope.tif"); });
+  EXPECT_NE(missing.find("nope.tif: cannot open as TIFF"), std::string::npos) << missing;
+}
+
+TEST(Tiff, FloatImageIsNotARawFrame) {
+  const auto path = temp_dir() / "float.tif";
+  write_tiff_stack(path, {ImageF(3, 3, 1.f)});
+  const std::string err = message_of([&] { read_tiff_u16(path); });
+  EXPECT_NE(err.find("expected a single-channel 8- or 16-bit unsigned TIFF"), std::string::npos) << err;
+}
+
+TEST(AtomicFile, AFailedWriteLeavesNothingBehind) {
+  const auto dir = temp_dir() / "atomic";
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  EXPECT_THROW(write_atomically(dir / "out.h5",
+                                [](const std::filesystem::path& tmp) {
+                                  std::ofstream(tmp) << "half";
+                                  throw std::runtime_error("disk full");
+                                }),
+               std::runtime_error);
+  EXPECT_TRUE(std::filesystem::is_empty(dir));
+  const std::string err = message_of([&] { write_volume_h5(dir / "missing/v.h5", ramp_volume()); });
+  EXPECT_NE(err.find("does not exist"), std::string::npos) << err;
+}
+
+TEST(Hdf5, VolumeRoundTrip) {
+  const Volume v = ramp_volume();
+  const auto path = temp_dir() / "volume.h5";
+  write_volume_h5(path, v);
+  const Volume back = read_volume_h5(path);
+  EXPECT_EQ(back.grid, v.grid);
+  EXPECT_EQ(back.data, v.data);
+}
+
+TEST(Hdf5, VectorFieldRoundTrip) {
+  const VectorField f = some_field();
+  const auto path = temp_dir() / "field.h5";
+  write_vector_field_h5(path, f, {{"vorticity_z", std::vector<float>(f.grid.count(), 2.f)}});
+  const VectorField back = read_vector_field_h5(path);
+  EXPECT_EQ(back.grid, f.grid);
+  EXPECT_EQ(back.dx_mm, f.dx_mm);
+  EXPECT_EQ(back.dy_mm, f.dy_mm);
+  EXPECT_EQ(back.dz_mm, f.dz_mm);
+  EXPECT_EQ(back.valid, f.valid);
+  EXPECT_EQ(back.peak_ratio, f.peak_ratio);
+  EXPECT_DOUBLE_EQ(back.dt_s, f.dt_s);
+}
+
+TEST(Hdf5, PythonH5pyReadsTheLayoutOfTheDesign) {
+  const auto vpath = temp_dir() / "py_volume.h5";
+  const auto fpath = temp_dir() / "py_field.h5";
+  write_volume_h5(vpath, ramp_volume());
+  write_vector_field_h5(fpath, some_field());
+  const std::string script =
+      "import h5py, numpy as np, sys\n"
+      "v = h5py.File(sys.argv[1], 'r')['volume']\n"
+      "assert v.shape == (3, 4, 5) and v.dtype == np.float32, v.shape\n"
+      "assert np.allclose(v.attrs['origin_mm'], [-1.0, -0.5, -0.25])\n"
+      "assert np.allclose(v.attrs['spacing_mm'], [0.125, 0.25, 0.5])\n"
+      "assert v[2, 3, 4] == 0.5 * 59\n"
+      "g = h5py.File(sys.argv[2], 'r')['vectors']\n"
+      "assert np.allclose(g['x'][:], [1, 1.5, 2]) and np.allclose(g['z'][:], [3, 4])\n"
+      "assert g['u'].shape == (2, 2, 3) and g['valid'].dtype == np.uint8\n"
+      "assert np.allclose(g['u'][:], g['dx'][:] * 1e-3 / 1e-3)\n"
+      "assert np.allclose(g['w'][:], 0.03)\n"
+      "assert abs(g.attrs['dt_s'] - 1e-3) < 1e-15\n"
+      "print('h5py ok')\n";
+  const auto script_path = temp_dir() / "check.py";
+  std::ofstream(script_path) << script;
+  if (!std::filesystem::exists("/usr/bin/python3")) GTEST_SKIP() << "/usr/bin/python3 missing";
+  std::string out;
+  const int rc = testing_support::run_command(
+      {"/usr/bin/python3", script_path.string(), vpath.string(), fpath.string()}, out);
+  EXPECT_EQ(rc, 0) << out;
+  EXPECT_NE(out.find("h5py ok"), std::string::npos) << out;
+}
+
+TEST(Hdf5, WrongFilesAreNamed) {
+  const auto text = temp_dir() / "text.h5";
+  std::ofstream(text) << "not hdf5";
+  EXPECT_NE(message_of([&] { read_volume_h5(text); }).find("not an HDF5 file"), std::string::npos);
+  const auto field = temp_dir() / "field_only.h5";
+  write_vector_field_h5(field, some_field());
+  EXPECT_NE(message_of([&] { read_volume_h5(field); }).find("no dataset volume"), std::string::npos);
+  const auto vol = temp_dir() / "volume_only.h5";
+  write_volume_h5(vol, ramp_volume());
+  EXPECT_NE(message_of([&] { read_vector_field_h5(vol); }).find("no group /vectors"), std::string::npos);
+  VectorField no_dt = some_field();
+  no_dt.dt_s = 0;
+  EXPECT_NE(message_of([&] { write_vector_field_h5(temp_dir() / "nodt.h5", no_dt); }).find("dt_s"),
+            std::string::npos);
+}
+
+TEST(Vti, HeaderAndAppendedSizesDescribeTheArrays) {
+  const auto path = temp_dir() / "volume.vti";
+  const Volume v = ramp_volume();
+  write_volume_vti(path, v);
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream s;
+  s << in.rdbuf();
+  const std::string text = s.str();
+  EXPECT_NE(text.find("WholeExtent=\"0 4 0 3 0 2\""), std::string::npos);
+  EXPECT_NE(text.find("Spacing=\"0.125 0.25 0.5\""), std::string::npos);
+  EXPECT_NE(text.find("Name=\"intensity\""), std::string::npos);
+  const auto start = text.find("_", text.find("<AppendedData")) + 1;
+  std::uint64_t n = 0;
+  std::memcpy(&n, text.data() + start, sizeof n);
+  EXPECT_EQ(n, v.data.size() * sizeof(float));
+  float last = 0;
+  std::memcpy(&last, text.data() + start + sizeof n + n - sizeof(float), sizeof last);
+  EXPECT_EQ(last, v.data.back());
+
+  const auto fpath = temp_dir() / "field.vti";
+  write_vector_field_vti(fpath, some_field());
+  std::ifstream fin(fpath);
+  std::stringstream fs;
+  fs << fin.rdbuf();
+  EXPECT_NE(fs.str().find("Name=\"velocity_m_s\" NumberOfComponents=\"3\""), std::string::npos);
+}
+
+}  // namespace
+}  // namespace plenopiv::io
