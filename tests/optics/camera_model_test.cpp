@@ -6,6 +6,7 @@
 
 #include "core/base/errors.hpp"
 #include "core/optics/camera_file.hpp"
+#include "core/optics/microlens_array.hpp"
 
 namespace plenopiv::optics {
 namespace {
@@ -171,6 +172,61 @@ TEST(CameraFile, UnreadableFileIsNamed) {
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find("/nonexistent/camera.yaml: cannot open"), std::string::npos);
   }
+}
+
+}  // namespace
+}  // namespace plenopiv::optics
+
+namespace plenopiv::optics {
+namespace {
+
+TEST(MicrolensArray, NominalLatticeIsCentredOnTheSensor) {
+  const CameraModel cam = parse_camera_yaml(kPaper, "paper");
+  const MicrolensArray array = MicrolensArray::from_lattice(Lattice::nominal(cam));
+  ASSERT_EQ(array.centres_mm.size(), std::size_t(289 * 193));
+  const auto first = array.centre(0, 0);
+  const auto last = array.centre(288, 192);
+  EXPECT_NEAR(first[0], -last[0], 1e-12);
+  EXPECT_NEAR(first[1], -last[1], 1e-12);
+  EXPECT_NEAR(array.centre(144, 96)[0], 0.0, 1e-12);  // odd counts: the middle lens is on axis
+  EXPECT_NEAR(array.centre(145, 96)[0] - array.centre(144, 96)[0], 0.125, 1e-12);
+}
+
+TEST(MicrolensArray, RotationTurnsPlusXTowardsMinusYOnTheUprightImage) {
+  Lattice l;
+  l.count_x = 3;
+  l.count_y = 1;
+  l.pitch_x_mm = l.pitch_y_mm = 1.0;
+  l.rotation_rad = std::acos(-1.0) / 2;
+  const auto p = l.position(2, 0);  // one pitch right of the centre before rotation
+  EXPECT_NEAR(p[0], 0.0, 1e-12);
+  EXPECT_NEAR(p[1], -1.0, 1e-12);
+}
+
+TEST(MicrolensArray, HexRowsAreShiftedByHalfAPitch) {
+  Lattice l;
+  l.layout = LensletLayout::hex;
+  l.count_x = 4;
+  l.count_y = 2;
+  l.pitch_x_mm = 1.0;
+  l.pitch_y_mm = std::sqrt(3.0) / 2;
+  EXPECT_NEAR(l.position(0, 1)[0] - l.position(0, 0)[0], 0.5, 1e-12);
+  EXPECT_NEAR(l.position(0, 1)[1] - l.position(0, 0)[1], std::sqrt(3.0) / 2, 1e-12);
+}
+
+TEST(SensorGeometry, PixelCentresAndTheApertureMapping) {
+  const CameraModel cam = parse_camera_yaml(kPaper, "paper");
+  const SensorSpec& s = cam.sensor();
+  EXPECT_NEAR(column_to_sensor_mm(s, 0), (0.5 - 2452) * 0.0074, 1e-12);
+  EXPECT_NEAR(sensor_mm_to_column(s, column_to_sensor_mm(s, 123.25)), 123.25, 1e-9);
+  EXPECT_NEAR(sensor_mm_to_row(s, row_to_sensor_mm(s, 7.5)), 7.5, 1e-9);
+  // The spot of a lens 10 mm off axis sits f_l / s_i further out; u = 0 there.
+  const double spot = lens_centre_to_spot_mm(10.0, 100.0, 0.5);
+  EXPECT_NEAR(spot, 10.05, 1e-12);
+  EXPECT_NEAR(spot_to_lens_centre_mm(spot, 100.0, 0.5), 10.0, 1e-12);
+  EXPECT_NEAR(aperture_from_sensor_mm(spot, spot, 100.0, 0.5), 0.0, 1e-12);
+  // Half a pitch right of the spot sees the left edge of a matched aperture: u = -p_m / 2.
+  EXPECT_NEAR(aperture_from_sensor_mm(spot + 0.0625, spot, 100.0, 0.5), -12.5, 1e-9);
 }
 
 }  // namespace
