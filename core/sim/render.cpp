@@ -8,6 +8,7 @@
 #include <atomic>
 #include <cmath>
 #include <limits>
+#include <mutex>
 #include <random>
 #include <string>
 
@@ -278,7 +279,8 @@ void check_array(const optics::MicrolensArray& array) {
 RenderResult trace_all(const optics::CameraModel& camera, const optics::MicrolensArray& array,
                        std::span<const Emitter> emitters, std::size_t rays_per_emitter,
                        double aperture_diameter_mm, double overfill, double sigma_mm,
-                       const SensorModel& sensor, std::uint64_t seed) {
+                       const SensorModel& sensor, const std::function<void(double)>& progress,
+                       std::uint64_t seed) {
   check_array(array);
   check_sensor(sensor);
   check_finite_nonnegative(sigma_mm, "diffraction_sigma_mm");
@@ -292,12 +294,20 @@ RenderResult trace_all(const optics::CameraModel& camera, const optics::Microlen
   std::vector<std::uint32_t> counts(std::size_t(w) * h, 0);
   const Tracer tracer(camera, array, aperture_diameter_mm, overfill, sigma_mm, counts.data());
   std::atomic<std::uint64_t> emitted{0}, outside_aperture{0}, missed{0}, outside_sensor{0}, landed{0};
+  std::atomic<std::size_t> done{0};
+  std::mutex progress_mutex;
+  const std::size_t step = std::max<std::size_t>(1, emitters.size() / 100);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, emitters.size(), 1),
                     [&](const tbb::blocked_range<std::size_t>& range) {
                       RayCounts c;
                       for (std::size_t k = range.begin(); k != range.end(); ++k) {
                         SplitMix64 rng(stream_seed(seed, k));
                         tracer.trace(emitters[k], rays_per_emitter, rng, c);
+                        const std::size_t n = ++done;
+                        if (progress && (n % step == 0 || n == emitters.size())) {
+                          const std::lock_guard lock(progress_mutex);
+                          progress(double(n) / double(emitters.size()));
+                        }
                       }
                       emitted += c.emitted;
                       outside_aperture += c.outside_aperture;
@@ -336,7 +346,8 @@ RenderResult render(const optics::CameraModel& camera, const optics::MicrolensAr
   const double aperture = options.aperture_diameter_mm > 0 ? options.aperture_diameter_mm
                                                            : camera.aperture_diameter_mm();
   return trace_all(camera, array, emitters, options.rays_per_particle, aperture,
-                   options.aperture_overfill, options.diffraction_sigma_mm, options.sensor, seed);
+                   options.aperture_overfill, options.diffraction_sigma_mm, options.sensor,
+                   options.progress, seed);
 }
 
 TargetOptions calibration_target() {
@@ -376,7 +387,7 @@ RenderResult render_target(const optics::CameraModel& camera, const optics::Micr
   }
   return trace_all(camera, array, tiles, options.rays_per_lens,
                    camera.main_lens().focal_length_mm / f_number, 1.0, options.diffraction_sigma_mm,
-                   options.sensor, seed);
+                   options.sensor, options.progress, seed);
 }
 
 ImageU16 apply_sensor(const ImageF& rays, const SensorModel& sensor, std::uint64_t seed) {

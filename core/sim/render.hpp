@@ -2,6 +2,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <span>
 
 #include "core/base/image.hpp"
@@ -34,6 +35,9 @@ struct RenderOptions {
   // through the aperture, as the paper does (its theta_min..theta_max); > 1 exercises the stop.
   double aperture_overfill = 1.0;
   SensorModel sensor;
+  // Called with the fraction of sources traced (about every 1 %, and at 1), from one thread at
+  // a time; for progress displays. Empty: not called.
+  std::function<void(double)> progress;
 };
 
 // Where the emitted rays went: landed + outside_sensor + missed_array + outside_aperture =
@@ -74,6 +78,7 @@ struct TargetOptions {
   std::size_t rays_per_lens = 2000;
   double diffraction_sigma_mm = 0.0052;
   SensorModel sensor;
+  std::function<void(double)> progress;  // as RenderOptions::progress
 };
 // Calibration image (paper sec 3.2, fig 7): the aperture stopped down (default f/16) so each
 // microlens shows one small spot at optics::lens_centre_to_spot_mm of its centre.
