@@ -19,6 +19,7 @@ int main(int argc, char** argv) {
   client::add_control_commands(app, control);
   client::add_camera_commands(app);
   client::add_simulate_commands(app);
+  client::add_piv_commands(app);
 
   try {
     setup_logging("plenopiv", "info", LogTarget::console);
