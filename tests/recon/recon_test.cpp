@@ -234,6 +234,7 @@ TEST_F(Mart, RowActionAndSimultaneousFormsAgree) {
   MartSettings s;
   s.iterations = 10;
   s.start = MartStart::ones;
+  s.dark_weight_cutoff = 0;
   const Volume simultaneous = reconstruct(*op_, image, s).volume;
   s.method = MartMethod::row_action;
   const Volume row_action = reconstruct_row_action(*op_, *matrix_, image, s);
@@ -249,6 +250,7 @@ TEST_F(Mart, VoxelsSeenByDarkPixelsAreSkippedAndStayZero) {
   const ImageF image = project_image(*op_, exact, 1000.f);
   MartSettings s;
   s.noise_threshold = 0.01f;
+  s.dark_weight_cutoff = 0;  // eq 9 literally, as the row-action reference
   const MartResult r = reconstruct(*op_, image, s);
   const SkipReport& k = r.skipped;
   EXPECT_EQ(k.voxels, op_->grid().count());
