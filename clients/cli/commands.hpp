@@ -15,5 +15,6 @@ void add_control_commands(CLI::App& app, ControlOptions& options);
 void add_camera_commands(CLI::App& app);
 void add_simulate_commands(CLI::App& app);
 void add_piv_commands(CLI::App& app);
+void add_recon_commands(CLI::App& app);
 
 }  // namespace plenopiv::client

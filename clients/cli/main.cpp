@@ -20,6 +20,7 @@ int main(int argc, char** argv) {
   client::add_camera_commands(app);
   client::add_simulate_commands(app);
   client::add_piv_commands(app);
+  client::add_recon_commands(app);
 
   try {
     setup_logging("plenopiv", "info", LogTarget::console);
