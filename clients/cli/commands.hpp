@@ -13,5 +13,7 @@ struct ControlOptions {
 
 void add_control_commands(CLI::App& app, ControlOptions& options);
 void add_camera_commands(CLI::App& app);
+void add_calib_commands(CLI::App& app);
+void add_lightfield_commands(CLI::App& app);
 
 }  // namespace plenopiv::client

@@ -18,6 +18,8 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   client::add_control_commands(app, control);
   client::add_camera_commands(app);
+  client::add_calib_commands(app);
+  client::add_lightfield_commands(app);
 
   try {
     setup_logging("plenopiv", "info", LogTarget::console);
