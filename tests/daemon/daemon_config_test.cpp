@@ -6,14 +6,13 @@
 
 #include "core/base/errors.hpp"
 #include "daemon/daemon_config.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace plenopiv::daemon {
 namespace {
 
 std::filesystem::path write_temp(const std::string& name, const std::string& text) {
-  const auto dir = std::filesystem::temp_directory_path() / "plenopiv-test-config";
-  std::filesystem::create_directories(dir);
-  const auto path = dir / name;
+  const auto path = testing_support::temp_dir("config-test") / name;
   std::ofstream(path) << text;
   return path;
 }

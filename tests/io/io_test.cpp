@@ -11,15 +11,12 @@
 #include "core/io/tiff.hpp"
 #include "core/io/vtk_files.hpp"
 #include "tests/support/child_process.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace plenopiv::io {
 namespace {
 
-std::filesystem::path temp_dir() {
-  const auto dir = std::filesystem::temp_directory_path() / "plenopiv-io-test";
-  std::filesystem::create_directories(dir);
-  return dir;
-}
+std::filesystem::path temp_dir() { return testing_support::temp_dir("io-test"); }
 
 std::string message_of(const std::function<void()>& f) {
   try {
