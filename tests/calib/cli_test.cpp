@@ -13,6 +13,7 @@
 #include "tests/calib/spot_render.hpp"
 #include "tests/lightfield/particle_render.hpp"
 #include "tests/support/child_process.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace plenopiv {
 namespace {
@@ -29,8 +30,7 @@ ImageU16 to_u16(const ImageF& in) {
 class CalibCli : public ::testing::Test {
  protected:
   void SetUp() override {
-    dir_ = std::filesystem::temp_directory_path() / ("plenopiv_calib_cli_" + std::to_string(::getpid()));
-    std::filesystem::create_directories(dir_);
+    dir_ = testing_support::temp_dir("calib-cli");
   }
   void TearDown() override {
     if (!std::getenv("PLENOPIV_KEEP_TEST_FILES")) std::filesystem::remove_all(dir_);
