@@ -70,6 +70,14 @@ void RunStateMachine::check_calibration_allowed() const {
   }
 }
 
+void RunStateMachine::cancel_start() {
+  std::lock_guard lock(mutex_);
+  if (state_ != RunState::Armed && state_ != RunState::Draining) {
+    throw std::logic_error(std::string("run state: cancel_start() in state ") + to_string(state_));
+  }
+  state_ = RunState::Idle;
+}
+
 void RunStateMachine::acquiring() {
   std::lock_guard lock(mutex_);
   if (state_ == RunState::Draining) return;  // stopped while arming: the run thread drains

@@ -32,6 +32,9 @@ class RunStateMachine {
   void start(const std::string& run_id);  // Idle|Error → Armed
   void stop();                            // Armed|Acquiring → Draining; Error → Idle
   void check_calibration_allowed() const; // Idle|Error only: calibration needs the camera
+  // The run could not be set up (camera not found, folder not writable): Armed → Idle, as if the
+  // start had been refused.
+  void cancel_start();
 
   // Progress reported by the run itself. These are the run thread's own steps, so a call in
   // another state is a bug and throws std::logic_error.
