@@ -13,5 +13,6 @@ struct ControlOptions {
 
 void add_control_commands(CLI::App& app, ControlOptions& options);
 void add_camera_commands(CLI::App& app);
+void add_run_commands(CLI::App& app, ControlOptions& options);
 
 }  // namespace plenopiv::client

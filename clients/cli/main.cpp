@@ -18,6 +18,7 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   client::add_control_commands(app, control);
   client::add_camera_commands(app);
+  client::add_run_commands(app, control);
 
   try {
     setup_logging("plenopiv", "info", LogTarget::console);
