@@ -26,7 +26,7 @@ TEST(RunConfig, ShippedDefaultParses) {
   std::stringstream text;
   text << in.rdbuf();
   const RunConfig c = parse_run_config(text.str(), "run.yaml");
-  EXPECT_EQ(c.pair_count, 5u);
+  EXPECT_EQ(c.pair_count, 20u);
   EXPECT_DOUBLE_EQ(c.rate_hz, 2.0);
   EXPECT_DOUBLE_EQ(c.dt_s, 1e-4);
   EXPECT_TRUE(c.camera_uri.empty());  // the daemon's default camera

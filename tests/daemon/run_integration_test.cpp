@@ -107,7 +107,14 @@ TEST_F(DaemonRuns, RunOfNPairsReachesSubscribersAndTheRunFolder) {
   ChildProcess watcher({binary("plenopiv"), "watch", "--publish", publish_, "--count",
                         std::to_string(n), "--wait", "20"},
                        scratch_ / "watch.log");
-  std::this_thread::sleep_for(500ms);
+  // A Python subscriber (Debian's python3-zmq and python3-protobuf), saving to HDF5 and plotting.
+  const fs::path h5 = scratch_ / "fields.h5", png = scratch_ / "view.png";
+  ChildProcess python({"/usr/bin/python3",
+                       std::string(PLENOPIV_SOURCE_DIR) + "/clients/python/plenopiv_subscribe.py",
+                       "--publish", publish_, "--count", std::to_string(n), "--wait", "20",
+                       "--save", h5.string(), "--png", png.string()},
+                      scratch_ / "python.log");
+  std::this_thread::sleep_for(1500ms);  // both subscriptions reach the publisher
 
   std::string out;
   ASSERT_EQ(client({"run", "start", "--config", write_config(kRun).string(), "--pairs",
@@ -129,6 +136,25 @@ TEST_F(DaemonRuns, RunOfNPairsReachesSubscribersAndTheRunFolder) {
     EXPECT_NE(lines.find(expect.str()), std::string::npos) << expect.str() << "\n" << lines;
   }
   EXPECT_NE(lines.find("valid 75.0 %"), std::string::npos) << lines;
+
+  const auto py = python.wait(30s);
+  ASSERT_TRUE(py.has_value()) << "the Python subscriber did not see " << n << " fields";
+  EXPECT_EQ(*py, 0) << python.output();
+  EXPECT_NE(python.output().find("pair      5  mean 5.0000 m/s"), std::string::npos)
+      << python.output();
+  EXPECT_TRUE(fs::exists(png));
+  // The saved arrays hold the decoded values: u = pair index at every node.
+  std::string saved;
+  ASSERT_EQ(testing_support::run_command(
+                {"/usr/bin/python3", "-c",
+                 "import h5py, sys; f = h5py.File(sys.argv[1]); "
+                 "print(len(f), [float(f['pair-%06d/u' % i][1, 2, 3]) for i in range(len(f))], "
+                 "f['pair-000002/u'].shape)",
+                 h5.string()},
+                saved),
+            0)
+      << saved;
+  EXPECT_NE(saved.find("6 [0.0, 1.0, 2.0, 3.0, 4.0, 5.0] (2, 3, 4)"), std::string::npos) << saved;
 
   wait_for_state("Idle");
   const fs::path run = only_run_dir();
