@@ -18,5 +18,6 @@ void add_piv_commands(CLI::App& app);
 void add_recon_commands(CLI::App& app);
 void add_calib_commands(CLI::App& app);
 void add_lightfield_commands(CLI::App& app);
+void add_run_commands(CLI::App& app, ControlOptions& options);
 
 }  // namespace plenopiv::client

@@ -23,6 +23,7 @@ int main(int argc, char** argv) {
   client::add_recon_commands(app);
   client::add_calib_commands(app);
   client::add_lightfield_commands(app);
+  client::add_run_commands(app, control);
 
   try {
     setup_logging("plenopiv", "info", LogTarget::console);
