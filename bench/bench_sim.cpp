@@ -72,7 +72,7 @@ int main(int argc, char** argv) {
     sim::RayCounts counts;
     double cpu = 0;
     overhead[threads] = time_render(camera, array, {}, sim::RenderOptions{}, threads, 3, counts, cpu);
-    std::printf("bench=sim_frame_overhead threads=%d median_s=%.3f\n", threads, overhead[threads]);
+    std::printf("bench=sim_frame_overhead threads=%d median_s=%.3f cpu_s=%.3f\n", threads, overhead[threads], cpu);
   }
   for (double sigma : {0.0, 0.0052}) {
     sim::RenderOptions options;
