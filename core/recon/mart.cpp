@@ -1,0 +1,372 @@
+// MART on the plenoptic weights: active-set selection (dark pixels, region, field of view),
+// MLOS start, simultaneous multiplicative iterations, and the row-action reference of eq 9.
+#include "core/recon/mart.hpp"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <string>
+
+#include "core/base/errors.hpp"
+
+namespace plenopiv::recon {
+namespace {
+
+// Bounds that keep every value finite and normal in float: log-ratios beyond ±kMaxLog carry no
+// information a reconstruction needs, and values under kTiny are flushed to zero (no denormals).
+constexpr float kMaxLog = 40.f;
+constexpr float kTiny = 1e-30f;
+constexpr float kHuge = 1e30f;
+
+double seconds_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+void validate_settings(const MartSettings& s) {
+  if (!(s.mu > 0 && s.mu <= 1)) throw InputError("MART: mu must lie in (0, 1], got " + std::to_string(s.mu));
+  if (s.iterations < 1 || s.iterations > 10000) {
+    throw InputError("MART: iterations must be 1..10000, got " + std::to_string(s.iterations));
+  }
+  if (!(s.noise_threshold >= 0) || !std::isfinite(s.noise_threshold)) {
+    throw InputError("MART: noise threshold must be a finite number >= 0");
+  }
+  if (!(s.dark_weight_cutoff >= 0 && s.dark_weight_cutoff < 1)) {
+    throw InputError("MART: dark weight cutoff must lie in [0, 1)");
+  }
+  if (!(s.convergence >= 0) || !std::isfinite(s.convergence)) {
+    throw InputError("MART: convergence tolerance must be a finite number >= 0");
+  }
+}
+
+// ||a - b|| / ||a|| with a fixed-order reduction (same result at any thread count).
+double normalised_residual(std::span<const float> a, std::span<const float> b) {
+  constexpr std::size_t kChunk = 1 << 14;
+  const std::size_t chunks = (a.size() + kChunk - 1) / kChunk;
+  std::vector<double> num(chunks, 0.0), den(chunks, 0.0);
+  tbb::parallel_for(std::size_t(0), chunks, [&](std::size_t c) {
+    double n = 0, d = 0;
+    for (std::size_t i = c * kChunk; i < std::min(a.size(), (c + 1) * kChunk); ++i) {
+      const double diff = double(a[i]) - double(b[i]);
+      n += diff * diff;
+      d += double(a[i]) * double(a[i]);
+    }
+    num[c] = n;
+    den[c] = d;
+  });
+  double n = 0, d = 0;
+  for (std::size_t c = 0; c < chunks; ++c) {
+    n += num[c];
+    d += den[c];
+  }
+  return d > 0 ? std::sqrt(n / d) : 0.0;
+}
+
+double sum(std::span<const float> a) {
+  double s = 0;
+  for (float v : a) s += v;
+  return s;
+}
+
+// The image MART sees: pixels at or below the noise threshold become 0.
+std::vector<float> thresholded(const ImageF& image, float threshold) {
+  std::vector<float> out(image.pixels.size());
+  for (std::size_t i = 0; i < out.size(); ++i) out[i] = image.pixels[i] > threshold ? image.pixels[i] : 0.f;
+  return out;
+}
+
+bool in_region(const Grid3& g, const std::optional<RegionMm>& region, int x, int y, int z) {
+  if (!region) return true;
+  const int idx[3] = {x, y, z};
+  for (int a = 0; a < 3; ++a) {
+    const double c = g.coordinate_mm(a, idx[a]);
+    if (c < region->min_mm[a] || c > region->max_mm[a]) return false;
+  }
+  return true;
+}
+
+// Rows of the dark-pixel mask as bits, padded by one word so a 64-bit window can always be read.
+struct DarkMask {
+  std::size_t words = 0;
+  std::vector<std::uint64_t> bits;
+  std::uint64_t window(int row, int first_column) const {
+    const std::uint64_t* w = bits.data() + std::size_t(row) * words + std::size_t(first_column >> 6);
+    const int s = first_column & 63;
+    return s ? (w[0] >> s) | (w[1] << (64 - s)) : w[0];
+  }
+};
+
+// Voxels MART can change: seen by some pixel, inside the region, and seen by no dark pixel (a
+// dark pixel's ratio is 0, so eq 9 zeroes every voxel it sees and they stay zero).
+std::vector<std::uint32_t> select_active(const WeightingOperator& op, std::span<const float> image,
+                                         const MartSettings& settings, SkipReport& report) {
+  const Grid3& g = op.grid();
+  const int width = op.image_width(), height = op.image_height();
+  DarkMask dark;
+  dark.words = std::size_t(width + 63) / 64 + 1;
+  dark.bits.assign(dark.words * std::size_t(height), 0);
+  const float* white = op.white().pixels.data();
+  report.pixels = op.pixel_count();
+  for (int r = 0; r < height; ++r) {
+    for (int c = 0; c < width; ++c) {
+      const std::size_t i = std::size_t(r) * std::size_t(width) + std::size_t(c);
+      if (white[i] > 0.f && image[i] == 0.f) {
+        dark.bits[std::size_t(r) * dark.words + std::size_t(c >> 6)] |= std::uint64_t(1) << (c & 63);
+        ++report.dark_pixels;
+      }
+    }
+  }
+
+  const int nx = g.shape[0], ny = g.shape[1], nz = g.shape[2];
+  report.voxels = g.count();
+  report.slices = nz;
+  std::vector<std::vector<std::uint32_t>> per_slice(static_cast<std::size_t>(nz));
+  std::vector<std::array<std::size_t, 3>> counts(std::size_t(nz), {0, 0, 0});  // unseen, outside, dark
+  tbb::parallel_for(0, nz, [&](int z) {
+    // Which columns each voxel column really touches (weight > 0), as bit words from its first.
+    std::vector<std::vector<std::uint64_t>> masks(static_cast<std::size_t>(nx));
+    for (int x = 0; x < nx; ++x) {
+      const AxisWeights ax = op.x_weights(z, x);
+      auto& m = masks[std::size_t(x)];
+      m.assign(ax.empty() ? 0 : std::size_t(ax.last - ax.first) / 64 + 1, 0);
+      float peak = 0.f;
+      for (const Segment& s : ax.segments) {
+        for (int c = 0; c < s.length; ++c) peak = std::max(peak, ax.table[s.offset + std::size_t(c)]);
+      }
+      const float cut = float(settings.dark_weight_cutoff) * peak;
+      for (const Segment& s : ax.segments) {
+        for (int c = 0; c < s.length; ++c) {
+          if (ax.table[s.offset + std::size_t(c)] > cut) {
+            const int bit = s.first + c - ax.first;
+            m[std::size_t(bit >> 6)] |= std::uint64_t(1) << (bit & 63);
+          }
+        }
+      }
+    }
+    auto& out = per_slice[std::size_t(z)];
+    auto& cnt = counts[std::size_t(z)];
+    for (int y = 0; y < ny; ++y) {
+      const AxisWeights ay = op.y_weights(z, y);
+      float peak = 0.f;
+      for (const Segment& s : ay.segments) {
+        for (int r = 0; r < s.length; ++r) peak = std::max(peak, ay.table[s.offset + std::size_t(r)]);
+      }
+      const float row_cut = float(settings.dark_weight_cutoff) * peak;
+      for (int x = 0; x < nx; ++x) {
+        const std::size_t v = g.index(x, y, z);
+        if (!(op.normaliser(v) > 0.f)) {
+          ++cnt[0];
+          continue;
+        }
+        if (!in_region(g, settings.region, x, y, z)) {
+          ++cnt[1];
+          continue;
+        }
+        const auto& m = masks[std::size_t(x)];
+        const int col0 = op.x_weights(z, x).first;
+        bool seen_dark = false;
+        for (const Segment& s : ay.segments) {
+          for (int r = 0; r < s.length && !seen_dark; ++r) {
+            if (!(ay.table[s.offset + std::size_t(r)] > row_cut)) continue;
+            for (std::size_t k = 0; k < m.size(); ++k) {
+              if (dark.window(s.first + r, col0 + int(64 * k)) & m[k]) {
+                seen_dark = true;
+                break;
+              }
+            }
+          }
+          if (seen_dark) break;
+        }
+        if (seen_dark) {
+          ++cnt[2];
+        } else {
+          out.push_back(std::uint32_t(v));
+        }
+      }
+    }
+  });
+  std::vector<std::uint32_t> active;
+  for (int z = 0; z < nz; ++z) {
+    const auto& s = per_slice[std::size_t(z)];
+    if (s.empty()) ++report.slices_empty;
+    active.insert(active.end(), s.begin(), s.end());
+    report.voxels_unseen += counts[std::size_t(z)][0];
+    report.voxels_outside_region += counts[std::size_t(z)][1];
+    report.voxels_dark += counts[std::size_t(z)][2];
+  }
+  report.voxels_active = active.size();
+  return active;
+}
+
+// ln I for the pixels MART uses (0 elsewhere: those pixels see no active voxel).
+std::vector<float> log_image(std::span<const float> image) {
+  std::vector<float> out(image.size(), 0.f);
+  for (std::size_t i = 0; i < image.size(); ++i) {
+    if (image[i] > 0.f) out[i] = std::log(std::max(image[i], kTiny));
+  }
+  return out;
+}
+
+float bounded_exp(float x) { return std::exp(std::clamp(x, -kMaxLog, kMaxLog)); }
+
+float clean(float v) { return v < kTiny ? 0.f : std::min(v, kHuge); }
+
+}  // namespace
+
+void validate_image(const ImageF& image, const WeightingOperator& op, const char* source) {
+  if (image.width != op.image_width() || image.height != op.image_height()) {
+    throw InputError(std::string(source) + ": image is " + std::to_string(image.width) + " x " +
+                     std::to_string(image.height) + " px, the camera's sensor is " +
+                     std::to_string(op.image_width()) + " x " + std::to_string(op.image_height()));
+  }
+  for (std::size_t i = 0; i < image.pixels.size(); ++i) {
+    const float v = image.pixels[i];
+    if (!std::isfinite(v) || v < 0.f) {
+      throw InputError(std::string(source) + ": pixel (" + std::to_string(i % std::size_t(image.width)) + ", " +
+                       std::to_string(i / std::size_t(image.width)) + ") is " + std::to_string(v) +
+                       "; intensities must be finite and non-negative");
+    }
+    if (v > kHuge) {
+      throw InputError(std::string(source) + ": pixel value " + std::to_string(v) + " exceeds " +
+                       std::to_string(kHuge) + "; scale the image down");
+    }
+  }
+}
+
+MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const MartSettings& settings,
+                       const std::function<void(const IterationReport&)>& progress) {
+  validate_settings(settings);
+  validate_image(image, op, "image");
+  if (settings.method != MartMethod::smart) {
+    throw InputError("MART: the matrix-free reconstruction runs the simultaneous form; the row-action "
+                     "form needs the explicit matrix (reconstruct_row_action)");
+  }
+  const auto t_setup = std::chrono::steady_clock::now();
+  MartResult result;
+  result.volume = Volume(op.grid(), 0.f);
+  const std::vector<float> data = thresholded(image, settings.noise_threshold);
+  const ActiveSet active(op, select_active(op, data, settings, result.skipped));
+  const std::size_t n = active.size();
+  std::vector<float> e(n, 1.f), update(n, 0.f), projection(op.pixel_count(), 0.f);
+  std::vector<float> ratio(op.pixel_count(), 0.f);  // white · ln(I / W E)
+  const float* white = op.white().pixels.data();
+
+  if (settings.start == MartStart::mlos && n > 0) {
+    // The weighted geometric mean of the lit pixels a voxel sees (dark ones below the cutoff
+    // carry no ln I), renormalised over those pixels.
+    std::vector<float> lit(data.size()), weight(n, 0.f);
+    for (std::size_t i = 0; i < data.size(); ++i) lit[i] = data[i] > 0.f ? 1.f : 0.f;
+    active.back_project(op, lit, weight);
+    active.back_project(op, log_image(data), update);
+    for (std::size_t m = 0; m < n; ++m) e[m] = weight[m] > 0.f ? clean(bounded_exp(update[m] / weight[m])) : 0.f;
+    // Scale to the image's total light so the first ratios are near 1.
+    active.project(op, e, projection);
+    const double total = sum(projection);
+    if (total > 0) {
+      const float scale = float(sum(data) / total);
+      for (float& v : e) v = clean(v * scale);
+    }
+  }
+  result.setup_seconds = seconds_since(t_setup);
+
+  double previous = -1;
+  for (int it = 1; it <= settings.iterations && n > 0; ++it) {
+    const auto t_it = std::chrono::steady_clock::now();
+    active.project(op, e, projection);
+    const double residual = normalised_residual(data, projection);
+    if (previous >= 0 && settings.convergence > 0 &&
+        std::abs(previous - residual) <= settings.convergence * previous) {
+      result.converged = true;
+      break;
+    }
+    previous = residual;
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, ratio.size(), 1 << 14),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+      for (std::size_t i = r.begin(); i != r.end(); ++i) {
+        const float p = projection[i], d = data[i];
+        ratio[i] = (d > 0.f && p > 0.f) ? white[i] * std::clamp(std::log(d) - std::log(p), -kMaxLog, kMaxLog) : 0.f;
+      }
+    });
+    active.back_project_whitened(op, ratio, update);
+    const float mu = float(settings.mu);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1 << 12), [&](const tbb::blocked_range<std::size_t>& r) {
+      for (std::size_t m = r.begin(); m != r.end(); ++m) e[m] = clean(e[m] * bounded_exp(mu * update[m]));
+    });
+    IterationReport rep{it, residual, seconds_since(t_it)};
+    result.iterations.push_back(rep);
+    if (progress) progress(rep);
+  }
+  if (n > 0) {
+    active.project(op, e, projection);
+    result.final_residual = normalised_residual(data, projection);
+  } else {
+    result.final_residual = normalised_residual(data, projection);
+  }
+  for (std::size_t m = 0; m < n; ++m) result.volume.data[active.voxels()[m]] = e[m];
+  return result;
+}
+
+Volume reconstruct_row_action(const WeightingOperator& op, const SparseMatrix& w, const ImageF& image,
+                              const MartSettings& settings) {
+  validate_settings(settings);
+  validate_image(image, op, "image");
+  const Grid3& g = op.grid();
+  if (w.rows != op.pixel_count() || w.cols != g.count()) {
+    throw InputError("row-action MART: the matrix does not belong to this operator");
+  }
+  const std::vector<float> data = thresholded(image, settings.noise_threshold);
+  std::vector<float> e(g.count(), 1.f);
+  if (settings.start == MartStart::mlos) {
+    std::vector<float> logs(g.count(), 0.f);
+    w.multiply_transpose(log_image(data), logs);
+    // A voxel seen by a dark pixel starts (and stays) at zero.
+    std::vector<char> dark(g.count(), 0);
+    for (std::size_t i = 0; i < w.rows; ++i) {
+      if (data[i] > 0.f) continue;
+      for (std::size_t k = w.row_start[i]; k < w.row_start[i + 1]; ++k) dark[w.col_index[k]] = 1;
+    }
+    for (std::size_t j = 0; j < e.size(); ++j) e[j] = dark[j] ? 0.f : clean(bounded_exp(logs[j]));
+    std::vector<float> p(w.rows, 0.f);
+    w.multiply(e, p);
+    const double total = sum(p);
+    if (total > 0) {
+      const float scale = float(sum(data) / total);
+      for (float& v : e) v = clean(v * scale);
+    }
+  }
+  for (int z = 0; z < g.shape[2]; ++z) {
+    for (int y = 0; y < g.shape[1]; ++y) {
+      for (int x = 0; x < g.shape[0]; ++x) {
+        const std::size_t j = g.index(x, y, z);
+        if (!in_region(g, settings.region, x, y, z) || !(op.normaliser(j) > 0.f)) e[j] = 0.f;
+      }
+    }
+  }
+  const double mu = settings.mu;
+  for (int it = 0; it < settings.iterations; ++it) {
+    for (std::size_t i = 0; i < w.rows; ++i) {
+      const std::size_t k0 = w.row_start[i], k1 = w.row_start[i + 1];
+      if (k0 == k1) continue;
+      double p = 0;
+      for (std::size_t k = k0; k < k1; ++k) p += double(w.values[k]) * e[w.col_index[k]];
+      if (data[i] == 0.f) {
+        for (std::size_t k = k0; k < k1; ++k) e[w.col_index[k]] = 0.f;
+        continue;
+      }
+      if (!(p > 0)) continue;
+      const double log_ratio = std::clamp(std::log(double(data[i]) / p), -double(kMaxLog), double(kMaxLog));
+      for (std::size_t k = k0; k < k1; ++k) {
+        float& v = e[w.col_index[k]];
+        v = clean(float(v * std::exp(mu * w.values[k] * log_ratio)));
+      }
+    }
+  }
+  Volume out(g, 0.f);
+  out.data = std::move(e);
+  return out;
+}
+
+}  // namespace plenopiv::recon

@@ -1,0 +1,94 @@
+// MART (eq 9) on the plenoptic weights: the row-action reference, and the simultaneous
+// multiplicative production form (SMART) with MLOS start, skipping and a convergence stop.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <functional>
+#include <optional>
+#include <vector>
+
+#include "core/base/grid.hpp"
+#include "core/base/image.hpp"
+#include "core/recon/weights.hpp"
+
+namespace plenopiv::recon {
+
+enum class MartMethod {
+  // E_j <- E_j · exp(mu Σ_i w̄_ij ln(I_i / (W E)_i)): every voxel multiplied by the weighted
+  // geometric mean of its pixels' ratios (Byrne's SMART; eq 9 applied to all pixels at once with
+  // the eq 13 weights). Matrix-free, parallel, production.
+  smart,
+  // Eq 9 literally: pixel after pixel on the explicit matrix. The small-case reference.
+  row_action,
+};
+
+enum class MartStart {
+  ones,  // E⁰ = 1 (eq 9)
+  mlos,  // multiplicative line of sight: E⁰_j = Π_i I_i^(w̄_ij)
+};
+
+// A box in object space, mm (inclusive bounds): voxels whose centres lie outside are not solved.
+struct RegionMm {
+  std::array<double, 3> min_mm{0, 0, 0};
+  std::array<double, 3> max_mm{0, 0, 0};
+};
+
+struct MartSettings {
+  MartMethod method = MartMethod::smart;
+  MartStart start = MartStart::mlos;
+  int iterations = 5;
+  double mu = 0.5;                 // relaxation, 0 < mu <= 1
+  float noise_threshold = 0.f;     // pixels at or below it count as dark (zero)
+  // A dark pixel zeroes a voxel (eq 9: ratio 0) only where the voxel's column and row weights at
+  // that pixel both exceed this fraction of their largest value; fainter dark pixels (the
+  // bilinear tails of the weights, lost to quantisation and noise) are left out of the update.
+  // 0 applies eq 9 literally: any dark pixel with weight zeroes the voxel.
+  double dark_weight_cutoff = 0.1;
+  double convergence = 0.0;        // stop when the residual changes by less than this fraction
+  std::optional<RegionMm> region;  // solve only here
+};
+
+// What was skipped, so a run can report how much of the box the scene needed.
+struct SkipReport {
+  std::size_t pixels = 0;
+  std::size_t dark_pixels = 0;           // at or below the noise threshold (inside microlens images)
+  std::size_t voxels = 0;
+  std::size_t voxels_unseen = 0;         // see no pixel (outside the field of view)
+  std::size_t voxels_outside_region = 0;
+  std::size_t voxels_dark = 0;           // seen by a dark pixel: zero under MART, never updated
+  std::size_t voxels_active = 0;
+  int slices = 0;
+  int slices_empty = 0;                  // no active voxel
+  double fraction_skipped() const { return voxels ? 1.0 - double(voxels_active) / double(voxels) : 0.0; }
+};
+
+struct IterationReport {
+  int iteration = 0;           // 1-based
+  double residual = 0;         // ||I - W E|| / ||I|| before this iteration's update
+  double seconds = 0;
+};
+
+struct MartResult {
+  Volume volume;
+  SkipReport skipped;
+  std::vector<IterationReport> iterations;
+  double final_residual = 0;   // after the last update
+  bool converged = false;
+  double setup_seconds = 0;    // active set and start
+};
+
+// Checks an image for the reconstruction: sensor-sized, finite, non-negative; InputError otherwise
+// naming `source`.
+void validate_image(const ImageF& image, const WeightingOperator& op, const char* source);
+
+// Reconstructs a volume from a raw plenoptic image (float, counts) with the matrix-free operator.
+// `progress` (optional) is called after each iteration. Bit-identical at any thread count.
+MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const MartSettings& settings,
+                       const std::function<void(const IterationReport&)>& progress = {});
+
+// The reference: eq 9 row by row on the explicit matrix (rows = pixels in storage order).
+Volume reconstruct_row_action(const WeightingOperator& op, const SparseMatrix& w, const ImageF& image,
+                              const MartSettings& settings);
+
+}  // namespace plenopiv::recon

@@ -1,0 +1,561 @@
+// The plenoptic weighting function of sec 5.2 (eqs 10-13): separable tables, matrix-free
+// operators and the explicit reference matrix, all from the same 1-D ray primitive.
+#include "core/recon/weights.hpp"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+#include <utility>
+
+#include "core/base/errors.hpp"
+
+namespace plenopiv::recon {
+namespace {
+
+struct Hit {
+  int index = -1;
+  double weight = 0;
+};
+
+// Eq 11 in lattice coordinates: the two lenses whose centres bracket `x` and the linear weights
+// (1 - t, t). Lattice coordinates are piecewise linear between measured centres; beyond the
+// array's ends they continue with the edge pitch and the missing lens's share is lost.
+std::pair<Hit, Hit> bracket(const std::vector<double>& centres, double x) {
+  const int n = int(centres.size());
+  if (n == 1) return {Hit{}, Hit{}};
+  const auto it = std::upper_bound(centres.begin(), centres.end(), x);
+  const int i1 = int(it - centres.begin());
+  if (i1 == 0) {
+    const double t = 1.0 + (x - centres[0]) / (centres[1] - centres[0]);
+    return {Hit{}, t > 0 ? Hit{0, t} : Hit{}};
+  }
+  if (i1 == n) {
+    const double t = (x - centres[n - 1]) / (centres[n - 1] - centres[n - 2]);
+    return {t < 1 ? Hit{n - 1, 1.0 - t} : Hit{}, Hit{}};
+  }
+  const int i0 = i1 - 1;
+  const double t = (x - centres[i0]) / (centres[i1] - centres[i0]);
+  return {Hit{i0, 1.0 - t}, Hit{i1, t}};
+}
+
+// Everything about one ray along one sensor axis: up to 2 lenses x 2 pixels (the 1-D factor of
+// eq 12's 16 coefficients). `pixel_of_mm` maps sensor mm to a fractional pixel index.
+template <typename PixelOf>
+int ray_coefficients(const WeightingOperator::Geometry& g, const std::vector<double>& centres,
+                     double alpha, double prime_mm, double u, int pixels, PixelOf pixel_of_mm,
+                     int* out_pixel, double* out_weight) {
+  // Eq 2: where the ray from aperture point u through the image-space point x' meets the
+  // microlens plane.
+  const double x_ml = u * (1.0 - 1.0 / alpha) + prime_mm / alpha;
+  const auto [a, b] = bracket(centres, x_ml);
+  int count = 0;
+  for (const Hit& lens : {a, b}) {
+    if (lens.index < 0 || lens.weight <= 0) continue;
+    // Eq 1 inverted: behind that lens the ray lands at spot - u f_l / s_i.
+    const double spot = optics::lens_centre_to_spot_mm(centres[std::size_t(lens.index)], g.s_i, g.f_lens);
+    const double p = pixel_of_mm(spot - u * g.f_lens / g.s_i);
+    const double p0 = std::floor(p);
+    const double t = p - p0;
+    const int i0 = int(p0);
+    if (i0 >= 0 && i0 < pixels && t < 1) {
+      out_pixel[count] = i0;
+      out_weight[count++] = lens.weight * (1.0 - t);
+    }
+    if (i0 + 1 >= 0 && i0 + 1 < pixels && t > 0) {
+      out_pixel[count] = i0 + 1;
+      out_weight[count++] = lens.weight * t;
+    }
+  }
+  return count;
+}
+
+double sample_position(double aperture, int samples, int k) {
+  return (k + 0.5) * aperture / samples - 0.5 * aperture;
+}
+
+}  // namespace
+
+ImageF geometric_white_image(const optics::CameraModel& camera, const optics::MicrolensArray& lenses) {
+  const optics::SensorSpec& s = camera.sensor();
+  ImageF white(s.width_px, s.height_px, 0.f);
+  const double radius_px = 0.5 * camera.microlens_image_diameter_px();
+  const double s_i = camera.image_distance_mm();
+  const double f_l = camera.microlens().focal_length_mm;
+  constexpr int kSub = 8;  // sub-samples per pixel axis on the disk edge
+  // Each lens paints its own disk; disks do not overlap (eq 7 is checked by CameraModel).
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, lenses.centres_mm.size()),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+    for (std::size_t lens = range.begin(); lens != range.end(); ++lens) {
+      const double cx = optics::sensor_mm_to_column(s, optics::lens_centre_to_spot_mm(lenses.centres_mm[lens][0], s_i, f_l));
+      const double cy = optics::sensor_mm_to_row(s, optics::lens_centre_to_spot_mm(lenses.centres_mm[lens][1], s_i, f_l));
+      const int x0 = std::max(0, int(std::floor(cx - radius_px - 1)));
+      const int x1 = std::min(s.width_px - 1, int(std::ceil(cx + radius_px + 1)));
+      const int y0 = std::max(0, int(std::floor(cy - radius_px - 1)));
+      const int y1 = std::min(s.height_px - 1, int(std::ceil(cy + radius_px + 1)));
+      for (int y = y0; y <= y1; ++y) {
+        for (int x = x0; x <= x1; ++x) {
+          const double d = std::hypot(x - cx, y - cy);
+          double fraction;
+          if (d <= radius_px - 0.75) {
+            fraction = 1.0;
+          } else if (d >= radius_px + 0.75) {
+            continue;
+          } else {
+            int inside = 0;
+            for (int j = 0; j < kSub; ++j) {
+              for (int i = 0; i < kSub; ++i) {
+                const double px = x - 0.5 + (i + 0.5) / kSub - cx;
+                const double py = y - 0.5 + (j + 0.5) / kSub - cy;
+                inside += px * px + py * py <= radius_px * radius_px;
+              }
+            }
+            fraction = double(inside) / (kSub * kSub);
+          }
+          // Neighbouring disks may touch a shared edge pixel: they never overlap, so add.
+          float& w = white.at(x, y);
+          w = std::min(1.f, w + float(fraction));
+        }
+      }
+    }
+  });
+  return white;
+}
+
+WeightingOperator::WeightingOperator(const optics::CameraModel& camera,
+                                     const optics::MicrolensArray& lenses, const Grid3& grid,
+                                     ImageF white)
+    : grid_(grid),
+      width_(camera.sensor().width_px),
+      height_(camera.sensor().height_px),
+      sensor_(camera.sensor()),
+      white_(std::move(white)) {
+  if (white_.width != width_ || white_.height != height_) {
+    throw InputError("white image: " + std::to_string(white_.width) + " x " + std::to_string(white_.height) +
+                     " px, the sensor is " + std::to_string(width_) + " x " + std::to_string(height_));
+  }
+  for (int a = 0; a < 3; ++a) {
+    if (grid_.shape[a] <= 0 || !(grid_.spacing_mm[a] > 0)) {
+      throw InputError("volume grid: every axis needs at least one voxel and a positive spacing");
+    }
+  }
+  const optics::Lattice& lat = lenses.lattice;
+  if (lat.layout != optics::LensletLayout::rect || lat.rotation_rad != 0.0) {
+    throw InputError("microlens array: the reconstruction needs a rectangular, unrotated lattice "
+                     "(hex or rotated arrays are not supported yet)");
+  }
+  if (lat.count_x < 2 || lat.count_y < 2 || lenses.centres_mm.size() != std::size_t(lat.count())) {
+    throw InputError("microlens array: needs at least 2 x 2 lenses and one centre per lens");
+  }
+  geo_.s_o = camera.object_distance_mm();
+  geo_.s_i = camera.image_distance_mm();
+  geo_.f_main = camera.main_lens().focal_length_mm;
+  geo_.f_lens = camera.microlens().focal_length_mm;
+  geo_.aperture = camera.aperture_diameter_mm();
+  geo_.pixel_pitch = camera.sensor().pixel_pitch_mm;
+  geo_.nominal_samples = std::max(2, int(std::ceil(camera.microlens_image_diameter_px() - 1e-9)));
+  // Separability: lens x depends on the column only, y on the row only.
+  for (int i = 0; i < lat.count_x; ++i) geo_.lens_x.push_back(lenses.centre(i, 0)[0]);
+  for (int j = 0; j < lat.count_y; ++j) geo_.lens_y.push_back(lenses.centre(0, j)[1]);
+  constexpr double kSameMm = 1e-9;
+  for (int j = 0; j < lat.count_y; ++j) {
+    for (int i = 0; i < lat.count_x; ++i) {
+      if (std::abs(lenses.centre(i, j)[0] - geo_.lens_x[std::size_t(i)]) > kSameMm ||
+          std::abs(lenses.centre(i, j)[1] - geo_.lens_y[std::size_t(j)]) > kSameMm) {
+        throw InputError("microlens array: lens (" + std::to_string(i) + ", " + std::to_string(j) +
+                         ") leaves its lattice column/row; the separable weights need centres that "
+                         "share x along columns and y along rows");
+      }
+    }
+  }
+  geo_.min_pitch = 1e300;
+  for (std::size_t i = 1; i < geo_.lens_x.size(); ++i) geo_.min_pitch = std::min(geo_.min_pitch, geo_.lens_x[i] - geo_.lens_x[i - 1]);
+  for (std::size_t j = 1; j < geo_.lens_y.size(); ++j) geo_.min_pitch = std::min(geo_.min_pitch, geo_.lens_y[j] - geo_.lens_y[j - 1]);
+  if (!(geo_.min_pitch > 0)) throw InputError("microlens array: centres must increase along rows and columns");
+
+  const int nx = grid_.shape[0], ny = grid_.shape[1], nz = grid_.shape[2];
+  slices_.resize(std::size_t(nz));
+  for (int z = 0; z < nz; ++z) slice_optics(grid_.coordinate_mm(2, z));  // validates every depth
+
+  auto column_of = [this](double mm) { return optics::sensor_mm_to_column(sensor_, mm); };
+  auto row_of = [this](double mm) { return optics::sensor_mm_to_row(sensor_, mm); };
+  tbb::parallel_for(0, nz, [&](int z) {
+    SliceTables& t = slices_[std::size_t(z)];
+    t.z_mm = grid_.coordinate_mm(2, z);
+    const SliceOptics o = slice_optics(t.z_mm);
+    t.alpha = o.alpha;
+    t.magnification = o.magnification;
+    t.samples = o.samples;
+    std::vector<double> scratch(std::size_t(std::max(width_, height_)), 0.0);
+    auto build = [&](int count, int axis, const std::vector<double>& centres, int pixels, auto pixel_of,
+                     std::vector<WeightRun>& runs, std::vector<Segment>& segments, std::vector<float>& table) {
+      runs.resize(std::size_t(count));
+      for (int v = 0; v < count; ++v) {
+        const double prime = o.magnification * grid_.coordinate_mm(axis, v);
+        int lo = pixels, hi = -1;
+        for (int k = 0; k < o.samples; ++k) {
+          int pix[4];
+          double w[4];
+          const int n = ray_coefficients(geo_, centres, o.alpha, prime, sample_position(geo_.aperture, o.samples, k),
+                                         pixels, pixel_of, pix, w);
+          for (int h = 0; h < n; ++h) {
+            scratch[std::size_t(pix[h])] += w[h];
+            lo = std::min(lo, pix[h]);
+            hi = std::max(hi, pix[h]);
+          }
+        }
+        // Away from focus a voxel reaches a few pixels behind each of many lenses: keep only the
+        // stretches with weight (gaps of up to kGap zeros are cheaper to carry than to split).
+        constexpr int kGap = 2;
+        WeightRun& run = runs[std::size_t(v)];
+        run.first = lo;
+        run.last = hi;
+        run.segment_begin = segments.size();
+        for (int p = lo; p <= hi;) {
+          if (scratch[std::size_t(p)] == 0.0) {
+            ++p;
+            continue;
+          }
+          int end = p;  // last pixel with weight in this stretch
+          for (int q = p + 1; q <= hi && q <= end + kGap + 1; ++q) {
+            if (scratch[std::size_t(q)] != 0.0) end = q;
+          }
+          segments.push_back(Segment{p, end - p + 1, table.size()});
+          for (int q = p; q <= end; ++q) table.push_back(float(scratch[std::size_t(q)]));
+          p = end + 1;
+        }
+        run.segment_end = segments.size();
+        for (int p = lo; p <= hi; ++p) scratch[std::size_t(p)] = 0.0;
+      }
+    };
+    build(nx, 0, geo_.lens_x, width_, column_of, t.x_runs, t.x_segments, t.x_table);
+    build(ny, 1, geo_.lens_y, height_, row_of, t.y_runs, t.y_segments, t.y_table);
+  });
+
+  // Eq 13's denominators n_j = Σ_rows Ay Σ_cols Ax white, in two separable stages per slice.
+  normaliser_.assign(grid_.count(), 0.f);
+  tbb::parallel_for(0, nz, [&](int z) {
+    const SliceTables& t = slices_[std::size_t(z)];
+    int r_lo = height_, r_hi = -1;
+    for (const WeightRun& r : t.y_runs) {
+      if (r.last < r.first) continue;
+      r_lo = std::min(r_lo, r.first);
+      r_hi = std::max(r_hi, r.last);
+    }
+    if (r_hi < r_lo) return;
+    const std::size_t rows = std::size_t(r_hi - r_lo + 1);
+    std::vector<double> g(rows * std::size_t(nx), 0.0);  // [row][x]
+    for (std::size_t r = 0; r < rows; ++r) {
+      const float* wrow = white_.pixels.data() + (std::size_t(r_lo) + r) * std::size_t(width_);
+      for (int x = 0; x < nx; ++x) {
+        const AxisWeights ax = x_weights(z, x);
+        double s = 0;
+        for (const Segment& seg : ax.segments) {
+          for (int c = 0; c < seg.length; ++c) s += double(ax.table[seg.offset + std::size_t(c)]) * wrow[seg.first + c];
+        }
+        g[r * std::size_t(nx) + std::size_t(x)] = s;
+      }
+    }
+    for (int y = 0; y < ny; ++y) {
+      const AxisWeights ay = y_weights(z, y);
+      for (int x = 0; x < nx; ++x) {
+        double s = 0;
+        for (const Segment& seg : ay.segments) {
+          for (int r = 0; r < seg.length; ++r) {
+            s += double(ay.table[seg.offset + std::size_t(r)]) *
+                 g[std::size_t(seg.first + r - r_lo) * std::size_t(nx) + std::size_t(x)];
+          }
+        }
+        normaliser_[grid_.index(x, y, z)] = float(s);
+      }
+    }
+  });
+}
+
+SliceOptics WeightingOperator::slice_optics(double z_mm) const {
+  // Eq 10 with s'_o = s_o + z_o (DESIGN.md: the printed s_i + z_o holds only at M = -1).
+  const double so = geo_.s_o + z_mm;
+  if (!(so > geo_.f_main * (1 + 1e-9))) {
+    throw InputError("volume grid: depth z = " + std::to_string(z_mm) +
+                     " mm lies at or inside the main lens's focal length; no real image forms there");
+  }
+  const double si = geo_.f_main * so / (so - geo_.f_main);
+  SliceOptics o;
+  o.alpha = si / geo_.s_i;
+  o.magnification = -si / so;
+  // Sec 5.2: enough rays that their spacing on the microlens plane stays under one microlens,
+  // and never fewer than the nominal angular sampling (pixels across a microlens image).
+  const double spread = geo_.aperture * std::abs(1.0 - 1.0 / o.alpha);
+  o.samples = std::max(geo_.nominal_samples, int(std::floor(spread / geo_.min_pitch)) + 1);
+  return o;
+}
+
+namespace {
+AxisWeights axis_weights(const WeightRun& r, const std::vector<Segment>& segments, const std::vector<float>& table) {
+  AxisWeights w;
+  w.segments = {segments.data() + r.segment_begin, r.segment_end - r.segment_begin};
+  w.table = table.data();
+  w.first = r.first;
+  w.last = r.last;
+  return w;
+}
+}  // namespace
+
+float AxisWeights::at(int p) const {
+  for (const Segment& s : segments) {
+    if (p >= s.first && p < s.first + s.length) return table[s.offset + std::size_t(p - s.first)];
+  }
+  return 0.f;
+}
+
+AxisWeights WeightingOperator::x_weights(int z, int x) const {
+  const SliceTables& t = slices_[std::size_t(z)];
+  return axis_weights(t.x_runs[std::size_t(x)], t.x_segments, t.x_table);
+}
+AxisWeights WeightingOperator::y_weights(int z, int y) const {
+  const SliceTables& t = slices_[std::size_t(z)];
+  return axis_weights(t.y_runs[std::size_t(y)], t.y_segments, t.y_table);
+}
+
+void WeightingOperator::project(std::span<const float> volume, std::span<float> image) const {
+  if (volume.size() != grid_.count() || image.size() != pixel_count()) {
+    throw InputError("project: volume or image size does not match the operator");
+  }
+  ActiveSet::all(*this).project(*this, volume, image);
+}
+
+void WeightingOperator::back_project(std::span<const float> image, std::span<float> volume) const {
+  if (volume.size() != grid_.count() || image.size() != pixel_count()) {
+    throw InputError("back_project: volume or image size does not match the operator");
+  }
+  ActiveSet::all(*this).back_project(*this, image, volume);
+}
+
+// ---------------------------------------------------------------------------------------------
+
+ActiveSet::ActiveSet(const WeightingOperator& op, std::vector<std::uint32_t> voxels)
+    : voxels_(std::move(voxels)) {
+  const Grid3& g = op.grid();
+  const int bands = (op.image_height() + band_rows_ - 1) / band_rows_;
+  std::vector<std::size_t> count(std::size_t(bands) + 1, 0);
+  auto band_range = [&](std::uint32_t v, int& b0, int& b1) {
+    const int x = int(v % std::uint32_t(g.shape[0]));
+    const int y = int((v / std::uint32_t(g.shape[0])) % std::uint32_t(g.shape[1]));
+    const int z = int(v / (std::uint32_t(g.shape[0]) * std::uint32_t(g.shape[1])));
+    const AxisWeights ay = op.y_weights(z, y);
+    if (ay.empty() || op.x_weights(z, x).empty() || op.normaliser(v) <= 0) {
+      b0 = 0;
+      b1 = -1;
+      return;
+    }
+    b0 = ay.first / band_rows_;
+    b1 = ay.last / band_rows_;
+  };
+  for (std::uint32_t v : voxels_) {
+    int b0, b1;
+    band_range(v, b0, b1);
+    for (int b = b0; b <= b1; ++b) ++count[std::size_t(b) + 1];
+  }
+  band_start_.assign(std::size_t(bands) + 1, 0);
+  for (int b = 0; b < bands; ++b) band_start_[std::size_t(b) + 1] = band_start_[std::size_t(b)] + count[std::size_t(b) + 1];
+  band_members_.resize(band_start_.back());
+  std::vector<std::size_t> fill(band_start_.begin(), band_start_.end() - 1);
+  for (std::size_t m = 0; m < voxels_.size(); ++m) {
+    int b0, b1;
+    band_range(voxels_[m], b0, b1);
+    for (int b = b0; b <= b1; ++b) band_members_[fill[std::size_t(b)]++] = std::uint32_t(m);
+  }
+}
+
+ActiveSet ActiveSet::all(const WeightingOperator& op) {
+  std::vector<std::uint32_t> v(op.grid().count());
+  for (std::size_t i = 0; i < v.size(); ++i) v[i] = std::uint32_t(i);
+  return ActiveSet(op, std::move(v));
+}
+
+void ActiveSet::project(const WeightingOperator& op, std::span<const float> values,
+                        std::span<float> image) const {
+  const Grid3& g = op.grid();
+  const std::size_t width = std::size_t(op.image_width());
+  const int height = op.image_height();
+  const std::uint32_t nx = std::uint32_t(g.shape[0]), nxy = nx * std::uint32_t(g.shape[1]);
+  const int bands = int(band_start_.size()) - 1;
+  // Each band owns its sensor rows and adds its voxels in a fixed order: no atomics, and the
+  // same sums whatever the thread count.
+  tbb::parallel_for(0, bands, [&](int b) {
+    const int r0 = b * band_rows_, r1 = std::min(height, r0 + band_rows_);
+    std::fill(image.begin() + std::ptrdiff_t(std::size_t(r0) * width), image.begin() + std::ptrdiff_t(std::size_t(r1) * width), 0.f);
+    for (std::size_t k = band_start_[std::size_t(b)]; k < band_start_[std::size_t(b) + 1]; ++k) {
+      const std::uint32_t m = band_members_[k];
+      const float e = values[m];
+      if (e == 0.f) continue;
+      const std::uint32_t v = voxels_[m];
+      const int x = int(v % nx), y = int((v % nxy) / nx), z = int(v / nxy);
+      const AxisWeights ax = op.x_weights(z, x), ay = op.y_weights(z, y);
+      const float s = e / op.normaliser(v);
+      for (const Segment& sy : ay.segments) {
+        const int lo = std::max(r0, sy.first), hi = std::min(r1, sy.first + sy.length);
+        for (int r = lo; r < hi; ++r) {
+          const float a = s * ay.table[sy.offset + std::size_t(r - sy.first)];
+          float* row = image.data() + std::size_t(r) * width;
+          for (const Segment& sx : ax.segments) {
+            float* q = row + sx.first;
+            const float* w = ax.table + sx.offset;
+            for (int c = 0; c < sx.length; ++c) q[c] += a * w[c];
+          }
+        }
+      }
+    }
+    const float* white = op.white().pixels.data();
+    for (std::size_t i = std::size_t(r0) * width; i < std::size_t(r1) * width; ++i) image[i] *= white[i];
+  });
+}
+
+void ActiveSet::back_project(const WeightingOperator& op, std::span<const float> image,
+                             std::span<float> values) const {
+  std::vector<float> whitened(image.size());
+  const float* white = op.white().pixels.data();
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, image.size(), 1 << 14),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+    for (std::size_t i = r.begin(); i != r.end(); ++i) whitened[i] = image[i] * white[i];
+  });
+  back_project_whitened(op, whitened, values);
+}
+
+void ActiveSet::back_project_whitened(const WeightingOperator& op, std::span<const float> image,
+                                      std::span<float> values) const {
+  const Grid3& g = op.grid();
+  const std::size_t width = std::size_t(op.image_width());
+  const std::uint32_t nx = std::uint32_t(g.shape[0]), nxy = nx * std::uint32_t(g.shape[1]);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, voxels_.size(), 256),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+    for (std::size_t m = range.begin(); m != range.end(); ++m) {
+      const std::uint32_t v = voxels_[m];
+      const float n = op.normaliser(v);
+      if (n <= 0.f) {
+        values[m] = 0.f;
+        continue;
+      }
+      const int x = int(v % nx), y = int((v % nxy) / nx), z = int(v / nxy);
+      const AxisWeights ax = op.x_weights(z, x), ay = op.y_weights(z, y);
+      double s = 0;
+      for (const Segment& sy : ay.segments) {
+        for (int r = 0; r < sy.length; ++r) {
+          const float* row = image.data() + std::size_t(sy.first + r) * width;
+          // Four fixed partial sums: the compiler may pipeline them, the order stays fixed.
+          float acc[4] = {0.f, 0.f, 0.f, 0.f};
+          for (const Segment& sx : ax.segments) {
+            const float* w = ax.table + sx.offset;
+            const float* img = row + sx.first;
+            int c = 0;
+            for (; c + 4 <= sx.length; c += 4) {
+              for (int k = 0; k < 4; ++k) acc[k] += w[c + k] * img[c + k];
+            }
+            for (; c < sx.length; ++c) acc[0] += w[c] * img[c];
+          }
+          s += double(ay.table[sy.offset + std::size_t(r)]) * ((acc[0] + acc[1]) + (acc[2] + acc[3]));
+        }
+      }
+      values[m] = float(s / n);
+    }
+  });
+}
+
+// ---------------------------------------------------------------------------------------------
+
+void SparseMatrix::multiply(std::span<const float> x, std::span<float> y) const {
+  for (std::size_t r = 0; r < rows; ++r) {
+    double s = 0;
+    for (std::size_t k = row_start[r]; k < row_start[r + 1]; ++k) s += double(values[k]) * x[col_index[k]];
+    y[r] = float(s);
+  }
+}
+
+void SparseMatrix::multiply_transpose(std::span<const float> y, std::span<float> x) const {
+  std::vector<double> acc(cols, 0.0);
+  for (std::size_t r = 0; r < rows; ++r) {
+    for (std::size_t k = row_start[r]; k < row_start[r + 1]; ++k) acc[col_index[k]] += double(values[k]) * y[r];
+  }
+  for (std::size_t c = 0; c < cols; ++c) x[c] = float(acc[c]);
+}
+
+SparseMatrix build_explicit_matrix(const WeightingOperator& op) {
+  const Grid3& g = op.grid();
+  const WeightingOperator::Geometry& geo = op.geometry();
+  const int width = op.image_width(), height = op.image_height();
+  const optics::SensorSpec sensor{width, height, geo.pixel_pitch};
+  auto column_of = [&](double mm) { return optics::sensor_mm_to_column(sensor, mm); };
+  auto row_of = [&](double mm) { return optics::sensor_mm_to_row(sensor, mm); };
+
+  // Columns of W (one per voxel), each a list of (pixel, weight).
+  std::vector<std::vector<std::pair<std::uint32_t, float>>> columns(g.count());
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, g.count(), 16),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+    std::vector<std::pair<std::uint32_t, double>> entries;
+    for (std::size_t j = range.begin(); j != range.end(); ++j) {
+      const int x = int(j % std::size_t(g.shape[0]));
+      const int y = int((j / std::size_t(g.shape[0])) % std::size_t(g.shape[1]));
+      const int z = int(j / (std::size_t(g.shape[0]) * std::size_t(g.shape[1])));
+      const SliceOptics o = op.slice_optics(g.coordinate_mm(2, z));
+      const double xp = o.magnification * g.coordinate_mm(0, x);
+      const double yp = o.magnification * g.coordinate_mm(1, y);
+      entries.clear();
+      // Literally sec 5.2: every ray of the plaid (u, v) grid through the voxel, its 4 lenses
+      // and 4 pixels behind each (eq 12), times the white image (fig 15).
+      for (int ku = 0; ku < o.samples; ++ku) {
+        const double u = sample_position(geo.aperture, o.samples, ku);
+        int cu[4];
+        double wu[4];
+        const int nu = ray_coefficients(geo, geo.lens_x, o.alpha, xp, u, width, column_of, cu, wu);
+        for (int kv = 0; kv < o.samples; ++kv) {
+          const double v = sample_position(geo.aperture, o.samples, kv);
+          int rv[4];
+          double wv[4];
+          const int nv = ray_coefficients(geo, geo.lens_y, o.alpha, yp, v, height, row_of, rv, wv);
+          for (int a = 0; a < nu; ++a) {
+            for (int b = 0; b < nv; ++b) {
+              const std::uint32_t pixel = std::uint32_t(rv[b]) * std::uint32_t(width) + std::uint32_t(cu[a]);
+              const double w = wu[a] * wv[b] * op.white().pixels[pixel];
+              if (w > 0) entries.emplace_back(pixel, w);
+            }
+          }
+        }
+      }
+      std::sort(entries.begin(), entries.end(),
+                [](const auto& p, const auto& q) { return p.first < q.first; });
+      double total = 0;
+      for (const auto& e : entries) total += e.second;
+      auto& col = columns[j];
+      for (std::size_t k = 0; k < entries.size();) {
+        double s = 0;
+        const std::uint32_t pixel = entries[k].first;
+        for (; k < entries.size() && entries[k].first == pixel; ++k) s += entries[k].second;
+        col.emplace_back(pixel, float(s / total));  // eq 13
+      }
+    }
+  });
+
+  SparseMatrix m;
+  m.rows = op.pixel_count();
+  m.cols = g.count();
+  m.row_start.assign(m.rows + 1, 0);
+  for (const auto& col : columns) {
+    for (const auto& e : col) ++m.row_start[e.first + 1];
+  }
+  for (std::size_t r = 0; r < m.rows; ++r) m.row_start[r + 1] += m.row_start[r];
+  m.col_index.resize(m.row_start.back());
+  m.values.resize(m.row_start.back());
+  std::vector<std::size_t> fill(m.row_start.begin(), m.row_start.end() - 1);
+  for (std::size_t j = 0; j < columns.size(); ++j) {
+    for (const auto& e : columns[j]) {
+      const std::size_t k = fill[e.first]++;
+      m.col_index[k] = std::uint32_t(j);
+      m.values[k] = e.second;
+    }
+  }
+  return m;
+}
+
+}  // namespace plenopiv::recon

@@ -1,0 +1,170 @@
+// The plenoptic weighting function of sec 5.2 (eqs 10-13) in raw sensor pixels: separable
+// per-slice tables, the matrix-free projection W·E and back-projection Wᵀ·r, and the explicit
+// sparse matrix built literally ray by ray as the reference for small cases.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "core/base/grid.hpp"
+#include "core/base/image.hpp"
+#include "core/optics/camera_model.hpp"
+#include "core/optics/microlens_array.hpp"
+
+namespace plenopiv::recon {
+
+// The white-image correction of fig 15 from the camera model: per pixel, the fraction of its area
+// inside the disk of diameter CameraModel::microlens_image_diameter_px() around the spot of each
+// lens (1 inside a microlens image, 0 outside). Calibration later provides the measured one.
+ImageF geometric_white_image(const optics::CameraModel& camera, const optics::MicrolensArray& lenses);
+
+// A stretch of consecutive pixels with weight along one sensor axis (the pixels one voxel reaches
+// behind one microlens, or behind neighbouring lenses where their images touch).
+struct Segment {
+  int first = 0;
+  int length = 0;
+  std::size_t offset = 0;  // into the slice's weight table
+};
+
+// One voxel's 1-D weights along one sensor axis: its segments, and their extent [first, last].
+struct WeightRun {
+  int first = 0;
+  int last = -1;
+  std::size_t segment_begin = 0, segment_end = 0;  // into the slice's segment list
+};
+
+// What one depth slice needs: eq 10 for its depth and the 1-D weights of each voxel column/row.
+struct SliceTables {
+  double z_mm = 0;
+  double alpha = 0;            // eq 10c
+  double magnification = 0;   // M' = -s'_i / s'_o
+  int samples = 0;             // (u, v) plaid samples per aperture axis for this slice
+  std::vector<WeightRun> x_runs;  // per voxel x index: weights over sensor columns
+  std::vector<WeightRun> y_runs;  // per voxel y index: weights over sensor rows
+  std::vector<Segment> x_segments, y_segments;
+  std::vector<float> x_table, y_table;
+};
+
+// One voxel's weights along one axis, ready for a kernel.
+struct AxisWeights {
+  std::span<const Segment> segments;
+  const float* table = nullptr;
+  int first = 0;
+  int last = -1;
+  bool empty() const { return segments.empty(); }
+  // Weight of pixel p (0 outside the segments); for tests and masks, not for kernels.
+  float at(int p) const;
+};
+
+// The depth-dependent part of eq 10 for one slice.
+struct SliceOptics {
+  double alpha = 0;
+  double magnification = 0;
+  int samples = 0;
+};
+
+// The weighting operator of a camera, a lens array and a voxel grid, in raw sensor pixels.
+//
+// w_ij = white_i · Ax_j(column_i) · Ay_j(row_i) / n_j, where Ax (Ay) is the sum over the plaid
+// aperture samples u (v) of the microlens interpolation weight (eq 11, floor/ceil in lattice
+// coordinates) times the pixel interpolation weight of the ray behind that lens (eq 1 inverted),
+// and n_j = Σ_i white_i Ax Ay (eq 13). The plaid grid covers the square around the aperture; the
+// circular aperture edge is applied by the white image, because behind every lens the pixel
+// offset from the spot is exactly -(u, v) f_l / s_i. That makes the 16 coefficients of eq 12
+// separable, so W is never stored: two 1-D tables per slice.
+//
+// Requires a rectangular lens array whose centres share x along columns and y along rows (the
+// nominal lattice, or a calibrated one without rotation); other arrays are an InputError.
+class WeightingOperator {
+ public:
+  // `white` must have the sensor's size. Throws InputError on a grid inside the main lens's focal
+  // length, an unsupported lens array, or a white image of the wrong size.
+  WeightingOperator(const optics::CameraModel& camera, const optics::MicrolensArray& lenses,
+                    const Grid3& grid, ImageF white);
+
+  const Grid3& grid() const { return grid_; }
+  int image_width() const { return width_; }
+  int image_height() const { return height_; }
+  std::size_t pixel_count() const { return std::size_t(width_) * height_; }
+  const ImageF& white() const { return white_; }
+  const SliceTables& slice(int z) const { return slices_[std::size_t(z)]; }
+  // Σ_i white_i Ax Ay before eq 13; 0 for a voxel that sees no pixel.
+  float normaliser(std::size_t voxel) const { return normaliser_[voxel]; }
+  std::span<const float> normalisers() const { return normaliser_; }
+
+  AxisWeights x_weights(int z, int x) const;
+  AxisWeights y_weights(int z, int y) const;
+
+  // Dense operators over the whole grid: image = W·volume, volume = Wᵀ·image.
+  void project(std::span<const float> volume, std::span<float> image) const;
+  void back_project(std::span<const float> image, std::span<float> volume) const;
+
+  // The eq 10 optics of a depth (exposed for the explicit builder and tests).
+  SliceOptics slice_optics(double z_mm) const;
+
+  // Everything the kernels share.
+  struct Geometry {
+    double s_o = 0, s_i = 0, f_main = 0, f_lens = 0, aperture = 0, pixel_pitch = 0;
+    int nominal_samples = 0;
+    double min_pitch = 0;
+    std::vector<double> lens_x;  // lens centres along x (one per lens column), increasing
+    std::vector<double> lens_y;  // along y (one per lens row), increasing
+  };
+  const Geometry& geometry() const { return geo_; }
+
+ private:
+  Grid3 grid_;
+  int width_ = 0, height_ = 0;
+  optics::SensorSpec sensor_;
+  ImageF white_;
+  Geometry geo_;
+  std::vector<SliceTables> slices_;
+  std::vector<float> normaliser_;
+};
+
+// A set of voxels that take part in a reconstruction (sorted flat indices), with the partition of
+// sensor rows into bands used to project deterministically without atomics.
+class ActiveSet {
+ public:
+  ActiveSet(const WeightingOperator& op, std::vector<std::uint32_t> voxels);
+  static ActiveSet all(const WeightingOperator& op);
+
+  const std::vector<std::uint32_t>& voxels() const { return voxels_; }
+  std::size_t size() const { return voxels_.size(); }
+
+  // image = W·values (values per active voxel, image of the sensor's size, overwritten).
+  void project(const WeightingOperator& op, std::span<const float> values, std::span<float> image) const;
+  // values = Wᵀ·image for the active voxels.
+  void back_project(const WeightingOperator& op, std::span<const float> image,
+                    std::span<float> values) const;
+  // The same for an image already multiplied pixel by pixel by the white correction (saves a
+  // pass and a buffer inside MART's loop).
+  void back_project_whitened(const WeightingOperator& op, std::span<const float> whitened_image,
+                             std::span<float> values) const;
+
+ private:
+  std::vector<std::uint32_t> voxels_;
+  int band_rows_ = 32;
+  std::vector<std::size_t> band_start_;       // per band, into band_members_
+  std::vector<std::uint32_t> band_members_;   // positions in voxels_
+};
+
+// Compressed sparse rows: the explicit matrix (rows = sensor pixels, columns = voxels).
+struct SparseMatrix {
+  std::size_t rows = 0, cols = 0;
+  std::vector<std::size_t> row_start;  // rows + 1
+  std::vector<std::uint32_t> col_index;
+  std::vector<float> values;
+
+  void multiply(std::span<const float> x, std::span<float> y) const;            // y = A x
+  void multiply_transpose(std::span<const float> y, std::span<float> x) const;  // x = Aᵀ y
+  std::size_t nonzeros() const { return values.size(); }
+};
+
+// The reference: for every voxel, for every plaid (u, v) sample, the 16 coefficients of eq 12
+// (4 lenses x 4 pixels) times the white image, normalised per voxel (eq 13). For small cases.
+SparseMatrix build_explicit_matrix(const WeightingOperator& op);
+
+}  // namespace plenopiv::recon

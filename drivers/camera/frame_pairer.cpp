@@ -1,0 +1,105 @@
+// Pairs frames A and B of each trigger by trigger index, frame id and timestamp gap; pure logic.
+#include "drivers/camera/frame_pairer.hpp"
+
+#include <utility>
+
+namespace plenopiv::drivers {
+
+FramePairer::FramePairer(PairerOptions options) : options_(options) {}
+
+std::uint64_t FramePairer::id_distance(std::uint64_t from, std::uint64_t to) const {
+  const std::uint64_t m = options_.frame_id_modulus;
+  if (m == 0) return to >= from ? to - from : 0;
+  std::uint64_t d = ((to % m) + m - (from % m)) % m;
+  // GigE Vision skips the reserved id 0 when wrapping: 65535 → 1 is the next frame.
+  if (to < from && d > 0) d -= 1;
+  return d;
+}
+
+bool FramePairer::within_gap(const Frame& a, const Frame& b) const {
+  const bool device = a.device_timestamp_ns != 0 && b.device_timestamp_ns != 0;
+  const std::uint64_t ta = device ? a.device_timestamp_ns : a.host_timestamp_ns;
+  const std::uint64_t tb = device ? b.device_timestamp_ns : b.host_timestamp_ns;
+  if (tb < ta) return false;  // B before A cannot be its partner
+  return tb - ta <= options_.max_gap_ns;
+}
+
+void FramePairer::discard_pending() {
+  if (!pending_) return;
+  ++counts_.frames_discarded;
+  ++counts_.pairs_discarded;
+  pending_.reset();
+}
+
+std::optional<FramePair> FramePairer::push(Frame frame, std::optional<std::uint64_t> trigger_index) {
+  ++counts_.frames_received;
+  if (!frame.complete) ++counts_.frames_incomplete;
+
+  if (options_.frame_id_modulus != 0 && frame.frame_id % options_.frame_id_modulus == 0) {
+    // Unknown id: it cannot be placed or paired. The gap it leaves is not counted lost.
+    ++counts_.frames_discarded;
+    ++unplaced_;
+    return std::nullopt;
+  }
+  std::uint64_t distance = 1;
+  if (last_id_) {
+    const bool repeated = frame.frame_id == *last_id_;
+    distance = id_distance(*last_id_, frame.frame_id);
+    const bool late = !repeated && (options_.frame_id_modulus == 0
+                                        ? frame.frame_id < *last_id_
+                                        : id_distance(frame.frame_id, *last_id_) < distance);
+    if (repeated || late) {
+      // A repeated id, or a frame that arrives after a later one (finished late, e.g. after a
+      // packet resend): it was counted lost when the later one came; now it is here but cannot
+      // be paired.
+      if (late && counts_.frames_lost > 0) --counts_.frames_lost;
+      ++counts_.frames_discarded;
+      return std::nullopt;
+    }
+    counts_.frames_lost += distance - 1 > unplaced_ ? distance - 1 - unplaced_ : 0;
+    sequence_ += distance;
+  }
+  last_id_ = frame.frame_id;
+  unplaced_ = 0;
+
+  if (pending_) {
+    const bool partner = distance == 1 && within_gap(pending_->frame, frame) &&
+                         (!pending_->trigger_index || !trigger_index ||
+                          *pending_->trigger_index == *trigger_index);
+    if (partner) {
+      Pending a = std::move(*pending_);
+      pending_.reset();
+      if (!a.frame.complete || !frame.complete) {
+        counts_.frames_discarded += 2;
+        ++counts_.pairs_discarded;
+        return std::nullopt;
+      }
+      FramePair pair;
+      pair.pair_index = counts_.pairs_delivered++;
+      pair.trigger_index = a.trigger_index ? *a.trigger_index : a.sequence / 2;
+      pair.a = std::move(a.frame);
+      pair.b = std::move(frame);
+      return pair;
+    }
+    discard_pending();
+  }
+  pending_ = Pending{std::move(frame), trigger_index, sequence_};
+  return std::nullopt;
+}
+
+void FramePairer::expire(std::uint64_t now_host_ns) {
+  if (pending_ && now_host_ns > pending_->frame.host_timestamp_ns + options_.stale_after_ns) {
+    discard_pending();
+  }
+}
+
+void FramePairer::flush() { discard_pending(); }
+
+void FramePairer::restart_sequence() {
+  discard_pending();
+  last_id_.reset();
+  sequence_ = 0;
+  unplaced_ = 0;
+}
+
+}  // namespace plenopiv::drivers

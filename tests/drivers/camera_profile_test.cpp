@@ -1,0 +1,87 @@
+// Camera profiles: the shipped ones load, and a camera lacking a feature is named in the error.
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <map>
+
+#include "core/base/errors.hpp"
+#include "drivers/camera/aravis/camera_profile.hpp"
+
+namespace plenopiv::drivers {
+namespace {
+
+// A device described by its features; enumerations list their values.
+FeatureProbe device(std::map<std::string, std::vector<std::string>> features) {
+  return [features](const std::string& name) -> std::optional<std::vector<std::string>> {
+    auto it = features.find(name);
+    if (it == features.end()) return std::nullopt;
+    return it->second;
+  };
+}
+
+TEST(CameraProfile, ShippedProfilesLoad) {
+  for (const char* name : {"sfnc-burst", "jai-piv", "two-frames", "aravis-fake"}) {
+    const CameraProfile p = find_camera_profile(name);
+    EXPECT_EQ(p.name, name);
+    EXPECT_FALSE(p.features.empty());
+  }
+  EXPECT_EQ(find_camera_profile("sfnc-burst").software_trigger_repeat, 1);
+  EXPECT_EQ(find_camera_profile("aravis-fake").software_trigger_repeat, 2);
+  EXPECT_EQ(find_camera_profile("aravis-fake").mode, "two-frames");
+}
+
+TEST(CameraProfile, UnknownProfileListsTheShippedOnes) {
+  try {
+    find_camera_profile("nosuch");
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("sfnc-burst"), std::string::npos) << e.what();
+  }
+}
+
+TEST(CameraProfile, MissingFeaturesAndValuesAreNamed) {
+  const CameraProfile p = find_camera_profile("sfnc-burst");
+  auto fake_like = device({{"AcquisitionMode", {"Continuous"}},
+                           {"TriggerSelector", {"FrameStart", "AcquisitionStart"}},
+                           {"TriggerMode", {"Off", "On"}},
+                           {"TriggerActivation", {"RisingEdge"}},
+                           {"TriggerSource", {"Line0", "Software"}},
+                           {"TriggerSoftware", {}}});
+  try {
+    check_camera_profile(p, fake_like, "aravis://x");
+    FAIL();
+  } catch (const InputError& e) {
+    const std::string m = e.what();
+    EXPECT_NE(m.find("feature TriggerSelector has no value FrameBurstStart (it has: FrameStart, "
+                     "AcquisitionStart)"),
+              std::string::npos)
+        << m;
+    EXPECT_NE(m.find("feature AcquisitionBurstFrameCount is missing"), std::string::npos) << m;
+    EXPECT_NE(m.find("aravis://x"), std::string::npos) << m;
+  }
+  auto burst = device({{"AcquisitionMode", {"Continuous"}},
+                       {"TriggerSelector", {"FrameBurstStart"}},
+                       {"AcquisitionBurstFrameCount", {}},
+                       {"TriggerMode", {"On"}},
+                       {"TriggerActivation", {"RisingEdge"}},
+                       {"TriggerSource", {"Line0", "Software"}},
+                       {"TriggerSoftware", {}}});
+  EXPECT_NO_THROW(check_camera_profile(p, burst, "aravis://y"));
+}
+
+TEST(CameraProfile, BadFilesNameTheKey) {
+  const auto file = std::filesystem::temp_directory_path() / "plenopiv-bad-profile.yaml";
+  std::ofstream(file) << "name: bad\nmode: triple\nfeatures: []\n";
+  try {
+    load_camera_profile(file);
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("mode"), std::string::npos) << e.what();
+  }
+  std::ofstream(file) << "name: bad\nfeatures:\n  - TriggerMode\n";
+  EXPECT_THROW(load_camera_profile(file), InputError);
+  std::filesystem::remove(file);
+}
+
+}  // namespace
+}  // namespace plenopiv::drivers
