@@ -22,6 +22,7 @@ struct CorrelateOptions {
   std::string first, second, output, vti, config, passes;
   std::optional<double> dt_s;
   std::optional<float> signal_threshold;
+  std::string fft_planning;
   int threads = 0;
 };
 
@@ -47,6 +48,8 @@ void run_correlate(const CorrelateOptions& o) {
   if (!o.passes.empty()) settings.passes = piv::parse_passes(o.passes);
   if (o.dt_s) settings.dt_s = *o.dt_s;
   if (o.signal_threshold) settings.signal_threshold = *o.signal_threshold;
+  if (o.fft_planning == "measure") settings.fft_planning = piv::FftPlanning::measure;
+  if (o.fft_planning == "estimate") settings.fft_planning = piv::FftPlanning::estimate;
   if (o.config.empty() && !o.dt_s)
     throw InputError("--dt: the pulse separation (s) is needed for velocities (or dt_s in --config)");
   piv::check(settings, o.config.empty() ? "command line" : o.config);
@@ -108,6 +111,9 @@ void add_piv_commands(CLI::App& app) {
   cmd->add_option("--dt", o->dt_s, "pulse separation, s (velocity = displacement / dt)");
   cmd->add_option("--signal-threshold", o->signal_threshold,
                   "windows whose brightest voxel is not above this are skipped (default 0)");
+  cmd->add_option("--fft-planning", o->fft_planning,
+                  "estimate (default; bit-identical between runs) or measure (faster FFTs)")
+      ->check(CLI::IsMember({"estimate", "measure"}));
   cmd->add_option("--threads", o->threads, "worker threads (0: all cores)")->capture_default_str();
   cmd->callback([o] { run_correlate(*o); });
 }

@@ -81,8 +81,8 @@ Layout layout_of(const PassSettings& p, const std::array<int, 3>& shape) {
 Candidates correlate_windows(const std::vector<float>& va, const std::vector<float>& vb,
                              const std::array<int, 3>& shape, const Layout& l,
                              const NodeField* predictor, float signal_threshold,
-                             std::vector<float>& ratio) {
-  const FftCorrelator correlator(l.window);
+                             FftPlanning planning, std::vector<float>& ratio) {
+  const FftCorrelator& correlator = FftCorrelator::shared(l.window, planning);
   Candidates c(l.count);
   // The predictor's mean over each window, as per-axis node weights: the residual a window
   // measures is relative to how far its voxels were moved on average, not to the predictor at
@@ -198,7 +198,7 @@ CorrelationResult correlate_volumes(const Volume& a, const Volume& b,
 
     t0 = Clock::now();
     last = correlate_windows(*va, *vb, shape, layout, have_predictor ? &predictor : nullptr,
-                             settings.signal_threshold, ratio);
+                             settings.signal_threshold, settings.fft_planning, ratio);
     report.correlate_s = seconds_since(t0);
     report.windows = last.size();
     for (std::size_t n = 0; n < last.size(); ++n) {
