@@ -23,6 +23,7 @@ struct CorrelateOptions {
   std::optional<double> dt_s;
   std::optional<float> signal_threshold;
   std::string fft_planning;
+  bool no_prefilter = false;
   int threads = 0;
 };
 
@@ -48,6 +49,7 @@ void run_correlate(const CorrelateOptions& o) {
   if (!o.passes.empty()) settings.passes = piv::parse_passes(o.passes);
   if (o.dt_s) settings.dt_s = *o.dt_s;
   if (o.signal_threshold) settings.signal_threshold = *o.signal_threshold;
+  if (o.no_prefilter) settings.prefilter = false;
   if (o.fft_planning == "measure") settings.fft_planning = piv::FftPlanning::measure;
   if (o.fft_planning == "estimate") settings.fft_planning = piv::FftPlanning::estimate;
   if (o.config.empty() && !o.dt_s)
@@ -114,6 +116,8 @@ void add_piv_commands(CLI::App& app) {
   cmd->add_option("--fft-planning", o->fft_planning,
                   "estimate (default; bit-identical between runs) or measure (faster FFTs)")
       ->check(CLI::IsMember({"estimate", "measure"}));
+  cmd->add_flag("--no-prefilter", o->no_prefilter,
+               "correlate the volumes as they are (default: binomial smoothing first)");
   cmd->add_option("--threads", o->threads, "worker threads (0: all cores)")->capture_default_str();
   cmd->callback([o] { run_correlate(*o); });
 }

@@ -27,6 +27,8 @@ struct CorrelationSettings {
   float signal_threshold = 0.f;
   double dt_s = 1.0;  // pulse separation: velocity = displacement / dt
   FftPlanning fft_planning = FftPlanning::estimate;
+  // Binomial [1 2 1]/4 smoothing of both volumes before correlating (deform.hpp: why).
+  bool prefilter = true;
 };
 
 // Checks every value (windows >= 4 voxels, 0 <= overlap < 100, threshold and epsilon > 0,
@@ -42,6 +44,7 @@ std::vector<PassSettings> parse_passes(const std::string& text);
 //   signal_threshold: 0
 //   dt_s: 0.001
 //   fft_planning: estimate   # or measure (faster; not bit-identical between processes)
+//   prefilter: true          # binomial smoothing of both volumes first
 // Every key is optional (defaults above); unknown keys are refused. Checked.
 CorrelationSettings load_correlation_settings(const std::filesystem::path& path);
 
