@@ -66,21 +66,26 @@ std::array<Peak, 3> find_peaks(std::span<const float> corr, const std::array<int
   std::array<Candidate, 3> best{};
   int found = 0;
   const int nx = shape[0], ny = shape[1], nz = shape[2];
-  // Neighbour offsets in scan order; away from the borders no index needs wrapping, and an
-  // offset < 0 is a neighbour the scan has already passed.
+  // Neighbour offsets; away from the borders no index needs wrapping, and an offset < 0 is a
+  // neighbour the scan has already passed.
   std::array<std::ptrdiff_t, 26> offset;
   std::array<std::array<int, 3>, 26> step;
+  // The 6 face neighbours come first: most voxels are rejected by one of them, and x +- 1 is
+  // in the same cache line.
   int o = 0;
-  for (int dz = -1; dz <= 1; ++dz)
-    for (int dy = -1; dy <= 1; ++dy)
-      for (int dx = -1; dx <= 1; ++dx) {
-        if (!dx && !dy && !dz) continue;
-        offset[o] = (std::ptrdiff_t(dz) * ny + dy) * nx + dx;
-        step[o++] = {dx, dy, dz};
-      }
+  for (int pass = 0; pass < 2; ++pass)
+    for (int dz = -1; dz <= 1; ++dz)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          const int nonzero = (dx != 0) + (dy != 0) + (dz != 0);
+          if (nonzero == 0 || (nonzero == 1) != (pass == 0)) continue;
+          offset[o] = (std::ptrdiff_t(dz) * ny + dy) * nx + dx;
+          step[o++] = {dx, dy, dz};
+        }
   // Strict against earlier neighbours, non-strict against later ones: a plateau yields exactly
   // one maximum, its first voxel.
   auto beaten = [](float w, float v, bool earlier) { return earlier ? w >= v : w > v; };
+  float threshold = 0;
   for (int z = 0; z < nz; ++z) {
     const bool z_inside = z > 0 && z < nz - 1;
     for (int y = 0; y < ny; ++y) {
@@ -88,8 +93,9 @@ std::array<Peak, 3> find_peaks(std::span<const float> corr, const std::array<int
       const float* row = corr.data() + index_of(shape, 0, y, z);
       for (int x = 0; x < nx; ++x) {
         const float v = row[x];
-        // Peaks <= 0 are of no use (discarded by the caller), so they need no test.
-        if (!(v > 0) || (found == 3 && v <= best[2].value)) continue;
+        // One well-predicted comparison per voxel: only values above the third peak so far (or
+        // above 0 while fewer than three were found; peaks <= 0 are of no use) need a test.
+        if (!(v > threshold)) continue;
         bool is_max = true;
         if (yz_inside && x > 0 && x < nx - 1) {
           for (int k = 0; k < 26; ++k)
@@ -115,6 +121,7 @@ std::array<Peak, 3> find_peaks(std::span<const float> corr, const std::array<int
         }
         best[pos] = {v, x, y, z};
         found = std::min(found + 1, 3);
+        if (found == 3) threshold = best[2].value;
       }
     }
   }
