@@ -9,6 +9,7 @@
 #include <tbb/global_control.h>
 
 #include "clients/cli/commands.hpp"
+#include "clients/cli/progress.hpp"
 #include "core/base/errors.hpp"
 #include "core/io/hdf5_files.hpp"
 #include "core/io/vtk_files.hpp"
@@ -69,11 +70,14 @@ void run_correlate(const CorrelateOptions& o) {
                      "x" + std::to_string(b.grid.shape[1]) + "x" +
                      std::to_string(b.grid.shape[2]) +
                      " voxels, or different origin/spacing): correlate volumes of one grid");
+  // A pass is the unit of progress: one line each with its counts, and on a terminal the shared
+  // bar (rate and ETA in passes) below the lines.
   const bool terminal = isatty(STDERR_FILENO);
+  Progress bar("correlate", "passes", double(settings.passes.size()));
   const auto result = piv::correlate_volumes(a, b, settings, [&](const piv::PassReport& r) {
-    // A pass is the unit of progress: one line each, coloured on a terminal.
-    if (terminal) std::cerr << "\033[1m" << pass_line(r) << "\033[0m\n";
-    else std::cerr << pass_line(r) << "\n";
+    if (terminal) std::cerr << "\r\033[K";
+    std::cerr << pass_line(r) << "\n";
+    if (terminal) bar.update(double(r.pass) / r.passes);
   });
 
   const auto omega = piv::vorticity(result.field);
