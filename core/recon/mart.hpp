@@ -44,7 +44,7 @@ struct MartSettings {
   // that pixel both exceed this fraction of their largest value; fainter dark pixels (the
   // bilinear tails of the weights, lost to quantisation and noise) are left out of the update.
   // 0 applies eq 9 literally: any dark pixel with weight zeroes the voxel.
-  double dark_weight_cutoff = 0.1;
+  double dark_weight_cutoff = 0.9;
   double convergence = 0.0;        // stop when the residual changes by less than this fraction
   std::optional<RegionMm> region;  // solve only here
 };
