@@ -51,7 +51,7 @@ Grid3 grid_of(int nx, int ny, int nz, double voxel_mm, double depth_mm) {
 }
 
 void paper_scale(const std::string& source_dir, bool small, double ppm, int iterations, float threshold_counts,
-                 double dark_cutoff) {
+                 double dark_cutoff, std::size_t count_override = 0) {
   const auto cam = optics::load_camera_file(source_dir + (small ? "/systemd/config/camera-small.yaml"
                                                                 : "/systemd/config/camera-fahringer2015.yaml"));
   const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(cam));
@@ -70,7 +70,7 @@ void paper_scale(const std::string& source_dir, bool small, double ppm, int iter
   // Particles filling the box at `ppm` (counted over the field of view, as the paper does), traced
   // ray by ray (the light-field tests' renderer, until core/sim's ray tracer lands), 12-bit counts.
   const sim::Box box = small ? sim::Box{{-3, -3, -10}, {3, 3, 10}} : sim::Box{{-15, -10, -10}, {15, 10, 10}};
-  const std::size_t count = sim::particle_count_from_ppm(cam, box, ppm);
+  const std::size_t count = count_override ? count_override : sim::particle_count_from_ppm(cam, box, ppm);
   const auto positions = sim::random_particles(box, count, 1);
   std::vector<testing_support::PointParticle> particles;
   for (const auto& p : positions) particles.push_back({p[0], p[1], p[2], 1000.0});
@@ -234,6 +234,8 @@ int main(int argc, char** argv) {
   const double cutoff = argc > 4 ? std::stod(argv[4]) : 0.9;
   if (which == "mid" || which == "all") mid_size(source_dir);
   if (which == "figures") figures(source_dir, argc > 2 ? std::stod(argv[2]) : 0.9);
+  // Fig 22: 500 particles in the paper-scale box.
+  if (which == "fig22") paper_scale(source_dir, false, 0, 5, 0.f, argc > 2 ? std::stod(argv[2]) : 0.9, 500);
   if (which == "small") paper_scale(source_dir, true, ppm, 5, threshold, cutoff);
   if (which == "paper" || which == "all") paper_scale(source_dir, false, ppm, 5, threshold, cutoff);
   return 0;
