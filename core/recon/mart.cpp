@@ -34,6 +34,9 @@ void validate_settings(const MartSettings& s) {
   if (!(s.noise_threshold >= 0) || !std::isfinite(s.noise_threshold)) {
     throw InputError("MART: noise threshold must be a finite number >= 0");
   }
+  if (!(s.dark_weight_cutoff >= 0 && s.dark_weight_cutoff < 1)) {
+    throw InputError("MART: dark weight cutoff must lie in [0, 1)");
+  }
   if (!(s.convergence >= 0) || !std::isfinite(s.convergence)) {
     throw InputError("MART: convergence tolerance must be a finite number >= 0");
   }
@@ -123,22 +126,35 @@ std::vector<std::uint32_t> select_active(const WeightingOperator& op, std::span<
   std::vector<std::vector<std::uint32_t>> per_slice(static_cast<std::size_t>(nz));
   std::vector<std::array<std::size_t, 3>> counts(std::size_t(nz), {0, 0, 0});  // unseen, outside, dark
   tbb::parallel_for(0, nz, [&](int z) {
-    const SliceTables& t = op.slice(z);
-    // Which columns each voxel column really touches (weight > 0), as bit words.
+    // Which columns each voxel column really touches (weight > 0), as bit words from its first.
     std::vector<std::vector<std::uint64_t>> masks(static_cast<std::size_t>(nx));
     for (int x = 0; x < nx; ++x) {
-      const std::span<const float> ax = op.x_weights(z, x);
+      const AxisWeights ax = op.x_weights(z, x);
       auto& m = masks[std::size_t(x)];
-      m.assign((ax.size() + 63) / 64, 0);
-      for (std::size_t c = 0; c < ax.size(); ++c) {
-        if (ax[c] > 0.f) m[c >> 6] |= std::uint64_t(1) << (c & 63);
+      m.assign(ax.empty() ? 0 : std::size_t(ax.last - ax.first) / 64 + 1, 0);
+      float peak = 0.f;
+      for (const Segment& s : ax.segments) {
+        for (int c = 0; c < s.length; ++c) peak = std::max(peak, ax.table[s.offset + std::size_t(c)]);
+      }
+      const float cut = float(settings.dark_weight_cutoff) * peak;
+      for (const Segment& s : ax.segments) {
+        for (int c = 0; c < s.length; ++c) {
+          if (ax.table[s.offset + std::size_t(c)] > cut) {
+            const int bit = s.first + c - ax.first;
+            m[std::size_t(bit >> 6)] |= std::uint64_t(1) << (bit & 63);
+          }
+        }
       }
     }
     auto& out = per_slice[std::size_t(z)];
     auto& cnt = counts[std::size_t(z)];
     for (int y = 0; y < ny; ++y) {
-      const std::span<const float> ay = op.y_weights(z, y);
-      const int row0 = t.y_runs[std::size_t(y)].first;
+      const AxisWeights ay = op.y_weights(z, y);
+      float peak = 0.f;
+      for (const Segment& s : ay.segments) {
+        for (int r = 0; r < s.length; ++r) peak = std::max(peak, ay.table[s.offset + std::size_t(r)]);
+      }
+      const float row_cut = float(settings.dark_weight_cutoff) * peak;
       for (int x = 0; x < nx; ++x) {
         const std::size_t v = g.index(x, y, z);
         if (!(op.normaliser(v) > 0.f)) {
@@ -150,16 +166,19 @@ std::vector<std::uint32_t> select_active(const WeightingOperator& op, std::span<
           continue;
         }
         const auto& m = masks[std::size_t(x)];
-        const int col0 = t.x_runs[std::size_t(x)].first;
+        const int col0 = op.x_weights(z, x).first;
         bool seen_dark = false;
-        for (std::size_t r = 0; r < ay.size() && !seen_dark; ++r) {
-          if (!(ay[r] > 0.f)) continue;
-          for (std::size_t k = 0; k < m.size(); ++k) {
-            if (dark.window(row0 + int(r), col0 + int(64 * k)) & m[k]) {
-              seen_dark = true;
-              break;
+        for (const Segment& s : ay.segments) {
+          for (int r = 0; r < s.length && !seen_dark; ++r) {
+            if (!(ay.table[s.offset + std::size_t(r)] > row_cut)) continue;
+            for (std::size_t k = 0; k < m.size(); ++k) {
+              if (dark.window(s.first + r, col0 + int(64 * k)) & m[k]) {
+                seen_dark = true;
+                break;
+              }
             }
           }
+          if (seen_dark) break;
         }
         if (seen_dark) {
           ++cnt[2];
@@ -232,11 +251,17 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const M
   const ActiveSet active(op, select_active(op, data, settings, result.skipped));
   const std::size_t n = active.size();
   std::vector<float> e(n, 1.f), update(n, 0.f), projection(op.pixel_count(), 0.f);
-  std::vector<float> ratio(op.pixel_count(), 0.f);
+  std::vector<float> ratio(op.pixel_count(), 0.f);  // white · ln(I / W E)
+  const float* white = op.white().pixels.data();
 
   if (settings.start == MartStart::mlos && n > 0) {
+    // The weighted geometric mean of the lit pixels a voxel sees (dark ones below the cutoff
+    // carry no ln I), renormalised over those pixels.
+    std::vector<float> lit(data.size()), weight(n, 0.f);
+    for (std::size_t i = 0; i < data.size(); ++i) lit[i] = data[i] > 0.f ? 1.f : 0.f;
+    active.back_project(op, lit, weight);
     active.back_project(op, log_image(data), update);
-    for (std::size_t m = 0; m < n; ++m) e[m] = clean(bounded_exp(update[m]));
+    for (std::size_t m = 0; m < n; ++m) e[m] = weight[m] > 0.f ? clean(bounded_exp(update[m] / weight[m])) : 0.f;
     // Scale to the image's total light so the first ratios are near 1.
     active.project(op, e, projection);
     const double total = sum(projection);
@@ -262,10 +287,10 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const M
                       [&](const tbb::blocked_range<std::size_t>& r) {
       for (std::size_t i = r.begin(); i != r.end(); ++i) {
         const float p = projection[i], d = data[i];
-        ratio[i] = (d > 0.f && p > 0.f) ? std::clamp(std::log(d) - std::log(p), -kMaxLog, kMaxLog) : 0.f;
+        ratio[i] = (d > 0.f && p > 0.f) ? white[i] * std::clamp(std::log(d) - std::log(p), -kMaxLog, kMaxLog) : 0.f;
       }
     });
-    active.back_project(op, ratio, update);
+    active.back_project_whitened(op, ratio, update);
     const float mu = float(settings.mu);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1 << 12), [&](const tbb::blocked_range<std::size_t>& r) {
       for (std::size_t m = r.begin(); m != r.end(); ++m) e[m] = clean(e[m] * bounded_exp(mu * update[m]));

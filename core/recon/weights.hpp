@@ -20,11 +20,19 @@ namespace plenopiv::recon {
 // lens (1 inside a microlens image, 0 outside). Calibration later provides the measured one.
 ImageF geometric_white_image(const optics::CameraModel& camera, const optics::MicrolensArray& lenses);
 
-// One voxel's 1-D weights along one sensor axis: `length` values starting at pixel `first`.
-struct WeightRun {
+// A stretch of consecutive pixels with weight along one sensor axis (the pixels one voxel reaches
+// behind one microlens, or behind neighbouring lenses where their images touch).
+struct Segment {
   int first = 0;
   int length = 0;
-  std::size_t offset = 0;  // into the slice's table
+  std::size_t offset = 0;  // into the slice's weight table
+};
+
+// One voxel's 1-D weights along one sensor axis: its segments, and their extent [first, last].
+struct WeightRun {
+  int first = 0;
+  int last = -1;
+  std::size_t segment_begin = 0, segment_end = 0;  // into the slice's segment list
 };
 
 // What one depth slice needs: eq 10 for its depth and the 1-D weights of each voxel column/row.
@@ -35,8 +43,19 @@ struct SliceTables {
   int samples = 0;             // (u, v) plaid samples per aperture axis for this slice
   std::vector<WeightRun> x_runs;  // per voxel x index: weights over sensor columns
   std::vector<WeightRun> y_runs;  // per voxel y index: weights over sensor rows
-  std::vector<float> x_table;
-  std::vector<float> y_table;
+  std::vector<Segment> x_segments, y_segments;
+  std::vector<float> x_table, y_table;
+};
+
+// One voxel's weights along one axis, ready for a kernel.
+struct AxisWeights {
+  std::span<const Segment> segments;
+  const float* table = nullptr;
+  int first = 0;
+  int last = -1;
+  bool empty() const { return segments.empty(); }
+  // Weight of pixel p (0 outside the segments); for tests and masks, not for kernels.
+  float at(int p) const;
 };
 
 // The depth-dependent part of eq 10 for one slice.
@@ -75,8 +94,8 @@ class WeightingOperator {
   float normaliser(std::size_t voxel) const { return normaliser_[voxel]; }
   std::span<const float> normalisers() const { return normaliser_; }
 
-  std::span<const float> x_weights(int z, int x) const;
-  std::span<const float> y_weights(int z, int y) const;
+  AxisWeights x_weights(int z, int x) const;
+  AxisWeights y_weights(int z, int y) const;
 
   // Dense operators over the whole grid: image = W·volume, volume = Wᵀ·image.
   void project(std::span<const float> volume, std::span<float> image) const;
@@ -120,6 +139,10 @@ class ActiveSet {
   // values = Wᵀ·image for the active voxels.
   void back_project(const WeightingOperator& op, std::span<const float> image,
                     std::span<float> values) const;
+  // The same for an image already multiplied pixel by pixel by the white correction (saves a
+  // pass and a buffer inside MART's loop).
+  void back_project_whitened(const WeightingOperator& op, std::span<const float> whitened_image,
+                             std::span<float> values) const;
 
  private:
   std::vector<std::uint32_t> voxels_;

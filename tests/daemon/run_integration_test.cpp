@@ -196,14 +196,14 @@ TEST_F(DaemonRuns, IllegalAndInvalidRequestsAreRefusedAndTheDaemonServesOn) {
   ASSERT_EQ(client({"run", "start", "--config", write_config(kRun).string()}, out), 0) << out;
   EXPECT_EQ(client({"run", "start", "--config", write_config(kRun).string()}, out), 4);
   EXPECT_NE(out.find("WRONG_STATE: cannot start a run"), std::string::npos) << out;
-  EXPECT_EQ(client({"calibrate"}, out), 4);
+  EXPECT_EQ(client({"capture-calibration"}, out), 4);
   EXPECT_NE(out.find("WRONG_STATE: cannot take calibration images"), std::string::npos) << out;
 
   ASSERT_EQ(client({"run", "stop"}, out), 0) << out;
   wait_for_state("Idle");
   EXPECT_EQ(manifest(only_run_dir()).state(), "stopped");
 
-  ASSERT_EQ(client({"calibrate", "--frames", "2"}, out), 0) << out;
+  ASSERT_EQ(client({"capture-calibration", "--frames", "2"}, out), 0) << out;
   EXPECT_NE(out.find("2 calibration images in"), std::string::npos) << out;
   EXPECT_TRUE(daemon_->running());
 }

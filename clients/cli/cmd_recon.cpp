@@ -1,0 +1,144 @@
+// `plenopiv reconstruct`: one raw plenoptic image to a particle volume (HDF5 and .vti) by MART
+// on the matrix-free plenoptic weights.
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+#include <memory>
+
+#include "clients/cli/commands.hpp"
+#include "core/base/errors.hpp"
+#include "core/io/hdf5_files.hpp"
+#include "core/io/tiff.hpp"
+#include "core/io/vtk_files.hpp"
+#include "core/optics/camera_file.hpp"
+#include "core/recon/mart.hpp"
+#include "core/recon/weights.hpp"
+
+namespace plenopiv::client {
+namespace {
+
+struct ReconOptions {
+  std::string camera, image, out, vti;
+  std::vector<double> extent;  // x0 x1 y0 y1 z0 z1, mm
+  double voxel_mm = 0.125, voxel_z_mm = 0;
+  int iterations = 5;
+  double mu = 0.5;
+  std::string start = "mlos";
+  float threshold = 0;
+  double dark_cutoff = 0.1;
+  double convergence = 0;
+};
+
+Grid3 grid_from(const ReconOptions& o) {
+  if (o.extent.size() != 6) throw InputError("--extent: give x0 x1 y0 y1 z0 z1 in mm");
+  const double d[3] = {o.voxel_mm, o.voxel_mm, o.voxel_z_mm > 0 ? o.voxel_z_mm : o.voxel_mm};
+  Grid3 g;
+  for (int a = 0; a < 3; ++a) {
+    const double lo = o.extent[std::size_t(2 * a)], hi = o.extent[std::size_t(2 * a + 1)];
+    if (!(d[a] > 0)) throw InputError("--voxel/--voxel-z: must be positive");
+    if (!(hi > lo)) throw InputError("--extent: each axis needs min < max (mm)");
+    const long n = std::lround((hi - lo) / d[a]);
+    if (n < 1 || n > 100000) throw InputError("--extent/--voxel: " + std::to_string(n) + " voxels along an axis");
+    g.shape[a] = int(n);
+    g.spacing_mm[a] = d[a];
+    // Voxel centres: the box of n voxels centred on the requested extent.
+    g.origin_mm[a] = 0.5 * (lo + hi) - 0.5 * (n - 1) * d[a];
+  }
+  return g;
+}
+
+void run(const ReconOptions& o) {
+  const optics::CameraModel camera = optics::load_camera_file(o.camera);
+  const Grid3 grid = grid_from(o);
+  recon::MartSettings s;
+  s.iterations = o.iterations;
+  s.mu = o.mu;
+  s.noise_threshold = o.threshold;
+  s.dark_weight_cutoff = o.dark_cutoff;
+  s.convergence = o.convergence;
+  if (o.start == "mlos") {
+    s.start = recon::MartStart::mlos;
+  } else if (o.start == "ones") {
+    s.start = recon::MartStart::ones;
+  } else {
+    throw InputError("--start: mlos or ones, got '" + o.start + "'");
+  }
+  const ImageU16 raw = io::read_tiff_u16(o.image);
+  ImageF image(raw.width, raw.height);
+  for (std::size_t i = 0; i < raw.size(); ++i) image.pixels[i] = raw.pixels[i];
+
+  const bool tty = ::isatty(STDERR_FILENO);
+  const auto t0 = std::chrono::steady_clock::now();
+  const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera));
+  const recon::WeightingOperator op(camera, lenses, grid, recon::geometric_white_image(camera, lenses));
+  recon::validate_image(image, op, o.image.c_str());
+  const double setup = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  std::fprintf(stderr, "weights: %d x %d x %d voxels, nominal lattice, geometric white image (%.1f s)\n",
+               grid.shape[0], grid.shape[1], grid.shape[2], setup);
+  double elapsed = 0;
+  const recon::MartResult r = recon::reconstruct(op, image, s, [&](const recon::IterationReport& it) {
+    elapsed += it.seconds;
+    const double rate = it.iteration / std::max(elapsed, 1e-9);
+    const double eta = (s.iterations - it.iteration) / rate;
+    if (tty) {
+      const int width = 30, done = width * it.iteration / s.iterations;
+      std::fprintf(stderr, "\r[%s%s] %d/%d  %.2f it/s  ETA %.0f s  residual %.4f", std::string(std::size_t(done), '#').c_str(),
+                   std::string(std::size_t(width - done), ' ').c_str(), it.iteration, s.iterations, rate, eta, it.residual);
+      if (it.iteration == s.iterations) std::fprintf(stderr, "\n");
+    } else {
+      std::fprintf(stderr, "iteration %d/%d residual %.4f (%.2f s, ETA %.0f s)\n", it.iteration, s.iterations,
+                   it.residual, it.seconds, eta);
+    }
+  });
+  if (tty && r.iterations.size() < std::size_t(s.iterations)) std::fprintf(stderr, "\n");
+  const recon::SkipReport& k = r.skipped;
+  std::fprintf(stderr,
+               "skipped %.1f %% of %zu voxels (seen by a dark pixel %zu, outside the field of view %zu), "
+               "%d of %d slices empty, %zu dark pixels; final residual %.4f%s\n",
+               100 * k.fraction_skipped(), k.voxels, k.voxels_dark, k.voxels_unseen, k.slices_empty, k.slices,
+               k.dark_pixels, r.final_residual, r.converged ? " (converged)" : "");
+  io::write_volume_h5(o.out, r.volume);
+  const std::string vti = o.vti.empty() ? std::filesystem::path(o.out).replace_extension(".vti").string() : o.vti;
+  io::write_volume_vti(vti, r.volume);
+  std::cout << o.out << "\n" << vti << "\n";
+}
+
+}  // namespace
+
+void add_recon_commands(CLI::App& app) {
+  auto o = std::make_shared<ReconOptions>();
+  auto* cmd = app.add_subcommand(
+      "reconstruct",
+      "reconstruct a particle volume from one raw plenoptic image (MART, sec 5). Uses the camera's "
+      "nominal microlens lattice and the geometric white-image correction; measured calibration files "
+      "are not accepted yet");
+  cmd->add_option("camera", o->camera, "camera file (YAML)")->required();
+  cmd->add_option("image", o->image, "raw plenoptic image (8/16-bit TIFF, sensor-sized)")->required();
+  cmd->add_option("--extent", o->extent, "volume box x0 x1 y0 y1 z0 z1 in mm (z = 0 at the focal plane)")
+      ->expected(6)
+      ->required();
+  cmd->add_option("--voxel", o->voxel_mm, "lateral voxel size, mm")->capture_default_str();
+  cmd->add_option("--voxel-z", o->voxel_z_mm, "depth voxel size, mm (default: --voxel)");
+  cmd->add_option("--iterations", o->iterations, "MART iterations")->capture_default_str();
+  cmd->add_option("--mu", o->mu, "relaxation, 0 < mu <= 1")->capture_default_str();
+  cmd->add_option("--start", o->start, "initial volume: mlos (multiplicative line of sight) or ones (eq 9)")
+      ->capture_default_str();
+  cmd->add_option("--threshold", o->threshold, "noise floor in counts: pixels at or below are dark")
+      ->capture_default_str();
+  cmd->add_option("--dark-cutoff", o->dark_cutoff,
+                  "a dark pixel zeroes a voxel only where both 1-D weights exceed this fraction of their "
+                  "peak (0: eq 9 literally)")
+      ->capture_default_str();
+  cmd->add_option("--convergence", o->convergence,
+                  "stop when the residual changes by less than this fraction (0: run all iterations)")
+      ->capture_default_str();
+  cmd->add_option("-o,--out", o->out, "output volume (HDF5: /volume, origin_mm, spacing_mm)")->required();
+  cmd->add_option("--vti", o->vti, "also write VTK image data here (default: --out with .vti)");
+  cmd->callback([o] { run(*o); });
+}
+
+}  // namespace plenopiv::client

@@ -1,0 +1,79 @@
+// `plenopiv reconstruct` end to end: a TIFF of known particles in, HDF5 and .vti volumes out,
+// progress per iteration, and clear refusals of bad arguments.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+
+#include "core/io/hdf5_files.hpp"
+#include "core/io/tiff.hpp"
+#include "core/optics/camera_file.hpp"
+#include "core/recon/quality.hpp"
+#include "core/recon/weights.hpp"
+#include "tests/support/child_process.hpp"
+#include "tests/support/temp_dir.hpp"
+
+namespace plenopiv::recon {
+namespace {
+
+using testing_support::binary;
+using testing_support::run_command;
+
+const std::string kCamera = std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml";
+
+TEST(ReconstructCli, WritesVolumesWhoseBrightestVoxelIsTheParticle) {
+  const auto dir = testing_support::temp_dir("recon-cli");
+  // The CLI's grid for --extent -0.625 0.625 -0.625 0.625 -2 2 --voxel 0.125 --voxel-z 0.5.
+  Grid3 g;
+  g.shape = {10, 10, 8};
+  g.spacing_mm = {0.125, 0.125, 0.5};
+  g.origin_mm = {-0.5625, -0.5625, -1.75};
+  const auto cam = optics::load_camera_file(kCamera);
+  const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(cam));
+  const WeightingOperator op(cam, lenses, g, geometric_white_image(cam, lenses));
+  Volume truth(g, 0.f);
+  truth.at(3, 6, 2) = 1.f;  // one particle at (-0.1875, 0.1875, -0.75) mm
+  ImageF projected(850, 850, 0.f);
+  op.project(truth.data, projected.pixels);
+  float peak = 0;
+  for (float v : projected.pixels) peak = std::max(peak, v);
+  ImageU16 image(850, 850, 0);
+  for (std::size_t i = 0; i < image.size(); ++i) image.pixels[i] = std::uint16_t(std::lround(projected.pixels[i] / peak * 60000));
+  io::write_tiff(dir / "particle.tif", image);
+
+  std::string out;
+  const int status = run_command({binary("plenopiv"), "reconstruct", kCamera, (dir / "particle.tif").string(),
+                                  "--extent", "-0.625", "0.625", "-0.625", "0.625", "-2", "2", "--voxel", "0.125",
+                                  "--voxel-z", "0.5", "--iterations", "3", "-o", (dir / "v.h5").string()},
+                                 out);
+  ASSERT_EQ(status, 0) << out;
+  EXPECT_NE(out.find("iteration 3/3 residual"), std::string::npos) << out;
+  EXPECT_NE(out.find("skipped"), std::string::npos) << out;
+  EXPECT_TRUE(std::filesystem::exists(dir / "v.vti"));
+  const Volume v = io::read_volume_h5(dir / "v.h5");
+  ASSERT_EQ(v.grid.shape, g.shape);
+  for (int a = 0; a < 3; ++a) EXPECT_NEAR(v.grid.origin_mm[a], g.origin_mm[a], 1e-9);
+  const auto fit = fit_particle(v, {-0.1875, 0.1875, -0.75}, {3, 3, 3});
+  ASSERT_TRUE(fit);
+  EXPECT_NEAR(fit->position_mm[0], -0.1875, 0.0625);
+  EXPECT_NEAR(fit->position_mm[1], 0.1875, 0.0625);
+  EXPECT_NEAR(fit->position_mm[2], -0.75, 0.5);
+}
+
+TEST(ReconstructCli, RefusesBadArgumentsClearly) {
+  const auto dir = testing_support::temp_dir("recon-cli");
+  io::write_tiff(dir / "small.tif", ImageU16(100, 100, 5));
+  std::string out;
+  EXPECT_EQ(2, run_command({binary("plenopiv"), "reconstruct", kCamera, (dir / "small.tif").string(), "--extent",
+                            "-1", "1", "-1", "1", "-1", "1", "-o", (dir / "x.h5").string()},
+                           out));
+  EXPECT_NE(out.find("850 x 850"), std::string::npos) << out;
+  EXPECT_EQ(2, run_command({binary("plenopiv"), "reconstruct", kCamera, (dir / "small.tif").string(), "--extent",
+                            "1", "-1", "-1", "1", "-1", "1", "-o", (dir / "x.h5").string()},
+                           out));
+  EXPECT_NE(out.find("--extent"), std::string::npos) << out;
+  EXPECT_FALSE(std::filesystem::exists(dir / "x.h5"));
+}
+
+}  // namespace
+}  // namespace plenopiv::recon
