@@ -1,6 +1,8 @@
 // plenopivd's main loop: control requests, the run, status publishing, systemd notification.
 #include "daemon/daemon_main.hpp"
 
+#include "drivers/sim/sim_camera.hpp"
+
 #include <CLI/CLI.hpp>
 #include <spdlog/spdlog.h>
 #include <systemd/sd-daemon.h>
@@ -20,6 +22,7 @@
 #include "daemon/logging/logging.hpp"
 #include "drivers/camera/camera_registry.hpp"
 #include "drivers/discovery/device_discovery.hpp"
+#include "drivers/sim/sim_camera.hpp"
 
 namespace plenopiv::daemon {
 namespace {
@@ -83,12 +86,15 @@ int daemon_main(int argc, char** argv, const DaemonExtensions& extensions) {
   CLI::App app{"plenopivd: single-camera plenoptic 3D/3C PIV daemon"};
   app.set_version_flag("--version", std::string(PLENOPIV_VERSION));
   std::filesystem::path config_path;
-  std::string control, publish, data_dir, log_level, camera_uri;
+  std::string control, publish, data_dir, log_level, camera_uri, camera_file;
   app.add_option("-c,--config", config_path, "daemon config (plenopivd.yaml)")->check(CLI::ExistingFile);
   app.add_option("--control", control, "control endpoint (overrides the config)");
   app.add_option("--publish", publish, "publishing endpoint (overrides the config)");
   app.add_option("--data-dir", data_dir, "where run folders are written (overrides the config)");
   app.add_option("--camera", camera_uri, "default camera URI (overrides the config)");
+  app.add_option("--camera-file", camera_file,
+                 "camera description (YAML) the processing and sim:// use (overrides the config)")
+      ->check(CLI::ExistingFile);
   app.add_option("--log-level", log_level, "trace, debug, info, warn, error");
   CLI11_PARSE(app, argc, argv);
 
@@ -99,9 +105,12 @@ int daemon_main(int argc, char** argv, const DaemonExtensions& extensions) {
     if (!publish.empty()) config.publish_endpoint = publish;
     if (!data_dir.empty()) config.data_dir = data_dir;
     if (!camera_uri.empty()) config.camera_uri = camera_uri;
+    if (!camera_file.empty()) config.camera_file = camera_file;
     if (!log_level.empty()) config.log_level = log_level;
     validate(config, config_path.empty() ? "command line" : config_path.string());
     setup_logging("plenopivd", config.log_level);
+    // sim:// renders with the same camera file the processing stage reconstructs with.
+    drivers::register_sim_camera(drivers::CameraRegistry::instance(), config.camera_file);
 
     ProcessFactory processing_factory = extensions.processing;
     std::string processing = extensions.processing_summary;

@@ -13,13 +13,13 @@ control="tcp://127.0.0.1:${PLENOPIV_DEMO_CONTROL_PORT:-5555}"
 publish="tcp://127.0.0.1:${PLENOPIV_DEMO_PUBLISH_PORT:-5556}"
 client=(build/bin/plenopiv --endpoint "$control")
 
-# Until the simulated camera (sim://) and the reconstruction/correlation stage are built into
-# plenopivd, the demo runs the same daemon built with the test camera (test://) and a test
-# processing stage whose vector fields carry u = pair index (tests/daemon/plenopivd_test_build.cpp).
-daemon_bin="${PLENOPIV_DEMO_DAEMON:-build/bin/plenopivd-testcam}"
-camera="${PLENOPIV_DEMO_CAMERA:-test://}"
-"$daemon_bin" --config systemd/config/plenopivd.yaml --control "$control" \
-  --publish "$publish" --data-dir "$data_dir" --camera "$camera" &
+# The simulated plenoptic camera renders every pair with the ray tracer (a uniform flow of
+# 0.25 mm between the pulses); the daemon reconstructs and correlates each pair live. The small
+# camera of the paper's sec 5.4 keeps the demo quick on two cores.
+camera_file="${PLENOPIV_DEMO_CAMERA_FILE:-systemd/config/camera-small.yaml}"
+camera="${PLENOPIV_DEMO_CAMERA:-sim://?seed=1&ppm=0.3&dx_mm=0.25}"
+build/bin/plenopivd --config systemd/config/plenopivd.yaml --control "$control" \
+  --publish "$publish" --data-dir "$data_dir" --camera-file "$camera_file" --camera "$camera" &
 daemon=$!
 trap 'kill $daemon 2>/dev/null || true' EXIT
 
@@ -29,8 +29,8 @@ for _ in $(seq 1 50); do
   kill -0 $daemon 2>/dev/null || { echo "demo: plenopivd exited" >&2; exit 1; }
 done
 
-echo "== plenopiv camera systemd/config/camera-fahringer2015.yaml"
-build/bin/plenopiv camera systemd/config/camera-fahringer2015.yaml
+echo "== plenopiv camera $camera_file"
+build/bin/plenopiv camera "$camera_file"
 echo "== plenopiv devices"
 "${client[@]}" devices
 echo "== plenopiv watch --count 4 (subscribed before the run starts)"

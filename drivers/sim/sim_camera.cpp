@@ -114,7 +114,11 @@ class SimCamera : public CameraBase {
   }
   void do_arm(const DoubleExposureSettings&) override {}
   void do_start() override {}
-  void do_stop() override {}
+  // Exposures already triggered are delivered, as a real camera's would be: wait for them.
+  void do_stop() override {
+    std::unique_lock lock(mutex_);
+    idle_.wait(lock, [this] { return pending_.empty() && !rendering_; });
+  }
 
   void do_software_trigger() override {
     {
@@ -133,8 +137,14 @@ class SimCamera : public CameraBase {
         if (quit_) return;
         trigger = pending_.front();
         pending_.pop_front();
+        rendering_ = true;
       }
       render_pair(trigger);
+      {
+        std::lock_guard lock(mutex_);
+        rendering_ = false;
+      }
+      idle_.notify_all();
     }
   }
 
@@ -179,7 +189,9 @@ class SimCamera : public CameraBase {
 
   std::mutex mutex_;
   std::condition_variable wake_;
+  std::condition_variable idle_;
   std::deque<std::uint64_t> pending_;
+  bool rendering_ = false;
   std::uint64_t next_trigger_ = 0;
   bool quit_ = false;
   std::thread worker_;
