@@ -31,14 +31,19 @@ function(plenopiv_executable name)
   plenopiv_defaults(${name})
 endfunction()
 
-# plenopiv_test(<name> LABEL unit|integration|slow SOURCES ... [LIBS ...] [TIMEOUT s])
+# plenopiv_test(<name> LABEL unit|integration|slow SOURCES ... [LIBS ...] [TIMEOUT s]
+#               [RESOURCE_LOCK name])  -- tests sharing a lock never run at the same time (ctest -j)
 function(plenopiv_test name)
-  cmake_parse_arguments(ARG "" "LABEL;TIMEOUT" "SOURCES;LIBS" ${ARGN})
+  cmake_parse_arguments(ARG "" "LABEL;TIMEOUT;RESOURCE_LOCK" "SOURCES;LIBS" ${ARGN})
   if(NOT ARG_LABEL)
     message(FATAL_ERROR "plenopiv_test(${name}): LABEL unit|integration|slow is required")
   endif()
   if(NOT ARG_TIMEOUT)
     set(ARG_TIMEOUT 300)
+  endif()
+  set(lock)
+  if(ARG_RESOURCE_LOCK)
+    set(lock RESOURCE_LOCK ${ARG_RESOURCE_LOCK})
   endif()
   add_executable(${name} ${ARG_SOURCES})
   target_link_libraries(${name} PRIVATE ${ARG_LIBS} GTest::gtest GTest::gtest_main)
@@ -48,6 +53,6 @@ function(plenopiv_test name)
   plenopiv_defaults(${name})
   gtest_discover_tests(${name}
     WORKING_DIRECTORY ${PROJECT_BINARY_DIR}
-    PROPERTIES LABELS ${ARG_LABEL} TIMEOUT ${ARG_TIMEOUT}
+    PROPERTIES LABELS ${ARG_LABEL} TIMEOUT ${ARG_TIMEOUT} ${lock}
     DISCOVERY_TIMEOUT 60)
 endfunction()

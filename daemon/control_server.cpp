@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "core/base/errors.hpp"
+#include "daemon/run_state.hpp"
 
 namespace plenopiv::daemon {
 
@@ -65,6 +66,8 @@ bool ControlServer::serve_one(int timeout_ms) {
       reply.set_id(request.id());
     } catch (const InputError& e) {
       reply = error_reply(request.id(), msg::Error::INVALID, e.what());
+    } catch (const WrongStateError& e) {
+      reply = error_reply(request.id(), msg::Error::WRONG_STATE, e.what());
     } catch (const std::exception& e) {
       spdlog::error("control request {} failed: {}", request.id(), e.what());
       reply = error_reply(request.id(), msg::Error::INTERNAL, e.what());

@@ -9,7 +9,8 @@
 
 namespace plenopiv::daemon {
 
-// Turns a parsed request into its reply. It may throw: the server answers INTERNAL and goes on.
+// Turns a parsed request into its reply. It may throw: InputError is answered INVALID,
+// WrongStateError WRONG_STATE, anything else INTERNAL; the server goes on.
 using RequestHandler = std::function<msg::Reply(const msg::Request&)>;
 
 // Serves REQ and DEALER clients alike (the envelope is echoed back as it came). A message that is

@@ -1,6 +1,10 @@
 // `plenopiv status` and `plenopiv devices`: ask plenopivd and print its answer.
+#include <unistd.h>
+
 #include <iomanip>
 #include <iostream>
+#include <memory>
+#include <thread>
 
 #include "clients/cli/commands.hpp"
 #include "clients/cli/control_client.hpp"
@@ -30,23 +34,39 @@ void print_status(const msg::Status& s) {
             << "camera         " << s.camera_uri() << "\n"
             << "trigger        " << s.trigger_uri() << "\n";
   if (!s.run_id().empty()) {
-    std::cout << "run            " << s.run_id() << "\n"
+    std::cout << "run            " << s.run_id() << "  " << s.run_dir() << "\n"
               << "pairs          acquired " << s.pairs_acquired() << ", recorded "
               << s.pairs_recorded() << ", processed " << s.pairs_processed() << ", skipped "
               << s.pairs_skipped() << ", frames lost " << s.frames_lost() << "\n";
+    for (const msg::StageCounters& c : s.stages()) {
+      std::cout << "  " << std::left << std::setw(13) << c.name() << std::right << "processed "
+                << c.processed() << ", skipped " << c.skipped() << ", queue " << c.queue_depth()
+                << ", mean " << std::setprecision(3) << c.mean_time_s() << " s\n";
+    }
   }
+  std::cout << "processing     " << s.processing() << "\n";
 }
 
 }  // namespace
 
 void add_control_commands(CLI::App& app, ControlOptions& options) {
-  app.add_subcommand("status", "show the daemon's state and counters")->callback([&options] {
+  auto refresh = std::make_shared<bool>(false);
+  auto* status = app.add_subcommand("status", "show the daemon's state and counters");
+  status->add_flag("-w,--watch", *refresh, "refresh every second until interrupted (on a terminal)");
+  status->callback([&options, refresh] {
     ControlClient client = connect(options);
-    msg::Request request;
-    request.mutable_status();
-    const msg::Reply reply = client.call(request);
-    check(reply);
-    print_status(reply.status());
+    // Refreshing only makes sense on a terminal; piped output gets one report.
+    const bool live = *refresh && ::isatty(STDOUT_FILENO);
+    do {
+      msg::Request request;
+      request.mutable_status();
+      const msg::Reply reply = client.call(request);
+      check(reply);
+      if (live) std::cout << "\033[H\033[2J";  // home and clear
+      print_status(reply.status());
+      std::cout.flush();
+      if (live) std::this_thread::sleep_for(std::chrono::seconds(1));
+    } while (live);
   });
 
   app.add_subcommand("devices", "list the cameras and trigger lines plenopivd can use")

@@ -18,7 +18,12 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   client::add_control_commands(app, control);
   client::add_camera_commands(app);
+  client::add_simulate_commands(app);
+  client::add_piv_commands(app);
   client::add_recon_commands(app);
+  client::add_calib_commands(app);
+  client::add_lightfield_commands(app);
+  client::add_run_commands(app, control);
 
   try {
     setup_logging("plenopiv", "info", LogTarget::console);

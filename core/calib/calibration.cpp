@@ -388,41 +388,85 @@ optics::MicrolensArray Calibration::microlens_array() const {
   return array;
 }
 
-std::vector<std::int32_t> pixel_lens_map(const optics::SensorSpec& sensor, const optics::Lattice& spot_lattice,
-                                         const std::vector<std::array<double, 2>>& spots_px) {
-  const double pp = sensor.pixel_pitch_mm;
-  PxLattice lat;
-  lat.hex = spot_lattice.layout == optics::LensletLayout::hex;
-  lat.nx = spot_lattice.count_x;
-  lat.ny = spot_lattice.count_y;
-  lat.px = spot_lattice.pitch_x_mm / pp;
-  lat.py = spot_lattice.pitch_y_mm / pp;
-  lat.th = spot_lattice.rotation_rad;
-  lat.ox = spot_lattice.offset_x_mm / pp;
-  lat.oy = spot_lattice.offset_y_mm / pp;
-  const double cx = 0.5 * sensor.width_px - 0.5, cy = 0.5 * sensor.height_px - 0.5;
-  const int w = sensor.width_px;
-  std::vector<std::int32_t> map(std::size_t(w) * sensor.height_px, -1);
-  // Beyond the array's edge a pixel belongs to no lens: its nearest lattice site lies outside.
-  tbb::parallel_for(0, sensor.height_px, [&](int y) {
-    for (int x = 0; x < w; ++x) {
-      const auto k = lat.nearest(x - cx, y - cy);
-      if (k[0] < 0 || k[1] < 0 || k[0] >= lat.nx || k[1] >= lat.ny) continue;
-      // The measured spots depart from the lattice by a fraction of a pixel: look one lens around.
-      double best = 1e300;
-      int who = -1;
-      for (int j = std::max(0, k[1] - 1); j <= std::min(lat.ny - 1, k[1] + 1); ++j) {
-        for (int i = std::max(0, k[0] - 1); i <= std::min(lat.nx - 1, k[0] + 1); ++i) {
-          const auto& q = spots_px[std::size_t(j) * lat.nx + i];
-          const double d = (q[0] - x) * (q[0] - x) + (q[1] - y) * (q[1] - y);
-          if (d < best) {
-            best = d;
-            who = j * lat.nx + i;
-          }
+namespace {
+
+// The lens a pixel belongs to: the nearest measured spot among the lattice neighbours of the
+// pixel's nearest lattice site (spots depart from the lattice by a fraction of a pixel).
+class LensFinder {
+ public:
+  LensFinder(const optics::SensorSpec& sensor, const optics::Lattice& spot_lattice,
+             const std::vector<std::array<double, 2>>& spots_px)
+      : spots_(spots_px), cx_(0.5 * sensor.width_px - 0.5), cy_(0.5 * sensor.height_px - 0.5) {
+    const double pp = sensor.pixel_pitch_mm;
+    lat_.hex = spot_lattice.layout == optics::LensletLayout::hex;
+    lat_.nx = spot_lattice.count_x;
+    lat_.ny = spot_lattice.count_y;
+    lat_.px = spot_lattice.pitch_x_mm / pp;
+    lat_.py = spot_lattice.pitch_y_mm / pp;
+    lat_.th = spot_lattice.rotation_rad;
+    lat_.ox = spot_lattice.offset_x_mm / pp;
+    lat_.oy = spot_lattice.offset_y_mm / pp;
+    c_ = std::cos(lat_.th);
+    s_ = std::sin(lat_.th);
+    // Within the inscribed circle of its Voronoi cell, shrunk by the largest departure of a spot
+    // from the lattice, a pixel's lattice site is certainly its lens: no search needed (~3/4 of
+    // all pixels).
+    double departure = 0;
+    for (int j = 0; j < lat_.ny; ++j) {
+      for (int i = 0; i < lat_.nx; ++i) {
+        const auto q = lat_.position(i, j);
+        const auto& m = spots_[std::size_t(j) * lat_.nx + i];
+        departure = std::max(departure, std::hypot(m[0] - cx_ - q[0], m[1] - cy_ - q[1]));
+      }
+    }
+    const double inscribed = 0.5 * (lat_.hex ? std::min(lat_.px, std::hypot(0.5 * lat_.px, lat_.py))
+                                             : std::min(lat_.px, lat_.py));
+    const double sure = std::max(0.0, inscribed - departure - 0.01);
+    sure2_ = sure * sure;
+  }
+
+  // Lens index j * count_x + i, or -1 beyond the array's edge.
+  int lens_at(int x, int y) const {
+    const double dx = x - cx_ - lat_.ox, dy = y - cy_ - lat_.oy;
+    const double b = (s_ * dx + c_ * dy) / lat_.py + 0.5 * (lat_.ny - 1);
+    const int j0 = int(std::floor(b + 0.5));
+    const double a = (c_ * dx - s_ * dy) / lat_.px + 0.5 * (lat_.nx - 1) - lat_.shift(j0);
+    const int i0 = int(std::floor(a + 0.5));
+    if (i0 < 0 || j0 < 0 || i0 >= lat_.nx || j0 >= lat_.ny) return -1;
+    const double ea = (a - i0) * lat_.px, eb = (b - j0) * lat_.py;
+    if (ea * ea + eb * eb < sure2_) return j0 * lat_.nx + i0;
+    double best = 1e300;
+    int who = -1;
+    for (int j = std::max(0, j0 - 1); j <= std::min(lat_.ny - 1, j0 + 1); ++j) {
+      const std::array<double, 2>* row = &spots_[std::size_t(j) * lat_.nx];
+      for (int i = std::max(0, i0 - 1); i <= std::min(lat_.nx - 1, i0 + 1); ++i) {
+        const double ex = row[i][0] - x, ey = row[i][1] - y;
+        const double d = ex * ex + ey * ey;
+        if (d < best) {
+          best = d;
+          who = j * lat_.nx + i;
         }
       }
-      map[std::size_t(y) * w + x] = who;
     }
+    return who;
+  }
+
+ private:
+  const std::vector<std::array<double, 2>>& spots_;
+  PxLattice lat_;
+  double cx_, cy_, c_ = 1, s_ = 0;
+  double sure2_ = 0;
+};
+
+}  // namespace
+
+std::vector<std::int32_t> pixel_lens_map(const optics::SensorSpec& sensor, const optics::Lattice& spot_lattice,
+                                         const std::vector<std::array<double, 2>>& spots_px) {
+  const LensFinder finder(sensor, spot_lattice, spots_px);
+  const int w = sensor.width_px;
+  std::vector<std::int32_t> map(std::size_t(w) * sensor.height_px, -1);
+  tbb::parallel_for(0, sensor.height_px, [&](int y) {
+    for (int x = 0; x < w; ++x) map[std::size_t(y) * w + x] = finder.lens_at(x, y);
   });
   return map;
 }
@@ -459,11 +503,11 @@ ImageF make_white_correction(const Calibration& cal, const ImageF& white, double
     }
     level[id] = n > 0 ? sum / n : 0.0;
   });
-  const std::vector<std::int32_t> map = pixel_lens_map(sensor, cal.spot_lattice, cal.spots_px);
+  const LensFinder finder(sensor, cal.spot_lattice, cal.spots_px);
   ImageF out(white.width, white.height, 0.0f);
   tbb::parallel_for(0, white.height, [&](int y) {
     for (int x = 0; x < white.width; ++x) {
-      const std::int32_t id = map[std::size_t(y) * white.width + x];
+      const int id = finder.lens_at(x, y);
       if (id < 0 || level[id] <= 0) continue;
       out.at(x, y) = float(std::max(0.0, (white.at(x, y) - dark_level) / level[id]));
     }

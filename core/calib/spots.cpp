@@ -66,15 +66,19 @@ std::vector<Spot> find_spots(const ImageF& image, const SpotOptions& options, Sp
   if (!(st.threshold > levels.median)) st.threshold = levels.median + 0.5;  // a flat image
 
   // Hot pixels: far above the noise and `hot_pixel_ratio` times brighter than every neighbour
-  // (a spot's centre never is: its neighbours share its light). Replaced by the neighbours' median.
+  // (a spot's centre never is: its neighbours share its light). They are few: kept as a sorted
+  // list of (index, neighbours' median) rather than a cleaned copy of a paper-size image.
   const float bg = float(st.background);
   const float floor_excess = float(std::max(st.threshold - st.background, 1e-6));
-  ImageF clean = image;
-  std::vector<int> hot_per_row(h, 0);
-  tbb::parallel_for(1, h - 1, [&](int y) {
-    for (int x = 1; x < w - 1; ++x) {
-      const float v = image.at(x, y) - bg;
-      if (v < floor_excess) continue;
+  std::vector<std::vector<std::pair<std::size_t, float>>> hot_rows(h);
+  cv::Mat mask(h, w, CV_8U);
+  const float thr = float(st.threshold);
+  tbb::parallel_for(0, h, [&](int y) {
+    auto* m = mask.ptr<std::uint8_t>(y);
+    for (int x = 0; x < w; ++x) {
+      const float value = image.at(x, y);
+      m[x] = value > thr ? 255 : 0;
+      if (y == 0 || y == h - 1 || x == 0 || x == w - 1 || value - bg < floor_excess) continue;
       float nb[8];
       int k = 0;
       float top = 0;
@@ -86,21 +90,24 @@ std::vector<Spot> find_spots(const ImageF& image, const SpotOptions& options, Sp
           ++k;
         }
       }
-      if (v > float(options.hot_pixel_ratio) * std::max(top, float(st.noise_sigma))) {
+      if (value - bg > float(options.hot_pixel_ratio) * std::max(top, float(st.noise_sigma))) {
         std::nth_element(nb, nb + 4, nb + 8);
-        clean.at(x, y) = nb[4];
-        ++hot_per_row[y];
+        hot_rows[y].push_back({std::size_t(y) * w + x, nb[4]});
+        m[x] = nb[4] > thr ? 255 : 0;
       }
     }
   });
-  for (int c : hot_per_row) st.hot_pixels += c;
+  std::vector<std::pair<std::size_t, float>> hot;
+  for (const auto& r : hot_rows) hot.insert(hot.end(), r.begin(), r.end());
+  st.hot_pixels = int(hot.size());
+  auto cleaned = [&](int x, int y) {
+    const float v = image.at(x, y);
+    if (hot.empty()) return v;
+    const std::size_t k = std::size_t(y) * w + x;
+    const auto it = std::lower_bound(hot.begin(), hot.end(), std::pair<std::size_t, float>{k, -1e30f});
+    return it != hot.end() && it->first == k ? it->second : v;
+  };
 
-  cv::Mat mask(h, w, CV_8U);
-  const float thr = float(st.threshold);
-  tbb::parallel_for(0, h, [&](int y) {
-    auto* m = mask.ptr<std::uint8_t>(y);
-    for (int x = 0; x < w; ++x) m[x] = clean.at(x, y) > thr ? 255 : 0;
-  });
   cv::Mat labels, boxes, centroids;
   const int n = cv::connectedComponentsWithStats(mask, labels, boxes, centroids, 8, CV_32S);
 
@@ -125,7 +132,7 @@ std::vector<Spot> find_spots(const ImageF& image, const SpotOptions& options, Sp
       const int* lab = labels.ptr<int>(y);
       for (int x = x0 - 1; x <= x1 + 1; ++x) {
         if (lab[x] != 0 && lab[x] != label) continue;
-        const double v = std::max(0.0f, clean.at(x, y) - bg);
+        const double v = std::max(0.0f, cleaned(x, y) - bg);
         sw += v;
         sx += v * x;
         sy += v * y;

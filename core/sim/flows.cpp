@@ -1,8 +1,8 @@
 // Displacement fields that move particle field A into field B, each with its exact displacement.
 #include "core/sim/flows.hpp"
 
+#include <charconv>
 #include <cmath>
-#include <cstdio>
 #include <numbers>
 
 #include "core/base/errors.hpp"
@@ -13,8 +13,8 @@ namespace {
 // Round-trip precision: parameters_yaml() must give back the same flow.
 std::string num(double v) {
   char buf[40];
-  std::snprintf(buf, sizeof buf, "%.17g", v);
-  return buf;
+  const auto end = std::to_chars(buf, buf + sizeof buf, v).ptr;  // shortest exact form
+  return std::string(buf, end);
 }
 std::string vec(const Point3& p) { return "[" + num(p[0]) + ", " + num(p[1]) + ", " + num(p[2]) + "]"; }
 

@@ -60,11 +60,20 @@ struct Frame {
   bool complete = true;                   // all data arrived; pairs are only made of complete frames
 };
 
+// The laser pulses of a pair as measured on the Q-switch sync input (trigger driver's clock).
+struct LaserPulses {
+  std::uint64_t pulse1_ns = 0;
+  std::uint64_t pulse2_ns = 0;
+  double dt_s() const { return double(pulse2_ns - pulse1_ns) * 1e-9; }
+};
+
 // Frame A (ends with laser pulse 1) and frame B (holds pulse 2) of one trigger.
 struct FramePair {
   std::uint64_t pair_index = 0;     // 0, 1, 2, ... in delivery order since open
   std::uint64_t trigger_index = 0;  // which trigger made it (counted from start; gaps = lost triggers)
   Frame a, b;
+  // The dt that really happened, when a trigger measures the Q-switch sync (ShotJoiner fills it).
+  std::optional<LaserPulses> measured;
 };
 
 // Running totals since open; they never go down. Every frame the device produced is either in a

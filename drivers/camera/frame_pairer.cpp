@@ -12,7 +12,7 @@ std::uint64_t FramePairer::id_distance(std::uint64_t from, std::uint64_t to) con
   if (m == 0) return to >= from ? to - from : 0;
   std::uint64_t d = ((to % m) + m - (from % m)) % m;
   // GigE Vision skips the reserved id 0 when wrapping: 65535 → 1 is the next frame.
-  if (to < from && to != 0 && d > 0) d -= 1;
+  if (to < from && d > 0) d -= 1;
   return d;
 }
 
@@ -35,19 +35,32 @@ std::optional<FramePair> FramePairer::push(Frame frame, std::optional<std::uint6
   ++counts_.frames_received;
   if (!frame.complete) ++counts_.frames_incomplete;
 
+  if (options_.frame_id_modulus != 0 && frame.frame_id % options_.frame_id_modulus == 0) {
+    // Unknown id: it cannot be placed or paired. The gap it leaves is not counted lost.
+    ++counts_.frames_discarded;
+    ++unplaced_;
+    return std::nullopt;
+  }
   std::uint64_t distance = 1;
   if (last_id_) {
+    const bool repeated = frame.frame_id == *last_id_;
     distance = id_distance(*last_id_, frame.frame_id);
-    if (distance == 0) {
-      // A repeated id (or one from before a device restart the backend did not report): it cannot
-      // be placed, so it pairs with nothing.
+    const bool late = !repeated && (options_.frame_id_modulus == 0
+                                        ? frame.frame_id < *last_id_
+                                        : id_distance(frame.frame_id, *last_id_) < distance);
+    if (repeated || late) {
+      // A repeated id, or a frame that arrives after a later one (finished late, e.g. after a
+      // packet resend): it was counted lost when the later one came; now it is here but cannot
+      // be paired.
+      if (late && counts_.frames_lost > 0) --counts_.frames_lost;
       ++counts_.frames_discarded;
       return std::nullopt;
     }
-    counts_.frames_lost += distance - 1;
+    counts_.frames_lost += distance - 1 > unplaced_ ? distance - 1 - unplaced_ : 0;
     sequence_ += distance;
   }
   last_id_ = frame.frame_id;
+  unplaced_ = 0;
 
   if (pending_) {
     const bool partner = distance == 1 && within_gap(pending_->frame, frame) &&
@@ -86,6 +99,7 @@ void FramePairer::restart_sequence() {
   discard_pending();
   last_id_.reset();
   sequence_ = 0;
+  unplaced_ = 0;
 }
 
 }  // namespace plenopiv::drivers

@@ -12,7 +12,7 @@ struct PairerOptions {
   // Frames of one pair are at most this far apart (device clock if both frames have one, else host).
   std::uint64_t max_gap_ns = 50'000'000;
   // 0: frame ids never wrap (64-bit ids). 65536: GigE Vision 16-bit block ids, which wrap from
-  // 65535 to 1 (0 is reserved; a device that does use 0 is accepted too).
+  // 65535 to 1; id 0 is reserved there and means "unknown" (a frame whose leader was lost).
   std::uint64_t frame_id_modulus = 0;
   // A waiting frame A is given up (host clock) this long after it arrived: its B is not coming.
   // Generous, because host arrival jitters far more than the device's own timestamps.
@@ -69,6 +69,7 @@ class FramePairer {
   std::optional<Pending> pending_;
   std::optional<std::uint64_t> last_id_;
   std::uint64_t sequence_ = 0;  // frames since the first, lost ones included
+  std::uint64_t unplaced_ = 0;  // frames with unknown id since the last placed one
 };
 
 }  // namespace plenopiv::drivers

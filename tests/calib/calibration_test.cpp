@@ -15,6 +15,7 @@
 #include "core/calib/calibration_file.hpp"
 #include "core/optics/camera_file.hpp"
 #include "tests/calib/spot_render.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace plenopiv::calib {
 namespace {
@@ -253,8 +254,7 @@ TEST(CalibrationFile, RoundTripH5pyAndLoader) {
   const RenderedSpots truth = render_calibration(cam, scene);
   Calibration cal = calibrate(cam, truth.image);
   cal.white_correction = make_white_correction(cal, testing_support::render_white(cam, truth, scene, 0.8), 100);
-  const auto dir = std::filesystem::temp_directory_path() / ("plenopiv_calib_" + std::to_string(::getpid()));
-  std::filesystem::create_directories(dir);
+  const auto dir = testing_support::temp_dir("calib");
   const auto file = dir / "cal.h5";
   write_calibration_h5(file, cal);
 

@@ -5,10 +5,20 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <string>
 
 #include "drivers/camera/camera.hpp"
 
 namespace plenopiv::testing_support {
+
+// Counters in one line, for failure messages.
+inline std::string describe(const drivers::CameraCounters& c) {
+  return "received " + std::to_string(c.frames_received) + ", incomplete " +
+         std::to_string(c.frames_incomplete) + ", lost " + std::to_string(c.frames_lost) +
+         ", discarded " + std::to_string(c.frames_discarded) + ", pairs delivered " +
+         std::to_string(c.pairs_delivered) + ", pairs discarded " +
+         std::to_string(c.pairs_discarded) + ", resent packets " + std::to_string(c.packets_resent);
+}
 
 struct ConformanceOptions {
   int pairs_per_run = 5;
@@ -46,7 +56,8 @@ inline void check_camera_conformance(drivers::Camera& camera, const ConformanceO
     for (int i = 0; i < options.pairs_per_run; ++i) {
       camera.software_trigger();
       const auto pair = camera.next_pair(options.pair_timeout);
-      ASSERT_TRUE(pair) << "run " << run << " pair " << i << ": no pair within timeout";
+      ASSERT_TRUE(pair) << "run " << run << " pair " << i << ": no pair within timeout; "
+                        << describe(camera.counters());
       ++delivered;
       EXPECT_TRUE(pair->a.complete && pair->b.complete);
       EXPECT_NE(pair->a.frame_id, pair->b.frame_id);

@@ -124,11 +124,31 @@ TEST(FramePairer, GigEVisionIdsWrapFrom65535To1) {
   ASSERT_TRUE(q.push(frame(65534, 0, 1)));
   q.push(frame(1, 1, 1));
   EXPECT_EQ(q.counts().frames_lost, 1u);
-  // A device that does use id 0 is accepted too.
+  // Id 0 is GigE Vision's "unknown": such a frame is discarded, and not counted lost twice.
   FramePairer z(options(65536));
-  z.push(frame(65535, 3, 0));
-  EXPECT_TRUE(z.push(frame(0, 3, 1)));
-  EXPECT_EQ(z.counts().frames_lost, 0u);
+  z.push(frame(65534, 3, 0));
+  EXPECT_FALSE(z.push(frame(0, 3, 1, false)));
+  z.push(frame(1, 4, 0));
+  EXPECT_TRUE(z.push(frame(2, 4, 1)));
+  EXPECT_EQ(z.counts().frames_lost, 0u);  // the unknown frame was 65535
+  EXPECT_EQ(z.counts().frames_received, 4u);
+  expect_invariant(z);
+}
+
+TEST(FramePairer, AFrameArrivingAfterALaterOneIsDiscardedNotCountedLost) {
+  for (std::uint64_t modulus : {std::uint64_t(0), std::uint64_t(65536)}) {
+    FramePairer p(options(modulus));
+    p.push(frame(1, 0, 0));
+    ASSERT_TRUE(p.push(frame(2, 0, 1)));
+    p.push(frame(4, 1, 1));  // 3 seems lost...
+    EXPECT_EQ(p.counts().frames_lost, 1u);
+    EXPECT_FALSE(p.push(frame(3, 1, 0)));  // ...and comes late
+    EXPECT_EQ(p.counts().frames_lost, 0u);
+    p.push(frame(5, 2, 0));
+    EXPECT_TRUE(p.push(frame(6, 2, 1)));
+    EXPECT_EQ(p.counts().frames_received, 6u);
+    expect_invariant(p);
+  }
 }
 
 TEST(FramePairer, StaleAAndFlushAreDiscarded) {

@@ -182,7 +182,8 @@ class AravisCamera final : public CameraBase {
     frame.frame_id = arv_buffer_get_frame_id(buffer);
     frame.device_timestamp_ns = arv_buffer_get_timestamp(buffer);
     frame.host_timestamp_ns = arv_buffer_get_system_timestamp(buffer);
-    frame.complete = arv_buffer_get_status(buffer) == ARV_BUFFER_STATUS_SUCCESS;
+    const ArvBufferStatus status = arv_buffer_get_status(buffer);
+    frame.complete = status == ARV_BUFFER_STATUS_SUCCESS;
     if (frame.complete) {
       const ArvPixelFormat format = arv_buffer_get_image_pixel_format(buffer);
       const int w = arv_buffer_get_image_width(buffer);
@@ -210,6 +211,7 @@ class AravisCamera final : public CameraBase {
     } else {
       g_object_unref(buffer);
     }
+    ++buffers_taken_;
     submit_frame(std::move(frame));
   }
 
@@ -385,16 +387,38 @@ class AravisCamera final : public CameraBase {
   void fire_software_trigger() {
     if (!camera_) throw DeviceError("camera " + uri_.text() + " is lost");
     ArvDevice* device = arv_camera_get_device(camera_);
+    const auto period = std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+        std::chrono::duration<double>(profile_.min_pair_period_s));
+    std::this_thread::sleep_until(last_trigger_ + period);
+    last_trigger_ = std::chrono::steady_clock::now();
     for (int i = 0; i < profile_.software_trigger_repeat; ++i) {
       if (i > 0) {
+        // A camera that latches one software trigger at a time would merge two commands sent
+        // too close together: wait for frame A (or half a second) before asking for frame B.
         std::this_thread::sleep_for(std::chrono::duration<double>(profile_.software_trigger_spacing_s));
+        wait_for_buffer(std::chrono::milliseconds(500));
       }
+      buffers_seen_at_trigger_ = buffers_taken_;
       GError* error = nullptr;
       arv_device_execute_command(device, profile_.software_trigger_command.c_str(), &error);
       if (error) {
         throw DeviceError("camera " + uri_.text() + ": " + profile_.software_trigger_command +
                           ": " + take_error(error));
       }
+    }
+  }
+
+  // Control thread: takes finished buffers until one arrives after the last trigger, or timeout.
+  void wait_for_buffer(std::chrono::milliseconds timeout) {
+    const auto deadline = std::chrono::steady_clock::now() + timeout;
+    while (buffers_taken_ == buffers_seen_at_trigger_) {
+      std::deque<ArvBuffer*> buffers;
+      {
+        std::unique_lock lock(mutex_);
+        if (!wake_.wait_until(lock, deadline, [this] { return !buffers_.empty(); })) return;
+        buffers.swap(buffers_);
+      }
+      for (ArvBuffer* b : buffers) take_buffer(b);
     }
   }
 
@@ -455,6 +479,9 @@ class AravisCamera final : public CameraBase {
   std::optional<DoubleExposureSettings> armed_;
   bool lost_ = false;
   std::chrono::steady_clock::time_point next_retry_;
+  std::chrono::steady_clock::time_point last_trigger_;
+  std::uint64_t buffers_taken_ = 0;
+  std::uint64_t buffers_seen_at_trigger_ = 0;
 };
 
 }  // namespace

@@ -43,7 +43,7 @@ CameraProfile load_camera_profile(const std::filesystem::path& file) {
   const YamlMap map(load_yaml_file(file), file.string());
   map.reject_unknown({"name", "description", "mode", "features", "external_trigger",
                       "software_trigger", "software_trigger_command", "software_trigger_repeat",
-                      "software_trigger_spacing_s", "max_pair_gap_s", "frame_id_bits"});
+                      "software_trigger_spacing_s", "min_pair_period_s", "max_pair_gap_s", "frame_id_bits"});
   CameraProfile p;
   p.source = file.string();
   p.name = map.string("name");
@@ -63,6 +63,13 @@ CameraProfile load_camera_profile(const std::filesystem::path& file) {
   }
   p.max_pair_gap_s = map.number_or("max_pair_gap_s", 0.05);
   if (p.max_pair_gap_s <= 0) map.fail("max_pair_gap_s", "must be > 0");
+  p.min_pair_period_s = map.number_or("min_pair_period_s", 0.0);
+  if (p.min_pair_period_s < 0 || p.min_pair_period_s > 10) {
+    map.fail("min_pair_period_s", "must be within 0..10 s");
+  }
+  if (p.min_pair_period_s > 0 && p.min_pair_period_s < 2 * p.max_pair_gap_s) {
+    map.fail("min_pair_period_s", "must be at least twice max_pair_gap_s, or pairs could mix");
+  }
   p.frame_id_bits = int(map.integer_or("frame_id_bits", 16));
   if (p.frame_id_bits != 16 && p.frame_id_bits != 64) map.fail("frame_id_bits", "must be 16 or 64");
   if (p.mode == "two-frames" && p.software_trigger_repeat != 2 && !p.software_trigger.empty()) {

@@ -31,7 +31,11 @@ struct CameraProfile {
   std::vector<FeatureSetting> software_trigger;  // applied on arm for TriggerSource::Software
   std::string software_trigger_command = "TriggerSoftware";
   int software_trigger_repeat = 1;       // commands per pair (2 in two-frames mode)
-  double software_trigger_spacing_s = 0;  // pause between those commands
+  // Pause between those commands; the second also waits (at most 0.5 s) for frame A to arrive.
+  double software_trigger_spacing_s = 0;
+  // Software triggers of consecutive pairs are at least this far apart, so that the gap between
+  // pairs stays well above max_pair_gap_s (the rate a real trigger line would have).
+  double min_pair_period_s = 0;
   double max_pair_gap_s = 0.05;
   int frame_id_bits = 16;  // GigE Vision 1.x block ids; 64 for extended ids / USB3 Vision
 

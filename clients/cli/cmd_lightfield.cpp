@@ -1,0 +1,198 @@
+// `plenopiv refocus` (focal stack TIFF + PNG contact sheet) and `plenopiv perspective` (views).
+#include <algorithm>
+#include <cmath>
+#include <iostream>
+#include <memory>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <sstream>
+
+#include "clients/cli/commands.hpp"
+#include "clients/cli/progress.hpp"
+#include "core/base/errors.hpp"
+#include "core/calib/calibration_file.hpp"
+#include "core/io/atomic_file.hpp"
+#include "core/io/tiff.hpp"
+#include "core/lightfield/light_field.hpp"
+#include "core/lightfield/refocus.hpp"
+#include "core/optics/camera_file.hpp"
+
+namespace plenopiv::client {
+namespace {
+
+struct LightFieldArgs {
+  std::string camera;
+  std::string calibration;
+  std::string raw;
+  bool no_white = false;
+  std::string depths;  // "start:stop:step" or "a,b,c" (mm)
+  std::vector<double> alphas;
+  std::string output;
+  std::string sheet;
+  std::vector<double> u, v;
+};
+
+lightfield::LightField load_field(const LightFieldArgs& args, optics::CameraModel& camera_out) {
+  camera_out = optics::load_camera_file(args.camera);
+  const calib::LoadedCalibration cal = calib::load_calibration(args.calibration, camera_out);
+  const ImageU16 raw16 = io::read_tiff_u16(args.raw);
+  ImageF raw(raw16.width, raw16.height);
+  for (std::size_t k = 0; k < raw16.size(); ++k) raw.pixels[k] = float(raw16.pixels[k]);
+  try {
+    return lightfield::rectify(camera_out, cal.lenses, raw, args.no_white ? nullptr : &cal.white_correction);
+  } catch (const InputError& e) {
+    throw InputError(args.raw + ": " + e.what());
+  }
+}
+
+// "start:stop:step" (inclusive) or a comma-separated list, in mm.
+std::vector<double> parse_depths(const std::string& spec) {
+  std::vector<double> out;
+  auto number = [&](const std::string& s) {
+    std::size_t used = 0;
+    double v = 0;
+    try {
+      v = std::stod(s, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (used == 0 || used != s.size() || !std::isfinite(v)) {
+      throw InputError("--z: '" + s + "' is not a number (give start:stop:step or a,b,c in mm)");
+    }
+    return v;
+  };
+  if (std::count(spec.begin(), spec.end(), ':') == 2) {
+    const auto a = spec.find(':'), b = spec.find(':', a + 1);
+    const double start = number(spec.substr(0, a)), stop = number(spec.substr(a + 1, b - a - 1)),
+                 step = number(spec.substr(b + 1));
+    if (!(step > 0) || stop < start) throw InputError("--z: " + spec + " needs start <= stop and step > 0");
+    const int n = int(std::floor((stop - start) / step + 1e-9)) + 1;
+    if (n > 10000) throw InputError("--z: " + spec + " asks for " + std::to_string(n) + " depths");
+    for (int k = 0; k < n; ++k) out.push_back(start + k * step);
+    return out;
+  }
+  std::stringstream ss(spec);
+  std::string item;
+  while (std::getline(ss, item, ',')) out.push_back(number(item));
+  if (out.empty()) throw InputError("--z: no depth given");
+  return out;
+}
+
+// One tile per image, a common grey scale (so relative sharpness shows), the label under each.
+void write_contact_sheet(const std::string& path, const std::vector<ImageF>& pages, const std::vector<std::string>& labels) {
+  float top = 0;
+  for (const auto& p : pages)
+    for (float v : p.pixels) top = std::max(top, v);
+  const int cols = int(std::ceil(std::sqrt(double(pages.size()))));
+  const int rows = int((pages.size() + cols - 1) / cols);
+  const int w = pages[0].width, h = pages[0].height;
+  const int scale = std::max(1, 200 / std::max(w, h));
+  const int tw = w * scale, th = h * scale + 18;
+  cv::Mat sheet(rows * th, cols * tw, CV_8U, cv::Scalar(0));
+  for (std::size_t k = 0; k < pages.size(); ++k) {
+    cv::Mat tile(h, w, CV_32F, const_cast<float*>(pages[k].pixels.data()));
+    cv::Mat tile8, big;
+    tile.convertTo(tile8, CV_8U, top > 0 ? 255.0 / top : 0.0);
+    cv::resize(tile8, big, cv::Size(tw, h * scale), 0, 0, cv::INTER_NEAREST);
+    const int x = int(k % cols) * tw, y = int(k / cols) * th;
+    big.copyTo(sheet(cv::Rect(x, y, tw, h * scale)));
+    cv::putText(sheet, labels[k], cv::Point(x + 2, y + h * scale + 14), cv::FONT_HERSHEY_SIMPLEX, 0.4,
+                cv::Scalar(255), 1);
+  }
+  std::vector<unsigned char> png;
+  if (!cv::imencode(".png", sheet, png)) throw InputError(path + ": cannot encode PNG");
+  io::write_atomically(path, [&](const std::filesystem::path& tmp) {
+    std::FILE* f = std::fopen(tmp.c_str(), "wb");
+    if (!f) throw InputError(path + ": cannot write");
+    const bool ok = std::fwrite(png.data(), 1, png.size(), f) == png.size();
+    if (std::fclose(f) != 0 || !ok) throw InputError(path + ": cannot write");
+  });
+}
+
+void run_refocus(const LightFieldArgs& args) {
+  optics::CameraModel camera = optics::load_camera_file(args.camera);
+  std::vector<double> alphas;
+  std::vector<std::string> labels;
+  if (!args.alphas.empty()) {
+    for (double a : args.alphas) {
+      if (!(a > 0)) throw InputError("--alpha: " + std::to_string(a) + " is not positive");
+      alphas.push_back(a);
+      std::ostringstream s;
+      s << "alpha " << a;
+      labels.push_back(s.str());
+    }
+  } else {
+    for (double z : parse_depths(args.depths.empty() ? "-10:10:1" : args.depths)) {
+      alphas.push_back(lightfield::alpha_for_depth(camera, z));
+      std::ostringstream s;
+      s << "z " << z << " mm";
+      labels.push_back(s.str());
+    }
+  }
+  const lightfield::LightField field = load_field(args, camera);
+  Progress progress("refocus", "images", double(alphas.size()));
+  std::vector<ImageF> stack;
+  for (std::size_t k = 0; k < alphas.size(); ++k) {
+    stack.push_back(lightfield::refocus(field, alphas[k]));
+    progress.update(double(k + 1) / double(alphas.size()));
+  }
+  io::write_tiff_stack(args.output, stack);
+  const std::string sheet = args.sheet.empty()
+                                ? std::filesystem::path(args.output).replace_extension(".png").string()
+                                : args.sheet;
+  write_contact_sheet(sheet, stack, labels);
+  std::cout << args.output << ": " << stack.size() << " refocused images of " << stack[0].width << " x "
+            << stack[0].height << " (one pixel per microlens)\n"
+            << sheet << ": contact sheet\n";
+}
+
+void run_perspective(const LightFieldArgs& args) {
+  if (args.u.size() != args.v.size()) {
+    throw InputError("--u and --v: give as many u as v values (" + std::to_string(args.u.size()) + " vs " +
+                     std::to_string(args.v.size()) + ")");
+  }
+  optics::CameraModel camera = optics::load_camera_file(args.camera);
+  const lightfield::LightField field = load_field(args, camera);
+  std::vector<ImageF> views;
+  std::vector<std::string> labels;
+  for (std::size_t k = 0; k < args.u.size(); ++k) {
+    views.push_back(lightfield::perspective_view(field, args.u[k], args.v[k]));
+    std::ostringstream s;
+    s << "u " << args.u[k] << " v " << args.v[k];
+    labels.push_back(s.str());
+  }
+  io::write_tiff_stack(args.output, views);
+  if (!args.sheet.empty()) write_contact_sheet(args.sheet, views, labels);
+  std::cout << args.output << ": " << views.size() << " perspective views of " << views[0].width << " x "
+            << views[0].height << "\n";
+}
+
+void add_common(CLI::App* cmd, LightFieldArgs& args) {
+  cmd->add_option("--camera", args.camera, "camera file (YAML)")->required();
+  cmd->add_option("--calibration", args.calibration, "calibration file from `plenopiv calibrate`")->required();
+  cmd->add_option("raw", args.raw, "raw plenoptic image (TIFF)")->required();
+  cmd->add_flag("--no-white", args.no_white, "do not divide by the white correction");
+  cmd->add_option("-o,--output", args.output, "multi-page float32 TIFF to write")->required();
+}
+
+}  // namespace
+
+void add_lightfield_commands(CLI::App& app) {
+  auto refocus_args = std::make_shared<LightFieldArgs>();
+  auto* refocus = app.add_subcommand("refocus", "computational refocusing (eqs 2-4): a focal stack and a contact sheet");
+  add_common(refocus, *refocus_args);
+  refocus->add_option("--z", refocus_args->depths, "object depths in mm: start:stop:step or a,b,c (default -10:10:1)");
+  refocus->add_option("--alpha", refocus_args->alphas, "refocus at these alpha = s'_i/s_i instead of depths");
+  refocus->add_option("--sheet", refocus_args->sheet, "PNG contact sheet (default: the output with .png)");
+  refocus->callback([refocus_args] { run_refocus(*refocus_args); });
+
+  auto view_args = std::make_shared<LightFieldArgs>();
+  auto* view = app.add_subcommand("perspective", "perspective views from aperture points (u, v) mm (sec 3.4)");
+  add_common(view, *view_args);
+  view->add_option("--u", view_args->u, "aperture u of each view, mm")->required();
+  view->add_option("--v", view_args->v, "aperture v of each view, mm")->required();
+  view->add_option("--sheet", view_args->sheet, "also write a PNG contact sheet here");
+  view->callback([view_args] { run_perspective(*view_args); });
+}
+
+}  // namespace plenopiv::client

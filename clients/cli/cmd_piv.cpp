@@ -1,0 +1,131 @@
+// `plenopiv correlate`: two volume files -> a 3D/3C vector field (HDF5 and ParaView .vti).
+#include <unistd.h>
+
+#include <cstdio>
+#include <iostream>
+#include <memory>
+#include <optional>
+
+#include <tbb/global_control.h>
+
+#include "clients/cli/commands.hpp"
+#include "clients/cli/progress.hpp"
+#include "core/base/errors.hpp"
+#include "core/io/hdf5_files.hpp"
+#include "core/io/vtk_files.hpp"
+#include "core/piv/derived.hpp"
+#include "core/piv/multipass.hpp"
+
+namespace plenopiv::client {
+namespace {
+
+struct CorrelateOptions {
+  std::string first, second, output, vti, config, passes;
+  std::optional<double> dt_s;
+  std::optional<float> signal_threshold;
+  std::string fft_planning;
+  bool no_prefilter = false;
+  int threads = 0;
+};
+
+std::string pass_line(const piv::PassReport& r) {
+  const auto& w = r.settings.window;
+  const auto& v = r.validation;
+  const double seconds = r.deform_s + r.correlate_s + r.validate_s;
+  char line[512];
+  std::snprintf(line, sizeof line,
+                "pass %d/%d: windows %dx%dx%d, overlap %.0f %%, %dx%dx%d vectors (%zu without "
+                "signal); outliers %zu (2nd peak %zu, 3rd peak %zu, interpolated %zu, "
+                "unresolved %zu); fallback fits %zu parabolic, %zu centroid; %.2f s (deform "
+                "%.2f, correlate %.2f, %.0f windows/s)",
+                r.pass, r.passes, w[0], w[1], w[2], r.settings.overlap_percent, r.vectors[0],
+                r.vectors[1], r.vectors[2], r.no_signal, v.outliers, v.second_peak, v.third_peak,
+                v.interpolated, v.unresolved, r.flag_parabolic, r.flag_centroid, seconds,
+                r.deform_s, r.correlate_s,
+                r.correlate_s > 0 ? double(r.windows) / r.correlate_s : 0.0);
+  return line;
+}
+
+void run_correlate(const CorrelateOptions& o) {
+  piv::CorrelationSettings settings;
+  if (!o.config.empty()) settings = piv::load_correlation_settings(o.config);
+  if (!o.passes.empty()) settings.passes = piv::parse_passes(o.passes);
+  if (o.dt_s) settings.dt_s = *o.dt_s;
+  if (o.signal_threshold) settings.signal_threshold = *o.signal_threshold;
+  if (o.no_prefilter) settings.prefilter = false;
+  if (o.fft_planning == "measure") settings.fft_planning = piv::FftPlanning::measure;
+  if (o.fft_planning == "estimate") settings.fft_planning = piv::FftPlanning::estimate;
+  if (o.config.empty() && !o.dt_s)
+    throw InputError("--dt: the pulse separation (s) is needed for velocities (or dt_s in --config)");
+  piv::check(settings, o.config.empty() ? "command line" : o.config);
+  if (o.threads < 0) throw InputError("--threads: must be >= 0 (0: all cores)");
+
+  std::optional<tbb::global_control> limit;
+  if (o.threads > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, o.threads);
+
+  const Volume a = io::read_volume_h5(o.first);
+  const Volume b = io::read_volume_h5(o.second);
+  if (!(a.grid == b.grid))
+    throw InputError(o.first + " and " + o.second + " are on different grids (" +
+                     std::to_string(a.grid.shape[0]) + "x" + std::to_string(a.grid.shape[1]) + "x" +
+                     std::to_string(a.grid.shape[2]) + " vs " + std::to_string(b.grid.shape[0]) +
+                     "x" + std::to_string(b.grid.shape[1]) + "x" +
+                     std::to_string(b.grid.shape[2]) +
+                     " voxels, or different origin/spacing): correlate volumes of one grid");
+  // A pass is the unit of progress: one line each with its counts, and on a terminal the shared
+  // bar (rate and ETA in passes) below the lines.
+  const bool terminal = isatty(STDERR_FILENO);
+  Progress bar("correlate", "passes", double(settings.passes.size()));
+  const auto result = piv::correlate_volumes(a, b, settings, [&](const piv::PassReport& r) {
+    if (terminal) std::cerr << "\r\033[K";
+    std::cerr << pass_line(r) << "\n";
+    if (terminal) bar.update(double(r.pass) / r.passes);
+  });
+
+  const auto omega = piv::vorticity(result.field);
+  std::vector<float> flags(result.flags.begin(), result.flags.end());
+  io::write_vector_field_h5(o.output, result.field,
+                            {{"vorticity_x", omega[0]},
+                             {"vorticity_y", omega[1]},
+                             {"vorticity_z", omega[2]},
+                             {"flags", flags}});
+  std::size_t valid = 0;
+  for (auto v : result.field.valid) valid += v;
+  std::cout << o.output << ": " << result.field.grid.count() << " vectors, " << valid << " valid\n";
+  if (!o.vti.empty()) {
+    std::vector<float> omega_vec(3 * omega[0].size());
+    for (std::size_t i = 0; i < omega[0].size(); ++i)
+      for (int c = 0; c < 3; ++c) omega_vec[3 * i + c] = omega[c][i];
+    io::write_vector_field_vti(o.vti, result.field,
+                               {{"vorticity_1_s_vec", omega_vec}, {"flags", flags}});
+    std::cout << o.vti << ": written\n";
+  }
+}
+
+}  // namespace
+
+void add_piv_commands(CLI::App& app) {
+  auto o = std::make_shared<CorrelateOptions>();  // owned by the callback, which the app keeps
+  auto* cmd = app.add_subcommand(
+      "correlate", "cross-correlate two volumes (HDF5) into a 3D/3C vector field (sec 6.3)");
+  cmd->add_option("first", o->first, "volume of exposure A (HDF5 /volume)")->required();
+  cmd->add_option("second", o->second, "volume of exposure B, same grid")->required();
+  cmd->add_option("-o,--output", o->output, "vector field to write (HDF5 /vectors)")->required();
+  cmd->add_option("--vti", o->vti, "also write VTK image data for ParaView");
+  cmd->add_option("--config", o->config,
+                  "YAML with passes, median, signal_threshold, dt_s (flags override it)");
+  cmd->add_option("--passes", o->passes,
+                  "coarse to fine, e.g. 32@50,24@75,16@75 or 32x32x64@50 (default: that)");
+  cmd->add_option("--dt", o->dt_s, "pulse separation, s (velocity = displacement / dt)");
+  cmd->add_option("--signal-threshold", o->signal_threshold,
+                  "windows whose brightest voxel is not above this are skipped (default 0)");
+  cmd->add_option("--fft-planning", o->fft_planning,
+                  "estimate (default; bit-identical between runs) or measure (faster FFTs)")
+      ->check(CLI::IsMember({"estimate", "measure"}));
+  cmd->add_flag("--no-prefilter", o->no_prefilter,
+               "correlate the volumes as they are (default: binomial smoothing first)");
+  cmd->add_option("--threads", o->threads, "worker threads (0: all cores)")->capture_default_str();
+  cmd->callback([o] { run_correlate(*o); });
+}
+
+}  // namespace plenopiv::client

@@ -1,0 +1,130 @@
+// `plenopiv run start|stop`, `watch` and `capture-calibration`: drive runs, follow what is published.
+#include <unistd.h>
+
+#include <fstream>
+#include <iomanip>
+#include <iostream>
+#include <sstream>
+#include <zmq.hpp>
+
+#include "clients/cli/commands.hpp"
+#include "clients/cli/control_client.hpp"
+#include "core/base/errors.hpp"
+
+namespace plenopiv::client {
+namespace {
+
+msg::Reply call(const ControlOptions& options, msg::Request request) {
+  ControlClient client(options.endpoint,
+                       std::chrono::milliseconds(static_cast<long>(options.timeout_s * 1000)));
+  msg::Reply reply = client.call(std::move(request));
+  if (reply.has_error()) {
+    std::cerr << "plenopivd refused: " << msg::Error::Code_Name(reply.error().code()) << ": "
+              << reply.error().message() << "\n";
+    throw CLI::RuntimeError(4);
+  }
+  return reply;
+}
+
+struct WatchOptions {
+  std::string publish = "tcp://127.0.0.1:5556";
+  long count = 0;
+  double timeout_s = 10.0;
+};
+
+// Subscribes to `vectors` and prints one line per field; exits after `count` (0: never) or when
+// nothing arrives for `timeout_s` (a clear error, exit 3).
+void watch(const WatchOptions& o) {
+  zmq::context_t context;
+  zmq::socket_t sub(context, zmq::socket_type::sub);
+  sub.set(zmq::sockopt::linger, 0);
+  sub.set(zmq::sockopt::rcvtimeo, int(o.timeout_s * 1000));
+  sub.set(zmq::sockopt::subscribe, "vectors");
+  sub.connect(o.publish);
+  for (long n = 0; o.count == 0 || n < o.count;) {
+    zmq::message_t topic;
+    if (!sub.recv(topic, zmq::recv_flags::none)) {
+      throw ControlError("no vector field published on " + o.publish + " within " +
+                         std::to_string(int(o.timeout_s)) + " s: is a run going? (plenopiv status)");
+    }
+    std::vector<zmq::message_t> frames;
+    while (sub.get(zmq::sockopt::rcvmore)) {
+      zmq::message_t frame;
+      if (!sub.recv(frame, zmq::recv_flags::none)) break;
+      frames.push_back(std::move(frame));
+    }
+    msg::VectorFieldHeader h;
+    if (frames.empty() || !h.ParseFromArray(frames[0].data(), int(frames[0].size()))) {
+      std::cerr << "plenopiv watch: a message on 'vectors' without a header, ignored\n";
+      continue;
+    }
+    std::cout << "pair " << std::setw(6) << h.pair_index() << std::fixed << std::setprecision(4)
+              << "  mean " << h.mean_speed_m_s() << " m/s  max " << h.max_speed_m_s()
+              << " m/s  valid " << std::setprecision(1) << 100.0 * h.valid_fraction() << " %"
+              << "  latency " << std::setprecision(3) << h.latency_s() << " s  grid "
+              << (h.shape_size() == 3 ? std::to_string(h.shape(0)) + "x" + std::to_string(h.shape(1)) +
+                                            "x" + std::to_string(h.shape(2))
+                                      : std::string("?"))
+              << "  run " << h.run_id() << std::endl;
+    ++n;
+  }
+}
+
+}  // namespace
+
+void add_run_commands(CLI::App& app, ControlOptions& options) {
+  auto* run = app.add_subcommand("run", "start or stop a run on plenopivd");
+  run->require_subcommand(1);
+
+  auto config = std::make_shared<std::string>();
+  auto pairs = std::make_shared<unsigned>(0);
+  auto* start = run->add_subcommand("start", "start a run with a run config (run.yaml)");
+  start->add_option("-c,--config", *config, "run config (YAML)")->required()->check(CLI::ExistingFile);
+  start->add_option("--pairs", *pairs, "number of pairs (overrides the config; 0: as configured)");
+  start->callback([&options, config, pairs] {
+    std::ifstream in(*config);
+    std::stringstream text;
+    text << in.rdbuf();
+    if (!in) throw InputError(*config + ": cannot read");
+    msg::Request request;
+    request.mutable_start_run()->set_config_yaml(text.str());
+    request.mutable_start_run()->set_pair_count(*pairs);
+    const msg::Reply reply = call(options, request);
+    std::cout << "run " << reply.run_started().run_id() << " started: "
+              << reply.run_started().run_dir() << "\n";
+  });
+
+  run->add_subcommand("stop", "stop the current run (in-flight pairs finish, the folder is closed)")
+      ->callback([&options] {
+        msg::Request request;
+        request.mutable_stop_run();
+        const msg::Reply reply = call(options, request);
+        std::cout << "run " << reply.run_stopping().run_id() << " stopping: "
+                  << reply.run_stopping().run_dir() << "\n";
+      });
+
+  auto w = std::make_shared<WatchOptions>();
+  auto* watch_cmd = app.add_subcommand("watch", "print a summary of each published vector field");
+  watch_cmd->add_option("--publish", w->publish, "plenopivd publishing endpoint")->capture_default_str();
+  watch_cmd->add_option("-n,--count", w->count, "exit after this many fields (0: never)");
+  watch_cmd->add_option("--wait", w->timeout_s, "seconds without a field before giving up")
+      ->capture_default_str();
+  watch_cmd->callback([w] { watch(*w); });
+
+  auto frames = std::make_shared<unsigned>(1);
+  auto camera = std::make_shared<std::string>();
+  auto* cal = app.add_subcommand(
+      "capture-calibration", "take calibration images on plenopivd's camera into its data directory");
+  cal->add_option("--frames", *frames, "number of images")->capture_default_str();
+  cal->add_option("--camera", *camera, "camera URI (default: the daemon's)");
+  cal->callback([&options, frames, camera] {
+    msg::Request request;
+    request.mutable_calibrate()->set_frame_count(*frames);
+    request.mutable_calibrate()->set_camera_uri(*camera);
+    const msg::Reply reply = call(options, request);
+    std::cout << reply.calibration().frame_count() << " calibration images in "
+              << reply.calibration().dir() << "\n";
+  });
+}
+
+}  // namespace plenopiv::client

@@ -1,0 +1,44 @@
+// Multi-pass, multigrid 3D cross-correlation with window deformation (VODIM, paper sec 6.3).
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <functional>
+#include <vector>
+
+#include "core/base/grid.hpp"
+#include "core/piv/settings.hpp"
+
+namespace plenopiv::piv {
+
+// What one pass did, for progress output and the run's record.
+struct PassReport {
+  int pass = 0;  // 1-based
+  int passes = 0;
+  PassSettings settings;
+  std::array<int, 3> vectors{0, 0, 0};  // nodes per axis
+  std::size_t windows = 0;              // nodes in total
+  std::size_t no_signal = 0;            // windows skipped: no particle signal (invalid)
+  ValidationCounts validation;          // outliers and how they were replaced
+  std::size_t flag_parabolic = 0;       // primary peaks fitted by the parabolic fallback
+  std::size_t flag_centroid = 0;        // primary peaks on the window border (centroid)
+  double deform_s = 0, correlate_s = 0, validate_s = 0;
+};
+
+struct CorrelationResult {
+  VectorField field;                 // displacement (mm), valid, peak ratio, dt_s, grid (mm)
+  std::vector<std::uint8_t> flags;   // VectorFlag bits per node (peak_fit.hpp)
+  std::vector<PassReport> passes;
+};
+
+// Correlates volume `a` (first exposure) with `b` (second). Both must be on the same grid
+// (InputError otherwise, as for non-finite voxels and windows larger than the volume). The
+// vector grid's node (i, j, k) is the centre of its window, in mm. `on_pass` is called after
+// each pass. Parallel (TBB) over windows and voxels; the result does not depend on the number
+// of threads.
+CorrelationResult correlate_volumes(const Volume& a, const Volume& b,
+                                    const CorrelationSettings& settings,
+                                    const std::function<void(const PassReport&)>& on_pass = {});
+
+}  // namespace plenopiv::piv

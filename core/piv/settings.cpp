@@ -1,0 +1,112 @@
+// Settings of the multi-pass correlation: passes (window, overlap), validation, dt; from YAML.
+#include "core/piv/settings.hpp"
+
+#include <sstream>
+
+#include "core/base/errors.hpp"
+#include "core/base/yaml_access.hpp"
+
+namespace plenopiv::piv {
+
+void check(const CorrelationSettings& s, const std::string& source) {
+  auto fail = [&](const std::string& what) { throw InputError(source + ": " + what); };
+  if (s.passes.empty()) fail("passes: at least one pass is needed");
+  for (std::size_t p = 0; p < s.passes.size(); ++p) {
+    const auto& pass = s.passes[p];
+    const std::string at = "passes[" + std::to_string(p) + "]";
+    for (int a = 0; a < 3; ++a)
+      if (pass.window[a] < 4)
+        fail(at + ".window: every size must be >= 4 voxels, got " + std::to_string(pass.window[a]));
+    if (!(pass.overlap_percent >= 0 && pass.overlap_percent < 100))
+      fail(at + ".overlap_percent: must be in [0, 100), got " + std::to_string(pass.overlap_percent));
+  }
+  if (!(s.median.threshold > 0)) fail("median.threshold: must be > 0");
+  if (!(s.median.epsilon > 0)) fail("median.epsilon_voxel: must be > 0");
+  if (s.median.radius < 1 || s.median.radius > 3) fail("median.radius: must be 1, 2 or 3");
+  if (!(s.signal_threshold >= 0)) fail("signal_threshold: must be >= 0");
+  if (!(s.dt_s > 0)) fail("dt_s: must be > 0, got " + std::to_string(s.dt_s));
+}
+
+std::vector<PassSettings> parse_passes(const std::string& text) {
+  std::vector<PassSettings> passes;
+  std::stringstream all(text);
+  std::string item;
+  auto bad = [&](const std::string& why) {
+    throw InputError("--passes: '" + item + "': " + why +
+                     " (expected WxHxD@overlap or W@overlap, e.g. 32@50,16x16x32@75)");
+  };
+  while (std::getline(all, item, ',')) {
+    const auto at = item.find('@');
+    if (at == std::string::npos) bad("missing @overlap");
+    PassSettings pass;
+    try {
+      std::size_t used = 0;
+      pass.overlap_percent = std::stod(item.substr(at + 1), &used);
+      if (used != item.size() - at - 1) bad("trailing characters after the overlap");
+      std::stringstream sizes(item.substr(0, at));
+      std::string size;
+      std::vector<int> w;
+      while (std::getline(sizes, size, 'x')) {
+        w.push_back(std::stoi(size, &used));
+        if (used != size.size()) bad("not a whole number: " + size);
+      }
+      if (w.size() == 1) pass.window = {w[0], w[0], w[0]};
+      else if (w.size() == 3) pass.window = {w[0], w[1], w[2]};
+      else bad("give one size or three");
+    } catch (const std::logic_error&) {
+      bad("not a number");
+    }
+    passes.push_back(pass);
+  }
+  CorrelationSettings s;
+  s.passes = passes;
+  check(s, "--passes");
+  return passes;
+}
+
+CorrelationSettings load_correlation_settings(const std::filesystem::path& path) {
+  const YamlMap root(load_yaml_file(path), path.string());
+  root.reject_unknown({"passes", "median", "signal_threshold", "dt_s", "fft_planning", "prefilter"});
+  CorrelationSettings s;
+  if (root.has("passes")) {
+    const YAML::Node list = root.node()["passes"];
+    if (!list.IsSequence()) root.fail("passes", "must be a list of {window, overlap_percent}");
+    s.passes.clear();
+    for (std::size_t p = 0; p < list.size(); ++p) {
+      const YamlMap pass(list[p], path.string(), "passes[" + std::to_string(p) + "]");
+      pass.reject_unknown({"window", "overlap_percent"});
+      PassSettings ps;
+      const YAML::Node w = pass.node()["window"];
+      try {
+        if (w.IsScalar()) {
+          const int n = w.as<int>();
+          ps.window = {n, n, n};
+        } else if (w.IsSequence() && w.size() == 3) {
+          ps.window = {w[0].as<int>(), w[1].as<int>(), w[2].as<int>()};
+        } else {
+          pass.fail("window", "must be a size or [x, y, z]");
+        }
+      } catch (const YAML::Exception&) {
+        pass.fail("window", "sizes must be whole numbers");
+      }
+      ps.overlap_percent = pass.number_or("overlap_percent", 0);
+      s.passes.push_back(ps);
+    }
+  }
+  if (auto m = root.optional_map("median")) {
+    m->reject_unknown({"threshold", "epsilon_voxel", "radius"});
+    s.median.threshold = m->number_or("threshold", s.median.threshold);
+    s.median.epsilon = m->number_or("epsilon_voxel", s.median.epsilon);
+    s.median.radius = int(m->integer_or("radius", s.median.radius));
+  }
+  s.signal_threshold = float(root.number_or("signal_threshold", s.signal_threshold));
+  s.dt_s = root.number_or("dt_s", s.dt_s);
+  s.fft_planning = root.choice_or("fft_planning", {"estimate", "measure"}, "estimate") == "measure"
+                       ? FftPlanning::measure
+                       : FftPlanning::estimate;
+  s.prefilter = root.boolean_or("prefilter", s.prefilter);
+  check(s, path.string());
+  return s;
+}
+
+}  // namespace plenopiv::piv

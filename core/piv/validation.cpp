@@ -1,0 +1,160 @@
+// Vector validation: normalised median test, replacement by secondary peaks or neighbours.
+#include "core/piv/validation.hpp"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "core/piv/peak_fit.hpp"
+
+namespace plenopiv::piv {
+namespace {
+
+constexpr int max_radius = 3;
+constexpr int max_neighbours = (2 * max_radius + 1) * (2 * max_radius + 1) * (2 * max_radius + 1);
+
+float median(float* v, int n) {
+  std::nth_element(v, v + n / 2, v + n);
+  const float upper = v[n / 2];
+  if (n % 2) return upper;
+  return 0.5f * (upper + *std::max_element(v, v + n / 2));
+}
+
+// Median and median absolute residual per component of the neighbours' primary vectors.
+struct Reference {
+  int n = 0;
+  std::array<float, 3> median{0, 0, 0};
+  std::array<float, 3> spread{0, 0, 0};
+};
+
+template <typename Visit>
+void for_neighbours(const std::array<int, 3>& count, std::size_t node, int radius, Visit visit) {
+  const int i = int(node % count[0]);
+  const int j = int((node / count[0]) % count[1]);
+  const int k = int(node / (std::size_t(count[0]) * count[1]));
+  for (int z = std::max(k - radius, 0); z <= std::min(k + radius, count[2] - 1); ++z)
+    for (int y = std::max(j - radius, 0); y <= std::min(j + radius, count[1] - 1); ++y)
+      for (int x = std::max(i - radius, 0); x <= std::min(i + radius, count[0] - 1); ++x) {
+        const std::size_t m = (std::size_t(z) * count[1] + y) * count[0] + x;
+        if (m != node) visit(m);
+      }
+}
+
+Reference reference_of(const Candidates& c, std::size_t node, int radius) {
+  std::array<std::array<float, max_neighbours>, 3> values;
+  Reference ref;
+  for_neighbours(c.count, node, radius, [&](std::size_t m) {
+    if (!c.peaks[m]) return;
+    for (int a = 0; a < 3; ++a) values[a][ref.n] = c.peak[0][m][a];
+    ++ref.n;
+  });
+  if (ref.n == 0) return ref;
+  for (int a = 0; a < 3; ++a) {
+    ref.median[a] = median(values[a].data(), ref.n);
+    for (int m = 0; m < ref.n; ++m) values[a][m] = std::abs(values[a][m] - ref.median[a]);
+    ref.spread[a] = median(values[a].data(), ref.n);
+  }
+  return ref;
+}
+
+bool passes(const std::array<float, 3>& u, const Reference& ref, const MedianTest& test) {
+  for (int a = 0; a < 3; ++a) {
+    const double r = std::abs(u[a] - ref.median[a]) / (ref.spread[a] + test.epsilon);
+    if (!(r <= test.threshold)) return false;
+  }
+  return true;
+}
+
+bool mean_of_valid(const ValidatedField& f, const std::array<int, 3>& count, std::size_t node,
+                   int radius, std::array<float, 3>& out) {
+  double sum[3] = {0, 0, 0};
+  int n = 0;
+  for_neighbours(count, node, radius, [&](std::size_t m) {
+    if (!f.valid[m]) return;
+    for (int a = 0; a < 3; ++a) sum[a] += f.d[m][a];
+    ++n;
+  });
+  if (!n) return false;
+  for (int a = 0; a < 3; ++a) out[a] = float(sum[a] / n);
+  return true;
+}
+
+}  // namespace
+
+Candidates::Candidates(std::array<int, 3> n) : count(n) {
+  for (auto& p : peak) p.assign(size(), {0, 0, 0});
+  peaks.assign(size(), 0);
+  flags.assign(size(), 0);
+}
+
+ValidatedField validate(Candidates& c, const MedianTest& test) {
+  const std::size_t n = c.size();
+  const int radius = std::clamp(test.radius, 1, max_radius);
+  ValidatedField f;
+  f.d.assign(n, {0, 0, 0});
+  f.valid.assign(n, 0);
+  // 0: passed, 1: outlier replaced by a peak, 2: outlier waiting for interpolation.
+  std::vector<std::uint8_t> state(n, 0);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n), [&](const auto& r) {
+    for (std::size_t node = r.begin(); node < r.end(); ++node) {
+      if (!c.peaks[node]) continue;
+      const Reference ref = reference_of(c, node, radius);
+      if (ref.n == 0 || passes(c.peak[0][node], ref, test)) {
+        f.d[node] = c.peak[0][node];
+        f.valid[node] = 1;
+        continue;
+      }
+      state[node] = 2;
+      for (int rank = 1; rank < c.peaks[node]; ++rank) {
+        if (passes(c.peak[rank][node], ref, test)) {
+          f.d[node] = c.peak[rank][node];
+          f.valid[node] = 1;
+          c.flags[node] |= rank == 1 ? flag_second_peak : flag_third_peak;
+          state[node] = 1;
+          break;
+        }
+      }
+    }
+  });
+  // Interpolation reads only vectors settled above, so the order of nodes does not matter.
+  std::vector<std::array<float, 3>> interpolated(n);
+  std::vector<std::uint8_t> got(n, 0);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n), [&](const auto& r) {
+    for (std::size_t node = r.begin(); node < r.end(); ++node) {
+      if (state[node] != 2) continue;
+      got[node] = mean_of_valid(f, c.count, node, 1, interpolated[node]) ||
+                  mean_of_valid(f, c.count, node, 2, interpolated[node]);
+    }
+  });
+  for (std::size_t node = 0; node < n; ++node) {
+    if (state[node] == 0) continue;
+    ++f.counts.outliers;
+    if (state[node] == 1) {
+      (c.flags[node] & flag_second_peak ? f.counts.second_peak : f.counts.third_peak)++;
+    } else if (got[node]) {
+      f.d[node] = interpolated[node];
+      f.valid[node] = 1;
+      c.flags[node] |= flag_interpolated;
+      ++f.counts.interpolated;
+    } else {
+      c.flags[node] |= flag_unresolved;
+      ++f.counts.unresolved;
+    }
+  }
+  return f;
+}
+
+std::vector<std::array<float, 3>> fill_invalid(const ValidatedField& f, std::array<int, 3> count) {
+  std::vector<std::array<float, 3>> out = f.d;
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, out.size()), [&](const auto& r) {
+    for (std::size_t node = r.begin(); node < r.end(); ++node) {
+      if (f.valid[node]) continue;
+      if (!mean_of_valid(f, count, node, 2, out[node])) out[node] = {0, 0, 0};
+    }
+  });
+  return out;
+}
+
+}  // namespace plenopiv::piv

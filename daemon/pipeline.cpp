@@ -1,0 +1,106 @@
+// The live path: a bounded tbb::parallel_pipeline from recorded pairs to published vector fields.
+#include "daemon/pipeline.hpp"
+
+#include <spdlog/spdlog.h>
+#include <tbb/parallel_pipeline.h>
+
+namespace plenopiv::daemon {
+
+using Clock = std::chrono::steady_clock;
+
+void LiveMailbox::push(SharedPair pair) {
+  {
+    std::lock_guard lock(mutex_);
+    pairs_.push_back(std::move(pair));
+  }
+  ready_.notify_one();
+}
+
+void LiveMailbox::close() {
+  {
+    std::lock_guard lock(mutex_);
+    closed_ = true;
+  }
+  ready_.notify_all();
+}
+
+std::optional<SharedPair> LiveMailbox::take(std::uint64_t& skipped) {
+  std::unique_lock lock(mutex_);
+  ready_.wait(lock, [&] { return closed_ || !pairs_.empty(); });
+  skipped = 0;
+  if (pairs_.empty()) return std::nullopt;
+  skipped = pairs_.size() - 1;
+  SharedPair newest = std::move(pairs_.back());
+  pairs_.clear();
+  return newest;
+}
+
+std::size_t LiveMailbox::depth() const {
+  std::lock_guard lock(mutex_);
+  return pairs_.size();
+}
+
+msg::StageCounters StageStats::to_message(const char* name, std::uint32_t queue_depth) const {
+  msg::StageCounters m;
+  m.set_name(name);
+  m.set_processed(processed);
+  m.set_skipped(skipped);
+  m.set_queue_depth(queue_depth);
+  const std::uint64_t n = processed;
+  m.set_mean_time_s(n ? double(busy_ns) * 1e-9 / double(n) : 0.0);
+  return m;
+}
+
+namespace {
+struct Item {
+  SharedPair pair;
+  std::optional<ProcessedPair> result;  // empty when processing failed
+};
+}  // namespace
+
+void run_live_pipeline(LiveMailbox& mailbox, int max_in_flight, const ProcessFn& process,
+                       const OutputFn& output, PipelineStats& stats) {
+  tbb::parallel_pipeline(
+      std::size_t(max_in_flight),
+      tbb::make_filter<void, std::shared_ptr<Item>>(
+          tbb::filter_mode::serial_in_order,
+          [&](tbb::flow_control& fc) -> std::shared_ptr<Item> {
+            std::uint64_t skipped = 0;
+            std::optional<SharedPair> pair = mailbox.take(skipped);
+            stats.input.skipped += skipped;
+            if (!pair) {
+              fc.stop();
+              return nullptr;
+            }
+            ++stats.input.processed;
+            ++stats.process.in_flight;
+            auto item = std::make_shared<Item>();
+            item->pair = std::move(*pair);
+            return item;
+          }) &
+          tbb::make_filter<std::shared_ptr<Item>, std::shared_ptr<Item>>(
+              tbb::filter_mode::parallel,
+              [&](std::shared_ptr<Item> item) {
+                const auto start = Clock::now();
+                try {
+                  item->result = process(*item->pair);
+                  ++stats.process.processed;
+                } catch (const std::exception& e) {
+                  ++stats.process.skipped;
+                  spdlog::warn("pair {}: processing failed: {}", item->pair->pair_index, e.what());
+                }
+                stats.process.add_time(Clock::now() - start);
+                --stats.process.in_flight;
+                return item;
+              }) &
+          tbb::make_filter<std::shared_ptr<Item>, void>(
+              tbb::filter_mode::serial_in_order, [&](std::shared_ptr<Item> item) {
+                if (!item->result) return;
+                const auto start = Clock::now();
+                output(*item->pair, *item->result);
+                ++stats.output.processed;
+                stats.output.add_time(Clock::now() - start);
+              }));
+}
+
+}  // namespace plenopiv::daemon

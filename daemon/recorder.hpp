@@ -1,0 +1,70 @@
+// The run folder: raw frames, vector fields, statistics and a manifest that always matches the disk.
+#pragma once
+
+#include <filesystem>
+#include <mutex>
+#include <string>
+
+#include "core/base/grid.hpp"
+#include "daemon/run_config.hpp"
+#include "daemon/statistics.hpp"
+#include "drivers/camera/camera.hpp"
+#include "plenopiv.pb.h"
+
+namespace plenopiv::daemon {
+
+// run-<id>/ under the data directory:
+//   run.yaml                 the run config as sent
+//   camera.yaml              the daemon's camera file, if it has one
+//   frames/pair-<n>-A.tif    raw frames, 16-bit TIFF, every pair the camera delivered
+//   frames/pair-<n>-B.tif
+//   vectors/pair-<n>.h5      vector fields of the pairs the live path processed
+//   statistics.h5            mean velocity (u, v, w) and u_rms, v_rms, w_rms, count per node
+//   manifest.json            RunManifest as JSON
+// Every file is written under a temporary name and renamed; the manifest is rewritten (atomically)
+// after each file, so whatever stops the daemon, the manifest lists exactly the complete files.
+// Thread safe: frames, vectors and close may come from different threads.
+class Recorder {
+ public:
+  struct Setup {
+    std::filesystem::path data_dir;
+    std::string run_id;
+    const RunConfig* config = nullptr;
+    std::string camera_uri, trigger_uri;
+    std::filesystem::path camera_file;  // empty: none
+    std::string camera_model;
+  };
+  // Creates the folder (InputError if it exists or cannot be made) and the first manifest.
+  explicit Recorder(const Setup& setup);
+
+  const std::filesystem::path& dir() const { return dir_; }
+  // Writes both frames and lists the pair. Throws if the disk refuses (the run then fails).
+  void record_pair(const drivers::FramePair& pair);
+  // Writes the pair's vector field, lists it, and adds it to the running statistics.
+  void record_vectors(std::uint64_t pair_index, const VectorField& field);
+  // Writes statistics (if any field was recorded) and the final manifest with `state`
+  // ("complete", "stopped", "failed: ..."). Later calls do nothing.
+  void close(const std::string& state, std::uint64_t processed, std::uint64_t skipped);
+
+  std::uint64_t pairs_recorded() const;
+  msg::RunManifest manifest() const;
+
+ private:
+  void write_manifest_locked();
+  void write_statistics_locked();
+
+  mutable std::mutex mutex_;
+  std::filesystem::path dir_;
+  msg::RunManifest manifest_;
+  RunningStatistics statistics_;
+  double nominal_dt_s_ = 0;
+  bool closed_ = false;
+};
+
+// A file name-safe run id from the current UTC time: 20261123-035512.
+std::string new_run_id();
+// Time between the two frames of a pair: B - A on the device clock when both frames carry it,
+// else on the host clock. (Not the laser's dt: frame B starts after the interline transfer.)
+double frame_gap_s(const drivers::FramePair& pair);
+
+}  // namespace plenopiv::daemon

@@ -1,0 +1,97 @@
+// One run's configuration (run.yaml), parsed key by key with errors that name the key.
+#include "daemon/run_config.hpp"
+
+#include <cmath>
+
+#include "core/base/errors.hpp"
+#include "core/base/yaml_access.hpp"
+
+namespace plenopiv::daemon {
+namespace {
+
+// `[min, max]` in mm along one axis of `volume`.
+std::array<double, 2> range_mm(const YamlMap& volume, const char* key) {
+  const YAML::Node node = volume.node()[key];
+  if (!node) volume.fail(key, "missing (expected [min, max] in mm)");
+  if (!node.IsSequence() || node.size() != 2) volume.fail(key, "expected [min, max] in mm");
+  std::array<double, 2> r{};
+  for (int i = 0; i < 2; ++i) {
+    try {
+      r[i] = node[i].as<double>();
+    } catch (const YAML::Exception&) {
+      volume.fail(key, "expected numbers [min, max] in mm, got '" + node[i].as<std::string>() + "'");
+    }
+    if (!std::isfinite(r[i])) volume.fail(key, "expected finite numbers");
+  }
+  if (!(r[1] > r[0])) volume.fail(key, "max must be greater than min");
+  return r;
+}
+
+YAML::Node opaque_section(const YamlMap& map, const char* key) {
+  if (!map.has(key)) return YAML::Node(YAML::NodeType::Map);
+  const YAML::Node node = map.node()[key];
+  if (!node.IsMap()) map.fail(key, "expected a mapping of settings");
+  return node;
+}
+
+}  // namespace
+
+Grid3 RunConfig::volume_grid() const {
+  Grid3 g;
+  for (int a = 0; a < 3; ++a) {
+    g.shape[a] = int(std::floor((volume_max_mm[a] - volume_min_mm[a]) / voxel_mm + 1e-9)) + 1;
+    g.origin_mm[a] = volume_min_mm[a];
+    g.spacing_mm[a] = voxel_mm;
+  }
+  return g;
+}
+
+RunConfig parse_run_config(const std::string& text, const std::string& source) {
+  const YAML::Node root = load_yaml_text(text, source);
+  if (!root.IsMap()) throw InputError(source + ": expected a mapping of run settings");
+  const YamlMap map(root, source);
+  map.reject_unknown({"camera_uri", "trigger_uri", "pairs", "duration_s", "rate_hz", "dt_s",
+                      "volume", "reconstruction", "correlation", "publish_volumes",
+                      "max_pairs_in_flight"});
+  RunConfig c;
+  c.text = text;
+  c.camera_uri = map.string_or("camera_uri", "");
+  c.trigger_uri = map.string_or("trigger_uri", "");
+  const long long pairs = map.integer_or("pairs", 0);
+  if (pairs < 0) map.fail("pairs", "must be >= 0 (0: until stopped), got " + std::to_string(pairs));
+  c.pair_count = std::uint64_t(pairs);
+  c.duration_s = map.number_or("duration_s", 0.0);
+  if (c.duration_s < 0) map.fail("duration_s", "must be >= 0 s (0: until stopped)");
+  c.rate_hz = map.number_or("rate_hz", c.rate_hz);
+  if (!(c.rate_hz > 0) || c.rate_hz > 1000) map.fail("rate_hz", "must be in (0, 1000] Hz");
+  c.dt_s = map.number_or("dt_s", c.dt_s);
+  if (!(c.dt_s > 0) || c.dt_s >= 1.0 / c.rate_hz) {
+    map.fail("dt_s", "must be > 0 s and shorter than one repetition period (1/rate_hz)");
+  }
+
+  const YamlMap volume = map.map("volume");
+  volume.reject_unknown({"x_mm", "y_mm", "z_mm", "voxel_mm"});
+  const char* axes[3] = {"x_mm", "y_mm", "z_mm"};
+  for (int a = 0; a < 3; ++a) {
+    const auto r = range_mm(volume, axes[a]);
+    c.volume_min_mm[a] = r[0];
+    c.volume_max_mm[a] = r[1];
+  }
+  c.voxel_mm = volume.number("voxel_mm");
+  if (!(c.voxel_mm > 0)) volume.fail("voxel_mm", "must be > 0 mm");
+  const Grid3 g = c.volume_grid();
+  if (double(g.count()) > 512.0 * 1024 * 1024) {
+    volume.fail("voxel_mm", "the volume would have " + std::to_string(g.count()) +
+                                " voxels; more than 2^29 does not fit a live run");
+  }
+
+  c.reconstruction = opaque_section(map, "reconstruction");
+  c.correlation = opaque_section(map, "correlation");
+  c.publish_volumes = map.boolean_or("publish_volumes", false);
+  const long long in_flight = map.integer_or("max_pairs_in_flight", c.max_pairs_in_flight);
+  if (in_flight < 1 || in_flight > 64) map.fail("max_pairs_in_flight", "must be between 1 and 64");
+  c.max_pairs_in_flight = int(in_flight);
+  return c;
+}
+
+}  // namespace plenopiv::daemon

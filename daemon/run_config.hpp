@@ -1,0 +1,37 @@
+// One run's configuration (run.yaml): devices, how many pairs at which rate, the volume, and the
+// processing settings handed on unread to the processing stage.
+#pragma once
+
+#include <yaml-cpp/yaml.h>
+
+#include <array>
+#include <string>
+
+#include "core/base/grid.hpp"
+
+namespace plenopiv::daemon {
+
+struct RunConfig {
+  std::string text;         // the YAML as the operator wrote it (saved in the run folder)
+  std::string camera_uri;   // empty: the daemon's default
+  std::string trigger_uri;  // empty: the daemon's default
+  std::uint64_t pair_count = 0;  // 0: until stopped or duration_s
+  double duration_s = 0.0;       // 0: until stopped or pair_count
+  double rate_hz = 1.0;          // laser repetition rate: pairs per second
+  double dt_s = 100e-6;          // pulse separation
+  std::array<double, 3> volume_min_mm{0, 0, 0}, volume_max_mm{0, 0, 0};  // x, y, z
+  double voxel_mm = 0.0;
+  YAML::Node reconstruction;  // opaque to the daemon: core/recon reads it
+  YAML::Node correlation;     // opaque to the daemon: core/piv reads it
+  bool publish_volumes = false;
+  int max_pairs_in_flight = 2;  // bounded work in the processing stage
+
+  // The reconstruction grid: voxel centres from volume_min_mm in steps of voxel_mm, covering max.
+  Grid3 volume_grid() const;
+};
+
+// Parses run.yaml text; `source` names it in messages ("run.yaml", "start request"). Every bad or
+// unknown key is an InputError naming it.
+RunConfig parse_run_config(const std::string& text, const std::string& source);
+
+}  // namespace plenopiv::daemon

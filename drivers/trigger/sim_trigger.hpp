@@ -1,0 +1,58 @@
+// `sim://`: a trigger with no hardware that records every edge with its time, for tests and for
+// the simulated camera (which listens to the camera line to know when to make a pair).
+#pragma once
+
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <vector>
+
+#include "drivers/common/device_uri.hpp"
+#include "drivers/trigger/scheduled_trigger.hpp"
+
+namespace plenopiv::drivers {
+
+struct RecordedEdge {
+  TriggerLine line = TriggerLine::Camera;
+  bool level = false;
+  std::uint64_t shot = 0;
+  double planned_s = 0;  // from the start of playback
+  double actual_s = 0;   // planned + how late it was written (equal in virtual time)
+};
+
+// URI parameters: clock=real|virtual (default real: edges are written at their times on the
+// steady clock; virtual: all at once, stamped with their planned times, for fast tests);
+// uncertainty_us=<us> (default 0) to stand in for a backend with jitter.
+class SimTrigger final : public ScheduledTrigger {
+ public:
+  SimTrigger(const std::string& uri, bool virtual_clock, double uncertainty_s);
+  ~SimTrigger() override;
+  void start(std::uint64_t shots) override;
+
+  std::vector<RecordedEdge> edges() const;
+  // Current level of each line, indexed by TriggerLine.
+  bool level(TriggerLine line) const;
+  // The seam for the simulated camera: called on the playback thread for every edge written.
+  // Keep it short; set it before start().
+  using EdgeListener = std::function<void(const RecordedEdge&)>;
+  void set_edge_listener(EdgeListener listener);
+
+ protected:
+  void write_line(TriggerLine line, bool level) override;
+  void all_low() noexcept override;
+  bool virtual_time() const override { return virtual_clock_; }
+  void on_edge_written(const Edge& edge, std::uint64_t shot, double planned_s,
+                       double lateness_s) override;
+
+ private:
+  bool virtual_clock_;
+  mutable std::mutex mutex_;
+  std::vector<RecordedEdge> edges_;
+  bool levels_[6] = {};
+  EdgeListener listener_;
+  std::uint64_t base_ns_ = 1'000'000'000;  // virtual clock origin for Q-switch sync times
+};
+
+std::unique_ptr<Trigger> open_sim_trigger(const DeviceUri& uri);
+
+}  // namespace plenopiv::drivers

@@ -1,0 +1,59 @@
+// The trigger driver interface: plays a Schedule on output lines, reports measured laser pulses.
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "drivers/trigger/sequencer.hpp"
+
+namespace plenopiv::drivers {
+
+struct TriggerInfo {
+  std::string uri;
+  std::string backend;                 // "sim", "gpiod"
+  double timing_uncertainty_s = 0;     // how precisely it places an edge (jitter)
+  std::vector<TriggerLine> outputs;    // lines wired
+  bool measures_qswitch = false;       // an input line on the laser's Q-switch sync
+};
+
+// The laser pulses of one shot as measured on the Q-switch sync input (kernel timestamps,
+// CLOCK_MONOTONIC for gpiod, or the sim trigger's clock). dt_s() is the dt that really happened.
+struct MeasuredShot {
+  std::uint64_t shot_index = 0;
+  std::uint64_t pulse1_ns = 0;
+  std::uint64_t pulse2_ns = 0;
+  double dt_s() const { return double(pulse2_ns - pulse1_ns) * 1e-9; }
+};
+
+struct TriggerCounters {
+  std::uint64_t shots_fired = 0;
+  std::uint64_t edges_written = 0;
+  std::uint64_t edges_late = 0;           // written later than the backend's uncertainty
+  double worst_lateness_s = 0;
+  std::uint64_t sync_edges = 0;           // Q-switch sync edges measured
+  std::uint64_t sync_unpaired = 0;        // sync edges that did not make a (pulse 1, pulse 2) shot
+};
+
+// Thread safety: load/start/stop from one controlling thread; next_shot, counters and running
+// from any. Every backend keeps its output lines low whenever it is not playing a schedule, and
+// drives them all low on stop(), on any error, and in its destructor.
+class Trigger {
+ public:
+  virtual ~Trigger() = default;
+  virtual TriggerInfo info() const = 0;
+  // Checks that the schedule only uses wired lines and that its margins exceed this backend's
+  // timing uncertainty; InputError otherwise. Not while running.
+  virtual void load(const Schedule& schedule) = 0;
+  // Plays the loaded schedule `shots` times (0: until stop()).
+  virtual void start(std::uint64_t shots = 0) = 0;
+  virtual void stop() = 0;  // all lines low; a no-op when not running
+  virtual bool running() const = 0;
+  // Waits for the next measured shot; nullopt on timeout or when nothing measures the Q-switch.
+  virtual std::optional<MeasuredShot> next_shot(std::chrono::milliseconds timeout) = 0;
+  virtual TriggerCounters counters() const = 0;
+};
+
+}  // namespace plenopiv::drivers

@@ -1,0 +1,325 @@
+// The live path in-process: ordering, skip-to-newest, recording of every pair, run folder contents,
+// and a subscriber that never reads; pipeline cases rerun at several concurrency levels.
+#include <google/protobuf/util/json_util.h>
+#include <gtest/gtest.h>
+#include <tbb/global_control.h>
+
+#include <fstream>
+#include <latch>
+#include <sstream>
+#include <thread>
+
+#include "core/base/errors.hpp"
+#include "core/io/hdf5_files.hpp"
+#include "core/io/tiff.hpp"
+#include "daemon/pipeline.hpp"
+#include "daemon/publisher.hpp"
+#include "daemon/recorder.hpp"
+#include "daemon/run.hpp"
+#include "tests/drivers/test_camera.hpp"
+#include "tests/support/temp_dir.hpp"
+
+namespace plenopiv::daemon {
+namespace {
+
+using namespace std::chrono_literals;
+namespace fs = std::filesystem;
+
+drivers::FramePair make_pair(std::uint64_t index) {
+  drivers::FramePair p;
+  p.pair_index = index;
+  p.trigger_index = index;
+  for (drivers::Frame* f : {&p.a, &p.b}) {
+    f->image = ImageU16(8, 6, std::uint16_t(index + (f == &p.b ? 1000 : 0)));
+    f->frame_id = 2 * index + (f == &p.b ? 2 : 1);
+    f->host_timestamp_ns = 1'000'000'000ull * (index + 1);
+    f->device_timestamp_ns = 1'000'000ull * index + (f == &p.b ? 100'000 : 0) + 1;
+  }
+  return p;
+}
+
+// A field whose x displacement is the pair index (mm): tells which pair a result came from.
+ProcessedPair tagged_field(const drivers::FramePair& pair) {
+  Grid3 g;
+  g.shape = {3, 2, 2};
+  ProcessedPair out;
+  out.vectors = VectorField(g);
+  out.vectors.dt_s = 1e-3;
+  for (std::size_t i = 0; i < g.count(); ++i) {
+    out.vectors.dx_mm[i] = float(pair.pair_index);
+    out.vectors.valid[i] = 1;
+  }
+  return out;
+}
+
+msg::RunManifest read_manifest(const fs::path& dir) {
+  std::ifstream in(dir / "manifest.json");
+  std::stringstream text;
+  text << in.rdbuf();
+  msg::RunManifest m;
+  EXPECT_TRUE(google::protobuf::util::JsonStringToMessage(text.str(), &m).ok()) << text.str();
+  return m;
+}
+
+class Concurrency : public ::testing::TestWithParam<int> {};
+
+TEST_P(Concurrency, OutputSeesEveryTakenPairInOrderWithItsOwnResult) {
+  tbb::global_control limit(tbb::global_control::max_allowed_parallelism, GetParam());
+  LiveMailbox mailbox;
+  PipelineStats stats;
+  std::vector<std::uint64_t> seen;
+  std::thread producer([&] {
+    for (std::uint64_t i = 0; i < 40; ++i) {
+      mailbox.push(std::make_shared<const drivers::FramePair>(make_pair(i)));
+      if (i % 3 == 0) std::this_thread::sleep_for(1ms);
+    }
+    mailbox.close();
+  });
+  run_live_pipeline(mailbox, 3, tagged_field,
+                    [&](const drivers::FramePair& pair, ProcessedPair& result) {
+                      EXPECT_EQ(result.vectors.dx_mm[0], float(pair.pair_index));
+                      seen.push_back(pair.pair_index);
+                    },
+                    stats);
+  producer.join();
+  ASSERT_FALSE(seen.empty());
+  for (std::size_t i = 1; i < seen.size(); ++i) EXPECT_LT(seen[i - 1], seen[i]);
+  EXPECT_EQ(seen.back(), 39u);  // the newest pair is never skipped
+  EXPECT_EQ(stats.output.processed + stats.input.skipped, 40u);
+  EXPECT_EQ(stats.process.processed, stats.output.processed);
+}
+
+TEST_P(Concurrency, SlowProcessingSkipsToTheNewestPairAndCountsTheRest) {
+  tbb::global_control limit(tbb::global_control::max_allowed_parallelism, GetParam());
+  LiveMailbox mailbox;
+  PipelineStats stats;
+  std::latch release(1);
+  std::vector<std::uint64_t> seen;
+  std::thread feeder([&] {
+    mailbox.push(std::make_shared<const drivers::FramePair>(make_pair(0)));
+    std::this_thread::sleep_for(50ms);  // pair 0 is taken and blocks in processing
+    for (std::uint64_t i = 1; i <= 10; ++i) {
+      mailbox.push(std::make_shared<const drivers::FramePair>(make_pair(i)));
+    }
+    std::this_thread::sleep_for(50ms);
+    release.count_down();
+    mailbox.close();
+  });
+  run_live_pipeline(
+      mailbox, 1,
+      [&](const drivers::FramePair& pair) {
+        release.wait();
+        return tagged_field(pair);
+      },
+      [&](const drivers::FramePair& pair, ProcessedPair&) { seen.push_back(pair.pair_index); },
+      stats);
+  feeder.join();
+  // One pair in flight: pair 0 blocks; when it finishes, the input takes the newest (10).
+  EXPECT_EQ(seen, (std::vector<std::uint64_t>{0, 10}));
+  EXPECT_EQ(stats.input.skipped, 9u);
+}
+
+TEST_P(Concurrency, AProcessingFailureSkipsThatPairOnly) {
+  tbb::global_control limit(tbb::global_control::max_allowed_parallelism, GetParam());
+  PipelineStats stats;
+  std::vector<std::uint64_t> seen;
+  // Fed one at a time so nothing is skipped for lateness.
+  LiveMailbox one_by_one;
+  std::thread feeder([&] {
+    for (std::uint64_t i = 0; i < 3; ++i) {
+      one_by_one.push(std::make_shared<const drivers::FramePair>(make_pair(i)));
+      while (one_by_one.depth() > 0) std::this_thread::sleep_for(1ms);
+      std::this_thread::sleep_for(20ms);
+    }
+    one_by_one.close();
+  });
+  run_live_pipeline(
+      one_by_one, 2,
+      [&](const drivers::FramePair& pair) {
+        if (pair.pair_index == 1) throw std::runtime_error("no particles");
+        return tagged_field(pair);
+      },
+      [&](const drivers::FramePair& pair, ProcessedPair&) { seen.push_back(pair.pair_index); },
+      stats);
+  feeder.join();
+  EXPECT_EQ(seen, (std::vector<std::uint64_t>{0, 2}));
+  EXPECT_EQ(stats.process.skipped, 1u);
+  EXPECT_EQ(stats.input.skipped, 0u);
+}
+
+INSTANTIATE_TEST_SUITE_P(Threads, Concurrency, ::testing::Values(1, 2, 4));
+
+TEST(Recorder, FolderHoldsFramesVectorsStatisticsAndAManifestListingThem) {
+  const fs::path data = testing_support::temp_dir("daemon") / "recorder";
+  fs::remove_all(data);
+  RunConfig config = parse_run_config(
+      "dt_s: 0.001\nvolume: {x_mm: [0, 1], y_mm: [0, 1], z_mm: [0, 1], voxel_mm: 0.5}\n", "run.yaml");
+  Recorder recorder({data, "r1", &config, "test://", "sim://", {}, "plenopiv test camera"});
+  EXPECT_EQ(read_manifest(recorder.dir()).state(), "recording");
+  for (std::uint64_t i = 0; i < 3; ++i) recorder.record_pair(make_pair(i));
+  // Vectors for pairs 0 and 2: u = 1 m/s and 3 m/s → mean 2, RMS fluctuation 1.
+  ProcessedPair a = tagged_field(make_pair(1)), b = tagged_field(make_pair(3));
+  recorder.record_vectors(0, a.vectors);
+  recorder.record_vectors(2, b.vectors);
+  msg::RunManifest m = read_manifest(recorder.dir());
+  ASSERT_EQ(m.pairs_size(), 3);
+  EXPECT_EQ(m.pairs(0).vectors(), "vectors/pair-000000.h5");
+  EXPECT_EQ(m.pairs(1).vectors(), "");
+  EXPECT_NEAR(m.pairs(1).frame_gap_s(), 100e-6, 1e-12);
+  EXPECT_EQ(m.pairs(1).measured_dt_s(), 0.0);  // no laser sync measured
+  recorder.close("complete", 2, 1);
+
+  m = read_manifest(recorder.dir());
+  EXPECT_EQ(m.state(), "complete");
+  EXPECT_EQ(m.run_id(), "r1");
+  EXPECT_EQ(m.config_file(), "run.yaml");
+  EXPECT_EQ(m.statistics_file(), "statistics.h5");
+  EXPECT_EQ(m.pairs_processed(), 2u);
+  EXPECT_EQ(m.pairs_skipped(), 1u);
+  for (const msg::ManifestPair& p : m.pairs()) {
+    const ImageU16 image = io::read_tiff_u16(recorder.dir() / p.frame_b());
+    EXPECT_EQ(image.pixels, make_pair(p.pair_index()).b.image.pixels);
+    EXPECT_EQ(p.frame_id_b(), 2 * p.pair_index() + 2);
+  }
+  const VectorField stats = io::read_vector_field_h5(recorder.dir() / "statistics.h5");
+  // Mean u = 2 m/s, stored as displacement over the nominal dt (1 ms): 2 mm.
+  EXPECT_NEAR(stats.dx_mm[0], 2.0, 1e-6);
+  std::ifstream config_copy(recorder.dir() / "run.yaml");
+  std::stringstream text;
+  text << config_copy.rdbuf();
+  EXPECT_EQ(text.str(), config.text);
+  for (const auto& entry : fs::recursive_directory_iterator(recorder.dir())) {
+    EXPECT_EQ(entry.path().filename().string().find(".tmp"), std::string::npos)
+        << "temporary file left: " << entry.path();
+  }
+}
+
+TEST(RunningStatistics, WelfordMeanAndRmsOfValidVectors) {
+  RunningStatistics s;
+  for (float d : {1.f, 3.f, 5.f}) {
+    ProcessedPair p = tagged_field(make_pair(0));
+    for (auto& x : p.vectors.dx_mm) x = d;
+    p.vectors.valid[1] = d == 5.f ? 0 : 1;  // node 1 misses the last sample
+    s.add(p.vectors);
+  }
+  EXPECT_NEAR(s.mean(0)[0], 3.0, 1e-6);            // u = 1, 3, 5 m/s
+  EXPECT_NEAR(s.rms(0)[0], std::sqrt(8.0 / 3), 1e-6);
+  EXPECT_NEAR(s.mean(0)[1], 2.0, 1e-6);            // u = 1, 3
+  EXPECT_NEAR(s.rms(0)[1], 1.0, 1e-6);
+  EXPECT_EQ(s.count()[1], 2u);
+}
+
+// A whole run in-process on the test camera.
+class RunTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    testing_support::register_test_camera(drivers::CameraRegistry::instance());
+    data_ = testing_support::temp_dir("daemon") /
+            ::testing::UnitTest::GetInstance()->current_test_info()->name();
+    fs::remove_all(data_);
+    env_.data_dir = data_;
+    env_.default_camera_uri = "test://";
+    env_.default_trigger_uri = "sim://";
+    env_.state = &state_;
+    env_.processing = [](const RunConfig&) { return ProcessFn(tagged_field); };
+  }
+
+  RunConfig config(const std::string& extra) {
+    return parse_run_config(
+        "volume: {x_mm: [0, 1], y_mm: [0, 1], z_mm: [0, 1], voxel_mm: 0.5}\n" + extra, "run.yaml");
+  }
+
+  void wait_finished(daemon::Run& run) {
+    for (int i = 0; i < 1000 && !run.finished(); ++i) std::this_thread::sleep_for(10ms);
+    ASSERT_TRUE(run.finished());
+  }
+
+  fs::path data_;
+  RunStateMachine state_;
+  RunEnvironment env_;
+};
+
+TEST_F(RunTest, RunOfNPairsRecordsAllAndEndsIdle) {
+  state_.start("n");
+  daemon::Run run(config("pairs: 6\nrate_hz: 50\n"), "n", env_);
+  wait_finished(run);
+  EXPECT_EQ(state_.state(), RunState::Idle) << state_.error();
+  const msg::RunManifest m = read_manifest(run.dir());
+  EXPECT_EQ(m.state(), "complete");
+  ASSERT_EQ(m.pairs_size(), 6);
+  for (int i = 0; i < 6; ++i) {
+    EXPECT_EQ(m.pairs(i).pair_index(), std::uint64_t(i));
+    EXPECT_TRUE(fs::exists(run.dir() / m.pairs(i).frame_a()));
+    EXPECT_TRUE(fs::exists(run.dir() / m.pairs(i).frame_b()));
+  }
+  EXPECT_EQ(m.pairs_processed() + m.pairs_skipped(), 6u);
+  msg::Status s;
+  run.fill_status(s);
+  EXPECT_EQ(s.pairs_recorded(), 6u);
+  EXPECT_EQ(s.stages_size(), 3);
+}
+
+TEST_F(RunTest, StopMidRunLeavesAConsistentFolder) {
+  state_.start("s");
+  daemon::Run run(config("pairs: 0\nrate_hz: 40\n"), "s", env_);
+  std::this_thread::sleep_for(300ms);
+  state_.stop();
+  run.request_stop();
+  wait_finished(run);
+  EXPECT_EQ(state_.state(), RunState::Idle);
+  const msg::RunManifest m = read_manifest(run.dir());
+  EXPECT_EQ(m.state(), "stopped");
+  EXPECT_GT(m.pairs_size(), 2);
+  std::size_t frames = 0;
+  for (const auto& e : fs::directory_iterator(run.dir() / "frames")) frames += e.is_regular_file();
+  EXPECT_EQ(frames, std::size_t(2 * m.pairs_size()));  // every frame on disk is listed, and back
+}
+
+TEST_F(RunTest, UnknownCameraIsAnInputErrorNamingTheUri) {
+  RunConfig c = config("camera_uri: nosuch://x\n");
+  try {
+    daemon::Run run(c, "u", env_);
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("nosuch://x"), std::string::npos) << e.what();
+  }
+}
+
+TEST_F(RunTest, ASubscriberThatNeverReadsDoesNotSlowAcquisition) {
+  zmq::context_t context;
+  Publisher publisher(context, "tcp://127.0.0.1:*", 2);
+  env_.publisher = &publisher;
+  // Big fields (32^3 nodes, 4 arrays: 512 KiB a message) fill the socket buffers quickly.
+  env_.processing = [](const RunConfig&) {
+    return ProcessFn([](const drivers::FramePair& pair) {
+      Grid3 g;
+      g.shape = {32, 32, 32};
+      ProcessedPair out;
+      out.vectors = VectorField(g);
+      out.vectors.dt_s = 1e-3;
+      out.vectors.dx_mm.assign(g.count(), float(pair.pair_index));
+      return out;
+    });
+  };
+  zmq::socket_t deaf(context, zmq::socket_type::sub);
+  deaf.set(zmq::sockopt::rcvhwm, 1);
+  deaf.set(zmq::sockopt::subscribe, "");
+  deaf.connect(publisher.endpoint());
+  std::this_thread::sleep_for(100ms);  // let the subscription reach the publisher
+
+  const auto start = std::chrono::steady_clock::now();
+  state_.start("deaf");
+  daemon::Run run(config("pairs: 40\nrate_hz: 100\nmax_pairs_in_flight: 2\n"), "deaf", env_);
+  wait_finished(run);
+  const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  const msg::RunManifest m = read_manifest(run.dir());
+  EXPECT_EQ(m.pairs_size(), 40);  // raw frame count unchanged
+  EXPECT_EQ(m.pairs_processed() + m.pairs_skipped(), 40u);
+  EXPECT_GE(publisher.messages_sent(), m.pairs_processed());  // every send returned
+  // 40 pairs at 100 Hz take 0.4 s; a publisher that blocked on the deaf subscriber would never
+  // finish. A bound on hanging, not a timing figure (measured: ~0.5 s on 2 loaded cores).
+  EXPECT_LT(elapsed, 10.0);
+}
+
+}  // namespace
+}  // namespace plenopiv::daemon

@@ -1,0 +1,78 @@
+// run.yaml: the shipped default parses; wrong keys and values are errors that name the key.
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <sstream>
+
+#include "core/base/errors.hpp"
+#include "daemon/run_config.hpp"
+
+namespace plenopiv::daemon {
+namespace {
+
+const std::string kVolume = "volume: {x_mm: [-1, 1], y_mm: [-2, 2], z_mm: [0, 1], voxel_mm: 0.5}\n";
+
+std::string error_of(const std::string& text) {
+  try {
+    parse_run_config(text, "run.yaml");
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  return "(no error)";
+}
+
+TEST(RunConfig, ShippedDefaultParses) {
+  std::ifstream in(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/run.yaml");
+  std::stringstream text;
+  text << in.rdbuf();
+  const RunConfig c = parse_run_config(text.str(), "run.yaml");
+  EXPECT_EQ(c.pair_count, 20u);
+  EXPECT_DOUBLE_EQ(c.rate_hz, 2.0);
+  EXPECT_DOUBLE_EQ(c.dt_s, 1e-4);
+  EXPECT_TRUE(c.camera_uri.empty());  // the daemon's default camera
+  EXPECT_EQ(c.reconstruction["iterations"].as<int>(), 3);
+  EXPECT_EQ(c.correlation["passes"][0]["window"].as<int>(), 16);
+  EXPECT_FALSE(c.publish_volumes);
+  EXPECT_EQ(c.text, text.str());
+}
+
+TEST(RunConfig, VolumeGridCoversTheExtent) {
+  const RunConfig c = parse_run_config(kVolume, "run.yaml");
+  const Grid3 g = c.volume_grid();
+  EXPECT_EQ(g.shape, (std::array<int, 3>{5, 9, 3}));
+  EXPECT_EQ(g.origin_mm, (std::array<double, 3>{-1, -2, 0}));
+  EXPECT_EQ(g.spacing_mm, (std::array<double, 3>{0.5, 0.5, 0.5}));
+  EXPECT_EQ(c.pair_count, 0u);  // until stopped
+  EXPECT_TRUE(c.reconstruction.IsMap());
+}
+
+TEST(RunConfig, UnknownKeyIsNamed) {
+  const std::string e = error_of(kVolume + "pairz: 3\n");
+  EXPECT_NE(e.find("run.yaml: pairz: unknown key"), std::string::npos) << e;
+}
+
+TEST(RunConfig, UnknownVolumeKeyIsNamedWithItsPath) {
+  const std::string e =
+      error_of("volume: {x_mm: [-1, 1], y_mm: [-1, 1], z_mm: [0, 1], voxel: 0.5}\n");
+  EXPECT_NE(e.find("volume.voxel: unknown key"), std::string::npos) << e;
+}
+
+TEST(RunConfig, BadValuesAreNamed) {
+  EXPECT_NE(error_of(kVolume + "pairs: -1\n").find("pairs: must be >= 0"), std::string::npos);
+  EXPECT_NE(error_of(kVolume + "rate_hz: 0\n").find("rate_hz"), std::string::npos);
+  EXPECT_NE(error_of(kVolume + "rate_hz: 10\ndt_s: 0.2\n").find("dt_s"), std::string::npos);
+  EXPECT_NE(error_of(kVolume + "reconstruction: 3\n").find("reconstruction: expected a mapping"),
+            std::string::npos);
+  EXPECT_NE(error_of(kVolume + "max_pairs_in_flight: 0\n").find("max_pairs_in_flight"),
+            std::string::npos);
+  EXPECT_NE(error_of("volume: {x_mm: [1, -1], y_mm: [-1, 1], z_mm: [0, 1], voxel_mm: 1}\n")
+                .find("volume.x_mm: max must be greater than min"),
+            std::string::npos);
+  EXPECT_NE(error_of("volume: {x_mm: [-1, 1], y_mm: [-1, 1], z_mm: [0, 1]}\n").find("voxel_mm"),
+            std::string::npos);
+  EXPECT_NE(error_of("pairs: 3\n").find("volume"), std::string::npos);
+  EXPECT_NE(error_of("pairs: [3\n").find("run.yaml"), std::string::npos);  // YAML syntax
+}
+
+}  // namespace
+}  // namespace plenopiv::daemon

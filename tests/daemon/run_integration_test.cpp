@@ -1,0 +1,339 @@
+// Runs end to end: plenopivd (test camera) as a child process, driven by the thin client, watched
+// by subscribers; illegal and invalid requests refused while it keeps serving; SIGTERM mid-run.
+#include <google/protobuf/util/json_util.h>
+#include <gtest/gtest.h>
+
+#include <sys/socket.h>
+#include <sys/un.h>
+#include <unistd.h>
+
+#include <csignal>
+#include <iomanip>
+#include <set>
+#include <fstream>
+#include <sstream>
+#include <thread>
+
+#include "clients/cli/control_client.hpp"
+#include "tests/support/child_process.hpp"
+#include "tests/support/temp_dir.hpp"
+
+namespace plenopiv {
+namespace {
+
+using namespace std::chrono_literals;
+namespace fs = std::filesystem;
+using testing_support::binary;
+using testing_support::ChildProcess;
+
+const std::string kRun =
+    "rate_hz: 10\ndt_s: 0.001\n"
+    "volume: {x_mm: [-1, 1], y_mm: [-1, 1], z_mm: [0, 1], voxel_mm: 0.5}\n";
+
+class DaemonRuns : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const std::string name = ::testing::UnitTest::GetInstance()->current_test_info()->name();
+    scratch_ = testing_support::temp_dir("daemon-runs") / name;
+    fs::remove_all(scratch_);
+    fs::create_directories(scratch_);
+    control_ = "tcp://127.0.0.1:" + std::to_string(testing_support::free_tcp_port());
+    publish_ = "tcp://127.0.0.1:" + std::to_string(testing_support::free_tcp_port());
+    daemon_ = std::make_unique<ChildProcess>(
+        std::vector<std::string>{binary("plenopivd-testcam"), "--control", control_, "--publish",
+                                 publish_, "--camera", "test://", "--data-dir",
+                                 (scratch_ / "data").string()},
+        scratch_ / "plenopivd.log");
+    for (int i = 0; i < 100; ++i) {
+      if (status_or_null()) return;
+      ASSERT_TRUE(daemon_->running()) << daemon_->output();
+    }
+    FAIL() << "plenopivd did not answer: " << daemon_->output();
+  }
+
+  std::optional<msg::Status> status_or_null() {
+    try {
+      client::ControlClient probe(control_, 300ms);
+      msg::Request r;
+      r.mutable_status();
+      const msg::Reply reply = probe.call(r);
+      if (reply.has_status()) return reply.status();
+    } catch (const client::ControlError&) {
+    }
+    return std::nullopt;
+  }
+
+  void wait_for_state(const std::string& state) {
+    for (int i = 0; i < 300; ++i) {
+      const auto s = status_or_null();
+      if (s && s->state() == state) return;
+      std::this_thread::sleep_for(50ms);
+    }
+    FAIL() << "plenopivd never reached " << state << ": " << daemon_->output();
+  }
+
+  int client(const std::vector<std::string>& args, std::string& out) {
+    std::vector<std::string> argv{binary("plenopiv"), "--endpoint", control_};
+    argv.insert(argv.end(), args.begin(), args.end());
+    return testing_support::run_command(argv, out);
+  }
+
+  fs::path write_config(const std::string& text) {
+    const fs::path path = scratch_ / "run.yaml";
+    std::ofstream(path) << text;
+    return path;
+  }
+
+  msg::RunManifest manifest(const fs::path& run_dir) {
+    std::ifstream in(run_dir / "manifest.json");
+    std::stringstream text;
+    text << in.rdbuf();
+    msg::RunManifest m;
+    EXPECT_TRUE(google::protobuf::util::JsonStringToMessage(text.str(), &m).ok()) << text.str();
+    return m;
+  }
+
+  fs::path only_run_dir() {
+    std::vector<fs::path> runs;
+    for (const auto& e : fs::directory_iterator(scratch_ / "data")) {
+      if (e.path().filename().string().rfind("run-", 0) == 0) runs.push_back(e.path());
+    }
+    EXPECT_EQ(runs.size(), 1u);
+    return runs.empty() ? fs::path() : runs[0];
+  }
+
+  fs::path scratch_;
+  std::string control_, publish_;
+  std::unique_ptr<ChildProcess> daemon_;
+};
+
+TEST_F(DaemonRuns, RunOfNPairsReachesSubscribersAndTheRunFolder) {
+  constexpr int n = 6;
+  // A C++ subscriber: the thin client's `watch`, started before the run (PUB/SUB joins late).
+  ChildProcess watcher({binary("plenopiv"), "watch", "--publish", publish_, "--count",
+                        std::to_string(n), "--wait", "20"},
+                       scratch_ / "watch.log");
+  // A Python subscriber (Debian's python3-zmq and python3-protobuf), saving to HDF5 and plotting.
+  const fs::path h5 = scratch_ / "fields.h5", png = scratch_ / "view.png";
+  ChildProcess python({"/usr/bin/python3",
+                       std::string(PLENOPIV_SOURCE_DIR) + "/clients/python/plenopiv_subscribe.py",
+                       "--publish", publish_, "--count", std::to_string(n), "--wait", "20",
+                       "--save", h5.string(), "--png", png.string()},
+                      scratch_ / "python.log");
+  std::this_thread::sleep_for(1500ms);  // both subscriptions reach the publisher
+
+  std::string out;
+  ASSERT_EQ(client({"run", "start", "--config", write_config(kRun).string(), "--pairs",
+                    std::to_string(n)},
+                   out),
+            0)
+      << out;
+  EXPECT_NE(out.find("started"), std::string::npos) << out;
+
+  const auto watched = watcher.wait(30s);
+  ASSERT_TRUE(watched.has_value()) << "watch did not see " << n << " fields: " << watcher.output();
+  EXPECT_EQ(*watched, 0) << watcher.output();
+  // Consecutive pair indices, each field's u = its pair index (the test processing stage).
+  const std::string lines = watcher.output();
+  for (int i = 0; i < n; ++i) {
+    std::ostringstream expect;
+    expect << "pair " << std::setw(6) << i << "  mean " << std::fixed << std::setprecision(4)
+           << double(i) << " m/s";
+    EXPECT_NE(lines.find(expect.str()), std::string::npos) << expect.str() << "\n" << lines;
+  }
+  EXPECT_NE(lines.find("valid 75.0 %"), std::string::npos) << lines;
+
+  const auto py = python.wait(30s);
+  ASSERT_TRUE(py.has_value()) << "the Python subscriber did not see " << n << " fields";
+  EXPECT_EQ(*py, 0) << python.output();
+  EXPECT_NE(python.output().find("pair      5  mean 5.0000 m/s"), std::string::npos)
+      << python.output();
+  EXPECT_TRUE(fs::exists(png));
+  // The saved arrays hold the decoded values: u = pair index at every node.
+  std::string saved;
+  ASSERT_EQ(testing_support::run_command(
+                {"/usr/bin/python3", "-c",
+                 "import h5py, sys; f = h5py.File(sys.argv[1]); "
+                 "print(len(f), [float(f['pair-%06d/u' % i][1, 2, 3]) for i in range(len(f))], "
+                 "f['pair-000002/u'].shape)",
+                 h5.string()},
+                saved),
+            0)
+      << saved;
+  EXPECT_NE(saved.find("6 [0.0, 1.0, 2.0, 3.0, 4.0, 5.0] (2, 3, 4)"), std::string::npos) << saved;
+
+  wait_for_state("Idle");
+  const fs::path run = only_run_dir();
+  const msg::RunManifest m = manifest(run);
+  EXPECT_EQ(m.state(), "complete");
+  ASSERT_EQ(m.pairs_size(), n);
+  for (int i = 0; i < n; ++i) {
+    EXPECT_EQ(m.pairs(i).pair_index(), std::uint64_t(i));
+    EXPECT_TRUE(fs::exists(run / m.pairs(i).frame_a()));
+    EXPECT_TRUE(fs::exists(run / m.pairs(i).frame_b()));
+    EXPECT_EQ(m.pairs(i).vectors(), "vectors/" + fs::path(m.pairs(i).frame_a()).stem().string().substr(0, 11) + ".h5");
+  }
+  EXPECT_TRUE(fs::exists(run / "statistics.h5"));
+  EXPECT_TRUE(fs::exists(run / "run.yaml"));
+
+  ASSERT_EQ(client({"status"}, out), 0) << out;
+  EXPECT_NE(out.find("recorded " + std::to_string(n)), std::string::npos) << out;
+}
+
+TEST_F(DaemonRuns, IllegalAndInvalidRequestsAreRefusedAndTheDaemonServesOn) {
+  std::string out;
+  EXPECT_EQ(client({"run", "stop"}, out), 4) << out;
+  EXPECT_NE(out.find("WRONG_STATE: no run to stop"), std::string::npos) << out;
+
+  EXPECT_EQ(client({"run", "start", "--config", write_config(kRun + "pairz: 3\n").string()}, out), 4);
+  EXPECT_NE(out.find("INVALID"), std::string::npos) << out;
+  EXPECT_NE(out.find("pairz: unknown key"), std::string::npos) << out;
+
+  EXPECT_EQ(client({"run", "start", "--config", write_config(kRun + "camera_uri: nosuch://\n").string()}, out), 4);
+  EXPECT_NE(out.find("nosuch"), std::string::npos) << out;
+  EXPECT_EQ(status_or_null()->state(), "Idle");  // the refused start changed nothing
+
+  ASSERT_EQ(client({"run", "start", "--config", write_config(kRun).string()}, out), 0) << out;
+  EXPECT_EQ(client({"run", "start", "--config", write_config(kRun).string()}, out), 4);
+  EXPECT_NE(out.find("WRONG_STATE: cannot start a run"), std::string::npos) << out;
+  EXPECT_EQ(client({"capture-calibration"}, out), 4);
+  EXPECT_NE(out.find("WRONG_STATE: cannot take calibration images"), std::string::npos) << out;
+
+  ASSERT_EQ(client({"run", "stop"}, out), 0) << out;
+  wait_for_state("Idle");
+  EXPECT_EQ(manifest(only_run_dir()).state(), "stopped");
+
+  ASSERT_EQ(client({"capture-calibration", "--frames", "2"}, out), 0) << out;
+  EXPECT_NE(out.find("2 calibration images in"), std::string::npos) << out;
+  EXPECT_TRUE(daemon_->running());
+}
+
+TEST_F(DaemonRuns, SigtermMidRunDrainsAndLeavesTheFolderConsistent) {
+  std::string out;
+  ASSERT_EQ(client({"run", "start", "--config", write_config(kRun).string()}, out), 0) << out;
+  wait_for_state("Acquiring");
+  std::this_thread::sleep_for(600ms);
+  daemon_->signal(SIGTERM);
+  const auto status = daemon_->wait(10s);
+  ASSERT_TRUE(status.has_value()) << "plenopivd did not stop on SIGTERM";
+  EXPECT_EQ(*status, 0) << daemon_->output();
+
+  const fs::path run = only_run_dir();
+  const msg::RunManifest m = manifest(run);
+  EXPECT_EQ(m.state(), "stopped");
+  EXPECT_GT(m.pairs_size(), 0);
+  std::set<std::string> listed;
+  for (const msg::ManifestPair& p : m.pairs()) {
+    listed.insert(p.frame_a());
+    listed.insert(p.frame_b());
+    if (!p.vectors().empty()) listed.insert(p.vectors());
+  }
+  std::set<std::string> on_disk;
+  for (const char* sub : {"frames", "vectors"}) {
+    for (const auto& e : fs::directory_iterator(run / sub)) {
+      on_disk.insert(std::string(sub) + "/" + e.path().filename().string());
+    }
+  }
+  EXPECT_EQ(listed, on_disk);  // nothing half-written, nothing unlisted
+}
+
+}  // namespace
+}  // namespace plenopiv
+
+namespace plenopiv {
+namespace {
+
+// A stand-in for systemd's notify socket: collects what plenopivd sends (READY, STATUS, WATCHDOG).
+class NotifySocket {
+ public:
+  explicit NotifySocket(const fs::path& path) : path_(path) {
+    fs::remove(path);
+    fd_ = ::socket(AF_UNIX, SOCK_DGRAM | SOCK_NONBLOCK, 0);
+    sockaddr_un addr{};
+    addr.sun_family = AF_UNIX;
+    std::snprintf(addr.sun_path, sizeof addr.sun_path, "%s", path.c_str());
+    if (::bind(fd_, reinterpret_cast<sockaddr*>(&addr), sizeof addr) != 0) {
+      throw std::runtime_error("cannot bind " + path.string());
+    }
+  }
+  ~NotifySocket() { ::close(fd_); }
+  // Every datagram received so far, with the time it was read.
+  std::vector<std::pair<std::chrono::steady_clock::time_point, std::string>> drain() {
+    std::vector<std::pair<std::chrono::steady_clock::time_point, std::string>> out;
+    char buffer[4096];
+    for (ssize_t n; (n = ::recv(fd_, buffer, sizeof buffer, 0)) > 0;) {
+      out.emplace_back(std::chrono::steady_clock::now(), std::string(buffer, std::size_t(n)));
+    }
+    return out;
+  }
+
+ private:
+  fs::path path_;
+  int fd_ = -1;
+};
+
+TEST(DaemonNotify, ReadyStatusAndAWatchdogThatStopsWhenTheRunStalls) {
+  const fs::path scratch = testing_support::temp_dir("daemon-notify");
+  NotifySocket notify(scratch / "notify.sock");
+  const std::string control = "tcp://127.0.0.1:" + std::to_string(testing_support::free_tcp_port());
+  const std::string publish = "tcp://127.0.0.1:" + std::to_string(testing_support::free_tcp_port());
+  ::setenv("NOTIFY_SOCKET", (scratch / "notify.sock").c_str(), 1);
+  ::setenv("WATCHDOG_USEC", "1000000", 1);  // 1 s: pings needed every 0.5 s
+  ChildProcess daemon({binary("plenopivd-testcam"), "--control", control, "--publish", publish,
+                       "--camera", "test://", "--data-dir", (scratch / "data").string()},
+                      scratch / "plenopivd.log");
+  ::unsetenv("NOTIFY_SOCKET");
+  ::unsetenv("WATCHDOG_USEC");
+
+  std::vector<std::string> messages;
+  for (int i = 0; i < 100 && messages.empty(); ++i) {
+    std::this_thread::sleep_for(50ms);
+    for (auto& [t, m] : notify.drain()) messages.push_back(m);
+  }
+  ASSERT_FALSE(messages.empty()) << daemon.output();
+  EXPECT_EQ(messages[0], "READY=1\nSTATUS=Idle");
+  std::this_thread::sleep_for(500ms);
+  int pings = 0;
+  for (auto& [t, m] : notify.drain()) pings += m == "WATCHDOG=1";
+  EXPECT_GE(pings, 2) << "no watchdog pings while idle";
+
+  // A run whose camera loses every frame makes no progress: the pings stop.
+  std::string lost;
+  for (int i = 0; i < 400; ++i) lost += (i ? "," : "") + std::to_string(i);
+  const fs::path config = scratch / "stalled.yaml";
+  std::ofstream(config) << kRun << "camera_uri: test://?lose=" << lost << "\n";
+  std::string out;
+  ASSERT_EQ(testing_support::run_command({binary("plenopiv"), "--endpoint", control, "run", "start",
+                                          "--config", config.string()},
+                                         out),
+            0)
+      << out;
+  const auto started = std::chrono::steady_clock::now();
+  std::vector<std::pair<std::chrono::steady_clock::time_point, std::string>> received;
+  while (std::chrono::steady_clock::now() - started < 1500ms) {  // read as they come: timed
+    for (auto& r : notify.drain()) received.push_back(r);
+    std::this_thread::sleep_for(20ms);
+  }
+  bool saw_acquiring = false;
+  int late_pings = 0;
+  for (auto& [t, m] : received) {
+    saw_acquiring = saw_acquiring || m.rfind("STATUS=Acquiring run ", 0) == 0;
+    // Half the watchdog time after the start (plus a poll period), no more pings.
+    if (m == "WATCHDOG=1" && t - started > 700ms) ++late_pings;
+  }
+  EXPECT_TRUE(saw_acquiring);
+  EXPECT_EQ(late_pings, 0) << "the watchdog was fed although no pair arrived";
+
+  ASSERT_EQ(testing_support::run_command({binary("plenopiv"), "--endpoint", control, "run", "stop"},
+                                         out),
+            0)
+      << out;
+  daemon.signal(SIGTERM);
+  ASSERT_TRUE(daemon.wait(10s).has_value());
+  bool stopping = false;
+  for (auto& [t, m] : notify.drain()) stopping = stopping || m.rfind("STOPPING=1", 0) == 0;
+  EXPECT_TRUE(stopping);
+}
+
+}  // namespace
+}  // namespace plenopiv
