@@ -66,7 +66,7 @@ double median(std::vector<double> v) {
 
 // Pitch and rotation from the vectors between neighbouring spots: rotation within a few degrees
 // and pitch within a few percent of nominal select the in-row neighbours and the next-row ones.
-void estimate_pitch_and_rotation(const std::vector<Spot>& spots, const std::vector<std::array<double, 2>>& p,
+void estimate_pitch_and_rotation(const std::vector<std::array<double, 2>>& p,
                                  PxLattice& lat, double nominal_px, double nominal_row_px) {
   const double cell = 1.3 * nominal_px;
   double xmin = 1e300, ymin = 1e300, xmax = -1e300, ymax = -1e300;
@@ -110,7 +110,6 @@ void estimate_pitch_and_rotation(const std::vector<Spot>& spots, const std::vect
       }
     }
   }
-  (void)spots;
   if (row_len.size() < 10 || cross.size() < 10) {
     throw InputError("calibration image: found " + count_str(long(p.size())) +
                      " spots but only " + std::to_string(row_len.size()) + " in-row and " +
@@ -236,7 +235,7 @@ Calibration calibrate(const optics::CameraModel& camera, const ImageF& image, co
   lat.hex = camera.microlens().layout == optics::LensletLayout::hex;
   lat.nx = camera.microlens().count_x;
   lat.ny = camera.microlens().count_y;
-  estimate_pitch_and_rotation(spots, p, lat, nominal_px, nominal_row_px);
+  estimate_pitch_and_rotation(p, lat, nominal_px, nominal_row_px);
   estimate_phase(p, lat);
 
   std::vector<std::array<int, 2>> ij(p.size());
