@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "core/base/yaml_access.hpp"
 #include "core/piv/validation.hpp"
 
 namespace plenopiv::piv {
@@ -40,5 +41,7 @@ std::vector<PassSettings> parse_passes(const std::string& text);
 //   dt_s: 0.001
 // Every key is optional (defaults above); unknown keys are refused. Checked.
 CorrelationSettings load_correlation_settings(const std::filesystem::path& path);
+// The same from a mapping already parsed (a section of a larger file, e.g. process.yaml).
+CorrelationSettings correlation_settings_from(const YamlMap& map);
 
 }  // namespace plenopiv::piv
