@@ -16,6 +16,7 @@
 #include "core/optics/camera_file.hpp"
 #include "daemon/control_server.hpp"
 #include "daemon/daemon_config.hpp"
+#include "daemon/processing.hpp"
 #include "daemon/logging/logging.hpp"
 #include "drivers/camera/camera_registry.hpp"
 #include "drivers/discovery/device_discovery.hpp"
@@ -102,10 +103,18 @@ int daemon_main(int argc, char** argv, const DaemonExtensions& extensions) {
     validate(config, config_path.empty() ? "command line" : config_path.string());
     setup_logging("plenopivd", config.log_level);
 
+    ProcessFactory processing_factory = extensions.processing;
+    std::string processing = extensions.processing_summary;
     if (!config.camera_file.empty()) {
       const optics::CameraModel camera = optics::load_camera_file(config.camera_file);
       spdlog::info("camera {}:\n{}", config.camera_file.string(), camera.summary());
+      if (!processing_factory) {
+        processing_factory = plenoptic_processing(camera);
+        processing = "MART + multi-pass 3D correlation, nominal lattice of " +
+                     config.camera_file.filename().string();
+      }
     }
+    if (!processing_factory) processing = "none: no camera_file configured (raw frames are recorded)";
 
     std::signal(SIGTERM, on_signal);
     std::signal(SIGINT, on_signal);
@@ -115,9 +124,6 @@ int daemon_main(int argc, char** argv, const DaemonExtensions& extensions) {
     RunStateMachine state;
     std::unique_ptr<Run> run;
     std::atomic<std::int64_t> last_progress{now_ns()};
-    const std::string processing = extensions.processing
-                                       ? extensions.processing_summary
-                                       : "not built into this plenopivd (raw frames are recorded)";
 
     const auto started = Clock::now();
     auto status = [&] {
@@ -140,7 +146,7 @@ int daemon_main(int argc, char** argv, const DaemonExtensions& extensions) {
     environment.camera_file = config.camera_file;
     environment.state = &state;
     environment.publisher = &publisher;
-    environment.processing = extensions.processing;
+    environment.processing = processing_factory;
     environment.heartbeat = [&] { last_progress = now_ns(); };
 
     ControlServer server(context, config.control_endpoint, [&](const msg::Request& req) {

@@ -7,7 +7,9 @@ namespace plenopiv::daemon {
 
 // What a particular plenopivd build brings beyond the registered drivers.
 struct DaemonExtensions {
-  ProcessFactory processing;       // empty: runs record raw frames only
+  // Empty: plenoptic_processing() on the configured camera_file (none without one: runs then
+  // record raw frames only).
+  ProcessFactory processing;
   std::string processing_summary;  // shown in status ("MART + 3D FFT correlation", ...)
 };
 

@@ -2,6 +2,6 @@
 #include "daemon/daemon_main.hpp"
 
 int main(int argc, char** argv) {
-  // The reconstruction and correlation stage plugs in here once core/recon and core/piv exist.
+  // Processing: MART and 3D correlation on the configured camera file (daemon/processing.hpp).
   return plenopiv::daemon::daemon_main(argc, argv, {});
 }

@@ -45,7 +45,7 @@ void write_text(const fs::path& path, const std::string& text) {
 
 std::string new_run_id() { return utc_now("%Y%m%d-%H%M%S"); }
 
-double measured_dt_s(const drivers::FramePair& pair) {
+double frame_gap_s(const drivers::FramePair& pair) {
   if (pair.a.device_timestamp_ns != 0 && pair.b.device_timestamp_ns != 0) {
     return (double(pair.b.device_timestamp_ns) - double(pair.a.device_timestamp_ns)) * 1e-9;
   }
@@ -101,7 +101,8 @@ void Recorder::record_pair(const drivers::FramePair& pair) {
   p->set_device_timestamp_b_ns(pair.b.device_timestamp_ns);
   p->set_host_timestamp_a_ns(pair.a.host_timestamp_ns);
   p->set_host_timestamp_b_ns(pair.b.host_timestamp_ns);
-  p->set_measured_dt_s(measured_dt_s(pair));
+  p->set_frame_gap_s(frame_gap_s(pair));
+  if (pair.measured) p->set_measured_dt_s(pair.measured->dt_s());
   write_manifest_locked();
 }
 

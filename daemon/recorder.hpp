@@ -63,8 +63,8 @@ class Recorder {
 
 // A file name-safe run id from the current UTC time: 20261123-035512.
 std::string new_run_id();
-// Measured pulse separation of a pair: B - A on the device clock when both frames carry it,
-// else on the host clock.
-double measured_dt_s(const drivers::FramePair& pair);
+// Time between the two frames of a pair: B - A on the device clock when both frames carry it,
+// else on the host clock. (Not the laser's dt: frame B starts after the interline transfer.)
+double frame_gap_s(const drivers::FramePair& pair);
 
 }  // namespace plenopiv::daemon

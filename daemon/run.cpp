@@ -25,12 +25,7 @@ Run::Run(RunConfig config, std::string run_id, RunEnvironment env)
   Recorder::Setup setup{env_.data_dir, run_id_, &config_, camera_uri, trigger_uri, env_.camera_file,
                         info.vendor + " " + info.model + " " + info.serial};
   recorder_ = std::make_unique<Recorder>(setup);
-  if (env_.processing) {
-    process_ = env_.processing(config_);
-    processing_note_ = "live";
-  } else {
-    processing_note_ = "not built into this plenopivd (raw frames are recorded)";
-  }
+  if (env_.processing) process_ = env_.processing(config_);
   spdlog::info("run {}: {} pairs at {} Hz from {}, folder {}", run_id_,
                config_.pair_count ? std::to_string(config_.pair_count) : "unlimited",
                config_.rate_hz, camera_uri, recorder_->dir().string());
@@ -172,7 +167,6 @@ void Run::run() {
 void Run::fill_status(msg::Status& s) const {
   s.set_run_id(run_id_);
   s.set_run_dir(recorder_->dir().string());
-  s.set_processing(processing_note_);
   const drivers::CameraCounters c = camera_->counters();
   s.set_pairs_acquired(pairs_received_);
   s.set_pairs_recorded(recorder_->pairs_recorded());

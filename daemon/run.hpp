@@ -64,7 +64,6 @@ class Run {
   std::unique_ptr<drivers::Camera> camera_;
   std::unique_ptr<Recorder> recorder_;
   ProcessFn process_;
-  std::string processing_note_;
   LiveMailbox mailbox_;
   PipelineStats stats_;
   std::atomic<bool> stop_{false}, finished_{false};

@@ -9,6 +9,7 @@
 #include <tbb/global_control.h>
 
 #include "clients/cli/commands.hpp"
+#include "clients/cli/progress.hpp"
 #include "core/base/errors.hpp"
 #include "core/io/hdf5_files.hpp"
 #include "core/io/vtk_files.hpp"
@@ -22,6 +23,8 @@ struct CorrelateOptions {
   std::string first, second, output, vti, config, passes;
   std::optional<double> dt_s;
   std::optional<float> signal_threshold;
+  std::string fft_planning;
+  bool no_prefilter = false;
   int threads = 0;
 };
 
@@ -33,10 +36,12 @@ std::string pass_line(const piv::PassReport& r) {
   std::snprintf(line, sizeof line,
                 "pass %d/%d: windows %dx%dx%d, overlap %.0f %%, %dx%dx%d vectors (%zu without "
                 "signal); outliers %zu (2nd peak %zu, 3rd peak %zu, interpolated %zu, "
-                "unresolved %zu); %.2f s (deform %.2f, correlate %.2f, %.0f windows/s)",
+                "unresolved %zu); fallback fits %zu parabolic, %zu centroid; %.2f s (deform "
+                "%.2f, correlate %.2f, %.0f windows/s)",
                 r.pass, r.passes, w[0], w[1], w[2], r.settings.overlap_percent, r.vectors[0],
                 r.vectors[1], r.vectors[2], r.no_signal, v.outliers, v.second_peak, v.third_peak,
-                v.interpolated, v.unresolved, seconds, r.deform_s, r.correlate_s,
+                v.interpolated, v.unresolved, r.flag_parabolic, r.flag_centroid, seconds,
+                r.deform_s, r.correlate_s,
                 r.correlate_s > 0 ? double(r.windows) / r.correlate_s : 0.0);
   return line;
 }
@@ -47,6 +52,9 @@ void run_correlate(const CorrelateOptions& o) {
   if (!o.passes.empty()) settings.passes = piv::parse_passes(o.passes);
   if (o.dt_s) settings.dt_s = *o.dt_s;
   if (o.signal_threshold) settings.signal_threshold = *o.signal_threshold;
+  if (o.no_prefilter) settings.prefilter = false;
+  if (o.fft_planning == "measure") settings.fft_planning = piv::FftPlanning::measure;
+  if (o.fft_planning == "estimate") settings.fft_planning = piv::FftPlanning::estimate;
   if (o.config.empty() && !o.dt_s)
     throw InputError("--dt: the pulse separation (s) is needed for velocities (or dt_s in --config)");
   piv::check(settings, o.config.empty() ? "command line" : o.config);
@@ -64,11 +72,14 @@ void run_correlate(const CorrelateOptions& o) {
                      "x" + std::to_string(b.grid.shape[1]) + "x" +
                      std::to_string(b.grid.shape[2]) +
                      " voxels, or different origin/spacing): correlate volumes of one grid");
+  // A pass is the unit of progress: one line each with its counts, and on a terminal the shared
+  // bar (rate and ETA in passes) below the lines.
   const bool terminal = isatty(STDERR_FILENO);
+  Progress bar("correlate", "passes", double(settings.passes.size()));
   const auto result = piv::correlate_volumes(a, b, settings, [&](const piv::PassReport& r) {
-    // A pass is the unit of progress: one line each, coloured on a terminal.
-    if (terminal) std::cerr << "\033[1m" << pass_line(r) << "\033[0m\n";
-    else std::cerr << pass_line(r) << "\n";
+    if (terminal) std::cerr << "\r\033[K";
+    std::cerr << pass_line(r) << "\n";
+    if (terminal) bar.update(double(r.pass) / r.passes);
   });
 
   const auto omega = piv::vorticity(result.field);
@@ -108,6 +119,11 @@ void add_piv_commands(CLI::App& app) {
   cmd->add_option("--dt", o->dt_s, "pulse separation, s (velocity = displacement / dt)");
   cmd->add_option("--signal-threshold", o->signal_threshold,
                   "windows whose brightest voxel is not above this are skipped (default 0)");
+  cmd->add_option("--fft-planning", o->fft_planning,
+                  "estimate (default; bit-identical between runs) or measure (faster FFTs)")
+      ->check(CLI::IsMember({"estimate", "measure"}));
+  cmd->add_flag("--no-prefilter", o->no_prefilter,
+               "correlate the volumes as they are (default: binomial smoothing first)");
   cmd->add_option("--threads", o->threads, "worker threads (0: all cores)")->capture_default_str();
   cmd->callback([o] { run_correlate(*o); });
 }

@@ -11,6 +11,7 @@
 
 #include "clients/cli/commands.hpp"
 #include "core/base/errors.hpp"
+#include "core/calib/calibration_file.hpp"
 #include "core/io/hdf5_files.hpp"
 #include "core/io/tiff.hpp"
 #include "core/io/vtk_files.hpp"
@@ -22,14 +23,14 @@ namespace plenopiv::client {
 namespace {
 
 struct ReconOptions {
-  std::string camera, image, out, vti;
+  std::string camera, image, out, vti, calibration;
   std::vector<double> extent;  // x0 x1 y0 y1 z0 z1, mm
   double voxel_mm = 0.125, voxel_z_mm = 0;
   int iterations = 5;
   double mu = 0.5;
   std::string start = "mlos";
   float threshold = 0;
-  double dark_cutoff = 0.1;
+  double dark_cutoff = 0.9;
   double convergence = 0;
 };
 
@@ -73,12 +74,21 @@ void run(const ReconOptions& o) {
 
   const bool tty = ::isatty(STDERR_FILENO);
   const auto t0 = std::chrono::steady_clock::now();
-  const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera));
-  const recon::WeightingOperator op(camera, lenses, grid, recon::geometric_white_image(camera, lenses));
+  optics::MicrolensArray lenses;
+  ImageF white;
+  if (o.calibration.empty()) {
+    lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera));
+    white = recon::geometric_white_image(camera, lenses);
+  } else {
+    calib::LoadedCalibration c = calib::load_calibration(o.calibration, camera);
+    lenses = std::move(c.lenses);
+    white = c.white_correction.empty() ? recon::geometric_white_image(camera, lenses) : std::move(c.white_correction);
+  }
+  const recon::WeightingOperator op(camera, lenses, grid, std::move(white));
   recon::validate_image(image, op, o.image.c_str());
   const double setup = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  std::fprintf(stderr, "weights: %d x %d x %d voxels, nominal lattice, geometric white image (%.1f s)\n",
-               grid.shape[0], grid.shape[1], grid.shape[2], setup);
+  std::fprintf(stderr, "weights: %d x %d x %d voxels, %s (%.1f s)\n", grid.shape[0], grid.shape[1], grid.shape[2],
+               o.calibration.empty() ? "nominal lattice, geometric white image" : o.calibration.c_str(), setup);
   double elapsed = 0;
   const recon::MartResult r = recon::reconstruct(op, image, s, [&](const recon::IterationReport& it) {
     elapsed += it.seconds;
@@ -113,11 +123,14 @@ void add_recon_commands(CLI::App& app) {
   auto o = std::make_shared<ReconOptions>();
   auto* cmd = app.add_subcommand(
       "reconstruct",
-      "reconstruct a particle volume from one raw plenoptic image (MART, sec 5). Uses the camera's "
-      "nominal microlens lattice and the geometric white-image correction; measured calibration files "
-      "are not accepted yet");
+      "reconstruct a particle volume from one raw plenoptic image (MART, sec 5). Lens centres and the "
+      "white correction come from --calibration, else the camera's nominal lattice and the geometric "
+      "white image");
   cmd->add_option("camera", o->camera, "camera file (YAML)")->required();
   cmd->add_option("image", o->image, "raw plenoptic image (8/16-bit TIFF, sensor-sized)")->required();
+  cmd->add_option("--calibration", o->calibration,
+                  "calibration file (HDF5 from core/calib); needs a rectangular array without "
+                  "measurable rotation");
   cmd->add_option("--extent", o->extent, "volume box x0 x1 y0 y1 z0 z1 in mm (z = 0 at the focal plane)")
       ->expected(6)
       ->required();

@@ -1,4 +1,4 @@
-// `plenopiv run start|stop`, `watch` and `calibrate`: drive runs and follow what is published.
+// `plenopiv run start|stop`, `watch` and `capture-calibration`: drive runs, follow what is published.
 #include <unistd.h>
 
 #include <fstream>
@@ -113,7 +113,8 @@ void add_run_commands(CLI::App& app, ControlOptions& options) {
 
   auto frames = std::make_shared<unsigned>(1);
   auto camera = std::make_shared<std::string>();
-  auto* cal = app.add_subcommand("calibrate", "take calibration images into the data directory");
+  auto* cal = app.add_subcommand(
+      "capture-calibration", "take calibration images on plenopivd's camera into its data directory");
   cal->add_option("--frames", *frames, "number of images")->capture_default_str();
   cal->add_option("--camera", *camera, "camera URI (default: the daemon's)");
   cal->callback([&options, frames, camera] {

@@ -127,6 +127,23 @@ void write_text(const std::filesystem::path& path, const std::string& text) {
   });
 }
 
+// The simulator's true array, for calibration tests: each lens centre (microlens plane, mm) and
+// where its spot falls (optics::lens_centre_to_spot_mm, in pixels).
+std::string lens_truth_csv(const optics::CameraModel& camera, const optics::MicrolensArray& array) {
+  std::string text = "i,j,centre_x_mm,centre_y_mm,spot_column,spot_row\n";
+  const double s_i = camera.image_distance_mm(), f_l = camera.microlens().focal_length_mm;
+  for (int j = 0; j < array.lattice.count_y; ++j) {
+    for (int i = 0; i < array.lattice.count_x; ++i) {
+      const auto& c = array.centre(i, j);
+      text += std::to_string(i) + "," + std::to_string(j) + "," + num(c[0]) + "," + num(c[1]) + "," +
+              num(optics::sensor_mm_to_column(camera.sensor(), optics::lens_centre_to_spot_mm(c[0], s_i, f_l))) +
+              "," + num(optics::sensor_mm_to_row(camera.sensor(), optics::lens_centre_to_spot_mm(c[1], s_i, f_l))) +
+              "\n";
+    }
+  }
+  return text;
+}
+
 void add_particles_command(CLI::App& simulate) {
   auto* cmd = simulate.add_subcommand("particles", "render a particle list (CSV x,y,z in mm) to a 16-bit TIFF");
   auto o = std::make_shared<CommonOptions>();
@@ -157,12 +174,15 @@ void add_target_command(CLI::App& simulate, const std::string& name, bool calibr
   auto o = std::make_shared<CommonOptions>();
   auto t = std::make_shared<sim::TargetOptions>(calibration ? sim::calibration_target() : sim::white_target());
   auto rays = std::make_shared<long long>(static_cast<long long>(t->rays_per_lens));
+  auto truth = std::make_shared<std::string>();
   add_common(cmd, *o, "output image (16-bit TIFF)");
+  cmd->add_option("--truth", *truth,
+                  "also write the true lens centres (CSV: i, j, centre x/y mm, spot column/row px)");
   cmd->add_option("--f-number", t->f_number,
                   calibration ? "main-lens f-number while calibrating" : "main-lens f-number (0: the camera's)")
       ->capture_default_str();
   cmd->add_option("--rays-per-lens", *rays, "rays per microlens area")->capture_default_str();
-  cmd->callback([o, t, rays, name] {
+  cmd->callback([o, t, rays, truth, name] {
     const optics::CameraModel camera = optics::load_camera_file(o->camera);
     sim::TargetOptions options = *t;
     options.rays_per_lens = ray_count(*rays, "--rays-per-lens");
@@ -171,8 +191,11 @@ void add_target_command(CLI::App& simulate, const std::string& name, bool calibr
     check_output_folder(o->output);
     auto progress = std::make_shared<Progress>(name, "Mrays", double(camera.lens_count()) * options.rays_per_lens * 1e-6);
     options.progress = [progress](double f) { progress->update(f); };
-    const auto result = sim::render_target(camera, true_array(camera, *o), options, seed_of(*o));
+    const optics::MicrolensArray array = true_array(camera, *o);
+    if (!truth->empty()) check_output_folder(*truth);
+    const auto result = sim::render_target(camera, array, options, seed_of(*o));
     io::write_tiff(o->output, result.image);
+    if (!truth->empty()) write_text(*truth, lens_truth_csv(camera, array));
     report(o->output, result.counts);
   });
 }

@@ -51,6 +51,15 @@ void sinc7_weights(double f, std::array<float, sinc_taps>& w);
 float sample_sinc7(std::span<const float> volume, const std::array<int, 3>& shape, double x,
                    double y, double z);
 
+// Smooths a volume with the binomial kernel [1 2 1] / 4 along x, y and z (a Gaussian of sigma
+// ~0.7 voxel; the edges use the kernel's inner taps only). Why: exact and reconstructed particles
+// are only ~3 voxels wide, and their spectrum reaches the Nyquist frequency, where any short
+// interpolator's phase is wrong; shifting both volumes by +-d/2 then biases the residual by up to
+// 0.02 voxel (measured at d = 0.5). After this filter the same test measures 0.0004.
+// `scratch` holds one volume. Parallel over z (TBB); deterministic.
+void binomial_smooth(std::span<const float> in, const std::array<int, 3>& shape,
+                     std::span<float> out, std::span<float> scratch);
+
 // Symmetric deformation (Scarano & Poelma's VODIM): with d the predictor at voxel x,
 // a_out(x) = a(x - d/2) and b_out(x) = b(x + d/2), so a particle displaced by d appears at the
 // same place in both outputs. Parallel over z-slices (TBB); deterministic.

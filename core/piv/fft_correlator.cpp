@@ -4,7 +4,9 @@
 #include <fftw3.h>
 #include <tbb/enumerable_thread_specific.h>
 
+#include <map>
 #include <mutex>
+#include <utility>
 #include <new>
 
 namespace plenopiv::piv {
@@ -95,7 +97,7 @@ std::span<const float> FftCorrelator::Workspace::correlate() {
   return {w.corr, n};
 }
 
-FftCorrelator::FftCorrelator(std::array<int, 3> shape) : shape_(shape) {
+FftCorrelator::FftCorrelator(std::array<int, 3> shape, FftPlanning planning) : shape_(shape) {
   const std::size_t n_real = size();
   const std::size_t n_complex = std::size_t(shape[2]) * shape[1] * (shape[0] / 2 + 1);
   plans_ = std::make_unique<Plans>([this, n_real, n_complex] {
@@ -104,10 +106,9 @@ FftCorrelator::FftCorrelator(std::array<int, 3> shape) : shape_(shape) {
   Workspace::Buffers probe(n_real, n_complex);
   std::lock_guard lock(fftw_planner_mutex());
   // FFTW takes the slowest-varying dimension first: [z][y][x].
-  plans_->forward = fftwf_plan_dft_r2c_3d(shape[2], shape[1], shape[0], probe.a, probe.fa,
-                                          FFTW_ESTIMATE);
-  plans_->inverse = fftwf_plan_dft_c2r_3d(shape[2], shape[1], shape[0], probe.fa, probe.corr,
-                                          FFTW_ESTIMATE);
+  const unsigned flags = planning == FftPlanning::measure ? FFTW_MEASURE : FFTW_ESTIMATE;
+  plans_->forward = fftwf_plan_dft_r2c_3d(shape[2], shape[1], shape[0], probe.a, probe.fa, flags);
+  plans_->inverse = fftwf_plan_dft_c2r_3d(shape[2], shape[1], shape[0], probe.fa, probe.corr, flags);
   if (!plans_->forward || !plans_->inverse) throw std::bad_alloc();
 }
 
@@ -115,6 +116,17 @@ FftCorrelator::~FftCorrelator() {
   std::lock_guard lock(fftw_planner_mutex());
   fftwf_destroy_plan(plans_->forward);
   fftwf_destroy_plan(plans_->inverse);
+}
+
+const FftCorrelator& FftCorrelator::shared(std::array<int, 3> shape, FftPlanning planning) {
+  // The planner mutex must outlive the cache, whose destructors take it: construct it first.
+  fftw_planner_mutex();
+  static std::mutex m;
+  static std::map<std::pair<std::array<int, 3>, FftPlanning>, std::unique_ptr<FftCorrelator>> cache;
+  std::lock_guard lock(m);
+  auto& slot = cache[{shape, planning}];
+  if (!slot) slot = std::make_unique<FftCorrelator>(shape, planning);
+  return *slot;
 }
 
 FftCorrelator::Workspace& FftCorrelator::workspace() const { return plans_->workspaces.local(); }

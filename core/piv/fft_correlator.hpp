@@ -8,11 +8,16 @@
 
 namespace plenopiv::piv {
 
+// How FFTW chooses its algorithm. estimate: from heuristics, the same plan in every process, so
+// results are bit-identical between runs. measure: FFTW times candidate algorithms when the plan
+// is made (once per window shape and process); faster transforms, but the chosen plan, and so
+// the last bits of the results, may differ between processes (never between thread counts).
+enum class FftPlanning { estimate, measure };
+
 // Correlates windows of one shape (nx, ny, nz; any size per axis). The FFTW plans are made once,
-// in the constructor, under a process-wide mutex (FFTW's planner is not thread-safe); they use
-// FFTW_ESTIMATE so that the same inputs give the same bits in every process. Each thread that
-// calls `workspace()` gets its own aligned buffers (tbb::enumerable_thread_specific) and runs the
-// shared plans on them with FFTW's new-array execute functions, which are thread-safe.
+// in the constructor, under a process-wide mutex (FFTW's planner is not thread-safe). Each thread
+// that calls `workspace()` gets its own aligned buffers (tbb::enumerable_thread_specific) and runs
+// the shared plans on them with FFTW's new-array execute functions, which are thread-safe.
 class FftCorrelator {
  public:
   // Per-thread buffers: fill window_a() and window_b() ([z][y][x], x fastest), then correlate().
@@ -33,7 +38,10 @@ class FftCorrelator {
     std::shared_ptr<Buffers> buffers_;
   };
 
-  explicit FftCorrelator(std::array<int, 3> shape);
+  explicit FftCorrelator(std::array<int, 3> shape, FftPlanning planning = FftPlanning::estimate);
+  // One correlator per (shape, planning) for the whole process, made on first request: plans
+  // and per-thread buffers are reused by every later correlation of that window shape.
+  static const FftCorrelator& shared(std::array<int, 3> shape, FftPlanning planning);
   ~FftCorrelator();
   FftCorrelator(const FftCorrelator&) = delete;
   FftCorrelator& operator=(const FftCorrelator&) = delete;

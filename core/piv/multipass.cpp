@@ -81,8 +81,8 @@ Layout layout_of(const PassSettings& p, const std::array<int, 3>& shape) {
 Candidates correlate_windows(const std::vector<float>& va, const std::vector<float>& vb,
                              const std::array<int, 3>& shape, const Layout& l,
                              const NodeField* predictor, float signal_threshold,
-                             std::vector<float>& ratio) {
-  const FftCorrelator correlator(l.window);
+                             FftPlanning planning, std::vector<float>& ratio) {
+  const FftCorrelator& correlator = FftCorrelator::shared(l.window, planning);
   Candidates c(l.count);
   // The predictor's mean over each window, as per-axis node weights: the residual a window
   // measures is relative to how far its voxels were moved on average, not to the predictor at
@@ -167,7 +167,18 @@ CorrelationResult correlate_volumes(const Volume& a, const Volume& b,
                                     const std::function<void(const PassReport&)>& on_pass) {
   check_inputs(a, b, settings);
   const std::array<int, 3> shape = a.grid.shape;
-  std::vector<float> deformed_a, deformed_b;
+  std::vector<float> smoothed_a, smoothed_b, deformed_a, deformed_b;
+  const std::vector<float>* input_a = &a.data;
+  const std::vector<float>* input_b = &b.data;
+  if (settings.prefilter) {
+    smoothed_a.resize(a.data.size());
+    smoothed_b.resize(b.data.size());
+    deformed_a.resize(a.data.size());  // scratch here, deformed volumes later
+    binomial_smooth(a.data, shape, smoothed_a, deformed_a);
+    binomial_smooth(b.data, shape, smoothed_b, deformed_a);
+    input_a = &smoothed_a;
+    input_b = &smoothed_b;
+  }
   NodeField predictor;
   bool have_predictor = false;
   CorrelationResult result;
@@ -185,12 +196,12 @@ CorrelationResult correlate_volumes(const Volume& a, const Volume& b,
     report.vectors = layout.count;
 
     auto t0 = Clock::now();
-    const std::vector<float>* va = &a.data;
-    const std::vector<float>* vb = &b.data;
+    const std::vector<float>* va = input_a;
+    const std::vector<float>* vb = input_b;
     if (have_predictor) {
       deformed_a.resize(a.data.size());
       deformed_b.resize(b.data.size());
-      deform_pair(a.data, b.data, shape, predictor, deformed_a, deformed_b);
+      deform_pair(*input_a, *input_b, shape, predictor, deformed_a, deformed_b);
       va = &deformed_a;
       vb = &deformed_b;
     }
@@ -198,7 +209,7 @@ CorrelationResult correlate_volumes(const Volume& a, const Volume& b,
 
     t0 = Clock::now();
     last = correlate_windows(*va, *vb, shape, layout, have_predictor ? &predictor : nullptr,
-                             settings.signal_threshold, ratio);
+                             settings.signal_threshold, settings.fft_planning, ratio);
     report.correlate_s = seconds_since(t0);
     report.windows = last.size();
     for (std::size_t n = 0; n < last.size(); ++n) {

@@ -66,37 +66,62 @@ std::array<Peak, 3> find_peaks(std::span<const float> corr, const std::array<int
   std::array<Candidate, 3> best{};
   int found = 0;
   const int nx = shape[0], ny = shape[1], nz = shape[2];
+  // Neighbour offsets; away from the borders no index needs wrapping, and an offset < 0 is a
+  // neighbour the scan has already passed.
+  std::array<std::ptrdiff_t, 26> offset;
+  std::array<std::array<int, 3>, 26> step;
+  // The 6 face neighbours come first: most voxels are rejected by one of them, and x +- 1 is
+  // in the same cache line.
+  int o = 0;
+  for (int pass = 0; pass < 2; ++pass)
+    for (int dz = -1; dz <= 1; ++dz)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          const int nonzero = (dx != 0) + (dy != 0) + (dz != 0);
+          if (nonzero == 0 || (nonzero == 1) != (pass == 0)) continue;
+          offset[o] = (std::ptrdiff_t(dz) * ny + dy) * nx + dx;
+          step[o++] = {dx, dy, dz};
+        }
+  // Strict against earlier neighbours, non-strict against later ones: a plateau yields exactly
+  // one maximum, its first voxel.
+  auto beaten = [](float w, float v, bool earlier) { return earlier ? w >= v : w > v; };
+  float threshold = 0;
   for (int z = 0; z < nz; ++z) {
+    const bool z_inside = z > 0 && z < nz - 1;
     for (int y = 0; y < ny; ++y) {
+      const bool yz_inside = z_inside && y > 0 && y < ny - 1;
+      const float* row = corr.data() + index_of(shape, 0, y, z);
       for (int x = 0; x < nx; ++x) {
-        const float v = corr[index_of(shape, x, y, z)];
-        if (found == 3 && v <= best[2].value) continue;
+        const float v = row[x];
+        // One well-predicted comparison per voxel: only values above the third peak so far (or
+        // above 0 while fewer than three were found; peaks <= 0 are of no use) need a test.
+        if (!(v > threshold)) continue;
         bool is_max = true;
-        for (int dz = -1; dz <= 1 && is_max; ++dz) {
-          for (int dy = -1; dy <= 1 && is_max; ++dy) {
-            for (int dx = -1; dx <= 1; ++dx) {
-              if (!dx && !dy && !dz) continue;
-              const float w = corr[index_of(shape, wrap(x + dx, nx), wrap(y + dy, ny),
-                                            wrap(z + dz, nz))];
-              // Strict against earlier neighbours, non-strict against later ones: a plateau
-              // yields exactly one maximum, its first voxel.
-              const bool earlier = dz < 0 || (dz == 0 && (dy < 0 || (dy == 0 && dx < 0)));
-              if (earlier ? w >= v : w > v) {
-                is_max = false;
-                break;
-              }
+        if (yz_inside && x > 0 && x < nx - 1) {
+          for (int k = 0; k < 26; ++k)
+            if (beaten(row[x + offset[k]], v, offset[k] < 0)) {
+              is_max = false;
+              break;
+            }
+        } else {
+          for (int k = 0; k < 26; ++k) {
+            const float w = corr[index_of(shape, wrap(x + step[k][0], nx), wrap(y + step[k][1], ny),
+                                          wrap(z + step[k][2], nz))];
+            if (beaten(w, v, offset[k] < 0)) {
+              is_max = false;
+              break;
             }
           }
         }
         if (!is_max) continue;
         int pos = std::min(found, 2);
-        if (found == 3 && v <= best[2].value) continue;
         while (pos > 0 && best[pos - 1].value < v) {
           best[pos] = best[pos - 1];
           --pos;
         }
         best[pos] = {v, x, y, z};
         found = std::min(found + 1, 3);
+        if (found == 3) threshold = best[2].value;
       }
     }
   }

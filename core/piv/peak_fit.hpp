@@ -35,7 +35,7 @@ Peak fit_peak(std::span<const float> corr, const std::array<int, 3>& shape,
               const std::array<int, 3>& at);
 
 // The three highest local maxima (26-neighbourhood, cyclic) in decreasing order, each fitted by
-// fit_peak. Missing peaks (fewer than three maxima) have value 0 and zero shift. Ties are broken
+// fit_peak. Only positive maxima count; missing peaks have value 0 and zero shift. Ties are broken
 // by the lower index, so the result does not depend on anything but the input.
 std::array<Peak, 3> find_peaks(std::span<const float> corr, const std::array<int, 3>& shape);
 

@@ -65,7 +65,7 @@ std::vector<PassSettings> parse_passes(const std::string& text) {
 }
 
 CorrelationSettings correlation_settings_from(const YamlMap& root) {
-  root.reject_unknown({"passes", "median", "signal_threshold", "dt_s"});
+  root.reject_unknown({"passes", "median", "signal_threshold", "dt_s", "fft_planning", "prefilter"});
   CorrelationSettings s;
   if (root.has("passes")) {
     const YAML::Node list = root.node()["passes"];
@@ -101,6 +101,10 @@ CorrelationSettings correlation_settings_from(const YamlMap& root) {
   }
   s.signal_threshold = float(root.number_or("signal_threshold", s.signal_threshold));
   s.dt_s = root.number_or("dt_s", s.dt_s);
+  s.fft_planning = root.choice_or("fft_planning", {"estimate", "measure"}, "estimate") == "measure"
+                       ? FftPlanning::measure
+                       : FftPlanning::estimate;
+  s.prefilter = root.boolean_or("prefilter", s.prefilter);
   check(s, root.source());
   return s;
 }

@@ -254,6 +254,15 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const M
   std::vector<float> ratio(op.pixel_count(), 0.f);  // white · ln(I / W E)
   const float* white = op.white().pixels.data();
 
+  // What a dark pixel recorded at most: the noise threshold, or half the faintest lit pixel.
+  float dark_floor = settings.noise_threshold;
+  if (!(dark_floor > 0.f)) {
+    float faintest = kHuge;
+    for (float v : data) {
+      if (v > 0.f) faintest = std::min(faintest, v);
+    }
+    dark_floor = 0.5f * faintest;
+  }
   if (settings.start == MartStart::mlos && n > 0) {
     // The weighted geometric mean of the lit pixels a voxel sees (dark ones below the cutoff
     // carry no ln I), renormalised over those pixels.
@@ -287,7 +296,13 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const M
                       [&](const tbb::blocked_range<std::size_t>& r) {
       for (std::size_t i = r.begin(); i != r.end(); ++i) {
         const float p = projection[i], d = data[i];
-        ratio[i] = (d > 0.f && p > 0.f) ? white[i] * std::clamp(std::log(d) - std::log(p), -kMaxLog, kMaxLog) : 0.f;
+        if (d > 0.f) {
+          ratio[i] = p > 0.f ? white[i] * std::clamp(std::log(d) - std::log(p), -kMaxLog, kMaxLog) : 0.f;
+        } else {
+          // A dark pixel the voxel sees only faintly: it recorded at most the floor, so it pulls
+          // the voxels that claim more light there down (never up).
+          ratio[i] = p > dark_floor ? white[i] * std::max(std::log(dark_floor) - std::log(p), -kMaxLog) : 0.f;
+        }
       }
     });
     active.back_project_whitened(op, ratio, update);

@@ -41,10 +41,11 @@ struct MartSettings {
   double mu = 0.5;                 // relaxation, 0 < mu <= 1
   float noise_threshold = 0.f;     // pixels at or below it count as dark (zero)
   // A dark pixel zeroes a voxel (eq 9: ratio 0) only where the voxel's column and row weights at
-  // that pixel both exceed this fraction of their largest value; fainter dark pixels (the
-  // bilinear tails of the weights, lost to quantisation and noise) are left out of the update.
-  // 0 applies eq 9 literally: any dark pixel with weight zeroes the voxel.
-  double dark_weight_cutoff = 0.1;
+  // that pixel both exceed this fraction of their largest value. Fainter dark pixels (where the
+  // weights are wider than a real particle image) pull the voxel down as if they had recorded the
+  // floor: the noise threshold, or half the faintest lit pixel. 0 applies eq 9 literally: any
+  // dark pixel with weight zeroes the voxel. 0.9 measured best (docs/benchmarks.md).
+  double dark_weight_cutoff = 0.9;
   double convergence = 0.0;        // stop when the residual changes by less than this fraction
   std::optional<RegionMm> region;  // solve only here
 };

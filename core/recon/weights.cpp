@@ -15,6 +15,9 @@
 namespace plenopiv::recon {
 namespace {
 
+// Interpolation fractions this close to 0 or 1 are rounding noise of an exact hit.
+constexpr double kSnap = 1e-9;
+
 struct Hit {
   int index = -1;
   double weight = 0;
@@ -37,7 +40,9 @@ std::pair<Hit, Hit> bracket(const std::vector<double>& centres, double x) {
     return {t < 1 ? Hit{n - 1, 1.0 - t} : Hit{}, Hit{}};
   }
   const int i0 = i1 - 1;
-  const double t = (x - centres[i0]) / (centres[i1] - centres[i0]);
+  double t = (x - centres[i0]) / (centres[i1] - centres[i0]);
+  if (t < kSnap) t = 0;
+  if (t > 1 - kSnap) t = 1;
   return {Hit{i0, 1.0 - t}, Hit{i1, t}};
 }
 
@@ -57,8 +62,15 @@ int ray_coefficients(const WeightingOperator::Geometry& g, const std::vector<dou
     // Eq 1 inverted: behind that lens the ray lands at spot - u f_l / s_i.
     const double spot = optics::lens_centre_to_spot_mm(centres[std::size_t(lens.index)], g.s_i, g.f_lens);
     const double p = pixel_of_mm(spot - u * g.f_lens / g.s_i);
-    const double p0 = std::floor(p);
-    const double t = p - p0;
+    double p0 = std::floor(p);
+    double t = p - p0;
+    // Rounding must not turn an exact hit into a 1e-16 weight on the neighbour (it would widen
+    // the voxel's footprint by a pixel that a dark test would then see).
+    if (t < kSnap) t = 0;
+    if (t > 1 - kSnap) {
+      t = 0;
+      p0 += 1;
+    }
     const int i0 = int(p0);
     if (i0 >= 0 && i0 < pixels && t < 1) {
       out_pixel[count] = i0;
@@ -71,6 +83,9 @@ int ray_coefficients(const WeightingOperator::Geometry& g, const std::vector<dou
   }
   return count;
 }
+
+// How far (pixels) a lens centre may sit from its column's and row's mean for the separable weights.
+constexpr double kSeparableTolerancePx = 0.25;
 
 double sample_position(double aperture, int samples, int k) {
   return (k + 0.5) * aperture / samples - 0.5 * aperture;
@@ -142,9 +157,9 @@ WeightingOperator::WeightingOperator(const optics::CameraModel& camera,
     }
   }
   const optics::Lattice& lat = lenses.lattice;
-  if (lat.layout != optics::LensletLayout::rect || lat.rotation_rad != 0.0) {
-    throw InputError("microlens array: the reconstruction needs a rectangular, unrotated lattice "
-                     "(hex or rotated arrays are not supported yet)");
+  if (lat.layout != optics::LensletLayout::rect) {
+    throw InputError("microlens array: the reconstruction needs a rectangular lattice (hex arrays are "
+                     "not supported yet)");
   }
   if (lat.count_x < 2 || lat.count_y < 2 || lenses.centres_mm.size() != std::size_t(lat.count())) {
     throw InputError("microlens array: needs at least 2 x 2 lenses and one centre per lens");
@@ -156,19 +171,31 @@ WeightingOperator::WeightingOperator(const optics::CameraModel& camera,
   geo_.aperture = camera.aperture_diameter_mm();
   geo_.pixel_pitch = camera.sensor().pixel_pitch_mm;
   geo_.nominal_samples = std::max(2, int(std::ceil(camera.microlens_image_diameter_px() - 1e-9)));
-  // Separability: lens x depends on the column only, y on the row only.
-  for (int i = 0; i < lat.count_x; ++i) geo_.lens_x.push_back(lenses.centre(i, 0)[0]);
-  for (int j = 0; j < lat.count_y; ++j) geo_.lens_y.push_back(lenses.centre(0, j)[1]);
-  constexpr double kSameMm = 1e-9;
+  // Separability: one x per lens column and one y per lens row (their means). A measured array
+  // may scatter about them by a fraction of a pixel; a rotated or warped one cannot be separated.
+  geo_.lens_x.assign(std::size_t(lat.count_x), 0.0);
+  geo_.lens_y.assign(std::size_t(lat.count_y), 0.0);
+  // Means as the first lens plus the mean departure from it, so an exact lattice stays exact.
   for (int j = 0; j < lat.count_y; ++j) {
     for (int i = 0; i < lat.count_x; ++i) {
-      if (std::abs(lenses.centre(i, j)[0] - geo_.lens_x[std::size_t(i)]) > kSameMm ||
-          std::abs(lenses.centre(i, j)[1] - geo_.lens_y[std::size_t(j)]) > kSameMm) {
-        throw InputError("microlens array: lens (" + std::to_string(i) + ", " + std::to_string(j) +
-                         ") leaves its lattice column/row; the separable weights need centres that "
-                         "share x along columns and y along rows");
-      }
+      geo_.lens_x[std::size_t(i)] += (lenses.centre(i, j)[0] - lenses.centre(i, 0)[0]) / lat.count_y;
+      geo_.lens_y[std::size_t(j)] += (lenses.centre(i, j)[1] - lenses.centre(0, j)[1]) / lat.count_x;
     }
+  }
+  for (int i = 0; i < lat.count_x; ++i) geo_.lens_x[std::size_t(i)] += lenses.centre(i, 0)[0];
+  for (int j = 0; j < lat.count_y; ++j) geo_.lens_y[std::size_t(j)] += lenses.centre(0, j)[1];
+  for (int j = 0; j < lat.count_y; ++j) {
+    for (int i = 0; i < lat.count_x; ++i) {
+      const double dev = std::max(std::abs(lenses.centre(i, j)[0] - geo_.lens_x[std::size_t(i)]),
+                                  std::abs(lenses.centre(i, j)[1] - geo_.lens_y[std::size_t(j)]));
+      geo_.max_centre_deviation_mm = std::max(geo_.max_centre_deviation_mm, dev);
+    }
+  }
+  if (geo_.max_centre_deviation_mm > kSeparableTolerancePx * geo_.pixel_pitch) {
+    throw InputError("microlens array: lens centres leave their lattice columns/rows by up to " +
+                     std::to_string(geo_.max_centre_deviation_mm / geo_.pixel_pitch) +
+                     " px (rotated or warped array); the separable weights allow " +
+                     std::to_string(kSeparableTolerancePx) + " px");
   }
   geo_.min_pitch = 1e300;
   for (std::size_t i = 1; i < geo_.lens_x.size(); ++i) geo_.min_pitch = std::min(geo_.min_pitch, geo_.lens_x[i] - geo_.lens_x[i - 1]);

@@ -75,8 +75,9 @@ struct SliceOptics {
 // offset from the spot is exactly -(u, v) f_l / s_i. That makes the 16 coefficients of eq 12
 // separable, so W is never stored: two 1-D tables per slice.
 //
-// Requires a rectangular lens array whose centres share x along columns and y along rows (the
-// nominal lattice, or a calibrated one without rotation); other arrays are an InputError.
+// Requires a rectangular lens array whose centres share x along columns and y along rows within
+// 0.25 px (the nominal lattice, or a calibrated one without measurable rotation); the column and
+// row means are used. Hex, rotated or warped arrays are an InputError that says so.
 class WeightingOperator {
  public:
   // `white` must have the sensor's size. Throws InputError on a grid inside the main lens's focal
@@ -111,6 +112,7 @@ class WeightingOperator {
     double min_pitch = 0;
     std::vector<double> lens_x;  // lens centres along x (one per lens column), increasing
     std::vector<double> lens_y;  // along y (one per lens row), increasing
+    double max_centre_deviation_mm = 0;  // of any lens from its column/row mean
   };
   const Geometry& geometry() const { return geo_; }
 

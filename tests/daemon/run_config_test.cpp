@@ -31,7 +31,7 @@ TEST(RunConfig, ShippedDefaultParses) {
   EXPECT_DOUBLE_EQ(c.dt_s, 1e-4);
   EXPECT_TRUE(c.camera_uri.empty());  // the daemon's default camera
   EXPECT_EQ(c.reconstruction["iterations"].as<int>(), 3);
-  EXPECT_EQ(c.correlation["window_voxels"].as<int>(), 8);
+  EXPECT_EQ(c.correlation["passes"][0]["window"].as<int>(), 16);
   EXPECT_FALSE(c.publish_volumes);
   EXPECT_EQ(c.text, text.str());
 }

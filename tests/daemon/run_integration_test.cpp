@@ -3,7 +3,13 @@
 #include <google/protobuf/util/json_util.h>
 #include <gtest/gtest.h>
 
+#include <sys/socket.h>
+#include <sys/un.h>
+#include <unistd.h>
+
 #include <csignal>
+#include <iomanip>
+#include <set>
 #include <fstream>
 #include <sstream>
 #include <thread>
@@ -190,14 +196,14 @@ TEST_F(DaemonRuns, IllegalAndInvalidRequestsAreRefusedAndTheDaemonServesOn) {
   ASSERT_EQ(client({"run", "start", "--config", write_config(kRun).string()}, out), 0) << out;
   EXPECT_EQ(client({"run", "start", "--config", write_config(kRun).string()}, out), 4);
   EXPECT_NE(out.find("WRONG_STATE: cannot start a run"), std::string::npos) << out;
-  EXPECT_EQ(client({"calibrate"}, out), 4);
+  EXPECT_EQ(client({"capture-calibration"}, out), 4);
   EXPECT_NE(out.find("WRONG_STATE: cannot take calibration images"), std::string::npos) << out;
 
   ASSERT_EQ(client({"run", "stop"}, out), 0) << out;
   wait_for_state("Idle");
   EXPECT_EQ(manifest(only_run_dir()).state(), "stopped");
 
-  ASSERT_EQ(client({"calibrate", "--frames", "2"}, out), 0) << out;
+  ASSERT_EQ(client({"capture-calibration", "--frames", "2"}, out), 0) << out;
   EXPECT_NE(out.find("2 calibration images in"), std::string::npos) << out;
   EXPECT_TRUE(daemon_->running());
 }
@@ -229,6 +235,104 @@ TEST_F(DaemonRuns, SigtermMidRunDrainsAndLeavesTheFolderConsistent) {
     }
   }
   EXPECT_EQ(listed, on_disk);  // nothing half-written, nothing unlisted
+}
+
+}  // namespace
+}  // namespace plenopiv
+
+namespace plenopiv {
+namespace {
+
+// A stand-in for systemd's notify socket: collects what plenopivd sends (READY, STATUS, WATCHDOG).
+class NotifySocket {
+ public:
+  explicit NotifySocket(const fs::path& path) : path_(path) {
+    fs::remove(path);
+    fd_ = ::socket(AF_UNIX, SOCK_DGRAM | SOCK_NONBLOCK, 0);
+    sockaddr_un addr{};
+    addr.sun_family = AF_UNIX;
+    std::snprintf(addr.sun_path, sizeof addr.sun_path, "%s", path.c_str());
+    if (::bind(fd_, reinterpret_cast<sockaddr*>(&addr), sizeof addr) != 0) {
+      throw std::runtime_error("cannot bind " + path.string());
+    }
+  }
+  ~NotifySocket() { ::close(fd_); }
+  // Every datagram received so far, with the time it was read.
+  std::vector<std::pair<std::chrono::steady_clock::time_point, std::string>> drain() {
+    std::vector<std::pair<std::chrono::steady_clock::time_point, std::string>> out;
+    char buffer[4096];
+    for (ssize_t n; (n = ::recv(fd_, buffer, sizeof buffer, 0)) > 0;) {
+      out.emplace_back(std::chrono::steady_clock::now(), std::string(buffer, std::size_t(n)));
+    }
+    return out;
+  }
+
+ private:
+  fs::path path_;
+  int fd_ = -1;
+};
+
+TEST(DaemonNotify, ReadyStatusAndAWatchdogThatStopsWhenTheRunStalls) {
+  const fs::path scratch = testing_support::temp_dir("daemon-notify");
+  NotifySocket notify(scratch / "notify.sock");
+  const std::string control = "tcp://127.0.0.1:" + std::to_string(testing_support::free_tcp_port());
+  const std::string publish = "tcp://127.0.0.1:" + std::to_string(testing_support::free_tcp_port());
+  ::setenv("NOTIFY_SOCKET", (scratch / "notify.sock").c_str(), 1);
+  ::setenv("WATCHDOG_USEC", "1000000", 1);  // 1 s: pings needed every 0.5 s
+  ChildProcess daemon({binary("plenopivd-testcam"), "--control", control, "--publish", publish,
+                       "--camera", "test://", "--data-dir", (scratch / "data").string()},
+                      scratch / "plenopivd.log");
+  ::unsetenv("NOTIFY_SOCKET");
+  ::unsetenv("WATCHDOG_USEC");
+
+  std::vector<std::string> messages;
+  for (int i = 0; i < 100 && messages.empty(); ++i) {
+    std::this_thread::sleep_for(50ms);
+    for (auto& [t, m] : notify.drain()) messages.push_back(m);
+  }
+  ASSERT_FALSE(messages.empty()) << daemon.output();
+  EXPECT_EQ(messages[0], "READY=1\nSTATUS=Idle");
+  std::this_thread::sleep_for(500ms);
+  int pings = 0;
+  for (auto& [t, m] : notify.drain()) pings += m == "WATCHDOG=1";
+  EXPECT_GE(pings, 2) << "no watchdog pings while idle";
+
+  // A run whose camera loses every frame makes no progress: the pings stop.
+  std::string lost;
+  for (int i = 0; i < 400; ++i) lost += (i ? "," : "") + std::to_string(i);
+  const fs::path config = scratch / "stalled.yaml";
+  std::ofstream(config) << kRun << "camera_uri: test://?lose=" << lost << "\n";
+  std::string out;
+  ASSERT_EQ(testing_support::run_command({binary("plenopiv"), "--endpoint", control, "run", "start",
+                                          "--config", config.string()},
+                                         out),
+            0)
+      << out;
+  const auto started = std::chrono::steady_clock::now();
+  std::vector<std::pair<std::chrono::steady_clock::time_point, std::string>> received;
+  while (std::chrono::steady_clock::now() - started < 1500ms) {  // read as they come: timed
+    for (auto& r : notify.drain()) received.push_back(r);
+    std::this_thread::sleep_for(20ms);
+  }
+  bool saw_acquiring = false;
+  int late_pings = 0;
+  for (auto& [t, m] : received) {
+    saw_acquiring = saw_acquiring || m.rfind("STATUS=Acquiring run ", 0) == 0;
+    // Half the watchdog time after the start (plus a poll period), no more pings.
+    if (m == "WATCHDOG=1" && t - started > 700ms) ++late_pings;
+  }
+  EXPECT_TRUE(saw_acquiring);
+  EXPECT_EQ(late_pings, 0) << "the watchdog was fed although no pair arrived";
+
+  ASSERT_EQ(testing_support::run_command({binary("plenopiv"), "--endpoint", control, "run", "stop"},
+                                         out),
+            0)
+      << out;
+  daemon.signal(SIGTERM);
+  ASSERT_TRUE(daemon.wait(10s).has_value());
+  bool stopping = false;
+  for (auto& [t, m] : notify.drain()) stopping = stopping || m.rfind("STOPPING=1", 0) == 0;
+  EXPECT_TRUE(stopping);
 }
 
 }  // namespace

@@ -272,11 +272,10 @@ TEST(Multipass, UniformSubvoxelShiftsAreRecovered) {
     }
   }
   std::printf("uniform shifts: worst |bias| %.4f, worst RMS %.4f voxel\n", worst_bias, worst_rms);
-  // Measured: worst |bias| 0.0216 (z at 0.5 voxel), worst RMS 0.0282 voxel. The bias follows
-  // the sub-voxel part of the shift (0 at 0 and 1 voxel, largest at 0.5): the 3x3x3 B-spline
-  // blobs are narrower than the 7-tap interpolator can shift without aliasing (docs/benchmarks.md).
-  EXPECT_LT(worst_bias, 0.025);
-  EXPECT_LT(worst_rms, 0.035);
+  // Measured: worst |bias| 0.0057, worst RMS 0.0096 voxel (issue bounds: 0.02 and 0.05). Without
+  // the binomial prefilter: 0.0216 and 0.0282, largest at half a voxel (deform.hpp: why).
+  EXPECT_LT(worst_bias, 0.01);
+  EXPECT_LT(worst_rms, 0.015);
 }
 
 TEST(Multipass, SameBitsAtOneAndTwoThreads) {
@@ -342,15 +341,16 @@ TEST(Multipass, WindowDeformationReducesTheRingVortexError) {
   const Volume b = sim::render_exact_volume(g, sim::displace(pa, flow));
   CorrelationSettings single;
   single.passes = {{{16, 16, 16}, 75}};
-  CorrelationSettings multi;  // the defaults: 32^3 50 %, 24^3 75 %, 16^3 75 %
+  CorrelationSettings multi;  // the defaults: 32^3 50 %, 16^3 50 %, 16^3 75 %
   const auto r1 = correlate_volumes(a, b, single);
   const auto r3 = correlate_volumes(a, b, multi);
   ASSERT_EQ(r1.field.grid, r3.field.grid);
   const P3 e1 = ring_errors(r1, flow, 0.1), e3 = ring_errors(r3, flow, 0.1);
   std::printf("ring vortex RMS (voxels) single pass %.3f %.3f %.3f, three passes %.3f %.3f %.3f\n",
               e1[0], e1[1], e1[2], e3[0], e3[1], e3[2]);
-  // Measured: single pass 1.64, 1.31, 1.12; three passes 0.33, 0.37, 0.36 (ratios 0.20-0.32).
-  for (int c = 0; c < 3; ++c) EXPECT_LT(e3[c], 0.4 * e1[c]) << c;
+  // Measured: single pass 1.03, 0.71, 0.73; three passes 0.34, 0.30, 0.32 (ratios 0.33-0.44).
+  for (int c = 0; c < 3; ++c) EXPECT_LT(e3[c], 0.6 * e1[c]) << c;
+  for (int c = 0; c < 3; ++c) EXPECT_LT(e3[c], 0.45) << c;
 }
 
 TEST(Multipass, EmptyWindowsAreSkippedAndInvalid) {

@@ -1,0 +1,229 @@
+// The simulated plenoptic camera, `sim://`: each trigger renders a particle pair with core/sim.
+#include "drivers/sim/sim_camera.hpp"
+
+#include <chrono>
+#include <cmath>
+#include <condition_variable>
+#include <deque>
+#include <mutex>
+#include <thread>
+
+#include "core/base/errors.hpp"
+#include "core/optics/camera_file.hpp"
+#include "core/optics/microlens_array.hpp"
+#include "core/sim/flows.hpp"
+#include "core/sim/particles.hpp"
+#include "core/sim/render.hpp"
+#include "drivers/camera/camera_base.hpp"
+
+namespace plenopiv::drivers {
+namespace {
+
+struct SceneSettings {
+  std::uint64_t seed = 1;
+  double ppm = 0.05;
+  double depth_mm = 5.0;
+  std::size_t rays = 2000;
+  bool noise = false;
+  std::uint64_t drop_every = 0;
+  std::uint64_t incomplete_every = 0;
+  std::uint64_t disconnect_after = 0;
+};
+
+std::uint64_t now_ns() {
+  return std::uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(
+                           std::chrono::system_clock::now().time_since_epoch())
+                           .count());
+}
+
+std::unique_ptr<sim::Flow> flow_from_uri(const DeviceUri& uri, const optics::CameraModel& camera) {
+  const std::string name = uri.string_or("flow", "uniform");
+  if (name == "uniform") {
+    return std::make_unique<sim::UniformFlow>(sim::Point3{
+        uri.number_or("dx_mm", 0.25), uri.number_or("dy_mm", 0.0), uri.number_or("dz_mm", 0.0)});
+  }
+  if (name == "ring") {
+    sim::RingVortexFlow::Parameters p;
+    p.voxel_mm = uri.number_or("voxel_mm", camera.nominal_voxel_size_mm());
+    return std::make_unique<sim::RingVortexFlow>(p);
+  }
+  if (name == "rotation") {
+    const double angle = uri.number_or("angle_deg", 1.0) * std::acos(-1.0) / 180.0;
+    return std::make_unique<sim::SolidBodyRotation>(sim::Point3{0, 0, 0}, sim::Point3{0, 1, 0}, angle);
+  }
+  if (name == "shear") {
+    return std::make_unique<sim::LinearShear>(sim::Point3{uri.number_or("shear_per_mm", 0.02), 0, 0},
+                                              1, 0.0);
+  }
+  uri.fail("flow: unknown flow '" + name + "' (uniform, ring, rotation, shear)");
+}
+
+// Renders on its own thread, so a trigger never waits for the ray tracer: the queue of pending
+// triggers is what a real camera's exposure pipeline would be.
+class SimCamera : public CameraBase {
+ public:
+  SimCamera(const DeviceUri& uri, optics::CameraModel camera, SceneSettings scene,
+            std::unique_ptr<sim::Flow> flow)
+      : CameraBase(make_info(uri, camera)),
+        camera_(std::move(camera)),
+        array_(optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera_))),
+        scene_(scene),
+        flow_(std::move(flow)),
+        box_(sim::field_of_view_box(camera_, -scene.depth_mm, scene.depth_mm)),
+        particle_count_(sim::particle_count_from_ppm(camera_, box_, scene.ppm)) {
+    options_.rays_per_particle = scene_.rays;
+    if (scene_.noise) {
+      options_.sensor.shot_noise = true;
+      options_.sensor.read_noise_electrons = 8.0;
+      options_.sensor.dark_offset_dn = 20.0;
+      options_.sensor.electrons_per_ray = 4.0;
+      options_.sensor.bit_depth = 12;
+    }
+    worker_ = std::thread([this] { render_loop(); });
+  }
+
+  ~SimCamera() override {
+    {
+      std::lock_guard lock(mutex_);
+      quit_ = true;
+    }
+    wake_.notify_all();
+    worker_.join();
+  }
+
+ private:
+  static CameraInfo make_info(const DeviceUri& uri, const optics::CameraModel& camera) {
+    CameraInfo info;
+    info.uri = uri.text();
+    info.vendor = "plenopiv";
+    info.model = "simulated plenoptic camera";
+    info.serial = "seed-" + uri.string_or("seed", "1");
+    info.sensor_width_px = camera.sensor().width_px;
+    info.sensor_height_px = camera.sensor().height_px;
+    info.double_exposure = "simulated frame pair per trigger";
+    return info;
+  }
+
+  void do_configure(const CameraSettings& settings) override {
+    const Roi& roi = settings.roi;
+    if (roi.x != 0 || roi.y != 0 ||
+        (roi.width != 0 && roi.width != camera_.sensor().width_px) ||
+        (roi.height != 0 && roi.height != camera_.sensor().height_px)) {
+      throw InputError(info().uri + ": roi: the simulated camera renders the full sensor only");
+    }
+  }
+  void do_arm(const DoubleExposureSettings&) override {}
+  void do_start() override {}
+  void do_stop() override {}
+
+  void do_software_trigger() override {
+    {
+      std::lock_guard lock(mutex_);
+      pending_.push_back(next_trigger_++);
+    }
+    wake_.notify_all();
+  }
+
+  void render_loop() {
+    for (;;) {
+      std::uint64_t trigger = 0;
+      {
+        std::unique_lock lock(mutex_);
+        wake_.wait(lock, [this] { return quit_ || !pending_.empty(); });
+        if (quit_) return;
+        trigger = pending_.front();
+        pending_.pop_front();
+      }
+      render_pair(trigger);
+    }
+  }
+
+  void render_pair(std::uint64_t trigger) {
+    if (scene_.disconnect_after && trigger >= scene_.disconnect_after) {
+      report_lost("simulated disconnect after " + std::to_string(scene_.disconnect_after) + " triggers");
+      return;
+    }
+    // Pair k depends on (seed, k) only: the same run renders the same frames.
+    const std::uint64_t pair_seed = scene_.seed * 0x9E3779B97F4A7C15ull + trigger;
+    const std::vector<sim::Point3> a = sim::random_particles(box_, particle_count_, pair_seed);
+    const std::vector<sim::Point3> b = sim::displace(a, *flow_);
+    const std::uint64_t t0 = now_ns();
+    Frame fa = make_frame(a, 2 * trigger, pair_seed, t0);
+    submit_frame(std::move(fa), trigger);
+    if (scene_.drop_every && (trigger + 1) % scene_.drop_every == 0) return;
+    Frame fb = make_frame(b, 2 * trigger + 1, pair_seed + 1, t0 + 1000);
+    if (scene_.incomplete_every && (trigger + 1) % scene_.incomplete_every == 0) fb.complete = false;
+    submit_frame(std::move(fb), trigger);
+  }
+
+  Frame make_frame(const std::vector<sim::Point3>& particles, std::uint64_t id, std::uint64_t seed,
+                   std::uint64_t device_ns) {
+    sim::RenderResult r = sim::render(camera_, array_, particles, options_, seed);
+    Frame f;
+    f.image = std::move(r.image);
+    f.bit_depth = options_.sensor.bit_depth;
+    f.frame_id = id + 1;  // GigE Vision style: 0 means "unknown"
+    f.device_timestamp_ns = device_ns;
+    f.host_timestamp_ns = now_ns();
+    f.complete = true;
+    return f;
+  }
+
+  optics::CameraModel camera_;
+  optics::MicrolensArray array_;
+  SceneSettings scene_;
+  std::unique_ptr<sim::Flow> flow_;
+  sim::Box box_;
+  std::size_t particle_count_;
+  sim::RenderOptions options_;
+
+  std::mutex mutex_;
+  std::condition_variable wake_;
+  std::deque<std::uint64_t> pending_;
+  std::uint64_t next_trigger_ = 0;
+  bool quit_ = false;
+  std::thread worker_;
+};
+
+}  // namespace
+
+std::unique_ptr<Camera> open_sim_camera(const DeviceUri& uri,
+                                        const std::filesystem::path& default_camera_file) {
+  uri.reject_unknown({"camera", "seed", "ppm", "depth_mm", "flow", "dx_mm", "dy_mm", "dz_mm",
+                      "voxel_mm", "angle_deg", "shear_per_mm", "rays", "noise", "drop_every",
+                      "incomplete_every", "disconnect_after"});
+  if (!uri.target().empty()) uri.fail("the simulated camera takes no device name, only ?parameters");
+  const std::string file = uri.string_or("camera", default_camera_file.string());
+  if (file.empty()) uri.fail("camera: no camera file given and no default configured");
+  optics::CameraModel camera = optics::load_camera_file(file);
+
+  SceneSettings scene;
+  auto count = [&](const char* key, long long fallback) -> std::uint64_t {
+    const long long v = uri.integer_or(key, fallback);
+    if (v < 0) uri.fail(std::string(key) + ": must be >= 0, got " + std::to_string(v));
+    return std::uint64_t(v);
+  };
+  scene.seed = count("seed", 1);
+  scene.ppm = uri.number_or("ppm", scene.ppm);
+  if (!(scene.ppm > 0) || scene.ppm > 10) uri.fail("ppm: must be in (0, 10] particles per microlens");
+  scene.depth_mm = uri.number_or("depth_mm", scene.depth_mm);
+  if (!(scene.depth_mm >= 0)) uri.fail("depth_mm: must be >= 0");
+  scene.rays = count("rays", 2000);
+  if (scene.rays == 0) uri.fail("rays: must be > 0");
+  const std::uint64_t noise = count("noise", 0);
+  if (noise > 1) uri.fail("noise: 0 or 1");
+  scene.noise = noise == 1;
+  scene.drop_every = count("drop_every", 0);
+  scene.incomplete_every = count("incomplete_every", 0);
+  scene.disconnect_after = count("disconnect_after", 0);
+  std::unique_ptr<sim::Flow> flow = flow_from_uri(uri, camera);
+  return std::make_unique<SimCamera>(uri, std::move(camera), scene, std::move(flow));
+}
+
+void register_sim_camera(CameraRegistry& registry, const std::filesystem::path& default_camera_file) {
+  registry.add("sim", [default_camera_file](const DeviceUri& uri) {
+    return open_sim_camera(uri, default_camera_file);
+  });
+}
+
+}  // namespace plenopiv::drivers

@@ -1,0 +1,35 @@
+// The simulated plenoptic camera, `sim://`: each trigger renders a particle pair with core/sim.
+#pragma once
+
+#include <filesystem>
+#include <memory>
+
+#include "drivers/camera/camera.hpp"
+#include "drivers/camera/camera_registry.hpp"
+#include "drivers/common/device_uri.hpp"
+
+namespace plenopiv::drivers {
+
+// Opens `sim://?key=value&...`. Parameters (all optional):
+//   camera=<file>       camera file (default: the one given to register_sim_camera)
+//   seed=<n>            random seed; pair k uses (seed, k): a run is reproducible (default 1)
+//   ppm=<x>             particles per microlens over the field of view (default 0.05)
+//   depth_mm=<d>        particles fill z in [-d, d] (default 5)
+//   flow=uniform|ring|rotation|shear                      (default uniform)
+//   dx_mm, dy_mm, dz_mm displacement of the uniform flow (default 0.25, 0, 0)
+//   voxel_mm=<v>        voxel edge the ring vortex is defined in (default: the nominal voxel)
+//   angle_deg=<a>       rotation about the y axis through the origin (default 1)
+//   shear_per_mm=<s>    x displacement per mm of y (default 0.02)
+//   rays=<n>            rays per particle (default 2000)
+//   noise=0|1           shot and read noise, dark offset, 12-bit output (default 0)
+//   drop_every=<n>      fault: frame B of every n-th trigger never arrives
+//   incomplete_every=<n> fault: frame B of every n-th trigger arrives incomplete
+//   disconnect_after=<n> fault: the camera is lost after n triggers (status Lost)
+// Unknown parameters, a missing camera file, or bad values are an InputError naming the URI.
+std::unique_ptr<Camera> open_sim_camera(const DeviceUri& uri,
+                                        const std::filesystem::path& default_camera_file);
+
+// Registers `sim` in `registry`, with `default_camera_file` for URIs that name none.
+void register_sim_camera(CameraRegistry& registry, const std::filesystem::path& default_camera_file);
+
+}  // namespace plenopiv::drivers

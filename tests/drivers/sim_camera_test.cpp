@@ -1,0 +1,120 @@
+// The simulated camera `sim://`: conformance, reproducible frames, injected faults, refused URIs.
+#include <gtest/gtest.h>
+
+#include <string>
+
+#include "core/base/errors.hpp"
+#include "drivers/sim/sim_camera.hpp"
+#include "tests/drivers/camera_conformance.hpp"
+
+namespace plenopiv::drivers {
+namespace {
+
+using namespace std::chrono_literals;
+
+const std::string kCamera = std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml";
+
+std::unique_ptr<Camera> open(const std::string& params) {
+  return open_sim_camera(DeviceUri::parse("sim://?rays=200&ppm=0.02&" + params), kCamera);
+}
+
+// Starts `camera` with software triggers and fires `n` triggers.
+void run_triggers(Camera& camera, int n) {
+  camera.configure(CameraSettings{});
+  camera.arm(DoubleExposureSettings{TriggerSource::Software, 0.0});
+  camera.start();
+  for (int i = 0; i < n; ++i) camera.software_trigger();
+}
+
+TEST(SimCamera, PassesTheConformanceSuite) {
+  auto camera = open("seed=3");
+  testing_support::ConformanceOptions o;
+  o.pairs_per_run = 3;
+  o.runs = 2;
+  o.pair_timeout = 20s;
+  testing_support::check_camera_conformance(*camera, o);
+  EXPECT_EQ(camera->info().sensor_width_px, 850);
+}
+
+TEST(SimCamera, TheSameSeedRendersTheSameFrames) {
+  auto first = open("seed=7");
+  auto second = open("seed=7");
+  auto other = open("seed=8");
+  for (Camera* c : {first.get(), second.get(), other.get()}) run_triggers(*c, 2);
+  for (int k = 0; k < 2; ++k) {
+    const auto p1 = first->next_pair(20s), p2 = second->next_pair(20s), p3 = other->next_pair(20s);
+    ASSERT_TRUE(p1 && p2 && p3);
+    EXPECT_EQ(p1->a.image.pixels, p2->a.image.pixels);
+    EXPECT_EQ(p1->b.image.pixels, p2->b.image.pixels);
+    EXPECT_NE(p1->a.image.pixels, p3->a.image.pixels);
+    EXPECT_NE(p1->a.image.pixels, p1->b.image.pixels);  // B holds the displaced particles
+    double lit = 0;
+    for (auto v : p1->a.image.pixels) lit += v;
+    EXPECT_GT(lit, 0) << "frame A is black";
+    EXPECT_EQ(p1->trigger_index, std::uint64_t(k));
+  }
+}
+
+TEST(SimCamera, DroppedFramesDiscardTheirPairAndAreCounted) {
+  auto camera = open("drop_every=2");
+  run_triggers(*camera, 4);
+  int delivered = 0;
+  while (camera->next_pair(3s)) ++delivered;
+  EXPECT_EQ(delivered, 2);
+  const CameraCounters c = camera->counters();
+  EXPECT_EQ(c.pairs_delivered, 2u);
+  EXPECT_EQ(c.frames_received, 6u) << testing_support::describe(c);
+}
+
+TEST(SimCamera, IncompleteFramesAreNeverPaired) {
+  auto camera = open("incomplete_every=2");
+  run_triggers(*camera, 4);
+  int delivered = 0;
+  while (auto pair = camera->next_pair(3s)) {
+    EXPECT_TRUE(pair->a.complete && pair->b.complete);
+    EXPECT_EQ(pair->trigger_index % 2, 0u);
+    ++delivered;
+  }
+  EXPECT_EQ(delivered, 2);
+  const CameraCounters c = camera->counters();
+  EXPECT_EQ(c.frames_incomplete, 2u) << testing_support::describe(c);
+  EXPECT_EQ(c.pairs_discarded, 2u) << testing_support::describe(c);
+}
+
+TEST(SimCamera, ADisconnectIsReportedAsLost) {
+  auto camera = open("disconnect_after=1");
+  run_triggers(*camera, 2);
+  EXPECT_TRUE(camera->next_pair(20s));
+  EXPECT_FALSE(camera->next_pair(1s));
+  const CameraStatus s = camera->status();
+  EXPECT_EQ(s.state, CameraState::Lost);
+  EXPECT_NE(s.last_error.find("simulated disconnect"), std::string::npos) << s.last_error;
+}
+
+TEST(SimCamera, BadUrisAreNamed) {
+  auto message = [](const std::string& uri) -> std::string {
+    try {
+      open_sim_camera(DeviceUri::parse(uri), kCamera);
+    } catch (const InputError& e) {
+      return e.what();
+    }
+    return "";
+  };
+  EXPECT_NE(message("sim://?colour=red").find("colour"), std::string::npos);
+  EXPECT_NE(message("sim://?flow=tornado").find("unknown flow 'tornado'"), std::string::npos);
+  EXPECT_NE(message("sim://?ppm=-1").find("ppm"), std::string::npos);
+  EXPECT_NE(message("sim://?rays=0").find("rays"), std::string::npos);
+  EXPECT_NE(message("sim://?camera=/nonexistent.yaml").find("/nonexistent.yaml"), std::string::npos);
+  EXPECT_NE(message("sim://cam0").find("sim://cam0"), std::string::npos);
+}
+
+TEST(SimCamera, RegistersUnderSim) {
+  CameraRegistry registry;
+  register_sim_camera(registry, kCamera);
+  EXPECT_TRUE(registry.available("sim"));
+  auto camera = registry.open("sim://?rays=100");
+  EXPECT_EQ(camera->info().model, "simulated plenoptic camera");
+}
+
+}  // namespace
+}  // namespace plenopiv::drivers
