@@ -76,7 +76,7 @@ calib::LoadedCalibration calibration_for(const ProcessOptions& o, const optics::
 cv::Mat preview_image(const VectorField& f, const std::vector<float>& omega_z) {
   const int nx = f.grid.shape[0], ny = f.grid.shape[1], k = f.grid.shape[2] / 2;
   const int cell = std::max(8, 640 / std::max(nx, ny));
-  const int w = nx * cell, h = ny * cell, bar = 90, top = 30;
+  const int w = nx * cell, h = ny * cell, bar = 100, top = 30;
   const auto idx = [&](int i, int j) { return (std::size_t(k) * ny + j) * nx + i; };
   double omega_max = 0, disp_max = 0;
   for (int j = 0; j < ny; ++j)
@@ -103,32 +103,32 @@ cv::Mat preview_image(const VectorField& f, const std::vector<float>& omega_z) {
 
   cv::Mat canvas(h + top, w + bar, CV_8UC3, cv::Scalar(255, 255, 255));
   coloured.copyTo(canvas(cv::Rect(0, top, w, h)));
-  // Arrows: the longest in-plane displacement spans 1.5 cells.
-  const double scale = disp_max > 0 ? 1.5 * cell / disp_max : 0;
+  // Arrows centred on their node; the longest in-plane displacement spans 0.9 cell.
+  const double scale = disp_max > 0 ? 0.9 * cell / disp_max : 0;
   for (int j = 0; j < ny; ++j)
     for (int i = 0; i < nx; ++i) {
       const auto n = idx(i, j);
       if (!f.valid[n]) continue;
       const cv::Point2d c((i + 0.5) * cell, top + (j + 0.5) * cell);
-      const cv::Point2d tip = c + cv::Point2d(f.dx_mm[n] * scale, f.dy_mm[n] * scale);
-      cv::arrowedLine(canvas, c, tip, cv::Scalar(0, 0, 0), 1, cv::LINE_AA, 0, 0.3);
+      const cv::Point2d half(0.5 * f.dx_mm[n] * scale, 0.5 * f.dy_mm[n] * scale);
+      cv::arrowedLine(canvas, c - half, c + half, cv::Scalar(0, 0, 0), 1, cv::LINE_AA, 0, 0.25);
     }
   // Colour bar from -ω_max (bottom) to +ω_max (top).
   for (int r = 0; r < h; ++r) {
     cv::Mat one(1, 1, CV_8U, cv::Scalar(255 - 255 * r / std::max(h - 1, 1))), c;
     cv::applyColorMap(one, c, cv::COLORMAP_JET);
-    cv::line(canvas, {w + 10, top + r}, {w + 30, top + r}, cv::Scalar(c.at<cv::Vec3b>(0, 0)));
+    cv::line(canvas, {w + 20, top + r}, {w + 40, top + r}, cv::Scalar(c.at<cv::Vec3b>(0, 0)));
   }
   char text[128];
   const auto label = [&](const char* s, cv::Point at) {
     cv::putText(canvas, s, at, cv::FONT_HERSHEY_SIMPLEX, 0.35, cv::Scalar(0, 0, 0), 1, cv::LINE_AA);
   };
   std::snprintf(text, sizeof text, "%+.3g", omega_max);
-  label(text, {w + 33, top + 10});
-  label("0", {w + 33, top + h / 2});
+  label(text, {w + 43, top + 10});
+  label("0", {w + 43, top + h / 2});
   std::snprintf(text, sizeof text, "%+.3g", -omega_max);
-  label(text, {w + 33, top + h - 2});
-  label("wz 1/s", {w + 33, top + h / 2 + 14});
+  label(text, {w + 43, top + h - 2});
+  label("wz 1/s", {w + 43, top + h / 2 + 14});
   const double z_mm = f.grid.origin_mm[2] + k * f.grid.spacing_mm[2];
   std::snprintf(text, sizeof text, "slice z = %.3f mm; longest arrow %.4g mm (%.4g m/s); grey: invalid", z_mm,
                 disp_max, f.dt_s > 0 ? disp_max * 1e-3 / f.dt_s : 0.0);
