@@ -78,7 +78,9 @@ TEST(ProcessCli, RecoversTheUniformDisplacement) {
   for (int a = 0; a < 3; ++a) {
     const double mean = sum[a] / double(valid);
     std::printf("axis %d: mean %.5f mm, truth %.5f mm, error %.5f mm\n", a, mean, kTruth[a], mean - kTruth[a]);
-    if (a < 2) EXPECT_NEAR(mean, kTruth[a], bound[a]) << "axis " << a;
+    if (a < 2) {
+      EXPECT_NEAR(mean, kTruth[a], bound[a]) << "axis " << a;
+    }
   }
 }
 
