@@ -16,6 +16,7 @@ void add_camera_commands(CLI::App& app);
 void add_simulate_commands(CLI::App& app);
 void add_piv_commands(CLI::App& app);
 void add_recon_commands(CLI::App& app);
+void add_process_commands(CLI::App& app);
 void add_calib_commands(CLI::App& app);
 void add_lightfield_commands(CLI::App& app);
 void add_run_commands(CLI::App& app, ControlOptions& options);

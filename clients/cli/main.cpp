@@ -21,6 +21,7 @@ int main(int argc, char** argv) {
   client::add_simulate_commands(app);
   client::add_piv_commands(app);
   client::add_recon_commands(app);
+  client::add_process_commands(app);
   client::add_calib_commands(app);
   client::add_lightfield_commands(app);
   client::add_run_commands(app, control);

@@ -64,8 +64,7 @@ std::vector<PassSettings> parse_passes(const std::string& text) {
   return passes;
 }
 
-CorrelationSettings load_correlation_settings(const std::filesystem::path& path) {
-  const YamlMap root(load_yaml_file(path), path.string());
+CorrelationSettings correlation_settings_from(const YamlMap& root) {
   root.reject_unknown({"passes", "median", "signal_threshold", "dt_s", "fft_planning", "prefilter"});
   CorrelationSettings s;
   if (root.has("passes")) {
@@ -73,7 +72,8 @@ CorrelationSettings load_correlation_settings(const std::filesystem::path& path)
     if (!list.IsSequence()) root.fail("passes", "must be a list of {window, overlap_percent}");
     s.passes.clear();
     for (std::size_t p = 0; p < list.size(); ++p) {
-      const YamlMap pass(list[p], path.string(), "passes[" + std::to_string(p) + "]");
+      const std::string key = "passes[" + std::to_string(p) + "]";
+      const YamlMap pass(list[p], root.source(), root.path().empty() ? key : root.path() + "." + key);
       pass.reject_unknown({"window", "overlap_percent"});
       PassSettings ps;
       const YAML::Node w = pass.node()["window"];
@@ -105,8 +105,12 @@ CorrelationSettings load_correlation_settings(const std::filesystem::path& path)
                        ? FftPlanning::measure
                        : FftPlanning::estimate;
   s.prefilter = root.boolean_or("prefilter", s.prefilter);
-  check(s, path.string());
+  check(s, root.source());
   return s;
+}
+
+CorrelationSettings load_correlation_settings(const std::filesystem::path& path) {
+  return correlation_settings_from(YamlMap(load_yaml_file(path), path.string()));
 }
 
 }  // namespace plenopiv::piv

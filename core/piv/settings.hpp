@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "core/base/yaml_access.hpp"
 #include "core/piv/fft_correlator.hpp"
 #include "core/piv/validation.hpp"
 
@@ -47,5 +48,7 @@ std::vector<PassSettings> parse_passes(const std::string& text);
 //   prefilter: true          # binomial smoothing of both volumes first
 // Every key is optional (defaults above); unknown keys are refused. Checked.
 CorrelationSettings load_correlation_settings(const std::filesystem::path& path);
+// The same from a mapping already parsed (a section of a larger file, e.g. process.yaml).
+CorrelationSettings correlation_settings_from(const YamlMap& map);
 
 }  // namespace plenopiv::piv

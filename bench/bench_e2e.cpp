@@ -1,0 +1,235 @@
+// End to end on the paper's Gaussian ring vortex (sec 6.4): simulate a pair, reconstruct both
+// frames, correlate; RMS error per component (voxels) against the exact displacement, beside the
+// same correlation on exact-particle volumes; time per stage, peak memory; a time/accuracy sweep
+// of the knobs on the reduced case with its Pareto front.
+//
+//   bench_e2e [reduced|full] [--no-sweep] [--rays N]
+//     reduced: camera-small.yaml (850 x 850 px), 48 x 48 x 48 voxels of 0.125 mm, a ring of 3 mm
+//              diameter with r_c = 8 voxels and v_rc = 3 voxels (the paper's ring scaled to fit).
+//     full:    camera-fahringer2015.yaml, 300 x 200 x 200 voxels of 0.125 mm, the paper's ring
+//              (8 mm diameter, r_c = 40 voxels, v_rc = 8 voxels).
+#include <sys/resource.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include "core/optics/camera_file.hpp"
+#include "core/process/process.hpp"
+#include "core/sim/exact_volume.hpp"
+#include "core/sim/flows.hpp"
+#include "core/sim/particles.hpp"
+#include "core/sim/render.hpp"
+
+using namespace plenopiv;
+
+namespace {
+
+double now_s() {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
+double peak_rss_gb() {
+  std::ifstream in("/proc/self/status");
+  std::string line;
+  while (std::getline(in, line))
+    if (line.rfind("VmHWM:", 0) == 0) return std::stod(line.substr(6)) / (1024.0 * 1024.0);
+  return -1;
+}
+
+struct Errors {
+  double rms[3] = {0, 0, 0};
+  double total = 0;
+  double valid_fraction = 0;
+};
+
+// RMS error (voxels) over valid nodes. Truth at a node x: the displacement of the particle whose
+// path is centred on x (the correlation measures the midpoint displacement), d = D(x - d/2) by
+// fixed-point iteration.
+Errors errors_against(const VectorField& f, const sim::Flow& flow, double voxel_mm) {
+  Errors e;
+  std::size_t n = 0;
+  double sum[3] = {0, 0, 0};
+  const auto& g = f.grid;
+  for (int k = 0; k < g.shape[2]; ++k)
+    for (int j = 0; j < g.shape[1]; ++j)
+      for (int i = 0; i < g.shape[0]; ++i) {
+        const std::size_t idx = (std::size_t(k) * g.shape[1] + j) * g.shape[0] + i;
+        if (!f.valid[idx]) continue;
+        const sim::Point3 x{g.origin_mm[0] + i * g.spacing_mm[0], g.origin_mm[1] + j * g.spacing_mm[1],
+                            g.origin_mm[2] + k * g.spacing_mm[2]};
+        sim::Point3 d = flow.displacement_mm(x);
+        for (int it = 0; it < 3; ++it)
+          d = flow.displacement_mm({x[0] - 0.5 * d[0], x[1] - 0.5 * d[1], x[2] - 0.5 * d[2]});
+        const double m[3] = {f.dx_mm[idx], f.dy_mm[idx], f.dz_mm[idx]};
+        for (int a = 0; a < 3; ++a) sum[a] += std::pow((m[a] - d[std::size_t(a)]) / voxel_mm, 2);
+        ++n;
+      }
+  for (int a = 0; a < 3; ++a) e.rms[a] = n ? std::sqrt(sum[a] / double(n)) : NAN;
+  e.total = n ? std::sqrt((sum[0] + sum[1] + sum[2]) / double(n)) : NAN;
+  e.valid_fraction = g.count() ? double(n) / double(g.count()) : 0;
+  return e;
+}
+
+struct Row {
+  std::string variant;
+  int iterations, passes, window;
+  double mu, seconds, rms_total;
+  Errors e;
+};
+
+void print_row(const char* scale, const Row& r, bool pareto) {
+  std::printf("bench=e2e case=%s variant=%s iterations=%d mu=%.2f final_window=%d passes=%d total_s=%.2f "
+              "rms_u=%.3f rms_v=%.3f rms_w=%.3f rms=%.3f valid=%.3f pareto=%s\n",
+              scale, r.variant.c_str(), r.iterations, r.mu, r.window, r.passes, r.seconds, r.e.rms[0], r.e.rms[1],
+              r.e.rms[2], r.e.total, r.e.valid_fraction, pareto ? "yes" : "no");
+}
+
+// Coarse to fine ending at `final` voxels, 75 % overlap after the first pass (50 %).
+std::vector<piv::PassSettings> passes_to(int final, int count) {
+  std::vector<piv::PassSettings> p;
+  for (int k = count - 1; k >= 0; --k) {
+    const int w = final + 8 * k;
+    p.push_back({{w, w, w}, k == count - 1 && count > 1 ? 50.0 : 75.0});
+  }
+  return p;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string scale = "reduced";
+  bool sweep = true;
+  std::size_t rays = 5000;
+  for (int i = 1; i < argc; ++i) {
+    if (!std::strcmp(argv[i], "--no-sweep")) sweep = false;
+    else if (!std::strcmp(argv[i], "--rays") && i + 1 < argc) rays = std::stoul(argv[++i]);
+    else scale = argv[i];
+  }
+  const bool full = scale == "full";
+  if (!full && scale != "reduced") {
+    std::fprintf(stderr, "usage: bench_e2e [reduced|full] [--no-sweep] [--rays N]\n");
+    return 2;
+  }
+  const std::string dir = std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/";
+  const auto camera = optics::load_camera_file(dir + (full ? "camera-fahringer2015.yaml" : "camera-small.yaml"));
+  const double voxel = 0.125;
+  const int nx = full ? 300 : 48, ny = full ? 200 : 48, nz = full ? 200 : 48;
+  const double hx = 0.5 * nx * voxel, hy = 0.5 * ny * voxel, hz = 0.5 * nz * voxel;
+
+  process::ProcessSettings settings;
+  settings.grid = process::grid_for_extent({-hx, -hy, -hz}, {hx, hy, hz}, {voxel, voxel, voxel}, "bench");
+  settings.correlation.dt_s = 1.0;
+
+  sim::RingVortexFlow::Parameters rv;
+  rv.voxel_mm = voxel;
+  if (!full) {
+    rv.ring_diameter_mm = 3.0;
+    rv.core_radius_voxels = 8;
+    rv.core_displacement_voxels = 3;
+  }
+  const sim::RingVortexFlow flow(rv);
+
+  // Seeding 0.5 ppm in the volume (a margin of 1 mm so particles move in and out as in a flow).
+  const sim::Box box{{-hx - 1, -hy - 1, -hz - 1}, {hx + 1, hy + 1, hz + 1}};
+  const std::size_t count = sim::particle_count_from_ppm(camera, box, 0.5);
+  const auto pa = sim::random_particles(box, count, 2015);
+  const auto pb = sim::displace(pa, flow);
+  const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera));
+  sim::RenderOptions ro;
+  ro.rays_per_particle = rays;
+  double t = now_s();
+  const auto render = [&](const std::vector<sim::Point3>& p, std::uint64_t seed) {
+    const auto r = sim::render(camera, lenses, p, ro, seed);
+    ImageF f(r.image.width, r.image.height);
+    for (std::size_t i = 0; i < f.size(); ++i) f.pixels[i] = r.image.pixels[i];
+    return f;
+  };
+  const ImageF a = render(pa, 1), b = render(pb, 2);
+  const double render_s = now_s() - t;
+
+  t = now_s();
+  const recon::WeightingOperator op(camera, lenses, settings.grid, recon::geometric_white_image(camera, lenses));
+  const double weights_s = now_s() - t;
+  std::printf("bench=e2e case=%s particles=%zu voxels=%zu render_s=%.2f weights_s=%.2f\n", scale.c_str(), count,
+              settings.grid.count(), render_s, weights_s);
+
+  // The paper's settings: reconstruction and correlation, stage by stage.
+  const auto base = process::process_pair(op, a, b, settings);
+  const Errors e = errors_against(base.correlation.field, flow, voxel);
+  std::printf("bench=e2e case=%s variant=reconstructed recon_a_s=%.2f recon_b_s=%.2f correlate_s=%.2f "
+              "skipped_a=%.3f skipped_b=%.3f rms_u=%.3f rms_v=%.3f rms_w=%.3f rms=%.3f valid=%.3f peak_rss_gb=%.2f\n",
+              scale.c_str(), base.times.reconstruct_a_s, base.times.reconstruct_b_s, base.times.correlate_s,
+              base.skipped_a.fraction_skipped(), base.skipped_b.fraction_skipped(), e.rms[0], e.rms[1], e.rms[2],
+              e.total, e.valid_fraction, peak_rss_gb());
+
+  // Baseline: exact-particle volumes through the same correlation (as the paper did).
+  t = now_s();
+  const Volume ea = sim::render_exact_volume(settings.grid, pa), eb = sim::render_exact_volume(settings.grid, pb);
+  const auto exact = piv::correlate_volumes(ea, eb, settings.correlation);
+  const Errors ex = errors_against(exact.field, flow, voxel);
+  std::printf("bench=e2e case=%s variant=exact_volumes correlate_s=%.2f rms_u=%.3f rms_v=%.3f rms_w=%.3f rms=%.3f "
+              "valid=%.3f\n",
+              scale.c_str(), now_s() - t, ex.rms[0], ex.rms[1], ex.rms[2], ex.total, ex.valid_fraction);
+  if (!sweep) return 0;
+
+  // The sweep: one knob at a time from the paper's settings. Reconstruction knobs re-run both
+  // reconstructions; correlation knobs reuse the default volumes (their time adds the default's
+  // reconstruction time, as a real run pays it).
+  std::vector<Row> rows;
+  const double recon_s = base.times.reconstruct_a_s + base.times.reconstruct_b_s;
+  rows.push_back({"paper", 5, 3, 16, 0.5, recon_s + base.times.correlate_s, e.total, e});
+  for (int it : {1, 2, 3, 10}) {
+    for (double mu : {0.5}) {
+      process::ProcessSettings s = settings;
+      s.mart.iterations = it;
+      s.mart.mu = mu;
+      const auto r = process::process_pair(op, a, b, s);
+      const Errors er = errors_against(r.correlation.field, flow, voxel);
+      rows.push_back({"iterations", it, 3, 16, mu,
+                      r.times.reconstruct_a_s + r.times.reconstruct_b_s + r.times.correlate_s, er.total, er});
+    }
+  }
+  for (double mu : {0.25, 1.0}) {
+    process::ProcessSettings s = settings;
+    s.mart.mu = mu;
+    const auto r = process::process_pair(op, a, b, s);
+    const Errors er = errors_against(r.correlation.field, flow, voxel);
+    rows.push_back({"mu", 5, 3, 16, mu, r.times.reconstruct_a_s + r.times.reconstruct_b_s + r.times.correlate_s,
+                    er.total, er});
+  }
+  for (int window : {12, 24}) {
+    for (int passes : {3}) {
+      piv::CorrelationSettings c = settings.correlation;
+      c.passes = passes_to(window, passes);
+      t = now_s();
+      const auto r = piv::correlate_volumes(base.volume_a, base.volume_b, c);
+      const double cs = now_s() - t;
+      const Errors er = errors_against(r.field, flow, voxel);
+      rows.push_back({"final_window", 5, passes, window, 0.5, recon_s + cs, er.total, er});
+    }
+  }
+  for (int passes : {1, 2, 4}) {
+    piv::CorrelationSettings c = settings.correlation;
+    c.passes = passes_to(16, passes);
+    t = now_s();
+    const auto r = piv::correlate_volumes(base.volume_a, base.volume_b, c);
+    const double cs = now_s() - t;
+    const Errors er = errors_against(r.field, flow, voxel);
+    rows.push_back({"passes", 5, passes, 16, 0.5, recon_s + cs, er.total, er});
+  }
+  for (const Row& r : rows) {
+    bool dominated = false;
+    for (const Row& o : rows)
+      if (&o != &r && o.seconds <= r.seconds && o.rms_total <= r.rms_total &&
+          (o.seconds < r.seconds || o.rms_total < r.rms_total))
+        dominated = true;
+    print_row(scale.c_str(), r, !dominated);
+  }
+  std::printf("bench=e2e case=%s peak_rss_gb=%.2f\n", scale.c_str(), peak_rss_gb());
+  return 0;
+}

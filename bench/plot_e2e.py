@@ -1,0 +1,33 @@
+#!/usr/bin/python3
+# Plots bench_e2e's sweep (time against RMS error, Pareto front marked) from its output on stdin:
+#   build/bin/bench_e2e reduced | /usr/bin/python3 bench/plot_e2e.py docs/e2e_pareto.png
+import sys
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+
+rows = []
+for line in sys.stdin:
+    fields = dict(f.split("=", 1) for f in line.split() if "=" in f)
+    if "pareto" in fields:
+        rows.append(fields)
+if not rows:
+    sys.exit("plot_e2e.py: no sweep rows (pareto=...) on stdin")
+fig, ax = plt.subplots(figsize=(7, 4.5))
+front = sorted((float(r["total_s"]), float(r["rms"])) for r in rows if r["pareto"] == "yes")
+ax.plot([t for t, _ in front], [e for _, e in front], "-", color="tab:red", label="Pareto front")
+for r in rows:
+    t, e = float(r["total_s"]), float(r["rms"])
+    ax.plot(t, e, "o", color="tab:red" if r["pareto"] == "yes" else "tab:gray")
+    label = {"paper": "paper", "iterations": f"it {r['iterations']}", "mu": f"mu {r['mu']}",
+             "final_window": f"{r['final_window']}³", "passes": f"{r['passes']} passes"}[r["variant"]]
+    ax.annotate(label, (t, e), textcoords="offset points", xytext=(4, 3), fontsize=8)
+ax.set_xlabel("time per pair, s (2 reconstructions + correlation; shared machine)")
+ax.set_ylabel("RMS error, voxels (|u, v, w|)")
+ax.set_title(f"bench_e2e {rows[0]['case']}: ring vortex, time against error")
+ax.grid(alpha=0.3)
+ax.legend()
+fig.tight_layout()
+fig.savefig(sys.argv[1] if len(sys.argv) > 1 else "e2e_pareto.png", dpi=110)

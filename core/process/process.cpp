@@ -1,0 +1,136 @@
+// One frame pair to a vector field: run config parsing and the reconstruct/correlate composition.
+#include "core/process/process.hpp"
+
+#include <chrono>
+#include <cmath>
+
+#include "core/base/errors.hpp"
+
+namespace plenopiv::process {
+namespace {
+
+double seconds_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+std::array<double, 2> range(const YamlMap& m, std::string_view key) {
+  const YAML::Node n = m.node()[std::string(key)];
+  if (!n) m.fail(key, "missing: give [min, max] in mm");
+  if (!n.IsSequence() || n.size() != 2) m.fail(key, "must be [min, max] in mm");
+  try {
+    return {n[0].as<double>(), n[1].as<double>()};
+  } catch (const YAML::Exception&) {
+    m.fail(key, "must be two numbers (mm)");
+  }
+}
+
+}  // namespace
+
+Grid3 grid_for_extent(const std::array<double, 3>& lo, const std::array<double, 3>& hi,
+                      const std::array<double, 3>& voxel_mm, const std::string& where) {
+  static const char* axis[3] = {"x", "y", "z"};
+  Grid3 g;
+  for (int a = 0; a < 3; ++a) {
+    if (!(voxel_mm[a] > 0) || !std::isfinite(voxel_mm[a]))
+      throw InputError(where + ": voxel size along " + axis[a] + " must be > 0 mm");
+    if (!(hi[a] > lo[a]) || !std::isfinite(lo[a]) || !std::isfinite(hi[a]))
+      throw InputError(where + ": " + axis[a] + " extent needs min < max (mm)");
+    const double n = std::round((hi[a] - lo[a]) / voxel_mm[a]);
+    if (n < 1 || n > 100000)
+      throw InputError(where + ": " + std::to_string(long(n)) + " voxels along " + axis[a] + " (1..100000)");
+    g.shape[a] = int(n);
+    g.spacing_mm[a] = voxel_mm[a];
+    g.origin_mm[a] = 0.5 * (lo[a] + hi[a]) - 0.5 * (n - 1) * voxel_mm[a];
+  }
+  return g;
+}
+
+ProcessSettings process_settings_from(const YamlMap& root) {
+  root.reject_unknown({"dt_s", "volume", "reconstruction", "correlation"});
+  ProcessSettings s;
+
+  const YamlMap vol = root.map("volume");
+  vol.reject_unknown({"x_mm", "y_mm", "z_mm", "voxel_mm", "voxel_z_mm"});
+  const auto x = range(vol, "x_mm"), y = range(vol, "y_mm"), z = range(vol, "z_mm");
+  const double voxel = vol.number("voxel_mm");
+  const double voxel_z = vol.number_or("voxel_z_mm", voxel);
+  s.grid = grid_for_extent({x[0], y[0], z[0]}, {x[1], y[1], z[1]}, {voxel, voxel, voxel_z}, root.where("volume"));
+
+  if (auto r = root.optional_map("reconstruction")) {
+    r->reject_unknown({"iterations", "mu", "start", "noise_threshold", "dark_weight_cutoff", "convergence"});
+    const long long it = r->integer_or("iterations", s.mart.iterations);
+    if (it < 1 || it > 1000) r->fail("iterations", "must be 1..1000, got " + std::to_string(it));
+    s.mart.iterations = int(it);
+    s.mart.mu = r->number_or("mu", s.mart.mu);
+    if (!(s.mart.mu > 0 && s.mart.mu <= 1)) r->fail("mu", "must be in (0, 1]");
+    s.mart.start = r->choice_or("start", {"mlos", "ones"}, "mlos") == "ones" ? recon::MartStart::ones
+                                                                          : recon::MartStart::mlos;
+    s.mart.noise_threshold = float(r->number_or("noise_threshold", s.mart.noise_threshold));
+    if (!(s.mart.noise_threshold >= 0)) r->fail("noise_threshold", "must be >= 0 counts");
+    s.mart.dark_weight_cutoff = r->number_or("dark_weight_cutoff", s.mart.dark_weight_cutoff);
+    if (!(s.mart.dark_weight_cutoff >= 0 && s.mart.dark_weight_cutoff < 1))
+      r->fail("dark_weight_cutoff", "must be in [0, 1)");
+    s.mart.convergence = r->number_or("convergence", s.mart.convergence);
+    if (!(s.mart.convergence >= 0)) r->fail("convergence", "must be >= 0");
+  }
+
+  if (auto c = root.optional_map("correlation")) {
+    if (c->has("dt_s")) c->fail("dt_s", "give dt_s once, at the top level");
+    s.correlation = piv::correlation_settings_from(*c);
+  }
+  s.correlation.dt_s = root.number("dt_s");
+  if (!(s.correlation.dt_s > 0) || !std::isfinite(s.correlation.dt_s)) root.fail("dt_s", "must be > 0 s");
+  piv::check(s.correlation, root.source());
+  for (const auto& p : s.correlation.passes)
+    for (int a = 0; a < 3; ++a)
+      if (p.window[std::size_t(a)] > s.grid.shape[std::size_t(a)])
+        root.fail("correlation", "a " + std::to_string(p.window[std::size_t(a)]) +
+                                     "-voxel window is larger than the volume (" +
+                                     std::to_string(s.grid.shape[std::size_t(a)]) + " voxels along that axis)");
+  return s;
+}
+
+ProcessSettings load_process_settings(const std::filesystem::path& path) {
+  return process_settings_from(YamlMap(load_yaml_file(path), path.string()));
+}
+
+PairResult process_pair(const recon::WeightingOperator& op, const ImageF& frame_a, const ImageF& frame_b,
+                        const ProcessSettings& settings, const PairProgress& progress) {
+  if (!(op.grid() == settings.grid))
+    throw InputError("process: the weighting operator was built for another volume grid than the run config's");
+  recon::validate_image(frame_a, op, "frame A");
+  recon::validate_image(frame_b, op, "frame B");
+  // Shares of the pair's work for the progress fraction: each reconstruction 40 %, correlation 20 %.
+  const auto report = [&](const char* stage, double f) {
+    if (progress) progress(stage, f);
+  };
+  const int iterations = settings.mart.iterations;
+  PairResult out;
+
+  auto t0 = std::chrono::steady_clock::now();
+  auto ra = recon::reconstruct(op, frame_a, settings.mart, [&](const recon::IterationReport& it) {
+    report("reconstruct A", 0.4 * it.iteration / iterations);
+  });
+  out.times.reconstruct_a_s = seconds_since(t0);
+  out.volume_a = std::move(ra.volume);
+  out.skipped_a = ra.skipped;
+
+  t0 = std::chrono::steady_clock::now();
+  auto rb = recon::reconstruct(op, frame_b, settings.mart, [&](const recon::IterationReport& it) {
+    report("reconstruct B", 0.4 + 0.4 * it.iteration / iterations);
+  });
+  out.times.reconstruct_b_s = seconds_since(t0);
+  out.volume_b = std::move(rb.volume);
+  out.skipped_b = rb.skipped;
+
+  t0 = std::chrono::steady_clock::now();
+  out.correlation = piv::correlate_volumes(out.volume_a, out.volume_b, settings.correlation,
+                                           [&](const piv::PassReport& p) {
+                                             report("correlate", 0.8 + 0.2 * p.pass / p.passes);
+                                           });
+  out.times.correlate_s = seconds_since(t0);
+  report("done", 1.0);
+  return out;
+}
+
+}  // namespace plenopiv::process

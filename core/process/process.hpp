@@ -1,0 +1,63 @@
+// One frame pair to a vector field: the run config (volume, MART, correlation, dt) and the
+// composition reconstruct A, reconstruct B, correlate, shared by `plenopiv process` and live mode.
+#pragma once
+
+#include <array>
+#include <functional>
+#include <string>
+
+#include "core/base/grid.hpp"
+#include "core/base/image.hpp"
+#include "core/base/yaml_access.hpp"
+#include "core/piv/multipass.hpp"
+#include "core/piv/settings.hpp"
+#include "core/recon/mart.hpp"
+#include "core/recon/weights.hpp"
+
+namespace plenopiv::process {
+
+// Everything one pair needs besides the camera and calibration. Defaults: the paper's settings
+// (MART mu 0.5, 5 iterations; passes 32³@50 %, 24³@75 %, 16³@75 %).
+struct ProcessSettings {
+  Grid3 grid;                        // reconstruction volume, mm
+  recon::MartSettings mart;
+  piv::CorrelationSettings correlation;  // dt_s lives here
+};
+
+// The box of voxels centred on [lo, hi] per axis with `voxel_mm` spacing (x, y, z); InputError
+// naming `where` when a size is not positive, an axis has min >= max, or the count is absurd.
+Grid3 grid_for_extent(const std::array<double, 3>& lo, const std::array<double, 3>& hi,
+                      const std::array<double, 3>& voxel_mm, const std::string& where);
+
+// Reads a run config mapping (systemd/config/process.yaml):
+//   dt_s: 0.0001                                   (required)
+//   volume: {x_mm: [a, b], y_mm: [..], z_mm: [..], voxel_mm: 0.125, voxel_z_mm: 0.125}
+//   reconstruction: {iterations, mu, start: mlos|ones, noise_threshold, dark_weight_cutoff, convergence}
+//   correlation: {passes, median, signal_threshold}    (as piv::load_correlation_settings)
+// Unknown keys are refused; every value is checked; InputError names the file and key.
+ProcessSettings process_settings_from(const YamlMap& root);
+ProcessSettings load_process_settings(const std::filesystem::path& path);
+
+// Where the time went and what was skipped.
+struct StageTimes {
+  double reconstruct_a_s = 0, reconstruct_b_s = 0, correlate_s = 0;
+};
+
+struct PairResult {
+  Volume volume_a, volume_b;
+  recon::SkipReport skipped_a, skipped_b;
+  piv::CorrelationResult correlation;
+  StageTimes times;
+};
+
+// Progress: stage name ("reconstruct A", "reconstruct B", "correlate") and the fraction of the
+// whole pair done, in [0, 1].
+using PairProgress = std::function<void(const std::string& stage, double fraction)>;
+
+// Reconstructs both frames with `op` (whose grid must be settings.grid: InputError otherwise),
+// then correlates them. Images are validated (sensor-sized, finite, non-negative) and named
+// "frame A" / "frame B" in errors. Bit-identical at any thread count.
+PairResult process_pair(const recon::WeightingOperator& op, const ImageF& frame_a, const ImageF& frame_b,
+                        const ProcessSettings& settings, const PairProgress& progress = {});
+
+}  // namespace plenopiv::process
