@@ -1,5 +1,6 @@
 // plenopivd.yaml: defaults, relative paths, and refused endpoints and keys.
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <filesystem>
 #include <fstream>
@@ -11,7 +12,9 @@ namespace plenopiv::daemon {
 namespace {
 
 std::filesystem::path write_temp(const std::string& name, const std::string& text) {
-  const auto dir = std::filesystem::temp_directory_path() / "plenopiv-test-config";
+  // One directory per process: ctest -j runs the tests of this file in parallel processes.
+  const auto dir = std::filesystem::temp_directory_path() /
+                   ("plenopiv-test-config-" + std::to_string(::getpid()));
   std::filesystem::create_directories(dir);
   const auto path = dir / name;
   std::ofstream(path) << text;
