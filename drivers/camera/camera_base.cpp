@@ -80,27 +80,28 @@ void CameraBase::require(std::initializer_list<CameraState> allowed, const char*
 
 void CameraBase::configure(const CameraSettings& settings) {
   require({CameraState::Idle, CameraState::Armed}, "configure");
-  if (settings.exposure_s <= 0) {
-    throw InputError("camera " + info_.uri + ": exposure_s must be > 0, got " +
+  const CameraInfo info = this->info();
+  if (!(settings.exposure_s > 0)) {
+    throw InputError("camera " + info.uri + ": exposure_s must be > 0, got " +
                      std::to_string(settings.exposure_s));
   }
   const Roi& r = settings.roi;
   if (r.x < 0 || r.y < 0 || r.width < 0 || r.height < 0 ||
-      (info_.sensor_width_px > 0 && r.x + r.width > info_.sensor_width_px) ||
-      (info_.sensor_height_px > 0 && r.y + r.height > info_.sensor_height_px)) {
-    throw InputError("camera " + info_.uri + ": roi " + std::to_string(r.x) + "," +
+      (info.sensor_width_px > 0 && r.x + r.width > info.sensor_width_px) ||
+      (info.sensor_height_px > 0 && r.y + r.height > info.sensor_height_px)) {
+    throw InputError("camera " + info.uri + ": roi " + std::to_string(r.x) + "," +
                      std::to_string(r.y) + " " + std::to_string(r.width) + "x" +
                      std::to_string(r.height) + " does not fit the " +
-                     std::to_string(info_.sensor_width_px) + "x" +
-                     std::to_string(info_.sensor_height_px) + " sensor");
+                     std::to_string(info.sensor_width_px) + "x" +
+                     std::to_string(info.sensor_height_px) + " sensor");
   }
   do_configure(settings);
 }
 
 void CameraBase::arm(const DoubleExposureSettings& settings) {
   require({CameraState::Idle, CameraState::Armed}, "arm");
-  if (settings.max_pair_gap_s < 0) {
-    throw InputError("camera " + info_.uri + ": max_pair_gap_s must be >= 0");
+  if (!(settings.max_pair_gap_s >= 0)) {
+    throw InputError("camera " + info().uri + ": max_pair_gap_s must be >= 0");
   }
   do_arm(settings);
   std::lock_guard lock(mutex_);

@@ -1,6 +1,7 @@
 // Pairs frames A and B of each trigger by trigger index, frame id and timestamp gap; pure logic.
 #include "drivers/camera/frame_pairer.hpp"
 
+#include <algorithm>
 #include <utility>
 
 namespace plenopiv::drivers {
@@ -14,6 +15,12 @@ std::uint64_t FramePairer::id_distance(std::uint64_t from, std::uint64_t to) con
   // GigE Vision skips the reserved id 0 when wrapping: 65535 → 1 is the next frame.
   if (to < from && d > 0) d -= 1;
   return d;
+}
+
+std::uint64_t FramePairer::next_id(std::uint64_t id) const {
+  const std::uint64_t m = options_.frame_id_modulus;
+  if (m == 0) return id + 1;
+  return id + 1 >= m ? 1 : id + 1;
 }
 
 bool FramePairer::within_gap(const Frame& a, const Frame& b) const {
@@ -32,11 +39,13 @@ void FramePairer::discard_pending() {
 }
 
 std::optional<FramePair> FramePairer::push(Frame frame, std::optional<std::uint64_t> trigger_index) {
-  ++counts_.frames_received;
-  if (!frame.complete) ++counts_.frames_incomplete;
-
+  auto count_arrival = [&] {
+    ++counts_.frames_received;
+    if (!frame.complete) ++counts_.frames_incomplete;
+  };
   if (options_.frame_id_modulus != 0 && frame.frame_id % options_.frame_id_modulus == 0) {
     // Unknown id: it cannot be placed or paired. The gap it leaves is not counted lost.
+    count_arrival();
     ++counts_.frames_discarded;
     ++unplaced_;
     return std::nullopt;
@@ -49,16 +58,29 @@ std::optional<FramePair> FramePairer::push(Frame frame, std::optional<std::uint6
                                         ? frame.frame_id < *last_id_
                                         : id_distance(frame.frame_id, *last_id_) < distance);
     if (repeated || late) {
-      // A repeated id, or a frame that arrives after a later one (finished late, e.g. after a
-      // packet resend): it was counted lost when the later one came; now it is here but cannot
-      // be paired.
-      if (late && counts_.frames_lost > 0) --counts_.frames_lost;
+      // A frame finished after a later one (e.g. it waited for resent packets) was counted lost
+      // when the later one came: now it has arrived, but it cannot be paired. Anything else with
+      // an old id is a duplicate or a stale buffer, not a frame: it is ignored.
+      auto it = std::find(missing_.begin(), missing_.end(), frame.frame_id);
+      if (it == missing_.end()) return std::nullopt;
+      missing_.erase(it);
+      --counts_.frames_lost;
+      count_arrival();
       ++counts_.frames_discarded;
       return std::nullopt;
     }
-    counts_.frames_lost += distance - 1 > unplaced_ ? distance - 1 - unplaced_ : 0;
+    const std::uint64_t gap = distance - 1 > unplaced_ ? distance - 1 - unplaced_ : 0;
+    counts_.frames_lost += gap;
+    // Remember which ids went missing, in case they still come (bounded: a long outage is lost).
+    std::uint64_t id = *last_id_;
+    for (std::uint64_t k = 0; k < std::min<std::uint64_t>(gap, kRememberMissing); ++k) {
+      id = next_id(id);
+      missing_.push_back(id);
+    }
+    while (missing_.size() > kRememberMissing) missing_.pop_front();
     sequence_ += distance;
   }
+  count_arrival();
   last_id_ = frame.frame_id;
   unplaced_ = 0;
 
@@ -100,6 +122,7 @@ void FramePairer::restart_sequence() {
   last_id_.reset();
   sequence_ = 0;
   unplaced_ = 0;
+  missing_.clear();
 }
 
 }  // namespace plenopiv::drivers

@@ -2,6 +2,7 @@
 #pragma once
 
 #include <cstdint>
+#include <deque>
 #include <optional>
 
 #include "drivers/camera/camera.hpp"
@@ -33,7 +34,8 @@ struct PairerCounts {
 // Two frames are paired only if their ids are consecutive, they are at most max_gap apart, and,
 // when the backend knows trigger indices, they carry the same one. Anything else (a frame whose
 // partner is lost, late or incomplete) is discarded and counted, never paired with a wrong frame.
-// Invariant: frames_received == 2 * pairs_delivered + frames_discarded + waiting().
+// Invariant: frames_received == 2 * pairs_delivered + frames_discarded + waiting(). A buffer with
+// an id already seen (a duplicate or a stale buffer) is not a frame and is not counted.
 class FramePairer {
  public:
   explicit FramePairer(PairerOptions options = {});
@@ -61,6 +63,7 @@ class FramePairer {
   };
   // Ids between two consecutive frames: 1 = next, 0 = same id, k = k - 1 frames lost.
   std::uint64_t id_distance(std::uint64_t from, std::uint64_t to) const;
+  std::uint64_t next_id(std::uint64_t id) const;
   bool within_gap(const Frame& a, const Frame& b) const;
   void discard_pending();
 
@@ -70,6 +73,8 @@ class FramePairer {
   std::optional<std::uint64_t> last_id_;
   std::uint64_t sequence_ = 0;  // frames since the first, lost ones included
   std::uint64_t unplaced_ = 0;  // frames with unknown id since the last placed one
+  static constexpr std::size_t kRememberMissing = 64;
+  std::deque<std::uint64_t> missing_;  // ids counted lost that may still arrive late
 };
 
 }  // namespace plenopiv::drivers

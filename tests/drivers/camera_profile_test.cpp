@@ -1,5 +1,6 @@
 // Camera profiles: the shipped ones load, and a camera lacking a feature is named in the error.
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <fstream>
 #include <map>
@@ -70,7 +71,8 @@ TEST(CameraProfile, MissingFeaturesAndValuesAreNamed) {
 }
 
 TEST(CameraProfile, BadFilesNameTheKey) {
-  const auto file = std::filesystem::temp_directory_path() / "plenopiv-bad-profile.yaml";
+  const auto file = std::filesystem::temp_directory_path() /
+                    ("plenopiv-bad-profile-" + std::to_string(::getpid()) + ".yaml");
   std::ofstream(file) << "name: bad\nmode: triple\nfeatures: []\n";
   try {
     load_camera_profile(file);

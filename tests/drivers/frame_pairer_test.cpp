@@ -147,6 +147,12 @@ TEST(FramePairer, AFrameArrivingAfterALaterOneIsDiscardedNotCountedLost) {
     p.push(frame(5, 2, 0));
     EXPECT_TRUE(p.push(frame(6, 2, 1)));
     EXPECT_EQ(p.counts().frames_received, 6u);
+    // The same id again, or an old one never counted lost: a duplicate or stale buffer, ignored.
+    EXPECT_FALSE(p.push(frame(3, 1, 0)));
+    EXPECT_FALSE(p.push(frame(6, 2, 1)));
+    EXPECT_FALSE(p.push(frame(1, 0, 0)));
+    EXPECT_EQ(p.counts().frames_received, 6u);
+    EXPECT_EQ(p.counts().frames_lost, 0u);
     expect_invariant(p);
   }
 }
