@@ -9,32 +9,12 @@
 
 #include "core/base/errors.hpp"
 #include "core/io/atomic_file.hpp"
+#include "core/io/hdf5_handle.hpp"
 
 namespace plenopiv::calib {
 namespace {
 
-// HDF5 prints its error stack to stderr by default; we report through InputError instead.
-struct QuietHdf5 {
-  QuietHdf5() { H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr); }
-};
-const QuietHdf5 g_quiet;
-
-// Owns one HDF5 identifier and closes it with the matching call.
-class Handle {
- public:
-  Handle(hid_t id, herr_t (*close)(hid_t)) : id_(id), close_(close) {}
-  ~Handle() {
-    if (id_ >= 0) close_(id_);
-  }
-  Handle(const Handle&) = delete;
-  Handle& operator=(const Handle&) = delete;
-  hid_t get() const { return id_; }
-  bool ok() const { return id_ >= 0; }
-
- private:
-  hid_t id_;
-  herr_t (*close_)(hid_t);
-};
+using Handle = io::Hdf5Handle;
 
 struct File {
   std::filesystem::path path;

@@ -7,33 +7,12 @@
 
 #include "core/base/errors.hpp"
 #include "core/io/atomic_file.hpp"
+#include "core/io/hdf5_handle.hpp"
 
 namespace plenopiv::io {
 namespace {
 
-// HDF5 prints its error stack to stderr by default; we report through InputError instead.
-struct QuietHdf5 {
-  QuietHdf5() { H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr); }
-};
-const QuietHdf5 g_quiet;
-
-// Owns one HDF5 identifier and closes it with the matching call.
-class Handle {
- public:
-  Handle(hid_t id, herr_t (*close)(hid_t)) : id_(id), close_(close) {}
-  ~Handle() {
-    if (id_ >= 0) close_(id_);
-  }
-  Handle(Handle&& other) noexcept : id_(other.id_), close_(other.close_) { other.id_ = -1; }
-  Handle(const Handle&) = delete;
-  Handle& operator=(const Handle&) = delete;
-  hid_t get() const { return id_; }
-  bool ok() const { return id_ >= 0; }
-
- private:
-  hid_t id_;
-  herr_t (*close_)(hid_t);
-};
+using Handle = Hdf5Handle;
 
 void check(herr_t status, const std::filesystem::path& path, const std::string& what) {
   if (status < 0) throw InputError(path.string() + ": HDF5: cannot " + what);
