@@ -20,6 +20,15 @@ double alpha_for_depth(const optics::CameraModel& camera, double z_mm) {
   return f * s_o / (s_o - f) / camera.image_distance_mm();
 }
 
+double focus_measure(const ImageF& image) {
+  double s1 = 0, s2 = 0;
+  for (float v : image.pixels) {
+    s1 += v;
+    s2 += double(v) * v;
+  }
+  return s1 > 0 ? s2 / (s1 * s1) : 0;
+}
+
 ImageF refocus(const LightField& field, double alpha) {
   if (!(alpha > 0) || !std::isfinite(alpha)) throw InputError("refocus: alpha must be positive, got " + std::to_string(alpha));
   const int nx = field.nx(), ny = field.ny();

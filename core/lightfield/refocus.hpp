@@ -24,6 +24,9 @@ double alpha_for_depth(const optics::CameraModel& camera, double z_mm);
 ImageF refocus(const LightField& field, double alpha);
 // One image per alpha, in order.
 std::vector<ImageF> focal_stack(const LightField& field, const std::vector<double>& alphas);
+// Focus measure of a refocused image: sum I^2 / (sum I)^2, largest when the light is most
+// concentrated (the particle in focus); 0 for a black image.
+double focus_measure(const ImageF& image);
 
 // Sec 3.4: the view from aperture point (u, v) mm: per lens, L interpolated bilinearly between
 // the four nearest aperture samples (invalid samples left out). InputError when (u, v) lies

@@ -8,19 +8,13 @@
 
 #include "core/calib/calibration.hpp"
 #include "core/optics/camera_file.hpp"
+#include "tests/support/cameras.hpp"
 #include "core/sim/render.hpp"
 
 namespace plenopiv::calib {
 namespace {
 
-optics::CameraModel small_camera(const std::string& layout) {
-  return optics::parse_camera_yaml(R"(
-sensor:    {width_px: 850, height_px: 850, pixel_pitch_mm: 0.0074}
-microlens: {pitch_mm: 0.125, focal_length_mm: 0.5, count_x: )" + std::string(layout == "hex" ? "49" : "50") +
-                                       ", count_y: 50, layout: " + layout + R"(}
-main_lens: {focal_length_mm: 50, f_number: 2, magnification: -1}
-)", "small");
-}
+using testing_support::small_camera;
 
 // The issue's scene: array rotated 0.5 deg, offset, 1 um per-lens jitter; sensor noise on.
 optics::MicrolensArray true_array(const optics::CameraModel& cam) {

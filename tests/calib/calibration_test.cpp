@@ -14,6 +14,7 @@
 #include "core/calib/calibration.hpp"
 #include "core/calib/calibration_file.hpp"
 #include "core/optics/camera_file.hpp"
+#include "tests/support/cameras.hpp"
 #include "tests/calib/spot_render.hpp"
 #include "tests/support/temp_dir.hpp"
 
@@ -24,14 +25,7 @@ using testing_support::render_calibration;
 using testing_support::RenderedSpots;
 using testing_support::SpotScene;
 
-optics::CameraModel small_camera(const char* layout = "rect") {
-  return optics::parse_camera_yaml(std::string(R"(
-sensor:    {width_px: 850, height_px: 850, pixel_pitch_mm: 0.0074}
-microlens: {pitch_mm: 0.125, focal_length_mm: 0.5, count_x: )") + (std::string(layout) == "hex" ? "49" : "50") +
-                                   ", count_y: 50, layout: " + layout + R"(}
-main_lens: {focal_length_mm: 50, f_number: 2, magnification: -1}
-)", "small");
-}
+using testing_support::small_camera;
 
 // The issue's figure scene: rotated 0.5 deg, offset, +-1 um per-lens jitter, noise on.
 SpotScene figure_scene() {

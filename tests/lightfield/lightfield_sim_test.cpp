@@ -65,15 +65,6 @@ LightField particle_field(const sim::Point3& p) {
   return rectify(rig().camera, rig().lenses, to_float(image.image), &rig().white);
 }
 
-double sharpness(const ImageF& image) {
-  double s1 = 0, s2 = 0;
-  for (float v : image.pixels) {
-    s1 += v;
-    s2 += double(v) * v;
-  }
-  return s1 > 0 ? s2 / (s1 * s1) : 0;
-}
-
 class SimRefocus : public ::testing::TestWithParam<double> {};
 
 TEST_P(SimRefocus, SharpestImageAtTheParticlesTrueDepth) {
@@ -83,7 +74,7 @@ TEST_P(SimRefocus, SharpestImageAtTheParticlesTrueDepth) {
   // -3, 0, 4.5 for 4.25, 9.25 for 9); 0.5 mm steps keep the test quick.
   double best_z = 0, best = -1;
   for (double z = -10; z <= 10.001; z += 0.5) {
-    const double m = sharpness(refocus(field, alpha_for_depth(rig().camera, z)));
+    const double m = focus_measure(refocus(field, alpha_for_depth(rig().camera, z)));
     if (m > best) {
       best = m;
       best_z = z;

@@ -10,6 +10,7 @@
 #include "core/lightfield/light_field.hpp"
 #include "core/lightfield/refocus.hpp"
 #include "core/optics/camera_file.hpp"
+#include "tests/support/cameras.hpp"
 #include "tests/lightfield/particle_render.hpp"
 
 namespace plenopiv::lightfield {
@@ -18,14 +19,7 @@ namespace {
 using testing_support::PointParticle;
 using testing_support::render_particles;
 
-optics::CameraModel small_camera(const char* layout = "rect") {
-  return optics::parse_camera_yaml(std::string(R"(
-sensor:    {width_px: 850, height_px: 850, pixel_pitch_mm: 0.0074}
-microlens: {pitch_mm: 0.125, focal_length_mm: 0.5, count_x: )") + (std::string(layout) == "hex" ? "49" : "50") +
-                                   ", count_y: 50, layout: " + layout + R"(}
-main_lens: {focal_length_mm: 50, f_number: 2, magnification: -1}
-)", "small");
-}
+using testing_support::small_camera;
 
 // A slightly rotated, offset array, as calibration finds it.
 optics::MicrolensArray measured_array(const optics::CameraModel& cam) {
@@ -76,16 +70,6 @@ TEST(Rectify, SubApertureSamplesAreTheRawPixelsTheyMapTo) {
   EXPECT_THROW(rectify(cam, lenses, ImageF(849, 850), nullptr), InputError);
 }
 
-// The focus measure: how concentrated the image is (sum I^2 / (sum I)^2), largest when sharp.
-double sharpness(const ImageF& image) {
-  double s1 = 0, s2 = 0;
-  for (float v : image.pixels) {
-    s1 += v;
-    s2 += double(v) * v;
-  }
-  return s1 > 0 ? s2 / (s1 * s1) : 0;
-}
-
 class RefocusDepth : public ::testing::TestWithParam<double> {};
 
 TEST_P(RefocusDepth, SharpestImageAtTheParticleDepth) {
@@ -99,7 +83,7 @@ TEST_P(RefocusDepth, SharpestImageAtTheParticleDepth) {
   // 9.25 for 9, the others exact); the test sweeps in 0.5 mm steps to stay fast.
   double best_z = 0, best = -1;
   for (double z = -10; z <= 10.001; z += 0.5) {
-    const double m = sharpness(refocus(field, alpha_for_depth(cam, z)));
+    const double m = focus_measure(refocus(field, alpha_for_depth(cam, z)));
     if (m > best) {
       best = m;
       best_z = z;
@@ -118,7 +102,7 @@ TEST(Refocus, HexArraySharpestAtTheParticleDepth) {
   const LightField field = rectify(cam, lenses, render_particles(cam, lenses, {p}, 300), nullptr);
   double best_z = 0, best = -1;
   for (double z = -10; z <= 10.001; z += 0.5) {
-    const double m = sharpness(refocus(field, alpha_for_depth(cam, z)));
+    const double m = focus_measure(refocus(field, alpha_for_depth(cam, z)));
     if (m > best) {
       best = m;
       best_z = z;
@@ -198,6 +182,20 @@ TEST(Refocus, SameImageAtOneAndTwoThreads) {
   }
   EXPECT_EQ(one.pixels, two.pixels);
   EXPECT_THROW(alpha_for_depth(cam, -60), InputError);
+}
+
+}  // namespace
+}  // namespace plenopiv::lightfield
+
+namespace plenopiv::lightfield {
+namespace {
+
+TEST(FocusMeasure, OneLitPixelIsOneAndUniformLightIsOneOverN) {
+  ImageF image(4, 5, 0.f);
+  EXPECT_EQ(focus_measure(image), 0.0);  // black: no light to be concentrated
+  image.at(2, 3) = 7.f;
+  EXPECT_DOUBLE_EQ(focus_measure(image), 1.0);
+  EXPECT_DOUBLE_EQ(focus_measure(ImageF(4, 5, 3.f)), 1.0 / 20);
 }
 
 }  // namespace
