@@ -20,12 +20,10 @@ using namespace plenopiv;
 
 namespace {
 
+// The paper's prototype camera (tables 1-2), as shipped.
 optics::CameraModel paper_camera() {
-  return optics::parse_camera_yaml(
-      "sensor:    {width_px: 4904, height_px: 3280, pixel_pitch_mm: 0.0074}\n"
-      "microlens: {pitch_mm: 0.125, focal_length_mm: 0.5, count_x: 289, count_y: 193, layout: rect}\n"
-      "main_lens: {focal_length_mm: 50, f_number: 2, magnification: -1}\n",
-      "paper");
+  return optics::load_camera_file(std::string(PLENOPIV_SOURCE_DIR) +
+                                  "/systemd/config/camera-fahringer2015.yaml");
 }
 
 double seconds_since(std::chrono::steady_clock::time_point t0) {

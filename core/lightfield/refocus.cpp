@@ -29,6 +29,25 @@ double focus_measure(const ImageF& image) {
   return s1 > 0 ? s2 / (s1 * s1) : 0;
 }
 
+double sharpest_depth_mm(const LightField& field, const optics::CameraModel& camera, double z_min_mm,
+                         double z_max_mm, double step_mm) {
+  if (!(step_mm > 0) || !(z_max_mm >= z_min_mm)) {
+    throw InputError("depth from focus: need step > 0 and z_max >= z_min, got " +
+                     std::to_string(z_min_mm) + ".." + std::to_string(z_max_mm) + " step " +
+                     std::to_string(step_mm));
+  }
+  double best_z = z_min_mm, best = -1;
+  for (int k = 0; z_min_mm + k * step_mm <= z_max_mm + 1e-9 * step_mm; ++k) {
+    const double z = z_min_mm + k * step_mm;
+    const double m = focus_measure(refocus(field, alpha_for_depth(camera, z)));
+    if (m > best) {
+      best = m;
+      best_z = z;
+    }
+  }
+  return best_z;
+}
+
 ImageF refocus(const LightField& field, double alpha) {
   if (!(alpha > 0) || !std::isfinite(alpha)) throw InputError("refocus: alpha must be positive, got " + std::to_string(alpha));
   const int nx = field.nx(), ny = field.ny();

@@ -72,14 +72,7 @@ TEST_P(SimRefocus, SharpestImageAtTheParticlesTrueDepth) {
   const LightField field = particle_field({0.31, -0.23, z0});
   // In 0.25 mm steps the maximum landed within 0.5 mm of every depth here (-8 for -8.5, -2.75 for
   // -3, 0, 4.5 for 4.25, 9.25 for 9); 0.5 mm steps keep the test quick.
-  double best_z = 0, best = -1;
-  for (double z = -10; z <= 10.001; z += 0.5) {
-    const double m = focus_measure(refocus(field, alpha_for_depth(rig().camera, z)));
-    if (m > best) {
-      best = m;
-      best_z = z;
-    }
-  }
+  const double best_z = sharpest_depth_mm(field, rig().camera, -10, 10, 0.5);
   std::cout << "simulated particle at z = " << z0 << " mm: sharpest refocus at " << best_z << " mm\n";
   EXPECT_NEAR(best_z, z0, 1.0);
 }

@@ -81,14 +81,7 @@ TEST_P(RefocusDepth, SharpestImageAtTheParticleDepth) {
   const LightField field = rectify(cam, lenses, raw, nullptr);
   // Swept in 0.25 mm steps the maximum landed within 0.25 mm of every depth below (-7.75 for -8,
   // 9.25 for 9, the others exact); the test sweeps in 0.5 mm steps to stay fast.
-  double best_z = 0, best = -1;
-  for (double z = -10; z <= 10.001; z += 0.5) {
-    const double m = focus_measure(refocus(field, alpha_for_depth(cam, z)));
-    if (m > best) {
-      best = m;
-      best_z = z;
-    }
-  }
+  const double best_z = sharpest_depth_mm(field, cam, -10, 10, 0.5);
   std::cout << "particle at z = " << z0 << " mm: sharpest refocus at " << best_z << " mm\n";
   EXPECT_NEAR(best_z, z0, 1.0);
 }
@@ -100,14 +93,7 @@ TEST(Refocus, HexArraySharpestAtTheParticleDepth) {
   const auto lenses = measured_array(cam);
   const PointParticle p{-0.2, 0.3, 5.0, 1000};
   const LightField field = rectify(cam, lenses, render_particles(cam, lenses, {p}, 300), nullptr);
-  double best_z = 0, best = -1;
-  for (double z = -10; z <= 10.001; z += 0.5) {
-    const double m = focus_measure(refocus(field, alpha_for_depth(cam, z)));
-    if (m > best) {
-      best = m;
-      best_z = z;
-    }
-  }
+  const double best_z = sharpest_depth_mm(field, cam, -10, 10, 0.5);
   std::cout << "hex: particle at z = 5 mm: sharpest refocus at " << best_z << " mm\n";
   EXPECT_NEAR(best_z, 5.0, 1.0);
 }
@@ -196,6 +182,12 @@ TEST(FocusMeasure, OneLitPixelIsOneAndUniformLightIsOneOverN) {
   image.at(2, 3) = 7.f;
   EXPECT_DOUBLE_EQ(focus_measure(image), 1.0);
   EXPECT_DOUBLE_EQ(focus_measure(ImageF(4, 5, 3.f)), 1.0 / 20);
+}
+
+TEST(SharpestDepth, RefusesAnEmptyOrBackwardSweep) {
+  const LightField none{};
+  EXPECT_THROW(sharpest_depth_mm(none, small_camera(), -1, 1, 0), InputError);
+  EXPECT_THROW(sharpest_depth_mm(none, small_camera(), 1, -1, 0.5), InputError);
 }
 
 }  // namespace
