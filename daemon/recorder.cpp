@@ -67,6 +67,7 @@ Recorder::Recorder(const Setup& setup) : dir_(setup.data_dir / ("run-" + setup.r
   manifest_.set_camera_uri(setup.camera_uri);
   manifest_.set_trigger_uri(setup.trigger_uri);
   manifest_.set_camera_model(setup.camera_model);
+  manifest_.set_camera_triggering(setup.camera_triggering);
   if (setup.config) {
     write_text(dir_ / "run.yaml", setup.config->text);
     manifest_.set_config_file("run.yaml");
@@ -102,7 +103,12 @@ void Recorder::record_pair(const drivers::FramePair& pair) {
   p->set_host_timestamp_a_ns(pair.a.host_timestamp_ns);
   p->set_host_timestamp_b_ns(pair.b.host_timestamp_ns);
   p->set_frame_gap_s(frame_gap_s(pair));
-  if (pair.measured) p->set_measured_dt_s(pair.measured->dt_s());
+  p->set_nominal_dt_s(nominal_dt_s_);
+  if (pair.measured) {
+    p->set_measured_dt_s(pair.measured->dt_s());
+    p->set_pulse1_ns(pair.measured->pulse1_ns);
+    p->set_pulse2_ns(pair.measured->pulse2_ns);
+  }
   write_manifest_locked();
 }
 

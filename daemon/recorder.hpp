@@ -33,6 +33,7 @@ class Recorder {
     std::string camera_uri, trigger_uri;
     std::filesystem::path camera_file;  // empty: none
     std::string camera_model;
+    std::string camera_triggering;  // drivers::CameraWiring::description
   };
   // Creates the folder (InputError if it exists or cannot be made) and the first manifest.
   explicit Recorder(const Setup& setup);

@@ -1,10 +1,13 @@
-// One run: camera → recorder (every pair) → live pipeline → publisher, on its own threads.
+// One run: trigger → camera → recorder (every pair) → live pipeline → publisher, on its own threads.
 #include "daemon/run.hpp"
 
 #include <spdlog/spdlog.h>
 
 #include "core/base/errors.hpp"
 #include "drivers/camera/camera_registry.hpp"
+#include "drivers/common/driver_errors.hpp"
+#include "drivers/trigger/camera_wiring.hpp"
+#include "drivers/trigger/trigger_registry.hpp"
 
 namespace plenopiv::daemon {
 
@@ -19,16 +22,29 @@ Run::Run(RunConfig config, std::string run_id, RunEnvironment env)
       config_.trigger_uri.empty() ? env_.default_trigger_uri : config_.trigger_uri;
   camera_ = drivers::open_camera(camera_uri);
   camera_->configure(drivers::CameraSettings{});
-  // Software triggers paced at rate_hz until the trigger drivers fire the laser and camera lines.
-  camera_->arm(drivers::DoubleExposureSettings{drivers::TriggerSource::Software, 0.0});
+  trigger_ = drivers::open_trigger(trigger_uri);
+  const drivers::TriggerInfo trigger_info = trigger_->info();
+  drivers::TimingRequest timing;
+  timing.repetition_rate_hz = config_.rate_hz;
+  timing.pulse_separation_s = config_.dt_s;
+  trigger_->load(drivers::make_schedule(timing, env_.timing_limits, trigger_info.timing_uncertainty_s,
+                                        trigger_info.backend));
+  const drivers::CameraWiring wiring = drivers::wire_camera(*trigger_, *camera_);
+  camera_trigger_ = wiring.source;
+  camera_->arm(drivers::DoubleExposureSettings{wiring.source, 0.0});
   const drivers::CameraInfo info = camera_->info();
   Recorder::Setup setup{env_.data_dir, run_id_, &config_, camera_uri, trigger_uri, env_.camera_file,
-                        info.vendor + " " + info.model + " " + info.serial};
+                        info.vendor + " " + info.model + " " + info.serial, wiring.description};
   recorder_ = std::make_unique<Recorder>(setup);
   if (env_.processing) process_ = env_.processing(config_);
-  spdlog::info("run {}: {} pairs at {} Hz from {}, folder {}", run_id_,
+  spdlog::info("run {}: {} pairs at {} Hz, dt {} s, from {}, trigger {}, folder {}", run_id_,
                config_.pair_count ? std::to_string(config_.pair_count) : "unlimited",
-               config_.rate_hz, camera_uri, recorder_->dir().string());
+               config_.rate_hz, config_.dt_s, camera_uri, trigger_uri, recorder_->dir().string());
+  if (wiring.source == drivers::TriggerSource::Software) {
+    spdlog::warn("run {}: camera triggering {}", run_id_, wiring.description);
+  } else {
+    spdlog::info("run {}: camera triggering {}", run_id_, wiring.description);
+  }
   thread_ = std::thread([this] { run(); });
 }
 
@@ -42,20 +58,54 @@ void Run::join() {
 }
 
 void Run::record(drivers::FramePair pair) {
+  attach_shot(pair);
   recorder_->record_pair(pair);  // raw frames first: never dropped once delivered
   ++pairs_received_;
   if (env_.heartbeat) env_.heartbeat();
   mailbox_.push(std::make_shared<const drivers::FramePair>(std::move(pair)));
 }
 
+// The shot of a pair may still be on its way (a camera can deliver before the Q-switches fire):
+// wait briefly for it; a pair whose shot never comes keeps measured_dt 0 ("not measured").
+void Run::attach_shot(drivers::FramePair& pair) {
+  if (!trigger_->info().measures_qswitch) return;
+  const auto deadline = Clock::now() + 200ms;
+  while (!joiner_.attach(pair)) {
+    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now());
+    if (left <= 0ms) return;
+    const auto shot = trigger_->next_shot(left);
+    if (!shot) return;
+    joiner_.add_shot(*shot);
+    if (shot->shot_index > pair.trigger_index) {
+      joiner_.attach(pair);  // drops the older shots; this pair's is gone
+      return;
+    }
+  }
+}
+
+void Run::stop_devices() noexcept {
+  try {
+    trigger_->stop();  // every line low
+  } catch (const std::exception& e) {
+    spdlog::error("run {}: stopping the trigger: {}", run_id_, e.what());
+  }
+  try {
+    camera_->stop();
+  } catch (const std::exception& e) {
+    spdlog::error("run {}: stopping the camera: {}", run_id_, e.what());
+  }
+}
+
 void Run::acquire() {
   try {
     const auto period = std::chrono::duration_cast<Clock::duration>(
         std::chrono::duration<double>(1.0 / config_.rate_hz));
+    const bool software = camera_trigger_ == drivers::TriggerSource::Software;
+    trigger_->start(config_.pair_count);  // 0: until stopped
     const auto started = Clock::now();
     auto next_trigger = started;
     std::uint64_t fired = 0;
-    auto last_fired = started;
+    std::optional<Clock::time_point> last_shot;  // when the trigger had played all its shots
     while (!stop_) {
       const std::uint64_t received = pairs_received_;
       if (config_.pair_count && received >= config_.pair_count) break;
@@ -64,30 +114,43 @@ void Run::acquire() {
           now - started >= std::chrono::duration<double>(config_.duration_s)) {
         break;
       }
+      if (!trigger_->running() && !last_shot) {
+        const std::uint64_t shots = trigger_->counters().shots_fired;
+        if (config_.pair_count == 0 || shots < config_.pair_count) {
+          throw drivers::DeviceError("trigger " + trigger_->info().uri + " stopped by itself after " +
+                                     std::to_string(shots) + " shots");
+        }
+        last_shot = now;
+      }
+      // A camera no line can reach: software triggers at rate_hz (the wiring said so, and the
+      // manifest and log say it too).
       const bool more_to_fire = config_.pair_count == 0 || fired < config_.pair_count;
-      if (more_to_fire && now >= next_trigger) {
+      if (software && more_to_fire && now >= next_trigger) {
         camera_->software_trigger();
         ++fired;
-        last_fired = now;
         next_trigger += period;
       }
-      // All triggers fired and the missing pairs never came (lost frames): end after a grace time.
-      if (!more_to_fire && now - last_fired > 2 * period + 1s) break;
-      const auto wait = std::clamp(std::chrono::duration_cast<std::chrono::milliseconds>(
-                                       next_trigger - Clock::now()),
-                                   0ms, 50ms);
+      // All shots fired and the missing pairs never came (lost frames): end after a grace time.
+      if (last_shot && (!software || !more_to_fire) && now - *last_shot > 2 * period + 1s) break;
+      const auto wait = software ? std::clamp(std::chrono::duration_cast<std::chrono::milliseconds>(
+                                                  next_trigger - Clock::now()),
+                                              0ms, 50ms)
+                                 : 50ms;
       if (auto pair = camera_->next_pair(wait)) record(std::move(*pair));
     }
+    // The last pair can come before its shot has finished (its falling edges): let the trigger
+    // play its shots to the end rather than cut one short.
+    const auto played = Clock::now() + period + 1s;
+    while (!stop_ && config_.pair_count && trigger_->running() && Clock::now() < played) {
+      std::this_thread::sleep_for(2ms);
+    }
     env_.state->finishing();
-    camera_->stop();
+    stop_devices();
     // Pairs the camera delivered before it stopped are recorded too.
     while (auto pair = camera_->next_pair(0ms)) record(std::move(*pair));
   } catch (const std::exception& e) {
     acquisition_error_ = e.what();
-    try {
-      camera_->stop();
-    } catch (const std::exception&) {
-    }
+    stop_devices();
   }
   mailbox_.close();
 }
@@ -95,7 +158,7 @@ void Run::acquire() {
 void Run::run() {
   std::string failure;
   try {
-    camera_->start();
+    camera_->start();  // before the trigger: its first edge must find the camera running
     env_.state->acquiring();
     std::thread acquisition([this] { acquire(); });
     if (process_) {

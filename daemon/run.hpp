@@ -1,4 +1,4 @@
-// One run: camera → recorder (every pair) → live pipeline → publisher, on its own threads.
+// One run: trigger → camera → recorder (every pair) → live pipeline → publisher, on its own threads.
 #pragma once
 
 #include <atomic>
@@ -14,6 +14,8 @@
 #include "daemon/run_config.hpp"
 #include "daemon/run_state.hpp"
 #include "drivers/camera/camera.hpp"
+#include "drivers/trigger/shot_joiner.hpp"
+#include "drivers/trigger/trigger.hpp"
 
 namespace plenopiv::daemon {
 
@@ -26,6 +28,8 @@ struct RunEnvironment {
   std::filesystem::path data_dir;
   std::string default_camera_uri, default_trigger_uri;
   std::filesystem::path camera_file;  // copied into the run folder; empty: none
+  // What the laser and camera allow; the run's rate_hz and dt_s must fit (make_schedule).
+  drivers::TimingLimits timing_limits;
   RunStateMachine* state = nullptr;
   Publisher* publisher = nullptr;     // null: nothing published
   ProcessFactory processing;
@@ -35,9 +39,13 @@ struct RunEnvironment {
 };
 
 // The state machine must already be Armed for `run_id` (RunStateMachine::start). The constructor
-// opens and arms the camera and creates the run folder (InputError on bad URIs or folders), then
-// the run starts acquiring on its own thread. It ends by itself after the pair count or duration,
-// or when stopped; either way every delivered pair is recorded and the folder closed.
+// opens the camera and the trigger (the run's URIs, else the daemon's), wires the trigger's camera
+// line to the camera (drivers/trigger/camera_wiring.hpp), loads the schedule for rate_hz and dt_s
+// and creates the run folder (InputError on bad URIs, timing or folders); then the run acquires
+// on its own thread: the trigger fires the laser and camera lines once per pair, and each pair
+// gets the laser pulses measured for its shot (ShotJoiner). It ends by itself after the pair
+// count or duration, or when stopped; either way every delivered pair is recorded, the folder
+// closed, and every trigger line driven low (also on errors).
 class Run {
  public:
   Run(RunConfig config, std::string run_id, RunEnvironment env);
@@ -50,6 +58,8 @@ class Run {
   void join();
   const std::filesystem::path& dir() const { return recorder_->dir(); }
   const std::string& run_id() const { return run_id_; }
+  // The run's trigger (tests look at a sim trigger's lines through it).
+  const drivers::Trigger& trigger() const { return *trigger_; }
   // Adds this run's counters to a status message.
   void fill_status(msg::Status& status) const;
 
@@ -57,11 +67,18 @@ class Run {
   void run();
   void acquire();
   void record(drivers::FramePair pair);
+  void attach_shot(drivers::FramePair& pair);
+  void stop_devices() noexcept;
 
   RunConfig config_;
   std::string run_id_;
   RunEnvironment env_;
   std::unique_ptr<drivers::Camera> camera_;
+  // Declared after the camera: destroyed first, so its lines go low and its connection to a
+  // simulated camera's input ends while the camera still exists.
+  std::unique_ptr<drivers::Trigger> trigger_;
+  drivers::TriggerSource camera_trigger_ = drivers::TriggerSource::External;
+  drivers::ShotJoiner joiner_;  // acquisition thread only
   std::unique_ptr<Recorder> recorder_;
   ProcessFn process_;
   LiveMailbox mailbox_;

@@ -101,6 +101,17 @@ struct CameraStatus {
   std::string last_error;  // empty when all is well; e.g. "control lost: heartbeat timed out"
 };
 
+// A simulated camera's external trigger input: where a simulated trigger's camera line is wired
+// (drivers/trigger/camera_wiring.hpp), as a cable is plugged into a real camera's trigger input.
+// Real cameras have none (their input is the cable). A rising edge exposes one pair when the
+// camera is running and armed for TriggerSource::External; other edges are ignored, as a real
+// camera ignores its line then. Called on the trigger's thread: keep it short.
+class TriggerInput {
+ public:
+  virtual ~TriggerInput() = default;
+  virtual void rising_edge() = 0;
+};
+
 // Thread safety: one thread controls a camera (configure/arm/start/stop/software_trigger);
 // next_pair() may be called from another thread; counters() and status() from any thread.
 class Camera {
@@ -123,6 +134,8 @@ class Camera {
 
   virtual CameraCounters counters() const = 0;
   virtual CameraStatus status() const = 0;
+  // The simulated trigger input, or null for a camera triggered through a cable (or by software).
+  virtual TriggerInput* trigger_input() { return nullptr; }
 };
 
 }  // namespace plenopiv::drivers

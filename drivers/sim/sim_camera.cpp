@@ -1,6 +1,7 @@
 // The simulated plenoptic camera, `sim://`: each trigger renders a particle pair with core/sim.
 #include "drivers/sim/sim_camera.hpp"
 
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
@@ -28,6 +29,7 @@ struct SceneSettings {
   std::uint64_t drop_every = 0;
   std::uint64_t incomplete_every = 0;
   std::uint64_t disconnect_after = 0;
+  double readout_s = 0.01;
 };
 
 std::uint64_t now_ns() {
@@ -59,8 +61,10 @@ std::unique_ptr<sim::Flow> flow_from_uri(const DeviceUri& uri, const optics::Cam
 }
 
 // Renders on its own thread, so a trigger never waits for the ray tracer: the queue of pending
-// triggers is what a real camera's exposure pipeline would be.
-class SimCamera : public CameraBase {
+// triggers is what a real camera's exposure pipeline would be. Armed for External, the pairs are
+// made by rising edges on its trigger input (a simulated trigger's camera line); for Software,
+// by software_trigger().
+class SimCamera : public CameraBase, public TriggerInput {
  public:
   SimCamera(const DeviceUri& uri, optics::CameraModel camera, SceneSettings scene,
             std::unique_ptr<sim::Flow> flow)
@@ -70,7 +74,9 @@ class SimCamera : public CameraBase {
         scene_(scene),
         flow_(std::move(flow)),
         box_(sim::field_of_view_box(camera_, -scene.depth_mm, scene.depth_mm)),
-        particle_count_(sim::particle_count_from_ppm(camera_, box_, scene.ppm)) {
+        particle_count_(sim::particle_count_from_ppm(camera_, box_, scene.ppm)),
+        readout_(std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+            std::chrono::duration<double>(scene.readout_s))) {
     options_.rays_per_particle = scene_.rays;
     if (scene_.noise) {
       options_.sensor.shot_noise = true;
@@ -112,7 +118,14 @@ class SimCamera : public CameraBase {
       throw InputError(info().uri + ": roi: the simulated camera renders the full sensor only");
     }
   }
-  void do_arm(const DoubleExposureSettings&) override {}
+  TriggerInput* trigger_input() override { return this; }
+  void rising_edge() override {
+    if (external_ && wanted_state() == CameraState::Running) do_software_trigger();
+  }
+
+  void do_arm(const DoubleExposureSettings& settings) override {
+    external_ = settings.trigger == TriggerSource::External;
+  }
   void do_start() override {}
   // Exposures already triggered are delivered, as a real camera's would be: wait for them.
   void do_stop() override {
@@ -120,10 +133,13 @@ class SimCamera : public CameraBase {
     idle_.wait(lock, [this] { return pending_.empty() && !rendering_; });
   }
 
+  // The pair is rendered once frame B would have been read out: rendering during the laser
+  // pulses would take the cores from the trigger that times them (on 2 cores it made the sim
+  // trigger write Q-switch 1 up to 0.9 ms late).
   void do_software_trigger() override {
     {
       std::lock_guard lock(mutex_);
-      pending_.push_back(next_trigger_++);
+      pending_.push_back({next_trigger_++, std::chrono::steady_clock::now() + readout_});
     }
     wake_.notify_all();
   }
@@ -135,7 +151,9 @@ class SimCamera : public CameraBase {
         std::unique_lock lock(mutex_);
         wake_.wait(lock, [this] { return quit_ || !pending_.empty(); });
         if (quit_) return;
-        trigger = pending_.front();
+        const auto due = pending_.front().due;
+        if (wake_.wait_until(lock, due, [this] { return quit_.load(); })) return;
+        trigger = pending_.front().trigger;
         pending_.pop_front();
         rendering_ = true;
       }
@@ -185,15 +203,21 @@ class SimCamera : public CameraBase {
   std::unique_ptr<sim::Flow> flow_;
   sim::Box box_;
   std::size_t particle_count_;
+  std::chrono::steady_clock::duration readout_;
   sim::RenderOptions options_;
 
+  std::atomic<bool> external_{false};
   std::mutex mutex_;
   std::condition_variable wake_;
   std::condition_variable idle_;
-  std::deque<std::uint64_t> pending_;
+  struct Pending {
+    std::uint64_t trigger;
+    std::chrono::steady_clock::time_point due;
+  };
+  std::deque<Pending> pending_;
   bool rendering_ = false;
   std::uint64_t next_trigger_ = 0;
-  bool quit_ = false;
+  std::atomic<bool> quit_{false};
   std::thread worker_;
 };
 
@@ -203,7 +227,7 @@ std::unique_ptr<Camera> open_sim_camera(const DeviceUri& uri,
                                         const std::filesystem::path& default_camera_file) {
   uri.reject_unknown({"camera", "seed", "ppm", "depth_mm", "flow", "dx_mm", "dy_mm", "dz_mm",
                       "voxel_mm", "angle_deg", "shear_per_mm", "rays", "noise", "drop_every",
-                      "incomplete_every", "disconnect_after"});
+                      "incomplete_every", "disconnect_after", "readout_ms"});
   if (!uri.target().empty()) uri.fail("the simulated camera takes no device name, only ?parameters");
   const std::string file = uri.string_or("camera", default_camera_file.string());
   if (file.empty()) uri.fail("camera: no camera file given and no default configured");
@@ -228,6 +252,9 @@ std::unique_ptr<Camera> open_sim_camera(const DeviceUri& uri,
   scene.drop_every = count("drop_every", 0);
   scene.incomplete_every = count("incomplete_every", 0);
   scene.disconnect_after = count("disconnect_after", 0);
+  const double readout_ms = uri.number_or("readout_ms", scene.readout_s * 1e3);
+  if (!(readout_ms >= 0) || readout_ms > 10000) uri.fail("readout_ms: must be in [0, 10000] ms");
+  scene.readout_s = readout_ms * 1e-3;
   std::unique_ptr<sim::Flow> flow = flow_from_uri(uri, camera);
   return std::make_unique<SimCamera>(uri, std::move(camera), scene, std::move(flow));
 }

@@ -25,6 +25,11 @@ namespace plenopiv::drivers {
 //   drop_every=<n>      fault: frame B of every n-th trigger never arrives
 //   incomplete_every=<n> fault: frame B of every n-th trigger arrives incomplete
 //   disconnect_after=<n> fault: the camera is lost after n triggers (status Lost)
+//   readout_ms=<ms>     a pair is rendered this long after its trigger, when frame B would have
+//                       been read out, not while the trigger times the laser pulses (default 10)
+// Armed for TriggerSource::External, the camera is fired by rising edges on its trigger_input()
+// (a simulated trigger's camera line, drivers/trigger/camera_wiring.hpp); for Software, by
+// software_trigger().
 // Unknown parameters, a missing camera file, or bad values are an InputError naming the URI.
 std::unique_ptr<Camera> open_sim_camera(const DeviceUri& uri,
                                         const std::filesystem::path& default_camera_file);

@@ -3,12 +3,13 @@
 #include "drivers/trigger/sim_trigger.hpp"
 
 #include "core/base/errors.hpp"
+#include "drivers/common/driver_errors.hpp"
 
 namespace plenopiv::drivers {
 
 SimTrigger::SimTrigger(const std::string& uri, bool virtual_clock, double uncertainty_s)
     : ScheduledTrigger(TriggerInfo{uri, "sim", uncertainty_s,
-                                   {kTriggerLines.begin(), kTriggerLines.end()}, true}),
+                                   {kTriggerLines.begin(), kTriggerLines.end()}, true, true}),
       virtual_clock_(virtual_clock) {}
 
 SimTrigger::~SimTrigger() { stop_playback(); }
@@ -38,11 +39,15 @@ void SimTrigger::on_edge_written(const Edge& edge, std::uint64_t shot, double pl
                                  double lateness_s) {
   RecordedEdge r{edge.line, edge.rising, shot, planned_s, planned_s + lateness_s};
   EdgeListener listener;
+  TriggerInput* camera_input = nullptr;
   {
     std::lock_guard lock(mutex_);
     edges_.push_back(r);
     listener = listener_;
+    camera_input = camera_input_;
   }
+  // The camera line, wired to a simulated camera's trigger input.
+  if (camera_input && edge.line == TriggerLine::Camera && edge.rising) camera_input->rising_edge();
   // The laser's Q-switch sync output fires with each Q-switch: measure it like gpiod would.
   if (edge.rising && (edge.line == TriggerLine::QSwitch1 || edge.line == TriggerLine::QSwitch2)) {
     report_sync_edge(virtual_clock_ ? base_ns_ + std::uint64_t(r.actual_s * 1e9) : now_ns());
@@ -63,6 +68,13 @@ bool SimTrigger::level(TriggerLine line) const {
 void SimTrigger::set_edge_listener(EdgeListener listener) {
   std::lock_guard lock(mutex_);
   listener_ = std::move(listener);
+}
+
+bool SimTrigger::connect_camera_input(TriggerInput* input) {
+  if (running()) throw StateError("trigger " + info().uri + ": connect_camera_input while running");
+  std::lock_guard lock(mutex_);
+  camera_input_ = input;
+  return true;
 }
 
 std::unique_ptr<Trigger> open_sim_trigger(const DeviceUri& uri) {

@@ -36,6 +36,7 @@ class SimTrigger final : public ScheduledTrigger {
   // Keep it short; set it before start().
   using EdgeListener = std::function<void(const RecordedEdge&)>;
   void set_edge_listener(EdgeListener listener);
+  bool connect_camera_input(TriggerInput* input) override;
 
  protected:
   void write_line(TriggerLine line, bool level) override;
@@ -50,6 +51,7 @@ class SimTrigger final : public ScheduledTrigger {
   std::vector<RecordedEdge> edges_;
   bool levels_[6] = {};
   EdgeListener listener_;
+  TriggerInput* camera_input_ = nullptr;
   std::uint64_t base_ns_ = 1'000'000'000;  // virtual clock origin for Q-switch sync times
 };
 

@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "drivers/camera/camera.hpp"
 #include "drivers/trigger/sequencer.hpp"
 
 namespace plenopiv::drivers {
@@ -17,6 +18,7 @@ struct TriggerInfo {
   double timing_uncertainty_s = 0;     // how precisely it places an edge (jitter)
   std::vector<TriggerLine> outputs;    // lines wired
   bool measures_qswitch = false;       // an input line on the laser's Q-switch sync
+  bool simulated = false;              // no hardware: its lines reach only simulated devices
 };
 
 // The laser pulses of one shot as measured on the Q-switch sync input (kernel timestamps,
@@ -54,6 +56,11 @@ class Trigger {
   // Waits for the next measured shot; nullopt on timeout or when nothing measures the Q-switch.
   virtual std::optional<MeasuredShot> next_shot(std::chrono::milliseconds timeout) = 0;
   virtual TriggerCounters counters() const = 0;
+  // Connects the camera line to a simulated camera's trigger input (null disconnects); every
+  // rising camera edge is then delivered to it. Only a simulated trigger can: a hardware
+  // backend's camera line is a physical output and this returns false. Not while running; the
+  // input must outlive the connection (disconnect, stop or destroy the trigger first).
+  virtual bool connect_camera_input(TriggerInput*) { return false; }
 };
 
 }  // namespace plenopiv::drivers

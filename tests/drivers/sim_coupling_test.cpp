@@ -2,6 +2,7 @@
 // and the measured laser pulses are attached to each pair.
 #include <gtest/gtest.h>
 
+#include "drivers/trigger/camera_wiring.hpp"
 #include "drivers/trigger/shot_joiner.hpp"
 #include "drivers/trigger/sim_trigger.hpp"
 #include "drivers/trigger/trigger_registry.hpp"
@@ -45,6 +46,53 @@ TEST(SimCoupling, TheSimTriggersCameraLineDrivesTheCameraAndDtIsAttached) {
   }
   camera.stop();
   EXPECT_EQ(camera.counters().pairs_delivered, 4u);
+}
+
+// wire_camera connects the camera line to the camera's trigger input, as the daemon does.
+TEST(SimCoupling, WireCameraConnectsTheCameraLineToASimulatedCamerasInput) {
+  testing_support::TestCamera camera;
+  auto trigger = open_trigger("sim://?clock=virtual");
+  const CameraWiring wiring = wire_camera(*trigger, camera);
+  EXPECT_EQ(wiring.source, TriggerSource::External);
+  EXPECT_NE(wiring.description.find("simulated line"), std::string::npos) << wiring.description;
+  camera.arm({wiring.source, 0});
+  camera.start();
+  TimingRequest r;
+  r.pulse_separation_s = 2e-3;
+  r.camera_pretrigger_s = 1e-3;
+  r.exposure_a_s = 1.5e-3;
+  trigger->load(make_schedule(r, {}, 0));
+  trigger->start(3);
+  for (std::uint64_t i = 0; i < 3; ++i) {
+    auto pair = camera.next_pair(1s);
+    ASSERT_TRUE(pair);
+    EXPECT_EQ(pair->trigger_index, i);
+  }
+  EXPECT_FALSE(camera.next_pair(50ms));
+  trigger->stop();
+  camera.stop();
+  EXPECT_EQ(camera.frames_made(), 6u);
+}
+
+TEST(SimCoupling, ACameraNoLineReachesIsSoftwareTriggeredAndTheWiringSaysWhy) {
+  testing_support::TestCamera camera("test://?input=none", {}, false);
+  auto trigger = open_trigger("sim://");
+  const CameraWiring wiring = wire_camera(*trigger, camera);
+  EXPECT_EQ(wiring.source, TriggerSource::Software);
+  EXPECT_NE(wiring.description.find("cannot reach the camera test://?input=none"), std::string::npos)
+      << wiring.description;
+}
+
+TEST(SimCoupling, EdgesBeforeStartOrForASoftwareArmedCameraAreIgnored) {
+  testing_support::TestCamera camera;
+  camera.arm({TriggerSource::External, 0});
+  camera.trigger_input()->rising_edge();  // armed, not running: a real camera ignores it too
+  EXPECT_EQ(camera.frames_made(), 0u);
+  camera.arm({TriggerSource::Software, 0});
+  camera.start();
+  camera.trigger_input()->rising_edge();
+  EXPECT_EQ(camera.frames_made(), 0u);
+  camera.stop();
 }
 
 TEST(ShotJoiner, SkipsShotsWhosePairNeverCameAndLeavesUnknownPairsAlone) {

@@ -8,10 +8,11 @@ namespace plenopiv::testing_support {
 
 using namespace plenopiv::drivers;
 
-TestCamera::TestCamera(std::string uri, TestCameraFaults faults)
+TestCamera::TestCamera(std::string uri, TestCameraFaults faults, bool with_input)
     : CameraBase(CameraInfo{uri, "plenopiv", "test camera", "T0", 64, 48, "burst (test)"},
                  PairerOptions{2'000'000, 0, 1'000'000'000}),
-      faults_(std::move(faults)) {}
+      faults_(std::move(faults)),
+      with_input_(with_input) {}
 
 std::uint16_t TestCamera::test_pixel(std::uint64_t frame_id, int x, int y) {
   return std::uint16_t((frame_id * 131 + std::uint64_t(x) * 7 + std::uint64_t(y) * 3) & 0x0fff);
@@ -55,10 +56,12 @@ std::set<std::uint64_t> numbers(const std::string& list) {
 
 void register_test_camera(CameraRegistry& registry) {
   registry.add("test", [](const DeviceUri& uri) -> std::unique_ptr<Camera> {
-    uri.reject_unknown({"lose", "incomplete"});
+    uri.reject_unknown({"lose", "incomplete", "input"});
+    const std::string input = uri.string_or("input", "line");
+    if (input != "line" && input != "none") uri.fail("input: line or none, got '" + input + "'");
     TestCameraFaults faults{numbers(uri.string_or("lose", "")),
                             numbers(uri.string_or("incomplete", ""))};
-    return std::make_unique<TestCamera>(uri.text(), faults);
+    return std::make_unique<TestCamera>(uri.text(), faults, input == "line");
   });
 }
 
