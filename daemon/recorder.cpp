@@ -74,7 +74,10 @@ Recorder::Recorder(const Setup& setup) : dir_(setup.data_dir / ("run-" + setup.r
     manifest_.set_nominal_dt_s(setup.config->dt_s);
     manifest_.set_rate_hz(setup.config->rate_hz);
     nominal_dt_s_ = setup.config->dt_s;
+    write_text(dir_ / "process.yaml", setup.config->process_yaml());
+    manifest_.set_process_file("process.yaml");
   }
+  manifest_.set_calibration(setup.calibration);
   if (!setup.camera_file.empty()) {
     io::write_atomically(dir_ / "camera.yaml",
                          [&](const fs::path& tmp) { fs::copy_file(setup.camera_file, tmp); });

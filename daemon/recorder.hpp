@@ -16,6 +16,7 @@ namespace plenopiv::daemon {
 // run-<id>/ under the data directory:
 //   run.yaml                 the run config as sent
 //   camera.yaml              the daemon's camera file, if it has one
+//   process.yaml             the processing settings resolved from run.yaml (core/process schema)
 //   frames/pair-<n>-A.tif    raw frames, 16-bit TIFF, every pair the camera delivered
 //   frames/pair-<n>-B.tif
 //   vectors/pair-<n>.h5      vector fields of the pairs the live path processed
@@ -23,6 +24,7 @@ namespace plenopiv::daemon {
 //   manifest.json            RunManifest as JSON
 // Every file is written under a temporary name and renamed; the manifest is rewritten (atomically)
 // after each file, so whatever stops the daemon, the manifest lists exactly the complete files.
+// The folder alone is enough to reprocess the run (`plenopiv process --run`).
 // Thread safe: frames, vectors and close may come from different threads.
 class Recorder {
  public:
@@ -34,6 +36,7 @@ class Recorder {
     std::filesystem::path camera_file;  // empty: none
     std::string camera_model;
     std::string camera_triggering;  // drivers::CameraWiring::description
+    std::string calibration;        // what the processing uses for lens centres and white: "nominal"
   };
   // Creates the folder (InputError if it exists or cannot be made) and the first manifest.
   explicit Recorder(const Setup& setup);

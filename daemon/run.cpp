@@ -34,7 +34,8 @@ Run::Run(RunConfig config, std::string run_id, RunEnvironment env)
   camera_->arm(drivers::DoubleExposureSettings{wiring.source, 0.0});
   const drivers::CameraInfo info = camera_->info();
   Recorder::Setup setup{env_.data_dir, run_id_, &config_, camera_uri, trigger_uri, env_.camera_file,
-                        info.vendor + " " + info.model + " " + info.serial, wiring.description};
+                        info.vendor + " " + info.model + " " + info.serial, wiring.description,
+                        env_.calibration};
   recorder_ = std::make_unique<Recorder>(setup);
   if (env_.processing) process_ = env_.processing(config_);
   spdlog::info("run {}: {} pairs at {} Hz, dt {} s, from {}, trigger {}, folder {}", run_id_,

@@ -28,6 +28,9 @@ struct RunEnvironment {
   std::filesystem::path data_dir;
   std::string default_camera_uri, default_trigger_uri;
   std::filesystem::path camera_file;  // copied into the run folder; empty: none
+  // How the processing finds lens centres and white correction, recorded for reprocessing:
+  // "nominal" (the camera's nominal lattice, geometric white image: plenoptic_processing).
+  std::string calibration = "nominal";
   // What the laser and camera allow; the run's rate_hz and dt_s must fit (make_schedule).
   drivers::TimingLimits timing_limits;
   RunStateMachine* state = nullptr;

@@ -46,6 +46,33 @@ Grid3 RunConfig::volume_grid() const {
   return g;
 }
 
+std::string RunConfig::process_yaml() const {
+  const Grid3 g = volume_grid();
+  YAML::Node root(YAML::NodeType::Map);
+  root["dt_s"] = dt_s;
+  YAML::Node volume(YAML::NodeType::Map);
+  const char* axes[3] = {"x_mm", "y_mm", "z_mm"};
+  for (int a = 0; a < 3; ++a) {
+    // Half a voxel beyond the first and last centres: grid_for_extent gives back volume_grid().
+    const double half = 0.5 * g.spacing_mm[a];
+    YAML::Node range(YAML::NodeType::Sequence);
+    range.push_back(g.origin_mm[a] - half);
+    range.push_back(g.origin_mm[a] + (g.shape[a] - 1) * g.spacing_mm[a] + half);
+    range.SetStyle(YAML::EmitterStyle::Flow);
+    volume[axes[a]] = range;
+  }
+  volume["voxel_mm"] = voxel_mm;
+  root["volume"] = volume;
+  if (reconstruction.size() > 0) root["reconstruction"] = YAML::Clone(reconstruction);
+  if (correlation.size() > 0) root["correlation"] = YAML::Clone(correlation);
+  YAML::Emitter out;
+  out.SetDoublePrecision(17);
+  out << root;
+  return "# Processing settings of this run, resolved from run.yaml (core/process schema:\n"
+         "# `plenopiv process --config`, `plenopiv process --run`).\n" +
+         std::string(out.c_str()) + "\n";
+}
+
 RunConfig parse_run_config(const std::string& text, const std::string& source) {
   const YAML::Node root = load_yaml_text(text, source);
   if (!root.IsMap()) throw InputError(source + ": expected a mapping of run settings");

@@ -28,6 +28,12 @@ struct RunConfig {
 
   // The reconstruction grid: voxel centres from volume_min_mm in steps of voxel_mm, covering max.
   Grid3 volume_grid() const;
+  // The processing settings as core/process reads them (process::process_settings_from, the
+  // schema of systemd/config/process.yaml): dt_s, the volume as the extent whose voxel centres are
+  // exactly volume_grid(), and the reconstruction and correlation sections as given. The live
+  // stage parses this text and the run folder keeps it (process.yaml), so `plenopiv process --run`
+  // reprocesses with exactly the live settings.
+  std::string process_yaml() const;
 };
 
 // Parses run.yaml text; `source` names it in messages ("run.yaml", "start request"). Every bad or

@@ -1,5 +1,6 @@
 // `plenopiv process`: one frame pair from files (camera, calibration, frames A and B, run config)
-// to a vector field in HDF5 and .vti and a PNG preview (a slice with vectors over vorticity).
+// to a vector field in HDF5 and .vti and a PNG preview (a slice with vectors over vorticity);
+// `plenopiv process --run <folder>`: every pair of a run recorded by plenopivd, from the folder alone.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -8,9 +9,11 @@
 #include <iostream>
 #include <memory>
 #include <optional>
+#include <sstream>
 
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <google/protobuf/util/json_util.h>
 #include <tbb/global_control.h>
 
 #include "clients/cli/commands.hpp"
@@ -25,11 +28,13 @@
 #include "core/optics/camera_file.hpp"
 #include "core/piv/derived.hpp"
 #include "core/process/process.hpp"
+#include "plenopiv.pb.h"
 
 namespace plenopiv::client {
 namespace {
 
 struct ProcessOptions {
+  std::string run;
   std::string camera, frame_a, frame_b, config, calibration, calibration_image, output, vti, preview;
   std::vector<std::string> white_images;
   bool nominal = false;
@@ -146,10 +151,32 @@ void write_png(const std::filesystem::path& path, const cv::Mat& image) {
   });
 }
 
-void run_process(const ProcessOptions& o) {
-  if (o.threads < 0) throw InputError("--threads: must be >= 0 (0: all cores)");
+// The vector field with vorticity and flags, as HDF5 and as VTK image data.
+void write_field(const std::filesystem::path& h5, const std::filesystem::path& vti,
+                 const piv::CorrelationResult& r, const std::array<std::vector<float>, 3>& omega) {
+  std::vector<float> flags(r.flags.begin(), r.flags.end());
+  io::write_vector_field_h5(h5, r.field,
+                            {{"vorticity_x", omega[0]}, {"vorticity_y", omega[1]}, {"vorticity_z", omega[2]},
+                             {"flags", flags}});
+  std::vector<float> omega_vec(3 * omega[0].size());
+  for (std::size_t i = 0; i < omega[0].size(); ++i)
+    for (int c = 0; c < 3; ++c) omega_vec[3 * i + std::size_t(c)] = omega[std::size_t(c)][i];
+  io::write_vector_field_vti(vti, r.field, {{"vorticity_1_s_vec", omega_vec}, {"flags", flags}});
+}
+
+std::optional<tbb::global_control> thread_limit(int threads) {
+  if (threads < 0) throw InputError("--threads: must be >= 0 (0: all cores)");
   std::optional<tbb::global_control> limit;
-  if (o.threads > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, o.threads);
+  if (threads > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, threads);
+  return limit;
+}
+
+void run_process(const ProcessOptions& o) {
+  for (const auto& [value, name] : {std::pair{&o.camera, "camera"}, std::pair{&o.frame_a, "frame_a"},
+                                    std::pair{&o.frame_b, "frame_b"}, std::pair{&o.config, "--config"},
+                                    std::pair{&o.output, "--output"}})
+    if (value->empty()) throw InputError(std::string(name) + " is required (or --run <run folder>)");
+  const auto limit = thread_limit(o.threads);
   // Every input is read and checked before any long work starts.
   const process::ProcessSettings settings = process::load_process_settings(o.config);
   const optics::CameraModel camera = optics::load_camera_file(o.camera);
@@ -178,14 +205,7 @@ void run_process(const ProcessOptions& o) {
   const auto r = process::process_pair(op, a, b, settings, [&](const std::string&, double f) { progress.update(f); });
 
   const auto omega = piv::vorticity(r.correlation.field);
-  std::vector<float> flags(r.correlation.flags.begin(), r.correlation.flags.end());
-  io::write_vector_field_h5(out, r.correlation.field,
-                            {{"vorticity_x", omega[0]}, {"vorticity_y", omega[1]}, {"vorticity_z", omega[2]},
-                             {"flags", flags}});
-  std::vector<float> omega_vec(3 * omega[0].size());
-  for (std::size_t i = 0; i < omega[0].size(); ++i)
-    for (int c = 0; c < 3; ++c) omega_vec[3 * i + std::size_t(c)] = omega[std::size_t(c)][i];
-  io::write_vector_field_vti(vti, r.correlation.field, {{"vorticity_1_s_vec", omega_vec}, {"flags", flags}});
+  write_field(out, vti, r.correlation, omega);
   write_png(png, preview_image(r.correlation.field, omega[2]));
 
   std::size_t valid = 0;
@@ -198,29 +218,106 @@ void run_process(const ProcessOptions& o) {
   std::cout << out.string() << "\n" << vti.string() << "\n" << png.string() << "\n";
 }
 
+// A file the manifest names, inside the run folder; missing is an InputError naming key and file.
+std::filesystem::path run_file(const std::filesystem::path& run, const std::string& key, const std::string& name) {
+  const std::filesystem::path manifest = run / "manifest.json";
+  if (name.empty())
+    throw InputError(manifest.string() + ": " + key + " is empty: the run folder does not say where it is");
+  const std::filesystem::path path = run / name;
+  if (!std::filesystem::is_regular_file(path))
+    throw InputError(manifest.string() + ": " + key + ": " + path.string() + " is missing");
+  return path;
+}
+
+// Every recorded pair again, from the run folder alone: process.yaml (the live settings),
+// camera.yaml, the calibration the manifest names, frames/, and each pair's measured dt as the
+// live path used it (the run's dt_s when none was measured).
+void run_reprocess(const ProcessOptions& o) {
+  for (const auto* other : {&o.camera, &o.frame_a, &o.frame_b, &o.config, &o.calibration, &o.calibration_image,
+                            &o.vti, &o.preview})
+    if (!other->empty())
+      throw InputError("--run takes the camera, frames, settings and calibration from the run folder; "
+                       "give only --run, -o and --threads");
+  if (!o.white_images.empty() || o.nominal)
+    throw InputError("--run takes the calibration from the run folder (manifest.json: calibration)");
+  const auto limit = thread_limit(o.threads);
+  const std::filesystem::path run = o.run;
+  if (!std::filesystem::is_directory(run)) throw InputError("--run: " + run.string() + " is not a folder");
+
+  // Every input is read and checked before any long work starts.
+  const std::filesystem::path manifest_path = run / "manifest.json";
+  std::ifstream in(manifest_path);
+  if (!in) throw InputError(manifest_path.string() + ": missing (not a plenopivd run folder?)");
+  std::stringstream text;
+  text << in.rdbuf();
+  msg::RunManifest m;
+  if (const auto status = google::protobuf::util::JsonStringToMessage(text.str(), &m); !status.ok())
+    throw InputError(manifest_path.string() + ": not a run manifest: " + std::string(status.message()));
+  const process::ProcessSettings settings = process::load_process_settings(run_file(run, "process_file", m.process_file()));
+  const std::filesystem::path camera_path = run_file(run, "camera_file", m.camera_file());
+  const optics::CameraModel camera = optics::load_camera_file(camera_path);
+  if (m.calibration() != "nominal")
+    throw InputError(manifest_path.string() + ": calibration: '" + m.calibration() +
+                     "' is not one this version can reprocess with (nominal)");
+  if (m.pairs_size() == 0) throw InputError(manifest_path.string() + ": pairs: the run recorded no pair");
+  for (const msg::ManifestPair& p : m.pairs()) {
+    run_file(run, "pairs[" + std::to_string(p.pair_index()) + "].frame_a", p.frame_a());
+    run_file(run, "pairs[" + std::to_string(p.pair_index()) + "].frame_b", p.frame_b());
+  }
+  const std::filesystem::path out_dir = o.output.empty() ? run / "reprocessed" : std::filesystem::path(o.output);
+  std::filesystem::create_directories(out_dir);
+
+  ProcessOptions nominal;
+  nominal.nominal = true;
+  const calib::LoadedCalibration cal = calibration_for(nominal, camera);
+  const auto& g = settings.grid;
+  std::fprintf(stderr, "%s: %d pairs; volume %d x %d x %d voxels; weights ...\n", run.string().c_str(),
+               m.pairs_size(), g.shape[0], g.shape[1], g.shape[2]);
+  const recon::WeightingOperator op(camera, cal.lenses, g, cal.white_correction);
+  const double pairs = double(m.pairs_size());
+  Progress progress("process", "pairs", pairs);
+  for (int k = 0; k < m.pairs_size(); ++k) {
+    const msg::ManifestPair& p = m.pairs(k);
+    const ImageF a = read_frame((run / p.frame_a()).string()), b = read_frame((run / p.frame_b()).string());
+    process::ProcessSettings s = settings;
+    if (p.measured_dt_s() > 0) s.correlation.dt_s = p.measured_dt_s();
+    const auto r = process::process_pair(op, a, b, s, [&](const std::string&, double f) {
+      progress.update((k + f) / pairs);
+    });
+    char name[32];
+    std::snprintf(name, sizeof name, "pair-%06llu", static_cast<unsigned long long>(p.pair_index()));
+    const std::filesystem::path h5 = out_dir / (std::string(name) + ".h5");
+    write_field(h5, out_dir / (std::string(name) + ".vti"), r.correlation, piv::vorticity(r.correlation.field));
+    std::cout << h5.string() << "\n";
+  }
+}
+
 }  // namespace
 
 void add_process_commands(CLI::App& app) {
   auto o = std::make_shared<ProcessOptions>();
   auto* cmd = app.add_subcommand(
       "process", "one frame pair to a 3D/3C vector field: reconstruct A and B (MART), correlate (multi-pass)");
-  cmd->add_option("camera", o->camera, "camera file (YAML)")->required();
-  cmd->add_option("frame_a", o->frame_a, "raw plenoptic frame A (16-bit TIFF, sensor-sized)")->required();
-  cmd->add_option("frame_b", o->frame_b, "raw plenoptic frame B")->required();
+  cmd->add_option("--run", o->run,
+                  "a run folder recorded by plenopivd: reprocess every pair with the run's own settings, "
+                  "camera and calibration into <run>/reprocessed/ (or -o DIR)");
+  cmd->add_option("camera", o->camera, "camera file (YAML)");
+  cmd->add_option("frame_a", o->frame_a, "raw plenoptic frame A (16-bit TIFF, sensor-sized)");
+  cmd->add_option("frame_b", o->frame_b, "raw plenoptic frame B");
   cmd->add_option("--config", o->config,
                   "run config YAML: dt_s, volume {x_mm, y_mm, z_mm, voxel_mm}, reconstruction, correlation "
-                  "(systemd/config/process.yaml)")
-      ->required();
+                  "(systemd/config/process.yaml)");
   cmd->add_option("--calibration", o->calibration, "calibration file (HDF5, from `plenopiv calibrate`)");
   cmd->add_option("--calibration-image", o->calibration_image, "calibration TIFF (aperture stopped down)");
   cmd->add_option("--white", o->white_images, "white TIFF(s) for --calibration-image (averaged)");
   cmd->add_flag("--nominal", o->nominal, "no calibration: the camera's nominal lattice and geometric white image "
                                           "(simulated frames)");
-  cmd->add_option("-o,--output", o->output, "vector field (HDF5 /vectors with vorticity and flags)")->required();
+  cmd->add_option("-o,--output", o->output,
+                  "vector field (HDF5 /vectors with vorticity and flags); with --run, the output folder");
   cmd->add_option("--vti", o->vti, "VTK image data for ParaView (default: --output with .vti)");
   cmd->add_option("--preview", o->preview, "PNG preview (default: --output with .png)");
   cmd->add_option("--threads", o->threads, "worker threads (0: all cores)")->capture_default_str();
-  cmd->callback([o] { run_process(*o); });
+  cmd->callback([o] { o->run.empty() ? run_process(*o) : run_reprocess(*o); });
 }
 
 }  // namespace plenopiv::client
