@@ -1,4 +1,4 @@
-// The live processing stage: raw pair → MART volumes A and B (core/recon) → 3D correlation (core/piv).
+// The live processing stage: raw pair → process::process_pair (MART of A and B, 3D correlation).
 #pragma once
 
 #include "core/optics/camera_model.hpp"
@@ -6,13 +6,13 @@
 
 namespace plenopiv::daemon {
 
-// For each run: the weighting operator for the run's volume (nominal microlens lattice,
-// geometric white image) is built once and shared read-only by the concurrent calls; the run's
-// `reconstruction` section sets MART (iterations, mu, start: mlos|ones, noise_threshold,
-// dark_weight_cutoff, convergence), its `correlation` section is core/piv's correlation settings
-// (passes, median, signal_threshold). dt is the laser pulse separation measured on the Q-switch
-// sync input when the pair carries it, else the run's dt_s. Bad keys are InputErrors naming
-// them, at run start.
+// For each run: the settings are core/process's, read from RunConfig::process_yaml() (the run's
+// volume, `reconstruction`: MART iterations, mu, start: mlos|ones, noise_threshold,
+// dark_weight_cutoff, convergence; `correlation`: core/piv's passes, median, signal_threshold);
+// the weighting operator for the run's volume (nominal microlens lattice, geometric white image)
+// is built once and shared read-only by the concurrent calls to process::process_pair. dt is the
+// laser pulse separation measured on the Q-switch sync input when the pair carries it, else the
+// run's dt_s. Bad keys are InputErrors naming them, at run start.
 ProcessFactory plenoptic_processing(const optics::CameraModel& camera);
 
 }  // namespace plenopiv::daemon
