@@ -1,6 +1,9 @@
 // plenopivd's own configuration (plenopivd.yaml): endpoints, data directory, devices, logging.
 #include "daemon/daemon_config.hpp"
 
+#include <algorithm>
+#include <cmath>
+
 #include "core/base/errors.hpp"
 #include "core/base/yaml_access.hpp"
 
@@ -22,12 +25,56 @@ bool is_endpoint(const std::string& endpoint) {
   return false;
 }
 
+// `timing:` keys, each a time in s or a rate in Hz, all > 0.
+RigTiming timing_from(const YamlMap& map) {
+  RigTiming t;
+  drivers::TimingRequest& r = t.request;
+  drivers::TimingLimits& l = t.limits;
+  const std::pair<const char*, double*> keys[] = {
+      {"flashlamp_to_qswitch_s", &r.flashlamp_to_qswitch_s},
+      {"camera_pretrigger_s", &r.camera_pretrigger_s},
+      {"exposure_a_s", &r.exposure_a_s},
+      {"flashlamp_pulse_width_s", &r.flashlamp_pulse_width_s},
+      {"qswitch_pulse_width_s", &r.qswitch_pulse_width_s},
+      {"camera_pulse_width_s", &r.camera_pulse_width_s},
+      {"laser_max_rate_hz", &l.laser_max_rate_hz},
+      {"min_flashlamp_to_qswitch_s", &l.min_flashlamp_to_qswitch_s},
+      {"max_flashlamp_to_qswitch_s", &l.max_flashlamp_to_qswitch_s},
+      {"interline_transfer_s", &l.interline_transfer_s},
+      {"frame_b_s", &l.frame_b_s},
+      {"camera_max_pair_rate_hz", &l.camera_max_pair_rate_hz},
+      {"gate_width_s", &t.gate_width_s}};
+  map.reject_unknown({"flashlamp_to_qswitch_s", "camera_pretrigger_s", "exposure_a_s",
+                      "flashlamp_pulse_width_s", "qswitch_pulse_width_s", "camera_pulse_width_s",
+                      "laser_max_rate_hz", "min_flashlamp_to_qswitch_s", "max_flashlamp_to_qswitch_s",
+                      "interline_transfer_s", "frame_b_s", "camera_max_pair_rate_hz", "gate_width_s"});
+  for (const auto& [key, value] : keys) {
+    *value = map.number_or(key, *value);
+    if (!(*value > 0) || !std::isfinite(*value)) map.fail(key, "must be > 0");
+  }
+  return t;
+}
+
 }  // namespace
+
+drivers::Schedule run_schedule(const RigTiming& timing, const drivers::TriggerInfo& trigger,
+                               double rate_hz, double dt_s) {
+  const auto wired = [&](drivers::TriggerLine line) {
+    return std::find(trigger.outputs.begin(), trigger.outputs.end(), line) != trigger.outputs.end();
+  };
+  if (wired(drivers::TriggerLine::Gate) && !wired(drivers::TriggerLine::QSwitch1)) {
+    return drivers::make_gate_schedule(rate_hz, timing.gate_width_s, timing.limits);
+  }
+  drivers::TimingRequest r = timing.request;
+  r.repetition_rate_hz = rate_hz;
+  r.pulse_separation_s = dt_s;
+  return drivers::make_schedule(r, timing.limits, trigger.timing_uncertainty_s, trigger.backend);
+}
 
 DaemonConfig load_daemon_config(const std::filesystem::path& path) {
   const YamlMap map(load_yaml_file(path), path.string());
   map.reject_unknown({"control_endpoint", "publish_endpoint", "data_dir", "camera_file",
-                      "camera_uri", "trigger_uri", "log_level", "publish_high_water_mark"});
+                      "camera_uri", "trigger_uri", "log_level", "publish_high_water_mark", "timing"});
   DaemonConfig config;
   const std::filesystem::path base = path.parent_path();
   auto resolve = [&](const std::string& p) {
@@ -47,6 +94,7 @@ DaemonConfig load_daemon_config(const std::filesystem::path& path) {
     map.fail("publish_high_water_mark", "must be between 1 and 1000 messages, got " + std::to_string(hwm));
   }
   config.publish_high_water_mark = int(hwm);
+  if (auto timing = map.optional_map("timing")) config.timing = timing_from(*timing);
   validate(config, path.string());
   return config;
 }

@@ -4,7 +4,23 @@
 #include <filesystem>
 #include <string>
 
+#include "drivers/trigger/trigger.hpp"
+
 namespace plenopiv::daemon {
+
+// The rig's timing (plenopivd.yaml `timing:`): what the laser and camera need and allow. Each
+// run brings its own rate_hz and dt_s.
+struct RigTiming {
+  drivers::TimingRequest request;  // repetition_rate_hz and pulse_separation_s unused: per run
+  drivers::TimingLimits limits;
+  double gate_width_s = 10e-6;     // hardware-timed mode: the delay generator's trigger pulse
+};
+
+// The schedule a run plays on `trigger`: the full sequence (both cavities and the camera) at
+// `rate_hz` with `dt_s`; when the trigger wires `gate` and no Q-switch line, hardware-timed mode
+// (one gate pulse per shot; the delay generator makes dt). InputError naming what to change.
+drivers::Schedule run_schedule(const RigTiming& timing, const drivers::TriggerInfo& trigger,
+                               double rate_hz, double dt_s);
 
 struct DaemonConfig {
   std::string control_endpoint = "tcp://127.0.0.1:5555";
@@ -15,6 +31,7 @@ struct DaemonConfig {
   std::string trigger_uri = "sim://";
   std::string log_level = "info";
   int publish_high_water_mark = 4;    // messages queued per subscriber before they are dropped
+  RigTiming timing;
 };
 
 // Reads plenopivd.yaml; relative paths are taken from the file's folder. Every bad key is an

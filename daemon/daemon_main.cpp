@@ -153,6 +153,7 @@ int daemon_main(int argc, char** argv, const DaemonExtensions& extensions) {
     environment.default_camera_uri = config.camera_uri;
     environment.default_trigger_uri = config.trigger_uri;
     environment.camera_file = config.camera_file;
+    environment.timing = config.timing;
     environment.state = &state;
     environment.publisher = &publisher;
     environment.processing = processing_factory;

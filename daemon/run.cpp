@@ -24,11 +24,7 @@ Run::Run(RunConfig config, std::string run_id, RunEnvironment env)
   camera_->configure(drivers::CameraSettings{});
   trigger_ = drivers::open_trigger(trigger_uri);
   const drivers::TriggerInfo trigger_info = trigger_->info();
-  drivers::TimingRequest timing;
-  timing.repetition_rate_hz = config_.rate_hz;
-  timing.pulse_separation_s = config_.dt_s;
-  trigger_->load(drivers::make_schedule(timing, env_.timing_limits, trigger_info.timing_uncertainty_s,
-                                        trigger_info.backend));
+  trigger_->load(run_schedule(env_.timing, trigger_info, config_.rate_hz, config_.dt_s));
   const drivers::CameraWiring wiring = drivers::wire_camera(*trigger_, *camera_);
   camera_trigger_ = wiring.source;
   camera_->arm(drivers::DoubleExposureSettings{wiring.source, 0.0});
@@ -36,8 +32,9 @@ Run::Run(RunConfig config, std::string run_id, RunEnvironment env)
   Recorder::Setup setup{env_.data_dir, run_id_, &config_, camera_uri, trigger_uri, env_.camera_file,
                         info.vendor + " " + info.model + " " + info.serial, wiring.description,
                         env_.calibration};
-  recorder_ = std::make_unique<Recorder>(setup);
+  // Bad processing settings are refused before the run folder exists.
   if (env_.processing) process_ = env_.processing(config_);
+  recorder_ = std::make_unique<Recorder>(setup);
   spdlog::info("run {}: {} pairs at {} Hz, dt {} s, from {}, trigger {}, folder {}", run_id_,
                config_.pair_count ? std::to_string(config_.pair_count) : "unlimited",
                config_.rate_hz, config_.dt_s, camera_uri, trigger_uri, recorder_->dir().string());

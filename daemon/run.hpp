@@ -8,6 +8,7 @@
 #include <string>
 #include <thread>
 
+#include "daemon/daemon_config.hpp"
 #include "daemon/pipeline.hpp"
 #include "daemon/publisher.hpp"
 #include "daemon/recorder.hpp"
@@ -31,8 +32,8 @@ struct RunEnvironment {
   // How the processing finds lens centres and white correction, recorded for reprocessing:
   // "nominal" (the camera's nominal lattice, geometric white image: plenoptic_processing).
   std::string calibration = "nominal";
-  // What the laser and camera allow; the run's rate_hz and dt_s must fit (make_schedule).
-  drivers::TimingLimits timing_limits;
+  // What the laser and camera need and allow; the run's rate_hz and dt_s must fit (run_schedule).
+  RigTiming timing;
   RunStateMachine* state = nullptr;
   Publisher* publisher = nullptr;     // null: nothing published
   ProcessFactory processing;

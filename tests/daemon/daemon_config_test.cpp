@@ -56,5 +56,36 @@ TEST(DaemonConfig, BadKeysAreNamed) {
             std::string::npos);
 }
 
+TEST(DaemonConfig, TimingSectionSetsTheRigAndBadKeysAreNamed) {
+  const DaemonConfig c = load_daemon_config(write_temp("t.yaml", "timing: {laser_max_rate_hz: 30, frame_b_s: 0.01}\n"));
+  EXPECT_DOUBLE_EQ(c.timing.limits.laser_max_rate_hz, 30);
+  EXPECT_DOUBLE_EQ(c.timing.limits.frame_b_s, 0.01);
+  EXPECT_DOUBLE_EQ(c.timing.request.exposure_a_s, drivers::TimingRequest{}.exposure_a_s);
+  EXPECT_NE(error_of("timing: {laser_rate_hz: 30}\n").find("timing.laser_rate_hz: unknown key"), std::string::npos)
+      << error_of("timing: {laser_rate_hz: 30}\n");
+  EXPECT_NE(error_of("timing: {frame_b_s: -1}\n").find("timing.frame_b_s"), std::string::npos);
+}
+
+TEST(RunSchedule, FullSequenceForQSwitchLinesGateAloneForHardwareTimedMode) {
+  const RigTiming rig;
+  drivers::TriggerInfo sim{"sim://", "sim", 0, {drivers::kTriggerLines.begin(), drivers::kTriggerLines.end()}, true, true};
+  const drivers::Schedule full = run_schedule(rig, sim, 10, 1e-3);
+  EXPECT_NEAR(full.dt_s(), 1e-3, 1e-12);
+  EXPECT_DOUBLE_EQ(full.period_s, 0.1);
+  drivers::TriggerInfo gate{"gpiod://gpiochip0?gate=5", "gpiod", 50e-6, {drivers::TriggerLine::Gate}, false, false};
+  const drivers::Schedule g = run_schedule(rig, gate, 10, 1e-3);
+  ASSERT_EQ(g.edges.size(), 2u);
+  EXPECT_EQ(g.edges[0].line, drivers::TriggerLine::Gate);
+  // User-space GPIO cannot place the full sequence's 10 us margins: refused, pointing to gate mode.
+  drivers::TriggerInfo coarse = sim;
+  coarse.timing_uncertainty_s = 50e-6;
+  try {
+    run_schedule(rig, coarse, 10, 1e-3);
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("hardware-timed"), std::string::npos) << e.what();
+  }
+}
+
 }  // namespace
 }  // namespace plenopiv::daemon
