@@ -153,7 +153,7 @@ int main(int argc, char** argv) {
   const double render_s = now_s() - t;
 
   t = now_s();
-  const recon::WeightingOperator op(camera, lenses, settings.grid, recon::geometric_white_image(camera, lenses));
+  const recon::WeightingOperator op(camera, lenses, settings.reconstruction_grid(), recon::geometric_white_image(camera, lenses));
   const double weights_s = now_s() - t;
   std::printf("bench=e2e case=%s particles=%zu voxels=%zu render_s=%.2f weights_s=%.2f\n", scale.c_str(), count,
               settings.grid.count(), render_s, weights_s);
