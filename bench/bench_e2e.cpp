@@ -195,12 +195,26 @@ int main(int argc, char** argv) {
     }
   }
   for (double mu : {0.25, 1.0}) {
+    for (int it : {5, 20}) {
+      if (mu < 1.0 && it != 5) continue;  // 20 iterations at mu 1: the shipped process.yaml
+      process::ProcessSettings s = settings;
+      s.mart.mu = mu;
+      s.mart.iterations = it;
+      const auto r = process::process_pair(op, a, b, s);
+      const Errors er = errors_against(r.correlation.field, flow, voxel);
+      rows.push_back({"mu", it, 3, 16, mu, r.times.reconstruct_a_s + r.times.reconstruct_b_s + r.times.correlate_s,
+                      er.total, er});
+    }
+  }
+  {
+    // Without the depth guard: particles beyond the depth ends pin light in the end slices.
     process::ProcessSettings s = settings;
-    s.mart.mu = mu;
-    const auto r = process::process_pair(op, a, b, s);
+    s.depth_guard_mm = 0;
+    const recon::WeightingOperator op0(camera, lenses, s.reconstruction_grid(), recon::geometric_white_image(camera, lenses));
+    const auto r = process::process_pair(op0, a, b, s);
     const Errors er = errors_against(r.correlation.field, flow, voxel);
-    rows.push_back({"mu", 5, 3, 16, mu, r.times.reconstruct_a_s + r.times.reconstruct_b_s + r.times.correlate_s,
-                    er.total, er});
+    rows.push_back({"no_depth_guard", 5, 3, 16, 0.5,
+                    r.times.reconstruct_a_s + r.times.reconstruct_b_s + r.times.correlate_s, er.total, er});
   }
   for (int window : {12, 24}) {
     for (int passes : {3}) {
