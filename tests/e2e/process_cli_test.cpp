@@ -33,7 +33,7 @@ const fs::path& pair_dir() {
     const auto d = testing_support::temp_dir("process-cli");
     std::string out;
     const int status = run_command({binary("plenopiv"), "simulate", "pair", "--camera", kCamera, "--seed", "7",
-                                    "--ppm", "1", "--box", "-2.5,2.5,-2.5,2.5,-2.5,2.5", "--uniform",
+                                    "--ppm", "1", "--box", "-2.5,2.5,-2.5,2.5,-0.5,4.5", "--uniform",
                                     "0.25,0.125,0.25", "--rays", "2000", "-o", (d / "pair").string()},
                                    out, std::chrono::seconds(120));
     EXPECT_EQ(status, 0) << out;
@@ -73,18 +73,19 @@ TEST(ProcessCli, RecoversTheUniformDisplacement) {
     sum[2] += f.dz_mm[i];
   }
   ASSERT_GT(valid, f.grid.count() / 2) << "valid " << valid << " of " << f.grid.count();
-  // Measured (seed 7, 125 of 125 vectors valid, process.yaml: 20 iterations at mu 1, 1 mm depth
-  // guard): mean 0.2458 / 0.1191 / 0.1134 mm. Around the focal plane at 1 ppm the depth component
-  // is only partly recovered (paper settings: 0.03 mm; see docs/benchmarks.md, "Depth
-  // displacement"); the bound keeps that partial recovery from sliding back.
-  const double bound[2] = {0.03, 0.01};
+  // Measured (seed 7, 1 ppm, particles at z -0.5 to 4.5 mm, process.yaml: z 0 to 4 mm, 20
+  // iterations at mu 1, 1 mm depth guard): mean 0.2487 / 0.1246 / 0.1483 mm. At 1 ppm the depth
+  // component is partly recovered (0.25 ppm: 0.21 mm; a box across the focal plane: 0.08-0.11 mm;
+  // the paper's 5 iterations at mu 0.5: 0.03 mm; docs/benchmarks.md, "Depth displacement"); the
+  // bound keeps that recovery from sliding back.
+  const double bound[2] = {0.01, 0.01};
   for (int a = 0; a < 3; ++a) {
     const double mean = sum[a] / double(valid);
     std::printf("axis %d: mean %.5f mm, truth %.5f mm, error %.5f mm\n", a, mean, kTruth[a], mean - kTruth[a]);
     if (a < 2) {
       EXPECT_NEAR(mean, kTruth[a], bound[a]) << "axis " << a;
     } else {
-      EXPECT_GT(mean, 0.08) << "depth displacement locked near zero";
+      EXPECT_GT(mean, 0.12) << "depth displacement sliding back towards zero";
       EXPECT_LT(mean, kTruth[2] + 0.03);
     }
   }
@@ -116,7 +117,7 @@ std::string off_focus_config(const std::string& guard_mm) {
     EXPECT_NE(at, std::string::npos) << from;
     if (at != std::string::npos) text.replace(at, from.size(), to);
   };
-  replace("z_mm: [-2, 2]", "z_mm: [2, 6]");
+  replace("z_mm: [0, 4]", "z_mm: [2, 6]");
   replace("depth_guard_mm: 1 ", "depth_guard_mm: " + guard_mm + " ");
   return text;
 }
