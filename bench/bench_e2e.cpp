@@ -80,13 +80,14 @@ struct Row {
   int iterations, passes, window;
   double mu, seconds, rms_total;
   Errors e;
+  std::string value = "-";  // the knob's value where the columns above do not show it
 };
 
 void print_row(const char* scale, const Row& r, bool pareto) {
-  std::printf("bench=e2e case=%s variant=%s iterations=%d mu=%.2f final_window=%d passes=%d total_s=%.2f "
+  std::printf("bench=e2e case=%s variant=%s value=%s iterations=%d mu=%.2f final_window=%d passes=%d total_s=%.2f "
               "rms_u=%.3f rms_v=%.3f rms_w=%.3f rms=%.3f valid=%.3f pareto=%s\n",
-              scale, r.variant.c_str(), r.iterations, r.mu, r.window, r.passes, r.seconds, r.e.rms[0], r.e.rms[1],
-              r.e.rms[2], r.e.total, r.e.valid_fraction, pareto ? "yes" : "no");
+              scale, r.variant.c_str(), r.value.c_str(), r.iterations, r.mu, r.window, r.passes, r.seconds, r.e.rms[0],
+              r.e.rms[1], r.e.rms[2], r.e.total, r.e.valid_fraction, pareto ? "yes" : "no");
 }
 
 // Coarse to fine ending at `final` voxels, 75 % overlap after the first pass (50 %).
@@ -153,7 +154,7 @@ int main(int argc, char** argv) {
   const double render_s = now_s() - t;
 
   t = now_s();
-  const recon::WeightingOperator op(camera, lenses, settings.grid, recon::geometric_white_image(camera, lenses));
+  const recon::WeightingOperator op(camera, lenses, settings.reconstruction_grid(), recon::geometric_white_image(camera, lenses));
   const double weights_s = now_s() - t;
   std::printf("bench=e2e case=%s particles=%zu voxels=%zu render_s=%.2f weights_s=%.2f\n", scale.c_str(), count,
               settings.grid.count(), render_s, weights_s);
@@ -195,12 +196,56 @@ int main(int argc, char** argv) {
     }
   }
   for (double mu : {0.25, 1.0}) {
+    for (int it : {5, 20}) {
+      if (mu < 1.0 && it != 5) continue;  // 20 iterations at mu 1: the shipped process.yaml
+      process::ProcessSettings s = settings;
+      s.mart.mu = mu;
+      s.mart.iterations = it;
+      const auto r = process::process_pair(op, a, b, s);
+      const Errors er = errors_against(r.correlation.field, flow, voxel);
+      rows.push_back({"mu", it, 3, 16, mu, r.times.reconstruct_a_s + r.times.reconstruct_b_s + r.times.correlate_s,
+                      er.total, er});
+    }
+  }
+  {
+    // Without the depth guard: particles beyond the depth ends pin light in the end slices.
     process::ProcessSettings s = settings;
-    s.mart.mu = mu;
+    s.depth_guard_mm = 0;
+    const recon::WeightingOperator op0(camera, lenses, s.reconstruction_grid(), recon::geometric_white_image(camera, lenses));
+    const auto r = process::process_pair(op0, a, b, s);
+    const Errors er = errors_against(r.correlation.field, flow, voxel);
+    rows.push_back({"no_depth_guard", 5, 3, 16, 0.5,
+                    r.times.reconstruct_a_s + r.times.reconstruct_b_s + r.times.correlate_s, er.total, er});
+  }
+  // Skip thresholds: the dark-pixel cutoff and a noise floor (counts; the images carry about
+  // 5-50 counts in a lit pixel at 5000 rays per particle).
+  for (double cutoff : {0.7, 0.99}) {
+    process::ProcessSettings s = settings;
+    s.mart.dark_weight_cutoff = cutoff;
     const auto r = process::process_pair(op, a, b, s);
     const Errors er = errors_against(r.correlation.field, flow, voxel);
-    rows.push_back({"mu", 5, 3, 16, mu, r.times.reconstruct_a_s + r.times.reconstruct_b_s + r.times.correlate_s,
-                    er.total, er});
+    rows.push_back({"dark_cutoff", 5, 3, 16, 0.5, r.times.reconstruct_a_s + r.times.reconstruct_b_s + r.times.correlate_s,
+                    er.total, er, std::to_string(cutoff).substr(0, 4)});
+  }
+  for (float floor_counts : {2.f, 5.f}) {
+    process::ProcessSettings s = settings;
+    s.mart.noise_threshold = floor_counts;
+    const auto r = process::process_pair(op, a, b, s);
+    const Errors er = errors_against(r.correlation.field, flow, voxel);
+    rows.push_back({"noise_threshold", 5, 3, 16, 0.5,
+                    r.times.reconstruct_a_s + r.times.reconstruct_b_s + r.times.correlate_s, er.total, er,
+                    std::to_string(int(floor_counts))});
+  }
+  {
+    // Volume binning: voxels of twice the size (the same box, windows of the same size in mm).
+    process::ProcessSettings s = settings;
+    s.grid = process::grid_for_extent({-hx, -hy, -hz}, {hx, hy, hz}, {2 * voxel, 2 * voxel, 2 * voxel}, "bench");
+    s.correlation.passes = {{{16, 16, 16}, 50.0}, {{12, 12, 12}, 75.0}, {{8, 8, 8}, 75.0}};
+    const recon::WeightingOperator op2(camera, lenses, s.reconstruction_grid(), recon::geometric_white_image(camera, lenses));
+    const auto r = process::process_pair(op2, a, b, s);
+    const Errors er = errors_against(r.correlation.field, flow, voxel);  // still in 0.125 mm voxels
+    rows.push_back({"binning", 5, 3, 8, 0.5, r.times.reconstruct_a_s + r.times.reconstruct_b_s + r.times.correlate_s,
+                    er.total, er, "2x"});
   }
   for (int window : {12, 24}) {
     for (int passes : {3}) {

@@ -21,8 +21,11 @@ ax.plot([t for t, _ in front], [e for _, e in front], "-", color="tab:red", labe
 for r in rows:
     t, e = float(r["total_s"]), float(r["rms"])
     ax.plot(t, e, "o", color="tab:red" if r["pareto"] == "yes" else "tab:gray")
-    label = {"paper": "paper", "iterations": f"it {r['iterations']}", "mu": f"mu {r['mu']}",
-             "final_window": f"{r['final_window']}³", "passes": f"{r['passes']} passes"}[r["variant"]]
+    label = {"paper": "paper", "iterations": f"it {r['iterations']}", "mu": f"mu {r['mu']}, it {r['iterations']}",
+             "no_depth_guard": "no depth guard", "dark_cutoff": f"cutoff {r.get('value')}",
+             "noise_threshold": f"floor {r.get('value')}", "binning": f"binning {r.get('value')}",
+             "final_window": f"{r['final_window']}³",
+             "passes": f"{r['passes']} passes"}[r["variant"]]
     ax.annotate(label, (t, e), textcoords="offset points", xytext=(4, 3), fontsize=8)
 ax.set_xlabel("time per pair, s (2 reconstructions + correlation; shared machine)")
 ax.set_ylabel("RMS error, voxels (|u, v, w|)")

@@ -62,6 +62,7 @@ std::string RunConfig::process_yaml() const {
     volume[axes[a]] = range;
   }
   volume["voxel_mm"] = voxel_mm;
+  if (depth_guard_mm) volume["depth_guard_mm"] = *depth_guard_mm;
   root["volume"] = volume;
   if (reconstruction.size() > 0) root["reconstruction"] = YAML::Clone(reconstruction);
   if (correlation.size() > 0) root["correlation"] = YAML::Clone(correlation);
@@ -97,7 +98,7 @@ RunConfig parse_run_config(const std::string& text, const std::string& source) {
   }
 
   const YamlMap volume = map.map("volume");
-  volume.reject_unknown({"x_mm", "y_mm", "z_mm", "voxel_mm"});
+  volume.reject_unknown({"x_mm", "y_mm", "z_mm", "voxel_mm", "depth_guard_mm"});
   const char* axes[3] = {"x_mm", "y_mm", "z_mm"};
   for (int a = 0; a < 3; ++a) {
     const auto r = range_mm(volume, axes[a]);
@@ -106,6 +107,10 @@ RunConfig parse_run_config(const std::string& text, const std::string& source) {
   }
   c.voxel_mm = volume.number("voxel_mm");
   if (!(c.voxel_mm > 0)) volume.fail("voxel_mm", "must be > 0 mm");
+  if (volume.has("depth_guard_mm")) {
+    c.depth_guard_mm = volume.number("depth_guard_mm");
+    if (!(*c.depth_guard_mm >= 0)) volume.fail("depth_guard_mm", "must be >= 0 mm");
+  }
   const Grid3 g = c.volume_grid();
   if (double(g.count()) > 512.0 * 1024 * 1024) {
     volume.fail("voxel_mm", "the volume would have " + std::to_string(g.count()) +

@@ -5,6 +5,7 @@
 #include <yaml-cpp/yaml.h>
 
 #include <array>
+#include <optional>
 #include <string>
 
 #include "core/base/grid.hpp"
@@ -21,6 +22,7 @@ struct RunConfig {
   double dt_s = 100e-6;          // pulse separation
   std::array<double, 3> volume_min_mm{0, 0, 0}, volume_max_mm{0, 0, 0};  // x, y, z
   double voxel_mm = 0.0;
+  std::optional<double> depth_guard_mm;  // volume.depth_guard_mm; unset: core/process's default
   YAML::Node reconstruction;  // opaque to the daemon: core/recon reads it
   YAML::Node correlation;     // opaque to the daemon: core/piv reads it
   bool publish_volumes = false;

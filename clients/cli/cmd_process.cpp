@@ -199,8 +199,9 @@ void run_process(const ProcessOptions& o) {
 
   const calib::LoadedCalibration cal = calibration_for(o, camera);
   const auto& g = settings.grid;
-  std::fprintf(stderr, "volume %d x %d x %d voxels; weights ...\n", g.shape[0], g.shape[1], g.shape[2]);
-  const recon::WeightingOperator op(camera, cal.lenses, g, cal.white_correction);
+  std::fprintf(stderr, "volume %d x %d x %d voxels (+%d guard slices at each depth end); weights ...\n", g.shape[0],
+               g.shape[1], g.shape[2], settings.guard_slices());
+  const recon::WeightingOperator op(camera, cal.lenses, settings.reconstruction_grid(), cal.white_correction);
   Progress progress("process", "pairs", 1.0);
   const auto r = process::process_pair(op, a, b, settings, [&](const std::string&, double f) { progress.update(f); });
 
@@ -271,9 +272,9 @@ void run_reprocess(const ProcessOptions& o) {
   nominal.nominal = true;
   const calib::LoadedCalibration cal = calibration_for(nominal, camera);
   const auto& g = settings.grid;
-  std::fprintf(stderr, "%s: %d pairs; volume %d x %d x %d voxels; weights ...\n", run.string().c_str(),
-               m.pairs_size(), g.shape[0], g.shape[1], g.shape[2]);
-  const recon::WeightingOperator op(camera, cal.lenses, g, cal.white_correction);
+  std::fprintf(stderr, "%s: %d pairs; volume %d x %d x %d voxels (+%d guard slices at each depth end); weights ...\n",
+               run.string().c_str(), m.pairs_size(), g.shape[0], g.shape[1], g.shape[2], settings.guard_slices());
+  const recon::WeightingOperator op(camera, cal.lenses, settings.reconstruction_grid(), cal.white_correction);
   const double pairs = double(m.pairs_size());
   Progress progress("process", "pairs", pairs);
   for (int k = 0; k < m.pairs_size(); ++k) {

@@ -2,6 +2,7 @@
 #include "core/process/process.hpp"
 
 #include <chrono>
+#include <algorithm>
 #include <cmath>
 
 #include "core/base/errors.hpp"
@@ -45,16 +46,41 @@ Grid3 grid_for_extent(const std::array<double, 3>& lo, const std::array<double, 
   return g;
 }
 
+int ProcessSettings::guard_slices() const {
+  return int(std::ceil(depth_guard_mm / grid.spacing_mm[2] - 1e-9));
+}
+
+Grid3 ProcessSettings::reconstruction_grid() const {
+  Grid3 g = grid;
+  const int guard = guard_slices();
+  g.shape[2] += 2 * guard;
+  g.origin_mm[2] -= guard * g.spacing_mm[2];
+  return g;
+}
+
+namespace {
+// The slices [first, first + grid.shape[2]) of `v`, on `grid` (the box the user asked for).
+Volume depth_crop(const Volume& v, int first, const Grid3& grid) {
+  if (first == 0 && v.grid == grid) return v;
+  Volume out(grid, 0.f);
+  const std::size_t slice = std::size_t(grid.shape[0]) * std::size_t(grid.shape[1]);
+  std::copy_n(v.data.begin() + std::ptrdiff_t(std::size_t(first) * slice), out.data.size(), out.data.begin());
+  return out;
+}
+}  // namespace
+
 ProcessSettings process_settings_from(const YamlMap& root) {
   root.reject_unknown({"dt_s", "volume", "reconstruction", "correlation"});
   ProcessSettings s;
 
   const YamlMap vol = root.map("volume");
-  vol.reject_unknown({"x_mm", "y_mm", "z_mm", "voxel_mm", "voxel_z_mm"});
+  vol.reject_unknown({"x_mm", "y_mm", "z_mm", "voxel_mm", "voxel_z_mm", "depth_guard_mm"});
   const auto x = range(vol, "x_mm"), y = range(vol, "y_mm"), z = range(vol, "z_mm");
   const double voxel = vol.number("voxel_mm");
   const double voxel_z = vol.number_or("voxel_z_mm", voxel);
   s.grid = grid_for_extent({x[0], y[0], z[0]}, {x[1], y[1], z[1]}, {voxel, voxel, voxel_z}, root.where("volume"));
+  s.depth_guard_mm = vol.number_or("depth_guard_mm", s.depth_guard_mm);
+  if (!(s.depth_guard_mm >= 0 && s.depth_guard_mm <= 100)) vol.fail("depth_guard_mm", "must be in [0, 100] mm");
 
   if (auto r = root.optional_map("reconstruction")) {
     r->reject_unknown({"iterations", "mu", "start", "noise_threshold", "dark_weight_cutoff", "convergence"});
@@ -96,8 +122,9 @@ ProcessSettings load_process_settings(const std::filesystem::path& path) {
 
 PairResult process_pair(const recon::WeightingOperator& op, const ImageF& frame_a, const ImageF& frame_b,
                         const ProcessSettings& settings, const PairProgress& progress) {
-  if (!(op.grid() == settings.grid))
-    throw InputError("process: the weighting operator was built for another volume grid than the run config's");
+  if (!(op.grid() == settings.reconstruction_grid()))
+    throw InputError("process: the weighting operator was built for another volume grid than the run config's "
+                     "(its volume plus the depth guard)");
   recon::validate_image(frame_a, op, "frame A");
   recon::validate_image(frame_b, op, "frame B");
   // Shares of the pair's work for the progress fraction: each reconstruction 40 %, correlation 20 %.
@@ -112,7 +139,7 @@ PairResult process_pair(const recon::WeightingOperator& op, const ImageF& frame_
     report("reconstruct A", 0.4 * it.iteration / iterations);
   });
   out.times.reconstruct_a_s = seconds_since(t0);
-  out.volume_a = std::move(ra.volume);
+  out.volume_a = depth_crop(ra.volume, settings.guard_slices(), settings.grid);
   out.skipped_a = ra.skipped;
 
   t0 = std::chrono::steady_clock::now();
@@ -120,7 +147,7 @@ PairResult process_pair(const recon::WeightingOperator& op, const ImageF& frame_
     report("reconstruct B", 0.4 + 0.4 * it.iteration / iterations);
   });
   out.times.reconstruct_b_s = seconds_since(t0);
-  out.volume_b = std::move(rb.volume);
+  out.volume_b = depth_crop(rb.volume, settings.guard_slices(), settings.grid);
   out.skipped_b = rb.skipped;
 
   t0 = std::chrono::steady_clock::now();

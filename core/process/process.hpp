@@ -19,9 +19,18 @@ namespace plenopiv::process {
 // Everything one pair needs besides the camera and calibration. Defaults: the paper's settings
 // (MART mu 0.5, 5 iterations; passes 32³@50 %, 24³@75 %, 16³@75 %).
 struct ProcessSettings {
-  Grid3 grid;                        // reconstruction volume, mm
+  Grid3 grid;                        // the volume the user asked for, mm: correlated and returned
+  // Slices reconstructed beyond each depth end of `grid` and then dropped. A particle just outside
+  // the box puts its elongated image (about ±1 mm at 4 mm from focus on the sec 5.4 camera) into
+  // the end slices, where it stays from frame to frame and pulls the correlation's depth peak
+  // towards zero: on a 0.25 mm depth shift measured 0.12 mm without a guard and 0.20 mm with
+  // 1 mm (docs/benchmarks.md, "Depth displacement").
+  double depth_guard_mm = 1.0;
   recon::MartSettings mart;
   piv::CorrelationSettings correlation;  // dt_s lives here
+
+  int guard_slices() const;           // depth_guard_mm in whole slices (rounded up)
+  Grid3 reconstruction_grid() const;  // `grid` with the guard slices at both depth ends
 };
 
 // The box of voxels centred on [lo, hi] per axis with `voxel_mm` spacing (x, y, z); InputError
@@ -31,7 +40,7 @@ Grid3 grid_for_extent(const std::array<double, 3>& lo, const std::array<double, 
 
 // Reads a run config mapping (systemd/config/process.yaml):
 //   dt_s: 0.0001                                   (required)
-//   volume: {x_mm: [a, b], y_mm: [..], z_mm: [..], voxel_mm: 0.125, voxel_z_mm: 0.125}
+//   volume: {x_mm: [a, b], y_mm: [..], z_mm: [..], voxel_mm: 0.125, voxel_z_mm: 0.125, depth_guard_mm: 1}
 //   reconstruction: {iterations, mu, start: mlos|ones, noise_threshold, dark_weight_cutoff, convergence}
 //   correlation: {passes, median, signal_threshold}    (as piv::load_correlation_settings)
 // Unknown keys are refused; every value is checked; InputError names the file and key.
@@ -54,8 +63,9 @@ struct PairResult {
 // whole pair done, in [0, 1].
 using PairProgress = std::function<void(const std::string& stage, double fraction)>;
 
-// Reconstructs both frames with `op` (whose grid must be settings.grid: InputError otherwise),
-// then correlates them. Images are validated (sensor-sized, finite, non-negative) and named
+// Reconstructs both frames with `op` (whose grid must be settings.reconstruction_grid():
+// InputError otherwise), drops the guard slices, then correlates them (PairResult's volumes are on
+// settings.grid). Images are validated (sensor-sized, finite, non-negative) and named
 // "frame A" / "frame B" in errors. Bit-identical at any thread count.
 PairResult process_pair(const recon::WeightingOperator& op, const ImageF& frame_a, const ImageF& frame_b,
                         const ProcessSettings& settings, const PairProgress& progress = {});

@@ -133,7 +133,7 @@ bool all_finite(const std::vector<float>& v) {
 
 PairResult run_at(int threads, const Case& c) {
   tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
-  return process_pair(fixture().op(c.settings.grid, c.depth), c.a, c.b, c.settings);
+  return process_pair(fixture().op(c.settings.reconstruction_grid(), c.depth), c.a, c.b, c.settings);
 }
 
 TEST(PLENOPIV_STRESS_SUITE, RandomisedPairsAreFiniteAndThreadIndependent) {
@@ -184,7 +184,7 @@ TEST(PLENOPIV_STRESS_SUITE, NaNAndNegativeImagesAreRefused) {
     spoiled.pixels[at] = bad[i % 4];
     const char* name = (i % 2) ? "frame B" : "frame A";
     try {
-      process_pair(fixture().op(c.settings.grid, c.depth), c.a, c.b, c.settings);
+      process_pair(fixture().op(c.settings.reconstruction_grid(), c.depth), c.a, c.b, c.settings);
       ADD_FAILURE() << "accepted a frame with " << bad[i % 4];
     } catch (const InputError& e) {
       EXPECT_NE(std::string(e.what()).find(name), std::string::npos) << e.what();
@@ -197,17 +197,17 @@ TEST(PLENOPIV_STRESS_SUITE, InvalidSettingsAreRefused) {
   for (double mu : {0.0, -0.5, 1.5, std::numeric_limits<double>::quiet_NaN()}) {
     ProcessSettings s = c.settings;
     s.mart.mu = mu;
-    EXPECT_THROW(process_pair(fixture().op(s.grid, c.depth), c.a, c.b, s), InputError) << "mu " << mu;
+    EXPECT_THROW(process_pair(fixture().op(s.reconstruction_grid(), c.depth), c.a, c.b, s), InputError) << "mu " << mu;
   }
   ProcessSettings s = c.settings;
   s.mart.iterations = 0;
-  EXPECT_THROW(process_pair(fixture().op(s.grid, c.depth), c.a, c.b, s), InputError);
+  EXPECT_THROW(process_pair(fixture().op(s.reconstruction_grid(), c.depth), c.a, c.b, s), InputError);
   s = c.settings;
   s.correlation.passes = {{{64, 64, 64}, 50}};  // larger than the 12-voxel box
-  EXPECT_THROW(process_pair(fixture().op(s.grid, c.depth), c.a, c.b, s), InputError);
+  EXPECT_THROW(process_pair(fixture().op(s.reconstruction_grid(), c.depth), c.a, c.b, s), InputError);
   s = c.settings;
   ImageF small(20, 20, 1.f);
-  EXPECT_THROW(process_pair(fixture().op(s.grid, c.depth), small, c.b, s), InputError);
+  EXPECT_THROW(process_pair(fixture().op(s.reconstruction_grid(), c.depth), small, c.b, s), InputError);
 }
 
 }  // namespace

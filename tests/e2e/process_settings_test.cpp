@@ -1,0 +1,78 @@
+// core/process's run config: the depth guard's grid, its refusal of bad values, and that
+// process_pair hands back the box the user asked for (guard slices reconstructed, then dropped).
+#include <gtest/gtest.h>
+
+#include <vector>
+
+#include "core/base/errors.hpp"
+#include "core/base/yaml_access.hpp"
+#include "core/optics/camera_file.hpp"
+#include "core/process/process.hpp"
+#include "core/recon/weights.hpp"
+#include "core/sim/render.hpp"
+
+namespace plenopiv::process {
+namespace {
+
+ProcessSettings parse(const std::string& text) {
+  return process_settings_from(YamlMap(load_yaml_text(text, "run.yaml"), "run.yaml"));
+}
+
+const std::string kVolume = "dt_s: 0.001\nvolume: {x_mm: [-1, 1], y_mm: [-1, 1], z_mm: [2, 4], voxel_mm: 0.125";
+const std::string kPasses = "correlation: {passes: [{window: 8, overlap_percent: 50}]}\n";
+
+TEST(ProcessSettings, TheDepthGuardAddsWholeSlicesAtBothDepthEnds) {
+  const ProcessSettings s = parse(kVolume + ", depth_guard_mm: 0.3}\n" + kPasses);
+  EXPECT_EQ(s.grid.shape[2], 16);
+  EXPECT_EQ(s.guard_slices(), 3);  // 0.3 mm in 0.125 mm slices, rounded up
+  const Grid3 r = s.reconstruction_grid();
+  EXPECT_EQ(r.shape[0], s.grid.shape[0]);
+  EXPECT_EQ(r.shape[1], s.grid.shape[1]);
+  EXPECT_EQ(r.shape[2], 16 + 6);
+  EXPECT_DOUBLE_EQ(r.origin_mm[2], s.grid.origin_mm[2] - 3 * 0.125);
+  EXPECT_DOUBLE_EQ(r.coordinate_mm(2, 3), s.grid.coordinate_mm(2, 0));
+
+  EXPECT_DOUBLE_EQ(parse(kVolume + "}\n" + kPasses).depth_guard_mm, 1.0);  // the default
+  EXPECT_EQ(parse(kVolume + ", depth_guard_mm: 0}\n" + kPasses).reconstruction_grid(),
+            parse(kVolume + "}\n" + kPasses).grid);
+}
+
+TEST(ProcessSettings, ABadDepthGuardIsNamed) {
+  for (const std::string bad : {"-0.5", "1000", "many"}) {
+    try {
+      parse(kVolume + ", depth_guard_mm: " + bad + "}\n" + kPasses);
+      ADD_FAILURE() << bad;
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("depth_guard_mm"), std::string::npos) << e.what();
+    }
+  }
+}
+
+TEST(ProcessSettings, ProcessPairReturnsTheRequestedBoxAndRefusesAnUnguardedOperator) {
+  const auto camera = optics::load_camera_file(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml");
+  const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera));
+  ProcessSettings s = parse(kVolume + ", depth_guard_mm: 0.25}\n" + kPasses);
+  sim::RenderOptions ro;
+  ro.rays_per_particle = 2000;
+  auto frame = [&](double z) {
+    const std::vector<sim::Point3> particles{{0.1, -0.2, z}, {-0.4, 0.3, z + 0.5}};
+    const auto r = sim::render(camera, lenses, particles, ro, 3);
+    ImageF f(r.image.width, r.image.height);
+    for (std::size_t i = 0; i < f.size(); ++i) f.pixels[i] = r.image.pixels[i];
+    return f;
+  };
+  const ImageF a = frame(3.0), b = frame(3.1);
+  const recon::WeightingOperator guarded(camera, lenses, s.reconstruction_grid(), recon::geometric_white_image(camera, lenses));
+  const PairResult r = process_pair(guarded, a, b, s);
+  EXPECT_EQ(r.volume_a.grid, s.grid);
+  EXPECT_EQ(r.volume_b.grid, s.grid);
+  double light = 0;
+  for (float v : r.volume_a.data) light += v;
+  EXPECT_GT(light, 0.0);  // the particles' slices are inside the returned box
+
+  const recon::WeightingOperator unguarded(camera, lenses, s.grid, recon::geometric_white_image(camera, lenses));
+  EXPECT_THROW(process_pair(unguarded, a, b, s), InputError);
+}
+
+}  // namespace
+}  // namespace plenopiv::process
