@@ -32,7 +32,8 @@ struct RunConfig {
   Grid3 volume_grid() const;
   // The processing settings as core/process reads them (process::process_settings_from, the
   // schema of systemd/config/process.yaml): dt_s, the volume as the extent whose voxel centres are
-  // exactly volume_grid(), and the reconstruction and correlation sections as given. The live
+  // volume_grid() (exactly for binary fractions such as 0.125 mm, else to rounding), the run's
+  // volume.depth_guard_mm when set, and the reconstruction and correlation sections as given. The live
   // stage parses this text and the run folder keeps it (process.yaml), so `plenopiv process --run`
   // reprocesses with exactly the live settings.
   std::string process_yaml() const;

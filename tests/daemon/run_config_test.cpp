@@ -5,6 +5,7 @@
 #include <sstream>
 
 #include "core/base/errors.hpp"
+#include "core/process/process.hpp"
 #include "daemon/run_config.hpp"
 
 namespace plenopiv::daemon {
@@ -72,6 +73,34 @@ TEST(RunConfig, BadValuesAreNamed) {
             std::string::npos);
   EXPECT_NE(error_of("pairs: 3\n").find("volume"), std::string::npos);
   EXPECT_NE(error_of("pairs: [3\n").find("run.yaml"), std::string::npos);  // YAML syntax
+}
+
+// process.yaml, as the live stage and `plenopiv process --run` read it: the run's grid,
+// the run's dt, its sections, and the depth guard when the run sets one.
+TEST(RunConfig, ProcessYamlGivesCoreProcessTheLiveGridAndSettings) {
+  for (const std::string& volume :
+       {std::string("volume: {x_mm: [-1, 1], y_mm: [-2, 2], z_mm: [0, 2], voxel_mm: 0.5}\n"),
+        std::string("volume: {x_mm: [-2, 2], y_mm: [-2, 2], z_mm: [-2, 2], voxel_mm: 0.125}\n"),
+        std::string("volume: {x_mm: [-0.3, 0.71], y_mm: [0.1, 1.3], z_mm: [-1.7, 0.2], voxel_mm: 0.1, "
+                    "depth_guard_mm: 0.25}\n")}) {
+    const RunConfig c = parse_run_config(
+        "dt_s: 0.0004\n" + volume + "reconstruction: {iterations: 2, mu: 0.7}\n"
+        "correlation: {passes: [{window: 4, overlap_percent: 50}]}\n", "run.yaml");
+    const process::ProcessSettings s =
+        process::process_settings_from(YamlMap(load_yaml_text(c.process_yaml(), "process.yaml"), "process.yaml"));
+    EXPECT_EQ(s.grid.shape, c.volume_grid().shape) << volume;
+    // The same voxels: exactly for binary fractions like 0.125, to a rounding of the extent's
+    // midpoint otherwise (both the live stage and --run read process.yaml, so they agree exactly).
+    for (int a = 0; a < 3; ++a) EXPECT_NEAR(s.grid.origin_mm[a], c.volume_grid().origin_mm[a], 1e-12) << volume;
+    EXPECT_EQ(s.grid.spacing_mm, c.volume_grid().spacing_mm) << volume;
+    EXPECT_DOUBLE_EQ(s.correlation.dt_s, 4e-4);
+    EXPECT_EQ(s.mart.iterations, 2);
+    EXPECT_DOUBLE_EQ(s.mart.mu, 0.7);
+    EXPECT_EQ(s.correlation.passes.size(), 1u);
+    EXPECT_DOUBLE_EQ(s.depth_guard_mm, c.depth_guard_mm.value_or(process::ProcessSettings{}.depth_guard_mm));
+  }
+  EXPECT_NE(error_of(kVolume.substr(0, kVolume.size() - 2) + ", depth_guard_mm: -1}\n").find("volume.depth_guard_mm"),
+            std::string::npos);
 }
 
 }  // namespace
