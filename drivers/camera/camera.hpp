@@ -110,6 +110,9 @@ class TriggerInput {
  public:
   virtual ~TriggerInput() = default;
   virtual void rising_edge() = 0;
+  // The laser fired (a Q-switch), at `time_ns` on the trigger's clock. A real camera does not see
+  // it; a simulated one uses it to move its scene by the time between an exposure's two pulses.
+  virtual void laser_pulse(std::uint64_t /*time_ns*/) {}
 };
 
 // Thread safety: one thread controls a camera (configure/arm/start/stop/software_trigger);

@@ -30,6 +30,9 @@ struct SceneSettings {
   std::uint64_t incomplete_every = 0;
   std::uint64_t disconnect_after = 0;
   double readout_s = 0.01;
+  // The pulse separation the flow's displacements belong to. When a simulated trigger reports an
+  // exposure's two laser pulses, the scene moves by the flow scaled to the time between them.
+  double flow_dt_s = 1e-4;
 };
 
 std::uint64_t now_ns() {
@@ -122,6 +125,11 @@ class SimCamera : public CameraBase, public TriggerInput {
   void rising_edge() override {
     if (external_ && wanted_state() == CameraState::Running) do_software_trigger();
   }
+  // The pulses after a trigger belong to its exposure (the camera line rises before pulse 1).
+  void laser_pulse(std::uint64_t time_ns) override {
+    std::lock_guard lock(mutex_);
+    if (!pending_.empty() && pending_.back().pulses < 2) pending_.back().pulse_ns[pending_.back().pulses++] = time_ns;
+  }
 
   void do_arm(const DoubleExposureSettings& settings) override {
     external_ = settings.trigger == TriggerSource::External;
@@ -139,25 +147,30 @@ class SimCamera : public CameraBase, public TriggerInput {
   void do_software_trigger() override {
     {
       std::lock_guard lock(mutex_);
-      pending_.push_back({next_trigger_++, std::chrono::steady_clock::now() + readout_});
+      pending_.push_back({next_trigger_++, std::chrono::steady_clock::now() + readout_, {0, 0}, 0});
     }
     wake_.notify_all();
   }
 
   void render_loop() {
     for (;;) {
-      std::uint64_t trigger = 0;
+      Pending exposure;
       {
         std::unique_lock lock(mutex_);
         wake_.wait(lock, [this] { return quit_ || !pending_.empty(); });
         if (quit_) return;
         const auto due = pending_.front().due;
         if (wake_.wait_until(lock, due, [this] { return quit_.load(); })) return;
-        trigger = pending_.front().trigger;
+        exposure = pending_.front();
         pending_.pop_front();
         rendering_ = true;
       }
-      render_pair(trigger);
+      // Two pulses seen: the scene moved for the time between them; otherwise (software trigger)
+      // by the flow as given.
+      const double scale = exposure.pulses == 2 && exposure.pulse_ns[1] > exposure.pulse_ns[0]
+                               ? double(exposure.pulse_ns[1] - exposure.pulse_ns[0]) * 1e-9 / scene_.flow_dt_s
+                               : 1.0;
+      render_pair(exposure.trigger, scale);
       {
         std::lock_guard lock(mutex_);
         rendering_ = false;
@@ -166,7 +179,7 @@ class SimCamera : public CameraBase, public TriggerInput {
     }
   }
 
-  void render_pair(std::uint64_t trigger) {
+  void render_pair(std::uint64_t trigger, double flow_scale) {
     if (scene_.disconnect_after && trigger >= scene_.disconnect_after) {
       report_lost("simulated disconnect after " + std::to_string(scene_.disconnect_after) + " triggers");
       return;
@@ -174,7 +187,12 @@ class SimCamera : public CameraBase, public TriggerInput {
     // Pair k depends on (seed, k) only: the same run renders the same frames.
     const std::uint64_t pair_seed = scene_.seed * 0x9E3779B97F4A7C15ull + trigger;
     const std::vector<sim::Point3> a = sim::random_particles(box_, particle_count_, pair_seed);
-    const std::vector<sim::Point3> b = sim::displace(a, *flow_);
+    std::vector<sim::Point3> b = sim::displace(a, *flow_);
+    if (flow_scale != 1.0) {
+      // Displacement proportional to the pulse separation (to first order for non-uniform flows).
+      for (std::size_t i = 0; i < b.size(); ++i)
+        for (int k = 0; k < 3; ++k) b[i][k] = a[i][k] + flow_scale * (b[i][k] - a[i][k]);
+    }
     const std::uint64_t t0 = now_ns();
     Frame fa = make_frame(a, 2 * trigger, pair_seed, t0);
     submit_frame(std::move(fa), trigger);
@@ -211,8 +229,10 @@ class SimCamera : public CameraBase, public TriggerInput {
   std::condition_variable wake_;
   std::condition_variable idle_;
   struct Pending {
-    std::uint64_t trigger;
+    std::uint64_t trigger = 0;
     std::chrono::steady_clock::time_point due;
+    std::uint64_t pulse_ns[2] = {0, 0};  // laser pulses reported during this exposure
+    int pulses = 0;
   };
   std::deque<Pending> pending_;
   bool rendering_ = false;
@@ -227,7 +247,7 @@ std::unique_ptr<Camera> open_sim_camera(const DeviceUri& uri,
                                         const std::filesystem::path& default_camera_file) {
   uri.reject_unknown({"camera", "seed", "ppm", "depth_mm", "flow", "dx_mm", "dy_mm", "dz_mm",
                       "voxel_mm", "angle_deg", "shear_per_mm", "rays", "noise", "drop_every",
-                      "incomplete_every", "disconnect_after", "readout_ms"});
+                      "incomplete_every", "disconnect_after", "readout_ms", "flow_dt_us"});
   if (!uri.target().empty()) uri.fail("the simulated camera takes no device name, only ?parameters");
   const std::string file = uri.string_or("camera", default_camera_file.string());
   if (file.empty()) uri.fail("camera: no camera file given and no default configured");
@@ -255,6 +275,9 @@ std::unique_ptr<Camera> open_sim_camera(const DeviceUri& uri,
   const double readout_ms = uri.number_or("readout_ms", scene.readout_s * 1e3);
   if (!(readout_ms >= 0) || readout_ms > 10000) uri.fail("readout_ms: must be in [0, 10000] ms");
   scene.readout_s = readout_ms * 1e-3;
+  const double flow_dt_us = uri.number_or("flow_dt_us", scene.flow_dt_s * 1e6);
+  if (!(flow_dt_us > 0) || flow_dt_us > 1e7) uri.fail("flow_dt_us: must be in (0, 1e7] us");
+  scene.flow_dt_s = flow_dt_us * 1e-6;
   std::unique_ptr<sim::Flow> flow = flow_from_uri(uri, camera);
   return std::make_unique<SimCamera>(uri, std::move(camera), scene, std::move(flow));
 }

@@ -50,7 +50,10 @@ void SimTrigger::on_edge_written(const Edge& edge, std::uint64_t shot, double pl
   if (camera_input && edge.line == TriggerLine::Camera && edge.rising) camera_input->rising_edge();
   // The laser's Q-switch sync output fires with each Q-switch: measure it like gpiod would.
   if (edge.rising && (edge.line == TriggerLine::QSwitch1 || edge.line == TriggerLine::QSwitch2)) {
-    report_sync_edge(virtual_clock_ ? base_ns_ + std::uint64_t(r.actual_s * 1e9) : now_ns());
+    const std::uint64_t fired_ns = virtual_clock_ ? base_ns_ + std::uint64_t(r.actual_s * 1e9) : now_ns();
+    report_sync_edge(fired_ns);
+    // The simulated scene moves between the pulses that really fired (a late Q-switch 1 shortens dt).
+    if (camera_input) camera_input->laser_pulse(fired_ns);
   }
   if (listener) listener(r);
 }

@@ -55,6 +55,29 @@ TEST(SimCamera, TheSameSeedRendersTheSameFrames) {
   }
 }
 
+// Laser pulses reported on the trigger input set how far the scene moves: pulses 200 us apart
+// with the flow given for 100 us render what a flow twice as fast renders with none reported.
+TEST(SimCamera, TheSceneMovesForTheTimeBetweenTheReportedLaserPulses) {
+  auto pulsed = open("seed=5&dx_mm=0.25&flow_dt_us=100");
+  auto doubled = open("seed=5&dx_mm=0.5");
+  auto plain = open("seed=5&dx_mm=0.25");
+  pulsed->configure(CameraSettings{});
+  pulsed->arm(DoubleExposureSettings{TriggerSource::External, 0.0});
+  pulsed->start();
+  TriggerInput* input = pulsed->trigger_input();
+  ASSERT_NE(input, nullptr);
+  input->rising_edge();
+  input->laser_pulse(1'000'000);
+  input->laser_pulse(1'200'000);
+  run_triggers(*doubled, 1);
+  run_triggers(*plain, 1);
+  const auto p = pulsed->next_pair(20s), d = doubled->next_pair(20s), n = plain->next_pair(20s);
+  ASSERT_TRUE(p && d && n);
+  EXPECT_EQ(p->a.image.pixels, d->a.image.pixels);
+  EXPECT_EQ(p->b.image.pixels, d->b.image.pixels);
+  EXPECT_NE(p->b.image.pixels, n->b.image.pixels);
+}
+
 TEST(SimCamera, DroppedFramesDiscardTheirPairAndAreCounted) {
   auto camera = open("drop_every=2");
   run_triggers(*camera, 4);
@@ -104,6 +127,7 @@ TEST(SimCamera, BadUrisAreNamed) {
   EXPECT_NE(message("sim://?flow=tornado").find("unknown flow 'tornado'"), std::string::npos);
   EXPECT_NE(message("sim://?ppm=-1").find("ppm"), std::string::npos);
   EXPECT_NE(message("sim://?rays=0").find("rays"), std::string::npos);
+  EXPECT_NE(message("sim://?flow_dt_us=0").find("flow_dt_us"), std::string::npos);
   EXPECT_NE(message("sim://?camera=/nonexistent.yaml").find("/nonexistent.yaml"), std::string::npos);
   EXPECT_NE(message("sim://cam0").find("sim://cam0"), std::string::npos);
 }
