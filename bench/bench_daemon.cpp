@@ -99,9 +99,9 @@ int main(int argc, char** argv) {
   }
   const std::string volume = "volume: {x_mm: [-2, 2], y_mm: [-2, 2], z_mm: [-1, 1], ";
   const std::vector<Variant> variants{
-      {"preview", volume + "voxel_mm: 0.25}\nreconstruction: {iterations: 3, start: ones, dark_weight_cutoff: 0.99}\n"
+      {"preview", volume + "voxel_mm: 0.25}\nreconstruction: {iterations: 3, mu: 1}\n"
                            "correlation: {passes: [{window: 8, overlap_percent: 50}]}\n"},
-      {"full", volume + "voxel_mm: 0.125}\nreconstruction: {iterations: 5, start: ones, dark_weight_cutoff: 0.99}\n"
+      {"full", volume + "voxel_mm: 0.125}\nreconstruction: {iterations: 5, mu: 1}\n"
                         "correlation: {passes: [{window: 16, overlap_percent: 50}, "
                         "{window: 8, overlap_percent: 50}]}\n"},
   };

@@ -15,9 +15,8 @@ namespace {
 const std::string kConfig =
     "dt_s: 0.001\n"
     "volume: {x_mm: [-1, 1], y_mm: [-1, 1], z_mm: [-1, 1], voxel_mm: 0.125}\n"
-    // MART's defaults (MLOS start, dark cutoff 0.1) zero every voxel on these ray-traced images
-    // (measured: 0 active voxels); a uniform start without dark zeroing reconstructs them.
-    "reconstruction: {iterations: 5, start: ones, dark_weight_cutoff: 0.99}\n"
+    // The live settings of systemd/config/run.yaml (MLOS start, dark cutoff 0.9: MART's defaults).
+    "reconstruction: {iterations: 3, mu: 1}\n"
     // Two passes: the predictor of the first removes the loss-of-pairs bias of a single pass
     // (measured with one 8^3 pass: mean dx 0.2250 mm; with 16^3 then 8^3: 0.2504 mm).
     "correlation: {passes: [{window: 16, overlap_percent: 50}, {window: 8, overlap_percent: 50}]}\n";
@@ -60,10 +59,11 @@ TEST(Processing, UniformDisplacementOfARayTracedPairComesBack) {
   std::printf("processing: %zu of %zu vectors valid, mean dx %.9f mm (truth %.4f), mean dy %.9f mm, "
               "mean dz %.9f mm, %.1f s\n",
               valid, f.valid.size(), mean_dx, shift_mm, mean_dy, sum_z / double(valid), seconds);
-  // Measured: 27 of 27 valid, mean dx 0.250505417 mm, mean dy 0.000583082 mm, mean dz
-  // -0.000663421 mm with core/process's default 1 mm depth guard. Without the guard
-  // (depth_guard_mm: 0): 0.250409039 / 0.000421395 / -0.000695535 mm, the same to the last digit
-  // as the daemon's own reconstruct-and-correlate chain gave before it moved onto process_pair.
+  // Measured: 27 of 27 valid, mean dx 0.250502232 mm, mean dy 0.000658094 mm, mean dz
+  // 0.001815075 mm (3 iterations at mu 1, MLOS start, cutoff 0.9, 1 mm depth guard). With the
+  // earlier live settings (5 iterations, uniform start, cutoff 0.99): 0.250505417 mm with the guard,
+  // 0.250409039 mm without it, the same to the last digit as the daemon's own reconstruct-and-
+  // correlate chain gave before it moved onto process_pair.
   EXPECT_EQ(valid, f.valid.size());
   EXPECT_NEAR(mean_dx, shift_mm, 0.02);
   EXPECT_NEAR(mean_dy, 0.0, 0.01);

@@ -43,7 +43,7 @@ const fs::path& recorded_run() {
     RunStateMachine state;
     RunEnvironment env;
     env.data_dir = data;
-    env.default_camera_uri = "sim://?seed=3&ppm=0.2&rays=500&dx_mm=0.25";
+    env.default_camera_uri = "sim://?seed=3&ppm=0.2&rays=500&dx_mm=0.25&flow_dt_us=1000";  // 0.25 mm in dt
     env.default_trigger_uri = "sim://";
     env.camera_file = kCameraFile;
     env.state = &state;
