@@ -6,6 +6,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <string>
 #include <utility>
@@ -91,6 +92,66 @@ double sample_position(double aperture, int samples, int k) {
   return (k + 0.5) * aperture / samples - 0.5 * aperture;
 }
 
+// Pixels per quad: one SSE vector, and at least as long as most segments away from focus (2-4
+// pixels behind each lens on the paper's camera beyond 5 mm from focus).
+constexpr int kQuad = 4;
+
+// The kernels' form of a slice's x weights: every segment cut into quads of kQuad pixels. A quad
+// past the end of the row is shifted left and its lanes outside its own pixels weigh 0, so the
+// kernels never touch a pixel outside the row. Segments are at least kGap + 1 > kQuad - 1 pixels
+// apart, so the quads of different segments never overlap.
+void build_quads(SliceTables& t, int width) {
+  t.x_quad_start.assign(t.x_runs.size() + 1, 0);
+  for (std::size_t x = 0; x < t.x_runs.size(); ++x) {
+    const WeightRun& run = t.x_runs[x];
+    for (std::size_t k = run.segment_begin; k < run.segment_end; ++k) {
+      const Segment& s = t.x_segments[k];
+      for (int c = 0; c < s.length; c += kQuad) {
+        const int own_first = s.first + c, own_end = s.first + std::min(c + kQuad, s.length);
+        const int first = std::min(own_first, width - kQuad);
+        t.x_quad_first.push_back(first);
+        for (int p = first; p < first + kQuad; ++p) {
+          t.x_quad_weights.push_back(p >= own_first && p < own_end ? t.x_table[s.offset + std::size_t(p - s.first)] : 0.f);
+        }
+      }
+    }
+    t.x_quad_start[x + 1] = t.x_quad_first.size();
+  }
+}
+
+// row[first[k] + j] += a * w[4 k + j]: the projection's inner loop (vectorised: one quad is one
+// SSE multiply and add; the quads of a voxel column never alias each other or the table).
+void add_quads(float* __restrict row, const int* __restrict first, const float* __restrict w, std::size_t n,
+               float a) {
+  for (std::size_t k = 0; k < n; ++k) {
+    float* __restrict q = row + first[k];
+    const float* __restrict wk = w + kQuad * k;
+    for (int j = 0; j < kQuad; ++j) q[j] += a * wk[j];
+  }
+}
+
+// Σ_k Σ_j w[4 k + j] row[first[k] + j]: the back-projection's inner loop, in two vector
+// accumulators (even and odd quads) so consecutive adds do not wait on each other; a fixed order.
+float dot_quads(const float* row, const int* first, const float* w, std::size_t n) {
+  float even[kQuad] = {0.f, 0.f, 0.f, 0.f}, odd[kQuad] = {0.f, 0.f, 0.f, 0.f};
+  std::size_t k = 0;
+  for (; k + 2 <= n; k += 2) {
+    const float* p0 = row + first[k];
+    const float* p1 = row + first[k + 1];
+    const float* w0 = w + kQuad * k;
+    for (int j = 0; j < kQuad; ++j) {
+      even[j] += w0[j] * p0[j];
+      odd[j] += w0[kQuad + j] * p1[j];
+    }
+  }
+  if (k < n) {
+    const float* p0 = row + first[k];
+    const float* w0 = w + kQuad * k;
+    for (int j = 0; j < kQuad; ++j) even[j] += w0[j] * p0[j];
+  }
+  return ((even[0] + odd[0]) + (even[1] + odd[1])) + ((even[2] + odd[2]) + (even[3] + odd[3]));
+}
+
 }  // namespace
 
 ImageF geometric_white_image(const optics::CameraModel& camera, const optics::MicrolensArray& lenses) {
@@ -151,6 +212,7 @@ WeightingOperator::WeightingOperator(const optics::CameraModel& camera,
     throw InputError("white image: " + std::to_string(white_.width) + " x " + std::to_string(white_.height) +
                      " px, the sensor is " + std::to_string(width_) + " x " + std::to_string(height_));
   }
+  if (width_ < kQuad) throw InputError("sensor: the reconstruction needs at least 4 pixels per row");
   for (int a = 0; a < 3; ++a) {
     if (grid_.shape[a] <= 0 || !(grid_.spacing_mm[a] > 0)) {
       throw InputError("volume grid: every axis needs at least one voxel and a positive spacing");
@@ -259,6 +321,7 @@ WeightingOperator::WeightingOperator(const optics::CameraModel& camera,
     };
     build(nx, 0, geo_.lens_x, width_, column_of, t.x_runs, t.x_segments, t.x_table);
     build(ny, 1, geo_.lens_y, height_, row_of, t.y_runs, t.y_segments, t.y_table);
+    build_quads(t, width_);
   });
 
   // Eq 13's denominators n_j = Σ_rows Ay Σ_cols Ax white, in two separable stages per slice.
@@ -365,34 +428,49 @@ void WeightingOperator::back_project(std::span<const float> image, std::span<flo
 ActiveSet::ActiveSet(const WeightingOperator& op, std::vector<std::uint32_t> voxels)
     : voxels_(std::move(voxels)) {
   const Grid3& g = op.grid();
-  const int bands = (op.image_height() + band_rows_ - 1) / band_rows_;
-  std::vector<std::size_t> count(std::size_t(bands) + 1, 0);
-  auto band_range = [&](std::uint32_t v, int& b0, int& b1) {
-    const int x = int(v % std::uint32_t(g.shape[0]));
-    const int y = int((v / std::uint32_t(g.shape[0])) % std::uint32_t(g.shape[1]));
-    const int z = int(v / (std::uint32_t(g.shape[0]) * std::uint32_t(g.shape[1])));
-    const AxisWeights ay = op.y_weights(z, y);
-    if (ay.empty() || op.x_weights(z, x).empty() || op.normaliser(v) <= 0) {
-      b0 = 0;
-      b1 = -1;
-      return;
-    }
-    b0 = ay.first / band_rows_;
-    b1 = ay.last / band_rows_;
-  };
+  const std::uint32_t nx = std::uint32_t(g.shape[0]), nxy = nx * std::uint32_t(g.shape[1]);
+  auto column_of = [&](std::uint32_t v) { return std::size_t(v / nxy) * nx + v % nx; };
+  // Group by voxel column (z, x) with a counting sort: y stays increasing within a column. A voxel
+  // that sees no pixel (n = 0) takes no part; its value is 0.
+  std::vector<std::uint32_t> start(std::size_t(nx) * std::size_t(g.shape[2]) + 1, 0);
   for (std::uint32_t v : voxels_) {
-    int b0, b1;
-    band_range(v, b0, b1);
-    for (int b = b0; b <= b1; ++b) ++count[std::size_t(b) + 1];
+    if (op.normaliser(v) > 0.f) ++start[column_of(v) + 1];
   }
-  band_start_.assign(std::size_t(bands) + 1, 0);
-  for (int b = 0; b < bands; ++b) band_start_[std::size_t(b) + 1] = band_start_[std::size_t(b)] + count[std::size_t(b) + 1];
-  band_members_.resize(band_start_.back());
-  std::vector<std::size_t> fill(band_start_.begin(), band_start_.end() - 1);
+  for (std::size_t c = 1; c < start.size(); ++c) start[c] += start[c - 1];
+  order_.resize(start.back());
+  order_y_.resize(start.back());
+  order_normaliser_.resize(start.back());
+  std::vector<std::uint32_t> fill(start.begin(), start.end() - 1);
   for (std::size_t m = 0; m < voxels_.size(); ++m) {
-    int b0, b1;
-    band_range(voxels_[m], b0, b1);
-    for (int b = b0; b <= b1; ++b) band_members_[fill[std::size_t(b)]++] = std::uint32_t(m);
+    const std::uint32_t v = voxels_[m];
+    const float n = op.normaliser(v);
+    if (!(n > 0.f)) continue;
+    const std::uint32_t p = fill[column_of(v)]++;
+    order_[p] = std::uint32_t(m);
+    order_y_[p] = int((v % nxy) / nx);
+    order_normaliser_[p] = n;
+  }
+  for (std::size_t c = 0; c + 1 < start.size(); ++c) {
+    if (start[c + 1] > start[c]) columns_.push_back(Column{int(c / nx), int(c % nx), start[c], start[c + 1]});
+  }
+  // Bands: each band of sensor rows lists, column by column, the voxels whose rows reach it.
+  const int bands = (op.image_height() + kBandRows - 1) / kBandRows;
+  band_columns_.assign(std::size_t(bands), {});
+  band_entries_.assign(std::size_t(bands), {});
+  for (std::uint32_t c = 0; c < columns_.size(); ++c) {
+    const Column& col = columns_[c];
+    for (std::uint32_t p = col.begin; p < col.end; ++p) {
+      const AxisWeights ay = op.y_weights(col.z, order_y_[p]);
+      for (int b = ay.first / kBandRows; b <= ay.last / kBandRows; ++b) {
+        std::vector<BandColumn>& bc = band_columns_[std::size_t(b)];
+        std::vector<std::uint32_t>& entries = band_entries_[std::size_t(b)];
+        if (bc.empty() || bc.back().column != c) {
+          bc.push_back(BandColumn{c, std::uint32_t(entries.size()), std::uint32_t(entries.size())});
+        }
+        entries.push_back(p);
+        bc.back().end = std::uint32_t(entries.size());
+      }
+    }
   }
 }
 
@@ -404,35 +482,51 @@ ActiveSet ActiveSet::all(const WeightingOperator& op) {
 
 void ActiveSet::project(const WeightingOperator& op, std::span<const float> values,
                         std::span<float> image) const {
-  const Grid3& g = op.grid();
   const std::size_t width = std::size_t(op.image_width());
   const int height = op.image_height();
-  const std::uint32_t nx = std::uint32_t(g.shape[0]), nxy = nx * std::uint32_t(g.shape[1]);
-  const int bands = int(band_start_.size()) - 1;
-  // Each band owns its sensor rows and adds its voxels in a fixed order: no atomics, and the
+  // E / n once per voxel, in column order.
+  std::vector<float> scaled(order_.size());
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, order_.size(), 1 << 14),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+    for (std::size_t p = r.begin(); p != r.end(); ++p) scaled[p] = values[order_[p]] / order_normaliser_[p];
+  });
+  const int bands = int(band_columns_.size());
+  // Each band owns its sensor rows and adds its columns in a fixed order: no atomics, and the
   // same sums whatever the thread count.
   tbb::parallel_for(0, bands, [&](int b) {
-    const int r0 = b * band_rows_, r1 = std::min(height, r0 + band_rows_);
+    const int r0 = b * kBandRows, r1 = std::min(height, r0 + kBandRows);
     std::fill(image.begin() + std::ptrdiff_t(std::size_t(r0) * width), image.begin() + std::ptrdiff_t(std::size_t(r1) * width), 0.f);
-    for (std::size_t k = band_start_[std::size_t(b)]; k < band_start_[std::size_t(b) + 1]; ++k) {
-      const std::uint32_t m = band_members_[k];
-      const float e = values[m];
-      if (e == 0.f) continue;
-      const std::uint32_t v = voxels_[m];
-      const int x = int(v % nx), y = int((v % nxy) / nx), z = int(v / nxy);
-      const AxisWeights ax = op.x_weights(z, x), ay = op.y_weights(z, y);
-      const float s = e / op.normaliser(v);
-      for (const Segment& sy : ay.segments) {
-        const int lo = std::max(r0, sy.first), hi = std::min(r1, sy.first + sy.length);
-        for (int r = lo; r < hi; ++r) {
-          const float a = s * ay.table[sy.offset + std::size_t(r - sy.first)];
-          float* row = image.data() + std::size_t(r) * width;
-          for (const Segment& sx : ax.segments) {
-            float* q = row + sx.first;
-            const float* w = ax.table + sx.offset;
-            for (int c = 0; c < sx.length; ++c) q[c] += a * w[c];
-          }
+    const std::vector<std::uint32_t>& entries = band_entries_[std::size_t(b)];
+    std::array<float, kBandRows> column_sum{};  // G(row) of one column over the band's rows
+    for (const BandColumn& bc : band_columns_[std::size_t(b)]) {
+      const Column& col = columns_[bc.column];
+      const SliceTables& t = op.slice(col.z);
+      // Stage 1: G(row) = Σ_y Ay_y(row) E_y / n_y over the column's voxels that reach the band.
+      int lo = kBandRows, hi = -1;
+      for (std::uint32_t k = bc.begin; k < bc.end; ++k) {
+        const std::uint32_t p = entries[k];
+        const float s = scaled[p];
+        if (s == 0.f) continue;
+        const WeightRun& run = t.y_runs[std::size_t(order_y_[p])];
+        const Segment* seg = std::partition_point(
+            t.y_segments.data() + run.segment_begin, t.y_segments.data() + run.segment_end,
+            [r0](const Segment& q) { return q.first + q.length <= r0; });
+        for (; seg != t.y_segments.data() + run.segment_end && seg->first < r1; ++seg) {
+          const int a = std::max(r0, seg->first), e = std::min(r1, seg->first + seg->length);
+          const float* w = t.y_table.data() + seg->offset;
+          for (int r = a; r < e; ++r) column_sum[std::size_t(r - r0)] += s * w[r - seg->first];
+          lo = std::min(lo, a - r0);
+          hi = std::max(hi, e - 1 - r0);
         }
+      }
+      // Stage 2: image(row, ·) += G(row) Ax, once per row the column reaches.
+      const std::size_t q0 = t.x_quad_start[std::size_t(col.x)], q1 = t.x_quad_start[std::size_t(col.x) + 1];
+      for (int r = lo; r <= hi; ++r) {
+        const float a = column_sum[std::size_t(r)];
+        if (a == 0.f) continue;
+        column_sum[std::size_t(r)] = 0.f;
+        add_quads(image.data() + std::size_t(r0 + r) * width, t.x_quad_first.data() + q0,
+                  t.x_quad_weights.data() + kQuad * q0, q1 - q0, a);
       }
     }
     const float* white = op.white().pixels.data();
@@ -453,39 +547,47 @@ void ActiveSet::back_project(const WeightingOperator& op, std::span<const float>
 
 void ActiveSet::back_project_whitened(const WeightingOperator& op, std::span<const float> image,
                                       std::span<float> values) const {
-  const Grid3& g = op.grid();
   const std::size_t width = std::size_t(op.image_width());
-  const std::uint32_t nx = std::uint32_t(g.shape[0]), nxy = nx * std::uint32_t(g.shape[1]);
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, voxels_.size(), 256),
+  const int height = op.image_height();
+  std::fill(values.begin(), values.end(), 0.f);  // voxels that see no pixel
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, columns_.size(), 4),
                     [&](const tbb::blocked_range<std::size_t>& range) {
-    for (std::size_t m = range.begin(); m != range.end(); ++m) {
-      const std::uint32_t v = voxels_[m];
-      const float n = op.normaliser(v);
-      if (n <= 0.f) {
-        values[m] = 0.f;
-        continue;
-      }
-      const int x = int(v % nx), y = int((v % nxy) / nx), z = int(v / nxy);
-      const AxisWeights ax = op.x_weights(z, x), ay = op.y_weights(z, y);
-      double s = 0;
-      for (const Segment& sy : ay.segments) {
-        for (int r = 0; r < sy.length; ++r) {
-          const float* row = image.data() + std::size_t(sy.first + r) * width;
-          // Four fixed partial sums: the compiler may pipeline them, the order stays fixed.
-          float acc[4] = {0.f, 0.f, 0.f, 0.f};
-          for (const Segment& sx : ax.segments) {
-            const float* w = ax.table + sx.offset;
-            const float* img = row + sx.first;
-            int c = 0;
-            for (; c + 4 <= sx.length; c += 4) {
-              for (int k = 0; k < 4; ++k) acc[k] += w[c + k] * img[c + k];
-            }
-            for (; c < sx.length; ++c) acc[0] += w[c] * img[c];
-          }
-          s += double(ay.table[sy.offset + std::size_t(r)]) * ((acc[0] + acc[1]) + (acc[2] + acc[3]));
+    std::vector<float> row_sum(std::size_t(height), 0.f);  // B(row) of one column
+    std::vector<unsigned char> reached(std::size_t(height), 0);
+    for (std::size_t c = range.begin(); c != range.end(); ++c) {
+      const Column& col = columns_[c];
+      const SliceTables& t = op.slice(col.z);
+      // The rows any voxel of the column reaches.
+      int lo = height, hi = -1;
+      for (std::uint32_t p = col.begin; p < col.end; ++p) {
+        const WeightRun& run = t.y_runs[std::size_t(order_y_[p])];
+        for (std::size_t k = run.segment_begin; k < run.segment_end; ++k) {
+          const Segment& seg = t.y_segments[k];
+          std::fill_n(reached.begin() + seg.first, seg.length, 1);
         }
+        lo = std::min(lo, run.first);
+        hi = std::max(hi, run.last);
       }
-      values[m] = float(s / n);
+      // Stage 1: B(row) = Σ_col Ax(col) r(row, col), once per reached row.
+      const std::size_t q0 = t.x_quad_start[std::size_t(col.x)], q1 = t.x_quad_start[std::size_t(col.x) + 1];
+      for (int r = lo; r <= hi; ++r) {
+        if (!reached[std::size_t(r)]) continue;
+        reached[std::size_t(r)] = 0;
+        row_sum[std::size_t(r)] = dot_quads(image.data() + std::size_t(r) * width, t.x_quad_first.data() + q0,
+                                            t.x_quad_weights.data() + kQuad * q0, q1 - q0);
+      }
+      // Stage 2: per voxel Σ_row Ay(row) B(row), over n (eq 13).
+      for (std::uint32_t p = col.begin; p < col.end; ++p) {
+        const WeightRun& run = t.y_runs[std::size_t(order_y_[p])];
+        double s = 0;
+        for (std::size_t k = run.segment_begin; k < run.segment_end; ++k) {
+          const Segment& seg = t.y_segments[k];
+          const float* w = t.y_table.data() + seg.offset;
+          const float* b = row_sum.data() + seg.first;
+          for (int r = 0; r < seg.length; ++r) s += double(w[r]) * b[r];
+        }
+        values[order_[p]] = float(s / order_normaliser_[p]);
+      }
     }
   });
 }

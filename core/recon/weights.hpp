@@ -45,6 +45,13 @@ struct SliceTables {
   std::vector<WeightRun> y_runs;  // per voxel y index: weights over sensor rows
   std::vector<Segment> x_segments, y_segments;
   std::vector<float> x_table, y_table;
+  // The x weights again in the form the kernels' inner loops take: voxel x owns the quads
+  // [x_quad_start[x], x_quad_start[x + 1]), each 4 consecutive pixels from x_quad_first with 4
+  // weights (zero-padded past a segment's end, shifted left to stay inside the sensor row), so
+  // a short segment costs one 4-wide vector operation instead of a loop.
+  std::vector<std::size_t> x_quad_start;
+  std::vector<int> x_quad_first;
+  std::vector<float> x_quad_weights;  // 4 per quad
 };
 
 // One voxel's weights along one axis, ready for a kernel.
@@ -126,8 +133,15 @@ class WeightingOperator {
   std::vector<float> normaliser_;
 };
 
-// A set of voxels that take part in a reconstruction (sorted flat indices), with the partition of
-// sensor rows into bands used to project deterministically without atomics.
+// A set of voxels that take part in a reconstruction (sorted flat indices), grouped by voxel
+// column (z, x) for the two-stage separable kernels, with the partition of sensor rows into bands
+// used to project deterministically without atomics.
+//
+// Per column the kernels factor the weights: projection forms G(row) = Σ_y Ay_y(row) E_y / n_y
+// over the column's voxels, then adds G(row) · Ax(col) once per row; back-projection forms
+// B(row) = Σ_col Ax(col) r(row, col) once per row, then Σ_row Ay_y(row) B(row) per voxel. That
+// costs (rows any voxel of the column reaches) x |Ax| instead of Σ_voxels |Ay| x |Ax|: never
+// more (a column with one voxel is the per-voxel form), 2-4x less where the column is dense.
 class ActiveSet {
  public:
   ActiveSet(const WeightingOperator& op, std::vector<std::uint32_t> voxels);
@@ -147,10 +161,26 @@ class ActiveSet {
                              std::span<float> values) const;
 
  private:
+  // One voxel column (z, x) of the set: its voxels are order_[begin, end), y increasing.
+  struct Column {
+    int z = 0, x = 0;
+    std::uint32_t begin = 0, end = 0;
+  };
+  // The voxels of one column that reach one band of sensor rows: entries [begin, end) of the band.
+  struct BandColumn {
+    std::uint32_t column = 0;
+    std::uint32_t begin = 0, end = 0;
+  };
+
   std::vector<std::uint32_t> voxels_;
-  int band_rows_ = 32;
-  std::vector<std::size_t> band_start_;       // per band, into band_members_
-  std::vector<std::uint32_t> band_members_;   // positions in voxels_
+  // Voxels with a positive normaliser, in column order: position in voxels_, y, and n.
+  std::vector<std::uint32_t> order_;
+  std::vector<int> order_y_;
+  std::vector<float> order_normaliser_;
+  std::vector<Column> columns_;
+  static constexpr int kBandRows = 32;  // sensor rows per band: a band of the paper sensor fits L2
+  std::vector<std::vector<BandColumn>> band_columns_;  // per band
+  std::vector<std::vector<std::uint32_t>> band_entries_;  // per band: positions in order_
 };
 
 // Compressed sparse rows: the explicit matrix (rows = sensor pixels, columns = voxels).
