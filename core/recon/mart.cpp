@@ -281,6 +281,15 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const M
   }
   result.setup_seconds = seconds_since(t_setup);
 
+  // ln I and ln floor once, not per iteration.
+  std::vector<float> log_data(data.size(), 0.f);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, data.size(), 1 << 14),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+    for (std::size_t i = r.begin(); i != r.end(); ++i) {
+      if (data[i] > 0.f) log_data[i] = std::log(data[i]);
+    }
+  });
+  const float log_floor = std::log(dark_floor);
   double previous = -1;
   for (int it = 1; it <= settings.iterations && n > 0; ++it) {
     const auto t_it = std::chrono::steady_clock::now();
@@ -296,12 +305,14 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const M
                       [&](const tbb::blocked_range<std::size_t>& r) {
       for (std::size_t i = r.begin(); i != r.end(); ++i) {
         const float p = projection[i], d = data[i];
-        if (d > 0.f) {
-          ratio[i] = p > 0.f ? white[i] * std::clamp(std::log(d) - std::log(p), -kMaxLog, kMaxLog) : 0.f;
+        if (white[i] == 0.f) {
+          ratio[i] = 0.f;  // between microlens images: no voxel sees the pixel
+        } else if (d > 0.f) {
+          ratio[i] = p > 0.f ? white[i] * std::clamp(log_data[i] - std::log(p), -kMaxLog, kMaxLog) : 0.f;
         } else {
           // A dark pixel the voxel sees only faintly: it recorded at most the floor, so it pulls
           // the voxels that claim more light there down (never up).
-          ratio[i] = p > dark_floor ? white[i] * std::max(std::log(dark_floor) - std::log(p), -kMaxLog) : 0.f;
+          ratio[i] = p > dark_floor ? white[i] * std::max(log_floor - std::log(p), -kMaxLog) : 0.f;
         }
       }
     });

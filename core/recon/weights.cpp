@@ -340,12 +340,9 @@ WeightingOperator::WeightingOperator(const optics::CameraModel& camera,
     for (std::size_t r = 0; r < rows; ++r) {
       const float* wrow = white_.pixels.data() + (std::size_t(r_lo) + r) * std::size_t(width_);
       for (int x = 0; x < nx; ++x) {
-        const AxisWeights ax = x_weights(z, x);
-        double s = 0;
-        for (const Segment& seg : ax.segments) {
-          for (int c = 0; c < seg.length; ++c) s += double(ax.table[seg.offset + std::size_t(c)]) * wrow[seg.first + c];
-        }
-        g[r * std::size_t(nx) + std::size_t(x)] = s;
+        const std::size_t q0 = t.x_quad_start[std::size_t(x)], q1 = t.x_quad_start[std::size_t(x) + 1];
+        g[r * std::size_t(nx) + std::size_t(x)] =
+            dot_quads(wrow, t.x_quad_first.data() + q0, t.x_quad_weights.data() + kQuad * q0, q1 - q0);
       }
     }
     for (int y = 0; y < ny; ++y) {
@@ -553,17 +550,19 @@ void ActiveSet::back_project_whitened(const WeightingOperator& op, std::span<con
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, columns_.size(), 4),
                     [&](const tbb::blocked_range<std::size_t>& range) {
     std::vector<float> row_sum(std::size_t(height), 0.f);  // B(row) of one column
-    std::vector<unsigned char> reached(std::size_t(height), 0);
+    // Rows reached by the column being summed carry its stamp (no clearing between columns).
+    std::vector<std::size_t> reached(std::size_t(height), 0);
     for (std::size_t c = range.begin(); c != range.end(); ++c) {
       const Column& col = columns_[c];
       const SliceTables& t = op.slice(col.z);
+      const std::size_t stamp = c + 1;
       // The rows any voxel of the column reaches.
       int lo = height, hi = -1;
       for (std::uint32_t p = col.begin; p < col.end; ++p) {
         const WeightRun& run = t.y_runs[std::size_t(order_y_[p])];
         for (std::size_t k = run.segment_begin; k < run.segment_end; ++k) {
           const Segment& seg = t.y_segments[k];
-          std::fill_n(reached.begin() + seg.first, seg.length, 1);
+          for (int r = seg.first; r < seg.first + seg.length; ++r) reached[std::size_t(r)] = stamp;
         }
         lo = std::min(lo, run.first);
         hi = std::max(hi, run.last);
@@ -571,8 +570,7 @@ void ActiveSet::back_project_whitened(const WeightingOperator& op, std::span<con
       // Stage 1: B(row) = Σ_col Ax(col) r(row, col), once per reached row.
       const std::size_t q0 = t.x_quad_start[std::size_t(col.x)], q1 = t.x_quad_start[std::size_t(col.x) + 1];
       for (int r = lo; r <= hi; ++r) {
-        if (!reached[std::size_t(r)]) continue;
-        reached[std::size_t(r)] = 0;
+        if (reached[std::size_t(r)] != stamp) continue;
         row_sum[std::size_t(r)] = dot_quads(image.data() + std::size_t(r) * width, t.x_quad_first.data() + q0,
                                             t.x_quad_weights.data() + kQuad * q0, q1 - q0);
       }
