@@ -425,18 +425,19 @@ void WeightingOperator::back_project(std::span<const float> image, std::span<flo
 ActiveSet::ActiveSet(const WeightingOperator& op, std::vector<std::uint32_t> voxels)
     : voxels_(std::move(voxels)) {
   const Grid3& g = op.grid();
-  const std::uint32_t nx = std::uint32_t(g.shape[0]), nxy = nx * std::uint32_t(g.shape[1]);
-  auto column_of = [&](std::uint32_t v) { return std::size_t(v / nxy) * nx + v % nx; };
-  // Group by voxel column (z, x) with a counting sort: y stays increasing within a column. A voxel
-  // that sees no pixel (n = 0) takes no part; its value is 0.
-  std::vector<std::uint32_t> start(std::size_t(nx) * std::size_t(g.shape[2]) + 1, 0);
+  const std::uint32_t nx = std::uint32_t(g.shape[0]), nz = std::uint32_t(g.shape[2]);
+  const std::uint32_t nxy = nx * std::uint32_t(g.shape[1]);
+  auto column_of = [&](std::uint32_t v) { return std::size_t(v % nx) * nz + v / nxy; };
+  // Group by voxel column, x-major, with a counting sort: y stays increasing within a column. A
+  // voxel that sees no pixel (n = 0) takes no part; its value is 0.
+  std::vector<std::uint32_t> start(std::size_t(nx) * nz + 1, 0);
   for (std::uint32_t v : voxels_) {
     if (op.normaliser(v) > 0.f) ++start[column_of(v) + 1];
   }
   for (std::size_t c = 1; c < start.size(); ++c) start[c] += start[c - 1];
   order_.resize(start.back());
-  order_y_.resize(start.back());
   order_normaliser_.resize(start.back());
+  std::vector<int> order_y(start.back());
   std::vector<std::uint32_t> fill(start.begin(), start.end() - 1);
   for (std::size_t m = 0; m < voxels_.size(); ++m) {
     const std::uint32_t v = voxels_[m];
@@ -444,29 +445,49 @@ ActiveSet::ActiveSet(const WeightingOperator& op, std::vector<std::uint32_t> vox
     if (!(n > 0.f)) continue;
     const std::uint32_t p = fill[column_of(v)]++;
     order_[p] = std::uint32_t(m);
-    order_y_[p] = int((v % nxy) / nx);
+    order_y[p] = int((v % nxy) / nx);
     order_normaliser_[p] = n;
   }
+  column_at_.assign(start.size() - 1, kNoColumn);
   for (std::size_t c = 0; c + 1 < start.size(); ++c) {
-    if (start[c + 1] > start[c]) columns_.push_back(Column{int(c / nx), int(c % nx), start[c], start[c + 1]});
+    if (start[c + 1] == start[c]) continue;
+    column_at_[c] = std::uint32_t(columns_.size());
+    columns_.push_back(Column{int(c % nz), int(c / nz), start[c], start[c + 1]});
   }
-  // Bands: each band of sensor rows lists, column by column, the voxels whose rows reach it.
-  const int bands = (op.image_height() + kBandRows - 1) / kBandRows;
-  band_columns_.assign(std::size_t(bands), {});
-  band_entries_.assign(std::size_t(bands), {});
+  // 16 voxel x per strip (~1.6 mm on the paper's camera), fewer on small grids so that there are
+  // at least 8 strips to share out; fixed by the grid, so the sums' order is too.
+  strip_x_ = std::clamp(int(nx) / 8, 1, 16);
+  // Per column, band by band, the voxels whose rows reach the band and their segments there.
+  const int height = op.image_height();
+  bands_ = (height + kBandRows - 1) / kBandRows;
+  block_start_.assign(1, 0);
+  std::vector<std::size_t> cursor;  // per voxel of the column: its first segment not yet behind
   for (std::uint32_t c = 0; c < columns_.size(); ++c) {
-    const Column& col = columns_[c];
+    Column& col = columns_[c];
+    const SliceTables& t = op.slice(col.z);
+    col.first_band = height;
     for (std::uint32_t p = col.begin; p < col.end; ++p) {
-      const AxisWeights ay = op.y_weights(col.z, order_y_[p]);
-      for (int b = ay.first / kBandRows; b <= ay.last / kBandRows; ++b) {
-        std::vector<BandColumn>& bc = band_columns_[std::size_t(b)];
-        std::vector<std::uint32_t>& entries = band_entries_[std::size_t(b)];
-        if (bc.empty() || bc.back().column != c) {
-          bc.push_back(BandColumn{c, std::uint32_t(entries.size()), std::uint32_t(entries.size())});
-        }
-        entries.push_back(p);
-        bc.back().end = std::uint32_t(entries.size());
+      const WeightRun& run = t.y_runs[std::size_t(order_y[p])];
+      col.first_band = std::min(col.first_band, run.first / kBandRows);
+      col.last_band = std::max(col.last_band, run.last / kBandRows);
+    }
+    col.block = block_start_.size() - 1;
+    cursor.resize(col.end - col.begin);
+    for (std::uint32_t p = col.begin; p < col.end; ++p) {
+      cursor[p - col.begin] = t.y_runs[std::size_t(order_y[p])].segment_begin;
+    }
+    for (int b = col.first_band; b <= col.last_band; ++b) {
+      const int r0 = b * kBandRows, r1 = std::min(height, r0 + kBandRows);
+      for (std::uint32_t p = col.begin; p < col.end; ++p) {
+        const WeightRun& run = t.y_runs[std::size_t(order_y[p])];
+        std::size_t& k = cursor[p - col.begin];
+        // A segment may cross into the next band: it stays the next band's first.
+        while (k < run.segment_end && t.y_segments[k].first + t.y_segments[k].length <= r0) ++k;
+        std::size_t e = k;
+        while (e < run.segment_end && t.y_segments[e].first < r1) ++e;
+        if (e > k) entries_.push_back(BandEntry{p, std::uint32_t(k), std::uint32_t(e - k)});
       }
+      block_start_.push_back(entries_.size());
     }
   }
 }
@@ -477,54 +498,64 @@ ActiveSet ActiveSet::all(const WeightingOperator& op) {
   return ActiveSet(op, std::move(v));
 }
 
+template <typename F>
+void ActiveSet::for_each_column(int b, int x0, int x1, int nz, F&& f) const {
+  for (int z = 0; z < nz; ++z) {
+    for (int x = x0; x < x1; ++x) {
+      const std::uint32_t c = column_at_[std::size_t(x) * std::size_t(nz) + std::size_t(z)];
+      if (c == kNoColumn) continue;
+      const Column& col = columns_[c];
+      if (b < col.first_band || b > col.last_band) continue;
+      const std::size_t block = col.block + std::size_t(b - col.first_band);
+      if (block_start_[block] < block_start_[block + 1]) f(col, block_start_[block], block_start_[block + 1]);
+    }
+  }
+}
+
 void ActiveSet::project(const WeightingOperator& op, std::span<const float> values,
                         std::span<float> image) const {
   const std::size_t width = std::size_t(op.image_width());
   const int height = op.image_height();
+  const int nx = op.grid().shape[0], nz = op.grid().shape[2];
   // E / n once per voxel, in column order.
   std::vector<float> scaled(order_.size());
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, order_.size(), 1 << 14),
                     [&](const tbb::blocked_range<std::size_t>& r) {
     for (std::size_t p = r.begin(); p != r.end(); ++p) scaled[p] = values[order_[p]] / order_normaliser_[p];
   });
-  const int bands = int(band_columns_.size());
   // Each band owns its sensor rows and adds its columns in a fixed order: no atomics, and the
   // same sums whatever the thread count.
-  tbb::parallel_for(0, bands, [&](int b) {
+  tbb::parallel_for(0, bands_, [&](int b) {
     const int r0 = b * kBandRows, r1 = std::min(height, r0 + kBandRows);
     std::fill(image.begin() + std::ptrdiff_t(std::size_t(r0) * width), image.begin() + std::ptrdiff_t(std::size_t(r1) * width), 0.f);
-    const std::vector<std::uint32_t>& entries = band_entries_[std::size_t(b)];
     std::array<float, kBandRows> column_sum{};  // G(row) of one column over the band's rows
-    for (const BandColumn& bc : band_columns_[std::size_t(b)]) {
-      const Column& col = columns_[bc.column];
-      const SliceTables& t = op.slice(col.z);
-      // Stage 1: G(row) = Σ_y Ay_y(row) E_y / n_y over the column's voxels that reach the band.
-      int lo = kBandRows, hi = -1;
-      for (std::uint32_t k = bc.begin; k < bc.end; ++k) {
-        const std::uint32_t p = entries[k];
-        const float s = scaled[p];
-        if (s == 0.f) continue;
-        const WeightRun& run = t.y_runs[std::size_t(order_y_[p])];
-        const Segment* seg = std::partition_point(
-            t.y_segments.data() + run.segment_begin, t.y_segments.data() + run.segment_end,
-            [r0](const Segment& q) { return q.first + q.length <= r0; });
-        for (; seg != t.y_segments.data() + run.segment_end && seg->first < r1; ++seg) {
-          const int a = std::max(r0, seg->first), e = std::min(r1, seg->first + seg->length);
-          const float* w = t.y_table.data() + seg->offset;
-          for (int r = a; r < e; ++r) column_sum[std::size_t(r - r0)] += s * w[r - seg->first];
-          lo = std::min(lo, a - r0);
-          hi = std::max(hi, e - 1 - r0);
+    for (int x0 = 0; x0 < nx; x0 += strip_x_) {
+      for_each_column(b, x0, std::min(nx, x0 + strip_x_), nz, [&](const Column& col, std::size_t k0, std::size_t k1) {
+        const SliceTables& t = op.slice(col.z);
+        // Stage 1: G(row) = Σ_y Ay_y(row) E_y / n_y over the column's voxels that reach the band.
+        int lo = kBandRows, hi = -1;
+        for (std::size_t k = k0; k < k1; ++k) {
+          const BandEntry& entry = entries_[k];
+          const float s = scaled[entry.position];
+          if (s == 0.f) continue;
+          for (const Segment& seg : std::span(t.y_segments.data() + entry.segment_begin, entry.segment_count)) {
+            const int a = std::max(r0, seg.first), e = std::min(r1, seg.first + seg.length);
+            const float* w = t.y_table.data() + seg.offset;
+            for (int r = a; r < e; ++r) column_sum[std::size_t(r - r0)] += s * w[r - seg.first];
+            lo = std::min(lo, a - r0);
+            hi = std::max(hi, e - 1 - r0);
+          }
         }
-      }
-      // Stage 2: image(row, ·) += G(row) Ax, once per row the column reaches.
-      const std::size_t q0 = t.x_quad_start[std::size_t(col.x)], q1 = t.x_quad_start[std::size_t(col.x) + 1];
-      for (int r = lo; r <= hi; ++r) {
-        const float a = column_sum[std::size_t(r)];
-        if (a == 0.f) continue;
-        column_sum[std::size_t(r)] = 0.f;
-        add_quads(image.data() + std::size_t(r0 + r) * width, t.x_quad_first.data() + q0,
-                  t.x_quad_weights.data() + kQuad * q0, q1 - q0, a);
-      }
+        // Stage 2: image(row, ·) += G(row) Ax, once per row the column reaches.
+        const std::size_t q0 = t.x_quad_start[std::size_t(col.x)], q1 = t.x_quad_start[std::size_t(col.x) + 1];
+        for (int r = lo; r <= hi; ++r) {
+          const float a = column_sum[std::size_t(r)];
+          if (a == 0.f) continue;
+          column_sum[std::size_t(r)] = 0.f;
+          add_quads(image.data() + std::size_t(r0 + r) * width, t.x_quad_first.data() + q0,
+                    t.x_quad_weights.data() + kQuad * q0, q1 - q0, a);
+        }
+      });
     }
     const float* white = op.white().pixels.data();
     for (std::size_t i = std::size_t(r0) * width; i < std::size_t(r1) * width; ++i) image[i] *= white[i];
@@ -546,47 +577,64 @@ void ActiveSet::back_project_whitened(const WeightingOperator& op, std::span<con
                                       std::span<float> values) const {
   const std::size_t width = std::size_t(op.image_width());
   const int height = op.image_height();
+  const int nx = op.grid().shape[0], nz = op.grid().shape[2];
   std::fill(values.begin(), values.end(), 0.f);  // voxels that see no pixel
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, columns_.size(), 4),
-                    [&](const tbb::blocked_range<std::size_t>& range) {
-    std::vector<float> row_sum(std::size_t(height), 0.f);  // B(row) of one column
-    // Rows reached by the column being summed carry its stamp (no clearing between columns).
-    std::vector<std::size_t> reached(std::size_t(height), 0);
-    for (std::size_t c = range.begin(); c != range.end(); ++c) {
-      const Column& col = columns_[c];
-      const SliceTables& t = op.slice(col.z);
-      const std::size_t stamp = c + 1;
-      // The rows any voxel of the column reaches.
-      int lo = height, hi = -1;
-      for (std::uint32_t p = col.begin; p < col.end; ++p) {
-        const WeightRun& run = t.y_runs[std::size_t(order_y_[p])];
-        for (std::size_t k = run.segment_begin; k < run.segment_end; ++k) {
-          const Segment& seg = t.y_segments[k];
-          for (int r = seg.first; r < seg.first + seg.length; ++r) reached[std::size_t(r)] = stamp;
-        }
-        lo = std::min(lo, run.first);
-        hi = std::max(hi, run.last);
-      }
-      // Stage 1: B(row) = Σ_col Ax(col) r(row, col), once per reached row.
-      const std::size_t q0 = t.x_quad_start[std::size_t(col.x)], q1 = t.x_quad_start[std::size_t(col.x) + 1];
-      for (int r = lo; r <= hi; ++r) {
-        if (reached[std::size_t(r)] != stamp) continue;
-        row_sum[std::size_t(r)] = dot_quads(image.data() + std::size_t(r) * width, t.x_quad_first.data() + q0,
-                                            t.x_quad_weights.data() + kQuad * q0, q1 - q0);
-      }
-      // Stage 2: per voxel Σ_row Ay(row) B(row), over n (eq 13).
-      for (std::uint32_t p = col.begin; p < col.end; ++p) {
-        const WeightRun& run = t.y_runs[std::size_t(order_y_[p])];
-        double s = 0;
-        for (std::size_t k = run.segment_begin; k < run.segment_end; ++k) {
-          const Segment& seg = t.y_segments[k];
-          const float* w = t.y_table.data() + seg.offset;
-          const float* b = row_sum.data() + seg.first;
-          for (int r = 0; r < seg.length; ++r) s += double(w[r]) * b[r];
-        }
-        values[order_[p]] = float(s / order_normaliser_[p]);
-      }
+  const int strips = (nx + strip_x_ - 1) / strip_x_;
+  // Each strip owns its voxels (x-major: a contiguous range of order_), so their sums need no
+  // atomics, and every voxel adds its bands in order whatever the thread count.
+  tbb::parallel_for(0, strips, [&](int strip) {
+    const int x0 = strip * strip_x_, x1 = std::min(nx, x0 + strip_x_);
+    std::uint32_t p0 = std::uint32_t(order_.size()), p1 = 0;
+    int first_band = bands_, last_band = -1;
+    for (std::size_t i = std::size_t(x0) * std::size_t(nz); i < std::size_t(x1) * std::size_t(nz); ++i) {
+      if (column_at_[i] == kNoColumn) continue;
+      const Column& col = columns_[column_at_[i]];
+      p0 = std::min(p0, col.begin);
+      p1 = std::max(p1, col.end);
+      first_band = std::min(first_band, col.first_band);
+      last_band = std::max(last_band, col.last_band);
     }
+    if (p1 <= p0) return;
+    std::vector<double> sum(p1 - p0, 0.0);
+    std::array<float, kBandRows> row_sum{};  // B(row) of one column over the band's rows
+    // Rows reached by the column being summed carry its stamp (no clearing between columns).
+    std::array<std::size_t, kBandRows> reached{};
+    std::size_t stamp = 0;
+    for (int b = first_band; b <= last_band; ++b) {
+      const int r0 = b * kBandRows, r1 = std::min(height, r0 + kBandRows);
+      for_each_column(b, x0, x1, nz, [&](const Column& col, std::size_t k0, std::size_t k1) {
+        const SliceTables& t = op.slice(col.z);
+        ++stamp;
+        int lo = kBandRows, hi = -1;
+        for (std::size_t k = k0; k < k1; ++k) {
+          for (const Segment& seg : std::span(t.y_segments.data() + entries_[k].segment_begin, entries_[k].segment_count)) {
+            const int a = std::max(r0, seg.first), e = std::min(r1, seg.first + seg.length);
+            for (int r = a; r < e; ++r) reached[std::size_t(r - r0)] = stamp;
+            lo = std::min(lo, a - r0);
+            hi = std::max(hi, e - 1 - r0);
+          }
+        }
+        // Stage 1: B(row) = Σ_col Ax(col) r(row, col), once per reached row.
+        const std::size_t q0 = t.x_quad_start[std::size_t(col.x)], q1 = t.x_quad_start[std::size_t(col.x) + 1];
+        for (int r = lo; r <= hi; ++r) {
+          if (reached[std::size_t(r)] != stamp) continue;
+          row_sum[std::size_t(r)] = dot_quads(image.data() + std::size_t(r0 + r) * width, t.x_quad_first.data() + q0,
+                                              t.x_quad_weights.data() + kQuad * q0, q1 - q0);
+        }
+        // Stage 2: per voxel Σ_row Ay(row) B(row) over the band's rows.
+        for (std::size_t k = k0; k < k1; ++k) {
+          const BandEntry& entry = entries_[k];
+          double s = 0;
+          for (const Segment& seg : std::span(t.y_segments.data() + entry.segment_begin, entry.segment_count)) {
+            const int a = std::max(r0, seg.first), e = std::min(r1, seg.first + seg.length);
+            const float* w = t.y_table.data() + seg.offset;
+            for (int r = a; r < e; ++r) s += double(w[r - seg.first]) * row_sum[std::size_t(r - r0)];
+          }
+          sum[entry.position - p0] += s;
+        }
+      });
+    }
+    for (std::uint32_t p = p0; p < p1; ++p) values[order_[p]] = float(sum[p - p0] / order_normaliser_[p]);  // eq 13
   });
 }
 

@@ -142,6 +142,9 @@ class WeightingOperator {
 // B(row) = Σ_col Ax(col) r(row, col) once per row, then Σ_row Ay_y(row) B(row) per voxel. That
 // costs (rows any voxel of the column reaches) x |Ax| instead of Σ_voxels |Ay| x |Ax|: never
 // more (a column with one voxel is the per-voxel form), 2-4x less where the column is dense.
+// Both walk the sensor in bands of rows and the voxels in strips of x so that the pixels and
+// weights they touch stay in cache: projection band by band (a band owns its rows: no atomics),
+// back-projection strip by strip (a strip owns its voxels, each summed band after band).
 class ActiveSet {
  public:
   ActiveSet(const WeightingOperator& op, std::vector<std::uint32_t> voxels);
@@ -161,26 +164,44 @@ class ActiveSet {
                              std::span<float> values) const;
 
  private:
-  // One voxel column (z, x) of the set: its voxels are order_[begin, end), y increasing.
+  // One voxel column (z, x) of the set: its voxels are order_[begin, end), y increasing, and its
+  // rows reach bands [first_band, last_band], whose entries start at block_start_[block].
+  // Columns run x-major (x, then z): consecutive columns reach nearly the same sensor columns.
   struct Column {
     int z = 0, x = 0;
     std::uint32_t begin = 0, end = 0;
+    int first_band = 0, last_band = -1;
+    std::size_t block = 0;
   };
-  // The voxels of one column that reach one band of sensor rows: entries [begin, end) of the band.
-  struct BandColumn {
-    std::uint32_t column = 0;
-    std::uint32_t begin = 0, end = 0;
+  // One voxel of a column in one band: its y segments there (into its slice's y_segments).
+  struct BandEntry {
+    std::uint32_t position = 0;  // in order_
+    std::uint32_t segment_begin = 0;
+    std::uint32_t segment_count = 0;
   };
 
   std::vector<std::uint32_t> voxels_;
-  // Voxels with a positive normaliser, in column order: position in voxels_, y, and n.
+  // Voxels with a positive normaliser, in column order: position in voxels_ and n.
   std::vector<std::uint32_t> order_;
-  std::vector<int> order_y_;
   std::vector<float> order_normaliser_;
   std::vector<Column> columns_;
-  static constexpr int kBandRows = 32;  // sensor rows per band: a band of the paper sensor fits L2
-  std::vector<std::vector<BandColumn>> band_columns_;  // per band
-  std::vector<std::vector<std::uint32_t>> band_entries_;  // per band: positions in order_
+  static constexpr std::uint32_t kNoColumn = ~std::uint32_t(0);
+  std::vector<std::uint32_t> column_at_;  // per voxel (x, z), x-major: index into columns_
+  // Sensor rows per band. Few bands per voxel keep the per-band bookkeeping small; the pixels a
+  // strip of voxel x reaches in one band (~0.3 MB on the paper sensor) stay in L2.
+  static constexpr int kBandRows = 128;
+  // Voxel x per strip: within a band the kernels walk strip by strip, depth by depth, x by x, so
+  // the y weights of one depth serve the whole strip and the pixels under the strip stay cached.
+  int strip_x_ = 1;
+  int bands_ = 0;
+  // Entries per column and band, column by column: [block_start_[i], block_start_[i + 1]).
+  std::vector<std::size_t> block_start_;
+  std::vector<BandEntry> entries_;
+
+  // Calls f(column, its entries in band b [k0, k1)) for the columns of voxel x in [x0, x1) that
+  // reach band b: depth by depth, x by x within a depth (the kernels' fixed order).
+  template <typename F>
+  void for_each_column(int b, int x0, int x1, int nz, F&& f) const;
 };
 
 // Compressed sparse rows: the explicit matrix (rows = sensor pixels, columns = voxels).
