@@ -188,8 +188,10 @@ class ActiveSet {
   static constexpr std::uint32_t kNoColumn = ~std::uint32_t(0);
   std::vector<std::uint32_t> column_at_;  // per voxel (x, z), x-major: index into columns_
   // Sensor rows per band. Few bands per voxel keep the per-band bookkeeping small; the pixels a
-  // strip of voxel x reaches in one band (~0.3 MB on the paper sensor) stay in L2.
-  static constexpr int kBandRows = 128;
+  // strip of voxel x reaches in one band (~0.6 MB on the paper sensor) stay in L2. Measured on
+  // the paper case (bench_recon paper 0.5 0 0.9 2, CPU time): 128 rows 1.12x the time of 256,
+  // 512 no better (and fewer bands to share out).
+  static constexpr int kBandRows = 256;
   // Voxel x per strip: within a band the kernels walk strip by strip, depth by depth, x by x, so
   // the y weights of one depth serve the whole strip and the pixels under the strip stay cached.
   int strip_x_ = 1;
