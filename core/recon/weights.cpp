@@ -457,21 +457,14 @@ ActiveSet::ActiveSet(const WeightingOperator& op, std::vector<std::uint32_t> vox
   // 16 voxel x per strip (~1.6 mm on the paper's camera), fewer on small grids so that there are
   // at least 8 strips to share out; fixed by the grid, so the sums' order is too.
   strip_x_ = std::clamp(int(nx) / 8, 1, 16);
-  // Per column, band by band, the voxels whose rows reach the band and their segments there.
+  // Per column, band by band, the voxels whose rows reach the band and their segments there:
+  // counted, then written, both in parallel over columns.
   const int height = op.image_height();
   bands_ = (height + kBandRows - 1) / kBandRows;
-  block_start_.assign(1, 0);
-  std::vector<std::size_t> cursor;  // per voxel of the column: its first segment not yet behind
-  for (std::uint32_t c = 0; c < columns_.size(); ++c) {
-    Column& col = columns_[c];
+  // Calls entry(p, first segment, count) for each voxel with segments in a band and band_end()
+  // after each band of the column, bands in order.
+  auto walk = [&](const Column& col, std::vector<std::size_t>& cursor, auto&& entry, auto&& band_end) {
     const SliceTables& t = op.slice(col.z);
-    col.first_band = height;
-    for (std::uint32_t p = col.begin; p < col.end; ++p) {
-      const WeightRun& run = t.y_runs[std::size_t(order_y[p])];
-      col.first_band = std::min(col.first_band, run.first / kBandRows);
-      col.last_band = std::max(col.last_band, run.last / kBandRows);
-    }
-    col.block = block_start_.size() - 1;
     cursor.resize(col.end - col.begin);
     for (std::uint32_t p = col.begin; p < col.end; ++p) {
       cursor[p - col.begin] = t.y_runs[std::size_t(order_y[p])].segment_begin;
@@ -485,11 +478,49 @@ ActiveSet::ActiveSet(const WeightingOperator& op, std::vector<std::uint32_t> vox
         while (k < run.segment_end && t.y_segments[k].first + t.y_segments[k].length <= r0) ++k;
         std::size_t e = k;
         while (e < run.segment_end && t.y_segments[e].first < r1) ++e;
-        if (e > k) entries_.push_back(BandEntry{p, std::uint32_t(k), std::uint32_t(e - k)});
+        if (e > k) entry(p, k, e - k);
       }
-      block_start_.push_back(entries_.size());
+      band_end();
     }
+  };
+  std::vector<std::size_t> entry_offset(columns_.size() + 1, 0), block_offset(columns_.size() + 1, 0);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, columns_.size(), 64),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+    std::vector<std::size_t> cursor;  // per voxel of the column: its first segment not yet behind
+    for (std::size_t c = range.begin(); c != range.end(); ++c) {
+      Column& col = columns_[c];
+      const SliceTables& t = op.slice(col.z);
+      col.first_band = height;
+      for (std::uint32_t p = col.begin; p < col.end; ++p) {
+        const WeightRun& run = t.y_runs[std::size_t(order_y[p])];
+        col.first_band = std::min(col.first_band, run.first / kBandRows);
+        col.last_band = std::max(col.last_band, run.last / kBandRows);
+      }
+      block_offset[c + 1] = std::size_t(col.last_band - col.first_band + 1);
+      walk(col, cursor, [&](std::uint32_t, std::size_t, std::size_t) { ++entry_offset[c + 1]; }, [] {});
+    }
+  });
+  for (std::size_t c = 0; c < columns_.size(); ++c) {
+    entry_offset[c + 1] += entry_offset[c];
+    block_offset[c + 1] += block_offset[c];
   }
+  entries_.resize(entry_offset.back());
+  block_start_.assign(block_offset.back() + 1, 0);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, columns_.size(), 64),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+    std::vector<std::size_t> cursor;
+    for (std::size_t c = range.begin(); c != range.end(); ++c) {
+      Column& col = columns_[c];
+      col.block = block_offset[c];
+      std::size_t next = entry_offset[c], block = col.block;
+      walk(
+          col, cursor,
+          [&](std::uint32_t p, std::size_t k, std::size_t n) {
+            entries_[next++] = BandEntry{p, std::uint32_t(k), std::uint32_t(n)};
+          },
+          [&] { block_start_[++block] = next; });
+    }
+  });
 }
 
 ActiveSet ActiveSet::all(const WeightingOperator& op) {
