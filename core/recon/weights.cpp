@@ -149,7 +149,10 @@ float dot_quads(const float* row, const int* first, const float* w, std::size_t 
     const float* w0 = w + kQuad * k;
     for (int j = 0; j < kQuad; ++j) even[j] += w0[j] * p0[j];
   }
-  return ((even[0] + odd[0]) + (even[1] + odd[1])) + ((even[2] + odd[2]) + (even[3] + odd[3]));
+  // Lanes added as one vector, then pairwise: the same order as adding them one by one.
+  float lane[kQuad];
+  for (int j = 0; j < kQuad; ++j) lane[j] = even[j] + odd[j];
+  return (lane[0] + lane[1]) + (lane[2] + lane[3]);
 }
 
 }  // namespace
