@@ -202,11 +202,11 @@ std::vector<std::uint32_t> select_active(const WeightingOperator& op, std::span<
 }
 
 // ln I for the pixels MART uses (0 elsewhere: those pixels see no active voxel).
+float log_pixel(float v) { return v > 0.f ? std::log(std::max(v, kTiny)) : 0.f; }
+
 std::vector<float> log_image(std::span<const float> image) {
-  std::vector<float> out(image.size(), 0.f);
-  for (std::size_t i = 0; i < image.size(); ++i) {
-    if (image[i] > 0.f) out[i] = std::log(std::max(image[i], kTiny));
-  }
+  std::vector<float> out(image.size());
+  for (std::size_t i = 0; i < image.size(); ++i) out[i] = log_pixel(image[i]);
   return out;
 }
 
@@ -266,10 +266,18 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const M
   if (settings.start == MartStart::mlos && n > 0) {
     // The weighted geometric mean of the lit pixels a voxel sees (dark ones below the cutoff
     // carry no ln I), renormalised over those pixels.
-    std::vector<float> lit(data.size()), weight(n, 0.f);
-    for (std::size_t i = 0; i < data.size(); ++i) lit[i] = data[i] > 0.f ? 1.f : 0.f;
-    active.back_project(op, lit, weight);
-    active.back_project(op, log_image(data), update);
+    // The lit mask and ln I, each times the white image, in the ratio buffer (not yet in use).
+    std::vector<float> weight(n, 0.f);
+    auto whitened = [&](auto pixel) {
+      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, data.size(), 1 << 14),
+                        [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t i = r.begin(); i != r.end(); ++i) ratio[i] = pixel(data[i]) * white[i];
+      });
+    };
+    whitened([](float d) { return d > 0.f ? 1.f : 0.f; });
+    active.back_project_whitened(op, ratio, weight);
+    whitened(log_pixel);
+    active.back_project_whitened(op, ratio, update);
     for (std::size_t m = 0; m < n; ++m) e[m] = weight[m] > 0.f ? clean(bounded_exp(update[m] / weight[m])) : 0.f;
     // Scale to the image's total light so the first ratios are near 1.
     active.project(op, e, projection);
@@ -281,6 +289,15 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const M
   }
   result.setup_seconds = seconds_since(t_setup);
 
+  // ln I and ln floor once, not per iteration.
+  std::vector<float> log_data(data.size(), 0.f);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, data.size(), 1 << 14),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+    for (std::size_t i = r.begin(); i != r.end(); ++i) {
+      if (data[i] > 0.f) log_data[i] = std::log(data[i]);
+    }
+  });
+  const float log_floor = std::log(dark_floor);
   double previous = -1;
   for (int it = 1; it <= settings.iterations && n > 0; ++it) {
     const auto t_it = std::chrono::steady_clock::now();
@@ -296,12 +313,14 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const M
                       [&](const tbb::blocked_range<std::size_t>& r) {
       for (std::size_t i = r.begin(); i != r.end(); ++i) {
         const float p = projection[i], d = data[i];
-        if (d > 0.f) {
-          ratio[i] = p > 0.f ? white[i] * std::clamp(std::log(d) - std::log(p), -kMaxLog, kMaxLog) : 0.f;
+        if (white[i] == 0.f) {
+          ratio[i] = 0.f;  // between microlens images: no voxel sees the pixel
+        } else if (d > 0.f) {
+          ratio[i] = p > 0.f ? white[i] * std::clamp(log_data[i] - std::log(p), -kMaxLog, kMaxLog) : 0.f;
         } else {
           // A dark pixel the voxel sees only faintly: it recorded at most the floor, so it pulls
           // the voxels that claim more light there down (never up).
-          ratio[i] = p > dark_floor ? white[i] * std::max(std::log(dark_floor) - std::log(p), -kMaxLog) : 0.f;
+          ratio[i] = p > dark_floor ? white[i] * std::max(log_floor - std::log(p), -kMaxLog) : 0.f;
         }
       }
     });
