@@ -21,6 +21,7 @@
 #include "drivers/sim/sim_camera.hpp"
 #include "drivers/trigger/sim_trigger.hpp"
 #include "tests/drivers/test_camera.hpp"
+#include "tests/support/run_manifest.hpp"
 #include "tests/support/temp_dir.hpp"
 
 namespace plenopiv::daemon {
@@ -56,14 +57,7 @@ ProcessedPair tagged_field(const drivers::FramePair& pair) {
   return out;
 }
 
-msg::RunManifest read_manifest(const fs::path& dir) {
-  std::ifstream in(dir / "manifest.json");
-  std::stringstream text;
-  text << in.rdbuf();
-  msg::RunManifest m;
-  EXPECT_TRUE(google::protobuf::util::JsonStringToMessage(text.str(), &m).ok()) << text.str();
-  return m;
-}
+using testing_support::read_manifest;
 
 class Concurrency : public ::testing::TestWithParam<int> {};
 

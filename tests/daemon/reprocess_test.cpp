@@ -15,6 +15,7 @@
 #include "drivers/camera/camera_registry.hpp"
 #include "drivers/sim/sim_camera.hpp"
 #include "tests/support/child_process.hpp"
+#include "tests/support/run_manifest.hpp"
 #include "tests/support/temp_dir.hpp"
 
 namespace plenopiv::daemon {
@@ -25,14 +26,7 @@ namespace fs = std::filesystem;
 
 const std::string kCameraFile = std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml";
 
-msg::RunManifest read_manifest(const fs::path& dir) {
-  std::ifstream in(dir / "manifest.json");
-  std::stringstream text;
-  text << in.rdbuf();
-  msg::RunManifest m;
-  EXPECT_TRUE(google::protobuf::util::JsonStringToMessage(text.str(), &m).ok()) << text.str();
-  return m;
-}
+using testing_support::read_manifest;
 
 // One short live run, recorded once for all tests of this file.
 const fs::path& recorded_run() {

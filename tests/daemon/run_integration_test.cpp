@@ -16,6 +16,7 @@
 
 #include "clients/cli/control_client.hpp"
 #include "tests/support/child_process.hpp"
+#include "tests/support/run_manifest.hpp"
 #include "tests/support/temp_dir.hpp"
 
 namespace plenopiv {
@@ -84,14 +85,7 @@ class DaemonRuns : public ::testing::Test {
     return path;
   }
 
-  msg::RunManifest manifest(const fs::path& run_dir) {
-    std::ifstream in(run_dir / "manifest.json");
-    std::stringstream text;
-    text << in.rdbuf();
-    msg::RunManifest m;
-    EXPECT_TRUE(google::protobuf::util::JsonStringToMessage(text.str(), &m).ok()) << text.str();
-    return m;
-  }
+  msg::RunManifest manifest(const fs::path& run_dir) { return testing_support::read_manifest(run_dir); }
 
   fs::path only_run_dir() {
     std::vector<fs::path> runs;
