@@ -3,6 +3,8 @@
 
 #include <spdlog/spdlog.h>
 
+#include <ctime>
+
 #include "core/base/errors.hpp"
 #include "drivers/camera/camera_registry.hpp"
 #include "drivers/common/driver_errors.hpp"
@@ -174,6 +176,13 @@ void Run::run() {
                 h.set_device_timestamp_ns(pair.a.device_timestamp_ns);
                 h.set_host_timestamp_ns(pair.a.host_timestamp_ns);
                 h.set_pairs_skipped(stats_.input.skipped + stats_.process.skipped);
+                if (pair.measured) {
+                  // The trigger's clock (CLOCK_MONOTONIC): laser pulse 1 to now, just before sending.
+                  timespec now{};
+                  clock_gettime(CLOCK_MONOTONIC, &now);
+                  const double now_ns = double(now.tv_sec) * 1e9 + double(now.tv_nsec);
+                  h.set_trigger_latency_s((now_ns - double(pair.measured->pulse1_ns)) * 1e-9);
+                }
                 env_.publisher->publish_vectors(h, result.vectors);
                 if (config_.publish_volumes) {
                   for (auto [volume, name] : {std::pair{&result.volume_a, "A"},

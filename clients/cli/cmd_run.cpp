@@ -14,6 +14,13 @@
 namespace plenopiv::client {
 namespace {
 
+// "0.123 s", for a figure that is not always printed.
+std::string seconds_text(double s) {
+  std::ostringstream out;
+  out << std::fixed << std::setprecision(3) << s << " s";
+  return out.str();
+}
+
 msg::Reply call(const ControlOptions& options, msg::Request request) {
   ControlClient client(options.endpoint,
                        std::chrono::milliseconds(static_cast<long>(options.timeout_s * 1000)));
@@ -61,7 +68,9 @@ void watch(const WatchOptions& o) {
     std::cout << "pair " << std::setw(6) << h.pair_index() << std::fixed << std::setprecision(4)
               << "  mean " << h.mean_speed_m_s() << " m/s  max " << h.max_speed_m_s()
               << " m/s  valid " << std::setprecision(1) << 100.0 * h.valid_fraction() << " %"
-              << "  latency " << std::setprecision(3) << h.latency_s() << " s  grid "
+              << "  latency " << std::setprecision(3) << h.latency_s() << " s"
+              << (h.trigger_latency_s() > 0 ? "  from laser " + seconds_text(h.trigger_latency_s()) : std::string())
+              << "  grid "
               << (h.shape_size() == 3 ? std::to_string(h.shape(0)) + "x" + std::to_string(h.shape(1)) +
                                             "x" + std::to_string(h.shape(2))
                                       : std::string("?"))

@@ -136,6 +136,8 @@ TEST_F(DaemonRuns, RunOfNPairsReachesSubscribersAndTheRunFolder) {
     EXPECT_NE(lines.find(expect.str()), std::string::npos) << expect.str() << "\n" << lines;
   }
   EXPECT_NE(lines.find("valid 75.0 %"), std::string::npos) << lines;
+  // The trigger measured each pair's laser pulses: the header carries pulse 1 -> published.
+  EXPECT_NE(lines.find(" from laser 0."), std::string::npos) << lines;
 
   const auto py = python.wait(30s);
   ASSERT_TRUE(py.has_value()) << "the Python subscriber did not see " << n << " fields";
