@@ -177,11 +177,14 @@ void Run::run() {
                 h.set_host_timestamp_ns(pair.a.host_timestamp_ns);
                 h.set_pairs_skipped(stats_.input.skipped + stats_.process.skipped);
                 if (pair.measured) {
-                  // The trigger's clock (CLOCK_MONOTONIC): laser pulse 1 to now, just before sending.
+                  // Laser pulse 1 to now, just before sending, on the trigger's clock
+                  // (CLOCK_MONOTONIC for gpiod and the real-time sim trigger). A value outside
+                  // [0, 60) s means another clock (a test trigger's virtual time): left at 0.
                   timespec now{};
                   clock_gettime(CLOCK_MONOTONIC, &now);
                   const double now_ns = double(now.tv_sec) * 1e9 + double(now.tv_nsec);
-                  h.set_trigger_latency_s((now_ns - double(pair.measured->pulse1_ns)) * 1e-9);
+                  const double latency_s = (now_ns - double(pair.measured->pulse1_ns)) * 1e-9;
+                  if (latency_s >= 0 && latency_s < 60) h.set_trigger_latency_s(latency_s);
                 }
                 env_.publisher->publish_vectors(h, result.vectors);
                 if (config_.publish_volumes) {
