@@ -24,6 +24,7 @@
 #include "core/optics/camera_file.hpp"
 #include "core/process/process.hpp"
 #include "core/sim/exact_volume.hpp"
+#include "core/sim/field_errors.hpp"
 #include "core/sim/flows.hpp"
 #include "core/sim/particles.hpp"
 #include "core/sim/render.hpp"
@@ -50,31 +51,14 @@ struct Errors {
   double valid_fraction = 0;
 };
 
-// RMS error (voxels) over valid nodes. Truth at a node x: the displacement of the particle whose
-// path is centred on x (the correlation measures the midpoint displacement), d = D(x - d/2) by
-// fixed-point iteration.
+// RMS error (voxels) over valid nodes against the midpoint displacement d = D(x - d/2) (three
+// fixed-point steps: the ring's displacements are several voxels), and the share of valid nodes.
 Errors errors_against(const VectorField& f, const sim::Flow& flow, double voxel_mm) {
+  const sim::FieldErrors s = sim::field_errors(f, flow, voxel_mm, 3);
   Errors e;
-  std::size_t n = 0;
-  double sum[3] = {0, 0, 0};
-  const auto& g = f.grid;
-  for (int k = 0; k < g.shape[2]; ++k)
-    for (int j = 0; j < g.shape[1]; ++j)
-      for (int i = 0; i < g.shape[0]; ++i) {
-        const std::size_t idx = (std::size_t(k) * g.shape[1] + j) * g.shape[0] + i;
-        if (!f.valid[idx]) continue;
-        const sim::Point3 x{g.origin_mm[0] + i * g.spacing_mm[0], g.origin_mm[1] + j * g.spacing_mm[1],
-                            g.origin_mm[2] + k * g.spacing_mm[2]};
-        sim::Point3 d = flow.displacement_mm(x);
-        for (int it = 0; it < 3; ++it)
-          d = flow.displacement_mm({x[0] - 0.5 * d[0], x[1] - 0.5 * d[1], x[2] - 0.5 * d[2]});
-        const double m[3] = {f.dx_mm[idx], f.dy_mm[idx], f.dz_mm[idx]};
-        for (int a = 0; a < 3; ++a) sum[a] += std::pow((m[a] - d[std::size_t(a)]) / voxel_mm, 2);
-        ++n;
-      }
-  for (int a = 0; a < 3; ++a) e.rms[a] = n ? std::sqrt(sum[a] / double(n)) : NAN;
-  e.total = n ? std::sqrt((sum[0] + sum[1] + sum[2]) / double(n)) : NAN;
-  e.valid_fraction = g.count() ? double(n) / double(g.count()) : 0;
+  for (int a = 0; a < 3; ++a) e.rms[a] = s.rms[a];
+  e.total = s.rms_total;
+  e.valid_fraction = f.grid.count() ? double(s.compared) / double(f.grid.count()) : 0;
   return e;
 }
 

@@ -18,6 +18,7 @@
 #include "core/piv/fft_correlator.hpp"
 #include "core/piv/multipass.hpp"
 #include "core/sim/exact_volume.hpp"
+#include "core/sim/field_errors.hpp"
 #include "core/sim/flows.hpp"
 #include "core/sim/particles.hpp"
 
@@ -48,44 +49,6 @@ std::vector<sim::Point3> particles_for(const Grid3& g, std::uint64_t seed) {
   return sim::random_particles(box, std::size_t(particles_per_voxel * voxels), seed);
 }
 
-struct Stats {
-  std::array<double, 3> bias{0, 0, 0}, rms{0, 0, 0};
-  double max_truth = 0;
-  std::size_t n = 0;
-};
-
-// Errors (voxels) of the valid vectors against the flow, truth taken halfway through the move.
-// skip: vector-grid layers left out at every face.
-Stats errors(const piv::CorrelationResult& r, const sim::Flow& flow, int skip) {
-  const auto& f = r.field;
-  Stats s;
-  for (int k = skip; k < f.grid.shape[2] - skip; ++k)
-    for (int j = skip; j < f.grid.shape[1] - skip; ++j)
-      for (int i = skip; i < f.grid.shape[0] - skip; ++i) {
-        const std::size_t m = f.grid.index(i, j, k);
-        if (!f.valid[m]) continue;
-        const sim::Point3 x{f.grid.coordinate_mm(0, i), f.grid.coordinate_mm(1, j),
-                            f.grid.coordinate_mm(2, k)};
-        sim::Point3 d = flow.displacement_mm(x);
-        d = flow.displacement_mm({x[0] - d[0] / 2, x[1] - d[1] / 2, x[2] - d[2] / 2});
-        const std::array<float, 3> got{f.dx_mm[m], f.dy_mm[m], f.dz_mm[m]};
-        double mag = 0;
-        for (int a = 0; a < 3; ++a) {
-          const double e = (got[a] - d[a]) / voxel_mm;
-          s.bias[a] += e;
-          s.rms[a] += e * e;
-          mag += d[a] * d[a];
-        }
-        s.max_truth = std::max(s.max_truth, std::sqrt(mag) / voxel_mm);
-        ++s.n;
-      }
-  for (int a = 0; a < 3; ++a) {
-    s.bias[a] /= double(s.n);
-    s.rms[a] = std::sqrt(s.rms[a] / double(s.n));
-  }
-  return s;
-}
-
 double cpu_seconds() {
   rusage u{};
   getrusage(RUSAGE_SELF, &u);
@@ -114,10 +77,11 @@ void uniform_shifts(int n) {
     const Volume b = sim::render_exact_volume(g, sim::displace(pa, flow));
     const auto r = piv::correlate_volumes(a, b, settings);
     for (int skip : {0, 1}) {
-      const Stats s = errors(r, flow, skip);
+      // skip: vector-grid layers left out at every face.
+      const sim::FieldErrors s = sim::field_errors(r.field, flow, voxel_mm, 1, skip);
       std::printf("bench=piv_uniform volume=%d^3 prefilter=%d shift_voxel=%.1f vectors=%s n=%zu "
                   "bias_x=%.4f bias_y=%.4f bias_z=%.4f rms_x=%.4f rms_y=%.4f rms_z=%.4f\n",
-                  n, int(prefilter), t, skip ? "interior" : "all", s.n, s.bias[0], s.bias[1], s.bias[2],
+                  n, int(prefilter), t, skip ? "interior" : "all", s.compared, s.bias[0], s.bias[1], s.bias[2],
                   s.rms[0], s.rms[1], s.rms[2]);
     }
   }
@@ -171,7 +135,7 @@ void ring_vortex(const std::array<int, 3>& shape, bool all_variants) {
       correlate += p.correlate_s;
       outliers += p.validation.outliers;
     }
-    const Stats e = errors(r, flow, 0);
+    const sim::FieldErrors e = sim::field_errors(r.field, flow, voxel_mm);
     std::printf("bench=piv_ring volume=%dx%dx%d variant=%s threads=%d seconds=%.2f cpu_s=%.2f cpu_ratio=%.2f "
                 "deform_s=%.2f correlate_s=%.2f final_windows=%zu final_us_per_window=%.1f "
                 "outliers=%zu rms_x=%.3f rms_y=%.3f rms_z=%.3f rms=%.3f max_displacement=%.2f "
@@ -180,9 +144,9 @@ void ring_vortex(const std::array<int, 3>& shape, bool all_variants) {
                 deform, correlate, last.windows, 1e6 * last.correlate_s / double(last.windows),
                 outliers, e.rms[0], e.rms[1], e.rms[2],
                 std::sqrt(e.rms[0] * e.rms[0] + e.rms[1] * e.rms[1] + e.rms[2] * e.rms[2]),
-                e.max_truth,
+                e.max_truth_voxels,
                 std::sqrt(e.rms[0] * e.rms[0] + e.rms[1] * e.rms[1] + e.rms[2] * e.rms[2]) /
-                    e.max_truth);
+                    e.max_truth_voxels);
     std::fflush(stdout);
   }
 }

@@ -6,6 +6,7 @@
 
 #include "core/piv/multipass.hpp"
 #include "core/sim/exact_volume.hpp"
+#include "core/sim/field_errors.hpp"
 #include "core/sim/flows.hpp"
 #include "core/sim/particles.hpp"
 
@@ -28,22 +29,9 @@ TEST(PaperScale, RingVortexOnExactParticleVolumes) {
                                    sim::render_exact_volume(g, sim::displace(pa, flow)),
                                    CorrelationSettings{});
   const auto& f = r.field;
-  std::array<double, 3> rms{0, 0, 0};
-  std::size_t n = 0;
-  for (int k = 0; k < f.grid.shape[2]; ++k)
-    for (int j = 0; j < f.grid.shape[1]; ++j)
-      for (int i = 0; i < f.grid.shape[0]; ++i) {
-        const std::size_t m = f.grid.index(i, j, k);
-        if (!f.valid[m]) continue;
-        const sim::Point3 x{f.grid.coordinate_mm(0, i), f.grid.coordinate_mm(1, j),
-                            f.grid.coordinate_mm(2, k)};
-        sim::Point3 d = flow.displacement_mm(x);
-        d = flow.displacement_mm({x[0] - d[0] / 2, x[1] - d[1] / 2, x[2] - d[2] / 2});
-        const std::array<float, 3> got{f.dx_mm[m], f.dy_mm[m], f.dz_mm[m]};
-        for (int a = 0; a < 3; ++a) rms[a] += std::pow((got[a] - d[a]) / 0.1, 2);
-        ++n;
-      }
-  for (auto& v : rms) v = std::sqrt(v / double(n));
+  const sim::FieldErrors e = sim::field_errors(f, flow, 0.1);
+  const auto& rms = e.rms;
+  const std::size_t n = e.compared;
   std::printf("paper-scale ring vortex RMS (voxels): %.3f %.3f %.3f over %zu vectors\n", rms[0],
               rms[1], rms[2], n);
   EXPECT_EQ(n, f.grid.count());

@@ -8,6 +8,7 @@
 #include "core/base/errors.hpp"
 #include "core/optics/camera_file.hpp"
 #include "core/sim/exact_volume.hpp"
+#include "core/sim/field_errors.hpp"
 #include "core/sim/flows.hpp"
 #include "core/sim/particles.hpp"
 
@@ -146,6 +147,59 @@ Grid3 small_grid() {
   g.origin_mm = {-1.0, -0.8, -0.6};
   g.spacing_mm = {0.1, 0.1, 0.1};
   return g;
+}
+
+// A 3 x 3 x 3 field of 0.1 mm nodes centred on the origin, every vector (dx, 0, 0).
+VectorField field_of(float dx_mm) {
+  Grid3 g;
+  g.shape = {3, 3, 3};
+  g.spacing_mm = {0.1, 0.1, 0.1};
+  g.origin_mm = {-0.1, -0.1, -0.1};
+  VectorField f(g);
+  f.dx_mm.assign(g.count(), dx_mm);
+  f.valid.assign(g.count(), 1);
+  return f;
+}
+
+TEST(FieldErrors, BiasRmsAndCountAgainstAUniformFlow) {
+  VectorField f = field_of(0.25f);
+  f.dx_mm[f.grid.index(0, 0, 0)] = 0.15f;
+  f.valid[f.grid.index(2, 2, 2)] = 0;  // an invalid node is not compared, whatever it holds
+  f.dx_mm[f.grid.index(2, 2, 2)] = 99.f;
+  const FieldErrors e = field_errors(f, UniformFlow({0.2, 0, 0}), 0.1);
+  EXPECT_EQ(e.compared, 26u);
+  // 25 nodes 0.5 voxel off, one -0.5 voxel off.
+  EXPECT_NEAR(e.bias[0], (25 * 0.5 - 0.5) / 26, 1e-6);
+  EXPECT_NEAR(e.rms[0], 0.5, 1e-6);
+  EXPECT_DOUBLE_EQ(e.bias[1], 0.0);
+  EXPECT_DOUBLE_EQ(e.rms[2], 0.0);
+  EXPECT_NEAR(e.rms_total, 0.5, 1e-6);
+  EXPECT_NEAR(e.max_truth_voxels, 2.0, 1e-12);
+  // One layer left out at every face: the centre node only.
+  const FieldErrors inner = field_errors(f, UniformFlow({0.2, 0, 0}), 0.1, 1, 1);
+  EXPECT_EQ(inner.compared, 1u);
+  EXPECT_NEAR(inner.bias[0], 0.5, 1e-6);
+  // No valid node: no figure rather than a perfect one.
+  f.valid.assign(f.valid.size(), 0);
+  const FieldErrors none = field_errors(f, UniformFlow({0.2, 0, 0}), 0.1);
+  EXPECT_EQ(none.compared, 0u);
+  EXPECT_TRUE(std::isnan(none.rms[0]));
+}
+
+TEST(FieldErrors, TheTruthIsTheMidpointDisplacement) {
+  // D(x) = 0.1 x along x; at node x = 0.1 mm the particle whose move is centred there has
+  // d = 0.1 (x - d/2), so d = 0.1 x / 1.05. One fixed-point step gives 0.1 x (1 - 0.05).
+  const LinearShear flow({0.1, 0, 0}, 0, 0.0);
+  VectorField f = field_of(0.f);
+  f.valid.assign(f.valid.size(), 0);
+  const std::size_t node = f.grid.index(2, 1, 1);  // x = 0.1 mm
+  f.valid[node] = 1;
+  const double exact = 0.01 / 1.05;
+  f.dx_mm[node] = float(exact);
+  const double one_step = 0.01 * 0.95;
+  EXPECT_NEAR(field_errors(f, flow, 0.1, 1).bias[0], (exact - one_step) / 0.1, 1e-7);
+  EXPECT_NEAR(field_errors(f, flow, 0.1, 20).bias[0], 0.0, 1e-7);
+  EXPECT_NEAR(field_errors(f, flow, 0.1, 0).bias[0], (exact - 0.01) / 0.1, 1e-7);  // D(x) itself
 }
 
 TEST(ExactVolume, BlobCentroidIsTheTruePosition) {

@@ -1,0 +1,28 @@
+// How far a measured vector field is from a flow's exact displacement: bias and RMS per component
+// in voxels, the yardstick of every accuracy test and benchmark that knows its flow.
+#pragma once
+
+#include <array>
+#include <cstddef>
+
+#include "core/base/grid.hpp"
+#include "core/sim/flows.hpp"
+
+namespace plenopiv::sim {
+
+struct FieldErrors {
+  std::array<double, 3> bias{0, 0, 0};  // mean error per component, voxels
+  std::array<double, 3> rms{0, 0, 0};   // RMS error per component, voxels
+  double rms_total = 0;                 // RMS of the error vector's length, voxels
+  double max_truth_voxels = 0;          // largest true displacement among the nodes compared
+  std::size_t compared = 0;             // valid nodes compared (bias and RMS are NaN when none)
+};
+
+// Errors of the valid vectors of `field` against `flow`. The truth at a node x is the displacement
+// of the particle whose move is centred on x (what a symmetric correlation measures):
+// d = D(x - d/2), from d = D(x) by `midpoint_iterations` fixed-point steps. `border` node layers at
+// every face are left out.
+FieldErrors field_errors(const VectorField& field, const Flow& flow, double voxel_mm, int midpoint_iterations = 1,
+                         int border = 0);
+
+}  // namespace plenopiv::sim
