@@ -12,6 +12,7 @@
 #include "core/optics/camera_file.hpp"
 #include "tests/support/cameras.hpp"
 #include "tests/lightfield/particle_render.hpp"
+#include "tests/lightfield/view_shift.hpp"
 
 namespace plenopiv::lightfield {
 namespace {
@@ -98,21 +99,6 @@ TEST(Refocus, HexArraySharpestAtTheParticleDepth) {
   EXPECT_NEAR(best_z, 5.0, 1.0);
 }
 
-// Centroid of a view image on the microlens plane (mm), by lattice positions.
-std::array<double, 2> centroid_mm(const ImageF& view, const optics::Lattice& lattice) {
-  double s = 0, sx = 0, sy = 0;
-  for (int j = 0; j < view.height; ++j) {
-    for (int i = 0; i < view.width; ++i) {
-      const double w = view.at(i, j);
-      const auto q = lattice.position(i, j);
-      s += w;
-      sx += w * q[0];
-      sy += w * q[1];
-    }
-  }
-  return {sx / s, sy / s};
-}
-
 class PerspectiveShift : public ::testing::TestWithParam<double> {};
 
 // Eq 2: in the view from u, a particle whose image forms at x' (alpha) lies at
@@ -127,21 +113,7 @@ TEST_P(PerspectiveShift, MovesAsEquationTwoPredicts) {
   const auto ip = testing_support::image_point(cam, p);
   const double expected_slope = 1 - 1 / ip.alpha;
   // Least-squares slope of the view centroid against u (v = 0) and against v (u = 0).
-  double su = 0, sx = 0, suu = 0, sux = 0, sy = 0, suy = 0;
-  int n = 0;
-  for (double u = -10; u <= 10.001; u += 1.0) {
-    const auto cx = centroid_mm(perspective_view(field, u, 0), lenses.lattice);
-    const auto cy = centroid_mm(perspective_view(field, 0, u), lenses.lattice);
-    su += u;
-    suu += u * u;
-    sx += cx[0];
-    sux += u * cx[0];
-    sy += cy[1];
-    suy += u * cy[1];
-    ++n;
-  }
-  const double slope_x = (n * sux - su * sx) / (n * suu - su * su);
-  const double slope_y = (n * suy - su * sy) / (n * suu - su * su);
+  const auto [slope_x, slope_y] = testing_support::view_shift_slopes(field, lenses.lattice, 10);
   std::cout << "z = " << z0 << " mm: view shift " << slope_x << ", " << slope_y << " mm per mm of u, v; eq 2 "
             << expected_slope << "\n";
   EXPECT_EQ(slope_x > 0, expected_slope > 0);
