@@ -3,6 +3,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <string_view>
+#include <vector>
 
 #include "core/base/errors.hpp"
 #include "core/base/yaml_access.hpp"
@@ -44,10 +46,9 @@ RigTiming timing_from(const YamlMap& map) {
       {"frame_b_s", &l.frame_b_s},
       {"camera_max_pair_rate_hz", &l.camera_max_pair_rate_hz},
       {"gate_width_s", &t.gate_width_s}};
-  map.reject_unknown({"flashlamp_to_qswitch_s", "camera_pretrigger_s", "exposure_a_s",
-                      "flashlamp_pulse_width_s", "qswitch_pulse_width_s", "camera_pulse_width_s",
-                      "laser_max_rate_hz", "min_flashlamp_to_qswitch_s", "max_flashlamp_to_qswitch_s",
-                      "interline_transfer_s", "frame_b_s", "camera_max_pair_rate_hz", "gate_width_s"});
+  std::vector<std::string_view> known;
+  for (const auto& key : keys) known.push_back(key.first);
+  map.reject_unknown(known);
   for (const auto& [key, value] : keys) {
     *value = map.number_or(key, *value);
     if (!(*value > 0) || !std::isfinite(*value)) map.fail(key, "must be > 0");

@@ -163,7 +163,7 @@ std::string YamlMap::choice_or(std::string_view key,
   return has(key) ? choice(key, allowed) : fallback;
 }
 
-void YamlMap::reject_unknown(std::initializer_list<std::string_view> known) const {
+void YamlMap::reject_unknown(std::span<const std::string_view> known) const {
   for (const auto& entry : node_) {
     const std::string name = entry.first.as<std::string>();
     bool found = false;

@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <initializer_list>
 #include <optional>
+#include <span>
 #include <string>
 #include <string_view>
 
@@ -39,7 +40,10 @@ class YamlMap {
                         std::string fallback) const;
 
   // Refuses keys not in `known` (a typo must not become a silent default).
-  void reject_unknown(std::initializer_list<std::string_view> known) const;
+  void reject_unknown(std::span<const std::string_view> known) const;
+  void reject_unknown(std::initializer_list<std::string_view> known) const {
+    reject_unknown(std::span<const std::string_view>(known.begin(), known.size()));
+  }
 
   // "<source>: <path.key>" for messages about a key.
   std::string where(std::string_view key) const;
