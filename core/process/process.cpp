@@ -4,6 +4,7 @@
 #include <chrono>
 #include <algorithm>
 #include <cmath>
+#include <utility>
 
 #include "core/base/errors.hpp"
 
@@ -59,13 +60,15 @@ Grid3 ProcessSettings::reconstruction_grid() const {
 }
 
 namespace {
-// The slices [first, first + grid.shape[2]) of `v`, on `grid` (the box the user asked for).
-Volume depth_crop(const Volume& v, int first, const Grid3& grid) {
-  if (first == 0 && v.grid == grid) return v;
-  Volume out(grid, 0.f);
+// The slices [first, first + grid.shape[2]) of `v`, on `grid` (the box the user asked for), in
+// place: no second volume-sized buffer per frame.
+Volume depth_crop(Volume v, int first, const Grid3& grid) {
   const std::size_t slice = std::size_t(grid.shape[0]) * std::size_t(grid.shape[1]);
-  std::copy_n(v.data.begin() + std::ptrdiff_t(std::size_t(first) * slice), out.data.size(), out.data.begin());
-  return out;
+  const auto begin = v.data.begin() + std::ptrdiff_t(std::size_t(first) * slice);
+  std::move(begin, begin + std::ptrdiff_t(grid.count()), v.data.begin());
+  v.data.resize(grid.count());
+  v.grid = grid;
+  return v;
 }
 }  // namespace
 
@@ -139,7 +142,7 @@ PairResult process_pair(const recon::WeightingOperator& op, const ImageF& frame_
     report("reconstruct A", 0.4 * it.iteration / iterations);
   });
   out.times.reconstruct_a_s = seconds_since(t0);
-  out.volume_a = depth_crop(ra.volume, settings.guard_slices(), settings.grid);
+  out.volume_a = depth_crop(std::move(ra.volume), settings.guard_slices(), settings.grid);
   out.skipped_a = ra.skipped;
 
   t0 = std::chrono::steady_clock::now();
@@ -147,7 +150,7 @@ PairResult process_pair(const recon::WeightingOperator& op, const ImageF& frame_
     report("reconstruct B", 0.4 + 0.4 * it.iteration / iterations);
   });
   out.times.reconstruct_b_s = seconds_since(t0);
-  out.volume_b = depth_crop(rb.volume, settings.guard_slices(), settings.grid);
+  out.volume_b = depth_crop(std::move(rb.volume), settings.guard_slices(), settings.grid);
   out.skipped_b = rb.skipped;
 
   t0 = std::chrono::steady_clock::now();

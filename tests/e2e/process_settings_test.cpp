@@ -8,6 +8,7 @@
 #include "core/base/yaml_access.hpp"
 #include "core/optics/camera_file.hpp"
 #include "core/process/process.hpp"
+#include "core/recon/mart.hpp"
 #include "core/recon/weights.hpp"
 #include "core/sim/render.hpp"
 
@@ -69,6 +70,13 @@ TEST(ProcessSettings, ProcessPairReturnsTheRequestedBoxAndRefusesAnUnguardedOper
   double light = 0;
   for (float v : r.volume_a.data) light += v;
   EXPECT_GT(light, 0.0);  // the particles' slices are inside the returned box
+  // Exactly the inner slices of the guarded reconstruction (deterministic kernels: bit for bit).
+  const Volume full = recon::reconstruct(guarded, a, s.mart).volume;
+  const std::size_t slice = std::size_t(s.grid.shape[0]) * std::size_t(s.grid.shape[1]);
+  const std::vector<float> inner(full.data.begin() + std::ptrdiff_t(std::size_t(s.guard_slices()) * slice),
+                                 full.data.begin() + std::ptrdiff_t(std::size_t(s.guard_slices()) * slice +
+                                                                    s.grid.count()));
+  EXPECT_EQ(r.volume_a.data, inner);
 
   const recon::WeightingOperator unguarded(camera, lenses, s.grid, recon::geometric_white_image(camera, lenses));
   EXPECT_THROW(process_pair(unguarded, a, b, s), InputError);
