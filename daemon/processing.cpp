@@ -27,7 +27,7 @@ ProcessFactory plenoptic_processing(const optics::CameraModel& camera) {
     // Built once per run, shared read-only by the concurrent pairs.
     const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera));
     auto op = std::make_shared<const recon::WeightingOperator>(
-        camera, lenses, settings.reconstruction_grid(), recon::geometric_white_image(camera, lenses));
+        process::make_operator(camera, lenses, recon::geometric_white_image(camera, lenses), settings));
     const bool keep_volumes = config.publish_volumes;
     return [op, settings, keep_volumes](const drivers::FramePair& pair) {
       process::ProcessSettings s = settings;

@@ -59,6 +59,12 @@ Grid3 ProcessSettings::reconstruction_grid() const {
   return g;
 }
 
+recon::WeightingOperator make_operator(const optics::CameraModel& camera, const optics::MicrolensArray& lenses,
+                                       ImageF white, const ProcessSettings& settings) {
+  return recon::WeightingOperator(camera, lenses, settings.reconstruction_grid(), std::move(white),
+                                  settings.angular_sampling);
+}
+
 namespace {
 // The slices [first, first + grid.shape[2]) of `v`, on `grid` (the box the user asked for), in
 // place: no second volume-sized buffer per frame.
@@ -86,7 +92,8 @@ ProcessSettings process_settings_from(const YamlMap& root) {
   if (!(s.depth_guard_mm >= 0 && s.depth_guard_mm <= 100)) vol.fail("depth_guard_mm", "must be in [0, 100] mm");
 
   if (auto r = root.optional_map("reconstruction")) {
-    r->reject_unknown({"iterations", "mu", "start", "noise_threshold", "dark_weight_cutoff", "convergence"});
+    r->reject_unknown(
+        {"iterations", "mu", "start", "noise_threshold", "dark_weight_cutoff", "convergence", "angular_sampling"});
     const long long it = r->integer_or("iterations", s.mart.iterations);
     if (it < 1 || it > 1000) r->fail("iterations", "must be 1..1000, got " + std::to_string(it));
     s.mart.iterations = int(it);
@@ -101,6 +108,8 @@ ProcessSettings process_settings_from(const YamlMap& root) {
       r->fail("dark_weight_cutoff", "must be in [0, 1)");
     s.mart.convergence = r->number_or("convergence", s.mart.convergence);
     if (!(s.mart.convergence >= 0)) r->fail("convergence", "must be >= 0");
+    s.angular_sampling = r->number_or("angular_sampling", s.angular_sampling);
+    if (!(s.angular_sampling > 0 && s.angular_sampling <= 8)) r->fail("angular_sampling", "must be in (0, 8]");
   }
 
   if (auto c = root.optional_map("correlation")) {
