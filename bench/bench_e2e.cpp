@@ -55,16 +55,13 @@ struct Errors {
   double off_band[3] = {0, 0, 0};  // RMS away from the ring's axis band
 };
 
-// Half the final window along x (mm): the axis band's half-width.
-double band_half_width_mm(const piv::CorrelationSettings& c, double voxel_mm) {
-  return 0.5 * c.passes.back().window[0] * voxel_mm;
-}
-
 // RMS error (voxels) over valid nodes against the midpoint displacement d = D(x - d/2) (three
 // fixed-point steps: the ring's displacements are several voxels), and the share of valid nodes;
 // beside it the RMS over the nodes whose final window does not reach the ring's axis
-// (sim::in_ring_axis_band, half-width `band_mm`), where the exact u and w jump.
-Errors errors_against(const VectorField& f, const sim::RingVortexFlow& flow, double voxel_mm, double band_mm) {
+// (sim::in_ring_axis_band; half-width: half the default final window, 1 mm at 0.125 mm voxels),
+// where the exact u and w jump.
+Errors errors_against(const VectorField& f, const sim::RingVortexFlow& flow, double voxel_mm) {
+  const double band_mm = 0.5 * piv::CorrelationSettings{}.passes.back().window[0] * voxel_mm;
   const sim::FieldErrors s = sim::field_errors(f, flow, voxel_mm, 3);
   const sim::FieldErrors off = sim::field_errors(f, flow, voxel_mm, 3, 0, [&](const sim::Point3& x) {
     return !sim::in_ring_axis_band(flow, x, band_mm);
@@ -176,9 +173,8 @@ int main(int argc, char** argv) {
               settings.grid.count(), render_s, weights_s);
 
   // The paper's settings: reconstruction and correlation, stage by stage.
-  const double band_mm = band_half_width_mm(settings.correlation, voxel);
   const auto base = process::process_pair(op, a, b, settings);
-  const Errors e = errors_against(base.correlation.field, flow, voxel, band_mm);
+  const Errors e = errors_against(base.correlation.field, flow, voxel);
   std::printf("bench=e2e case=%s variant=reconstructed iterations=%d mu=%.2f recon_a_s=%.2f recon_b_s=%.2f "
               "correlate_s=%.2f skipped_a=%.3f skipped_b=%.3f rms_u=%.3f rms_v=%.3f rms_w=%.3f rms=%.3f valid=%.3f "
               "off_axis_band_rms_u=%.3f off_axis_band_rms_v=%.3f off_axis_band_rms_w=%.3f peak_rss_gb=%.2f\n",
@@ -190,7 +186,7 @@ int main(int argc, char** argv) {
   t = now_s();
   const Volume ea = sim::render_exact_volume(settings.grid, pa), eb = sim::render_exact_volume(settings.grid, pb);
   const auto exact = piv::correlate_volumes(ea, eb, settings.correlation);
-  const Errors ex = errors_against(exact.field, flow, voxel, band_mm);
+  const Errors ex = errors_against(exact.field, flow, voxel);
   std::printf("bench=e2e case=%s variant=exact_volumes correlate_s=%.2f rms_u=%.3f rms_v=%.3f rms_w=%.3f rms=%.3f "
               "valid=%.3f off_axis_band_rms_u=%.3f off_axis_band_rms_v=%.3f off_axis_band_rms_w=%.3f\n",
               scale.c_str(), now_s() - t, ex.rms[0], ex.rms[1], ex.rms[2], ex.total, ex.valid_fraction,
@@ -215,7 +211,7 @@ int main(int argc, char** argv) {
         const auto r = recon ? piv::correlate_volumes(base.volume_a, base.volume_b, v.c)
                              : piv::correlate_volumes(ea, eb, v.c);
         const double cs = now_s() - t;
-        const Errors er = errors_against(r.field, flow, voxel, band_mm);
+        const Errors er = errors_against(r.field, flow, voxel);
         std::printf("bench=e2e case=%s correlation=%s volumes=%s correlate_s=%.2f rms_u=%.3f rms_v=%.3f rms_w=%.3f "
                     "rms=%.3f off_axis_band_rms_u=%.3f off_axis_band_rms_v=%.3f off_axis_band_rms_w=%.3f\n",
                     scale.c_str(), v.name, recon ? "reconstructed" : "exact", cs, er.rms[0], er.rms[1], er.rms[2],
@@ -240,7 +236,7 @@ int main(int argc, char** argv) {
       s.mart.iterations = it;
       s.mart.mu = mu;
       const auto r = process::process_pair(op, a, b, s);
-      const Errors er = errors_against(r.correlation.field, flow, voxel, band_mm);
+      const Errors er = errors_against(r.correlation.field, flow, voxel);
       rows.push_back({"iterations", it, np, 16, mu,
                       r.times.reconstruct_a_s + r.times.reconstruct_b_s + r.times.correlate_s, er.total, er});
     }
@@ -252,7 +248,7 @@ int main(int argc, char** argv) {
       s.mart.mu = mu;
       s.mart.iterations = it;
       const auto r = process::process_pair(op, a, b, s);
-      const Errors er = errors_against(r.correlation.field, flow, voxel, band_mm);
+      const Errors er = errors_against(r.correlation.field, flow, voxel);
       rows.push_back({"mu", it, np, 16, mu, r.times.reconstruct_a_s + r.times.reconstruct_b_s + r.times.correlate_s,
                       er.total, er});
     }
@@ -263,7 +259,7 @@ int main(int argc, char** argv) {
     s.depth_guard_mm = 0;
     const recon::WeightingOperator op0(camera, lenses, s.reconstruction_grid(), recon::geometric_white_image(camera, lenses));
     const auto r = process::process_pair(op0, a, b, s);
-    const Errors er = errors_against(r.correlation.field, flow, voxel, band_mm);
+    const Errors er = errors_against(r.correlation.field, flow, voxel);
     rows.push_back({"no_depth_guard", 5, np, 16, 0.5,
                     r.times.reconstruct_a_s + r.times.reconstruct_b_s + r.times.correlate_s, er.total, er});
   }
@@ -273,7 +269,7 @@ int main(int argc, char** argv) {
     process::ProcessSettings s = settings;
     s.mart.dark_weight_cutoff = cutoff;
     const auto r = process::process_pair(op, a, b, s);
-    const Errors er = errors_against(r.correlation.field, flow, voxel, band_mm);
+    const Errors er = errors_against(r.correlation.field, flow, voxel);
     rows.push_back({"dark_cutoff", 5, np, 16, 0.5, r.times.reconstruct_a_s + r.times.reconstruct_b_s + r.times.correlate_s,
                     er.total, er, std::to_string(cutoff).substr(0, 4)});
   }
@@ -281,7 +277,7 @@ int main(int argc, char** argv) {
     process::ProcessSettings s = settings;
     s.mart.noise_threshold = floor_counts;
     const auto r = process::process_pair(op, a, b, s);
-    const Errors er = errors_against(r.correlation.field, flow, voxel, band_mm);
+    const Errors er = errors_against(r.correlation.field, flow, voxel);
     rows.push_back({"noise_threshold", 5, np, 16, 0.5,
                     r.times.reconstruct_a_s + r.times.reconstruct_b_s + r.times.correlate_s, er.total, er,
                     std::to_string(int(floor_counts))});
@@ -293,7 +289,7 @@ int main(int argc, char** argv) {
     s.correlation.passes = {{{16, 16, 16}, 50.0}, {{12, 12, 12}, 75.0}, {{8, 8, 8}, 75.0}};
     const recon::WeightingOperator op2(camera, lenses, s.reconstruction_grid(), recon::geometric_white_image(camera, lenses));
     const auto r = process::process_pair(op2, a, b, s);
-    const Errors er = errors_against(r.correlation.field, flow, voxel, band_mm);  // still in 0.125 mm voxels
+    const Errors er = errors_against(r.correlation.field, flow, voxel);  // still in 0.125 mm voxels
     rows.push_back({"binning", 5, 3, 8, 0.5, r.times.reconstruct_a_s + r.times.reconstruct_b_s + r.times.correlate_s,
                     er.total, er, "2x"});
   }
@@ -304,7 +300,7 @@ int main(int argc, char** argv) {
       t = now_s();
       const auto r = piv::correlate_volumes(base.volume_a, base.volume_b, c);
       const double cs = now_s() - t;
-      const Errors er = errors_against(r.field, flow, voxel, band_mm);
+      const Errors er = errors_against(r.field, flow, voxel);
       rows.push_back({"final_window", 5, passes, window, 0.5, recon_s + cs, er.total, er});
     }
   }
@@ -314,7 +310,7 @@ int main(int argc, char** argv) {
     t = now_s();
     const auto r = piv::correlate_volumes(base.volume_a, base.volume_b, c);
     const double cs = now_s() - t;
-    const Errors er = errors_against(r.field, flow, voxel, band_mm);
+    const Errors er = errors_against(r.field, flow, voxel);
     rows.push_back({"passes", 5, passes, 16, 0.5, recon_s + cs, er.total, er});
   }
   for (const Row& r : rows) {
