@@ -77,19 +77,18 @@ Layout layout_of(const PassSettings& p, const std::array<int, 3>& shape) {
 }
 
 // Correlates every window of `va` with the same window of `vb`; a window's candidates are the
-// predictor at its centre plus each correlation peak.
+// predictor (at its centre, or its mean over the window: settings.hpp, PredictorBase) plus each
+// correlation peak.
 Candidates correlate_windows(const std::vector<float>& va, const std::vector<float>& vb,
                              const std::array<int, 3>& shape, const Layout& l,
                              const NodeField* predictor, float signal_threshold,
-                             FftPlanning planning, std::vector<float>& ratio) {
+                             FftPlanning planning, bool at_centre, std::vector<float>& ratio) {
   const FftCorrelator& correlator = FftCorrelator::shared(l.window, planning);
   Candidates c(l.count);
-  // The predictor's mean over each window, as per-axis node weights: the residual a window
-  // measures is relative to how far its voxels were moved on average, not to the predictor at
-  // its centre. Adding it to the centre value instead leaves an alternating (odd-even) error
-  // undamped once windows overlap by more than half.
+  // window_mean: the predictor's mean over each window, as per-axis node weights (the residual
+  // a window measures is relative to how far its voxels were moved on average).
   std::array<std::vector<std::vector<double>>, 3> mean_weights;
-  if (predictor)
+  if (predictor && !at_centre)
     for (int a = 0; a < 3; ++a)
       for (int i = 0; i < l.count[a]; ++i)
         mean_weights[a].push_back(predictor->mean_weights(a, l.start[a] + i * l.step[a], l.window[a]));
@@ -123,7 +122,10 @@ Candidates correlate_windows(const std::vector<float>& va, const std::vector<flo
       }
       const auto peaks = find_peaks(ws.correlate(), l.window);
       std::array<float, 3> base{0, 0, 0};
-      if (predictor) {
+      if (predictor && at_centre) {
+        base = predictor->at(x0 + 0.5 * (l.window[0] - 1), y0 + 0.5 * (l.window[1] - 1),
+                             z0 + 0.5 * (l.window[2] - 1));
+      } else if (predictor) {
         const auto& wx = mean_weights[0][i];
         const auto& wy = mean_weights[1][j];
         const auto& wz = mean_weights[2][k];
@@ -209,7 +211,8 @@ CorrelationResult correlate_volumes(const Volume& a, const Volume& b,
 
     t0 = Clock::now();
     last = correlate_windows(*va, *vb, shape, layout, have_predictor ? &predictor : nullptr,
-                             settings.signal_threshold, settings.fft_planning, ratio);
+                             settings.signal_threshold, settings.fft_planning,
+                             settings.predictor == PredictorBase::centre, ratio);
     report.correlate_s = seconds_since(t0);
     report.windows = last.size();
     for (std::size_t n = 0; n < last.size(); ++n) {
@@ -226,6 +229,13 @@ CorrelationResult correlate_volumes(const Volume& a, const Volume& b,
       const auto filled = fill_invalid(validated, layout.count);
       for (std::size_t n = 0; n < filled.size(); ++n)
         for (int c = 0; c < 3; ++c) predictor.d[c][n] = filled[n][c];
+      // Smoothing between passes: settings.hpp (PredictorBase) says why.
+      std::vector<float> smoothed(predictor.size()), scratch(predictor.size());
+      for (int c = 0; c < 3; ++c)
+        for (int it = 0; it < settings.predictor_smoothing; ++it) {
+          binomial_smooth(predictor.d[c], layout.count, smoothed, scratch);
+          predictor.d[c].swap(smoothed);
+        }
       have_predictor = true;
     }
     report.validate_s = seconds_since(t0);

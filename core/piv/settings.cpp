@@ -23,6 +23,8 @@ void check(const CorrelationSettings& s, const std::string& source) {
   if (!(s.median.threshold > 0)) fail("median.threshold: must be > 0");
   if (!(s.median.epsilon > 0)) fail("median.epsilon_voxel: must be > 0");
   if (s.median.radius < 1 || s.median.radius > 3) fail("median.radius: must be 1, 2 or 3");
+  if (s.predictor_smoothing < 0 || s.predictor_smoothing > 4)
+    fail("predictor_smoothing: must be 0 to 4, got " + std::to_string(s.predictor_smoothing));
   if (!(s.signal_threshold >= 0)) fail("signal_threshold: must be >= 0");
   if (!(s.dt_s > 0)) fail("dt_s: must be > 0, got " + std::to_string(s.dt_s));
 }
@@ -65,7 +67,8 @@ std::vector<PassSettings> parse_passes(const std::string& text) {
 }
 
 CorrelationSettings correlation_settings_from(const YamlMap& root) {
-  root.reject_unknown({"passes", "median", "signal_threshold", "dt_s", "fft_planning", "prefilter"});
+  root.reject_unknown({"passes", "median", "signal_threshold", "dt_s", "fft_planning", "prefilter",
+                      "predictor", "predictor_smoothing"});
   CorrelationSettings s;
   if (root.has("passes")) {
     const YAML::Node list = root.node()["passes"];
@@ -105,6 +108,10 @@ CorrelationSettings correlation_settings_from(const YamlMap& root) {
                        ? FftPlanning::measure
                        : FftPlanning::estimate;
   s.prefilter = root.boolean_or("prefilter", s.prefilter);
+  s.predictor = root.choice_or("predictor", {"centre", "window_mean"}, "centre") == "centre"
+                    ? PredictorBase::centre
+                    : PredictorBase::window_mean;
+  s.predictor_smoothing = int(root.integer_or("predictor_smoothing", s.predictor_smoothing));
   check(s, root.source());
   return s;
 }

@@ -17,12 +17,22 @@ struct PassSettings {
   double overlap_percent = 50;            // 0 <= overlap < 100
 };
 
+// What a deformed window's residual is added to. window_mean: the predictor's mean over the
+// window's voxels; the passes then converge to the window-averaged (box-filtered) field. centre:
+// the predictor at the window's centre; iterated, the passes undo most of the window's
+// filtering (the field is measured where the window is, not averaged over it), but an
+// alternating (odd-even) error between overlapping windows grows unless the predictor is
+// smoothed between passes (Schrijer & Scarano 2008): use it with predictor_smoothing >= 1.
+enum class PredictorBase { window_mean, centre };
+
 struct CorrelationSettings {
   // Coarse to fine. Pass 1 correlates the volumes as they are; every later pass deforms both
-  // volumes by the previous pass's validated field (VODIM). Default: three passes ending at the
-  // paper's 16^3 with 75 % overlap; the middle pass at 16^3, 50 % measured both faster (0.5x
-  // CPU) and more accurate on the ring vortex than 24^3, 75 % (docs/benchmarks.md).
-  std::vector<PassSettings> passes{{{32, 32, 32}, 50}, {{16, 16, 16}, 50}, {{16, 16, 16}, 75}};
+  // volumes by the previous pass's validated field (VODIM). Default: four passes ending at the
+  // paper's 16^3 with 75 % overlap; the 16^3, 50 % passes cost an eighth of the final pass's
+  // correlations, and each one moves the centre-based predictor closer to the unfiltered field
+  // (docs/benchmarks.md, "Ring vortex": error and time of each schedule).
+  std::vector<PassSettings> passes{
+      {{32, 32, 32}, 50}, {{16, 16, 16}, 50}, {{16, 16, 16}, 50}, {{16, 16, 16}, 75}};
   MedianTest median;
   // A window whose largest intensity in either volume is <= this has no particle signal.
   float signal_threshold = 0.f;
@@ -30,10 +40,14 @@ struct CorrelationSettings {
   FftPlanning fft_planning = FftPlanning::estimate;
   // Binomial [1 2 1]/4 smoothing of both volumes before correlating (deform.hpp: why).
   bool prefilter = true;
+  PredictorBase predictor = PredictorBase::centre;
+  // Binomial [1 2 1]/4 smoothing passes (per axis) over the predictor's nodes before it deforms
+  // the next pass: removes the alternating mode the centre predictor lets grow. 0 to 4.
+  int predictor_smoothing = 1;
 };
 
 // Checks every value (windows >= 4 voxels, 0 <= overlap < 100, threshold and epsilon > 0,
-// radius 1..3, dt > 0); InputError naming `source` and the setting otherwise.
+// radius 1..3, predictor_smoothing 0..4, dt > 0); InputError naming `source` and the setting otherwise.
 void check(const CorrelationSettings& s, const std::string& source);
 
 // Parses "WxHxD@overlap" or "W@overlap" passes, comma separated, e.g. "32@50,24@75,16x16x32@75".
@@ -46,6 +60,8 @@ std::vector<PassSettings> parse_passes(const std::string& text);
 //   dt_s: 0.001
 //   fft_planning: estimate   # or measure (faster; not bit-identical between processes)
 //   prefilter: true          # binomial smoothing of both volumes first
+//   predictor: centre        # or window_mean (what a window's residual is added to)
+//   predictor_smoothing: 1   # binomial passes over the predictor between passes, 0..4
 // Every key is optional (defaults above); unknown keys are refused. Checked.
 CorrelationSettings load_correlation_settings(const std::filesystem::path& path);
 // The same from a mapping already parsed (a section of a larger file, e.g. process.yaml).

@@ -8,6 +8,16 @@ namespace plenopiv::sim {
 
 FieldErrors field_errors(const VectorField& field, const Flow& flow, double voxel_mm, int midpoint_iterations,
                          int border) {
+  return field_errors(field, flow, voxel_mm, midpoint_iterations, border, {});
+}
+
+bool in_ring_axis_band(const RingVortexFlow& flow, const Point3& node_mm, double half_window_mm) {
+  const Point3& c = flow.parameters().centre_mm;
+  return std::abs(node_mm[0] - c[0]) <= half_window_mm && std::abs(node_mm[2] - c[2]) <= half_window_mm;
+}
+
+FieldErrors field_errors(const VectorField& field, const Flow& flow, double voxel_mm, int midpoint_iterations,
+                         int border, const std::function<bool(const Point3&)>& include) {
   const Grid3& g = field.grid;
   FieldErrors e;
   std::array<double, 3> sum{0, 0, 0}, sum_sq{0, 0, 0};
@@ -17,6 +27,7 @@ FieldErrors field_errors(const VectorField& field, const Flow& flow, double voxe
         const std::size_t m = g.index(i, j, k);
         if (!field.valid[m]) continue;
         const Point3 x{g.coordinate_mm(0, i), g.coordinate_mm(1, j), g.coordinate_mm(2, k)};
+        if (include && !include(x)) continue;
         Point3 d = flow.displacement_mm(x);
         for (int it = 0; it < midpoint_iterations; ++it)
           d = flow.displacement_mm({x[0] - d[0] / 2, x[1] - d[1] / 2, x[2] - d[2] / 2});

@@ -4,6 +4,7 @@
 
 #include <array>
 #include <cstddef>
+#include <functional>
 
 #include "core/base/grid.hpp"
 #include "core/sim/flows.hpp"
@@ -24,5 +25,14 @@ struct FieldErrors {
 // every face are left out.
 FieldErrors field_errors(const VectorField& field, const Flow& flow, double voxel_mm, int midpoint_iterations = 1,
                          int border = 0);
+// The same over the nodes (node centre in mm) for which `include` is true.
+FieldErrors field_errors(const VectorField& field, const Flow& flow, double voxel_mm, int midpoint_iterations,
+                         int border, const std::function<bool(const Point3&)>& include);
+
+// The ring vortex's axis band: nodes whose cubic window (half-width `half_window_mm`) reaches the
+// ring's axis, |x - x_c| <= h and |z - z_c| <= h. There, with DESIGN.md's reading, the exact radial
+// displacement (u, w) changes sign across the axis (every core point is equally near), so the
+// true field is discontinuous and a window can only measure the mean across the jump.
+bool in_ring_axis_band(const RingVortexFlow& flow, const Point3& node_mm, double half_window_mm);
 
 }  // namespace plenopiv::sim

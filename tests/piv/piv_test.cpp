@@ -8,6 +8,7 @@
 #include <random>
 
 #include "core/base/errors.hpp"
+#include "core/base/yaml_access.hpp"
 #include "core/piv/deform.hpp"
 #include "core/piv/derived.hpp"
 #include "core/piv/fft_correlator.hpp"
@@ -305,8 +306,9 @@ TEST(Multipass, SameBitsAtOneAndTwoThreads) {
 }
 
 // The paper's ring vortex (8 mm ring, r_c 40 voxels, v_rc 8 voxels, 0.1 mm voxels) on a region
-// cropped around it, 128x96x96 voxels: three passes with deformation against one pass with the
-// same final windows (16^3, 75 % overlap).
+// cropped around it, 128x96x96 voxels: the default passes with deformation against one pass with
+// the same final windows (16^3, 75 % overlap), and the previous default (three passes, residual
+// added to the predictor's window mean, no smoothing between passes).
 TEST(Multipass, WindowDeformationReducesTheRingVortexError) {
   Grid3 g;
   g.shape = {128, 96, 96};
@@ -319,17 +321,31 @@ TEST(Multipass, WindowDeformationReducesTheRingVortexError) {
   const Volume b = sim::render_exact_volume(g, sim::displace(pa, flow));
   CorrelationSettings single;
   single.passes = {{{16, 16, 16}, 75}};
-  CorrelationSettings multi;  // the defaults: 32^3 50 %, 16^3 50 %, 16^3 75 %
+  CorrelationSettings previous;
+  previous.passes = {{{32, 32, 32}, 50}, {{16, 16, 16}, 50}, {{16, 16, 16}, 75}};
+  previous.predictor = PredictorBase::window_mean;
+  previous.predictor_smoothing = 0;
+  const CorrelationSettings multi;  // the defaults
   const auto r1 = correlate_volumes(a, b, single);
+  const auto r0 = correlate_volumes(a, b, previous);
   const auto r3 = correlate_volumes(a, b, multi);
   ASSERT_EQ(r1.field.grid, r3.field.grid);
   // RMS per component against the flow, truth where the particle sat halfway through its move.
-  const P3 e1 = sim::field_errors(r1.field, flow, 0.1).rms, e3 = sim::field_errors(r3.field, flow, 0.1).rms;
-  std::printf("ring vortex RMS (voxels) single pass %.3f %.3f %.3f, three passes %.3f %.3f %.3f\n",
-              e1[0], e1[1], e1[2], e3[0], e3[1], e3[2]);
-  // Measured: single pass 1.03, 0.71, 0.73; three passes 0.34, 0.30, 0.32 (ratios 0.33-0.44).
-  for (int c = 0; c < 3; ++c) EXPECT_LT(e3[c], 0.6 * e1[c]) << c;
-  for (int c = 0; c < 3; ++c) EXPECT_LT(e3[c], 0.45) << c;
+  const P3 e1 = sim::field_errors(r1.field, flow, 0.1).rms, e0 = sim::field_errors(r0.field, flow, 0.1).rms,
+           e3 = sim::field_errors(r3.field, flow, 0.1).rms;
+  // Away from the axis band (the windows reaching the ring's axis, where the exact u and w jump).
+  const auto off_band = [&](const sim::Point3& x) { return !sim::in_ring_axis_band(flow, x, 0.8); };
+  const P3 o3 = sim::field_errors(r3.field, flow, 0.1, 1, 0, off_band).rms;
+  std::printf("ring vortex RMS (voxels) single pass %.3f %.3f %.3f, previous default %.3f %.3f %.3f, default "
+              "%.3f %.3f %.3f (off the axis band %.3f %.3f %.3f)\n",
+              e1[0], e1[1], e1[2], e0[0], e0[1], e0[2], e3[0], e3[1], e3[2], o3[0], o3[1], o3[2]);
+  // Measured: single pass 1.028 0.706 0.729; previous default 0.34 0.30 0.32 (its bounds were
+  // 0.6 x single pass and 0.45); default 0.223 0.167 0.199, off the band 0.125 0.168 0.110 (the
+  // crop cuts the cores: many windows here sit near its faces).
+  for (int c = 0; c < 3; ++c) EXPECT_LT(e3[c], 0.35 * e1[c]) << c;
+  for (int c = 0; c < 3; ++c) EXPECT_LT(e3[c], 0.8 * e0[c]) << c;
+  for (int c = 0; c < 3; ++c) EXPECT_LT(e3[c], 0.27) << c;
+  for (int c = 0; c < 3; ++c) EXPECT_LT(o3[c], 0.2) << c;
 }
 
 TEST(Multipass, EmptyWindowsAreSkippedAndInvalid) {
@@ -462,6 +478,22 @@ TEST(Settings, PassesFromTextAndRefusals) {
   EXPECT_THROW(parse_passes("32x16@50"), InputError);
   EXPECT_THROW(parse_passes("2@50"), InputError);
   EXPECT_THROW(parse_passes("16@100"), InputError);
+}
+
+TEST(Settings, PredictorKeysFromYamlAndRefusals) {
+  auto from = [](const std::string& text) {
+    return correlation_settings_from(YamlMap(load_yaml_text(text, "piv.yaml"), "piv.yaml"));
+  };
+  const CorrelationSettings d = from("{}");
+  EXPECT_EQ(d.predictor, PredictorBase::centre);
+  EXPECT_EQ(d.predictor_smoothing, 1);
+  EXPECT_EQ(d.passes.size(), 4u);
+  const CorrelationSettings m = from("predictor: window_mean\npredictor_smoothing: 0\n");
+  EXPECT_EQ(m.predictor, PredictorBase::window_mean);
+  EXPECT_EQ(m.predictor_smoothing, 0);
+  EXPECT_THROW(from("predictor: middle\n"), InputError);
+  EXPECT_THROW(from("predictor_smoothing: 5\n"), InputError);
+  EXPECT_THROW(from("predictor_smoothing: -1\n"), InputError);
 }
 
 }  // namespace
