@@ -16,8 +16,8 @@
 
 namespace plenopiv::process {
 
-// Everything one pair needs besides the camera and calibration. Defaults: the paper's settings
-// (MART mu 0.5, 5 iterations; passes 32³@50 %, 24³@75 %, 16³@75 %).
+// Everything one pair needs besides the camera and calibration. Defaults: the paper's MART (mu
+// 0.5, 5 iterations) and core/piv's default correlation (piv::CorrelationSettings).
 struct ProcessSettings {
   Grid3 grid;                        // the volume the user asked for, mm: correlated and returned
   // Slices reconstructed beyond each depth end of `grid` and then dropped. A particle just outside
