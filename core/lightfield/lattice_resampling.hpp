@@ -1,0 +1,89 @@
+// Resampling a raw plenoptic image onto an axis-aligned virtual microlens lattice (DESIGN.md's
+// "rectified light field"), so that the separable weights of core/recon serve a calibrated array
+// that is rotated, warped or hexagonal.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include "core/base/image.hpp"
+#include "core/optics/camera_model.hpp"
+#include "core/optics/microlens_array.hpp"
+
+namespace plenopiv::lightfield {
+
+// The virtual lattice a calibrated array is resampled onto: rectangular, not rotated, centred
+// where the calibrated lattice is, every centre exactly on it. Rect: the calibrated lattice's lens
+// count and (fitted, mean) pitches. Hex: the same number of lenses per row at the hex pitch, and
+// rows one pitch apart (not the hex row spacing, pitch sqrt(3)/2: the microlens images, one pitch
+// across, would overlap), as many as fit in the calibrated array's height.
+optics::MicrolensArray axis_aligned_lattice(const optics::MicrolensArray& calibrated);
+
+// A raw image as the sensor behind the axis-aligned lattice would have recorded it.
+//
+// For every virtual pixel: the virtual lens whose spot is nearest (every pixel has one), its
+// offset from that spot, which fixes the aperture point it sees (eq 1); the virtual lens's centre
+// in the calibrated lattice's coordinates (LatticeInterpolator, refined so that the interpolated
+// position of the surrounding measured centres is the virtual centre: piecewise bilinear between
+// the actual lenses, so a warped array is followed, not just its fitted lattice); then, for each of
+// those up to 4 calibrated lenses, the raw image interpolated bilinearly at the same offset from
+// that lens's own spot (the same aperture point), weighted by the lens weight. That is up to 16
+// raw pixels per virtual pixel with fixed weights: the resampling is one linear map R.
+//
+// White correction: the virtual sensor's white image is R applied to the calibrated white
+// correction. A raw pixel records white x light field, so R(raw) = R(white) x the light field at
+// the virtual lens wherever the light field varies slowly across neighbouring lenses: the
+// weighting model (white_i times the ray weights) holds on the virtual sensor with R(white) as
+// its white image, with no division by small white values at the rims. Where a virtual lens lies
+// partly or wholly beyond the calibrated array (the corners of a rotated one), the lens weights
+// sum to less than 1 in both the image and its white, so their ratio stays right.
+//
+// Why not rectify() followed by an interpolation in (u, v): rectify samples fixed aperture points,
+// and the virtual pixels see other ones (their spots sit at fractional pixel positions), so the
+// raw pixels would be interpolated twice; here each raw sample is taken at exactly the aperture
+// point the virtual pixel sees.
+class LatticeResampler {
+ public:
+  // `white`: the calibrated white correction (sensor-sized, finite, non-negative). Throws
+  // InputError naming what does not match the camera.
+  LatticeResampler(const optics::CameraModel& camera, const optics::MicrolensArray& calibrated, const ImageF& white);
+
+  // The virtual lattice (axis_aligned_lattice of the calibrated array) and the virtual sensor's
+  // white image: what the weighting operator is built from.
+  const optics::MicrolensArray& lenses() const { return virtual_; }
+  const ImageF& white() const { return white_; }
+
+  // `raw` must be the sensor's size (not checked for values: R keeps finite, non-negative images
+  // finite and non-negative). `out` is resized to it and overwritten. Parallel over rows; every
+  // pixel's sum has a fixed order, so the result does not depend on the thread count.
+  void resample(const ImageF& raw, ImageF& out) const;
+  ImageF resample(const ImageF& raw) const;
+
+  // Coverage of the virtual lenses by the calibrated array: fully inside it, partly (at its edge),
+  // and not at all (beyond it: their pixels stay 0).
+  struct Coverage {
+    int full = 0, partial = 0, none = 0;
+  };
+  const Coverage& coverage() const { return coverage_; }
+
+ private:
+  // One calibrated lens as seen from one virtual lens: the raw pixel offset (integer part of the
+  // spot-to-spot shift) and the four bilinear weights times the lens weight.
+  struct Tap {
+    std::int32_t dc = 0, dr = 0;
+    std::array<float, 4> w{};  // (dr, dc), (dr, dc + 1), (dr + 1, dc), (dr + 1, dc + 1)
+  };
+  void apply(const ImageF& in, ImageF& out) const;
+
+  optics::MicrolensArray virtual_;
+  int width_ = 0, height_ = 0;
+  // The virtual lens of pixel (col, row) is lens_column_[col] + count_x * lens_row_[row].
+  std::vector<std::int32_t> lens_column_, lens_row_;
+  std::vector<std::uint32_t> tap_start_;     // per virtual lens: taps [tap_start_[v], tap_start_[v + 1])
+  std::vector<Tap> taps_;
+  ImageF white_;
+  Coverage coverage_;
+};
+
+}  // namespace plenopiv::lightfield
