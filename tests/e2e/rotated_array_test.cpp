@@ -9,6 +9,7 @@
 #include <cmath>
 #include <iostream>
 #include <numbers>
+#include <random>
 #include <vector>
 
 #include "core/base/errors.hpp"
@@ -94,6 +95,34 @@ TEST(LatticeResampling, AnAxisAlignedLatticeIsResampledOntoItselfExactly) {
   const ImageF image = render(lenses, scene(), 3);
   EXPECT_EQ(r.resample(image).pixels, image.pixels);
   EXPECT_EQ(r.white().pixels, white.pixels);
+}
+
+TEST(LatticeResampling, FollowsTheMeasuredCentresNotJustTheFittedLattice) {
+  // Every measured centre one pitch right of its lattice position: the lens at lattice position i
+  // is lens i - 1. Read by the fitted lattice alone, virtual lens i would take lens i and sample
+  // 17 px off; followed through the measured centres it takes lens i - 1, whose spot is where the
+  // virtual one is, and the resampling is the identity there (lens column 0 has no lens left of it).
+  const optics::Lattice l = optics::Lattice::nominal(camera());
+  optics::MicrolensArray shifted = optics::MicrolensArray::from_lattice(l);
+  for (auto& c : shifted.centres_mm) c[0] += l.pitch_x_mm;
+  const lightfield::LatticeResampler r(camera(), shifted, ImageF(850, 850, 1.f));
+  EXPECT_EQ(r.coverage().none, 50);  // virtual lens column 0
+  std::mt19937 rng(1);
+  std::uniform_real_distribution<float> value(0.f, 100.f);
+  ImageF raw(850, 850);
+  for (float& v : raw.pixels) v = value(rng);
+  const ImageF out = r.resample(raw);
+  const double s_i = camera().image_distance_mm(), f_l = camera().microlens().focal_length_mm;
+  const double spot0 = optics::sensor_mm_to_column(camera().sensor(), optics::lens_centre_to_spot_mm(l.position(0, 0)[0], s_i, f_l));
+  const double spot_pitch = optics::lens_centre_to_spot_mm(l.pitch_x_mm, s_i, f_l) / camera().sensor().pixel_pitch_mm;
+  std::size_t compared = 0, equal = 0;
+  for (int row = 0; row < 850; ++row)
+    for (int col = int(std::ceil(spot0 + 0.5 * spot_pitch)); col < 850; ++col) {
+      ++compared;
+      equal += out.at(col, row) == raw.at(col, row);
+    }
+  EXPECT_EQ(equal, compared);
+  EXPECT_GT(compared, 800u * 800u);
 }
 
 TEST(LatticeResampling, ARotatedArraysImageLooksLikeTheAxisAlignedOnes) {
