@@ -98,15 +98,13 @@ LatticeResampler::LatticeResampler(const optics::CameraModel& camera, const opti
     const std::array<double, 2> vs = virtual_spots[v];
     for (int q = 0; q < n; ++q) {
       const std::array<double, 2> cs = spot_px(calibrated.centres_mm[std::size_t(lens[std::size_t(q)])]);
-      // Same offset from the calibrated spot as from the virtual one: the same aperture point (eq 1).
-      const double shift_c = cs[0] - vs[0], shift_r = cs[1] - vs[1];
-      const double fc = std::floor(shift_c), fr = std::floor(shift_r);
-      const float tc = float(shift_c - fc), tr = float(shift_r - fr), w = weight[std::size_t(q)];
+      // Same offset from the calibrated spot as from the virtual one: the same aperture point
+      // (eq 1), at the nearest raw pixel (see the header for why not bilinear).
       Tap& t = taps[v][std::size_t(q)];
-      t.dc = std::int32_t(fc);
-      t.dr = std::int32_t(fr);
-      t.w = {w * (1 - tr) * (1 - tc), w * (1 - tr) * tc, w * tr * (1 - tc), w * tr * tc};
-      weight_sums[v] += w;
+      t.dc = std::int32_t(std::lround(cs[0] - vs[0]));
+      t.dr = std::int32_t(std::lround(cs[1] - vs[1]));
+      t.w = weight[std::size_t(q)];
+      weight_sums[v] += t.w;
     }
     counts[v] = n;
   });
@@ -135,17 +133,9 @@ void LatticeResampler::apply(const ImageF& in, ImageF& out) const {
       float sum = 0;
       for (std::uint32_t t = tap_start_[v]; t < tap_start_[v + 1]; ++t) {
         const Tap& tap = taps_[t];
-        const int r0 = row + tap.dr, c0 = col + tap.dc;
-        for (int dr = 0; dr < 2; ++dr) {
-          const int r = r0 + dr;
-          if (r < 0 || r >= height_) continue;
-          const float* line = &in.pixels[std::size_t(r) * width_];
-          for (int dc = 0; dc < 2; ++dc) {
-            const int c = c0 + dc;
-            // Off the sensor counts as dark, in the image and in its white alike.
-            if (c >= 0 && c < width_) sum += tap.w[std::size_t(2 * dr + dc)] * line[c];
-          }
-        }
+        const int r = row + tap.dr, c = col + tap.dc;
+        // Off the sensor counts as dark, in the image and in its white alike.
+        if (r >= 0 && r < height_ && c >= 0 && c < width_) sum += tap.w * in.pixels[std::size_t(r) * width_ + c];
       }
       out.pixels[std::size_t(row) * width_ + col] = sum;
     }
