@@ -154,7 +154,8 @@ int main(int argc, char** argv) {
   const double render_s = now_s() - t;
 
   t = now_s();
-  const recon::WeightingOperator op(camera, lenses, settings.reconstruction_grid(), recon::geometric_white_image(camera, lenses));
+  const recon::WeightingOperator op =
+      process::make_operator(camera, lenses, recon::geometric_white_image(camera, lenses), settings);
   const double weights_s = now_s() - t;
   std::printf("bench=e2e case=%s particles=%zu voxels=%zu render_s=%.2f weights_s=%.2f\n", scale.c_str(), count,
               settings.grid.count(), render_s, weights_s);
@@ -212,11 +213,29 @@ int main(int argc, char** argv) {
     // Without the depth guard: particles beyond the depth ends pin light in the end slices.
     process::ProcessSettings s = settings;
     s.depth_guard_mm = 0;
-    const recon::WeightingOperator op0(camera, lenses, s.reconstruction_grid(), recon::geometric_white_image(camera, lenses));
+    const recon::WeightingOperator op0 =
+        process::make_operator(camera, lenses, recon::geometric_white_image(camera, lenses), s);
     const auto r = process::process_pair(op0, a, b, s);
     const Errors er = errors_against(r.correlation.field, flow, voxel);
     rows.push_back({"no_depth_guard", 5, 3, 16, 0.5,
                     r.times.reconstruct_a_s + r.times.reconstruct_b_s + r.times.correlate_s, er.total, er});
+  }
+  // Angular sampling of the weights: (u, v) samples per aperture axis against sec 5.2's count.
+  // It sets the cost of the tables (once per run, printed in `value`) and how finely the operator
+  // follows the rays; the per-pair time is that of the reconstructions and the correlation.
+  for (double sampling : {0.5, 2.0}) {
+    process::ProcessSettings s = settings;
+    s.angular_sampling = sampling;
+    t = now_s();
+    const recon::WeightingOperator op_a =
+        process::make_operator(camera, lenses, recon::geometric_white_image(camera, lenses), s);
+    const double tables_s = now_s() - t;
+    const auto r = process::process_pair(op_a, a, b, s);
+    const Errors er = errors_against(r.correlation.field, flow, voxel);
+    char value[64];
+    std::snprintf(value, sizeof value, "%.1fx,tables_%.1fs", sampling, tables_s);
+    rows.push_back({"angular_sampling", 5, 3, 16, 0.5,
+                    r.times.reconstruct_a_s + r.times.reconstruct_b_s + r.times.correlate_s, er.total, er, value});
   }
   // Skip thresholds: the dark-pixel cutoff and a noise floor (counts; the images carry about
   // 5-50 counts in a lit pixel at 5000 rays per particle).
@@ -242,7 +261,8 @@ int main(int argc, char** argv) {
     process::ProcessSettings s = settings;
     s.grid = process::grid_for_extent({-hx, -hy, -hz}, {hx, hy, hz}, {2 * voxel, 2 * voxel, 2 * voxel}, "bench");
     s.correlation.passes = {{{16, 16, 16}, 50.0}, {{12, 12, 12}, 75.0}, {{8, 8, 8}, 75.0}};
-    const recon::WeightingOperator op2(camera, lenses, s.reconstruction_grid(), recon::geometric_white_image(camera, lenses));
+    const recon::WeightingOperator op2 =
+        process::make_operator(camera, lenses, recon::geometric_white_image(camera, lenses), s);
     const auto r = process::process_pair(op2, a, b, s);
     const Errors er = errors_against(r.correlation.field, flow, voxel);  // still in 0.125 mm voxels
     rows.push_back({"binning", 5, 3, 8, 0.5, r.times.reconstruct_a_s + r.times.reconstruct_b_s + r.times.correlate_s,

@@ -23,7 +23,8 @@ for r in rows:
     ax.plot(t, e, "o", color="tab:red" if r["pareto"] == "yes" else "tab:gray")
     label = {"paper": "paper", "iterations": f"it {r['iterations']}", "mu": f"mu {r['mu']}, it {r['iterations']}",
              "no_depth_guard": "no depth guard", "dark_cutoff": f"cutoff {r.get('value')}",
-             "noise_threshold": f"floor {r.get('value')}", "binning": f"binning {r.get('value')}",
+             "noise_threshold": f"floor {r.get('value')}",
+             "angular_sampling": f"angular {r.get('value', '').split(',')[0]}", "binning": f"binning {r.get('value')}",
              "final_window": f"{r['final_window']}³",
              "passes": f"{r['passes']} passes"}[r["variant"]]
     ax.annotate(label, (t, e), textcoords="offset points", xytext=(4, 3), fontsize=8)

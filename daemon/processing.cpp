@@ -31,7 +31,7 @@ ProcessFactory plenoptic_processing(const optics::CameraModel& camera) {
     // lattice used here; said in the log when it does).
     const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera));
     auto op = std::make_shared<const process::PairOperator>(camera, lenses, recon::geometric_white_image(camera, lenses),
-                                                            settings.reconstruction_grid());
+                                                            settings);
     if (!op->note().empty()) spdlog::info("run processing: {}", op->note());
     const bool keep_volumes = config.publish_volumes;
     return [op, settings, keep_volumes](const drivers::FramePair& pair) {

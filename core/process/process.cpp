@@ -61,6 +61,12 @@ Grid3 ProcessSettings::reconstruction_grid() const {
   return g;
 }
 
+recon::WeightingOperator make_operator(const optics::CameraModel& camera, const optics::MicrolensArray& lenses,
+                                       ImageF white, const ProcessSettings& settings) {
+  return recon::WeightingOperator(camera, lenses, settings.reconstruction_grid(), std::move(white),
+                                  settings.angular_sampling);
+}
+
 namespace {
 // The slices [first, first + grid.shape[2]) of `v`, on `grid` (the box the user asked for), in
 // place: no second volume-sized buffer per frame.
@@ -88,7 +94,8 @@ ProcessSettings process_settings_from(const YamlMap& root) {
   if (!(s.depth_guard_mm >= 0 && s.depth_guard_mm <= 100)) vol.fail("depth_guard_mm", "must be in [0, 100] mm");
 
   if (auto r = root.optional_map("reconstruction")) {
-    r->reject_unknown({"iterations", "mu", "start", "noise_threshold", "dark_weight_cutoff", "convergence"});
+    r->reject_unknown(
+        {"iterations", "mu", "start", "noise_threshold", "dark_weight_cutoff", "convergence", "angular_sampling"});
     const long long it = r->integer_or("iterations", s.mart.iterations);
     if (it < 1 || it > 1000) r->fail("iterations", "must be 1..1000, got " + std::to_string(it));
     s.mart.iterations = int(it);
@@ -103,6 +110,8 @@ ProcessSettings process_settings_from(const YamlMap& root) {
       r->fail("dark_weight_cutoff", "must be in [0, 1)");
     s.mart.convergence = r->number_or("convergence", s.mart.convergence);
     if (!(s.mart.convergence >= 0)) r->fail("convergence", "must be >= 0");
+    s.angular_sampling = r->number_or("angular_sampling", s.angular_sampling);
+    if (!(s.angular_sampling > 0 && s.angular_sampling <= 8)) r->fail("angular_sampling", "must be in (0, 8]");
   }
 
   if (auto c = root.optional_map("correlation")) {
@@ -166,17 +175,22 @@ PairResult process_pair(const recon::WeightingOperator& op, const ImageF& frame_
 }
 
 PairOperator::PairOperator(const optics::CameraModel& camera, const optics::MicrolensArray& lenses,
-                           const ImageF& white, const Grid3& grid) {
+                           const ImageF& white, const ProcessSettings& settings)
+    : PairOperator(camera, lenses, white, settings.reconstruction_grid(), settings.angular_sampling) {}
+
+PairOperator::PairOperator(const optics::CameraModel& camera, const optics::MicrolensArray& lenses,
+                           const ImageF& white, const Grid3& grid, double angular_sampling) {
   const optics::Lattice& l = lenses.lattice;
   const bool rect = l.layout == optics::LensletLayout::rect;
   const double pixel = camera.sensor().pixel_pitch_mm;
   const recon::SeparableLattice sep = recon::separable_lattice(lenses);
   if (rect && sep.separable(pixel)) {
-    weights_ = std::make_unique<const recon::WeightingOperator>(camera, lenses, grid, white);
+    weights_ = std::make_unique<const recon::WeightingOperator>(camera, lenses, grid, white, angular_sampling);
     return;
   }
   resampler_ = std::make_unique<const lightfield::LatticeResampler>(camera, lenses, white);
-  weights_ = std::make_unique<const recon::WeightingOperator>(camera, resampler_->lenses(), grid, resampler_->white());
+  weights_ = std::make_unique<const recon::WeightingOperator>(camera, resampler_->lenses(), grid, resampler_->white(),
+                                                               angular_sampling);
   const auto& c = resampler_->coverage();
   const auto& v = resampler_->lenses().lattice;
   char text[320];

@@ -30,6 +30,8 @@ struct ProcessSettings {
   // towards zero: on a 0.25 mm depth shift measured 0.12 mm without a guard and 0.20 mm with
   // 1 mm (docs/benchmarks.md, "Depth displacement").
   double depth_guard_mm = 1.0;
+  // (u, v) samples per aperture axis relative to sec 5.2's count (recon::WeightingOperator).
+  double angular_sampling = 1.0;
   recon::MartSettings mart;
   piv::CorrelationSettings correlation;  // dt_s lives here
 
@@ -45,11 +47,17 @@ Grid3 grid_for_extent(const std::array<double, 3>& lo, const std::array<double, 
 // Reads a run config mapping (systemd/config/process.yaml):
 //   dt_s: 0.0001                                   (required)
 //   volume: {x_mm: [a, b], y_mm: [..], z_mm: [..], voxel_mm: 0.125, voxel_z_mm: 0.125, depth_guard_mm: 1}
-//   reconstruction: {iterations, mu, start: mlos|ones, noise_threshold, dark_weight_cutoff, convergence}
+//   reconstruction: {iterations, mu, start: mlos|ones, noise_threshold, dark_weight_cutoff, convergence,
+//                    angular_sampling}
 //   correlation: {passes, median, signal_threshold}    (as piv::load_correlation_settings)
 // Unknown keys are refused; every value is checked; InputError names the file and key.
 ProcessSettings process_settings_from(const YamlMap& root);
 ProcessSettings load_process_settings(const std::filesystem::path& path);
+
+// The weighting operator process_pair needs for these settings: built on reconstruction_grid()
+// (the guard slices included) with the settings' angular sampling.
+recon::WeightingOperator make_operator(const optics::CameraModel& camera, const optics::MicrolensArray& lenses,
+                                       ImageF white, const ProcessSettings& settings);
 
 // Where the time went and what was skipped.
 struct StageTimes {
@@ -79,8 +87,13 @@ using PairProgress = std::function<void(const std::string& stage, double fractio
 // LatticeResampler do.
 class PairOperator {
  public:
+  // `grid` and `angular_sampling` as recon::WeightingOperator takes them.
   PairOperator(const optics::CameraModel& camera, const optics::MicrolensArray& lenses, const ImageF& white,
-               const Grid3& grid);
+               const Grid3& grid, double angular_sampling = 1.0);
+  // What process_pair needs for `settings`: reconstruction_grid() (the guard slices included) and
+  // the settings' angular sampling (as make_operator).
+  PairOperator(const optics::CameraModel& camera, const optics::MicrolensArray& lenses, const ImageF& white,
+               const ProcessSettings& settings);
 
   const recon::WeightingOperator& weights() const { return *weights_; }
   // Null when the operator works on raw pixels.

@@ -231,7 +231,7 @@ SeparableLattice separable_lattice(const optics::MicrolensArray& lenses) {
 
 WeightingOperator::WeightingOperator(const optics::CameraModel& camera,
                                      const optics::MicrolensArray& lenses, const Grid3& grid,
-                                     ImageF white)
+                                     ImageF white, double angular_sampling)
     : grid_(grid),
       width_(camera.sensor().width_px),
       height_(camera.sensor().height_px),
@@ -242,6 +242,9 @@ WeightingOperator::WeightingOperator(const optics::CameraModel& camera,
                      " px, the sensor is " + std::to_string(width_) + " x " + std::to_string(height_));
   }
   if (width_ < kQuad) throw InputError("sensor: the reconstruction needs at least 4 pixels per row");
+  if (!(angular_sampling > 0 && angular_sampling <= 8)) {
+    throw InputError("angular_sampling: must be in (0, 8], got " + std::to_string(angular_sampling));
+  }
   for (int a = 0; a < 3; ++a) {
     if (grid_.shape[a] <= 0 || !(grid_.spacing_mm[a] > 0)) {
       throw InputError("volume grid: every axis needs at least one voxel and a positive spacing");
@@ -262,6 +265,7 @@ WeightingOperator::WeightingOperator(const optics::CameraModel& camera,
   geo_.aperture = camera.aperture_diameter_mm();
   geo_.pixel_pitch = camera.sensor().pixel_pitch_mm;
   geo_.nominal_samples = std::max(2, int(std::ceil(camera.microlens_image_diameter_px() - 1e-9)));
+  geo_.angular_sampling = angular_sampling;
   SeparableLattice sep = separable_lattice(lenses);
   geo_.lens_x = std::move(sep.lens_x);
   geo_.lens_y = std::move(sep.lens_y);
@@ -386,9 +390,11 @@ SliceOptics WeightingOperator::slice_optics(double z_mm) const {
   o.alpha = si / geo_.s_i;
   o.magnification = -si / so;
   // Sec 5.2: enough rays that their spacing on the microlens plane stays under one microlens,
-  // and never fewer than the nominal angular sampling (pixels across a microlens image).
+  // and never fewer than the nominal angular sampling (pixels across a microlens image); then
+  // scaled by the operator's angular_sampling (a time-against-accuracy knob), at least 2.
   const double spread = geo_.aperture * std::abs(1.0 - 1.0 / o.alpha);
-  o.samples = std::max(geo_.nominal_samples, int(std::floor(spread / geo_.min_pitch)) + 1);
+  const int sec52 = std::max(geo_.nominal_samples, int(std::floor(spread / geo_.min_pitch)) + 1);
+  o.samples = std::max(2, int(std::ceil(geo_.angular_sampling * sec52 - 1e-9)));
   return o;
 }
 

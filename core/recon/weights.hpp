@@ -104,10 +104,13 @@ struct SliceOptics {
 // row means are used. Hex, rotated or warped arrays are an InputError that says so.
 class WeightingOperator {
  public:
-  // `white` must have the sensor's size. Throws InputError on a grid inside the main lens's focal
-  // length, an unsupported lens array, or a white image of the wrong size.
+  // `white` must have the sensor's size. `angular_sampling` scales the (u, v) samples per aperture
+  // axis of every slice (1: sec 5.2's count, see slice_optics; below 1 the rays' spacing on the
+  // microlens plane may exceed a lens: cheaper tables, a coarser operator). Throws InputError on a
+  // grid inside the main lens's focal length, an unsupported lens array, a white image of the
+  // wrong size, or angular_sampling outside (0, 8].
   WeightingOperator(const optics::CameraModel& camera, const optics::MicrolensArray& lenses,
-                    const Grid3& grid, ImageF white);
+                    const Grid3& grid, ImageF white, double angular_sampling = 1.0);
 
   const Grid3& grid() const { return grid_; }
   int image_width() const { return width_; }
@@ -133,6 +136,7 @@ class WeightingOperator {
   struct Geometry {
     double s_o = 0, s_i = 0, f_main = 0, f_lens = 0, aperture = 0, pixel_pitch = 0;
     int nominal_samples = 0;
+    double angular_sampling = 1.0;  // scale of the per-slice sample count
     double min_pitch = 0;
     std::vector<double> lens_x;  // lens centres along x (one per lens column), increasing
     std::vector<double> lens_y;  // along y (one per lens row), increasing

@@ -242,6 +242,29 @@ TEST(WeightsInput, RejectsUnsupportedArraysAndDepthsInsideTheFocalLength) {
   EXPECT_THROW(WeightingOperator(cam, nominal, centred_grid(4, 2, 1, -60), ImageF(850, 850, 1.f)), InputError);
 }
 
+TEST(WeightsInput, AngularSamplingScalesTheSamplesOfEverySlice) {
+  const auto cam = small_camera();
+  const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(cam));
+  const Grid3 g = centred_grid(4, 2, 9, 0);  // slices from -4 to +4 mm: the sec 5.2 count varies
+  const WeightingOperator base(cam, lenses, g, geometric_white_image(cam, lenses));
+  const WeightingOperator fine(cam, lenses, g, geometric_white_image(cam, lenses), 2.0);
+  const WeightingOperator coarse(cam, lenses, g, geometric_white_image(cam, lenses), 0.5);
+  for (int z = 0; z < g.shape[2]; ++z) {
+    const int n = base.slice(z).samples;
+    EXPECT_GE(n, base.geometry().nominal_samples) << "slice " << z;
+    EXPECT_EQ(fine.slice(z).samples, 2 * n) << "slice " << z;
+    EXPECT_EQ(coarse.slice(z).samples, (n + 1) / 2) << "slice " << z;
+  }
+  for (double bad : {0.0, -1.0, 9.0}) {
+    try {
+      WeightingOperator(cam, lenses, g, geometric_white_image(cam, lenses), bad);
+      ADD_FAILURE() << bad;
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("angular_sampling"), std::string::npos) << e.what();
+    }
+  }
+}
+
 // ---------------------------------------------------------------------------------------------
 
 class Mart : public Weights {
