@@ -1,6 +1,8 @@
 // The live processing stage: raw pair → process::process_pair (MART of A and B, 3D correlation).
 #include "daemon/processing.hpp"
 
+#include <spdlog/spdlog.h>
+
 #include "core/base/errors.hpp"
 #include "core/base/yaml_access.hpp"
 #include "core/optics/microlens_array.hpp"
@@ -24,10 +26,13 @@ ProcessFactory plenoptic_processing(const optics::CameraModel& camera) {
     // stage and `plenopiv process --run` read exactly the same settings the same way.
     const process::ProcessSettings settings =
         process::process_settings_from(YamlMap(load_yaml_text(config.process_yaml(), "run config"), "run config"));
-    // Built once per run, shared read-only by the concurrent pairs.
+    // Built once per run, shared read-only by the concurrent pairs. PairOperator resamples the
+    // frames onto an axis-aligned lattice when the array is not separable (never for the nominal
+    // lattice used here; said in the log when it does).
     const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera));
-    auto op = std::make_shared<const recon::WeightingOperator>(
-        process::make_operator(camera, lenses, recon::geometric_white_image(camera, lenses), settings));
+    auto op = std::make_shared<const process::PairOperator>(camera, lenses, recon::geometric_white_image(camera, lenses),
+                                                            settings);
+    if (!op->note().empty()) spdlog::info("run processing: {}", op->note());
     const bool keep_volumes = config.publish_volumes;
     return [op, settings, keep_volumes](const drivers::FramePair& pair) {
       process::ProcessSettings s = settings;

@@ -201,7 +201,8 @@ void run_process(const ProcessOptions& o) {
   const auto& g = settings.grid;
   std::fprintf(stderr, "volume %d x %d x %d voxels (+%d guard slices at each depth end); weights ...\n", g.shape[0],
                g.shape[1], g.shape[2], settings.guard_slices());
-  const recon::WeightingOperator op = process::make_operator(camera, cal.lenses, cal.white_correction, settings);
+  const process::PairOperator op(camera, cal.lenses, cal.white_correction, settings);
+  if (!op.note().empty()) std::fprintf(stderr, "%s\n", op.note().c_str());
   Progress progress("process", "pairs", 1.0);
   const auto r = process::process_pair(op, a, b, settings, [&](const std::string&, double f) { progress.update(f); });
 
@@ -274,7 +275,8 @@ void run_reprocess(const ProcessOptions& o) {
   const auto& g = settings.grid;
   std::fprintf(stderr, "%s: %d pairs; volume %d x %d x %d voxels (+%d guard slices at each depth end); weights ...\n",
                run.string().c_str(), m.pairs_size(), g.shape[0], g.shape[1], g.shape[2], settings.guard_slices());
-  const recon::WeightingOperator op = process::make_operator(camera, cal.lenses, cal.white_correction, settings);
+  const process::PairOperator op(camera, cal.lenses, cal.white_correction, settings);
+  if (!op.note().empty()) std::fprintf(stderr, "%s\n", op.note().c_str());
   const double pairs = double(m.pairs_size());
   Progress progress("process", "pairs", pairs);
   for (int k = 0; k < m.pairs_size(); ++k) {

@@ -16,6 +16,7 @@
 #include "core/io/tiff.hpp"
 #include "core/io/vtk_files.hpp"
 #include "core/optics/camera_file.hpp"
+#include "core/process/process.hpp"
 #include "core/recon/mart.hpp"
 #include "core/recon/weights.hpp"
 
@@ -84,13 +85,18 @@ void run(const ReconOptions& o) {
     lenses = std::move(c.lenses);
     white = c.white_correction.empty() ? recon::geometric_white_image(camera, lenses) : std::move(c.white_correction);
   }
-  const recon::WeightingOperator op(camera, lenses, grid, std::move(white));
+  // Raw pixels, or the image resampled onto an axis-aligned lattice for a rotated/warped/hex array.
+  const process::PairOperator pair_op(camera, lenses, white, grid);
+  const recon::WeightingOperator& op = pair_op.weights();
   recon::validate_image(image, op, o.image.c_str());
+  ImageF scratch;
+  const ImageF& prepared = pair_op.prepare(image, scratch);
   const double setup = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   std::fprintf(stderr, "weights: %d x %d x %d voxels, %s (%.1f s)\n", grid.shape[0], grid.shape[1], grid.shape[2],
                o.calibration.empty() ? "nominal lattice, geometric white image" : o.calibration.c_str(), setup);
+  if (!pair_op.note().empty()) std::fprintf(stderr, "%s\n", pair_op.note().c_str());
   double elapsed = 0;
-  const recon::MartResult r = recon::reconstruct(op, image, s, [&](const recon::IterationReport& it) {
+  const recon::MartResult r = recon::reconstruct(op, prepared, s, [&](const recon::IterationReport& it) {
     elapsed += it.seconds;
     const double rate = it.iteration / std::max(elapsed, 1e-9);
     const double eta = (s.iterations - it.iteration) / rate;

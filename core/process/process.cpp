@@ -4,6 +4,8 @@
 #include <chrono>
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <numbers>
 #include <utility>
 
 #include "core/base/errors.hpp"
@@ -169,6 +171,60 @@ PairResult process_pair(const recon::WeightingOperator& op, const ImageF& frame_
                                            });
   out.times.correlate_s = seconds_since(t0);
   report("done", 1.0);
+  return out;
+}
+
+PairOperator::PairOperator(const optics::CameraModel& camera, const optics::MicrolensArray& lenses,
+                           const ImageF& white, const ProcessSettings& settings)
+    : PairOperator(camera, lenses, white, settings.reconstruction_grid(), settings.angular_sampling) {}
+
+PairOperator::PairOperator(const optics::CameraModel& camera, const optics::MicrolensArray& lenses,
+                           const ImageF& white, const Grid3& grid, double angular_sampling) {
+  const optics::Lattice& l = lenses.lattice;
+  const bool rect = l.layout == optics::LensletLayout::rect;
+  const double pixel = camera.sensor().pixel_pitch_mm;
+  const recon::SeparableLattice sep = recon::separable_lattice(lenses);
+  if (rect && sep.separable(pixel)) {
+    weights_ = std::make_unique<const recon::WeightingOperator>(camera, lenses, grid, white, angular_sampling);
+    return;
+  }
+  resampler_ = std::make_unique<const lightfield::LatticeResampler>(camera, lenses, white);
+  weights_ = std::make_unique<const recon::WeightingOperator>(camera, resampler_->lenses(), grid, resampler_->white(),
+                                                               angular_sampling);
+  const auto& c = resampler_->coverage();
+  const auto& v = resampler_->lenses().lattice;
+  char text[320];
+  if (rect) {
+    std::snprintf(text, sizeof text,
+                  "image resampled onto an axis-aligned lattice: calibrated array rotated %.2f deg, max departure %.1f px "
+                  "(the separable weights allow %.2f px); virtual lenses: %d inside the array, %d at its edge, %d beyond",
+                  l.rotation_rad * 180 / std::numbers::pi, sep.max_departure_mm / pixel,
+                  recon::kSeparableTolerancePx, c.full, c.partial, c.none);
+  } else {
+    std::snprintf(text, sizeof text,
+                  "image resampled onto an axis-aligned lattice: calibrated array hexagonal (%d x %d lenses, rotated "
+                  "%.2f deg), resampled onto %d x %d rectangular lenses one pitch apart; virtual lenses: %d inside "
+                  "the array, %d at its edge, %d beyond",
+                  l.count_x, l.count_y, l.rotation_rad * 180 / std::numbers::pi, v.count_x, v.count_y, c.full,
+                  c.partial, c.none);
+  }
+  note_ = text;
+}
+
+const ImageF& PairOperator::prepare(const ImageF& frame, ImageF& scratch) const {
+  if (!resampler_) return frame;
+  resampler_->resample(frame, scratch);
+  return scratch;
+}
+
+PairResult process_pair(const PairOperator& op, const ImageF& frame_a, const ImageF& frame_b,
+                        const ProcessSettings& settings, const PairProgress& progress) {
+  recon::validate_image(frame_a, op.weights(), "frame A");
+  recon::validate_image(frame_b, op.weights(), "frame B");
+  ImageF scratch_a, scratch_b;
+  PairResult out = process_pair(op.weights(), op.prepare(frame_a, scratch_a), op.prepare(frame_b, scratch_b),
+                                settings, progress);
+  out.lattice_note = op.note();
   return out;
 }
 

@@ -4,11 +4,15 @@
 
 #include <array>
 #include <functional>
+#include <memory>
 #include <string>
 
 #include "core/base/grid.hpp"
 #include "core/base/image.hpp"
 #include "core/base/yaml_access.hpp"
+#include "core/lightfield/lattice_resampling.hpp"
+#include "core/optics/camera_model.hpp"
+#include "core/optics/microlens_array.hpp"
 #include "core/piv/multipass.hpp"
 #include "core/piv/settings.hpp"
 #include "core/recon/mart.hpp"
@@ -65,17 +69,54 @@ struct PairResult {
   recon::SkipReport skipped_a, skipped_b;
   piv::CorrelationResult correlation;
   StageTimes times;
+  std::string lattice_note;  // PairOperator::note: why and how the frames were resampled; empty if not
 };
 
 // Progress: stage name ("reconstruct A", "reconstruct B", "correlate") and the fraction of the
 // whole pair done, in [0, 1].
 using PairProgress = std::function<void(const std::string& stage, double fraction)>;
 
+// What every pair of a run is reconstructed with; built once per run, shared read-only by
+// concurrent pairs. When the separable weights take the lens array (rectangular, centres within
+// recon::kSeparableTolerancePx of their column and row means: recon::separable_lattice), the
+// operator works on raw pixels. Otherwise (a calibrated array is always rotated a little, warped,
+// or hexagonal) the frames are first resampled onto an axis-aligned lattice
+// (lightfield::LatticeResampler) and the operator is built on that lattice and its white image;
+// `note` then says so and why, e.g. "image resampled onto an axis-aligned lattice: calibrated
+// array rotated 0.31 deg, max departure 4.2 px; ...". Throws InputError as WeightingOperator and
+// LatticeResampler do.
+class PairOperator {
+ public:
+  // `grid` and `angular_sampling` as recon::WeightingOperator takes them.
+  PairOperator(const optics::CameraModel& camera, const optics::MicrolensArray& lenses, const ImageF& white,
+               const Grid3& grid, double angular_sampling = 1.0);
+  // What process_pair needs for `settings`: reconstruction_grid() (the guard slices included) and
+  // the settings' angular sampling (as make_operator).
+  PairOperator(const optics::CameraModel& camera, const optics::MicrolensArray& lenses, const ImageF& white,
+               const ProcessSettings& settings);
+
+  const recon::WeightingOperator& weights() const { return *weights_; }
+  // Null when the operator works on raw pixels.
+  const lightfield::LatticeResampler* resampler() const { return resampler_.get(); }
+  const std::string& note() const { return note_; }
+  // A raw frame in the operator's pixel space: `frame` itself, or `scratch` holding it resampled.
+  const ImageF& prepare(const ImageF& frame, ImageF& scratch) const;
+
+ private:
+  std::unique_ptr<const lightfield::LatticeResampler> resampler_;
+  std::unique_ptr<const recon::WeightingOperator> weights_;
+  std::string note_;
+};
+
 // Reconstructs both frames with `op` (whose grid must be settings.reconstruction_grid():
 // InputError otherwise), drops the guard slices, then correlates them (PairResult's volumes are on
 // settings.grid). Images are validated (sensor-sized, finite, non-negative) and named
 // "frame A" / "frame B" in errors. Bit-identical at any thread count.
 PairResult process_pair(const recon::WeightingOperator& op, const ImageF& frame_a, const ImageF& frame_b,
+                        const ProcessSettings& settings, const PairProgress& progress = {});
+// The same from raw frames through a PairOperator: the frames are validated as raw images, resampled
+// when the operator says so, and PairResult::lattice_note carries its note.
+PairResult process_pair(const PairOperator& op, const ImageF& frame_a, const ImageF& frame_b,
                         const ProcessSettings& settings, const PairProgress& progress = {});
 
 }  // namespace plenopiv::process

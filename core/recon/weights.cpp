@@ -85,9 +85,6 @@ int ray_coefficients(const WeightingOperator::Geometry& g, const std::vector<dou
   return count;
 }
 
-// How far (pixels) a lens centre may sit from its column's and row's mean for the separable weights.
-constexpr double kSeparableTolerancePx = 0.25;
-
 double sample_position(double aperture, int samples, int k) {
   return (k + 0.5) * aperture / samples - 0.5 * aperture;
 }
@@ -203,6 +200,35 @@ ImageF geometric_white_image(const optics::CameraModel& camera, const optics::Mi
   return white;
 }
 
+SeparableLattice separable_lattice(const optics::MicrolensArray& lenses) {
+  const optics::Lattice& lat = lenses.lattice;
+  if (lenses.centres_mm.size() != std::size_t(lat.count()))
+    throw InputError("microlens array: " + std::to_string(lenses.centres_mm.size()) + " centres for " +
+                     std::to_string(lat.count()) + " lenses");
+  SeparableLattice out;
+  // Separability: one x per lens column and one y per lens row (their means). A measured array
+  // may scatter about them by a fraction of a pixel; a rotated or warped one cannot be separated.
+  out.lens_x.assign(std::size_t(lat.count_x), 0.0);
+  out.lens_y.assign(std::size_t(lat.count_y), 0.0);
+  // Means as the first lens plus the mean departure from it, so an exact lattice stays exact.
+  for (int j = 0; j < lat.count_y; ++j) {
+    for (int i = 0; i < lat.count_x; ++i) {
+      out.lens_x[std::size_t(i)] += (lenses.centre(i, j)[0] - lenses.centre(i, 0)[0]) / lat.count_y;
+      out.lens_y[std::size_t(j)] += (lenses.centre(i, j)[1] - lenses.centre(0, j)[1]) / lat.count_x;
+    }
+  }
+  for (int i = 0; i < lat.count_x; ++i) out.lens_x[std::size_t(i)] += lenses.centre(i, 0)[0];
+  for (int j = 0; j < lat.count_y; ++j) out.lens_y[std::size_t(j)] += lenses.centre(0, j)[1];
+  for (int j = 0; j < lat.count_y; ++j) {
+    for (int i = 0; i < lat.count_x; ++i) {
+      const double dev = std::max(std::abs(lenses.centre(i, j)[0] - out.lens_x[std::size_t(i)]),
+                                  std::abs(lenses.centre(i, j)[1] - out.lens_y[std::size_t(j)]));
+      out.max_departure_mm = std::max(out.max_departure_mm, dev);
+    }
+  }
+  return out;
+}
+
 WeightingOperator::WeightingOperator(const optics::CameraModel& camera,
                                      const optics::MicrolensArray& lenses, const Grid3& grid,
                                      ImageF white, double angular_sampling)
@@ -240,27 +266,11 @@ WeightingOperator::WeightingOperator(const optics::CameraModel& camera,
   geo_.pixel_pitch = camera.sensor().pixel_pitch_mm;
   geo_.nominal_samples = std::max(2, int(std::ceil(camera.microlens_image_diameter_px() - 1e-9)));
   geo_.angular_sampling = angular_sampling;
-  // Separability: one x per lens column and one y per lens row (their means). A measured array
-  // may scatter about them by a fraction of a pixel; a rotated or warped one cannot be separated.
-  geo_.lens_x.assign(std::size_t(lat.count_x), 0.0);
-  geo_.lens_y.assign(std::size_t(lat.count_y), 0.0);
-  // Means as the first lens plus the mean departure from it, so an exact lattice stays exact.
-  for (int j = 0; j < lat.count_y; ++j) {
-    for (int i = 0; i < lat.count_x; ++i) {
-      geo_.lens_x[std::size_t(i)] += (lenses.centre(i, j)[0] - lenses.centre(i, 0)[0]) / lat.count_y;
-      geo_.lens_y[std::size_t(j)] += (lenses.centre(i, j)[1] - lenses.centre(0, j)[1]) / lat.count_x;
-    }
-  }
-  for (int i = 0; i < lat.count_x; ++i) geo_.lens_x[std::size_t(i)] += lenses.centre(i, 0)[0];
-  for (int j = 0; j < lat.count_y; ++j) geo_.lens_y[std::size_t(j)] += lenses.centre(0, j)[1];
-  for (int j = 0; j < lat.count_y; ++j) {
-    for (int i = 0; i < lat.count_x; ++i) {
-      const double dev = std::max(std::abs(lenses.centre(i, j)[0] - geo_.lens_x[std::size_t(i)]),
-                                  std::abs(lenses.centre(i, j)[1] - geo_.lens_y[std::size_t(j)]));
-      geo_.max_centre_deviation_mm = std::max(geo_.max_centre_deviation_mm, dev);
-    }
-  }
-  if (geo_.max_centre_deviation_mm > kSeparableTolerancePx * geo_.pixel_pitch) {
+  SeparableLattice sep = separable_lattice(lenses);
+  geo_.lens_x = std::move(sep.lens_x);
+  geo_.lens_y = std::move(sep.lens_y);
+  geo_.max_centre_deviation_mm = sep.max_departure_mm;
+  if (!sep.separable(geo_.pixel_pitch)) {
     throw InputError("microlens array: lens centres leave their lattice columns/rows by up to " +
                      std::to_string(geo_.max_centre_deviation_mm / geo_.pixel_pitch) +
                      " px (rotated or warped array); the separable weights allow " +

@@ -20,6 +20,23 @@ namespace plenopiv::recon {
 // lens (1 inside a microlens image, 0 outside). Calibration later provides the measured one.
 ImageF geometric_white_image(const optics::CameraModel& camera, const optics::MicrolensArray& lenses);
 
+// How far (pixels) a lens centre may sit from its column's mean x and its row's mean y for the
+// separable weights.
+inline constexpr double kSeparableTolerancePx = 0.25;
+
+// The separable form's view of a rectangular array: one x per lens column and one y per lens row
+// (their means), and how far any lens centre departs from them. WeightingOperator takes an array
+// only when `separable`; a rotated or warped one is resampled onto an axis-aligned lattice first
+// (core/lightfield/lattice_resampling.hpp, chosen by core/process).
+struct SeparableLattice {
+  std::vector<double> lens_x, lens_y;  // mm on the microlens plane, per lens column / row
+  double max_departure_mm = 0;         // of any lens centre from its column's x or row's y
+  bool separable(double pixel_pitch_mm) const { return max_departure_mm <= kSeparableTolerancePx * pixel_pitch_mm; }
+};
+// Reads `lenses` as rows and columns (the layout is not checked: a hex array's shifted rows show
+// as a departure of a quarter pitch).
+SeparableLattice separable_lattice(const optics::MicrolensArray& lenses);
+
 // A stretch of consecutive pixels with weight along one sensor axis (the pixels one voxel reaches
 // behind one microlens, or behind neighbouring lenses where their images touch).
 struct Segment {
