@@ -279,7 +279,7 @@ int main(int argc, char** argv) {
     const Errors er = errors_against(r.correlation.field, flow, voxel);
     char value[64];
     std::snprintf(value, sizeof value, "%.1fx,tables_%.1fs", sampling, tables_s);
-    rows.push_back({"angular_sampling", 5, 3, 16, 0.5,
+    rows.push_back({"angular_sampling", 5, np, 16, 0.5,
                     r.times.reconstruct_a_s + r.times.reconstruct_b_s + r.times.correlate_s, er.total, er, value});
   }
   // Skip thresholds: the dark-pixel cutoff and a noise floor (counts; the images carry about
