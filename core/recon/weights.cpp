@@ -119,20 +119,61 @@ void build_quads(SliceTables& t, int width) {
   }
 }
 
-// row[first[k] + j] += a * w[4 k + j]: the projection's inner loop (vectorised: one quad is one
-// SSE multiply and add; the quads of a voxel column never alias each other or the table).
-void add_quads(float* __restrict row, const int* __restrict first, const float* __restrict w, std::size_t n,
-               float a) {
+// The two inner loops of the kernels, in two builds chosen at run time by GCC's function
+// multiversioning (an ifunc resolved once at load time, as core/piv/deform.cpp's target_clones):
+// the baseline x86-64 one works one quad (one SSE vector) at a time; the AVX2 one pairs two
+// quads in one 8-lane vector, half the arithmetic and loop instructions. Both do the same float
+// operations in the same order (a multiply, then an add: AVX2 has no fused multiply-add), so
+// they give the same bits.
+using Lanes4 = float __attribute__((vector_size(16)));
+using Lanes8 = float __attribute__((vector_size(32)));
+
+__attribute__((target("avx2"), always_inline)) inline Lanes8 load_pair(const float* lo, const float* hi) {
+  Lanes4 a, b;
+  __builtin_memcpy(&a, lo, sizeof a);
+  __builtin_memcpy(&b, hi, sizeof b);
+  return __builtin_shufflevector(a, b, 0, 1, 2, 3, 4, 5, 6, 7);
+}
+__attribute__((target("avx2"), always_inline)) inline Lanes8 load8(const float* p) {
+  Lanes8 v;
+  __builtin_memcpy(&v, p, sizeof v);
+  return v;
+}
+
+// row[first[k] + j] += a * w[4 k + j]: the projection's inner loop. The quads of a voxel column
+// overlap only at the sensor's right edge, where a segment's last quad is shifted left over the
+// one before it with weight 0 on the shared pixels.
+__attribute__((target("default"))) void add_quads(float* __restrict row, const int* __restrict first,
+                                                  const float* __restrict w, std::size_t n, float a) {
   for (std::size_t k = 0; k < n; ++k) {
     float* __restrict q = row + first[k];
     const float* __restrict wk = w + kQuad * k;
     for (int j = 0; j < kQuad; ++j) q[j] += a * wk[j];
   }
 }
+__attribute__((target("avx2"))) void add_quads(float* __restrict row, const int* __restrict first,
+                                               const float* __restrict w, std::size_t n, float a) {
+  std::size_t k = 0;
+  for (; k + 2 <= n; k += 2) {
+    float* q0 = row + first[k];
+    float* q1 = row + first[k + 1];
+    const Lanes8 sum = load_pair(q0, q1) + a * load8(w + kQuad * k);
+    const Lanes4 lo = __builtin_shufflevector(sum, sum, 0, 1, 2, 3), hi = __builtin_shufflevector(sum, sum, 4, 5, 6, 7);
+    // The later quad first: where an edge quad overlaps the one before, its lanes there add 0 to
+    // stale values, and the earlier quad's sums must be the ones that stay (as one after the other).
+    __builtin_memcpy(q1, &hi, sizeof hi);
+    __builtin_memcpy(q0, &lo, sizeof lo);
+  }
+  if (k < n) {
+    float* q = row + first[k];
+    const float* wk = w + kQuad * k;
+    for (int j = 0; j < kQuad; ++j) q[j] += a * wk[j];
+  }
+}
 
 // Σ_k Σ_j w[4 k + j] row[first[k] + j]: the back-projection's inner loop, in two vector
 // accumulators (even and odd quads) so consecutive adds do not wait on each other; a fixed order.
-float dot_quads(const float* row, const int* first, const float* w, std::size_t n) {
+__attribute__((target("default"))) float dot_quads(const float* row, const int* first, const float* w, std::size_t n) {
   float even[kQuad] = {0.f, 0.f, 0.f, 0.f}, odd[kQuad] = {0.f, 0.f, 0.f, 0.f};
   std::size_t k = 0;
   for (; k + 2 <= n; k += 2) {
@@ -152,6 +193,22 @@ float dot_quads(const float* row, const int* first, const float* w, std::size_t 
   // Lanes added as one vector, then pairwise: the same order as adding them one by one.
   float lane[kQuad];
   for (int j = 0; j < kQuad; ++j) lane[j] = even[j] + odd[j];
+  return (lane[0] + lane[1]) + (lane[2] + lane[3]);
+}
+// The same sums: the even quads in lanes 0-3, the odd ones in lanes 4-7.
+__attribute__((target("avx2"))) float dot_quads(const float* row, const int* first, const float* w, std::size_t n) {
+  Lanes8 acc = {0.f, 0.f, 0.f, 0.f, 0.f, 0.f, 0.f, 0.f};
+  std::size_t k = 0;
+  for (; k + 2 <= n; k += 2) acc += load8(w + kQuad * k) * load_pair(row + first[k], row + first[k + 1]);
+  Lanes4 even = __builtin_shufflevector(acc, acc, 0, 1, 2, 3);
+  const Lanes4 odd = __builtin_shufflevector(acc, acc, 4, 5, 6, 7);
+  if (k < n) {
+    Lanes4 p, wk;
+    __builtin_memcpy(&p, row + first[k], sizeof p);
+    __builtin_memcpy(&wk, w + kQuad * k, sizeof wk);
+    even += wk * p;
+  }
+  const Lanes4 lane = even + odd;
   return (lane[0] + lane[1]) + (lane[2] + lane[3]);
 }
 
