@@ -266,18 +266,17 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const M
   if (settings.start == MartStart::mlos && n > 0) {
     // The weighted geometric mean of the lit pixels a voxel sees (dark ones below the cutoff
     // carry no ln I), renormalised over those pixels.
-    // The lit mask and ln I, each times the white image, in the ratio buffer (not yet in use).
+    // The lit mask and ln I, each times the white image, in the ratio and projection buffers
+    // (not yet in use), back-projected in one walk.
     std::vector<float> weight(n, 0.f);
-    auto whitened = [&](auto pixel) {
-      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, data.size(), 1 << 14),
-                        [&](const tbb::blocked_range<std::size_t>& r) {
-        for (std::size_t i = r.begin(); i != r.end(); ++i) ratio[i] = pixel(data[i]) * white[i];
-      });
-    };
-    whitened([](float d) { return d > 0.f ? 1.f : 0.f; });
-    active.back_project_whitened(op, ratio, weight);
-    whitened(log_pixel);
-    active.back_project_whitened(op, ratio, update);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, data.size(), 1 << 14),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+      for (std::size_t i = r.begin(); i != r.end(); ++i) {
+        ratio[i] = (data[i] > 0.f ? 1.f : 0.f) * white[i];
+        projection[i] = log_pixel(data[i]) * white[i];
+      }
+    });
+    active.back_project_whitened(op, ratio, weight, projection, update);
     for (std::size_t m = 0; m < n; ++m) e[m] = weight[m] > 0.f ? clean(bounded_exp(update[m] / weight[m])) : 0.f;
     // Scale to the image's total light so the first ratios are near 1.
     active.project(op, e, projection);

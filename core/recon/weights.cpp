@@ -666,10 +666,22 @@ void ActiveSet::back_project(const WeightingOperator& op, std::span<const float>
 
 void ActiveSet::back_project_whitened(const WeightingOperator& op, std::span<const float> image,
                                       std::span<float> values) const {
+  back_project_images<1>(op, {image.data()}, {values.data()});
+}
+
+void ActiveSet::back_project_whitened(const WeightingOperator& op, std::span<const float> whitened_a,
+                                      std::span<float> values_a, std::span<const float> whitened_b,
+                                      std::span<float> values_b) const {
+  back_project_images<2>(op, {whitened_a.data(), whitened_b.data()}, {values_a.data(), values_b.data()});
+}
+
+template <std::size_t N>
+void ActiveSet::back_project_images(const WeightingOperator& op, const std::array<const float*, N>& images,
+                                    const std::array<float*, N>& values) const {
   const std::size_t width = std::size_t(op.image_width());
   const int height = op.image_height();
   const int nx = op.grid().shape[0], nz = op.grid().shape[2];
-  std::fill(values.begin(), values.end(), 0.f);  // voxels that see no pixel
+  for (float* v : values) std::fill(v, v + voxels_.size(), 0.f);  // voxels that see no pixel
   const int strips = (nx + strip_x_ - 1) / strip_x_;
   // Each strip owns its voxels (x-major: a contiguous range of order_), so their sums need no
   // atomics, and every voxel adds its bands in order whatever the thread count.
@@ -686,8 +698,8 @@ void ActiveSet::back_project_whitened(const WeightingOperator& op, std::span<con
       last_band = std::max(last_band, col.last_band);
     }
     if (p1 <= p0) return;
-    std::vector<double> sum(p1 - p0, 0.0);
-    std::array<float, kBandRows> row_sum{};  // B(row) of one column over the band's rows
+    std::vector<double> sum(N * (p1 - p0), 0.0);  // image after image
+    std::array<std::array<float, kBandRows>, N> row_sum{};  // B(row) of one column over the band's rows
     // Rows reached by the column being summed carry its stamp (no clearing between columns).
     std::array<std::size_t, kBandRows> reached{};
     std::size_t stamp = 0;
@@ -709,23 +721,31 @@ void ActiveSet::back_project_whitened(const WeightingOperator& op, std::span<con
         const std::size_t q0 = t.x_quad_start[std::size_t(col.x)], q1 = t.x_quad_start[std::size_t(col.x) + 1];
         for (int r = lo; r <= hi; ++r) {
           if (reached[std::size_t(r)] != stamp) continue;
-          row_sum[std::size_t(r)] = dot_quads(image.data() + std::size_t(r0 + r) * width, t.x_quad_first.data() + q0,
-                                              t.x_quad_weights.data() + kQuad * q0, q1 - q0);
+          for (std::size_t i = 0; i < N; ++i) {
+            row_sum[i][std::size_t(r)] = dot_quads(images[i] + std::size_t(r0 + r) * width, t.x_quad_first.data() + q0,
+                                                   t.x_quad_weights.data() + kQuad * q0, q1 - q0);
+          }
         }
         // Stage 2: per voxel Σ_row Ay(row) B(row) over the band's rows.
         for (std::size_t k = k0; k < k1; ++k) {
           const BandEntry& entry = entries_[k];
-          double s = 0;
+          std::array<double, N> s{};
           for (const Segment& seg : std::span(t.y_segments.data() + entry.segment_begin, entry.segment_count)) {
             const int a = std::max(r0, seg.first), e = std::min(r1, seg.first + seg.length);
             const float* w = t.y_table.data() + seg.offset;
-            for (int r = a; r < e; ++r) s += double(w[r - seg.first]) * row_sum[std::size_t(r - r0)];
+            for (int r = a; r < e; ++r) {
+              for (std::size_t i = 0; i < N; ++i) s[i] += double(w[r - seg.first]) * row_sum[i][std::size_t(r - r0)];
+            }
           }
-          sum[entry.position - p0] += s;
+          for (std::size_t i = 0; i < N; ++i) sum[i * (p1 - p0) + entry.position - p0] += s[i];
         }
       });
     }
-    for (std::uint32_t p = p0; p < p1; ++p) values[order_[p]] = float(sum[p - p0] / order_normaliser_[p]);  // eq 13
+    for (std::size_t i = 0; i < N; ++i) {
+      for (std::uint32_t p = p0; p < p1; ++p) {
+        values[i][order_[p]] = float(sum[i * (p1 - p0) + p - p0] / order_normaliser_[p]);  // eq 13
+      }
+    }
   });
 }
 

@@ -3,6 +3,7 @@
 // sparse matrix built literally ray by ray as the reference for small cases.
 #pragma once
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <span>
@@ -162,6 +163,11 @@ class ActiveSet {
   // pass and a buffer inside MART's loop).
   void back_project_whitened(const WeightingOperator& op, std::span<const float> whitened_image,
                              std::span<float> values) const;
+  // Two whitened images in one walk (MLOS needs the lit mask's and ln I's): each result has the
+  // same bits as its own back_project_whitened; the bookkeeping is paid once.
+  void back_project_whitened(const WeightingOperator& op, std::span<const float> whitened_a,
+                             std::span<float> values_a, std::span<const float> whitened_b,
+                             std::span<float> values_b) const;
 
  private:
   // One voxel column (z, x) of the set: its voxels are order_[begin, end), y increasing, and its
@@ -204,6 +210,10 @@ class ActiveSet {
   // reach band b: depth by depth, x by x within a depth (the kernels' fixed order).
   template <typename F>
   void for_each_column(int b, int x0, int x1, int nz, F&& f) const;
+  // Back-projection of N whitened images at once (N = 1 or 2).
+  template <std::size_t N>
+  void back_project_images(const WeightingOperator& op, const std::array<const float*, N>& images,
+                           const std::array<float*, N>& values) const;
 };
 
 // Compressed sparse rows: the explicit matrix (rows = sensor pixels, columns = voxels).
