@@ -4,8 +4,10 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
@@ -71,10 +73,19 @@ double sum(std::span<const float> a) {
   return s;
 }
 
+// f(i0, i1) over [0, n) in parallel chunks of pixels.
+template <typename F>
+void for_pixels(std::size_t n, F&& f) {
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1 << 14),
+                    [&](const tbb::blocked_range<std::size_t>& r) { f(r.begin(), r.end()); });
+}
+
 // The image MART sees: pixels at or below the noise threshold become 0.
 std::vector<float> thresholded(const ImageF& image, float threshold) {
   std::vector<float> out(image.pixels.size());
-  for (std::size_t i = 0; i < out.size(); ++i) out[i] = image.pixels[i] > threshold ? image.pixels[i] : 0.f;
+  for_pixels(out.size(), [&](std::size_t i0, std::size_t i1) {
+    for (std::size_t i = i0; i < i1; ++i) out[i] = image.pixels[i] > threshold ? image.pixels[i] : 0.f;
+  });
   return out;
 }
 
@@ -110,15 +121,19 @@ std::vector<std::uint32_t> select_active(const WeightingOperator& op, std::span<
   dark.bits.assign(dark.words * std::size_t(height), 0);
   const float* white = op.white().pixels.data();
   report.pixels = op.pixel_count();
-  for (int r = 0; r < height; ++r) {
+  std::vector<std::size_t> dark_in_row(std::size_t(height), 0);  // each row owns its mask words
+  tbb::parallel_for(0, height, [&](int r) {
+    std::size_t count = 0;
     for (int c = 0; c < width; ++c) {
       const std::size_t i = std::size_t(r) * std::size_t(width) + std::size_t(c);
       if (white[i] > 0.f && image[i] == 0.f) {
         dark.bits[std::size_t(r) * dark.words + std::size_t(c >> 6)] |= std::uint64_t(1) << (c & 63);
-        ++report.dark_pixels;
+        ++count;
       }
     }
-  }
+    dark_in_row[std::size_t(r)] = count;
+  });
+  for (std::size_t count : dark_in_row) report.dark_pixels += count;
 
   const int nx = g.shape[0], ny = g.shape[1], nz = g.shape[2];
   report.voxels = g.count();
@@ -222,6 +237,18 @@ void validate_image(const ImageF& image, const WeightingOperator& op, const char
                      std::to_string(image.height) + " px, the camera's sensor is " +
                      std::to_string(op.image_width()) + " x " + std::to_string(op.image_height()));
   }
+  // Checked in parallel; only an image that fails is scanned again in order to name its first
+  // bad pixel.
+  std::atomic<bool> bad{false};
+  for_pixels(image.pixels.size(), [&](std::size_t i0, std::size_t i1) {
+    bool chunk_bad = false;
+    for (std::size_t i = i0; i < i1; ++i) {
+      const float v = image.pixels[i];
+      chunk_bad |= !(v >= 0.f && v <= kHuge);  // NaN fails both
+    }
+    if (chunk_bad) bad.store(true, std::memory_order_relaxed);
+  });
+  if (!bad.load()) return;
   for (std::size_t i = 0; i < image.pixels.size(); ++i) {
     const float v = image.pixels[i];
     if (!std::isfinite(v) || v < 0.f) {
@@ -257,10 +284,16 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const M
   // What a dark pixel recorded at most: the noise threshold, or half the faintest lit pixel.
   float dark_floor = settings.noise_threshold;
   if (!(dark_floor > 0.f)) {
-    float faintest = kHuge;
-    for (float v : data) {
-      if (v > 0.f) faintest = std::min(faintest, v);
-    }
+    // A minimum: the same whatever the order.
+    const float faintest = tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, data.size(), 1 << 14), kHuge,
+        [&](const tbb::blocked_range<std::size_t>& r, float m) {
+          for (std::size_t i = r.begin(); i != r.end(); ++i) {
+            if (data[i] > 0.f) m = std::min(m, data[i]);
+          }
+          return m;
+        },
+        [](float a, float b) { return std::min(a, b); });
     dark_floor = 0.5f * faintest;
   }
   if (settings.start == MartStart::mlos && n > 0) {
