@@ -603,13 +603,16 @@ void ActiveSet::for_each_column(int b, int x0, int x1, int nz, F&& f) const {
   }
 }
 
-void ActiveSet::project(const WeightingOperator& op, std::span<const float> values,
-                        std::span<float> image) const {
+void ActiveSet::project(const WeightingOperator& op, std::span<const float> values, std::span<float> image,
+                        Workspace* workspace, const BandDone& band_done) const {
   const std::size_t width = std::size_t(op.image_width());
   const int height = op.image_height();
   const int nx = op.grid().shape[0], nz = op.grid().shape[2];
+  Workspace local;
+  Workspace& ws = workspace ? *workspace : local;
   // E / n once per voxel, in column order.
-  std::vector<float> scaled(order_.size());
+  std::vector<float>& scaled = ws.scaled;
+  scaled.resize(order_.size());
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, order_.size(), 1 << 14),
                     [&](const tbb::blocked_range<std::size_t>& r) {
     for (std::size_t p = r.begin(); p != r.end(); ++p) scaled[p] = values[order_[p]] / order_normaliser_[p];
@@ -650,6 +653,7 @@ void ActiveSet::project(const WeightingOperator& op, std::span<const float> valu
     }
     const float* white = op.white().pixels.data();
     for (std::size_t i = std::size_t(r0) * width; i < std::size_t(r1) * width; ++i) image[i] *= white[i];
+    if (band_done) band_done(b, std::size_t(r0) * width, std::size_t(r1) * width);
   });
 }
 
@@ -665,24 +669,30 @@ void ActiveSet::back_project(const WeightingOperator& op, std::span<const float>
 }
 
 void ActiveSet::back_project_whitened(const WeightingOperator& op, std::span<const float> image,
-                                      std::span<float> values) const {
-  back_project_images<1>(op, {image.data()}, {values.data()});
+                                      std::span<float> values, Workspace* workspace) const {
+  Workspace local;
+  back_project_images<1>(op, {image.data()}, {values.data()}, workspace ? *workspace : local);
 }
 
 void ActiveSet::back_project_whitened(const WeightingOperator& op, std::span<const float> whitened_a,
                                       std::span<float> values_a, std::span<const float> whitened_b,
-                                      std::span<float> values_b) const {
-  back_project_images<2>(op, {whitened_a.data(), whitened_b.data()}, {values_a.data(), values_b.data()});
+                                      std::span<float> values_b, Workspace* workspace) const {
+  Workspace local;
+  back_project_images<2>(op, {whitened_a.data(), whitened_b.data()}, {values_a.data(), values_b.data()},
+                         workspace ? *workspace : local);
 }
 
 template <std::size_t N>
 void ActiveSet::back_project_images(const WeightingOperator& op, const std::array<const float*, N>& images,
-                                    const std::array<float*, N>& values) const {
+                                    const std::array<float*, N>& values, Workspace& workspace) const {
   const std::size_t width = std::size_t(op.image_width());
   const int height = op.image_height();
   const int nx = op.grid().shape[0], nz = op.grid().shape[2];
   for (float* v : values) std::fill(v, v + voxels_.size(), 0.f);  // voxels that see no pixel
   const int strips = (nx + strip_x_ - 1) / strip_x_;
+  // Per image and voxel in column order; each strip zeroes and sums its own range.
+  std::vector<double>& sums = workspace.sums;
+  sums.resize(N * order_.size());
   // Each strip owns its voxels (x-major: a contiguous range of order_), so their sums need no
   // atomics, and every voxel adds its bands in order whatever the thread count.
   tbb::parallel_for(0, strips, [&](int strip) {
@@ -698,7 +708,7 @@ void ActiveSet::back_project_images(const WeightingOperator& op, const std::arra
       last_band = std::max(last_band, col.last_band);
     }
     if (p1 <= p0) return;
-    std::vector<double> sum(N * (p1 - p0), 0.0);  // image after image
+    for (std::size_t i = 0; i < N; ++i) std::fill_n(sums.begin() + std::ptrdiff_t(i * order_.size() + p0), p1 - p0, 0.0);
     std::array<std::array<float, kBandRows>, N> row_sum{};  // B(row) of one column over the band's rows
     // Rows reached by the column being summed carry its stamp (no clearing between columns).
     std::array<std::size_t, kBandRows> reached{};
@@ -737,13 +747,13 @@ void ActiveSet::back_project_images(const WeightingOperator& op, const std::arra
               for (std::size_t i = 0; i < N; ++i) s[i] += double(w[r - seg.first]) * row_sum[i][std::size_t(r - r0)];
             }
           }
-          for (std::size_t i = 0; i < N; ++i) sum[i * (p1 - p0) + entry.position - p0] += s[i];
+          for (std::size_t i = 0; i < N; ++i) sums[i * order_.size() + entry.position] += s[i];
         }
       });
     }
     for (std::size_t i = 0; i < N; ++i) {
       for (std::uint32_t p = p0; p < p1; ++p) {
-        values[i][order_[p]] = float(sum[i * (p1 - p0) + p - p0] / order_normaliser_[p]);  // eq 13
+        values[i][order_[p]] = float(sums[i * order_.size() + p] / order_normaliser_[p]);  // eq 13
       }
     }
   });
