@@ -143,16 +143,16 @@ __attribute__((target("avx2"), always_inline)) inline Lanes8 load8(const float* 
 // row[first[k] + j] += a * w[4 k + j]: the projection's inner loop. The quads of a voxel column
 // overlap only at the sensor's right edge, where a segment's last quad is shifted left over the
 // one before it with weight 0 on the shared pixels.
-__attribute__((target("default"))) void add_quads(float* __restrict row, const int* __restrict first,
-                                                  const float* __restrict w, std::size_t n, float a) {
+inline void add_quads_base(float* __restrict row, const int* __restrict first, const float* __restrict w,
+                           std::size_t n, float a) {
   for (std::size_t k = 0; k < n; ++k) {
     float* __restrict q = row + first[k];
     const float* __restrict wk = w + kQuad * k;
     for (int j = 0; j < kQuad; ++j) q[j] += a * wk[j];
   }
 }
-__attribute__((target("avx2"))) void add_quads(float* __restrict row, const int* __restrict first,
-                                               const float* __restrict w, std::size_t n, float a) {
+__attribute__((target("avx2"), always_inline)) inline void add_quads_avx2(float* row, const int* first,
+                                                                          const float* w, std::size_t n, float a) {
   std::size_t k = 0;
   for (; k + 2 <= n; k += 2) {
     float* q0 = row + first[k];
@@ -173,7 +173,7 @@ __attribute__((target("avx2"))) void add_quads(float* __restrict row, const int*
 
 // Σ_k Σ_j w[4 k + j] row[first[k] + j]: the back-projection's inner loop, in two vector
 // accumulators (even and odd quads) so consecutive adds do not wait on each other; a fixed order.
-__attribute__((target("default"))) float dot_quads(const float* row, const int* first, const float* w, std::size_t n) {
+inline float dot_quads_base(const float* row, const int* first, const float* w, std::size_t n) {
   float even[kQuad] = {0.f, 0.f, 0.f, 0.f}, odd[kQuad] = {0.f, 0.f, 0.f, 0.f};
   std::size_t k = 0;
   for (; k + 2 <= n; k += 2) {
@@ -196,7 +196,8 @@ __attribute__((target("default"))) float dot_quads(const float* row, const int* 
   return (lane[0] + lane[1]) + (lane[2] + lane[3]);
 }
 // The same sums: the even quads in lanes 0-3, the odd ones in lanes 4-7.
-__attribute__((target("avx2"))) float dot_quads(const float* row, const int* first, const float* w, std::size_t n) {
+__attribute__((target("avx2"), always_inline)) inline float dot_quads_avx2(const float* row, const int* first,
+                                                                           const float* w, std::size_t n) {
   Lanes8 acc = {0.f, 0.f, 0.f, 0.f, 0.f, 0.f, 0.f, 0.f};
   std::size_t k = 0;
   for (; k + 2 <= n; k += 2) acc += load8(w + kQuad * k) * load_pair(row + first[k], row + first[k + 1]);
@@ -210,6 +211,53 @@ __attribute__((target("avx2"))) float dot_quads(const float* row, const int* fir
   }
   const Lanes4 lane = even + odd;
   return (lane[0] + lane[1]) + (lane[2] + lane[3]);
+}
+
+// The dispatched entry points: one call per voxel column and band (not per row), so the row
+// loop runs inside the chosen build too.
+//
+// Projection stage 2: image row r += g[r] Ax for the rows in [lo, hi] the column reaches
+// (g[r] != 0), resetting g for the next column. `band` points at the band's first row.
+__attribute__((target("default"))) void add_column(float* band, std::size_t width, float* g, int lo, int hi,
+                                                   const int* first, const float* w, std::size_t n) {
+  for (int r = lo; r <= hi; ++r) {
+    if (g[r] == 0.f) continue;
+    add_quads_base(band + std::size_t(r) * width, first, w, n, g[r]);
+    g[r] = 0.f;
+  }
+}
+__attribute__((target("avx2"))) void add_column(float* band, std::size_t width, float* g, int lo, int hi,
+                                                const int* first, const float* w, std::size_t n) {
+  for (int r = lo; r <= hi; ++r) {
+    if (g[r] == 0.f) continue;
+    add_quads_avx2(band + std::size_t(r) * width, first, w, n, g[r]);
+    g[r] = 0.f;
+  }
+}
+
+// Back-projection stage 1: out[r] = Σ_col Ax r(row, col) for the rows in [lo, hi] stamped as
+// reached by the column.
+__attribute__((target("default"))) void dot_column(const float* band, std::size_t width, const std::size_t* reached,
+                                                   std::size_t stamp, int lo, int hi, const int* first, const float* w,
+                                                   std::size_t n, float* out) {
+  for (int r = lo; r <= hi; ++r) {
+    if (reached[r] == stamp) out[r] = dot_quads_base(band + std::size_t(r) * width, first, w, n);
+  }
+}
+__attribute__((target("avx2"))) void dot_column(const float* band, std::size_t width, const std::size_t* reached,
+                                                std::size_t stamp, int lo, int hi, const int* first, const float* w,
+                                                std::size_t n, float* out) {
+  for (int r = lo; r <= hi; ++r) {
+    if (reached[r] == stamp) out[r] = dot_quads_avx2(band + std::size_t(r) * width, first, w, n);
+  }
+}
+
+// One row against one voxel column's quads (the eq 13 normalisers).
+__attribute__((target("default"))) float dot_quads(const float* row, const int* first, const float* w, std::size_t n) {
+  return dot_quads_base(row, first, w, n);
+}
+__attribute__((target("avx2"))) float dot_quads(const float* row, const int* first, const float* w, std::size_t n) {
+  return dot_quads_avx2(row, first, w, n);
 }
 
 }  // namespace
@@ -642,13 +690,8 @@ void ActiveSet::project(const WeightingOperator& op, std::span<const float> valu
         }
         // Stage 2: image(row, ·) += G(row) Ax, once per row the column reaches.
         const std::size_t q0 = t.x_quad_start[std::size_t(col.x)], q1 = t.x_quad_start[std::size_t(col.x) + 1];
-        for (int r = lo; r <= hi; ++r) {
-          const float a = column_sum[std::size_t(r)];
-          if (a == 0.f) continue;
-          column_sum[std::size_t(r)] = 0.f;
-          add_quads(image.data() + std::size_t(r0 + r) * width, t.x_quad_first.data() + q0,
-                    t.x_quad_weights.data() + kQuad * q0, q1 - q0, a);
-        }
+        add_column(image.data() + std::size_t(r0) * width, width, column_sum.data(), lo, hi,
+                   t.x_quad_first.data() + q0, t.x_quad_weights.data() + kQuad * q0, q1 - q0);
       });
     }
     const float* white = op.white().pixels.data();
@@ -729,12 +772,9 @@ void ActiveSet::back_project_images(const WeightingOperator& op, const std::arra
         }
         // Stage 1: B(row) = Σ_col Ax(col) r(row, col), once per reached row.
         const std::size_t q0 = t.x_quad_start[std::size_t(col.x)], q1 = t.x_quad_start[std::size_t(col.x) + 1];
-        for (int r = lo; r <= hi; ++r) {
-          if (reached[std::size_t(r)] != stamp) continue;
-          for (std::size_t i = 0; i < N; ++i) {
-            row_sum[i][std::size_t(r)] = dot_quads(images[i] + std::size_t(r0 + r) * width, t.x_quad_first.data() + q0,
-                                                   t.x_quad_weights.data() + kQuad * q0, q1 - q0);
-          }
+        for (std::size_t i = 0; i < N; ++i) {
+          dot_column(images[i] + std::size_t(r0) * width, width, reached.data(), stamp, lo, hi,
+                     t.x_quad_first.data() + q0, t.x_quad_weights.data() + kQuad * q0, q1 - q0, row_sum[i].data());
         }
         // Stage 2: per voxel Σ_row Ay(row) B(row) over the band's rows.
         for (std::size_t k = k0; k < k1; ++k) {
