@@ -58,8 +58,8 @@ void for_pixels(std::size_t n, F&& f) {
 }
 
 // The image MART sees: pixels at or below the noise threshold become 0.
-std::vector<float> thresholded(const ImageF& image, float threshold) {
-  std::vector<float> out(image.pixels.size());
+BigBuffer<float> thresholded(const ImageF& image, float threshold) {
+  BigBuffer<float> out(image.pixels.size());
   for_pixels(out.size(), [&](std::size_t i0, std::size_t i1) {
     for (std::size_t i = i0; i < i1; ++i) out[i] = image.pixels[i] > threshold ? image.pixels[i] : 0.f;
   });
@@ -251,12 +251,13 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const M
   const auto t_setup = std::chrono::steady_clock::now();
   MartResult result;
   result.volume = Volume(op.grid(), 0.f);
-  const std::vector<float> data = thresholded(image, settings.noise_threshold);
+  const BigBuffer<float> data = thresholded(image, settings.noise_threshold);
   const ActiveSet active(op, select_active(op, data, settings, result.skipped));
   const std::size_t n = active.size();
   ActiveSet::Workspace workspace;  // the kernels' buffers, reused by every pass
-  std::vector<float> e(n, 1.f), update(n, 0.f), projection(op.pixel_count(), 0.f);
-  std::vector<float> ratio(op.pixel_count(), 0.f);  // white · ln(I / W E)
+  std::vector<float> e(n, 1.f), update(n, 0.f);
+  // Written in full by every pass before being read.
+  BigBuffer<float> projection(op.pixel_count()), ratio(op.pixel_count());  // ratio: white · ln(I / W E)
   const float* white = op.white().pixels.data();
   auto for_voxels = [n](auto&& f) {
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1 << 12), [&](const tbb::blocked_range<std::size_t>& r) {
@@ -304,11 +305,9 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const M
   result.setup_seconds = seconds_since(t_setup);
 
   // ln I and ln floor once, not per iteration.
-  std::vector<float> log_data(data.size(), 0.f);
+  BigBuffer<float> log_data(data.size());
   for_pixels(data.size(), [&](std::size_t i0, std::size_t i1) {
-    for (std::size_t i = i0; i < i1; ++i) {
-      if (data[i] > 0.f) log_data[i] = std::log(data[i]);
-    }
+    for (std::size_t i = i0; i < i1; ++i) log_data[i] = data[i] > 0.f ? std::log(data[i]) : 0.f;
   });
   const float log_floor = std::log(dark_floor);
   // Work on each band of the projection as soon as it is finished, while its pixels are in cache:
@@ -385,7 +384,7 @@ Volume reconstruct_row_action(const WeightingOperator& op, const SparseMatrix& w
   if (w.rows != op.pixel_count() || w.cols != g.count()) {
     throw InputError("row-action MART: the matrix does not belong to this operator");
   }
-  const std::vector<float> data = thresholded(image, settings.noise_threshold);
+  const BigBuffer<float> data = thresholded(image, settings.noise_threshold);
   std::vector<float> e(g.count(), 1.f);
   if (settings.start == MartStart::mlos) {
     std::vector<float> logs(g.count(), 0.f);

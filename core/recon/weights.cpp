@@ -659,7 +659,7 @@ void ActiveSet::project(const WeightingOperator& op, std::span<const float> valu
   Workspace local;
   Workspace& ws = workspace ? *workspace : local;
   // E / n once per voxel, in column order.
-  std::vector<float>& scaled = ws.scaled;
+  auto& scaled = ws.scaled;
   scaled.resize(order_.size());
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, order_.size(), 1 << 14),
                     [&](const tbb::blocked_range<std::size_t>& r) {
@@ -734,7 +734,7 @@ void ActiveSet::back_project_images(const WeightingOperator& op, const std::arra
   for (float* v : values) std::fill(v, v + voxels_.size(), 0.f);  // voxels that see no pixel
   const int strips = (nx + strip_x_ - 1) / strip_x_;
   // Per image and voxel in column order; each strip zeroes and sums its own range.
-  std::vector<double>& sums = workspace.sums;
+  auto& sums = workspace.sums;
   sums.resize(N * order_.size());
   // Each strip owns its voxels (x-major: a contiguous range of order_), so their sums need no
   // atomics, and every voxel adds its bands in order whatever the thread count.

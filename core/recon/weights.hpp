@@ -14,6 +14,7 @@
 #include "core/base/image.hpp"
 #include "core/optics/camera_model.hpp"
 #include "core/optics/microlens_array.hpp"
+#include "core/recon/big_buffer.hpp"
 
 namespace plenopiv::recon {
 
@@ -157,8 +158,8 @@ class ActiveSet {
   // Buffers a pass needs (E / n in column order, the per-voxel sums), kept by whoever runs many
   // passes (MART) so that a pass neither allocates nor page-faults them (~36 MB on the paper case).
   struct Workspace {
-    std::vector<float> scaled;
-    std::vector<double> sums;
+    BigBuffer<float> scaled;
+    BigBuffer<double> sums;
   };
   // Called once per band of sensor rows, pixels [first_pixel, end_pixel), as soon as a projection
   // has finished them, on the thread that computed them: per-pixel work on the projection while
@@ -194,10 +195,10 @@ class ActiveSet {
     std::size_t block = 0;
   };
   // One voxel of a column in one band: its y segments there (into its slice's y_segments).
-  struct BandEntry {
-    std::uint32_t position = 0;  // in order_
-    std::uint32_t segment_begin = 0;
-    std::uint32_t segment_count = 0;
+  struct BandEntry {  // no initialisers: millions are allocated, then each written once
+    std::uint32_t position;  // in order_
+    std::uint32_t segment_begin;
+    std::uint32_t segment_count;
   };
 
   std::vector<std::uint32_t> voxels_;
@@ -218,7 +219,7 @@ class ActiveSet {
   int bands_ = 0;
   // Entries per column and band, column by column: [block_start_[i], block_start_[i + 1]).
   std::vector<std::size_t> block_start_;
-  std::vector<BandEntry> entries_;
+  BigBuffer<BandEntry> entries_;
 
   // Calls f(column, its entries in band b [k0, k1)) for the columns of voxel x in [x0, x1) that
   // reach band b: depth by depth, x by x within a depth (the kernels' fixed order).
