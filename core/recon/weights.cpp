@@ -569,9 +569,8 @@ ActiveSet::ActiveSet(const WeightingOperator& op, std::vector<std::uint32_t> vox
   // counted, then written, both in parallel over columns.
   const int height = op.image_height();
   bands_ = (height + kBandRows - 1) / kBandRows;
-  // Calls entry(p, first segment, count) for each voxel with segments in a band and band_end()
-  // after each band of the column, bands in order.
-  auto walk = [&](const Column& col, std::vector<std::size_t>& cursor, auto&& entry, auto&& band_end) {
+  // Calls entry(b, p, first segment, count) for each voxel with segments in band b, bands in order.
+  auto walk = [&](const Column& col, std::vector<std::size_t>& cursor, auto&& entry) {
     const SliceTables& t = op.slice(col.z);
     cursor.resize(col.end - col.begin);
     for (std::uint32_t p = col.begin; p < col.end; ++p) {
@@ -586,15 +585,13 @@ ActiveSet::ActiveSet(const WeightingOperator& op, std::vector<std::uint32_t> vox
         while (k < run.segment_end && t.y_segments[k].first + t.y_segments[k].length <= r0) ++k;
         std::size_t e = k;
         while (e < run.segment_end && t.y_segments[e].first < r1) ++e;
-        if (e > k) entry(p, k, e - k);
+        if (e > k) entry(b, p, k, e - k);
       }
-      band_end();
     }
   };
-  std::vector<std::size_t> entry_offset(columns_.size() + 1, 0), block_offset(columns_.size() + 1, 0);
+  std::vector<std::size_t> block_offset(columns_.size() + 1, 0);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, columns_.size(), 64),
                     [&](const tbb::blocked_range<std::size_t>& range) {
-    std::vector<std::size_t> cursor;  // per voxel of the column: its first segment not yet behind
     for (std::size_t c = range.begin(); c != range.end(); ++c) {
       Column& col = columns_[c];
       const SliceTables& t = op.slice(col.z);
@@ -605,28 +602,51 @@ ActiveSet::ActiveSet(const WeightingOperator& op, std::vector<std::uint32_t> vox
         col.last_band = std::max(col.last_band, run.last / kBandRows);
       }
       block_offset[c + 1] = std::size_t(col.last_band - col.first_band + 1);
-      walk(col, cursor, [&](std::uint32_t, std::size_t, std::size_t) { ++entry_offset[c + 1]; }, [] {});
     }
   });
   for (std::size_t c = 0; c < columns_.size(); ++c) {
-    entry_offset[c + 1] += entry_offset[c];
     block_offset[c + 1] += block_offset[c];
+    columns_[c].block = block_offset[c];
   }
-  entries_.resize(entry_offset.back());
-  block_start_.assign(block_offset.back() + 1, 0);
+  blocks_.assign(block_offset.back(), Block{});
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, columns_.size(), 64),
                     [&](const tbb::blocked_range<std::size_t>& range) {
-    std::vector<std::size_t> cursor;
+    std::vector<std::size_t> cursor;  // per voxel of the column: its first segment not yet behind
     for (std::size_t c = range.begin(); c != range.end(); ++c) {
-      Column& col = columns_[c];
-      col.block = block_offset[c];
-      std::size_t next = entry_offset[c], block = col.block;
-      walk(
-          col, cursor,
-          [&](std::uint32_t p, std::size_t k, std::size_t n) {
-            entries_[next++] = BandEntry{p, std::uint32_t(k), std::uint32_t(n)};
-          },
-          [&] { block_start_[++block] = next; });
+      const Column& col = columns_[c];
+      walk(col, cursor, [&](int b, std::uint32_t, std::size_t, std::size_t) {
+        ++blocks_[col.block + std::size_t(b - col.first_band)].end;  // a count for now
+      });
+    }
+  });
+  // The entries in the order the kernels read them: band by band, then strip by strip, depth by
+  // depth, x by x (for_each_column), so both kernels stream through them.
+  std::size_t next = 0;
+  for (int b = 0; b < bands_; ++b) {
+    for (int x0 = 0; x0 < int(nx); x0 += strip_x_) {
+      for (std::uint32_t z = 0; z < nz; ++z) {
+        for (int x = x0; x < std::min(int(nx), x0 + strip_x_); ++x) {
+          const std::uint32_t c = column_at_[std::size_t(x) * nz + z];
+          if (c == kNoColumn || b < columns_[c].first_band || b > columns_[c].last_band) continue;
+          Block& blk = blocks_[columns_[c].block + std::size_t(b - columns_[c].first_band)];
+          blk.begin = next;
+          next += blk.end;
+          blk.end = next;
+        }
+      }
+    }
+  }
+  entries_.resize(next);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, columns_.size(), 64),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+    std::vector<std::size_t> cursor, fill;
+    for (std::size_t c = range.begin(); c != range.end(); ++c) {
+      const Column& col = columns_[c];
+      fill.clear();
+      for (int b = col.first_band; b <= col.last_band; ++b) fill.push_back(blocks_[col.block + std::size_t(b - col.first_band)].begin);
+      walk(col, cursor, [&](int b, std::uint32_t p, std::size_t k, std::size_t n) {
+        entries_[fill[std::size_t(b - col.first_band)]++] = BandEntry{p, std::uint32_t(k), std::uint32_t(n)};
+      });
     }
   });
 }
@@ -645,8 +665,8 @@ void ActiveSet::for_each_column(int b, int x0, int x1, int nz, F&& f) const {
       if (c == kNoColumn) continue;
       const Column& col = columns_[c];
       if (b < col.first_band || b > col.last_band) continue;
-      const std::size_t block = col.block + std::size_t(b - col.first_band);
-      if (block_start_[block] < block_start_[block + 1]) f(col, block_start_[block], block_start_[block + 1]);
+      const Block& blk = blocks_[col.block + std::size_t(b - col.first_band)];
+      if (blk.begin < blk.end) f(col, blk.begin, blk.end);
     }
   }
 }

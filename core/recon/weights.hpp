@@ -186,7 +186,7 @@ class ActiveSet {
 
  private:
   // One voxel column (z, x) of the set: its voxels are order_[begin, end), y increasing, and its
-  // rows reach bands [first_band, last_band], whose entries start at block_start_[block].
+  // rows reach bands [first_band, last_band], whose entries are blocks_[block + band - first_band].
   // Columns run x-major (x, then z): consecutive columns reach nearly the same sensor columns.
   struct Column {
     int z = 0, x = 0;
@@ -217,8 +217,13 @@ class ActiveSet {
   // the y weights of one depth serve the whole strip and the pixels under the strip stay cached.
   int strip_x_ = 1;
   int bands_ = 0;
-  // Entries per column and band, column by column: [block_start_[i], block_start_[i + 1]).
-  std::vector<std::size_t> block_start_;
+  // The entries of one column in one band: entries_[begin, end). Blocks are indexed column by
+  // column (Column::block + band - first_band); the entries themselves lie band by band in the
+  // kernels' visiting order (strip, depth, x), so a pass reads them front to back.
+  struct Block {
+    std::size_t begin = 0, end = 0;
+  };
+  std::vector<Block> blocks_;
   BigBuffer<BandEntry> entries_;
 
   // Calls f(column, its entries in band b [k0, k1)) for the columns of voxel x in [x0, x1) that
