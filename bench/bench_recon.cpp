@@ -6,7 +6,9 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
+#include <cstring>
 #include <fstream>
 #include <random>
 #include <string>
@@ -98,13 +100,20 @@ void paper_scale(const std::string& source_dir, bool small, double ppm, int iter
   double iter_total = 0;
   for (const auto& it : r.iterations) iter_total += it.seconds;
   const recon::SkipReport& k = r.skipped;
+  // The volume's exact bits (FNV-1a): speed work must leave it unchanged, or say why not.
+  std::uint64_t hash = 1469598103934665603ull;
+  for (float v : r.volume.data) {
+    std::uint32_t bits;
+    std::memcpy(&bits, &v, sizeof bits);
+    hash = (hash ^ bits) * 1099511628211ull;
+  }
   std::printf("bench=recon_paper particles=%zu ppm=%.2f lit_pixel_fraction=%.4f threshold_counts=%.1f dark_cutoff=%.2f\n",
               count, ppm, double(lit) / double(image.size()), double(s.noise_threshold), dark_cutoff);
   std::printf("bench=recon_paper phase=active_set_and_mlos seconds=%.3f\n", r.setup_seconds);
   std::printf("bench=recon_paper phase=iterations seconds=%.3f per_iteration=%.3f\n", iter_total,
               iter_total / double(std::max<std::size_t>(1, r.iterations.size())));
-  std::printf("bench=recon_paper phase=reconstruct_total seconds=%.3f cpu_s=%.3f final_residual=%.4f\n", t_mart, c_mart,
-              r.final_residual);
+  std::printf("bench=recon_paper phase=reconstruct_total seconds=%.3f cpu_s=%.3f final_residual=%.4f volume_hash=%016llx\n",
+              t_mart, c_mart, r.final_residual, static_cast<unsigned long long>(hash));
   std::printf("bench=recon_paper voxels=%zu active=%zu skipped_fraction=%.4f dark=%zu unseen=%zu slices_empty=%d "
               "dark_pixels=%zu\n",
               k.voxels, k.voxels_active, k.fraction_skipped(), k.voxels_dark, k.voxels_unseen, k.slices_empty,

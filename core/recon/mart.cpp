@@ -4,8 +4,10 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
@@ -42,39 +44,25 @@ void validate_settings(const MartSettings& s) {
   }
 }
 
-// ||a - b|| / ||a|| with a fixed-order reduction (same result at any thread count).
-double normalised_residual(std::span<const float> a, std::span<const float> b) {
-  constexpr std::size_t kChunk = 1 << 14;
-  const std::size_t chunks = (a.size() + kChunk - 1) / kChunk;
-  std::vector<double> num(chunks, 0.0), den(chunks, 0.0);
-  tbb::parallel_for(std::size_t(0), chunks, [&](std::size_t c) {
-    double n = 0, d = 0;
-    for (std::size_t i = c * kChunk; i < std::min(a.size(), (c + 1) * kChunk); ++i) {
-      const double diff = double(a[i]) - double(b[i]);
-      n += diff * diff;
-      d += double(a[i]) * double(a[i]);
-    }
-    num[c] = n;
-    den[c] = d;
-  });
-  double n = 0, d = 0;
-  for (std::size_t c = 0; c < chunks; ++c) {
-    n += num[c];
-    d += den[c];
-  }
-  return d > 0 ? std::sqrt(n / d) : 0.0;
-}
-
 double sum(std::span<const float> a) {
   double s = 0;
   for (float v : a) s += v;
   return s;
 }
 
+// f(i0, i1) over [0, n) in parallel chunks of pixels.
+template <typename F>
+void for_pixels(std::size_t n, F&& f) {
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1 << 14),
+                    [&](const tbb::blocked_range<std::size_t>& r) { f(r.begin(), r.end()); });
+}
+
 // The image MART sees: pixels at or below the noise threshold become 0.
-std::vector<float> thresholded(const ImageF& image, float threshold) {
-  std::vector<float> out(image.pixels.size());
-  for (std::size_t i = 0; i < out.size(); ++i) out[i] = image.pixels[i] > threshold ? image.pixels[i] : 0.f;
+BigBuffer<float> thresholded(const ImageF& image, float threshold) {
+  BigBuffer<float> out(image.pixels.size());
+  for_pixels(out.size(), [&](std::size_t i0, std::size_t i1) {
+    for (std::size_t i = i0; i < i1; ++i) out[i] = image.pixels[i] > threshold ? image.pixels[i] : 0.f;
+  });
   return out;
 }
 
@@ -110,15 +98,19 @@ std::vector<std::uint32_t> select_active(const WeightingOperator& op, std::span<
   dark.bits.assign(dark.words * std::size_t(height), 0);
   const float* white = op.white().pixels.data();
   report.pixels = op.pixel_count();
-  for (int r = 0; r < height; ++r) {
+  std::vector<std::size_t> dark_in_row(std::size_t(height), 0);  // each row owns its mask words
+  tbb::parallel_for(0, height, [&](int r) {
+    std::size_t count = 0;
     for (int c = 0; c < width; ++c) {
       const std::size_t i = std::size_t(r) * std::size_t(width) + std::size_t(c);
       if (white[i] > 0.f && image[i] == 0.f) {
         dark.bits[std::size_t(r) * dark.words + std::size_t(c >> 6)] |= std::uint64_t(1) << (c & 63);
-        ++report.dark_pixels;
+        ++count;
       }
     }
-  }
+    dark_in_row[std::size_t(r)] = count;
+  });
+  for (std::size_t count : dark_in_row) report.dark_pixels += count;
 
   const int nx = g.shape[0], ny = g.shape[1], nz = g.shape[2];
   report.voxels = g.count();
@@ -222,6 +214,18 @@ void validate_image(const ImageF& image, const WeightingOperator& op, const char
                      std::to_string(image.height) + " px, the camera's sensor is " +
                      std::to_string(op.image_width()) + " x " + std::to_string(op.image_height()));
   }
+  // Checked in parallel; only an image that fails is scanned again in order to name its first
+  // bad pixel.
+  std::atomic<bool> bad{false};
+  for_pixels(image.pixels.size(), [&](std::size_t i0, std::size_t i1) {
+    bool chunk_bad = false;
+    for (std::size_t i = i0; i < i1; ++i) {
+      const float v = image.pixels[i];
+      chunk_bad |= !(v >= 0.f && v <= kHuge);  // NaN fails both
+    }
+    if (chunk_bad) bad.store(true, std::memory_order_relaxed);
+  });
+  if (!bad.load()) return;
   for (std::size_t i = 0; i < image.pixels.size(); ++i) {
     const float v = image.pixels[i];
     if (!std::isfinite(v) || v < 0.f) {
@@ -247,99 +251,128 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const M
   const auto t_setup = std::chrono::steady_clock::now();
   MartResult result;
   result.volume = Volume(op.grid(), 0.f);
-  const std::vector<float> data = thresholded(image, settings.noise_threshold);
+  const BigBuffer<float> data = thresholded(image, settings.noise_threshold);
   const ActiveSet active(op, select_active(op, data, settings, result.skipped));
   const std::size_t n = active.size();
-  std::vector<float> e(n, 1.f), update(n, 0.f), projection(op.pixel_count(), 0.f);
-  std::vector<float> ratio(op.pixel_count(), 0.f);  // white · ln(I / W E)
+  ActiveSet::Workspace workspace;  // the kernels' buffers, reused by every pass
+  std::vector<float> e(n, 1.f), update(n, 0.f);
+  // Written in full by every pass before being read.
+  BigBuffer<float> projection(op.pixel_count()), ratio(op.pixel_count());  // ratio: white · ln(I / W E)
   const float* white = op.white().pixels.data();
+  auto for_voxels = [n](auto&& f) {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1 << 12), [&](const tbb::blocked_range<std::size_t>& r) {
+      for (std::size_t m = r.begin(); m != r.end(); ++m) f(m);
+    });
+  };
 
   // What a dark pixel recorded at most: the noise threshold, or half the faintest lit pixel.
   float dark_floor = settings.noise_threshold;
   if (!(dark_floor > 0.f)) {
-    float faintest = kHuge;
-    for (float v : data) {
-      if (v > 0.f) faintest = std::min(faintest, v);
-    }
+    // A minimum: the same whatever the order.
+    const float faintest = tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, data.size(), 1 << 14), kHuge,
+        [&](const tbb::blocked_range<std::size_t>& r, float m) {
+          for (std::size_t i = r.begin(); i != r.end(); ++i) {
+            if (data[i] > 0.f) m = std::min(m, data[i]);
+          }
+          return m;
+        },
+        [](float a, float b) { return std::min(a, b); });
     dark_floor = 0.5f * faintest;
   }
   if (settings.start == MartStart::mlos && n > 0) {
     // The weighted geometric mean of the lit pixels a voxel sees (dark ones below the cutoff
     // carry no ln I), renormalised over those pixels.
-    // The lit mask and ln I, each times the white image, in the ratio buffer (not yet in use).
+    // The lit mask and ln I, each times the white image, in the ratio and projection buffers
+    // (not yet in use), back-projected in one walk.
     std::vector<float> weight(n, 0.f);
-    auto whitened = [&](auto pixel) {
-      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, data.size(), 1 << 14),
-                        [&](const tbb::blocked_range<std::size_t>& r) {
-        for (std::size_t i = r.begin(); i != r.end(); ++i) ratio[i] = pixel(data[i]) * white[i];
-      });
-    };
-    whitened([](float d) { return d > 0.f ? 1.f : 0.f; });
-    active.back_project_whitened(op, ratio, weight);
-    whitened(log_pixel);
-    active.back_project_whitened(op, ratio, update);
-    for (std::size_t m = 0; m < n; ++m) e[m] = weight[m] > 0.f ? clean(bounded_exp(update[m] / weight[m])) : 0.f;
+    for_pixels(data.size(), [&](std::size_t i0, std::size_t i1) {
+      for (std::size_t i = i0; i < i1; ++i) {
+        ratio[i] = (data[i] > 0.f ? 1.f : 0.f) * white[i];
+        projection[i] = log_pixel(data[i]) * white[i];
+      }
+    });
+    active.back_project_whitened(op, ratio, weight, projection, update, &workspace);
+    for_voxels([&](std::size_t m) { e[m] = weight[m] > 0.f ? clean(bounded_exp(update[m] / weight[m])) : 0.f; });
     // Scale to the image's total light so the first ratios are near 1.
-    active.project(op, e, projection);
+    active.project(op, e, projection, &workspace);
     const double total = sum(projection);
     if (total > 0) {
       const float scale = float(sum(data) / total);
-      for (float& v : e) v = clean(v * scale);
+      for_voxels([&](std::size_t m) { e[m] = clean(e[m] * scale); });
     }
   }
   result.setup_seconds = seconds_since(t_setup);
 
   // ln I and ln floor once, not per iteration.
-  std::vector<float> log_data(data.size(), 0.f);
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, data.size(), 1 << 14),
-                    [&](const tbb::blocked_range<std::size_t>& r) {
-    for (std::size_t i = r.begin(); i != r.end(); ++i) {
-      if (data[i] > 0.f) log_data[i] = std::log(data[i]);
-    }
+  BigBuffer<float> log_data(data.size());
+  for_pixels(data.size(), [&](std::size_t i0, std::size_t i1) {
+    for (std::size_t i = i0; i < i1; ++i) log_data[i] = data[i] > 0.f ? std::log(data[i]) : 0.f;
   });
   const float log_floor = std::log(dark_floor);
+  // Work on each band of the projection as soon as it is finished, while its pixels are in cache:
+  // the residual's two sums (kept per band and added in band order, so the same at any thread
+  // count) and the log-ratios the update back-projects.
+  std::vector<std::array<double, 2>> band_sums(std::size_t(active.band_count()));
+  auto residual_band = [&](int band, std::size_t i0, std::size_t i1) {
+    double num = 0, den = 0;
+    for (std::size_t i = i0; i < i1; ++i) {
+      const double diff = double(data[i]) - double(projection[i]);
+      num += diff * diff;
+      den += double(data[i]) * double(data[i]);
+    }
+    band_sums[std::size_t(band)] = {num, den};
+  };
+  auto residual = [&] {  // ||I - W E|| / ||I||
+    double num = 0, den = 0;
+    for (const auto& b : band_sums) {
+      num += b[0];
+      den += b[1];
+    }
+    return den > 0 ? std::sqrt(num / den) : 0.0;
+  };
+  auto ratio_band = [&](std::size_t i0, std::size_t i1) {
+    for (std::size_t i = i0; i < i1; ++i) {
+      const float p = projection[i], d = data[i];
+      if (white[i] == 0.f) {
+        ratio[i] = 0.f;  // between microlens images: no voxel sees the pixel
+      } else if (d > 0.f) {
+        ratio[i] = p > 0.f ? white[i] * std::clamp(log_data[i] - std::log(p), -kMaxLog, kMaxLog) : 0.f;
+      } else {
+        // A dark pixel the voxel sees only faintly: it recorded at most the floor, so it pulls
+        // the voxels that claim more light there down (never up).
+        ratio[i] = p > dark_floor ? white[i] * std::max(log_floor - std::log(p), -kMaxLog) : 0.f;
+      }
+    }
+  };
   double previous = -1;
   for (int it = 1; it <= settings.iterations && n > 0; ++it) {
     const auto t_it = std::chrono::steady_clock::now();
-    active.project(op, e, projection);
-    const double residual = normalised_residual(data, projection);
-    if (previous >= 0 && settings.convergence > 0 &&
-        std::abs(previous - residual) <= settings.convergence * previous) {
+    active.project(op, e, projection, &workspace, [&](int band, std::size_t i0, std::size_t i1) {
+      residual_band(band, i0, i1);
+      ratio_band(i0, i1);
+    });
+    const double r = residual();
+    if (previous >= 0 && settings.convergence > 0 && std::abs(previous - r) <= settings.convergence * previous) {
       result.converged = true;
       break;
     }
-    previous = residual;
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, ratio.size(), 1 << 14),
-                      [&](const tbb::blocked_range<std::size_t>& r) {
-      for (std::size_t i = r.begin(); i != r.end(); ++i) {
-        const float p = projection[i], d = data[i];
-        if (white[i] == 0.f) {
-          ratio[i] = 0.f;  // between microlens images: no voxel sees the pixel
-        } else if (d > 0.f) {
-          ratio[i] = p > 0.f ? white[i] * std::clamp(log_data[i] - std::log(p), -kMaxLog, kMaxLog) : 0.f;
-        } else {
-          // A dark pixel the voxel sees only faintly: it recorded at most the floor, so it pulls
-          // the voxels that claim more light there down (never up).
-          ratio[i] = p > dark_floor ? white[i] * std::max(log_floor - std::log(p), -kMaxLog) : 0.f;
-        }
-      }
-    });
-    active.back_project_whitened(op, ratio, update);
+    previous = r;
+    active.back_project_whitened(op, ratio, update, &workspace);
     const float mu = float(settings.mu);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1 << 12), [&](const tbb::blocked_range<std::size_t>& r) {
-      for (std::size_t m = r.begin(); m != r.end(); ++m) e[m] = clean(e[m] * bounded_exp(mu * update[m]));
-    });
-    IterationReport rep{it, residual, seconds_since(t_it)};
+    for_voxels([&](std::size_t m) { e[m] = clean(e[m] * bounded_exp(mu * update[m])); });
+    IterationReport rep{it, r, seconds_since(t_it)};
     result.iterations.push_back(rep);
     if (progress) progress(rep);
   }
   if (n > 0) {
-    active.project(op, e, projection);
-    result.final_residual = normalised_residual(data, projection);
+    active.project(op, e, projection, &workspace, residual_band);
+    result.final_residual = residual();
   } else {
-    result.final_residual = normalised_residual(data, projection);
+    result.final_residual = sum(data) > 0 ? 1.0 : 0.0;  // nothing projected: ||I - 0|| / ||I||
   }
-  for (std::size_t m = 0; m < n; ++m) result.volume.data[active.voxels()[m]] = e[m];
+  const std::vector<std::uint32_t>& voxels = active.voxels();
+  for_voxels([&](std::size_t m) { result.volume.data[voxels[m]] = e[m]; });  // distinct voxels
   return result;
 }
 
@@ -351,7 +384,7 @@ Volume reconstruct_row_action(const WeightingOperator& op, const SparseMatrix& w
   if (w.rows != op.pixel_count() || w.cols != g.count()) {
     throw InputError("row-action MART: the matrix does not belong to this operator");
   }
-  const std::vector<float> data = thresholded(image, settings.noise_threshold);
+  const BigBuffer<float> data = thresholded(image, settings.noise_threshold);
   std::vector<float> e(g.count(), 1.f);
   if (settings.start == MartStart::mlos) {
     std::vector<float> logs(g.count(), 0.f);

@@ -116,20 +116,61 @@ void build_quads(SliceTables& t, int width) {
   }
 }
 
-// row[first[k] + j] += a * w[4 k + j]: the projection's inner loop (vectorised: one quad is one
-// SSE multiply and add; the quads of a voxel column never alias each other or the table).
-void add_quads(float* __restrict row, const int* __restrict first, const float* __restrict w, std::size_t n,
-               float a) {
+// The two inner loops of the kernels, in two builds chosen at run time by GCC's function
+// multiversioning (an ifunc resolved once at load time, as core/piv/deform.cpp's target_clones):
+// the baseline x86-64 one works one quad (one SSE vector) at a time; the AVX2 one pairs two
+// quads in one 8-lane vector, half the arithmetic and loop instructions. Both do the same float
+// operations in the same order (a multiply, then an add: AVX2 has no fused multiply-add), so
+// they give the same bits.
+using Lanes4 = float __attribute__((vector_size(16)));
+using Lanes8 = float __attribute__((vector_size(32)));
+
+__attribute__((target("avx2"), always_inline)) inline Lanes8 load_pair(const float* lo, const float* hi) {
+  Lanes4 a, b;
+  __builtin_memcpy(&a, lo, sizeof a);
+  __builtin_memcpy(&b, hi, sizeof b);
+  return __builtin_shufflevector(a, b, 0, 1, 2, 3, 4, 5, 6, 7);
+}
+__attribute__((target("avx2"), always_inline)) inline Lanes8 load8(const float* p) {
+  Lanes8 v;
+  __builtin_memcpy(&v, p, sizeof v);
+  return v;
+}
+
+// row[first[k] + j] += a * w[4 k + j]: the projection's inner loop. The quads of a voxel column
+// overlap only at the sensor's right edge, where a segment's last quad is shifted left over the
+// one before it with weight 0 on the shared pixels.
+inline void add_quads_base(float* __restrict row, const int* __restrict first, const float* __restrict w,
+                           std::size_t n, float a) {
   for (std::size_t k = 0; k < n; ++k) {
     float* __restrict q = row + first[k];
     const float* __restrict wk = w + kQuad * k;
     for (int j = 0; j < kQuad; ++j) q[j] += a * wk[j];
   }
 }
+__attribute__((target("avx2"), always_inline)) inline void add_quads_avx2(float* row, const int* first,
+                                                                          const float* w, std::size_t n, float a) {
+  std::size_t k = 0;
+  for (; k + 2 <= n; k += 2) {
+    float* q0 = row + first[k];
+    float* q1 = row + first[k + 1];
+    const Lanes8 sum = load_pair(q0, q1) + a * load8(w + kQuad * k);
+    const Lanes4 lo = __builtin_shufflevector(sum, sum, 0, 1, 2, 3), hi = __builtin_shufflevector(sum, sum, 4, 5, 6, 7);
+    // The later quad first: where an edge quad overlaps the one before, its lanes there add 0 to
+    // stale values, and the earlier quad's sums must be the ones that stay (as one after the other).
+    __builtin_memcpy(q1, &hi, sizeof hi);
+    __builtin_memcpy(q0, &lo, sizeof lo);
+  }
+  if (k < n) {
+    float* q = row + first[k];
+    const float* wk = w + kQuad * k;
+    for (int j = 0; j < kQuad; ++j) q[j] += a * wk[j];
+  }
+}
 
 // Σ_k Σ_j w[4 k + j] row[first[k] + j]: the back-projection's inner loop, in two vector
 // accumulators (even and odd quads) so consecutive adds do not wait on each other; a fixed order.
-float dot_quads(const float* row, const int* first, const float* w, std::size_t n) {
+inline float dot_quads_base(const float* row, const int* first, const float* w, std::size_t n) {
   float even[kQuad] = {0.f, 0.f, 0.f, 0.f}, odd[kQuad] = {0.f, 0.f, 0.f, 0.f};
   std::size_t k = 0;
   for (; k + 2 <= n; k += 2) {
@@ -150,6 +191,70 @@ float dot_quads(const float* row, const int* first, const float* w, std::size_t 
   float lane[kQuad];
   for (int j = 0; j < kQuad; ++j) lane[j] = even[j] + odd[j];
   return (lane[0] + lane[1]) + (lane[2] + lane[3]);
+}
+// The same sums: the even quads in lanes 0-3, the odd ones in lanes 4-7.
+__attribute__((target("avx2"), always_inline)) inline float dot_quads_avx2(const float* row, const int* first,
+                                                                           const float* w, std::size_t n) {
+  Lanes8 acc = {0.f, 0.f, 0.f, 0.f, 0.f, 0.f, 0.f, 0.f};
+  std::size_t k = 0;
+  for (; k + 2 <= n; k += 2) acc += load8(w + kQuad * k) * load_pair(row + first[k], row + first[k + 1]);
+  Lanes4 even = __builtin_shufflevector(acc, acc, 0, 1, 2, 3);
+  const Lanes4 odd = __builtin_shufflevector(acc, acc, 4, 5, 6, 7);
+  if (k < n) {
+    Lanes4 p, wk;
+    __builtin_memcpy(&p, row + first[k], sizeof p);
+    __builtin_memcpy(&wk, w + kQuad * k, sizeof wk);
+    even += wk * p;
+  }
+  const Lanes4 lane = even + odd;
+  return (lane[0] + lane[1]) + (lane[2] + lane[3]);
+}
+
+// The dispatched entry points: one call per voxel column and band (not per row), so the row
+// loop runs inside the chosen build too.
+//
+// Projection stage 2: image row r += g[r] Ax for the rows in [lo, hi] the column reaches
+// (g[r] != 0), resetting g for the next column. `band` points at the band's first row.
+__attribute__((target("default"))) void add_column(float* band, std::size_t width, float* g, int lo, int hi,
+                                                   const int* first, const float* w, std::size_t n) {
+  for (int r = lo; r <= hi; ++r) {
+    if (g[r] == 0.f) continue;
+    add_quads_base(band + std::size_t(r) * width, first, w, n, g[r]);
+    g[r] = 0.f;
+  }
+}
+__attribute__((target("avx2"))) void add_column(float* band, std::size_t width, float* g, int lo, int hi,
+                                                const int* first, const float* w, std::size_t n) {
+  for (int r = lo; r <= hi; ++r) {
+    if (g[r] == 0.f) continue;
+    add_quads_avx2(band + std::size_t(r) * width, first, w, n, g[r]);
+    g[r] = 0.f;
+  }
+}
+
+// Back-projection stage 1: out[r] = Σ_col Ax r(row, col) for the rows in [lo, hi] stamped as
+// reached by the column.
+__attribute__((target("default"))) void dot_column(const float* band, std::size_t width, const std::size_t* reached,
+                                                   std::size_t stamp, int lo, int hi, const int* first, const float* w,
+                                                   std::size_t n, float* out) {
+  for (int r = lo; r <= hi; ++r) {
+    if (reached[r] == stamp) out[r] = dot_quads_base(band + std::size_t(r) * width, first, w, n);
+  }
+}
+__attribute__((target("avx2"))) void dot_column(const float* band, std::size_t width, const std::size_t* reached,
+                                                std::size_t stamp, int lo, int hi, const int* first, const float* w,
+                                                std::size_t n, float* out) {
+  for (int r = lo; r <= hi; ++r) {
+    if (reached[r] == stamp) out[r] = dot_quads_avx2(band + std::size_t(r) * width, first, w, n);
+  }
+}
+
+// One row against one voxel column's quads (the eq 13 normalisers).
+__attribute__((target("default"))) float dot_quads(const float* row, const int* first, const float* w, std::size_t n) {
+  return dot_quads_base(row, first, w, n);
+}
+__attribute__((target("avx2"))) float dot_quads(const float* row, const int* first, const float* w, std::size_t n) {
+  return dot_quads_avx2(row, first, w, n);
 }
 
 }  // namespace
@@ -480,9 +585,8 @@ ActiveSet::ActiveSet(const WeightingOperator& op, std::vector<std::uint32_t> vox
   // counted, then written, both in parallel over columns.
   const int height = op.image_height();
   bands_ = (height + kBandRows - 1) / kBandRows;
-  // Calls entry(p, first segment, count) for each voxel with segments in a band and band_end()
-  // after each band of the column, bands in order.
-  auto walk = [&](const Column& col, std::vector<std::size_t>& cursor, auto&& entry, auto&& band_end) {
+  // Calls entry(b, p, first segment, count) for each voxel with segments in band b, bands in order.
+  auto walk = [&](const Column& col, std::vector<std::size_t>& cursor, auto&& entry) {
     const SliceTables& t = op.slice(col.z);
     cursor.resize(col.end - col.begin);
     for (std::uint32_t p = col.begin; p < col.end; ++p) {
@@ -497,15 +601,13 @@ ActiveSet::ActiveSet(const WeightingOperator& op, std::vector<std::uint32_t> vox
         while (k < run.segment_end && t.y_segments[k].first + t.y_segments[k].length <= r0) ++k;
         std::size_t e = k;
         while (e < run.segment_end && t.y_segments[e].first < r1) ++e;
-        if (e > k) entry(p, k, e - k);
+        if (e > k) entry(b, p, k, e - k);
       }
-      band_end();
     }
   };
-  std::vector<std::size_t> entry_offset(columns_.size() + 1, 0), block_offset(columns_.size() + 1, 0);
+  std::vector<std::size_t> block_offset(columns_.size() + 1, 0);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, columns_.size(), 64),
                     [&](const tbb::blocked_range<std::size_t>& range) {
-    std::vector<std::size_t> cursor;  // per voxel of the column: its first segment not yet behind
     for (std::size_t c = range.begin(); c != range.end(); ++c) {
       Column& col = columns_[c];
       const SliceTables& t = op.slice(col.z);
@@ -516,28 +618,51 @@ ActiveSet::ActiveSet(const WeightingOperator& op, std::vector<std::uint32_t> vox
         col.last_band = std::max(col.last_band, run.last / kBandRows);
       }
       block_offset[c + 1] = std::size_t(col.last_band - col.first_band + 1);
-      walk(col, cursor, [&](std::uint32_t, std::size_t, std::size_t) { ++entry_offset[c + 1]; }, [] {});
     }
   });
   for (std::size_t c = 0; c < columns_.size(); ++c) {
-    entry_offset[c + 1] += entry_offset[c];
     block_offset[c + 1] += block_offset[c];
+    columns_[c].block = block_offset[c];
   }
-  entries_.resize(entry_offset.back());
-  block_start_.assign(block_offset.back() + 1, 0);
+  blocks_.assign(block_offset.back(), Block{});
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, columns_.size(), 64),
                     [&](const tbb::blocked_range<std::size_t>& range) {
-    std::vector<std::size_t> cursor;
+    std::vector<std::size_t> cursor;  // per voxel of the column: its first segment not yet behind
     for (std::size_t c = range.begin(); c != range.end(); ++c) {
-      Column& col = columns_[c];
-      col.block = block_offset[c];
-      std::size_t next = entry_offset[c], block = col.block;
-      walk(
-          col, cursor,
-          [&](std::uint32_t p, std::size_t k, std::size_t n) {
-            entries_[next++] = BandEntry{p, std::uint32_t(k), std::uint32_t(n)};
-          },
-          [&] { block_start_[++block] = next; });
+      const Column& col = columns_[c];
+      walk(col, cursor, [&](int b, std::uint32_t, std::size_t, std::size_t) {
+        ++blocks_[col.block + std::size_t(b - col.first_band)].end;  // a count for now
+      });
+    }
+  });
+  // The entries in the order the kernels read them: band by band, then strip by strip, depth by
+  // depth, x by x (for_each_column), so both kernels stream through them.
+  std::size_t next = 0;
+  for (int b = 0; b < bands_; ++b) {
+    for (int x0 = 0; x0 < int(nx); x0 += strip_x_) {
+      for (std::uint32_t z = 0; z < nz; ++z) {
+        for (int x = x0; x < std::min(int(nx), x0 + strip_x_); ++x) {
+          const std::uint32_t c = column_at_[std::size_t(x) * nz + z];
+          if (c == kNoColumn || b < columns_[c].first_band || b > columns_[c].last_band) continue;
+          Block& blk = blocks_[columns_[c].block + std::size_t(b - columns_[c].first_band)];
+          blk.begin = next;
+          next += blk.end;
+          blk.end = next;
+        }
+      }
+    }
+  }
+  entries_.resize(next);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, columns_.size(), 64),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+    std::vector<std::size_t> cursor, fill;
+    for (std::size_t c = range.begin(); c != range.end(); ++c) {
+      const Column& col = columns_[c];
+      fill.clear();
+      for (int b = col.first_band; b <= col.last_band; ++b) fill.push_back(blocks_[col.block + std::size_t(b - col.first_band)].begin);
+      walk(col, cursor, [&](int b, std::uint32_t p, std::size_t k, std::size_t n) {
+        entries_[fill[std::size_t(b - col.first_band)]++] = BandEntry{p, std::uint32_t(k), std::uint32_t(n)};
+      });
     }
   });
 }
@@ -556,19 +681,22 @@ void ActiveSet::for_each_column(int b, int x0, int x1, int nz, F&& f) const {
       if (c == kNoColumn) continue;
       const Column& col = columns_[c];
       if (b < col.first_band || b > col.last_band) continue;
-      const std::size_t block = col.block + std::size_t(b - col.first_band);
-      if (block_start_[block] < block_start_[block + 1]) f(col, block_start_[block], block_start_[block + 1]);
+      const Block& blk = blocks_[col.block + std::size_t(b - col.first_band)];
+      if (blk.begin < blk.end) f(col, blk.begin, blk.end);
     }
   }
 }
 
-void ActiveSet::project(const WeightingOperator& op, std::span<const float> values,
-                        std::span<float> image) const {
+void ActiveSet::project(const WeightingOperator& op, std::span<const float> values, std::span<float> image,
+                        Workspace* workspace, const BandDone& band_done) const {
   const std::size_t width = std::size_t(op.image_width());
   const int height = op.image_height();
   const int nx = op.grid().shape[0], nz = op.grid().shape[2];
+  Workspace local;
+  Workspace& ws = workspace ? *workspace : local;
   // E / n once per voxel, in column order.
-  std::vector<float> scaled(order_.size());
+  auto& scaled = ws.scaled;
+  scaled.resize(order_.size());
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, order_.size(), 1 << 14),
                     [&](const tbb::blocked_range<std::size_t>& r) {
     for (std::size_t p = r.begin(); p != r.end(); ++p) scaled[p] = values[order_[p]] / order_normaliser_[p];
@@ -598,17 +726,13 @@ void ActiveSet::project(const WeightingOperator& op, std::span<const float> valu
         }
         // Stage 2: image(row, ·) += G(row) Ax, once per row the column reaches.
         const std::size_t q0 = t.x_quad_start[std::size_t(col.x)], q1 = t.x_quad_start[std::size_t(col.x) + 1];
-        for (int r = lo; r <= hi; ++r) {
-          const float a = column_sum[std::size_t(r)];
-          if (a == 0.f) continue;
-          column_sum[std::size_t(r)] = 0.f;
-          add_quads(image.data() + std::size_t(r0 + r) * width, t.x_quad_first.data() + q0,
-                    t.x_quad_weights.data() + kQuad * q0, q1 - q0, a);
-        }
+        add_column(image.data() + std::size_t(r0) * width, width, column_sum.data(), lo, hi,
+                   t.x_quad_first.data() + q0, t.x_quad_weights.data() + kQuad * q0, q1 - q0);
       });
     }
     const float* white = op.white().pixels.data();
     for (std::size_t i = std::size_t(r0) * width; i < std::size_t(r1) * width; ++i) image[i] *= white[i];
+    if (band_done) band_done(b, std::size_t(r0) * width, std::size_t(r1) * width);
   });
 }
 
@@ -624,12 +748,30 @@ void ActiveSet::back_project(const WeightingOperator& op, std::span<const float>
 }
 
 void ActiveSet::back_project_whitened(const WeightingOperator& op, std::span<const float> image,
-                                      std::span<float> values) const {
+                                      std::span<float> values, Workspace* workspace) const {
+  Workspace local;
+  back_project_images<1>(op, {image.data()}, {values.data()}, workspace ? *workspace : local);
+}
+
+void ActiveSet::back_project_whitened(const WeightingOperator& op, std::span<const float> whitened_a,
+                                      std::span<float> values_a, std::span<const float> whitened_b,
+                                      std::span<float> values_b, Workspace* workspace) const {
+  Workspace local;
+  back_project_images<2>(op, {whitened_a.data(), whitened_b.data()}, {values_a.data(), values_b.data()},
+                         workspace ? *workspace : local);
+}
+
+template <std::size_t N>
+void ActiveSet::back_project_images(const WeightingOperator& op, const std::array<const float*, N>& images,
+                                    const std::array<float*, N>& values, Workspace& workspace) const {
   const std::size_t width = std::size_t(op.image_width());
   const int height = op.image_height();
   const int nx = op.grid().shape[0], nz = op.grid().shape[2];
-  std::fill(values.begin(), values.end(), 0.f);  // voxels that see no pixel
+  for (float* v : values) std::fill(v, v + voxels_.size(), 0.f);  // voxels that see no pixel
   const int strips = (nx + strip_x_ - 1) / strip_x_;
+  // Per image and voxel in column order; each strip zeroes and sums its own range.
+  auto& sums = workspace.sums;
+  sums.resize(N * order_.size());
   // Each strip owns its voxels (x-major: a contiguous range of order_), so their sums need no
   // atomics, and every voxel adds its bands in order whatever the thread count.
   tbb::parallel_for(0, strips, [&](int strip) {
@@ -645,8 +787,8 @@ void ActiveSet::back_project_whitened(const WeightingOperator& op, std::span<con
       last_band = std::max(last_band, col.last_band);
     }
     if (p1 <= p0) return;
-    std::vector<double> sum(p1 - p0, 0.0);
-    std::array<float, kBandRows> row_sum{};  // B(row) of one column over the band's rows
+    for (std::size_t i = 0; i < N; ++i) std::fill_n(sums.begin() + std::ptrdiff_t(i * order_.size() + p0), p1 - p0, 0.0);
+    std::array<std::array<float, kBandRows>, N> row_sum{};  // B(row) of one column over the band's rows
     // Rows reached by the column being summed carry its stamp (no clearing between columns).
     std::array<std::size_t, kBandRows> reached{};
     std::size_t stamp = 0;
@@ -666,25 +808,30 @@ void ActiveSet::back_project_whitened(const WeightingOperator& op, std::span<con
         }
         // Stage 1: B(row) = Σ_col Ax(col) r(row, col), once per reached row.
         const std::size_t q0 = t.x_quad_start[std::size_t(col.x)], q1 = t.x_quad_start[std::size_t(col.x) + 1];
-        for (int r = lo; r <= hi; ++r) {
-          if (reached[std::size_t(r)] != stamp) continue;
-          row_sum[std::size_t(r)] = dot_quads(image.data() + std::size_t(r0 + r) * width, t.x_quad_first.data() + q0,
-                                              t.x_quad_weights.data() + kQuad * q0, q1 - q0);
+        for (std::size_t i = 0; i < N; ++i) {
+          dot_column(images[i] + std::size_t(r0) * width, width, reached.data(), stamp, lo, hi,
+                     t.x_quad_first.data() + q0, t.x_quad_weights.data() + kQuad * q0, q1 - q0, row_sum[i].data());
         }
         // Stage 2: per voxel Σ_row Ay(row) B(row) over the band's rows.
         for (std::size_t k = k0; k < k1; ++k) {
           const BandEntry& entry = entries_[k];
-          double s = 0;
+          std::array<double, N> s{};
           for (const Segment& seg : std::span(t.y_segments.data() + entry.segment_begin, entry.segment_count)) {
             const int a = std::max(r0, seg.first), e = std::min(r1, seg.first + seg.length);
             const float* w = t.y_table.data() + seg.offset;
-            for (int r = a; r < e; ++r) s += double(w[r - seg.first]) * row_sum[std::size_t(r - r0)];
+            for (int r = a; r < e; ++r) {
+              for (std::size_t i = 0; i < N; ++i) s[i] += double(w[r - seg.first]) * row_sum[i][std::size_t(r - r0)];
+            }
           }
-          sum[entry.position - p0] += s;
+          for (std::size_t i = 0; i < N; ++i) sums[i * order_.size() + entry.position] += s[i];
         }
       });
     }
-    for (std::uint32_t p = p0; p < p1; ++p) values[order_[p]] = float(sum[p - p0] / order_normaliser_[p]);  // eq 13
+    for (std::size_t i = 0; i < N; ++i) {
+      for (std::uint32_t p = p0; p < p1; ++p) {
+        values[i][order_[p]] = float(sums[i * order_.size() + p] / order_normaliser_[p]);  // eq 13
+      }
+    }
   });
 }
 

@@ -3,8 +3,10 @@
 // sparse matrix built literally ray by ray as the reference for small cases.
 #pragma once
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <span>
 #include <vector>
 
@@ -12,6 +14,7 @@
 #include "core/base/image.hpp"
 #include "core/optics/camera_model.hpp"
 #include "core/optics/microlens_array.hpp"
+#include "core/recon/big_buffer.hpp"
 
 namespace plenopiv::recon {
 
@@ -173,8 +176,21 @@ class ActiveSet {
   const std::vector<std::uint32_t>& voxels() const { return voxels_; }
   std::size_t size() const { return voxels_.size(); }
 
+  // Buffers a pass needs (E / n in column order, the per-voxel sums), kept by whoever runs many
+  // passes (MART) so that a pass neither allocates nor page-faults them (~36 MB on the paper case).
+  struct Workspace {
+    BigBuffer<float> scaled;
+    BigBuffer<double> sums;
+  };
+  // Called once per band of sensor rows, pixels [first_pixel, end_pixel), as soon as a projection
+  // has finished them, on the thread that computed them: per-pixel work on the projection while
+  // the band is in cache. Bands are numbered 0..band_count() - 1 and cover the image in order.
+  using BandDone = std::function<void(int band, std::size_t first_pixel, std::size_t end_pixel)>;
+  int band_count() const { return bands_; }
+
   // image = W·values (values per active voxel, image of the sensor's size, overwritten).
-  void project(const WeightingOperator& op, std::span<const float> values, std::span<float> image) const;
+  void project(const WeightingOperator& op, std::span<const float> values, std::span<float> image,
+               Workspace* workspace = nullptr, const BandDone& band_done = {}) const;
   // values = Wᵀ·image for the active voxels. The image must be finite: the 4-pixel quads also
   // read a few pixels beside a voxel's segments, with weight 0.
   void back_project(const WeightingOperator& op, std::span<const float> image,
@@ -182,11 +198,16 @@ class ActiveSet {
   // The same for an image already multiplied pixel by pixel by the white correction (saves a
   // pass and a buffer inside MART's loop).
   void back_project_whitened(const WeightingOperator& op, std::span<const float> whitened_image,
-                             std::span<float> values) const;
+                             std::span<float> values, Workspace* workspace = nullptr) const;
+  // Two whitened images in one walk (MLOS needs the lit mask's and ln I's): each result has the
+  // same bits as its own back_project_whitened; the bookkeeping is paid once.
+  void back_project_whitened(const WeightingOperator& op, std::span<const float> whitened_a,
+                             std::span<float> values_a, std::span<const float> whitened_b,
+                             std::span<float> values_b, Workspace* workspace = nullptr) const;
 
  private:
   // One voxel column (z, x) of the set: its voxels are order_[begin, end), y increasing, and its
-  // rows reach bands [first_band, last_band], whose entries start at block_start_[block].
+  // rows reach bands [first_band, last_band], whose entries are blocks_[block + band - first_band].
   // Columns run x-major (x, then z): consecutive columns reach nearly the same sensor columns.
   struct Column {
     int z = 0, x = 0;
@@ -195,10 +216,10 @@ class ActiveSet {
     std::size_t block = 0;
   };
   // One voxel of a column in one band: its y segments there (into its slice's y_segments).
-  struct BandEntry {
-    std::uint32_t position = 0;  // in order_
-    std::uint32_t segment_begin = 0;
-    std::uint32_t segment_count = 0;
+  struct BandEntry {  // no initialisers: millions are allocated, then each written once
+    std::uint32_t position;  // in order_
+    std::uint32_t segment_begin;
+    std::uint32_t segment_count;
   };
 
   std::vector<std::uint32_t> voxels_;
@@ -217,14 +238,23 @@ class ActiveSet {
   // the y weights of one depth serve the whole strip and the pixels under the strip stay cached.
   int strip_x_ = 1;
   int bands_ = 0;
-  // Entries per column and band, column by column: [block_start_[i], block_start_[i + 1]).
-  std::vector<std::size_t> block_start_;
-  std::vector<BandEntry> entries_;
+  // The entries of one column in one band: entries_[begin, end). Blocks are indexed column by
+  // column (Column::block + band - first_band); the entries themselves lie band by band in the
+  // kernels' visiting order (strip, depth, x), so a pass reads them front to back.
+  struct Block {
+    std::size_t begin = 0, end = 0;
+  };
+  std::vector<Block> blocks_;
+  BigBuffer<BandEntry> entries_;
 
   // Calls f(column, its entries in band b [k0, k1)) for the columns of voxel x in [x0, x1) that
   // reach band b: depth by depth, x by x within a depth (the kernels' fixed order).
   template <typename F>
   void for_each_column(int b, int x0, int x1, int nz, F&& f) const;
+  // Back-projection of N whitened images at once (N = 1 or 2).
+  template <std::size_t N>
+  void back_project_images(const WeightingOperator& op, const std::array<const float*, N>& images,
+                           const std::array<float*, N>& values, Workspace& workspace) const;
 };
 
 // Compressed sparse rows: the explicit matrix (rows = sensor pixels, columns = voxels).

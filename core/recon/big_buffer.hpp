@@ -1,0 +1,63 @@
+// Large scratch arrays of the reconstruction (per-pixel images, band entries, per-voxel sums):
+// not zeroed when allocated, and on transparent huge pages where the kernel offers them.
+#pragma once
+
+#include <sys/mman.h>
+
+#include <cstddef>
+#include <cstdlib>
+#include <new>
+#include <utility>
+#include <vector>
+
+namespace plenopiv::recon {
+
+// An allocator for std::vector whose elements are default-initialised (a float is left as it is:
+// every user writes these arrays before reading them, so zeroing 64 MB first is wasted work done
+// on one thread) and whose large blocks are 2 MB aligned and marked MADV_HUGEPAGE: a 64 MB image
+// then takes 32 page faults instead of 16 384, and the kernels' scattered row accesses miss the
+// TLB less. Where huge pages are off, the advice is ignored and nothing else changes.
+template <typename T>
+struct BigBufferAllocator {
+  using value_type = T;
+  static constexpr std::size_t kHugePage = std::size_t(2) << 20;
+
+  BigBufferAllocator() = default;
+  template <typename U>
+  BigBufferAllocator(const BigBufferAllocator<U>&) noexcept {}
+
+  static bool huge(std::size_t n) { return n * sizeof(T) >= kHugePage; }
+  T* allocate(std::size_t n) {
+    if (!huge(n)) return static_cast<T*>(::operator new(n * sizeof(T)));
+    const std::size_t bytes = (n * sizeof(T) + kHugePage - 1) / kHugePage * kHugePage;
+    void* p = std::aligned_alloc(kHugePage, bytes);
+    if (!p) throw std::bad_alloc();
+    madvise(p, bytes, MADV_HUGEPAGE);
+    return static_cast<T*>(p);
+  }
+  void deallocate(T* p, std::size_t n) noexcept {
+    if (huge(n)) {
+      std::free(p);
+    } else {
+      ::operator delete(p);
+    }
+  }
+  // v(n) and resize(n) default-initialise; v(n, x) still fills with x.
+  template <typename U>
+  void construct(U* p) noexcept {
+    ::new (static_cast<void*>(p)) U;
+  }
+  template <typename U, typename... Args>
+  void construct(U* p, Args&&... args) {
+    ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
+  }
+  template <typename U>
+  bool operator==(const BigBufferAllocator<U>&) const noexcept {
+    return true;
+  }
+};
+
+template <typename T>
+using BigBuffer = std::vector<T, BigBufferAllocator<T>>;
+
+}  // namespace plenopiv::recon
