@@ -50,7 +50,8 @@ void run_calibrate(const CalibrateArgs& args) {
     if (white.empty()) white = ImageF(w.width, w.height, 0.0f);
     for (std::size_t k = 0; k < w.size(); ++k) white.pixels[k] += w.pixels[k] / float(args.white_images.size());
   }
-  cal.white_correction = calib::make_white_correction(cal, white, cal.image_stats.background);
+  double white_outside = 0;
+  cal.white_correction = calib::make_white_correction(cal, white, cal.image_stats.background, &white_outside);
   calib::write_calibration_h5(args.output, cal);
 
   int missing = 0, rejected = 0;
@@ -71,6 +72,9 @@ void run_calibrate(const CalibrateArgs& args) {
             << "  offset             " << cal.spot_lattice.offset_x_mm / pp << ", " << cal.spot_lattice.offset_y_mm / pp
             << " px from the sensor centre\n"
             << "  residuals          " << cal.rms_residual_px << " px rms, " << cal.max_residual_px << " px max\n"
+            << "  white outside      " << 100 * white_outside << " % of the white's light lies outside the "
+            << cal.microlens_image_diameter_px << " px microlens image disks (set to 0; a large share means the\n"
+            << "                     camera file's f-number or s_i does not match the lens images)\n"
             << "  time               " << seconds << " s\n";
 }
 

@@ -210,6 +210,7 @@ Calibration calibrate(const optics::CameraModel& camera, const ImageF& image, co
   cal.sensor = sensor;
   cal.image_distance_mm = s_i;
   cal.microlens_focal_length_mm = f_l;
+  cal.microlens_image_diameter_px = camera.microlens_image_diameter_px();
   const std::vector<Spot> spots = find_spots(image, spot_options, &cal.image_stats);
   cal.spots_found = int(spots.size());
 
@@ -470,12 +471,17 @@ std::vector<std::int32_t> pixel_lens_map(const optics::SensorSpec& sensor, const
   return map;
 }
 
-ImageF make_white_correction(const Calibration& cal, const ImageF& white, double dark_level) {
+ImageF make_white_correction(const Calibration& cal, const ImageF& white, double dark_level,
+                             double* light_outside_fraction) {
   const optics::SensorSpec& sensor = cal.sensor;
   if (white.width != sensor.width_px || white.height != sensor.height_px) {
     throw InputError("white image is " + std::to_string(white.width) + " x " + std::to_string(white.height) +
                      " pixels, the camera file's sensor is " + std::to_string(sensor.width_px) + " x " +
                      std::to_string(sensor.height_px));
+  }
+  if (!(cal.microlens_image_diameter_px > 0)) {
+    throw InputError("white correction: the calibration carries no microlens image diameter (calibrate() "
+                     "sets it from the camera)");
   }
   for (std::size_t k = 0; k < white.size(); ++k) {
     if (!std::isfinite(white.pixels[k]) || white.pixels[k] < 0) {
@@ -503,14 +509,31 @@ ImageF make_white_correction(const Calibration& cal, const ImageF& white, double
     level[id] = n > 0 ? sum / n : 0.0;
   });
   const LensFinder finder(sensor, cal.spot_lattice, cal.spots_px);
+  const double disk_r2 = 0.25 * cal.microlens_image_diameter_px * cal.microlens_image_diameter_px;
   ImageF out(white.width, white.height, 0.0f);
+  // Per row: (signal kept, signal outside the disks), summed in row order afterwards.
+  std::vector<std::array<double, 2>> signal(std::size_t(white.height), {0.0, 0.0});
   tbb::parallel_for(0, white.height, [&](int y) {
     for (int x = 0; x < white.width; ++x) {
       const int id = finder.lens_at(x, y);
       if (id < 0 || level[id] <= 0) continue;
-      out.at(x, y) = float(std::max(0.0, (white.at(x, y) - dark_level) / level[id]));
+      const double v = std::max(0.0, (white.at(x, y) - dark_level) / level[id]);
+      // The point of the pixel's square nearest the spot: inside the disk means the pixel overlaps it.
+      const auto& q = cal.spots_px[std::size_t(id)];
+      const double ex = std::clamp(q[0], x - 0.5, x + 0.5) - q[0], ey = std::clamp(q[1], y - 0.5, y + 0.5) - q[1];
+      const bool inside = ex * ex + ey * ey < disk_r2;
+      signal[std::size_t(y)][inside ? 0 : 1] += v;
+      if (inside) out.at(x, y) = float(v);
     }
   });
+  if (light_outside_fraction) {
+    double kept = 0, outside = 0;
+    for (const auto& s : signal) {
+      kept += s[0];
+      outside += s[1];
+    }
+    *light_outside_fraction = kept + outside > 0 ? outside / (kept + outside) : 0.0;
+  }
   return out;
 }
 

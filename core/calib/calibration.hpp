@@ -26,6 +26,8 @@ struct Calibration {
   optics::SensorSpec sensor;
   double image_distance_mm = 0;          // s_i used to convert spots to lens centres
   double microlens_focal_length_mm = 0;  // f_l
+  double microlens_image_diameter_px = 0;  // the main-lens aperture's image behind each lens (camera
+                                           // model; not stored in the calibration file)
   optics::Lattice spot_lattice;          // sensor-plane mm, origin at the sensor centre
   std::vector<std::array<double, 2>> spots_px;     // (column, row) of each lens's spot
   std::vector<LensStatus> status;
@@ -58,8 +60,15 @@ Calibration calibrate(const optics::CameraModel& camera, const ImageF& calibrati
 
 // Fig 15: `white` (an average of open-aperture white images, same size as the sensor) minus
 // `dark_level`, divided in each microlens image by that image's central level (the mean within a
-// quarter pitch of its spot), clamped below at 0. Pixels nearest no lens of the array are 0.
-ImageF make_white_correction(const Calibration& calibration, const ImageF& white, double dark_level);
+// quarter pitch of its spot), clamped below at 0. Pixels nearest no lens of the array are 0, and so
+// are pixels that do not overlap their lens's image disk (diameter `microlens_image_diameter_px`
+// around its spot): light there is diffraction and scatter that no ray through the aperture
+// reaches, and the reconstruction's separable weights rely on the white being 0 outside the disk
+// to apply the circular aperture (docs/recon.md, "White correction from a measured white image").
+// `light_outside_fraction`, if given, receives the share of the white's signal so removed.
+// InputError if the calibration carries no image diameter (one read from a file).
+ImageF make_white_correction(const Calibration& calibration, const ImageF& white, double dark_level,
+                             double* light_outside_fraction = nullptr);
 
 // For every pixel, the index (j * count_x + i) of the lens whose spot is nearest, or -1 where the
 // pixel lies beyond the array's edge (further than half a pitch outside the outermost spots).

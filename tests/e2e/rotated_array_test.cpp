@@ -238,9 +238,10 @@ namespace {
 // calibration image (core/calib), then process_pair with process.yaml's settings on a pair with a
 // known uniform displacement (process_cli_test's scene), against the same particles through the
 // unrotated camera. The white correction is the geometric one of the calibrated lenses: the
-// measured one (make_white_correction of a simulated white image) loses most of the depth
+// measured one (make_white_correction of a simulated white image) lost most of the depth
 // displacement even for an unrotated array on raw pixels (0.02-0.08 mm against 0.15 mm:
-// docs/benchmarks.md, "Rotated arrays"), which would hide what the resampling does.
+// docs/benchmarks.md, "Rotated arrays") until core/calib zeroed it outside the lens image disks
+// (tests/e2e/measured_white_test.cpp); the geometric one keeps this test about the resampling.
 TEST(RotatedArray, ProcessPairWithARotatedCalibration) {
   const auto t0 = std::chrono::steady_clock::now();
   const process::ProcessSettings s = process::process_settings_from(YamlMap(load_yaml_text(R"(
