@@ -219,7 +219,7 @@ class RunTest : public ::testing::Test {
     env_.default_camera_uri = "test://";
     env_.default_trigger_uri = "sim://";
     env_.state = &state_;
-    env_.processing = [](const RunConfig&) { return ProcessFn(tagged_field); };
+    env_.processing = [](const RunConfig&, const RunCalibration&) { return ProcessFn(tagged_field); };
     // Faster than a real laser, so runs stay short: frame B must end within the period.
     env_.timing.limits.laser_max_rate_hz = 200;
     env_.timing.limits.camera_max_pair_rate_hz = 200;
@@ -404,7 +404,7 @@ TEST_F(RunTest, ASubscriberThatNeverReadsDoesNotSlowAcquisition) {
   auto publisher = std::make_optional<Publisher>(context, "tcp://127.0.0.1:*", 2);
   env_.publisher = &*publisher;
   // Big fields (32^3 nodes, 4 arrays: 512 KiB a message) fill the socket buffers quickly.
-  env_.processing = [](const RunConfig&) {
+  env_.processing = [](const RunConfig&, const RunCalibration&) {
     return ProcessFn([](const drivers::FramePair& pair) {
       Grid3 g;
       g.shape = {32, 32, 32};
