@@ -152,7 +152,7 @@ TEST(Recorder, FolderHoldsFramesVectorsStatisticsAndAManifestListingThem) {
   fs::remove_all(data);
   RunConfig config = parse_run_config(
       "dt_s: 0.001\nvolume: {x_mm: [0, 1], y_mm: [0, 1], z_mm: [0, 1], voxel_mm: 0.5}\n", "run.yaml");
-  Recorder recorder({data, "r1", &config, "test://", "sim://", {}, "plenopiv test camera", "software: test", "nominal"});
+  Recorder recorder({data, "r1", &config, "test://", "sim://", {}, "plenopiv test camera", "software: test", nullptr});
   EXPECT_EQ(read_manifest(recorder.dir()).state(), "recording");
   for (std::uint64_t i = 0; i < 3; ++i) recorder.record_pair(make_pair(i));
   // Vectors for pairs 0 and 2: u = 1 m/s and 3 m/s → mean 2, RMS fluctuation 1.

@@ -202,7 +202,8 @@ TEST(Reprocess, ACalibratedRunKeepsItsCalibrationAndReprocessesWithIt) {
   // The rotated array goes through the resampling PairOperator, live and again.
   std::string out;
   expect_reprocessed_as_live(run, out);
-  EXPECT_NE(out.find("resampled onto an axis-aligned lattice"), std::string::npos) << out;
+  EXPECT_NE(out.find("resampled onto an axis-aligned lattice: calibrated array rotated 0.29 deg"), std::string::npos)
+      << out;  // 0.005 rad
 
   // The calibrated live fields see the simulator's displacement (0.25 mm along x). Measured per
   // pair over 8 runs: mean dx 0.168-0.211 mm, dy -0.005-0.000 mm, 9 of 9 vectors valid (these
