@@ -45,6 +45,8 @@ if(NOT HDF5_FOUND)
   plenopiv_missing(HDF5 libhdf5-dev)
 endif()
 message(STATUS "plenopiv: found HDF5 ${HDF5_VERSION}")
+# CRC-32 of the files a run folder copies (libhdf5-dev depends on zlib1g-dev)
+plenopiv_find_pkgconfig(ZLIB zlib zlib1g-dev)
 
 # Messaging
 plenopiv_find_pkgconfig(LIBZMQ libzmq libzmq3-dev)

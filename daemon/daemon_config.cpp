@@ -75,7 +75,7 @@ drivers::Schedule run_schedule(const RigTiming& timing, const drivers::TriggerIn
 DaemonConfig load_daemon_config(const std::filesystem::path& path) {
   const YamlMap map(load_yaml_file(path), path.string());
   map.reject_unknown({"control_endpoint", "publish_endpoint", "data_dir", "camera_file",
-                      "camera_uri", "trigger_uri", "log_level", "publish_high_water_mark", "timing"});
+                      "calibration_file", "camera_uri", "trigger_uri", "log_level", "publish_high_water_mark", "timing"});
   DaemonConfig config;
   const std::filesystem::path base = path.parent_path();
   auto resolve = [&](const std::string& p) {
@@ -86,6 +86,7 @@ DaemonConfig load_daemon_config(const std::filesystem::path& path) {
   config.publish_endpoint = map.string_or("publish_endpoint", config.publish_endpoint);
   if (map.has("data_dir")) config.data_dir = resolve(map.string("data_dir"));
   if (map.has("camera_file")) config.camera_file = resolve(map.string("camera_file"));
+  if (map.has("calibration_file")) config.calibration_file = resolve(map.string("calibration_file"));
   config.camera_uri = map.string_or("camera_uri", config.camera_uri);
   config.trigger_uri = map.string_or("trigger_uri", config.trigger_uri);
   config.log_level = map.choice_or("log_level", {"trace", "debug", "info", "warn", "error"},
@@ -109,6 +110,10 @@ void validate(const DaemonConfig& config, const std::string& source) {
     throw InputError(source + ": control_endpoint: '" + config.control_endpoint +
                      "' is reachable from other machines; control stays on 127.0.0.1 unless "
                      "CURVE keys are configured, which this version does not support");
+  }
+  if (!config.calibration_file.empty() && config.camera_file.empty()) {
+    throw InputError(source + ": calibration_file: '" + config.calibration_file.string() +
+                     "' needs camera_file, the camera it was made for");
   }
   if (!is_endpoint(config.publish_endpoint)) {
     throw InputError(source + ": publish_endpoint: '" + config.publish_endpoint +

@@ -27,6 +27,9 @@ struct DaemonConfig {
   std::string publish_endpoint = "tcp://*:5556";
   std::filesystem::path data_dir = "/var/lib/plenopiv";
   std::filesystem::path camera_file;  // empty: the camera driver reports its own
+  // The rig's calibration file (HDF5 from `plenopiv calibrate`, made for camera_file); empty: the
+  // nominal lattice and geometric white image. Checked at start and at every run start.
+  std::filesystem::path calibration_file;
   std::string camera_uri = "sim://?seed=1";
   std::string trigger_uri = "sim://";
   std::string log_level = "info";

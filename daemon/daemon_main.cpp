@@ -86,7 +86,7 @@ int daemon_main(int argc, char** argv, const DaemonExtensions& extensions) {
   CLI::App app{"plenopivd: single-camera plenoptic 3D/3C PIV daemon"};
   app.set_version_flag("--version", std::string(PLENOPIV_VERSION));
   std::filesystem::path config_path;
-  std::string control, publish, data_dir, log_level, camera_uri, camera_file;
+  std::string control, publish, data_dir, log_level, camera_uri, camera_file, calibration_file;
   app.add_option("-c,--config", config_path, "daemon config (plenopivd.yaml)")->check(CLI::ExistingFile);
   app.add_option("--control", control, "control endpoint (overrides the config)");
   app.add_option("--publish", publish, "publishing endpoint (overrides the config)");
@@ -95,6 +95,9 @@ int daemon_main(int argc, char** argv, const DaemonExtensions& extensions) {
   app.add_option("--camera-file", camera_file,
                  "camera description (YAML) the processing and sim:// use (overrides the config)")
       ->check(CLI::ExistingFile);
+  app.add_option("--calibration-file", calibration_file,
+                 "the rig's calibration file (HDF5, `plenopiv calibrate`) the processing uses (overrides the "
+                 "config)");
   app.add_option("--log-level", log_level, "trace, debug, info, warn, error");
   CLI11_PARSE(app, argc, argv);
 
@@ -106,6 +109,7 @@ int daemon_main(int argc, char** argv, const DaemonExtensions& extensions) {
     if (!data_dir.empty()) config.data_dir = data_dir;
     if (!camera_uri.empty()) config.camera_uri = camera_uri;
     if (!camera_file.empty()) config.camera_file = camera_file;
+    if (!calibration_file.empty()) config.calibration_file = calibration_file;
     if (!log_level.empty()) config.log_level = log_level;
     validate(config, config_path.empty() ? "command line" : config_path.string());
     setup_logging("plenopivd", config.log_level);
@@ -119,8 +123,25 @@ int daemon_main(int argc, char** argv, const DaemonExtensions& extensions) {
       spdlog::info("camera {}:\n{}", config.camera_file.string(), camera.summary());
       if (!processing_factory) {
         processing_factory = plenoptic_processing(camera);
-        processing = "MART + multi-pass 3D correlation, nominal lattice of " +
-                     config.camera_file.filename().string();
+        processing = "MART + multi-pass 3D correlation, " +
+                     (config.calibration_file.empty()
+                          ? "nominal lattice of " + config.camera_file.filename().string()
+                          : "calibration " + config.calibration_file.string());
+      }
+      // Checked now and again at each run start (it may be replaced meanwhile). A bad file does
+      // not stop the daemon: it still serves status and takes calibration images for a new one,
+      // and refuses runs, naming the file, until the file is fixed.
+      if (config.calibration_file.empty()) {
+        spdlog::info("calibration: none configured (calibration_file): runs use the nominal lattice of {} and "
+                     "the geometric white image",
+                     config.camera_file.string());
+      } else {
+        try {
+          spdlog::info("calibration: {}", load_run_calibration(config.calibration_file, camera).summary());
+        } catch (const InputError& e) {
+          spdlog::error("{}; runs are refused until it is fixed", e.what());
+          processing += " (unusable at start: " + std::string(e.what()) + ")";
+        }
       }
     }
     if (!processing_factory) processing = "none: no camera_file configured (raw frames are recorded)";
@@ -153,6 +174,7 @@ int daemon_main(int argc, char** argv, const DaemonExtensions& extensions) {
     environment.default_camera_uri = config.camera_uri;
     environment.default_trigger_uri = config.trigger_uri;
     environment.camera_file = config.camera_file;
+    environment.calibration_file = config.calibration_file;
     environment.timing = config.timing;
     environment.state = &state;
     environment.publisher = &publisher;

@@ -21,18 +21,25 @@ ImageF to_float(const ImageU16& image) {
 }  // namespace
 
 ProcessFactory plenoptic_processing(const optics::CameraModel& camera) {
-  return [camera](const RunConfig& config) -> ProcessFn {
+  return [camera](const RunConfig& config, const RunCalibration& calibration) -> ProcessFn {
     // The run's settings go through the text the run folder keeps (process.yaml), so the live
     // stage and `plenopiv process --run` read exactly the same settings the same way.
     const process::ProcessSettings settings =
         process::process_settings_from(YamlMap(load_yaml_text(config.process_yaml(), "run config"), "run config"));
     // Built once per run, shared read-only by the concurrent pairs. PairOperator resamples the
-    // frames onto an axis-aligned lattice when the array is not separable (never for the nominal
-    // lattice used here; said in the log when it does).
-    const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera));
-    auto op = std::make_shared<const process::PairOperator>(camera, lenses, recon::geometric_white_image(camera, lenses),
-                                                            settings);
-    if (!op->note().empty()) spdlog::info("run processing: {}", op->note());
+    // frames onto an axis-aligned lattice when the array is not separable (a calibrated array is
+    // always rotated a little; never the nominal lattice): said in the log when it does.
+    std::shared_ptr<const process::PairOperator> op;
+    if (calibration.loaded) {
+      op = std::make_shared<const process::PairOperator>(camera, calibration.loaded->lenses,
+                                                         calibration.loaded->white_correction, settings);
+    } else {
+      const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera));
+      op = std::make_shared<const process::PairOperator>(camera, lenses, recon::geometric_white_image(camera, lenses),
+                                                         settings);
+    }
+    spdlog::info("run processing: calibration {}; {}", calibration.summary(),
+                 op->note().empty() ? "frames reconstructed on raw pixels" : op->note());
     const bool keep_volumes = config.publish_volumes;
     return [op, settings, keep_volumes](const drivers::FramePair& pair) {
       process::ProcessSettings s = settings;

@@ -9,8 +9,10 @@ namespace plenopiv::daemon {
 // For each run: the settings are core/process's, read from RunConfig::process_yaml() (the run's
 // volume, `reconstruction`: MART iterations, mu, start: mlos|ones, noise_threshold,
 // dark_weight_cutoff, convergence; `correlation`: core/piv's passes, median, signal_threshold);
-// the weighting operator for the run's volume (nominal microlens lattice, geometric white image)
-// is built once and shared read-only by the concurrent calls to process::process_pair. dt is the
+// the pair operator for the run's volume (process::PairOperator: the run's calibration's lens
+// centres and white correction, or the nominal lattice and geometric white image without one;
+// its note, e.g. resampling a rotated array, goes to the log) is built once and shared read-only
+// by the concurrent calls to process::process_pair. dt is the
 // laser pulse separation measured on the Q-switch sync input when the pair carries it, else the
 // run's dt_s. Bad keys are InputErrors naming them, at run start.
 ProcessFactory plenoptic_processing(const optics::CameraModel& camera);

@@ -10,6 +10,7 @@
 
 #include "core/base/errors.hpp"
 #include "core/io/atomic_file.hpp"
+#include "core/io/checksum.hpp"
 #include "core/io/hdf5_files.hpp"
 #include "core/io/tiff.hpp"
 
@@ -77,7 +78,17 @@ Recorder::Recorder(const Setup& setup) : dir_(setup.data_dir / ("run-" + setup.r
     write_text(dir_ / "process.yaml", setup.config->process_yaml());
     manifest_.set_process_file("process.yaml");
   }
-  manifest_.set_calibration(setup.calibration);
+  if (setup.calibration && !setup.calibration->nominal()) {
+    const RunCalibration& c = *setup.calibration;
+    write_text(dir_ / "calibration.h5", c.bytes);
+    manifest_.set_calibration("file");
+    manifest_.set_calibration_file("calibration.h5");
+    manifest_.set_calibration_source(c.source.string());
+    manifest_.set_calibration_bytes(c.bytes.size());
+    manifest_.set_calibration_crc32(io::crc32_hex(c.crc32));
+  } else {
+    manifest_.set_calibration("nominal");
+  }
   if (!setup.camera_file.empty()) {
     io::write_atomically(dir_ / "camera.yaml",
                          [&](const fs::path& tmp) { fs::copy_file(setup.camera_file, tmp); });

@@ -6,6 +6,7 @@
 #include <string>
 
 #include "core/base/grid.hpp"
+#include "daemon/run_calibration.hpp"
 #include "daemon/run_config.hpp"
 #include "daemon/statistics.hpp"
 #include "drivers/camera/camera.hpp"
@@ -16,6 +17,7 @@ namespace plenopiv::daemon {
 // run-<id>/ under the data directory:
 //   run.yaml                 the run config as sent
 //   camera.yaml              the daemon's camera file, if it has one
+//   calibration.h5           the calibration file the run processed with, byte for byte, if any
 //   process.yaml             the processing settings resolved from run.yaml (core/process schema)
 //   frames/pair-<n>-A.tif    raw frames, 16-bit TIFF, every pair the camera delivered
 //   frames/pair-<n>-B.tif
@@ -36,7 +38,10 @@ class Recorder {
     std::filesystem::path camera_file;  // empty: none
     std::string camera_model;
     std::string camera_triggering;  // drivers::CameraWiring::description
-    std::string calibration;        // what the processing uses for lens centres and white: "nominal"
+    // What the processing uses for lens centres and white: null or nominal, the camera's nominal
+    // lattice; else its bytes are written to calibration.h5 and the manifest names it with the
+    // source path, size and CRC-32.
+    const RunCalibration* calibration = nullptr;
   };
   // Creates the folder (InputError if it exists or cannot be made) and the first manifest.
   explicit Recorder(const Setup& setup);

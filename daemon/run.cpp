@@ -6,6 +6,7 @@
 #include <ctime>
 
 #include "core/base/errors.hpp"
+#include "core/optics/camera_file.hpp"
 #include "drivers/camera/camera_registry.hpp"
 #include "drivers/common/driver_errors.hpp"
 #include "drivers/trigger/camera_wiring.hpp"
@@ -31,12 +32,23 @@ Run::Run(RunConfig config, std::string run_id, RunEnvironment env)
   camera_trigger_ = wiring.source;
   camera_->arm(drivers::DoubleExposureSettings{wiring.source, 0.0});
   const drivers::CameraInfo info = camera_->info();
+  // Read once, checked against the camera file, and then the same bytes go to the processing and
+  // into the run folder: a calibration file replaced later changes neither this run nor its copy.
+  RunCalibration calibration;
+  if (!env_.calibration_file.empty()) {
+    if (env_.camera_file.empty()) {
+      throw InputError("calibration_file: " + env_.calibration_file.string() +
+                       ": needs camera_file (the camera it was made for)");
+    }
+    calibration = load_run_calibration(env_.calibration_file, optics::load_camera_file(env_.camera_file));
+  }
   Recorder::Setup setup{env_.data_dir, run_id_, &config_, camera_uri, trigger_uri, env_.camera_file,
                         info.vendor + " " + info.model + " " + info.serial, wiring.description,
-                        env_.calibration};
-  // Bad processing settings are refused before the run folder exists.
-  if (env_.processing) process_ = env_.processing(config_);
+                        &calibration};
+  // Bad processing settings and a bad calibration are refused before the run folder exists.
+  if (env_.processing) process_ = env_.processing(config_, calibration);
   recorder_ = std::make_unique<Recorder>(setup);
+  spdlog::info("run {}: calibration {}", run_id_, calibration.summary());
   spdlog::info("run {}: {} pairs at {} Hz, dt {} s, from {}, trigger {}, folder {}", run_id_,
                config_.pair_count ? std::to_string(config_.pair_count) : "unlimited",
                config_.rate_hz, config_.dt_s, camera_uri, trigger_uri, recorder_->dir().string());

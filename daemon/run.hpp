@@ -12,6 +12,7 @@
 #include "daemon/pipeline.hpp"
 #include "daemon/publisher.hpp"
 #include "daemon/recorder.hpp"
+#include "daemon/run_calibration.hpp"
 #include "daemon/run_config.hpp"
 #include "daemon/run_state.hpp"
 #include "drivers/camera/camera.hpp"
@@ -21,17 +22,18 @@
 namespace plenopiv::daemon {
 
 // Makes the processing function for a run (it may read the run's reconstruction and correlation
-// sections and set up per-run tables). Empty: this daemon has no processing stage, and runs
-// record raw frames only.
-using ProcessFactory = std::function<ProcessFn(const RunConfig&)>;
+// sections and set up per-run tables) with the run's calibration (the one the run folder keeps).
+// Empty: this daemon has no processing stage, and runs record raw frames only.
+using ProcessFactory = std::function<ProcessFn(const RunConfig&, const RunCalibration&)>;
 
 struct RunEnvironment {
   std::filesystem::path data_dir;
   std::string default_camera_uri, default_trigger_uri;
   std::filesystem::path camera_file;  // copied into the run folder; empty: none
-  // How the processing finds lens centres and white correction, recorded for reprocessing:
-  // "nominal" (the camera's nominal lattice, geometric white image: plenoptic_processing).
-  std::string calibration = "nominal";
+  // The rig's calibration file (lens centres, white correction), read and checked against
+  // camera_file at each run start (load_run_calibration), given to the processing and copied
+  // into the run folder. Empty: nominal lattice and geometric white image.
+  std::filesystem::path calibration_file;
   // What the laser and camera need and allow; the run's rate_hz and dt_s must fit (run_schedule).
   RigTiming timing;
   RunStateMachine* state = nullptr;
@@ -45,6 +47,7 @@ struct RunEnvironment {
 // The state machine must already be Armed for `run_id` (RunStateMachine::start). The constructor
 // opens the camera and the trigger (the run's URIs, else the daemon's), wires the trigger's camera
 // line to the camera (drivers/trigger/camera_wiring.hpp), loads the schedule for rate_hz and dt_s
+// reads the calibration file (InputError naming it when missing, corrupt or made for another camera)
 // and creates the run folder (InputError on bad URIs, timing or folders); then the run acquires
 // on its own thread: the trigger fires the laser and camera lines once per pair, and each pair
 // gets the laser pulses measured for its shot (ShotJoiner). It ends by itself after the pair

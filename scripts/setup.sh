@@ -11,7 +11,7 @@ packages=(
   libzmq3-dev cppzmq-dev libprotobuf-dev protobuf-compiler libspdlog-dev libtbb-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   # numerics and files
-  libfftw3-dev libhdf5-dev libyaml-cpp-dev libcli11-dev libsystemd-dev libtiff-dev
+  libfftw3-dev libhdf5-dev libyaml-cpp-dev libcli11-dev libsystemd-dev libtiff-dev zlib1g-dev
   # Python subscriber, plots and file checks (Debian's /usr/bin/python3)
   python3 python3-numpy python3-zmq python3-protobuf python3-h5py python3-matplotlib
   # systemd unit checks

@@ -22,6 +22,7 @@
 #include "core/calib/calibration.hpp"
 #include "core/calib/calibration_file.hpp"
 #include "core/io/atomic_file.hpp"
+#include "core/io/checksum.hpp"
 #include "core/io/hdf5_files.hpp"
 #include "core/io/tiff.hpp"
 #include "core/io/vtk_files.hpp"
@@ -232,7 +233,8 @@ std::filesystem::path run_file(const std::filesystem::path& run, const std::stri
 }
 
 // Every recorded pair again, from the run folder alone: process.yaml (the live settings),
-// camera.yaml, the calibration the manifest names, frames/, and each pair's measured dt as the
+// camera.yaml, the calibration the manifest names (nominal, or the run's calibration.h5, whose
+// size and CRC-32 must match the manifest's), frames/, and each pair's measured dt as the
 // live path used it (the run's dt_s when none was measured).
 void run_reprocess(const ProcessOptions& o) {
   for (const auto* other : {&o.camera, &o.frame_a, &o.frame_b, &o.config, &o.calibration, &o.calibration_image,
@@ -258,9 +260,20 @@ void run_reprocess(const ProcessOptions& o) {
   const process::ProcessSettings settings = process::load_process_settings(run_file(run, "process_file", m.process_file()));
   const std::filesystem::path camera_path = run_file(run, "camera_file", m.camera_file());
   const optics::CameraModel camera = optics::load_camera_file(camera_path);
-  if (m.calibration() != "nominal")
+  std::optional<std::filesystem::path> calibration_copy;
+  if (m.calibration() == "file") {
+    // The run's own copy, checked against what the daemon recorded when it copied it.
+    calibration_copy = run_file(run, "calibration_file", m.calibration_file());
+    const std::string bytes = io::read_file_bytes(*calibration_copy);
+    const std::string crc = io::crc32_hex(io::crc32_of(bytes));
+    if (bytes.size() != m.calibration_bytes() || crc != m.calibration_crc32())
+      throw InputError(calibration_copy->string() + ": " + std::to_string(bytes.size()) + " bytes, crc32 " + crc +
+                       "; the manifest recorded " + std::to_string(m.calibration_bytes()) + " bytes, crc32 " +
+                       m.calibration_crc32() + " (the copy was changed or damaged)");
+  } else if (m.calibration() != "nominal") {
     throw InputError(manifest_path.string() + ": calibration: '" + m.calibration() +
-                     "' is not one this version can reprocess with (nominal)");
+                     "' is not one this version can reprocess with (nominal, file)");
+  }
   if (m.pairs_size() == 0) throw InputError(manifest_path.string() + ": pairs: the run recorded no pair");
   for (const msg::ManifestPair& p : m.pairs()) {
     run_file(run, "pairs[" + std::to_string(p.pair_index()) + "].frame_a", p.frame_a());
@@ -269,9 +282,13 @@ void run_reprocess(const ProcessOptions& o) {
   const std::filesystem::path out_dir = o.output.empty() ? run / "reprocessed" : std::filesystem::path(o.output);
   std::filesystem::create_directories(out_dir);
 
-  ProcessOptions nominal;
-  nominal.nominal = true;
-  const calib::LoadedCalibration cal = calibration_for(nominal, camera);
+  ProcessOptions source;
+  if (calibration_copy) {
+    source.calibration = calibration_copy->string();
+  } else {
+    source.nominal = true;
+  }
+  const calib::LoadedCalibration cal = calibration_for(source, camera);
   const auto& g = settings.grid;
   std::fprintf(stderr, "%s: %d pairs; volume %d x %d x %d voxels (+%d guard slices at each depth end); weights ...\n",
                run.string().c_str(), m.pairs_size(), g.shape[0], g.shape[1], g.shape[2], settings.guard_slices());

@@ -33,6 +33,9 @@ struct SceneSettings {
   // The pulse separation the flow's displacements belong to. When a simulated trigger reports an
   // exposure's two laser pulses, the scene moves by the flow scaled to the time between them.
   double flow_dt_s = 1e-4;
+  // The true lens array turned from the nominal lattice (as `plenopiv simulate --array-rotation-rad`):
+  // frames a calibration must correct.
+  double array_rotation_rad = 0;
 };
 
 std::uint64_t now_ns() {
@@ -73,7 +76,7 @@ class SimCamera : public CameraBase, public TriggerInput {
             std::unique_ptr<sim::Flow> flow)
       : CameraBase(make_info(uri, camera)),
         camera_(std::move(camera)),
-        array_(optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera_))),
+        array_(true_array(camera_, scene.array_rotation_rad)),
         scene_(scene),
         flow_(std::move(flow)),
         box_(sim::field_of_view_box(camera_, -scene.depth_mm, scene.depth_mm)),
@@ -101,6 +104,12 @@ class SimCamera : public CameraBase, public TriggerInput {
   }
 
  private:
+  static optics::MicrolensArray true_array(const optics::CameraModel& camera, double rotation_rad) {
+    optics::Lattice lattice = optics::Lattice::nominal(camera);
+    lattice.rotation_rad = rotation_rad;
+    return optics::MicrolensArray::from_lattice(lattice);
+  }
+
   static CameraInfo make_info(const DeviceUri& uri, const optics::CameraModel& camera) {
     CameraInfo info;
     info.uri = uri.text();
@@ -247,7 +256,8 @@ std::unique_ptr<Camera> open_sim_camera(const DeviceUri& uri,
                                         const std::filesystem::path& default_camera_file) {
   uri.reject_unknown({"camera", "seed", "ppm", "depth_mm", "flow", "dx_mm", "dy_mm", "dz_mm",
                       "voxel_mm", "angle_deg", "shear_per_mm", "rays", "noise", "drop_every",
-                      "incomplete_every", "disconnect_after", "readout_ms", "flow_dt_us"});
+                      "incomplete_every", "disconnect_after", "readout_ms", "flow_dt_us",
+                      "array_rotation_rad"});
   if (!uri.target().empty()) uri.fail("the simulated camera takes no device name, only ?parameters");
   const std::string file = uri.string_or("camera", default_camera_file.string());
   if (file.empty()) uri.fail("camera: no camera file given and no default configured");
@@ -278,6 +288,8 @@ std::unique_ptr<Camera> open_sim_camera(const DeviceUri& uri,
   const double flow_dt_us = uri.number_or("flow_dt_us", scene.flow_dt_s * 1e6);
   if (!(flow_dt_us > 0) || flow_dt_us > 1e7) uri.fail("flow_dt_us: must be in (0, 1e7] us");
   scene.flow_dt_s = flow_dt_us * 1e-6;
+  scene.array_rotation_rad = uri.number_or("array_rotation_rad", 0.0);
+  if (!(std::abs(scene.array_rotation_rad) <= 0.1)) uri.fail("array_rotation_rad: must be in [-0.1, 0.1] rad");
   std::unique_ptr<sim::Flow> flow = flow_from_uri(uri, camera);
   return std::make_unique<SimCamera>(uri, std::move(camera), scene, std::move(flow));
 }

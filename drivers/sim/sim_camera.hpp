@@ -27,6 +27,8 @@ namespace plenopiv::drivers {
 //   disconnect_after=<n> fault: the camera is lost after n triggers (status Lost)
 //   readout_ms=<ms>     a pair is rendered this long after its trigger, when frame B would have
 //                       been read out, not while the trigger times the laser pulses (default 10)
+//   array_rotation_rad=<r> the true lens array turned by r (counter-clockwise, |r| <= 0.1) from the
+//                       camera file's nominal lattice: frames that need a calibration (default 0)
 // Armed for TriggerSource::External, the camera is fired by rising edges on its trigger_input()
 // (a simulated trigger's camera line, drivers/trigger/camera_wiring.hpp); for Software, by
 // software_trigger().

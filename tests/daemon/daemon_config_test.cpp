@@ -32,6 +32,7 @@ TEST(DaemonConfig, ShippedDefaultLoads) {
   EXPECT_EQ(c.control_endpoint, "tcp://127.0.0.1:5555");
   EXPECT_EQ(c.publish_endpoint, "tcp://*:5556");
   EXPECT_TRUE(std::filesystem::exists(c.camera_file)) << c.camera_file;
+  EXPECT_TRUE(c.calibration_file.empty());  // nominal until the rig is calibrated
 }
 
 TEST(DaemonConfig, RelativePathsAreTakenFromTheConfigFolder) {
@@ -39,6 +40,13 @@ TEST(DaemonConfig, RelativePathsAreTakenFromTheConfigFolder) {
   const DaemonConfig c = load_daemon_config(path);
   EXPECT_EQ(c.data_dir, path.parent_path() / "runs");
   EXPECT_EQ(c.camera_file, path.parent_path() / "cams/c.yaml");
+}
+
+TEST(DaemonConfig, CalibrationFileIsTakenFromTheConfigFolderAndNeedsTheCamera) {
+  const auto path = write_temp("cal.yaml", "camera_file: c.yaml\ncalibration_file: rig/calibration.h5\n");
+  EXPECT_EQ(load_daemon_config(path).calibration_file, path.parent_path() / "rig/calibration.h5");
+  const std::string err = error_of("calibration_file: /etc/plenopiv/rig.h5\n");
+  EXPECT_NE(err.find("calibration_file: '/etc/plenopiv/rig.h5' needs camera_file"), std::string::npos) << err;
 }
 
 TEST(DaemonConfig, RemoteControlEndpointIsRefused) {

@@ -152,7 +152,7 @@ TEST(Recorder, FolderHoldsFramesVectorsStatisticsAndAManifestListingThem) {
   fs::remove_all(data);
   RunConfig config = parse_run_config(
       "dt_s: 0.001\nvolume: {x_mm: [0, 1], y_mm: [0, 1], z_mm: [0, 1], voxel_mm: 0.5}\n", "run.yaml");
-  Recorder recorder({data, "r1", &config, "test://", "sim://", {}, "plenopiv test camera", "software: test", "nominal"});
+  Recorder recorder({data, "r1", &config, "test://", "sim://", {}, "plenopiv test camera", "software: test", nullptr});
   EXPECT_EQ(read_manifest(recorder.dir()).state(), "recording");
   for (std::uint64_t i = 0; i < 3; ++i) recorder.record_pair(make_pair(i));
   // Vectors for pairs 0 and 2: u = 1 m/s and 3 m/s → mean 2, RMS fluctuation 1.
@@ -219,7 +219,7 @@ class RunTest : public ::testing::Test {
     env_.default_camera_uri = "test://";
     env_.default_trigger_uri = "sim://";
     env_.state = &state_;
-    env_.processing = [](const RunConfig&) { return ProcessFn(tagged_field); };
+    env_.processing = [](const RunConfig&, const RunCalibration&) { return ProcessFn(tagged_field); };
     // Faster than a real laser, so runs stay short: frame B must end within the period.
     env_.timing.limits.laser_max_rate_hz = 200;
     env_.timing.limits.camera_max_pair_rate_hz = 200;
@@ -404,7 +404,7 @@ TEST_F(RunTest, ASubscriberThatNeverReadsDoesNotSlowAcquisition) {
   auto publisher = std::make_optional<Publisher>(context, "tcp://127.0.0.1:*", 2);
   env_.publisher = &*publisher;
   // Big fields (32^3 nodes, 4 arrays: 512 KiB a message) fill the socket buffers quickly.
-  env_.processing = [](const RunConfig&) {
+  env_.processing = [](const RunConfig&, const RunCalibration&) {
     return ProcessFn([](const drivers::FramePair& pair) {
       Grid3 g;
       g.shape = {32, 32, 32};

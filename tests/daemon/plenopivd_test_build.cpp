@@ -25,7 +25,7 @@ plenopiv::daemon::ProcessedPair tagged_field(const plenopiv::drivers::FramePair&
 int main(int argc, char** argv) {
   plenopiv::testing_support::register_test_camera(plenopiv::drivers::CameraRegistry::instance());
   plenopiv::daemon::DaemonExtensions extensions;
-  extensions.processing = [](const plenopiv::daemon::RunConfig&) {
+  extensions.processing = [](const plenopiv::daemon::RunConfig&, const plenopiv::daemon::RunCalibration&) {
     return plenopiv::daemon::ProcessFn(tagged_field);
   };
   extensions.processing_summary = "test stage (u = pair index)";

@@ -38,7 +38,7 @@ TEST(Processing, UniformDisplacementOfARayTracedPairComesBack) {
 
   const RunConfig config = parse_run_config(kConfig, "run.yaml");
   const auto t0 = std::chrono::steady_clock::now();
-  const ProcessFn process = plenoptic_processing(camera)(config);
+  const ProcessFn process = plenoptic_processing(camera)(config, RunCalibration{});
   const ProcessedPair out = process(pair);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 
@@ -77,13 +77,13 @@ TEST(Processing, BadSettingsAndWrongImagesAreNamed) {
       "volume: {x_mm: [-1, 1], y_mm: [-1, 1], z_mm: [-1, 1], voxel_mm: 0.125}\n"
       "reconstruction: {iteratons: 3}\n";
   try {
-    factory(parse_run_config(bad, "run.yaml"));
+    factory(parse_run_config(bad, "run.yaml"), RunCalibration{});
     FAIL() << "a misspelt reconstruction key was accepted";
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find("reconstruction.iteratons: unknown key"), std::string::npos)
         << e.what();
   }
-  const ProcessFn process = factory(parse_run_config(kConfig, "run.yaml"));
+  const ProcessFn process = factory(parse_run_config(kConfig, "run.yaml"), RunCalibration{});
   drivers::FramePair small;
   small.a.image = ImageU16(64, 48);
   small.b.image = ImageU16(64, 48);

@@ -1,0 +1,18 @@
+// File contents and their CRC-32 (zlib): how a run folder says which bytes of a file it copied.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <string_view>
+
+namespace plenopiv::io {
+
+// The whole file as bytes; InputError naming the file when it is missing or cannot be read.
+std::string read_file_bytes(const std::filesystem::path& path);
+// CRC-32 (zlib's, as `crc32` in Python's zlib and binascii) of `bytes`.
+std::uint32_t crc32_of(std::string_view bytes);
+// "%08x" of a CRC-32, as manifests write it.
+std::string crc32_hex(std::uint32_t crc);
+
+}  // namespace plenopiv::io

@@ -1,0 +1,108 @@
+// plenopivd as a child process with a calibration file (plenopivd.yaml calibration_file): a bad
+// file at start is logged and shown in status, the daemon keeps serving, and runs are refused
+// naming the file until it is replaced by a good one, which the next run then uses and copies.
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <thread>
+
+#include "clients/cli/control_client.hpp"
+#include "core/io/checksum.hpp"
+#include "tests/support/child_process.hpp"
+#include "tests/support/run_manifest.hpp"
+#include "tests/support/temp_dir.hpp"
+
+namespace plenopiv {
+namespace {
+
+using namespace std::chrono_literals;
+namespace fs = std::filesystem;
+using testing_support::binary;
+
+const std::string kCameraFile = std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml";
+
+int plenopiv(const std::vector<std::string>& args, std::string& out) {
+  std::vector<std::string> argv{binary("plenopiv")};
+  argv.insert(argv.end(), args.begin(), args.end());
+  return testing_support::run_command(argv, out, 120s);
+}
+
+TEST(DaemonCalibration, ABadFileIsRefusedByNameAndAGoodOneIsUsedOnceItIsThere) {
+  const fs::path dir = testing_support::temp_dir("daemon-calibration");
+  fs::remove_all(dir / "data");
+  // The rig's calibration, made with the offline tools on the nominal (unrotated) array.
+  std::string out;
+  ASSERT_EQ(plenopiv({"simulate", "calibration", "--camera", kCameraFile, "-o", (dir / "cal.tif").string()}, out), 0)
+      << out;
+  ASSERT_EQ(plenopiv({"simulate", "white", "--camera", kCameraFile, "-o", (dir / "white.tif").string()}, out), 0) << out;
+  ASSERT_EQ(plenopiv({"calibrate", "--camera", kCameraFile, "--calibration-image", (dir / "cal.tif").string(),
+                      "--white", (dir / "white.tif").string(), "-o", (dir / "good.h5").string()},
+                     out),
+            0)
+      << out;
+  const fs::path rig = dir / "rig.h5";  // what plenopivd.yaml names: corrupt at first
+  std::ofstream(rig) << "not a calibration file";
+  std::ofstream(dir / "plenopivd.yaml") << "camera_file: " << kCameraFile << "\ncalibration_file: rig.h5\n"
+                                        << "data_dir: data\ncamera_uri: sim://?seed=2&ppm=0.1&rays=200\n";
+  const std::string control = "tcp://127.0.0.1:" + std::to_string(testing_support::free_tcp_port());
+  const std::string publish = "tcp://127.0.0.1:" + std::to_string(testing_support::free_tcp_port());
+  testing_support::ChildProcess daemon({binary("plenopivd"), "--config", (dir / "plenopivd.yaml").string(),
+                                        "--control", control, "--publish", publish},
+                                       dir / "plenopivd.log");
+  auto status = [&]() -> std::optional<msg::Status> {
+    try {
+      client::ControlClient probe(control, 300ms);
+      msg::Request r;
+      r.mutable_status();
+      const msg::Reply reply = probe.call(r);
+      if (reply.has_status()) return reply.status();
+    } catch (const client::ControlError&) {
+    }
+    return std::nullopt;
+  };
+  std::optional<msg::Status> s;
+  for (int i = 0; i < 100 && !(s = status()); ++i) ASSERT_TRUE(daemon.running()) << daemon.output();
+  ASSERT_TRUE(s) << daemon.output();
+  // Serving, and saying what is wrong and where.
+  EXPECT_NE(s->processing().find("unusable at start: calibration_file: " + rig.string() + ": not an HDF5 file"),
+            std::string::npos)
+      << s->processing();
+  EXPECT_NE(daemon.output().find("runs are refused until it is fixed"), std::string::npos) << daemon.output();
+
+  const fs::path run_yaml = dir / "run.yaml";
+  std::ofstream(run_yaml) << "pairs: 1\nrate_hz: 2\ndt_s: 0.001\n"
+                             "volume: {x_mm: [-0.5, 0.5], y_mm: [-0.5, 0.5], z_mm: [-0.5, 0.5], voxel_mm: 0.125}\n"
+                             "reconstruction: {iterations: 1}\n"
+                             "correlation: {passes: [{window: 8, overlap_percent: 50}]}\n";
+  auto client = [&](const std::vector<std::string>& args) {
+    std::vector<std::string> a{"--endpoint", control};
+    a.insert(a.end(), args.begin(), args.end());
+    return plenopiv(a, out);
+  };
+  EXPECT_NE(client({"run", "start", "--config", run_yaml.string()}), 0) << out;
+  EXPECT_NE(out.find("calibration_file: " + rig.string() + ": not an HDF5 file"), std::string::npos) << out;
+  EXPECT_FALSE(fs::exists(dir / "data") && !fs::is_empty(dir / "data")) << "a refused run left a folder";
+  ASSERT_TRUE(daemon.running()) << daemon.output();
+
+  // Replaced by a good file: checked again at run start, used, and copied.
+  fs::copy_file(dir / "good.h5", rig, fs::copy_options::overwrite_existing);
+  ASSERT_EQ(client({"run", "start", "--config", run_yaml.string()}), 0) << out;
+  for (int i = 0; i < 600; ++i) {
+    s = status();
+    if (s && s->state() == "Idle" && s->pairs_processed() + s->pairs_skipped() >= 1) break;
+    std::this_thread::sleep_for(100ms);
+  }
+  ASSERT_TRUE(s && s->state() == "Idle") << daemon.output();
+  const fs::path run_dir = s->run_dir();
+  const msg::RunManifest m = testing_support::read_manifest(run_dir);
+  EXPECT_EQ(m.state(), "complete");
+  EXPECT_EQ(m.calibration(), "file");
+  EXPECT_EQ(m.calibration_source(), rig.string());
+  EXPECT_EQ(io::read_file_bytes(run_dir / m.calibration_file()), io::read_file_bytes(dir / "good.h5"));
+  EXPECT_EQ(m.pairs_processed(), 1u);
+  daemon.signal(SIGTERM);
+  EXPECT_EQ(daemon.wait(10s), 0) << daemon.output();
+}
+
+}  // namespace
+}  // namespace plenopiv
