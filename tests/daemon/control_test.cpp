@@ -7,6 +7,7 @@
 
 #include "clients/cli/control_client.hpp"
 #include "tests/support/child_process.hpp"
+#include "tests/support/daemon_status.hpp"
 
 namespace plenopiv {
 namespace {
@@ -26,13 +27,7 @@ class Daemon : public ::testing::Test {
             (std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()) + ".log"));
     // Wait for the control socket to answer.
     for (int i = 0; i < 100; ++i) {
-      try {
-        client::ControlClient probe(control_, 200ms);
-        msg::Request r;
-        r.mutable_status();
-        if (probe.call(r).has_status()) return;
-      } catch (const client::ControlError&) {
-      }
+      if (testing_support::probe_status(control_)) return;
       ASSERT_TRUE(daemon_->running()) << daemon_->output();
     }
     FAIL() << "plenopivd did not answer: " << daemon_->output();

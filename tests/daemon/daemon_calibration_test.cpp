@@ -9,6 +9,7 @@
 #include "clients/cli/control_client.hpp"
 #include "core/io/checksum.hpp"
 #include "tests/support/child_process.hpp"
+#include "tests/support/daemon_status.hpp"
 #include "tests/support/run_manifest.hpp"
 #include "tests/support/temp_dir.hpp"
 
@@ -49,17 +50,7 @@ TEST(DaemonCalibration, ABadFileIsRefusedByNameAndAGoodOneIsUsedOnceItIsThere) {
   testing_support::ChildProcess daemon({binary("plenopivd"), "--config", (dir / "plenopivd.yaml").string(),
                                         "--control", control, "--publish", publish},
                                        dir / "plenopivd.log");
-  auto status = [&]() -> std::optional<msg::Status> {
-    try {
-      client::ControlClient probe(control, 300ms);
-      msg::Request r;
-      r.mutable_status();
-      const msg::Reply reply = probe.call(r);
-      if (reply.has_status()) return reply.status();
-    } catch (const client::ControlError&) {
-    }
-    return std::nullopt;
-  };
+  auto status = [&] { return testing_support::probe_status(control); };
   std::optional<msg::Status> s;
   for (int i = 0; i < 100 && !(s = status()); ++i) ASSERT_TRUE(daemon.running()) << daemon.output();
   ASSERT_TRUE(s) << daemon.output();

@@ -16,6 +16,7 @@
 
 #include "clients/cli/control_client.hpp"
 #include "tests/support/child_process.hpp"
+#include "tests/support/daemon_status.hpp"
 #include "tests/support/run_manifest.hpp"
 #include "tests/support/temp_dir.hpp"
 
@@ -52,17 +53,7 @@ class DaemonRuns : public ::testing::Test {
     FAIL() << "plenopivd did not answer: " << daemon_->output();
   }
 
-  std::optional<msg::Status> status_or_null() {
-    try {
-      client::ControlClient probe(control_, 300ms);
-      msg::Request r;
-      r.mutable_status();
-      const msg::Reply reply = probe.call(r);
-      if (reply.has_status()) return reply.status();
-    } catch (const client::ControlError&) {
-    }
-    return std::nullopt;
-  }
+  std::optional<msg::Status> status_or_null() { return testing_support::probe_status(control_); }
 
   void wait_for_state(const std::string& state) {
     for (int i = 0; i < 300; ++i) {

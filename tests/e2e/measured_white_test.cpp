@@ -15,24 +15,16 @@
 #include "core/sim/particles.hpp"
 #include "core/sim/render.hpp"
 #include "tests/support/cameras.hpp"
+#include "tests/support/mean_displacement.hpp"
 
 namespace plenopiv {
 namespace {
 
 // Mean (dx, dy, dz) over the valid vectors, mm.
 std::array<double, 3> mean_displacement(const VectorField& f) {
-  std::array<double, 3> sum{0, 0, 0};
-  std::size_t valid = 0;
-  for (std::size_t i = 0; i < f.grid.count(); ++i) {
-    if (!f.valid[i]) continue;
-    ++valid;
-    sum[0] += f.dx_mm[i];
-    sum[1] += f.dy_mm[i];
-    sum[2] += f.dz_mm[i];
-  }
-  EXPECT_GT(valid, f.grid.count() / 2);
-  for (double& v : sum) v /= double(std::max<std::size_t>(valid, 1));
-  return sum;
+  const testing_support::MeanDisplacement m = testing_support::mean_displacement(f);
+  EXPECT_GT(m.valid, f.grid.count() / 2);
+  return m.mm;
 }
 
 // The reproduction of the finding (docs/recon.md, "White correction from a measured white

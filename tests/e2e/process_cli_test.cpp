@@ -13,6 +13,7 @@
 #include "core/io/hdf5_files.hpp"
 #include "core/io/tiff.hpp"
 #include "tests/support/child_process.hpp"
+#include "tests/support/mean_displacement.hpp"
 #include "tests/support/temp_dir.hpp"
 
 namespace plenopiv {
@@ -50,18 +51,9 @@ std::vector<std::string> process_args(const fs::path& dir, const std::string& co
 // Mean (dx, dy, dz) over the valid vectors of a field file.
 std::array<double, 3> mean_displacement(const fs::path& file) {
   const VectorField f = io::read_vector_field_h5(file);
-  std::array<double, 3> sum{0, 0, 0};
-  std::size_t valid = 0;
-  for (std::size_t i = 0; i < f.grid.count(); ++i) {
-    if (!f.valid[i]) continue;
-    ++valid;
-    sum[0] += f.dx_mm[i];
-    sum[1] += f.dy_mm[i];
-    sum[2] += f.dz_mm[i];
-  }
-  EXPECT_GT(valid, f.grid.count() / 2) << file;
-  for (double& v : sum) v /= double(std::max<std::size_t>(valid, 1));
-  return sum;
+  const testing_support::MeanDisplacement m = testing_support::mean_displacement(f);
+  EXPECT_GT(m.valid, f.grid.count() / 2) << file;
+  return m.mm;
 }
 
 TEST(ProcessCli, RecoversTheUniformDisplacement) {

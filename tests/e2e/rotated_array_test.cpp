@@ -23,6 +23,7 @@
 #include "core/sim/exact_volume.hpp"
 #include "core/sim/render.hpp"
 #include "tests/support/cameras.hpp"
+#include "tests/support/mean_displacement.hpp"
 
 namespace plenopiv {
 namespace {
@@ -266,19 +267,10 @@ correlation:
     const process::PairResult r = process::process_pair(op, sim::render(camera(), truth, a, ro, 3).rays,
                                                         sim::render(camera(), truth, b, ro, 4).rays, s);
     note = r.lattice_note;
-    std::array<double, 3> sum{0, 0, 0};
-    std::size_t valid = 0;
     const VectorField& f = r.correlation.field;
-    for (std::size_t i = 0; i < f.grid.count(); ++i) {
-      if (!f.valid[i]) continue;
-      ++valid;
-      sum[0] += f.dx_mm[i];
-      sum[1] += f.dy_mm[i];
-      sum[2] += f.dz_mm[i];
-    }
-    EXPECT_GT(valid, f.grid.count() / 2);
-    for (double& v : sum) v /= double(std::max<std::size_t>(valid, 1));
-    return sum;
+    const testing_support::MeanDisplacement m = testing_support::mean_displacement(f);
+    EXPECT_GT(m.valid, f.grid.count() / 2);
+    return m.mm;
   };
   std::string note;
   const auto nominal = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera()));
