@@ -61,12 +61,6 @@ Grid3 ProcessSettings::reconstruction_grid() const {
   return g;
 }
 
-recon::WeightingOperator make_operator(const optics::CameraModel& camera, const optics::MicrolensArray& lenses,
-                                       ImageF white, const ProcessSettings& settings) {
-  return recon::WeightingOperator(camera, lenses, settings.reconstruction_grid(), std::move(white),
-                                  settings.angular_sampling);
-}
-
 namespace {
 // The slices [first, first + grid.shape[2]) of `v`, on `grid` (the box the user asked for), in
 // place: no second volume-sized buffer per frame.

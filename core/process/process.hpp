@@ -54,11 +54,6 @@ Grid3 grid_for_extent(const std::array<double, 3>& lo, const std::array<double, 
 ProcessSettings process_settings_from(const YamlMap& root);
 ProcessSettings load_process_settings(const std::filesystem::path& path);
 
-// The weighting operator process_pair needs for these settings: built on reconstruction_grid()
-// (the guard slices included) with the settings' angular sampling.
-recon::WeightingOperator make_operator(const optics::CameraModel& camera, const optics::MicrolensArray& lenses,
-                                       ImageF white, const ProcessSettings& settings);
-
 // Where the time went and what was skipped.
 struct StageTimes {
   double reconstruct_a_s = 0, reconstruct_b_s = 0, correlate_s = 0;
@@ -91,7 +86,7 @@ class PairOperator {
   PairOperator(const optics::CameraModel& camera, const optics::MicrolensArray& lenses, const ImageF& white,
                const Grid3& grid, double angular_sampling = 1.0);
   // What process_pair needs for `settings`: reconstruction_grid() (the guard slices included) and
-  // the settings' angular sampling (as make_operator).
+  // the settings' angular sampling.
   PairOperator(const optics::CameraModel& camera, const optics::MicrolensArray& lenses, const ImageF& white,
                const ProcessSettings& settings);
 

@@ -55,9 +55,9 @@ TEST(ProcessSettings, AngularSamplingReachesTheOperator) {
   EXPECT_DOUBLE_EQ(s.angular_sampling, 2.0);
   const auto camera = optics::load_camera_file(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml");
   const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera));
-  const recon::WeightingOperator op = make_operator(camera, lenses, recon::geometric_white_image(camera, lenses), s);
-  EXPECT_EQ(op.grid(), s.reconstruction_grid());
-  EXPECT_DOUBLE_EQ(op.geometry().angular_sampling, 2.0);
+  const PairOperator op(camera, lenses, recon::geometric_white_image(camera, lenses), s);
+  EXPECT_EQ(op.weights().grid(), s.reconstruction_grid());
+  EXPECT_DOUBLE_EQ(op.weights().geometry().angular_sampling, 2.0);
   for (const std::string bad : {"0", "-1", "20", "fine"}) {
     try {
       parse(kVolume + "}\nreconstruction: {angular_sampling: " + bad + "}\n" + kPasses);
