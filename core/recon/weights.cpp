@@ -688,7 +688,7 @@ void ActiveSet::for_each_column(int b, int x0, int x1, int nz, F&& f) const {
 }
 
 void ActiveSet::project(const WeightingOperator& op, std::span<const float> values, std::span<float> image,
-                        Workspace* workspace, const BandDone& band_done) const {
+                        Workspace* workspace, const BandDone& band_done, RowSubset rows) const {
   const std::size_t width = std::size_t(op.image_width());
   const int height = op.image_height();
   const int nx = op.grid().shape[0], nz = op.grid().shape[2];
@@ -719,7 +719,7 @@ void ActiveSet::project(const WeightingOperator& op, std::span<const float> valu
           for (const Segment& seg : std::span(t.y_segments.data() + entry.segment_begin, entry.segment_count)) {
             const int a = std::max(r0, seg.first), e = std::min(r1, seg.first + seg.length);
             const float* w = t.y_table.data() + seg.offset;
-            for (int r = a; r < e; ++r) column_sum[std::size_t(r - r0)] += s * w[r - seg.first];
+            for (int r = rows.first_from(a); r < e; r += rows.count) column_sum[std::size_t(r - r0)] += s * w[r - seg.first];
             lo = std::min(lo, a - r0);
             hi = std::max(hi, e - 1 - r0);
           }
@@ -731,7 +731,9 @@ void ActiveSet::project(const WeightingOperator& op, std::span<const float> valu
       });
     }
     const float* white = op.white().pixels.data();
-    for (std::size_t i = std::size_t(r0) * width; i < std::size_t(r1) * width; ++i) image[i] *= white[i];
+    for (int r = rows.first_from(r0); r < r1; r += rows.count) {
+      for (std::size_t i = std::size_t(r) * width; i < std::size_t(r + 1) * width; ++i) image[i] *= white[i];
+    }
     if (band_done) band_done(b, std::size_t(r0) * width, std::size_t(r1) * width);
   });
 }
@@ -748,9 +750,9 @@ void ActiveSet::back_project(const WeightingOperator& op, std::span<const float>
 }
 
 void ActiveSet::back_project_whitened(const WeightingOperator& op, std::span<const float> image,
-                                      std::span<float> values, Workspace* workspace) const {
+                                      std::span<float> values, Workspace* workspace, RowSubset rows) const {
   Workspace local;
-  back_project_images<1>(op, {image.data()}, {values.data()}, workspace ? *workspace : local);
+  back_project_images<1>(op, {image.data()}, {values.data()}, workspace ? *workspace : local, rows);
 }
 
 void ActiveSet::back_project_whitened(const WeightingOperator& op, std::span<const float> whitened_a,
@@ -758,12 +760,13 @@ void ActiveSet::back_project_whitened(const WeightingOperator& op, std::span<con
                                       std::span<float> values_b, Workspace* workspace) const {
   Workspace local;
   back_project_images<2>(op, {whitened_a.data(), whitened_b.data()}, {values_a.data(), values_b.data()},
-                         workspace ? *workspace : local);
+                         workspace ? *workspace : local, RowSubset{});
 }
 
 template <std::size_t N>
 void ActiveSet::back_project_images(const WeightingOperator& op, const std::array<const float*, N>& images,
-                                    const std::array<float*, N>& values, Workspace& workspace) const {
+                                    const std::array<float*, N>& values, Workspace& workspace,
+                                    RowSubset rows) const {
   const std::size_t width = std::size_t(op.image_width());
   const int height = op.image_height();
   const int nx = op.grid().shape[0], nz = op.grid().shape[2];
@@ -801,7 +804,7 @@ void ActiveSet::back_project_images(const WeightingOperator& op, const std::arra
         for (std::size_t k = k0; k < k1; ++k) {
           for (const Segment& seg : std::span(t.y_segments.data() + entries_[k].segment_begin, entries_[k].segment_count)) {
             const int a = std::max(r0, seg.first), e = std::min(r1, seg.first + seg.length);
-            for (int r = a; r < e; ++r) reached[std::size_t(r - r0)] = stamp;
+            for (int r = rows.first_from(a); r < e; r += rows.count) reached[std::size_t(r - r0)] = stamp;
             lo = std::min(lo, a - r0);
             hi = std::max(hi, e - 1 - r0);
           }
@@ -819,7 +822,7 @@ void ActiveSet::back_project_images(const WeightingOperator& op, const std::arra
           for (const Segment& seg : std::span(t.y_segments.data() + entry.segment_begin, entry.segment_count)) {
             const int a = std::max(r0, seg.first), e = std::min(r1, seg.first + seg.length);
             const float* w = t.y_table.data() + seg.offset;
-            for (int r = a; r < e; ++r) {
+            for (int r = rows.first_from(a); r < e; r += rows.count) {
               for (std::size_t i = 0; i < N; ++i) s[i] += double(w[r - seg.first]) * row_sum[i][std::size_t(r - r0)];
             }
           }
