@@ -30,6 +30,7 @@ struct ReconOptions {
   int iterations = 5;
   double mu = 0.5;
   int subsets = 1;
+  bool accelerate = false;
   std::string start = "mlos";
   float threshold = 0;
   double dark_cutoff = 0.9;
@@ -61,6 +62,7 @@ void run(const ReconOptions& o) {
   s.iterations = o.iterations;
   s.mu = o.mu;
   s.subsets = o.subsets;
+  s.accelerate = o.accelerate;
   s.noise_threshold = o.threshold;
   s.dark_weight_cutoff = o.dark_cutoff;
   s.convergence = o.convergence;
@@ -150,6 +152,9 @@ void add_recon_commands(CLI::App& app) {
                   "ordered subsets of sensor rows per iteration (1: the paper's simultaneous form; 4 moves "
                   "voxels about 4x as far per iteration at about the same cost)")
       ->capture_default_str();
+  cmd->add_flag("--accelerate", o->accelerate,
+                "Nesterov momentum on the iterations (about 2.5x fewer iterations for the same depth "
+                "recovery; off: the paper's iteration)");
   cmd->add_option("--start", o->start, "initial volume: mlos (multiplicative line of sight) or ones (eq 9)")
       ->capture_default_str();
   cmd->add_option("--threshold", o->threshold, "noise floor in counts: pixels at or below are dark")

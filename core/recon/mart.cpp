@@ -369,9 +369,27 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const M
     return previous >= 0 && settings.convergence > 0 && std::abs(previous - r) <= settings.convergence * previous;
   };
   double previous = -1;
+  // Nesterov's momentum on ln E (settings.accelerate): each iteration starts from the
+  // extrapolated y = x_k (x_k / x_(k-1))^beta_k with FISTA's beta_k = (k - 1) / (k + 2), and k
+  // restarts at 1 when an iteration's step opposes the momentum (O'Donoghue and Candes's gradient
+  // restart). `last` holds x_(k-1), then x_k; `momentum` ln x_k - ln x_(k-1) (0 where either is 0).
+  std::vector<float> last, momentum;
+  if (settings.accelerate) {
+    last = e;
+    momentum.assign(n, 0.f);
+  }
+  int momentum_step = 1;
   for (int it = 1; it <= settings.iterations && n > 0; ++it) {
     const auto t_it = std::chrono::steady_clock::now();
     double r = 0;
+    const float beta = float(momentum_step - 1) / float(momentum_step + 2);
+    if (settings.accelerate) {
+      for_voxels([&](std::size_t m) {
+        momentum[m] = e[m] > 0.f && last[m] > 0.f ? std::log(e[m]) - std::log(last[m]) : 0.f;
+        last[m] = e[m];
+        e[m] = clean(e[m] * bounded_exp(beta * momentum[m]));
+      });
+    }
     if (subsets == 1) {
       active.project(op, e, projection, &workspace, [&](int band, std::size_t i0, std::size_t i1) {
         residual_band(band, i0, i1);
@@ -380,6 +398,7 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const M
       r = residual();
       if (converged(previous, r)) {  // stop before an update that would change nothing
         result.converged = true;
+        if (settings.accelerate) e = last;  // x_k, not the extrapolated point
         break;
       }
       active.back_project_whitened(op, ratio, update, &workspace);
@@ -403,6 +422,22 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const M
       }
       r = residual();
       result.converged = converged(previous, r);  // known only after the sweep: stop after it
+    }
+    if (settings.accelerate) {
+      // Does this iteration's step (ln x_(k+1) - ln y) go along the momentum? Summed in fixed
+      // chunks, so the restart is the same at any thread count.
+      const double along = tbb::parallel_deterministic_reduce(
+          tbb::blocked_range<std::size_t>(0, n, 1 << 14), 0.0,
+          [&](const tbb::blocked_range<std::size_t>& range, double acc) {
+            for (std::size_t m = range.begin(); m != range.end(); ++m) {
+              if (e[m] > 0.f && last[m] > 0.f && momentum[m] != 0.f) {
+                acc += double(std::log(e[m]) - std::log(last[m]) - beta * momentum[m]) * double(momentum[m]);
+              }
+            }
+            return acc;
+          },
+          std::plus<double>());
+      momentum_step = along < 0 ? 1 : momentum_step + 1;
     }
     previous = r;
     IterationReport rep{it, r, seconds_since(t_it)};

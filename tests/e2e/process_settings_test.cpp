@@ -1,4 +1,4 @@
-// core/process's run config: the depth guard's grid, its refusal of bad values, and that
+// core/process's run config: the depth guard's grid, MART's knobs, refusal of bad values, and that
 // process_pair hands back the box the user asked for (guard slices reconstructed, then dropped).
 #include <gtest/gtest.h>
 
@@ -64,6 +64,23 @@ TEST(ProcessSettings, AngularSamplingReachesTheOperator) {
       ADD_FAILURE() << bad;
     } catch (const InputError& e) {
       EXPECT_NE(std::string(e.what()).find("angular_sampling"), std::string::npos) << e.what();
+    }
+  }
+}
+
+TEST(ProcessSettings, SubsetsAndAccelerationReachMart) {
+  const ProcessSettings plain = parse(kVolume + "}\n" + kPasses);
+  EXPECT_EQ(plain.mart.subsets, 1);  // the paper's iteration by default
+  EXPECT_FALSE(plain.mart.accelerate);
+  const ProcessSettings s = parse(kVolume + "}\nreconstruction: {subsets: 4, acceleration: nesterov}\n" + kPasses);
+  EXPECT_EQ(s.mart.subsets, 4);
+  EXPECT_TRUE(s.mart.accelerate);
+  for (const std::string bad : {"subsets: 0", "subsets: 17", "subsets: two", "acceleration: fista"}) {
+    try {
+      parse(kVolume + "}\nreconstruction: {" + bad + "}\n" + kPasses);
+      ADD_FAILURE() << bad;
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(bad.substr(0, bad.find(':'))), std::string::npos) << e.what();
     }
   }
 }

@@ -376,6 +376,34 @@ TEST_F(Mart, OrderedSubsetsConvergeFasterPerIteration) {
   EXPECT_NEAR(res2x4, res8, 0.1 * res8);
 }
 
+// Nesterov's momentum: the same update per iteration, taken from an extrapolated volume.
+TEST_F(Mart, AccelerationConvergesFasterPerIteration) {
+  const Volume exact = truth();
+  const ImageF image = project_image(*op_, exact, 1000.f);
+  auto run = [&](int iterations, bool accelerate) {
+    MartSettings s;
+    s.iterations = iterations;
+    s.mu = 1;
+    s.accelerate = accelerate;
+    const MartResult r = reconstruct(*op_, image, s);
+    const double q = quality_factor(r.volume, exact);
+    std::cout << "measured: " << iterations << (accelerate ? " accelerated" : " plain") << " iterations: Q* " << q
+              << ", residual " << r.final_residual << "\n";
+    EXPECT_TRUE(all_finite_bounded(r.volume, 1e30f));
+    return std::pair{q, r.final_residual};
+  };
+  const auto [q4, res4] = run(4, false);
+  const auto [q10, res10] = run(10, false);
+  const auto [q4a, res4a] = run(4, true);
+  const auto [q10a, res10a] = run(10, true);
+  // Measured: residual 0.0614 / 0.0289 plain after 4 / 10, 0.0454 / 0.0184 accelerated; Q* 0.9758
+  // / 0.9903 plain, 0.9822 / 0.9948 accelerated.
+  EXPECT_LT(res4a, 0.85 * res4);
+  EXPECT_LT(res10a, 0.75 * res10);
+  EXPECT_GT(q4a, q4);
+  EXPECT_GT(q10a, q10);
+}
+
 TEST_F(Mart, RowActionAndSimultaneousFormsAgree) {
   const Volume exact = truth();
   const ImageF image = project_image(*op_, exact, 1000.f);
@@ -444,14 +472,16 @@ TEST_F(Mart, ConvergenceStopEndsEarly) {
   EXPECT_LT(r.iterations.size(), 200u);
 }
 
-class MartStable : public Mart, public ::testing::WithParamInterface<int> {};
+// Parameters: subsets, accelerated.
+class MartStable : public Mart, public ::testing::WithParamInterface<std::tuple<int, bool>> {};
 
 TEST_P(MartStable, OnExtremeInputs) {
   const Volume exact = truth();
   MartSettings s;
   s.iterations = 50;
   s.mu = 1.0;
-  s.subsets = GetParam();
+  s.subsets = std::get<0>(GetParam());
+  s.accelerate = std::get<1>(GetParam());
   const float bound = 1e30f;
   {  // all zero: nothing to reconstruct
     const MartResult r = reconstruct(*op_, ImageF(850, 850, 0.f), s);
@@ -485,7 +515,9 @@ TEST_P(MartStable, OnExtremeInputs) {
   }
 }
 
-INSTANTIATE_TEST_SUITE_P(Subsets, MartStable, ::testing::Values(1, 8));
+INSTANTIATE_TEST_SUITE_P(Variants, MartStable,
+                         ::testing::Values(std::tuple{1, false}, std::tuple{8, false}, std::tuple{1, true},
+                                           std::tuple{4, true}));
 
 TEST_F(Mart, RejectsNaNAndNegativePixelsAndBadSettings) {
   ImageF image(850, 850, 1.f);
@@ -516,10 +548,11 @@ TEST_F(Mart, RejectsNaNAndNegativePixelsAndBadSettings) {
 
 TEST_F(Mart, IdenticalVolumesAtOneAndTwoThreads) {
   const ImageF image = project_image(*op_, truth(), 1000.f);
-  for (int subsets : {1, 4}) {
+  for (const auto& [subsets, accelerate] : {std::pair{1, false}, std::pair{4, false}, std::pair{1, true}}) {
     MartSettings s;
     s.iterations = 5;
     s.subsets = subsets;
+    s.accelerate = accelerate;
     auto run = [&](int threads) {
       tbb::global_control c(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
       const WeightingOperator op = make_operator(*camera_, op_->grid());
@@ -527,7 +560,8 @@ TEST_F(Mart, IdenticalVolumesAtOneAndTwoThreads) {
     };
     const auto one = run(1), two = run(2);
     ASSERT_EQ(one.size(), two.size());
-    EXPECT_EQ(0, std::memcmp(one.data(), two.data(), one.size() * sizeof(float))) << subsets << " subsets";
+    EXPECT_EQ(0, std::memcmp(one.data(), two.data(), one.size() * sizeof(float)))
+        << subsets << " subsets, accelerated " << accelerate;
   }
 }
 
