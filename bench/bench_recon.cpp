@@ -53,7 +53,7 @@ Grid3 grid_of(int nx, int ny, int nz, double voxel_mm, double depth_mm) {
 }
 
 void paper_scale(const std::string& source_dir, bool small, double ppm, int iterations, float threshold_counts,
-                 double dark_cutoff, std::size_t count_override = 0, double mu = 0.5) {
+                 double dark_cutoff, std::size_t count_override = 0, double mu = 0.5, bool accelerate = false) {
   const auto cam = optics::load_camera_file(source_dir + (small ? "/systemd/config/camera-small.yaml"
                                                                 : "/systemd/config/camera-fahringer2015.yaml"));
   const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(cam));
@@ -88,6 +88,7 @@ void paper_scale(const std::string& source_dir, bool small, double ppm, int iter
   recon::MartSettings s;
   s.iterations = iterations;
   s.mu = mu;
+  s.accelerate = accelerate;
   s.noise_threshold = threshold_counts;
   s.dark_weight_cutoff = dark_cutoff;
   t = Clock::now();
@@ -248,10 +249,10 @@ int main(int argc, char** argv) {
   const int iterations = argc > 5 ? std::stoi(argv[5]) : 5;
   if (which == "mid" || which == "all") mid_size(source_dir);
   if (which == "figures") figures(source_dir, argc > 2 ? std::stod(argv[2]) : 0.9);
-  // Fig 22: 500 particles in the paper-scale box; `fig22 [cutoff] [iterations] [mu]`.
+  // Fig 22: 500 particles in the paper-scale box; `fig22 [cutoff] [iterations] [mu] [nesterov]`.
   if (which == "fig22")
     paper_scale(source_dir, false, 0, argc > 3 ? std::stoi(argv[3]) : 5, 0.f, argc > 2 ? std::stod(argv[2]) : 0.9, 500,
-                argc > 4 ? std::stod(argv[4]) : 0.5);
+                argc > 4 ? std::stod(argv[4]) : 0.5, argc > 5 && std::string(argv[5]) == "nesterov");
   if (which == "small") paper_scale(source_dir, true, ppm, iterations, threshold, cutoff);
   if (which == "paper" || which == "all") paper_scale(source_dir, false, ppm, iterations, threshold, cutoff);
   return 0;

@@ -39,12 +39,6 @@ struct MartSettings {
   MartStart start = MartStart::mlos;
   int iterations = 5;
   double mu = 0.5;                 // relaxation, 0 < mu <= 1
-  // Ordered subsets: each iteration is `subsets` sub-iterations, each projecting and
-  // back-projecting only every subsets-th sensor row (interleaved vertical aperture positions
-  // behind every lens) and updating every voxel by the weighted mean of its ratios over those
-  // rows. A sweep costs about one iteration and moves the voxels about `subsets` times as far.
-  // 1 is the paper's simultaneous form.
-  int subsets = 1;
   // Nesterov's momentum on ln E with FISTA's schedule and a gradient restart: the same cost per
   // iteration as SMART (a few operations per voxel), far fewer iterations for a converged depth
   // (docs/recon.md, "Acceleration"). Off: the paper's iteration.
@@ -76,8 +70,7 @@ struct SkipReport {
 
 struct IterationReport {
   int iteration = 0;           // 1-based
-  double residual = 0;         // ||I - W E|| / ||I|| before this iteration's update (with subsets:
-                               // each subset's rows as they were projected in the sweep)
+  double residual = 0;         // ||I - W E|| / ||I|| before this iteration's update
   double seconds = 0;
 };
 

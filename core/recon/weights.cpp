@@ -687,30 +687,8 @@ void ActiveSet::for_each_column(int b, int x0, int x1, int nz, F&& f) const {
   }
 }
 
-namespace {
-
-// A row subset's rows within one band of sensor rows, looked up rather than computed: the kernels
-// ask for the first subset row of every segment they visit, millions of times per pass, and an
-// integer division there cost as much as the pass's arithmetic.
-template <int kRows>
-class BandRows {
- public:
-  BandRows(RowSubset rows, int r0) : r0_(r0), step_(rows.count) {
-    for (int k = 0; k <= kRows; ++k) next_[std::size_t(k)] = std::int16_t(rows.first_from(r0 + k) - r0);
-  }
-  // The subset's first row at or after `row` (r0 <= row <= r0 + the band's rows).
-  int first(int row) const { return r0_ + next_[std::size_t(row - r0_)]; }
-  int step() const { return step_; }
-
- private:
-  int r0_, step_;
-  std::array<std::int16_t, kRows + 1> next_;
-};
-
-}  // namespace
-
 void ActiveSet::project(const WeightingOperator& op, std::span<const float> values, std::span<float> image,
-                        Workspace* workspace, const BandDone& band_done, RowSubset rows) const {
+                        Workspace* workspace, const BandDone& band_done) const {
   const std::size_t width = std::size_t(op.image_width());
   const int height = op.image_height();
   const int nx = op.grid().shape[0], nz = op.grid().shape[2];
@@ -727,7 +705,6 @@ void ActiveSet::project(const WeightingOperator& op, std::span<const float> valu
   // same sums whatever the thread count.
   tbb::parallel_for(0, bands_, [&](int b) {
     const int r0 = b * kBandRows, r1 = std::min(height, r0 + kBandRows);
-    const BandRows<kBandRows> band_rows(rows, r0);
     std::fill(image.begin() + std::ptrdiff_t(std::size_t(r0) * width), image.begin() + std::ptrdiff_t(std::size_t(r1) * width), 0.f);
     std::array<float, kBandRows> column_sum{};  // G(row) of one column over the band's rows
     for (int x0 = 0; x0 < nx; x0 += strip_x_) {
@@ -742,7 +719,7 @@ void ActiveSet::project(const WeightingOperator& op, std::span<const float> valu
           for (const Segment& seg : std::span(t.y_segments.data() + entry.segment_begin, entry.segment_count)) {
             const int a = std::max(r0, seg.first), e = std::min(r1, seg.first + seg.length);
             const float* w = t.y_table.data() + seg.offset;
-            for (int r = band_rows.first(a); r < e; r += band_rows.step()) column_sum[std::size_t(r - r0)] += s * w[r - seg.first];
+            for (int r = a; r < e; ++r) column_sum[std::size_t(r - r0)] += s * w[r - seg.first];
             lo = std::min(lo, a - r0);
             hi = std::max(hi, e - 1 - r0);
           }
@@ -754,9 +731,7 @@ void ActiveSet::project(const WeightingOperator& op, std::span<const float> valu
       });
     }
     const float* white = op.white().pixels.data();
-    for (int r = band_rows.first(r0); r < r1; r += band_rows.step()) {
-      for (std::size_t i = std::size_t(r) * width; i < std::size_t(r + 1) * width; ++i) image[i] *= white[i];
-    }
+    for (std::size_t i = std::size_t(r0) * width; i < std::size_t(r1) * width; ++i) image[i] *= white[i];
     if (band_done) band_done(b, std::size_t(r0) * width, std::size_t(r1) * width);
   });
 }
@@ -773,9 +748,9 @@ void ActiveSet::back_project(const WeightingOperator& op, std::span<const float>
 }
 
 void ActiveSet::back_project_whitened(const WeightingOperator& op, std::span<const float> image,
-                                      std::span<float> values, Workspace* workspace, RowSubset rows) const {
+                                      std::span<float> values, Workspace* workspace) const {
   Workspace local;
-  back_project_images<1>(op, {image.data()}, {values.data()}, workspace ? *workspace : local, rows);
+  back_project_images<1>(op, {image.data()}, {values.data()}, workspace ? *workspace : local);
 }
 
 void ActiveSet::back_project_whitened(const WeightingOperator& op, std::span<const float> whitened_a,
@@ -783,13 +758,12 @@ void ActiveSet::back_project_whitened(const WeightingOperator& op, std::span<con
                                       std::span<float> values_b, Workspace* workspace) const {
   Workspace local;
   back_project_images<2>(op, {whitened_a.data(), whitened_b.data()}, {values_a.data(), values_b.data()},
-                         workspace ? *workspace : local, RowSubset{});
+                         workspace ? *workspace : local);
 }
 
 template <std::size_t N>
 void ActiveSet::back_project_images(const WeightingOperator& op, const std::array<const float*, N>& images,
-                                    const std::array<float*, N>& values, Workspace& workspace,
-                                    RowSubset rows) const {
+                                    const std::array<float*, N>& values, Workspace& workspace) const {
   const std::size_t width = std::size_t(op.image_width());
   const int height = op.image_height();
   const int nx = op.grid().shape[0], nz = op.grid().shape[2];
@@ -820,7 +794,6 @@ void ActiveSet::back_project_images(const WeightingOperator& op, const std::arra
     std::size_t stamp = 0;
     for (int b = first_band; b <= last_band; ++b) {
       const int r0 = b * kBandRows, r1 = std::min(height, r0 + kBandRows);
-      const BandRows<kBandRows> band_rows(rows, r0);
       for_each_column(b, x0, x1, nz, [&](const Column& col, std::size_t k0, std::size_t k1) {
         const SliceTables& t = op.slice(col.z);
         ++stamp;
@@ -828,7 +801,7 @@ void ActiveSet::back_project_images(const WeightingOperator& op, const std::arra
         for (std::size_t k = k0; k < k1; ++k) {
           for (const Segment& seg : std::span(t.y_segments.data() + entries_[k].segment_begin, entries_[k].segment_count)) {
             const int a = std::max(r0, seg.first), e = std::min(r1, seg.first + seg.length);
-            for (int r = band_rows.first(a); r < e; r += band_rows.step()) reached[std::size_t(r - r0)] = stamp;
+            for (int r = a; r < e; ++r) reached[std::size_t(r - r0)] = stamp;
             lo = std::min(lo, a - r0);
             hi = std::max(hi, e - 1 - r0);
           }
@@ -846,7 +819,7 @@ void ActiveSet::back_project_images(const WeightingOperator& op, const std::arra
           for (const Segment& seg : std::span(t.y_segments.data() + entry.segment_begin, entry.segment_count)) {
             const int a = std::max(r0, seg.first), e = std::min(r1, seg.first + seg.length);
             const float* w = t.y_table.data() + seg.offset;
-            for (int r = band_rows.first(a); r < e; r += band_rows.step()) {
+            for (int r = a; r < e; ++r) {
               for (std::size_t i = 0; i < N; ++i) s[i] += double(w[r - seg.first]) * row_sum[i][std::size_t(r - r0)];
             }
           }
