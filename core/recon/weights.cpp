@@ -4,10 +4,16 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/partitioner.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <array>
+#include <atomic>
+#include <bit>
 #include <cmath>
+#include <limits>
+#include <numeric>
 #include <string>
 #include <utility>
 
@@ -162,9 +168,11 @@ __attribute__((target("avx2"), always_inline)) inline void add_quads_avx2(float*
     __builtin_memcpy(q0, &lo, sizeof lo);
   }
   if (k < n) {
-    float* q = row + first[k];
-    const float* wk = w + kQuad * k;
-    for (int j = 0; j < kQuad; ++j) q[j] += a * wk[j];
+    Lanes4 q, wk;
+    __builtin_memcpy(&q, row + first[k], sizeof q);
+    __builtin_memcpy(&wk, w + kQuad * k, sizeof wk);
+    q += a * wk;
+    __builtin_memcpy(row + first[k], &q, sizeof q);
   }
 }
 
@@ -213,39 +221,50 @@ __attribute__((target("avx2"), always_inline)) inline float dot_quads_avx2(const
 // The dispatched entry points: one call per voxel column and band (not per row), so the row
 // loop runs inside the chosen build too.
 //
-// Projection stage 2: image row r += g[r] Ax for the rows in [lo, hi] the column reaches
-// (g[r] != 0), resetting g for the next column. `band` points at the band's first row.
-__attribute__((target("default"))) void add_column(float* band, std::size_t width, float* g, int lo, int hi,
-                                                   const int* first, const float* w, std::size_t n) {
-  for (int r = lo; r <= hi; ++r) {
-    if (g[r] == 0.f) continue;
-    add_quads_base(band + std::size_t(r) * width, first, w, n, g[r]);
-    g[r] = 0.f;
+// Projection stage 2: image row r += g[r] Ax for the rows the column reaches (bits of `rows`)
+// with g[r] != 0, resetting g for the next column. `band` points at the band's first row.
+__attribute__((target("default"))) void add_column(float* band, std::size_t width, float* g, const std::uint64_t* rows,
+                                                   int words, const int* first, const float* w, std::size_t n) {
+  for (int i = 0; i < words; ++i) {
+    for (std::uint64_t m = rows[i]; m != 0; m &= m - 1) {
+      const int r = 64 * i + __builtin_ctzll(m);
+      if (g[r] == 0.f) continue;
+      add_quads_base(band + std::size_t(r) * width, first, w, n, g[r]);
+      g[r] = 0.f;
+    }
   }
 }
-__attribute__((target("avx2"))) void add_column(float* band, std::size_t width, float* g, int lo, int hi,
-                                                const int* first, const float* w, std::size_t n) {
-  for (int r = lo; r <= hi; ++r) {
-    if (g[r] == 0.f) continue;
-    add_quads_avx2(band + std::size_t(r) * width, first, w, n, g[r]);
-    g[r] = 0.f;
+__attribute__((target("avx2"))) void add_column(float* band, std::size_t width, float* g, const std::uint64_t* rows,
+                                                int words, const int* first, const float* w, std::size_t n) {
+  for (int i = 0; i < words; ++i) {
+    for (std::uint64_t m = rows[i]; m != 0; m &= m - 1) {
+      const int r = 64 * i + __builtin_ctzll(m);
+      if (g[r] == 0.f) continue;
+      add_quads_avx2(band + std::size_t(r) * width, first, w, n, g[r]);
+      g[r] = 0.f;
+    }
   }
 }
 
-// Back-projection stage 1: out[r] = Σ_col Ax r(row, col) for the rows in [lo, hi] stamped as
-// reached by the column.
-__attribute__((target("default"))) void dot_column(const float* band, std::size_t width, const std::size_t* reached,
-                                                   std::size_t stamp, int lo, int hi, const int* first, const float* w,
-                                                   std::size_t n, float* out) {
-  for (int r = lo; r <= hi; ++r) {
-    if (reached[r] == stamp) out[r] = dot_quads_base(band + std::size_t(r) * width, first, w, n);
+// Back-projection stage 1: out[r] = Σ_col Ax r(row, col) for the rows the column reaches.
+__attribute__((target("default"))) void dot_column(const float* band, std::size_t width, const std::uint64_t* rows,
+                                                   int words, const int* first, const float* w, std::size_t n,
+                                                   float* out) {
+  for (int i = 0; i < words; ++i) {
+    for (std::uint64_t m = rows[i]; m != 0; m &= m - 1) {
+      const int r = 64 * i + __builtin_ctzll(m);
+      out[r] = dot_quads_base(band + std::size_t(r) * width, first, w, n);
+    }
   }
 }
-__attribute__((target("avx2"))) void dot_column(const float* band, std::size_t width, const std::size_t* reached,
-                                                std::size_t stamp, int lo, int hi, const int* first, const float* w,
-                                                std::size_t n, float* out) {
-  for (int r = lo; r <= hi; ++r) {
-    if (reached[r] == stamp) out[r] = dot_quads_avx2(band + std::size_t(r) * width, first, w, n);
+__attribute__((target("avx2"))) void dot_column(const float* band, std::size_t width, const std::uint64_t* rows,
+                                                int words, const int* first, const float* w, std::size_t n,
+                                                float* out) {
+  for (int i = 0; i < words; ++i) {
+    for (std::uint64_t m = rows[i]; m != 0; m &= m - 1) {
+      const int r = 64 * i + __builtin_ctzll(m);
+      out[r] = dot_quads_avx2(band + std::size_t(r) * width, first, w, n);
+    }
   }
 }
 
@@ -255,6 +274,19 @@ __attribute__((target("default"))) float dot_quads(const float* row, const int* 
 }
 __attribute__((target("avx2"))) float dot_quads(const float* row, const int* first, const float* w, std::size_t n) {
   return dot_quads_avx2(row, first, w, n);
+}
+
+// Runs f(item) for every item on the arena's threads, each thread taking the next item of the
+// list when it is free. With the costliest items first, a pass ends on short ones instead of
+// leaving a core idle while the other finishes a long last band or strip. Which thread runs an
+// item does not change any sum.
+template <typename F>
+void run_costliest_first(const std::vector<int>& items, F&& f) {
+  std::atomic<std::size_t> next{0};
+  const int workers = std::max(1, std::min(tbb::this_task_arena::max_concurrency(), int(items.size())));
+  tbb::parallel_for(0, workers, [&](int) {
+    for (std::size_t i = next++; i < items.size(); i = next++) f(items[i]);
+  }, tbb::simple_partitioner());
 }
 
 }  // namespace
@@ -551,12 +583,21 @@ ActiveSet::ActiveSet(const WeightingOperator& op, std::vector<std::uint32_t> vox
   const Grid3& g = op.grid();
   const std::uint32_t nx = std::uint32_t(g.shape[0]), nz = std::uint32_t(g.shape[2]);
   const std::uint32_t nxy = nx * std::uint32_t(g.shape[1]);
-  auto column_of = [&](std::uint32_t v) { return std::size_t(v % nx) * nz + v / nxy; };
-  // Group by voxel column, x-major, with a counting sort: y stays increasing within a column. A
-  // voxel that sees no pixel (n = 0) takes no part; its value is 0.
-  std::vector<std::uint32_t> start(std::size_t(nx) * nz + 1, 0);
+  // 16 voxel x per strip (~1.6 mm on the paper's camera), fewer on small grids so that there are
+  // at least 8 strips to share out; fixed by the grid, so the sums' order is too.
+  strip_x_ = std::clamp(int(nx) / 8, 1, 16);
+  strips_ = (int(nx) + strip_x_ - 1) / strip_x_;
+  const std::uint32_t sx = std::uint32_t(strip_x_);
+  // A voxel column's place in the visiting order: strip, depth, x within the strip.
+  auto key_of = [&](std::uint32_t v) {
+    const std::uint32_t x = v % nx, z = v / nxy;
+    return (std::size_t(x / sx) * nz + z) * sx + x % sx;
+  };
+  // Group by voxel column in that order with a counting sort: y stays increasing within a
+  // column. A voxel that sees no pixel (n = 0) takes no part; its value is 0.
+  std::vector<std::uint32_t> start(std::size_t(strips_) * nz * sx + 1, 0);
   for (std::uint32_t v : voxels_) {
-    if (op.normaliser(v) > 0.f) ++start[column_of(v) + 1];
+    if (op.normaliser(v) > 0.f) ++start[key_of(v) + 1];
   }
   for (std::size_t c = 1; c < start.size(); ++c) start[c] += start[c - 1];
   order_.resize(start.back());
@@ -567,32 +608,33 @@ ActiveSet::ActiveSet(const WeightingOperator& op, std::vector<std::uint32_t> vox
     const std::uint32_t v = voxels_[m];
     const float n = op.normaliser(v);
     if (!(n > 0.f)) continue;
-    const std::uint32_t p = fill[column_of(v)]++;
+    const std::uint32_t p = fill[key_of(v)]++;
     order_[p] = std::uint32_t(m);
     order_y[p] = int((v % nxy) / nx);
     order_normaliser_[p] = n;
   }
-  column_at_.assign(start.size() - 1, kNoColumn);
-  for (std::size_t c = 0; c + 1 < start.size(); ++c) {
-    if (start[c + 1] == start[c]) continue;
-    column_at_[c] = std::uint32_t(columns_.size());
-    columns_.push_back(Column{int(c % nz), int(c / nz), start[c], start[c + 1]});
+  strip_columns_.assign(std::size_t(strips_) + 1, 0);
+  for (std::size_t key = 0; key + 1 < start.size(); ++key) {
+    if (start[key + 1] == start[key]) continue;
+    const std::size_t strip = key / (std::size_t(nz) * sx);
+    columns_.push_back(Column{int((key / sx) % nz), int(strip * sx + key % sx), start[key], start[key + 1]});
+    strip_columns_[strip + 1] = std::uint32_t(columns_.size());
   }
-  // 16 voxel x per strip (~1.6 mm on the paper's camera), fewer on small grids so that there are
-  // at least 8 strips to share out; fixed by the grid, so the sums' order is too.
-  strip_x_ = std::clamp(int(nx) / 8, 1, 16);
+  for (int s = 1; s <= strips_; ++s) strip_columns_[std::size_t(s)] = std::max(strip_columns_[std::size_t(s)], strip_columns_[std::size_t(s) - 1]);
   // Per column, band by band, the voxels whose rows reach the band and their segments there:
   // counted, then written, both in parallel over columns.
   const int height = op.image_height();
   bands_ = (height + kBandRows - 1) / kBandRows;
+  std::vector<int> first_band(columns_.size()), last_band(columns_.size());
   // Calls entry(b, p, first segment, count) for each voxel with segments in band b, bands in order.
-  auto walk = [&](const Column& col, std::vector<std::size_t>& cursor, auto&& entry) {
+  auto walk = [&](std::size_t c, std::vector<std::size_t>& cursor, auto&& entry) {
+    const Column& col = columns_[c];
     const SliceTables& t = op.slice(col.z);
     cursor.resize(col.end - col.begin);
     for (std::uint32_t p = col.begin; p < col.end; ++p) {
       cursor[p - col.begin] = t.y_runs[std::size_t(order_y[p])].segment_begin;
     }
-    for (int b = col.first_band; b <= col.last_band; ++b) {
+    for (int b = first_band[c]; b <= last_band[c]; ++b) {
       const int r0 = b * kBandRows, r1 = std::min(height, r0 + kBandRows);
       for (std::uint32_t p = col.begin; p < col.end; ++p) {
         const WeightRun& run = t.y_runs[std::size_t(order_y[p])];
@@ -605,66 +647,111 @@ ActiveSet::ActiveSet(const WeightingOperator& op, std::vector<std::uint32_t> vox
       }
     }
   };
+  // Entries per (column, band): block_offset[c] + band - first_band[c].
   std::vector<std::size_t> block_offset(columns_.size() + 1, 0);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, columns_.size(), 64),
                     [&](const tbb::blocked_range<std::size_t>& range) {
     for (std::size_t c = range.begin(); c != range.end(); ++c) {
-      Column& col = columns_[c];
+      const Column& col = columns_[c];
       const SliceTables& t = op.slice(col.z);
-      col.first_band = height;
+      first_band[c] = height;
+      last_band[c] = -1;
       for (std::uint32_t p = col.begin; p < col.end; ++p) {
         const WeightRun& run = t.y_runs[std::size_t(order_y[p])];
-        col.first_band = std::min(col.first_band, run.first / kBandRows);
-        col.last_band = std::max(col.last_band, run.last / kBandRows);
+        first_band[c] = std::min(first_band[c], run.first / kBandRows);
+        last_band[c] = std::max(last_band[c], run.last / kBandRows);
       }
-      block_offset[c + 1] = std::size_t(col.last_band - col.first_band + 1);
+      block_offset[c + 1] = std::size_t(last_band[c] - first_band[c] + 1);
     }
   });
-  for (std::size_t c = 0; c < columns_.size(); ++c) {
-    block_offset[c + 1] += block_offset[c];
-    columns_[c].block = block_offset[c];
-  }
-  blocks_.assign(block_offset.back(), Block{});
+  for (std::size_t c = 0; c < columns_.size(); ++c) block_offset[c + 1] += block_offset[c];
+  std::vector<std::uint32_t> block_entries(block_offset.back(), 0);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, columns_.size(), 64),
                     [&](const tbb::blocked_range<std::size_t>& range) {
     std::vector<std::size_t> cursor;  // per voxel of the column: its first segment not yet behind
     for (std::size_t c = range.begin(); c != range.end(); ++c) {
-      const Column& col = columns_[c];
-      walk(col, cursor, [&](int b, std::uint32_t, std::size_t, std::size_t) {
-        ++blocks_[col.block + std::size_t(b - col.first_band)].end;  // a count for now
+      walk(c, cursor, [&](int b, std::uint32_t, std::size_t, std::size_t) {
+        ++block_entries[block_offset[c] + std::size_t(b - first_band[c])];
       });
     }
   });
-  // The entries in the order the kernels read them: band by band, then strip by strip, depth by
-  // depth, x by x (for_each_column), so both kernels stream through them.
-  std::size_t next = 0;
-  for (int b = 0; b < bands_; ++b) {
-    for (int x0 = 0; x0 < int(nx); x0 += strip_x_) {
-      for (std::uint32_t z = 0; z < nz; ++z) {
-        for (int x = x0; x < std::min(int(nx), x0 + strip_x_); ++x) {
-          const std::uint32_t c = column_at_[std::size_t(x) * nz + z];
-          if (c == kNoColumn || b < columns_[c].first_band || b > columns_[c].last_band) continue;
-          Block& blk = blocks_[columns_[c].block + std::size_t(b - columns_[c].first_band)];
-          blk.begin = next;
-          next += blk.end;
-          blk.end = next;
+  // The visits in the order the kernels read them: band by band, then strip by strip, depth by
+  // depth, x by x (columns_'s order), each with its entries; counted, then laid out.
+  auto for_each_visit = [&](auto&& f) {
+    for (int b = 0; b < bands_; ++b) {
+      for (int s = 0; s < strips_; ++s) {
+        for (std::uint32_t c = strip_columns_[std::size_t(s)]; c < strip_columns_[std::size_t(s) + 1]; ++c) {
+          if (b < first_band[c] || b > last_band[c]) continue;
+          const std::size_t block = block_offset[c] + std::size_t(b - first_band[c]);
+          if (block_entries[block] > 0) f(b, s, c, block);
         }
       }
     }
-  }
-  entries_.resize(next);
+  };
+  visit_start_.assign(std::size_t(bands_) * std::size_t(strips_) + 1, 0);
+  for_each_visit([&](int b, int s, std::uint32_t, std::size_t) { ++visit_start_[std::size_t(b) * std::size_t(strips_) + std::size_t(s) + 1]; });
+  for (std::size_t i = 1; i < visit_start_.size(); ++i) visit_start_[i] += visit_start_[i - 1];
+  visits_.resize(visit_start_.back());
+  std::vector<std::size_t> block_visit(block_offset.back());
+  std::size_t next_visit = 0, next_entry = 0;
+  for_each_visit([&](int, int, std::uint32_t c, std::size_t block) {
+    if (next_entry + block_entries[block] > std::numeric_limits<std::uint32_t>::max()) {
+      throw InputError("reconstruction: more than 2^32 voxel-band entries; use a coarser volume grid");
+    }
+    Visit& v = visits_[next_visit];
+    v.column = c;
+    v.entry_begin = std::uint32_t(next_entry);
+    next_entry += block_entries[block];
+    v.entry_end = std::uint32_t(next_entry);
+    v.rows = {};
+    block_visit[block] = next_visit++;
+  });
+  entries_.resize(next_entry);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, columns_.size(), 64),
                     [&](const tbb::blocked_range<std::size_t>& range) {
-    std::vector<std::size_t> cursor, fill;
+    std::vector<std::size_t> cursor;
     for (std::size_t c = range.begin(); c != range.end(); ++c) {
-      const Column& col = columns_[c];
-      fill.clear();
-      for (int b = col.first_band; b <= col.last_band; ++b) fill.push_back(blocks_[col.block + std::size_t(b - col.first_band)].begin);
-      walk(col, cursor, [&](int b, std::uint32_t p, std::size_t k, std::size_t n) {
-        entries_[fill[std::size_t(b - col.first_band)]++] = BandEntry{p, std::uint32_t(k), std::uint32_t(n)};
+      const SliceTables& t = op.slice(columns_[c].z);
+      walk(c, cursor, [&](int b, std::uint32_t p, std::size_t k, std::size_t n) {
+        const std::size_t block = block_offset[c] + std::size_t(b - first_band[c]);
+        Visit& v = visits_[block_visit[block]];
+        entries_[v.entry_end - block_entries[block]--] = BandEntry{p, std::uint32_t(k), std::uint32_t(n)};  // in y order
+        const int r0 = b * kBandRows, r1 = std::min(height, r0 + kBandRows);
+        for (const Segment& seg : std::span(t.y_segments.data() + k, n)) {
+          for (int r = std::max(r0, seg.first); r < std::min(r1, seg.first + seg.length); ++r) {
+            v.rows[std::size_t((r - r0) >> 6)] |= std::uint64_t(1) << ((r - r0) & 63);
+          }
+        }
       });
     }
   });
+  // The work of each band and strip, estimated as the kernels' quad operations (rows reached
+  // times x quads) plus a share per entry, to hand out the costliest first.
+  std::vector<double> band_cost(std::size_t(bands_), 0.0), strip_cost(std::size_t(strips_), 0.0);
+  for (int b = 0; b < bands_; ++b) {
+    for (int s = 0; s < strips_; ++s) {
+      const std::size_t slot = std::size_t(b) * std::size_t(strips_) + std::size_t(s);
+      for (std::size_t i = visit_start_[slot]; i < visit_start_[slot + 1]; ++i) {
+        const Visit& v = visits_[i];
+        const Column& col = columns_[v.column];
+        const SliceTables& t = op.slice(col.z);
+        int rows = 0;
+        for (std::uint64_t word : v.rows) rows += std::popcount(word);
+        const double cost = double(rows) * double(t.x_quad_start[std::size_t(col.x) + 1] - t.x_quad_start[std::size_t(col.x)] + 2) +
+                            8.0 * double(v.entry_end - v.entry_begin);
+        band_cost[std::size_t(b)] += cost;
+        strip_cost[std::size_t(s)] += cost;
+      }
+    }
+  }
+  auto costliest_first = [](const std::vector<double>& cost) {
+    std::vector<int> order(cost.size());
+    std::iota(order.begin(), order.end(), 0);
+    std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return cost[std::size_t(a)] > cost[std::size_t(b)]; });
+    return order;
+  };
+  band_order_ = costliest_first(band_cost);
+  strip_order_ = costliest_first(strip_cost);
 }
 
 ActiveSet ActiveSet::all(const WeightingOperator& op) {
@@ -672,29 +759,13 @@ ActiveSet ActiveSet::all(const WeightingOperator& op) {
   for (std::size_t i = 0; i < v.size(); ++i) v[i] = std::uint32_t(i);
   return ActiveSet(op, std::move(v));
 }
-
-template <typename F>
-void ActiveSet::for_each_column(int b, int x0, int x1, int nz, F&& f) const {
-  for (int z = 0; z < nz; ++z) {
-    for (int x = x0; x < x1; ++x) {
-      const std::uint32_t c = column_at_[std::size_t(x) * std::size_t(nz) + std::size_t(z)];
-      if (c == kNoColumn) continue;
-      const Column& col = columns_[c];
-      if (b < col.first_band || b > col.last_band) continue;
-      const Block& blk = blocks_[col.block + std::size_t(b - col.first_band)];
-      if (blk.begin < blk.end) f(col, blk.begin, blk.end);
-    }
-  }
-}
-
 void ActiveSet::project(const WeightingOperator& op, std::span<const float> values, std::span<float> image,
                         Workspace* workspace, const BandDone& band_done) const {
   const std::size_t width = std::size_t(op.image_width());
   const int height = op.image_height();
-  const int nx = op.grid().shape[0], nz = op.grid().shape[2];
   Workspace local;
   Workspace& ws = workspace ? *workspace : local;
-  // E / n once per voxel, in column order.
+  // E / n once per voxel, in visiting order.
   auto& scaled = ws.scaled;
   scaled.resize(order_.size());
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, order_.size(), 1 << 14),
@@ -703,32 +774,30 @@ void ActiveSet::project(const WeightingOperator& op, std::span<const float> valu
   });
   // Each band owns its sensor rows and adds its columns in a fixed order: no atomics, and the
   // same sums whatever the thread count.
-  tbb::parallel_for(0, bands_, [&](int b) {
+  run_costliest_first(band_order_, [&](int b) {
     const int r0 = b * kBandRows, r1 = std::min(height, r0 + kBandRows);
     std::fill(image.begin() + std::ptrdiff_t(std::size_t(r0) * width), image.begin() + std::ptrdiff_t(std::size_t(r1) * width), 0.f);
     std::array<float, kBandRows> column_sum{};  // G(row) of one column over the band's rows
-    for (int x0 = 0; x0 < nx; x0 += strip_x_) {
-      for_each_column(b, x0, std::min(nx, x0 + strip_x_), nz, [&](const Column& col, std::size_t k0, std::size_t k1) {
-        const SliceTables& t = op.slice(col.z);
-        // Stage 1: G(row) = Σ_y Ay_y(row) E_y / n_y over the column's voxels that reach the band.
-        int lo = kBandRows, hi = -1;
-        for (std::size_t k = k0; k < k1; ++k) {
-          const BandEntry& entry = entries_[k];
-          const float s = scaled[entry.position];
-          if (s == 0.f) continue;
-          for (const Segment& seg : std::span(t.y_segments.data() + entry.segment_begin, entry.segment_count)) {
-            const int a = std::max(r0, seg.first), e = std::min(r1, seg.first + seg.length);
-            const float* w = t.y_table.data() + seg.offset;
-            for (int r = a; r < e; ++r) column_sum[std::size_t(r - r0)] += s * w[r - seg.first];
-            lo = std::min(lo, a - r0);
-            hi = std::max(hi, e - 1 - r0);
-          }
+    const std::size_t v1 = visit_start_[std::size_t(b + 1) * std::size_t(strips_)];
+    for (std::size_t v = visit_start_[std::size_t(b) * std::size_t(strips_)]; v < v1; ++v) {
+      const Visit& visit = visits_[v];
+      const Column& col = columns_[visit.column];
+      const SliceTables& t = op.slice(col.z);
+      // Stage 1: G(row) = Σ_y Ay_y(row) E_y / n_y over the column's voxels that reach the band.
+      for (std::size_t k = visit.entry_begin; k < visit.entry_end; ++k) {
+        const BandEntry& entry = entries_[k];
+        const float s = scaled[entry.position];
+        if (s == 0.f) continue;
+        for (const Segment& seg : std::span(t.y_segments.data() + entry.segment_begin, entry.segment_count)) {
+          const int a = std::max(r0, seg.first), e = std::min(r1, seg.first + seg.length);
+          const float* w = t.y_table.data() + seg.offset;
+          for (int r = a; r < e; ++r) column_sum[std::size_t(r - r0)] += s * w[r - seg.first];
         }
-        // Stage 2: image(row, ·) += G(row) Ax, once per row the column reaches.
-        const std::size_t q0 = t.x_quad_start[std::size_t(col.x)], q1 = t.x_quad_start[std::size_t(col.x) + 1];
-        add_column(image.data() + std::size_t(r0) * width, width, column_sum.data(), lo, hi,
-                   t.x_quad_first.data() + q0, t.x_quad_weights.data() + kQuad * q0, q1 - q0);
-      });
+      }
+      // Stage 2: image(row, ·) += G(row) Ax, once per row the column reaches.
+      const std::size_t q0 = t.x_quad_start[std::size_t(col.x)], q1 = t.x_quad_start[std::size_t(col.x) + 1];
+      add_column(image.data() + std::size_t(r0) * width, width, column_sum.data(), visit.rows.data(), kRowWords,
+                 t.x_quad_first.data() + q0, t.x_quad_weights.data() + kQuad * q0, q1 - q0);
     }
     const float* white = op.white().pixels.data();
     for (std::size_t i = std::size_t(r0) * width; i < std::size_t(r1) * width; ++i) image[i] *= white[i];
@@ -766,54 +835,33 @@ void ActiveSet::back_project_images(const WeightingOperator& op, const std::arra
                                     const std::array<float*, N>& values, Workspace& workspace) const {
   const std::size_t width = std::size_t(op.image_width());
   const int height = op.image_height();
-  const int nx = op.grid().shape[0], nz = op.grid().shape[2];
   for (float* v : values) std::fill(v, v + voxels_.size(), 0.f);  // voxels that see no pixel
-  const int strips = (nx + strip_x_ - 1) / strip_x_;
-  // Per image and voxel in column order; each strip zeroes and sums its own range.
+  // Per image and voxel in visiting order; each strip zeroes and sums its own range.
   auto& sums = workspace.sums;
   sums.resize(N * order_.size());
-  // Each strip owns its voxels (x-major: a contiguous range of order_), so their sums need no
-  // atomics, and every voxel adds its bands in order whatever the thread count.
-  tbb::parallel_for(0, strips, [&](int strip) {
-    const int x0 = strip * strip_x_, x1 = std::min(nx, x0 + strip_x_);
-    std::uint32_t p0 = std::uint32_t(order_.size()), p1 = 0;
-    int first_band = bands_, last_band = -1;
-    for (std::size_t i = std::size_t(x0) * std::size_t(nz); i < std::size_t(x1) * std::size_t(nz); ++i) {
-      if (column_at_[i] == kNoColumn) continue;
-      const Column& col = columns_[column_at_[i]];
-      p0 = std::min(p0, col.begin);
-      p1 = std::max(p1, col.end);
-      first_band = std::min(first_band, col.first_band);
-      last_band = std::max(last_band, col.last_band);
-    }
-    if (p1 <= p0) return;
+  // Each strip owns its voxels (a contiguous range of order_), so their sums need no atomics,
+  // and every voxel adds its bands in order whatever the thread count.
+  run_costliest_first(strip_order_, [&](int strip) {
+    const std::uint32_t c0 = strip_columns_[std::size_t(strip)], c1 = strip_columns_[std::size_t(strip) + 1];
+    if (c0 == c1) return;
+    const std::uint32_t p0 = columns_[c0].begin, p1 = columns_[c1 - 1].end;
     for (std::size_t i = 0; i < N; ++i) std::fill_n(sums.begin() + std::ptrdiff_t(i * order_.size() + p0), p1 - p0, 0.0);
     std::array<std::array<float, kBandRows>, N> row_sum{};  // B(row) of one column over the band's rows
-    // Rows reached by the column being summed carry its stamp (no clearing between columns).
-    std::array<std::size_t, kBandRows> reached{};
-    std::size_t stamp = 0;
-    for (int b = first_band; b <= last_band; ++b) {
+    for (int b = 0; b < bands_; ++b) {
       const int r0 = b * kBandRows, r1 = std::min(height, r0 + kBandRows);
-      for_each_column(b, x0, x1, nz, [&](const Column& col, std::size_t k0, std::size_t k1) {
+      const std::size_t slot = std::size_t(b) * std::size_t(strips_) + std::size_t(strip);
+      for (std::size_t v = visit_start_[slot]; v < visit_start_[slot + 1]; ++v) {
+        const Visit& visit = visits_[v];
+        const Column& col = columns_[visit.column];
         const SliceTables& t = op.slice(col.z);
-        ++stamp;
-        int lo = kBandRows, hi = -1;
-        for (std::size_t k = k0; k < k1; ++k) {
-          for (const Segment& seg : std::span(t.y_segments.data() + entries_[k].segment_begin, entries_[k].segment_count)) {
-            const int a = std::max(r0, seg.first), e = std::min(r1, seg.first + seg.length);
-            for (int r = a; r < e; ++r) reached[std::size_t(r - r0)] = stamp;
-            lo = std::min(lo, a - r0);
-            hi = std::max(hi, e - 1 - r0);
-          }
-        }
         // Stage 1: B(row) = Σ_col Ax(col) r(row, col), once per reached row.
         const std::size_t q0 = t.x_quad_start[std::size_t(col.x)], q1 = t.x_quad_start[std::size_t(col.x) + 1];
         for (std::size_t i = 0; i < N; ++i) {
-          dot_column(images[i] + std::size_t(r0) * width, width, reached.data(), stamp, lo, hi,
+          dot_column(images[i] + std::size_t(r0) * width, width, visit.rows.data(), kRowWords,
                      t.x_quad_first.data() + q0, t.x_quad_weights.data() + kQuad * q0, q1 - q0, row_sum[i].data());
         }
         // Stage 2: per voxel Σ_row Ay(row) B(row) over the band's rows.
-        for (std::size_t k = k0; k < k1; ++k) {
+        for (std::size_t k = visit.entry_begin; k < visit.entry_end; ++k) {
           const BandEntry& entry = entries_[k];
           std::array<double, N> s{};
           for (const Segment& seg : std::span(t.y_segments.data() + entry.segment_begin, entry.segment_count)) {
@@ -825,7 +873,7 @@ void ActiveSet::back_project_images(const WeightingOperator& op, const std::arra
           }
           for (std::size_t i = 0; i < N; ++i) sums[i * order_.size() + entry.position] += s[i];
         }
-      });
+      }
     }
     for (std::size_t i = 0; i < N; ++i) {
       for (std::uint32_t p = p0; p < p1; ++p) {
