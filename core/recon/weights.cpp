@@ -99,26 +99,30 @@ double sample_position(double aperture, int samples, int k) {
 // pixels behind each lens on the paper's camera beyond 5 mm from focus).
 constexpr int kQuad = 4;
 
-// The kernels' form of a slice's x weights: every segment cut into quads of kQuad pixels. A quad
-// past the end of the row is shifted left and its lanes outside its own pixels weigh 0, so the
-// kernels never touch a pixel outside the row. Segments are at least kGap + 1 > kQuad - 1 pixels
-// apart, so the quads of different segments never overlap.
-void build_quads(SliceTables& t, int width) {
-  t.x_quad_start.assign(t.x_runs.size() + 1, 0);
-  for (std::size_t x = 0; x < t.x_runs.size(); ++x) {
-    const WeightRun& run = t.x_runs[x];
+// The kernels' form of one axis's weights: every segment cut into quads of kQuad pixels, voxel
+// v owning quads [start[v], start[v + 1]). Along x a quad past the end of the row is shifted left
+// and its lanes outside its own pixels weigh 0, so the kernels never touch a pixel outside the
+// row (`shift_width`; 0 along y, whose quads weigh rows of the kernels' padded scratch arrays).
+// Segments are at least kGap + 1 > kQuad - 1 pixels apart, so the quads of different segments
+// never overlap.
+void build_quads(const std::vector<WeightRun>& runs, const std::vector<Segment>& segments,
+                 const std::vector<float>& table, int shift_width, std::vector<std::size_t>& start,
+                 std::vector<int>& quad_first, std::vector<float>& quad_weights) {
+  start.assign(runs.size() + 1, 0);
+  for (std::size_t v = 0; v < runs.size(); ++v) {
+    const WeightRun& run = runs[v];
     for (std::size_t k = run.segment_begin; k < run.segment_end; ++k) {
-      const Segment& s = t.x_segments[k];
+      const Segment& s = segments[k];
       for (int c = 0; c < s.length; c += kQuad) {
         const int own_first = s.first + c, own_end = s.first + std::min(c + kQuad, s.length);
-        const int first = std::min(own_first, width - kQuad);
-        t.x_quad_first.push_back(first);
+        const int first = shift_width > 0 ? std::min(own_first, shift_width - kQuad) : own_first;
+        quad_first.push_back(first);
         for (int p = first; p < first + kQuad; ++p) {
-          t.x_quad_weights.push_back(p >= own_first && p < own_end ? t.x_table[s.offset + std::size_t(p - s.first)] : 0.f);
+          quad_weights.push_back(p >= own_first && p < own_end ? table[s.offset + std::size_t(p - s.first)] : 0.f);
         }
       }
     }
-    t.x_quad_start[x + 1] = t.x_quad_first.size();
+    start[v + 1] = quad_first.size();
   }
 }
 
@@ -130,6 +134,7 @@ void build_quads(SliceTables& t, int width) {
 // they give the same bits.
 using Lanes4 = float __attribute__((vector_size(16)));
 using Lanes8 = float __attribute__((vector_size(32)));
+using Doubles4 = double __attribute__((vector_size(32)));
 
 __attribute__((target("avx2"), always_inline)) inline Lanes8 load_pair(const float* lo, const float* hi) {
   Lanes4 a, b;
@@ -475,7 +480,8 @@ WeightingOperator::WeightingOperator(const optics::CameraModel& camera,
     };
     build(nx, 0, geo_.lens_x, width_, column_of, t.x_runs, t.x_segments, t.x_table);
     build(ny, 1, geo_.lens_y, height_, row_of, t.y_runs, t.y_segments, t.y_table);
-    build_quads(t, width_);
+    build_quads(t.x_runs, t.x_segments, t.x_table, width_, t.x_quad_start, t.x_quad_first, t.x_quad_weights);
+    build_quads(t.y_runs, t.y_segments, t.y_table, 0, t.y_quad_start, t.y_quad_first, t.y_quad_weights);
   });
 
   // Eq 13's denominators n_j = Σ_rows Ay Σ_cols Ax white, in two separable stages per slice.
@@ -632,17 +638,17 @@ ActiveSet::ActiveSet(const WeightingOperator& op, std::vector<std::uint32_t> vox
     const SliceTables& t = op.slice(col.z);
     cursor.resize(col.end - col.begin);
     for (std::uint32_t p = col.begin; p < col.end; ++p) {
-      cursor[p - col.begin] = t.y_runs[std::size_t(order_y[p])].segment_begin;
+      cursor[p - col.begin] = t.y_quad_start[std::size_t(order_y[p])];
     }
     for (int b = first_band[c]; b <= last_band[c]; ++b) {
       const int r0 = b * kBandRows, r1 = std::min(height, r0 + kBandRows);
       for (std::uint32_t p = col.begin; p < col.end; ++p) {
-        const WeightRun& run = t.y_runs[std::size_t(order_y[p])];
+        const std::size_t quad_end = t.y_quad_start[std::size_t(order_y[p]) + 1];
         std::size_t& k = cursor[p - col.begin];
-        // A segment may cross into the next band: it stays the next band's first.
-        while (k < run.segment_end && t.y_segments[k].first + t.y_segments[k].length <= r0) ++k;
+        // A quad may cross into the next band: it stays the next band's first.
+        while (k < quad_end && t.y_quad_first[k] + kQuad <= r0) ++k;
         std::size_t e = k;
-        while (e < run.segment_end && t.y_segments[e].first < r1) ++e;
+        while (e < quad_end && t.y_quad_first[e] < r1) ++e;
         if (e > k) entry(b, p, k, e - k);
       }
     }
@@ -717,9 +723,12 @@ ActiveSet::ActiveSet(const WeightingOperator& op, std::vector<std::uint32_t> vox
         Visit& v = visits_[block_visit[block]];
         entries_[v.entry_end - block_entries[block]--] = BandEntry{p, std::uint32_t(k), std::uint32_t(n)};  // in y order
         const int r0 = b * kBandRows, r1 = std::min(height, r0 + kBandRows);
-        for (const Segment& seg : std::span(t.y_segments.data() + k, n)) {
-          for (int r = std::max(r0, seg.first); r < std::min(r1, seg.first + seg.length); ++r) {
-            v.rows[std::size_t((r - r0) >> 6)] |= std::uint64_t(1) << ((r - r0) & 63);
+        for (std::size_t q = k; q < k + n; ++q) {
+          for (int j = 0; j < kQuad; ++j) {
+            const int r = t.y_quad_first[q] + j;
+            if (r >= r0 && r < r1 && t.y_quad_weights[kQuad * q + std::size_t(j)] != 0.f) {
+              v.rows[std::size_t((r - r0) >> 6)] |= std::uint64_t(1) << ((r - r0) & 63);
+            }
           }
         }
       });
@@ -777,27 +786,39 @@ void ActiveSet::project(const WeightingOperator& op, std::span<const float> valu
   run_costliest_first(band_order_, [&](int b) {
     const int r0 = b * kBandRows, r1 = std::min(height, r0 + kBandRows);
     std::fill(image.begin() + std::ptrdiff_t(std::size_t(r0) * width), image.begin() + std::ptrdiff_t(std::size_t(r1) * width), 0.f);
-    std::array<float, kBandRows> column_sum{};  // G(row) of one column over the band's rows
+    // G(row) of one column over the band's rows, with kQuad rows of margin on either side for the
+    // lanes of quads that straddle the band's edges (those belong to the neighbouring band).
+    std::array<float, kQuad + kBandRows + kQuad> padded_sum{};
+    float* const column_sum = padded_sum.data() + kQuad;
     const std::size_t v1 = visit_start_[std::size_t(b + 1) * std::size_t(strips_)];
     for (std::size_t v = visit_start_[std::size_t(b) * std::size_t(strips_)]; v < v1; ++v) {
       const Visit& visit = visits_[v];
       const Column& col = columns_[visit.column];
       const SliceTables& t = op.slice(col.z);
-      // Stage 1: G(row) = Σ_y Ay_y(row) E_y / n_y over the column's voxels that reach the band.
+      // Stage 1: G(row) = Σ_y Ay_y(row) E_y / n_y over the column's voxels that reach the band,
+      // one quad of rows at a time; a quad's padded lanes add s · 0 = +0, which leaves every sum
+      // as it was, so each row gets the same float additions in the same order as row by row.
       for (std::size_t k = visit.entry_begin; k < visit.entry_end; ++k) {
         const BandEntry& entry = entries_[k];
         const float s = scaled[entry.position];
         if (s == 0.f) continue;
-        for (const Segment& seg : std::span(t.y_segments.data() + entry.segment_begin, entry.segment_count)) {
-          const int a = std::max(r0, seg.first), e = std::min(r1, seg.first + seg.length);
-          const float* w = t.y_table.data() + seg.offset;
-          for (int r = a; r < e; ++r) column_sum[std::size_t(r - r0)] += s * w[r - seg.first];
+        const int* first = t.y_quad_first.data() + entry.quad_begin;
+        const float* w = t.y_quad_weights.data() + kQuad * std::size_t(entry.quad_begin);
+        for (std::uint32_t q = 0; q < entry.quad_count; ++q) {
+          float* g = column_sum + (first[q] - r0);
+          Lanes4 sum, wq;
+          __builtin_memcpy(&sum, g, sizeof sum);
+          __builtin_memcpy(&wq, w + kQuad * q, sizeof wq);
+          sum += s * wq;
+          __builtin_memcpy(g, &sum, sizeof sum);
         }
       }
-      // Stage 2: image(row, ·) += G(row) Ax, once per row the column reaches.
+      // Stage 2: image(row, ·) += G(row) Ax, once per row the column reaches (resets those rows).
       const std::size_t q0 = t.x_quad_start[std::size_t(col.x)], q1 = t.x_quad_start[std::size_t(col.x) + 1];
-      add_column(image.data() + std::size_t(r0) * width, width, column_sum.data(), visit.rows.data(), kRowWords,
+      add_column(image.data() + std::size_t(r0) * width, width, column_sum, visit.rows.data(), kRowWords,
                  t.x_quad_first.data() + q0, t.x_quad_weights.data() + kQuad * q0, q1 - q0);
+      std::fill_n(padded_sum.begin(), kQuad, 0.f);
+      std::fill_n(padded_sum.end() - kQuad, kQuad, 0.f);
     }
     const float* white = op.white().pixels.data();
     for (std::size_t i = std::size_t(r0) * width; i < std::size_t(r1) * width; ++i) image[i] *= white[i];
@@ -834,7 +855,6 @@ template <std::size_t N>
 void ActiveSet::back_project_images(const WeightingOperator& op, const std::array<const float*, N>& images,
                                     const std::array<float*, N>& values, Workspace& workspace) const {
   const std::size_t width = std::size_t(op.image_width());
-  const int height = op.image_height();
   for (float* v : values) std::fill(v, v + voxels_.size(), 0.f);  // voxels that see no pixel
   // Per image and voxel in visiting order; each strip zeroes and sums its own range.
   auto& sums = workspace.sums;
@@ -846,9 +866,15 @@ void ActiveSet::back_project_images(const WeightingOperator& op, const std::arra
     if (c0 == c1) return;
     const std::uint32_t p0 = columns_[c0].begin, p1 = columns_[c1 - 1].end;
     for (std::size_t i = 0; i < N; ++i) std::fill_n(sums.begin() + std::ptrdiff_t(i * order_.size() + p0), p1 - p0, 0.0);
-    std::array<std::array<float, kBandRows>, N> row_sum{};  // B(row) of one column over the band's rows
+    // B(row) of one column over the band's rows, with kQuad rows of margin on either side, all
+    // 0 except the rows the column reaches: the lanes of y quads outside the band, and their
+    // zero lanes on rows the column does not reach, then add 0 · 0 (a stale value from another
+    // column would give 0 too if finite, but not if a row sum overflowed).
+    std::array<std::array<float, kQuad + kBandRows + kQuad>, N> padded_sum;
+    std::array<float*, N> row_sum;
+    for (std::size_t i = 0; i < N; ++i) row_sum[i] = padded_sum[i].data() + kQuad;
     for (int b = 0; b < bands_; ++b) {
-      const int r0 = b * kBandRows, r1 = std::min(height, r0 + kBandRows);
+      const int r0 = b * kBandRows;
       const std::size_t slot = std::size_t(b) * std::size_t(strips_) + std::size_t(strip);
       for (std::size_t v = visit_start_[slot]; v < visit_start_[slot + 1]; ++v) {
         const Visit& visit = visits_[v];
@@ -857,18 +883,27 @@ void ActiveSet::back_project_images(const WeightingOperator& op, const std::arra
         // Stage 1: B(row) = Σ_col Ax(col) r(row, col), once per reached row.
         const std::size_t q0 = t.x_quad_start[std::size_t(col.x)], q1 = t.x_quad_start[std::size_t(col.x) + 1];
         for (std::size_t i = 0; i < N; ++i) {
+          padded_sum[i].fill(0.f);
           dot_column(images[i] + std::size_t(r0) * width, width, visit.rows.data(), kRowWords,
-                     t.x_quad_first.data() + q0, t.x_quad_weights.data() + kQuad * q0, q1 - q0, row_sum[i].data());
+                     t.x_quad_first.data() + q0, t.x_quad_weights.data() + kQuad * q0, q1 - q0, row_sum[i]);
         }
-        // Stage 2: per voxel Σ_row Ay(row) B(row) over the band's rows.
+        // Stage 2: per voxel Σ_row Ay(row) B(row) over the band's rows, one quad of rows at a
+        // time, lane after lane: the zero lanes add +0, so the sums are those row by row.
         for (std::size_t k = visit.entry_begin; k < visit.entry_end; ++k) {
           const BandEntry& entry = entries_[k];
+          const int* first = t.y_quad_first.data() + entry.quad_begin;
+          const float* w = t.y_quad_weights.data() + kQuad * std::size_t(entry.quad_begin);
           std::array<double, N> s{};
-          for (const Segment& seg : std::span(t.y_segments.data() + entry.segment_begin, entry.segment_count)) {
-            const int a = std::max(r0, seg.first), e = std::min(r1, seg.first + seg.length);
-            const float* w = t.y_table.data() + seg.offset;
-            for (int r = a; r < e; ++r) {
-              for (std::size_t i = 0; i < N; ++i) s[i] += double(w[r - seg.first]) * row_sum[i][std::size_t(r - r0)];
+          for (std::uint32_t q = 0; q < entry.quad_count; ++q) {
+            Lanes4 wq;
+            __builtin_memcpy(&wq, w + kQuad * q, sizeof wq);
+            const Doubles4 wd = __builtin_convertvector(wq, Doubles4);
+            for (std::size_t i = 0; i < N; ++i) {
+              Lanes4 bq;
+              __builtin_memcpy(&bq, row_sum[i] + (first[q] - r0), sizeof bq);
+              // Products of floats are exact in double: only the order of the adds matters.
+              const Doubles4 p = wd * __builtin_convertvector(bq, Doubles4);
+              s[i] = (((s[i] + p[0]) + p[1]) + p[2]) + p[3];
             }
           }
           for (std::size_t i = 0; i < N; ++i) sums[i * order_.size() + entry.position] += s[i];

@@ -72,6 +72,12 @@ struct SliceTables {
   std::vector<std::size_t> x_quad_start;
   std::vector<int> x_quad_first;
   std::vector<float> x_quad_weights;  // 4 per quad
+  // The y weights as quads of 4 consecutive rows, the same way, for the kernels' y stages
+  // (zero-padded past a segment's end, never shifted: they weigh rows of a scratch array, and
+  // rows past the sensor's last weigh 0).
+  std::vector<std::size_t> y_quad_start;
+  std::vector<int> y_quad_first;
+  std::vector<float> y_quad_weights;  // 4 per quad
 };
 
 // One voxel's weights along one axis, ready for a kernel.
@@ -211,11 +217,12 @@ class ActiveSet {
     int z = 0, x = 0;
     std::uint32_t begin = 0, end = 0;
   };
-  // One voxel of a column in one band: its y segments there (into its slice's y_segments).
+  // One voxel of a column in one band: its y quads that overlap the band (into its slice's
+  // y_quad_first / y_quad_weights).
   struct BandEntry {  // no initialisers: millions are allocated, then each written once
     std::uint32_t position;  // in order_
-    std::uint32_t segment_begin;
-    std::uint32_t segment_count;
+    std::uint32_t quad_begin;
+    std::uint32_t quad_count;
   };
   // Sensor rows per band. Few bands per voxel keep the per-band bookkeeping small; the pixels a
   // strip of voxel x reaches in one band (~0.6 MB on the paper sensor) stay in L2. Measured on
