@@ -181,6 +181,36 @@ __attribute__((target("avx2"), always_inline)) inline void add_quads_avx2(float*
   }
 }
 
+// The same for two rows at once (each row's float operations exactly as add_quads_avx2's): the
+// quads' positions and weights are loaded once for both.
+__attribute__((target("avx2"), always_inline)) inline void add_quads2_avx2(float* row_a, float* row_b, const int* first,
+                                                                           const float* w, std::size_t n, float a,
+                                                                           float b) {
+  std::size_t k = 0;
+  for (; k + 2 <= n; k += 2) {
+    const int f0 = first[k], f1 = first[k + 1];
+    const Lanes8 wk = load8(w + kQuad * k);
+    const Lanes8 sum_a = load_pair(row_a + f0, row_a + f1) + a * wk;
+    const Lanes8 sum_b = load_pair(row_b + f0, row_b + f1) + b * wk;
+    const Lanes4 lo_a = __builtin_shufflevector(sum_a, sum_a, 0, 1, 2, 3), hi_a = __builtin_shufflevector(sum_a, sum_a, 4, 5, 6, 7);
+    const Lanes4 lo_b = __builtin_shufflevector(sum_b, sum_b, 0, 1, 2, 3), hi_b = __builtin_shufflevector(sum_b, sum_b, 4, 5, 6, 7);
+    __builtin_memcpy(row_a + f1, &hi_a, sizeof hi_a);  // the later quad first, as above
+    __builtin_memcpy(row_a + f0, &lo_a, sizeof lo_a);
+    __builtin_memcpy(row_b + f1, &hi_b, sizeof hi_b);
+    __builtin_memcpy(row_b + f0, &lo_b, sizeof lo_b);
+  }
+  if (k < n) {
+    Lanes4 qa, qb, wk;
+    __builtin_memcpy(&qa, row_a + first[k], sizeof qa);
+    __builtin_memcpy(&qb, row_b + first[k], sizeof qb);
+    __builtin_memcpy(&wk, w + kQuad * k, sizeof wk);
+    qa += a * wk;
+    qb += b * wk;
+    __builtin_memcpy(row_a + first[k], &qa, sizeof qa);
+    __builtin_memcpy(row_b + first[k], &qb, sizeof qb);
+  }
+}
+
 // Σ_k Σ_j w[4 k + j] row[first[k] + j]: the back-projection's inner loop, in two vector
 // accumulators (even and odd quads) so consecutive adds do not wait on each other; a fixed order.
 inline float dot_quads_base(const float* row, const int* first, const float* w, std::size_t n) {
@@ -223,6 +253,33 @@ __attribute__((target("avx2"), always_inline)) inline float dot_quads_avx2(const
   return (lane[0] + lane[1]) + (lane[2] + lane[3]);
 }
 
+// The same for two rows at once, each with dot_quads_avx2's sums in its order.
+__attribute__((target("avx2"), always_inline)) inline void dot_quads2_avx2(const float* row_a, const float* row_b,
+                                                                           const int* first, const float* w,
+                                                                           std::size_t n, float* out_a, float* out_b) {
+  Lanes8 acc_a = {0.f, 0.f, 0.f, 0.f, 0.f, 0.f, 0.f, 0.f}, acc_b = acc_a;
+  std::size_t k = 0;
+  for (; k + 2 <= n; k += 2) {
+    const int f0 = first[k], f1 = first[k + 1];
+    const Lanes8 wk = load8(w + kQuad * k);
+    acc_a += wk * load_pair(row_a + f0, row_a + f1);
+    acc_b += wk * load_pair(row_b + f0, row_b + f1);
+  }
+  Lanes4 even_a = __builtin_shufflevector(acc_a, acc_a, 0, 1, 2, 3), even_b = __builtin_shufflevector(acc_b, acc_b, 0, 1, 2, 3);
+  const Lanes4 odd_a = __builtin_shufflevector(acc_a, acc_a, 4, 5, 6, 7), odd_b = __builtin_shufflevector(acc_b, acc_b, 4, 5, 6, 7);
+  if (k < n) {
+    Lanes4 pa, pb, wk;
+    __builtin_memcpy(&pa, row_a + first[k], sizeof pa);
+    __builtin_memcpy(&pb, row_b + first[k], sizeof pb);
+    __builtin_memcpy(&wk, w + kQuad * k, sizeof wk);
+    even_a += wk * pa;
+    even_b += wk * pb;
+  }
+  const Lanes4 lane_a = even_a + odd_a, lane_b = even_b + odd_b;
+  *out_a = (lane_a[0] + lane_a[1]) + (lane_a[2] + lane_a[3]);
+  *out_b = (lane_b[0] + lane_b[1]) + (lane_b[2] + lane_b[3]);
+}
+
 // The dispatched entry points: one call per voxel column and band (not per row), so the row
 // loop runs inside the chosen build too.
 //
@@ -239,15 +296,27 @@ __attribute__((target("default"))) void add_column(float* band, std::size_t widt
     }
   }
 }
+// The AVX2 build takes the rows two at a time.
 __attribute__((target("avx2"))) void add_column(float* band, std::size_t width, float* g, const std::uint64_t* rows,
                                                 int words, const int* first, const float* w, std::size_t n) {
+  int held = -1;  // a row waiting for a partner
   for (int i = 0; i < words; ++i) {
     for (std::uint64_t m = rows[i]; m != 0; m &= m - 1) {
       const int r = 64 * i + __builtin_ctzll(m);
       if (g[r] == 0.f) continue;
-      add_quads_avx2(band + std::size_t(r) * width, first, w, n, g[r]);
+      if (held < 0) {
+        held = r;
+        continue;
+      }
+      add_quads2_avx2(band + std::size_t(held) * width, band + std::size_t(r) * width, first, w, n, g[held], g[r]);
+      g[held] = 0.f;
       g[r] = 0.f;
+      held = -1;
     }
+  }
+  if (held >= 0) {
+    add_quads_avx2(band + std::size_t(held) * width, first, w, n, g[held]);
+    g[held] = 0.f;
   }
 }
 
@@ -262,15 +331,23 @@ __attribute__((target("default"))) void dot_column(const float* band, std::size_
     }
   }
 }
+// The AVX2 build takes the rows two at a time.
 __attribute__((target("avx2"))) void dot_column(const float* band, std::size_t width, const std::uint64_t* rows,
                                                 int words, const int* first, const float* w, std::size_t n,
                                                 float* out) {
+  int held = -1;  // a row waiting for a partner
   for (int i = 0; i < words; ++i) {
     for (std::uint64_t m = rows[i]; m != 0; m &= m - 1) {
       const int r = 64 * i + __builtin_ctzll(m);
-      out[r] = dot_quads_avx2(band + std::size_t(r) * width, first, w, n);
+      if (held < 0) {
+        held = r;
+        continue;
+      }
+      dot_quads2_avx2(band + std::size_t(held) * width, band + std::size_t(r) * width, first, w, n, out + held, out + r);
+      held = -1;
     }
   }
+  if (held >= 0) out[held] = dot_quads_avx2(band + std::size_t(held) * width, first, w, n);
 }
 
 // One row against one voxel column's quads (the eq 13 normalisers).
@@ -279,6 +356,19 @@ __attribute__((target("default"))) float dot_quads(const float* row, const int* 
 }
 __attribute__((target("avx2"))) float dot_quads(const float* row, const int* first, const float* w, std::size_t n) {
   return dot_quads_avx2(row, first, w, n);
+}
+
+// image[i] *= white[i] over a band, 4 pixels per vector (-O2 leaves the plain loop scalar).
+void white_band(float* image, const float* white, std::size_t n) {
+  std::size_t i = 0;
+  for (; i + kQuad <= n; i += kQuad) {
+    Lanes4 p, w;
+    __builtin_memcpy(&p, image + i, sizeof p);
+    __builtin_memcpy(&w, white + i, sizeof w);
+    p *= w;
+    __builtin_memcpy(image + i, &p, sizeof p);
+  }
+  for (; i < n; ++i) image[i] *= white[i];
 }
 
 // Runs f(item) for every item on the arena's threads, each thread taking the next item of the
@@ -821,7 +911,7 @@ void ActiveSet::project(const WeightingOperator& op, std::span<const float> valu
       std::fill_n(padded_sum.end() - kQuad, kQuad, 0.f);
     }
     const float* white = op.white().pixels.data();
-    for (std::size_t i = std::size_t(r0) * width; i < std::size_t(r1) * width; ++i) image[i] *= white[i];
+    white_band(image.data() + std::size_t(r0) * width, white + std::size_t(r0) * width, std::size_t(r1 - r0) * width);
     if (band_done) band_done(b, std::size_t(r0) * width, std::size_t(r1) * width);
   });
 }
