@@ -813,13 +813,20 @@ ActiveSet::ActiveSet(const WeightingOperator& op, std::vector<std::uint32_t> vox
         Visit& v = visits_[block_visit[block]];
         entries_[v.entry_end - block_entries[block]--] = BandEntry{p, std::uint32_t(k), std::uint32_t(n)};  // in y order
         const int r0 = b * kBandRows, r1 = std::min(height, r0 + kBandRows);
+        // The rows with weight, a quad's lanes at a time: bit j for row first + j, without the
+        // lanes in the neighbouring bands.
         for (std::size_t q = k; q < k + n; ++q) {
-          for (int j = 0; j < kQuad; ++j) {
-            const int r = t.y_quad_first[q] + j;
-            if (r >= r0 && r < r1 && t.y_quad_weights[kQuad * q + std::size_t(j)] != 0.f) {
-              v.rows[std::size_t((r - r0) >> 6)] |= std::uint64_t(1) << ((r - r0) & 63);
-            }
+          const float* w = t.y_quad_weights.data() + kQuad * q;
+          std::uint64_t lanes = 0;
+          for (int j = 0; j < kQuad; ++j) lanes |= std::uint64_t(w[j] != 0.f) << j;
+          int at = t.y_quad_first[q] - r0;
+          if (at < 0) {
+            lanes >>= -at;
+            at = 0;
           }
+          if (r1 - r0 - at < kQuad) lanes &= (std::uint64_t(1) << (r1 - r0 - at)) - 1;
+          v.rows[std::size_t(at >> 6)] |= lanes << (at & 63);
+          if ((at & 63) > 64 - kQuad && (at >> 6) + 1 < kRowWords) v.rows[std::size_t(at >> 6) + 1] |= lanes >> (64 - (at & 63));
         }
       });
     }
