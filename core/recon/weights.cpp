@@ -350,12 +350,31 @@ __attribute__((target("avx2"))) void dot_column(const float* band, std::size_t w
   if (held >= 0) out[held] = dot_quads_avx2(band + std::size_t(held) * width, first, w, n);
 }
 
-// One row against one voxel column's quads (the eq 13 normalisers).
-__attribute__((target("default"))) float dot_quads(const float* row, const int* first, const float* w, std::size_t n) {
-  return dot_quads_base(row, first, w, n);
+// The eq 13 normalisers' first stage: out[x] = Σ_col Ax_x(col) row(col) for every voxel x of a
+// slice (its quads [start[x], start[x + 1])), for two rows at once (row_b null: one row).
+__attribute__((target("default"))) void dot_slice_rows(const float* row_a, const float* row_b, const std::size_t* start,
+                                                       const int* first, const float* w, int nx, double* out_a,
+                                                       double* out_b) {
+  for (int x = 0; x < nx; ++x) {
+    const std::size_t q0 = start[x], n = start[x + 1] - q0;
+    out_a[x] = dot_quads_base(row_a, first + q0, w + kQuad * q0, n);
+    if (row_b) out_b[x] = dot_quads_base(row_b, first + q0, w + kQuad * q0, n);
+  }
 }
-__attribute__((target("avx2"))) float dot_quads(const float* row, const int* first, const float* w, std::size_t n) {
-  return dot_quads_avx2(row, first, w, n);
+__attribute__((target("avx2"))) void dot_slice_rows(const float* row_a, const float* row_b, const std::size_t* start,
+                                                    const int* first, const float* w, int nx, double* out_a,
+                                                    double* out_b) {
+  for (int x = 0; x < nx; ++x) {
+    const std::size_t q0 = start[x], n = start[x + 1] - q0;
+    if (row_b) {
+      float a, b;
+      dot_quads2_avx2(row_a, row_b, first + q0, w + kQuad * q0, n, &a, &b);
+      out_a[x] = a;
+      out_b[x] = b;
+    } else {
+      out_a[x] = dot_quads_avx2(row_a, first + q0, w + kQuad * q0, n);
+    }
+  }
 }
 
 // image[i] *= white[i] over a band, 4 pixels per vector (-O2 leaves the plain loop scalar).
@@ -587,13 +606,10 @@ WeightingOperator::WeightingOperator(const optics::CameraModel& camera,
     if (r_hi < r_lo) return;
     const std::size_t rows = std::size_t(r_hi - r_lo + 1);
     std::vector<double> g(rows * std::size_t(nx), 0.0);  // [row][x]
-    for (std::size_t r = 0; r < rows; ++r) {
+    for (std::size_t r = 0; r < rows; r += 2) {
       const float* wrow = white_.pixels.data() + (std::size_t(r_lo) + r) * std::size_t(width_);
-      for (int x = 0; x < nx; ++x) {
-        const std::size_t q0 = t.x_quad_start[std::size_t(x)], q1 = t.x_quad_start[std::size_t(x) + 1];
-        g[r * std::size_t(nx) + std::size_t(x)] =
-            dot_quads(wrow, t.x_quad_first.data() + q0, t.x_quad_weights.data() + kQuad * q0, q1 - q0);
-      }
+      dot_slice_rows(wrow, r + 1 < rows ? wrow + width_ : nullptr, t.x_quad_start.data(), t.x_quad_first.data(),
+                     t.x_quad_weights.data(), nx, g.data() + r * std::size_t(nx), g.data() + (r + 1) * std::size_t(nx));
     }
     for (int y = 0; y < ny; ++y) {
       const AxisWeights ay = y_weights(z, y);
