@@ -3,7 +3,7 @@
 // same correlation on exact-particle volumes; time per stage, peak memory; a time/accuracy sweep
 // of the knobs on the reduced case with its Pareto front.
 //
-//   bench_e2e [reduced|full] [--no-sweep] [--rays N] [--iterations N --mu X] [--z-centre MM]
+//   bench_e2e [reduced|full] [--no-sweep] [--rays N] [--iterations N --mu X --subsets S] [--z-centre MM]
 //     --iterations/--mu: MART for the headline rows (default the paper's 5 at mu 0.5; the sweep's
 //              rows still start from the paper's settings).
 //     --z-centre: depth of the volume's (and the ring's) centre, mm (default 0: the focal plane).
@@ -106,23 +106,25 @@ int main(int argc, char** argv) {
   std::string scale = "reduced";
   bool sweep = true;
   std::size_t rays = 5000;
-  int iterations = 5;
+  int iterations = 5, subsets = 1;
   double mu = 0.5, z_centre = 0.0;
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--no-sweep")) sweep = false;
     else if (!std::strcmp(argv[i], "--rays") && i + 1 < argc) rays = std::stoul(argv[++i]);
     else if (!std::strcmp(argv[i], "--iterations") && i + 1 < argc) iterations = std::stoi(argv[++i]);
     else if (!std::strcmp(argv[i], "--mu") && i + 1 < argc) mu = std::stod(argv[++i]);
+    else if (!std::strcmp(argv[i], "--subsets") && i + 1 < argc) subsets = std::stoi(argv[++i]);
     else if (!std::strcmp(argv[i], "--z-centre") && i + 1 < argc) z_centre = std::stod(argv[++i]);
     else scale = argv[i];
   }
-  if (sweep && (iterations != 5 || mu != 0.5 || z_centre != 0.0)) {
-    std::fprintf(stderr, "bench_e2e: --iterations/--mu/--z-centre change the headline rows only; use them with --no-sweep\n");
+  if (sweep && (iterations != 5 || mu != 0.5 || subsets != 1 || z_centre != 0.0)) {
+    std::fprintf(stderr, "bench_e2e: --iterations/--mu/--subsets/--z-centre change the headline rows only; use them "
+                         "with --no-sweep\n");
     return 2;
   }
   const bool full = scale == "full";
   if (!full && scale != "reduced") {
-    std::fprintf(stderr, "usage: bench_e2e [reduced|full] [--no-sweep] [--rays N] [--iterations N --mu X] [--z-centre MM]\n");
+    std::fprintf(stderr, "usage: bench_e2e [reduced|full] [--no-sweep] [--rays N] [--iterations N --mu X --subsets S] [--z-centre MM]\n");
     return 2;
   }
   const std::string dir = std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/";
@@ -137,6 +139,7 @@ int main(int argc, char** argv) {
   settings.correlation.dt_s = 1.0;
   settings.mart.iterations = iterations;
   settings.mart.mu = mu;
+  settings.mart.subsets = subsets;
 
   sim::RingVortexFlow::Parameters rv;
   rv.voxel_mm = voxel;
@@ -175,10 +178,10 @@ int main(int argc, char** argv) {
   // The paper's settings: reconstruction and correlation, stage by stage.
   const auto base = process::process_pair(op, a, b, settings);
   const Errors e = errors_against(base.correlation.field, flow, voxel);
-  std::printf("bench=e2e case=%s variant=reconstructed iterations=%d mu=%.2f recon_a_s=%.2f recon_b_s=%.2f "
+  std::printf("bench=e2e case=%s variant=reconstructed iterations=%d mu=%.2f subsets=%d recon_a_s=%.2f recon_b_s=%.2f "
               "correlate_s=%.2f skipped_a=%.3f skipped_b=%.3f rms_u=%.3f rms_v=%.3f rms_w=%.3f rms=%.3f valid=%.3f "
               "off_axis_band_rms_u=%.3f off_axis_band_rms_v=%.3f off_axis_band_rms_w=%.3f peak_rss_gb=%.2f\n",
-              scale.c_str(), iterations, mu, base.times.reconstruct_a_s, base.times.reconstruct_b_s, base.times.correlate_s,
+              scale.c_str(), iterations, mu, subsets, base.times.reconstruct_a_s, base.times.reconstruct_b_s, base.times.correlate_s,
               base.skipped_a.fraction_skipped(), base.skipped_b.fraction_skipped(), e.rms[0], e.rms[1], e.rms[2],
               e.total, e.valid_fraction, e.off_band[0], e.off_band[1], e.off_band[2], peak_rss_gb());
 

@@ -29,6 +29,7 @@ struct ReconOptions {
   double voxel_mm = 0.125, voxel_z_mm = 0;
   int iterations = 5;
   double mu = 0.5;
+  int subsets = 1;
   std::string start = "mlos";
   float threshold = 0;
   double dark_cutoff = 0.9;
@@ -59,6 +60,7 @@ void run(const ReconOptions& o) {
   recon::MartSettings s;
   s.iterations = o.iterations;
   s.mu = o.mu;
+  s.subsets = o.subsets;
   s.noise_threshold = o.threshold;
   s.dark_weight_cutoff = o.dark_cutoff;
   s.convergence = o.convergence;
@@ -144,6 +146,10 @@ void add_recon_commands(CLI::App& app) {
   cmd->add_option("--voxel-z", o->voxel_z_mm, "depth voxel size, mm (default: --voxel)");
   cmd->add_option("--iterations", o->iterations, "MART iterations")->capture_default_str();
   cmd->add_option("--mu", o->mu, "relaxation, 0 < mu <= 1")->capture_default_str();
+  cmd->add_option("--subsets", o->subsets,
+                  "ordered subsets of sensor rows per iteration (1: the paper's simultaneous form; 4 moves "
+                  "voxels about 4x as far per iteration at about the same cost)")
+      ->capture_default_str();
   cmd->add_option("--start", o->start, "initial volume: mlos (multiplicative line of sight) or ones (eq 9)")
       ->capture_default_str();
   cmd->add_option("--threshold", o->threshold, "noise floor in counts: pixels at or below are dark")

@@ -89,12 +89,16 @@ ProcessSettings process_settings_from(const YamlMap& root) {
 
   if (auto r = root.optional_map("reconstruction")) {
     r->reject_unknown(
-        {"iterations", "mu", "start", "noise_threshold", "dark_weight_cutoff", "convergence", "angular_sampling"});
+        {"iterations", "mu", "subsets", "start", "noise_threshold", "dark_weight_cutoff", "convergence",
+         "angular_sampling"});
     const long long it = r->integer_or("iterations", s.mart.iterations);
     if (it < 1 || it > 1000) r->fail("iterations", "must be 1..1000, got " + std::to_string(it));
     s.mart.iterations = int(it);
     s.mart.mu = r->number_or("mu", s.mart.mu);
     if (!(s.mart.mu > 0 && s.mart.mu <= 1)) r->fail("mu", "must be in (0, 1]");
+    const long long subsets = r->integer_or("subsets", s.mart.subsets);
+    if (subsets < 1 || subsets > 16) r->fail("subsets", "must be 1..16, got " + std::to_string(subsets));
+    s.mart.subsets = int(subsets);
     s.mart.start = r->choice_or("start", {"mlos", "ones"}, "mlos") == "ones" ? recon::MartStart::ones
                                                                           : recon::MartStart::mlos;
     s.mart.noise_threshold = float(r->number_or("noise_threshold", s.mart.noise_threshold));

@@ -23,6 +23,8 @@ namespace {
 constexpr float kMaxLog = 40.f;
 constexpr float kTiny = 1e-30f;
 constexpr float kHuge = 1e30f;
+// More subsets than pixel rows behind a lens would leave subsets that see a voxel in few lenses.
+constexpr int kMaxSubsets = 16;
 
 double seconds_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -32,6 +34,9 @@ void validate_settings(const MartSettings& s) {
   if (!(s.mu > 0 && s.mu <= 1)) throw InputError("MART: mu must lie in (0, 1], got " + std::to_string(s.mu));
   if (s.iterations < 1 || s.iterations > 10000) {
     throw InputError("MART: iterations must be 1..10000, got " + std::to_string(s.iterations));
+  }
+  if (s.subsets < 1 || s.subsets > kMaxSubsets) {
+    throw InputError("MART: subsets must be 1.." + std::to_string(kMaxSubsets) + ", got " + std::to_string(s.subsets));
   }
   if (!(s.noise_threshold >= 0) || !std::isfinite(s.noise_threshold)) {
     throw InputError("MART: noise threshold must be a finite number >= 0");
@@ -312,16 +317,19 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const M
   const float log_floor = std::log(dark_floor);
   // Work on each band of the projection as soon as it is finished, while its pixels are in cache:
   // the residual's two sums (kept per band and added in band order, so the same at any thread
-  // count) and the log-ratios the update back-projects.
+  // count) and the log-ratios the update back-projects, over the rows the pass projected.
+  const std::size_t width = std::size_t(op.image_width());
   std::vector<std::array<double, 2>> band_sums(std::size_t(active.band_count()));
-  auto residual_band = [&](int band, std::size_t i0, std::size_t i1) {
-    double num = 0, den = 0;
+  auto residual_rows = [&](std::size_t i0, std::size_t i1, std::array<double, 2>& sums) {
     for (std::size_t i = i0; i < i1; ++i) {
       const double diff = double(data[i]) - double(projection[i]);
-      num += diff * diff;
-      den += double(data[i]) * double(data[i]);
+      sums[0] += diff * diff;
+      sums[1] += double(data[i]) * double(data[i]);
     }
-    band_sums[std::size_t(band)] = {num, den};
+  };
+  auto residual_band = [&](int band, std::size_t i0, std::size_t i1) {
+    band_sums[std::size_t(band)] = {0, 0};
+    residual_rows(i0, i1, band_sums[std::size_t(band)]);
   };
   auto residual = [&] {  // ||I - W E|| / ||I||
     double num = 0, den = 0;
@@ -331,7 +339,7 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const M
     }
     return den > 0 ? std::sqrt(num / den) : 0.0;
   };
-  auto ratio_band = [&](std::size_t i0, std::size_t i1) {
+  auto ratio_rows = [&](std::size_t i0, std::size_t i1) {
     for (std::size_t i = i0; i < i1; ++i) {
       const float p = projection[i], d = data[i];
       if (white[i] == 0.f) {
@@ -345,25 +353,62 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const M
       }
     }
   };
+  const float mu = float(settings.mu);
+  const int subsets = settings.subsets;
+  // Ordered subsets: per subset, the share of each voxel's weights on its rows (eq 13 over the
+  // subset), so a sub-iteration's update is the weighted mean of the ratios that subset sees.
+  std::vector<std::vector<float>> subset_share;
+  if (subsets > 1 && n > 0) {
+    for (int s = 0; s < subsets; ++s) {
+      subset_share.emplace_back(n, 0.f);
+      active.back_project_whitened(op, std::span<const float>(white, data.size()), subset_share.back(), &workspace,
+                                   RowSubset{subsets, s});
+    }
+  }
+  auto converged = [&](double previous, double r) {
+    return previous >= 0 && settings.convergence > 0 && std::abs(previous - r) <= settings.convergence * previous;
+  };
   double previous = -1;
   for (int it = 1; it <= settings.iterations && n > 0; ++it) {
     const auto t_it = std::chrono::steady_clock::now();
-    active.project(op, e, projection, &workspace, [&](int band, std::size_t i0, std::size_t i1) {
-      residual_band(band, i0, i1);
-      ratio_band(i0, i1);
-    });
-    const double r = residual();
-    if (previous >= 0 && settings.convergence > 0 && std::abs(previous - r) <= settings.convergence * previous) {
-      result.converged = true;
-      break;
+    double r = 0;
+    if (subsets == 1) {
+      active.project(op, e, projection, &workspace, [&](int band, std::size_t i0, std::size_t i1) {
+        residual_band(band, i0, i1);
+        ratio_rows(i0, i1);
+      });
+      r = residual();
+      if (converged(previous, r)) {  // stop before an update that would change nothing
+        result.converged = true;
+        break;
+      }
+      active.back_project_whitened(op, ratio, update, &workspace);
+      for_voxels([&](std::size_t m) { e[m] = clean(e[m] * bounded_exp(mu * update[m])); });
+    } else {
+      std::fill(band_sums.begin(), band_sums.end(), std::array<double, 2>{0, 0});
+      for (int s = 0; s < subsets; ++s) {
+        const RowSubset rows{subsets, s};
+        // Each row is projected in its subset's turn: the sweep's residual adds up those rows.
+        active.project(op, e, projection, &workspace, [&](int band, std::size_t i0, std::size_t i1) {
+          for (std::size_t row = std::size_t(rows.first_from(int(i0 / width))); row * width < i1; row += std::size_t(subsets)) {
+            residual_rows(row * width, (row + 1) * width, band_sums[std::size_t(band)]);
+            ratio_rows(row * width, (row + 1) * width);
+          }
+        }, rows);
+        active.back_project_whitened(op, ratio, update, &workspace, rows);
+        const std::vector<float>& share = subset_share[std::size_t(s)];
+        for_voxels([&](std::size_t m) {
+          if (share[m] > 0.f) e[m] = clean(e[m] * bounded_exp(mu * update[m] / share[m]));
+        });
+      }
+      r = residual();
+      result.converged = converged(previous, r);  // known only after the sweep: stop after it
     }
     previous = r;
-    active.back_project_whitened(op, ratio, update, &workspace);
-    const float mu = float(settings.mu);
-    for_voxels([&](std::size_t m) { e[m] = clean(e[m] * bounded_exp(mu * update[m])); });
     IterationReport rep{it, r, seconds_since(t_it)};
     result.iterations.push_back(rep);
     if (progress) progress(rep);
+    if (result.converged) break;
   }
   if (n > 0) {
     active.project(op, e, projection, &workspace, residual_band);

@@ -39,6 +39,12 @@ struct MartSettings {
   MartStart start = MartStart::mlos;
   int iterations = 5;
   double mu = 0.5;                 // relaxation, 0 < mu <= 1
+  // Ordered subsets: each iteration is `subsets` sub-iterations, each projecting and
+  // back-projecting only every subsets-th sensor row (interleaved vertical aperture positions
+  // behind every lens) and updating every voxel by the weighted mean of its ratios over those
+  // rows. A sweep costs about one iteration and moves the voxels about `subsets` times as far.
+  // 1 is the paper's simultaneous form.
+  int subsets = 1;
   float noise_threshold = 0.f;     // pixels at or below it count as dark (zero)
   // A dark pixel zeroes a voxel (eq 9: ratio 0) only where the voxel's column and row weights at
   // that pixel both exceed this fraction of their largest value. Fainter dark pixels (where the
@@ -66,7 +72,8 @@ struct SkipReport {
 
 struct IterationReport {
   int iteration = 0;           // 1-based
-  double residual = 0;         // ||I - W E|| / ||I|| before this iteration's update
+  double residual = 0;         // ||I - W E|| / ||I|| before this iteration's update (with subsets:
+                               // each subset's rows as they were projected in the sweep)
   double seconds = 0;
 };
 

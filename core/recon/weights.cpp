@@ -893,13 +893,25 @@ ActiveSet::ActiveSet(const WeightingOperator& op, std::vector<std::uint32_t> vox
   strip_order_ = costliest_first(strip_cost);
 }
 
+ActiveSet::RowBits ActiveSet::subset_bits(RowSubset rows, int r0, int r1) {
+  RowBits bits{};
+  for (int r = rows.first_from(r0); r < r1; r += rows.count) bits[std::size_t((r - r0) >> 6)] |= std::uint64_t(1) << ((r - r0) & 63);
+  return bits;
+}
+
+ActiveSet::RowBits ActiveSet::both(const RowBits& a, const RowBits& b) {
+  RowBits out;
+  for (std::size_t i = 0; i < out.size(); ++i) out[i] = a[i] & b[i];
+  return out;
+}
+
 ActiveSet ActiveSet::all(const WeightingOperator& op) {
   std::vector<std::uint32_t> v(op.grid().count());
   for (std::size_t i = 0; i < v.size(); ++i) v[i] = std::uint32_t(i);
   return ActiveSet(op, std::move(v));
 }
 void ActiveSet::project(const WeightingOperator& op, std::span<const float> values, std::span<float> image,
-                        Workspace* workspace, const BandDone& band_done) const {
+                        Workspace* workspace, const BandDone& band_done, RowSubset rows) const {
   const std::size_t width = std::size_t(op.image_width());
   const int height = op.image_height();
   Workspace local;
@@ -916,6 +928,7 @@ void ActiveSet::project(const WeightingOperator& op, std::span<const float> valu
   run_costliest_first(band_order_, [&](int b) {
     const int r0 = b * kBandRows, r1 = std::min(height, r0 + kBandRows);
     std::fill(image.begin() + std::ptrdiff_t(std::size_t(r0) * width), image.begin() + std::ptrdiff_t(std::size_t(r1) * width), 0.f);
+    const RowBits subset = subset_bits(rows, r0, r1);
     // G(row) of one column over the band's rows, with kQuad rows of margin on either side for the
     // lanes of quads that straddle the band's edges (those belong to the neighbouring band).
     std::array<float, kQuad + kBandRows + kQuad> padded_sum{};
@@ -943,13 +956,20 @@ void ActiveSet::project(const WeightingOperator& op, std::span<const float> valu
           __builtin_memcpy(g, &sum, sizeof sum);
         }
       }
-      // Stage 2: image(row, ·) += G(row) Ax, once per row the column reaches (resets those rows).
+      // Stage 2: image(row, ·) += G(row) Ax, once per row of the subset the column reaches
+      // (resets those rows; the margins, and with a subset the other rows, are reset here).
       const std::size_t q0 = t.x_quad_start[std::size_t(col.x)], q1 = t.x_quad_start[std::size_t(col.x) + 1];
-      add_column(image.data() + std::size_t(r0) * width, width, column_sum, visit.rows.data(), kRowWords,
+      const RowBits reached = both(visit.rows, subset);
+      add_column(image.data() + std::size_t(r0) * width, width, column_sum, reached.data(), kRowWords,
                  t.x_quad_first.data() + q0, t.x_quad_weights.data() + kQuad * q0, q1 - q0);
-      std::fill_n(padded_sum.begin(), kQuad, 0.f);
-      std::fill_n(padded_sum.end() - kQuad, kQuad, 0.f);
+      if (rows.count > 1) {
+        padded_sum.fill(0.f);
+      } else {
+        std::fill_n(padded_sum.begin(), kQuad, 0.f);
+        std::fill_n(padded_sum.end() - kQuad, kQuad, 0.f);
+      }
     }
+    // Rows outside the subset stay 0 (0 · white).
     const float* white = op.white().pixels.data();
     white_band(image.data() + std::size_t(r0) * width, white + std::size_t(r0) * width, std::size_t(r1 - r0) * width);
     if (band_done) band_done(b, std::size_t(r0) * width, std::size_t(r1) * width);
@@ -968,9 +988,9 @@ void ActiveSet::back_project(const WeightingOperator& op, std::span<const float>
 }
 
 void ActiveSet::back_project_whitened(const WeightingOperator& op, std::span<const float> image,
-                                      std::span<float> values, Workspace* workspace) const {
+                                      std::span<float> values, Workspace* workspace, RowSubset rows) const {
   Workspace local;
-  back_project_images<1>(op, {image.data()}, {values.data()}, workspace ? *workspace : local);
+  back_project_images<1>(op, {image.data()}, {values.data()}, workspace ? *workspace : local, rows);
 }
 
 void ActiveSet::back_project_whitened(const WeightingOperator& op, std::span<const float> whitened_a,
@@ -978,13 +998,15 @@ void ActiveSet::back_project_whitened(const WeightingOperator& op, std::span<con
                                       std::span<float> values_b, Workspace* workspace) const {
   Workspace local;
   back_project_images<2>(op, {whitened_a.data(), whitened_b.data()}, {values_a.data(), values_b.data()},
-                         workspace ? *workspace : local);
+                         workspace ? *workspace : local, RowSubset{});
 }
 
 template <std::size_t N>
 void ActiveSet::back_project_images(const WeightingOperator& op, const std::array<const float*, N>& images,
-                                    const std::array<float*, N>& values, Workspace& workspace) const {
+                                    const std::array<float*, N>& values, Workspace& workspace,
+                                    RowSubset rows) const {
   const std::size_t width = std::size_t(op.image_width());
+  const int height = op.image_height();
   for (float* v : values) std::fill(v, v + voxels_.size(), 0.f);  // voxels that see no pixel
   // Per image and voxel in visiting order; each strip zeroes and sums its own range.
   auto& sums = workspace.sums;
@@ -1005,6 +1027,8 @@ void ActiveSet::back_project_images(const WeightingOperator& op, const std::arra
     for (std::size_t i = 0; i < N; ++i) row_sum[i] = padded_sum[i].data() + kQuad;
     for (int b = 0; b < bands_; ++b) {
       const int r0 = b * kBandRows;
+      // With a row subset B is computed on its rows only; the others stay 0 and add nothing.
+      const RowBits subset = subset_bits(rows, r0, std::min(height, r0 + kBandRows));
       const std::size_t slot = std::size_t(b) * std::size_t(strips_) + std::size_t(strip);
       for (std::size_t v = visit_start_[slot]; v < visit_start_[slot + 1]; ++v) {
         const Visit& visit = visits_[v];
@@ -1012,9 +1036,10 @@ void ActiveSet::back_project_images(const WeightingOperator& op, const std::arra
         const SliceTables& t = op.slice(col.z);
         // Stage 1: B(row) = Σ_col Ax(col) r(row, col), once per reached row.
         const std::size_t q0 = t.x_quad_start[std::size_t(col.x)], q1 = t.x_quad_start[std::size_t(col.x) + 1];
+        const RowBits reached = both(visit.rows, subset);
         for (std::size_t i = 0; i < N; ++i) {
           padded_sum[i].fill(0.f);
-          dot_column(images[i] + std::size_t(r0) * width, width, visit.rows.data(), kRowWords,
+          dot_column(images[i] + std::size_t(r0) * width, width, reached.data(), kRowWords,
                      t.x_quad_first.data() + q0, t.x_quad_weights.data() + kQuad * q0, q1 - q0, row_sum[i]);
         }
         // Stage 2: per voxel Σ_row Ay(row) B(row) over the band's rows, one quad of rows at a

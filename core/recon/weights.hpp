@@ -163,6 +163,18 @@ class WeightingOperator {
   std::vector<float> normaliser_;
 };
 
+// Every count-th sensor row starting at row `index` (0 <= index < count): the pixels one
+// sub-iteration of ordered-subsets MART works on. Interleaved rows are interleaved vertical
+// aperture positions behind every lens, so each subset sees every voxel from most directions.
+// The default is every row.
+struct RowSubset {
+  int count = 1;
+  int index = 0;
+  bool contains(int row) const { return row % count == index; }
+  // The subset's first row at or after `row` (row >= 0).
+  int first_from(int row) const { return count == 1 ? row : row + ((index - row % count) + count) % count; }
+};
+
 // A set of voxels that take part in a reconstruction (sorted flat indices), grouped by voxel
 // column (z, x) and by bands of sensor rows for the two-stage separable kernels.
 //
@@ -194,17 +206,22 @@ class ActiveSet {
   using BandDone = std::function<void(int band, std::size_t first_pixel, std::size_t end_pixel)>;
   int band_count() const { return bands_; }
 
-  // image = W·values (values per active voxel, image of the sensor's size, overwritten).
+  // image = W·values (values per active voxel, image of the sensor's size, overwritten). With a
+  // row subset only the subset's rows are projected (the others are set to 0) at about
+  // 1 / rows.count of the cost; `band_done` still gets whole bands.
   void project(const WeightingOperator& op, std::span<const float> values, std::span<float> image,
-               Workspace* workspace = nullptr, const BandDone& band_done = {}) const;
+               Workspace* workspace = nullptr, const BandDone& band_done = {}, RowSubset rows = {}) const;
   // values = Wᵀ·image for the active voxels. The image must be finite: the 4-pixel quads also
   // read a few pixels beside a voxel's segments, with weight 0.
   void back_project(const WeightingOperator& op, std::span<const float> image,
                     std::span<float> values) const;
   // The same for an image already multiplied pixel by pixel by the white correction (saves a
   // pass and a buffer inside MART's loop).
+  // With a row subset: the image's other rows are not read (as if 0). The result is still
+  // divided by each voxel's whole eq 13 normaliser.
   void back_project_whitened(const WeightingOperator& op, std::span<const float> whitened_image,
-                             std::span<float> values, Workspace* workspace = nullptr) const;
+                             std::span<float> values, Workspace* workspace = nullptr,
+                             RowSubset rows = {}) const;
   // Two whitened images in one walk (MLOS needs the lit mask's and ln I's): each result has the
   // same bits as its own back_project_whitened; the bookkeeping is paid once.
   void back_project_whitened(const WeightingOperator& op, std::span<const float> whitened_a,
@@ -230,12 +247,16 @@ class ActiveSet {
   // 512 no better (and fewer bands to share out).
   static constexpr int kBandRows = 256;
   static constexpr int kRowWords = kBandRows / 64;
+  // A set of a band's rows: bit r is row r0 + r.
+  using RowBits = std::array<std::uint64_t, kRowWords>;
+  static RowBits subset_bits(RowSubset rows, int r0, int r1);  // the rows of [r0, r1) in the subset
+  static RowBits both(const RowBits& a, const RowBits& b);
   // One column's share of one band, as the kernels visit it: its entries and, as bits, the band's
   // rows its voxels reach (the rows the two-stage kernels touch).
   struct Visit {  // no initialisers, as BandEntry
     std::uint32_t column;  // into columns_
     std::uint32_t entry_begin, entry_end;  // into entries_
-    std::array<std::uint64_t, kRowWords> rows;  // bit r: row r0 + r of the band
+    RowBits rows;  // the band's rows its voxels reach
   };
 
   std::vector<std::uint32_t> voxels_;
@@ -262,7 +283,7 @@ class ActiveSet {
   // Back-projection of N whitened images at once (N = 1 or 2).
   template <std::size_t N>
   void back_project_images(const WeightingOperator& op, const std::array<const float*, N>& images,
-                           const std::array<float*, N>& values, Workspace& workspace) const;
+                           const std::array<float*, N>& values, Workspace& workspace, RowSubset rows) const;
 };
 
 // Compressed sparse rows: the explicit matrix (rows = sensor pixels, columns = voxels).
