@@ -4,10 +4,16 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/partitioner.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <array>
+#include <atomic>
+#include <bit>
 #include <cmath>
+#include <limits>
+#include <numeric>
 #include <string>
 #include <utility>
 
@@ -93,26 +99,30 @@ double sample_position(double aperture, int samples, int k) {
 // pixels behind each lens on the paper's camera beyond 5 mm from focus).
 constexpr int kQuad = 4;
 
-// The kernels' form of a slice's x weights: every segment cut into quads of kQuad pixels. A quad
-// past the end of the row is shifted left and its lanes outside its own pixels weigh 0, so the
-// kernels never touch a pixel outside the row. Segments are at least kGap + 1 > kQuad - 1 pixels
-// apart, so the quads of different segments never overlap.
-void build_quads(SliceTables& t, int width) {
-  t.x_quad_start.assign(t.x_runs.size() + 1, 0);
-  for (std::size_t x = 0; x < t.x_runs.size(); ++x) {
-    const WeightRun& run = t.x_runs[x];
+// The kernels' form of one axis's weights: every segment cut into quads of kQuad pixels, voxel
+// v owning quads [start[v], start[v + 1]). Along x a quad past the end of the row is shifted left
+// and its lanes outside its own pixels weigh 0, so the kernels never touch a pixel outside the
+// row (`shift_width`; 0 along y, whose quads weigh rows of the kernels' padded scratch arrays).
+// Segments are at least kGap + 1 > kQuad - 1 pixels apart, so the quads of different segments
+// never overlap.
+void build_quads(const std::vector<WeightRun>& runs, const std::vector<Segment>& segments,
+                 const std::vector<float>& table, int shift_width, std::vector<std::size_t>& start,
+                 std::vector<int>& quad_first, std::vector<float>& quad_weights) {
+  start.assign(runs.size() + 1, 0);
+  for (std::size_t v = 0; v < runs.size(); ++v) {
+    const WeightRun& run = runs[v];
     for (std::size_t k = run.segment_begin; k < run.segment_end; ++k) {
-      const Segment& s = t.x_segments[k];
+      const Segment& s = segments[k];
       for (int c = 0; c < s.length; c += kQuad) {
         const int own_first = s.first + c, own_end = s.first + std::min(c + kQuad, s.length);
-        const int first = std::min(own_first, width - kQuad);
-        t.x_quad_first.push_back(first);
+        const int first = shift_width > 0 ? std::min(own_first, shift_width - kQuad) : own_first;
+        quad_first.push_back(first);
         for (int p = first; p < first + kQuad; ++p) {
-          t.x_quad_weights.push_back(p >= own_first && p < own_end ? t.x_table[s.offset + std::size_t(p - s.first)] : 0.f);
+          quad_weights.push_back(p >= own_first && p < own_end ? table[s.offset + std::size_t(p - s.first)] : 0.f);
         }
       }
     }
-    t.x_quad_start[x + 1] = t.x_quad_first.size();
+    start[v + 1] = quad_first.size();
   }
 }
 
@@ -124,6 +134,7 @@ void build_quads(SliceTables& t, int width) {
 // they give the same bits.
 using Lanes4 = float __attribute__((vector_size(16)));
 using Lanes8 = float __attribute__((vector_size(32)));
+using Doubles4 = double __attribute__((vector_size(32)));
 
 __attribute__((target("avx2"), always_inline)) inline Lanes8 load_pair(const float* lo, const float* hi) {
   Lanes4 a, b;
@@ -162,9 +173,41 @@ __attribute__((target("avx2"), always_inline)) inline void add_quads_avx2(float*
     __builtin_memcpy(q0, &lo, sizeof lo);
   }
   if (k < n) {
-    float* q = row + first[k];
-    const float* wk = w + kQuad * k;
-    for (int j = 0; j < kQuad; ++j) q[j] += a * wk[j];
+    Lanes4 q, wk;
+    __builtin_memcpy(&q, row + first[k], sizeof q);
+    __builtin_memcpy(&wk, w + kQuad * k, sizeof wk);
+    q += a * wk;
+    __builtin_memcpy(row + first[k], &q, sizeof q);
+  }
+}
+
+// The same for two rows at once (each row's float operations exactly as add_quads_avx2's): the
+// quads' positions and weights are loaded once for both.
+__attribute__((target("avx2"), always_inline)) inline void add_quads2_avx2(float* row_a, float* row_b, const int* first,
+                                                                           const float* w, std::size_t n, float a,
+                                                                           float b) {
+  std::size_t k = 0;
+  for (; k + 2 <= n; k += 2) {
+    const int f0 = first[k], f1 = first[k + 1];
+    const Lanes8 wk = load8(w + kQuad * k);
+    const Lanes8 sum_a = load_pair(row_a + f0, row_a + f1) + a * wk;
+    const Lanes8 sum_b = load_pair(row_b + f0, row_b + f1) + b * wk;
+    const Lanes4 lo_a = __builtin_shufflevector(sum_a, sum_a, 0, 1, 2, 3), hi_a = __builtin_shufflevector(sum_a, sum_a, 4, 5, 6, 7);
+    const Lanes4 lo_b = __builtin_shufflevector(sum_b, sum_b, 0, 1, 2, 3), hi_b = __builtin_shufflevector(sum_b, sum_b, 4, 5, 6, 7);
+    __builtin_memcpy(row_a + f1, &hi_a, sizeof hi_a);  // the later quad first, as above
+    __builtin_memcpy(row_a + f0, &lo_a, sizeof lo_a);
+    __builtin_memcpy(row_b + f1, &hi_b, sizeof hi_b);
+    __builtin_memcpy(row_b + f0, &lo_b, sizeof lo_b);
+  }
+  if (k < n) {
+    Lanes4 qa, qb, wk;
+    __builtin_memcpy(&qa, row_a + first[k], sizeof qa);
+    __builtin_memcpy(&qb, row_b + first[k], sizeof qb);
+    __builtin_memcpy(&wk, w + kQuad * k, sizeof wk);
+    qa += a * wk;
+    qb += b * wk;
+    __builtin_memcpy(row_a + first[k], &qa, sizeof qa);
+    __builtin_memcpy(row_b + first[k], &qb, sizeof qb);
   }
 }
 
@@ -210,51 +253,154 @@ __attribute__((target("avx2"), always_inline)) inline float dot_quads_avx2(const
   return (lane[0] + lane[1]) + (lane[2] + lane[3]);
 }
 
+// The same for two rows at once, each with dot_quads_avx2's sums in its order.
+__attribute__((target("avx2"), always_inline)) inline void dot_quads2_avx2(const float* row_a, const float* row_b,
+                                                                           const int* first, const float* w,
+                                                                           std::size_t n, float* out_a, float* out_b) {
+  Lanes8 acc_a = {0.f, 0.f, 0.f, 0.f, 0.f, 0.f, 0.f, 0.f}, acc_b = acc_a;
+  std::size_t k = 0;
+  for (; k + 2 <= n; k += 2) {
+    const int f0 = first[k], f1 = first[k + 1];
+    const Lanes8 wk = load8(w + kQuad * k);
+    acc_a += wk * load_pair(row_a + f0, row_a + f1);
+    acc_b += wk * load_pair(row_b + f0, row_b + f1);
+  }
+  Lanes4 even_a = __builtin_shufflevector(acc_a, acc_a, 0, 1, 2, 3), even_b = __builtin_shufflevector(acc_b, acc_b, 0, 1, 2, 3);
+  const Lanes4 odd_a = __builtin_shufflevector(acc_a, acc_a, 4, 5, 6, 7), odd_b = __builtin_shufflevector(acc_b, acc_b, 4, 5, 6, 7);
+  if (k < n) {
+    Lanes4 pa, pb, wk;
+    __builtin_memcpy(&pa, row_a + first[k], sizeof pa);
+    __builtin_memcpy(&pb, row_b + first[k], sizeof pb);
+    __builtin_memcpy(&wk, w + kQuad * k, sizeof wk);
+    even_a += wk * pa;
+    even_b += wk * pb;
+  }
+  const Lanes4 lane_a = even_a + odd_a, lane_b = even_b + odd_b;
+  *out_a = (lane_a[0] + lane_a[1]) + (lane_a[2] + lane_a[3]);
+  *out_b = (lane_b[0] + lane_b[1]) + (lane_b[2] + lane_b[3]);
+}
+
 // The dispatched entry points: one call per voxel column and band (not per row), so the row
 // loop runs inside the chosen build too.
 //
-// Projection stage 2: image row r += g[r] Ax for the rows in [lo, hi] the column reaches
-// (g[r] != 0), resetting g for the next column. `band` points at the band's first row.
-__attribute__((target("default"))) void add_column(float* band, std::size_t width, float* g, int lo, int hi,
-                                                   const int* first, const float* w, std::size_t n) {
-  for (int r = lo; r <= hi; ++r) {
-    if (g[r] == 0.f) continue;
-    add_quads_base(band + std::size_t(r) * width, first, w, n, g[r]);
-    g[r] = 0.f;
+// Projection stage 2: image row r += g[r] Ax for the rows the column reaches (bits of `rows`)
+// with g[r] != 0, resetting g for the next column. `band` points at the band's first row.
+__attribute__((target("default"))) void add_column(float* band, std::size_t width, float* g, const std::uint64_t* rows,
+                                                   int words, const int* first, const float* w, std::size_t n) {
+  for (int i = 0; i < words; ++i) {
+    for (std::uint64_t m = rows[i]; m != 0; m &= m - 1) {
+      const int r = 64 * i + __builtin_ctzll(m);
+      if (g[r] == 0.f) continue;
+      add_quads_base(band + std::size_t(r) * width, first, w, n, g[r]);
+      g[r] = 0.f;
+    }
   }
 }
-__attribute__((target("avx2"))) void add_column(float* band, std::size_t width, float* g, int lo, int hi,
-                                                const int* first, const float* w, std::size_t n) {
-  for (int r = lo; r <= hi; ++r) {
-    if (g[r] == 0.f) continue;
-    add_quads_avx2(band + std::size_t(r) * width, first, w, n, g[r]);
-    g[r] = 0.f;
+// The AVX2 build takes the rows two at a time.
+__attribute__((target("avx2"))) void add_column(float* band, std::size_t width, float* g, const std::uint64_t* rows,
+                                                int words, const int* first, const float* w, std::size_t n) {
+  int held = -1;  // a row waiting for a partner
+  for (int i = 0; i < words; ++i) {
+    for (std::uint64_t m = rows[i]; m != 0; m &= m - 1) {
+      const int r = 64 * i + __builtin_ctzll(m);
+      if (g[r] == 0.f) continue;
+      if (held < 0) {
+        held = r;
+        continue;
+      }
+      add_quads2_avx2(band + std::size_t(held) * width, band + std::size_t(r) * width, first, w, n, g[held], g[r]);
+      g[held] = 0.f;
+      g[r] = 0.f;
+      held = -1;
+    }
+  }
+  if (held >= 0) {
+    add_quads_avx2(band + std::size_t(held) * width, first, w, n, g[held]);
+    g[held] = 0.f;
   }
 }
 
-// Back-projection stage 1: out[r] = Σ_col Ax r(row, col) for the rows in [lo, hi] stamped as
-// reached by the column.
-__attribute__((target("default"))) void dot_column(const float* band, std::size_t width, const std::size_t* reached,
-                                                   std::size_t stamp, int lo, int hi, const int* first, const float* w,
-                                                   std::size_t n, float* out) {
-  for (int r = lo; r <= hi; ++r) {
-    if (reached[r] == stamp) out[r] = dot_quads_base(band + std::size_t(r) * width, first, w, n);
+// Back-projection stage 1: out[r] = Σ_col Ax r(row, col) for the rows the column reaches.
+__attribute__((target("default"))) void dot_column(const float* band, std::size_t width, const std::uint64_t* rows,
+                                                   int words, const int* first, const float* w, std::size_t n,
+                                                   float* out) {
+  for (int i = 0; i < words; ++i) {
+    for (std::uint64_t m = rows[i]; m != 0; m &= m - 1) {
+      const int r = 64 * i + __builtin_ctzll(m);
+      out[r] = dot_quads_base(band + std::size_t(r) * width, first, w, n);
+    }
   }
 }
-__attribute__((target("avx2"))) void dot_column(const float* band, std::size_t width, const std::size_t* reached,
-                                                std::size_t stamp, int lo, int hi, const int* first, const float* w,
-                                                std::size_t n, float* out) {
-  for (int r = lo; r <= hi; ++r) {
-    if (reached[r] == stamp) out[r] = dot_quads_avx2(band + std::size_t(r) * width, first, w, n);
+// The AVX2 build takes the rows two at a time.
+__attribute__((target("avx2"))) void dot_column(const float* band, std::size_t width, const std::uint64_t* rows,
+                                                int words, const int* first, const float* w, std::size_t n,
+                                                float* out) {
+  int held = -1;  // a row waiting for a partner
+  for (int i = 0; i < words; ++i) {
+    for (std::uint64_t m = rows[i]; m != 0; m &= m - 1) {
+      const int r = 64 * i + __builtin_ctzll(m);
+      if (held < 0) {
+        held = r;
+        continue;
+      }
+      dot_quads2_avx2(band + std::size_t(held) * width, band + std::size_t(r) * width, first, w, n, out + held, out + r);
+      held = -1;
+    }
+  }
+  if (held >= 0) out[held] = dot_quads_avx2(band + std::size_t(held) * width, first, w, n);
+}
+
+// The eq 13 normalisers' first stage: out[x] = Σ_col Ax_x(col) row(col) for every voxel x of a
+// slice (its quads [start[x], start[x + 1])), for two rows at once (row_b null: one row).
+__attribute__((target("default"))) void dot_slice_rows(const float* row_a, const float* row_b, const std::size_t* start,
+                                                       const int* first, const float* w, int nx, double* out_a,
+                                                       double* out_b) {
+  for (int x = 0; x < nx; ++x) {
+    const std::size_t q0 = start[x], n = start[x + 1] - q0;
+    out_a[x] = dot_quads_base(row_a, first + q0, w + kQuad * q0, n);
+    if (row_b) out_b[x] = dot_quads_base(row_b, first + q0, w + kQuad * q0, n);
+  }
+}
+__attribute__((target("avx2"))) void dot_slice_rows(const float* row_a, const float* row_b, const std::size_t* start,
+                                                    const int* first, const float* w, int nx, double* out_a,
+                                                    double* out_b) {
+  for (int x = 0; x < nx; ++x) {
+    const std::size_t q0 = start[x], n = start[x + 1] - q0;
+    if (row_b) {
+      float a, b;
+      dot_quads2_avx2(row_a, row_b, first + q0, w + kQuad * q0, n, &a, &b);
+      out_a[x] = a;
+      out_b[x] = b;
+    } else {
+      out_a[x] = dot_quads_avx2(row_a, first + q0, w + kQuad * q0, n);
+    }
   }
 }
 
-// One row against one voxel column's quads (the eq 13 normalisers).
-__attribute__((target("default"))) float dot_quads(const float* row, const int* first, const float* w, std::size_t n) {
-  return dot_quads_base(row, first, w, n);
+// image[i] *= white[i] over a band, 4 pixels per vector (-O2 leaves the plain loop scalar).
+void white_band(float* image, const float* white, std::size_t n) {
+  std::size_t i = 0;
+  for (; i + kQuad <= n; i += kQuad) {
+    Lanes4 p, w;
+    __builtin_memcpy(&p, image + i, sizeof p);
+    __builtin_memcpy(&w, white + i, sizeof w);
+    p *= w;
+    __builtin_memcpy(image + i, &p, sizeof p);
+  }
+  for (; i < n; ++i) image[i] *= white[i];
 }
-__attribute__((target("avx2"))) float dot_quads(const float* row, const int* first, const float* w, std::size_t n) {
-  return dot_quads_avx2(row, first, w, n);
+
+// Runs f(item) for every item on the arena's threads, each thread taking the next item of the
+// list when it is free. With the costliest items first, a pass ends on short ones instead of
+// leaving a core idle while the other finishes a long last band or strip. Which thread runs an
+// item does not change any sum.
+template <typename F>
+void run_costliest_first(const std::vector<int>& items, F&& f) {
+  std::atomic<std::size_t> next{0};
+  const int workers = std::max(1, std::min(tbb::this_task_arena::max_concurrency(), int(items.size())));
+  tbb::parallel_for(0, workers, [&](int) {
+    for (std::size_t i = next++; i < items.size(); i = next++) f(items[i]);
+  }, tbb::simple_partitioner());
 }
 
 }  // namespace
@@ -266,39 +412,56 @@ ImageF geometric_white_image(const optics::CameraModel& camera, const optics::Mi
   const double s_i = camera.image_distance_mm();
   const double f_l = camera.microlens().focal_length_mm;
   constexpr int kSub = 8;  // sub-samples per pixel axis on the disk edge
-  // Each lens paints its own disk; disks do not overlap (eq 7 is checked by CameraModel).
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, lenses.centres_mm.size()),
-                    [&](const tbb::blocked_range<std::size_t>& range) {
-    for (std::size_t lens = range.begin(); lens != range.end(); ++lens) {
-      const double cx = optics::sensor_mm_to_column(s, optics::lens_centre_to_spot_mm(lenses.centres_mm[lens][0], s_i, f_l));
-      const double cy = optics::sensor_mm_to_row(s, optics::lens_centre_to_spot_mm(lenses.centres_mm[lens][1], s_i, f_l));
-      const int x0 = std::max(0, int(std::floor(cx - radius_px - 1)));
-      const int x1 = std::min(s.width_px - 1, int(std::ceil(cx + radius_px + 1)));
-      const int y0 = std::max(0, int(std::floor(cy - radius_px - 1)));
-      const int y1 = std::min(s.height_px - 1, int(std::ceil(cy + radius_px + 1)));
-      for (int y = y0; y <= y1; ++y) {
-        for (int x = x0; x <= x1; ++x) {
-          const double d = std::hypot(x - cx, y - cy);
-          double fraction;
-          if (d <= radius_px - 0.75) {
-            fraction = 1.0;
-          } else if (d >= radius_px + 0.75) {
-            continue;
-          } else {
-            int inside = 0;
-            for (int j = 0; j < kSub; ++j) {
-              for (int i = 0; i < kSub; ++i) {
-                const double px = x - 0.5 + (i + 0.5) / kSub - cx;
-                const double py = y - 0.5 + (j + 0.5) / kSub - cy;
-                inside += px * px + py * py <= radius_px * radius_px;
-              }
+  // Each lens paints its own disk; disks do not overlap (eq 7 is checked by CameraModel), but
+  // neighbouring disks may touch a shared edge pixel. So the work is shared out by pixel rows,
+  // each row painted by the lenses that reach it in lens order: no two threads write one pixel
+  // (sharing out by lens let two lenses update a shared edge pixel at once and lose one update,
+  // about one run in 100 on the small camera).
+  struct Spot {
+    double cx, cy;
+    int x0, x1;
+  };
+  std::vector<Spot> spots(lenses.centres_mm.size());
+  std::vector<std::uint32_t> row_start(std::size_t(s.height_px) + 1, 0);
+  std::vector<std::array<int, 2>> rows(spots.size());
+  for (std::size_t lens = 0; lens < spots.size(); ++lens) {
+    Spot& p = spots[lens];
+    p.cx = optics::sensor_mm_to_column(s, optics::lens_centre_to_spot_mm(lenses.centres_mm[lens][0], s_i, f_l));
+    p.cy = optics::sensor_mm_to_row(s, optics::lens_centre_to_spot_mm(lenses.centres_mm[lens][1], s_i, f_l));
+    p.x0 = std::max(0, int(std::floor(p.cx - radius_px - 1)));
+    p.x1 = std::min(s.width_px - 1, int(std::ceil(p.cx + radius_px + 1)));
+    rows[lens] = {std::max(0, int(std::floor(p.cy - radius_px - 1))), std::min(s.height_px - 1, int(std::ceil(p.cy + radius_px + 1)))};
+    for (int y = rows[lens][0]; y <= rows[lens][1]; ++y) ++row_start[std::size_t(y) + 1];
+  }
+  for (std::size_t y = 0; y < std::size_t(s.height_px); ++y) row_start[y + 1] += row_start[y];
+  std::vector<std::uint32_t> row_lenses(row_start.back());
+  std::vector<std::uint32_t> fill(row_start.begin(), row_start.end() - 1);
+  for (std::size_t lens = 0; lens < spots.size(); ++lens) {
+    for (int y = rows[lens][0]; y <= rows[lens][1]; ++y) row_lenses[fill[std::size_t(y)]++] = std::uint32_t(lens);
+  }
+  tbb::parallel_for(0, s.height_px, [&](int y) {
+    for (std::uint32_t k = row_start[std::size_t(y)]; k < row_start[std::size_t(y) + 1]; ++k) {
+      const Spot& p = spots[row_lenses[k]];
+      for (int x = p.x0; x <= p.x1; ++x) {
+        const double d = std::hypot(x - p.cx, y - p.cy);
+        double fraction;
+        if (d <= radius_px - 0.75) {
+          fraction = 1.0;
+        } else if (d >= radius_px + 0.75) {
+          continue;
+        } else {
+          int inside = 0;
+          for (int j = 0; j < kSub; ++j) {
+            for (int i = 0; i < kSub; ++i) {
+              const double px = x - 0.5 + (i + 0.5) / kSub - p.cx;
+              const double py = y - 0.5 + (j + 0.5) / kSub - p.cy;
+              inside += px * px + py * py <= radius_px * radius_px;
             }
-            fraction = double(inside) / (kSub * kSub);
           }
-          // Neighbouring disks may touch a shared edge pixel: they never overlap, so add.
-          float& w = white.at(x, y);
-          w = std::min(1.f, w + float(fraction));
+          fraction = double(inside) / (kSub * kSub);
         }
+        float& w = white.at(x, y);
+        w = std::min(1.f, w + float(fraction));
       }
     }
   });
@@ -443,7 +606,8 @@ WeightingOperator::WeightingOperator(const optics::CameraModel& camera,
     };
     build(nx, 0, geo_.lens_x, width_, column_of, t.x_runs, t.x_segments, t.x_table);
     build(ny, 1, geo_.lens_y, height_, row_of, t.y_runs, t.y_segments, t.y_table);
-    build_quads(t, width_);
+    build_quads(t.x_runs, t.x_segments, t.x_table, width_, t.x_quad_start, t.x_quad_first, t.x_quad_weights);
+    build_quads(t.y_runs, t.y_segments, t.y_table, 0, t.y_quad_start, t.y_quad_first, t.y_quad_weights);
   });
 
   // Eq 13's denominators n_j = Σ_rows Ay Σ_cols Ax white, in two separable stages per slice.
@@ -459,13 +623,10 @@ WeightingOperator::WeightingOperator(const optics::CameraModel& camera,
     if (r_hi < r_lo) return;
     const std::size_t rows = std::size_t(r_hi - r_lo + 1);
     std::vector<double> g(rows * std::size_t(nx), 0.0);  // [row][x]
-    for (std::size_t r = 0; r < rows; ++r) {
+    for (std::size_t r = 0; r < rows; r += 2) {
       const float* wrow = white_.pixels.data() + (std::size_t(r_lo) + r) * std::size_t(width_);
-      for (int x = 0; x < nx; ++x) {
-        const std::size_t q0 = t.x_quad_start[std::size_t(x)], q1 = t.x_quad_start[std::size_t(x) + 1];
-        g[r * std::size_t(nx) + std::size_t(x)] =
-            dot_quads(wrow, t.x_quad_first.data() + q0, t.x_quad_weights.data() + kQuad * q0, q1 - q0);
-      }
+      dot_slice_rows(wrow, r + 1 < rows ? wrow + width_ : nullptr, t.x_quad_start.data(), t.x_quad_first.data(),
+                     t.x_quad_weights.data(), nx, g.data() + r * std::size_t(nx), g.data() + (r + 1) * std::size_t(nx));
     }
     for (int y = 0; y < ny; ++y) {
       const AxisWeights ay = y_weights(z, y);
@@ -551,12 +712,21 @@ ActiveSet::ActiveSet(const WeightingOperator& op, std::vector<std::uint32_t> vox
   const Grid3& g = op.grid();
   const std::uint32_t nx = std::uint32_t(g.shape[0]), nz = std::uint32_t(g.shape[2]);
   const std::uint32_t nxy = nx * std::uint32_t(g.shape[1]);
-  auto column_of = [&](std::uint32_t v) { return std::size_t(v % nx) * nz + v / nxy; };
-  // Group by voxel column, x-major, with a counting sort: y stays increasing within a column. A
-  // voxel that sees no pixel (n = 0) takes no part; its value is 0.
-  std::vector<std::uint32_t> start(std::size_t(nx) * nz + 1, 0);
+  // 16 voxel x per strip (~1.6 mm on the paper's camera), fewer on small grids so that there are
+  // at least 8 strips to share out; fixed by the grid, so the sums' order is too.
+  strip_x_ = std::clamp(int(nx) / 8, 1, 16);
+  strips_ = (int(nx) + strip_x_ - 1) / strip_x_;
+  const std::uint32_t sx = std::uint32_t(strip_x_);
+  // A voxel column's place in the visiting order: strip, depth, x within the strip.
+  auto key_of = [&](std::uint32_t v) {
+    const std::uint32_t x = v % nx, z = v / nxy;
+    return (std::size_t(x / sx) * nz + z) * sx + x % sx;
+  };
+  // Group by voxel column in that order with a counting sort: y stays increasing within a
+  // column. A voxel that sees no pixel (n = 0) takes no part; its value is 0.
+  std::vector<std::uint32_t> start(std::size_t(strips_) * nz * sx + 1, 0);
   for (std::uint32_t v : voxels_) {
-    if (op.normaliser(v) > 0.f) ++start[column_of(v) + 1];
+    if (op.normaliser(v) > 0.f) ++start[key_of(v) + 1];
   }
   for (std::size_t c = 1; c < start.size(); ++c) start[c] += start[c - 1];
   order_.resize(start.back());
@@ -567,104 +737,160 @@ ActiveSet::ActiveSet(const WeightingOperator& op, std::vector<std::uint32_t> vox
     const std::uint32_t v = voxels_[m];
     const float n = op.normaliser(v);
     if (!(n > 0.f)) continue;
-    const std::uint32_t p = fill[column_of(v)]++;
+    const std::uint32_t p = fill[key_of(v)]++;
     order_[p] = std::uint32_t(m);
     order_y[p] = int((v % nxy) / nx);
     order_normaliser_[p] = n;
   }
-  column_at_.assign(start.size() - 1, kNoColumn);
-  for (std::size_t c = 0; c + 1 < start.size(); ++c) {
-    if (start[c + 1] == start[c]) continue;
-    column_at_[c] = std::uint32_t(columns_.size());
-    columns_.push_back(Column{int(c % nz), int(c / nz), start[c], start[c + 1]});
+  strip_columns_.assign(std::size_t(strips_) + 1, 0);
+  for (std::size_t key = 0; key + 1 < start.size(); ++key) {
+    if (start[key + 1] == start[key]) continue;
+    const std::size_t strip = key / (std::size_t(nz) * sx);
+    columns_.push_back(Column{int((key / sx) % nz), int(strip * sx + key % sx), start[key], start[key + 1]});
+    strip_columns_[strip + 1] = std::uint32_t(columns_.size());
   }
-  // 16 voxel x per strip (~1.6 mm on the paper's camera), fewer on small grids so that there are
-  // at least 8 strips to share out; fixed by the grid, so the sums' order is too.
-  strip_x_ = std::clamp(int(nx) / 8, 1, 16);
+  for (int s = 1; s <= strips_; ++s) strip_columns_[std::size_t(s)] = std::max(strip_columns_[std::size_t(s)], strip_columns_[std::size_t(s) - 1]);
   // Per column, band by band, the voxels whose rows reach the band and their segments there:
   // counted, then written, both in parallel over columns.
   const int height = op.image_height();
   bands_ = (height + kBandRows - 1) / kBandRows;
+  std::vector<int> first_band(columns_.size()), last_band(columns_.size());
   // Calls entry(b, p, first segment, count) for each voxel with segments in band b, bands in order.
-  auto walk = [&](const Column& col, std::vector<std::size_t>& cursor, auto&& entry) {
+  auto walk = [&](std::size_t c, std::vector<std::size_t>& cursor, auto&& entry) {
+    const Column& col = columns_[c];
     const SliceTables& t = op.slice(col.z);
     cursor.resize(col.end - col.begin);
     for (std::uint32_t p = col.begin; p < col.end; ++p) {
-      cursor[p - col.begin] = t.y_runs[std::size_t(order_y[p])].segment_begin;
+      cursor[p - col.begin] = t.y_quad_start[std::size_t(order_y[p])];
     }
-    for (int b = col.first_band; b <= col.last_band; ++b) {
+    for (int b = first_band[c]; b <= last_band[c]; ++b) {
       const int r0 = b * kBandRows, r1 = std::min(height, r0 + kBandRows);
       for (std::uint32_t p = col.begin; p < col.end; ++p) {
-        const WeightRun& run = t.y_runs[std::size_t(order_y[p])];
+        const std::size_t quad_end = t.y_quad_start[std::size_t(order_y[p]) + 1];
         std::size_t& k = cursor[p - col.begin];
-        // A segment may cross into the next band: it stays the next band's first.
-        while (k < run.segment_end && t.y_segments[k].first + t.y_segments[k].length <= r0) ++k;
+        // A quad may cross into the next band: it stays the next band's first.
+        while (k < quad_end && t.y_quad_first[k] + kQuad <= r0) ++k;
         std::size_t e = k;
-        while (e < run.segment_end && t.y_segments[e].first < r1) ++e;
+        while (e < quad_end && t.y_quad_first[e] < r1) ++e;
         if (e > k) entry(b, p, k, e - k);
       }
     }
   };
+  // Entries per (column, band): block_offset[c] + band - first_band[c].
   std::vector<std::size_t> block_offset(columns_.size() + 1, 0);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, columns_.size(), 64),
                     [&](const tbb::blocked_range<std::size_t>& range) {
     for (std::size_t c = range.begin(); c != range.end(); ++c) {
-      Column& col = columns_[c];
+      const Column& col = columns_[c];
       const SliceTables& t = op.slice(col.z);
-      col.first_band = height;
+      first_band[c] = height;
+      last_band[c] = -1;
       for (std::uint32_t p = col.begin; p < col.end; ++p) {
         const WeightRun& run = t.y_runs[std::size_t(order_y[p])];
-        col.first_band = std::min(col.first_band, run.first / kBandRows);
-        col.last_band = std::max(col.last_band, run.last / kBandRows);
+        first_band[c] = std::min(first_band[c], run.first / kBandRows);
+        last_band[c] = std::max(last_band[c], run.last / kBandRows);
       }
-      block_offset[c + 1] = std::size_t(col.last_band - col.first_band + 1);
+      block_offset[c + 1] = std::size_t(last_band[c] - first_band[c] + 1);
     }
   });
-  for (std::size_t c = 0; c < columns_.size(); ++c) {
-    block_offset[c + 1] += block_offset[c];
-    columns_[c].block = block_offset[c];
-  }
-  blocks_.assign(block_offset.back(), Block{});
+  for (std::size_t c = 0; c < columns_.size(); ++c) block_offset[c + 1] += block_offset[c];
+  std::vector<std::uint32_t> block_entries(block_offset.back(), 0);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, columns_.size(), 64),
                     [&](const tbb::blocked_range<std::size_t>& range) {
     std::vector<std::size_t> cursor;  // per voxel of the column: its first segment not yet behind
     for (std::size_t c = range.begin(); c != range.end(); ++c) {
-      const Column& col = columns_[c];
-      walk(col, cursor, [&](int b, std::uint32_t, std::size_t, std::size_t) {
-        ++blocks_[col.block + std::size_t(b - col.first_band)].end;  // a count for now
+      walk(c, cursor, [&](int b, std::uint32_t, std::size_t, std::size_t) {
+        ++block_entries[block_offset[c] + std::size_t(b - first_band[c])];
       });
     }
   });
-  // The entries in the order the kernels read them: band by band, then strip by strip, depth by
-  // depth, x by x (for_each_column), so both kernels stream through them.
-  std::size_t next = 0;
-  for (int b = 0; b < bands_; ++b) {
-    for (int x0 = 0; x0 < int(nx); x0 += strip_x_) {
-      for (std::uint32_t z = 0; z < nz; ++z) {
-        for (int x = x0; x < std::min(int(nx), x0 + strip_x_); ++x) {
-          const std::uint32_t c = column_at_[std::size_t(x) * nz + z];
-          if (c == kNoColumn || b < columns_[c].first_band || b > columns_[c].last_band) continue;
-          Block& blk = blocks_[columns_[c].block + std::size_t(b - columns_[c].first_band)];
-          blk.begin = next;
-          next += blk.end;
-          blk.end = next;
+  // The visits in the order the kernels read them: band by band, then strip by strip, depth by
+  // depth, x by x (columns_'s order), each with its entries; counted, then laid out.
+  auto for_each_visit = [&](auto&& f) {
+    for (int b = 0; b < bands_; ++b) {
+      for (int s = 0; s < strips_; ++s) {
+        for (std::uint32_t c = strip_columns_[std::size_t(s)]; c < strip_columns_[std::size_t(s) + 1]; ++c) {
+          if (b < first_band[c] || b > last_band[c]) continue;
+          const std::size_t block = block_offset[c] + std::size_t(b - first_band[c]);
+          if (block_entries[block] > 0) f(b, s, c, block);
         }
       }
     }
-  }
-  entries_.resize(next);
+  };
+  visit_start_.assign(std::size_t(bands_) * std::size_t(strips_) + 1, 0);
+  for_each_visit([&](int b, int s, std::uint32_t, std::size_t) { ++visit_start_[std::size_t(b) * std::size_t(strips_) + std::size_t(s) + 1]; });
+  for (std::size_t i = 1; i < visit_start_.size(); ++i) visit_start_[i] += visit_start_[i - 1];
+  visits_.resize(visit_start_.back());
+  std::vector<std::size_t> block_visit(block_offset.back());
+  std::size_t next_visit = 0, next_entry = 0;
+  for_each_visit([&](int, int, std::uint32_t c, std::size_t block) {
+    if (next_entry + block_entries[block] > std::numeric_limits<std::uint32_t>::max()) {
+      throw InputError("reconstruction: more than 2^32 voxel-band entries; use a coarser volume grid");
+    }
+    Visit& v = visits_[next_visit];
+    v.column = c;
+    v.entry_begin = std::uint32_t(next_entry);
+    next_entry += block_entries[block];
+    v.entry_end = std::uint32_t(next_entry);
+    v.rows = {};
+    block_visit[block] = next_visit++;
+  });
+  entries_.resize(next_entry);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, columns_.size(), 64),
                     [&](const tbb::blocked_range<std::size_t>& range) {
-    std::vector<std::size_t> cursor, fill;
+    std::vector<std::size_t> cursor;
     for (std::size_t c = range.begin(); c != range.end(); ++c) {
-      const Column& col = columns_[c];
-      fill.clear();
-      for (int b = col.first_band; b <= col.last_band; ++b) fill.push_back(blocks_[col.block + std::size_t(b - col.first_band)].begin);
-      walk(col, cursor, [&](int b, std::uint32_t p, std::size_t k, std::size_t n) {
-        entries_[fill[std::size_t(b - col.first_band)]++] = BandEntry{p, std::uint32_t(k), std::uint32_t(n)};
+      const SliceTables& t = op.slice(columns_[c].z);
+      walk(c, cursor, [&](int b, std::uint32_t p, std::size_t k, std::size_t n) {
+        const std::size_t block = block_offset[c] + std::size_t(b - first_band[c]);
+        Visit& v = visits_[block_visit[block]];
+        entries_[v.entry_end - block_entries[block]--] = BandEntry{p, std::uint32_t(k), std::uint32_t(n)};  // in y order
+        const int r0 = b * kBandRows, r1 = std::min(height, r0 + kBandRows);
+        // The rows with weight, a quad's lanes at a time: bit j for row first + j, without the
+        // lanes in the neighbouring bands.
+        for (std::size_t q = k; q < k + n; ++q) {
+          const float* w = t.y_quad_weights.data() + kQuad * q;
+          std::uint64_t lanes = 0;
+          for (int j = 0; j < kQuad; ++j) lanes |= std::uint64_t(w[j] != 0.f) << j;
+          int at = t.y_quad_first[q] - r0;
+          if (at < 0) {
+            lanes >>= -at;
+            at = 0;
+          }
+          if (r1 - r0 - at < kQuad) lanes &= (std::uint64_t(1) << (r1 - r0 - at)) - 1;
+          v.rows[std::size_t(at >> 6)] |= lanes << (at & 63);
+          if ((at & 63) > 64 - kQuad && (at >> 6) + 1 < kRowWords) v.rows[std::size_t(at >> 6) + 1] |= lanes >> (64 - (at & 63));
+        }
       });
     }
   });
+  // The work of each band and strip, estimated as the kernels' quad operations (rows reached
+  // times x quads) plus a share per entry, to hand out the costliest first.
+  std::vector<double> band_cost(std::size_t(bands_), 0.0), strip_cost(std::size_t(strips_), 0.0);
+  for (int b = 0; b < bands_; ++b) {
+    for (int s = 0; s < strips_; ++s) {
+      const std::size_t slot = std::size_t(b) * std::size_t(strips_) + std::size_t(s);
+      for (std::size_t i = visit_start_[slot]; i < visit_start_[slot + 1]; ++i) {
+        const Visit& v = visits_[i];
+        const Column& col = columns_[v.column];
+        const SliceTables& t = op.slice(col.z);
+        int rows = 0;
+        for (std::uint64_t word : v.rows) rows += std::popcount(word);
+        const double cost = double(rows) * double(t.x_quad_start[std::size_t(col.x) + 1] - t.x_quad_start[std::size_t(col.x)] + 2) +
+                            8.0 * double(v.entry_end - v.entry_begin);
+        band_cost[std::size_t(b)] += cost;
+        strip_cost[std::size_t(s)] += cost;
+      }
+    }
+  }
+  auto costliest_first = [](const std::vector<double>& cost) {
+    std::vector<int> order(cost.size());
+    std::iota(order.begin(), order.end(), 0);
+    std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return cost[std::size_t(a)] > cost[std::size_t(b)]; });
+    return order;
+  };
+  band_order_ = costliest_first(band_cost);
+  strip_order_ = costliest_first(strip_cost);
 }
 
 ActiveSet ActiveSet::all(const WeightingOperator& op) {
@@ -672,29 +898,13 @@ ActiveSet ActiveSet::all(const WeightingOperator& op) {
   for (std::size_t i = 0; i < v.size(); ++i) v[i] = std::uint32_t(i);
   return ActiveSet(op, std::move(v));
 }
-
-template <typename F>
-void ActiveSet::for_each_column(int b, int x0, int x1, int nz, F&& f) const {
-  for (int z = 0; z < nz; ++z) {
-    for (int x = x0; x < x1; ++x) {
-      const std::uint32_t c = column_at_[std::size_t(x) * std::size_t(nz) + std::size_t(z)];
-      if (c == kNoColumn) continue;
-      const Column& col = columns_[c];
-      if (b < col.first_band || b > col.last_band) continue;
-      const Block& blk = blocks_[col.block + std::size_t(b - col.first_band)];
-      if (blk.begin < blk.end) f(col, blk.begin, blk.end);
-    }
-  }
-}
-
 void ActiveSet::project(const WeightingOperator& op, std::span<const float> values, std::span<float> image,
                         Workspace* workspace, const BandDone& band_done) const {
   const std::size_t width = std::size_t(op.image_width());
   const int height = op.image_height();
-  const int nx = op.grid().shape[0], nz = op.grid().shape[2];
   Workspace local;
   Workspace& ws = workspace ? *workspace : local;
-  // E / n once per voxel, in column order.
+  // E / n once per voxel, in visiting order.
   auto& scaled = ws.scaled;
   scaled.resize(order_.size());
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, order_.size(), 1 << 14),
@@ -703,35 +913,45 @@ void ActiveSet::project(const WeightingOperator& op, std::span<const float> valu
   });
   // Each band owns its sensor rows and adds its columns in a fixed order: no atomics, and the
   // same sums whatever the thread count.
-  tbb::parallel_for(0, bands_, [&](int b) {
+  run_costliest_first(band_order_, [&](int b) {
     const int r0 = b * kBandRows, r1 = std::min(height, r0 + kBandRows);
     std::fill(image.begin() + std::ptrdiff_t(std::size_t(r0) * width), image.begin() + std::ptrdiff_t(std::size_t(r1) * width), 0.f);
-    std::array<float, kBandRows> column_sum{};  // G(row) of one column over the band's rows
-    for (int x0 = 0; x0 < nx; x0 += strip_x_) {
-      for_each_column(b, x0, std::min(nx, x0 + strip_x_), nz, [&](const Column& col, std::size_t k0, std::size_t k1) {
-        const SliceTables& t = op.slice(col.z);
-        // Stage 1: G(row) = Σ_y Ay_y(row) E_y / n_y over the column's voxels that reach the band.
-        int lo = kBandRows, hi = -1;
-        for (std::size_t k = k0; k < k1; ++k) {
-          const BandEntry& entry = entries_[k];
-          const float s = scaled[entry.position];
-          if (s == 0.f) continue;
-          for (const Segment& seg : std::span(t.y_segments.data() + entry.segment_begin, entry.segment_count)) {
-            const int a = std::max(r0, seg.first), e = std::min(r1, seg.first + seg.length);
-            const float* w = t.y_table.data() + seg.offset;
-            for (int r = a; r < e; ++r) column_sum[std::size_t(r - r0)] += s * w[r - seg.first];
-            lo = std::min(lo, a - r0);
-            hi = std::max(hi, e - 1 - r0);
-          }
+    // G(row) of one column over the band's rows, with kQuad rows of margin on either side for the
+    // lanes of quads that straddle the band's edges (those belong to the neighbouring band).
+    std::array<float, kQuad + kBandRows + kQuad> padded_sum{};
+    float* const column_sum = padded_sum.data() + kQuad;
+    const std::size_t v1 = visit_start_[std::size_t(b + 1) * std::size_t(strips_)];
+    for (std::size_t v = visit_start_[std::size_t(b) * std::size_t(strips_)]; v < v1; ++v) {
+      const Visit& visit = visits_[v];
+      const Column& col = columns_[visit.column];
+      const SliceTables& t = op.slice(col.z);
+      // Stage 1: G(row) = Σ_y Ay_y(row) E_y / n_y over the column's voxels that reach the band,
+      // one quad of rows at a time; a quad's padded lanes add s · 0 = +0, which leaves every sum
+      // as it was, so each row gets the same float additions in the same order as row by row.
+      for (std::size_t k = visit.entry_begin; k < visit.entry_end; ++k) {
+        const BandEntry& entry = entries_[k];
+        const float s = scaled[entry.position];
+        if (s == 0.f) continue;
+        const int* first = t.y_quad_first.data() + entry.quad_begin;
+        const float* w = t.y_quad_weights.data() + kQuad * std::size_t(entry.quad_begin);
+        for (std::uint32_t q = 0; q < entry.quad_count; ++q) {
+          float* g = column_sum + (first[q] - r0);
+          Lanes4 sum, wq;
+          __builtin_memcpy(&sum, g, sizeof sum);
+          __builtin_memcpy(&wq, w + kQuad * q, sizeof wq);
+          sum += s * wq;
+          __builtin_memcpy(g, &sum, sizeof sum);
         }
-        // Stage 2: image(row, ·) += G(row) Ax, once per row the column reaches.
-        const std::size_t q0 = t.x_quad_start[std::size_t(col.x)], q1 = t.x_quad_start[std::size_t(col.x) + 1];
-        add_column(image.data() + std::size_t(r0) * width, width, column_sum.data(), lo, hi,
-                   t.x_quad_first.data() + q0, t.x_quad_weights.data() + kQuad * q0, q1 - q0);
-      });
+      }
+      // Stage 2: image(row, ·) += G(row) Ax, once per row the column reaches (resets those rows).
+      const std::size_t q0 = t.x_quad_start[std::size_t(col.x)], q1 = t.x_quad_start[std::size_t(col.x) + 1];
+      add_column(image.data() + std::size_t(r0) * width, width, column_sum, visit.rows.data(), kRowWords,
+                 t.x_quad_first.data() + q0, t.x_quad_weights.data() + kQuad * q0, q1 - q0);
+      std::fill_n(padded_sum.begin(), kQuad, 0.f);
+      std::fill_n(padded_sum.end() - kQuad, kQuad, 0.f);
     }
     const float* white = op.white().pixels.data();
-    for (std::size_t i = std::size_t(r0) * width; i < std::size_t(r1) * width; ++i) image[i] *= white[i];
+    white_band(image.data() + std::size_t(r0) * width, white + std::size_t(r0) * width, std::size_t(r1 - r0) * width);
     if (band_done) band_done(b, std::size_t(r0) * width, std::size_t(r1) * width);
   });
 }
@@ -765,67 +985,60 @@ template <std::size_t N>
 void ActiveSet::back_project_images(const WeightingOperator& op, const std::array<const float*, N>& images,
                                     const std::array<float*, N>& values, Workspace& workspace) const {
   const std::size_t width = std::size_t(op.image_width());
-  const int height = op.image_height();
-  const int nx = op.grid().shape[0], nz = op.grid().shape[2];
   for (float* v : values) std::fill(v, v + voxels_.size(), 0.f);  // voxels that see no pixel
-  const int strips = (nx + strip_x_ - 1) / strip_x_;
-  // Per image and voxel in column order; each strip zeroes and sums its own range.
+  // Per image and voxel in visiting order; each strip zeroes and sums its own range.
   auto& sums = workspace.sums;
   sums.resize(N * order_.size());
-  // Each strip owns its voxels (x-major: a contiguous range of order_), so their sums need no
-  // atomics, and every voxel adds its bands in order whatever the thread count.
-  tbb::parallel_for(0, strips, [&](int strip) {
-    const int x0 = strip * strip_x_, x1 = std::min(nx, x0 + strip_x_);
-    std::uint32_t p0 = std::uint32_t(order_.size()), p1 = 0;
-    int first_band = bands_, last_band = -1;
-    for (std::size_t i = std::size_t(x0) * std::size_t(nz); i < std::size_t(x1) * std::size_t(nz); ++i) {
-      if (column_at_[i] == kNoColumn) continue;
-      const Column& col = columns_[column_at_[i]];
-      p0 = std::min(p0, col.begin);
-      p1 = std::max(p1, col.end);
-      first_band = std::min(first_band, col.first_band);
-      last_band = std::max(last_band, col.last_band);
-    }
-    if (p1 <= p0) return;
+  // Each strip owns its voxels (a contiguous range of order_), so their sums need no atomics,
+  // and every voxel adds its bands in order whatever the thread count.
+  run_costliest_first(strip_order_, [&](int strip) {
+    const std::uint32_t c0 = strip_columns_[std::size_t(strip)], c1 = strip_columns_[std::size_t(strip) + 1];
+    if (c0 == c1) return;
+    const std::uint32_t p0 = columns_[c0].begin, p1 = columns_[c1 - 1].end;
     for (std::size_t i = 0; i < N; ++i) std::fill_n(sums.begin() + std::ptrdiff_t(i * order_.size() + p0), p1 - p0, 0.0);
-    std::array<std::array<float, kBandRows>, N> row_sum{};  // B(row) of one column over the band's rows
-    // Rows reached by the column being summed carry its stamp (no clearing between columns).
-    std::array<std::size_t, kBandRows> reached{};
-    std::size_t stamp = 0;
-    for (int b = first_band; b <= last_band; ++b) {
-      const int r0 = b * kBandRows, r1 = std::min(height, r0 + kBandRows);
-      for_each_column(b, x0, x1, nz, [&](const Column& col, std::size_t k0, std::size_t k1) {
+    // B(row) of one column over the band's rows, with kQuad rows of margin on either side, all
+    // 0 except the rows the column reaches: the lanes of y quads outside the band, and their
+    // zero lanes on rows the column does not reach, then add 0 · 0 (a stale value from another
+    // column would give 0 too if finite, but not if a row sum overflowed).
+    std::array<std::array<float, kQuad + kBandRows + kQuad>, N> padded_sum;
+    std::array<float*, N> row_sum;
+    for (std::size_t i = 0; i < N; ++i) row_sum[i] = padded_sum[i].data() + kQuad;
+    for (int b = 0; b < bands_; ++b) {
+      const int r0 = b * kBandRows;
+      const std::size_t slot = std::size_t(b) * std::size_t(strips_) + std::size_t(strip);
+      for (std::size_t v = visit_start_[slot]; v < visit_start_[slot + 1]; ++v) {
+        const Visit& visit = visits_[v];
+        const Column& col = columns_[visit.column];
         const SliceTables& t = op.slice(col.z);
-        ++stamp;
-        int lo = kBandRows, hi = -1;
-        for (std::size_t k = k0; k < k1; ++k) {
-          for (const Segment& seg : std::span(t.y_segments.data() + entries_[k].segment_begin, entries_[k].segment_count)) {
-            const int a = std::max(r0, seg.first), e = std::min(r1, seg.first + seg.length);
-            for (int r = a; r < e; ++r) reached[std::size_t(r - r0)] = stamp;
-            lo = std::min(lo, a - r0);
-            hi = std::max(hi, e - 1 - r0);
-          }
-        }
         // Stage 1: B(row) = Σ_col Ax(col) r(row, col), once per reached row.
         const std::size_t q0 = t.x_quad_start[std::size_t(col.x)], q1 = t.x_quad_start[std::size_t(col.x) + 1];
         for (std::size_t i = 0; i < N; ++i) {
-          dot_column(images[i] + std::size_t(r0) * width, width, reached.data(), stamp, lo, hi,
-                     t.x_quad_first.data() + q0, t.x_quad_weights.data() + kQuad * q0, q1 - q0, row_sum[i].data());
+          padded_sum[i].fill(0.f);
+          dot_column(images[i] + std::size_t(r0) * width, width, visit.rows.data(), kRowWords,
+                     t.x_quad_first.data() + q0, t.x_quad_weights.data() + kQuad * q0, q1 - q0, row_sum[i]);
         }
-        // Stage 2: per voxel Σ_row Ay(row) B(row) over the band's rows.
-        for (std::size_t k = k0; k < k1; ++k) {
+        // Stage 2: per voxel Σ_row Ay(row) B(row) over the band's rows, one quad of rows at a
+        // time, lane after lane: the zero lanes add +0, so the sums are those row by row.
+        for (std::size_t k = visit.entry_begin; k < visit.entry_end; ++k) {
           const BandEntry& entry = entries_[k];
+          const int* first = t.y_quad_first.data() + entry.quad_begin;
+          const float* w = t.y_quad_weights.data() + kQuad * std::size_t(entry.quad_begin);
           std::array<double, N> s{};
-          for (const Segment& seg : std::span(t.y_segments.data() + entry.segment_begin, entry.segment_count)) {
-            const int a = std::max(r0, seg.first), e = std::min(r1, seg.first + seg.length);
-            const float* w = t.y_table.data() + seg.offset;
-            for (int r = a; r < e; ++r) {
-              for (std::size_t i = 0; i < N; ++i) s[i] += double(w[r - seg.first]) * row_sum[i][std::size_t(r - r0)];
+          for (std::uint32_t q = 0; q < entry.quad_count; ++q) {
+            Lanes4 wq;
+            __builtin_memcpy(&wq, w + kQuad * q, sizeof wq);
+            const Doubles4 wd = __builtin_convertvector(wq, Doubles4);
+            for (std::size_t i = 0; i < N; ++i) {
+              Lanes4 bq;
+              __builtin_memcpy(&bq, row_sum[i] + (first[q] - r0), sizeof bq);
+              // Products of floats are exact in double: only the order of the adds matters.
+              const Doubles4 p = wd * __builtin_convertvector(bq, Doubles4);
+              s[i] = (((s[i] + p[0]) + p[1]) + p[2]) + p[3];
             }
           }
           for (std::size_t i = 0; i < N; ++i) sums[i * order_.size() + entry.position] += s[i];
         }
-      });
+      }
     }
     for (std::size_t i = 0; i < N; ++i) {
       for (std::uint32_t p = p0; p < p1; ++p) {

@@ -72,6 +72,12 @@ struct SliceTables {
   std::vector<std::size_t> x_quad_start;
   std::vector<int> x_quad_first;
   std::vector<float> x_quad_weights;  // 4 per quad
+  // The y weights as quads of 4 consecutive rows, the same way, for the kernels' y stages
+  // (zero-padded past a segment's end, never shifted: they weigh rows of a scratch array, and
+  // rows past the sensor's last weigh 0).
+  std::vector<std::size_t> y_quad_start;
+  std::vector<int> y_quad_first;
+  std::vector<float> y_quad_weights;  // 4 per quad
 };
 
 // One voxel's weights along one axis, ready for a kernel.
@@ -206,51 +212,53 @@ class ActiveSet {
                              std::span<float> values_b, Workspace* workspace = nullptr) const;
 
  private:
-  // One voxel column (z, x) of the set: its voxels are order_[begin, end), y increasing, and its
-  // rows reach bands [first_band, last_band], whose entries are blocks_[block + band - first_band].
-  // Columns run x-major (x, then z): consecutive columns reach nearly the same sensor columns.
+  // One voxel column (z, x) of the set: its voxels are order_[begin, end), y increasing.
   struct Column {
     int z = 0, x = 0;
     std::uint32_t begin = 0, end = 0;
-    int first_band = 0, last_band = -1;
-    std::size_t block = 0;
   };
-  // One voxel of a column in one band: its y segments there (into its slice's y_segments).
+  // One voxel of a column in one band: its y quads that overlap the band (into its slice's
+  // y_quad_first / y_quad_weights).
   struct BandEntry {  // no initialisers: millions are allocated, then each written once
     std::uint32_t position;  // in order_
-    std::uint32_t segment_begin;
-    std::uint32_t segment_count;
+    std::uint32_t quad_begin;
+    std::uint32_t quad_count;
   };
-
-  std::vector<std::uint32_t> voxels_;
-  // Voxels with a positive normaliser, in column order: position in voxels_ and n.
-  std::vector<std::uint32_t> order_;
-  std::vector<float> order_normaliser_;
-  std::vector<Column> columns_;
-  static constexpr std::uint32_t kNoColumn = ~std::uint32_t(0);
-  std::vector<std::uint32_t> column_at_;  // per voxel (x, z), x-major: index into columns_
   // Sensor rows per band. Few bands per voxel keep the per-band bookkeeping small; the pixels a
   // strip of voxel x reaches in one band (~0.6 MB on the paper sensor) stay in L2. Measured on
   // the paper case (bench_recon paper 0.5 0 0.9 2, CPU time): 128 rows 1.12x the time of 256,
   // 512 no better (and fewer bands to share out).
   static constexpr int kBandRows = 256;
+  static constexpr int kRowWords = kBandRows / 64;
+  // One column's share of one band, as the kernels visit it: its entries and, as bits, the band's
+  // rows its voxels reach (the rows the two-stage kernels touch).
+  struct Visit {  // no initialisers, as BandEntry
+    std::uint32_t column;  // into columns_
+    std::uint32_t entry_begin, entry_end;  // into entries_
+    std::array<std::uint64_t, kRowWords> rows;  // bit r: row r0 + r of the band
+  };
+
+  std::vector<std::uint32_t> voxels_;
+  // Voxels with a positive normaliser, in the kernels' visiting order (strip, depth, x, then y
+  // increasing): position in voxels_ and n. A pass reads and writes its per-voxel arrays front to
+  // back, and each strip owns one contiguous range of them.
+  std::vector<std::uint32_t> order_;
+  std::vector<float> order_normaliser_;
+  std::vector<Column> columns_;  // in the same order
   // Voxel x per strip: within a band the kernels walk strip by strip, depth by depth, x by x, so
   // the y weights of one depth serve the whole strip and the pixels under the strip stay cached.
   int strip_x_ = 1;
+  int strips_ = 0;
   int bands_ = 0;
-  // The entries of one column in one band: entries_[begin, end). Blocks are indexed column by
-  // column (Column::block + band - first_band); the entries themselves lie band by band in the
-  // kernels' visiting order (strip, depth, x), so a pass reads them front to back.
-  struct Block {
-    std::size_t begin = 0, end = 0;
-  };
-  std::vector<Block> blocks_;
+  std::vector<int> band_order_, strip_order_;  // the order passes hand them out: costliest first
+  std::vector<std::uint32_t> strip_columns_;  // strip s owns columns_[strip_columns_[s], strip_columns_[s + 1])
+  // The visits of band b and strip s are visits_[visit_start_[b * strips_ + s], visit_start_[b * strips_ + s + 1]);
+  // visits and their entries lie in the kernels' reading order (band, strip, depth, x), so a
+  // pass streams through both.
+  std::vector<std::size_t> visit_start_;
+  BigBuffer<Visit> visits_;
   BigBuffer<BandEntry> entries_;
 
-  // Calls f(column, its entries in band b [k0, k1)) for the columns of voxel x in [x0, x1) that
-  // reach band b: depth by depth, x by x within a depth (the kernels' fixed order).
-  template <typename F>
-  void for_each_column(int b, int x0, int x1, int nz, F&& f) const;
   // Back-projection of N whitened images at once (N = 1 or 2).
   template <std::size_t N>
   void back_project_images(const WeightingOperator& op, const std::array<const float*, N>& images,

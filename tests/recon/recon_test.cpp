@@ -192,6 +192,15 @@ TEST(WeightsActiveSet, SubsetOnAWideGridEqualsExplicitColumns) {
   }
   std::cout << "measured: last pixel column reached " << last_column << "\n";
   ASSERT_GT(last_column, op.image_width() - 4);
+  // The kernels cut the sensor into bands of 256 rows (850 rows: 4 bands, the last partial) and
+  // keep the y weights as 4-row quads: some quads must cross a band edge for this test to cover
+  // the lanes that belong to the neighbouring band.
+  int straddling = 0;
+  for (int z = 0; z < g.shape[2]; ++z) {
+    for (int first : op.slice(z).y_quad_first) straddling += first / 256 != (first + 3) / 256;
+  }
+  std::cout << "measured: y quads across a band edge " << straddling << "\n";
+  ASSERT_GT(straddling, 0);
   const SparseMatrix w = build_explicit_matrix(op);
   std::mt19937 rng(11);
   std::uniform_real_distribution<float> u(0.f, 1.f);
