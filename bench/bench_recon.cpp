@@ -246,7 +246,7 @@ int main(int argc, char** argv) {
   const double ppm = argc > 2 ? std::stod(argv[2]) : 0.5;
   const float threshold = argc > 3 ? std::stof(argv[3]) : 0.f;
   const double cutoff = argc > 4 ? std::stod(argv[4]) : 0.9;
-  const int iterations = argc > 5 ? std::stoi(argv[5]) : 5;
+  const int iterations = which != "fig22" && argc > 5 ? std::stoi(argv[5]) : 5;  // fig22 reads its own
   if (which == "mid" || which == "all") mid_size(source_dir);
   if (which == "figures") figures(source_dir, argc > 2 ? std::stod(argv[2]) : 0.9);
   // Fig 22: 500 particles in the paper-scale box; `fig22 [cutoff] [iterations] [mu] [nesterov]`.

@@ -22,6 +22,7 @@ for r in rows:
     t, e = float(r["total_s"]), float(r["rms"])
     ax.plot(t, e, "o", color="tab:red" if r["pareto"] == "yes" else "tab:gray")
     label = {"paper": "paper", "iterations": f"it {r['iterations']}", "mu": f"mu {r['mu']}, it {r['iterations']}",
+             "acceleration": f"accelerated, it {r['iterations']}",
              "no_depth_guard": "no depth guard", "dark_cutoff": f"cutoff {r.get('value')}",
              "noise_threshold": f"floor {r.get('value')}",
              "angular_sampling": f"angular {r.get('value', '').split(',')[0]}", "binning": f"binning {r.get('value')}",
