@@ -3,9 +3,10 @@
 // same correlation on exact-particle volumes; time per stage, peak memory; a time/accuracy sweep
 // of the knobs on the reduced case with its Pareto front.
 //
-//   bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate] [--z-centre MM]
-//     --iterations/--mu: MART for the headline rows (default the paper's 5 at mu 0.5; the sweep's
-//              rows still start from the paper's settings).
+//   bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate]
+//             [--z-centre MM]
+//     --iterations/--mu/--accelerate: MART for the headline rows (default the paper's 5 at mu 0.5,
+//              not accelerated; the sweep's rows still start from the paper's settings).
 //     --z-centre: depth of the volume's (and the ring's) centre, mm (default 0: the focal plane).
 //   Every RMS is given over all vectors and, as off_axis_band_*, over the vectors whose final
 //   window (16 voxels: half-width 1 mm) does not reach the ring's axis, |x - x_c| and |z - z_c|
@@ -14,6 +15,8 @@
 //              diameter with r_c = 8 voxels and v_rc = 3 voxels (the paper's ring scaled to fit).
 //     full:    camera-fahringer2015.yaml, 300 x 200 x 200 voxels of 0.125 mm, the paper's ring
 //              (8 mm diameter, r_c = 40 voxels, v_rc = 8 voxels).
+//     mid:     as full, the box cut laterally to 120 x 80 voxels around the ring (a sixth of the
+//              cost; the same optics, depth and seeding).
 #include <sys/resource.h>
 
 #include <chrono>
