@@ -147,7 +147,7 @@ void add_recon_commands(CLI::App& app) {
   cmd->add_option("--iterations", o->iterations, "MART iterations")->capture_default_str();
   cmd->add_option("--mu", o->mu, "relaxation, 0 < mu <= 1")->capture_default_str();
   cmd->add_flag("--accelerate", o->accelerate,
-                "Nesterov momentum on the iterations (about 2.5x fewer iterations for the same depth "
+                "Nesterov momentum on the iterations (about half the iterations for the same depth "
                 "recovery; off: the paper's iteration)");
   cmd->add_option("--start", o->start, "initial volume: mlos (multiplicative line of sight) or ones (eq 9)")
       ->capture_default_str();

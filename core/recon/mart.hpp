@@ -41,7 +41,7 @@ struct MartSettings {
   double mu = 0.5;                 // relaxation, 0 < mu <= 1
   // Nesterov's momentum on ln E with FISTA's schedule and a gradient restart: the same cost per
   // iteration as SMART (a few operations per voxel), far fewer iterations for a converged depth
-  // (docs/recon.md, "Acceleration"). Off: the paper's iteration.
+  // (docs/recon.md, "MART"). Off: the paper's iteration.
   bool accelerate = false;
   float noise_threshold = 0.f;     // pixels at or below it count as dark (zero)
   // A dark pixel zeroes a voxel (eq 9: ratio 0) only where the voxel's column and row weights at

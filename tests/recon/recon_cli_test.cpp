@@ -58,6 +58,21 @@ TEST(ReconstructCli, WritesVolumesWhoseBrightestVoxelIsTheParticle) {
   EXPECT_NEAR(fit->position_mm[0], -0.1875, 0.0625);
   EXPECT_NEAR(fit->position_mm[1], 0.1875, 0.0625);
   EXPECT_NEAR(fit->position_mm[2], -0.75, 0.5);
+
+  // --accelerate reaches MART: another volume, the particle still where it is.
+  ASSERT_EQ(run_command({binary("plenopiv"), "reconstruct", kCamera, (dir / "particle.tif").string(), "--extent",
+                         "-0.625", "0.625", "-0.625", "0.625", "-2", "2", "--voxel", "0.125", "--voxel-z", "0.5",
+                         "--iterations", "3", "--accelerate", "-o", (dir / "accelerated.h5").string()},
+                        out),
+            0)
+      << out;
+  const Volume accelerated = io::read_volume_h5(dir / "accelerated.h5");
+  EXPECT_NE(accelerated.data, v.data);
+  const auto fit_accelerated = fit_particle(accelerated, {-0.1875, 0.1875, -0.75}, {3, 3, 3});
+  ASSERT_TRUE(fit_accelerated);
+  EXPECT_NEAR(fit_accelerated->position_mm[0], -0.1875, 0.0625);
+  EXPECT_NEAR(fit_accelerated->position_mm[1], 0.1875, 0.0625);
+  EXPECT_NEAR(fit_accelerated->position_mm[2], -0.75, 0.5);
 }
 
 TEST(ReconstructCli, RefusesBadArgumentsClearly) {
