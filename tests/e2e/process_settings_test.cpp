@@ -22,6 +22,16 @@ ProcessSettings parse(const std::string& text) {
 const std::string kVolume = "dt_s: 0.001\nvolume: {x_mm: [-1, 1], y_mm: [-1, 1], z_mm: [2, 4], voxel_mm: 0.125";
 const std::string kPasses = "correlation: {passes: [{window: 8, overlap_percent: 50}]}\n";
 
+// The run config `text` is refused with an InputError that names `key`.
+void expect_refused_naming(const std::string& text, const std::string& key) {
+  try {
+    parse(text);
+    ADD_FAILURE() << "accepted: " << text;
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find(key), std::string::npos) << e.what();
+  }
+}
+
 TEST(ProcessSettings, TheDepthGuardAddsWholeSlicesAtBothDepthEnds) {
   const ProcessSettings s = parse(kVolume + ", depth_guard_mm: 0.3}\n" + kPasses);
   EXPECT_EQ(s.grid.shape[2], 16);
@@ -40,12 +50,7 @@ TEST(ProcessSettings, TheDepthGuardAddsWholeSlicesAtBothDepthEnds) {
 
 TEST(ProcessSettings, ABadDepthGuardIsNamed) {
   for (const std::string bad : {"-0.5", "1000", "many"}) {
-    try {
-      parse(kVolume + ", depth_guard_mm: " + bad + "}\n" + kPasses);
-      ADD_FAILURE() << bad;
-    } catch (const InputError& e) {
-      EXPECT_NE(std::string(e.what()).find("depth_guard_mm"), std::string::npos) << e.what();
-    }
+    expect_refused_naming(kVolume + ", depth_guard_mm: " + bad + "}\n" + kPasses, "depth_guard_mm");
   }
 }
 
@@ -59,12 +64,8 @@ TEST(ProcessSettings, AngularSamplingReachesTheOperator) {
   EXPECT_EQ(op.weights().grid(), s.reconstruction_grid());
   EXPECT_DOUBLE_EQ(op.weights().geometry().angular_sampling, 2.0);
   for (const std::string bad : {"0", "-1", "20", "fine"}) {
-    try {
-      parse(kVolume + "}\nreconstruction: {angular_sampling: " + bad + "}\n" + kPasses);
-      ADD_FAILURE() << bad;
-    } catch (const InputError& e) {
-      EXPECT_NE(std::string(e.what()).find("angular_sampling"), std::string::npos) << e.what();
-    }
+    expect_refused_naming(kVolume + "}\nreconstruction: {angular_sampling: " + bad + "}\n" + kPasses,
+                          "angular_sampling");
   }
 }
 
@@ -73,12 +74,7 @@ TEST(ProcessSettings, AccelerationReachesMart) {
   EXPECT_TRUE(parse(kVolume + "}\nreconstruction: {acceleration: nesterov}\n" + kPasses).mart.accelerate);
   EXPECT_FALSE(parse(kVolume + "}\nreconstruction: {acceleration: none}\n" + kPasses).mart.accelerate);
   for (const std::string bad : {"fista", "yes", "1"}) {
-    try {
-      parse(kVolume + "}\nreconstruction: {acceleration: " + bad + "}\n" + kPasses);
-      ADD_FAILURE() << bad;
-    } catch (const InputError& e) {
-      EXPECT_NE(std::string(e.what()).find("acceleration"), std::string::npos) << e.what();
-    }
+    expect_refused_naming(kVolume + "}\nreconstruction: {acceleration: " + bad + "}\n" + kPasses, "acceleration");
   }
 }
 
