@@ -19,7 +19,7 @@
 #include "core/recon/weights.hpp"
 #include "core/sim/exact_volume.hpp"
 #include "core/sim/particles.hpp"
-#include "tests/lightfield/particle_render.hpp"
+#include "core/sim/render.hpp"
 
 using namespace plenopiv;
 using Clock = std::chrono::steady_clock;
@@ -42,6 +42,18 @@ double peak_rss_gb() {
     if (line.rfind("VmHWM:", 0) == 0) return std::stod(line.substr(6)) / (1024.0 * 1024.0);
   }
   return -1;
+}
+
+// Particles ray traced by core/sim (the paper's sec 4 simulator: 10 000 rays each, diffraction
+// jitter 5.2 um at the microlens plane and the sensor; its defaults), seeded so runs repeat; the
+// landed rays scaled so the brightest pixel reads 4095 (12 bits, no noise).
+ImageF traced_12bit(const optics::CameraModel& cam, const optics::MicrolensArray& lenses,
+                    const std::vector<sim::Point3>& positions, std::uint64_t seed) {
+  ImageF image = sim::render(cam, lenses, positions, sim::RenderOptions{}, seed).rays;
+  float peak = 0;
+  for (float v : image.pixels) peak = std::max(peak, v);
+  for (float& v : image.pixels) v = std::round(v / peak * 4095.f);
+  return image;
 }
 
 Grid3 grid_of(int nx, int ny, int nz, double voxel_mm, double depth_mm) {
@@ -69,19 +81,13 @@ void paper_scale(const std::string& source_dir, bool small, double ppm, int iter
   const recon::WeightingOperator op(cam, lenses, g, std::move(white));
   std::printf("bench=recon_paper phase=tables_and_normalisers seconds=%.3f cpu_s=%.3f\n", since(t), cpu_seconds() - c);
 
-  // Particles filling the box at `ppm` (counted over the field of view, as the paper does), traced
-  // ray by ray (the light-field tests' renderer, until core/sim's ray tracer lands), 12-bit counts.
+  // Particles filling the box at `ppm` (counted over the field of view, as the paper does).
   const sim::Box box = small ? sim::Box{{-3, -3, -10}, {3, 3, 10}} : sim::Box{{-15, -10, -10}, {15, 10, 10}};
   const std::size_t count = count_override ? count_override : sim::particle_count_from_ppm(cam, box, ppm);
   const auto positions = sim::random_particles(box, count, 1);
-  std::vector<testing_support::PointParticle> particles;
-  for (const auto& p : positions) particles.push_back({p[0], p[1], p[2], 1000.0});
   t = Clock::now();
-  ImageF image = testing_support::render_particles(cam, lenses, particles, 40);
+  const ImageF image = traced_12bit(cam, lenses, positions, 1);
   std::printf("bench=recon_paper phase=render_image seconds=%.3f\n", since(t));
-  float peak = 0;
-  for (float v : image.pixels) peak = std::max(peak, v);
-  for (float& v : image.pixels) v = std::round(v / peak * 4095.f);
   std::size_t lit = 0;
   for (float v : image.pixels) lit += v > 0;
 
@@ -196,8 +202,10 @@ void figures(const std::string& source_dir, double dark_cutoff) {
     const recon::WeightingOperator op(cam, lenses, g, recon::geometric_white_image(cam, lenses));
     for (int k = -9; k <= 9; ++k) {
       const std::array<double, 3> p{0.0, 0.0, double(k)};  // on a voxel centre, as the paper
-      ImageF image = testing_support::render_particles(cam, lenses, {{p[0], p[1], p[2], 4000.0}}, 100);
-      for (float& v : image.pixels) v = std::round(v);
+      // 10^5 rays (core/sim, diffraction on): enough that Monte Carlo noise does not move the fit.
+      sim::RenderOptions ro;
+      ro.rays_per_particle = 100000;
+      const ImageF image = sim::render(cam, lenses, std::vector<sim::Point3>{p}, ro, 21).rays;
       recon::MartSettings s;
       s.dark_weight_cutoff = dark_cutoff;
       const recon::MartResult r = recon::reconstruct(op, image, s);
@@ -216,12 +224,7 @@ void figures(const std::string& source_dir, double dark_cutoff) {
   const sim::Box box{{-3, -3, -10}, {3, 3, 10}};
   auto run = [&](double ppm, int iterations) {
     const auto positions = sim::random_particles(box, sim::particle_count_from_ppm(cam, box, ppm), 7);
-    std::vector<testing_support::PointParticle> particles;
-    for (const auto& p : positions) particles.push_back({p[0], p[1], p[2], 1000.0});
-    ImageF image = testing_support::render_particles(cam, lenses, particles, 40);
-    float peak = 0;
-    for (float v : image.pixels) peak = std::max(peak, v);
-    for (float& v : image.pixels) v = std::round(v / peak * 4095.f);
+    const ImageF image = traced_12bit(cam, lenses, positions, 7);
     recon::MartSettings s;
     s.iterations = iterations;
     s.dark_weight_cutoff = dark_cutoff;

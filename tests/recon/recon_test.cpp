@@ -15,7 +15,7 @@
 #include "core/recon/mart.hpp"
 #include "core/recon/quality.hpp"
 #include "core/recon/weights.hpp"
-#include "tests/lightfield/particle_render.hpp"
+#include "core/sim/render.hpp"
 
 namespace plenopiv::recon {
 namespace {
@@ -523,50 +523,68 @@ namespace plenopiv::recon {
 namespace {
 
 // Fig 16: the weights of one voxel against a ray-traced image of 400 point particles spread
-// uniformly over that voxel (traced by the light-field tests' renderer: thin main lens, thin
-// microlenses, nearest lens per ray). Zero-mean normalised cross-correlation over every pixel
-// either of them lights.
+// uniformly over that voxel, 10 000 rays each as the paper's, traced by core/sim (the product's
+// simulator, sec 4). Zero-mean normalised cross-correlation over every pixel either of them
+// lights. The weights are geometric (sec 5.2 has no diffraction), so the comparison is made with
+// the simulator's diffraction jitter (its default, 5.2 um at the microlens plane and at the
+// sensor) and without it.
+double fig16_ncc(const optics::CameraModel& cam, const optics::MicrolensArray& lenses, double z,
+                 double diffraction_sigma_mm) {
+  Grid3 g;
+  g.shape = {1, 1, 1};
+  g.spacing_mm = {0.125, 0.125, 0.125};
+  g.origin_mm = {0.3, -0.2, z};
+  const WeightingOperator op(cam, lenses, g, geometric_white_image(cam, lenses));
+  std::vector<float> weights(op.pixel_count());
+  op.project(std::vector<float>{1.f}, weights);
+  std::mt19937 rng(16);
+  std::uniform_real_distribution<double> u(-0.5, 0.5);
+  std::vector<sim::Point3> particles;
+  for (int p = 0; p < 400; ++p) particles.push_back({0.3 + 0.125 * u(rng), -0.2 + 0.125 * u(rng), z + 0.125 * u(rng)});
+  sim::RenderOptions ro;
+  ro.rays_per_particle = 10000;
+  ro.diffraction_sigma_mm = diffraction_sigma_mm;
+  const ImageF traced = sim::render(cam, lenses, particles, ro, 16).rays;
+  double ma = 0, mb = 0;
+  std::size_t n = 0;
+  for (std::size_t i = 0; i < weights.size(); ++i) {
+    if (weights[i] > 0 || traced.pixels[i] > 0) {
+      ma += weights[i];
+      mb += traced.pixels[i];
+      ++n;
+    }
+  }
+  ma /= double(n);
+  mb /= double(n);
+  double ab = 0, aa = 0, bb = 0;
+  for (std::size_t i = 0; i < weights.size(); ++i) {
+    if (weights[i] > 0 || traced.pixels[i] > 0) {
+      const double a = weights[i] - ma, b = traced.pixels[i] - mb;
+      ab += a * b;
+      aa += a * a;
+      bb += b * b;
+    }
+  }
+  const double ncc = ab / std::sqrt(aa * bb);
+  std::cout << "measured: fig 16 NCC at z = " << z << " mm, diffraction " << diffraction_sigma_mm * 1000
+            << " um: " << ncc << " over " << n << " pixels\n";
+  return ncc;
+}
+
 TEST(WeightsFig16, OneVoxelResemblesRayTracedParticlesInIt) {
   const auto cam = small_camera();
   const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(cam));
+  const double diffraction_mm = sim::RenderOptions{}.diffraction_sigma_mm;
   for (double z : {-6.0, -2.0, 0.5, 3.0, 8.0}) {
-    Grid3 g;
-    g.shape = {1, 1, 1};
-    g.spacing_mm = {0.125, 0.125, 0.125};
-    g.origin_mm = {0.3, -0.2, z};
-    const WeightingOperator op(cam, lenses, g, geometric_white_image(cam, lenses));
-    std::vector<float> weights(op.pixel_count());
-    op.project(std::vector<float>{1.f}, weights);
-    std::mt19937 rng(16);
-    std::uniform_real_distribution<double> u(-0.5, 0.5);
-    std::vector<testing_support::PointParticle> particles;
-    for (int p = 0; p < 400; ++p) {
-      particles.push_back({0.3 + 0.125 * u(rng), -0.2 + 0.125 * u(rng), z + 0.125 * u(rng), 1.0});
-    }
-    const ImageF traced = testing_support::render_particles(cam, lenses, particles, 60);
-    double ma = 0, mb = 0;
-    std::size_t n = 0;
-    for (std::size_t i = 0; i < weights.size(); ++i) {
-      if (weights[i] > 0 || traced.pixels[i] > 0) {
-        ma += weights[i];
-        mb += traced.pixels[i];
-        ++n;
-      }
-    }
-    ma /= double(n);
-    mb /= double(n);
-    double ab = 0, aa = 0, bb = 0;
-    for (std::size_t i = 0; i < weights.size(); ++i) {
-      if (weights[i] > 0 || traced.pixels[i] > 0) {
-        const double a = weights[i] - ma, b = traced.pixels[i] - mb;
-        ab += a * b;
-        aa += a * a;
-        bb += b * b;
-      }
-    }
-    const double ncc = ab / std::sqrt(aa * bb);
-    std::cout << "measured: fig 16 NCC at z = " << z << " mm: " << ncc << " over " << n << " pixels\n";
-    EXPECT_GE(ncc, 0.9) << "z = " << z;  // measured 0.966 (z = 8) to 0.997 (z = 0.5)
+    // Without diffraction the image is what the weights model: measured 0.974 (z = 8) to 0.997
+    // (z = 0.5).
+    EXPECT_GE(fig16_ncc(cam, lenses, z, 0.0), 0.95) << "z = " << z;
+    // With it, the 0.9 holds within 3 mm of focus (measured 0.980-0.992). Far from focus
+    // each lens sees the particles as a spot a few pixels wide, and the jitter (about 1 px of
+    // 7.4 um, microlens plane and sensor together) spreads it over pixels the weights leave
+    // dark: measured 0.894 at z = -6 and 0.874 at z = 8 (the same at 5 000 or 20 000 rays: it
+    // is the jitter, not Monte Carlo noise), so the bound there is 0.85.
+    EXPECT_GE(fig16_ncc(cam, lenses, z, diffraction_mm), std::abs(z) <= 3 ? 0.95 : 0.85) << "z = " << z;
   }
 }
 
@@ -576,8 +594,10 @@ TEST(WeightsFig16, OneVoxelResemblesRayTracedParticlesInIt) {
 namespace plenopiv::recon {
 namespace {
 
-// Fig 21 in small: single ray-traced particles at several depths, reconstructed (5 iterations,
-// mu = 0.5) and located by the Gaussian fit; lateral and depth errors in voxels.
+// Fig 21 in small: single particles at several depths, ray traced by core/sim (diffraction
+// jitter 5.2 um, its default; 10^5 rays each so Monte Carlo noise stays below the fit's
+// resolution: at 4 000 rays a particle can go unfound), reconstructed (5 iterations, mu = 0.5)
+// and located by the Gaussian fit; lateral and depth errors in voxels.
 TEST(MartFig21, SingleRayTracedParticlesAreFoundWhereTheyAre) {
   const auto cam = small_camera();
   const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(cam));
@@ -589,8 +609,9 @@ TEST(MartFig21, SingleRayTracedParticlesAreFoundWhereTheyAre) {
   double worst_lateral = 0, worst_depth = 0;
   for (double z : {-3.0, -1.5, 1.0, 2.5, 3.5}) {
     const std::array<double, 3> p{0.21, -0.13, z};
-    ImageF image = testing_support::render_particles(cam, lenses, {{p[0], p[1], p[2], 4000.0}}, 100);
-    for (float& v : image.pixels) v = std::round(v);
+    sim::RenderOptions ro;
+    ro.rays_per_particle = 100000;
+    const ImageF image = sim::render(cam, lenses, std::vector<sim::Point3>{p}, ro, 21).rays;
     MartSettings s;
     s.dark_weight_cutoff = 0.9;
     const MartResult r = reconstruct(op, image, s);
@@ -603,8 +624,12 @@ TEST(MartFig21, SingleRayTracedParticlesAreFoundWhereTheyAre) {
     worst_lateral = std::max({worst_lateral, std::abs(ex), std::abs(ey)});
     worst_depth = std::max(worst_depth, std::abs(ez));
   }
-  EXPECT_LT(worst_lateral, 1.0);
-  EXPECT_LT(worst_depth, 8.0);
+  // Measured (seed 21): lateral 0.46 at every depth (the fit lands on the nearest voxel centre;
+  // the particle is 0.18 and 0.46 voxel from it); depth 0.11-0.60, and 2.5 at z = 1 mm (the
+  // ambiguity next to the focal plane that fig 21 shows too). Seeds 1-3 and 4 x 10^5 rays: the
+  // same worst cases. (The test-support renderer, without diffraction, gave 0.54 and 3.5.)
+  EXPECT_LT(worst_lateral, 0.75);
+  EXPECT_LT(worst_depth, 4.0);
 }
 
 }  // namespace
