@@ -31,28 +31,44 @@ double quality_factor(const Volume& reconstructed, const Volume& exact) {
   return aa > 0 && bb > 0 ? ab / std::sqrt(aa * bb) : 0.0;
 }
 
-std::optional<ParticleFit> fit_particle(const Volume& volume, const std::array<double, 3>& guess_mm,
-                                        const std::array<int, 3>& half_size) {
+namespace {
+
+struct Brightest {
+  std::array<int, 3> voxel{-1, -1, -1};
+  float value = 0;
+};
+
+// The brightest voxel within half_size of guess_mm (value 0 when the window holds no positive
+// intensity or lies outside the grid).
+Brightest brightest_near(const Volume& volume, const std::array<double, 3>& guess_mm,
+                         const std::array<int, 3>& half_size) {
   const Grid3& g = volume.grid;
-  std::array<int, 3> lo{}, hi{}, centre{};
+  std::array<int, 3> lo{}, hi{};
   for (int a = 0; a < 3; ++a) {
-    centre[a] = int(std::lround((guess_mm[a] - g.origin_mm[a]) / g.spacing_mm[a]));
-    lo[a] = std::max(0, centre[a] - half_size[a]);
-    hi[a] = std::min(g.shape[a] - 1, centre[a] + half_size[a]);
-    if (lo[a] > hi[a]) return std::nullopt;
+    const int centre = int(std::lround((guess_mm[a] - g.origin_mm[a]) / g.spacing_mm[a]));
+    lo[a] = std::max(0, centre - half_size[a]);
+    hi[a] = std::min(g.shape[a] - 1, centre + half_size[a]);
+    if (lo[a] > hi[a]) return {};
   }
-  std::array<int, 3> best{-1, -1, -1};
-  float peak = 0;
+  Brightest b;
   for (int z = lo[2]; z <= hi[2]; ++z) {
     for (int y = lo[1]; y <= hi[1]; ++y) {
       for (int x = lo[0]; x <= hi[0]; ++x) {
-        if (volume.at(x, y, z) > peak) {
-          peak = volume.at(x, y, z);
-          best = {x, y, z};
-        }
+        if (volume.at(x, y, z) > b.value) b = {{x, y, z}, volume.at(x, y, z)};
       }
     }
   }
+  return b;
+}
+
+}  // namespace
+
+std::optional<ParticleFit> fit_particle(const Volume& volume, const std::array<double, 3>& guess_mm,
+                                        const std::array<int, 3>& half_size) {
+  const Grid3& g = volume.grid;
+  const Brightest brightest = brightest_near(volume, guess_mm, half_size);
+  const std::array<int, 3>& best = brightest.voxel;
+  const float peak = brightest.value;
   if (!(peak > 0)) return std::nullopt;
   ParticleFit fit;
   fit.peak = peak;
@@ -101,6 +117,39 @@ std::optional<ParticleFit> fit_particle(const Volume& volume, const std::array<d
       }
     }
     fit.position_voxel[a] = best[a] + offset;
+    fit.position_mm[a] = g.origin_mm[a] + fit.position_voxel[a] * g.spacing_mm[a];
+  }
+  return fit;
+}
+
+std::optional<ParticleFit> fit_particle_moments(const Volume& volume, const std::array<double, 3>& guess_mm,
+                                                const std::array<int, 3>& half_size, int lateral_radius) {
+  const Grid3& g = volume.grid;
+  const Brightest brightest = brightest_near(volume, guess_mm, half_size);
+  if (!(brightest.value > 0)) return std::nullopt;
+  const std::array<int, 3> radius{lateral_radius, lateral_radius, half_size[2]};
+  std::array<int, 3> lo{}, hi{};
+  for (int a = 0; a < 3; ++a) {
+    lo[a] = std::max(0, brightest.voxel[a] - radius[a]);
+    hi[a] = std::min(g.shape[a] - 1, brightest.voxel[a] + radius[a]);
+  }
+  double total = 0;
+  std::array<double, 3> moment{0, 0, 0};
+  for (int z = lo[2]; z <= hi[2]; ++z) {
+    for (int y = lo[1]; y <= hi[1]; ++y) {
+      for (int x = lo[0]; x <= hi[0]; ++x) {
+        const double v = volume.at(x, y, z);
+        total += v;
+        moment[0] += v * x;
+        moment[1] += v * y;
+        moment[2] += v * z;
+      }
+    }
+  }
+  ParticleFit fit;
+  fit.peak = brightest.value;
+  for (int a = 0; a < 3; ++a) {
+    fit.position_voxel[a] = moment[a] / total;  // total >= the peak > 0
     fit.position_mm[a] = g.origin_mm[a] + fit.position_voxel[a] * g.spacing_mm[a];
   }
   return fit;

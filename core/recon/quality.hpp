@@ -26,4 +26,13 @@ struct ParticleFit {
 std::optional<ParticleFit> fit_particle(const Volume& volume, const std::array<double, 3>& guess_mm,
                                         const std::array<int, 3>& half_size);
 
+// The centre of a 3D Gaussian by the method of moments: the intensity-weighted mean position of
+// the voxels within `lateral_radius` (x and y) and half_size[2] (z) of the brightest voxel within
+// `half_size` of `guess_mm`. A reconstructed particle is stretched along the line of sight, tilted
+// off the z axis away from the optical axis, and after many iterations its light gathers in a few
+// sharp voxels along that streak: a fit through the peak's own column sees one or two of them,
+// the moments see them all (docs/benchmarks.md, "Fig 22"). std::nullopt as fit_particle.
+std::optional<ParticleFit> fit_particle_moments(const Volume& volume, const std::array<double, 3>& guess_mm,
+                                                const std::array<int, 3>& half_size, int lateral_radius = 1);
+
 }  // namespace plenopiv::recon

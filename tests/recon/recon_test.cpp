@@ -516,6 +516,42 @@ TEST(Quality, GaussianFitFindsSubVoxelCentres) {
   EXPECT_FALSE(fit_particle(Volume(g, 0.f), {0, 0, 0}, {2, 2, 2}));
 }
 
+TEST(Quality, MomentsFitFindsBlobAndStreakCentres) {
+  const Grid3 g = centred_grid(16, 24, 0.125, -1.5);
+  const std::array<double, 3> guess{g.coordinate_mm(0, 7), g.coordinate_mm(1, 8), g.coordinate_mm(2, 12)};
+  // A blob narrow across (the 3 x 3 window holds +-2 sigma) and long in depth (the window +-2.7
+  // sigma): the windows' truncation pulls towards the peak voxel, measured up to 0.026 voxel
+  // across and 0.008 in depth.
+  for (const std::array<double, 3> c : {std::array<double, 3>{7.3, 8.6, 11.2}, {7.0, 8.45, 13.8}}) {
+    const auto fit = fit_particle_moments(blob_volume(g, {c}, 0.5, 3.0), guess, {3, 3, 8});
+    ASSERT_TRUE(fit);
+    for (int a = 0; a < 3; ++a) EXPECT_NEAR(fit->position_voxel[a], c[a], a == 2 ? 0.012 : 0.035) << "axis " << a;
+    EXPECT_NEAR(fit->position_mm[2], g.coordinate_mm(2, 0) + c[2] * g.spacing_mm[2], 0.012 * g.spacing_mm[2]);
+  }
+  // A particle after many MART iterations: its light in three sharp voxels along a tilted line of
+  // sight. The moments give their weighted mean; the fit through the peak's rows sees only the
+  // brightest voxel (its neighbours are dark) and stays there.
+  Volume streak(g, 0.f);
+  streak.at(7, 8, 9) = 1.0f;
+  streak.at(7, 9, 12) = 0.6f;
+  streak.at(8, 9, 15) = 0.8f;
+  const auto moments = fit_particle_moments(streak, guess, {3, 3, 8});
+  ASSERT_TRUE(moments);
+  EXPECT_NEAR(moments->position_voxel[0], (7 * 1.0 + 7 * 0.6 + 8 * 0.8) / 2.4, 1e-6);
+  EXPECT_NEAR(moments->position_voxel[1], (8 * 1.0 + 9 * 0.6 + 9 * 0.8) / 2.4, 1e-6);
+  EXPECT_NEAR(moments->position_voxel[2], (9 * 1.0 + 12 * 0.6 + 15 * 0.8) / 2.4, 1e-6);
+  EXPECT_EQ(moments->peak, 1.0f);
+  const auto rows = fit_particle(streak, guess, {3, 3, 8});
+  ASSERT_TRUE(rows);
+  EXPECT_EQ(rows->position_voxel[2], 9.0);
+  // A voxel beyond lateral_radius of the peak is not counted.
+  streak.at(10, 8, 9) = 5.0f;
+  const auto with_neighbour = fit_particle_moments(streak, {g.coordinate_mm(0, 7), guess[1], guess[2]}, {1, 3, 8});
+  ASSERT_TRUE(with_neighbour);
+  EXPECT_NEAR(with_neighbour->position_voxel[2], moments->position_voxel[2], 1e-12);
+  EXPECT_FALSE(fit_particle_moments(Volume(g, 0.f), {0, 0, 0}, {2, 2, 2}));
+}
+
 }  // namespace
 }  // namespace plenopiv::recon
 
