@@ -113,6 +113,7 @@ int main(int argc, char** argv) {
   int iterations = 5;
   bool accelerate = false;
   double mu = 0.5, z_centre = 0.0, dark_cutoff = recon::MartSettings{}.dark_weight_cutoff;
+  double sensor_blur_mm = recon::MartSettings{}.sensor_blur_sigma_mm;
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--no-sweep")) sweep = false;
     else if (!std::strcmp(argv[i], "--rays") && i + 1 < argc) rays = std::stoul(argv[++i]);
@@ -121,11 +122,14 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--accelerate")) accelerate = true;
     else if (!std::strcmp(argv[i], "--z-centre") && i + 1 < argc) z_centre = std::stod(argv[++i]);
     else if (!std::strcmp(argv[i], "--dark-cutoff") && i + 1 < argc) dark_cutoff = std::stod(argv[++i]);
+    else if (!std::strcmp(argv[i], "--sensor-blur-mm") && i + 1 < argc) sensor_blur_mm = std::stod(argv[++i]);
     else scale = argv[i];
   }
-  if (sweep && (iterations != 5 || mu != 0.5 || accelerate || z_centre != 0.0 || dark_cutoff != recon::MartSettings{}.dark_weight_cutoff)) {
-    std::fprintf(stderr, "bench_e2e: --iterations/--mu/--accelerate/--dark-cutoff/--z-centre change the headline rows only; use them "
-                         "with --no-sweep\n");
+  if (sweep && (iterations != 5 || mu != 0.5 || accelerate || z_centre != 0.0 ||
+                dark_cutoff != recon::MartSettings{}.dark_weight_cutoff ||
+                sensor_blur_mm != recon::MartSettings{}.sensor_blur_sigma_mm)) {
+    std::fprintf(stderr, "bench_e2e: --iterations/--mu/--accelerate/--dark-cutoff/--sensor-blur-mm/--z-centre change the "
+                         "headline rows only; use them with --no-sweep\n");
     return 2;
   }
   // mid: the paper's camera and depth with the box cut laterally to the ring (120 x 80 voxels):
@@ -133,7 +137,7 @@ int main(int argc, char** argv) {
   const bool mid = scale == "mid";
   const bool full = scale == "full" || mid;
   if (!full && scale != "reduced") {
-    std::fprintf(stderr, "usage: bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate] [--dark-cutoff F] [--z-centre MM]\n");
+    std::fprintf(stderr, "usage: bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate] [--dark-cutoff F] [--sensor-blur-mm S] [--z-centre MM]\n");
     return 2;
   }
   const std::string dir = std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/";
@@ -150,6 +154,7 @@ int main(int argc, char** argv) {
   settings.mart.mu = mu;
   settings.mart.accelerate = accelerate;
   settings.mart.dark_weight_cutoff = dark_cutoff;
+  settings.mart.sensor_blur_sigma_mm = sensor_blur_mm;
 
   sim::RingVortexFlow::Parameters rv;
   rv.voxel_mm = voxel;
@@ -188,10 +193,11 @@ int main(int argc, char** argv) {
   // The paper's settings: reconstruction and correlation, stage by stage.
   const auto base = process::process_pair(op, a, b, settings);
   const Errors e = errors_against(base.correlation.field, flow, voxel);
-  std::printf("bench=e2e case=%s variant=reconstructed iterations=%d mu=%.2f accelerate=%d dark_cutoff=%.3g recon_a_s=%.2f recon_b_s=%.2f "
+  std::printf("bench=e2e case=%s variant=reconstructed iterations=%d mu=%.2f accelerate=%d dark_cutoff=%.3g sensor_blur_mm=%.4g "
+              "recon_a_s=%.2f recon_b_s=%.2f "
               "correlate_s=%.2f skipped_a=%.3f skipped_b=%.3f rms_u=%.3f rms_v=%.3f rms_w=%.3f rms=%.3f valid=%.3f "
               "off_axis_band_rms_u=%.3f off_axis_band_rms_v=%.3f off_axis_band_rms_w=%.3f peak_rss_gb=%.2f\n",
-              scale.c_str(), iterations, mu, int(accelerate), dark_cutoff, base.times.reconstruct_a_s, base.times.reconstruct_b_s, base.times.correlate_s,
+              scale.c_str(), iterations, mu, int(accelerate), dark_cutoff, sensor_blur_mm, base.times.reconstruct_a_s, base.times.reconstruct_b_s, base.times.correlate_s,
               base.skipped_a.fraction_skipped(), base.skipped_b.fraction_skipped(), e.rms[0], e.rms[1], e.rms[2],
               e.total, e.valid_fraction, e.off_band[0], e.off_band[1], e.off_band[2], peak_rss_gb());
 

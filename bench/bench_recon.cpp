@@ -65,7 +65,8 @@ Grid3 grid_of(int nx, int ny, int nz, double voxel_mm, double depth_mm) {
 }
 
 void paper_scale(const std::string& source_dir, bool small, double ppm, int iterations, float threshold_counts,
-                 double dark_cutoff, std::size_t count_override = 0, double mu = 0.5, bool accelerate = false) {
+                 double dark_cutoff, std::size_t count_override = 0, double mu = 0.5, bool accelerate = false,
+                 double sensor_blur_mm = 0.0) {
   const auto cam = optics::load_camera_file(source_dir + (small ? "/systemd/config/camera-small.yaml"
                                                                 : "/systemd/config/camera-fahringer2015.yaml"));
   const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(cam));
@@ -95,6 +96,7 @@ void paper_scale(const std::string& source_dir, bool small, double ppm, int iter
   s.iterations = iterations;
   s.mu = mu;
   s.accelerate = accelerate;
+  s.sensor_blur_sigma_mm = sensor_blur_mm;
   s.noise_threshold = threshold_counts;
   s.dark_weight_cutoff = dark_cutoff;
   t = Clock::now();
@@ -114,8 +116,10 @@ void paper_scale(const std::string& source_dir, bool small, double ppm, int iter
     std::memcpy(&bits, &v, sizeof bits);
     hash = (hash ^ bits) * 1099511628211ull;
   }
-  std::printf("bench=recon_paper particles=%zu ppm=%.2f lit_pixel_fraction=%.4f threshold_counts=%.1f dark_cutoff=%.2f\n",
-              count, ppm, double(lit) / double(image.size()), double(s.noise_threshold), dark_cutoff);
+  std::printf("bench=recon_paper particles=%zu ppm=%.2f lit_pixel_fraction=%.4f threshold_counts=%.1f dark_cutoff=%.2f "
+              "iterations=%d mu=%.2f accelerate=%d sensor_blur_mm=%.4f\n",
+              count, ppm, double(lit) / double(image.size()), double(s.noise_threshold), dark_cutoff, iterations, mu,
+              int(accelerate), sensor_blur_mm);
   std::printf("bench=recon_paper phase=active_set_and_mlos seconds=%.3f\n", r.setup_seconds);
   std::printf("bench=recon_paper phase=iterations seconds=%.3f per_iteration=%.3f\n", iter_total,
               iter_total / double(std::max<std::size_t>(1, r.iterations.size())));
@@ -266,11 +270,15 @@ int main(int argc, char** argv) {
   const int iterations = which != "fig22" && argc > 5 ? std::stoi(argv[5]) : 5;  // fig22 reads its own
   if (which == "mid" || which == "all") mid_size(source_dir);
   if (which == "figures") figures(source_dir, argc > 2 ? std::stod(argv[2]) : 0.9);
-  // Fig 22: 500 particles in the paper-scale box; `fig22 [cutoff] [iterations] [mu] [nesterov]`.
+  // Fig 22: 500 particles in the paper-scale box;
+  // `fig22 [cutoff] [iterations] [mu] [nesterov|none] [sensor blur sigma, mm]`.
   if (which == "fig22")
     paper_scale(source_dir, false, 0, argc > 3 ? std::stoi(argv[3]) : 5, 0.f, argc > 2 ? std::stod(argv[2]) : 0.9, 500,
-                argc > 4 ? std::stod(argv[4]) : 0.5, argc > 5 && std::string(argv[5]) == "nesterov");
+                argc > 4 ? std::stod(argv[4]) : 0.5, argc > 5 && std::string(argv[5]) == "nesterov",
+                argc > 6 ? std::stod(argv[6]) : 0.0);
   if (which == "small") paper_scale(source_dir, true, ppm, iterations, threshold, cutoff);
-  if (which == "paper" || which == "all") paper_scale(source_dir, false, ppm, iterations, threshold, cutoff);
+  // `paper [ppm] [threshold] [cutoff] [iterations] [sensor blur sigma, mm]`.
+  if (which == "paper" || which == "all")
+    paper_scale(source_dir, false, ppm, iterations, threshold, cutoff, 0, 0.5, false, argc > 6 ? std::stod(argv[6]) : 0.0);
   return 0;
 }

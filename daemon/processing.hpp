@@ -8,8 +8,8 @@ namespace plenopiv::daemon {
 
 // For each run: the settings are core/process's, read from RunConfig::process_yaml() (the run's
 // volume, `reconstruction`: MART iterations, mu, acceleration: none|nesterov, start: mlos|ones,
-// noise_threshold, dark_weight_cutoff, convergence; `correlation`: core/piv's passes, median,
-// signal_threshold);
+// noise_threshold, dark_weight_cutoff, convergence, angular_sampling, sensor_blur_sigma_mm;
+// `correlation`: core/piv's passes, median, signal_threshold);
 // the pair operator for the run's volume (process::PairOperator: the run's calibration's lens
 // centres and white correction, or the nominal lattice and geometric white image without one;
 // its note, e.g. resampling a rotated array, goes to the log) is built once and shared read-only

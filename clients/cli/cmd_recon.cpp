@@ -34,6 +34,7 @@ struct ReconOptions {
   float threshold = 0;
   double dark_cutoff = 0.9;
   double convergence = 0;
+  double sensor_blur_mm = 0;
 };
 
 Grid3 grid_from(const ReconOptions& o) {
@@ -64,6 +65,7 @@ void run(const ReconOptions& o) {
   s.noise_threshold = o.threshold;
   s.dark_weight_cutoff = o.dark_cutoff;
   s.convergence = o.convergence;
+  s.sensor_blur_sigma_mm = o.sensor_blur_mm;
   if (o.start == "mlos") {
     s.start = recon::MartStart::mlos;
   } else if (o.start == "ones") {
@@ -159,6 +161,10 @@ void add_recon_commands(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--convergence", o->convergence,
                   "stop when the residual changes by less than this fraction (0: run all iterations)")
+      ->capture_default_str();
+  cmd->add_option("--sensor-blur-mm", o->sensor_blur_mm,
+                  "the camera's blur at the sensor as a Gaussian sigma, mm, modelled in MART (diffraction: "
+                  "core/sim's is 0.0052; 0: sec 5.2's weights alone)")
       ->capture_default_str();
   cmd->add_option("-o,--out", o->out, "output volume (HDF5: /volume, origin_mm, spacing_mm)")->required();
   cmd->add_option("--vti", o->vti, "also write VTK image data here (default: --out with .vti)");

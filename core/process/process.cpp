@@ -90,7 +90,7 @@ ProcessSettings process_settings_from(const YamlMap& root) {
   if (auto r = root.optional_map("reconstruction")) {
     r->reject_unknown(
         {"iterations", "mu", "acceleration", "start", "noise_threshold", "dark_weight_cutoff", "convergence",
-         "angular_sampling"});
+         "angular_sampling", "sensor_blur_sigma_mm"});
     const long long it = r->integer_or("iterations", s.mart.iterations);
     if (it < 1 || it > 1000) r->fail("iterations", "must be 1..1000, got " + std::to_string(it));
     s.mart.iterations = int(it);
@@ -106,6 +106,9 @@ ProcessSettings process_settings_from(const YamlMap& root) {
       r->fail("dark_weight_cutoff", "must be in [0, 1)");
     s.mart.convergence = r->number_or("convergence", s.mart.convergence);
     if (!(s.mart.convergence >= 0)) r->fail("convergence", "must be >= 0");
+    s.mart.sensor_blur_sigma_mm = r->number_or("sensor_blur_sigma_mm", s.mart.sensor_blur_sigma_mm);
+    if (!(s.mart.sensor_blur_sigma_mm >= 0 && s.mart.sensor_blur_sigma_mm <= 0.05))
+      r->fail("sensor_blur_sigma_mm", "must be in [0, 0.05] mm");
     s.angular_sampling = r->number_or("angular_sampling", s.angular_sampling);
     if (!(s.angular_sampling > 0 && s.angular_sampling <= 8)) r->fail("angular_sampling", "must be in (0, 8]");
   }

@@ -6,6 +6,8 @@
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
 
+#include <opencv2/imgproc.hpp>
+
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -23,6 +25,8 @@ namespace {
 constexpr float kMaxLog = 40.f;
 constexpr float kTiny = 1e-30f;
 constexpr float kHuge = 1e30f;
+// A Gaussian wider than this is no sensor blur (the paper's lens images are 0.125 mm across).
+constexpr double kMaxSensorBlurMm = 0.05;
 
 double seconds_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -42,7 +46,31 @@ void validate_settings(const MartSettings& s) {
   if (!(s.convergence >= 0) || !std::isfinite(s.convergence)) {
     throw InputError("MART: convergence tolerance must be a finite number >= 0");
   }
+  if (!(s.sensor_blur_sigma_mm >= 0 && s.sensor_blur_sigma_mm <= kMaxSensorBlurMm)) {
+    throw InputError("MART: sensor blur sigma must lie in [0, " + std::to_string(kMaxSensorBlurMm) + "] mm, got " +
+                     std::to_string(s.sensor_blur_sigma_mm));
+  }
 }
+
+// The sensor blur B of MartSettings::sensor_blur_sigma_mm on a whole sensor image, in place
+// (light blurred off the sensor is lost, as on the camera). OpenCV's separable Gaussian: each
+// output pixel is the same sum whatever the threads.
+class SensorBlur {
+ public:
+  SensorBlur(const WeightingOperator& op, double sigma_mm)
+      : width_(op.image_width()), height_(op.image_height()), sigma_px_(sigma_mm / op.geometry().pixel_pitch) {}
+  bool active() const { return sigma_px_ > 0; }
+  void apply(std::span<float> image) {
+    cv::Mat in(height_, width_, CV_32F, image.data());
+    cv::GaussianBlur(in, scratch_, cv::Size(0, 0), sigma_px_, sigma_px_, cv::BORDER_CONSTANT);
+    scratch_.copyTo(in);
+  }
+
+ private:
+  int width_, height_;
+  double sigma_px_;
+  cv::Mat scratch_;
+};
 
 double sum(std::span<const float> a) {
   double s = 0;
@@ -331,19 +359,47 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const M
     }
     return den > 0 ? std::sqrt(num / den) : 0.0;
   };
-  auto ratio_band = [&](std::size_t i0, std::size_t i1) {
+  // The log-ratio of each pixel MART uses, times `scale` (the white image, or 1 where the sensor
+  // blur is applied before whitening).
+  auto ratio_band = [&](std::size_t i0, std::size_t i1, const float* scale) {
     for (std::size_t i = i0; i < i1; ++i) {
-      const float p = projection[i], d = data[i];
+      const float p = projection[i], d = data[i], k = scale ? scale[i] : 1.f;
       if (white[i] == 0.f) {
         ratio[i] = 0.f;  // between microlens images: no voxel sees the pixel
       } else if (d > 0.f) {
-        ratio[i] = p > 0.f ? white[i] * std::clamp(log_data[i] - std::log(p), -kMaxLog, kMaxLog) : 0.f;
+        ratio[i] = p > 0.f ? k * std::clamp(log_data[i] - std::log(p), -kMaxLog, kMaxLog) : 0.f;
       } else {
         // A dark pixel the voxel sees only faintly: it recorded at most the floor, so it pulls
         // the voxels that claim more light there down (never up).
-        ratio[i] = p > dark_floor ? white[i] * std::max(log_floor - std::log(p), -kMaxLog) : 0.f;
+        ratio[i] = p > dark_floor ? k * std::max(log_floor - std::log(p), -kMaxLog) : 0.f;
       }
     }
+  };
+  // Projection W E (B W E with the sensor blur), the residual's sums and, if `with_ratio`, the
+  // whitened log-ratios the update back-projects. Without blur, each band is finished while its
+  // pixels are in cache; with it, the whole projection must exist before the blur.
+  SensorBlur blur(op, settings.sensor_blur_sigma_mm);
+  auto project_and_compare = [&](bool with_ratio) {
+    if (!blur.active()) {
+      active.project(op, e, projection, &workspace, [&](int band, std::size_t i0, std::size_t i1) {
+        residual_band(band, i0, i1);
+        if (with_ratio) ratio_band(i0, i1, white);
+      });
+      return;
+    }
+    active.project(op, e, projection, &workspace);
+    blur.apply(projection);
+    // The residual's sums in fixed pixel bands (the projection's own bands no longer apply).
+    const std::size_t bands = band_sums.size(), per_band = (data.size() + bands - 1) / bands;
+    tbb::parallel_for(std::size_t(0), bands, [&](std::size_t b) {
+      residual_band(int(b), std::min(data.size(), b * per_band), std::min(data.size(), (b + 1) * per_band));
+    });
+    if (!with_ratio) return;
+    for_pixels(data.size(), [&](std::size_t i0, std::size_t i1) { ratio_band(i0, i1, nullptr); });
+    blur.apply(ratio);
+    for_pixels(data.size(), [&](std::size_t i0, std::size_t i1) {
+      for (std::size_t i = i0; i < i1; ++i) ratio[i] *= white[i];
+    });
   };
   // Nesterov's momentum on ln E (settings.accelerate): each iteration starts from the
   // extrapolated y = x_k (x_k / x_(k-1))^beta_k with FISTA's beta_k = (k - 1) / (k + 2), and k
@@ -366,10 +422,7 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const M
         e[m] = clean(e[m] * bounded_exp(beta * momentum[m]));
       });
     }
-    active.project(op, e, projection, &workspace, [&](int band, std::size_t i0, std::size_t i1) {
-      residual_band(band, i0, i1);
-      ratio_band(i0, i1);
-    });
+    project_and_compare(true);
     const double r = residual();
     if (previous >= 0 && settings.convergence > 0 && std::abs(previous - r) <= settings.convergence * previous) {
       result.converged = true;
@@ -397,7 +450,7 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const M
     if (progress) progress(rep);
   }
   if (n > 0) {
-    active.project(op, e, projection, &workspace, residual_band);
+    project_and_compare(false);
     result.final_residual = residual();
   } else {
     result.final_residual = sum(data) > 0 ? 1.0 : 0.0;  // nothing projected: ||I - 0|| / ||I||

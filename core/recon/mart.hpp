@@ -52,6 +52,13 @@ struct MartSettings {
   double dark_weight_cutoff = 0.9;
   double convergence = 0.0;        // stop when the residual changes by less than this fraction
   std::optional<RegionMm> region;  // solve only here
+  // The camera's blur at the sensor (diffraction-limited spot, pixel crosstalk) as a Gaussian of
+  // this standard deviation, mm. With it MART solves I = B W E: each projection is blurred, and
+  // the log-ratios are blurred before the back-projection (B is symmetric, so (B W)^T = W^T B).
+  // Sec 5.2's weights model no diffraction; a blurred image matches voxels nearer the focal plane
+  // best, and particles come out compressed toward it (docs/recon.md, "Sensor blur"). 0: the
+  // weights alone, as the paper. core/sim's diffraction (the paper's sec 4.1) is 0.0052 mm.
+  double sensor_blur_sigma_mm = 0.0;
 };
 
 // What was skipped, so a run can report how much of the box the scene needed.

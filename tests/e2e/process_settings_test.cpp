@@ -78,6 +78,16 @@ TEST(ProcessSettings, AccelerationReachesMart) {
   }
 }
 
+TEST(ProcessSettings, SensorBlurReachesMart) {
+  EXPECT_EQ(parse(kVolume + "}\n" + kPasses).mart.sensor_blur_sigma_mm, 0.0);  // sec 5.2's weights alone
+  EXPECT_DOUBLE_EQ(parse(kVolume + "}\nreconstruction: {sensor_blur_sigma_mm: 0.0052}\n" + kPasses).mart.sensor_blur_sigma_mm,
+                   0.0052);
+  for (const std::string bad : {"-0.001", "0.5", "wide"}) {
+    expect_refused_naming(kVolume + "}\nreconstruction: {sensor_blur_sigma_mm: " + bad + "}\n" + kPasses,
+                          "sensor_blur_sigma_mm");
+  }
+}
+
 TEST(ProcessSettings, ProcessPairReturnsTheRequestedBoxAndRefusesAnUnguardedOperator) {
   const auto camera = optics::load_camera_file(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml");
   const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera));

@@ -87,6 +87,12 @@ TEST(ReconstructCli, RefusesBadArgumentsClearly) {
                             "1", "-1", "-1", "1", "-1", "1", "-o", (dir / "x.h5").string()},
                            out));
   EXPECT_NE(out.find("--extent"), std::string::npos) << out;
+  io::write_tiff(dir / "right.tif", ImageU16(850, 850, 5));
+  EXPECT_EQ(2, run_command({binary("plenopiv"), "reconstruct", kCamera, (dir / "right.tif").string(), "--extent",
+                            "-1", "1", "-1", "1", "-1", "1", "--sensor-blur-mm", "-0.001", "-o",
+                            (dir / "x.h5").string()},
+                           out));
+  EXPECT_NE(out.find("sensor blur"), std::string::npos) << out;
   EXPECT_FALSE(std::filesystem::exists(dir / "x.h5"));
 }
 
