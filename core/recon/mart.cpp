@@ -236,6 +236,15 @@ float clean(float v) { return v < kTiny ? 0.f : std::min(v, kHuge); }
 
 }  // namespace
 
+void apply_sensor_blur(const WeightingOperator& op, double sigma_mm, std::span<float> image) {
+  if (!(sigma_mm >= 0 && sigma_mm <= kMaxSensorBlurMm)) {
+    throw InputError("sensor blur sigma must lie in [0, " + std::to_string(kMaxSensorBlurMm) + "] mm");
+  }
+  if (image.size() != op.pixel_count()) throw InputError("sensor blur: the image is not the operator's sensor");
+  SensorBlur blur(op, sigma_mm);
+  if (blur.active()) blur.apply(image);
+}
+
 void validate_image(const ImageF& image, const WeightingOperator& op, const char* source) {
   if (image.width != op.image_width() || image.height != op.image_height()) {
     throw InputError(std::string(source) + ": image is " + std::to_string(image.width) + " x " +

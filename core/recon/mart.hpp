@@ -6,6 +6,7 @@
 #include <cstddef>
 #include <functional>
 #include <optional>
+#include <span>
 #include <vector>
 
 #include "core/base/grid.hpp"
@@ -60,6 +61,10 @@ struct MartSettings {
   // weights alone, as the paper. core/sim's diffraction (the paper's sec 4.1) is 0.0052 mm.
   double sensor_blur_sigma_mm = 0.0;
 };
+
+// The sensor blur of MartSettings::sensor_blur_sigma_mm on an image of op's sensor, in place: what
+// MART with that setting does to each projection W E.
+void apply_sensor_blur(const WeightingOperator& op, double sigma_mm, std::span<float> image);
 
 // What was skipped, so a run can report how much of the box the scene needed.
 struct SkipReport {
