@@ -107,8 +107,8 @@ ProcessSettings process_settings_from(const YamlMap& root) {
     s.mart.convergence = r->number_or("convergence", s.mart.convergence);
     if (!(s.mart.convergence >= 0)) r->fail("convergence", "must be >= 0");
     s.mart.sensor_blur_sigma_mm = r->number_or("sensor_blur_sigma_mm", s.mart.sensor_blur_sigma_mm);
-    if (!(s.mart.sensor_blur_sigma_mm >= 0 && s.mart.sensor_blur_sigma_mm <= 0.05))
-      r->fail("sensor_blur_sigma_mm", "must be in [0, 0.05] mm");
+    if (!(s.mart.sensor_blur_sigma_mm >= 0 && s.mart.sensor_blur_sigma_mm <= recon::kMaxSensorBlurSigmaMm))
+      r->fail("sensor_blur_sigma_mm", "must be in [0, " + std::to_string(recon::kMaxSensorBlurSigmaMm) + "] mm");
     s.angular_sampling = r->number_or("angular_sampling", s.angular_sampling);
     if (!(s.angular_sampling > 0 && s.angular_sampling <= 8)) r->fail("angular_sampling", "must be in (0, 8]");
   }

@@ -25,8 +25,6 @@ namespace {
 constexpr float kMaxLog = 40.f;
 constexpr float kTiny = 1e-30f;
 constexpr float kHuge = 1e30f;
-// A Gaussian wider than this is no sensor blur (the paper's lens images are 0.125 mm across).
-constexpr double kMaxSensorBlurMm = 0.05;
 
 double seconds_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -46,8 +44,8 @@ void validate_settings(const MartSettings& s) {
   if (!(s.convergence >= 0) || !std::isfinite(s.convergence)) {
     throw InputError("MART: convergence tolerance must be a finite number >= 0");
   }
-  if (!(s.sensor_blur_sigma_mm >= 0 && s.sensor_blur_sigma_mm <= kMaxSensorBlurMm)) {
-    throw InputError("MART: sensor blur sigma must lie in [0, " + std::to_string(kMaxSensorBlurMm) + "] mm, got " +
+  if (!(s.sensor_blur_sigma_mm >= 0 && s.sensor_blur_sigma_mm <= kMaxSensorBlurSigmaMm)) {
+    throw InputError("MART: sensor blur sigma must lie in [0, " + std::to_string(kMaxSensorBlurSigmaMm) + "] mm, got " +
                      std::to_string(s.sensor_blur_sigma_mm));
   }
 }
@@ -237,8 +235,8 @@ float clean(float v) { return v < kTiny ? 0.f : std::min(v, kHuge); }
 }  // namespace
 
 void apply_sensor_blur(const WeightingOperator& op, double sigma_mm, std::span<float> image) {
-  if (!(sigma_mm >= 0 && sigma_mm <= kMaxSensorBlurMm)) {
-    throw InputError("sensor blur sigma must lie in [0, " + std::to_string(kMaxSensorBlurMm) + "] mm");
+  if (!(sigma_mm >= 0 && sigma_mm <= kMaxSensorBlurSigmaMm)) {
+    throw InputError("sensor blur sigma must lie in [0, " + std::to_string(kMaxSensorBlurSigmaMm) + "] mm");
   }
   if (image.size() != op.pixel_count()) throw InputError("sensor blur: the image is not the operator's sensor");
   SensorBlur blur(op, sigma_mm);

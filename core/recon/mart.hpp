@@ -61,6 +61,8 @@ struct MartSettings {
   // weights alone, as the paper. core/sim's diffraction (the paper's sec 4.1) is 0.0052 mm.
   double sensor_blur_sigma_mm = 0.0;
 };
+// A Gaussian wider than this is no sensor blur (the paper's lens images are 0.125 mm across).
+inline constexpr double kMaxSensorBlurSigmaMm = 0.05;
 
 // The sensor blur of MartSettings::sensor_blur_sigma_mm on an image of op's sensor, in place: what
 // MART with that setting does to each projection W E.
@@ -82,7 +84,7 @@ struct SkipReport {
 
 struct IterationReport {
   int iteration = 0;           // 1-based
-  double residual = 0;         // ||I - W E|| / ||I|| before this iteration's update
+  double residual = 0;         // ||I - W E|| / ||I|| (B W E with the sensor blur) before the update
   double seconds = 0;
 };
 
