@@ -12,6 +12,7 @@
 #include <atomic>
 #include <bit>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <numeric>
 #include <string>
@@ -718,30 +719,45 @@ ActiveSet::ActiveSet(const WeightingOperator& op, std::vector<std::uint32_t> vox
   strips_ = (int(nx) + strip_x_ - 1) / strip_x_;
   const std::uint32_t sx = std::uint32_t(strip_x_);
   // A voxel column's place in the visiting order: strip, depth, x within the strip.
-  auto key_of = [&](std::uint32_t v) {
-    const std::uint32_t x = v % nx, z = v / nxy;
-    return (std::size_t(x / sx) * nz + z) * sx + x % sx;
-  };
-  // Group by voxel column in that order with a counting sort: y stays increasing within a
+  auto key_of = [&](std::uint32_t x, std::uint32_t z) { return (std::size_t(x / sx) * nz + z) * sx + x % sx; };
+  if (std::adjacent_find(voxels_.begin(), voxels_.end(), std::greater_equal<>()) != voxels_.end() ||
+      (!voxels_.empty() && voxels_.back() >= g.count())) {
+    throw InputError("active set: voxel indices must be distinct, increasing and inside the grid");
+  }
+  // Group by voxel column in that order with a counting sort, slice by slice in parallel (the
+  // voxels are sorted, so each slice is one stretch of them): y stays increasing within a
   // column. A voxel that sees no pixel (n = 0) takes no part; its value is 0.
+  std::vector<std::size_t> slice_begin(std::size_t(nz) + 1);
+  for (std::uint32_t z = 0; z <= nz; ++z) {
+    slice_begin[z] = std::size_t(std::lower_bound(voxels_.begin(), voxels_.end(), std::uint64_t(z) * nxy) - voxels_.begin());
+  }
+  std::vector<std::uint32_t> column_count(std::size_t(nz) * nx, 0);  // [z][x]
+  tbb::parallel_for(std::uint32_t(0), nz, [&](std::uint32_t z) {
+    for (std::size_t m = slice_begin[z]; m < slice_begin[z + 1]; ++m) {
+      if (op.normaliser(voxels_[m]) > 0.f) ++column_count[std::size_t(z) * nx + voxels_[m] % nx];
+    }
+  });
   std::vector<std::uint32_t> start(std::size_t(strips_) * nz * sx + 1, 0);
-  for (std::uint32_t v : voxels_) {
-    if (op.normaliser(v) > 0.f) ++start[key_of(v) + 1];
+  for (std::uint32_t z = 0; z < nz; ++z) {
+    for (std::uint32_t x = 0; x < nx; ++x) start[key_of(x, z) + 1] = column_count[std::size_t(z) * nx + x];
   }
   for (std::size_t c = 1; c < start.size(); ++c) start[c] += start[c - 1];
   order_.resize(start.back());
   order_normaliser_.resize(start.back());
   std::vector<int> order_y(start.back());
-  std::vector<std::uint32_t> fill(start.begin(), start.end() - 1);
-  for (std::size_t m = 0; m < voxels_.size(); ++m) {
-    const std::uint32_t v = voxels_[m];
-    const float n = op.normaliser(v);
-    if (!(n > 0.f)) continue;
-    const std::uint32_t p = fill[key_of(v)]++;
-    order_[p] = std::uint32_t(m);
-    order_y[p] = int((v % nxy) / nx);
-    order_normaliser_[p] = n;
-  }
+  tbb::parallel_for(std::uint32_t(0), nz, [&](std::uint32_t z) {
+    std::uint32_t* fill = column_count.data() + std::size_t(z) * nx;  // now each column's next place
+    for (std::uint32_t x = 0; x < nx; ++x) fill[x] = start[key_of(x, z)];
+    for (std::size_t m = slice_begin[z]; m < slice_begin[z + 1]; ++m) {
+      const std::uint32_t v = voxels_[m];
+      const float n = op.normaliser(v);
+      if (!(n > 0.f)) continue;
+      const std::uint32_t p = fill[v % nx]++;
+      order_[p] = std::uint32_t(m);
+      order_y[p] = int((v % nxy) / nx);
+      order_normaliser_[p] = n;
+    }
+  });
   strip_columns_.assign(std::size_t(strips_) + 1, 0);
   for (std::size_t key = 0; key + 1 < start.size(); ++key) {
     if (start[key + 1] == start[key]) continue;
@@ -755,23 +771,23 @@ ActiveSet::ActiveSet(const WeightingOperator& op, std::vector<std::uint32_t> vox
   const int height = op.image_height();
   bands_ = (height + kBandRows - 1) / kBandRows;
   std::vector<int> first_band(columns_.size()), last_band(columns_.size());
-  // Calls entry(b, p, first segment, count) for each voxel with segments in band b, bands in order.
-  auto walk = [&](std::size_t c, std::vector<std::size_t>& cursor, auto&& entry) {
+  // Calls entry(b, p, first quad, count) for each voxel p of column c whose y quads reach band b
+  // (a quad may reach two bands: it is in both), for the column's bands only: voxel by voxel in
+  // y order, each voxel's bands in order, so the entries of one band keep y order.
+  auto walk = [&](std::size_t c, auto&& entry) {
     const Column& col = columns_[c];
     const SliceTables& t = op.slice(col.z);
-    cursor.resize(col.end - col.begin);
     for (std::uint32_t p = col.begin; p < col.end; ++p) {
-      cursor[p - col.begin] = t.y_quad_start[std::size_t(order_y[p])];
-    }
-    for (int b = first_band[c]; b <= last_band[c]; ++b) {
-      const int r0 = b * kBandRows, r1 = std::min(height, r0 + kBandRows);
-      for (std::uint32_t p = col.begin; p < col.end; ++p) {
-        const std::size_t quad_end = t.y_quad_start[std::size_t(order_y[p]) + 1];
-        std::size_t& k = cursor[p - col.begin];
-        // A quad may cross into the next band: it stays the next band's first.
-        while (k < quad_end && t.y_quad_first[k] + kQuad <= r0) ++k;
+      const std::size_t q0 = t.y_quad_start[std::size_t(order_y[p])], q1 = t.y_quad_start[std::size_t(order_y[p]) + 1];
+      if (q0 == q1) continue;
+      const int b0 = std::max(first_band[c], t.y_quad_first[q0] / kBandRows);
+      const int b1 = std::min(last_band[c], (t.y_quad_first[q1 - 1] + kQuad - 1) / kBandRows);
+      std::size_t k = q0;
+      for (int b = b0; b <= b1; ++b) {
+        const int r0 = b * kBandRows, r1 = std::min(height, r0 + kBandRows);
+        while (k < q1 && t.y_quad_first[k] + kQuad <= r0) ++k;
         std::size_t e = k;
-        while (e < quad_end && t.y_quad_first[e] < r1) ++e;
+        while (e < q1 && t.y_quad_first[e] < r1) ++e;
         if (e > k) entry(b, p, k, e - k);
       }
     }
@@ -797,9 +813,8 @@ ActiveSet::ActiveSet(const WeightingOperator& op, std::vector<std::uint32_t> vox
   std::vector<std::uint32_t> block_entries(block_offset.back(), 0);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, columns_.size(), 64),
                     [&](const tbb::blocked_range<std::size_t>& range) {
-    std::vector<std::size_t> cursor;  // per voxel of the column: its first segment not yet behind
     for (std::size_t c = range.begin(); c != range.end(); ++c) {
-      walk(c, cursor, [&](int b, std::uint32_t, std::size_t, std::size_t) {
+      walk(c, [&](int b, std::uint32_t, std::size_t, std::size_t) {
         ++block_entries[block_offset[c] + std::size_t(b - first_band[c])];
       });
     }
@@ -838,10 +853,9 @@ ActiveSet::ActiveSet(const WeightingOperator& op, std::vector<std::uint32_t> vox
   entries_.resize(next_entry);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, columns_.size(), 64),
                     [&](const tbb::blocked_range<std::size_t>& range) {
-    std::vector<std::size_t> cursor;
     for (std::size_t c = range.begin(); c != range.end(); ++c) {
       const SliceTables& t = op.slice(columns_[c].z);
-      walk(c, cursor, [&](int b, std::uint32_t p, std::size_t k, std::size_t n) {
+      walk(c, [&](int b, std::uint32_t p, std::size_t k, std::size_t n) {
         const std::size_t block = block_offset[c] + std::size_t(b - first_band[c]);
         Visit& v = visits_[block_visit[block]];
         entries_[v.entry_end - block_entries[block]--] = BandEntry{p, std::uint32_t(k), std::uint32_t(n)};  // in y order

@@ -176,6 +176,7 @@ class WeightingOperator {
 // back-projection strip by strip (a strip owns its voxels, each summed band after band).
 class ActiveSet {
  public:
+  // `voxels`: flat indices into the operator's grid, strictly increasing (InputError otherwise).
   ActiveSet(const WeightingOperator& op, std::vector<std::uint32_t> voxels);
   static ActiveSet all(const WeightingOperator& op);
 
