@@ -173,7 +173,9 @@ class WeightingOperator {
 // more (a column with one voxel is the per-voxel form); 2x less on the 0.5 ppm benchmarks.
 // Both walk the sensor in bands of rows and the voxels in strips of x so that the pixels and
 // weights they touch stay in cache: projection band by band (a band owns its rows: no atomics),
-// back-projection strip by strip (a strip owns its voxels, each summed band after band).
+// back-projection strip by strip (a strip owns its voxels, each summed band after band). Within
+// a band the x stages take a few dozen columns at a time, a few rows at a time, so the pixels
+// those columns share stay in L1; every pixel and voxel still gets its sums in the same order.
 class ActiveSet {
  public:
   // `voxels`: flat indices into the operator's grid, strictly increasing (InputError otherwise).
