@@ -6,6 +6,7 @@
 #include <tbb/parallel_for.h>
 #include <tbb/partitioner.h>
 #include <tbb/task_arena.h>
+#include <xmmintrin.h>
 
 #include <algorithm>
 #include <array>
@@ -872,8 +873,8 @@ ActiveSet::ActiveSet(const WeightingOperator& op, std::vector<std::uint32_t> vox
         // lanes in the neighbouring bands.
         for (std::size_t q = k; q < k + n; ++q) {
           const float* w = t.y_quad_weights.data() + kQuad * q;
-          std::uint64_t lanes = 0;
-          for (int j = 0; j < kQuad; ++j) lanes |= std::uint64_t(w[j] != 0.f) << j;
+          // Bit j: lane j's weight is not 0 (one SSE compare, not four scalar ones).
+          std::uint64_t lanes = std::uint64_t(_mm_movemask_ps(_mm_cmpneq_ps(_mm_loadu_ps(w), _mm_setzero_ps())));
           int at = t.y_quad_first[q] - r0;
           if (at < 0) {
             lanes >>= -at;
