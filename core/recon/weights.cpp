@@ -290,74 +290,123 @@ __attribute__((target("avx2"), always_inline)) inline void dot_quads2_avx2(const
   *out_b = (lane_b[0] + lane_b[1]) + (lane_b[2] + lane_b[3]);
 }
 
-// The dispatched entry points: one call per voxel column and band (not per row), so the row
-// loop runs inside the chosen build too.
+// One visit of a chunk as the x stages see it: its row sums over the band (G for the projection;
+// B, per image, for the back-projection; pointing at the band's first row), the band's rows it
+// reaches (kRowWords words), and its column's x quads.
+struct ColumnJob {
+  std::array<float*, 2> sums;
+  const std::uint64_t* rows;
+  const int* first;
+  const float* w;
+  std::size_t n;
+};
+
+// The dispatched entry points: one call per chunk of visits in a band, so the loops over
+// sub-bands, visits and rows run inside the chosen build too. Both walk the band kSubRows rows
+// at a time and, within those, the chunk's visits in order; `words` words of 64 rows.
 //
-// Projection stage 2: image row r += g[r] Ax for the rows the column reaches (bits of `rows`)
-// with g[r] != 0, resetting g for the next column. `band` points at the band's first row.
-__attribute__((target("default"))) void add_column(float* band, std::size_t width, float* g, const std::uint64_t* rows,
-                                                   int words, const int* first, const float* w, std::size_t n) {
-  for (int i = 0; i < words; ++i) {
-    for (std::uint64_t m = rows[i]; m != 0; m &= m - 1) {
-      const int r = 64 * i + __builtin_ctzll(m);
-      if (g[r] == 0.f) continue;
-      add_quads_base(band + std::size_t(r) * width, first, w, n, g[r]);
-      g[r] = 0.f;
+// Projection stage 2: image row r += g[r] Ax for the rows each visit reaches (bits of `rows`)
+// with g[r] != 0, resetting g for later use. `band` points at the band's first row.
+__attribute__((target("default"))) void add_columns(float* band, std::size_t width, int words, const ColumnJob* jobs,
+                                                    int count) {
+  for (int word = 0; word < words; ++word) {
+    for (int sub = 0; sub < 64; sub += kSubRows) {
+      const std::uint64_t part = (~std::uint64_t(0) >> (64 - kSubRows)) << sub;
+      for (int v = 0; v < count; ++v) {
+        const ColumnJob& j = jobs[v];
+        float* g = j.sums[0] + 64 * word;
+        float* rows_at = band + std::size_t(64 * word) * width;
+        for (std::uint64_t m = j.rows[word] & part; m != 0; m &= m - 1) {
+          const int r = __builtin_ctzll(m);
+          if (g[r] == 0.f) continue;
+          add_quads_base(rows_at + std::size_t(r) * width, j.first, j.w, j.n, g[r]);
+          g[r] = 0.f;
+        }
+      }
     }
   }
 }
 // The AVX2 build takes the rows two at a time.
-__attribute__((target("avx2"))) void add_column(float* band, std::size_t width, float* g, const std::uint64_t* rows,
-                                                int words, const int* first, const float* w, std::size_t n) {
-  int held = -1;  // a row waiting for a partner
-  for (int i = 0; i < words; ++i) {
-    for (std::uint64_t m = rows[i]; m != 0; m &= m - 1) {
-      const int r = 64 * i + __builtin_ctzll(m);
-      if (g[r] == 0.f) continue;
-      if (held < 0) {
-        held = r;
-        continue;
+__attribute__((target("avx2"))) void add_columns(float* band, std::size_t width, int words, const ColumnJob* jobs,
+                                                 int count) {
+  for (int word = 0; word < words; ++word) {
+    for (int sub = 0; sub < 64; sub += kSubRows) {
+      const std::uint64_t part = (~std::uint64_t(0) >> (64 - kSubRows)) << sub;
+      for (int v = 0; v < count; ++v) {
+        const ColumnJob& j = jobs[v];
+        float* g = j.sums[0] + 64 * word;
+        float* rows_at = band + std::size_t(64 * word) * width;
+        int held = -1;  // a row waiting for a partner
+        for (std::uint64_t m = j.rows[word] & part; m != 0; m &= m - 1) {
+          const int r = __builtin_ctzll(m);
+          if (g[r] == 0.f) continue;
+          if (held < 0) {
+            held = r;
+            continue;
+          }
+          add_quads2_avx2(rows_at + std::size_t(held) * width, rows_at + std::size_t(r) * width, j.first, j.w, j.n,
+                          g[held], g[r]);
+          g[held] = 0.f;
+          g[r] = 0.f;
+          held = -1;
+        }
+        if (held >= 0) {
+          add_quads_avx2(rows_at + std::size_t(held) * width, j.first, j.w, j.n, g[held]);
+          g[held] = 0.f;
+        }
       }
-      add_quads2_avx2(band + std::size_t(held) * width, band + std::size_t(r) * width, first, w, n, g[held], g[r]);
-      g[held] = 0.f;
-      g[r] = 0.f;
-      held = -1;
     }
-  }
-  if (held >= 0) {
-    add_quads_avx2(band + std::size_t(held) * width, first, w, n, g[held]);
-    g[held] = 0.f;
   }
 }
 
-// Back-projection stage 1: out[r] = Σ_col Ax r(row, col) for the rows the column reaches.
-__attribute__((target("default"))) void dot_column(const float* band, std::size_t width, const std::uint64_t* rows,
-                                                   int words, const int* first, const float* w, std::size_t n,
-                                                   float* out) {
-  for (int i = 0; i < words; ++i) {
-    for (std::uint64_t m = rows[i]; m != 0; m &= m - 1) {
-      const int r = 64 * i + __builtin_ctzll(m);
-      out[r] = dot_quads_base(band + std::size_t(r) * width, first, w, n);
+// Back-projection stage 1: B_i[r] = Σ_col Ax r_i(row, col) for the rows each visit reaches, for
+// `images` (1 or 2) images whose bands start at band[i].
+__attribute__((target("default"))) void dot_columns(const float* const* band, int images, std::size_t width, int words,
+                                                    const ColumnJob* jobs, int count) {
+  for (int word = 0; word < words; ++word) {
+    for (int sub = 0; sub < 64; sub += kSubRows) {
+      const std::uint64_t part = (~std::uint64_t(0) >> (64 - kSubRows)) << sub;
+      for (int v = 0; v < count; ++v) {
+        const ColumnJob& j = jobs[v];
+        for (int i = 0; i < images; ++i) {
+          const float* rows_at = band[i] + std::size_t(64 * word) * width;
+          float* out = j.sums[std::size_t(i)] + 64 * word;
+          for (std::uint64_t m = j.rows[word] & part; m != 0; m &= m - 1) {
+            const int r = __builtin_ctzll(m);
+            out[r] = dot_quads_base(rows_at + std::size_t(r) * width, j.first, j.w, j.n);
+          }
+        }
+      }
     }
   }
 }
 // The AVX2 build takes the rows two at a time.
-__attribute__((target("avx2"))) void dot_column(const float* band, std::size_t width, const std::uint64_t* rows,
-                                                int words, const int* first, const float* w, std::size_t n,
-                                                float* out) {
-  int held = -1;  // a row waiting for a partner
-  for (int i = 0; i < words; ++i) {
-    for (std::uint64_t m = rows[i]; m != 0; m &= m - 1) {
-      const int r = 64 * i + __builtin_ctzll(m);
-      if (held < 0) {
-        held = r;
-        continue;
+__attribute__((target("avx2"))) void dot_columns(const float* const* band, int images, std::size_t width, int words,
+                                                 const ColumnJob* jobs, int count) {
+  for (int word = 0; word < words; ++word) {
+    for (int sub = 0; sub < 64; sub += kSubRows) {
+      const std::uint64_t part = (~std::uint64_t(0) >> (64 - kSubRows)) << sub;
+      for (int v = 0; v < count; ++v) {
+        const ColumnJob& j = jobs[v];
+        for (int i = 0; i < images; ++i) {
+          const float* rows_at = band[i] + std::size_t(64 * word) * width;
+          float* out = j.sums[std::size_t(i)] + 64 * word;
+          int held = -1;  // a row waiting for a partner
+          for (std::uint64_t m = j.rows[word] & part; m != 0; m &= m - 1) {
+            const int r = __builtin_ctzll(m);
+            if (held < 0) {
+              held = r;
+              continue;
+            }
+            dot_quads2_avx2(rows_at + std::size_t(held) * width, rows_at + std::size_t(r) * width, j.first, j.w, j.n,
+                            out + held, out + r);
+            held = -1;
+          }
+          if (held >= 0) out[held] = dot_quads_avx2(rows_at + std::size_t(held) * width, j.first, j.w, j.n);
+        }
       }
-      dot_quads2_avx2(band + std::size_t(held) * width, band + std::size_t(r) * width, first, w, n, out + held, out + r);
-      held = -1;
     }
   }
-  if (held >= 0) out[held] = dot_quads_avx2(band + std::size_t(held) * width, first, w, n);
 }
 
 // The eq 13 normalisers' first stage: out[x] = Σ_col Ax_x(col) row(col) for every voxel x of a
@@ -974,21 +1023,16 @@ void ActiveSet::project(const WeightingOperator& op, std::span<const float> valu
       // Stage 2: image(row, ·) += G(row) Ax, once per row the column reaches (resets those
       // rows), kSubRows rows at a time for all the chunk's visits, so the pixels they share stay
       // in L1. Every pixel still gets its visits' additions in visiting order.
-      for (int sub = 0; sub < kBandRows; sub += kSubRows) {
-        const int word = sub >> 6;
-        const std::uint64_t part = (~std::uint64_t(0) >> (64 - kSubRows)) << (sub & 63);
-        for (std::size_t v = c0; v < c1; ++v) {
-          const Visit& visit = visits_[v];
-          const std::uint64_t rows = visit.rows[std::size_t(word)] & part;
-          if (rows == 0) continue;
-          const Column& col = columns_[visit.column];
-          const SliceTables& t = op.slice(col.z);
-          const std::size_t q0 = t.x_quad_start[std::size_t(col.x)], q1 = t.x_quad_start[std::size_t(col.x) + 1];
-          add_column(image.data() + (std::size_t(r0) + 64 * std::size_t(word)) * width, width,
-                     padded_sums[v - c0].data() + kQuad + 64 * word, &rows, 1, t.x_quad_first.data() + q0,
-                     t.x_quad_weights.data() + kQuad * q0, q1 - q0);
-        }
+      std::array<ColumnJob, kChunk> jobs;
+      for (std::size_t v = c0; v < c1; ++v) {
+        const Visit& visit = visits_[v];
+        const Column& col = columns_[visit.column];
+        const SliceTables& t = op.slice(col.z);
+        const std::size_t q0 = t.x_quad_start[std::size_t(col.x)], q1 = t.x_quad_start[std::size_t(col.x) + 1];
+        jobs[v - c0] = ColumnJob{{padded_sums[v - c0].data() + kQuad, nullptr}, visit.rows.data(), t.x_quad_first.data() + q0,
+                                 t.x_quad_weights.data() + kQuad * q0, q1 - q0};
       }
+      add_columns(image.data() + std::size_t(r0) * width, width, kRowWords, jobs.data(), int(c1 - c0));
       for (std::size_t v = c0; v < c1; ++v) {
         std::fill_n(padded_sums[v - c0].begin(), kQuad, 0.f);
         std::fill_n(padded_sums[v - c0].end() - kQuad, kQuad, 0.f);
@@ -1028,6 +1072,7 @@ void ActiveSet::back_project_whitened(const WeightingOperator& op, std::span<con
 template <std::size_t N>
 void ActiveSet::back_project_images(const WeightingOperator& op, const std::array<const float*, N>& images,
                                     const std::array<float*, N>& values, Workspace& workspace) const {
+  static_assert(N == 1 || N == 2, "ColumnJob holds the sums of at most two images");
   const std::size_t width = std::size_t(op.image_width());
   for (float* v : values) std::fill(v, v + voxels_.size(), 0.f);  // voxels that see no pixel
   // Per image and voxel in visiting order; each strip zeroes and sums its own range.
@@ -1055,23 +1100,20 @@ void ActiveSet::back_project_images(const WeightingOperator& op, const std::arra
         }
         // Stage 1: B(row) = Σ_col Ax(col) r(row, col), once per reached row, kSubRows rows at a
         // time for all the chunk's visits, so the pixels they share stay in L1.
-        for (int sub = 0; sub < kBandRows; sub += kSubRows) {
-          const int word = sub >> 6;
-          const std::uint64_t part = (~std::uint64_t(0) >> (64 - kSubRows)) << (sub & 63);
-          for (std::size_t v = v0; v < v1; ++v) {
-            const Visit& visit = visits_[v];
-            const std::uint64_t rows = visit.rows[std::size_t(word)] & part;
-            if (rows == 0) continue;
-            const Column& col = columns_[visit.column];
-            const SliceTables& t = op.slice(col.z);
-            const std::size_t q0 = t.x_quad_start[std::size_t(col.x)], q1 = t.x_quad_start[std::size_t(col.x) + 1];
-            for (std::size_t i = 0; i < N; ++i) {
-              dot_column(images[i] + (std::size_t(r0) + 64 * std::size_t(word)) * width, width, &rows, 1,
-                         t.x_quad_first.data() + q0, t.x_quad_weights.data() + kQuad * q0, q1 - q0,
-                         padded_sums[i][v - v0].data() + kQuad + 64 * word);
-            }
-          }
+        std::array<ColumnJob, kChunk> jobs;
+        for (std::size_t v = v0; v < v1; ++v) {
+          const Visit& visit = visits_[v];
+          const Column& col = columns_[visit.column];
+          const SliceTables& t = op.slice(col.z);
+          const std::size_t q0 = t.x_quad_start[std::size_t(col.x)], q1 = t.x_quad_start[std::size_t(col.x) + 1];
+          ColumnJob& j = jobs[v - v0];
+          j = ColumnJob{{nullptr, nullptr}, visit.rows.data(), t.x_quad_first.data() + q0, t.x_quad_weights.data() + kQuad * q0,
+                        q1 - q0};
+          for (std::size_t i = 0; i < N; ++i) j.sums[i] = padded_sums[i][v - v0].data() + kQuad;
         }
+        std::array<const float*, N> bands;
+        for (std::size_t i = 0; i < N; ++i) bands[i] = images[i] + std::size_t(r0) * width;
+        dot_columns(bands.data(), int(N), width, kRowWords, jobs.data(), int(v1 - v0));
         // Stage 2: per voxel Σ_row Ay(row) B(row) over the band's rows, one quad of rows at a
         // time, lane after lane: the zero lanes add +0, so the sums are those row by row.
         for (std::size_t v = v0; v < v1; ++v) {
