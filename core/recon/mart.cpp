@@ -306,9 +306,12 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const M
     });
     active.back_project_whitened(op, ratio, weight, projection, update, &workspace);
     for_voxels([&](std::size_t m) { e[m] = weight[m] > 0.f ? clean(bounded_exp(update[m] / weight[m])) : 0.f; });
-    // Scale to the image's total light so the first ratios are near 1.
-    active.project(op, e, projection, &workspace);
-    const double total = sum(projection);
+    // Scale to the image's total light so the first ratios are near 1. The projection's total
+    // is Σ_j E_j (eq 13 makes each voxel's weights sum to 1 over the sensor), so no projection
+    // is needed; the two totals differ by the projection's float rounding only (~1e-10 relative
+    // on the paper case: the float scale and the volume's bits come out the same there,
+    // docs/benchmarks.md).
+    const double total = sum(e);
     if (total > 0) {
       const float scale = float(sum(data) / total);
       for_voxels([&](std::size_t m) { e[m] = clean(e[m] * scale); });
