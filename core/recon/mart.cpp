@@ -267,7 +267,9 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const M
   const auto t_start = std::chrono::steady_clock::now();
   const std::size_t n = active.size();
   ActiveSet::Workspace workspace;  // the kernels' buffers, reused by every pass
-  std::vector<float> e(n, 1.f), update(n, 0.f);
+  // Per active voxel; BigBuffers (huge pages: 26 MB each on the paper case would otherwise take
+  // 6 500 page faults apiece). `update` is written in full by every back-projection.
+  BigBuffer<float> e(n, 1.f), update(n);
   // Written in full by every pass before being read.
   BigBuffer<float> projection(op.pixel_count()), ratio(op.pixel_count());  // ratio: white · ln(I / W E)
   const float* white = op.white().pixels.data();
@@ -297,7 +299,7 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const M
     // carry no ln I), renormalised over those pixels.
     // The lit mask and ln I, each times the white image, in the ratio and projection buffers
     // (not yet in use), back-projected in one walk.
-    std::vector<float> weight(n, 0.f);
+    BigBuffer<float> weight(n);  // written in full by the back-projection
     for_pixels(data.size(), [&](std::size_t i0, std::size_t i1) {
       for (std::size_t i = i0; i < i1; ++i) {
         ratio[i] = (data[i] > 0.f ? 1.f : 0.f) * white[i];
@@ -365,7 +367,7 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const M
   // extrapolated y = x_k (x_k / x_(k-1))^beta_k with FISTA's beta_k = (k - 1) / (k + 2), and k
   // restarts at 1 when an iteration's step opposes the momentum (O'Donoghue and Candes's gradient
   // restart). `last` holds x_(k-1), then x_k; `momentum` ln x_k - ln x_(k-1) (0 where either is 0).
-  std::vector<float> last, momentum;
+  BigBuffer<float> last, momentum;
   if (settings.accelerate) {
     last = e;
     momentum.assign(n, 0.f);

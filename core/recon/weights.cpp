@@ -802,7 +802,7 @@ ActiveSet::ActiveSet(const WeightingOperator& op, std::vector<std::uint32_t> vox
   for (std::size_t c = 1; c < start.size(); ++c) start[c] += start[c - 1];
   order_.resize(start.back());
   order_normaliser_.resize(start.back());
-  std::vector<int> order_y(start.back());
+  BigBuffer<int> order_y(start.back());  // written in full below
   tbb::parallel_for(std::uint32_t(0), nz, [&](std::uint32_t z) {
     std::uint32_t* fill = column_count.data() + std::size_t(z) * nx;  // now each column's next place
     for (std::uint32_t x = 0; x < nx; ++x) fill[x] = start[key_of(x, z)];

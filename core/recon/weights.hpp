@@ -245,8 +245,8 @@ class ActiveSet {
   // Voxels with a positive normaliser, in the kernels' visiting order (strip, depth, x, then y
   // increasing): position in voxels_ and n. A pass reads and writes its per-voxel arrays front to
   // back, and each strip owns one contiguous range of them.
-  std::vector<std::uint32_t> order_;
-  std::vector<float> order_normaliser_;
+  BigBuffer<std::uint32_t> order_;
+  BigBuffer<float> order_normaliser_;
   std::vector<Column> columns_;  // in the same order
   // Voxel x per strip: within a band the kernels walk strip by strip, depth by depth, x by x, so
   // the y weights of one depth serve the whole strip and the pixels under the strip stay cached.
