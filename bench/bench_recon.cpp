@@ -120,7 +120,8 @@ void paper_scale(const std::string& source_dir, bool small, double ppm, int iter
               "iterations=%d mu=%.2f accelerate=%d sensor_blur_mm=%.4f\n",
               count, ppm, double(lit) / double(image.size()), double(s.noise_threshold), dark_cutoff, iterations, mu,
               int(accelerate), sensor_blur_mm);
-  std::printf("bench=recon_paper phase=active_set_and_mlos seconds=%.3f\n", r.setup_seconds);
+  std::printf("bench=recon_paper phase=active_set_and_mlos seconds=%.3f select=%.3f active_set=%.3f start=%.3f\n",
+              r.setup_seconds, r.select_seconds, r.active_set_seconds, r.start_seconds);
   std::printf("bench=recon_paper phase=iterations seconds=%.3f per_iteration=%.3f\n", iter_total,
               iter_total / double(std::max<std::size_t>(1, r.iterations.size())));
   std::printf("bench=recon_paper phase=reconstruct_total seconds=%.3f cpu_s=%.3f final_residual=%.4f volume_hash=%016llx\n",

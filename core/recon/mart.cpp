@@ -14,6 +14,7 @@
 #include <cmath>
 #include <cstdint>
 #include <string>
+#include <utility>
 
 #include "core/base/errors.hpp"
 
@@ -102,77 +103,88 @@ bool in_region(const Grid3& g, const std::optional<RegionMm>& region, int x, int
   return true;
 }
 
-// Rows of the dark-pixel mask as bits, padded by one word so a 64-bit window can always be read.
-struct DarkMask {
-  std::size_t words = 0;
-  std::vector<std::uint64_t> bits;
-  std::uint64_t window(int row, int first_column) const {
-    const std::uint64_t* w = bits.data() + std::size_t(row) * words + std::size_t(first_column >> 6);
-    const int s = first_column & 63;
-    return s ? (w[0] >> s) | (w[1] << (64 - s)) : w[0];
-  }
-};
-
 // Voxels MART can change: seen by some pixel, inside the region, and seen by no dark pixel (a
-// dark pixel's ratio is 0, so eq 9 zeroes every voxel it sees and they stay zero).
+// dark pixel's ratio is 0, so eq 9 zeroes every voxel it sees and they stay zero). "Seen" here:
+// a pixel where both the voxel's column weight and its row weight exceed the cutoff's fraction
+// of their largest value.
+//
+// The test is separable: voxel (x, y) of slice z is dark when some row r among y's strong rows
+// holds a dark pixel in one of x's strong columns. So the dark pixels are kept column by column
+// as bits over the sensor rows; per voxel column x the OR of its strong columns' bits gives the
+// rows where x meets a dark pixel, per voxel row y its strong rows are bits too, and each voxel
+// costs one AND over the words of y's strong rows.
 std::vector<std::uint32_t> select_active(const WeightingOperator& op, std::span<const float> image,
                                          const MartSettings& settings, SkipReport& report) {
   const Grid3& g = op.grid();
   const int width = op.image_width(), height = op.image_height();
-  DarkMask dark;
-  dark.words = std::size_t(width + 63) / 64 + 1;
-  dark.bits.assign(dark.words * std::size_t(height), 0);
+  const std::size_t words = std::size_t(height + 63) / 64;  // per sensor column
+  std::vector<std::uint64_t> dark(std::size_t(width) * words, 0);  // [column][row word]
   const float* white = op.white().pixels.data();
   report.pixels = op.pixel_count();
-  std::vector<std::size_t> dark_in_row(std::size_t(height), 0);  // each row owns its mask words
-  tbb::parallel_for(0, height, [&](int r) {
+  // Each group of 64 sensor rows owns its word of every column.
+  std::vector<std::size_t> dark_in_group(words, 0);
+  tbb::parallel_for(std::size_t(0), words, [&](std::size_t w) {
     std::size_t count = 0;
-    for (int c = 0; c < width; ++c) {
-      const std::size_t i = std::size_t(r) * std::size_t(width) + std::size_t(c);
-      if (white[i] > 0.f && image[i] == 0.f) {
-        dark.bits[std::size_t(r) * dark.words + std::size_t(c >> 6)] |= std::uint64_t(1) << (c & 63);
-        ++count;
+    const int r1 = std::min(height, int(64 * w) + 64);
+    for (int r = int(64 * w); r < r1; ++r) {
+      const std::uint64_t bit = std::uint64_t(1) << (r & 63);
+      const std::size_t row = std::size_t(r) * std::size_t(width);
+      for (int c = 0; c < width; ++c) {
+        if (white[row + std::size_t(c)] > 0.f && image[row + std::size_t(c)] == 0.f) {
+          dark[std::size_t(c) * words + w] |= bit;
+          ++count;
+        }
       }
     }
-    dark_in_row[std::size_t(r)] = count;
+    dark_in_group[w] = count;
   });
-  for (std::size_t count : dark_in_row) report.dark_pixels += count;
+  for (std::size_t count : dark_in_group) report.dark_pixels += count;
 
   const int nx = g.shape[0], ny = g.shape[1], nz = g.shape[2];
+  const float cutoff = float(settings.dark_weight_cutoff);
   report.voxels = g.count();
   report.slices = nz;
   std::vector<std::vector<std::uint32_t>> per_slice(static_cast<std::size_t>(nz));
   std::vector<std::array<std::size_t, 3>> counts(std::size_t(nz), {0, 0, 0});  // unseen, outside, dark
+  auto peak_of = [](const AxisWeights& a) {
+    float peak = 0.f;
+    for (const Segment& s : a.segments) {
+      for (int k = 0; k < s.length; ++k) peak = std::max(peak, a.table[s.offset + std::size_t(k)]);
+    }
+    return peak;
+  };
   tbb::parallel_for(0, nz, [&](int z) {
-    // Which columns each voxel column really touches (weight > 0), as bit words from its first.
-    std::vector<std::vector<std::uint64_t>> masks(static_cast<std::size_t>(nx));
+    // Per voxel column x: the sensor rows where one of its strong columns is dark.
+    std::vector<std::uint64_t> dark_rows(std::size_t(nx) * words, 0);
     for (int x = 0; x < nx; ++x) {
       const AxisWeights ax = op.x_weights(z, x);
-      auto& m = masks[std::size_t(x)];
-      m.assign(ax.empty() ? 0 : std::size_t(ax.last - ax.first) / 64 + 1, 0);
-      float peak = 0.f;
-      for (const Segment& s : ax.segments) {
-        for (int c = 0; c < s.length; ++c) peak = std::max(peak, ax.table[s.offset + std::size_t(c)]);
-      }
-      const float cut = float(settings.dark_weight_cutoff) * peak;
+      const float cut = cutoff * peak_of(ax);
+      std::uint64_t* rows = dark_rows.data() + std::size_t(x) * words;
       for (const Segment& s : ax.segments) {
         for (int c = 0; c < s.length; ++c) {
-          if (ax.table[s.offset + std::size_t(c)] > cut) {
-            const int bit = s.first + c - ax.first;
-            m[std::size_t(bit >> 6)] |= std::uint64_t(1) << (bit & 63);
-          }
+          if (!(ax.table[s.offset + std::size_t(c)] > cut)) continue;
+          const std::uint64_t* column = dark.data() + std::size_t(s.first + c) * words;
+          for (std::size_t w = 0; w < words; ++w) rows[w] |= column[w];
         }
       }
     }
     auto& out = per_slice[std::size_t(z)];
+    out.reserve(std::size_t(nx) * std::size_t(ny));
     auto& cnt = counts[std::size_t(z)];
+    std::vector<std::uint64_t> strong(words, 0);  // voxel row y's strong rows
     for (int y = 0; y < ny; ++y) {
       const AxisWeights ay = op.y_weights(z, y);
-      float peak = 0.f;
+      const float row_cut = cutoff * peak_of(ay);
+      std::size_t w0 = words, w1 = 0;  // the words holding strong rows: [w0, w1)
       for (const Segment& s : ay.segments) {
-        for (int r = 0; r < s.length; ++r) peak = std::max(peak, ay.table[s.offset + std::size_t(r)]);
+        for (int r = 0; r < s.length; ++r) {
+          if (!(ay.table[s.offset + std::size_t(r)] > row_cut)) continue;
+          const std::size_t w = std::size_t(s.first + r) >> 6;
+          strong[w] |= std::uint64_t(1) << ((s.first + r) & 63);
+          w0 = std::min(w0, w);
+          w1 = std::max(w1, w + 1);
+        }
       }
-      const float row_cut = float(settings.dark_weight_cutoff) * peak;
       for (int x = 0; x < nx; ++x) {
         const std::size_t v = g.index(x, y, z);
         if (!(op.normaliser(v) > 0.f)) {
@@ -183,38 +195,33 @@ std::vector<std::uint32_t> select_active(const WeightingOperator& op, std::span<
           ++cnt[1];
           continue;
         }
-        const auto& m = masks[std::size_t(x)];
-        const int col0 = op.x_weights(z, x).first;
-        bool seen_dark = false;
-        for (const Segment& s : ay.segments) {
-          for (int r = 0; r < s.length && !seen_dark; ++r) {
-            if (!(ay.table[s.offset + std::size_t(r)] > row_cut)) continue;
-            for (std::size_t k = 0; k < m.size(); ++k) {
-              if (dark.window(s.first + r, col0 + int(64 * k)) & m[k]) {
-                seen_dark = true;
-                break;
-              }
-            }
-          }
-          if (seen_dark) break;
-        }
-        if (seen_dark) {
+        const std::uint64_t* rows = dark_rows.data() + std::size_t(x) * words;
+        std::uint64_t hit = 0;
+        for (std::size_t w = w0; w < w1; ++w) hit |= rows[w] & strong[w];
+        if (hit) {
           ++cnt[2];
         } else {
           out.push_back(std::uint32_t(v));
         }
       }
+      for (std::size_t w = w0; w < w1; ++w) strong[w] = 0;
     }
   });
-  std::vector<std::uint32_t> active;
+  // Slices one after another, copied in parallel.
+  std::vector<std::size_t> offset(std::size_t(nz) + 1, 0);
   for (int z = 0; z < nz; ++z) {
     const auto& s = per_slice[std::size_t(z)];
     if (s.empty()) ++report.slices_empty;
-    active.insert(active.end(), s.begin(), s.end());
+    offset[std::size_t(z) + 1] = offset[std::size_t(z)] + s.size();
     report.voxels_unseen += counts[std::size_t(z)][0];
     report.voxels_outside_region += counts[std::size_t(z)][1];
     report.voxels_dark += counts[std::size_t(z)][2];
   }
+  std::vector<std::uint32_t> active(offset.back());
+  tbb::parallel_for(0, nz, [&](int z) {
+    const auto& s = per_slice[std::size_t(z)];
+    std::copy(s.begin(), s.end(), active.begin() + std::ptrdiff_t(offset[std::size_t(z)]));
+  });
   report.voxels_active = active.size();
   return active;
 }
@@ -287,10 +294,17 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const M
   MartResult result;
   result.volume = Volume(op.grid(), 0.f);
   const BigBuffer<float> data = thresholded(image, settings.noise_threshold);
-  const ActiveSet active(op, select_active(op, data, settings, result.skipped));
+  std::vector<std::uint32_t> selected = select_active(op, data, settings, result.skipped);
+  result.select_seconds = seconds_since(t_setup);
+  const auto t_active = std::chrono::steady_clock::now();
+  const ActiveSet active(op, std::move(selected));
+  result.active_set_seconds = seconds_since(t_active);
+  const auto t_start = std::chrono::steady_clock::now();
   const std::size_t n = active.size();
   ActiveSet::Workspace workspace;  // the kernels' buffers, reused by every pass
-  std::vector<float> e(n, 1.f), update(n, 0.f);
+  // Per active voxel; BigBuffers (huge pages: 26 MB each on the paper case would otherwise take
+  // 6 500 page faults apiece). `update` is written in full by every back-projection.
+  BigBuffer<float> e(n, 1.f), update(n);
   // Written in full by every pass before being read.
   BigBuffer<float> projection(op.pixel_count()), ratio(op.pixel_count());  // ratio: white · ln(I / W E)
   const float* white = op.white().pixels.data();
@@ -320,7 +334,7 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const M
     // carry no ln I), renormalised over those pixels.
     // The lit mask and ln I, each times the white image, in the ratio and projection buffers
     // (not yet in use), back-projected in one walk.
-    std::vector<float> weight(n, 0.f);
+    BigBuffer<float> weight(n);  // written in full by the back-projection
     for_pixels(data.size(), [&](std::size_t i0, std::size_t i1) {
       for (std::size_t i = i0; i < i1; ++i) {
         ratio[i] = (data[i] > 0.f ? 1.f : 0.f) * white[i];
@@ -329,14 +343,18 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const M
     });
     active.back_project_whitened(op, ratio, weight, projection, update, &workspace);
     for_voxels([&](std::size_t m) { e[m] = weight[m] > 0.f ? clean(bounded_exp(update[m] / weight[m])) : 0.f; });
-    // Scale to the image's total light so the first ratios are near 1.
-    active.project(op, e, projection, &workspace);
-    const double total = sum(projection);
+    // Scale to the image's total light so the first ratios are near 1. The projection's total
+    // is Σ_j E_j (eq 13 makes each voxel's weights sum to 1 over the sensor), so no projection
+    // is needed; the two totals differ by the projection's float rounding only (~1e-10 relative
+    // on the paper case: the float scale and the volume's bits come out the same there,
+    // docs/benchmarks.md).
+    const double total = sum(e);
     if (total > 0) {
       const float scale = float(sum(data) / total);
       for_voxels([&](std::size_t m) { e[m] = clean(e[m] * scale); });
     }
   }
+  result.start_seconds = seconds_since(t_start);
   result.setup_seconds = seconds_since(t_setup);
 
   // ln I and ln floor once, not per iteration.
@@ -412,7 +430,7 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const M
   // extrapolated y = x_k (x_k / x_(k-1))^beta_k with FISTA's beta_k = (k - 1) / (k + 2), and k
   // restarts at 1 when an iteration's step opposes the momentum (O'Donoghue and Candes's gradient
   // restart). `last` holds x_(k-1), then x_k; `momentum` ln x_k - ln x_(k-1) (0 where either is 0).
-  std::vector<float> last, momentum;
+  BigBuffer<float> last, momentum;
   if (settings.accelerate) {
     last = e;
     momentum.assign(n, 0.f);

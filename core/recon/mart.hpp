@@ -95,6 +95,9 @@ struct MartResult {
   double final_residual = 0;   // after the last update
   bool converged = false;
   double setup_seconds = 0;    // active set and start
+  // The setup's parts (wall seconds): choosing the active voxels, grouping them for the kernels
+  // (ActiveSet), and the MLOS start (one two-image back-projection, one projection).
+  double select_seconds = 0, active_set_seconds = 0, start_seconds = 0;
 };
 
 // Checks an image for the reconstruction: sensor-sized, finite, non-negative; InputError otherwise

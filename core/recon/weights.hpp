@@ -173,9 +173,12 @@ class WeightingOperator {
 // more (a column with one voxel is the per-voxel form); 2x less on the 0.5 ppm benchmarks.
 // Both walk the sensor in bands of rows and the voxels in strips of x so that the pixels and
 // weights they touch stay in cache: projection band by band (a band owns its rows: no atomics),
-// back-projection strip by strip (a strip owns its voxels, each summed band after band).
+// back-projection strip by strip (a strip owns its voxels, each summed band after band). Within
+// a band the x stages take a few dozen columns at a time, a few rows at a time, so the pixels
+// those columns share stay in L1; every pixel and voxel still gets its sums in the same order.
 class ActiveSet {
  public:
+  // `voxels`: flat indices into the operator's grid, strictly increasing (InputError otherwise).
   ActiveSet(const WeightingOperator& op, std::vector<std::uint32_t> voxels);
   static ActiveSet all(const WeightingOperator& op);
 
@@ -242,8 +245,8 @@ class ActiveSet {
   // Voxels with a positive normaliser, in the kernels' visiting order (strip, depth, x, then y
   // increasing): position in voxels_ and n. A pass reads and writes its per-voxel arrays front to
   // back, and each strip owns one contiguous range of them.
-  std::vector<std::uint32_t> order_;
-  std::vector<float> order_normaliser_;
+  BigBuffer<std::uint32_t> order_;
+  BigBuffer<float> order_normaliser_;
   std::vector<Column> columns_;  // in the same order
   // Voxel x per strip: within a band the kernels walk strip by strip, depth by depth, x by x, so
   // the y weights of one depth serve the whole strip and the pixels under the strip stay cached.

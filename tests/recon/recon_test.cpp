@@ -386,6 +386,56 @@ TEST_F(Mart, VoxelsSeenByDarkPixelsAreSkippedAndStayZero) {
   EXPECT_EQ(nonzero_ref, k.voxels_active);
 }
 
+// The dark cutoff's selection against its definition, voxel by voxel (the selection tests it
+// with row bitsets): a voxel is dark when a dark pixel lies where both its column weight and its
+// row weight exceed the cutoff's fraction of their largest values.
+TEST_F(Mart, DarkCutoffSkipsExactlyTheVoxelsItsDefinitionNames) {
+  const ImageF image = project_image(*op_, truth(), 1000.f);
+  const Grid3& g = op_->grid();
+  for (const double cutoff : {0.0, 0.5, 0.9}) {
+    MartSettings s;
+    s.noise_threshold = 0.01f;
+    s.dark_weight_cutoff = cutoff;
+    s.iterations = 1;
+    const MartResult r = reconstruct(*op_, image, s);
+    auto dark = [&](int column, int row) {
+      const std::size_t i = std::size_t(row) * std::size_t(image.width) + std::size_t(column);
+      return op_->white().pixels[i] > 0.f && !(image.pixels[i] > s.noise_threshold);
+    };
+    auto cut_of = [&](const AxisWeights& a) {
+      float peak = 0.f;
+      for (int p = a.first; p <= a.last; ++p) peak = std::max(peak, a.at(p));
+      return float(cutoff) * peak;
+    };
+    std::size_t expected = 0;
+    for (int z = 0; z < g.shape[2]; ++z) {
+      for (int y = 0; y < g.shape[1]; ++y) {
+        for (int x = 0; x < g.shape[0]; ++x) {
+          const std::size_t v = g.index(x, y, z);
+          if (!(op_->normaliser(v) > 0.f)) continue;
+          const AxisWeights ax = op_->x_weights(z, x), ay = op_->y_weights(z, y);
+          const float cx = cut_of(ax), cy = cut_of(ay);
+          bool seen_dark = false;
+          for (int row = ay.first; row <= ay.last && !seen_dark; ++row) {
+            if (!(ay.at(row) > cy)) continue;
+            for (int column = ax.first; column <= ax.last && !seen_dark; ++column) {
+              seen_dark = ax.at(column) > cx && dark(column, row);
+            }
+          }
+          if (!seen_dark) continue;
+          ++expected;
+          EXPECT_EQ(r.volume.data[v], 0.f) << "voxel " << v;
+        }
+      }
+    }
+    std::cout << "measured: cutoff " << cutoff << ": dark voxels " << expected << ", active " << r.skipped.voxels_active
+              << "\n";
+    EXPECT_EQ(r.skipped.voxels_dark, expected) << "cutoff " << cutoff;
+    EXPECT_GT(expected, 0u);
+    EXPECT_GT(r.skipped.voxels_active, 0u);
+  }
+}
+
 TEST_F(Mart, RegionOfInterestLimitsTheSolution) {
   const ImageF image = project_image(*op_, truth(), 1000.f);
   MartSettings s;
