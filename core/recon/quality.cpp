@@ -124,6 +124,7 @@ std::optional<ParticleFit> fit_particle(const Volume& volume, const std::array<d
 
 std::optional<ParticleFit> fit_particle_moments(const Volume& volume, const std::array<double, 3>& guess_mm,
                                                 const std::array<int, 3>& half_size, int lateral_radius) {
+  if (lateral_radius < 0) throw InputError("particle fit: lateral radius must be >= 0 voxels");
   const Grid3& g = volume.grid;
   const Brightest brightest = brightest_near(volume, guess_mm, half_size);
   if (!(brightest.value > 0)) return std::nullopt;

@@ -31,7 +31,8 @@ std::optional<ParticleFit> fit_particle(const Volume& volume, const std::array<d
 // `half_size` of `guess_mm`. A reconstructed particle is stretched along the line of sight, tilted
 // off the z axis away from the optical axis, and after many iterations its light gathers in a few
 // sharp voxels along that streak: a fit through the peak's own column sees one or two of them,
-// the moments see them all (docs/benchmarks.md, "Fig 22"). std::nullopt as fit_particle.
+// the moments see them all (docs/benchmarks.md, "Fig 22"). std::nullopt as fit_particle;
+// InputError for a negative lateral_radius.
 std::optional<ParticleFit> fit_particle_moments(const Volume& volume, const std::array<double, 3>& guess_mm,
                                                 const std::array<int, 3>& half_size, int lateral_radius = 1);
 

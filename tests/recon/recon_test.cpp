@@ -617,6 +617,7 @@ TEST(Quality, MomentsFitFindsBlobAndStreakCentres) {
   ASSERT_TRUE(with_neighbour);
   EXPECT_NEAR(with_neighbour->position_voxel[2], moments->position_voxel[2], 1e-12);
   EXPECT_FALSE(fit_particle_moments(Volume(g, 0.f), {0, 0, 0}, {2, 2, 2}));
+  EXPECT_THROW(fit_particle_moments(streak, guess, {3, 3, 8}, -1), InputError);
 }
 
 }  // namespace
