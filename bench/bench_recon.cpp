@@ -66,7 +66,7 @@ Grid3 grid_of(int nx, int ny, int nz, double voxel_mm, double depth_mm) {
 
 void paper_scale(const std::string& source_dir, bool small, double ppm, int iterations, float threshold_counts,
                  double dark_cutoff, std::size_t count_override = 0, double mu = 0.5, bool accelerate = false,
-                 double sensor_blur_mm = 0.0) {
+                 double sensor_blur_mm = 0.0, recon::MartStart start = recon::MartStart::mlos) {
   const auto cam = optics::load_camera_file(source_dir + (small ? "/systemd/config/camera-small.yaml"
                                                                 : "/systemd/config/camera-fahringer2015.yaml"));
   const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(cam));
@@ -97,6 +97,7 @@ void paper_scale(const std::string& source_dir, bool small, double ppm, int iter
   s.mu = mu;
   s.accelerate = accelerate;
   s.sensor_blur_sigma_mm = sensor_blur_mm;
+  s.start = start;
   s.noise_threshold = threshold_counts;
   s.dark_weight_cutoff = dark_cutoff;
   t = Clock::now();
@@ -117,9 +118,9 @@ void paper_scale(const std::string& source_dir, bool small, double ppm, int iter
     hash = (hash ^ bits) * 1099511628211ull;
   }
   std::printf("bench=recon_paper particles=%zu ppm=%.2f lit_pixel_fraction=%.4f threshold_counts=%.1f dark_cutoff=%.2f "
-              "iterations=%d mu=%.2f accelerate=%d sensor_blur_mm=%.4f\n",
+              "iterations=%d mu=%.2f accelerate=%d sensor_blur_mm=%.4f start=%s\n",
               count, ppm, double(lit) / double(image.size()), double(s.noise_threshold), dark_cutoff, iterations, mu,
-              int(accelerate), sensor_blur_mm);
+              int(accelerate), sensor_blur_mm, start == recon::MartStart::ones ? "ones" : "mlos");
   std::printf("bench=recon_paper phase=active_set_and_mlos seconds=%.3f select=%.3f active_set=%.3f start=%.3f\n",
               r.setup_seconds, r.select_seconds, r.active_set_seconds, r.start_seconds);
   std::printf("bench=recon_paper phase=iterations seconds=%.3f per_iteration=%.3f\n", iter_total,
@@ -289,8 +290,9 @@ int main(int argc, char** argv) {
                 argc > 4 ? std::stod(argv[4]) : 0.5, argc > 5 && std::string(argv[5]) == "nesterov",
                 argc > 6 ? std::stod(argv[6]) : 0.0);
   if (which == "small") paper_scale(source_dir, true, ppm, iterations, threshold, cutoff);
-  // `paper [ppm] [threshold] [cutoff] [iterations] [sensor blur sigma, mm]`.
+  // `paper [ppm] [threshold] [cutoff] [iterations] [sensor blur sigma, mm] [mlos|ones]`.
   if (which == "paper" || which == "all")
-    paper_scale(source_dir, false, ppm, iterations, threshold, cutoff, 0, 0.5, false, argc > 6 ? std::stod(argv[6]) : 0.0);
+    paper_scale(source_dir, false, ppm, iterations, threshold, cutoff, 0, 0.5, false, argc > 6 ? std::stod(argv[6]) : 0.0,
+                argc > 7 && std::string(argv[7]) == "ones" ? recon::MartStart::ones : recon::MartStart::mlos);
   return 0;
 }
