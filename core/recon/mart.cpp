@@ -31,6 +31,13 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
+void check_sensor_blur_sigma(double sigma_mm, const char* who) {
+  if (!(sigma_mm >= 0 && sigma_mm <= kMaxSensorBlurSigmaMm)) {
+    throw InputError(std::string(who) + ": sensor blur sigma must lie in [0, " + std::to_string(kMaxSensorBlurSigmaMm) +
+                     "] mm, got " + std::to_string(sigma_mm));
+  }
+}
+
 void validate_settings(const MartSettings& s) {
   if (!(s.mu > 0 && s.mu <= 1)) throw InputError("MART: mu must lie in (0, 1], got " + std::to_string(s.mu));
   if (s.iterations < 1 || s.iterations > 10000) {
@@ -45,10 +52,7 @@ void validate_settings(const MartSettings& s) {
   if (!(s.convergence >= 0) || !std::isfinite(s.convergence)) {
     throw InputError("MART: convergence tolerance must be a finite number >= 0");
   }
-  if (!(s.sensor_blur_sigma_mm >= 0 && s.sensor_blur_sigma_mm <= kMaxSensorBlurSigmaMm)) {
-    throw InputError("MART: sensor blur sigma must lie in [0, " + std::to_string(kMaxSensorBlurSigmaMm) + "] mm, got " +
-                     std::to_string(s.sensor_blur_sigma_mm));
-  }
+  check_sensor_blur_sigma(s.sensor_blur_sigma_mm, "MART");
 }
 
 // The sensor blur B of MartSettings::sensor_blur_sigma_mm on a whole sensor image, in place
@@ -242,9 +246,7 @@ float clean(float v) { return v < kTiny ? 0.f : std::min(v, kHuge); }
 }  // namespace
 
 void apply_sensor_blur(const WeightingOperator& op, double sigma_mm, std::span<float> image) {
-  if (!(sigma_mm >= 0 && sigma_mm <= kMaxSensorBlurSigmaMm)) {
-    throw InputError("sensor blur sigma must lie in [0, " + std::to_string(kMaxSensorBlurSigmaMm) + "] mm");
-  }
+  check_sensor_blur_sigma(sigma_mm, "apply_sensor_blur");
   if (image.size() != op.pixel_count()) throw InputError("sensor blur: the image is not the operator's sensor");
   SensorBlur blur(op, sigma_mm);
   if (blur.active()) blur.apply(image);
