@@ -101,10 +101,11 @@ double sample_position(double aperture, int samples, int k) {
 // pixels behind each lens on the paper's camera beyond 5 mm from focus).
 constexpr int kQuad = 4;
 // The kernels' x stages take kChunk visits (voxel columns in one band) at a time and walk them
-// kSubRows sensor rows at a time: the pixels those visits share in those rows (a few KB) stay
-// in L1 instead of being fetched again for every column. Measured on the paper case
-// (docs/benchmarks.md): projection 1.1x, back-projection 1.2x less CPU time than column by
-// column; 16 x 16 and 8 x 32 did about as well, 16 x 8 worse.
+// one block of kSubRows sensor rows at a time: the pixels those visits share in those rows (a
+// few KB) stay in L1 instead of being fetched again for every column. Measured on the paper case
+// with row-major quads (docs/benchmarks.md): projection 1.1x, back-projection 1.2x less CPU time
+// than column by column; 16 x 16 and 8 x 32 did about as well, 16 x 8 worse. kSubRows is also
+// the width of the row lanes (below): one AVX-512 register of floats.
 constexpr int kChunk = 32;
 constexpr int kSubRows = 16;
 static_assert(64 % kSubRows == 0 && kSubRows <= 64);
@@ -136,12 +137,11 @@ void build_quads(const std::vector<WeightRun>& runs, const std::vector<Segment>&
   }
 }
 
-// The two inner loops of the kernels, in two builds chosen at run time by GCC's function
-// multiversioning (an ifunc resolved once at load time, as core/piv/deform.cpp's target_clones):
-// the baseline x86-64 one works one quad (one SSE vector) at a time; the AVX2 one pairs two
-// quads in one 8-lane vector, half the arithmetic and loop instructions. Both do the same float
-// operations in the same order (a multiply, then an add: AVX2 has no fused multiply-add), so
-// they give the same bits.
+// Row-major dot products over quads, for the eq 13 normalisers (one sensor row against every
+// voxel x of a slice), in two builds chosen at run time by GCC's function multiversioning: the
+// baseline x86-64 one works one quad (one SSE vector) at a time; the AVX2 one pairs two quads in
+// one 8-lane vector. Both do the same float operations in the same order (a multiply, then an
+// add), so they give the same bits; the passes' x stages below use the same order per row.
 using Lanes4 = float __attribute__((vector_size(16)));
 using Lanes8 = float __attribute__((vector_size(32)));
 using Doubles4 = double __attribute__((vector_size(32)));
@@ -158,70 +158,7 @@ __attribute__((target("avx2"), always_inline)) inline Lanes8 load8(const float* 
   return v;
 }
 
-// row[first[k] + j] += a * w[4 k + j]: the projection's inner loop. The quads of a voxel column
-// overlap only at the sensor's right edge, where a segment's last quad is shifted left over the
-// one before it with weight 0 on the shared pixels.
-inline void add_quads_base(float* __restrict row, const int* __restrict first, const float* __restrict w,
-                           std::size_t n, float a) {
-  for (std::size_t k = 0; k < n; ++k) {
-    float* __restrict q = row + first[k];
-    const float* __restrict wk = w + kQuad * k;
-    for (int j = 0; j < kQuad; ++j) q[j] += a * wk[j];
-  }
-}
-__attribute__((target("avx2"), always_inline)) inline void add_quads_avx2(float* row, const int* first,
-                                                                          const float* w, std::size_t n, float a) {
-  std::size_t k = 0;
-  for (; k + 2 <= n; k += 2) {
-    float* q0 = row + first[k];
-    float* q1 = row + first[k + 1];
-    const Lanes8 sum = load_pair(q0, q1) + a * load8(w + kQuad * k);
-    const Lanes4 lo = __builtin_shufflevector(sum, sum, 0, 1, 2, 3), hi = __builtin_shufflevector(sum, sum, 4, 5, 6, 7);
-    // The later quad first: where an edge quad overlaps the one before, its lanes there add 0 to
-    // stale values, and the earlier quad's sums must be the ones that stay (as one after the other).
-    __builtin_memcpy(q1, &hi, sizeof hi);
-    __builtin_memcpy(q0, &lo, sizeof lo);
-  }
-  if (k < n) {
-    Lanes4 q, wk;
-    __builtin_memcpy(&q, row + first[k], sizeof q);
-    __builtin_memcpy(&wk, w + kQuad * k, sizeof wk);
-    q += a * wk;
-    __builtin_memcpy(row + first[k], &q, sizeof q);
-  }
-}
-
-// The same for two rows at once (each row's float operations exactly as add_quads_avx2's): the
-// quads' positions and weights are loaded once for both.
-__attribute__((target("avx2"), always_inline)) inline void add_quads2_avx2(float* row_a, float* row_b, const int* first,
-                                                                           const float* w, std::size_t n, float a,
-                                                                           float b) {
-  std::size_t k = 0;
-  for (; k + 2 <= n; k += 2) {
-    const int f0 = first[k], f1 = first[k + 1];
-    const Lanes8 wk = load8(w + kQuad * k);
-    const Lanes8 sum_a = load_pair(row_a + f0, row_a + f1) + a * wk;
-    const Lanes8 sum_b = load_pair(row_b + f0, row_b + f1) + b * wk;
-    const Lanes4 lo_a = __builtin_shufflevector(sum_a, sum_a, 0, 1, 2, 3), hi_a = __builtin_shufflevector(sum_a, sum_a, 4, 5, 6, 7);
-    const Lanes4 lo_b = __builtin_shufflevector(sum_b, sum_b, 0, 1, 2, 3), hi_b = __builtin_shufflevector(sum_b, sum_b, 4, 5, 6, 7);
-    __builtin_memcpy(row_a + f1, &hi_a, sizeof hi_a);  // the later quad first, as above
-    __builtin_memcpy(row_a + f0, &lo_a, sizeof lo_a);
-    __builtin_memcpy(row_b + f1, &hi_b, sizeof hi_b);
-    __builtin_memcpy(row_b + f0, &lo_b, sizeof lo_b);
-  }
-  if (k < n) {
-    Lanes4 qa, qb, wk;
-    __builtin_memcpy(&qa, row_a + first[k], sizeof qa);
-    __builtin_memcpy(&qb, row_b + first[k], sizeof qb);
-    __builtin_memcpy(&wk, w + kQuad * k, sizeof wk);
-    qa += a * wk;
-    qb += b * wk;
-    __builtin_memcpy(row_a + first[k], &qa, sizeof qa);
-    __builtin_memcpy(row_b + first[k], &qb, sizeof qb);
-  }
-}
-
-// Σ_k Σ_j w[4 k + j] row[first[k] + j]: the back-projection's inner loop, in two vector
+// Σ_k Σ_j w[4 k + j] row[first[k] + j], in two vector
 // accumulators (even and odd quads) so consecutive adds do not wait on each other; a fixed order.
 inline float dot_quads_base(const float* row, const int* first, const float* w, std::size_t n) {
   float even[kQuad] = {0.f, 0.f, 0.f, 0.f}, odd[kQuad] = {0.f, 0.f, 0.f, 0.f};
@@ -301,108 +238,130 @@ struct ColumnJob {
   std::size_t n;
 };
 
-// The dispatched entry points: one call per chunk of visits in a band, so the loops over
-// sub-bands, visits and rows run inside the chosen build too. Both walk the band kSubRows rows
-// at a time and, within those, the chunk's visits in order; `words` words of 64 rows.
-//
-// Projection stage 2: image row r += g[r] Ax for the rows each visit reaches (bits of `rows`)
-// with g[r] != 0, resetting g for later use. `band` points at the band's first row.
-__attribute__((target("default"))) void add_columns(float* band, std::size_t width, int words, const ColumnJob* jobs,
-                                                    int count) {
-  for (int word = 0; word < words; ++word) {
-    for (int sub = 0; sub < 64; sub += kSubRows) {
-      const std::uint64_t part = (~std::uint64_t(0) >> (64 - kSubRows)) << sub;
-      for (int v = 0; v < count; ++v) {
-        const ColumnJob& j = jobs[v];
-        float* g = j.sums[0] + 64 * word;
-        float* rows_at = band + std::size_t(64 * word) * width;
-        for (std::uint64_t m = j.rows[word] & part; m != 0; m &= m - 1) {
-          const int r = __builtin_ctzll(m);
-          if (g[r] == 0.f) continue;
-          add_quads_base(rows_at + std::size_t(r) * width, j.first, j.w, j.n, g[r]);
-          g[r] = 0.f;
-        }
+// The x stages work on images in "row lanes": each block of kSubRows sensor rows stored column
+// by column, the block's kSubRows pixels of one column side by side, so pixel (r, c) is at
+// ((r / kSubRows) * width + c) * kSubRows + r % kSubRows. One x weight then meets all of a
+// block's rows in one 16-lane vector operation (one AVX-512 register, two AVX2 ones) instead of
+// one 4-pixel quad per row: a 16-row block of a visit is on average 13 rows reached on the paper
+// case, so the vectors are mostly full.
+using Rows = float __attribute__((vector_size(kSubRows * sizeof(float))));
+using RowBits = std::int32_t __attribute__((vector_size(kSubRows * sizeof(std::int32_t))));
+constexpr std::uint64_t kSubMask = ~std::uint64_t(0) >> (64 - kSubRows);
+
+
+// `count` image rows from `rows` -> row lanes from `lanes`; the rest of the last block is 0.
+void rows_to_lanes(const float* rows, std::size_t width, int count, float* lanes) {
+  for (int b0 = 0; b0 < count; b0 += kSubRows) {
+    float* block = lanes + std::size_t(b0) * width;
+    const int in_block = std::min(kSubRows, count - b0);
+    for (std::size_t c0 = 0; c0 < width; c0 += kSubRows) {
+      const std::size_t c1 = std::min(width, c0 + kSubRows);
+      for (int l = 0; l < in_block; ++l) {
+        const float* in = rows + std::size_t(b0 + l) * width;
+        for (std::size_t c = c0; c < c1; ++c) block[c * kSubRows + std::size_t(l)] = in[c];
+      }
+      for (int l = in_block; l < kSubRows; ++l) {
+        for (std::size_t c = c0; c < c1; ++c) block[c * kSubRows + std::size_t(l)] = 0.f;
       }
     }
   }
 }
-// The AVX2 build takes the rows two at a time.
-__attribute__((target("avx2"))) void add_columns(float* band, std::size_t width, int words, const ColumnJob* jobs,
-                                                 int count) {
+// The way back: row lanes from `lanes` -> `count` image rows from `rows`.
+void lanes_to_rows(const float* lanes, std::size_t width, int count, float* rows) {
+  for (int b0 = 0; b0 < count; b0 += kSubRows) {
+    const float* block = lanes + std::size_t(b0) * width;
+    const int in_block = std::min(kSubRows, count - b0);
+    for (std::size_t c0 = 0; c0 < width; c0 += kSubRows) {
+      const std::size_t c1 = std::min(width, c0 + kSubRows);
+      for (int l = 0; l < in_block; ++l) {
+        float* out = rows + std::size_t(b0 + l) * width;
+        for (std::size_t c = c0; c < c1; ++c) out[c] = block[c * kSubRows + std::size_t(l)];
+      }
+    }
+  }
+}
+
+// acc[l] += w[l] · (column l of a quad, kSubRows rows), skipping zero weights.
+__attribute__((always_inline)) inline void dot_quad(Rows* acc, const float* at, const float* w) {
+#pragma GCC unroll 4
+  for (int l = 0; l < kQuad; ++l) {
+    if (w[l] == 0.f) continue;
+    Rows p;
+    __builtin_memcpy(&p, at + l * kSubRows, sizeof p);
+    acc[l] += p * w[l];
+  }
+}
+
+// The dispatched entry points (GCC's function multiversioning, an ifunc resolved once at load
+// time, as core/piv/deform.cpp's target_clones): one call per chunk of visits in a band, so the
+// loops over blocks, visits and weights run inside the chosen build. Each build does the same
+// float operations in the same order on each lane (a multiply, then an add: weights.cpp is built
+// with -ffp-contract=off, so the AVX-512 build fuses nothing), so all give the same bits. A zero
+// weight (a quad's padding) is skipped: it would add +0.
+//
+// Projection stage 2: lanes(r, ·) += G(r) Ax over the band's blocks of kSubRows rows that a
+// visit reaches, resetting G for later use. `band` points at the band's first block; every
+// pixel gets its visits' additions in visiting order, its quads' in quad order.
+__attribute__((target_clones("avx512f", "avx2", "default"))) void add_columns(float* band, std::size_t width, int words,
+                                                                              const ColumnJob* jobs, int count) {
   for (int word = 0; word < words; ++word) {
     for (int sub = 0; sub < 64; sub += kSubRows) {
-      const std::uint64_t part = (~std::uint64_t(0) >> (64 - kSubRows)) << sub;
+      float* block = band + std::size_t(64 * word + sub) * width;
       for (int v = 0; v < count; ++v) {
         const ColumnJob& j = jobs[v];
-        float* g = j.sums[0] + 64 * word;
-        float* rows_at = band + std::size_t(64 * word) * width;
-        int held = -1;  // a row waiting for a partner
-        for (std::uint64_t m = j.rows[word] & part; m != 0; m &= m - 1) {
-          const int r = __builtin_ctzll(m);
-          if (g[r] == 0.f) continue;
-          if (held < 0) {
-            held = r;
-            continue;
+        if (((j.rows[word] >> sub) & kSubMask) == 0) continue;
+        float* g = j.sums[0] + 64 * word + sub;
+        Rows gv;
+        __builtin_memcpy(&gv, g, sizeof gv);
+        std::fill_n(g, kSubRows, 0.f);
+        for (std::size_t k = 0; k < j.n; ++k) {
+          float* at = block + std::size_t(j.first[k]) * kSubRows;
+          const float* w = j.w + kQuad * k;
+#pragma GCC unroll 4
+          for (int l = 0; l < kQuad; ++l) {
+            if (w[l] == 0.f) continue;
+            Rows p;
+            __builtin_memcpy(&p, at + l * kSubRows, sizeof p);
+            p += gv * w[l];
+            __builtin_memcpy(at + l * kSubRows, &p, sizeof p);
           }
-          add_quads2_avx2(rows_at + std::size_t(held) * width, rows_at + std::size_t(r) * width, j.first, j.w, j.n,
-                          g[held], g[r]);
-          g[held] = 0.f;
-          g[r] = 0.f;
-          held = -1;
-        }
-        if (held >= 0) {
-          add_quads_avx2(rows_at + std::size_t(held) * width, j.first, j.w, j.n, g[held]);
-          g[held] = 0.f;
         }
       }
     }
   }
 }
 
-// Back-projection stage 1: B_i[r] = Σ_col Ax r_i(row, col) for the rows each visit reaches, for
-// `images` (1 or 2) images whose bands start at band[i].
-__attribute__((target("default"))) void dot_columns(const float* const* band, int images, std::size_t width, int words,
-                                                    const ColumnJob* jobs, int count) {
+// Back-projection stage 1: B_i[r] = Σ_col Ax r_i(r, col) over the blocks a visit reaches, for
+// `images` (1 or 2) lanes images whose bands start at band[i]; rows the visit does not reach
+// keep 0. Each row's sum in dot_quads_base's order: lane j of the even quads and of the odd ones
+// in eight accumulators, then even + odd and the lanes pairwise.
+__attribute__((target_clones("avx512f", "avx2", "default"))) void dot_columns(const float* const* band, int images,
+                                                                              std::size_t width, int words,
+                                                                              const ColumnJob* jobs, int count) {
+  RowBits lane_bit;
+  for (int l = 0; l < kSubRows; ++l) lane_bit[l] = 1 << l;
   for (int word = 0; word < words; ++word) {
     for (int sub = 0; sub < 64; sub += kSubRows) {
-      const std::uint64_t part = (~std::uint64_t(0) >> (64 - kSubRows)) << sub;
+      const std::size_t block = std::size_t(64 * word + sub) * width;
       for (int v = 0; v < count; ++v) {
         const ColumnJob& j = jobs[v];
+        const std::int32_t bits = std::int32_t((j.rows[word] >> sub) & kSubMask);
+        if (bits == 0) continue;
+        const RowBits reached = (RowBits{} + bits) & lane_bit;
         for (int i = 0; i < images; ++i) {
-          const float* rows_at = band[i] + std::size_t(64 * word) * width;
-          float* out = j.sums[std::size_t(i)] + 64 * word;
-          for (std::uint64_t m = j.rows[word] & part; m != 0; m &= m - 1) {
-            const int r = __builtin_ctzll(m);
-            out[r] = dot_quads_base(rows_at + std::size_t(r) * width, j.first, j.w, j.n);
+          const float* lanes = band[i] + block;
+          Rows even[kQuad] = {}, odd[kQuad] = {};
+          std::size_t k = 0;
+          for (; k + 2 <= j.n; k += 2) {
+            dot_quad(even, lanes + std::size_t(j.first[k]) * kSubRows, j.w + kQuad * k);
+            dot_quad(odd, lanes + std::size_t(j.first[k + 1]) * kSubRows, j.w + kQuad * (k + 1));
           }
-        }
-      }
-    }
-  }
-}
-// The AVX2 build takes the rows two at a time.
-__attribute__((target("avx2"))) void dot_columns(const float* const* band, int images, std::size_t width, int words,
-                                                 const ColumnJob* jobs, int count) {
-  for (int word = 0; word < words; ++word) {
-    for (int sub = 0; sub < 64; sub += kSubRows) {
-      const std::uint64_t part = (~std::uint64_t(0) >> (64 - kSubRows)) << sub;
-      for (int v = 0; v < count; ++v) {
-        const ColumnJob& j = jobs[v];
-        for (int i = 0; i < images; ++i) {
-          const float* rows_at = band[i] + std::size_t(64 * word) * width;
-          float* out = j.sums[std::size_t(i)] + 64 * word;
-          int held = -1;  // a row waiting for a partner
-          for (std::uint64_t m = j.rows[word] & part; m != 0; m &= m - 1) {
-            const int r = __builtin_ctzll(m);
-            if (held < 0) {
-              held = r;
-              continue;
-            }
-            dot_quads2_avx2(rows_at + std::size_t(held) * width, rows_at + std::size_t(r) * width, j.first, j.w, j.n,
-                            out + held, out + r);
-            held = -1;
-          }
-          if (held >= 0) out[held] = dot_quads_avx2(rows_at + std::size_t(held) * width, j.first, j.w, j.n);
+          if (k < j.n) dot_quad(even, lanes + std::size_t(j.first[k]) * kSubRows, j.w + kQuad * k);
+          const Rows lane0 = even[0] + odd[0], lane1 = even[1] + odd[1];
+          const Rows lane2 = even[2] + odd[2], lane3 = even[3] + odd[3];
+          const Rows sum = (lane0 + lane1) + (lane2 + lane3);
+          const Rows kept = reached != 0 ? sum : Rows{};
+          __builtin_memcpy(j.sums[std::size_t(i)] + 64 * word + sub, &kept, sizeof kept);
         }
       }
     }
@@ -983,11 +942,15 @@ void ActiveSet::project(const WeightingOperator& op, std::span<const float> valu
                     [&](const tbb::blocked_range<std::size_t>& r) {
     for (std::size_t p = r.begin(); p != r.end(); ++p) scaled[p] = values[order_[p]] / order_normaliser_[p];
   });
+  const std::size_t band_size = std::size_t(kBandRows) * width;
+  ws.band_lanes.resize(std::size_t(tbb::this_task_arena::max_concurrency()) * band_size);
   // Each band owns its sensor rows and adds its columns in a fixed order: no atomics, and the
   // same sums whatever the thread count.
   run_costliest_first(band_order_, [&](int b) {
     const int r0 = b * kBandRows, r1 = std::min(height, r0 + kBandRows);
-    std::fill(image.begin() + std::ptrdiff_t(std::size_t(r0) * width), image.begin() + std::ptrdiff_t(std::size_t(r1) * width), 0.f);
+    // The band in row lanes, this thread's own, copied into the image when finished.
+    float* lanes = ws.band_lanes.data() + std::size_t(tbb::this_task_arena::current_thread_index()) * band_size;
+    std::fill_n(lanes, band_size, 0.f);
     // G(row) of kChunk consecutive visits over the band's rows, each with kQuad rows of margin on
     // either side for the lanes of quads that straddle the band's edges (those belong to the
     // neighbouring band). Zero between uses: stage 2 resets the rows it adds, then the margins.
@@ -1032,12 +995,13 @@ void ActiveSet::project(const WeightingOperator& op, std::span<const float> valu
         jobs[v - c0] = ColumnJob{{padded_sums[v - c0].data() + kQuad, nullptr}, visit.rows.data(), t.x_quad_first.data() + q0,
                                  t.x_quad_weights.data() + kQuad * q0, q1 - q0};
       }
-      add_columns(image.data() + std::size_t(r0) * width, width, kRowWords, jobs.data(), int(c1 - c0));
+      add_columns(lanes, width, kRowWords, jobs.data(), int(c1 - c0));
       for (std::size_t v = c0; v < c1; ++v) {
         std::fill_n(padded_sums[v - c0].begin(), kQuad, 0.f);
         std::fill_n(padded_sums[v - c0].end() - kQuad, kQuad, 0.f);
       }
     }
+    lanes_to_rows(lanes, width, r1 - r0, image.data() + std::size_t(r0) * width);
     const float* white = op.white().pixels.data();
     white_band(image.data() + std::size_t(r0) * width, white + std::size_t(r0) * width, std::size_t(r1 - r0) * width);
     if (band_done) band_done(b, std::size_t(r0) * width, std::size_t(r1) * width);
@@ -1078,6 +1042,16 @@ void ActiveSet::back_project_images(const WeightingOperator& op, const std::arra
   // Per image and voxel in visiting order; each strip zeroes and sums its own range.
   auto& sums = workspace.sums;
   sums.resize(N * order_.size());
+  // The images in row lanes (bands_ whole bands; rows past the sensor 0), band by band in parallel.
+  const int height = op.image_height();
+  const std::size_t image_size = std::size_t(bands_) * std::size_t(kBandRows) * width;
+  workspace.image_lanes.resize(N * image_size);
+  tbb::parallel_for(0, int(N) * bands_, [&](int item) {
+    const std::size_t i = std::size_t(item / bands_);
+    const int r0 = (item % bands_) * kBandRows;
+    rows_to_lanes(images[i] + std::size_t(r0) * width, width, std::min(height, r0 + kBandRows) - r0,
+                  workspace.image_lanes.data() + i * image_size + std::size_t(r0) * width);
+  });
   // Each strip owns its voxels (a contiguous range of order_), so their sums need no atomics,
   // and every voxel adds its bands in order whatever the thread count.
   run_costliest_first(strip_order_, [&](int strip) {
@@ -1112,7 +1086,7 @@ void ActiveSet::back_project_images(const WeightingOperator& op, const std::arra
           for (std::size_t i = 0; i < N; ++i) j.sums[i] = padded_sums[i][v - v0].data() + kQuad;
         }
         std::array<const float*, N> bands;
-        for (std::size_t i = 0; i < N; ++i) bands[i] = images[i] + std::size_t(r0) * width;
+        for (std::size_t i = 0; i < N; ++i) bands[i] = workspace.image_lanes.data() + i * image_size + std::size_t(r0) * width;
         dot_columns(bands.data(), int(N), width, kRowWords, jobs.data(), int(v1 - v0));
         // Stage 2: per voxel Σ_row Ay(row) B(row) over the band's rows, one quad of rows at a
         // time, lane after lane: the zero lanes add +0, so the sums are those row by row.

@@ -174,8 +174,10 @@ class WeightingOperator {
 // Both walk the sensor in bands of rows and the voxels in strips of x so that the pixels and
 // weights they touch stay in cache: projection band by band (a band owns its rows: no atomics),
 // back-projection strip by strip (a strip owns its voxels, each summed band after band). Within
-// a band the x stages take a few dozen columns at a time, a few rows at a time, so the pixels
-// those columns share stay in L1; every pixel and voxel still gets its sums in the same order.
+// a band the x stages take a few dozen columns at a time, 16 rows at a time, so the pixels those
+// columns share stay in L1. They work on the image in row lanes (each block of 16 rows stored
+// column by column), so one x weight meets 16 rows in one vector operation; every pixel and voxel
+// still gets its sums in the same order as row by row.
 class ActiveSet {
  public:
   // `voxels`: flat indices into the operator's grid, strictly increasing (InputError otherwise).
@@ -190,6 +192,9 @@ class ActiveSet {
   struct Workspace {
     BigBuffer<float> scaled;
     BigBuffer<double> sums;
+    // The kernels' x stages take images in row lanes (blocks of 16 rows stored column by
+    // column): one band per thread for a projection, the whole images for a back-projection.
+    BigBuffer<float> band_lanes, image_lanes;
   };
   // Called once per band of sensor rows, pixels [first_pixel, end_pixel), as soon as a projection
   // has finished them, on the thread that computed them: per-pixel work on the projection while
