@@ -35,6 +35,24 @@ double cpu_seconds() {
   return double(u.ru_utime.tv_sec + u.ru_stime.tv_sec) + 1e-6 * double(u.ru_utime.tv_usec + u.ru_stime.tv_usec);
 }
 
+// Minor page faults of the process so far (a fresh buffer faults once per page it touches).
+long minor_faults() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return u.ru_minflt;
+}
+
+// The volume's exact bits (FNV-1a): speed work must leave them unchanged, or say why not.
+std::uint64_t volume_hash(const Volume& v) {
+  std::uint64_t hash = 1469598103934665603ull;
+  for (float x : v.data) {
+    std::uint32_t bits;
+    std::memcpy(&bits, &x, sizeof bits);
+    hash = (hash ^ bits) * 1099511628211ull;
+  }
+  return hash;
+}
+
 double peak_rss_gb() {
   std::ifstream in("/proc/self/status");
   std::string line;
@@ -64,9 +82,11 @@ Grid3 grid_of(int nx, int ny, int nz, double voxel_mm, double depth_mm) {
   return g;
 }
 
+// `reuse`: after the first reconstruction (in a new recon::MartWorkspace), the same image again in
+// that workspace and once more without one, to compare a first frame with the steady state.
 void paper_scale(const std::string& source_dir, bool small, double ppm, int iterations, float threshold_counts,
                  double dark_cutoff, std::size_t count_override = 0, double mu = 0.5, bool accelerate = false,
-                 double sensor_blur_mm = 0.0, recon::MartStart start = recon::MartStart::mlos) {
+                 double sensor_blur_mm = 0.0, recon::MartStart start = recon::MartStart::mlos, bool reuse = false) {
   const auto cam = optics::load_camera_file(source_dir + (small ? "/systemd/config/camera-small.yaml"
                                                                 : "/systemd/config/camera-fahringer2015.yaml"));
   const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(cam));
@@ -100,23 +120,20 @@ void paper_scale(const std::string& source_dir, bool small, double ppm, int iter
   s.start = start;
   s.noise_threshold = threshold_counts;
   s.dark_weight_cutoff = dark_cutoff;
+  recon::MartWorkspace workspace;
   t = Clock::now();
   c = cpu_seconds();
-  const recon::MartResult r = recon::reconstruct(op, image, s, [](const recon::IterationReport& it) {
+  long faults = minor_faults();
+  const recon::MartResult r = recon::reconstruct(op, image, s, workspace, [](const recon::IterationReport& it) {
     std::printf("bench=recon_paper phase=iteration n=%d seconds=%.3f residual=%.4f\n", it.iteration, it.seconds,
                 it.residual);
   });
   const double t_mart = since(t), c_mart = cpu_seconds() - c;
+  const long faults_mart = minor_faults() - faults;
   double iter_total = 0;
   for (const auto& it : r.iterations) iter_total += it.seconds;
   const recon::SkipReport& k = r.skipped;
-  // The volume's exact bits (FNV-1a): speed work must leave it unchanged, or say why not.
-  std::uint64_t hash = 1469598103934665603ull;
-  for (float v : r.volume.data) {
-    std::uint32_t bits;
-    std::memcpy(&bits, &v, sizeof bits);
-    hash = (hash ^ bits) * 1099511628211ull;
-  }
+  const std::uint64_t hash = volume_hash(r.volume);
   std::printf("bench=recon_paper particles=%zu ppm=%.2f lit_pixel_fraction=%.4f threshold_counts=%.1f dark_cutoff=%.2f "
               "iterations=%d mu=%.2f accelerate=%d sensor_blur_mm=%.4f start=%s\n",
               count, ppm, double(lit) / double(image.size()), double(s.noise_threshold), dark_cutoff, iterations, mu,
@@ -131,6 +148,31 @@ void paper_scale(const std::string& source_dir, bool small, double ppm, int iter
               "dark_pixels=%zu\n",
               k.voxels, k.voxels_active, k.fraction_skipped(), k.voxels_dark, k.voxels_unseen, k.slices_empty,
               k.dark_pixels);
+  if (reuse) {
+    // The first frame above against the steady state of a caller that keeps its workspace (the
+    // same image again: the same bits), and a second frame without one (the process is warm, so
+    // this separates the workspace's gain from the first call's other costs).
+    auto frame = [&](const char* variant, recon::MartWorkspace* ws) {
+      const auto t0 = Clock::now();
+      const double c0 = cpu_seconds();
+      const long f0 = minor_faults();
+      const recon::MartResult again = ws ? recon::reconstruct(op, image, s, *ws) : recon::reconstruct(op, image, s);
+      const double wall = since(t0), cpu = cpu_seconds() - c0;
+      std::printf("bench=recon_reuse variant=%s seconds=%.3f cpu_s=%.3f setup_s=%.3f minor_faults=%ld volume_hash=%016llx\n",
+                  variant, wall, cpu, again.setup_seconds, minor_faults() - f0,
+                  static_cast<unsigned long long>(volume_hash(again.volume)));
+      return std::array<double, 2>{wall, cpu};
+    };
+    std::printf("bench=recon_reuse variant=first seconds=%.3f cpu_s=%.3f setup_s=%.3f minor_faults=%ld volume_hash=%016llx "
+                "workspace_mb=%.0f\n",
+                t_mart, c_mart, r.setup_seconds, faults_mart, static_cast<unsigned long long>(hash),
+                double(workspace.bytes()) / (1 << 20));
+    const auto reused = frame("reused", &workspace);
+    const auto fresh = frame("fresh_again", nullptr);
+    std::printf("bench=recon_reuse ratio_reused_over_first wall=%.3f cpu=%.3f ratio_reused_over_fresh_again wall=%.3f "
+                "cpu=%.3f\n",
+                reused[0] / t_mart, reused[1] / c_mart, reused[0] / fresh[0], reused[1] / fresh[1]);
+  }
   const Volume exact = sim::render_exact_volume(g, positions);
   std::printf("bench=recon_paper quality_q_star=%.4f\n", recon::quality_factor(r.volume, exact));
   // Fig 22: per-particle position errors, the brightest voxel searched within 3 x 3 x 15 voxels of
@@ -290,9 +332,11 @@ int main(int argc, char** argv) {
                 argc > 4 ? std::stod(argv[4]) : 0.5, argc > 5 && std::string(argv[5]) == "nesterov",
                 argc > 6 ? std::stod(argv[6]) : 0.0);
   if (which == "small") paper_scale(source_dir, true, ppm, iterations, threshold, cutoff);
-  // `paper [ppm] [threshold] [cutoff] [iterations] [sensor blur sigma, mm] [mlos|ones]`.
+  // `paper [ppm] [threshold] [cutoff] [iterations] [sensor blur sigma, mm] [mlos|ones]`, and the
+  // first frame against a kept workspace (bench=recon_reuse).
   if (which == "paper" || which == "all")
     paper_scale(source_dir, false, ppm, iterations, threshold, cutoff, 0, 0.5, false, argc > 6 ? std::stod(argv[6]) : 0.0,
-                argc > 7 && std::string(argv[7]) == "ones" ? recon::MartStart::ones : recon::MartStart::mlos);
+                argc > 7 && std::string(argv[7]) == "ones" ? recon::MartStart::ones : recon::MartStart::mlos,
+                which == "paper");
   return 0;
 }

@@ -3,10 +3,15 @@
 
 #include <spdlog/spdlog.h>
 
+#include <memory>
+#include <mutex>
+#include <vector>
+
 #include "core/base/errors.hpp"
 #include "core/base/yaml_access.hpp"
 #include "core/optics/microlens_array.hpp"
 #include "core/process/process.hpp"
+#include "core/recon/mart.hpp"
 #include "core/recon/weights.hpp"
 
 namespace plenopiv::daemon {
@@ -17,6 +22,45 @@ ImageF to_float(const ImageU16& image) {
   for (std::size_t i = 0; i < image.size(); ++i) out.pixels[i] = float(image.pixels[i]);
   return out;
 }
+
+// MART's buffers (recon::MartWorkspace, ~0.4 GB each on the paper case) kept from pair to pair of
+// a run: a pair takes a free one (or a new one when all are in use, so there are as many as pairs
+// were ever in flight at once) and gives it back when done, also when processing fails. Not per
+// thread: a TBB thread waiting inside one pair's reconstruction may run another pair's.
+class WorkspacePool {
+ public:
+  class Lease {
+   public:
+    Lease(WorkspacePool& pool, std::unique_ptr<recon::MartWorkspace> workspace)
+        : pool_(pool), workspace_(std::move(workspace)) {}
+    Lease(const Lease&) = delete;
+    Lease& operator=(const Lease&) = delete;
+    ~Lease() { pool_.give_back(std::move(workspace_)); }
+    recon::MartWorkspace& operator*() const { return *workspace_; }
+
+   private:
+    WorkspacePool& pool_;
+    std::unique_ptr<recon::MartWorkspace> workspace_;
+  };
+
+  Lease take() { return Lease(*this, free_or_new()); }
+
+ private:
+  std::unique_ptr<recon::MartWorkspace> free_or_new() {
+    std::lock_guard lock(mutex_);
+    if (free_.empty()) return std::make_unique<recon::MartWorkspace>();
+    std::unique_ptr<recon::MartWorkspace> workspace = std::move(free_.back());
+    free_.pop_back();
+    return workspace;
+  }
+  void give_back(std::unique_ptr<recon::MartWorkspace> workspace) {
+    std::lock_guard lock(mutex_);
+    free_.push_back(std::move(workspace));
+  }
+
+  std::mutex mutex_;
+  std::vector<std::unique_ptr<recon::MartWorkspace>> free_;
+};
 
 }  // namespace
 
@@ -41,10 +85,13 @@ ProcessFactory plenoptic_processing(const optics::CameraModel& camera) {
     spdlog::info("run processing: calibration {}; {}", calibration.summary(),
                  op->note().empty() ? "frames reconstructed on raw pixels" : op->note());
     const bool keep_volumes = config.publish_volumes;
-    return [op, settings, keep_volumes](const drivers::FramePair& pair) {
+    auto workspaces = std::make_shared<WorkspacePool>();
+    return [op, settings, keep_volumes, workspaces](const drivers::FramePair& pair) {
       process::ProcessSettings s = settings;
       if (pair.measured && pair.measured->dt_s() > 0) s.correlation.dt_s = pair.measured->dt_s();
-      process::PairResult r = process::process_pair(*op, to_float(pair.a.image), to_float(pair.b.image), s);
+      const WorkspacePool::Lease workspace = workspaces->take();
+      process::PairResult r =
+          process::process_pair(*op, to_float(pair.a.image), to_float(pair.b.image), s, {}, &*workspace);
       ProcessedPair out;
       out.vectors = std::move(r.correlation.field);
       if (keep_volumes) {

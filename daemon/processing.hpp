@@ -13,7 +13,8 @@ namespace plenopiv::daemon {
 // the pair operator for the run's volume (process::PairOperator: the run's calibration's lens
 // centres and white correction, or the nominal lattice and geometric white image without one;
 // its note, e.g. resampling a rotated array, goes to the log) is built once and shared read-only
-// by the concurrent calls to process::process_pair. dt is the
+// by the concurrent calls to process::process_pair; MART's buffers (recon::MartWorkspace) are kept
+// from pair to pair, one per pair in flight. dt is the
 // laser pulse separation measured on the Q-switch sync input when the pair carries it, else the
 // run's dt_s. Bad keys are InputErrors naming them, at run start.
 ProcessFactory plenoptic_processing(const optics::CameraModel& camera);

@@ -29,6 +29,7 @@
 #include "core/optics/camera_file.hpp"
 #include "core/piv/derived.hpp"
 #include "core/process/process.hpp"
+#include "core/recon/mart.hpp"
 #include "plenopiv.pb.h"
 
 namespace plenopiv::client {
@@ -296,6 +297,7 @@ void run_reprocess(const ProcessOptions& o) {
   if (!op.note().empty()) std::fprintf(stderr, "%s\n", op.note().c_str());
   const double pairs = double(m.pairs_size());
   Progress progress("process", "pairs", pairs);
+  recon::MartWorkspace workspace;  // MART's buffers, kept from pair to pair
   for (int k = 0; k < m.pairs_size(); ++k) {
     const msg::ManifestPair& p = m.pairs(k);
     const ImageF a = read_frame((run / p.frame_a()).string()), b = read_frame((run / p.frame_b()).string());
@@ -303,7 +305,7 @@ void run_reprocess(const ProcessOptions& o) {
     if (p.measured_dt_s() > 0) s.correlation.dt_s = p.measured_dt_s();
     const auto r = process::process_pair(op, a, b, s, [&](const std::string&, double f) {
       progress.update((k + f) / pairs);
-    });
+    }, &workspace);
     char name[32];
     std::snprintf(name, sizeof name, "pair-%06llu", static_cast<unsigned long long>(p.pair_index()));
     const std::filesystem::path h5 = out_dir / (std::string(name) + ".h5");

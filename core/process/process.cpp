@@ -134,7 +134,8 @@ ProcessSettings load_process_settings(const std::filesystem::path& path) {
 }
 
 PairResult process_pair(const recon::WeightingOperator& op, const ImageF& frame_a, const ImageF& frame_b,
-                        const ProcessSettings& settings, const PairProgress& progress) {
+                        const ProcessSettings& settings, const PairProgress& progress,
+                        recon::MartWorkspace* workspace) {
   if (!(op.grid() == settings.reconstruction_grid()))
     throw InputError("process: the weighting operator was built for another volume grid than the run config's "
                      "(its volume plus the depth guard)");
@@ -146,9 +147,11 @@ PairResult process_pair(const recon::WeightingOperator& op, const ImageF& frame_
   };
   const int iterations = settings.mart.iterations;
   PairResult out;
+  recon::MartWorkspace pair_workspace;  // no buffers until used
+  recon::MartWorkspace& buffers = workspace ? *workspace : pair_workspace;
 
   auto t0 = std::chrono::steady_clock::now();
-  auto ra = recon::reconstruct(op, frame_a, settings.mart, [&](const recon::IterationReport& it) {
+  auto ra = recon::reconstruct(op, frame_a, settings.mart, buffers, [&](const recon::IterationReport& it) {
     report("reconstruct A", 0.4 * it.iteration / iterations);
   });
   out.times.reconstruct_a_s = seconds_since(t0);
@@ -156,7 +159,7 @@ PairResult process_pair(const recon::WeightingOperator& op, const ImageF& frame_
   out.skipped_a = ra.skipped;
 
   t0 = std::chrono::steady_clock::now();
-  auto rb = recon::reconstruct(op, frame_b, settings.mart, [&](const recon::IterationReport& it) {
+  auto rb = recon::reconstruct(op, frame_b, settings.mart, buffers, [&](const recon::IterationReport& it) {
     report("reconstruct B", 0.4 + 0.4 * it.iteration / iterations);
   });
   out.times.reconstruct_b_s = seconds_since(t0);
@@ -217,12 +220,13 @@ const ImageF& PairOperator::prepare(const ImageF& frame, ImageF& scratch) const 
 }
 
 PairResult process_pair(const PairOperator& op, const ImageF& frame_a, const ImageF& frame_b,
-                        const ProcessSettings& settings, const PairProgress& progress) {
+                        const ProcessSettings& settings, const PairProgress& progress,
+                        recon::MartWorkspace* workspace) {
   recon::validate_image(frame_a, op.weights(), "frame A");
   recon::validate_image(frame_b, op.weights(), "frame B");
   ImageF scratch_a, scratch_b;
   PairResult out = process_pair(op.weights(), op.prepare(frame_a, scratch_a), op.prepare(frame_b, scratch_b),
-                                settings, progress);
+                                settings, progress, workspace);
   out.lattice_note = op.note();
   return out;
 }

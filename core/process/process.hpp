@@ -106,12 +106,17 @@ class PairOperator {
 // Reconstructs both frames with `op` (whose grid must be settings.reconstruction_grid():
 // InputError otherwise), drops the guard slices, then correlates them (PairResult's volumes are on
 // settings.grid). Images are validated (sensor-sized, finite, non-negative) and named
-// "frame A" / "frame B" in errors. Bit-identical at any thread count.
+// "frame A" / "frame B" in errors. Bit-identical at any thread count. Frame B is reconstructed in
+// frame A's buffers: in `workspace` when given (a caller processing pair after pair keeps one per
+// pair in flight, so that no frame allocates them afresh), else in one kept for the pair. The
+// results are the same bits either way.
 PairResult process_pair(const recon::WeightingOperator& op, const ImageF& frame_a, const ImageF& frame_b,
-                        const ProcessSettings& settings, const PairProgress& progress = {});
+                        const ProcessSettings& settings, const PairProgress& progress = {},
+                        recon::MartWorkspace* workspace = nullptr);
 // The same from raw frames through a PairOperator: the frames are validated as raw images, resampled
 // when the operator says so, and PairResult::lattice_note carries its note.
 PairResult process_pair(const PairOperator& op, const ImageF& frame_a, const ImageF& frame_b,
-                        const ProcessSettings& settings, const PairProgress& progress = {});
+                        const ProcessSettings& settings, const PairProgress& progress = {},
+                        recon::MartWorkspace* workspace = nullptr);
 
 }  // namespace plenopiv::process

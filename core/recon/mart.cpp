@@ -88,13 +88,20 @@ void for_pixels(std::size_t n, F&& f) {
                     [&](const tbb::blocked_range<std::size_t>& r) { f(r.begin(), r.end()); });
 }
 
-// The image MART sees: pixels at or below the noise threshold become 0.
-BigBuffer<float> thresholded(const ImageF& image, float threshold) {
-  BigBuffer<float> out(image.pixels.size());
+// `b` with n elements that the caller writes before reading: its storage is kept when large
+// enough, and nothing is copied into new storage when not.
+template <typename T>
+void fit(BigBuffer<T>& b, std::size_t n) {
+  b.clear();
+  b.resize(n);
+}
+
+// The image MART sees, in `out`: pixels at or below the noise threshold become 0.
+void threshold_image(const ImageF& image, float threshold, BigBuffer<float>& out) {
+  fit(out, image.pixels.size());
   for_pixels(out.size(), [&](std::size_t i0, std::size_t i1) {
     for (std::size_t i = i0; i < i1; ++i) out[i] = image.pixels[i] > threshold ? image.pixels[i] : 0.f;
   });
-  return out;
 }
 
 bool in_region(const Grid3& g, const std::optional<RegionMm>& region, int x, int y, int z) {
@@ -107,6 +114,12 @@ bool in_region(const Grid3& g, const std::optional<RegionMm>& region, int x, int
   return true;
 }
 
+// select_active's largest arrays, kept across frames.
+struct SelectScratch {
+  std::vector<std::uint64_t> dark;                    // dark pixels as bits, per sensor column
+  std::vector<std::vector<std::uint32_t>> per_slice;  // each slice's active voxels
+};
+
 // Voxels MART can change: seen by some pixel, inside the region, and seen by no dark pixel (a
 // dark pixel's ratio is 0, so eq 9 zeroes every voxel it sees and they stay zero). "Seen" here:
 // a pixel where both the voxel's column weight and its row weight exceed the cutoff's fraction
@@ -118,11 +131,12 @@ bool in_region(const Grid3& g, const std::optional<RegionMm>& region, int x, int
 // rows where x meets a dark pixel, per voxel row y its strong rows are bits too, and each voxel
 // costs one AND over the words of y's strong rows.
 std::vector<std::uint32_t> select_active(const WeightingOperator& op, std::span<const float> image,
-                                         const MartSettings& settings, SkipReport& report) {
+                                         const MartSettings& settings, SelectScratch& scratch, SkipReport& report) {
   const Grid3& g = op.grid();
   const int width = op.image_width(), height = op.image_height();
   const std::size_t words = std::size_t(height + 63) / 64;  // per sensor column
-  std::vector<std::uint64_t> dark(std::size_t(width) * words, 0);  // [column][row word]
+  std::vector<std::uint64_t>& dark = scratch.dark;  // [column][row word]
+  dark.assign(std::size_t(width) * words, 0);
   const float* white = op.white().pixels.data();
   report.pixels = op.pixel_count();
   // Each group of 64 sensor rows owns its word of every column.
@@ -148,7 +162,8 @@ std::vector<std::uint32_t> select_active(const WeightingOperator& op, std::span<
   const float cutoff = float(settings.dark_weight_cutoff);
   report.voxels = g.count();
   report.slices = nz;
-  std::vector<std::vector<std::uint32_t>> per_slice(static_cast<std::size_t>(nz));
+  std::vector<std::vector<std::uint32_t>>& per_slice = scratch.per_slice;
+  per_slice.resize(std::size_t(nz));
   std::vector<std::array<std::size_t, 3>> counts(std::size_t(nz), {0, 0, 0});  // unseen, outside, dark
   auto peak_of = [](const AxisWeights& a) {
     float peak = 0.f;
@@ -173,6 +188,7 @@ std::vector<std::uint32_t> select_active(const WeightingOperator& op, std::span<
       }
     }
     auto& out = per_slice[std::size_t(z)];
+    out.clear();
     out.reserve(std::size_t(nx) * std::size_t(ny));
     auto& cnt = counts[std::size_t(z)];
     std::vector<std::uint64_t> strong(words, 0);  // voxel row y's strong rows
@@ -284,8 +300,55 @@ void validate_image(const ImageF& image, const WeightingOperator& op, const char
   }
 }
 
+namespace detail {
+// What a MartWorkspace holds. Every reconstruction sizes and writes each buffer before reading it.
+struct MartBuffers {
+  std::atomic<bool> busy{false};
+  // Per sensor pixel: the thresholded image, ln I, W E and white · ln(I / W E).
+  BigBuffer<float> data, log_data, projection, ratio;
+  // Per active voxel: E, the back-projected update, MLOS's weight, and the momentum's two.
+  BigBuffer<float> e, update, weight, last, momentum;
+  ActiveSet::Workspace kernels;  // reused by every pass
+  SelectScratch select;
+};
+}  // namespace detail
+
+MartWorkspace::MartWorkspace() : buffers_(std::make_unique<detail::MartBuffers>()) {}
+MartWorkspace::~MartWorkspace() = default;
+MartWorkspace::MartWorkspace(MartWorkspace&&) noexcept = default;
+MartWorkspace& MartWorkspace::operator=(MartWorkspace&&) noexcept = default;
+
+std::size_t MartWorkspace::bytes() const {
+  if (!buffers_) return 0;  // moved from
+  const detail::MartBuffers& b = *buffers_;
+  std::size_t total = 0;
+  for (const auto* v : {&b.data, &b.log_data, &b.projection, &b.ratio, &b.e, &b.update, &b.weight, &b.last, &b.momentum}) {
+    total += v->capacity() * sizeof(float);
+  }
+  total += b.kernels.scaled.capacity() * sizeof(float) + b.kernels.sums.capacity() * sizeof(double);
+  total += b.select.dark.capacity() * sizeof(std::uint64_t);
+  for (const auto& slice : b.select.per_slice) total += slice.capacity() * sizeof(std::uint32_t);
+  return total;
+}
+
 MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const MartSettings& settings,
                        const std::function<void(const IterationReport&)>& progress) {
+  MartWorkspace workspace;
+  return reconstruct(op, image, settings, workspace, progress);
+}
+
+MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const MartSettings& settings,
+                       MartWorkspace& workspace, const std::function<void(const IterationReport&)>& progress) {
+  if (!workspace.buffers_) throw InputError("MART: the workspace was moved from; use the one it was moved to");
+  detail::MartBuffers& buffers = *workspace.buffers_;
+  if (buffers.busy.exchange(true)) {
+    throw InputError("MART: the workspace is in use by another reconstruction; give each concurrent "
+                     "reconstruction its own");
+  }
+  struct Release {
+    std::atomic<bool>& busy;
+    ~Release() { busy.store(false); }
+  } release{buffers.busy};
   validate_settings(settings);
   validate_image(image, op, "image");
   if (settings.method != MartMethod::smart) {
@@ -295,20 +358,27 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const M
   const auto t_setup = std::chrono::steady_clock::now();
   MartResult result;
   result.volume = Volume(op.grid(), 0.f);
-  const BigBuffer<float> data = thresholded(image, settings.noise_threshold);
-  std::vector<std::uint32_t> selected = select_active(op, data, settings, result.skipped);
+  BigBuffer<float>& data = buffers.data;
+  threshold_image(image, settings.noise_threshold, data);
+  std::vector<std::uint32_t> selected = select_active(op, data, settings, buffers.select, result.skipped);
   result.select_seconds = seconds_since(t_setup);
   const auto t_active = std::chrono::steady_clock::now();
   const ActiveSet active(op, std::move(selected));
   result.active_set_seconds = seconds_since(t_active);
   const auto t_start = std::chrono::steady_clock::now();
   const std::size_t n = active.size();
-  ActiveSet::Workspace workspace;  // the kernels' buffers, reused by every pass
+  ActiveSet::Workspace& workspace_kernels = buffers.kernels;
   // Per active voxel; BigBuffers (huge pages: 26 MB each on the paper case would otherwise take
   // 6 500 page faults apiece). `update` is written in full by every back-projection.
-  BigBuffer<float> e(n, 1.f), update(n);
-  // Written in full by every pass before being read.
-  BigBuffer<float> projection(op.pixel_count()), ratio(op.pixel_count());  // ratio: white · ln(I / W E)
+  BigBuffer<float>& e = buffers.e;
+  BigBuffer<float>& update = buffers.update;
+  e.assign(n, 1.f);
+  fit(update, n);
+  // Written in full by every pass before being read. ratio: white · ln(I / W E).
+  BigBuffer<float>& projection = buffers.projection;
+  BigBuffer<float>& ratio = buffers.ratio;
+  fit(projection, op.pixel_count());
+  fit(ratio, op.pixel_count());
   const float* white = op.white().pixels.data();
   auto for_voxels = [n](auto&& f) {
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1 << 12), [&](const tbb::blocked_range<std::size_t>& r) {
@@ -336,14 +406,15 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const M
     // carry no ln I), renormalised over those pixels.
     // The lit mask and ln I, each times the white image, in the ratio and projection buffers
     // (not yet in use), back-projected in one walk.
-    BigBuffer<float> weight(n);  // written in full by the back-projection
+    BigBuffer<float>& weight = buffers.weight;  // written in full by the back-projection
+    fit(weight, n);
     for_pixels(data.size(), [&](std::size_t i0, std::size_t i1) {
       for (std::size_t i = i0; i < i1; ++i) {
         ratio[i] = (data[i] > 0.f ? 1.f : 0.f) * white[i];
         projection[i] = log_pixel(data[i]) * white[i];
       }
     });
-    active.back_project_whitened(op, ratio, weight, projection, update, &workspace);
+    active.back_project_whitened(op, ratio, weight, projection, update, &workspace_kernels);
     for_voxels([&](std::size_t m) { e[m] = weight[m] > 0.f ? clean(bounded_exp(update[m] / weight[m])) : 0.f; });
     // Scale to the image's total light so the first ratios are near 1. The projection's total
     // is Σ_j E_j (eq 13 makes each voxel's weights sum to 1 over the sensor), so no projection
@@ -360,7 +431,8 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const M
   result.setup_seconds = seconds_since(t_setup);
 
   // ln I and ln floor once, not per iteration.
-  BigBuffer<float> log_data(data.size());
+  BigBuffer<float>& log_data = buffers.log_data;
+  fit(log_data, data.size());
   for_pixels(data.size(), [&](std::size_t i0, std::size_t i1) {
     for (std::size_t i = i0; i < i1; ++i) log_data[i] = data[i] > 0.f ? std::log(data[i]) : 0.f;
   });
@@ -408,13 +480,13 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const M
   SensorBlur blur(op, settings.sensor_blur_sigma_mm);
   auto project_and_compare = [&](bool with_ratio) {
     if (!blur.active()) {
-      active.project(op, e, projection, &workspace, [&](int band, std::size_t i0, std::size_t i1) {
+      active.project(op, e, projection, &workspace_kernels, [&](int band, std::size_t i0, std::size_t i1) {
         residual_band(band, i0, i1);
         if (with_ratio) ratio_band(i0, i1, white);
       });
       return;
     }
-    active.project(op, e, projection, &workspace);
+    active.project(op, e, projection, &workspace_kernels);
     blur.apply(projection);
     // The residual's sums in fixed pixel bands (the projection's own bands no longer apply).
     const std::size_t bands = band_sums.size(), per_band = (data.size() + bands - 1) / bands;
@@ -432,9 +504,10 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const M
   // extrapolated y = x_k (x_k / x_(k-1))^beta_k with FISTA's beta_k = (k - 1) / (k + 2), and k
   // restarts at 1 when an iteration's step opposes the momentum (O'Donoghue and Candes's gradient
   // restart). `last` holds x_(k-1), then x_k; `momentum` ln x_k - ln x_(k-1) (0 where either is 0).
-  BigBuffer<float> last, momentum;
+  BigBuffer<float>& last = buffers.last;
+  BigBuffer<float>& momentum = buffers.momentum;
   if (settings.accelerate) {
-    last = e;
+    last.assign(e.begin(), e.end());
     momentum.assign(n, 0.f);
   }
   int momentum_step = 1;
@@ -457,7 +530,7 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const M
       break;
     }
     previous = r;
-    active.back_project_whitened(op, ratio, update, &workspace);
+    active.back_project_whitened(op, ratio, update, &workspace_kernels);
     const float mu = float(settings.mu);
     for_voxels([&](std::size_t m) { e[m] = clean(e[m] * bounded_exp(mu * update[m])); });
     if (settings.accelerate) {
@@ -495,7 +568,8 @@ Volume reconstruct_row_action(const WeightingOperator& op, const SparseMatrix& w
   if (w.rows != op.pixel_count() || w.cols != g.count()) {
     throw InputError("row-action MART: the matrix does not belong to this operator");
   }
-  const BigBuffer<float> data = thresholded(image, settings.noise_threshold);
+  BigBuffer<float> data;
+  threshold_image(image, settings.noise_threshold, data);
   std::vector<float> e(g.count(), 1.f);
   if (settings.start == MartStart::mlos) {
     std::vector<float> logs(g.count(), 0.f);

@@ -5,6 +5,7 @@
 #include <array>
 #include <cstddef>
 #include <functional>
+#include <memory>
 #include <optional>
 #include <span>
 #include <vector>
@@ -104,10 +105,45 @@ struct MartResult {
 // naming `source`.
 void validate_image(const ImageF& image, const WeightingOperator& op, const char* source);
 
+namespace detail {
+struct MartBuffers;
+}
+
+// The buffers of one reconstruction: the thresholded image, ln I, the projection and log-ratio
+// images, the per-voxel arrays, the active-set selection's scratch and the kernels' workspace
+// (~0.4 GB on the paper case). A caller that reconstructs frame after frame (core/process: frame A
+// then B; the daemon and `plenopiv process --run`: pair after pair) keeps one, so that later
+// frames neither allocate these buffers nor page-fault and zero them again (docs/recon.md, "Buffers
+// kept across frames").
+//
+// It carries nothing from one frame to the next: reconstruct writes every buffer before reading
+// it, so a volume has the same bits with a new workspace, a used one, or none. It takes any
+// operator: the buffers grow to the largest sensor and active set seen and are freed with it.
+// One reconstruction at a time: a second one while the first runs is refused (InputError); give
+// each concurrent reconstruction its own.
+class MartWorkspace {
+ public:
+  MartWorkspace();
+  ~MartWorkspace();
+  MartWorkspace(MartWorkspace&&) noexcept;
+  MartWorkspace& operator=(MartWorkspace&&) noexcept;
+
+  // Bytes held (the buffers' capacities).
+  std::size_t bytes() const;
+
+ private:
+  std::unique_ptr<detail::MartBuffers> buffers_;
+  friend MartResult reconstruct(const WeightingOperator&, const ImageF&, const MartSettings&, MartWorkspace&,
+                                const std::function<void(const IterationReport&)>&);
+};
+
 // Reconstructs a volume from a raw plenoptic image (float, counts) with the matrix-free operator.
 // `progress` (optional) is called after each iteration. Bit-identical at any thread count.
 MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const MartSettings& settings,
                        const std::function<void(const IterationReport&)>& progress = {});
+// The same in `workspace`'s buffers (the same bits).
+MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const MartSettings& settings,
+                       MartWorkspace& workspace, const std::function<void(const IterationReport&)>& progress = {});
 
 // The reference: eq 9 row by row on the explicit matrix (rows = pixels in storage order).
 Volume reconstruct_row_action(const WeightingOperator& op, const SparseMatrix& w, const ImageF& image,

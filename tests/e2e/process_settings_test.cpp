@@ -88,20 +88,22 @@ TEST(ProcessSettings, SensorBlurReachesMart) {
   }
 }
 
+// Two particles at depths z and z + 0.5 mm through the small camera, as the camera records them.
+ImageF two_particle_frame(const optics::CameraModel& camera, const optics::MicrolensArray& lenses, double z) {
+  sim::RenderOptions ro;
+  ro.rays_per_particle = 2000;
+  const std::vector<sim::Point3> particles{{0.1, -0.2, z}, {-0.4, 0.3, z + 0.5}};
+  const auto r = sim::render(camera, lenses, particles, ro, 3);
+  ImageF f(r.image.width, r.image.height);
+  for (std::size_t i = 0; i < f.size(); ++i) f.pixels[i] = r.image.pixels[i];
+  return f;
+}
+
 TEST(ProcessSettings, ProcessPairReturnsTheRequestedBoxAndRefusesAnUnguardedOperator) {
   const auto camera = optics::load_camera_file(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml");
   const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera));
   ProcessSettings s = parse(kVolume + ", depth_guard_mm: 0.25}\n" + kPasses);
-  sim::RenderOptions ro;
-  ro.rays_per_particle = 2000;
-  auto frame = [&](double z) {
-    const std::vector<sim::Point3> particles{{0.1, -0.2, z}, {-0.4, 0.3, z + 0.5}};
-    const auto r = sim::render(camera, lenses, particles, ro, 3);
-    ImageF f(r.image.width, r.image.height);
-    for (std::size_t i = 0; i < f.size(); ++i) f.pixels[i] = r.image.pixels[i];
-    return f;
-  };
-  const ImageF a = frame(3.0), b = frame(3.1);
+  const ImageF a = two_particle_frame(camera, lenses, 3.0), b = two_particle_frame(camera, lenses, 3.1);
   const recon::WeightingOperator guarded(camera, lenses, s.reconstruction_grid(), recon::geometric_white_image(camera, lenses));
   const PairResult r = process_pair(guarded, a, b, s);
   EXPECT_EQ(r.volume_a.grid, s.grid);
@@ -119,6 +121,30 @@ TEST(ProcessSettings, ProcessPairReturnsTheRequestedBoxAndRefusesAnUnguardedOper
 
   const recon::WeightingOperator unguarded(camera, lenses, s.grid, recon::geometric_white_image(camera, lenses));
   EXPECT_THROW(process_pair(unguarded, a, b, s), InputError);
+}
+
+// A caller's kept MART workspace (the daemon's, pair after pair) changes no bit: a pair processed
+// after another in the same workspace gives the volumes and vectors of one processed alone, and
+// frame B (reconstructed in A's buffers) the volume of B reconstructed first.
+TEST(ProcessSettings, AKeptWorkspaceGivesTheSameVolumesAndVectors) {
+  const auto camera = optics::load_camera_file(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml");
+  const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera));
+  const ProcessSettings s = parse(kVolume + ", depth_guard_mm: 0.25}\n" + kPasses);
+  const ImageF a = two_particle_frame(camera, lenses, 3.0), b = two_particle_frame(camera, lenses, 3.1);
+  const PairOperator op(camera, lenses, recon::geometric_white_image(camera, lenses), s);
+  const PairResult alone = process_pair(op, a, b, s);
+  recon::MartWorkspace workspace;
+  const PairResult reversed = process_pair(op, b, a, s, {}, &workspace);
+  const PairResult kept = process_pair(op, a, b, s, {}, &workspace);
+  EXPECT_EQ(reversed.volume_a.data, alone.volume_b.data);
+  EXPECT_EQ(kept.volume_a.data, alone.volume_a.data);
+  EXPECT_EQ(kept.volume_b.data, alone.volume_b.data);
+  EXPECT_EQ(kept.correlation.field.dx_mm, alone.correlation.field.dx_mm);
+  EXPECT_EQ(kept.correlation.field.dy_mm, alone.correlation.field.dy_mm);
+  EXPECT_EQ(kept.correlation.field.dz_mm, alone.correlation.field.dz_mm);
+  EXPECT_EQ(kept.correlation.field.valid, alone.correlation.field.valid);
+  EXPECT_NE(alone.volume_a.data, alone.volume_b.data);  // two different frames
+  EXPECT_GT(workspace.bytes(), 0u);  // the pairs ran in it
 }
 
 }  // namespace

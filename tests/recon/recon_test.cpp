@@ -555,6 +555,94 @@ TEST_F(Mart, IdenticalVolumesAtOneAndTwoThreads) {
   }
 }
 
+// A kept workspace changes no bit: images of different scenes (and an empty one) in sequence, then
+// the first again, each against its reconstruction without a workspace; the plain iteration and
+// the accelerated, blurred one (which uses every buffer).
+TEST_F(Mart, WorkspaceReuseGivesTheBitsOfAFreshReconstruction) {
+  const ImageF a = project_image(*op_, truth(), 1000.f);
+  const ImageF b = project_image(*op_, blob_volume(op_->grid(), {{2, 2, 1}, {7, 3, 6}, {5, 8, 3}, {8, 8, 8}}, 0.9, 0.6), 700.f);
+  const ImageF dark(850, 850, 0.f);
+  for (const bool accelerate : {false, true}) {
+    MartSettings s;
+    s.iterations = 4;
+    s.accelerate = accelerate;
+    s.sensor_blur_sigma_mm = accelerate ? 0.0052 : 0.0;
+    MartWorkspace workspace;
+    std::size_t bytes_after_b = 0;
+    int k = 0;
+    for (const ImageF* image : {&a, &b, &dark, &a}) {
+      const MartResult fresh = reconstruct(*op_, *image, s);
+      const MartResult kept = reconstruct(*op_, *image, s, workspace);
+      ASSERT_EQ(fresh.volume.data.size(), kept.volume.data.size());
+      EXPECT_EQ(0, std::memcmp(fresh.volume.data.data(), kept.volume.data.data(), fresh.volume.data.size() * sizeof(float)))
+          << "frame " << k << ", accelerated " << accelerate;
+      EXPECT_EQ(fresh.final_residual, kept.final_residual) << "frame " << k;
+      EXPECT_EQ(fresh.skipped.voxels_active, kept.skipped.voxels_active) << "frame " << k;
+      ASSERT_EQ(fresh.iterations.size(), kept.iterations.size());
+      for (std::size_t i = 0; i < fresh.iterations.size(); ++i) {
+        EXPECT_EQ(fresh.iterations[i].residual, kept.iterations[i].residual) << "frame " << k << ", iteration " << i;
+      }
+      if (k == 1) bytes_after_b = workspace.bytes();
+      ++k;
+    }
+    // The frames after B needed no more than A and B: the buffers were kept, not grown.
+    EXPECT_GT(bytes_after_b, 4 * 850 * 850 * sizeof(float));
+    EXPECT_EQ(workspace.bytes(), bytes_after_b);
+  }
+}
+
+// One workspace for operators of different sensors and grids, larger after smaller and back:
+// the buffers are sized for each call, and the volumes are those without a workspace.
+TEST_F(Mart, WorkspaceServesOperatorsOfOtherSensorsAndGrids) {
+  // 40 x 30 lenses on a 680 x 510 sensor, otherwise the small camera.
+  const optics::CameraModel cam = optics::parse_camera_yaml(
+      "sensor:    {width_px: 680, height_px: 510, pixel_pitch_mm: 0.0074}\n"
+      "microlens: {pitch_mm: 0.125, focal_length_mm: 0.5, count_x: 40, count_y: 30, layout: rect}\n"
+      "main_lens: {focal_length_mm: 50, f_number: 2, magnification: -1}\n",
+      "test camera");
+  const WeightingOperator other = make_operator(cam, centred_grid(14, 7, 1.0, -3.0));
+  const ImageF big = project_image(*op_, truth(), 1000.f);
+  const ImageF small = project_image(other, blob_volume(other.grid(), {{4, 5, 2}, {9, 8, 4}}, 0.8, 0.7), 1000.f);
+  MartSettings s;
+  s.iterations = 3;
+  MartWorkspace workspace;
+  int k = 0;
+  using Call = std::pair<const WeightingOperator*, const ImageF*>;
+  for (const auto& [op, image] : {Call{op_, &big}, Call{&other, &small}, Call{op_, &big}}) {
+    const Volume fresh = reconstruct(*op, *image, s).volume;
+    const Volume kept = reconstruct(*op, *image, s, workspace).volume;
+    ASSERT_EQ(fresh.data.size(), kept.data.size());
+    EXPECT_EQ(0, std::memcmp(fresh.data.data(), kept.data.data(), fresh.data.size() * sizeof(float))) << "call " << k;
+    EXPECT_GT(*std::max_element(kept.data.begin(), kept.data.end()), 0.f) << "call " << k;
+    ++k;
+  }
+  // An image that is not the operator's sensor is refused as without a workspace.
+  EXPECT_THROW(reconstruct(other, big, s, workspace), InputError);
+}
+
+// A workspace serves one reconstruction at a time: a second one started while the first runs
+// (here from its progress callback) is refused, and the first is unharmed.
+TEST_F(Mart, WorkspaceInUseIsRefused) {
+  const ImageF image = project_image(*op_, truth(), 1000.f);
+  MartSettings s;
+  s.iterations = 2;
+  MartWorkspace workspace;
+  int refused = 0;
+  const MartResult r = reconstruct(*op_, image, s, workspace, [&](const IterationReport&) {
+    try {
+      reconstruct(*op_, image, s, workspace);
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("in use"), std::string::npos) << e.what();
+      ++refused;
+    }
+  });
+  EXPECT_EQ(refused, 2);
+  const Volume fresh = reconstruct(*op_, image, s).volume;
+  EXPECT_EQ(0, std::memcmp(fresh.data.data(), r.volume.data.data(), fresh.data.size() * sizeof(float)));
+  // Free again once it returned.
+  EXPECT_NO_THROW(reconstruct(*op_, image, s, workspace));
+}
+
 // ---------------------------------------------------------------------------------------------
 
 TEST(Quality, FactorOfKnownVolumes) {
