@@ -306,8 +306,8 @@ struct MartBuffers {
   std::atomic<bool> busy{false};
   // Per sensor pixel: the thresholded image, ln I, W E and white · ln(I / W E).
   BigBuffer<float> data, log_data, projection, ratio;
-  // Per active voxel: E, the back-projected update, MLOS's weight, and the momentum's two.
-  BigBuffer<float> e, update, weight, last, momentum;
+  // Per active voxel: E, the back-projected update, MLOS's weight, and the momentum's three.
+  BigBuffer<float> e, update, weight, last, log_last, momentum;
   ActiveSet::Workspace kernels;  // reused by every pass
   SelectScratch select;
 };
@@ -322,7 +322,7 @@ std::size_t MartWorkspace::bytes() const {
   if (!buffers_) return 0;  // moved from
   const detail::MartBuffers& b = *buffers_;
   std::size_t total = 0;
-  for (const auto* v : {&b.data, &b.log_data, &b.projection, &b.ratio, &b.e, &b.update, &b.weight, &b.last, &b.momentum}) {
+  for (const auto* v : {&b.data, &b.log_data, &b.projection, &b.ratio, &b.e, &b.update, &b.weight, &b.last, &b.log_last, &b.momentum}) {
     total += v->capacity() * sizeof(float);
   }
   total += b.kernels.scaled.capacity() * sizeof(float) + b.kernels.sums.capacity() * sizeof(double);
@@ -503,11 +503,15 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const M
   // Nesterov's momentum on ln E (settings.accelerate): each iteration starts from the
   // extrapolated y = x_k (x_k / x_(k-1))^beta_k with FISTA's beta_k = (k - 1) / (k + 2), and k
   // restarts at 1 when an iteration's step opposes the momentum (O'Donoghue and Candes's gradient
-  // restart). `last` holds x_(k-1), then x_k; `momentum` ln x_k - ln x_(k-1) (0 where either is 0).
+  // restart). `last` holds x_(k-1), then x_k; `log_last` its ln (kept, so each iteration takes one
+  // log per voxel, not two); `momentum` ln x_k - ln x_(k-1) (0 where either is 0).
   BigBuffer<float>& last = buffers.last;
+  BigBuffer<float>& log_last = buffers.log_last;
   BigBuffer<float>& momentum = buffers.momentum;
   if (settings.accelerate) {
     last.assign(e.begin(), e.end());
+    log_last.resize(n);  // written in full here
+    for_voxels([&](std::size_t m) { log_last[m] = last[m] > 0.f ? std::log(last[m]) : 0.f; });
     momentum.assign(n, 0.f);
   }
   int momentum_step = 1;
@@ -517,8 +521,10 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const M
     const float beta = float(momentum_step - 1) / float(momentum_step + 2);
     if (settings.accelerate) {
       for_voxels([&](std::size_t m) {
-        momentum[m] = e[m] > 0.f && last[m] > 0.f ? std::log(e[m]) - std::log(last[m]) : 0.f;
+        const float log_e = e[m] > 0.f ? std::log(e[m]) : 0.f;
+        momentum[m] = e[m] > 0.f && last[m] > 0.f ? log_e - log_last[m] : 0.f;
         last[m] = e[m];
+        log_last[m] = log_e;
         e[m] = clean(e[m] * bounded_exp(beta * momentum[m]));
       });
     }
