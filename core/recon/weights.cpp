@@ -1042,7 +1042,8 @@ void ActiveSet::back_project_images(const WeightingOperator& op, const std::arra
   // Per image and voxel in visiting order; each strip zeroes and sums its own range.
   auto& sums = workspace.sums;
   sums.resize(N * order_.size());
-  // The images in row lanes (bands_ whole bands; rows past the sensor 0), band by band in parallel.
+  // The images in row lanes, band by band in parallel: the last block's rows past the sensor are
+  // 0; blocks wholly past it are left unwritten (no visit reaches them, so none is read).
   const int height = op.image_height();
   const std::size_t image_size = std::size_t(bands_) * std::size_t(kBandRows) * width;
   workspace.image_lanes.resize(N * image_size);
