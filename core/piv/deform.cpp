@@ -6,8 +6,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <numbers>
-#include <tuple>
 
 namespace plenopiv::piv {
 namespace {
@@ -48,38 +48,53 @@ const SincTable& sinc_table() {
   return table;
 }
 
+// Weights for the fractional offset f in [-0.5, 0.5] from the table, linearly interpolated.
+[[gnu::always_inline]] inline void weights_from(const SincTable& table, double f,
+                                                std::array<float, sinc_taps>& w) {
+  const auto& rows = table.rows;
+  const double u = std::clamp((f + 0.5) * table_steps, 0.0, double(table_steps));
+  const int r = std::min(int(u), table_steps - 1);
+  const float t = float(u - r);
+  for (int k = 0; k < sinc_taps; ++k) w[k] = rows[r][k] + t * (rows[r + 1][k] - rows[r][k]);
+}
+
 // Nearest voxel and weights of a coordinate.
 struct Taps {
   int base;  // first tap: round(p) - 3
   std::array<float, sinc_taps> w;
 };
 
-Taps taps_for(double p) {
+[[gnu::always_inline]] inline Taps taps_for(const SincTable& table, double p) {
   Taps t;
   const double n0 = std::floor(p + 0.5);
   t.base = int(n0) - sinc_taps / 2;
-  sinc7_weights(p - n0, t.w);
+  weights_from(table, p - n0, t.w);
   return t;
 }
 
+// Eight floats: one stencil row and its (zero-weighted) eighth voxel. GCC's vector extension,
+// so each target clone gets its own instructions (two SSE or one AVX operation per row).
+typedef float Lanes8 __attribute__((vector_size(32)));
+
 // Sum over the 7x7x7 stencil. Inside the volume, each of the 49 rows is read as 8 contiguous
-// voxels (the 8th with weight 0) into 8 accumulators, so the compiler can use one vector
-// multiply-add per row; the x weights are applied once at the end. The AVX2 clone is chosen at
-// run time where the CPU has it.
-__attribute__((target_clones("avx2", "default")))
-float sample(const float* v, const std::array<int, 3>& s, const Taps& tx, const Taps& ty,
-             const Taps& tz) {
+// voxels (the 8th with weight 0) and added, times its z and y weights, into one 8-lane
+// accumulator; the x weights are applied once at the end. Every lane sees the same multiplies
+// and adds in the same order as a scalar loop would (no fused multiply-add: deform.cpp is built
+// with -ffp-contract=off), so all target clones give the same bits. Inlined into the clones.
+[[gnu::always_inline]] inline float sample(const float* v, const std::array<int, 3>& s,
+                                           const Taps& tx, const Taps& ty, const Taps& tz) {
   const std::size_t plane = std::size_t(s[0]) * s[1];
   const bool inside = tx.base >= 0 && tx.base + sinc_taps + 1 <= s[0] && ty.base >= 0 &&
                       ty.base + sinc_taps <= s[1] && tz.base >= 0 && tz.base + sinc_taps <= s[2];
   if (inside) {
-    float acc[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+    Lanes8 acc = {0, 0, 0, 0, 0, 0, 0, 0};
     for (int kz = 0; kz < sinc_taps; ++kz) {
       const float* slab = v + (tz.base + kz) * plane + std::size_t(ty.base) * s[0] + tx.base;
       for (int ky = 0; ky < sinc_taps; ++ky) {
         const float w = tz.w[kz] * ty.w[ky];
-        const float* row = slab + std::size_t(ky) * s[0];
-        for (int k = 0; k < 8; ++k) acc[k] += w * row[k];
+        Lanes8 row;
+        std::memcpy(&row, slab + std::size_t(ky) * s[0], sizeof row);
+        acc += w * row;
       }
     }
     float total = 0;
@@ -107,6 +122,24 @@ float sample(const float* v, const std::array<int, 3>& s, const Taps& tx, const 
   return total;
 }
 
+using Located = std::pair<int, double>;
+
+// One row (y, z) of both deformed volumes. `lx`: the predictor's node location of every x;
+// `ly`, `lz`: of this row. The AVX-512 or AVX2 clone is chosen at run time where the CPU has it.
+__attribute__((target_clones("avx512f", "avx2", "default")))
+void deform_row(const float* a, const float* b, const std::array<int, 3>& shape,
+                const NodeField& predictor, const SincTable& table, const Located* lx,
+                const Located& ly, const Located& lz, int y, int z, float* a_out, float* b_out) {
+  for (int x = 0; x < shape[0]; ++x) {
+    const auto d = predictor.at_located({lx[x], ly, lz});
+    const double hx = 0.5 * d[0], hy = 0.5 * d[1], hz = 0.5 * d[2];
+    a_out[x] = sample(a, shape, taps_for(table, x - hx), taps_for(table, y - hy),
+                      taps_for(table, z - hz));
+    b_out[x] = sample(b, shape, taps_for(table, x + hx), taps_for(table, y + hy),
+                      taps_for(table, z + hz));
+  }
+}
+
 }  // namespace
 
 NodeField::NodeField(std::array<int, 3> n, std::array<double, 3> first_node,
@@ -122,19 +155,20 @@ std::pair<int, double> NodeField::locate(int axis, double p) const {
 }
 
 std::array<float, 3> NodeField::at(double x, double y, double z) const {
-  const std::array<double, 3> p{x, y, z};
-  std::array<int, 3> i0;
-  std::array<double, 3> frac;
-  for (int a = 0; a < 3; ++a) std::tie(i0[a], frac[a]) = locate(a, p[a]);
+  return at_located({locate(0, x), locate(1, y), locate(2, z)});
+}
+
+std::array<float, 3> NodeField::at_located(const std::array<std::pair<int, double>, 3>& where) const {
   std::array<float, 3> out{0, 0, 0};
   for (int c = 0; c < 8; ++c) {
     const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
-    const double w = (dx ? frac[0] : 1 - frac[0]) * (dy ? frac[1] : 1 - frac[1]) *
-                     (dz ? frac[2] : 1 - frac[2]);
+    const double w = (dx ? where[0].second : 1 - where[0].second) *
+                     (dy ? where[1].second : 1 - where[1].second) *
+                     (dz ? where[2].second : 1 - where[2].second);
     if (w == 0) continue;
-    const std::size_t k = index(std::min(i0[0] + dx, count[0] - 1),
-                                std::min(i0[1] + dy, count[1] - 1),
-                                std::min(i0[2] + dz, count[2] - 1));
+    const std::size_t k = index(std::min(where[0].first + dx, count[0] - 1),
+                                std::min(where[1].first + dy, count[1] - 1),
+                                std::min(where[2].first + dz, count[2] - 1));
     for (int a = 0; a < 3; ++a) out[a] += float(w * d[a][k]);
   }
   return out;
@@ -150,17 +184,12 @@ std::vector<double> NodeField::mean_weights(int axis, int first_voxel, int n) co
   return w;
 }
 
-void sinc7_weights(double f, std::array<float, sinc_taps>& w) {
-  const auto& rows = sinc_table().rows;
-  const double u = std::clamp((f + 0.5) * table_steps, 0.0, double(table_steps));
-  const int r = std::min(int(u), table_steps - 1);
-  const float t = float(u - r);
-  for (int k = 0; k < sinc_taps; ++k) w[k] = rows[r][k] + t * (rows[r + 1][k] - rows[r][k]);
-}
+void sinc7_weights(double f, std::array<float, sinc_taps>& w) { weights_from(sinc_table(), f, w); }
 
 float sample_sinc7(std::span<const float> volume, const std::array<int, 3>& shape, double x,
                    double y, double z) {
-  return sample(volume.data(), shape, taps_for(x), taps_for(y), taps_for(z));
+  const SincTable& table = sinc_table();
+  return sample(volume.data(), shape, taps_for(table, x), taps_for(table, y), taps_for(table, z));
 }
 
 void binomial_smooth(std::span<const float> in, const std::array<int, 3>& shape,
@@ -197,18 +226,17 @@ void deform_pair(std::span<const float> a, std::span<const float> b,
                  const std::array<int, 3>& shape, const NodeField& predictor,
                  std::span<float> a_out, std::span<float> b_out) {
   const std::size_t plane = std::size_t(shape[0]) * shape[1];
+  const SincTable& table = sinc_table();
+  std::array<std::vector<Located>, 3> where;
+  for (int axis = 0; axis < 3; ++axis)
+    for (int i = 0; i < shape[axis]; ++i) where[axis].push_back(predictor.locate(axis, i));
   tbb::parallel_for(tbb::blocked_range<int>(0, shape[2]), [&](const tbb::blocked_range<int>& r) {
-    for (int z = r.begin(); z < r.end(); ++z) {
+    for (int z = r.begin(); z < r.end(); ++z)
       for (int y = 0; y < shape[1]; ++y) {
-        for (int x = 0; x < shape[0]; ++x) {
-          const auto d = predictor.at(x, y, z);
-          const std::size_t i = z * plane + std::size_t(y) * shape[0] + x;
-          const double hx = 0.5 * d[0], hy = 0.5 * d[1], hz = 0.5 * d[2];
-          a_out[i] = sample(a.data(), shape, taps_for(x - hx), taps_for(y - hy), taps_for(z - hz));
-          b_out[i] = sample(b.data(), shape, taps_for(x + hx), taps_for(y + hy), taps_for(z + hz));
-        }
+        const std::size_t row = z * plane + std::size_t(y) * shape[0];
+        deform_row(a.data(), b.data(), shape, predictor, table, where[0].data(), where[1][y],
+                   where[2][z], y, z, a_out.data() + row, b_out.data() + row);
       }
-    }
   });
 }
 
