@@ -76,31 +76,56 @@ struct Taps {
 // so each target clone gets its own instructions (two SSE or one AVX operation per row).
 typedef float Lanes8 __attribute__((vector_size(32)));
 
-// Sum over the 7x7x7 stencil. Inside the volume, each of the 49 rows is read as 8 contiguous
-// voxels (the 8th with weight 0) and added, times its z and y weights, into one 8-lane
-// accumulator; the x weights are applied once at the end. Every lane sees the same multiplies
-// and adds in the same order as a scalar loop would (no fused multiply-add: deform.cpp is built
-// with -ffp-contract=off), so all target clones give the same bits. Inlined into the clones.
-[[gnu::always_inline]] inline float sample(const float* v, const std::array<int, 3>& s,
-                                           const Taps& tx, const Taps& ty, const Taps& tz) {
+// The taps of one sample along x, y and z.
+using Stencil = std::array<Taps, 3>;
+
+// Whether the stencil, read as 8 voxels per row (below), lies inside the volume.
+[[gnu::always_inline]] inline bool inside(const std::array<int, 3>& s, const Stencil& t) {
+  return t[0].base >= 0 && t[0].base + sinc_taps + 1 <= s[0] && t[1].base >= 0 &&
+         t[1].base + sinc_taps <= s[1] && t[2].base >= 0 && t[2].base + sinc_taps <= s[2];
+}
+
+// N samples inside their volumes (v[n] with stencil t[n]), summed over the 7x7x7 stencil: each
+// of the 49 rows is read as 8 contiguous voxels (the 8th with weight 0) and added, times its z
+// and y weights, into the sample's 8-lane accumulator; the x weights are applied once at the
+// end. Every lane sees the same multiplies and adds in the same order as a scalar loop would (no
+// fused multiply-add: deform.cpp is built with -ffp-contract=off), so all target clones and
+// every N give the same bits. Why N samples at once: each sample's 49 additions form one
+// dependent chain; N independent chains side by side keep the adders busy.
+template <int N>
+[[gnu::always_inline]] inline void sample_inside(const float* const* v, const std::array<int, 3>& s,
+                                                 const Stencil* t, float* out) {
   const std::size_t plane = std::size_t(s[0]) * s[1];
-  const bool inside = tx.base >= 0 && tx.base + sinc_taps + 1 <= s[0] && ty.base >= 0 &&
-                      ty.base + sinc_taps <= s[1] && tz.base >= 0 && tz.base + sinc_taps <= s[2];
-  if (inside) {
-    Lanes8 acc = {0, 0, 0, 0, 0, 0, 0, 0};
-    for (int kz = 0; kz < sinc_taps; ++kz) {
-      const float* slab = v + (tz.base + kz) * plane + std::size_t(ty.base) * s[0] + tx.base;
-      for (int ky = 0; ky < sinc_taps; ++ky) {
-        const float w = tz.w[kz] * ty.w[ky];
+  const float* slab[N];
+  for (int n = 0; n < N; ++n)
+    slab[n] = v[n] + t[n][2].base * plane + std::size_t(t[n][1].base) * s[0] + t[n][0].base;
+  Lanes8 acc[N];
+  for (int n = 0; n < N; ++n) acc[n] = Lanes8{0, 0, 0, 0, 0, 0, 0, 0};
+  for (int kz = 0; kz < sinc_taps; ++kz)
+    for (int ky = 0; ky < sinc_taps; ++ky)
+      for (int n = 0; n < N; ++n) {
+        const float w = t[n][2].w[kz] * t[n][1].w[ky];
         Lanes8 row;
-        std::memcpy(&row, slab + std::size_t(ky) * s[0], sizeof row);
-        acc += w * row;
+        std::memcpy(&row, slab[n] + kz * plane + std::size_t(ky) * s[0], sizeof row);
+        acc[n] += w * row;
       }
-    }
+  for (int n = 0; n < N; ++n) {
     float total = 0;
-    for (int k = 0; k < sinc_taps; ++k) total += tx.w[k] * acc[k];
-    return total;
+    for (int k = 0; k < sinc_taps; ++k) total += t[n][0].w[k] * acc[n][k];
+    out[n] = total;
   }
+}
+
+// One sample anywhere; voxels outside the volume count as 0.
+[[gnu::always_inline]] inline float sample(const float* v, const std::array<int, 3>& s,
+                                           const Stencil& t) {
+  if (inside(s, t)) {
+    float out;
+    sample_inside<1>(&v, s, &t, &out);
+    return out;
+  }
+  const std::size_t plane = std::size_t(s[0]) * s[1];
+  const Taps &tx = t[0], &ty = t[1], &tz = t[2];
   float total = 0;
   for (int kz = 0; kz < sinc_taps; ++kz) {
     const int z = tz.base + kz;
@@ -124,19 +149,43 @@ typedef float Lanes8 __attribute__((vector_size(32)));
 
 using Located = std::pair<int, double>;
 
+// Voxels per block of deform_row: 2 x 4 samples side by side (sample_inside says why).
+constexpr int block_voxels = 4;
+
 // One row (y, z) of both deformed volumes. `lx`: the predictor's node location of every x;
 // `ly`, `lz`: of this row. The AVX-512 or AVX2 clone is chosen at run time where the CPU has it.
 __attribute__((target_clones("avx512f", "avx2", "default")))
 void deform_row(const float* a, const float* b, const std::array<int, 3>& shape,
                 const NodeField& predictor, const SincTable& table, const Located* lx,
                 const Located& ly, const Located& lz, int y, int z, float* a_out, float* b_out) {
-  for (int x = 0; x < shape[0]; ++x) {
-    const auto d = predictor.at_located({lx[x], ly, lz});
-    const double hx = 0.5 * d[0], hy = 0.5 * d[1], hz = 0.5 * d[2];
-    a_out[x] = sample(a, shape, taps_for(table, x - hx), taps_for(table, y - hy),
-                      taps_for(table, z - hz));
-    b_out[x] = sample(b, shape, taps_for(table, x + hx), taps_for(table, y + hy),
-                      taps_for(table, z + hz));
+  constexpr int samples = 2 * block_voxels;
+  const float* const src[samples] = {a, b, a, b, a, b, a, b};
+  static_assert(samples == 8);
+  for (int x0 = 0; x0 < shape[0]; x0 += block_voxels) {
+    const int n = std::min(block_voxels, shape[0] - x0);
+    Stencil t[samples];  // a, b of voxel x0, then of x0 + 1, ...
+    bool all_inside = n == block_voxels;
+    for (int i = 0; i < n; ++i) {
+      const int x = x0 + i;
+      const auto d = predictor.at_located({lx[x], ly, lz});
+      const double hx = 0.5 * d[0], hy = 0.5 * d[1], hz = 0.5 * d[2];
+      t[2 * i] = {taps_for(table, x - hx), taps_for(table, y - hy), taps_for(table, z - hz)};
+      t[2 * i + 1] = {taps_for(table, x + hx), taps_for(table, y + hy), taps_for(table, z + hz)};
+      all_inside = all_inside && inside(shape, t[2 * i]) && inside(shape, t[2 * i + 1]);
+    }
+    if (all_inside) {
+      float out[samples];
+      sample_inside<samples>(src, shape, t, out);
+      for (int i = 0; i < n; ++i) {
+        a_out[x0 + i] = out[2 * i];
+        b_out[x0 + i] = out[2 * i + 1];
+      }
+    } else {
+      for (int i = 0; i < n; ++i) {
+        a_out[x0 + i] = sample(a, shape, t[2 * i]);
+        b_out[x0 + i] = sample(b, shape, t[2 * i + 1]);
+      }
+    }
   }
 }
 
@@ -189,7 +238,7 @@ void sinc7_weights(double f, std::array<float, sinc_taps>& w) { weights_from(sin
 float sample_sinc7(std::span<const float> volume, const std::array<int, 3>& shape, double x,
                    double y, double z) {
   const SincTable& table = sinc_table();
-  return sample(volume.data(), shape, taps_for(table, x), taps_for(table, y), taps_for(table, z));
+  return sample(volume.data(), shape, {taps_for(table, x), taps_for(table, y), taps_for(table, z)});
 }
 
 void binomial_smooth(std::span<const float> in, const std::array<int, 3>& shape,
