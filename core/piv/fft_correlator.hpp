@@ -1,4 +1,4 @@
-// FFT cross-correlation of 3-D interrogation windows: FFTW real-to-complex, single precision.
+// FFT cross-correlation of 3-D interrogation windows: FFTW, single precision, both windows in one complex transform.
 #pragma once
 
 #include <array>
