@@ -147,6 +147,24 @@ template <int N>
   return total;
 }
 
+// NodeField::at_located's trilinear interpolation, inlined into deform_row's clones.
+[[gnu::always_inline]] inline std::array<float, 3> interpolate(
+    const NodeField& f, const std::array<std::pair<int, double>, 3>& where) {
+  std::array<float, 3> out{0, 0, 0};
+  for (int c = 0; c < 8; ++c) {
+    const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
+    const double w = (dx ? where[0].second : 1 - where[0].second) *
+                     (dy ? where[1].second : 1 - where[1].second) *
+                     (dz ? where[2].second : 1 - where[2].second);
+    if (w == 0) continue;
+    const std::size_t k = f.index(std::min(where[0].first + dx, f.count[0] - 1),
+                                  std::min(where[1].first + dy, f.count[1] - 1),
+                                  std::min(where[2].first + dz, f.count[2] - 1));
+    for (int a = 0; a < 3; ++a) out[a] += float(w * f.d[a][k]);
+  }
+  return out;
+}
+
 using Located = std::pair<int, double>;
 
 // Voxels per block of deform_row: 2 x 4 samples side by side (sample_inside says why).
@@ -167,7 +185,7 @@ void deform_row(const float* a, const float* b, const std::array<int, 3>& shape,
     bool all_inside = n == block_voxels;
     for (int i = 0; i < n; ++i) {
       const int x = x0 + i;
-      const auto d = predictor.at_located({lx[x], ly, lz});
+      const auto d = interpolate(predictor, {lx[x], ly, lz});
       const double hx = 0.5 * d[0], hy = 0.5 * d[1], hz = 0.5 * d[2];
       t[2 * i] = {taps_for(table, x - hx), taps_for(table, y - hy), taps_for(table, z - hz)};
       t[2 * i + 1] = {taps_for(table, x + hx), taps_for(table, y + hy), taps_for(table, z + hz)};
@@ -208,19 +226,7 @@ std::array<float, 3> NodeField::at(double x, double y, double z) const {
 }
 
 std::array<float, 3> NodeField::at_located(const std::array<std::pair<int, double>, 3>& where) const {
-  std::array<float, 3> out{0, 0, 0};
-  for (int c = 0; c < 8; ++c) {
-    const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
-    const double w = (dx ? where[0].second : 1 - where[0].second) *
-                     (dy ? where[1].second : 1 - where[1].second) *
-                     (dz ? where[2].second : 1 - where[2].second);
-    if (w == 0) continue;
-    const std::size_t k = index(std::min(where[0].first + dx, count[0] - 1),
-                                std::min(where[1].first + dy, count[1] - 1),
-                                std::min(where[2].first + dz, count[2] - 1));
-    for (int a = 0; a < 3; ++a) out[a] += float(w * d[a][k]);
-  }
-  return out;
+  return interpolate(*this, where);
 }
 
 std::vector<double> NodeField::mean_weights(int axis, int first_voxel, int n) const {
