@@ -147,7 +147,7 @@ template <int N>
   return total;
 }
 
-// NodeField::at_located's trilinear interpolation, inlined into deform_row's clones.
+// NodeField::at_located's trilinear interpolation (also used by it, so the two cannot differ).
 [[gnu::always_inline]] inline std::array<float, 3> interpolate(
     const NodeField& f, const std::array<std::pair<int, double>, 3>& where) {
   std::array<float, 3> out{0, 0, 0};
@@ -167,6 +167,48 @@ template <int N>
 
 using Located = std::pair<int, double>;
 
+typedef double Doubles4 __attribute__((vector_size(32)));
+typedef float Floats4 __attribute__((vector_size(16)));
+
+// The predictor along one voxel row (y, z), bit for bit what interpolate() gives: the 8 corner
+// displacements of the current node cell are kept (x, y, z in the first three of four lanes) and
+// reloaded only when x enters the next cell, and the three components are weighted and summed
+// side by side, each lane in interpolate()'s order. A corner interpolate() skips (weight 0)
+// adds a zero here, which leaves a sum that started at +0 unchanged.
+class RowPredictor {
+ public:
+  RowPredictor(const NodeField& f, const Located& ly, const Located& lz) : f_(f), ly_(ly), lz_(lz) {}
+
+  [[gnu::always_inline]] std::array<float, 3> at(const Located& lx) {
+    if (lx.first != cell_) load(lx.first);
+    const double fx = lx.second, fy = ly_.second, fz = lz_.second;
+    Floats4 out = {0, 0, 0, 0};
+    for (int c = 0; c < 8; ++c) {
+      const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
+      const double w = (dx ? fx : 1 - fx) * (dy ? fy : 1 - fy) * (dz ? fz : 1 - fz);
+      out += __builtin_convertvector(w * corner_[c], Floats4);
+    }
+    return {out[0], out[1], out[2]};
+  }
+
+ private:
+  void load(int i0) {
+    cell_ = i0;
+    for (int c = 0; c < 8; ++c) {
+      const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
+      const std::size_t k = f_.index(std::min(i0 + dx, f_.count[0] - 1),
+                                     std::min(ly_.first + dy, f_.count[1] - 1),
+                                     std::min(lz_.first + dz, f_.count[2] - 1));
+      corner_[c] = Doubles4{f_.d[0][k], f_.d[1][k], f_.d[2][k], 0};
+    }
+  }
+
+  const NodeField& f_;
+  Located ly_, lz_;
+  int cell_ = -1;
+  Doubles4 corner_[8];
+};
+
 // Voxels per block of deform_row: 2 x 4 samples side by side (sample_inside says why).
 constexpr int block_voxels = 4;
 
@@ -179,13 +221,14 @@ void deform_row(const float* a, const float* b, const std::array<int, 3>& shape,
   constexpr int samples = 2 * block_voxels;
   const float* const src[samples] = {a, b, a, b, a, b, a, b};
   static_assert(samples == 8);
+  RowPredictor predicted(predictor, ly, lz);
   for (int x0 = 0; x0 < shape[0]; x0 += block_voxels) {
     const int n = std::min(block_voxels, shape[0] - x0);
     Stencil t[samples];  // a, b of voxel x0, then of x0 + 1, ...
     bool all_inside = n == block_voxels;
     for (int i = 0; i < n; ++i) {
       const int x = x0 + i;
-      const auto d = interpolate(predictor, {lx[x], ly, lz});
+      const auto d = predicted.at(lx[x]);
       const double hx = 0.5 * d[0], hy = 0.5 * d[1], hz = 0.5 * d[2];
       t[2 * i] = {taps_for(table, x - hx), taps_for(table, y - hy), taps_for(table, z - hz)};
       t[2 * i + 1] = {taps_for(table, x + hx), taps_for(table, y + hy), taps_for(table, z + hz)};
