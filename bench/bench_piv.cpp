@@ -171,7 +171,7 @@ void ring_vortex(const std::array<int, 3>& shape, bool all_variants, bool defaul
     });
     std::printf("bench=piv_ring volume=%dx%dx%d variant=%s threads=%d seconds=%.2f cpu_s=%.2f cpu_ratio=%.2f "
                 "deform_s=%.2f correlate_s=%.2f final_windows=%zu final_us_per_window=%.1f "
-                "outliers=%zu rms_x=%.3f rms_y=%.3f rms_z=%.3f rms=%.3f max_displacement=%.2f "
+                "outliers=%zu rms_x=%.5f rms_y=%.5f rms_z=%.5f rms=%.5f max_displacement=%.2f "
                 "rms_over_max=%.4f off_axis_band_n=%zu off_axis_band_rms_u=%.3f off_axis_band_rms_v=%.3f "
                 "off_axis_band_rms_w=%.3f field_hash=%016llx\n",
                 shape[0], shape[1], shape[2], v.name.c_str(), v.threads, s, cpu, cpu / reference_s,
