@@ -147,37 +147,20 @@ template <int N>
   return total;
 }
 
-// NodeField::at_located's trilinear interpolation (also used by it, so the two cannot differ).
-[[gnu::always_inline]] inline std::array<float, 3> interpolate(
-    const NodeField& f, const std::array<std::pair<int, double>, 3>& where) {
-  std::array<float, 3> out{0, 0, 0};
-  for (int c = 0; c < 8; ++c) {
-    const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
-    const double w = (dx ? where[0].second : 1 - where[0].second) *
-                     (dy ? where[1].second : 1 - where[1].second) *
-                     (dz ? where[2].second : 1 - where[2].second);
-    if (w == 0) continue;
-    const std::size_t k = f.index(std::min(where[0].first + dx, f.count[0] - 1),
-                                  std::min(where[1].first + dy, f.count[1] - 1),
-                                  std::min(where[2].first + dz, f.count[2] - 1));
-    for (int a = 0; a < 3; ++a) out[a] += float(w * f.d[a][k]);
-  }
-  return out;
-}
-
 using Located = std::pair<int, double>;
 
 typedef double Doubles4 __attribute__((vector_size(32)));
 typedef float Floats4 __attribute__((vector_size(16)));
 
-// The predictor along one voxel row (y, z), bit for bit what interpolate() gives: the 8 corner
-// displacements of the current node cell are kept (x, y, z in the first three of four lanes) and
-// reloaded only when x enters the next cell, and the three components are weighted and summed
-// side by side, each lane in interpolate()'s order. A corner interpolate() skips (weight 0)
+// The predictor along one voxel row (y, z), bit for bit what NodeField::at_located gives: the 8
+// corner displacements of the current node cell are kept (x, y, z in the first three of four
+// lanes) and reloaded only when x enters the next cell, and the three components are weighted and
+// summed side by side, each lane in at_located's order. A corner at_located skips (weight 0)
 // adds a zero here, which leaves a sum that started at +0 unchanged.
 class RowPredictor {
  public:
-  RowPredictor(const NodeField& f, const Located& ly, const Located& lz) : f_(f), ly_(ly), lz_(lz) {}
+  RowPredictor(const NodeField& f, const Located& ly, const Located& lz)
+      : f_(f), ly_(ly), lz_(lz) {}
 
   [[gnu::always_inline]] std::array<float, 3> at(const Located& lx) {
     if (lx.first != cell_) load(lx.first);
@@ -268,8 +251,21 @@ std::array<float, 3> NodeField::at(double x, double y, double z) const {
   return at_located({locate(0, x), locate(1, y), locate(2, z)});
 }
 
-std::array<float, 3> NodeField::at_located(const std::array<std::pair<int, double>, 3>& where) const {
-  return interpolate(*this, where);
+std::array<float, 3> NodeField::at_located(
+    const std::array<std::pair<int, double>, 3>& where) const {
+  std::array<float, 3> out{0, 0, 0};
+  for (int c = 0; c < 8; ++c) {
+    const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
+    const double w = (dx ? where[0].second : 1 - where[0].second) *
+                     (dy ? where[1].second : 1 - where[1].second) *
+                     (dz ? where[2].second : 1 - where[2].second);
+    if (w == 0) continue;
+    const std::size_t k = index(std::min(where[0].first + dx, count[0] - 1),
+                                std::min(where[1].first + dy, count[1] - 1),
+                                std::min(where[2].first + dz, count[2] - 1));
+    for (int a = 0; a < 3; ++a) out[a] += float(w * d[a][k]);
+  }
+  return out;
 }
 
 std::vector<double> NodeField::mean_weights(int axis, int first_voxel, int n) const {

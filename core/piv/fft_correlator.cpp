@@ -1,4 +1,4 @@
-// FFT cross-correlation of 3-D interrogation windows: FFTW, single precision, both windows in one complex transform.
+// FFT cross-correlation of 3-D interrogation windows (FFTW, float): a + i b in one transform.
 #include "core/piv/fft_correlator.hpp"
 
 #include <fftw3.h>
@@ -124,7 +124,8 @@ FftCorrelator::FftCorrelator(std::array<int, 3> shape, FftPlanning planning) : s
   const unsigned flags = planning == FftPlanning::measure ? FFTW_MEASURE : FFTW_ESTIMATE;
   plans_->forward =
       fftwf_plan_dft_3d(shape[2], shape[1], shape[0], probe.z, probe.spec, FFTW_FORWARD, flags);
-  plans_->inverse = fftwf_plan_dft_c2r_3d(shape[2], shape[1], shape[0], probe.cross, probe.corr, flags);
+  plans_->inverse =
+      fftwf_plan_dft_c2r_3d(shape[2], shape[1], shape[0], probe.cross, probe.corr, flags);
   if (!plans_->forward || !plans_->inverse) throw std::bad_alloc();
 }
 
