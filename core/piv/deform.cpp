@@ -6,8 +6,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <numbers>
-#include <tuple>
 
 namespace plenopiv::piv {
 namespace {
@@ -48,44 +48,84 @@ const SincTable& sinc_table() {
   return table;
 }
 
+// Weights for the fractional offset f in [-0.5, 0.5] from the table, linearly interpolated.
+[[gnu::always_inline]] inline void weights_from(const SincTable& table, double f,
+                                                std::array<float, sinc_taps>& w) {
+  const auto& rows = table.rows;
+  const double u = std::clamp((f + 0.5) * table_steps, 0.0, double(table_steps));
+  const int r = std::min(int(u), table_steps - 1);
+  const float t = float(u - r);
+  for (int k = 0; k < sinc_taps; ++k) w[k] = rows[r][k] + t * (rows[r + 1][k] - rows[r][k]);
+}
+
 // Nearest voxel and weights of a coordinate.
 struct Taps {
   int base;  // first tap: round(p) - 3
   std::array<float, sinc_taps> w;
 };
 
-Taps taps_for(double p) {
+[[gnu::always_inline]] inline Taps taps_for(const SincTable& table, double p) {
   Taps t;
   const double n0 = std::floor(p + 0.5);
   t.base = int(n0) - sinc_taps / 2;
-  sinc7_weights(p - n0, t.w);
+  weights_from(table, p - n0, t.w);
   return t;
 }
 
-// Sum over the 7x7x7 stencil. Inside the volume, each of the 49 rows is read as 8 contiguous
-// voxels (the 8th with weight 0) into 8 accumulators, so the compiler can use one vector
-// multiply-add per row; the x weights are applied once at the end. The AVX2 clone is chosen at
-// run time where the CPU has it.
-__attribute__((target_clones("avx2", "default")))
-float sample(const float* v, const std::array<int, 3>& s, const Taps& tx, const Taps& ty,
-             const Taps& tz) {
+// Eight floats: one stencil row and its (zero-weighted) eighth voxel. GCC's vector extension,
+// so each target clone gets its own instructions (two SSE or one AVX operation per row).
+typedef float Lanes8 __attribute__((vector_size(32)));
+
+// The taps of one sample along x, y and z.
+using Stencil = std::array<Taps, 3>;
+
+// Whether the stencil, read as 8 voxels per row (below), lies inside the volume.
+[[gnu::always_inline]] inline bool inside(const std::array<int, 3>& s, const Stencil& t) {
+  return t[0].base >= 0 && t[0].base + sinc_taps + 1 <= s[0] && t[1].base >= 0 &&
+         t[1].base + sinc_taps <= s[1] && t[2].base >= 0 && t[2].base + sinc_taps <= s[2];
+}
+
+// N samples inside their volumes (v[n] with stencil t[n]), summed over the 7x7x7 stencil: each
+// of the 49 rows is read as 8 contiguous voxels (the 8th with weight 0) and added, times its z
+// and y weights, into the sample's 8-lane accumulator; the x weights are applied once at the
+// end. Every lane sees the same multiplies and adds in the same order as a scalar loop would (no
+// fused multiply-add: deform.cpp is built with -ffp-contract=off), so all target clones and
+// every N give the same bits. Why N samples at once: each sample's 49 additions form one
+// dependent chain; N independent chains side by side keep the adders busy.
+template <int N>
+[[gnu::always_inline]] inline void sample_inside(const float* const* v, const std::array<int, 3>& s,
+                                                 const Stencil* t, float* out) {
   const std::size_t plane = std::size_t(s[0]) * s[1];
-  const bool inside = tx.base >= 0 && tx.base + sinc_taps + 1 <= s[0] && ty.base >= 0 &&
-                      ty.base + sinc_taps <= s[1] && tz.base >= 0 && tz.base + sinc_taps <= s[2];
-  if (inside) {
-    float acc[8] = {0, 0, 0, 0, 0, 0, 0, 0};
-    for (int kz = 0; kz < sinc_taps; ++kz) {
-      const float* slab = v + (tz.base + kz) * plane + std::size_t(ty.base) * s[0] + tx.base;
-      for (int ky = 0; ky < sinc_taps; ++ky) {
-        const float w = tz.w[kz] * ty.w[ky];
-        const float* row = slab + std::size_t(ky) * s[0];
-        for (int k = 0; k < 8; ++k) acc[k] += w * row[k];
+  const float* slab[N];
+  for (int n = 0; n < N; ++n)
+    slab[n] = v[n] + t[n][2].base * plane + std::size_t(t[n][1].base) * s[0] + t[n][0].base;
+  Lanes8 acc[N];
+  for (int n = 0; n < N; ++n) acc[n] = Lanes8{0, 0, 0, 0, 0, 0, 0, 0};
+  for (int kz = 0; kz < sinc_taps; ++kz)
+    for (int ky = 0; ky < sinc_taps; ++ky)
+      for (int n = 0; n < N; ++n) {
+        const float w = t[n][2].w[kz] * t[n][1].w[ky];
+        Lanes8 row;
+        std::memcpy(&row, slab[n] + kz * plane + std::size_t(ky) * s[0], sizeof row);
+        acc[n] += w * row;
       }
-    }
+  for (int n = 0; n < N; ++n) {
     float total = 0;
-    for (int k = 0; k < sinc_taps; ++k) total += tx.w[k] * acc[k];
-    return total;
+    for (int k = 0; k < sinc_taps; ++k) total += t[n][0].w[k] * acc[n][k];
+    out[n] = total;
   }
+}
+
+// One sample anywhere; voxels outside the volume count as 0.
+[[gnu::always_inline]] inline float sample(const float* v, const std::array<int, 3>& s,
+                                           const Stencil& t) {
+  if (inside(s, t)) {
+    float out;
+    sample_inside<1>(&v, s, &t, &out);
+    return out;
+  }
+  const std::size_t plane = std::size_t(s[0]) * s[1];
+  const Taps &tx = t[0], &ty = t[1], &tz = t[2];
   float total = 0;
   for (int kz = 0; kz < sinc_taps; ++kz) {
     const int z = tz.base + kz;
@@ -107,6 +147,92 @@ float sample(const float* v, const std::array<int, 3>& s, const Taps& tx, const 
   return total;
 }
 
+using Located = std::pair<int, double>;
+
+typedef double Doubles4 __attribute__((vector_size(32)));
+typedef float Floats4 __attribute__((vector_size(16)));
+
+// The predictor along one voxel row (y, z), bit for bit what NodeField::at_located gives: the 8
+// corner displacements of the current node cell are kept (x, y, z in the first three of four
+// lanes) and reloaded only when x enters the next cell, and the three components are weighted and
+// summed side by side, each lane in at_located's order. A corner at_located skips (weight 0)
+// adds a zero here, which leaves a sum that started at +0 unchanged.
+class RowPredictor {
+ public:
+  RowPredictor(const NodeField& f, const Located& ly, const Located& lz)
+      : f_(f), ly_(ly), lz_(lz) {}
+
+  [[gnu::always_inline]] std::array<float, 3> at(const Located& lx) {
+    if (lx.first != cell_) load(lx.first);
+    const double fx = lx.second, fy = ly_.second, fz = lz_.second;
+    Floats4 out = {0, 0, 0, 0};
+    for (int c = 0; c < 8; ++c) {
+      const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
+      const double w = (dx ? fx : 1 - fx) * (dy ? fy : 1 - fy) * (dz ? fz : 1 - fz);
+      out += __builtin_convertvector(w * corner_[c], Floats4);
+    }
+    return {out[0], out[1], out[2]};
+  }
+
+ private:
+  void load(int i0) {
+    cell_ = i0;
+    for (int c = 0; c < 8; ++c) {
+      const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
+      const std::size_t k = f_.index(std::min(i0 + dx, f_.count[0] - 1),
+                                     std::min(ly_.first + dy, f_.count[1] - 1),
+                                     std::min(lz_.first + dz, f_.count[2] - 1));
+      corner_[c] = Doubles4{f_.d[0][k], f_.d[1][k], f_.d[2][k], 0};
+    }
+  }
+
+  const NodeField& f_;
+  Located ly_, lz_;
+  int cell_ = -1;
+  Doubles4 corner_[8];
+};
+
+// Voxels per block of deform_row: 2 x 4 samples side by side (sample_inside says why).
+constexpr int block_voxels = 4;
+
+// One row (y, z) of both deformed volumes. `lx`: the predictor's node location of every x;
+// `ly`, `lz`: of this row. The AVX-512 or AVX2 clone is chosen at run time where the CPU has it.
+__attribute__((target_clones("avx512f", "avx2", "default")))
+void deform_row(const float* a, const float* b, const std::array<int, 3>& shape,
+                const NodeField& predictor, const SincTable& table, const Located* lx,
+                const Located& ly, const Located& lz, int y, int z, float* a_out, float* b_out) {
+  constexpr int samples = 2 * block_voxels;
+  const float* const src[samples] = {a, b, a, b, a, b, a, b};
+  static_assert(samples == 8);
+  RowPredictor predicted(predictor, ly, lz);
+  for (int x0 = 0; x0 < shape[0]; x0 += block_voxels) {
+    const int n = std::min(block_voxels, shape[0] - x0);
+    Stencil t[samples];  // a, b of voxel x0, then of x0 + 1, ...
+    bool all_inside = n == block_voxels;
+    for (int i = 0; i < n; ++i) {
+      const int x = x0 + i;
+      const auto d = predicted.at(lx[x]);
+      const double hx = 0.5 * d[0], hy = 0.5 * d[1], hz = 0.5 * d[2];
+      t[2 * i] = {taps_for(table, x - hx), taps_for(table, y - hy), taps_for(table, z - hz)};
+      t[2 * i + 1] = {taps_for(table, x + hx), taps_for(table, y + hy), taps_for(table, z + hz)};
+      all_inside = all_inside && inside(shape, t[2 * i]) && inside(shape, t[2 * i + 1]);
+    }
+    if (all_inside) {
+      float out[samples];
+      sample_inside<samples>(src, shape, t, out);
+      for (int i = 0; i < n; ++i) {
+        a_out[x0 + i] = out[2 * i];
+        b_out[x0 + i] = out[2 * i + 1];
+      }
+    } else {
+      for (int i = 0; i < n; ++i) {
+        a_out[x0 + i] = sample(a, shape, t[2 * i]);
+        b_out[x0 + i] = sample(b, shape, t[2 * i + 1]);
+      }
+    }
+  }
+}
+
 }  // namespace
 
 NodeField::NodeField(std::array<int, 3> n, std::array<double, 3> first_node,
@@ -122,19 +248,21 @@ std::pair<int, double> NodeField::locate(int axis, double p) const {
 }
 
 std::array<float, 3> NodeField::at(double x, double y, double z) const {
-  const std::array<double, 3> p{x, y, z};
-  std::array<int, 3> i0;
-  std::array<double, 3> frac;
-  for (int a = 0; a < 3; ++a) std::tie(i0[a], frac[a]) = locate(a, p[a]);
+  return at_located({locate(0, x), locate(1, y), locate(2, z)});
+}
+
+std::array<float, 3> NodeField::at_located(
+    const std::array<std::pair<int, double>, 3>& where) const {
   std::array<float, 3> out{0, 0, 0};
   for (int c = 0; c < 8; ++c) {
     const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
-    const double w = (dx ? frac[0] : 1 - frac[0]) * (dy ? frac[1] : 1 - frac[1]) *
-                     (dz ? frac[2] : 1 - frac[2]);
+    const double w = (dx ? where[0].second : 1 - where[0].second) *
+                     (dy ? where[1].second : 1 - where[1].second) *
+                     (dz ? where[2].second : 1 - where[2].second);
     if (w == 0) continue;
-    const std::size_t k = index(std::min(i0[0] + dx, count[0] - 1),
-                                std::min(i0[1] + dy, count[1] - 1),
-                                std::min(i0[2] + dz, count[2] - 1));
+    const std::size_t k = index(std::min(where[0].first + dx, count[0] - 1),
+                                std::min(where[1].first + dy, count[1] - 1),
+                                std::min(where[2].first + dz, count[2] - 1));
     for (int a = 0; a < 3; ++a) out[a] += float(w * d[a][k]);
   }
   return out;
@@ -150,17 +278,12 @@ std::vector<double> NodeField::mean_weights(int axis, int first_voxel, int n) co
   return w;
 }
 
-void sinc7_weights(double f, std::array<float, sinc_taps>& w) {
-  const auto& rows = sinc_table().rows;
-  const double u = std::clamp((f + 0.5) * table_steps, 0.0, double(table_steps));
-  const int r = std::min(int(u), table_steps - 1);
-  const float t = float(u - r);
-  for (int k = 0; k < sinc_taps; ++k) w[k] = rows[r][k] + t * (rows[r + 1][k] - rows[r][k]);
-}
+void sinc7_weights(double f, std::array<float, sinc_taps>& w) { weights_from(sinc_table(), f, w); }
 
 float sample_sinc7(std::span<const float> volume, const std::array<int, 3>& shape, double x,
                    double y, double z) {
-  return sample(volume.data(), shape, taps_for(x), taps_for(y), taps_for(z));
+  const SincTable& table = sinc_table();
+  return sample(volume.data(), shape, {taps_for(table, x), taps_for(table, y), taps_for(table, z)});
 }
 
 void binomial_smooth(std::span<const float> in, const std::array<int, 3>& shape,
@@ -197,18 +320,17 @@ void deform_pair(std::span<const float> a, std::span<const float> b,
                  const std::array<int, 3>& shape, const NodeField& predictor,
                  std::span<float> a_out, std::span<float> b_out) {
   const std::size_t plane = std::size_t(shape[0]) * shape[1];
+  const SincTable& table = sinc_table();
+  std::array<std::vector<Located>, 3> where;
+  for (int axis = 0; axis < 3; ++axis)
+    for (int i = 0; i < shape[axis]; ++i) where[axis].push_back(predictor.locate(axis, i));
   tbb::parallel_for(tbb::blocked_range<int>(0, shape[2]), [&](const tbb::blocked_range<int>& r) {
-    for (int z = r.begin(); z < r.end(); ++z) {
+    for (int z = r.begin(); z < r.end(); ++z)
       for (int y = 0; y < shape[1]; ++y) {
-        for (int x = 0; x < shape[0]; ++x) {
-          const auto d = predictor.at(x, y, z);
-          const std::size_t i = z * plane + std::size_t(y) * shape[0] + x;
-          const double hx = 0.5 * d[0], hy = 0.5 * d[1], hz = 0.5 * d[2];
-          a_out[i] = sample(a.data(), shape, taps_for(x - hx), taps_for(y - hy), taps_for(z - hz));
-          b_out[i] = sample(b.data(), shape, taps_for(x + hx), taps_for(y + hy), taps_for(z + hz));
-        }
+        const std::size_t row = z * plane + std::size_t(y) * shape[0];
+        deform_row(a.data(), b.data(), shape, predictor, table, where[0].data(), where[1][y],
+                   where[2][z], y, z, a_out.data() + row, b_out.data() + row);
       }
-    }
   });
 }
 

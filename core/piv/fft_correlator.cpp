@@ -1,4 +1,4 @@
-// FFT cross-correlation of 3-D interrogation windows: FFTW real-to-complex, single precision.
+// FFT cross-correlation of 3-D interrogation windows (FFTW, float): a + i b in one transform.
 #include "core/piv/fft_correlator.hpp"
 
 #include <fftw3.h>
@@ -29,26 +29,28 @@ T* fftw_array(std::size_t count) {
 
 // Aligned buffers from fftwf_malloc, so the plans' alignment assumptions hold for every thread.
 struct FftCorrelator::Workspace::Buffers {
-  std::size_t real_count, complex_count;
+  std::size_t real_count;
   float* a;
   float* b;
-  fftwf_complex* fa;
-  fftwf_complex* fb;
+  fftwf_complex* z;      // a + i b
+  fftwf_complex* spec;   // Z = DFT(a + i b)
+  fftwf_complex* cross;  // conj(A) B on the half spectrum kx = 0 .. nx / 2 (it is Hermitian)
   float* corr;
 
-  Buffers(std::size_t n_real, std::size_t n_complex)
-      : real_count(n_real),
-        complex_count(n_complex),
-        a(fftw_array<float>(n_real)),
-        b(fftw_array<float>(n_real)),
-        fa(fftw_array<fftwf_complex>(n_complex)),
-        fb(fftw_array<fftwf_complex>(n_complex)),
-        corr(fftw_array<float>(n_real)) {}
+  Buffers(std::size_t n, std::size_t n_half)
+      : real_count(n),
+        a(fftw_array<float>(n)),
+        b(fftw_array<float>(n)),
+        z(fftw_array<fftwf_complex>(n)),
+        spec(fftw_array<fftwf_complex>(n)),
+        cross(fftw_array<fftwf_complex>(n_half)),
+        corr(fftw_array<float>(n)) {}
   ~Buffers() {
     fftwf_free(a);
     fftwf_free(b);
-    fftwf_free(fa);
-    fftwf_free(fb);
+    fftwf_free(z);
+    fftwf_free(spec);
+    fftwf_free(cross);
     fftwf_free(corr);
   }
   Buffers(const Buffers&) = delete;
@@ -73,42 +75,57 @@ std::span<float> FftCorrelator::Workspace::window_b() { return {buffers_->b, buf
 std::span<const float> FftCorrelator::Workspace::correlate() {
   Buffers& w = *buffers_;
   const std::size_t n = w.real_count;
-  // Mean subtraction removes the pedestal that would otherwise put a broad peak at shift 0.
-  double sum_a = 0, sum_b = 0;
+  const std::array<int, 3>& s = owner_->shape_;
+  // Both windows in one complex transform: Z = DFT(a + i b) = A + i B, with A and B Hermitian,
+  // so A_k = (Z_k + conj Z_-k) / 2 and B_k = (Z_k - conj Z_-k) / 2i. One complex transform
+  // replaces two real-to-complex ones: FFTW's real transform of a 16^3 window costs about as
+  // much as its complex one (docs/benchmarks.md, "Correlation, faster").
   for (std::size_t i = 0; i < n; ++i) {
-    sum_a += w.a[i];
-    sum_b += w.b[i];
+    w.z[i][0] = w.a[i];
+    w.z[i][1] = w.b[i];
   }
-  const float mean_a = float(sum_a / double(n)), mean_b = float(sum_b / double(n));
-  for (std::size_t i = 0; i < n; ++i) {
-    w.a[i] -= mean_a;
-    w.b[i] -= mean_b;
+  fftwf_execute_dft(owner_->plans_->forward, w.z, w.spec);
+  // conj(A_k) B_k = Im(Z_k Z_-k) / 2 - i (|Z_k|^2 - |Z_-k|^2) / 4, scaled by 1/n so the
+  // inverse transform gives the plain correlation sum.
+  const float half = 0.5f / float(n), quarter = 0.25f / float(n);
+  const int half_x = s[0] / 2 + 1;
+  for (int kz = 0; kz < s[2]; ++kz) {
+    const int mz = kz ? s[2] - kz : 0;
+    for (int ky = 0; ky < s[1]; ++ky) {
+      const int my = ky ? s[1] - ky : 0;
+      const std::size_t row = (std::size_t(kz) * s[1] + ky) * s[0];
+      const std::size_t mirror_row = (std::size_t(mz) * s[1] + my) * s[0];
+      fftwf_complex* out = w.cross + (std::size_t(kz) * s[1] + ky) * half_x;
+      for (int kx = 0; kx < half_x; ++kx) {
+        const std::size_t k = row + kx, m = mirror_row + (kx ? s[0] - kx : 0);
+        const float zr = w.spec[k][0], zi = w.spec[k][1], mr = w.spec[m][0], mi = w.spec[m][1];
+        out[kx][0] = (zr * mi + zi * mr) * half;
+        out[kx][1] = ((mr * mr + mi * mi) - (zr * zr + zi * zi)) * quarter;
+      }
+    }
   }
-  fftwf_execute_dft_r2c(owner_->plans_->forward, w.a, w.fa);
-  fftwf_execute_dft_r2c(owner_->plans_->forward, w.b, w.fb);
-  // conj(A) * B, scaled by 1/n so the inverse transform gives the plain correlation sum.
-  const float scale = 1.f / float(n);
-  for (std::size_t k = 0; k < w.complex_count; ++k) {
-    const float ar = w.fa[k][0], ai = w.fa[k][1], br = w.fb[k][0], bi = w.fb[k][1];
-    w.fa[k][0] = (ar * br + ai * bi) * scale;
-    w.fa[k][1] = (ar * bi - ai * br) * scale;
-  }
-  fftwf_execute_dft_c2r(owner_->plans_->inverse, w.fa, w.corr);
+  // Mean subtraction (it removes the pedestal that would otherwise put a broad peak at shift 0)
+  // changes only the k = 0 term of A and B: their product there is zero.
+  w.cross[0][0] = 0.f;
+  w.cross[0][1] = 0.f;
+  fftwf_execute_dft_c2r(owner_->plans_->inverse, w.cross, w.corr);
   return {w.corr, n};
 }
 
 FftCorrelator::FftCorrelator(std::array<int, 3> shape, FftPlanning planning) : shape_(shape) {
-  const std::size_t n_real = size();
-  const std::size_t n_complex = std::size_t(shape[2]) * shape[1] * (shape[0] / 2 + 1);
-  plans_ = std::make_unique<Plans>([this, n_real, n_complex] {
-    return Workspace(*this, std::make_unique<Workspace::Buffers>(n_real, n_complex));
+  const std::size_t n = size();
+  const std::size_t n_half = std::size_t(shape[2]) * shape[1] * (shape[0] / 2 + 1);
+  plans_ = std::make_unique<Plans>([this, n, n_half] {
+    return Workspace(*this, std::make_unique<Workspace::Buffers>(n, n_half));
   });
-  Workspace::Buffers probe(n_real, n_complex);
+  Workspace::Buffers probe(n, n_half);
   std::lock_guard lock(fftw_planner_mutex());
   // FFTW takes the slowest-varying dimension first: [z][y][x].
   const unsigned flags = planning == FftPlanning::measure ? FFTW_MEASURE : FFTW_ESTIMATE;
-  plans_->forward = fftwf_plan_dft_r2c_3d(shape[2], shape[1], shape[0], probe.a, probe.fa, flags);
-  plans_->inverse = fftwf_plan_dft_c2r_3d(shape[2], shape[1], shape[0], probe.fa, probe.corr, flags);
+  plans_->forward =
+      fftwf_plan_dft_3d(shape[2], shape[1], shape[0], probe.z, probe.spec, FFTW_FORWARD, flags);
+  plans_->inverse =
+      fftwf_plan_dft_c2r_3d(shape[2], shape[1], shape[0], probe.cross, probe.corr, flags);
   if (!plans_->forward || !plans_->inverse) throw std::bad_alloc();
 }
 

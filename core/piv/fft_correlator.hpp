@@ -1,4 +1,4 @@
-// FFT cross-correlation of 3-D interrogation windows: FFTW real-to-complex, single precision.
+// FFT cross-correlation of 3-D interrogation windows (FFTW, float): a + i b in one transform.
 #pragma once
 
 #include <array>

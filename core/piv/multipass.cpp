@@ -3,6 +3,7 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <xmmintrin.h>
 
 #include <algorithm>
 #include <chrono>
@@ -104,18 +105,36 @@ Candidates correlate_windows(const std::vector<float>& va, const std::vector<flo
                 z0 = l.start[2] + k * l.step[2];
       auto wa = ws.window_a();
       auto wb = ws.window_b();
+      // Copy the window and take its largest value four voxels at a time (SSE). The voxels are
+      // finite (checked), so the maximum does not depend on the order it is taken in.
+      __m128 max4_a = _mm_set1_ps(-INFINITY), max4_b = max4_a;
       float max_a = -INFINITY, max_b = -INFINITY;
       std::size_t o = 0;
       for (int z = 0; z < l.window[2]; ++z)
         for (int y = 0; y < l.window[1]; ++y) {
           const std::size_t row = (z0 + z) * plane + std::size_t(y0 + y) * shape[0] + x0;
-          for (int x = 0; x < l.window[0]; ++x, ++o) {
+          int x = 0;
+          for (; x + 4 <= l.window[0]; x += 4, o += 4) {
+            const __m128 qa = _mm_loadu_ps(&va[row + x]), qb = _mm_loadu_ps(&vb[row + x]);
+            _mm_storeu_ps(&wa[o], qa);
+            _mm_storeu_ps(&wb[o], qb);
+            max4_a = _mm_max_ps(max4_a, qa);
+            max4_b = _mm_max_ps(max4_b, qb);
+          }
+          for (; x < l.window[0]; ++x, ++o) {
             wa[o] = va[row + x];
             wb[o] = vb[row + x];
             max_a = std::max(max_a, wa[o]);
             max_b = std::max(max_b, wb[o]);
           }
         }
+      float lanes_a[4], lanes_b[4];
+      _mm_storeu_ps(lanes_a, max4_a);
+      _mm_storeu_ps(lanes_b, max4_b);
+      for (int k = 0; k < 4; ++k) {
+        max_a = std::max(max_a, lanes_a[k]);
+        max_b = std::max(max_b, lanes_b[k]);
+      }
       if (!(max_a > signal_threshold && max_b > signal_threshold)) {
         c.flags[node] = flag_no_signal;
         continue;

@@ -5,6 +5,8 @@
 #include <cmath>
 #include <cstddef>
 
+#include <xmmintrin.h>
+
 namespace plenopiv::piv {
 namespace {
 
@@ -86,43 +88,49 @@ std::array<Peak, 3> find_peaks(std::span<const float> corr, const std::array<int
   // one maximum, its first voxel.
   auto beaten = [](float w, float v, bool earlier) { return earlier ? w >= v : w > v; };
   float threshold = 0;
+  // One voxel: is it a local maximum above the threshold, and among the three highest so far?
+  auto visit = [&](const float* row, int x, int y, int z, bool yz_inside) {
+    const float v = row[x];
+    // Only values above the third peak so far (or above 0 while fewer than three were found;
+    // peaks <= 0 are of no use) need a test.
+    if (!(v > threshold)) return;
+    if (yz_inside && x > 0 && x < nx - 1) {
+      for (int k = 0; k < 26; ++k)
+        if (beaten(row[x + offset[k]], v, offset[k] < 0)) return;
+    } else {
+      for (int k = 0; k < 26; ++k) {
+        const float w = corr[index_of(shape, wrap(x + step[k][0], nx), wrap(y + step[k][1], ny),
+                                      wrap(z + step[k][2], nz))];
+        if (beaten(w, v, offset[k] < 0)) return;
+      }
+    }
+    int pos = std::min(found, 2);
+    while (pos > 0 && best[pos - 1].value < v) {
+      best[pos] = best[pos - 1];
+      --pos;
+    }
+    best[pos] = {v, x, y, z};
+    found = std::min(found + 1, 3);
+    if (found == 3) threshold = best[2].value;
+  };
   for (int z = 0; z < nz; ++z) {
     const bool z_inside = z > 0 && z < nz - 1;
     for (int y = 0; y < ny; ++y) {
       const bool yz_inside = z_inside && y > 0 && y < ny - 1;
       const float* row = corr.data() + index_of(shape, 0, y, z);
-      for (int x = 0; x < nx; ++x) {
-        const float v = row[x];
-        // One well-predicted comparison per voxel: only values above the third peak so far (or
-        // above 0 while fewer than three were found; peaks <= 0 are of no use) need a test.
-        if (!(v > threshold)) continue;
-        bool is_max = true;
-        if (yz_inside && x > 0 && x < nx - 1) {
-          for (int k = 0; k < 26; ++k)
-            if (beaten(row[x + offset[k]], v, offset[k] < 0)) {
-              is_max = false;
-              break;
-            }
-        } else {
-          for (int k = 0; k < 26; ++k) {
-            const float w = corr[index_of(shape, wrap(x + step[k][0], nx), wrap(y + step[k][1], ny),
-                                          wrap(z + step[k][2], nz))];
-            if (beaten(w, v, offset[k] < 0)) {
-              is_max = false;
-              break;
-            }
-          }
+      // Four voxels per SSE comparison against the threshold: most groups hold none above it
+      // and are passed over with one well-predicted branch. The voxels above it are visited in
+      // scan order, each tested again (the threshold may have risen), so the result is that of
+      // a voxel-by-voxel scan.
+      int x = 0;
+      for (; x + 4 <= nx; x += 4) {
+        int above = _mm_movemask_ps(_mm_cmpgt_ps(_mm_loadu_ps(row + x), _mm_set1_ps(threshold)));
+        while (above) {
+          visit(row, x + __builtin_ctz(above), y, z, yz_inside);
+          above &= above - 1;
         }
-        if (!is_max) continue;
-        int pos = std::min(found, 2);
-        while (pos > 0 && best[pos - 1].value < v) {
-          best[pos] = best[pos - 1];
-          --pos;
-        }
-        best[pos] = {v, x, y, z};
-        found = std::min(found + 1, 3);
-        if (found == 3) threshold = best[2].value;
       }
+      for (; x < nx; ++x) visit(row, x, y, z, yz_inside);
     }
   }
   std::array<Peak, 3> peaks{};
