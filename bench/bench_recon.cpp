@@ -143,7 +143,7 @@ void paper_scale(const std::string& source_dir, bool small, double ppm, int iter
   std::printf("bench=recon_paper phase=iterations seconds=%.3f per_iteration=%.3f\n", iter_total,
               iter_total / double(std::max<std::size_t>(1, r.iterations.size())));
   std::printf("bench=recon_paper phase=reconstruct_total seconds=%.3f cpu_s=%.3f final_residual=%.4f volume_hash=%016llx\n",
-              t_mart, c_mart, r.final_residual, static_cast<unsigned long long>(hash));
+              t_mart, c_mart, r.final_residual.value(), static_cast<unsigned long long>(hash));
   std::printf("bench=recon_paper voxels=%zu active=%zu skipped_fraction=%.4f dark=%zu unseen=%zu slices_empty=%d "
               "dark_pixels=%zu\n",
               k.voxels, k.voxels_active, k.fraction_skipped(), k.voxels_dark, k.voxels_unseen, k.slices_empty,
@@ -297,7 +297,7 @@ void figures(const std::string& source_dir, double dark_cutoff) {
     }
     const recon::MartResult r = recon::reconstruct(op, image, s);
     return std::array<double, 3>{recon::quality_factor(r.volume, sim::render_exact_volume(g, positions)),
-                                 r.skipped.fraction_skipped(), r.final_residual};
+                                 r.skipped.fraction_skipped(), r.final_residual.value()};
   };
   for (int it : {1, 2, 5, 10, 20}) {
     const auto q = run(0.5, it);

@@ -120,7 +120,7 @@ void run(const ReconOptions& o) {
                "skipped %.1f %% of %zu voxels (seen by a dark pixel %zu, outside the field of view %zu), "
                "%d of %d slices empty, %zu dark pixels; final residual %.4f%s\n",
                100 * k.fraction_skipped(), k.voxels, k.voxels_dark, k.voxels_unseen, k.slices_empty, k.slices,
-               k.dark_pixels, r.final_residual, r.converged ? " (converged)" : "");
+               k.dark_pixels, r.final_residual.value(), r.converged ? " (converged)" : "");
   io::write_volume_h5(o.out, r.volume);
   const std::string vti = o.vti.empty() ? std::filesystem::path(o.out).replace_extension(".vti").string() : o.vti;
   io::write_volume_vti(vti, r.volume);

@@ -146,12 +146,14 @@ PairResult process_pair(const recon::WeightingOperator& op, const ImageF& frame_
     if (progress) progress(stage, f);
   };
   const int iterations = settings.mart.iterations;
+  recon::MartSettings mart = settings.mart;
+  mart.final_residual = false;  // nothing here reads it: one projection less per frame
   PairResult out;
   recon::MartWorkspace pair_workspace;  // no buffers until used
   recon::MartWorkspace& buffers = workspace ? *workspace : pair_workspace;
 
   auto t0 = std::chrono::steady_clock::now();
-  auto ra = recon::reconstruct(op, frame_a, settings.mart, buffers, [&](const recon::IterationReport& it) {
+  auto ra = recon::reconstruct(op, frame_a, mart, buffers, [&](const recon::IterationReport& it) {
     report("reconstruct A", 0.4 * it.iteration / iterations);
   });
   out.times.reconstruct_a_s = seconds_since(t0);
@@ -159,7 +161,7 @@ PairResult process_pair(const recon::WeightingOperator& op, const ImageF& frame_
   out.skipped_a = ra.skipped;
 
   t0 = std::chrono::steady_clock::now();
-  auto rb = recon::reconstruct(op, frame_b, settings.mart, buffers, [&](const recon::IterationReport& it) {
+  auto rb = recon::reconstruct(op, frame_b, mart, buffers, [&](const recon::IterationReport& it) {
     report("reconstruct B", 0.4 + 0.4 * it.iteration / iterations);
   });
   out.times.reconstruct_b_s = seconds_since(t0);

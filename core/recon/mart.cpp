@@ -555,11 +555,13 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const M
     result.iterations.push_back(rep);
     if (progress) progress(rep);
   }
-  if (n > 0) {
-    project_and_compare(false);
-    result.final_residual = residual();
-  } else {
-    result.final_residual = sum(data) > 0 ? 1.0 : 0.0;  // nothing projected: ||I - 0|| / ||I||
+  if (settings.final_residual) {
+    if (n > 0) {
+      project_and_compare(false);
+      result.final_residual = residual();
+    } else {
+      result.final_residual = sum(data) > 0 ? 1.0 : 0.0;  // nothing projected: ||I - 0|| / ||I||
+    }
   }
   const std::vector<std::uint32_t>& voxels = active.voxels();
   for_voxels([&](std::size_t m) { result.volume.data[voxels[m]] = e[m]; });  // distinct voxels

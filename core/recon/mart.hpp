@@ -61,6 +61,10 @@ struct MartSettings {
   // best, and particles come out compressed toward it (docs/recon.md, "Sensor blur"). 0: the
   // weights alone, as the paper. core/sim's diffraction (the paper's sec 4.1) is 0.0052 mm.
   double sensor_blur_sigma_mm = 0.0;
+  // One more projection after the last update, for MartResult::final_residual (~7 % of a 5-iteration
+  // paper-scale reconstruction). Off where nothing reads it (process::process_pair); the volume is
+  // the same either way.
+  bool final_residual = true;
 };
 // A Gaussian wider than this is no sensor blur (the paper's lens images are 0.125 mm across).
 inline constexpr double kMaxSensorBlurSigmaMm = 0.05;
@@ -93,7 +97,8 @@ struct MartResult {
   Volume volume;
   SkipReport skipped;
   std::vector<IterationReport> iterations;
-  double final_residual = 0;   // after the last update
+  // ||I - W E|| / ||I|| after the last update; empty when MartSettings::final_residual is off.
+  std::optional<double> final_residual;
   bool converged = false;
   double setup_seconds = 0;    // active set and start
   // The setup's parts (wall seconds): choosing the active voxels, grouping them for the kernels

@@ -302,14 +302,15 @@ TEST_F(Mart, QualityRisesWithIterations) {
     s.iterations = iterations;
     const MartResult r = reconstruct(*op_, image, s);
     const double q = quality_factor(r.volume, exact);
+    ASSERT_TRUE(r.final_residual);
     std::cout << "measured: Q* after " << iterations << " iterations " << q << ", residual "
-              << r.final_residual << "\n";
+              << *r.final_residual << "\n";
     // Measured (own forward operator, so an optimistic case until the simulator lands): Q* 0.897,
     // 0.963, 0.990 after 1, 5, 20 iterations.
     EXPECT_GT(q, previous) << iterations << " iterations";
     previous = q;
     ASSERT_FALSE(r.iterations.empty());
-    EXPECT_LE(r.final_residual, r.iterations.front().residual);
+    EXPECT_LE(*r.final_residual, r.iterations.front().residual);
   }
   EXPECT_GT(previous, 0.95);
 }
@@ -325,10 +326,12 @@ TEST_F(Mart, AccelerationConvergesFasterPerIteration) {
     s.accelerate = accelerate;
     const MartResult r = reconstruct(*op_, image, s);
     const double q = quality_factor(r.volume, exact);
+    EXPECT_TRUE(r.final_residual);
+    const double residual = r.final_residual.value_or(1.0);
     std::cout << "measured: " << iterations << (accelerate ? " accelerated" : " plain") << " iterations: Q* " << q
-              << ", residual " << r.final_residual << "\n";
+              << ", residual " << residual << "\n";
     EXPECT_TRUE(all_finite_bounded(r.volume, 1e30f));
-    return std::pair{q, r.final_residual};
+    return std::pair{q, residual};
   };
   const auto [q4, res4] = run(4, false);
   const auto [q10, res10] = run(10, false);
@@ -460,6 +463,27 @@ TEST_F(Mart, ConvergenceStopEndsEarly) {
   EXPECT_LT(r.iterations.size(), 200u);
 }
 
+// Without the final residual's projection the volume is the same, only the report is missing.
+TEST_F(Mart, FinalResidualOffLeavesTheVolumeAsItWas) {
+  const ImageF image = project_image(*op_, truth(), 1000.f);
+  for (bool accelerate : {false, true}) {
+    MartSettings s;
+    s.iterations = 4;
+    s.accelerate = accelerate;
+    const MartResult with = reconstruct(*op_, image, s);
+    s.final_residual = false;
+    const MartResult without = reconstruct(*op_, image, s);
+    ASSERT_TRUE(with.final_residual);
+    EXPECT_GT(*with.final_residual, 0.0);
+    EXPECT_FALSE(without.final_residual);
+    EXPECT_EQ(with.volume.data, without.volume.data) << "accelerated " << accelerate;
+    ASSERT_EQ(with.iterations.size(), without.iterations.size());
+    for (std::size_t k = 0; k < with.iterations.size(); ++k) {
+      EXPECT_EQ(with.iterations[k].residual, without.iterations[k].residual);
+    }
+  }
+}
+
 // Parameters: accelerated; the sensor blur's sigma, mm.
 class MartStable : public Mart, public ::testing::WithParamInterface<std::tuple<bool, double>> {};
 
@@ -479,7 +503,8 @@ TEST_P(MartStable, OnExtremeInputs) {
   {  // saturated 16-bit
     const MartResult r = reconstruct(*op_, ImageF(850, 850, 65535.f), s);
     EXPECT_TRUE(all_finite_bounded(r.volume, bound));
-    EXPECT_TRUE(std::isfinite(r.final_residual));
+    ASSERT_TRUE(r.final_residual);
+    EXPECT_TRUE(std::isfinite(*r.final_residual));
   }
   {  // one hot pixel on a blob image
     ImageF image = project_image(*op_, exact, 1000.f);
