@@ -88,7 +88,9 @@ TEST(SimTrigger, RealTimePlaybackStopsWithAllLinesLow) {
   EXPECT_THROW(t->start(1), StateError);
   auto shot = t->next_shot(500ms);
   ASSERT_TRUE(shot);
-  std::this_thread::sleep_for(60ms);
+  // Stop in the middle of the playback, once two double pulses have completed (polled for up to
+  // 0.5 s rather than a fixed sleep of 60 ms: under load the playback thread may be late).
+  for (int i = 0; i < 500 && t->counters().shots_fired < 2; ++i) std::this_thread::sleep_for(1ms);
   t->stop();
   // The measured dt is what really happened (a late Q-switch 1 shortens it), and agrees with the
   // times the edges were actually written.
