@@ -326,6 +326,7 @@ std::size_t MartWorkspace::bytes() const {
     total += v->capacity() * sizeof(float);
   }
   total += b.kernels.scaled.capacity() * sizeof(float) + b.kernels.sums.capacity() * sizeof(double);
+  total += (b.kernels.band_lanes.capacity() + b.kernels.image_lanes.capacity()) * sizeof(float);
   total += b.select.dark.capacity() * sizeof(std::uint64_t);
   for (const auto& slice : b.select.per_slice) total += slice.capacity() * sizeof(std::uint32_t);
   return total;
