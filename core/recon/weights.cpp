@@ -237,6 +237,11 @@ struct ColumnJob {
   const float* w;
   std::size_t n;
 };
+// The job of voxel column x of slice `t` reaching the band rows `rows`, its sums not yet set.
+ColumnJob x_job(const SliceTables& t, int x, const std::uint64_t* rows) {
+  const std::size_t q0 = t.x_quad_start[std::size_t(x)], q1 = t.x_quad_start[std::size_t(x) + 1];
+  return ColumnJob{{nullptr, nullptr}, rows, t.x_quad_first.data() + q0, t.x_quad_weights.data() + kQuad * q0, q1 - q0};
+}
 
 // The x stages work on images in "row lanes": each block of kSubRows sensor rows stored column
 // by column, the block's kSubRows pixels of one column side by side, so pixel (r, c) is at
@@ -983,17 +988,14 @@ void ActiveSet::project(const WeightingOperator& op, std::span<const float> valu
           }
         }
       }
-      // Stage 2: image(row, ·) += G(row) Ax, once per row the column reaches (resets those
-      // rows), kSubRows rows at a time for all the chunk's visits, so the pixels they share stay
+      // Stage 2: lanes(row, ·) += G(row) Ax over each 16-row block the column reaches (resets
+      // G there), one block at a time for all the chunk's visits, so the pixels they share stay
       // in L1. Every pixel still gets its visits' additions in visiting order.
       std::array<ColumnJob, kChunk> jobs;
       for (std::size_t v = c0; v < c1; ++v) {
-        const Visit& visit = visits_[v];
-        const Column& col = columns_[visit.column];
-        const SliceTables& t = op.slice(col.z);
-        const std::size_t q0 = t.x_quad_start[std::size_t(col.x)], q1 = t.x_quad_start[std::size_t(col.x) + 1];
-        jobs[v - c0] = ColumnJob{{padded_sums[v - c0].data() + kQuad, nullptr}, visit.rows.data(), t.x_quad_first.data() + q0,
-                                 t.x_quad_weights.data() + kQuad * q0, q1 - q0};
+        const Column& col = columns_[visits_[v].column];
+        jobs[v - c0] = x_job(op.slice(col.z), col.x, visits_[v].rows.data());
+        jobs[v - c0].sums[0] = padded_sums[v - c0].data() + kQuad;
       }
       add_columns(lanes, width, kRowWords, jobs.data(), int(c1 - c0));
       for (std::size_t v = c0; v < c1; ++v) {
@@ -1073,18 +1075,14 @@ void ActiveSet::back_project_images(const WeightingOperator& op, const std::arra
         for (std::size_t i = 0; i < N; ++i) {
           for (std::size_t v = v0; v < v1; ++v) padded_sums[i][v - v0].fill(0.f);
         }
-        // Stage 1: B(row) = Σ_col Ax(col) r(row, col), once per reached row, kSubRows rows at a
-        // time for all the chunk's visits, so the pixels they share stay in L1.
+        // Stage 1: B(row) = Σ_col Ax(col) r(row, col) over each 16-row block the column reaches
+        // (its unreached rows kept 0), one block at a time for all the chunk's visits, so the
+        // pixels they share stay in L1.
         std::array<ColumnJob, kChunk> jobs;
         for (std::size_t v = v0; v < v1; ++v) {
-          const Visit& visit = visits_[v];
-          const Column& col = columns_[visit.column];
-          const SliceTables& t = op.slice(col.z);
-          const std::size_t q0 = t.x_quad_start[std::size_t(col.x)], q1 = t.x_quad_start[std::size_t(col.x) + 1];
-          ColumnJob& j = jobs[v - v0];
-          j = ColumnJob{{nullptr, nullptr}, visit.rows.data(), t.x_quad_first.data() + q0, t.x_quad_weights.data() + kQuad * q0,
-                        q1 - q0};
-          for (std::size_t i = 0; i < N; ++i) j.sums[i] = padded_sums[i][v - v0].data() + kQuad;
+          const Column& col = columns_[visits_[v].column];
+          jobs[v - v0] = x_job(op.slice(col.z), col.x, visits_[v].rows.data());
+          for (std::size_t i = 0; i < N; ++i) jobs[v - v0].sums[i] = padded_sums[i][v - v0].data() + kQuad;
         }
         std::array<const float*, N> bands;
         for (std::size_t i = 0; i < N; ++i) bands[i] = workspace.image_lanes.data() + i * image_size + std::size_t(r0) * width;
