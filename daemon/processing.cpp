@@ -23,7 +23,7 @@ ImageF to_float(const ImageU16& image) {
   return out;
 }
 
-// MART's buffers (recon::MartWorkspace, ~0.4 GB each on the paper case) kept from pair to pair of
+// MART's buffers (recon::MartWorkspace, ~0.6 GB each on the paper case) kept from pair to pair of
 // a run: a pair takes a free one (or a new one when all are in use, so there are as many as pairs
 // were ever in flight at once) and gives it back when done, also when processing fails. Not per
 // thread: a TBB thread waiting inside one pair's reconstruction may run another pair's.

@@ -116,7 +116,7 @@ struct MartBuffers;
 
 // The buffers of one reconstruction: the thresholded image, ln I, the projection and log-ratio
 // images, the per-voxel arrays, the active-set selection's scratch and the kernels' workspace
-// (~0.4 GB on the paper case). A caller that reconstructs frame after frame (core/process: frame A
+// (~0.6 GB on the paper case). A caller that reconstructs frame after frame (core/process: frame A
 // then B; the daemon and `plenopiv process --run`: pair after pair) keeps one, so that later
 // frames neither allocate these buffers nor page-fault and zero them again (docs/recon.md, "Buffers
 // kept across frames").
