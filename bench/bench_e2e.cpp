@@ -4,10 +4,13 @@
 // of the knobs on the reduced case with its Pareto front.
 //
 //   bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate]
-//             [--dark-cutoff F] [--z-centre MM]
+//             [--dark-cutoff F] [--intensity-threshold K] [--z-centre MM]
 //     --iterations/--mu/--accelerate/--dark-cutoff: MART for the headline rows (default the
 //              paper's 5 at mu 0.5, not accelerated, MartSettings' dark-pixel cutoff; the sweep's
 //              rows still start from the paper's settings).
+//     --intensity-threshold: the correlation's ghost floor for the headline rows, times each
+//              volume's mean (default 0, the paper's correlation); they then also print the
+//              correlation without it on the same volumes.
 //     --z-centre: depth of the volume's (and the ring's) centre, mm (default 0: the focal plane).
 //   Every RMS is given over all vectors and, as off_axis_band_*, over the vectors whose final
 //   window (16 voxels: half-width 1 mm) does not reach the ring's axis, |x - x_c| and |z - z_c|
@@ -114,6 +117,7 @@ int main(int argc, char** argv) {
   bool accelerate = false;
   double mu = 0.5, z_centre = 0.0, dark_cutoff = recon::MartSettings{}.dark_weight_cutoff;
   double sensor_blur_mm = recon::MartSettings{}.sensor_blur_sigma_mm;
+  double intensity_threshold = piv::CorrelationSettings{}.intensity_threshold_of_mean;
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--no-sweep")) sweep = false;
     else if (!std::strcmp(argv[i], "--rays") && i + 1 < argc) rays = std::stoul(argv[++i]);
@@ -123,12 +127,14 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--z-centre") && i + 1 < argc) z_centre = std::stod(argv[++i]);
     else if (!std::strcmp(argv[i], "--dark-cutoff") && i + 1 < argc) dark_cutoff = std::stod(argv[++i]);
     else if (!std::strcmp(argv[i], "--sensor-blur-mm") && i + 1 < argc) sensor_blur_mm = std::stod(argv[++i]);
+    else if (!std::strcmp(argv[i], "--intensity-threshold") && i + 1 < argc) intensity_threshold = std::stod(argv[++i]);
     else scale = argv[i];
   }
   if (sweep && (iterations != 5 || mu != 0.5 || accelerate || z_centre != 0.0 ||
                 dark_cutoff != recon::MartSettings{}.dark_weight_cutoff ||
-                sensor_blur_mm != recon::MartSettings{}.sensor_blur_sigma_mm)) {
-    std::fprintf(stderr, "bench_e2e: --iterations/--mu/--accelerate/--dark-cutoff/--sensor-blur-mm/--z-centre change the "
+                sensor_blur_mm != recon::MartSettings{}.sensor_blur_sigma_mm ||
+                intensity_threshold != piv::CorrelationSettings{}.intensity_threshold_of_mean)) {
+    std::fprintf(stderr, "bench_e2e: --iterations/--mu/--accelerate/--dark-cutoff/--sensor-blur-mm/--intensity-threshold/--z-centre change the "
                          "headline rows only; use them with --no-sweep\n");
     return 2;
   }
@@ -137,7 +143,7 @@ int main(int argc, char** argv) {
   const bool mid = scale == "mid";
   const bool full = scale == "full" || mid;
   if (!full && scale != "reduced") {
-    std::fprintf(stderr, "usage: bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate] [--dark-cutoff F] [--sensor-blur-mm S] [--z-centre MM]\n");
+    std::fprintf(stderr, "usage: bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate] [--dark-cutoff F] [--sensor-blur-mm S] [--intensity-threshold K] [--z-centre MM]\n");
     return 2;
   }
   const std::string dir = std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/";
@@ -155,6 +161,7 @@ int main(int argc, char** argv) {
   settings.mart.accelerate = accelerate;
   settings.mart.dark_weight_cutoff = dark_cutoff;
   settings.mart.sensor_blur_sigma_mm = sensor_blur_mm;
+  settings.correlation.intensity_threshold_of_mean = intensity_threshold;
 
   sim::RingVortexFlow::Parameters rv;
   rv.voxel_mm = voxel;
@@ -194,10 +201,10 @@ int main(int argc, char** argv) {
   const auto base = process::process_pair(op, a, b, settings);
   const Errors e = errors_against(base.correlation.field, flow, voxel);
   std::printf("bench=e2e case=%s variant=reconstructed iterations=%d mu=%.2f accelerate=%d dark_cutoff=%.3g sensor_blur_mm=%.4g "
-              "recon_a_s=%.2f recon_b_s=%.2f "
+              "intensity_threshold=%.3g recon_a_s=%.2f recon_b_s=%.2f "
               "correlate_s=%.2f skipped_a=%.3f skipped_b=%.3f rms_u=%.3f rms_v=%.3f rms_w=%.3f rms=%.3f valid=%.3f "
               "off_axis_band_rms_u=%.3f off_axis_band_rms_v=%.3f off_axis_band_rms_w=%.3f peak_rss_gb=%.2f\n",
-              scale.c_str(), iterations, mu, int(accelerate), dark_cutoff, sensor_blur_mm, base.times.reconstruct_a_s, base.times.reconstruct_b_s, base.times.correlate_s,
+              scale.c_str(), iterations, mu, int(accelerate), dark_cutoff, sensor_blur_mm, intensity_threshold, base.times.reconstruct_a_s, base.times.reconstruct_b_s, base.times.correlate_s,
               base.skipped_a.fraction_skipped(), base.skipped_b.fraction_skipped(), e.rms[0], e.rms[1], e.rms[2],
               e.total, e.valid_fraction, e.off_band[0], e.off_band[1], e.off_band[2], peak_rss_gb());
 
@@ -224,7 +231,11 @@ int main(int argc, char** argv) {
     piv::CorrelationSettings centre3 = previous;
     centre3.predictor = piv::PredictorBase::centre;
     centre3.predictor_smoothing = 1;
-    for (const Variant& v : {Variant{"previous_default_3pass_window_mean", previous}, Variant{"centre_3pass", centre3}}) {
+    // The ghost floor toggled: off when the headline has it, 4 (measured best) when not.
+    piv::CorrelationSettings toggled = settings.correlation;
+    toggled.intensity_threshold_of_mean = intensity_threshold > 0 ? 0.0 : 4.0;
+    for (const Variant& v : {Variant{intensity_threshold > 0 ? "no_intensity_threshold" : "intensity_threshold_4", toggled},
+                             Variant{"previous_default_3pass_window_mean", previous}, Variant{"centre_3pass", centre3}}) {
       for (bool recon : {true, false}) {
         t = now_s();
         const auto r = recon ? piv::correlate_volumes(base.volume_a, base.volume_b, v.c)
@@ -359,6 +370,17 @@ int main(int argc, char** argv) {
     const double cs = now_s() - t;
     const Errors er = errors_against(r.field, flow, voxel);
     rows.push_back({"passes", 5, passes, 16, 0.5, recon_s + cs, er.total, er});
+  }
+  for (double k : {2.0, 4.0, 8.0}) {
+    piv::CorrelationSettings c = settings.correlation;
+    c.intensity_threshold_of_mean = k;
+    t = now_s();
+    const auto r = piv::correlate_volumes(base.volume_a, base.volume_b, c);
+    const double cs = now_s() - t;
+    const Errors er = errors_against(r.field, flow, voxel);
+    Row row{"intensity_threshold", 5, np, 16, 0.5, recon_s + cs, er.total, er};
+    row.value = std::to_string(int(k));
+    rows.push_back(row);
   }
   for (const Row& r : rows) {
     bool dominated = false;

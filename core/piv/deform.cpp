@@ -316,6 +316,28 @@ void binomial_smooth(std::span<const float> in, const std::array<int, 3>& shape,
   }
 }
 
+float subtract_mean_floor(std::span<const float> in, const std::array<int, 3>& shape, double multiple,
+                          std::span<float> out) {
+  const std::size_t slice = std::size_t(shape[0]) * std::size_t(shape[1]);
+  std::vector<double> slice_sums(std::size_t(shape[2]), 0.0);
+  tbb::parallel_for(tbb::blocked_range<int>(0, shape[2]), [&](const tbb::blocked_range<int>& r) {
+    for (int z = r.begin(); z < r.end(); ++z) {
+      double s = 0;
+      for (std::size_t i = std::size_t(z) * slice, end = i + slice; i < end; ++i) s += in[i];
+      slice_sums[std::size_t(z)] = s;
+    }
+  });
+  double total = 0;
+  for (double s : slice_sums) total += s;
+  const std::size_t n = slice * std::size_t(shape[2]);
+  const float floor = n > 0 ? float(multiple * total / double(n)) : 0.f;
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, std::size_t(1) << 16),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      for (std::size_t i = r.begin(); i != r.end(); ++i) out[i] = std::max(0.f, in[i] - floor);
+                    });
+  return floor;
+}
+
 void deform_pair(std::span<const float> a, std::span<const float> b,
                  const std::array<int, 3>& shape, const NodeField& predictor,
                  std::span<float> a_out, std::span<float> b_out) {

@@ -62,6 +62,15 @@ float sample_sinc7(std::span<const float> volume, const std::array<int, 3>& shap
 void binomial_smooth(std::span<const float> in, const std::array<int, 3>& shape,
                      std::span<float> out, std::span<float> scratch);
 
+// out = max(0, in - multiple * mean(in)): every voxel loses a floor proportional to the volume's
+// mean intensity, and what lies below it becomes zero. Why (CorrelationSettings::
+// intensity_threshold_of_mean): a reconstruction's ghost intensity is a faint haze along lines of
+// sight that barely moves between the exposures and pulls the depth displacement toward zero; the
+// particles stand well above it. Returns the floor subtracted. The mean is summed per z-slice in
+// parallel and the slices in order: the same bits at any thread count. `in` and `out` may alias.
+float subtract_mean_floor(std::span<const float> in, const std::array<int, 3>& shape, double multiple,
+                          std::span<float> out);
+
 // Symmetric deformation (Scarano & Poelma's VODIM): with d the predictor at voxel x,
 // a_out(x) = a(x - d/2) and b_out(x) = b(x + d/2), so a particle displaced by d appears at the
 // same place in both outputs. Parallel over z-slices (TBB); deterministic.

@@ -191,12 +191,25 @@ CorrelationResult correlate_volumes(const Volume& a, const Volume& b,
   std::vector<float> smoothed_a, smoothed_b, deformed_a, deformed_b;
   const std::vector<float>* input_a = &a.data;
   const std::vector<float>* input_b = &b.data;
+  if (settings.intensity_threshold_of_mean > 0) {
+    // Floored copies, in the deformed buffers (unused until pass 2) when the prefilter follows.
+    std::vector<float>& floored_a = settings.prefilter ? deformed_a : smoothed_a;
+    std::vector<float>& floored_b = settings.prefilter ? deformed_b : smoothed_b;
+    floored_a.resize(a.data.size());
+    floored_b.resize(b.data.size());
+    subtract_mean_floor(a.data, shape, settings.intensity_threshold_of_mean, floored_a);
+    subtract_mean_floor(b.data, shape, settings.intensity_threshold_of_mean, floored_b);
+    input_a = &floored_a;
+    input_b = &floored_b;
+  }
   if (settings.prefilter) {
     smoothed_a.resize(a.data.size());
     smoothed_b.resize(b.data.size());
-    deformed_a.resize(a.data.size());  // scratch here, deformed volumes later
-    binomial_smooth(a.data, shape, smoothed_a, deformed_a);
-    binomial_smooth(b.data, shape, smoothed_b, deformed_a);
+    deformed_a.resize(a.data.size());
+    // The smoothing needs one scratch volume: smoothed_b while A is smoothed, then deformed_a
+    // (A's floored copy, if any, is read by then).
+    binomial_smooth(*input_a, shape, smoothed_a, smoothed_b);
+    binomial_smooth(*input_b, shape, smoothed_b, deformed_a);
     input_a = &smoothed_a;
     input_b = &smoothed_b;
   }

@@ -26,6 +26,9 @@ void check(const CorrelationSettings& s, const std::string& source) {
   if (s.predictor_smoothing < 0 || s.predictor_smoothing > 4)
     fail("predictor_smoothing: must be 0 to 4, got " + std::to_string(s.predictor_smoothing));
   if (!(s.signal_threshold >= 0)) fail("signal_threshold: must be >= 0");
+  if (!(s.intensity_threshold_of_mean >= 0 && s.intensity_threshold_of_mean <= 100))
+    fail("intensity_threshold_of_mean: must be in [0, 100] (times the volume's mean), got " +
+         std::to_string(s.intensity_threshold_of_mean));
   if (!(s.dt_s > 0)) fail("dt_s: must be > 0, got " + std::to_string(s.dt_s));
 }
 
@@ -68,7 +71,7 @@ std::vector<PassSettings> parse_passes(const std::string& text) {
 
 CorrelationSettings correlation_settings_from(const YamlMap& root) {
   root.reject_unknown({"passes", "median", "signal_threshold", "dt_s", "fft_planning", "prefilter",
-                      "predictor", "predictor_smoothing"});
+                      "predictor", "predictor_smoothing", "intensity_threshold_of_mean"});
   CorrelationSettings s;
   if (root.has("passes")) {
     const YAML::Node list = root.node()["passes"];
@@ -107,6 +110,7 @@ CorrelationSettings correlation_settings_from(const YamlMap& root) {
   s.fft_planning = root.choice_or("fft_planning", {"estimate", "measure"}, "estimate") == "measure"
                        ? FftPlanning::measure
                        : FftPlanning::estimate;
+  s.intensity_threshold_of_mean = root.number_or("intensity_threshold_of_mean", s.intensity_threshold_of_mean);
   s.prefilter = root.boolean_or("prefilter", s.prefilter);
   s.predictor = root.choice_or("predictor", {"centre", "window_mean"}, "centre") == "centre"
                     ? PredictorBase::centre
