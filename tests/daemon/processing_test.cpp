@@ -19,7 +19,8 @@ const std::string kConfig =
     "reconstruction: {iterations: 3, mu: 1}\n"
     // Two passes: the predictor of the first removes the loss-of-pairs bias of a single pass
     // (measured with one 8^3 pass: mean dx 0.2250 mm; with 16^3 then 8^3: 0.2504 mm).
-    "correlation: {passes: [{window: 16, overlap_percent: 50}, {window: 8, overlap_percent: 50}]}\n";
+    "correlation: {passes: [{window: 16, overlap_percent: 50}, {window: 8, overlap_percent: 50}],\n"
+    "              intensity_threshold_of_mean: 4}\n";
 
 TEST(Processing, UniformDisplacementOfARayTracedPairComesBack) {
   const optics::CameraModel camera =
