@@ -8,8 +8,10 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <span>
 #include <sstream>
 
+#include "core/base/big_buffer.hpp"
 #include "core/base/errors.hpp"
 #include "core/piv/deform.hpp"
 #include "core/piv/fft_correlator.hpp"
@@ -80,7 +82,7 @@ Layout layout_of(const PassSettings& p, const std::array<int, 3>& shape) {
 // Correlates every window of `va` with the same window of `vb`; a window's candidates are the
 // predictor (at its centre, or its mean over the window: settings.hpp, PredictorBase) plus each
 // correlation peak.
-Candidates correlate_windows(const std::vector<float>& va, const std::vector<float>& vb,
+Candidates correlate_windows(std::span<const float> va, std::span<const float> vb,
                              const std::array<int, 3>& shape, const Layout& l,
                              const NodeField* predictor, float signal_threshold,
                              FftPlanning planning, bool at_centre, std::vector<float>& ratio) {
@@ -188,19 +190,20 @@ CorrelationResult correlate_volumes(const Volume& a, const Volume& b,
                                     const std::function<void(const PassReport&)>& on_pass) {
   check_inputs(a, b, settings);
   const std::array<int, 3> shape = a.grid.shape;
-  std::vector<float> smoothed_a, smoothed_b, deformed_a, deformed_b;
-  const std::vector<float>* input_a = &a.data;
-  const std::vector<float>* input_b = &b.data;
+  // Volume-sized copies (4 x 48 MB on the paper's grid), neither zeroed nor kept: each is written
+  // in full before it is read.
+  BigBuffer<float> smoothed_a, smoothed_b, deformed_a, deformed_b;
+  std::span<const float> input_a = a.data, input_b = b.data;
   if (settings.intensity_threshold_of_mean > 0) {
     // Floored copies, in the deformed buffers (unused until pass 2) when the prefilter follows.
-    std::vector<float>& floored_a = settings.prefilter ? deformed_a : smoothed_a;
-    std::vector<float>& floored_b = settings.prefilter ? deformed_b : smoothed_b;
+    BigBuffer<float>& floored_a = settings.prefilter ? deformed_a : smoothed_a;
+    BigBuffer<float>& floored_b = settings.prefilter ? deformed_b : smoothed_b;
     floored_a.resize(a.data.size());
     floored_b.resize(b.data.size());
     subtract_mean_floor(a.data, shape, settings.intensity_threshold_of_mean, floored_a);
     subtract_mean_floor(b.data, shape, settings.intensity_threshold_of_mean, floored_b);
-    input_a = &floored_a;
-    input_b = &floored_b;
+    input_a = floored_a;
+    input_b = floored_b;
   }
   if (settings.prefilter) {
     smoothed_a.resize(a.data.size());
@@ -208,10 +211,10 @@ CorrelationResult correlate_volumes(const Volume& a, const Volume& b,
     deformed_a.resize(a.data.size());
     // The smoothing needs one scratch volume: smoothed_b while A is smoothed, then deformed_a
     // (A's floored copy, if any, is read by then).
-    binomial_smooth(*input_a, shape, smoothed_a, smoothed_b);
-    binomial_smooth(*input_b, shape, smoothed_b, deformed_a);
-    input_a = &smoothed_a;
-    input_b = &smoothed_b;
+    binomial_smooth(input_a, shape, smoothed_a, smoothed_b);
+    binomial_smooth(input_b, shape, smoothed_b, deformed_a);
+    input_a = smoothed_a;
+    input_b = smoothed_b;
   }
   NodeField predictor;
   bool have_predictor = false;
@@ -230,19 +233,18 @@ CorrelationResult correlate_volumes(const Volume& a, const Volume& b,
     report.vectors = layout.count;
 
     auto t0 = Clock::now();
-    const std::vector<float>* va = input_a;
-    const std::vector<float>* vb = input_b;
+    std::span<const float> va = input_a, vb = input_b;
     if (have_predictor) {
       deformed_a.resize(a.data.size());
       deformed_b.resize(b.data.size());
-      deform_pair(*input_a, *input_b, shape, predictor, deformed_a, deformed_b);
-      va = &deformed_a;
-      vb = &deformed_b;
+      deform_pair(input_a, input_b, shape, predictor, deformed_a, deformed_b);
+      va = deformed_a;
+      vb = deformed_b;
     }
     report.deform_s = seconds_since(t0);
 
     t0 = Clock::now();
-    last = correlate_windows(*va, *vb, shape, layout, have_predictor ? &predictor : nullptr,
+    last = correlate_windows(va, vb, shape, layout, have_predictor ? &predictor : nullptr,
                              settings.signal_threshold, settings.fft_planning,
                              settings.predictor == PredictorBase::centre, ratio);
     report.correlate_s = seconds_since(t0);

@@ -14,7 +14,7 @@
 #include "core/base/image.hpp"
 #include "core/optics/camera_model.hpp"
 #include "core/optics/microlens_array.hpp"
-#include "core/recon/big_buffer.hpp"
+#include "core/base/big_buffer.hpp"
 
 namespace plenopiv::recon {
 

@@ -1,5 +1,5 @@
-// Large scratch arrays of the reconstruction (per-pixel images, band entries, per-voxel sums):
-// not zeroed when allocated, and on transparent huge pages where the kernel offers them.
+// Large scratch arrays (the reconstruction's images and per-voxel sums, the correlation's volume
+// copies): not zeroed when allocated, and on transparent huge pages where the kernel offers them.
 #pragma once
 
 #include <sys/mman.h>
@@ -10,7 +10,7 @@
 #include <utility>
 #include <vector>
 
-namespace plenopiv::recon {
+namespace plenopiv {
 
 // An allocator for std::vector whose elements are default-initialised (a float is left as it is:
 // every user writes these arrays before reading them, so zeroing 64 MB first is wasted work done
@@ -60,4 +60,4 @@ struct BigBufferAllocator {
 template <typename T>
 using BigBuffer = std::vector<T, BigBufferAllocator<T>>;
 
-}  // namespace plenopiv::recon
+}  // namespace plenopiv
