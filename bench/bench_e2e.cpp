@@ -4,10 +4,13 @@
 // of the knobs on the reduced case with its Pareto front.
 //
 //   bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate]
-//             [--dark-cutoff F] [--intensity-threshold K] [--z-centre MM]
+//             [--dark-cutoff F] [--intensity-threshold K] [--steady] [--time-sweep] [--z-centre MM]
 //     --iterations/--mu/--accelerate/--dark-cutoff: MART for the headline rows (default the
 //              paper's 5 at mu 0.5, not accelerated, MartSettings' dark-pixel cutoff; the sweep's
 //              rows still start from the paper's settings).
+//     --time-sweep: MART iterations and the ghost floor against time per pair at this scale (with
+//              --no-sweep; eight pairs in a kept workspace; rows marked pareto= for plot_e2e.py).
+//     --steady: the headline pair once more in the kept MART workspace (time per pair in a run).
 //     --intensity-threshold: the correlation's ghost floor for the headline rows, times each
 //              volume's mean (default 0, the paper's correlation); they then also print the
 //              correlation without it on the same volumes.
@@ -97,6 +100,18 @@ void print_row(const char* scale, const Row& r, bool pareto) {
               pareto ? "yes" : "no");
 }
 
+// Every row, marked pareto=yes where no other row is both faster and more accurate.
+void print_pareto(const char* scale, const std::vector<Row>& rows) {
+  for (const Row& r : rows) {
+    bool dominated = false;
+    for (const Row& o : rows)
+      if (&o != &r && o.seconds <= r.seconds && o.rms_total <= r.rms_total &&
+          (o.seconds < r.seconds || o.rms_total < r.rms_total))
+        dominated = true;
+    print_row(scale, r, !dominated);
+  }
+}
+
 // Coarse to fine ending at `final` voxels, 75 % overlap after the first pass (50 %).
 std::vector<piv::PassSettings> passes_to(int final, int count) {
   std::vector<piv::PassSettings> p;
@@ -118,6 +133,7 @@ int main(int argc, char** argv) {
   double mu = 0.5, z_centre = 0.0, dark_cutoff = recon::MartSettings{}.dark_weight_cutoff;
   double sensor_blur_mm = recon::MartSettings{}.sensor_blur_sigma_mm;
   double intensity_threshold = piv::CorrelationSettings{}.intensity_threshold_of_mean;
+  bool steady = false, time_sweep = false;
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--no-sweep")) sweep = false;
     else if (!std::strcmp(argv[i], "--rays") && i + 1 < argc) rays = std::stoul(argv[++i]);
@@ -128,6 +144,8 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--dark-cutoff") && i + 1 < argc) dark_cutoff = std::stod(argv[++i]);
     else if (!std::strcmp(argv[i], "--sensor-blur-mm") && i + 1 < argc) sensor_blur_mm = std::stod(argv[++i]);
     else if (!std::strcmp(argv[i], "--intensity-threshold") && i + 1 < argc) intensity_threshold = std::stod(argv[++i]);
+    else if (!std::strcmp(argv[i], "--steady")) steady = true;
+    else if (!std::strcmp(argv[i], "--time-sweep")) time_sweep = true;
     else scale = argv[i];
   }
   if (sweep && (iterations != 5 || mu != 0.5 || accelerate || z_centre != 0.0 ||
@@ -143,7 +161,7 @@ int main(int argc, char** argv) {
   const bool mid = scale == "mid";
   const bool full = scale == "full" || mid;
   if (!full && scale != "reduced") {
-    std::fprintf(stderr, "usage: bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate] [--dark-cutoff F] [--sensor-blur-mm S] [--intensity-threshold K] [--z-centre MM]\n");
+    std::fprintf(stderr, "usage: bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate] [--dark-cutoff F] [--sensor-blur-mm S] [--intensity-threshold K] [--steady] [--time-sweep] [--z-centre MM]\n");
     return 2;
   }
   const std::string dir = std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/";
@@ -198,7 +216,8 @@ int main(int argc, char** argv) {
               settings.grid.count(), render_s, weights_s);
 
   // The paper's settings: reconstruction and correlation, stage by stage.
-  const auto base = process::process_pair(op, a, b, settings);
+  recon::MartWorkspace workspace;  // kept for --steady
+  const auto base = process::process_pair(op, a, b, settings, {}, &workspace);
   const Errors e = errors_against(base.correlation.field, flow, voxel);
   std::printf("bench=e2e case=%s variant=reconstructed iterations=%d mu=%.2f accelerate=%d dark_cutoff=%.3g sensor_blur_mm=%.4g "
               "intensity_threshold=%.3g recon_a_s=%.2f recon_b_s=%.2f "
@@ -207,6 +226,32 @@ int main(int argc, char** argv) {
               scale.c_str(), iterations, mu, int(accelerate), dark_cutoff, sensor_blur_mm, intensity_threshold, base.times.reconstruct_a_s, base.times.reconstruct_b_s, base.times.correlate_s,
               base.skipped_a.fraction_skipped(), base.skipped_b.fraction_skipped(), e.rms[0], e.rms[1], e.rms[2],
               e.total, e.valid_fraction, e.off_band[0], e.off_band[1], e.off_band[2], peak_rss_gb());
+
+  if (steady) {
+    // The same pair again in the kept MART workspace: what each pair costs in a run of many
+    // (the daemon and `plenopiv process --run` keep one per pair in flight).
+    std::vector<std::pair<std::string, double>> marks;
+    const double t_again = now_s();
+    const auto again = process::process_pair(op, a, b, settings,
+                                             [&](const std::string& stage, double) { marks.emplace_back(stage, now_s() - t_again); },
+                                             &workspace);
+    // Per stage: seconds to the first progress mark (set-up and one iteration), then per iteration.
+    std::string steps;
+    for (std::size_t i = 0; i < marks.size(); ++i) {
+      char item[64];
+      std::snprintf(item, sizeof item, "%s%.2f", i ? "," : "", marks[i].second - (i ? marks[i - 1].second : 0.0));
+      steps += item;
+    }
+    std::printf("bench=e2e case=%s steady_state_marks_s=%s\n", scale.c_str(), steps.c_str());
+    std::printf("bench=e2e case=%s variant=steady_state recon_a_s=%.2f recon_b_s=%.2f correlate_s=%.2f pair_s=%.2f "
+                "first_pair_s=%.2f same_field=%d\n",
+                scale.c_str(), again.times.reconstruct_a_s, again.times.reconstruct_b_s, again.times.correlate_s,
+                again.times.reconstruct_a_s + again.times.reconstruct_b_s + again.times.correlate_s,
+                base.times.reconstruct_a_s + base.times.reconstruct_b_s + base.times.correlate_s,
+                int(again.correlation.field.dz_mm == base.correlation.field.dz_mm &&
+                    again.correlation.field.dx_mm == base.correlation.field.dx_mm));
+    std::fflush(stdout);
+  }
 
   // Baseline: exact-particle volumes through the same correlation (as the paper did).
   t = now_s();
@@ -249,6 +294,38 @@ int main(int argc, char** argv) {
       }
     }
     std::fflush(stdout);
+  }
+  if (time_sweep) {
+    // Time against error at this scale: MART iterations and the ghost floor, every pair in the kept
+    // workspace (as in a run of many pairs), so no row pays the first pair's allocations.
+    struct Setting {
+      const char* name;
+      int iterations;
+      double mu;
+      bool accelerate;
+      double floor;
+    };
+    std::vector<Row> rows;
+    const int np = int(settings.correlation.passes.size());
+    for (const Setting& st : {Setting{"paper_5_it_mu_0.5", 5, 0.5, false, 0}, Setting{"7_acc_floor_4", 7, 1, true, 4},
+                              Setting{"9_acc_floor_5", 9, 1, true, 5}, Setting{"10_acc", 10, 1, true, 0},
+                              Setting{"10_acc_floor_4", 10, 1, true, 4},
+                              Setting{"14_acc_floor_4", 14, 1, true, 4}, Setting{"20_acc", 20, 1, true, 0},
+                              Setting{"20_acc_floor_4", 20, 1, true, 4}}) {
+      process::ProcessSettings s = settings;
+      s.mart.iterations = st.iterations;
+      s.mart.mu = st.mu;
+      s.mart.accelerate = st.accelerate;
+      s.correlation.intensity_threshold_of_mean = st.floor;
+      const auto r = process::process_pair(op, a, b, s, {}, &workspace);
+      const Errors er = errors_against(r.correlation.field, flow, voxel);
+      Row row{"mart_floor", st.iterations, np, 16, st.mu,
+              r.times.reconstruct_a_s + r.times.reconstruct_b_s + r.times.correlate_s, er.total, er};
+      row.value = st.name;
+      rows.push_back(row);
+      std::fprintf(stderr, "bench_e2e: %s done (%.1f s)\n", st.name, row.seconds);
+    }
+    print_pareto(scale.c_str(), rows);
   }
   if (!sweep) return 0;
 
@@ -382,14 +459,7 @@ int main(int argc, char** argv) {
     row.value = std::to_string(int(k));
     rows.push_back(row);
   }
-  for (const Row& r : rows) {
-    bool dominated = false;
-    for (const Row& o : rows)
-      if (&o != &r && o.seconds <= r.seconds && o.rms_total <= r.rms_total &&
-          (o.seconds < r.seconds || o.rms_total < r.rms_total))
-        dominated = true;
-    print_row(scale.c_str(), r, !dominated);
-  }
+  print_pareto(scale.c_str(), rows);
   std::printf("bench=e2e case=%s peak_rss_gb=%.2f\n", scale.c_str(), peak_rss_gb());
   return 0;
 }

@@ -27,7 +27,9 @@ for r in rows:
              "noise_threshold": f"floor {r.get('value')}",
              "angular_sampling": f"angular {r.get('value', '').split(',')[0]}", "binning": f"binning {r.get('value')}",
              "final_window": f"{r['final_window']}³",
-             "passes": f"{r['passes']} passes"}[r["variant"]]
+             "passes": f"{r['passes']} passes",
+             "intensity_threshold": f"ghost floor {r.get('value')}x mean",
+             "mart_floor": r.get("value", "").replace("_", " ")}[r["variant"]]
     ax.annotate(label, (t, e), textcoords="offset points", xytext=(4, 3), fontsize=8)
 ax.set_xlabel("time per pair, s (2 reconstructions + correlation; shared machine)")
 ax.set_ylabel("RMS error, voxels (|u, v, w|)")
