@@ -114,9 +114,16 @@ Case make_case(std::uint64_t index) {
     std::fill(c.a.pixels.begin(), c.a.pixels.end(), fill);
     if (pick(2)) std::fill(c.b.pixels.begin(), c.b.pixels.end(), fill);
   }
+  // Drawn last, so that the draws above (and the cases they made before these knobs) stay as they were.
+  c.settings.mart.accelerate = pick(2) == 1;
+  const double floors[] = {0, 0, 4, 100};  // none, process.yaml's, the largest allowed
+  c.settings.correlation.intensity_threshold_of_mean = floors[pick(4)];
   c.description = "case " + std::to_string(index) + ": mode " + std::to_string(mode) + ", " +
                   std::to_string(count) + " particles, mu " + std::to_string(c.settings.mart.mu) + ", " +
-                  std::to_string(c.settings.mart.iterations) + " iterations, depth " + std::to_string(c.depth);
+                  std::to_string(c.settings.mart.iterations) + " iterations" +
+                  (c.settings.mart.accelerate ? " accelerated" : "") + ", intensity floor " +
+                  std::to_string(c.settings.correlation.intensity_threshold_of_mean) + "x the mean, depth " +
+                  std::to_string(c.depth);
   return c;
 }
 
