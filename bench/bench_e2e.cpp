@@ -227,6 +227,21 @@ int main(int argc, char** argv) {
               base.skipped_a.fraction_skipped(), base.skipped_b.fraction_skipped(), e.rms[0], e.rms[1], e.rms[2],
               e.total, e.valid_fraction, e.off_band[0], e.off_band[1], e.off_band[2], peak_rss_gb());
 
+  {
+    // Where depth is lost: RMS of w (voxels) per band of the vectors' depth (mm from the focal plane).
+    const double edges[] = {-1e9, -8, -4, -2, 0, 2, 4, 8, 1e9};
+    std::string bands;
+    for (int k = 0; k + 1 < int(std::size(edges)); ++k) {
+      const sim::FieldErrors fe = sim::field_errors(base.correlation.field, flow, voxel, 3, 0, [&](const sim::Point3& x) {
+        return x[2] - z_centre >= edges[k] && x[2] - z_centre < edges[k + 1];
+      });
+      char item[96];
+      std::snprintf(item, sizeof item, "%s%s..%s:%.3f(%zu)", k ? "," : "", k ? std::to_string(int(edges[k])).c_str() : "-inf",
+                    k + 2 < int(std::size(edges)) ? std::to_string(int(edges[k + 1])).c_str() : "inf", fe.rms[2], fe.compared);
+      bands += item;
+    }
+    std::printf("bench=e2e case=%s rms_w_by_depth_mm=%s\n", scale.c_str(), bands.c_str());
+  }
   if (steady) {
     // The same pair again in the kept MART workspace: what each pair costs in a run of many
     // (the daemon and `plenopiv process --run` keep one per pair in flight).
