@@ -245,16 +245,16 @@ int main(int argc, char** argv) {
   if (steady) {
     // The same pair again in the kept MART workspace: what each pair costs in a run of many
     // (the daemon and `plenopiv process --run` keep one per pair in flight).
-    std::vector<std::pair<std::string, double>> marks;
+    std::vector<double> marks;  // seconds since the start at each progress call
     const double t_again = now_s();
-    const auto again = process::process_pair(op, a, b, settings,
-                                             [&](const std::string& stage, double) { marks.emplace_back(stage, now_s() - t_again); },
-                                             &workspace);
-    // Per stage: seconds to the first progress mark (set-up and one iteration), then per iteration.
+    const auto again = process::process_pair(
+        op, a, b, settings, [&](const std::string&, double) { marks.push_back(now_s() - t_again); }, &workspace);
+    // Seconds between progress calls: per frame set-up with its first iteration, then one per
+    // iteration; then the correlation's passes.
     std::string steps;
     for (std::size_t i = 0; i < marks.size(); ++i) {
       char item[64];
-      std::snprintf(item, sizeof item, "%s%.2f", i ? "," : "", marks[i].second - (i ? marks[i - 1].second : 0.0));
+      std::snprintf(item, sizeof item, "%s%.2f", i ? "," : "", marks[i] - (i ? marks[i - 1] : 0.0));
       steps += item;
     }
     std::printf("bench=e2e case=%s steady_state_marks_s=%s\n", scale.c_str(), steps.c_str());
