@@ -152,10 +152,10 @@ using Located = std::pair<int, double>;
 typedef double Doubles4 __attribute__((vector_size(32)));
 typedef float Floats4 __attribute__((vector_size(16)));
 
-// The predictor along one voxel row (y, z), bit for bit what NodeField::at_located gives: the 8
+// The predictor along one voxel row (y, z), bit for bit what NodeField::at gives: the 8
 // corner displacements of the current node cell are kept (x, y, z in the first three of four
 // lanes) and reloaded only when x enters the next cell, and the three components are weighted and
-// summed side by side, each lane in at_located's order. A corner at_located skips (weight 0)
+// summed side by side, each lane in at's order. A corner at skips (weight 0)
 // adds a zero here, which leaves a sum that started at +0 unchanged.
 class RowPredictor {
  public:
@@ -248,11 +248,7 @@ std::pair<int, double> NodeField::locate(int axis, double p) const {
 }
 
 std::array<float, 3> NodeField::at(double x, double y, double z) const {
-  return at_located({locate(0, x), locate(1, y), locate(2, z)});
-}
-
-std::array<float, 3> NodeField::at_located(
-    const std::array<std::pair<int, double>, 3>& where) const {
+  const std::array<std::pair<int, double>, 3> where{locate(0, x), locate(1, y), locate(2, z)};
   std::array<float, 3> out{0, 0, 0};
   for (int c = 0; c < 8; ++c) {
     const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;

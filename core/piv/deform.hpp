@@ -26,16 +26,13 @@ struct NodeField {
   }
   // Trilinear interpolation at voxel coordinates (x, y, z); constant beyond the outer nodes.
   std::array<float, 3> at(double x, double y, double z) const;
-  // Lower node and fraction towards the next one of coordinate p along `axis`.
+  // Lower node and fraction towards the next one of coordinate p along `axis` (what at()
+  // interpolates between; the deformation locates each voxel row and column once).
   std::pair<int, double> locate(int axis, double p) const;
-  // The same interpolation from the three axes' locate() results (what at() computes, bit for
-  // bit): the deformation locates each voxel row and column once instead of once per voxel.
-  std::array<float, 3> at_located(const std::array<std::pair<int, double>, 3>& where) const;
   // Weight of each node along `axis` in the mean of that interpolant over the voxels
   // first_voxel .. first_voxel + n - 1. The mean over a box of voxels is the tensor product of
   // the three axes' weights: what a window that was deformed by this predictor has been moved by.
   std::vector<double> mean_weights(int axis, int first_voxel, int n) const;
-
 };
 
 // The cardinal interpolator: for a sample at voxel coordinate p, the 7 taps are the voxels
