@@ -30,10 +30,10 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
-#include <fstream>
 #include <string>
 #include <vector>
 
+#include "bench/bench_support.hpp"
 #include "core/optics/camera_file.hpp"
 #include "core/process/process.hpp"
 #include "core/sim/exact_volume.hpp"
@@ -48,14 +48,6 @@ namespace {
 
 double now_s() {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
-
-double peak_rss_gb() {
-  std::ifstream in("/proc/self/status");
-  std::string line;
-  while (std::getline(in, line))
-    if (line.rfind("VmHWM:", 0) == 0) return std::stod(line.substr(6)) / (1024.0 * 1024.0);
-  return -1;
 }
 
 struct Errors {
@@ -225,7 +217,7 @@ int main(int argc, char** argv) {
               "off_axis_band_rms_u=%.3f off_axis_band_rms_v=%.3f off_axis_band_rms_w=%.3f peak_rss_gb=%.2f\n",
               scale.c_str(), iterations, mu, int(accelerate), dark_cutoff, sensor_blur_mm, intensity_threshold, base.times.reconstruct_a_s, base.times.reconstruct_b_s, base.times.correlate_s,
               base.skipped_a.fraction_skipped(), base.skipped_b.fraction_skipped(), e.rms[0], e.rms[1], e.rms[2],
-              e.total, e.valid_fraction, e.off_band[0], e.off_band[1], e.off_band[2], peak_rss_gb());
+              e.total, e.valid_fraction, e.off_band[0], e.off_band[1], e.off_band[2], bench::peak_rss_gb());
 
   {
     // Where depth is lost: RMS of w (voxels) per band of the vectors' depth (mm from the focal plane).
@@ -475,6 +467,6 @@ int main(int argc, char** argv) {
     rows.push_back(row);
   }
   print_pareto(scale.c_str(), rows);
-  std::printf("bench=e2e case=%s peak_rss_gb=%.2f\n", scale.c_str(), peak_rss_gb());
+  std::printf("bench=e2e case=%s peak_rss_gb=%.2f\n", scale.c_str(), bench::peak_rss_gb());
   return 0;
 }

@@ -20,6 +20,7 @@
 #include <functional>
 #include <string>
 
+#include "bench/bench_support.hpp"
 #include "core/piv/fft_correlator.hpp"
 #include "core/piv/multipass.hpp"
 #include "core/sim/exact_volume.hpp"
@@ -155,14 +156,9 @@ void ring_vortex(const std::array<int, 3>& shape, bool all_variants, bool defaul
       outliers += p.validation.outliers;
     }
     const sim::FieldErrors e = sim::field_errors(r.field, flow, voxel_mm);
-    // FNV-1a over the field's bits: equal hashes mean bit-identical vectors (between builds).
-    std::uint64_t hash = 1469598103934665603ull;
-    for (const auto* c : {&r.field.dx_mm, &r.field.dy_mm, &r.field.dz_mm})
-      for (float x : *c) {
-        std::uint32_t bits;
-        std::memcpy(&bits, &x, sizeof bits);
-        hash = (hash ^ bits) * 1099511628211ull;
-      }
+    // The vectors' bits: equal hashes mean bit-identical vectors (between builds).
+    std::uint64_t hash = bench::kFnvOffset;
+    for (const auto* c : {&r.field.dx_mm, &r.field.dy_mm, &r.field.dz_mm}) hash = bench::bits_hash(*c, hash);
     // Away from the axis band (the final windows that reach the ring's axis, where the exact
     // u and w jump: sim::in_ring_axis_band).
     const double half_window_mm = 0.5 * v.passes.back().window[0] * voxel_mm;

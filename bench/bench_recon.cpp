@@ -8,11 +8,10 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
-#include <cstring>
-#include <fstream>
 #include <random>
 #include <string>
 
+#include "bench/bench_support.hpp"
 #include "core/optics/camera_file.hpp"
 #include "core/recon/mart.hpp"
 #include "core/recon/quality.hpp"
@@ -40,26 +39,6 @@ long minor_faults() {
   rusage u{};
   getrusage(RUSAGE_SELF, &u);
   return u.ru_minflt;
-}
-
-// The volume's exact bits (FNV-1a): speed work must leave them unchanged, or say why not.
-std::uint64_t volume_hash(const Volume& v) {
-  std::uint64_t hash = 1469598103934665603ull;
-  for (float x : v.data) {
-    std::uint32_t bits;
-    std::memcpy(&bits, &x, sizeof bits);
-    hash = (hash ^ bits) * 1099511628211ull;
-  }
-  return hash;
-}
-
-double peak_rss_gb() {
-  std::ifstream in("/proc/self/status");
-  std::string line;
-  while (std::getline(in, line)) {
-    if (line.rfind("VmHWM:", 0) == 0) return std::stod(line.substr(6)) / (1024.0 * 1024.0);
-  }
-  return -1;
 }
 
 // Particles ray traced by core/sim (the paper's sec 4 simulator: 10 000 rays each, diffraction
@@ -133,7 +112,7 @@ void paper_scale(const std::string& source_dir, bool small, double ppm, int iter
   double iter_total = 0;
   for (const auto& it : r.iterations) iter_total += it.seconds;
   const recon::SkipReport& k = r.skipped;
-  const std::uint64_t hash = volume_hash(r.volume);
+  const std::uint64_t hash = bench::bits_hash(r.volume.data);
   std::printf("bench=recon_paper particles=%zu ppm=%.2f lit_pixel_fraction=%.4f threshold_counts=%.1f dark_cutoff=%.2f "
               "iterations=%d mu=%.2f accelerate=%d sensor_blur_mm=%.4f start=%s\n",
               count, ppm, double(lit) / double(image.size()), double(s.noise_threshold), dark_cutoff, iterations, mu,
@@ -160,7 +139,7 @@ void paper_scale(const std::string& source_dir, bool small, double ppm, int iter
       const double wall = since(t0), cpu = cpu_seconds() - c0;
       std::printf("bench=recon_reuse variant=%s seconds=%.3f cpu_s=%.3f setup_s=%.3f minor_faults=%ld volume_hash=%016llx\n",
                   variant, wall, cpu, again.setup_seconds, minor_faults() - f0,
-                  static_cast<unsigned long long>(volume_hash(again.volume)));
+                  static_cast<unsigned long long>(bench::bits_hash(again.volume.data)));
       return std::array<double, 2>{wall, cpu};
     };
     std::printf("bench=recon_reuse variant=first seconds=%.3f cpu_s=%.3f setup_s=%.3f minor_faults=%ld volume_hash=%016llx "
@@ -207,7 +186,7 @@ void paper_scale(const std::string& source_dir, bool small, double ppm, int iter
   };
   report("peak_rows", [&](const sim::Point3& p) { return recon::fit_particle(r.volume, p, {3, 3, 15}); });
   report("moments", [&](const sim::Point3& p) { return recon::fit_particle_moments(r.volume, p, {3, 3, 15}); });
-  std::printf("bench=recon_paper peak_rss_gb=%.3f\n", peak_rss_gb());
+  std::printf("bench=recon_paper peak_rss_gb=%.3f\n", bench::peak_rss_gb());
 }
 
 void mid_size(const std::string& source_dir) {

@@ -1,0 +1,36 @@
+// What several benchmarks print alike: a hash of float bits (bit-identity across builds) and the
+// process's peak memory.
+#pragma once
+
+#include <cstdint>
+#include <cstring>
+#include <fstream>
+#include <span>
+#include <string>
+
+namespace plenopiv::bench {
+
+inline constexpr std::uint64_t kFnvOffset = 1469598103934665603ull;
+
+// FNV-1a over the bits of `values`, continuing from `hash` (chain several arrays by passing the
+// previous result): equal hashes mean bit-identical results. Speed work must leave them unchanged,
+// or say why not.
+inline std::uint64_t bits_hash(std::span<const float> values, std::uint64_t hash = kFnvOffset) {
+  for (float x : values) {
+    std::uint32_t bits;
+    std::memcpy(&bits, &x, sizeof bits);
+    hash = (hash ^ bits) * 1099511628211ull;
+  }
+  return hash;
+}
+
+// Peak resident memory of this process so far (VmHWM), GB; -1 where /proc does not say.
+inline double peak_rss_gb() {
+  std::ifstream in("/proc/self/status");
+  std::string line;
+  while (std::getline(in, line))
+    if (line.rfind("VmHWM:", 0) == 0) return std::stod(line.substr(6)) / (1024.0 * 1024.0);
+  return -1;
+}
+
+}  // namespace plenopiv::bench
