@@ -253,7 +253,6 @@ using Rows = float __attribute__((vector_size(kSubRows * sizeof(float))));
 using RowBits = std::int32_t __attribute__((vector_size(kSubRows * sizeof(std::int32_t))));
 constexpr std::uint64_t kSubMask = ~std::uint64_t(0) >> (64 - kSubRows);
 
-
 // `count` image rows from `rows` -> row lanes from `lanes`; the rest of the last block is 0.
 void rows_to_lanes(const float* rows, std::size_t width, int count, float* lanes) {
   for (int b0 = 0; b0 < count; b0 += kSubRows) {

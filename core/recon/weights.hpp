@@ -10,11 +10,11 @@
 #include <span>
 #include <vector>
 
+#include "core/base/big_buffer.hpp"
 #include "core/base/grid.hpp"
 #include "core/base/image.hpp"
 #include "core/optics/camera_model.hpp"
 #include "core/optics/microlens_array.hpp"
-#include "core/base/big_buffer.hpp"
 
 namespace plenopiv::recon {
 
