@@ -20,7 +20,7 @@ FieldErrors field_errors(const VectorField& field, const Flow& flow, double voxe
                          int border, const std::function<bool(const Point3&)>& include) {
   const Grid3& g = field.grid;
   FieldErrors e;
-  std::array<double, 3> sum{0, 0, 0}, sum_sq{0, 0, 0};
+  std::array<double, 3> sum{0, 0, 0}, sum_sq{0, 0, 0}, sum_mt{0, 0, 0}, sum_tt{0, 0, 0};
   for (int k = border; k < g.shape[2] - border; ++k)
     for (int j = border; j < g.shape[1] - border; ++j)
       for (int i = border; i < g.shape[0] - border; ++i) {
@@ -37,6 +37,8 @@ FieldErrors field_errors(const VectorField& field, const Flow& flow, double voxe
           const double err = (got[a] - d[a]) / voxel_mm;
           sum[a] += err;
           sum_sq[a] += err * err;
+          sum_mt[a] += got[a] * d[a];
+          sum_tt[a] += d[a] * d[a];
           truth_sq += d[a] * d[a];
         }
         e.max_truth_voxels = std::max(e.max_truth_voxels, std::sqrt(truth_sq) / voxel_mm);
@@ -45,6 +47,7 @@ FieldErrors field_errors(const VectorField& field, const Flow& flow, double voxe
   if (e.compared == 0) {  // no valid node: no error figure, not a perfect one
     e.bias.fill(NAN);
     e.rms.fill(NAN);
+    e.gain.fill(NAN);
     e.rms_total = NAN;
     return e;
   }
@@ -52,6 +55,7 @@ FieldErrors field_errors(const VectorField& field, const Flow& flow, double voxe
   for (int a = 0; a < 3; ++a) {
     e.bias[a] = sum[a] / n;
     e.rms[a] = std::sqrt(sum_sq[a] / n);
+    e.gain[a] = sum_tt[a] > 0 ? sum_mt[a] / sum_tt[a] : NAN;
   }
   e.rms_total = std::sqrt((sum_sq[0] + sum_sq[1] + sum_sq[2]) / n);
   return e;
