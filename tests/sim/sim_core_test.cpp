@@ -175,6 +175,9 @@ TEST(FieldErrors, BiasRmsAndCountAgainstAUniformFlow) {
   EXPECT_DOUBLE_EQ(e.rms[2], 0.0);
   EXPECT_NEAR(e.rms_total, 0.5, 1e-6);
   EXPECT_NEAR(e.max_truth_voxels, 2.0, 1e-12);
+  // Gain: sum(m t) / sum(t^2) = (25 * 0.25 + 0.15) * 0.2 / (26 * 0.2^2); no truth along y, z.
+  EXPECT_NEAR(e.gain[0], (25 * 0.25 + 0.15) / (26 * 0.2), 1e-6);
+  EXPECT_TRUE(std::isnan(e.gain[1]));
   // One layer left out at every face: the centre node only.
   const FieldErrors inner = field_errors(f, UniformFlow({0.2, 0, 0}), 0.1, 1, 1);
   EXPECT_EQ(inner.compared, 1u);
@@ -184,6 +187,7 @@ TEST(FieldErrors, BiasRmsAndCountAgainstAUniformFlow) {
   const FieldErrors none = field_errors(f, UniformFlow({0.2, 0, 0}), 0.1);
   EXPECT_EQ(none.compared, 0u);
   EXPECT_TRUE(std::isnan(none.rms[0]));
+  EXPECT_TRUE(std::isnan(none.gain[0]));
 }
 
 TEST(FieldErrors, TheTruthIsTheMidpointDisplacement) {
