@@ -72,7 +72,7 @@ FftCorrelator::Workspace::Workspace(const FftCorrelator& owner, std::unique_ptr<
 std::span<float> FftCorrelator::Workspace::window_a() { return {buffers_->a, buffers_->real_count}; }
 std::span<float> FftCorrelator::Workspace::window_b() { return {buffers_->b, buffers_->real_count}; }
 
-std::span<const float> FftCorrelator::Workspace::correlate() {
+std::span<float> FftCorrelator::Workspace::correlate() {
   Buffers& w = *buffers_;
   const std::size_t n = w.real_count;
   const std::array<int, 3>& s = owner_->shape_;

@@ -26,9 +26,9 @@ class FftCorrelator {
     std::span<float> window_a();
     std::span<float> window_b();
     // R(s) = sum_x a'(x) b'(x + s) of the mean-subtracted windows a', b'; [z][y][x] with shift 0
-    // at index 0 and negative shifts wrapped (cyclic). Valid until the next call; the windows'
-    // contents are consumed.
-    std::span<const float> correlate();
+    // at index 0 and negative shifts wrapped (cyclic). Valid until the next call, and the caller's
+    // to rescale; the windows' contents are consumed.
+    std::span<float> correlate();
 
    private:
     friend class FftCorrelator;

@@ -57,6 +57,7 @@ void check_inputs(const Volume& a, const Volume& b, const CorrelationSettings& s
 // Windows of one pass: node i's window starts at voxel start[a] + i * step[a].
 struct Layout {
   std::array<int, 3> window, step, start, count;
+  int depth_margin = 0;  // PassSettings::depth_margin
   NodeField nodes() const {
     std::array<double, 3> first, st;
     for (int a = 0; a < 3; ++a) {
@@ -70,6 +71,7 @@ struct Layout {
 Layout layout_of(const PassSettings& p, const std::array<int, 3>& shape) {
   Layout l;
   l.window = p.window;
+  l.depth_margin = p.depth_margin;
   for (int a = 0; a < 3; ++a) {
     l.step[a] = std::max(1, int(std::lround(p.window[a] * (1 - p.overlap_percent / 100))));
     l.count[a] = (shape[a] - p.window[a]) / l.step[a] + 1;
@@ -79,6 +81,53 @@ Layout layout_of(const PassSettings& p, const std::array<int, 3>& shape) {
   return l;
 }
 
+// Copies `n` floats (or zeros, where `src` is null) and keeps their running maximum in `max4`
+// (four lanes, SSE) and `max1` (the tail). The voxels are finite (checked), so the maximum does
+// not depend on the order it is taken in.
+void copy_row(const float* src, int n, float* dst, __m128& max4, float& max1) {
+  if (!src) {
+    std::fill(dst, dst + n, 0.f);
+    return;
+  }
+  int x = 0;
+  for (; x + 4 <= n; x += 4) {
+    const __m128 q = _mm_loadu_ps(src + x);
+    _mm_storeu_ps(dst + x, q);
+    max4 = _mm_max_ps(max4, q);
+  }
+  for (; x < n; ++x) max1 = std::max(max1, dst[x] = src[x]);
+}
+
+float max_of(__m128 max4, float max1) {
+  float lanes[4];
+  _mm_storeu_ps(lanes, max4);
+  for (float v : lanes) max1 = std::max(max1, v);
+  return max1;
+}
+
+// With a depth margin (PassSettings::depth_margin): the cyclic correlation `corr` of window A (its
+// `depth` slices in the middle of the buffer, zero-mean, zeros around) with the taller window B,
+// divided at each depth shift s by the spread of B's intensity over the slices A covers at that
+// shift, sqrt(sum (b - mean)^2); shifts beyond the margin are set to 0 (not searched). `slice_sum`
+// and `slice_sum_sq` are B's per-slice sums of b and b^2.
+void normalise_by_depth_shift(std::span<float> corr, std::size_t slice, int depth, int margin,
+                              std::span<const double> slice_sum, std::span<const double> slice_sum_sq) {
+  const int slices = depth + 2 * margin;
+  const double count = double(slice) * depth;
+  for (int kz = 0; kz < slices; ++kz) {
+    const int shift = kz < slices / 2 ? kz : kz - slices;
+    double scale = 0;
+    if (std::abs(shift) <= margin) {
+      double sum = 0, sum_sq = 0;
+      for (int z = margin + shift; z < margin + shift + depth; ++z) sum += slice_sum[z], sum_sq += slice_sum_sq[z];
+      const double spread = sum_sq - sum * sum / count;
+      if (spread > 0) scale = 1.0 / std::sqrt(spread);
+    }
+    float* plane = corr.data() + std::size_t(kz) * slice;
+    for (std::size_t q = 0; q < slice; ++q) plane[q] *= float(scale);
+  }
+}
+
 // Correlates every window of `va` with the same window of `vb`; a window's candidates are the
 // predictor (at its centre, or its mean over the window: settings.hpp, PredictorBase) plus each
 // correlation peak.
@@ -86,7 +135,10 @@ Candidates correlate_windows(std::span<const float> va, std::span<const float> v
                              const std::array<int, 3>& shape, const Layout& l,
                              const NodeField* predictor, float signal_threshold,
                              FftPlanning planning, bool at_centre, std::vector<float>& ratio) {
-  const FftCorrelator& correlator = FftCorrelator::shared(l.window, planning);
+  const int margin = l.depth_margin;
+  const std::array<int, 3> fft_shape{l.window[0], l.window[1], l.window[2] + 2 * margin};
+  const FftCorrelator& correlator = FftCorrelator::shared(fft_shape, planning);
+  const std::size_t slice = std::size_t(l.window[0]) * l.window[1];
   Candidates c(l.count);
   // window_mean: the predictor's mean over each window, as per-axis node weights (the residual
   // a window measures is relative to how far its voxels were moved on average).
@@ -99,6 +151,7 @@ Candidates correlate_windows(std::span<const float> va, std::span<const float> v
   const std::size_t plane = std::size_t(shape[0]) * shape[1];
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, c.size()), [&](const auto& r) {
     auto& ws = correlator.workspace();
+    std::vector<double> slice_sums(margin ? 2 * std::size_t(fft_shape[2]) : 0);  // b, then b^2
     for (std::size_t node = r.begin(); node < r.end(); ++node) {
       const int i = int(node % l.count[0]);
       const int j = int((node / l.count[0]) % l.count[1]);
@@ -107,41 +160,49 @@ Candidates correlate_windows(std::span<const float> va, std::span<const float> v
                 z0 = l.start[2] + k * l.step[2];
       auto wa = ws.window_a();
       auto wb = ws.window_b();
-      // Copy the window and take its largest value four voxels at a time (SSE). The voxels are
-      // finite (checked), so the maximum does not depend on the order it is taken in.
+      // Slices -margin .. window + margin of B; A's are its window's, zeros in the margins.
       __m128 max4_a = _mm_set1_ps(-INFINITY), max4_b = max4_a;
       float max_a = -INFINITY, max_b = -INFINITY;
-      std::size_t o = 0;
-      for (int z = 0; z < l.window[2]; ++z)
+      for (int z = -margin; z < l.window[2] + margin; ++z) {
+        const bool in_a = z >= 0 && z < l.window[2], in_volume = z0 + z >= 0 && z0 + z < shape[2];
         for (int y = 0; y < l.window[1]; ++y) {
-          const std::size_t row = (z0 + z) * plane + std::size_t(y0 + y) * shape[0] + x0;
-          int x = 0;
-          for (; x + 4 <= l.window[0]; x += 4, o += 4) {
-            const __m128 qa = _mm_loadu_ps(&va[row + x]), qb = _mm_loadu_ps(&vb[row + x]);
-            _mm_storeu_ps(&wa[o], qa);
-            _mm_storeu_ps(&wb[o], qb);
-            max4_a = _mm_max_ps(max4_a, qa);
-            max4_b = _mm_max_ps(max4_b, qb);
-          }
-          for (; x < l.window[0]; ++x, ++o) {
-            wa[o] = va[row + x];
-            wb[o] = vb[row + x];
-            max_a = std::max(max_a, wa[o]);
-            max_b = std::max(max_b, wb[o]);
-          }
+          const std::size_t row = std::size_t(in_volume ? z0 + z : 0) * plane + std::size_t(y0 + y) * shape[0] + x0;
+          const std::size_t o = (std::size_t(z + margin) * l.window[1] + y) * l.window[0];
+          copy_row(in_a ? &va[row] : nullptr, l.window[0], &wa[o], max4_a, max_a);
+          copy_row(in_volume ? &vb[row] : nullptr, l.window[0], &wb[o], max4_b, max_b);
         }
-      float lanes_a[4], lanes_b[4];
-      _mm_storeu_ps(lanes_a, max4_a);
-      _mm_storeu_ps(lanes_b, max4_b);
-      for (int k = 0; k < 4; ++k) {
-        max_a = std::max(max_a, lanes_a[k]);
-        max_b = std::max(max_b, lanes_b[k]);
       }
+      max_a = max_of(max4_a, max_a);
+      max_b = max_of(max4_b, max_b);
       if (!(max_a > signal_threshold && max_b > signal_threshold)) {
         c.flags[node] = flag_no_signal;
         continue;
       }
-      const auto peaks = find_peaks(ws.correlate(), l.window);
+      std::span<float> corr;
+      if (margin == 0) {
+        corr = ws.correlate();  // the transform takes out both windows' means
+      } else {
+        // A's mean over its own voxels, not the padded buffer's; B's sums per slice for the
+        // normalisation, taken before correlate() consumes the window.
+        float* a_window = wa.data() + std::size_t(margin) * slice;
+        const std::size_t a_count = slice * l.window[2];
+        double sum_a = 0;
+        for (std::size_t q = 0; q < a_count; ++q) sum_a += a_window[q];
+        const float mean_a = float(sum_a / double(a_count));
+        for (std::size_t q = 0; q < a_count; ++q) a_window[q] -= mean_a;
+        const std::size_t slices = std::size_t(fft_shape[2]);
+        std::fill(slice_sums.begin(), slice_sums.end(), 0.0);
+        for (std::size_t z = 0; z < slices; ++z)
+          for (std::size_t q = 0; q < slice; ++q) {
+            const double v = wb[z * slice + q];
+            slice_sums[z] += v;
+            slice_sums[slices + z] += v * v;
+          }
+        corr = ws.correlate();
+        const std::span<const double> sums(slice_sums);
+        normalise_by_depth_shift(corr, slice, l.window[2], margin, sums.first(slices), sums.subspan(slices));
+      }
+      const auto peaks = find_peaks(corr, fft_shape);
       std::array<float, 3> base{0, 0, 0};
       if (predictor && at_centre) {
         base = predictor->at(x0 + 0.5 * (l.window[0] - 1), y0 + 0.5 * (l.window[1] - 1),

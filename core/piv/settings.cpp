@@ -19,6 +19,9 @@ void check(const CorrelationSettings& s, const std::string& source) {
         fail(at + ".window: every size must be >= 4 voxels, got " + std::to_string(pass.window[a]));
     if (!(pass.overlap_percent >= 0 && pass.overlap_percent < 100))
       fail(at + ".overlap_percent: must be in [0, 100), got " + std::to_string(pass.overlap_percent));
+    if (pass.depth_margin < 0 || pass.depth_margin > pass.window[2])
+      fail(at + ".depth_margin: must be 0 to the window's depth (" + std::to_string(pass.window[2]) +
+           " voxels), got " + std::to_string(pass.depth_margin));
   }
   if (!(s.median.threshold > 0)) fail("median.threshold: must be > 0");
   if (!(s.median.epsilon > 0)) fail("median.epsilon_voxel: must be > 0");
@@ -38,16 +41,23 @@ std::vector<PassSettings> parse_passes(const std::string& text) {
   std::string item;
   auto bad = [&](const std::string& why) {
     throw InputError("--passes: '" + item + "': " + why +
-                     " (expected WxHxD@overlap or W@overlap, e.g. 32@50,16x16x32@75)");
+                     " (expected WxHxD@overlap or W@overlap, optionally +depth_margin, e.g. "
+                     "32@50,16@50+4,16x16x32@75)");
   };
   while (std::getline(all, item, ',')) {
     const auto at = item.find('@');
     if (at == std::string::npos) bad("missing @overlap");
+    const auto plus = item.find('+', at);
+    const std::size_t overlap_end = plus == std::string::npos ? item.size() : plus;
     PassSettings pass;
     try {
       std::size_t used = 0;
-      pass.overlap_percent = std::stod(item.substr(at + 1), &used);
-      if (used != item.size() - at - 1) bad("trailing characters after the overlap");
+      pass.overlap_percent = std::stod(item.substr(at + 1, overlap_end - at - 1), &used);
+      if (used != overlap_end - at - 1) bad("trailing characters after the overlap");
+      if (plus != std::string::npos) {
+        pass.depth_margin = std::stoi(item.substr(plus + 1), &used);
+        if (used != item.size() - plus - 1) bad("the depth margin is not a whole number");
+      }
       std::stringstream sizes(item.substr(0, at));
       std::string size;
       std::vector<int> w;
@@ -75,12 +85,12 @@ CorrelationSettings correlation_settings_from(const YamlMap& root) {
   CorrelationSettings s;
   if (root.has("passes")) {
     const YAML::Node list = root.node()["passes"];
-    if (!list.IsSequence()) root.fail("passes", "must be a list of {window, overlap_percent}");
+    if (!list.IsSequence()) root.fail("passes", "must be a list of {window, overlap_percent, depth_margin}");
     s.passes.clear();
     for (std::size_t p = 0; p < list.size(); ++p) {
       const std::string key = "passes[" + std::to_string(p) + "]";
       const YamlMap pass(list[p], root.source(), root.path().empty() ? key : root.path() + "." + key);
-      pass.reject_unknown({"window", "overlap_percent"});
+      pass.reject_unknown({"window", "overlap_percent", "depth_margin"});
       PassSettings ps;
       const YAML::Node w = pass.node()["window"];
       try {
@@ -96,6 +106,10 @@ CorrelationSettings correlation_settings_from(const YamlMap& root) {
         pass.fail("window", "sizes must be whole numbers");
       }
       ps.overlap_percent = pass.number_or("overlap_percent", 0);
+      const long long margin = pass.integer_or("depth_margin", 0);
+      if (margin < 0 || margin > ps.window[2])
+        pass.fail("depth_margin", "must be 0 to the window's depth (" + std::to_string(ps.window[2]) + " voxels)");
+      ps.depth_margin = int(margin);
       s.passes.push_back(ps);
     }
   }

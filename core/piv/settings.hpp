@@ -15,6 +15,17 @@ namespace plenopiv::piv {
 struct PassSettings {
   std::array<int, 3> window{32, 32, 32};  // voxels, x y z (elongated in z allowed)
   double overlap_percent = 50;            // 0 <= overlap < 100
+  // Voxels by which the second volume's window reaches further in depth at each end (0: the same
+  // window in both; 0 <= depth_margin <= window z). Reconstructed particles are streaks several
+  // voxels long in depth (paper sec 6.2: elongated about 4 times). A window's depth faces cut
+  // them at the same place in both volumes, and the cut ends pull the correlation's depth peak
+  // toward zero shift: w comes out short in proportion to the shift still to be measured. With a
+  // margin, every piece of a streak in the first window has its whole counterpart in the second,
+  // and the correlation, divided at each depth shift by the second window's spread of intensity
+  // under the first window, has no such pull. Depth shifts beyond the margin are not searched, so
+  // it belongs in passes after the first, whose predictor is already close. FFT size: times
+  // (window z + 2 margin) / window z.
+  int depth_margin = 0;
 };
 
 // What a deformed window's residual is added to. window_mean: the predictor's mean over the
@@ -30,9 +41,12 @@ struct CorrelationSettings {
   // volumes by the previous pass's validated field (VODIM). Default: four passes ending at the
   // paper's 16^3 with 75 % overlap; the 16^3, 50 % passes cost an eighth of the final pass's
   // correlations, and each one moves the centre-based predictor closer to the unfiltered field
-  // (docs/benchmarks.md, "Ring vortex": error and time of each schedule).
+  // (docs/benchmarks.md, "Ring vortex": error and time of each schedule). Those two reach 4
+  // voxels further in depth in the second volume (depth_margin), so the final pass starts from
+  // the full depth shift; the final pass has no margin: there it adds more random error than the
+  // little bias left to remove (docs/benchmarks.md, "Depth margin").
   std::vector<PassSettings> passes{
-      {{32, 32, 32}, 50}, {{16, 16, 16}, 50}, {{16, 16, 16}, 50}, {{16, 16, 16}, 75}};
+      {{32, 32, 32}, 50}, {{16, 16, 16}, 50, 4}, {{16, 16, 16}, 50, 4}, {{16, 16, 16}, 75}};
   MedianTest median;
   // A window whose largest intensity in either volume is <= this has no particle signal.
   float signal_threshold = 0.f;
@@ -53,15 +67,18 @@ struct CorrelationSettings {
   int predictor_smoothing = 1;
 };
 
-// Checks every value (windows >= 4 voxels, 0 <= overlap < 100, threshold and epsilon > 0,
-// radius 1..3, predictor_smoothing 0..4, intensity_threshold_of_mean 0..100, dt > 0); InputError naming `source` and the setting otherwise.
+// Checks every value (windows >= 4 voxels, 0 <= overlap < 100, 0 <= depth_margin <= window z,
+// threshold and epsilon > 0, radius 1..3, predictor_smoothing 0..4, intensity_threshold_of_mean
+// 0..100, dt > 0); InputError naming `source` and the setting otherwise.
 void check(const CorrelationSettings& s, const std::string& source);
 
-// Parses "WxHxD@overlap" or "W@overlap" passes, comma separated, e.g. "32@50,24@75,16x16x32@75".
+// Parses "WxHxD@overlap" or "W@overlap" passes, each optionally followed by "+depth_margin",
+// comma separated, e.g. "32@50,16@50+4,16x16x32@75".
 std::vector<PassSettings> parse_passes(const std::string& text);
 
 // Reads a YAML file:
-//   passes: [{window: [32, 32, 32], overlap_percent: 50}, {window: 16, overlap_percent: 75}]
+//   passes: [{window: [32, 32, 32], overlap_percent: 50}, {window: 16, overlap_percent: 50, depth_margin: 4},
+//            {window: 16, overlap_percent: 75}]
 //   median: {threshold: 2, epsilon_voxel: 0.1, radius: 2}
 //   signal_threshold: 0
 //   dt_s: 0.001

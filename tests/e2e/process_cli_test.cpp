@@ -131,16 +131,18 @@ TEST(ProcessCli, RecoversTheDepthDisplacementAwayFromFocus) {
                 guard_mm.c_str(), floor ? "on" : "off", mean[0], mean[1], mean[2]);
     return mean;
   };
-  // The shipped settings (the floor on). Measured (accelerated iterations): 0.2487 / 0.1250 / 0.2205 mm.
+  // The shipped settings (the floor on). Measured (accelerated iterations): 0.2487 / 0.1251 / 0.2207 mm.
   const std::array<double, 3> shipped = process("1", true);
   EXPECT_NEAR(shipped[0], kTruth[0], 0.01);
   EXPECT_NEAR(shipped[1], kTruth[1], 0.01);
   EXPECT_NEAR(shipped[2], kTruth[2], 0.07);
   // The guard alone, with the floor off (the floor takes part of the end slices' stationary light
-  // away too: with it, dz 0.1742 mm without the guard). Measured: guard 1 mm dz 0.2128 mm, guard
-  // 0: 0.1479 mm (without the acceleration 0.2053 and 0.1121).
+  // away too: with it, dz 0.1742 mm without the guard). Measured: guard 1 mm dz 0.2117 mm, guard
+  // 0: 0.1773 mm. The correlation's depth margins (piv::PassSettings::depth_margin) take part of
+  // the guard's work: the box's depth faces are window faces too. Before them 0.2128 and 0.1479
+  // (without the acceleration 0.2053 and 0.1121).
   const double guarded = process("1", false)[2], unguarded = process("0", false)[2];
-  EXPECT_LT(unguarded, guarded - 0.05) << "the guard no longer matters: update docs and defaults";
+  EXPECT_LT(unguarded, guarded - 0.02) << "the guard no longer matters: update docs and defaults";
 }
 
 // A camera whose lens array is rotated 1 deg (offset, 1 um per-lens jitter), calibrated by
