@@ -117,7 +117,8 @@ void add_piv_commands(CLI::App& app) {
   cmd->add_option("--config", o->config,
                   "YAML with passes, median, signal_threshold, dt_s, predictor, ... (flags override it)");
   cmd->add_option("--passes", o->passes,
-                  "coarse to fine, e.g. 32@50,24@75,16@75 or 32x32x64@50 (default 32@50,16@50,16@50,16@75)");
+                  "coarse to fine, e.g. 32@50,24@75,16@75 or 32x32x64@50; +M: the second window reaches M voxels "
+                  "further in depth (default 32@50,16@50+4,16@50,16@75)");
   cmd->add_option("--dt", o->dt_s, "pulse separation, s (velocity = displacement / dt)");
   cmd->add_option("--signal-threshold", o->signal_threshold,
                   "windows whose brightest voxel is not above this are skipped (default 0)");

@@ -41,12 +41,12 @@ struct CorrelationSettings {
   // volumes by the previous pass's validated field (VODIM). Default: four passes ending at the
   // paper's 16^3 with 75 % overlap; the 16^3, 50 % passes cost an eighth of the final pass's
   // correlations, and each one moves the centre-based predictor closer to the unfiltered field
-  // (docs/benchmarks.md, "Ring vortex": error and time of each schedule). Those two reach 4
-  // voxels further in depth in the second volume (depth_margin), so the final pass starts from
-  // the full depth shift; the final pass has no margin: there it adds more random error than the
-  // little bias left to remove (docs/benchmarks.md, "Depth margin").
+  // (docs/benchmarks.md, "Ring vortex": error and time of each schedule). The first of them
+  // reaches 4 voxels further in depth in the second volume (depth_margin), so the passes after it
+  // start from the full depth shift. They have no margin: a margin's normalisation adds random
+  // error, more than the little bias left to remove there (docs/benchmarks.md, "Depth margin").
   std::vector<PassSettings> passes{
-      {{32, 32, 32}, 50}, {{16, 16, 16}, 50, 4}, {{16, 16, 16}, 50, 4}, {{16, 16, 16}, 75}};
+      {{32, 32, 32}, 50}, {{16, 16, 16}, 50, 4}, {{16, 16, 16}, 50}, {{16, 16, 16}, 75}};
   MedianTest median;
   // A window whose largest intensity in either volume is <= this has no particle signal.
   float signal_threshold = 0.f;
