@@ -5,6 +5,7 @@
 //
 //   bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate]
 //             [--dark-cutoff F] [--intensity-threshold K] [--steady] [--time-sweep] [--z-centre MM]
+//             [--compare-passes 'P1;P2;...']
 //     --iterations/--mu/--accelerate/--dark-cutoff: MART for the headline rows (default the
 //              paper's 5 at mu 0.5, not accelerated, MartSettings' dark-pixel cutoff; the sweep's
 //              rows still start from the paper's settings).
@@ -15,6 +16,8 @@
 //              volume's mean (default 0, the paper's correlation); they then also print the
 //              correlation without it on the same volumes.
 //     --z-centre: depth of the volume's (and the ring's) centre, mm (default 0: the focal plane).
+//     --compare-passes: correlate the headline volumes (and the exact ones) with each pass list
+//              too, in --passes syntax (e.g. '32@50,16@50+4,16@50,16@75'), separated by ';'.
 //   Every RMS is given over all vectors and, as off_axis_band_*, over the vectors whose final
 //   window (16 voxels: half-width 1 mm) does not reach the ring's axis, |x - x_c| and |z - z_c|
 //   <= 1 mm (sim::in_ring_axis_band: there the exact u and w jump).
@@ -26,6 +29,7 @@
 //              cost; the same optics, depth and seeding).
 #include <sys/resource.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -126,6 +130,7 @@ int main(int argc, char** argv) {
   double sensor_blur_mm = recon::MartSettings{}.sensor_blur_sigma_mm;
   double intensity_threshold = piv::CorrelationSettings{}.intensity_threshold_of_mean;
   bool steady = false, time_sweep = false;
+  std::string compare_passes;  // pass lists separated by ';'
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--no-sweep")) sweep = false;
     else if (!std::strcmp(argv[i], "--rays") && i + 1 < argc) rays = std::stoul(argv[++i]);
@@ -138,6 +143,7 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--intensity-threshold") && i + 1 < argc) intensity_threshold = std::stod(argv[++i]);
     else if (!std::strcmp(argv[i], "--steady")) steady = true;
     else if (!std::strcmp(argv[i], "--time-sweep")) time_sweep = true;
+    else if (!std::strcmp(argv[i], "--compare-passes") && i + 1 < argc) compare_passes = argv[++i];
     else scale = argv[i];
   }
   if (sweep && (iterations != 5 || mu != 0.5 || accelerate || z_centre != 0.0 ||
@@ -153,7 +159,7 @@ int main(int argc, char** argv) {
   const bool mid = scale == "mid";
   const bool full = scale == "full" || mid;
   if (!full && scale != "reduced") {
-    std::fprintf(stderr, "usage: bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate] [--dark-cutoff F] [--sensor-blur-mm S] [--intensity-threshold K] [--steady] [--time-sweep] [--z-centre MM]\n");
+    std::fprintf(stderr, "usage: bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate] [--dark-cutoff F] [--sensor-blur-mm S] [--intensity-threshold K] [--steady] [--time-sweep] [--z-centre MM] [--compare-passes 'P1;P2']\n");
     return 2;
   }
   const std::string dir = std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/";
@@ -274,6 +280,27 @@ int main(int argc, char** argv) {
               scale.c_str(), now_s() - t, ex.rms[0], ex.rms[1], ex.rms[2], ex.total, ex.valid_fraction,
               ex.off_band[0], ex.off_band[1], ex.off_band[2]);
   print_w_by_depth(exact.field, "exact");
+
+  // Pass schedules from --compare-passes on the same volumes (reconstructed and exact).
+  for (std::size_t at = 0; at < compare_passes.size();) {
+    const std::size_t end = std::min(compare_passes.find(';', at), compare_passes.size());
+    const std::string text = compare_passes.substr(at, end - at);
+    at = end + 1;
+    piv::CorrelationSettings c = settings.correlation;
+    c.passes = piv::parse_passes(text);
+    for (bool recon : {true, false}) {
+      t = now_s();
+      const auto r = recon ? piv::correlate_volumes(base.volume_a, base.volume_b, c) : piv::correlate_volumes(ea, eb, c);
+      const double cs = now_s() - t;
+      const Errors er = errors_against(r.field, flow, voxel);
+      std::printf("bench=e2e case=%s passes=%s volumes=%s correlate_s=%.2f rms_u=%.3f rms_v=%.3f rms_w=%.3f rms=%.3f "
+                  "off_axis_band_rms_u=%.3f off_axis_band_rms_v=%.3f off_axis_band_rms_w=%.3f\n",
+                  scale.c_str(), text.c_str(), recon ? "reconstructed" : "exact", cs, er.rms[0], er.rms[1], er.rms[2],
+                  er.total, er.off_band[0], er.off_band[1], er.off_band[2]);
+      if (recon) print_w_by_depth(r.field, ("reconstructed_" + text).c_str());
+      std::fflush(stdout);
+    }
+  }
 
   // Correlation variants on the same volumes (reconstructed and exact), side by side.
   {
