@@ -59,6 +59,7 @@ struct Errors {
   double total = 0;
   double valid_fraction = 0;
   double off_band[3] = {0, 0, 0};  // RMS away from the ring's axis band
+  double off_band_gain[3] = {0, 0, 0};  // measured against true displacement there (FieldErrors::gain)
 };
 
 // RMS error (voxels) over valid nodes against the midpoint displacement d = D(x - d/2) (three
@@ -73,7 +74,7 @@ Errors errors_against(const VectorField& f, const sim::RingVortexFlow& flow, dou
     return !sim::in_ring_axis_band(flow, x, band_mm);
   });
   Errors e;
-  for (int a = 0; a < 3; ++a) e.rms[a] = s.rms[a], e.off_band[a] = off.rms[a];
+  for (int a = 0; a < 3; ++a) e.rms[a] = s.rms[a], e.off_band[a] = off.rms[a], e.off_band_gain[a] = off.gain[a];
   e.total = s.rms_total;
   e.valid_fraction = f.grid.count() ? double(s.compared) / double(f.grid.count()) : 0;
   return e;
@@ -220,10 +221,12 @@ int main(int argc, char** argv) {
   std::printf("bench=e2e case=%s variant=reconstructed iterations=%d mu=%.2f accelerate=%d dark_cutoff=%.3g sensor_blur_mm=%.4g "
               "intensity_threshold=%.3g recon_a_s=%.2f recon_b_s=%.2f "
               "correlate_s=%.2f skipped_a=%.3f skipped_b=%.3f rms_u=%.3f rms_v=%.3f rms_w=%.3f rms=%.3f valid=%.3f "
-              "off_axis_band_rms_u=%.3f off_axis_band_rms_v=%.3f off_axis_band_rms_w=%.3f peak_rss_gb=%.2f\n",
+              "off_axis_band_rms_u=%.3f off_axis_band_rms_v=%.3f off_axis_band_rms_w=%.3f off_axis_band_gain_u=%.3f "
+              "off_axis_band_gain_v=%.3f off_axis_band_gain_w=%.3f peak_rss_gb=%.2f\n",
               scale.c_str(), iterations, mu, int(accelerate), dark_cutoff, sensor_blur_mm, intensity_threshold, base.times.reconstruct_a_s, base.times.reconstruct_b_s, base.times.correlate_s,
               base.skipped_a.fraction_skipped(), base.skipped_b.fraction_skipped(), e.rms[0], e.rms[1], e.rms[2],
-              e.total, e.valid_fraction, e.off_band[0], e.off_band[1], e.off_band[2], bench::peak_rss_gb());
+              e.total, e.valid_fraction, e.off_band[0], e.off_band[1], e.off_band[2], e.off_band_gain[0],
+              e.off_band_gain[1], e.off_band_gain[2], bench::peak_rss_gb());
 
   // Where depth is lost: RMS of w (voxels) per band of the vectors' depth (mm from the focal plane),
   // with the band's gain (slope of measured against true w: below 1 where w falls short in
@@ -276,9 +279,11 @@ int main(int argc, char** argv) {
   const auto exact = piv::correlate_volumes(ea, eb, settings.correlation);
   const Errors ex = errors_against(exact.field, flow, voxel);
   std::printf("bench=e2e case=%s variant=exact_volumes correlate_s=%.2f rms_u=%.3f rms_v=%.3f rms_w=%.3f rms=%.3f "
-              "valid=%.3f off_axis_band_rms_u=%.3f off_axis_band_rms_v=%.3f off_axis_band_rms_w=%.3f\n",
+              "valid=%.3f off_axis_band_rms_u=%.3f off_axis_band_rms_v=%.3f off_axis_band_rms_w=%.3f "
+              "off_axis_band_gain_u=%.3f off_axis_band_gain_v=%.3f off_axis_band_gain_w=%.3f\n",
               scale.c_str(), now_s() - t, ex.rms[0], ex.rms[1], ex.rms[2], ex.total, ex.valid_fraction,
-              ex.off_band[0], ex.off_band[1], ex.off_band[2]);
+              ex.off_band[0], ex.off_band[1], ex.off_band[2], ex.off_band_gain[0], ex.off_band_gain[1],
+              ex.off_band_gain[2]);
   print_w_by_depth(exact.field, "exact");
 
   // Pass schedules from --compare-passes on the same volumes (reconstructed and exact).
