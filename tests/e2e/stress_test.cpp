@@ -118,11 +118,14 @@ Case make_case(std::uint64_t index) {
   c.settings.mart.accelerate = pick(2) == 1;
   const double floors[] = {0, 0, 4, 100};  // none, process.yaml's, the largest allowed
   c.settings.correlation.intensity_threshold_of_mean = floors[pick(4)];
+  const int margins[] = {0, 2, 6};  // none, some, the second pass's whole window depth (the largest allowed)
+  c.settings.correlation.passes[1].depth_margin = margins[pick(3)];
   c.description = "case " + std::to_string(index) + ": mode " + std::to_string(mode) + ", " +
                   std::to_string(count) + " particles, mu " + std::to_string(c.settings.mart.mu) + ", " +
                   std::to_string(c.settings.mart.iterations) + " iterations" +
                   (c.settings.mart.accelerate ? " accelerated" : "") + ", intensity floor " +
-                  std::to_string(c.settings.correlation.intensity_threshold_of_mean) + "x the mean, depth " +
+                  std::to_string(c.settings.correlation.intensity_threshold_of_mean) + "x the mean, depth margin " +
+                  std::to_string(c.settings.correlation.passes[1].depth_margin) + ", depth " +
                   std::to_string(c.depth);
   return c;
 }
@@ -212,6 +215,11 @@ TEST(PLENOPIV_STRESS_SUITE, InvalidSettingsAreRefused) {
   s = c.settings;
   s.correlation.passes = {{{64, 64, 64}, 50}};  // larger than the 12-voxel box
   EXPECT_THROW(process_pair(fixture().op(s.reconstruction_grid(), c.depth), c.a, c.b, s), InputError);
+  for (int margin : {-1, 7}) {  // the second pass's window is 6 voxels deep
+    s = c.settings;
+    s.correlation.passes[1].depth_margin = margin;
+    EXPECT_THROW(process_pair(fixture().op(s.reconstruction_grid(), c.depth), c.a, c.b, s), InputError) << margin;
+  }
   s = c.settings;
   ImageF small(20, 20, 1.f);
   EXPECT_THROW(process_pair(fixture().op(s.reconstruction_grid(), c.depth), small, c.b, s), InputError);
