@@ -35,11 +35,11 @@ std::string pass_line(const piv::PassReport& r) {
   const double seconds = r.deform_s + r.correlate_s + r.validate_s;
   char line[512];
   std::snprintf(line, sizeof line,
-                "pass %d/%d: windows %dx%dx%d, overlap %.0f %%, %dx%dx%d vectors (%zu without "
+                "pass %d/%d: windows %dx%dx%d, overlap %.0f %%, depth margin %d, %dx%dx%d vectors (%zu without "
                 "signal); outliers %zu (2nd peak %zu, 3rd peak %zu, interpolated %zu, "
                 "unresolved %zu); fallback fits %zu parabolic, %zu centroid; %.2f s (deform "
                 "%.2f, correlate %.2f, %.0f windows/s)",
-                r.pass, r.passes, w[0], w[1], w[2], r.settings.overlap_percent, r.vectors[0],
+                r.pass, r.passes, w[0], w[1], w[2], r.settings.overlap_percent, r.settings.depth_margin, r.vectors[0],
                 r.vectors[1], r.vectors[2], r.no_signal, v.outliers, v.second_peak, v.third_peak,
                 v.interpolated, v.unresolved, r.flag_parabolic, r.flag_centroid, seconds,
                 r.deform_s, r.correlate_s,
