@@ -286,33 +286,36 @@ int main(int argc, char** argv) {
               ex.off_band_gain[2]);
   print_w_by_depth(exact.field, "exact");
 
-  // Pass schedules from --compare-passes on the same volumes (reconstructed and exact).
+  // Another correlation of the same volumes (reconstructed, then exact): one row each, labelled
+  // `key`=`name`; with `by_depth`, w per depth band for the reconstructed ones as well.
+  const auto correlate_both = [&](const char* key, const std::string& name, const piv::CorrelationSettings& c,
+                                  bool by_depth) {
+    for (bool recon : {true, false}) {
+      t = now_s();
+      const auto r = recon ? piv::correlate_volumes(base.volume_a, base.volume_b, c) : piv::correlate_volumes(ea, eb, c);
+      const double cs = now_s() - t;
+      const Errors er = errors_against(r.field, flow, voxel);
+      std::printf("bench=e2e case=%s %s=%s volumes=%s correlate_s=%.2f rms_u=%.3f rms_v=%.3f rms_w=%.3f rms=%.3f "
+                  "off_axis_band_rms_u=%.3f off_axis_band_rms_v=%.3f off_axis_band_rms_w=%.3f\n",
+                  scale.c_str(), key, name.c_str(), recon ? "reconstructed" : "exact", cs, er.rms[0], er.rms[1],
+                  er.rms[2], er.total, er.off_band[0], er.off_band[1], er.off_band[2]);
+      if (recon && by_depth) print_w_by_depth(r.field, ("reconstructed_" + name).c_str());
+    }
+    std::fflush(stdout);
+  };
+
+  // Pass schedules from --compare-passes on the same volumes.
   for (std::size_t at = 0; at < compare_passes.size();) {
     const std::size_t end = std::min(compare_passes.find(';', at), compare_passes.size());
     const std::string text = compare_passes.substr(at, end - at);
     at = end + 1;
     piv::CorrelationSettings c = settings.correlation;
     c.passes = piv::parse_passes(text);
-    for (bool recon : {true, false}) {
-      t = now_s();
-      const auto r = recon ? piv::correlate_volumes(base.volume_a, base.volume_b, c) : piv::correlate_volumes(ea, eb, c);
-      const double cs = now_s() - t;
-      const Errors er = errors_against(r.field, flow, voxel);
-      std::printf("bench=e2e case=%s passes=%s volumes=%s correlate_s=%.2f rms_u=%.3f rms_v=%.3f rms_w=%.3f rms=%.3f "
-                  "off_axis_band_rms_u=%.3f off_axis_band_rms_v=%.3f off_axis_band_rms_w=%.3f\n",
-                  scale.c_str(), text.c_str(), recon ? "reconstructed" : "exact", cs, er.rms[0], er.rms[1], er.rms[2],
-                  er.total, er.off_band[0], er.off_band[1], er.off_band[2]);
-      if (recon) print_w_by_depth(r.field, ("reconstructed_" + text).c_str());
-      std::fflush(stdout);
-    }
+    correlate_both("passes", text, c, true);
   }
 
   // Correlation variants on the same volumes (reconstructed and exact), side by side.
   {
-    struct Variant {
-      const char* name;
-      piv::CorrelationSettings c;
-    };
     piv::CorrelationSettings previous = settings.correlation;  // the default until 2026-11-23
     previous.passes = {{{32, 32, 32}, 50}, {{16, 16, 16}, 50}, {{16, 16, 16}, 75}};
     previous.predictor = piv::PredictorBase::window_mean;
@@ -320,28 +323,17 @@ int main(int argc, char** argv) {
     piv::CorrelationSettings centre3 = previous;
     centre3.predictor = piv::PredictorBase::centre;
     centre3.predictor_smoothing = 1;
-    // The ghost floor toggled: off when the headline has it, 4 (measured best) when not.
     // The passes without their depth margins (core/piv's default until 2026-11-24).
     piv::CorrelationSettings no_margin = settings.correlation;
     for (piv::PassSettings& p : no_margin.passes) p.depth_margin = 0;
+    // The ghost floor toggled: off when the headline has it, 4 (measured best) when not.
     piv::CorrelationSettings toggled = settings.correlation;
     toggled.intensity_threshold_of_mean = intensity_threshold > 0 ? 0.0 : 4.0;
-    for (const Variant& v : {Variant{"no_depth_margin", no_margin},
-                             Variant{intensity_threshold > 0 ? "no_intensity_threshold" : "intensity_threshold_4", toggled},
-                             Variant{"previous_default_3pass_window_mean", previous}, Variant{"centre_3pass", centre3}}) {
-      for (bool recon : {true, false}) {
-        t = now_s();
-        const auto r = recon ? piv::correlate_volumes(base.volume_a, base.volume_b, v.c)
-                             : piv::correlate_volumes(ea, eb, v.c);
-        const double cs = now_s() - t;
-        const Errors er = errors_against(r.field, flow, voxel);
-        std::printf("bench=e2e case=%s correlation=%s volumes=%s correlate_s=%.2f rms_u=%.3f rms_v=%.3f rms_w=%.3f "
-                    "rms=%.3f off_axis_band_rms_u=%.3f off_axis_band_rms_v=%.3f off_axis_band_rms_w=%.3f\n",
-                    scale.c_str(), v.name, recon ? "reconstructed" : "exact", cs, er.rms[0], er.rms[1], er.rms[2],
-                    er.total, er.off_band[0], er.off_band[1], er.off_band[2]);
-      }
-    }
-    std::fflush(stdout);
+    correlate_both("correlation", "no_depth_margin", no_margin, false);
+    correlate_both("correlation", intensity_threshold > 0 ? "no_intensity_threshold" : "intensity_threshold_4", toggled,
+                   false);
+    correlate_both("correlation", "previous_default_3pass_window_mean", previous, false);
+    correlate_both("correlation", "centre_3pass", centre3, false);
   }
   if (time_sweep) {
     // Time against error at this scale: MART iterations and the ghost floor, every pair in the kept
