@@ -144,7 +144,7 @@ TEST(ProcessCli, RecoversTheDepthDisplacementAwayFromFocus) {
   // (without the acceleration 0.2053 and 0.1121); with margins on both 16^3, 50 % passes 0.2117
   // and 0.1773.
   const double guarded = process("1", false)[2], unguarded = process("0", false)[2];
-  EXPECT_LT(unguarded, guarded - 0.03) << "the guard no longer matters: update docs and defaults";
+  EXPECT_LT(unguarded, guarded - 0.04) << "the guard no longer matters: update docs and defaults";
 }
 
 // A camera whose lens array is rotated 1 deg (offset, 1 um per-lens jitter), calibrated by
