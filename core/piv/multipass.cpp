@@ -338,6 +338,8 @@ CorrelationResult correlate_volumes(const Volume& a, const Volume& b,
     if (on_pass) on_pass(report);
   }
 
+  if (settings.final_smoothing > 0) smooth_valid(validated, layout.count, settings.final_smoothing);
+
   Grid3 g;
   g.shape = layout.count;
   const NodeField nodes = layout.nodes();

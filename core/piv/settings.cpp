@@ -28,6 +28,8 @@ void check(const CorrelationSettings& s, const std::string& source) {
   if (s.median.radius < 1 || s.median.radius > 3) fail("median.radius: must be 1, 2 or 3");
   if (s.predictor_smoothing < 0 || s.predictor_smoothing > 4)
     fail("predictor_smoothing: must be 0 to 4, got " + std::to_string(s.predictor_smoothing));
+  if (s.final_smoothing < 0 || s.final_smoothing > 4)
+    fail("final_smoothing: must be 0 to 4, got " + std::to_string(s.final_smoothing));
   if (!(s.signal_threshold >= 0)) fail("signal_threshold: must be >= 0");
   if (!(s.intensity_threshold_of_mean >= 0 && s.intensity_threshold_of_mean <= 100))
     fail("intensity_threshold_of_mean: must be in [0, 100] (times the volume's mean), got " +
@@ -81,7 +83,7 @@ std::vector<PassSettings> parse_passes(const std::string& text) {
 
 CorrelationSettings correlation_settings_from(const YamlMap& root) {
   root.reject_unknown({"passes", "median", "signal_threshold", "dt_s", "fft_planning", "prefilter",
-                      "predictor", "predictor_smoothing", "intensity_threshold_of_mean"});
+                      "predictor", "predictor_smoothing", "intensity_threshold_of_mean", "final_smoothing"});
   CorrelationSettings s;
   if (root.has("passes")) {
     const YAML::Node list = root.node()["passes"];
@@ -130,6 +132,10 @@ CorrelationSettings correlation_settings_from(const YamlMap& root) {
                     ? PredictorBase::centre
                     : PredictorBase::window_mean;
   s.predictor_smoothing = int(root.integer_or("predictor_smoothing", s.predictor_smoothing));
+  // Range-checked before the cast: a huge value must not wrap into a valid int.
+  const long long final_smoothing = root.integer_or("final_smoothing", s.final_smoothing);
+  if (final_smoothing < 0 || final_smoothing > 4) root.fail("final_smoothing", "must be 0 to 4");
+  s.final_smoothing = int(final_smoothing);
   check(s, root.source());
   return s;
 }

@@ -146,6 +146,25 @@ ValidatedField validate(Candidates& c, const MedianTest& test) {
   return f;
 }
 
+void smooth_valid(ValidatedField& f, std::array<int, 3> count, int passes) {
+  const std::array<std::size_t, 3> stride{1, std::size_t(count[0]), std::size_t(count[0]) * count[1]};
+  std::vector<std::array<float, 3>> in;
+  for (int pass = 0; pass < passes; ++pass)
+    for (int axis = 0; axis < 3; ++axis) {
+      in = f.d;
+      const std::size_t st = stride[axis];
+      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, in.size()), [&](const auto& r) {
+        for (std::size_t node = r.begin(); node < r.end(); ++node) {
+          const int c = int((node / st) % std::size_t(count[axis]));
+          if (!f.valid[node] || c == 0 || c == count[axis] - 1 || !f.valid[node - st] || !f.valid[node + st])
+            continue;
+          for (int a = 0; a < 3; ++a)
+            f.d[node][a] = 0.25f * in[node - st][a] + 0.5f * in[node][a] + 0.25f * in[node + st][a];
+        }
+      });
+    }
+}
+
 std::vector<std::array<float, 3>> fill_invalid(const ValidatedField& f, std::array<int, 3> count) {
   std::vector<std::array<float, 3>> out = f.d;
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, out.size()), [&](const auto& r) {

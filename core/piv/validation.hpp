@@ -50,6 +50,13 @@ struct ValidatedField {
 // Updates `c.flags`. Parallel over nodes (TBB); deterministic.
 ValidatedField validate(Candidates& c, const MedianTest& test);
 
+// Smooths the valid vectors in place: `passes` binomial [1 2 1]/4 passes along x, y and z in turn.
+// Along an axis a node is smoothed only where it and both its neighbours on that axis are valid;
+// elsewhere (at the field's faces, beside an invalid node) it keeps its value, so a linear field
+// comes out unchanged everywhere and nothing is taken from invalid nodes, which stay invalid with
+// their values. Parallel over nodes (TBB); deterministic.
+void smooth_valid(ValidatedField& f, std::array<int, 3> count, int passes);
+
 // Fills invalid nodes (for use as a predictor) with the mean of valid nodes in the 5x5x5
 // neighbourhood, or zero when there is none.
 std::vector<std::array<float, 3>> fill_invalid(const ValidatedField& f, std::array<int, 3> count);

@@ -120,12 +120,15 @@ Case make_case(std::uint64_t index) {
   c.settings.correlation.intensity_threshold_of_mean = floors[pick(4)];
   const int margins[] = {0, 2, 6};  // none, some, the second pass's whole window depth (the largest allowed)
   c.settings.correlation.passes[1].depth_margin = margins[pick(3)];
+  const int smoothing[] = {0, 1, 4};  // none, process.yaml's, the most allowed
+  c.settings.correlation.final_smoothing = smoothing[pick(3)];
   c.description = "case " + std::to_string(index) + ": mode " + std::to_string(mode) + ", " +
                   std::to_string(count) + " particles, mu " + std::to_string(c.settings.mart.mu) + ", " +
                   std::to_string(c.settings.mart.iterations) + " iterations" +
                   (c.settings.mart.accelerate ? " accelerated" : "") + ", intensity floor " +
                   std::to_string(c.settings.correlation.intensity_threshold_of_mean) + "x the mean, depth margin " +
-                  std::to_string(c.settings.correlation.passes[1].depth_margin) + ", depth " +
+                  std::to_string(c.settings.correlation.passes[1].depth_margin) + ", final smoothing " +
+                  std::to_string(c.settings.correlation.final_smoothing) + ", depth " +
                   std::to_string(c.depth);
   return c;
 }
@@ -219,6 +222,11 @@ TEST(PLENOPIV_STRESS_SUITE, InvalidSettingsAreRefused) {
     s = c.settings;
     s.correlation.passes[1].depth_margin = margin;
     EXPECT_THROW(process_pair(fixture().op(s.reconstruction_grid(), c.depth), c.a, c.b, s), InputError) << margin;
+  }
+  for (int passes : {-1, 5}) {
+    s = c.settings;
+    s.correlation.final_smoothing = passes;
+    EXPECT_THROW(process_pair(fixture().op(s.reconstruction_grid(), c.depth), c.a, c.b, s), InputError) << passes;
   }
   s = c.settings;
   ImageF small(20, 20, 1.f);
