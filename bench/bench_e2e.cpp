@@ -4,7 +4,7 @@
 // of the knobs on the reduced case with its Pareto front.
 //
 //   bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate]
-//             [--dark-cutoff F] [--intensity-threshold K] [--steady] [--time-sweep] [--z-centre MM]
+//             [--dark-cutoff F] [--intensity-threshold K] [--final-smoothing K] [--steady] [--time-sweep] [--z-centre MM]
 //             [--compare-passes 'P1;P2;...']
 //     --iterations/--mu/--accelerate/--dark-cutoff: MART for the headline rows (default the
 //              paper's 5 at mu 0.5, not accelerated, MartSettings' dark-pixel cutoff; the sweep's
@@ -15,6 +15,9 @@
 //     --intensity-threshold: the correlation's ghost floor for the headline rows, times each
 //              volume's mean (default 0, the paper's correlation); they then also print the
 //              correlation without it on the same volumes.
+//     --final-smoothing: binomial passes over the headline rows' final field (default 0, the
+//              paper's correlation); they then also print the field with one pass more and, when
+//              it is set, without it.
 //     --z-centre: depth of the volume's (and the ring's) centre, mm (default 0: the focal plane).
 //     --compare-passes: correlate the headline volumes (and the exact ones) with each pass list
 //              too, in --passes syntax (e.g. '32@50,16@50+4,16@50,16@75'), separated by ';'.
@@ -130,6 +133,7 @@ int main(int argc, char** argv) {
   double mu = 0.5, z_centre = 0.0, dark_cutoff = recon::MartSettings{}.dark_weight_cutoff;
   double sensor_blur_mm = recon::MartSettings{}.sensor_blur_sigma_mm;
   double intensity_threshold = piv::CorrelationSettings{}.intensity_threshold_of_mean;
+  int final_smoothing = piv::CorrelationSettings{}.final_smoothing;
   bool steady = false, time_sweep = false;
   std::string compare_passes;  // pass lists separated by ';'
   for (int i = 1; i < argc; ++i) {
@@ -142,6 +146,7 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--dark-cutoff") && i + 1 < argc) dark_cutoff = std::stod(argv[++i]);
     else if (!std::strcmp(argv[i], "--sensor-blur-mm") && i + 1 < argc) sensor_blur_mm = std::stod(argv[++i]);
     else if (!std::strcmp(argv[i], "--intensity-threshold") && i + 1 < argc) intensity_threshold = std::stod(argv[++i]);
+    else if (!std::strcmp(argv[i], "--final-smoothing") && i + 1 < argc) final_smoothing = std::stoi(argv[++i]);
     else if (!std::strcmp(argv[i], "--steady")) steady = true;
     else if (!std::strcmp(argv[i], "--time-sweep")) time_sweep = true;
     else if (!std::strcmp(argv[i], "--compare-passes") && i + 1 < argc) compare_passes = argv[++i];
@@ -150,8 +155,9 @@ int main(int argc, char** argv) {
   if (sweep && (iterations != 5 || mu != 0.5 || accelerate || z_centre != 0.0 ||
                 dark_cutoff != recon::MartSettings{}.dark_weight_cutoff ||
                 sensor_blur_mm != recon::MartSettings{}.sensor_blur_sigma_mm ||
-                intensity_threshold != piv::CorrelationSettings{}.intensity_threshold_of_mean)) {
-    std::fprintf(stderr, "bench_e2e: --iterations/--mu/--accelerate/--dark-cutoff/--sensor-blur-mm/--intensity-threshold/--z-centre change the "
+                intensity_threshold != piv::CorrelationSettings{}.intensity_threshold_of_mean ||
+                final_smoothing != piv::CorrelationSettings{}.final_smoothing)) {
+    std::fprintf(stderr, "bench_e2e: --iterations/--mu/--accelerate/--dark-cutoff/--sensor-blur-mm/--intensity-threshold/--final-smoothing/--z-centre change the "
                          "headline rows only; use them with --no-sweep\n");
     return 2;
   }
@@ -160,7 +166,7 @@ int main(int argc, char** argv) {
   const bool mid = scale == "mid";
   const bool full = scale == "full" || mid;
   if (!full && scale != "reduced") {
-    std::fprintf(stderr, "usage: bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate] [--dark-cutoff F] [--sensor-blur-mm S] [--intensity-threshold K] [--steady] [--time-sweep] [--z-centre MM] [--compare-passes 'P1;P2']\n");
+    std::fprintf(stderr, "usage: bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate] [--dark-cutoff F] [--sensor-blur-mm S] [--intensity-threshold K] [--final-smoothing K] [--steady] [--time-sweep] [--z-centre MM] [--compare-passes 'P1;P2']\n");
     return 2;
   }
   const std::string dir = std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/";
@@ -179,6 +185,7 @@ int main(int argc, char** argv) {
   settings.mart.dark_weight_cutoff = dark_cutoff;
   settings.mart.sensor_blur_sigma_mm = sensor_blur_mm;
   settings.correlation.intensity_threshold_of_mean = intensity_threshold;
+  settings.correlation.final_smoothing = final_smoothing;
 
   sim::RingVortexFlow::Parameters rv;
   rv.voxel_mm = voxel;
@@ -219,11 +226,11 @@ int main(int argc, char** argv) {
   const auto base = process::process_pair(op, a, b, settings, {}, &workspace);
   const Errors e = errors_against(base.correlation.field, flow, voxel);
   std::printf("bench=e2e case=%s variant=reconstructed iterations=%d mu=%.2f accelerate=%d dark_cutoff=%.3g sensor_blur_mm=%.4g "
-              "intensity_threshold=%.3g recon_a_s=%.2f recon_b_s=%.2f "
+              "intensity_threshold=%.3g final_smoothing=%d recon_a_s=%.2f recon_b_s=%.2f "
               "correlate_s=%.2f skipped_a=%.3f skipped_b=%.3f rms_u=%.3f rms_v=%.3f rms_w=%.3f rms=%.3f valid=%.3f "
               "off_axis_band_rms_u=%.3f off_axis_band_rms_v=%.3f off_axis_band_rms_w=%.3f off_axis_band_gain_u=%.3f "
               "off_axis_band_gain_v=%.3f off_axis_band_gain_w=%.3f peak_rss_gb=%.2f\n",
-              scale.c_str(), iterations, mu, int(accelerate), dark_cutoff, sensor_blur_mm, intensity_threshold, base.times.reconstruct_a_s, base.times.reconstruct_b_s, base.times.correlate_s,
+              scale.c_str(), iterations, mu, int(accelerate), dark_cutoff, sensor_blur_mm, intensity_threshold, final_smoothing, base.times.reconstruct_a_s, base.times.reconstruct_b_s, base.times.correlate_s,
               base.skipped_a.fraction_skipped(), base.skipped_b.fraction_skipped(), e.rms[0], e.rms[1], e.rms[2],
               e.total, e.valid_fraction, e.off_band[0], e.off_band[1], e.off_band[2], e.off_band_gain[0],
               e.off_band_gain[1], e.off_band_gain[2], bench::peak_rss_gb());
@@ -235,13 +242,19 @@ int main(int argc, char** argv) {
     const double edges[] = {-1e9, -8, -4, -2, 0, 2, 4, 8, 1e9};
     std::string bands;
     for (int k = 0; k + 1 < int(std::size(edges)); ++k) {
-      const sim::FieldErrors fe = sim::field_errors(field, flow, voxel, 3, 0, [&](const sim::Point3& x) {
+      const auto in_band = [&](const sim::Point3& x) {
         return x[2] - z_centre >= edges[k] && x[2] - z_centre < edges[k + 1];
-      });
-      char item[128];
-      std::snprintf(item, sizeof item, "%s%s..%s:%.3f(%zu,gain=%.3f)", k ? "," : "", k ? std::to_string(int(edges[k])).c_str() : "-inf",
+      };
+      const sim::FieldErrors fe = sim::field_errors(field, flow, voxel, 3, 0, in_band);
+      // The same band's truth: the error of a field of zeros (valid where `field` is).
+      VectorField zero(field.grid);
+      zero.valid = field.valid;
+      const sim::FieldErrors truth = sim::field_errors(zero, flow, voxel, 3, 0, in_band);
+      char item[256];
+      std::snprintf(item, sizeof item, "%s%s..%s:%.3f(%zu,gain=%.3f,u=%.3f,v=%.3f,true_rms_uvw=%.2f/%.2f/%.2f)", k ? "," : "",
+                    k ? std::to_string(int(edges[k])).c_str() : "-inf",
                     k + 2 < int(std::size(edges)) ? std::to_string(int(edges[k + 1])).c_str() : "inf", fe.rms[2], fe.compared,
-                    fe.gain[2]);
+                    fe.gain[2], fe.rms[0], fe.rms[1], truth.rms[0], truth.rms[1], truth.rms[2]);
       bands += item;
     }
     std::printf("bench=e2e case=%s volumes=%s rms_w_by_depth_mm=%s\n", scale.c_str(), volumes, bands.c_str());
@@ -332,6 +345,15 @@ int main(int argc, char** argv) {
     correlate_both("correlation", "no_depth_margin", no_margin, false);
     correlate_both("correlation", intensity_threshold > 0 ? "no_intensity_threshold" : "intensity_threshold_4", toggled,
                    false);
+    // The final smoothing: one pass more than the headline's, and none when the headline has some.
+    piv::CorrelationSettings smoother = settings.correlation;
+    smoother.final_smoothing = final_smoothing + 1;
+    correlate_both("correlation", "final_smoothing_" + std::to_string(smoother.final_smoothing), smoother, true);
+    if (final_smoothing > 0) {
+      piv::CorrelationSettings unsmoothed = settings.correlation;
+      unsmoothed.final_smoothing = 0;
+      correlate_both("correlation", "final_smoothing_0", unsmoothed, true);
+    }
     correlate_both("correlation", "previous_default_3pass_window_mean", previous, false);
     correlate_both("correlation", "centre_3pass", centre3, false);
   }
