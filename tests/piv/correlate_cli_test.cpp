@@ -100,6 +100,45 @@ TEST(CorrelateCli, MissingDtAndBadPassesAreRefused) {
                         output),
             2);
   EXPECT_NE(output.find("--passes"), std::string::npos) << output;
+  EXPECT_EQ(run_command({binary("plenopiv"), "correlate", a.string(), b.string(), "-o",
+                         (dir() / "x.h5").string(), "--dt", "1", "--final-smoothing", "5"},
+                        output),
+            2);
+  EXPECT_NE(output.find("final_smoothing"), std::string::npos) << output;
+  EXPECT_FALSE(std::filesystem::exists(dir() / "x.h5"));
+}
+
+// --final-smoothing: the run says so, and the field is the same uniform shift (a uniform field is
+// left as it is; only its noise drops).
+TEST(CorrelateCli, FinalSmoothingIsAppliedAndReported) {
+  const auto a = dir() / "as.h5", b = dir() / "bs.h5", plain = dir() / "plain.h5", smooth = dir() / "smooth.h5";
+  write_pair(grid(48), a, b);
+  std::string output;
+  ASSERT_EQ(run_command({binary("plenopiv"), "correlate", a.string(), b.string(), "-o", plain.string(), "--dt",
+                         "0.002", "--passes", "24@50,16@75"},
+                        output),
+            0)
+      << output;
+  EXPECT_EQ(output.find("smoothing pass"), std::string::npos) << output;
+  ASSERT_EQ(run_command({binary("plenopiv"), "correlate", a.string(), b.string(), "-o", smooth.string(), "--dt",
+                         "0.002", "--passes", "24@50,16@75", "--final-smoothing", "2"},
+                        output),
+            0)
+      << output;
+  EXPECT_NE(output.find("final field: 2 binomial smoothing passes"), std::string::npos) << output;
+  const VectorField p = io::read_vector_field_h5(plain), s = io::read_vector_field_h5(smooth);
+  ASSERT_EQ(p.grid, s.grid);
+  double spread_p = 0, spread_s = 0;
+  std::size_t differ = 0;
+  for (std::size_t i = 0; i < p.grid.count(); ++i) {
+    ASSERT_TRUE(p.valid[i] && s.valid[i]);
+    EXPECT_NEAR(s.dx_mm[i], 0.12, 0.01);
+    spread_p += std::pow(p.dx_mm[i] - 0.12, 2);
+    spread_s += std::pow(s.dx_mm[i] - 0.12, 2);
+    differ += p.dx_mm[i] != s.dx_mm[i];
+  }
+  EXPECT_GT(differ, p.grid.count() / 2);  // smoothed inside, not only at the faces
+  EXPECT_LT(spread_s, spread_p);
 }
 
 }  // namespace
