@@ -33,8 +33,11 @@ std::string describe(const Grid3& g) {
   return s.str();
 }
 
-void check_inputs(const Volume& a, const Volume& b, const CorrelationSettings& s) {
+void check_inputs(const Volume& a, const Volume& b, const CorrelationSettings& s, int depth_context) {
   check(s, "correlation settings");
+  if (depth_context < 0 || 2 * depth_context >= a.grid.shape[2])
+    throw InputError("depth context: " + std::to_string(depth_context) + " slices at each depth end of a volume " +
+                     std::to_string(a.grid.shape[2]) + " slices deep (0 to less than half of it)");
   if (!(a.grid == b.grid))
     throw InputError("the two volumes are on different grids: first " + describe(a.grid) +
                      ", second " + describe(b.grid));
@@ -46,12 +49,14 @@ void check_inputs(const Volume& a, const Volume& b, const CorrelationSettings& s
         throw InputError(std::string(v == &a ? "first" : "second") +
                          " volume holds a non-finite intensity (NaN or infinity)");
   for (std::size_t p = 0; p < s.passes.size(); ++p)
-    for (int axis = 0; axis < 3; ++axis)
-      if (s.passes[p].window[axis] > a.grid.shape[axis])
+    for (int axis = 0; axis < 3; ++axis) {
+      const int room = a.grid.shape[axis] - (axis == 2 ? 2 * depth_context : 0);
+      if (s.passes[p].window[axis] > room)
         throw InputError("passes[" + std::to_string(p) + "].window: " +
                          std::to_string(s.passes[p].window[axis]) + " voxels along " +
-                         "xyz"[axis] + " exceed the volume's " +
-                         std::to_string(a.grid.shape[axis]));
+                         "xyz"[axis] + " exceed the volume's " + std::to_string(room) +
+                         (axis == 2 && depth_context ? " (its depth context left out)" : ""));
+    }
 }
 
 // Windows of one pass: node i's window starts at voxel start[a] + i * step[a].
@@ -68,15 +73,17 @@ struct Layout {
   }
 };
 
-Layout layout_of(const PassSettings& p, const std::array<int, 3>& shape) {
+// The windows lie within the volume without its `depth_context` slices at each depth end.
+Layout layout_of(const PassSettings& p, const std::array<int, 3>& shape, int depth_context) {
   Layout l;
   l.window = p.window;
   l.depth_margin = p.depth_margin;
   for (int a = 0; a < 3; ++a) {
+    const int context = a == 2 ? depth_context : 0, length = shape[a] - 2 * context;
     l.step[a] = std::max(1, int(std::lround(p.window[a] * (1 - p.overlap_percent / 100))));
-    l.count[a] = (shape[a] - p.window[a]) / l.step[a] + 1;
+    l.count[a] = (length - p.window[a]) / l.step[a] + 1;
     // Centre the set of windows in the volume.
-    l.start[a] = (shape[a] - p.window[a] - (l.count[a] - 1) * l.step[a]) / 2;
+    l.start[a] = context + (length - p.window[a] - (l.count[a] - 1) * l.step[a]) / 2;
   }
   return l;
 }
@@ -248,8 +255,8 @@ Candidates correlate_windows(std::span<const float> va, std::span<const float> v
 
 CorrelationResult correlate_volumes(const Volume& a, const Volume& b,
                                     const CorrelationSettings& settings,
-                                    const std::function<void(const PassReport&)>& on_pass) {
-  check_inputs(a, b, settings);
+                                    const std::function<void(const PassReport&)>& on_pass, int depth_context) {
+  check_inputs(a, b, settings, depth_context);
   const std::array<int, 3> shape = a.grid.shape;
   // Volume-sized copies (4 x 48 MB on the paper's grid), neither zeroed nor kept: each is written
   // in full before it is read.
@@ -290,7 +297,7 @@ CorrelationResult correlate_volumes(const Volume& a, const Volume& b,
     report.pass = p + 1;
     report.passes = passes;
     report.settings = settings.passes[p];
-    layout = layout_of(settings.passes[p], shape);
+    layout = layout_of(settings.passes[p], shape, depth_context);
     report.vectors = layout.count;
 
     auto t0 = Clock::now();

@@ -37,8 +37,16 @@ struct CorrelationResult {
 // vector grid's node (i, j, k) is the centre of its window, in mm. `on_pass` is called after
 // each pass. Parallel (TBB) over windows and voxels; the result does not depend on the number
 // of threads.
+//
+// `depth_context`: slices at each depth end that hold no window but that the correlation may
+// read: a window's depth margin, the deformation, the prefilter. The vectors are those of the
+// volume without them (the same nodes), measured with what lies beyond its depth faces in view.
+// core/process passes its depth guard here: a reconstructed particle is a streak in depth, and
+// a box face cuts it as a window face does (PassSettings::depth_margin). 0 to less than half the
+// volume's depth.
 CorrelationResult correlate_volumes(const Volume& a, const Volume& b,
                                     const CorrelationSettings& settings,
-                                    const std::function<void(const PassReport&)>& on_pass = {});
+                                    const std::function<void(const PassReport&)>& on_pass = {},
+                                    int depth_context = 0);
 
 }  // namespace plenopiv::piv

@@ -157,7 +157,6 @@ PairResult process_pair(const recon::WeightingOperator& op, const ImageF& frame_
     report("reconstruct A", 0.4 * it.iteration / iterations);
   });
   out.times.reconstruct_a_s = seconds_since(t0);
-  out.volume_a = depth_crop(std::move(ra.volume), settings.guard_slices(), settings.grid);
   out.skipped_a = ra.skipped;
 
   t0 = std::chrono::steady_clock::now();
@@ -165,15 +164,17 @@ PairResult process_pair(const recon::WeightingOperator& op, const ImageF& frame_
     report("reconstruct B", 0.4 + 0.4 * it.iteration / iterations);
   });
   out.times.reconstruct_b_s = seconds_since(t0);
-  out.volume_b = depth_crop(std::move(rb.volume), settings.guard_slices(), settings.grid);
   out.skipped_b = rb.skipped;
 
+  // The guard slices are the correlation's depth context: no window lies in them, but the windows
+  // at the box's depth faces see the rest of the streaks those faces cut (piv::correlate_volumes).
   t0 = std::chrono::steady_clock::now();
-  out.correlation = piv::correlate_volumes(out.volume_a, out.volume_b, settings.correlation,
-                                           [&](const piv::PassReport& p) {
-                                             report("correlate", 0.8 + 0.2 * p.pass / p.passes);
-                                           });
+  out.correlation = piv::correlate_volumes(
+      ra.volume, rb.volume, settings.correlation,
+      [&](const piv::PassReport& p) { report("correlate", 0.8 + 0.2 * p.pass / p.passes); }, settings.guard_slices());
   out.times.correlate_s = seconds_since(t0);
+  out.volume_a = depth_crop(std::move(ra.volume), settings.guard_slices(), settings.grid);
+  out.volume_b = depth_crop(std::move(rb.volume), settings.guard_slices(), settings.grid);
   report("done", 1.0);
   return out;
 }

@@ -104,8 +104,9 @@ class PairOperator {
 };
 
 // Reconstructs both frames with `op` (whose grid must be settings.reconstruction_grid():
-// InputError otherwise), drops the guard slices, then correlates them (PairResult's volumes are on
-// settings.grid). Images are validated (sensor-sized, finite, non-negative) and named
+// InputError otherwise), correlates them with the guard slices as depth context (vectors on
+// settings.grid's box only; piv::correlate_volumes), then drops those slices (PairResult's volumes
+// are on settings.grid). Images are validated (sensor-sized, finite, non-negative) and named
 // "frame A" / "frame B" in errors. Bit-identical at any thread count. Frame B is reconstructed in
 // frame A's buffers: in `workspace` when given (a caller processing pair after pair keeps one per
 // pair in flight, so that no frame allocates them afresh), else in one kept for the pair. The
