@@ -119,7 +119,9 @@ CorrelationSettings correlation_settings_from(const YamlMap& root) {
     m->reject_unknown({"threshold", "epsilon_voxel", "radius"});
     s.median.threshold = m->number_or("threshold", s.median.threshold);
     s.median.epsilon = m->number_or("epsilon_voxel", s.median.epsilon);
-    s.median.radius = int(m->integer_or("radius", s.median.radius));
+    const long long radius = m->integer_or("radius", s.median.radius);
+    if (radius < 1 || radius > 3) m->fail("radius", "must be 1, 2 or 3");
+    s.median.radius = int(radius);
   }
   s.signal_threshold = float(root.number_or("signal_threshold", s.signal_threshold));
   s.dt_s = root.number_or("dt_s", s.dt_s);
@@ -131,8 +133,11 @@ CorrelationSettings correlation_settings_from(const YamlMap& root) {
   s.predictor = root.choice_or("predictor", {"centre", "window_mean"}, "centre") == "centre"
                     ? PredictorBase::centre
                     : PredictorBase::window_mean;
-  s.predictor_smoothing = int(root.integer_or("predictor_smoothing", s.predictor_smoothing));
-  // Range-checked before the cast: a huge value must not wrap into a valid int.
+  // The whole numbers are range-checked before the cast: a huge value must not wrap into a valid
+  // int (4294967297 would become 1).
+  const long long predictor_smoothing = root.integer_or("predictor_smoothing", s.predictor_smoothing);
+  if (predictor_smoothing < 0 || predictor_smoothing > 4) root.fail("predictor_smoothing", "must be 0 to 4");
+  s.predictor_smoothing = int(predictor_smoothing);
   const long long final_smoothing = root.integer_or("final_smoothing", s.final_smoothing);
   if (final_smoothing < 0 || final_smoothing > 4) root.fail("final_smoothing", "must be 0 to 4");
   s.final_smoothing = int(final_smoothing);

@@ -755,6 +755,9 @@ TEST(Settings, PredictorKeysFromYamlAndRefusals) {
   EXPECT_THROW(from("predictor: middle\n"), InputError);
   EXPECT_THROW(from("predictor_smoothing: 5\n"), InputError);
   EXPECT_THROW(from("predictor_smoothing: -1\n"), InputError);
+  EXPECT_THROW(from("predictor_smoothing: 4294967297\n"), InputError);  // 1 if cast to int unchecked
+  EXPECT_THROW(from("median: {radius: 4294967298}\n"), InputError);     // 2 likewise
+  EXPECT_EQ(from("median: {radius: 3}\n").median.radius, 3);
   EXPECT_EQ(d.intensity_threshold_of_mean, 0.0);
   EXPECT_EQ(from("intensity_threshold_of_mean: 4\n").intensity_threshold_of_mean, 4.0);
   EXPECT_THROW(from("intensity_threshold_of_mean: -1\n"), InputError);
@@ -765,6 +768,7 @@ TEST(Settings, PredictorKeysFromYamlAndRefusals) {
   EXPECT_THROW(from("final_smoothing: -1\n"), InputError);
   EXPECT_THROW(from("final_smoothing: 5\n"), InputError);
   EXPECT_THROW(from("final_smoothing: 1e10\n"), InputError);
+  EXPECT_THROW(from("final_smoothing: 4294967297\n"), InputError);
   EXPECT_THROW(from("final_smoothing: 1.5\n"), InputError);
   EXPECT_THROW(from("final_smoothing: many\n"), InputError);
 }
