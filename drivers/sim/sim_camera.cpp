@@ -202,12 +202,17 @@ class SimCamera : public CameraBase, public TriggerInput {
       for (std::size_t i = 0; i < b.size(); ++i)
         for (int k = 0; k < 3; ++k) b[i][k] = a[i][k] + flow_scale * (b[i][k] - a[i][k]);
     }
+    // Both frames are rendered before either is delivered: a camera's frame B follows A by one
+    // read-out, not by a ray trace (on the paper's camera one frame's render takes ~1.5 s on two
+    // cores, beyond the pairer's 1 s wait for a B, and whole pairs were discarded).
     const std::uint64_t t0 = now_ns();
     Frame fa = make_frame(a, 2 * trigger, pair_seed, t0);
-    submit_frame(std::move(fa), trigger);
-    if (scene_.drop_every && (trigger + 1) % scene_.drop_every == 0) return;
     Frame fb = make_frame(b, 2 * trigger + 1, pair_seed + 1, t0 + 1000);
     if (scene_.incomplete_every && (trigger + 1) % scene_.incomplete_every == 0) fb.complete = false;
+    fa.host_timestamp_ns = now_ns();
+    submit_frame(std::move(fa), trigger);
+    if (scene_.drop_every && (trigger + 1) % scene_.drop_every == 0) return;
+    fb.host_timestamp_ns = now_ns();
     submit_frame(std::move(fb), trigger);
   }
 
@@ -219,7 +224,7 @@ class SimCamera : public CameraBase, public TriggerInput {
     f.bit_depth = options_.sensor.bit_depth;
     f.frame_id = id + 1;  // GigE Vision style: 0 means "unknown"
     f.device_timestamp_ns = device_ns;
-    f.host_timestamp_ns = now_ns();
+    f.host_timestamp_ns = now_ns();  // set again when the frame is delivered
     f.complete = true;
     return f;
   }
