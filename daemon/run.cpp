@@ -257,7 +257,9 @@ void Run::fill_status(msg::Status& s) const {
   s.set_pairs_recorded(recorder_->pairs_recorded());
   s.set_pairs_processed(stats_.output.processed);
   s.set_pairs_skipped(stats_.input.skipped + stats_.process.skipped);
-  s.set_frames_lost(c.frames_lost + c.frames_incomplete);
+  // Every frame that is in no delivered pair: never arrived, or arrived and was discarded
+  // (incomplete, or its partner missing or late). Incomplete frames are among the discarded.
+  s.set_frames_lost(c.frames_lost + c.frames_discarded);
   *s.add_stages() = stats_.input.to_message("input", std::uint32_t(mailbox_.depth()));
   *s.add_stages() = stats_.process.to_message("process", stats_.process.in_flight);
   *s.add_stages() = stats_.output.to_message("output", 0);

@@ -195,6 +195,27 @@ TEST_F(DaemonRuns, IllegalAndInvalidRequestsAreRefusedAndTheDaemonServesOn) {
   EXPECT_TRUE(daemon_->running());
 }
 
+// Frames that reach the camera driver but no recorded pair are reported: a frame A whose B never
+// came was discarded by the pairer and used to be left out of the status's "frames lost".
+TEST_F(DaemonRuns, UnpairedFramesCountAsLost) {
+  std::string out;
+  const std::string camera = "sim://?rays=200&ppm=0.02&drop_every=2&camera=" + std::string(PLENOPIV_SOURCE_DIR) +
+                             "/systemd/config/camera-small.yaml";
+  ASSERT_EQ(client({"run", "start", "--config", write_config(kRun + "camera_uri: \"" + camera + "\"\n").string(),
+                    "--pairs", "4"},
+                   out),
+            0)
+      << out;
+  std::this_thread::sleep_for(500ms);
+  wait_for_state("Idle");
+  const auto s = status_or_null();
+  ASSERT_TRUE(s);
+  // Triggers 1 and 3 lose frame B: B1 is a gap in the ids (lost), A1 and A3 wait for partners that
+  // never come (discarded); pairs 0 and 2 are recorded.
+  EXPECT_EQ(s->pairs_recorded(), 2u);
+  EXPECT_EQ(s->frames_lost(), 3u);
+}
+
 TEST_F(DaemonRuns, SigtermMidRunDrainsAndLeavesTheFolderConsistent) {
   std::string out;
   ASSERT_EQ(client({"run", "start", "--config", write_config(kRun).string()}, out), 0) << out;
