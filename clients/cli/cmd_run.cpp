@@ -1,6 +1,7 @@
 // `plenopiv run start|stop`, `watch` and `capture-calibration`: drive runs, follow what is published.
 #include <unistd.h>
 
+#include <algorithm>
 #include <fstream>
 #include <iomanip>
 #include <iostream>
@@ -98,7 +99,17 @@ void add_run_commands(CLI::App& app, ControlOptions& options) {
     msg::Request request;
     request.mutable_start_run()->set_config_yaml(text.str());
     request.mutable_start_run()->set_pair_count(*pairs);
-    const msg::Reply reply = call(options, request);
+    // plenopivd answers a start once the run is ready, its reconstruction tables built: about 7 s
+    // for the paper's camera and box (systemd/config/run-paper.yaml), beyond --timeout's default.
+    // So the daemon is asked for its status first, within --timeout (no daemon is still a quick,
+    // clear error), and the start's answer is then awaited for up to kRunStartWaitS.
+    msg::Request status;
+    status.mutable_status();
+    call(options, status);
+    constexpr double kRunStartWaitS = 120.0;
+    ControlOptions patient = options;
+    patient.timeout_s = std::max(options.timeout_s, kRunStartWaitS);
+    const msg::Reply reply = call(patient, request);
     std::cout << "run " << reply.run_started().run_id() << " started: "
               << reply.run_started().run_dir() << "\n";
   });

@@ -147,6 +147,21 @@ TEST(ThinClient, MissingDaemonExitsWithStatus3) {
   EXPECT_NE(out.find("no reply from plenopivd"), std::string::npos) << out;
 }
 
+// `run start` waits long for the start's answer (a run's tables take seconds at paper scale),
+// but asks for the status first within --timeout: no daemon is still a quick error.
+TEST(ThinClient, RunStartToAMissingDaemonFailsWithinTheTimeout) {
+  std::string out;
+  const std::string endpoint = "tcp://127.0.0.1:" + std::to_string(testing_support::free_tcp_port());
+  const auto start = std::chrono::steady_clock::now();
+  const int rc = testing_support::run_command({testing_support::binary("plenopiv"), "--endpoint", endpoint, "--timeout",
+                                               "0.3", "run", "start", "--config",
+                                               std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/run.yaml"},
+                                              out);
+  EXPECT_EQ(rc, 3) << out;
+  EXPECT_NE(out.find("no reply from plenopivd"), std::string::npos) << out;
+  EXPECT_LT(std::chrono::steady_clock::now() - start, 10s);  // not the start's 120 s wait
+}
+
 TEST(Plenopivd, RefusesARemoteControlEndpoint) {
   std::string out;
   const int rc = testing_support::run_command(
