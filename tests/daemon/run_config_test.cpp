@@ -37,6 +37,26 @@ TEST(RunConfig, ShippedDefaultParses) {
   EXPECT_EQ(c.text, text.str());
 }
 
+// The paper-scale live config gives core/process the paper's box and the setting measured to fit
+// 30 s per pair (docs/benchmarks.md, "Full scale, now").
+TEST(RunConfig, ShippedPaperScaleConfigParses) {
+  std::ifstream in(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/run-paper.yaml");
+  std::stringstream text;
+  text << in.rdbuf();
+  const RunConfig c = parse_run_config(text.str(), "run-paper.yaml");
+  EXPECT_EQ(c.max_pairs_in_flight, 1);
+  const process::ProcessSettings s =
+      process::process_settings_from(YamlMap(load_yaml_text(c.process_yaml(), "process.yaml"), "process.yaml"));
+  EXPECT_EQ(s.grid.shape, (std::array<int, 3>{300, 200, 200}));
+  EXPECT_EQ(s.grid.spacing_mm, (std::array<double, 3>{0.125, 0.125, 0.125}));
+  EXPECT_EQ(s.mart.iterations, 8);
+  EXPECT_DOUBLE_EQ(s.mart.mu, 1.0);
+  EXPECT_TRUE(s.mart.accelerate);
+  EXPECT_EQ(s.correlation.passes.size(), piv::CorrelationSettings{}.passes.size());
+  EXPECT_DOUBLE_EQ(s.correlation.intensity_threshold_of_mean, 4.0);
+  EXPECT_EQ(s.correlation.final_smoothing, 1);
+}
+
 TEST(RunConfig, VolumeGridCoversTheExtent) {
   const RunConfig c = parse_run_config(kVolume, "run.yaml");
   const Grid3 g = c.volume_grid();
