@@ -240,8 +240,13 @@ void Run::run() {
   if (failure.empty()) {
     env_.state->finishing();
     env_.state->drained();
-    spdlog::info("run {} ended: {} pairs recorded, {} processed, {} skipped", run_id_,
-                 recorder_->pairs_recorded(), stats_.output.processed.load(), skipped);
+    // Frames in no recorded pair (as the status counts them), said at the end where a log reader
+    // looks: a warning when there were any.
+    const drivers::CameraCounters c = camera_->counters();
+    const std::uint64_t lost = c.frames_lost + c.frames_discarded;
+    spdlog::log(lost ? spdlog::level::warn : spdlog::level::info,
+                "run {} ended: {} pairs recorded, {} processed, {} skipped, {} frames lost", run_id_,
+                recorder_->pairs_recorded(), stats_.output.processed.load(), skipped, lost);
   } else {
     env_.state->fail("run " + run_id_ + ": " + failure);
     spdlog::error("run {} failed: {}", run_id_, failure);

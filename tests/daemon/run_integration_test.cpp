@@ -214,6 +214,9 @@ TEST_F(DaemonRuns, UnpairedFramesCountAsLost) {
   // never come (discarded); pairs 0 and 2 are recorded.
   EXPECT_EQ(s->pairs_recorded(), 2u);
   EXPECT_EQ(s->frames_lost(), 3u);
+  // ... and the log says so at the run's end.
+  EXPECT_NE(daemon_->output().find("2 pairs recorded, 2 processed, 0 skipped, 3 frames lost"), std::string::npos)
+      << daemon_->output();
 }
 
 TEST_F(DaemonRuns, SigtermMidRunDrainsAndLeavesTheFolderConsistent) {
