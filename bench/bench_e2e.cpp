@@ -4,8 +4,8 @@
 // of the knobs on the reduced case with its Pareto front.
 //
 //   bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate]
-//             [--dark-cutoff F] [--intensity-threshold K] [--final-smoothing K] [--steady] [--time-sweep] [--z-centre MM]
-//             [--compare-passes 'P1;P2;...']
+//             [--dark-cutoff F] [--intensity-threshold K] [--final-smoothing K] [--steady] [--time-sweep]
+//             [--z-centre MM] [--compare-passes 'P1;P2;...']
 //     --iterations/--mu/--accelerate/--dark-cutoff: MART for the headline rows (default the
 //              paper's 5 at mu 0.5, not accelerated, MartSettings' dark-pixel cutoff; the sweep's
 //              rows still start from the paper's settings).
@@ -15,9 +15,9 @@
 //     --intensity-threshold: the correlation's ghost floor for the headline rows, times each
 //              volume's mean (default 0, the paper's correlation); they then also print the
 //              correlation without it on the same volumes.
-//     --final-smoothing: binomial passes over the headline rows' final field (default 0, the
-//              paper's correlation); they then also print the field with one pass more and, when
-//              it is set, without it.
+//     --final-smoothing: binomial passes over the headline rows' final field, 0 to 4 (default 0,
+//              the paper's correlation); they then also print the field with one pass more (below
+//              4) and, when it is set, without it.
 //     --z-centre: depth of the volume's (and the ring's) centre, mm (default 0: the focal plane).
 //     --compare-passes: correlate the headline volumes (and the exact ones) with each pass list
 //              too, in --passes syntax (e.g. '32@50,16@50+4,16@50,16@75'), separated by ';'.
@@ -347,10 +347,13 @@ int main(int argc, char** argv) {
     correlate_both("correlation", "no_depth_margin", no_margin, false);
     correlate_both("correlation", intensity_threshold > 0 ? "no_intensity_threshold" : "intensity_threshold_4", toggled,
                    false);
-    // The final smoothing: one pass more than the headline's, and none when the headline has some.
-    piv::CorrelationSettings smoother = settings.correlation;
-    smoother.final_smoothing = final_smoothing + 1;
-    correlate_both("correlation", "final_smoothing_" + std::to_string(smoother.final_smoothing), smoother, true);
+    // The final smoothing: one pass more than the headline's (up to the 4 allowed), and none when
+    // the headline has some.
+    if (final_smoothing < 4) {
+      piv::CorrelationSettings smoother = settings.correlation;
+      smoother.final_smoothing = final_smoothing + 1;
+      correlate_both("correlation", "final_smoothing_" + std::to_string(smoother.final_smoothing), smoother, true);
+    }
     if (final_smoothing > 0) {
       piv::CorrelationSettings unsmoothed = settings.correlation;
       unsmoothed.final_smoothing = 0;

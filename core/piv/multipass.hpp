@@ -39,8 +39,9 @@ struct CorrelationResult {
 // of threads.
 //
 // `depth_context`: slices at each depth end that hold no window but that the correlation may
-// read: a window's depth margin, the deformation, the prefilter. The vectors are those of the
-// volume without them (the same nodes), measured with what lies beyond its depth faces in view.
+// read: a window's depth margin, the deformation, the prefilter (and the intensity floor's mean is
+// taken over the whole volume, context included). The vectors are those of the volume without
+// them (the same nodes), measured with what lies beyond its depth faces in view.
 // core/process passes its depth guard here: a reconstructed particle is a streak in depth, and
 // a box face cuts it as a window face does (PassSettings::depth_margin). 0 to less than half the
 // volume's depth.

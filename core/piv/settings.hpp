@@ -70,14 +70,15 @@ struct CorrelationSettings {
   // Binomial [1 2 1]/4 passes (per axis) over the final field's valid vectors (smooth_valid in
   // validation.hpp), 0..4. A spatial filter after the last pass: it trades resolution for random
   // error. On the paper's ring at full scale one pass took the reconstructed volumes' error from
-  // 0.214 / 0.130 / 0.571 to 0.198 / 0.118 / 0.528 voxel, and cost the exact-particle volumes' v
-  // 0.043 -> 0.050 (docs/benchmarks.md, "Final smoothing"). 0: off, the paper's correlation.
+  // 0.214 / 0.130 / 0.571 to 0.199 / 0.117 / 0.532 voxel, and cost the exact-particle volumes' v
+  // 0.043 -> 0.051 (docs/benchmarks.md, "Final smoothing and depth context"). 0: off, the
+  // paper's correlation.
   int final_smoothing = 0;
 };
 
 // Checks every value (windows >= 4 voxels, 0 <= overlap < 100, 0 <= depth_margin <= window z,
-// threshold and epsilon > 0, radius 1..3, predictor_smoothing and final_smoothing 0..4, intensity_threshold_of_mean
-// 0..100, dt > 0); InputError naming `source` and the setting otherwise.
+// threshold and epsilon > 0, radius 1..3, predictor_smoothing and final_smoothing 0..4,
+// intensity_threshold_of_mean 0..100, dt > 0); InputError naming `source` and the setting otherwise.
 void check(const CorrelationSettings& s, const std::string& source);
 
 // Parses "WxHxD@overlap" or "W@overlap" passes, each optionally followed by "+depth_margin",
