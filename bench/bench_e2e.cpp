@@ -4,8 +4,8 @@
 // of the knobs on the reduced case with its Pareto front.
 //
 //   bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate]
-//             [--dark-cutoff F] [--intensity-threshold K] [--final-smoothing K] [--steady] [--time-sweep]
-//             [--z-centre MM] [--compare-passes 'P1;P2;...']
+//             [--dark-cutoff F] [--intensity-threshold K] [--final-smoothing K] [--passes P] [--steady]
+//             [--time-sweep] [--z-centre MM] [--compare-passes 'P1;P2;...']
 //     --iterations/--mu/--accelerate/--dark-cutoff: MART for the headline rows (default the
 //              paper's 5 at mu 0.5, not accelerated, MartSettings' dark-pixel cutoff; the sweep's
 //              rows still start from the paper's settings).
@@ -19,6 +19,7 @@
 //              the paper's correlation); they then also print the field with one pass more (below
 //              4) and, when it is set, without it.
 //     --z-centre: depth of the volume's (and the ring's) centre, mm (default 0: the focal plane).
+//     --passes: the headline rows' pass list in --passes syntax (default core/piv's).
 //     --compare-passes: correlate the headline volumes (and the exact ones) with each pass list
 //              too, in --passes syntax (e.g. '32@50,16@50+4,16@50,16@75'), separated by ';'.
 //   Every RMS is given over all vectors and, as off_axis_band_*, over the vectors whose final
@@ -136,6 +137,7 @@ int main(int argc, char** argv) {
   int final_smoothing = piv::CorrelationSettings{}.final_smoothing;
   bool steady = false, time_sweep = false;
   std::string compare_passes;  // pass lists separated by ';'
+  std::string passes;          // the headline's passes (--passes syntax); empty: core/piv's default
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--no-sweep")) sweep = false;
     else if (!std::strcmp(argv[i], "--rays") && i + 1 < argc) rays = std::stoul(argv[++i]);
@@ -150,14 +152,15 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--steady")) steady = true;
     else if (!std::strcmp(argv[i], "--time-sweep")) time_sweep = true;
     else if (!std::strcmp(argv[i], "--compare-passes") && i + 1 < argc) compare_passes = argv[++i];
+    else if (!std::strcmp(argv[i], "--passes") && i + 1 < argc) passes = argv[++i];
     else scale = argv[i];
   }
-  if (sweep && (iterations != 5 || mu != 0.5 || accelerate || z_centre != 0.0 ||
+  if (sweep && (iterations != 5 || mu != 0.5 || accelerate || z_centre != 0.0 || !passes.empty() ||
                 dark_cutoff != recon::MartSettings{}.dark_weight_cutoff ||
                 sensor_blur_mm != recon::MartSettings{}.sensor_blur_sigma_mm ||
                 intensity_threshold != piv::CorrelationSettings{}.intensity_threshold_of_mean ||
                 final_smoothing != piv::CorrelationSettings{}.final_smoothing)) {
-    std::fprintf(stderr, "bench_e2e: --iterations/--mu/--accelerate/--dark-cutoff/--sensor-blur-mm/--intensity-threshold/--final-smoothing/--z-centre change the "
+    std::fprintf(stderr, "bench_e2e: --iterations/--mu/--accelerate/--dark-cutoff/--sensor-blur-mm/--intensity-threshold/--final-smoothing/--passes/--z-centre change the "
                          "headline rows only; use them with --no-sweep\n");
     return 2;
   }
@@ -166,7 +169,7 @@ int main(int argc, char** argv) {
   const bool mid = scale == "mid";
   const bool full = scale == "full" || mid;
   if (!full && scale != "reduced") {
-    std::fprintf(stderr, "usage: bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate] [--dark-cutoff F] [--sensor-blur-mm S] [--intensity-threshold K] [--final-smoothing K] [--steady] [--time-sweep] [--z-centre MM] [--compare-passes 'P1;P2']\n");
+    std::fprintf(stderr, "usage: bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate] [--dark-cutoff F] [--sensor-blur-mm S] [--intensity-threshold K] [--final-smoothing K] [--passes P] [--steady] [--time-sweep] [--z-centre MM] [--compare-passes 'P1;P2']\n");
     return 2;
   }
   const std::string dir = std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/";
@@ -186,6 +189,7 @@ int main(int argc, char** argv) {
   settings.mart.sensor_blur_sigma_mm = sensor_blur_mm;
   settings.correlation.intensity_threshold_of_mean = intensity_threshold;
   settings.correlation.final_smoothing = final_smoothing;
+  if (!passes.empty()) settings.correlation.passes = piv::parse_passes(passes);
 
   sim::RingVortexFlow::Parameters rv;
   rv.voxel_mm = voxel;

@@ -52,7 +52,10 @@ TEST(RunConfig, ShippedPaperScaleConfigParses) {
   EXPECT_EQ(s.mart.iterations, 8);
   EXPECT_DOUBLE_EQ(s.mart.mu, 1.0);
   EXPECT_TRUE(s.mart.accelerate);
-  EXPECT_EQ(s.correlation.passes.size(), piv::CorrelationSettings{}.passes.size());
+  ASSERT_EQ(s.correlation.passes.size(), 5u);  // core/piv's default with a third 16^3, 50 % pass
+  EXPECT_EQ(s.correlation.passes[1].depth_margin, 4);
+  EXPECT_EQ(s.correlation.passes[4].window, (std::array<int, 3>{16, 16, 16}));
+  EXPECT_DOUBLE_EQ(s.correlation.passes[4].overlap_percent, 75.0);
   EXPECT_DOUBLE_EQ(s.correlation.intensity_threshold_of_mean, 4.0);
   EXPECT_EQ(s.correlation.final_smoothing, 1);
 }
