@@ -91,11 +91,7 @@ DaemonConfig load_daemon_config(const std::filesystem::path& path) {
   config.trigger_uri = map.string_or("trigger_uri", config.trigger_uri);
   config.log_level = map.choice_or("log_level", {"trace", "debug", "info", "warn", "error"},
                                    config.log_level);
-  const long long hwm = map.integer_or("publish_high_water_mark", config.publish_high_water_mark);
-  if (hwm < 1 || hwm > 1000) {
-    map.fail("publish_high_water_mark", "must be between 1 and 1000 messages, got " + std::to_string(hwm));
-  }
-  config.publish_high_water_mark = int(hwm);
+  config.publish_high_water_mark = map.integer_in("publish_high_water_mark", config.publish_high_water_mark, 1, 1000);
   if (auto timing = map.optional_map("timing")) config.timing = timing_from(*timing);
   validate(config, path.string());
   return config;

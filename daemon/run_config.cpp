@@ -120,9 +120,7 @@ RunConfig parse_run_config(const std::string& text, const std::string& source) {
   c.reconstruction = opaque_section(map, "reconstruction");
   c.correlation = opaque_section(map, "correlation");
   c.publish_volumes = map.boolean_or("publish_volumes", false);
-  const long long in_flight = map.integer_or("max_pairs_in_flight", c.max_pairs_in_flight);
-  if (in_flight < 1 || in_flight > 64) map.fail("max_pairs_in_flight", "must be between 1 and 64");
-  c.max_pairs_in_flight = int(in_flight);
+  c.max_pairs_in_flight = map.integer_in("max_pairs_in_flight", c.max_pairs_in_flight, 1, 64);
   return c;
 }
 

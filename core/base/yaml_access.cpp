@@ -126,6 +126,14 @@ long long YamlMap::integer_or(std::string_view key, long long fallback) const {
   return has(key) ? integer(key) : fallback;
 }
 
+int YamlMap::integer_in(std::string_view key, int fallback, int lo, int hi) const {
+  const long long value = integer_or(key, fallback);
+  if (value < lo || value > hi) {
+    fail(key, "must be " + std::to_string(lo) + " to " + std::to_string(hi) + ", got " + std::to_string(value));
+  }
+  return int(value);
+}
+
 bool YamlMap::boolean_or(std::string_view key, bool fallback) const {
   if (!has(key)) return fallback;
   const YAML::Node child = required(key);

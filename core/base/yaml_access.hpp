@@ -31,6 +31,10 @@ class YamlMap {
   double number_or(std::string_view key, double fallback) const;
   long long integer(std::string_view key) const;
   long long integer_or(std::string_view key, long long fallback) const;
+  // A whole number from lo to hi, or `fallback` when the key is absent; "must be lo to hi, got v"
+  // otherwise. The range is checked on the 64-bit value, before it narrows to int, so that a huge
+  // value cannot wrap into range (4294967297 would become 1).
+  int integer_in(std::string_view key, int fallback, int lo, int hi) const;
   bool boolean_or(std::string_view key, bool fallback) const;
   std::string string(std::string_view key) const;
   std::string string_or(std::string_view key, std::string fallback) const;

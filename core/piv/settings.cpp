@@ -119,9 +119,7 @@ CorrelationSettings correlation_settings_from(const YamlMap& root) {
     m->reject_unknown({"threshold", "epsilon_voxel", "radius"});
     s.median.threshold = m->number_or("threshold", s.median.threshold);
     s.median.epsilon = m->number_or("epsilon_voxel", s.median.epsilon);
-    const long long radius = m->integer_or("radius", s.median.radius);
-    if (radius < 1 || radius > 3) m->fail("radius", "must be 1, 2 or 3");
-    s.median.radius = int(radius);
+    s.median.radius = m->integer_in("radius", s.median.radius, 1, 3);
   }
   s.signal_threshold = float(root.number_or("signal_threshold", s.signal_threshold));
   s.dt_s = root.number_or("dt_s", s.dt_s);
@@ -133,14 +131,8 @@ CorrelationSettings correlation_settings_from(const YamlMap& root) {
   s.predictor = root.choice_or("predictor", {"centre", "window_mean"}, "centre") == "centre"
                     ? PredictorBase::centre
                     : PredictorBase::window_mean;
-  // The whole numbers are range-checked before the cast: a huge value must not wrap into a valid
-  // int (4294967297 would become 1).
-  const long long predictor_smoothing = root.integer_or("predictor_smoothing", s.predictor_smoothing);
-  if (predictor_smoothing < 0 || predictor_smoothing > 4) root.fail("predictor_smoothing", "must be 0 to 4");
-  s.predictor_smoothing = int(predictor_smoothing);
-  const long long final_smoothing = root.integer_or("final_smoothing", s.final_smoothing);
-  if (final_smoothing < 0 || final_smoothing > 4) root.fail("final_smoothing", "must be 0 to 4");
-  s.final_smoothing = int(final_smoothing);
+  s.predictor_smoothing = root.integer_in("predictor_smoothing", s.predictor_smoothing, 0, 4);
+  s.final_smoothing = root.integer_in("final_smoothing", s.final_smoothing, 0, 4);
   check(s, root.source());
   return s;
 }

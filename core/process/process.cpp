@@ -91,9 +91,7 @@ ProcessSettings process_settings_from(const YamlMap& root) {
     r->reject_unknown(
         {"iterations", "mu", "acceleration", "start", "noise_threshold", "dark_weight_cutoff", "convergence",
          "angular_sampling", "sensor_blur_sigma_mm"});
-    const long long it = r->integer_or("iterations", s.mart.iterations);
-    if (it < 1 || it > 1000) r->fail("iterations", "must be 1..1000, got " + std::to_string(it));
-    s.mart.iterations = int(it);
+    s.mart.iterations = r->integer_in("iterations", s.mart.iterations, 1, 1000);
     s.mart.mu = r->number_or("mu", s.mart.mu);
     if (!(s.mart.mu > 0 && s.mart.mu <= 1)) r->fail("mu", "must be in (0, 1]");
     s.mart.accelerate = r->choice_or("acceleration", {"none", "nesterov"}, "none") == "nesterov";

@@ -82,6 +82,18 @@ TEST(CameraProfile, BadFilesNameTheKey) {
   }
   std::ofstream(file) << "name: bad\nfeatures:\n  - TriggerMode\n";
   EXPECT_THROW(load_camera_profile(file), InputError);
+  // Whole numbers out of range are refused before they narrow to int (4294967297 would be 1, and
+  // 4294967312 would be 16).
+  for (const std::string bad : {"software_trigger_repeat: 4294967297", "software_trigger_repeat: 3",
+                                "frame_id_bits: 4294967312", "frame_id_bits: 32"}) {
+    std::ofstream(file) << "name: bad\nfeatures: []\n" << bad << "\n";
+    try {
+      load_camera_profile(file);
+      ADD_FAILURE() << "accepted: " << bad;
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(bad.substr(0, bad.find(':'))), std::string::npos) << e.what();
+    }
+  }
   std::filesystem::remove(file);
 }
 

@@ -52,11 +52,7 @@ CameraProfile load_camera_profile(const std::filesystem::path& file) {
   p.external_trigger = read_settings(map, "external_trigger");
   p.software_trigger = read_settings(map, "software_trigger");
   p.software_trigger_command = map.string_or("software_trigger_command", "TriggerSoftware");
-  p.software_trigger_repeat = int(map.integer_or("software_trigger_repeat",
-                                                 p.mode == "two-frames" ? 2 : 1));
-  if (p.software_trigger_repeat < 1 || p.software_trigger_repeat > 2) {
-    map.fail("software_trigger_repeat", "must be 1 or 2");
-  }
+  p.software_trigger_repeat = map.integer_in("software_trigger_repeat", p.mode == "two-frames" ? 2 : 1, 1, 2);
   p.software_trigger_spacing_s = map.number_or("software_trigger_spacing_s", 0.0);
   if (p.software_trigger_spacing_s < 0 || p.software_trigger_spacing_s > 1) {
     map.fail("software_trigger_spacing_s", "must be within 0..1 s");
@@ -70,7 +66,7 @@ CameraProfile load_camera_profile(const std::filesystem::path& file) {
   if (p.min_pair_period_s > 0 && p.min_pair_period_s < 2 * p.max_pair_gap_s) {
     map.fail("min_pair_period_s", "must be at least twice max_pair_gap_s, or pairs could mix");
   }
-  p.frame_id_bits = int(map.integer_or("frame_id_bits", 16));
+  p.frame_id_bits = map.integer_in("frame_id_bits", 16, 16, 64);
   if (p.frame_id_bits != 16 && p.frame_id_bits != 64) map.fail("frame_id_bits", "must be 16 or 64");
   if (p.mode == "two-frames" && p.software_trigger_repeat != 2 && !p.software_trigger.empty()) {
     map.fail("software_trigger_repeat", "two-frames mode needs 2 software triggers per pair");
