@@ -48,6 +48,7 @@ FieldErrors field_errors(const VectorField& field, const Flow& flow, double voxe
     e.bias.fill(NAN);
     e.rms.fill(NAN);
     e.gain.fill(NAN);
+    e.truth_rms.fill(NAN);
     e.rms_total = NAN;
     return e;
   }
@@ -56,6 +57,7 @@ FieldErrors field_errors(const VectorField& field, const Flow& flow, double voxe
     e.bias[a] = sum[a] / n;
     e.rms[a] = std::sqrt(sum_sq[a] / n);
     e.gain[a] = sum_tt[a] > 0 ? sum_mt[a] / sum_tt[a] : NAN;
+    e.truth_rms[a] = std::sqrt(sum_tt[a] / n) / voxel_mm;
   }
   e.rms_total = std::sqrt((sum_sq[0] + sum_sq[1] + sum_sq[2]) / n);
   return e;

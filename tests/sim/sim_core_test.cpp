@@ -178,6 +178,9 @@ TEST(FieldErrors, BiasRmsAndCountAgainstAUniformFlow) {
   // Gain: sum(m t) / sum(t^2) = (25 * 0.25 + 0.15) * 0.2 / (26 * 0.2^2); no truth along y, z.
   EXPECT_NEAR(e.gain[0], (25 * 0.25 + 0.15) / (26 * 0.2), 1e-6);
   EXPECT_TRUE(std::isnan(e.gain[1]));
+  // The truth's RMS over the compared nodes: 0.2 mm = 2 voxels along x, none along y and z.
+  EXPECT_NEAR(e.truth_rms[0], 2.0, 1e-12);
+  EXPECT_DOUBLE_EQ(e.truth_rms[1], 0.0);
   // One layer left out at every face: the centre node only.
   const FieldErrors inner = field_errors(f, UniformFlow({0.2, 0, 0}), 0.1, 1, 1);
   EXPECT_EQ(inner.compared, 1u);
@@ -188,6 +191,7 @@ TEST(FieldErrors, BiasRmsAndCountAgainstAUniformFlow) {
   EXPECT_EQ(none.compared, 0u);
   EXPECT_TRUE(std::isnan(none.rms[0]));
   EXPECT_TRUE(std::isnan(none.gain[0]));
+  EXPECT_TRUE(std::isnan(none.truth_rms[0]));
 }
 
 TEST(FieldErrors, TheTruthIsTheMidpointDisplacement) {
