@@ -282,34 +282,43 @@ float sample_sinc7(std::span<const float> volume, const std::array<int, 3>& shap
   return sample(volume.data(), shape, {taps_for(table, x), taps_for(table, y), taps_for(table, z)});
 }
 
-void binomial_smooth(std::span<const float> in, const std::array<int, 3>& shape,
-                     std::span<float> out, std::span<float> scratch) {
-  const std::array<std::size_t, 3> stride{1, std::size_t(shape[0]),
-                                          std::size_t(shape[0]) * shape[1]};
-  // x: in -> out, y: out -> scratch, z: scratch -> out.
-  const std::array<const float*, 3> src{in.data(), out.data(), scratch.data()};
-  const std::array<float*, 3> dst{out.data(), scratch.data(), out.data()};
-  for (int axis = 0; axis < 3; ++axis) {
-    const float* s = src[axis];
-    float* d = dst[axis];
-    const std::size_t st = stride[axis];
-    const int n = shape[axis];
-    tbb::parallel_for(tbb::blocked_range<int>(0, shape[2]), [&](const tbb::blocked_range<int>& r) {
-      for (int z = r.begin(); z < r.end(); ++z)
-        for (int y = 0; y < shape[1]; ++y) {
-          const std::size_t row = z * stride[2] + y * stride[1];
-          for (int x = 0; x < shape[0]; ++x) {
-            const std::size_t i = row + x;
-            const int c = axis == 0 ? x : axis == 1 ? y : z;
-            float v = 0.5f * s[i];
-            float w = 0.5f;
-            if (c > 0) v += 0.25f * s[i - st], w += 0.25f;
-            if (c < n - 1) v += 0.25f * s[i + st], w += 0.25f;
-            d[i] = v / w;
-          }
+namespace {
+
+// One [1 2 1] / 4 pass along `axis`, src -> dst; at a face the kernel's inner taps only,
+// renormalised. Parallel over z-slices.
+void binomial_pass(const float* s, float* d, const std::array<int, 3>& shape, int axis) {
+  const std::array<std::size_t, 3> stride{1, std::size_t(shape[0]), std::size_t(shape[0]) * shape[1]};
+  const std::size_t st = stride[axis];
+  const int n = shape[axis];
+  tbb::parallel_for(tbb::blocked_range<int>(0, shape[2]), [&](const tbb::blocked_range<int>& r) {
+    for (int z = r.begin(); z < r.end(); ++z)
+      for (int y = 0; y < shape[1]; ++y) {
+        const std::size_t row = z * stride[2] + y * stride[1];
+        for (int x = 0; x < shape[0]; ++x) {
+          const std::size_t i = row + x;
+          const int c = axis == 0 ? x : axis == 1 ? y : z;
+          float v = 0.5f * s[i];
+          float w = 0.5f;
+          if (c > 0) v += 0.25f * s[i - st], w += 0.25f;
+          if (c < n - 1) v += 0.25f * s[i + st], w += 0.25f;
+          d[i] = v / w;
         }
-    });
-  }
+      }
+  });
+}
+
+}  // namespace
+
+void binomial_smooth(std::span<const float> in, const std::array<int, 3>& shape,
+                     std::span<float> out, std::span<float> scratch, int depth_passes) {
+  // x: in -> out, y: out -> scratch, z: scratch -> out; then the depth passes, out -> scratch ->
+  // out in turn, and a copy home after an odd number of them.
+  binomial_pass(in.data(), out.data(), shape, 0);
+  binomial_pass(out.data(), scratch.data(), shape, 1);
+  binomial_pass(scratch.data(), out.data(), shape, 2);
+  for (int k = 0; k < depth_passes; ++k)
+    binomial_pass(k % 2 ? scratch.data() : out.data(), k % 2 ? out.data() : scratch.data(), shape, 2);
+  if (depth_passes % 2) std::copy(scratch.begin(), scratch.begin() + std::ptrdiff_t(out.size()), out.begin());
 }
 
 float subtract_mean_floor(std::span<const float> in, const std::array<int, 3>& shape, double multiple,

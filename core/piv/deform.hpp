@@ -55,9 +55,12 @@ float sample_sinc7(std::span<const float> volume, const std::array<int, 3>& shap
 // are only ~3 voxels wide, and their spectrum reaches the Nyquist frequency, where any short
 // interpolator's phase is wrong; shifting both volumes by +-d/2 then biases the residual by up to
 // 0.02 voxel (measured at d = 0.5). After this filter the same test measures 0.0004.
-// `scratch` holds one volume. Parallel over z (TBB); deterministic.
+// `depth_passes` more [1 2 1] / 4 passes along z only follow (CorrelationSettings::
+// depth_prefilter: a reconstructed particle is ~4 times as long in depth as wide, so a volume's
+// depth detail finer than that is noise). `scratch` holds one volume. Parallel over z (TBB);
+// deterministic.
 void binomial_smooth(std::span<const float> in, const std::array<int, 3>& shape,
-                     std::span<float> out, std::span<float> scratch);
+                     std::span<float> out, std::span<float> scratch, int depth_passes = 0);
 
 // out = max(0, in - multiple * mean(in)): every voxel loses a floor proportional to the volume's
 // mean intensity, and what lies below it becomes zero. Why (CorrelationSettings::

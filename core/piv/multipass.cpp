@@ -279,8 +279,8 @@ CorrelationResult correlate_volumes(const Volume& a, const Volume& b,
     deformed_a.resize(a.data.size());
     // The smoothing needs one scratch volume: smoothed_b while A is smoothed, then deformed_a
     // (A's floored copy, if any, is read by then).
-    binomial_smooth(input_a, shape, smoothed_a, smoothed_b);
-    binomial_smooth(input_b, shape, smoothed_b, deformed_a);
+    binomial_smooth(input_a, shape, smoothed_a, smoothed_b, settings.depth_prefilter);
+    binomial_smooth(input_b, shape, smoothed_b, deformed_a, settings.depth_prefilter);
     input_a = smoothed_a;
     input_b = smoothed_b;
   }

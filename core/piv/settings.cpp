@@ -30,6 +30,11 @@ void check(const CorrelationSettings& s, const std::string& source) {
     fail("predictor_smoothing: must be 0 to 4, got " + std::to_string(s.predictor_smoothing));
   if (s.final_smoothing < 0 || s.final_smoothing > 4)
     fail("final_smoothing: must be 0 to 4, got " + std::to_string(s.final_smoothing));
+  if (s.depth_prefilter < 0 || s.depth_prefilter > 8)
+    fail("depth_prefilter: must be 0 to 8, got " + std::to_string(s.depth_prefilter));
+  if (s.depth_prefilter > 0 && !s.prefilter)
+    fail("depth_prefilter: " + std::to_string(s.depth_prefilter) +
+         " depth passes follow the prefilter, which is off (prefilter: false); set it to 0 or turn the prefilter on");
   if (!(s.signal_threshold >= 0)) fail("signal_threshold: must be >= 0");
   if (!(s.intensity_threshold_of_mean >= 0 && s.intensity_threshold_of_mean <= 100))
     fail("intensity_threshold_of_mean: must be in [0, 100] (times the volume's mean), got " +
@@ -83,7 +88,7 @@ std::vector<PassSettings> parse_passes(const std::string& text) {
 
 CorrelationSettings correlation_settings_from(const YamlMap& root) {
   root.reject_unknown({"passes", "median", "signal_threshold", "dt_s", "fft_planning", "prefilter",
-                      "predictor", "predictor_smoothing", "intensity_threshold_of_mean", "final_smoothing"});
+                      "depth_prefilter", "predictor", "predictor_smoothing", "intensity_threshold_of_mean", "final_smoothing"});
   CorrelationSettings s;
   if (root.has("passes")) {
     const YAML::Node list = root.node()["passes"];
@@ -128,6 +133,7 @@ CorrelationSettings correlation_settings_from(const YamlMap& root) {
                        : FftPlanning::estimate;
   s.intensity_threshold_of_mean = root.number_or("intensity_threshold_of_mean", s.intensity_threshold_of_mean);
   s.prefilter = root.boolean_or("prefilter", s.prefilter);
+  s.depth_prefilter = root.integer_in("depth_prefilter", s.depth_prefilter, 0, 8);
   s.predictor = root.choice_or("predictor", {"centre", "window_mean"}, "centre") == "centre"
                     ? PredictorBase::centre
                     : PredictorBase::window_mean;

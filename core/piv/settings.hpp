@@ -63,6 +63,14 @@ struct CorrelationSettings {
   double intensity_threshold_of_mean = 0.0;
   // Binomial [1 2 1]/4 smoothing of both volumes before correlating (deform.hpp: why).
   bool prefilter = true;
+  // After the prefilter, this many more [1 2 1]/4 passes along depth (z) only, 0..8; needs the
+  // prefilter. A reconstructed particle is ~4 times as long in depth as wide (paper sec 6.2), so
+  // depth detail finer than that is reconstruction noise, and this takes it out where a second
+  // full prefilter pass would blur the particles laterally too. On the paper's ring at full
+  // scale (8 accelerated iterations) 4 took the error from 0.194 / 0.114 / 0.498 voxel to
+  // 0.189 / 0.110 / 0.451 at the same floor; it blurs exact (round) particles in depth, whose w
+  // went 0.115 -> 0.147 (docs/benchmarks.md, "Depth prefilter"). 0: off.
+  int depth_prefilter = 0;
   PredictorBase predictor = PredictorBase::centre;
   // Binomial [1 2 1]/4 smoothing passes (per axis) over the predictor's nodes before it deforms
   // the next pass: removes the alternating mode the centre predictor lets grow. 0 to 4.
@@ -78,6 +86,7 @@ struct CorrelationSettings {
 
 // Checks every value (windows >= 4 voxels, 0 <= overlap < 100, 0 <= depth_margin <= window z,
 // threshold and epsilon > 0, radius 1..3, predictor_smoothing and final_smoothing 0..4,
+// depth_prefilter 0..8 and only with the prefilter,
 // intensity_threshold_of_mean 0..100, dt > 0); InputError naming `source` and the setting otherwise.
 void check(const CorrelationSettings& s, const std::string& source);
 
@@ -94,6 +103,7 @@ std::vector<PassSettings> parse_passes(const std::string& text);
 //   fft_planning: estimate   # or measure (faster; not bit-identical between processes)
 //   intensity_threshold_of_mean: 0  # subtract this many times each volume's mean first (ghosts)
 //   prefilter: true          # binomial smoothing of both volumes first
+//   depth_prefilter: 0       # then this many binomial passes along z only, 0..8 (needs prefilter)
 //   predictor: centre        # or window_mean (what a window's residual is added to)
 //   predictor_smoothing: 1   # binomial passes over the predictor between passes, 0..4
 //   final_smoothing: 0       # binomial passes over the final field's valid vectors, 0..4

@@ -122,13 +122,16 @@ Case make_case(std::uint64_t index) {
   c.settings.correlation.passes[1].depth_margin = margins[pick(3)];
   const int smoothing[] = {0, 1, 4};  // none, process.yaml's, the most allowed
   c.settings.correlation.final_smoothing = smoothing[pick(3)];
+  const int depth_passes[] = {0, 4, 8};  // none, the shipped configs', the most allowed
+  c.settings.correlation.depth_prefilter = depth_passes[pick(3)];
   c.description = "case " + std::to_string(index) + ": mode " + std::to_string(mode) + ", " +
                   std::to_string(count) + " particles, mu " + std::to_string(c.settings.mart.mu) + ", " +
                   std::to_string(c.settings.mart.iterations) + " iterations" +
                   (c.settings.mart.accelerate ? " accelerated" : "") + ", intensity floor " +
                   std::to_string(c.settings.correlation.intensity_threshold_of_mean) + "x the mean, depth margin " +
                   std::to_string(c.settings.correlation.passes[1].depth_margin) + ", final smoothing " +
-                  std::to_string(c.settings.correlation.final_smoothing) + ", depth " +
+                  std::to_string(c.settings.correlation.final_smoothing) + ", depth prefilter " +
+                  std::to_string(c.settings.correlation.depth_prefilter) + ", depth " +
                   std::to_string(c.depth);
   return c;
 }
@@ -228,6 +231,15 @@ TEST(PLENOPIV_STRESS_SUITE, InvalidSettingsAreRefused) {
     s.correlation.final_smoothing = passes;
     EXPECT_THROW(process_pair(fixture().op(s.reconstruction_grid(), c.depth), c.a, c.b, s), InputError) << passes;
   }
+  for (int passes : {-1, 9}) {
+    s = c.settings;
+    s.correlation.depth_prefilter = passes;
+    EXPECT_THROW(process_pair(fixture().op(s.reconstruction_grid(), c.depth), c.a, c.b, s), InputError) << passes;
+  }
+  s = c.settings;
+  s.correlation.prefilter = false;
+  s.correlation.depth_prefilter = 1;
+  EXPECT_THROW(process_pair(fixture().op(s.reconstruction_grid(), c.depth), c.a, c.b, s), InputError);
   s = c.settings;
   ImageF small(20, 20, 1.f);
   EXPECT_THROW(process_pair(fixture().op(s.reconstruction_grid(), c.depth), small, c.b, s), InputError);

@@ -105,7 +105,46 @@ TEST(CorrelateCli, MissingDtAndBadPassesAreRefused) {
                         output),
             2);
   EXPECT_NE(output.find("final_smoothing"), std::string::npos) << output;
+  EXPECT_EQ(run_command({binary("plenopiv"), "correlate", a.string(), b.string(), "-o",
+                         (dir() / "x.h5").string(), "--dt", "1", "--depth-prefilter", "9"},
+                        output),
+            2);
+  EXPECT_NE(output.find("depth_prefilter: must be 0 to 8, got 9"), std::string::npos) << output;
+  EXPECT_EQ(run_command({binary("plenopiv"), "correlate", a.string(), b.string(), "-o",
+                         (dir() / "x.h5").string(), "--dt", "1", "--depth-prefilter", "2", "--no-prefilter"},
+                        output),
+            2);
+  EXPECT_NE(output.find("the prefilter, which is off"), std::string::npos) << output;
   EXPECT_FALSE(std::filesystem::exists(dir() / "x.h5"));
+}
+
+// --depth-prefilter: the run says so, and the field is still the uniform shift, measured through
+// volumes smoothed in depth (so not the same bits as without).
+TEST(CorrelateCli, DepthPrefilterIsAppliedAndReported) {
+  const auto a = dir() / "ad.h5", b = dir() / "bd.h5", plain = dir() / "plain_d.h5", deep = dir() / "deep.h5";
+  write_pair(grid(48), a, b);
+  std::string output;
+  ASSERT_EQ(run_command({binary("plenopiv"), "correlate", a.string(), b.string(), "-o", plain.string(), "--dt",
+                         "0.002", "--passes", "24@50,16@75"},
+                        output),
+            0)
+      << output;
+  EXPECT_EQ(output.find("along depth"), std::string::npos) << output;
+  ASSERT_EQ(run_command({binary("plenopiv"), "correlate", a.string(), b.string(), "-o", deep.string(), "--dt",
+                         "0.002", "--passes", "24@50,16@75", "--depth-prefilter", "3"},
+                        output),
+            0)
+      << output;
+  EXPECT_NE(output.find("prefilter: 3 more binomial passes along depth (z)"), std::string::npos) << output;
+  const VectorField p = io::read_vector_field_h5(plain), d = io::read_vector_field_h5(deep);
+  ASSERT_EQ(p.grid, d.grid);
+  std::size_t differ = 0;
+  for (std::size_t i = 0; i < p.grid.count(); ++i) {
+    ASSERT_TRUE(d.valid[i]);
+    EXPECT_NEAR(d.dx_mm[i], 0.12, 0.01);
+    differ += p.dx_mm[i] != d.dx_mm[i];
+  }
+  EXPECT_GT(differ, p.grid.count() / 2);
 }
 
 // --final-smoothing: the run says so, and the field is the same uniform shift (a uniform field is
