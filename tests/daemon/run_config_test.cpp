@@ -56,7 +56,8 @@ TEST(RunConfig, ShippedPaperScaleConfigParses) {
   EXPECT_EQ(s.correlation.passes[1].depth_margin, 4);
   EXPECT_EQ(s.correlation.passes[4].window, (std::array<int, 3>{16, 16, 16}));
   EXPECT_DOUBLE_EQ(s.correlation.passes[4].overlap_percent, 75.0);
-  EXPECT_DOUBLE_EQ(s.correlation.intensity_threshold_of_mean, 4.0);
+  EXPECT_DOUBLE_EQ(s.correlation.intensity_threshold_of_mean, 3.0);
+  EXPECT_EQ(s.correlation.depth_prefilter, 4);
   EXPECT_EQ(s.correlation.final_smoothing, 1);
 }
 

@@ -74,8 +74,9 @@ TEST(ProcessCli, RecoversTheUniformDisplacement) {
   const std::array<double, 3> mean_of = mean_displacement(dir / "v.h5");
   // Measured (seed 7, 1 ppm, particles at z -0.5 to 4.5 mm, process.yaml: z 0 to 4 mm, 20
   // accelerated iterations at mu 1, 1 mm depth guard, core/piv's 4 default passes, intensity floor
-  // 4x the mean, one final smoothing pass, the guard slices as the correlation's depth context):
-  // mean 0.2457 / 0.1266 / 0.2050 mm (without the depth context 0.2461 / 0.1262 / 0.2071; before
+  // 4x the mean, four depth prefilter passes, one final smoothing pass, the guard slices as the
+  // correlation's depth context): mean 0.2463 / 0.1271 / 0.2128 mm (without the depth prefilter
+  // 0.2457 / 0.1266 / 0.2050; without the depth context 0.2461 / 0.1262 / 0.2071; before
   // the final smoothing 0.2463 / 0.1260 / 0.2073; before the passes' depth margin 0.2467 /
   // 0.1258 / 0.2015; without the floor 0.2483 / 0.1241 / 0.1890; 0.1494 in depth without the
   // acceleration either). At 1 ppm the depth component is partly
@@ -134,16 +135,17 @@ TEST(ProcessCli, RecoversTheDepthDisplacementAwayFromFocus) {
                 guard_mm.c_str(), floor ? "on" : "off", mean[0], mean[1], mean[2]);
     return mean;
   };
-  // The shipped settings (the floor on). Measured (accelerated iterations): 0.2488 / 0.1250 / 0.2310 mm
-  // (0.2207 before the guard slices became the correlation's depth context, 0.2209 before
+  // The shipped settings (the floor on). Measured (accelerated iterations): 0.2484 / 0.1245 / 0.2353 mm
+  // (0.2310 before process.yaml's depth prefilter, 0.2207 before the guard slices became the correlation's depth context, 0.2209 before
   // process.yaml's final smoothing).
   const std::array<double, 3> shipped = process("1", true);
   EXPECT_NEAR(shipped[0], kTruth[0], 0.01);
   EXPECT_NEAR(shipped[1], kTruth[1], 0.01);
   EXPECT_NEAR(shipped[2], kTruth[2], 0.07);
   // The guard alone, with the floor off (the floor takes part of the end slices' stationary light
-  // away too: with it, dz 0.1742 mm without the guard). Measured: guard 1 mm dz 0.2301 mm, guard
-  // 0: 0.1603 mm, a difference of 0.070. The guard slices are also the correlation's depth context
+  // away too: with it, dz 0.1742 mm without the guard). Measured: guard 1 mm dz 0.2356 mm, guard
+  // 0: 0.1725 mm, a difference of 0.063 (before process.yaml's depth prefilter 0.2301 and 0.1603,
+  // 0.070). The guard slices are also the correlation's depth context
   // (the windows at the box's depth faces see the streaks the faces cut); before that 0.2128 and
   // 0.1603, and before process.yaml's final smoothing 0.2136 and 0.1613. The correlation's depth
   // margin (piv::PassSettings::depth_margin) took a little of the guard's work then: the box's
@@ -202,8 +204,8 @@ TEST(ProcessCli, ResamplesARotatedCalibrationAndSaysSo) {
   for (int a = 0; a < 3; ++a)
     std::printf("axis %d: unrotated %.4f mm, rotated 1 deg %.4f mm, truth %.4f mm\n", a, plain_mean[std::size_t(a)],
                 rotated_mean[std::size_t(a)], kTruth[a]);
-  // Measured: 0.2465 / 0.1274 / 0.1946 mm against the unrotated nominal run's 0.2457 / 0.1265 /
-  // 0.2050 (0.95 of it; without the depth context 0.1913 against 0.2071; before process.yaml's
+  // Measured: 0.2459 / 0.1286 / 0.2079 mm against the unrotated nominal run's 0.2463 / 0.1271 /
+  // 0.2128 (0.98 of it; before process.yaml's depth prefilter 0.1946 against 0.2050; without the depth context 0.1913 against 0.2071; before process.yaml's
   // final smoothing 0.1914 against 0.2073; before the passes' depth margin 0.1860 against 0.2015);
   // before process.yaml's
   // intensity floor 0.2499 / 0.1245 /
