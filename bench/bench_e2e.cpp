@@ -4,7 +4,7 @@
 // of the knobs on the reduced case with its Pareto front.
 //
 //   bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate]
-//             [--dark-cutoff F] [--intensity-threshold K] [--final-smoothing K] [--passes P] [--steady]
+//             [--dark-cutoff F] [--intensity-threshold K] [--final-smoothing K] [--depth-prefilter K] [--passes P] [--steady]
 //             [--time-sweep] [--z-centre MM] [--compare-passes 'P1;P2;...']
 //     --iterations/--mu/--accelerate/--dark-cutoff: MART for the headline rows (default the
 //              paper's 5 at mu 0.5, not accelerated, MartSettings' dark-pixel cutoff; the sweep's
@@ -135,6 +135,7 @@ int main(int argc, char** argv) {
   double sensor_blur_mm = recon::MartSettings{}.sensor_blur_sigma_mm;
   double intensity_threshold = piv::CorrelationSettings{}.intensity_threshold_of_mean;
   int final_smoothing = piv::CorrelationSettings{}.final_smoothing;
+  int depth_prefilter = piv::CorrelationSettings{}.depth_prefilter;
   bool steady = false, time_sweep = false;
   std::string compare_passes;  // pass lists separated by ';'
   std::string passes;          // the headline's passes (--passes syntax); empty: core/piv's default
@@ -149,6 +150,7 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--sensor-blur-mm") && i + 1 < argc) sensor_blur_mm = std::stod(argv[++i]);
     else if (!std::strcmp(argv[i], "--intensity-threshold") && i + 1 < argc) intensity_threshold = std::stod(argv[++i]);
     else if (!std::strcmp(argv[i], "--final-smoothing") && i + 1 < argc) final_smoothing = std::stoi(argv[++i]);
+    else if (!std::strcmp(argv[i], "--depth-prefilter") && i + 1 < argc) depth_prefilter = std::stoi(argv[++i]);
     else if (!std::strcmp(argv[i], "--steady")) steady = true;
     else if (!std::strcmp(argv[i], "--time-sweep")) time_sweep = true;
     else if (!std::strcmp(argv[i], "--compare-passes") && i + 1 < argc) compare_passes = argv[++i];
@@ -159,8 +161,9 @@ int main(int argc, char** argv) {
                 dark_cutoff != recon::MartSettings{}.dark_weight_cutoff ||
                 sensor_blur_mm != recon::MartSettings{}.sensor_blur_sigma_mm ||
                 intensity_threshold != piv::CorrelationSettings{}.intensity_threshold_of_mean ||
-                final_smoothing != piv::CorrelationSettings{}.final_smoothing)) {
-    std::fprintf(stderr, "bench_e2e: --iterations/--mu/--accelerate/--dark-cutoff/--sensor-blur-mm/--intensity-threshold/--final-smoothing/--passes/--z-centre change the "
+                final_smoothing != piv::CorrelationSettings{}.final_smoothing ||
+                depth_prefilter != piv::CorrelationSettings{}.depth_prefilter)) {
+    std::fprintf(stderr, "bench_e2e: --iterations/--mu/--accelerate/--dark-cutoff/--sensor-blur-mm/--intensity-threshold/--final-smoothing/--depth-prefilter/--passes/--z-centre change the "
                          "headline rows only; use them with --no-sweep\n");
     return 2;
   }
@@ -169,7 +172,7 @@ int main(int argc, char** argv) {
   const bool mid = scale == "mid";
   const bool full = scale == "full" || mid;
   if (!full && scale != "reduced") {
-    std::fprintf(stderr, "usage: bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate] [--dark-cutoff F] [--sensor-blur-mm S] [--intensity-threshold K] [--final-smoothing K] [--passes P] [--steady] [--time-sweep] [--z-centre MM] [--compare-passes 'P1;P2']\n");
+    std::fprintf(stderr, "usage: bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate] [--dark-cutoff F] [--sensor-blur-mm S] [--intensity-threshold K] [--final-smoothing K] [--depth-prefilter K] [--passes P] [--steady] [--time-sweep] [--z-centre MM] [--compare-passes 'P1;P2']\n");
     return 2;
   }
   const std::string dir = std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/";
@@ -189,6 +192,7 @@ int main(int argc, char** argv) {
   settings.mart.sensor_blur_sigma_mm = sensor_blur_mm;
   settings.correlation.intensity_threshold_of_mean = intensity_threshold;
   settings.correlation.final_smoothing = final_smoothing;
+  settings.correlation.depth_prefilter = depth_prefilter;
   if (!passes.empty()) settings.correlation.passes = piv::parse_passes(passes);
 
   sim::RingVortexFlow::Parameters rv;
@@ -230,11 +234,11 @@ int main(int argc, char** argv) {
   const auto base = process::process_pair(op, a, b, settings, {}, &workspace);
   const Errors e = errors_against(base.correlation.field, flow, voxel);
   std::printf("bench=e2e case=%s variant=reconstructed iterations=%d mu=%.2f accelerate=%d dark_cutoff=%.3g sensor_blur_mm=%.4g "
-              "intensity_threshold=%.3g final_smoothing=%d recon_a_s=%.2f recon_b_s=%.2f "
+              "intensity_threshold=%.3g final_smoothing=%d depth_prefilter=%d recon_a_s=%.2f recon_b_s=%.2f "
               "correlate_s=%.2f skipped_a=%.3f skipped_b=%.3f rms_u=%.3f rms_v=%.3f rms_w=%.3f rms=%.3f valid=%.3f "
               "off_axis_band_rms_u=%.3f off_axis_band_rms_v=%.3f off_axis_band_rms_w=%.3f off_axis_band_gain_u=%.3f "
               "off_axis_band_gain_v=%.3f off_axis_band_gain_w=%.3f peak_rss_gb=%.2f\n",
-              scale.c_str(), iterations, mu, int(accelerate), dark_cutoff, sensor_blur_mm, intensity_threshold, final_smoothing, base.times.reconstruct_a_s, base.times.reconstruct_b_s, base.times.correlate_s,
+              scale.c_str(), iterations, mu, int(accelerate), dark_cutoff, sensor_blur_mm, intensity_threshold, final_smoothing, depth_prefilter, base.times.reconstruct_a_s, base.times.reconstruct_b_s, base.times.correlate_s,
               base.skipped_a.fraction_skipped(), base.skipped_b.fraction_skipped(), e.rms[0], e.rms[1], e.rms[2],
               e.total, e.valid_fraction, e.off_band[0], e.off_band[1], e.off_band[2], e.off_band_gain[0],
               e.off_band_gain[1], e.off_band_gain[2], bench::peak_rss_gb());
@@ -358,6 +362,11 @@ int main(int argc, char** argv) {
       unsmoothed.final_smoothing = 0;
       correlate_both("correlation", "final_smoothing_0", unsmoothed, true);
     }
+    // The depth prefilter toggled: off when the headline has it, 4 (run-paper.yaml's) when not.
+    piv::CorrelationSettings depth_toggled = settings.correlation;
+    depth_toggled.depth_prefilter = depth_prefilter > 0 ? 0 : 4;
+    correlate_both("correlation", "depth_prefilter_" + std::to_string(depth_toggled.depth_prefilter), depth_toggled,
+                   true);
     correlate_both("correlation", "previous_default_3pass_window_mean", previous, false);
     correlate_both("correlation", "centre_3pass", centre3, false);
   }
@@ -373,11 +382,12 @@ int main(int argc, char** argv) {
     };
     std::vector<Row> rows;
     const int np = int(settings.correlation.passes.size());
-    for (const Setting& st : {Setting{"paper_5_it_mu_0.5", 5, 0.5, false, 0}, Setting{"7_acc_floor_4", 7, 1, true, 4},
-                              Setting{"8_acc_floor_4", 8, 1, true, 4}, Setting{"9_acc", 9, 1, true, 0},
-                              Setting{"9_acc_floor_5", 9, 1, true, 5}, Setting{"10_acc_floor_4", 10, 1, true, 4},
-                              Setting{"14_acc_floor_4", 14, 1, true, 4}, Setting{"20_acc", 20, 1, true, 0},
-                              Setting{"20_acc_floor_4", 20, 1, true, 4}}) {
+    // Floor 3 is run-paper.yaml's with the depth prefilter, 4 process.yaml's ("Depth prefilter").
+    for (const Setting& st : {Setting{"paper_5_it_mu_0.5", 5, 0.5, false, 0}, Setting{"7_acc_floor_3", 7, 1, true, 3},
+                              Setting{"8_acc_floor_3", 8, 1, true, 3}, Setting{"8_acc_floor_4", 8, 1, true, 4},
+                              Setting{"9_acc_floor_3", 9, 1, true, 3}, Setting{"10_acc_floor_3", 10, 1, true, 3},
+                              Setting{"12_acc_floor_3", 12, 1, true, 3}, Setting{"14_acc_floor_3", 14, 1, true, 3},
+                              Setting{"20_acc", 20, 1, true, 0}, Setting{"20_acc_floor_4", 20, 1, true, 4}}) {
       process::ProcessSettings s = settings;
       s.mart.iterations = st.iterations;
       s.mart.mu = st.mu;
