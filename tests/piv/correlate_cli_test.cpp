@@ -118,54 +118,53 @@ TEST(CorrelateCli, MissingDtAndBadPassesAreRefused) {
   EXPECT_FALSE(std::filesystem::exists(dir() / "x.h5"));
 }
 
+// One pair correlated twice (passes 24@50,16@75, dt 2 ms), as it is and with `flags`; files named
+// after `name`. Both runs must succeed: their fields and what each printed.
+struct PlainAndWith {
+  VectorField plain, with;
+  std::string plain_output, with_output;
+};
+PlainAndWith correlate_plain_and_with(const std::string& name, const std::vector<std::string>& flags) {
+  const auto a = dir() / (name + "_a.h5"), b = dir() / (name + "_b.h5");
+  const auto plain = dir() / (name + "_plain.h5"), with = dir() / (name + "_with.h5");
+  write_pair(grid(48), a, b);
+  PlainAndWith r;
+  std::vector<std::string> command{binary("plenopiv"), "correlate", a.string(), b.string(), "--dt", "0.002",
+                                   "--passes", "24@50,16@75", "-o"};
+  command.push_back(plain.string());
+  EXPECT_EQ(run_command(command, r.plain_output), 0) << r.plain_output;
+  command.back() = with.string();
+  command.insert(command.end(), flags.begin(), flags.end());
+  EXPECT_EQ(run_command(command, r.with_output), 0) << r.with_output;
+  r.plain = io::read_vector_field_h5(plain);
+  r.with = io::read_vector_field_h5(with);
+  return r;
+}
+
 // --depth-prefilter: the run says so, and the field is still the uniform shift, measured through
 // volumes smoothed in depth (so not the same bits as without).
 TEST(CorrelateCli, DepthPrefilterIsAppliedAndReported) {
-  const auto a = dir() / "ad.h5", b = dir() / "bd.h5", plain = dir() / "plain_d.h5", deep = dir() / "deep.h5";
-  write_pair(grid(48), a, b);
-  std::string output;
-  ASSERT_EQ(run_command({binary("plenopiv"), "correlate", a.string(), b.string(), "-o", plain.string(), "--dt",
-                         "0.002", "--passes", "24@50,16@75"},
-                        output),
-            0)
-      << output;
-  EXPECT_EQ(output.find("along depth"), std::string::npos) << output;
-  ASSERT_EQ(run_command({binary("plenopiv"), "correlate", a.string(), b.string(), "-o", deep.string(), "--dt",
-                         "0.002", "--passes", "24@50,16@75", "--depth-prefilter", "3"},
-                        output),
-            0)
-      << output;
-  EXPECT_NE(output.find("prefilter: 3 more binomial passes along depth (z)"), std::string::npos) << output;
-  const VectorField p = io::read_vector_field_h5(plain), d = io::read_vector_field_h5(deep);
-  ASSERT_EQ(p.grid, d.grid);
+  const PlainAndWith r = correlate_plain_and_with("depth", {"--depth-prefilter", "3"});
+  EXPECT_EQ(r.plain_output.find("along depth"), std::string::npos) << r.plain_output;
+  EXPECT_NE(r.with_output.find("prefilter: 3 more binomial passes along depth (z)"), std::string::npos)
+      << r.with_output;
+  ASSERT_EQ(r.plain.grid, r.with.grid);
   std::size_t differ = 0;
-  for (std::size_t i = 0; i < p.grid.count(); ++i) {
-    ASSERT_TRUE(d.valid[i]);
-    EXPECT_NEAR(d.dx_mm[i], 0.12, 0.01);
-    differ += p.dx_mm[i] != d.dx_mm[i];
+  for (std::size_t i = 0; i < r.plain.grid.count(); ++i) {
+    ASSERT_TRUE(r.with.valid[i]);
+    EXPECT_NEAR(r.with.dx_mm[i], 0.12, 0.01);
+    differ += r.plain.dx_mm[i] != r.with.dx_mm[i];
   }
-  EXPECT_GT(differ, p.grid.count() / 2);
+  EXPECT_GT(differ, r.plain.grid.count() / 2);
 }
 
 // --final-smoothing: the run says so, and the field is the same uniform shift (a uniform field is
 // left as it is; only its noise drops).
 TEST(CorrelateCli, FinalSmoothingIsAppliedAndReported) {
-  const auto a = dir() / "as.h5", b = dir() / "bs.h5", plain = dir() / "plain.h5", smooth = dir() / "smooth.h5";
-  write_pair(grid(48), a, b);
-  std::string output;
-  ASSERT_EQ(run_command({binary("plenopiv"), "correlate", a.string(), b.string(), "-o", plain.string(), "--dt",
-                         "0.002", "--passes", "24@50,16@75"},
-                        output),
-            0)
-      << output;
-  EXPECT_EQ(output.find("smoothing pass"), std::string::npos) << output;
-  ASSERT_EQ(run_command({binary("plenopiv"), "correlate", a.string(), b.string(), "-o", smooth.string(), "--dt",
-                         "0.002", "--passes", "24@50,16@75", "--final-smoothing", "2"},
-                        output),
-            0)
-      << output;
-  EXPECT_NE(output.find("final field: 2 binomial smoothing passes"), std::string::npos) << output;
-  const VectorField p = io::read_vector_field_h5(plain), s = io::read_vector_field_h5(smooth);
+  const PlainAndWith r = correlate_plain_and_with("smooth", {"--final-smoothing", "2"});
+  EXPECT_EQ(r.plain_output.find("smoothing pass"), std::string::npos) << r.plain_output;
+  EXPECT_NE(r.with_output.find("final field: 2 binomial smoothing passes"), std::string::npos) << r.with_output;
+  const VectorField &p = r.plain, &s = r.with;
   ASSERT_EQ(p.grid, s.grid);
   double spread_p = 0, spread_s = 0;
   std::size_t differ = 0;
