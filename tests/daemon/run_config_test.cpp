@@ -33,6 +33,13 @@ TEST(RunConfig, ShippedDefaultParses) {
   EXPECT_TRUE(c.camera_uri.empty());  // the daemon's default camera
   EXPECT_EQ(c.reconstruction["iterations"].as<int>(), 3);
   EXPECT_EQ(c.correlation["passes"][0]["window"].as<int>(), 16);
+  const process::ProcessSettings s =
+      process::process_settings_from(YamlMap(load_yaml_text(c.process_yaml(), "process.yaml"), "process.yaml"));
+  ASSERT_EQ(s.correlation.passes.size(), 2u);
+  EXPECT_EQ(s.correlation.passes[0].depth_margin, 4);  // depth motion recovered twice over (benchmarks.md)
+  EXPECT_EQ(s.correlation.passes[1].window, (std::array<int, 3>{8, 8, 8}));
+  EXPECT_EQ(s.correlation.depth_prefilter, 4);
+  EXPECT_EQ(s.correlation.final_smoothing, 1);
   EXPECT_FALSE(c.publish_volumes);
   EXPECT_EQ(c.text, text.str());
 }
