@@ -31,6 +31,7 @@ for k, r in enumerate(sorted(rows, key=lambda r: float(r["total_s"]))):
              "final_window": f"{r['final_window']}³",
              "passes": f"{r['passes']} passes",
              "intensity_threshold": f"ghost floor {r.get('value')}x mean",
+             "depth_prefilter": f"depth prefilter {r.get('value')}",
              "mart_floor": r.get("value", "").replace("_", " ")}[r["variant"]]
     ax.annotate(label, (t, e), textcoords="offset points", xytext=(4, 4 if k % 2 == 0 else -11), fontsize=8)
 ax.set_xlabel("time per pair, s (2 reconstructions + correlation; shared machine)")
