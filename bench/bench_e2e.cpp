@@ -4,13 +4,13 @@
 // of the knobs on the reduced case with its Pareto front.
 //
 //   bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate]
-//             [--dark-cutoff F] [--intensity-threshold K] [--final-smoothing K] [--depth-prefilter K] [--passes P] [--steady]
-//             [--time-sweep] [--z-centre MM] [--compare-passes 'P1;P2;...']
+//             [--dark-cutoff F] [--intensity-threshold K] [--final-smoothing K] [--depth-prefilter K]
+//             [--passes P] [--steady] [--time-sweep] [--z-centre MM] [--compare-passes 'P1;P2;...']
 //     --iterations/--mu/--accelerate/--dark-cutoff: MART for the headline rows (default the
 //              paper's 5 at mu 0.5, not accelerated, MartSettings' dark-pixel cutoff; the sweep's
 //              rows still start from the paper's settings).
 //     --time-sweep: MART iterations and the ghost floor against time per pair at this scale (with
-//              --no-sweep; nine pairs in a kept workspace; rows marked pareto= for plot_e2e.py).
+//              --no-sweep; ten pairs in a kept workspace; rows marked pareto= for plot_e2e.py).
 //     --steady: the headline pair once more in the kept MART workspace (time per pair in a run).
 //     --intensity-threshold: the correlation's ghost floor for the headline rows, times each
 //              volume's mean (default 0, the paper's correlation); they then also print the
@@ -18,6 +18,8 @@
 //     --final-smoothing: binomial passes over the headline rows' final field, 0 to 4 (default 0,
 //              the paper's correlation); they then also print the field with one pass more (below
 //              4) and, when it is set, without it.
+//     --depth-prefilter: more binomial passes along z after the prefilter for the headline rows,
+//              0 to 8 (default 0); they then also print the field with it toggled (0, or 4).
 //     --z-centre: depth of the volume's (and the ring's) centre, mm (default 0: the focal plane).
 //     --passes: the headline rows' pass list in --passes syntax (default core/piv's).
 //     --compare-passes: correlate the headline volumes (and the exact ones) with each pass list

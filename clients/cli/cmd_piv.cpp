@@ -139,8 +139,9 @@ void add_piv_commands(CLI::App& app) {
                   "binomial [1 2 1]/4 passes over the final field's valid vectors, 0 to 4: less random error, "
                   "less resolution (default 0: off, the paper's correlation)");
   cmd->add_option("--depth-prefilter", o->depth_prefilter,
-                  "after the prefilter, this many more binomial [1 2 1]/4 passes along depth (z) only, 0 to 8: "
-                  "MART's particles are ~4x as long in depth as wide (default 0: off; 4 measured best on MART volumes)");
+                  "after the prefilter, this many more binomial [1 2 1]/4 passes along depth (z) "
+                  "only, 0 to 8: MART's particles are ~4x as long in depth as wide (default 0: "
+                  "off; 4 measured best on MART volumes)");
   cmd->add_option("--fft-planning", o->fft_planning,
                   "estimate (default; bit-identical between runs) or measure (faster FFTs)")
       ->check(CLI::IsMember({"estimate", "measure"}));

@@ -88,7 +88,8 @@ std::vector<PassSettings> parse_passes(const std::string& text) {
 
 CorrelationSettings correlation_settings_from(const YamlMap& root) {
   root.reject_unknown({"passes", "median", "signal_threshold", "dt_s", "fft_planning", "prefilter",
-                      "depth_prefilter", "predictor", "predictor_smoothing", "intensity_threshold_of_mean", "final_smoothing"});
+                      "depth_prefilter", "predictor", "predictor_smoothing",
+                      "intensity_threshold_of_mean", "final_smoothing"});
   CorrelationSettings s;
   if (root.has("passes")) {
     const YAML::Node list = root.node()["passes"];

@@ -135,9 +135,9 @@ TEST(ProcessCli, RecoversTheDepthDisplacementAwayFromFocus) {
                 guard_mm.c_str(), floor ? "on" : "off", mean[0], mean[1], mean[2]);
     return mean;
   };
-  // The shipped settings (the floor on). Measured (accelerated iterations): 0.2484 / 0.1245 / 0.2353 mm
-  // (0.2310 before process.yaml's depth prefilter, 0.2207 before the guard slices became the correlation's depth context, 0.2209 before
-  // process.yaml's final smoothing).
+  // The shipped settings (the floor on). Measured (accelerated iterations): 0.2484 / 0.1245 /
+  // 0.2353 mm (0.2310 before process.yaml's depth prefilter, 0.2207 before the guard slices became
+  // the correlation's depth context, 0.2209 before process.yaml's final smoothing).
   const std::array<double, 3> shipped = process("1", true);
   EXPECT_NEAR(shipped[0], kTruth[0], 0.01);
   EXPECT_NEAR(shipped[1], kTruth[1], 0.01);
@@ -205,8 +205,8 @@ TEST(ProcessCli, ResamplesARotatedCalibrationAndSaysSo) {
     std::printf("axis %d: unrotated %.4f mm, rotated 1 deg %.4f mm, truth %.4f mm\n", a, plain_mean[std::size_t(a)],
                 rotated_mean[std::size_t(a)], kTruth[a]);
   // Measured: 0.2459 / 0.1286 / 0.2079 mm against the unrotated nominal run's 0.2463 / 0.1271 /
-  // 0.2128 (0.98 of it; before process.yaml's depth prefilter 0.1946 against 0.2050; without the depth context 0.1913 against 0.2071; before process.yaml's
-  // final smoothing 0.1914 against 0.2073; before the passes' depth margin 0.1860 against 0.2015);
+  // 0.2128 (0.98 of it; before process.yaml's depth prefilter 0.1946 against 0.2050; without the
+  // depth context 0.1913 against 0.2071; before process.yaml's final smoothing 0.1914 against 0.2073; before the passes' depth margin 0.1860 against 0.2015);
   // before process.yaml's
   // intensity floor 0.2499 / 0.1245 /
   // 0.1422 against 0.2483 / 0.1241 / 0.1890 (accelerated iterations; without: 0.0948 against
