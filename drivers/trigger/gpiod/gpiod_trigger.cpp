@@ -73,6 +73,13 @@ class GpiodTrigger final : public ScheduledTrigger {
   }
 
  protected:
+  // The chip's device path and the line offset: the physical output, however the URI spells it.
+  std::string line_identity(TriggerLine line) const override {
+    const std::string chip = map_.chip.find('/') == std::string::npos ? "/dev/" + map_.chip : map_.chip;
+    const auto it = map_.outputs.find(line);
+    return "gpiod:" + chip + ":" + (it == map_.outputs.end() ? to_string(line) : std::to_string(it->second));
+  }
+
   void write_line(TriggerLine line, bool level) override {
     gpiod_line* l = lines_[int(line)];
     if (!l || gpiod_line_set_value(l, level ? 1 : 0) != 0) {
