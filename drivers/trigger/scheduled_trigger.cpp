@@ -158,6 +158,7 @@ void ScheduledTrigger::play(Schedule schedule, std::uint64_t shots) {
       write_line(l, false);
       high[int(l)] = false;
       const Edge down{now - std::int64_t(k) * period, double(now - std::int64_t(k) * period) * 1e-9, l, false};
+      // (time relative to the shot's planned start; only the sim trigger records it)
       on_edge_written(down, k, double(now) * 1e-9, 0.0);
     }
   };
@@ -165,7 +166,20 @@ void ScheduledTrigger::play(Schedule schedule, std::uint64_t shots) {
     for (std::uint64_t k = 0; (shots == 0 || k < shots) && !stop_requested_; ++k) {
       // k * period + an edge's time stays within 64 bits (k beyond ~2.5e6 shots of the longest period).
       if (k >= std::uint64_t(std::numeric_limits<std::int64_t>::max() / period) - 1) break;
-      const std::int64_t shot_start = std::int64_t(k) * period;
+      // A shot that would fire a laser line sooner after that line's last rising edge than the laser
+      // allows (the playback wrote the previous shot late) is played later, whole, so that its own
+      // timing (flashlamp to Q-switch, dt, camera) holds too.
+      std::int64_t shot_start = std::int64_t(k) * period;
+      std::int64_t shift = 0;
+      for (const Edge& e : schedule.edges) {
+        if (!e.rising || !is_laser_line(e.line) || !last_rise[int(e.line)]) continue;
+        shift = std::max(shift, *last_rise[int(e.line)] + min_interval - (shot_start + e.time_ns));
+      }
+      if (shift > 0) {
+        shot_start += shift;
+        std::lock_guard lock(mutex_);
+        ++counters_.shots_delayed;
+      }
       bool stopped = false;
       for (std::size_t i = 0; i < schedule.edges.size(); ++i) {
         const Edge& e = schedule.edges[i];
@@ -183,8 +197,9 @@ void ScheduledTrigger::play(Schedule schedule, std::uint64_t shots) {
           lock.unlock();
           now = std::max(steady_ns() - start_ns, planned);
         }
-        // A laser line never rises sooner after its previous rising edge than the laser allows,
-        // however late this thread runs: the rest of the shot is given up and counted instead.
+        // A laser line never rises sooner after its previous rising edge than the laser allows: the
+        // shot was moved so that it does not, and should that ever fail, the rest of the shot is
+        // given up and counted rather than fired.
         if (e.rising && is_laser_line(e.line) && last_rise[int(e.line)] &&
             now - *last_rise[int(e.line)] < min_interval) {
           lower_all(k, now);

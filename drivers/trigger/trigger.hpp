@@ -32,8 +32,12 @@ struct MeasuredShot {
 
 struct TriggerCounters {
   std::uint64_t shots_fired = 0;         // shots whose every edge was written
-  // Shots given up because the playback ran so late that a laser line would have risen sooner
-  // after its previous rising edge than the laser allows (lines already high went low at once).
+  // Shots played later than planned because the playback had written the previous one late and a
+  // laser line would otherwise have risen sooner after its previous rising edge than the laser
+  // allows. They still fire, whole, with their own timing.
+  std::uint64_t shots_delayed = 0;
+  // Shots given up half way for the same reason (a defence that delaying should leave idle; lines
+  // already high went low at once).
   std::uint64_t shots_abandoned = 0;
   std::uint64_t edges_written = 0;
   std::uint64_t edges_late = 0;           // written later than the backend's uncertainty

@@ -132,7 +132,7 @@ std::map<TriggerLine, std::vector<double>> laser_rises(const std::vector<Recorde
 TEST(LaserSafety, NoCavityFiresFasterThanItsLimitWhateverThePlaybackDelays) {
   std::mt19937_64 random(20261125);
   std::uniform_real_distribution<double> unit(0.0, 1.0);
-  int abandoned_somewhere = 0;
+  int delayed_somewhere = 0;
   for (int trial = 0; trial < 300; ++trial) {
     // A random schedule the sequencer accepts: rate up to the laser's maximum, dt and delays in range.
     TimingLimits limits;
@@ -192,15 +192,17 @@ TEST(LaserSafety, NoCavityFiresFasterThanItsLimitWhateverThePlaybackDelays) {
       EXPECT_FALSE(sim->level(l)) << to_string(l);
       EXPECT_FALSE(level[l]) << "trial " << trial << ": " << to_string(l) << " ends high";
     }
+    // Every shot fires, whole: one that came too soon after a late one was moved, not dropped.
     const TriggerCounters c = t->counters();
-    EXPECT_EQ(c.shots_fired + c.shots_abandoned, shots) << "trial " << trial;
+    EXPECT_EQ(c.shots_fired, shots) << "trial " << trial;
+    EXPECT_EQ(c.shots_abandoned, 0u) << "trial " << trial;
     if (model == 0) {
-      EXPECT_EQ(c.shots_abandoned, 0u) << "on-time playback abandons nothing";
+      EXPECT_EQ(c.shots_delayed, 0u) << "on-time playback moves nothing";
     }
-    abandoned_somewhere += c.shots_abandoned > 0;
+    delayed_somewhere += c.shots_delayed > 0;
   }
   // The delays did push shots together: the guard was exercised, not just never needed.
-  EXPECT_GT(abandoned_somewhere, 10);
+  EXPECT_GT(delayed_somewhere, 10);
 }
 
 TEST(LaserSafety, ARunStartedRightAfterAnotherWaitsOutTheLasersInterval) {
