@@ -4,6 +4,7 @@
 #include <hdf5.h>
 
 #include <array>
+#include <stdexcept>
 
 #include "core/base/errors.hpp"
 #include "core/io/atomic_file.hpp"
@@ -14,9 +15,13 @@ namespace {
 
 using Handle = Hdf5Handle;
 
+// A failed write is the disk's failure, not the input's (write_atomically names a full disk).
 void check(herr_t status, const std::filesystem::path& path, const std::string& what) {
-  if (status < 0) throw InputError(path.string() + ": HDF5: cannot " + what);
+  if (status < 0) throw std::runtime_error(path.string() + ": HDF5: cannot " + what);
 }
+
+// Writes what HDF5 still buffers: a failure at close would otherwise go unnoticed.
+void flush(hid_t file, const std::filesystem::path& path) { check(H5Fflush(file, H5F_SCOPE_GLOBAL), path, "write"); }
 
 template <typename T>
 hid_t mem_type() {
@@ -126,6 +131,7 @@ void write_volume_h5(const std::filesystem::path& path, const Volume& volume) {
     Handle set(H5Dopen2(file.get(), "volume", H5P_DEFAULT), H5Dclose);
     write_attribute(set.get(), path, "origin_mm", volume.grid.origin_mm.data(), 3);
     write_attribute(set.get(), path, "spacing_mm", volume.grid.spacing_mm.data(), 3);
+    flush(file.get(), path);
   });
 }
 
@@ -186,6 +192,7 @@ void write_vector_field_h5(const std::filesystem::path& path, const VectorField&
     write_attribute(group.get(), path, "dt_s", &f.dt_s, 1);
     write_attribute(group.get(), path, "origin_mm", f.grid.origin_mm.data(), 3);
     write_attribute(group.get(), path, "spacing_mm", f.grid.spacing_mm.data(), 3);
+    flush(file.get(), path);
   });
 }
 
