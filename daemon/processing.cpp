@@ -86,12 +86,16 @@ ProcessFactory plenoptic_processing(const optics::CameraModel& camera) {
                  op->note().empty() ? "frames reconstructed on raw pixels" : op->note());
     const bool keep_volumes = config.publish_volumes;
     auto workspaces = std::make_shared<WorkspacePool>();
-    return [op, settings, keep_volumes, workspaces](const drivers::FramePair& pair) {
+    return [op, settings, keep_volumes, workspaces](const drivers::FramePair& pair, const CancelFlag& cancel) {
       process::ProcessSettings s = settings;
       if (pair.measured && pair.measured->dt_s() > 0) s.correlation.dt_s = pair.measured->dt_s();
       const WorkspacePool::Lease workspace = workspaces->take();
-      process::PairResult r =
-          process::process_pair(*op, to_float(pair.a.image), to_float(pair.b.image), s, {}, &*workspace);
+      // Called after every MART iteration and correlation pass: a stopping run gives up there.
+      const process::PairProgress check_cancel = [&cancel](const std::string&, double) {
+        if (cancel) throw Cancelled("run stopping");
+      };
+      process::PairResult r = process::process_pair(*op, to_float(pair.a.image), to_float(pair.b.image), s,
+                                                    check_cancel, &*workspace);
       ProcessedPair out;
       out.vectors = std::move(r.correlation.field);
       if (keep_volumes) {

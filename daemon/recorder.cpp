@@ -7,6 +7,8 @@
 #include <cstdio>
 #include <ctime>
 #include <fstream>
+#include <future>
+#include <sstream>
 
 #include "core/base/errors.hpp"
 #include "core/io/atomic_file.hpp"
@@ -42,9 +44,50 @@ void write_text(const fs::path& path, const std::string& text) {
   });
 }
 
+std::string manifest_json(const msg::RunManifest& manifest) {
+  google::protobuf::util::JsonPrintOptions options;
+  options.add_whitespace = true;
+  options.always_print_primitive_fields = true;
+  options.preserve_proto_field_names = true;
+  std::string json;
+  const auto status = google::protobuf::util::MessageToJsonString(manifest, &json, options);
+  if (!status.ok()) throw std::runtime_error("manifest: " + status.ToString());
+  return json;
+}
+
 }  // namespace
 
 std::string new_run_id() { return utc_now("%Y%m%d-%H%M%S"); }
+
+std::vector<fs::path> mark_interrupted_runs(const fs::path& data_dir, std::vector<std::string>* problems) {
+  std::vector<fs::path> marked;
+  std::error_code ec;
+  fs::directory_iterator it(data_dir, ec);
+  if (ec) return marked;  // no data directory yet: nothing was interrupted
+  for (const auto& entry : it) {
+    const fs::path manifest_file = entry.path() / "manifest.json";
+    if (entry.path().filename().string().rfind("run-", 0) != 0 || !fs::is_regular_file(manifest_file, ec)) continue;
+    try {
+      std::ifstream in(manifest_file, std::ios::binary);
+      std::stringstream text;
+      text << in.rdbuf();
+      msg::RunManifest manifest;
+      google::protobuf::util::JsonParseOptions options;
+      options.ignore_unknown_fields = true;
+      if (!google::protobuf::util::JsonStringToMessage(text.str(), &manifest, options).ok()) {
+        throw std::runtime_error("manifest.json does not parse");
+      }
+      if (manifest.state() != "recording") continue;
+      manifest.set_state("interrupted");
+      manifest.set_ended_utc(utc_now("%Y-%m-%dT%H:%M:%SZ"));
+      write_text(manifest_file, manifest_json(manifest));
+      marked.push_back(entry.path());
+    } catch (const std::exception& e) {
+      if (problems) problems->push_back(entry.path().string() + ": " + e.what());
+    }
+  }
+  return marked;
+}
 
 double frame_gap_s(const drivers::FramePair& pair) {
   if (pair.a.device_timestamp_ns != 0 && pair.b.device_timestamp_ns != 0) {
@@ -101,9 +144,17 @@ Recorder::Recorder(const Setup& setup) : dir_(setup.data_dir / ("run-" + setup.r
 void Recorder::record_pair(const drivers::FramePair& pair) {
   const std::string name = pair_name(pair.pair_index);
   const std::string a = "frames/" + name + "-A.tif", b = "frames/" + name + "-B.tif";
-  // Frames are written outside the lock: the output stage may be listing vectors meanwhile.
-  io::write_tiff(dir_ / a, pair.a.image);
-  io::write_tiff(dir_ / b, pair.b.image);
+  // Frames are written outside the lock (the output stage may be listing vectors meanwhile), both at
+  // once: each waits for the disk to confirm its data (fsync), and the folder is flushed once for both.
+  auto frame_b = std::async(std::launch::async, [&] { io::write_tiff(dir_ / b, pair.b.image, false); });
+  try {
+    io::write_tiff(dir_ / a, pair.a.image, false);
+  } catch (...) {
+    frame_b.wait();
+    throw;
+  }
+  frame_b.get();
+  io::sync_folder(dir_ / "frames");
   std::lock_guard lock(mutex_);
   msg::ManifestPair* p = manifest_.add_pairs();
   p->set_pair_index(pair.pair_index);
@@ -163,16 +214,42 @@ void Recorder::write_statistics_locked() {
   manifest_.set_statistics_file("statistics.h5");
 }
 
-void Recorder::close(const std::string& state, std::uint64_t processed, std::uint64_t skipped) {
+void Recorder::record_drops(const std::vector<drivers::PairDrop>& drops) {
+  std::lock_guard lock(mutex_);
+  for (const drivers::PairDrop& d : drops) {
+    if (manifest_.dropped_size() >= kMaxListedDrops) break;
+    msg::ManifestDrop* out = manifest_.add_dropped();
+    out->set_trigger_index(d.trigger_index);
+    out->set_reason(drivers::to_string(d.reason));
+  }
+}
+
+void Recorder::add_warning(const std::string& warning) {
+  std::lock_guard lock(mutex_);
+  for (const std::string& w : manifest_.warnings()) {
+    if (w == warning) return;
+  }
+  manifest_.add_warnings(warning);
+}
+
+void Recorder::close(const std::string& state, std::uint64_t processed, std::uint64_t skipped,
+                     const msg::Losses& losses, std::uint64_t frames_lost) {
   std::lock_guard lock(mutex_);
   if (closed_) return;
   closed_ = true;
-  if (statistics_.fields() > 0) write_statistics_locked();
   manifest_.set_state(state);
   manifest_.set_ended_utc(utc_now("%Y-%m-%dT%H:%M:%SZ"));
   manifest_.set_pairs_processed(processed);
   manifest_.set_pairs_skipped(skipped);
+  *manifest_.mutable_losses() = losses;
+  manifest_.set_frames_lost(frames_lost);
+  // The final manifest goes first: statistics are a summary of files already listed, and a disk
+  // that fills up writing them must not leave the folder "recording".
   write_manifest_locked();
+  if (statistics_.fields() > 0) {
+    write_statistics_locked();
+    write_manifest_locked();
+  }
 }
 
 std::uint64_t Recorder::pairs_recorded() const {
@@ -185,15 +262,6 @@ msg::RunManifest Recorder::manifest() const {
   return manifest_;
 }
 
-void Recorder::write_manifest_locked() {
-  google::protobuf::util::JsonPrintOptions options;
-  options.add_whitespace = true;
-  options.always_print_primitive_fields = true;
-  options.preserve_proto_field_names = true;
-  std::string json;
-  const auto status = google::protobuf::util::MessageToJsonString(manifest_, &json, options);
-  if (!status.ok()) throw std::runtime_error("manifest: " + status.ToString());
-  write_text(dir_ / "manifest.json", json);
-}
+void Recorder::write_manifest_locked() { write_text(dir_ / "manifest.json", manifest_json(manifest_)); }
 
 }  // namespace plenopiv::daemon

@@ -4,6 +4,7 @@
 #include <filesystem>
 #include <mutex>
 #include <string>
+#include <vector>
 
 #include "core/base/grid.hpp"
 #include "daemon/run_calibration.hpp"
@@ -51,9 +52,16 @@ class Recorder {
   void record_pair(const drivers::FramePair& pair);
   // Writes the pair's vector field, lists it, and adds it to the running statistics.
   void record_vectors(std::uint64_t pair_index, const VectorField& field);
+  // Lists pairs the camera dropped, with the reason, in the manifest (the first kMaxListedDrops;
+  // the losses count them all). The manifest is rewritten with the next file or at close.
+  void record_drops(const std::vector<drivers::PairDrop>& drops);
+  static constexpr int kMaxListedDrops = 10000;
+  // Bad data met on the way (all-zero or saturated frames, ...): listed once each.
+  void add_warning(const std::string& warning);
   // Writes statistics (if any field was recorded) and the final manifest with `state`
-  // ("complete", "stopped", "failed: ..."). Later calls do nothing.
-  void close(const std::string& state, std::uint64_t processed, std::uint64_t skipped);
+  // ("complete", "stopped", "failed: ..."), the losses and the raw frames lost. Later calls do nothing.
+  void close(const std::string& state, std::uint64_t processed, std::uint64_t skipped,
+             const msg::Losses& losses = {}, std::uint64_t frames_lost = 0);
 
   std::uint64_t pairs_recorded() const;
   msg::RunManifest manifest() const;
@@ -69,6 +77,13 @@ class Recorder {
   double nominal_dt_s_ = 0;
   bool closed_ = false;
 };
+
+// Marks every run folder under `data_dir` whose manifest still says "recording" (its daemon ended
+// without closing it: a crash, SIGKILL, power cut) as "interrupted", with the time it was found;
+// its files stay as the manifest lists them. Returns the folders marked. Folders that cannot be
+// read are skipped and named in `problems`.
+std::vector<std::filesystem::path> mark_interrupted_runs(const std::filesystem::path& data_dir,
+                                                         std::vector<std::string>* problems = nullptr);
 
 // A file name-safe run id from the current UTC time: 20261123-035512.
 std::string new_run_id();

@@ -80,7 +80,7 @@ RunConfig parse_run_config(const std::string& text, const std::string& source) {
   const YamlMap map(root, source);
   map.reject_unknown({"camera_uri", "trigger_uri", "pairs", "duration_s", "rate_hz", "dt_s",
                       "volume", "reconstruction", "correlation", "publish_volumes",
-                      "max_pairs_in_flight"});
+                      "max_pairs_in_flight", "live_queue"});
   RunConfig c;
   c.text = text;
   c.camera_uri = map.string_or("camera_uri", "");
@@ -89,7 +89,7 @@ RunConfig parse_run_config(const std::string& text, const std::string& source) {
   if (pairs < 0) map.fail("pairs", "must be >= 0 (0: until stopped), got " + std::to_string(pairs));
   c.pair_count = std::uint64_t(pairs);
   c.duration_s = map.number_or("duration_s", 0.0);
-  if (c.duration_s < 0) map.fail("duration_s", "must be >= 0 s (0: until stopped)");
+  if (!(c.duration_s >= 0) || !std::isfinite(c.duration_s)) map.fail("duration_s", "must be >= 0 s (0: until stopped)");
   c.rate_hz = map.number_or("rate_hz", c.rate_hz);
   if (!(c.rate_hz > 0) || c.rate_hz > 1000) map.fail("rate_hz", "must be in (0, 1000] Hz");
   c.dt_s = map.number_or("dt_s", c.dt_s);
@@ -121,6 +121,7 @@ RunConfig parse_run_config(const std::string& text, const std::string& source) {
   c.correlation = opaque_section(map, "correlation");
   c.publish_volumes = map.boolean_or("publish_volumes", false);
   c.max_pairs_in_flight = map.integer_in("max_pairs_in_flight", c.max_pairs_in_flight, 1, 64);
+  c.live_queue = map.integer_in("live_queue", c.live_queue, 1, 64);
   return c;
 }
 

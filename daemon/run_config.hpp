@@ -27,6 +27,9 @@ struct RunConfig {
   YAML::Node correlation;     // opaque to the daemon: core/piv reads it
   bool publish_volumes = false;
   int max_pairs_in_flight = 2;  // bounded work in the processing stage
+  // Recorded pairs waiting for the live path, at most (the newest are kept, older ones dropped
+  // from processing and counted; they stay on disk). 1..64, default 2.
+  int live_queue = 2;
 
   // The reconstruction grid: voxel centres from volume_min_mm in steps of voxel_mm, covering max.
   Grid3 volume_grid() const;

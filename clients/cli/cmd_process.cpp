@@ -9,6 +9,7 @@
 #include <iostream>
 #include <memory>
 #include <optional>
+#include <set>
 #include <sstream>
 
 #include <opencv2/imgcodecs.hpp>
@@ -28,6 +29,7 @@
 #include "core/io/vtk_files.hpp"
 #include "core/optics/camera_file.hpp"
 #include "core/piv/derived.hpp"
+#include "core/process/frame_check.hpp"
 #include "core/process/process.hpp"
 #include "core/recon/mart.hpp"
 #include "plenopiv.pb.h"
@@ -43,11 +45,29 @@ struct ProcessOptions {
   int threads = 0;
 };
 
-ImageF read_frame(const std::string& path) {
+// A raw frame as floats; a frame with nothing to measure (all zero, saturated) is said on stderr
+// under `name` and added to `warnings` when given.
+ImageF read_frame(const std::string& path, const std::string& name = "", std::vector<std::string>* warnings = nullptr) {
   const ImageU16 raw = io::read_tiff_u16(path);
+  if (warnings) {
+    if (const auto problem = process::frame_problem(raw.pixels)) {
+      warnings->push_back(name + " (" + path + ") " + *problem);
+      std::fprintf(stderr, "warning: %s\n", warnings->back().c_str());
+    }
+  }
   ImageF image(raw.width, raw.height);
   for (std::size_t i = 0; i < raw.size(); ++i) image.pixels[i] = raw.pixels[i];
   return image;
+}
+
+// Says on stderr when a field has no valid vector or hardly any: the frames or settings, not the
+// flow, are then the likely cause.
+void warn_if_few_valid(const VectorField& f, const std::string& what) {
+  std::size_t valid = 0;
+  for (auto v : f.valid) valid += v;
+  if (f.valid.empty() || 10 * valid >= f.valid.size()) return;
+  std::fprintf(stderr, "warning: %s: only %zu of %zu vectors valid: check the frames (light, focus, seeding) and "
+               "the volume and correlation settings\n", what.c_str(), valid, f.valid.size());
 }
 
 // The lens centres and white correction from exactly one of the three sources.
@@ -182,7 +202,8 @@ void run_process(const ProcessOptions& o) {
   // Every input is read and checked before any long work starts.
   const process::ProcessSettings settings = process::load_process_settings(o.config);
   const optics::CameraModel camera = optics::load_camera_file(o.camera);
-  const ImageF a = read_frame(o.frame_a), b = read_frame(o.frame_b);
+  std::vector<std::string> warnings;
+  const ImageF a = read_frame(o.frame_a, "frame A", &warnings), b = read_frame(o.frame_b, "frame B", &warnings);
   for (const auto* f : {&o.frame_a, &o.frame_b}) {
     const ImageF& img = f == &o.frame_a ? a : b;
     if (img.width != camera.sensor().width_px || img.height != camera.sensor().height_px)
@@ -211,6 +232,7 @@ void run_process(const ProcessOptions& o) {
   const auto omega = piv::vorticity(r.correlation.field);
   write_field(out, vti, r.correlation, omega);
   write_png(png, preview_image(r.correlation.field, omega[2]));
+  warn_if_few_valid(r.correlation.field, out.string());
 
   std::size_t valid = 0;
   for (auto v : r.correlation.field.valid) valid += v;
@@ -276,9 +298,28 @@ void run_reprocess(const ProcessOptions& o) {
                      "' is not one this version can reprocess with (nominal, file)");
   }
   if (m.pairs_size() == 0) throw InputError(manifest_path.string() + ": pairs: the run recorded no pair");
+  // Every frame the manifest lists lies inside the folder, is listed once, and is a whole TIFF of
+  // the camera's size: checked before anything is written, so a damaged folder costs nothing.
+  std::set<std::uint64_t> indices;
+  std::set<std::string> names;
   for (const msg::ManifestPair& p : m.pairs()) {
-    run_file(run, "pairs[" + std::to_string(p.pair_index()) + "].frame_a", p.frame_a());
-    run_file(run, "pairs[" + std::to_string(p.pair_index()) + "].frame_b", p.frame_b());
+    const std::string where = "pairs[" + std::to_string(p.pair_index()) + "]";
+    if (!indices.insert(p.pair_index()).second)
+      throw InputError(manifest_path.string() + ": " + where + ": pair index listed twice");
+    for (const auto& [key, name] : {std::pair{".frame_a", &p.frame_a()}, std::pair{".frame_b", &p.frame_b()}}) {
+      const std::filesystem::path rel(*name);
+      const auto escapes = std::any_of(rel.begin(), rel.end(), [](const auto& part) { return part == ".."; });
+      if (rel.is_absolute() || escapes || rel.empty())
+        throw InputError(manifest_path.string() + ": " + where + key + ": '" + *name +
+                         "' is not a path inside the run folder");
+      if (!names.insert(rel.lexically_normal().string()).second)
+        throw InputError(manifest_path.string() + ": " + where + key + ": " + *name + " is listed twice");
+      const io::TiffInfo info = io::check_tiff(run_file(run, where + key, *name));
+      if (info.width != camera.sensor().width_px || info.height != camera.sensor().height_px)
+        throw InputError((run / *name).string() + ": frame is " + std::to_string(info.width) + " x " +
+                         std::to_string(info.height) + ", the run's camera (" + camera_path.string() + ") is " +
+                         std::to_string(camera.sensor().width_px) + " x " + std::to_string(camera.sensor().height_px));
+    }
   }
   const std::filesystem::path out_dir = o.output.empty() ? run / "reprocessed" : std::filesystem::path(o.output);
   std::filesystem::create_directories(out_dir);
@@ -298,9 +339,12 @@ void run_reprocess(const ProcessOptions& o) {
   const double pairs = double(m.pairs_size());
   Progress progress("process", "pairs", pairs);
   recon::MartWorkspace workspace;  // MART's buffers, kept from pair to pair
+  std::vector<std::string> warnings;
   for (int k = 0; k < m.pairs_size(); ++k) {
     const msg::ManifestPair& p = m.pairs(k);
-    const ImageF a = read_frame((run / p.frame_a()).string()), b = read_frame((run / p.frame_b()).string());
+    const std::string pair_name = "pair " + std::to_string(p.pair_index());
+    const ImageF a = read_frame((run / p.frame_a()).string(), pair_name + " frame A", &warnings);
+    const ImageF b = read_frame((run / p.frame_b()).string(), pair_name + " frame B", &warnings);
     process::ProcessSettings s = settings;
     if (p.measured_dt_s() > 0) s.correlation.dt_s = p.measured_dt_s();
     const auto r = process::process_pair(op, a, b, s, [&](const std::string&, double f) {
@@ -310,8 +354,10 @@ void run_reprocess(const ProcessOptions& o) {
     std::snprintf(name, sizeof name, "pair-%06llu", static_cast<unsigned long long>(p.pair_index()));
     const std::filesystem::path h5 = out_dir / (std::string(name) + ".h5");
     write_field(h5, out_dir / (std::string(name) + ".vti"), r.correlation, piv::vorticity(r.correlation.field));
+    warn_if_few_valid(r.correlation.field, h5.string());
     std::cout << h5.string() << "\n";
   }
+  if (!warnings.empty()) std::fprintf(stderr, "%zu frame warning(s); see above\n", warnings.size());
 }
 
 }  // namespace

@@ -40,7 +40,8 @@ TEST(Processing, UniformDisplacementOfARayTracedPairComesBack) {
   const RunConfig config = parse_run_config(kConfig, "run.yaml");
   const auto t0 = std::chrono::steady_clock::now();
   const ProcessFn process = plenoptic_processing(camera)(config, RunCalibration{});
-  const ProcessedPair out = process(pair);
+  const CancelFlag go{false};
+  const ProcessedPair out = process(pair, go);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 
   const VectorField& f = out.vectors;
@@ -68,6 +69,10 @@ TEST(Processing, UniformDisplacementOfARayTracedPairComesBack) {
   EXPECT_EQ(valid, f.valid.size());
   EXPECT_NEAR(mean_dx, shift_mm, 0.02);
   EXPECT_NEAR(mean_dy, 0.0, 0.01);
+
+  // A stopping run: the same pair gives up at the first MART iteration's check.
+  const CancelFlag stop{true};
+  EXPECT_THROW(process(pair, stop), Cancelled);
 }
 
 TEST(Processing, BadSettingsAndWrongImagesAreNamed) {
@@ -88,7 +93,8 @@ TEST(Processing, BadSettingsAndWrongImagesAreNamed) {
   drivers::FramePair small;
   small.a.image = ImageU16(64, 48);
   small.b.image = ImageU16(64, 48);
-  EXPECT_THROW(process(small), InputError);  // not the camera's sensor size
+  const CancelFlag go{false};
+  EXPECT_THROW(process(small, go), InputError);  // not the camera's sensor size
 }
 
 }  // namespace

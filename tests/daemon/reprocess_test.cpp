@@ -298,6 +298,31 @@ TEST(Reprocess, ADamagedFolderIsRefusedNamingWhatIsMissing) {
     s.replace(at, std::string("\"process_file\": \"process.yaml\"").size(), "\"process_file\": \"\"");
     std::ofstream(d / "manifest.json") << s;
   }, "process_file is empty");
+  // A manifest edited to point outside the folder, or to list a frame twice; a frame cut short.
+  const auto edit_manifest = [](const fs::path& d, const std::string& from, const std::string& to) {
+    std::ifstream in(d / "manifest.json");
+    std::stringstream text;
+    text << in.rdbuf();
+    std::string s = text.str();
+    const auto at = s.find(from);
+    ASSERT_NE(at, std::string::npos) << from;
+    s.replace(at, from.size(), to);
+    std::ofstream(d / "manifest.json") << s;
+  };
+  expect_refused("outside", [&](const fs::path& d) {
+    edit_manifest(d, "\"frames/pair-000001-A.tif\"", "\"../../../../etc/passwd\"");
+  }, "is not a path inside the run folder");
+  expect_refused("absolute", [&](const fs::path& d) {
+    edit_manifest(d, "\"frames/pair-000001-A.tif\"", "\"/etc/passwd\"");
+  }, "is not a path inside the run folder");
+  expect_refused("twice", [&](const fs::path& d) {
+    edit_manifest(d, "\"frames/pair-000002-A.tif\"", "\"frames/pair-000001-A.tif\"");
+  }, "frames/pair-000001-A.tif is listed twice");
+  // The last pair's frame truncated: found before the first pair is processed (nothing written).
+  expect_refused("truncated", [](const fs::path& d) {
+    const fs::path frame = d / "frames/pair-000002-B.tif";
+    fs::resize_file(frame, fs::file_size(frame) / 2);
+  }, "frames/pair-000002-B.tif: ");
   // The calibrated run without its calibration, or with a changed one.
   expect_refused("calibration", [](const fs::path& d) { fs::remove(d / "calibration.h5"); },
                  "calibration_file: " , calibrated_run());

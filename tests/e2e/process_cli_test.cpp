@@ -231,6 +231,32 @@ void expect_refused(const std::vector<std::string>& args, const std::string& cul
 
 void write_text(const fs::path& p, const std::string& s) { std::ofstream(p) << s; }
 
+// Frames with nothing to measure are processed as they are but flagged: an all-zero frame (no
+// light) and a saturated one each get a warning naming the frame, and a field with almost no valid
+// vector says so.
+TEST(ProcessCli, FlagsFramesWithoutLightAndSaturatedFrames) {
+  const fs::path& dir = pair_dir();
+  const ImageU16 a = io::read_tiff_u16(dir / "pair/frame_A.tif");
+  io::write_tiff(dir / "dark.tif", ImageU16(a.width, a.height, 0));
+  ImageU16 bright = a;
+  for (std::size_t i = 0; i < bright.size(); ++i) {
+    bright.pixels[i] = i % 20 == 0 ? 4095 : std::min<std::uint16_t>(bright.pixels[i], 4000);  // 5 % at 12-bit full scale
+  }
+  io::write_tiff(dir / "bright.tif", bright);
+  const fs::path out = dir / "flagged.h5";
+  auto args = process_args(dir, kConfig, out);
+  args[3] = (dir / "dark.tif").string();
+  args[4] = (dir / "bright.tif").string();
+  std::string text;
+  ASSERT_EQ(run_command(args, text, std::chrono::seconds(300)), 0) << text;
+  EXPECT_NE(text.find("warning: frame A (" + (dir / "dark.tif").string() + ") all zero"), std::string::npos) << text;
+  EXPECT_NE(text.find("warning: frame B (" + (dir / "bright.tif").string() + ") saturated: 5.00 % of the pixels "
+                      "at full scale 4095"),
+            std::string::npos)
+      << text;
+  EXPECT_NE(text.find("vectors valid: check the frames"), std::string::npos) << text;
+}
+
 TEST(ProcessCli, RefusesBadInputsByName) {
   const fs::path& dir = pair_dir();
   const fs::path out = dir / "bad.h5";
