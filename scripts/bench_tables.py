@@ -172,7 +172,7 @@ def pct(x):
 # Tables: each takes the results it needs and returns markdown lines (provenance included).
 
 HEADLINE_ROWS = [
-    # (result, shipped config, what it ran, paper, targets)
+    # (result, shipped config, what it ran, paper, targets); the time-sweep row with the same settings
     ("e2e-full", "run-paper.yaml",
      "sec 6.4 ring vortex: paper camera, 300x200x200 voxels, 0.5 ppm",
      "0.165 / 0.23 / 0.98; 30 min per image on 12 cores",
@@ -186,6 +186,11 @@ HEADLINE_ROWS = [
 ]
 
 
+# The headline row whose settings the paper-scale time sweep also ran: its time there, when that
+# sweep ran on another day (another load), is shown beside the headline's.
+SWEEP_TWIN = {"e2e-full": "8_acc_floor_3"}
+
+
 def t_headline(R):
     rows = []
     for name, config, case, paper, target in HEADLINE_ROWS:
@@ -193,6 +198,11 @@ def t_headline(R):
         rec = r.one(variant="reconstructed") or {}
         steady = r.one(variant="steady_state") or {}
         time = f"{steady.get('pair_s', '?')} s" if r.exists else "—"
+        sweep = R("e2e-full-sweep")
+        twin = sweep.one(variant="mart_floor", value=SWEEP_TWIN.get(name, ""))
+        if twin and sweep.meta.get("date") != r.meta.get("date"):
+            time += (f" (load {r.meta.get('load', '?').split()[0]}); {twin['total_s']} s on "
+                     f"{sweep.meta.get('date', '?').split()[0]}, {sweep.meta.get('load', '?')}")
         rows.append([config, case, f"{uvw(rec)} ({uvw(rec, 'off_axis_band_rms_')})" if r.exists else "—",
                      time, paper, target, r.meta.get("date", "—").split(" (")[0],
                      r.meta.get("commit", "—")])
@@ -247,7 +257,7 @@ def t_e2e_variants(name):
         r = R(name)
         rows = []
         for d in r.find(volumes="reconstructed"):
-            if "rms" not in d:
+            if "rms" not in d or d.get("correlation") == "centre_3pass":  # bench_piv compares schedules
                 continue
             key = "passes" if "passes" in d else "correlation"
             value = d[key]
@@ -258,7 +268,7 @@ def t_e2e_variants(name):
                          f"{uvw(ex)}" if ex else "—", d["correlate_s"]])
         out = table(["correlation of the same volumes (no depth context)", "RMS u / v / w (RMS)",
                      "off the axis band", "exact-particle volumes", "correlate s"], rows)
-        return out + ["", r.provenance()]
+        return out + [""]  # the w-by-depth table that follows gives the run's provenance
     return make
 
 
@@ -391,7 +401,13 @@ def t_fig22(R):
     rows.append(FIG22_TARGET)
     out = table(["500 particles, 300x200x200", "Q*", "peak rows: abs X; abs Z (mean / sd)",
                  "moments: abs X", "moments: abs Z", "depth slope", "reconstruction s"], rows)
-    return out + ["", R("recon-fig22").provenance() + "  ", R("recon-fig22-accurate").provenance()]
+    a, b = R("recon-fig22"), R("recon-fig22-accurate")
+    if a.exists and b.exists and not a.meta.get("carried over") and all(
+            a.meta.get(k) == b.meta.get(k) for k in ("commit", "machine")):
+        m = a.meta
+        return out + ["", f"*`{m['command']}` and `{b.meta['command']}` · {m.get('date', '?')} · commit "
+                      f"{m['commit']} · {m['machine']} · load {m.get('load', '?').split(' (')[0]}*"]
+    return out + ["", a.provenance() + "  ", b.provenance()]
 
 
 def t_figures(R):
@@ -399,15 +415,22 @@ def t_figures(R):
     fig21 = r.find(bench="recon_fig21")
     out = []
     if fig21:
-        out += table(["fig 21: z, mm"] + [f"{float(d['z_mm']):g}" for d in fig21],
-                     [["depth error, voxels"] + [f"{float(d.get('depth_err_vox', 'nan')):.2f}" for d in fig21],
-                      ["lateral error, voxels"] + [f"{float(d.get('lateral_err_vox', 'nan')):.2f}" for d in fig21]])
+        lateral = [f"{float(d.get('lateral_err_vox', 'nan')):.2f}" for d in fig21]
+        rows = [["depth error, voxels"] + [f"{float(d.get('depth_err_vox', 'nan')):.2f}" for d in fig21]]
+        if any(x != "0.00" for x in lateral):
+            rows.append(["lateral error, voxels"] + lateral)
+        out += table(["fig 21: z, mm"] + [f"{float(d['z_mm']):g}" for d in fig21], rows)
         out.append("")
+        if len(rows) == 1:
+            out[-1:] = ["", "Fig 21's lateral error is 0.00 voxel at every depth."]
     b = r.find(bench="recon_fig23b")
     c5 = [d for d in r.find(bench="recon_fig23c") if d["iterations"] == "5"]
     c20 = [d for d in r.find(bench="recon_fig23c") if d["iterations"] == "20"]
-    out += table(["fig 23b: iterations (0.5 ppm)"] + [d["iterations"] for d in b], [["Q*"] + [d["q_star"] for d in b]])
-    out.append("")
+    note = ["Fig 23b, Q* after " + " / ".join(d["iterations"] for d in b) + " iterations (0.5 ppm): "
+            + " / ".join(d["q_star"] for d in b) + "."]
+    if out and out[-1].startswith("Fig 21's"):
+        note = [out.pop() + " " + note[0]]
+    out += note + [""]
     out += table(["fig 23c: ppm"] + [f"{float(d['ppm']):g}" for d in c5],
                  [["Q*, 5 it"] + [d["q_star"] for d in c5],
                   ["voxels skipped, 5 it"] + [pct(d["skipped"]) for d in c5],
@@ -445,8 +468,16 @@ def t_piv_uniform(name):
         vol = rows and r.find(bench="piv_uniform")[0]["volume"]
         out = table([f"shift (t, t, t), voxels ({vol})", "bias x / y / z", "RMS x / y / z",
                      "RMS, interior vectors", "no prefilter: bias x / RMS x"], rows)
-        return out + ["", r.provenance()]
+        return out + [""]  # the ring table of the same run follows with the provenance
     return make
+
+
+PIV_LABELS = {"default_4pass_2threads": "default, 2 threads", "default_4pass_1thread": "default, 1 thread",
+              "previous_default_3pass_window_mean": "32/50, 16/50, 16/75, window-mean predictor, unsmoothed",
+              "centre_3pass": "32/50, 16/50, 16/75", "centre_4pass_16_75": "32/50, 16/50, 16/75, 16/75",
+              "centre_5pass": "32/50, 16/50, 16/75 x 3", "default_no_prefilter": "default without the prefilter",
+              "default_fftw_measure": "default, FFTW_MEASURE plans", "single_pass_16": "one 16³@75 % pass",
+              "window_mean_4pass": "default passes, window-mean predictor"}
 
 
 def t_piv_ring(name):
@@ -454,7 +485,7 @@ def t_piv_ring(name):
         r = R(name)
         rows = []
         for d in r.find(bench="piv_ring"):
-            rows.append([d["variant"].replace("_", " "), d["threads"], f"{d['seconds']} ({d['cpu_s']})",
+            rows.append([PIV_LABELS.get(d["variant"], d["variant"].replace("_", " ")), d["threads"], f"{d['seconds']} ({d['cpu_s']})",
                          d["cpu_ratio"], " / ".join(f"{float(d['rms_' + k]):.3f}" for k in "xyz"),
                          uvw(d, "off_axis_band_rms_"), d["outliers"], f"`{d['field_hash']}`"])
         vol = rows and r.find(bench="piv_ring")[0]["volume"]
