@@ -336,17 +336,19 @@ int main(int argc, char** argv) {
 
   // Correlation variants on the same volumes (reconstructed and exact), side by side.
   {
-    piv::CorrelationSettings previous = settings.correlation;  // the default until 2026-11-23
+    // Three passes with the residual added to the predictor's window mean, unsmoothed: what the
+    // centre predictor, its smoothing and the fourth pass are compared against.
+    piv::CorrelationSettings previous = settings.correlation;
     previous.passes = {{{32, 32, 32}, 50}, {{16, 16, 16}, 50}, {{16, 16, 16}, 75}};
     previous.predictor = piv::PredictorBase::window_mean;
     previous.predictor_smoothing = 0;
     piv::CorrelationSettings centre3 = previous;
     centre3.predictor = piv::PredictorBase::centre;
     centre3.predictor_smoothing = 1;
-    // The passes without their depth margins (core/piv's default until 2026-11-24).
+    // The passes without their depth margins.
     piv::CorrelationSettings no_margin = settings.correlation;
     for (piv::PassSettings& p : no_margin.passes) p.depth_margin = 0;
-    // The ghost floor toggled: off when the headline has it, 4 (measured best) when not.
+    // The ghost floor toggled: off when the headline has it, 4 (process.yaml's) when not.
     piv::CorrelationSettings toggled = settings.correlation;
     toggled.intensity_threshold_of_mean = intensity_threshold > 0 ? 0.0 : 4.0;
     correlate_both("correlation", "no_depth_margin", no_margin, false);
@@ -384,7 +386,7 @@ int main(int argc, char** argv) {
     };
     std::vector<Row> rows;
     const int np = int(settings.correlation.passes.size());
-    // Floor 3 is run-paper.yaml's with the depth prefilter, 4 process.yaml's ("Depth prefilter").
+    // Floor 3 is run-paper.yaml's, 4 process.yaml's.
     for (const Setting& st : {Setting{"paper_5_it_mu_0.5", 5, 0.5, false, 0}, Setting{"7_acc_floor_3", 7, 1, true, 3},
                               Setting{"8_acc_floor_3", 8, 1, true, 3}, Setting{"8_acc_floor_4", 8, 1, true, 4},
                               Setting{"9_acc_floor_3", 9, 1, true, 3}, Setting{"10_acc_floor_3", 10, 1, true, 3},

@@ -24,13 +24,14 @@ namespace plenopiv::process {
 // 0.5, 5 iterations) and core/piv's default correlation (piv::CorrelationSettings).
 struct ProcessSettings {
   Grid3 grid;                        // the volume the user asked for, mm: correlated and returned
-  // Slices reconstructed beyond each depth end of `grid` and then dropped. A particle just outside
-  // the box puts its elongated image (about ±1 mm at 4 mm from focus on the sec 5.4 camera) into
-  // the end slices, where it stays from frame to frame and pulls the correlation's depth peak
-  // towards zero: on a 0.25 mm depth shift measured 0.12 mm without a guard and 0.20 mm with
-  // 1 mm (docs/benchmarks.md, "Depth displacement").
+  // Depth reconstructed beyond each depth end of `grid`, mm, 0..100; default 1. A particle just
+  // outside the box puts its elongated image (about ±1 mm at 4 mm from focus on the sec 5.4
+  // camera) into the end slices, where it stays from frame to frame and pulls the correlation's
+  // depth peak towards zero. The correlation reads the guard slices as depth context; the
+  // results drop them (docs/benchmarks.md, "Reduced ring: knob sweep", the no-depth-guard row).
   double depth_guard_mm = 1.0;
-  // (u, v) samples per aperture axis relative to sec 5.2's count (recon::WeightingOperator).
+  // (u, v) samples per aperture axis relative to sec 5.2's count (recon::WeightingOperator),
+  // (0, 8]; default 1.
   double angular_sampling = 1.0;
   recon::MartSettings mart;
   piv::CorrelationSettings correlation;  // dt_s lives here

@@ -60,10 +60,9 @@ std::uint64_t stream_seed(std::uint64_t seed, std::uint64_t index) {
 }
 
 // Standard normal quantiles at the 2^12 cell midpoints (k + 0.5) / 2^12: one 64-bit draw gives
-// four normal samples by table look-up from a 16 KB table that stays in L1 (with a 2^16-entry
-// double table, 512 KB, a ray with diffraction cost 1.8x one without, cache misses; with this
-// one 1.2x: docs/benchmarks.md). The tails are cut at 3.5 sigma and the variance is 0.997; for the
-// diffraction jitter (sigma 5.2 um against a 7.4 um pixel) neither is visible.
+// four normal samples by table look-up from a 16 KB table that stays in L1 (a 2^16-entry double
+// table, 512 KB, misses the cache on every ray). The tails are cut at 3.5 sigma and the variance
+// is 0.997; for the diffraction jitter (sigma 5.2 um against a 7.4 um pixel) neither is visible.
 class NormalTable {
  public:
   static const NormalTable& get() {
