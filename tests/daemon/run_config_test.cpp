@@ -45,7 +45,7 @@ TEST(RunConfig, ShippedDefaultParses) {
 }
 
 // The paper-scale live config gives core/process the paper's box and the setting measured to fit
-// 30 s per pair (docs/benchmarks.md, "Full scale, now").
+// 30 s per pair (docs/benchmarks.md, "Paper scale: time against error").
 TEST(RunConfig, ShippedPaperScaleConfigParses) {
   std::ifstream in(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/run-paper.yaml");
   std::stringstream text;
