@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "core/base/errors.hpp"
+#include "core/base/memory.hpp"
 #include "core/base/yaml_access.hpp"
 #include "core/optics/microlens_array.hpp"
 #include "core/process/process.hpp"
@@ -70,6 +71,15 @@ ProcessFactory plenoptic_processing(const optics::CameraModel& camera) {
     // stage and `plenopiv process --run` read exactly the same settings the same way.
     const process::ProcessSettings settings =
         process::process_settings_from(YamlMap(load_yaml_text(config.process_yaml(), "run config"), "run config"));
+    // A run's volume is refused before any table is built when the pairs it keeps in flight would not
+    // fit this machine: kPeakBytesPerVoxel is the measured peak per reconstructed voxel of one pair
+    // (tables, MART buffers, both volumes, correlation; docs/benchmarks.md "Speed and memory").
+    constexpr double kPeakBytesPerVoxel = 160;
+    const Grid3 g = settings.reconstruction_grid();
+    require_memory(double(g.shape[0]) * g.shape[1] * g.shape[2] * kPeakBytesPerVoxel * config.max_pairs_in_flight,
+                   "processing " + std::to_string(config.max_pairs_in_flight) + " pair(s) at once on a " +
+                       std::to_string(g.shape[0]) + " x " + std::to_string(g.shape[1]) + " x " +
+                       std::to_string(g.shape[2]) + " voxel volume (volume, max_pairs_in_flight)");
     // Built once per run, shared read-only by the concurrent pairs. PairOperator resamples the
     // frames onto an axis-aligned lattice when the array is not separable (a calibrated array is
     // always rotated a little; never the nominal lattice): said in the log when it does.

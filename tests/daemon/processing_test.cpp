@@ -89,6 +89,19 @@ TEST(Processing, BadSettingsAndWrongImagesAreNamed) {
     EXPECT_NE(std::string(e.what()).find("reconstruction.iteratons: unknown key"), std::string::npos)
         << e.what();
   }
+  // A volume whose pairs in flight would not fit this machine's memory: refused with the estimate
+  // before any table is built (2^29 voxels is what run.yaml itself allows).
+  try {
+    factory(parse_run_config("volume: {x_mm: [-100, 100], y_mm: [-100, 100], z_mm: [-5, 5], voxel_mm: 0.125}\n"
+                             "max_pairs_in_flight: 4\n",
+                             "run.yaml"),
+            RunCalibration{});
+    FAIL() << "a 1601 x 1601 x 97 voxel volume with 4 pairs in flight was accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("processing 4 pair(s) at once on a 1601 x 1601 x"), std::string::npos)
+        << e.what();
+    EXPECT_NE(std::string(e.what()).find("GB of memory"), std::string::npos) << e.what();
+  }
   const ProcessFn process = factory(parse_run_config(kConfig, "run.yaml"), RunCalibration{});
   drivers::FramePair small;
   small.a.image = ImageU16(64, 48);
