@@ -18,11 +18,6 @@
 
 namespace plenopiv::recon {
 
-// The white-image correction of fig 15 from the camera model: per pixel, the fraction of its area
-// inside the disk of diameter CameraModel::microlens_image_diameter_px() around the spot of each
-// lens (1 inside a microlens image, 0 outside). Calibration later provides the measured one.
-ImageF geometric_white_image(const optics::CameraModel& camera, const optics::MicrolensArray& lenses);
-
 // How far (pixels) a lens centre may sit from its column's mean x and its row's mean y for the
 // separable weights.
 inline constexpr double kSeparableTolerancePx = 0.25;
