@@ -14,6 +14,8 @@
 #include "bench/bench_support.hpp"
 #include "core/calib/nominal_calibration.hpp"
 #include "core/optics/camera_file.hpp"
+#include "core/recon/active_set.hpp"
+#include "core/recon/explicit_matrix.hpp"
 #include "core/recon/mart.hpp"
 #include "core/recon/quality.hpp"
 #include "core/recon/weights.hpp"

@@ -12,6 +12,8 @@
 
 #include "core/base/grid.hpp"
 #include "core/base/image.hpp"
+#include "core/recon/active_set.hpp"
+#include "core/recon/explicit_matrix.hpp"
 #include "core/recon/weights.hpp"
 
 namespace plenopiv::recon {
