@@ -44,6 +44,7 @@
 #include <vector>
 
 #include "bench/bench_support.hpp"
+#include "core/calib/nominal_calibration.hpp"
 #include "core/optics/camera_file.hpp"
 #include "core/process/process.hpp"
 #include "core/sim/exact_volume.hpp"
@@ -212,7 +213,8 @@ int main(int argc, char** argv) {
   const std::size_t count = sim::particle_count_from_ppm(camera, box, 0.5);
   const auto pa = sim::random_particles(box, count, 2015);
   const auto pb = sim::displace(pa, flow);
-  const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera));
+  const calib::LoadedCalibration nominal = calib::nominal_calibration(camera);
+  const optics::MicrolensArray& lenses = nominal.lenses;
   sim::RenderOptions ro;
   ro.rays_per_particle = rays;
   double t = now_s();
@@ -226,7 +228,7 @@ int main(int argc, char** argv) {
   const double render_s = now_s() - t;
 
   t = now_s();
-  const process::PairOperator op(camera, lenses, recon::geometric_white_image(camera, lenses), settings);
+  const process::PairOperator op(camera, lenses, nominal.white_correction, settings);
   const double weights_s = now_s() - t;
   std::printf("bench=e2e case=%s particles=%zu voxels=%zu render_s=%.2f weights_s=%.2f\n", scale.c_str(), count,
               settings.grid.count(), render_s, weights_s);
@@ -456,7 +458,7 @@ int main(int argc, char** argv) {
     // Without the depth guard: particles beyond the depth ends pin light in the end slices.
     process::ProcessSettings s = settings;
     s.depth_guard_mm = 0;
-    const process::PairOperator op0(camera, lenses, recon::geometric_white_image(camera, lenses), s);
+    const process::PairOperator op0(camera, lenses, nominal.white_correction, s);
     const auto r = process::process_pair(op0, a, b, s);
     const Errors er = errors_against(r.correlation.field, flow, voxel);
     rows.push_back({"no_depth_guard", 5, np, 16, 0.5,
@@ -469,7 +471,7 @@ int main(int argc, char** argv) {
     process::ProcessSettings s = settings;
     s.angular_sampling = sampling;
     t = now_s();
-    const process::PairOperator op_a(camera, lenses, recon::geometric_white_image(camera, lenses), s);
+    const process::PairOperator op_a(camera, lenses, nominal.white_correction, s);
     const double tables_s = now_s() - t;
     const auto r = process::process_pair(op_a, a, b, s);
     const Errors er = errors_against(r.correlation.field, flow, voxel);
@@ -502,7 +504,7 @@ int main(int argc, char** argv) {
     process::ProcessSettings s = settings;
     s.grid = process::grid_for_extent({-hx, -hy, -hz}, {hx, hy, hz}, {2 * voxel, 2 * voxel, 2 * voxel}, "bench");
     s.correlation.passes = {{{16, 16, 16}, 50.0}, {{12, 12, 12}, 75.0}, {{8, 8, 8}, 75.0}};
-    const process::PairOperator op2(camera, lenses, recon::geometric_white_image(camera, lenses), s);
+    const process::PairOperator op2(camera, lenses, nominal.white_correction, s);
     const auto r = process::process_pair(op2, a, b, s);
     const Errors er = errors_against(r.correlation.field, flow, voxel);  // still in 0.125 mm voxels
     rows.push_back({"binning", 5, 3, 8, 0.5, r.times.reconstruct_a_s + r.times.reconstruct_b_s + r.times.correlate_s,

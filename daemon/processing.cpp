@@ -10,6 +10,7 @@
 #include "core/base/errors.hpp"
 #include "core/base/memory.hpp"
 #include "core/base/yaml_access.hpp"
+#include "core/calib/nominal_calibration.hpp"
 #include "core/optics/microlens_array.hpp"
 #include "core/process/process.hpp"
 #include "core/recon/mart.hpp"
@@ -88,9 +89,8 @@ ProcessFactory plenoptic_processing(const optics::CameraModel& camera) {
       op = std::make_shared<const process::PairOperator>(camera, calibration.loaded->lenses,
                                                          calibration.loaded->white_correction, settings);
     } else {
-      const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera));
-      op = std::make_shared<const process::PairOperator>(camera, lenses, recon::geometric_white_image(camera, lenses),
-                                                         settings);
+      const calib::LoadedCalibration nominal = calib::nominal_calibration(camera);
+      op = std::make_shared<const process::PairOperator>(camera, nominal.lenses, nominal.white_correction, settings);
     }
     spdlog::info("run processing: calibration {}; {}", calibration.summary(),
                  op->note().empty() ? "frames reconstructed on raw pixels" : op->note());

@@ -22,6 +22,7 @@
 #include "core/base/errors.hpp"
 #include "core/calib/calibration.hpp"
 #include "core/calib/calibration_file.hpp"
+#include "core/calib/nominal_calibration.hpp"
 #include "core/io/atomic_file.hpp"
 #include "core/io/checksum.hpp"
 #include "core/io/hdf5_files.hpp"
@@ -77,11 +78,7 @@ calib::LoadedCalibration calibration_for(const ProcessOptions& o, const optics::
     throw InputError("give exactly one of --calibration FILE.h5, --calibration-image TIFF (with --white), "
                      "or --nominal");
   if (!o.calibration.empty()) return calib::load_calibration(o.calibration, camera);
-  if (o.nominal) {
-    auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera));
-    ImageF white = recon::geometric_white_image(camera, lenses);
-    return {std::move(lenses), std::move(white)};
-  }
+  if (o.nominal) return calib::nominal_calibration(camera);
   if (o.white_images.empty()) throw InputError("--calibration-image: needs at least one --white image");
   calib::Calibration cal = calib::calibrate(camera, read_frame(o.calibration_image));
   ImageF white;

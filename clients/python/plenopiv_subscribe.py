@@ -150,9 +150,9 @@ def main(argv=None):
     if bool(args.server_key) != bool(args.client_cert):
         p.error("CURVE needs both --server-key and --client-cert")
     if args.server_key:
-        import zmq.auth  # the certificate files `plenopiv keys` writes are zmq.auth's format
-        server_public, _ = zmq.auth.load_certificate(args.server_key)
-        client_public, client_secret = zmq.auth.load_certificate(args.client_cert)
+        from zmq import auth  # the certificate files `plenopiv keys` writes are zmq.auth's format
+        server_public, _ = auth.load_certificate(args.server_key)
+        client_public, client_secret = auth.load_certificate(args.client_cert)
         if client_secret is None:
             p.error(args.client_cert + ": holds no secret key: give the .key_secret file")
         sub.curve_serverkey = server_public

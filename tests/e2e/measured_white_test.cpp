@@ -10,6 +10,7 @@
 
 #include "core/base/yaml_access.hpp"
 #include "core/calib/calibration.hpp"
+#include "core/calib/nominal_calibration.hpp"
 #include "core/process/process.hpp"
 #include "core/recon/weights.hpp"
 #include "core/sim/particles.hpp"
@@ -70,7 +71,7 @@ correlation: {median: {threshold: 2, epsilon_voxel: 0.1, radius: 2}, signal_thre
     const process::PairOperator op(camera, lenses, white, s);
     return mean_displacement(process::process_pair(op, frame_a, frame_b, s).correlation.field);
   };
-  const auto geometric = run(recon::geometric_white_image(camera, lenses));
+  const auto geometric = run(calib::geometric_white_image(camera, lenses));
   const auto with_measured = run(measured);
   std::cout << "measured: geometric white " << geometric[0] << " " << geometric[1] << " " << geometric[2]
             << " mm; measured white (20000 rays per lens) " << with_measured[0] << " " << with_measured[1] << " "

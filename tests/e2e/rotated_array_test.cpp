@@ -15,6 +15,7 @@
 #include "core/base/errors.hpp"
 #include "core/base/yaml_access.hpp"
 #include "core/calib/calibration.hpp"
+#include "core/calib/nominal_calibration.hpp"
 #include "core/lightfield/lattice_resampling.hpp"
 #include "core/process/process.hpp"
 #include "core/recon/mart.hpp"
@@ -89,7 +90,7 @@ double ncc(const ImageF& a, const ImageF& b) {
 
 TEST(LatticeResampling, AnAxisAlignedLatticeIsResampledOntoItselfExactly) {
   const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera()));
-  const ImageF white = recon::geometric_white_image(camera(), lenses);
+  const ImageF white = calib::geometric_white_image(camera(), lenses);
   const lightfield::LatticeResampler r(camera(), lenses, white);
   EXPECT_EQ(r.coverage().full, 2500);
   EXPECT_EQ(r.lenses().centres_mm, lenses.centres_mm);
@@ -132,13 +133,13 @@ TEST(LatticeResampling, ARotatedArraysImageLooksLikeTheAxisAlignedOnes) {
   // virtual lattice's geometric one.
   for (double degrees : {0.3, 1.0}) {
     const auto array = true_array(degrees, 0.001);
-    const lightfield::LatticeResampler r(camera(), array, recon::geometric_white_image(camera(), array));
+    const lightfield::LatticeResampler r(camera(), array, calib::geometric_white_image(camera(), array));
     EXPECT_EQ(r.lenses().lattice.rotation_rad, 0.0);
     EXPECT_NEAR(r.lenses().lattice.offset_x_mm, 0.011, 1e-12);
     const ImageF resampled = r.resample(render(array, scene(), 3));
     const ImageF direct = render(r.lenses(), scene(), 3);
     const double image_ncc = ncc(resampled, direct);
-    const double white_ncc = ncc(r.white(), recon::geometric_white_image(camera(), r.lenses()));
+    const double white_ncc = ncc(r.white(), calib::geometric_white_image(camera(), r.lenses()));
     std::cout << "measured: " << degrees << " deg: image NCC " << image_ncc << ", white NCC " << white_ncc
               << ", virtual lenses full/partial/none " << r.coverage().full << "/" << r.coverage().partial << "/"
               << r.coverage().none << "\n";
@@ -153,7 +154,7 @@ TEST(LatticeResampling, ARotatedArraysImageLooksLikeTheAxisAlignedOnes) {
   }
   // A different sensor size is named.
   const auto array = true_array(0.3, 0.001);
-  const lightfield::LatticeResampler r(camera(), array, recon::geometric_white_image(camera(), array));
+  const lightfield::LatticeResampler r(camera(), array, calib::geometric_white_image(camera(), array));
   EXPECT_THROW(r.resample(ImageF(10, 10)), InputError);
   EXPECT_THROW(lightfield::LatticeResampler(camera(), array, ImageF(10, 10)), InputError);
 }
@@ -163,7 +164,7 @@ TEST(LatticeResampling, SameImageAtOneAndTwoThreads) {
   const ImageF image = render(array, scene(), 3);
   auto run = [&](int threads) {
     tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
-    const lightfield::LatticeResampler r(camera(), array, recon::geometric_white_image(camera(), array));
+    const lightfield::LatticeResampler r(camera(), array, calib::geometric_white_image(camera(), array));
     return r.resample(image).pixels;
   };
   EXPECT_EQ(run(1), run(2));
@@ -178,7 +179,7 @@ struct SceneErrors {
 // resampled lattice), then fits every particle and compares with the exact volume.
 SceneErrors reconstruct_scene(const optics::MicrolensArray& array) {
   const Grid3 g = scene_grid();
-  const process::PairOperator op(camera(), array, recon::geometric_white_image(camera(), array), g);
+  const process::PairOperator op(camera(), array, calib::geometric_white_image(camera(), array), g);
   ImageF scratch;
   recon::MartSettings s;
   s.iterations = 20;
@@ -262,7 +263,7 @@ correlation:
   ro.rays_per_particle = 2000;
 
   auto mean_shift = [&](const optics::MicrolensArray& truth, const optics::MicrolensArray& lenses, std::string& note) {
-    const process::PairOperator op(camera(), lenses, recon::geometric_white_image(camera(), lenses), s.reconstruction_grid());
+    const process::PairOperator op(camera(), lenses, calib::geometric_white_image(camera(), lenses), s.reconstruction_grid());
     const process::PairResult r = process::process_pair(op, sim::render(camera(), truth, a, ro, 3).rays,
                                                         sim::render(camera(), truth, b, ro, 4).rays, s);
     note = r.lattice_note;
@@ -311,7 +312,7 @@ TEST(RotatedArray, AHexArrayIsResampledOntoARectangularLattice) {
   l.rotation_rad = 0.3 * std::numbers::pi / 180;
   const auto array = sim::jittered_array(l, 0.001, 5);
   const Grid3 g = scene_grid();
-  const process::PairOperator op(cam, array, recon::geometric_white_image(cam, array), g);
+  const process::PairOperator op(cam, array, calib::geometric_white_image(cam, array), g);
   EXPECT_NE(op.note().find("hexagonal (49 x 50 lenses, rotated 0.30 deg), resampled onto 49 x 43"), std::string::npos)
       << op.note();
   recon::MartSettings s;
@@ -349,7 +350,7 @@ TEST(RotatedArray, TheSeparableOperatorStillRefusesARotatedArrayByName) {
   EXPECT_TRUE(recon::separable_lattice(optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera())))
                   .separable(camera().sensor().pixel_pitch_mm));
   try {
-    recon::WeightingOperator(camera(), array, scene_grid(), recon::geometric_white_image(camera(), array));
+    recon::WeightingOperator(camera(), array, scene_grid(), calib::geometric_white_image(camera(), array));
     ADD_FAILURE() << "a rotated array was accepted";
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find("rotated or warped array"), std::string::npos) << e.what();

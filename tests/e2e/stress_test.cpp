@@ -12,6 +12,7 @@
 #include <random>
 
 #include "core/base/errors.hpp"
+#include "core/calib/nominal_calibration.hpp"
 #include "core/optics/camera_file.hpp"
 #include "core/process/process.hpp"
 #include "core/sim/particles.hpp"
@@ -38,7 +39,7 @@ main_lens: {focal_length_mm: 50, f_number: 2, magnification: -1}
 struct Fixture {
   optics::CameraModel camera = optics::parse_camera_yaml(kTinyCamera, "tiny camera");
   optics::MicrolensArray lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera));
-  ImageF white = recon::geometric_white_image(camera, lenses);
+  ImageF white = calib::geometric_white_image(camera, lenses);
   // One operator per depth extent (the expensive part, shared by the cases).
   std::map<int, std::unique_ptr<recon::WeightingOperator>> operators;
 
