@@ -46,6 +46,7 @@
 #include "bench/bench_support.hpp"
 #include "core/calib/nominal_calibration.hpp"
 #include "core/optics/camera_file.hpp"
+#include "core/process/pair_processor.hpp"
 #include "core/process/process.hpp"
 #include "core/sim/exact_volume.hpp"
 #include "core/sim/field_errors.hpp"
@@ -228,14 +229,17 @@ int main(int argc, char** argv) {
   const double render_s = now_s() - t;
 
   t = now_s();
-  const process::PairOperator op(camera, lenses, nominal.white_correction, settings);
+  // The headline goes through the owner every caller uses (process::PairProcessor); the variants
+  // below re-run its operator with other settings.
+  const process::PairProcessor processor(camera, nominal, settings);
+  const process::PairOperator& op = processor.op();
   const double weights_s = now_s() - t;
   std::printf("bench=e2e case=%s particles=%zu voxels=%zu render_s=%.2f weights_s=%.2f\n", scale.c_str(), count,
               settings.grid.count(), render_s, weights_s);
 
   // The paper's settings: reconstruction and correlation, stage by stage.
-  recon::MartWorkspace workspace;  // kept for --steady
-  const auto base = process::process_pair(op, a, b, settings, {}, &workspace);
+  recon::MartWorkspace workspace;  // kept for --steady and the sweeps
+  const auto base = processor.process(a, b);
   const Errors e = errors_against(base.correlation.field, flow, voxel);
   std::printf("bench=e2e case=%s variant=reconstructed iterations=%d mu=%.2f accelerate=%d dark_cutoff=%.3g sensor_blur_mm=%.4g "
               "intensity_threshold=%.3g final_smoothing=%d depth_prefilter=%d recon_a_s=%.2f recon_b_s=%.2f "
@@ -268,12 +272,13 @@ int main(int argc, char** argv) {
   };
   print_w_by_depth(base.correlation.field, "reconstructed");
   if (steady) {
-    // The same pair again in the kept MART workspace: what each pair costs in a run of many
-    // (the daemon and `plenopiv process --run` keep one per pair in flight).
+    // The same pair again, the processor's MART buffers kept: what each pair costs in a run of many
+    // (the daemon and `plenopiv process --run` keep them from pair to pair).
     std::vector<double> marks;  // seconds since the start at each progress call
     const double t_again = now_s();
-    const auto again = process::process_pair(
-        op, a, b, settings, [&](const std::string&, double) { marks.push_back(now_s() - t_again); }, &workspace);
+    process::PairOptions timed;
+    timed.progress = [&](const std::string&, double) { marks.push_back(now_s() - t_again); };
+    const auto again = processor.process(a, b, timed);
     // Seconds between progress calls: per frame set-up with its first iteration, then one per
     // iteration; then the correlation's passes.
     std::string steps;

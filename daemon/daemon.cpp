@@ -27,7 +27,7 @@ std::int64_t now_ns() {
 
 // A run id whose folder does not exist yet (two runs in one second get -2, -3, ...).
 std::string unused_run_id(const std::filesystem::path& data_dir, const std::string& prefix) {
-  std::string id = new_run_id();
+  std::string id = run_folder::new_run_id();
   const std::string base = id;
   for (int n = 2; std::filesystem::exists(data_dir / (prefix + id)); ++n) {
     id = base + "-" + std::to_string(n);
@@ -105,7 +105,7 @@ Daemon::Daemon(DaemonConfig config, const DaemonExtensions& extensions)
       context_, config_.control_endpoint, [this](const msg::Request& r) { return handle(r); }, security);
 
   std::vector<std::string> problems;
-  for (const auto& dir : mark_interrupted_runs(config_.data_dir, &problems)) {
+  for (const auto& dir : run_folder::mark_interrupted_runs(config_.data_dir, &problems)) {
     spdlog::warn("run folder {} was left recording by a daemon that did not close it: marked interrupted",
                  dir.string());
   }

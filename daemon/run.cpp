@@ -24,6 +24,15 @@ using namespace std::chrono_literals;
 
 namespace {
 
+// Time between the two frames of a pair: B - A on the device clock when both frames carry it,
+// else on the host clock. (Not the laser's dt: frame B starts after the interline transfer.)
+double frame_gap_s(const drivers::FramePair& pair) {
+  if (pair.a.device_timestamp_ns != 0 && pair.b.device_timestamp_ns != 0) {
+    return (double(pair.b.device_timestamp_ns) - double(pair.a.device_timestamp_ns)) * 1e-9;
+  }
+  return (double(pair.b.host_timestamp_ns) - double(pair.a.host_timestamp_ns)) * 1e-9;
+}
+
 // Space kept free on the data directory's file system beyond the pairs themselves (manifest
 // rewrites, vector fields, statistics, the rest of the system).
 constexpr std::uint64_t kReserveBytes = 64ull * 1024 * 1024;
@@ -84,12 +93,22 @@ Run::Run(RunConfig config, std::string run_id, RunEnvironment env)
                        ": free some space or record fewer pairs");
     }
   }
-  Recorder::Setup setup{env_.data_dir, run_id_, &config_, camera_uri, trigger_uri, env_.camera_file,
-                        info.vendor + " " + info.model + " " + info.serial, wiring.description,
-                        &calibration};
+  run_folder::Writer::Setup setup;
+  setup.data_dir = env_.data_dir;
+  setup.run_id = run_id_;
+  setup.run_yaml = config_.text;
+  setup.process_yaml = config_.process_yaml();
+  setup.nominal_dt_s = config_.dt_s;
+  setup.rate_hz = config_.rate_hz;
+  setup.camera_uri = camera_uri;
+  setup.trigger_uri = trigger_uri;
+  setup.camera_file = env_.camera_file;
+  setup.camera_model = info.vendor + " " + info.model + " " + info.serial;
+  setup.camera_triggering = wiring.description;
+  if (!calibration.nominal()) setup.calibration = run_folder::CalibrationCopy{calibration.source, calibration.bytes, calibration.crc32};
   // Bad processing settings and a bad calibration are refused before the run folder exists.
   if (env_.processing) process_ = env_.processing(config_, calibration);
-  recorder_ = std::make_unique<Recorder>(setup);
+  recorder_ = std::make_unique<run_folder::Writer>(setup);
   spdlog::info("run {}: calibration {}", run_id_, calibration.summary());
   spdlog::info("run {}: {} pairs at {} Hz, dt {} s, from {}, trigger {}, folder {}", run_id_,
                config_.pair_count ? std::to_string(config_.pair_count) : "unlimited",
@@ -115,7 +134,20 @@ void Run::join() {
 void Run::record(drivers::FramePair pair) {
   attach_shot(pair);
   check_space();
-  recorder_->record_pair(pair);
+  run_folder::PairRecord record;
+  record.pair_index = pair.pair_index;
+  record.trigger_index = pair.trigger_index;
+  record.frame_a = &pair.a.image;
+  record.frame_b = &pair.b.image;
+  record.frame_id_a = pair.a.frame_id;
+  record.frame_id_b = pair.b.frame_id;
+  record.device_timestamp_a_ns = pair.a.device_timestamp_ns;
+  record.device_timestamp_b_ns = pair.b.device_timestamp_ns;
+  record.host_timestamp_a_ns = pair.a.host_timestamp_ns;
+  record.host_timestamp_b_ns = pair.b.host_timestamp_ns;
+  record.frame_gap_s = frame_gap_s(pair);
+  if (pair.measured) record.laser_pulses_ns = std::pair{pair.measured->pulse1_ns, pair.measured->pulse2_ns};
+  recorder_->record_pair(record);
   ++pairs_received_;
   check_frames(pair);
   if (env_.heartbeat) env_.heartbeat();
@@ -155,8 +187,8 @@ void Run::check_frames(const drivers::FramePair& pair) {
 void Run::take_drops() {
   const std::vector<drivers::PairDrop> drops = camera_->take_drops();
   if (drops.empty()) return;
-  recorder_->record_drops(drops);
   for (const drivers::PairDrop& d : drops) {
+    recorder_->record_drop(d.trigger_index, drivers::to_string(d.reason));
     spdlog::warn("run {}: trigger {}: no pair recorded: {}", run_id_, d.trigger_index, drivers::to_string(d.reason));
   }
 }

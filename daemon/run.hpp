@@ -13,13 +13,13 @@
 #include "daemon/daemon_config.hpp"
 #include "daemon/pipeline.hpp"
 #include "daemon/publisher.hpp"
-#include "daemon/recorder.hpp"
 #include "daemon/run_calibration.hpp"
 #include "daemon/run_config.hpp"
 #include "daemon/run_state.hpp"
 #include "drivers/camera/camera.hpp"
 #include "drivers/trigger/shot_joiner.hpp"
 #include "drivers/trigger/trigger.hpp"
+#include "proto/run_folder.hpp"
 
 namespace plenopiv::daemon {
 
@@ -102,7 +102,7 @@ class Run {
   std::unique_ptr<drivers::Trigger> trigger_;
   drivers::TriggerSource camera_trigger_ = drivers::TriggerSource::External;
   drivers::ShotJoiner joiner_;  // acquisition thread only
-  std::unique_ptr<Recorder> recorder_;
+  std::unique_ptr<run_folder::Writer> recorder_;
   ProcessFn process_;
   std::unique_ptr<LiveMailbox> mailbox_;
   PipelineStats stats_;

@@ -7,6 +7,7 @@
 #include <functional>
 #include <memory>
 #include <optional>
+#include <string>
 #include <span>
 #include <vector>
 
@@ -70,6 +71,16 @@ struct MartSettings {
 };
 // A Gaussian wider than this is no sensor blur (the paper's lens images are 0.125 mm across).
 inline constexpr double kMaxSensorBlurSigmaMm = 0.05;
+
+// A setting outside its range: the YAML key (as core/process reads it under `reconstruction:`) and
+// the reason, e.g. {"mu", "must be in (0, 1], got 1.5"}.
+struct SettingProblem {
+  std::string key, reason;
+};
+// The one place MART's ranges are checked (reconstruct() refuses what it finds, core/process names
+// the config key): iterations 1..10000, mu (0, 1], noise_threshold finite >= 0, dark_weight_cutoff
+// [0, 1), convergence finite >= 0, sensor_blur_sigma_mm [0, kMaxSensorBlurSigmaMm].
+std::optional<SettingProblem> check(const MartSettings& settings);
 
 // The sensor blur of MartSettings::sensor_blur_sigma_mm on an image of op's sensor, in place: what
 // MART with that setting does to each projection W E.

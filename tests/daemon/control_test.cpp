@@ -264,7 +264,8 @@ TEST_F(Daemon, DeviceUrisFromRequestsCannotNameFiles) {
   const auto refusal = [&](const std::string& camera_uri) {
     msg::Request r;
     r.mutable_start_run()->set_config_yaml("camera_uri: \"" + camera_uri +
-                                           "\"\nvolume: {x_mm: [0, 1], y_mm: [0, 1], z_mm: [0, 1], voxel_mm: 0.5}\n");
+                                           "\"\ndt_s: 0.0001\nvolume: {x_mm: [0, 2], y_mm: [0, 2], z_mm: [0, 2], voxel_mm: "
+                                           "0.5}\ncorrelation: {passes: [{window: 4, overlap_percent: 50}]}\n");
     const msg::Reply reply = client.call(r);
     EXPECT_TRUE(reply.has_error()) << camera_uri;
     EXPECT_EQ(reply.error().code(), msg::Error::INVALID) << reply.error().message();

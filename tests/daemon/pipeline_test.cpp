@@ -16,7 +16,6 @@
 #include "core/io/tiff.hpp"
 #include "daemon/pipeline.hpp"
 #include "daemon/publisher.hpp"
-#include "daemon/recorder.hpp"
 #include "daemon/run.hpp"
 #include "drivers/sim/sim_camera.hpp"
 #include "drivers/trigger/sim_trigger.hpp"
@@ -213,66 +212,6 @@ TEST_P(Concurrency, AProcessingFailureSkipsThatPairOnly) {
 
 INSTANTIATE_TEST_SUITE_P(Threads, Concurrency, ::testing::Values(1, 2, 4));
 
-TEST(Recorder, FolderHoldsFramesVectorsStatisticsAndAManifestListingThem) {
-  const fs::path data = testing_support::temp_dir("daemon") / "recorder";
-  fs::remove_all(data);
-  RunConfig config = parse_run_config(
-      "dt_s: 0.001\nvolume: {x_mm: [0, 1], y_mm: [0, 1], z_mm: [0, 1], voxel_mm: 0.5}\n", "run.yaml");
-  Recorder recorder({data, "r1", &config, "test://", "sim://", {}, "plenopiv test camera", "software: test", nullptr});
-  EXPECT_EQ(read_manifest(recorder.dir()).state(), "recording");
-  for (std::uint64_t i = 0; i < 3; ++i) recorder.record_pair(make_pair(i));
-  // Vectors for pairs 0 and 2: u = 1 m/s and 3 m/s → mean 2, RMS fluctuation 1.
-  ProcessedPair a = tagged_field(make_pair(1)), b = tagged_field(make_pair(3));
-  recorder.record_vectors(0, a.vectors);
-  recorder.record_vectors(2, b.vectors);
-  msg::RunManifest m = read_manifest(recorder.dir());
-  ASSERT_EQ(m.pairs_size(), 3);
-  EXPECT_EQ(m.pairs(0).vectors(), "vectors/pair-000000.h5");
-  EXPECT_EQ(m.pairs(1).vectors(), "");
-  EXPECT_NEAR(m.pairs(1).frame_gap_s(), 100e-6, 1e-12);
-  EXPECT_EQ(m.pairs(1).measured_dt_s(), 0.0);  // no laser sync measured
-  recorder.close("complete", 2, 1);
-
-  m = read_manifest(recorder.dir());
-  EXPECT_EQ(m.state(), "complete");
-  EXPECT_EQ(m.run_id(), "r1");
-  EXPECT_EQ(m.config_file(), "run.yaml");
-  EXPECT_EQ(m.statistics_file(), "statistics.h5");
-  EXPECT_EQ(m.pairs_processed(), 2u);
-  EXPECT_EQ(m.pairs_skipped(), 1u);
-  for (const msg::ManifestPair& p : m.pairs()) {
-    const ImageU16 image = io::read_tiff_u16(recorder.dir() / p.frame_b());
-    EXPECT_EQ(image.pixels, make_pair(p.pair_index()).b.image.pixels);
-    EXPECT_EQ(p.frame_id_b(), 2 * p.pair_index() + 2);
-  }
-  const VectorField stats = io::read_vector_field_h5(recorder.dir() / "statistics.h5");
-  // Mean u = 2 m/s, stored as displacement over the nominal dt (1 ms): 2 mm.
-  EXPECT_NEAR(stats.dx_mm[0], 2.0, 1e-6);
-  std::ifstream config_copy(recorder.dir() / "run.yaml");
-  std::stringstream text;
-  text << config_copy.rdbuf();
-  EXPECT_EQ(text.str(), config.text);
-  for (const auto& entry : fs::recursive_directory_iterator(recorder.dir())) {
-    EXPECT_EQ(entry.path().filename().string().find(".tmp"), std::string::npos)
-        << "temporary file left: " << entry.path();
-  }
-}
-
-TEST(RunningStatistics, WelfordMeanAndRmsOfValidVectors) {
-  RunningStatistics s;
-  for (float d : {1.f, 3.f, 5.f}) {
-    ProcessedPair p = tagged_field(make_pair(0));
-    for (auto& x : p.vectors.dx_mm) x = d;
-    p.vectors.valid[1] = d == 5.f ? 0 : 1;  // node 1 misses the last sample
-    s.add(p.vectors);
-  }
-  EXPECT_NEAR(s.mean(0)[0], 3.0, 1e-6);            // u = 1, 3, 5 m/s
-  EXPECT_NEAR(s.rms(0)[0], std::sqrt(8.0 / 3), 1e-6);
-  EXPECT_NEAR(s.mean(0)[1], 2.0, 1e-6);            // u = 1, 3
-  EXPECT_NEAR(s.rms(0)[1], 1.0, 1e-6);
-  EXPECT_EQ(s.count()[1], 2u);
-}
-
 // A whole run in-process on the test camera.
 class RunTest : public ::testing::Test {
  protected:
@@ -296,7 +235,11 @@ class RunTest : public ::testing::Test {
 
   RunConfig config(const std::string& extra) {
     return parse_run_config(
-        "volume: {x_mm: [0, 1], y_mm: [0, 1], z_mm: [0, 1], voxel_mm: 0.5}\n" + extra, "run.yaml");
+        (extra.find("dt_s:") == std::string::npos ? "dt_s: 0.0001\n" : "") +
+            std::string("volume: {x_mm: [0, 2], y_mm: [0, 2], z_mm: [0, 2], voxel_mm: 0.5}\n"
+                        "correlation: {passes: [{window: 4, overlap_percent: 50}]}\n") +
+            extra,
+        "run.yaml");
   }
 
   void wait_finished(daemon::Run& run) {
@@ -519,35 +462,6 @@ TEST_F(RunTest, ATooSlowOrNotANumberRateIsRefusedBeforeAnythingFires) {
   }
   state_.cancel_start();
   EXPECT_FALSE(fs::exists(data_ / "run-rate"));
-}
-
-TEST(Recorder, FoldersLeftRecordingAreMarkedInterruptedAndKeepTheirPairs) {
-  const fs::path data = testing_support::temp_dir("daemon") / "interrupted";
-  fs::remove_all(data);
-  RunConfig config = parse_run_config(
-      "dt_s: 0.001\nvolume: {x_mm: [0, 1], y_mm: [0, 1], z_mm: [0, 1], voxel_mm: 0.5}\n", "run.yaml");
-  {
-    // A run that never closed its folder (the daemon was killed), one that did, and one damaged.
-    Recorder crashed({data, "crashed", &config, "test://", "sim://", {}, "m", "t", nullptr});
-    crashed.record_pair(make_pair(0));
-    crashed.record_pair(make_pair(1));
-    Recorder closed({data, "closed", &config, "test://", "sim://", {}, "m", "t", nullptr});
-    closed.close("complete", 0, 0);
-  }
-  fs::create_directories(data / "run-damaged");
-  std::ofstream(data / "run-damaged" / "manifest.json") << "{\"state\": ";
-  std::vector<std::string> problems;
-  const auto marked = mark_interrupted_runs(data, &problems);
-  ASSERT_EQ(marked.size(), 1u);
-  EXPECT_EQ(marked[0], data / "run-crashed");
-  const msg::RunManifest m = read_manifest(data / "run-crashed");
-  EXPECT_EQ(m.state(), "interrupted");
-  EXPECT_FALSE(m.ended_utc().empty());
-  EXPECT_EQ(m.pairs_size(), 2);
-  EXPECT_EQ(read_manifest(data / "run-closed").state(), "complete");
-  ASSERT_EQ(problems.size(), 1u);
-  EXPECT_NE(problems[0].find("run-damaged"), std::string::npos) << problems[0];
-  EXPECT_TRUE(mark_interrupted_runs(data).empty()) << "marked once";
 }
 
 TEST_F(RunTest, ASubscriberThatNeverReadsDoesNotSlowAcquisition) {

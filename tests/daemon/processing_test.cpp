@@ -80,10 +80,10 @@ TEST(Processing, BadSettingsAndWrongImagesAreNamed) {
       optics::load_camera_file(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml");
   const ProcessFactory factory = plenoptic_processing(camera);
   const std::string bad =
-      "volume: {x_mm: [-1, 1], y_mm: [-1, 1], z_mm: [-1, 1], voxel_mm: 0.125}\n"
+      "dt_s: 0.001\nvolume: {x_mm: [-1, 1], y_mm: [-1, 1], z_mm: [-1, 1], voxel_mm: 0.125}\n"
       "reconstruction: {iteratons: 3}\n";
   try {
-    factory(parse_run_config(bad, "run.yaml"), RunCalibration{});
+    parse_run_config(bad, "run.yaml");
     FAIL() << "a misspelt reconstruction key was accepted";
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find("reconstruction.iteratons: unknown key"), std::string::npos)
@@ -92,13 +92,13 @@ TEST(Processing, BadSettingsAndWrongImagesAreNamed) {
   // A volume whose pairs in flight would not fit this machine's memory: refused with the estimate
   // before any table is built (2^29 voxels is what run.yaml itself allows).
   try {
-    factory(parse_run_config("volume: {x_mm: [-100, 100], y_mm: [-100, 100], z_mm: [-5, 5], voxel_mm: 0.125}\n"
+    factory(parse_run_config("dt_s: 0.001\nvolume: {x_mm: [-100, 100], y_mm: [-100, 100], z_mm: [-5, 5], voxel_mm: 0.125}\n"
                              "max_pairs_in_flight: 4\n",
                              "run.yaml"),
             RunCalibration{});
-    FAIL() << "a 1601 x 1601 x 97 voxel volume with 4 pairs in flight was accepted";
+    FAIL() << "a 1600 x 1600 x 96 voxel volume with 4 pairs in flight was accepted";
   } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("processing 4 pair(s) at once on a 1601 x 1601 x"), std::string::npos)
+    EXPECT_NE(std::string(e.what()).find("processing 4 pair(s) at once on a 1600 x 1600 x"), std::string::npos)
         << e.what();
     EXPECT_NE(std::string(e.what()).find("GB of memory"), std::string::npos) << e.what();
   }

@@ -30,7 +30,8 @@ using testing_support::ChildProcess;
 
 const std::string kRun =
     "rate_hz: 10\ndt_s: 0.001\n"
-    "volume: {x_mm: [-1, 1], y_mm: [-1, 1], z_mm: [0, 1], voxel_mm: 0.5}\n";
+    "volume: {x_mm: [-1, 1], y_mm: [-1, 1], z_mm: [0, 2], voxel_mm: 0.5}\n"
+    "correlation: {passes: [{window: 4, overlap_percent: 50}]}\n";
 
 class DaemonRuns : public ::testing::Test {
  protected:
@@ -204,7 +205,7 @@ TEST_F(DaemonRuns, IllegalAndInvalidRequestsAreRefusedAndTheDaemonServesOn) {
   ASSERT_EQ(client({"capture-calibration", "--frames", "2"}, out), 0) << out;
   EXPECT_NE(out.find("2 calibration images in"), std::string::npos) << out;
   // A repetition rate that would overflow the trigger's nanosecond clock is refused, naming it.
-  const std::string slow = "rate_hz: 1.0e-12\ndt_s: 0.001\nvolume: {x_mm: [-1, 1], y_mm: [-1, 1], z_mm: [0, 1], voxel_mm: 0.5}\n";
+  const std::string slow = "rate_hz: 1.0e-12\n" + kRun.substr(kRun.find("dt_s"));
   EXPECT_EQ(client({"run", "start", "--config", write_config(slow).string()}, out), 4);
   EXPECT_NE(out.find("INVALID"), std::string::npos) << out;
   EXPECT_NE(out.find("below one pair per 3600 s"), std::string::npos) << out;

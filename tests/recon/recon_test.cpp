@@ -556,7 +556,7 @@ TEST_F(Mart, RejectsNaNAndNegativePixelsAndBadSettings) {
       reconstruct(*op_, ImageF(850, 850, 1.f), blurred);
       ADD_FAILURE() << "sensor blur " << blur << " accepted";
     } catch (const InputError& e) {
-      EXPECT_NE(std::string(e.what()).find("sensor blur"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("sensor_blur_sigma_mm"), std::string::npos) << e.what();
     }
   }
 
