@@ -131,11 +131,11 @@ void write_statistics(const fs::path& path, const piv::RunningStatistics& statis
     mean.valid[i] = statistics.count()[i] > 0;
   }
   io::write_vector_field_h5(path, mean,
-                            {{"u_rms", statistics.rms(0)},
-                             {"v_rms", statistics.rms(1)},
-                             {"w_rms", statistics.rms(2)},
-                             {"count", count},
-                             {"valid_fraction", valid_fraction}},
+                            {{"u_rms", statistics.rms(0), "m/s"},
+                             {"v_rms", statistics.rms(1), "m/s"},
+                             {"w_rms", statistics.rms(2), "m/s"},
+                             {"count", count, "1"},
+                             {"valid_fraction", valid_fraction, "1"}},
                             {{"fields", std::to_string(fields)}});
 }
 

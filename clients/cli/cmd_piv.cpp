@@ -9,6 +9,7 @@
 #include <tbb/global_control.h>
 
 #include "clients/cli/commands.hpp"
+#include "clients/cli/field_output.hpp"
 #include "clients/cli/progress.hpp"
 #include "core/base/errors.hpp"
 #include "core/io/hdf5_files.hpp"
@@ -94,22 +95,12 @@ void run_correlate(const CorrelateOptions& o) {
     std::cerr << "final field: " << settings.final_smoothing << " binomial smoothing pass"
               << (settings.final_smoothing > 1 ? "es" : "") << " over the valid vectors\n";
 
-  const auto omega = piv::vorticity(result.field);
-  std::vector<float> flags(result.flags.begin(), result.flags.end());
-  io::write_vector_field_h5(o.output, result.field,
-                            {{"vorticity_x", omega[0]},
-                             {"vorticity_y", omega[1]},
-                             {"vorticity_z", omega[2]},
-                             {"flags", flags}});
+  const std::filesystem::path vti = o.vti.empty() ? std::filesystem::path() : std::filesystem::path(o.vti);
+  write_field_outputs(o.output, vti, result);
   std::size_t valid = 0;
   for (auto v : result.field.valid) valid += v;
   std::cout << o.output << ": " << result.field.grid.count() << " vectors, " << valid << " valid\n";
   if (!o.vti.empty()) {
-    std::vector<float> omega_vec(3 * omega[0].size());
-    for (std::size_t i = 0; i < omega[0].size(); ++i)
-      for (int c = 0; c < 3; ++c) omega_vec[3 * i + c] = omega[c][i];
-    io::write_vector_field_vti(o.vti, result.field,
-                               {{"vorticity_1_s_vec", omega_vec}, {"flags", flags}});
     std::cout << o.vti << ": written\n";
   }
 }

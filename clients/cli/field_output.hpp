@@ -1,4 +1,4 @@
-// The files `plenopiv process` writes for a vector field: HDF5 with vorticity and flags, and .vti.
+// The files `plenopiv process` and `correlate` write for a vector field: HDF5 with vorticity and flags, and .vti.
 #pragma once
 
 #include <filesystem>
@@ -10,8 +10,8 @@
 namespace plenopiv::client {
 
 // `h5`: /vectors (DESIGN.md layout) with vorticity_x/y/z (1/s), flags (the correlation's per-node
-// bits) and the `text` attributes; `vti`: the same field for ParaView with the vorticity vector.
-// Both written atomically.
+// bits, uint8 with their legend) and the `text` attributes; `vti` (none when empty): the same field
+// for ParaView with the vorticity vector. Both written atomically.
 void write_field_outputs(const std::filesystem::path& h5, const std::filesystem::path& vti,
                          const piv::CorrelationResult& result, const std::vector<io::TextAttribute>& text = {});
 

@@ -2,10 +2,12 @@
 #include "core/io/hdf5_files.hpp"
 
 #include <hdf5.h>
+#include <hdf5_hl.h>
 
 #include <algorithm>
 #include <array>
 #include <cstring>
+#include <optional>
 #include <stdexcept>
 
 #include "core/base/errors.hpp"
@@ -69,6 +71,45 @@ void write_text_attribute(hid_t parent, const std::filesystem::path& path, const
   if (!attr.ok()) throw std::runtime_error(path.string() + ": HDF5: cannot create attribute " + name);
   const std::string padded = value.empty() ? std::string(1, '\0') : value;
   check(H5Awrite(attr.get(), type.get(), padded.data()), path, "write attribute " + name);
+}
+
+// The axes' meaning, for the group that holds 3-D arrays.
+constexpr const char* kAxisOrder = "z, y, x: arrays are [nz][ny][nx] (C order, x fastest; MATLAB shows them x, y, z)";
+constexpr const char* kAxes =
+    "x right, y down on the sensor, z away from the camera along the optical axis; mm; z = 0 the nominal focal plane";
+
+void write_units(hid_t parent, const std::filesystem::path& path, const std::string& name, const std::string& units,
+                 const std::string& description = {}) {
+  Handle set(H5Dopen2(parent, name.c_str(), H5P_DEFAULT), H5Dclose);
+  if (!set.ok()) throw std::runtime_error(path.string() + ": HDF5: cannot open dataset " + name);
+  write_text_attribute(set.get(), path, "units", units);
+  if (!description.empty()) write_text_attribute(set.get(), path, "long_name", description);
+}
+
+// Writes the 1-D coordinates x, y, z (mm, voxel or node centres) into `parent` and makes them
+// dimension scales.
+void write_axes(hid_t parent, const std::filesystem::path& path, const Grid3& grid) {
+  const char* names[3] = {"x", "y", "z"};
+  for (int a = 0; a < 3; ++a) {
+    std::vector<double> axis(std::size_t(grid.shape[a]));
+    for (int i = 0; i < grid.shape[a]; ++i) axis[std::size_t(i)] = grid.coordinate_mm(a, i);
+    write_dataset(parent, path, names[a], {hsize_t(axis.size())}, axis.data());
+    Handle set(H5Dopen2(parent, names[a], H5P_DEFAULT), H5Dclose);
+    check(H5DSset_scale(set.get(), names[a]), path, std::string("make ") + names[a] + " a dimension scale");
+    write_text_attribute(set.get(), path, "units", "mm");
+  }
+  write_text_attribute(parent, path, "axis_order", kAxisOrder);
+  write_text_attribute(parent, path, "axes", kAxes);
+}
+
+// Attaches z, y, x (in `parent`) to dimensions 0, 1, 2 of the 3-D dataset `name`.
+void attach_axes(hid_t parent, const std::filesystem::path& path, const std::string& name) {
+  Handle set(H5Dopen2(parent, name.c_str(), H5P_DEFAULT), H5Dclose);
+  const char* names[3] = {"z", "y", "x"};
+  for (unsigned dim = 0; dim < 3; ++dim) {
+    Handle scale(H5Dopen2(parent, names[dim], H5P_DEFAULT), H5Dclose);
+    check(H5DSattach_scale(set.get(), scale.get(), dim), path, "attach " + std::string(names[dim]) + " to " + name);
+  }
 }
 
 std::vector<double> read_attribute(hid_t parent, const std::filesystem::path& path,
@@ -142,9 +183,15 @@ void write_volume_h5(const std::filesystem::path& path, const Volume& volume) {
     Handle file(H5Fcreate(tmp.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT), H5Fclose);
     if (!file.ok()) throw InputError(path.string() + ": cannot create HDF5 file");
     write_dataset(file.get(), path, "volume", dims_of(volume.grid), volume.data.data());
-    Handle set(H5Dopen2(file.get(), "volume", H5P_DEFAULT), H5Dclose);
-    write_attribute(set.get(), path, "origin_mm", volume.grid.origin_mm.data(), 3);
-    write_attribute(set.get(), path, "spacing_mm", volume.grid.spacing_mm.data(), 3);
+    {
+      Handle set(H5Dopen2(file.get(), "volume", H5P_DEFAULT), H5Dclose);
+      write_attribute(set.get(), path, "origin_mm", volume.grid.origin_mm.data(), 3);
+      write_attribute(set.get(), path, "spacing_mm", volume.grid.spacing_mm.data(), 3);
+    }
+    write_units(file.get(), path, "volume", "arbitrary (reconstructed intensity)",
+                "particle intensity per voxel (MART)");
+    write_axes(file.get(), path, volume.grid);
+    attach_axes(file.get(), path, "volume");
     flush(file.get(), path);
   });
 }
@@ -169,28 +216,29 @@ Volume read_volume_h5(const std::filesystem::path& path) {
 }
 
 void write_vector_field_h5(const std::filesystem::path& path, const VectorField& f,
-                           const std::vector<NamedField>& extra, const std::vector<TextAttribute>& text) {
+                           const std::vector<NamedField>& extra, const std::vector<TextAttribute>& text,
+                           const std::optional<FlagField>& flags) {
   const std::string what = path.string() + ": vector field";
   check_grid(f.grid, f.dx_mm.size(), what);
   for (const auto* v : {&f.dy_mm, &f.dz_mm, &f.peak_ratio}) check_grid(f.grid, v->size(), what);
   check_grid(f.grid, f.valid.size(), what);
   for (const NamedField& e : extra) check_grid(f.grid, e.values.size(), what + " field " + e.name);
+  if (flags) check_grid(f.grid, flags->bits.size(), what + " field " + flags->name);
   if (!(f.dt_s > 0)) throw InputError(what + ": dt_s must be > 0 to give velocities");
 
   write_atomically(path, [&](const std::filesystem::path& tmp) {
     Handle file(H5Fcreate(tmp.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT), H5Fclose);
     if (!file.ok()) throw InputError(path.string() + ": cannot create HDF5 file");
     Handle group(H5Gcreate2(file.get(), "vectors", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT), H5Gclose);
-    const char* axis_names[3] = {"x", "y", "z"};
-    for (int a = 0; a < 3; ++a) {
-      std::vector<double> axis(f.grid.shape[a]);
-      for (int i = 0; i < f.grid.shape[a]; ++i) axis[i] = f.grid.coordinate_mm(a, i);
-      write_dataset(group.get(), path, axis_names[a], {hsize_t(axis.size())}, axis.data());
-    }
+    write_axes(group.get(), path, f.grid);
     const auto dims = dims_of(f.grid);
+    // Each 3-D array: its name, units and meaning.
+    std::vector<std::array<std::string, 3>> fields;
     write_dataset(group.get(), path, "dx", dims, f.dx_mm.data());
     write_dataset(group.get(), path, "dy", dims, f.dy_mm.data());
     write_dataset(group.get(), path, "dz", dims, f.dz_mm.data());
+    for (const char* c : {"x", "y", "z"})
+      fields.push_back({std::string("d") + c, "mm", std::string("displacement along ") + c + " between the pulses"});
     // mm / s -> m/s
     const double scale = 1e-3 / f.dt_s;
     std::vector<float> velocity(f.grid.count());
@@ -200,9 +248,27 @@ void write_vector_field_h5(const std::filesystem::path& path, const VectorField&
       for (std::size_t i = 0; i < velocity.size(); ++i) velocity[i] = float((*disp)[i] * scale);
       write_dataset(group.get(), path, name, dims, velocity.data());
     }
+    fields.push_back({"u", "m/s", "velocity along x"});
+    fields.push_back({"v", "m/s", "velocity along y"});
+    fields.push_back({"w", "m/s", "velocity along z"});
     write_dataset(group.get(), path, "valid", dims, f.valid.data());
+    fields.push_back({"valid", "1", "1: a vector (measured, or replaced by validation); 0: none"});
     write_dataset(group.get(), path, "peak_ratio", dims, f.peak_ratio.data());
-    for (const NamedField& e : extra) write_dataset(group.get(), path, e.name, dims, e.values.data());
+    fields.push_back({"peak_ratio", "1", "primary over secondary correlation peak"});
+    for (const NamedField& e : extra) {
+      write_dataset(group.get(), path, e.name, dims, e.values.data());
+      fields.push_back({e.name, e.units.empty() ? "1" : e.units, ""});
+    }
+    if (flags) {
+      write_dataset(group.get(), path, flags->name, dims, flags->bits.data());
+      fields.push_back({flags->name, "1", "bit flags per vector"});
+      Handle set(H5Dopen2(group.get(), flags->name.c_str(), H5P_DEFAULT), H5Dclose);
+      write_text_attribute(set.get(), path, "legend", flags->legend);
+    }
+    for (const auto& [name, units, meaning] : fields) {
+      write_units(group.get(), path, name, units, meaning);
+      attach_axes(group.get(), path, name);
+    }
     write_attribute(group.get(), path, "dt_s", &f.dt_s, 1);
     write_attribute(group.get(), path, "origin_mm", f.grid.origin_mm.data(), 3);
     write_attribute(group.get(), path, "spacing_mm", f.grid.spacing_mm.data(), 3);

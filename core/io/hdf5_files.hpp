@@ -1,6 +1,7 @@
 // HDF5 files for volumes and vector fields, laid out as DESIGN.md says (h5py, MATLAB, ParaView).
 #pragma once
 
+#include <cstdint>
 #include <filesystem>
 #include <optional>
 #include <string>
@@ -15,10 +16,23 @@ namespace plenopiv::io {
 struct NamedField {
   std::string name;
   std::vector<float> values;  // [nz][ny][nx]
+  std::string units;          // written as the dataset's `units` attribute ("1/s", "m/s", "1")
 };
 
-// /volume float32 [nz][ny][nx] with attributes origin_mm (x, y, z of voxel [0][0][0]) and
-// spacing_mm (dx, dy, dz). Written atomically.
+// Per-node bit flags stored as uint8 [nz][ny][nx] beside a field, with the meaning of each bit.
+struct FlagField {
+  std::string name;
+  std::vector<std::uint8_t> bits;
+  std::string legend;  // e.g. "1: parabolic fit; 2: ...", the dataset's `legend` attribute
+};
+
+// Every array these files hold carries a `units` attribute, and the 3-D ones, stored [nz][ny][nx]
+// (C order: x varies fastest), have the 1-D voxel or node centre coordinates x, y, z (mm) attached
+// as HDF5 dimension scales, so that xarray, netCDF readers and MATLAB see their coordinates; the
+// group (or root) says so in `axis_order` and `axes`.
+//
+// /volume float32 [nz][ny][nx] (units: arbitrary intensity) with attributes origin_mm (x, y, z of
+// voxel [0][0][0]) and spacing_mm (dx, dy, dz); /x, /y, /z its dimension scales. Written atomically.
 void write_volume_h5(const std::filesystem::path& path, const Volume& volume);
 // Reads it back; a file that is not HDF5 or lacks /volume or its attributes is an InputError.
 Volume read_volume_h5(const std::filesystem::path& path);
@@ -26,11 +40,13 @@ Volume read_volume_h5(const std::filesystem::path& path);
 // A text attribute (name, value) of a file's group, e.g. where its inputs came from.
 using TextAttribute = std::pair<std::string, std::string>;
 
-// Group /vectors: 1-D axes x, y, z (mm); on the [nz][ny][nx] grid dx, dy, dz (mm), u, v, w (m/s,
-// from dt_s, which must be > 0), valid (uint8), peak_ratio, and any `extra` fields; attribute
-// dt_s, and the `text` attributes as strings. Written atomically.
+// Group /vectors: 1-D axes x, y, z (mm, the dimension scales); on the [nz][ny][nx] grid dx, dy, dz
+// (mm), u, v, w (m/s, from dt_s, which must be > 0), valid (uint8, 1: a measured or replaced vector),
+// peak_ratio, any `extra` fields and `flags`; attribute dt_s, and the `text` attributes as strings.
+// Written atomically.
 void write_vector_field_h5(const std::filesystem::path& path, const VectorField& field,
-                           const std::vector<NamedField>& extra = {}, const std::vector<TextAttribute>& text = {});
+                           const std::vector<NamedField>& extra = {}, const std::vector<TextAttribute>& text = {},
+                           const std::optional<FlagField>& flags = std::nullopt);
 VectorField read_vector_field_h5(const std::filesystem::path& path);
 // A text attribute of /vectors, or nullopt when the file has none of that name (or is no vector
 // field file: a file that cannot be opened reads as having none).

@@ -19,6 +19,13 @@ enum VectorFlag : std::uint8_t {
   flag_unresolved = 64,   // outlier with no valid replacement: invalid
 };
 
+// The meaning of each VectorFlag bit, for files that store the flags ("1: ...; 2: ...").
+inline constexpr const char* kVectorFlagLegend =
+    "bits: 1 parabolic peak fit on an axis (3-point Gaussian impossible); 2 peak on the window border "
+    "(centroid); 4 no particle signal (invalid); 8 outlier replaced by the second correlation peak; 16 by the "
+    "third peak; 32 by the mean of valid neighbours; 64 outlier without a replacement (invalid); 0 a first-peak "
+    "Gaussian fit that passed validation";
+
 // One correlation peak: sub-voxel shift (voxels, x, y, z), the correlation value at its integer
 // maximum, and how it was fitted (flag_parabolic / flag_centroid bits).
 struct Peak {

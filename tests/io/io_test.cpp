@@ -123,7 +123,7 @@ TEST(Hdf5, VolumeRoundTrip) {
 TEST(Hdf5, VectorFieldRoundTrip) {
   const VectorField f = some_field();
   const auto path = temp_dir() / "field.h5";
-  write_vector_field_h5(path, f, {{"vorticity_z", std::vector<float>(f.grid.count(), 2.f)}});
+  write_vector_field_h5(path, f, {{"vorticity_z", std::vector<float>(f.grid.count(), 2.f), "1/s"}});
   const VectorField back = read_vector_field_h5(path);
   EXPECT_EQ(back.grid, f.grid);
   EXPECT_EQ(back.dx_mm, f.dx_mm);
@@ -138,7 +138,11 @@ TEST(Hdf5, PythonH5pyReadsTheLayoutOfTheDesign) {
   const auto vpath = temp_dir() / "py_volume.h5";
   const auto fpath = temp_dir() / "py_field.h5";
   write_volume_h5(vpath, ramp_volume());
-  write_vector_field_h5(fpath, some_field());
+  const VectorField field = some_field();
+  std::vector<std::uint8_t> bits(field.grid.count(), 0);
+  bits[1] = 5;
+  write_vector_field_h5(fpath, field, {{"vorticity_z", std::vector<float>(field.grid.count(), 2.f), "1/s"}}, {},
+                        FlagField{"flags", bits, "1: one; 4: four"});
   const std::string script =
       "import h5py, numpy as np, sys\n"
       "v = h5py.File(sys.argv[1], 'r')['volume']\n"
@@ -152,6 +156,20 @@ TEST(Hdf5, PythonH5pyReadsTheLayoutOfTheDesign) {
       "assert np.allclose(g['u'][:], g['dx'][:] * 1e-3 / 1e-3)\n"
       "assert np.allclose(g['w'][:], 0.03)\n"
       "assert abs(g.attrs['dt_s'] - 1e-3) < 1e-15\n"
+      "f = h5py.File(sys.argv[2], 'r')\n"
+      "units = {n: g[n].attrs['units'] for n in g}\n"
+      "units = {n: u.decode() if isinstance(u, bytes) else u for n, u in units.items()}\n"
+      "assert units['u'] == 'm/s' and units['dx'] == 'mm' and units['x'] == 'mm', units\n"
+      "assert units['vorticity_z'] == '1/s' and units['flags'] == '1', units\n"
+      "for name in ('u', 'dx', 'valid', 'vorticity_z', 'flags'):\n"
+      "    ds = g[name]\n"
+      "    assert [d[0].name for d in ds.dims] == ['/vectors/z', '/vectors/y', '/vectors/x'], name\n"
+      "assert g['flags'].dtype == np.uint8 and g['flags'][0, 0, 1] == 5\n"
+      "legend = g['flags'].attrs['legend']\n"
+      "assert (legend.decode() if isinstance(legend, bytes) else legend) == '1: one; 4: four'\n"
+      "vf = h5py.File(sys.argv[1], 'r')\n"
+      "assert [d[0].name for d in vf['volume'].dims] == ['/z', '/y', '/x']\n"
+      "assert np.allclose(vf['x'][:], -1.0 + 0.125 * np.arange(5))\n"
       "print('h5py ok')\n";
   const auto script_path = temp_dir() / "check.py";
   std::ofstream(script_path) << script;
