@@ -13,6 +13,7 @@
 #include "core/optics/camera_file.hpp"
 #include "daemon/processing.hpp"
 #include "drivers/camera/camera_registry.hpp"
+#include "drivers/replay/replay_camera.hpp"
 #include "drivers/sim/sim_camera.hpp"
 
 namespace plenopiv::daemon {
@@ -80,6 +81,19 @@ Daemon::Daemon(DaemonConfig config, const DaemonExtensions& extensions)
   } else {
     drivers::CameraRegistry::instance().add_unavailable(
         "sim", "the simulated camera is not enabled on this daemon (plenopivd.yaml simulation: true, or --simulation)");
+  }
+  if (config_.simulation && !config_.replay_dir.empty()) {
+    // replay:// reads only under the folder the operator named at start, never one a request names.
+    drivers::register_replay_camera(drivers::CameraRegistry::instance(),
+                                    drivers::ReplaySource{config_.replay_dir, config_.camera_file});
+  } else {
+    drivers::CameraRegistry::instance().add_unavailable(
+        "replay",
+        config_.simulation
+            ? "the replay camera is not enabled on this daemon: it needs replay_dir "
+              "(plenopivd.yaml, or --replay-dir), the only folder it may read"
+            : "the replay camera is not enabled on this daemon (plenopivd.yaml simulation: true "
+              "and replay_dir, or --simulation --replay-dir)");
   }
   std::tie(processing_factory_, processing_) = choose_processing(config_, extensions);
 
@@ -196,7 +210,9 @@ DeferredReply Daemon::list_devices() {
     discovery_ = std::async(std::launch::async, [] { return drivers::discover_devices(); }).share();
   }
   const bool simulation = config_.simulation;
-  return std::async(std::launch::async, [found = discovery_, simulation] {
+  const std::filesystem::path replay_dir =
+      simulation ? config_.replay_dir : std::filesystem::path();
+  return std::async(std::launch::async, [found = discovery_, simulation, replay_dir] {
     msg::Reply reply;
     reply.mutable_devices();  // an empty list is still an answer
     if (simulation) {
@@ -205,6 +221,13 @@ DeferredReply Daemon::list_devices() {
       sim->set_kind("camera");
       sim->set_model("simulated plenoptic camera");
       sim->set_detail("renders the daemon's camera_file (simulation: true)");
+    }
+    if (!replay_dir.empty()) {
+      msg::Device* replay = reply.mutable_devices()->add_devices();
+      replay->set_uri("replay://");
+      replay->set_kind("camera");
+      replay->set_model("replay camera");
+      replay->set_detail("plays recorded frame pairs from folders under " + replay_dir.string());
     }
     for (const auto& d : found.get().devices) {
       msg::Device* out = reply.mutable_devices()->add_devices();
@@ -271,10 +294,12 @@ void Daemon::notify_systemd(const msg::Status& s, std::string& last_state, bool 
 void Daemon::serve(const std::atomic<bool>& stop) {
   std::uint64_t watchdog_us = 0;
   const bool watchdog = sd_watchdog_enabled(0, &watchdog_us) > 0;
-  spdlog::info("plenopivd {} ready: control {}{}, publishing {}{}, data {}{}", PLENOPIV_VERSION, server_->endpoint(),
-               config_.curve ? " (CURVE)" : "", publisher_->endpoint(),
-               config_.curve && config_.curve->publish ? " (CURVE)" : "", config_.data_dir.string(),
-               config_.simulation ? ", simulation enabled" : "");
+  spdlog::info(
+      "plenopivd {} ready: control {}{}, publishing {}{}, data {}{}{}", PLENOPIV_VERSION,
+      server_->endpoint(), config_.curve ? " (CURVE)" : "", publisher_->endpoint(),
+      config_.curve && config_.curve->publish ? " (CURVE)" : "", config_.data_dir.string(),
+      config_.simulation ? ", simulation enabled" : "",
+      config_.replay_dir.empty() ? "" : ", replay:// reads under " + config_.replay_dir.string());
   sd_notify(0, "READY=1\nSTATUS=Idle");
   auto last_status = Clock::now();
   std::string last_state;

@@ -70,9 +70,10 @@ drivers::Schedule run_schedule(const RigTiming& timing, const drivers::TriggerIn
 
 DaemonConfig load_daemon_config(const std::filesystem::path& path) {
   const YamlMap map(load_yaml_file(path), path.string());
-  map.reject_unknown({"control_endpoint", "control_socket_group", "curve", "publish_endpoint", "simulation",
-                      "data_dir", "camera_file", "calibration_file", "camera_uri", "trigger_uri", "log_level",
-                      "publish_high_water_mark", "timing"});
+  map.reject_unknown({"control_endpoint", "control_socket_group", "curve", "publish_endpoint",
+                      "simulation", "replay_dir", "data_dir", "camera_file", "calibration_file",
+                      "camera_uri", "trigger_uri", "log_level", "publish_high_water_mark",
+                      "timing"});
   DaemonConfig config;
   const std::filesystem::path base = path.parent_path();
   auto resolve = [&](const std::string& p) {
@@ -91,6 +92,7 @@ DaemonConfig load_daemon_config(const std::filesystem::path& path) {
   }
   config.publish_endpoint = map.string_or("publish_endpoint", config.publish_endpoint);
   config.simulation = map.boolean_or("simulation", config.simulation);
+  if (map.has("replay_dir")) config.replay_dir = resolve(map.string("replay_dir"));
   if (map.has("data_dir")) config.data_dir = resolve(map.string("data_dir"));
   if (map.has("camera_file")) config.camera_file = resolve(map.string("camera_file"));
   if (map.has("calibration_file")) config.calibration_file = resolve(map.string("calibration_file"));
@@ -122,6 +124,18 @@ void validate(const DaemonConfig& config, const std::string& source) {
     throw InputError(source + ": camera_uri: '" + config.camera_uri +
                      "' is the simulated camera, which this daemon does not enable (simulation: true, or "
                      "--simulation)");
+  }
+  if (!config.simulation && config.camera_uri.rfind("replay://", 0) == 0) {
+    throw InputError(
+        source + ": camera_uri: '" + config.camera_uri +
+        "' is the replay camera, which this daemon does not enable (simulation: true, or "
+        "--simulation, and replay_dir)");
+  }
+  if (!config.simulation && !config.replay_dir.empty()) {
+    throw InputError(
+        source + ": replay_dir: '" + config.replay_dir.string() +
+        "' is for the replay camera, a test and bench tool that exists only with simulation: true "
+        "(or --simulation)");
   }
   if (!config.calibration_file.empty() && config.camera_file.empty()) {
     throw InputError(source + ": calibration_file: '" + config.calibration_file.string() +

@@ -40,6 +40,9 @@ struct DaemonConfig {
   // Whether the simulated camera (sim://) exists in this daemon. Off by default: a rig's daemon
   // opens real devices only; the demo, tests and development turn it on.
   bool simulation = false;
+  // The only folder the replay camera (replay://<folder>, drivers/replay/replay_camera.hpp) may
+  // read: replay URIs name folders under it. Needs simulation; empty (default): no replay camera.
+  std::filesystem::path replay_dir;
   std::filesystem::path data_dir = "/var/lib/plenopiv";
   std::filesystem::path camera_file;  // empty: the camera driver reports its own
   // The rig's calibration file (HDF5 from `plenopiv calibrate`, made for camera_file); empty: the

@@ -26,7 +26,8 @@ int daemon_main(int argc, char** argv, const DaemonExtensions& extensions) {
   CLI::App app{"plenopivd: single-camera plenoptic 3D/3C PIV daemon"};
   app.set_version_flag("--version", std::string(PLENOPIV_VERSION));
   std::filesystem::path config_path;
-  std::string control, publish, data_dir, log_level, camera_uri, camera_file, calibration_file;
+  std::string control, publish, data_dir, log_level, camera_uri, camera_file, calibration_file,
+      replay_dir;
   bool simulation = false;
   app.add_option("-c,--config", config_path, "daemon config (plenopivd.yaml)")->check(CLI::ExistingFile);
   app.add_option("--control", control,
@@ -41,6 +42,9 @@ int daemon_main(int argc, char** argv, const DaemonExtensions& extensions) {
                  "the rig's calibration file (HDF5, `plenopiv calibrate`) the processing uses (overrides the "
                  "config)");
   app.add_flag("--simulation", simulation, "enable the simulated camera sim:// (as simulation: true)");
+  app.add_option("--replay-dir", replay_dir,
+                 "the only folder replay:// may read (needs --simulation; overrides the config)")
+      ->check(CLI::ExistingDirectory);
   app.add_option("--log-level", log_level, "trace, debug, info, warn, error");
   CLI11_PARSE(app, argc, argv);
 
@@ -54,6 +58,7 @@ int daemon_main(int argc, char** argv, const DaemonExtensions& extensions) {
     if (!camera_file.empty()) config.camera_file = camera_file;
     if (!calibration_file.empty()) config.calibration_file = calibration_file;
     if (simulation) config.simulation = true;
+    if (!replay_dir.empty()) config.replay_dir = replay_dir;
     if (!log_level.empty()) config.log_level = log_level;
     validate(config, config_path.empty() ? "command line" : config_path.string());
     setup_logging("plenopivd", config.log_level);

@@ -8,10 +8,14 @@ namespace plenopiv::drivers {
 CameraRegistry& CameraRegistry::instance() {
   static CameraRegistry* registry = [] {
     auto* r = new CameraRegistry;
-    // Until the simulated camera library registers itself, say where it comes from.
+    // Until the simulated and replay camera libraries register themselves, say where they come
+    // from.
     r->add_unavailable("sim",
                        "the simulated camera is not registered in this program (it registers "
                        "under sim:// from the simulated-camera driver library at start-up)");
+    r->add_unavailable("replay",
+                       "the replay camera is not registered in this program (it registers under "
+                       "replay:// from the replay-camera driver library at start-up)");
     register_builtin_camera_backends(*r);
     return r;
   }();

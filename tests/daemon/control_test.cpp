@@ -274,6 +274,10 @@ TEST_F(Daemon, DeviceUrisFromRequestsCannotNameFiles) {
   };
   // This daemon was started without simulation.
   EXPECT_NE(refusal("sim://?camera=/etc/passwd").find("not enabled on this daemon"), std::string::npos);
+  const std::string replay = refusal("replay:///etc?rate_hz=10");
+  EXPECT_NE(replay.find("replay:///etc?rate_hz=10"), std::string::npos) << replay;
+  EXPECT_NE(replay.find("the replay camera is not enabled on this daemon"), std::string::npos)
+      << replay;
   EXPECT_NE(refusal("aravis://127.0.0.1?profile=/etc/passwd").find("not a path"), std::string::npos);
   EXPECT_TRUE(daemon_->running());
 }

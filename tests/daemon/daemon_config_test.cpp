@@ -81,6 +81,22 @@ TEST(DaemonConfig, TheSimulatedCameraExistsOnlyWhereTheConfigEnablesIt) {
   EXPECT_EQ(error_of("camera_uri: sim://?seed=1\nsimulation: true\n"), "");
 }
 
+// replay:// reads files: like sim:// it needs simulation, and it reads only under replay_dir.
+TEST(DaemonConfig, TheReplayCameraExistsOnlyWithSimulationAndReadsUnderReplayDir) {
+  EXPECT_TRUE(DaemonConfig{}.replay_dir.empty());  // built-in default: no replay camera
+  const std::string err = error_of("camera_uri: replay://recorded?rate_hz=10\n");
+  EXPECT_NE(err.find("camera_uri: 'replay://recorded?rate_hz=10' is the replay camera"),
+            std::string::npos)
+      << err;
+  EXPECT_NE(err.find("simulation: true"), std::string::npos) << err;
+  const std::string dir_err = error_of("replay_dir: recordings\n");
+  EXPECT_NE(dir_err.find("replay_dir: '"), std::string::npos) << dir_err;
+  EXPECT_NE(dir_err.find("simulation: true"), std::string::npos) << dir_err;
+  const auto path = write_temp(
+      "replay.yaml", "simulation: true\nreplay_dir: recordings\ncamera_uri: replay://a\n");
+  EXPECT_EQ(load_daemon_config(path).replay_dir, path.parent_path() / "recordings");
+}
+
 TEST(DaemonConfig, BadKeysAreNamed) {
   EXPECT_NE(error_of("contrl_endpoint: tcp://127.0.0.1:1\n").find("contrl_endpoint: unknown key"),
             std::string::npos);
