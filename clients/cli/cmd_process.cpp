@@ -24,7 +24,7 @@
 #include "core/io/atomic_file.hpp"
 #include "core/io/checksum.hpp"
 #include "core/io/hdf5_files.hpp"
-#include "core/io/tiff.hpp"
+#include "core/io/raw_frame.hpp"
 #include "core/io/vtk_files.hpp"
 #include "core/optics/camera_file.hpp"
 #include "core/piv/derived.hpp"
@@ -38,24 +38,22 @@ namespace {
 struct ProcessOptions {
   std::string run;
   std::string camera, frame_a, frame_b, config, calibration, calibration_image, output, vti, preview;
-  std::vector<std::string> white_images;
+  std::vector<std::string> white_images, dark_images;
   bool nominal = false;
   int threads = 0;
 };
 
-ImageF read_frame(const std::string& path) {
-  const ImageU16 raw = io::read_tiff_u16(path);
-  ImageF image(raw.width, raw.height);
-  for (std::size_t i = 0; i < raw.size(); ++i) image.pixels[i] = raw.pixels[i];
-  return image;
-}
+ImageF read_frame(const std::string& path) { return io::read_raw_frame(path); }
 
-// The lens centres and white correction from exactly one of the three sources.
+// The lens centres and white correction from exactly one of the three sources: a calibration
+// file, calibration frames (white, optionally stopped-down and dark; as `plenopiv calibrate`), or
+// the nominal lattice.
 calib::LoadedCalibration calibration_for(const ProcessOptions& o, const optics::CameraModel& camera) {
-  const int given = int(!o.calibration.empty()) + int(!o.calibration_image.empty()) + int(o.nominal);
+  const bool from_frames = !o.calibration_image.empty() || !o.white_images.empty();
+  const int given = int(!o.calibration.empty()) + int(from_frames) + int(o.nominal);
   if (given != 1)
-    throw InputError("give exactly one of --calibration FILE.h5, --calibration-image TIFF (with --white), "
-                     "or --nominal");
+    throw InputError("give exactly one of --calibration FILE.h5, --white FRAMES (optionally with "
+                     "--calibration-image and --dark), or --nominal");
   if (!o.calibration.empty()) return calib::load_calibration(o.calibration, camera);
   if (o.nominal) {
     auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera));
@@ -63,18 +61,18 @@ calib::LoadedCalibration calibration_for(const ProcessOptions& o, const optics::
     return {std::move(lenses), std::move(white)};
   }
   if (o.white_images.empty()) throw InputError("--calibration-image: needs at least one --white image");
-  calib::Calibration cal = calib::calibrate(camera, read_frame(o.calibration_image));
-  ImageF white;
-  for (const std::string& path : o.white_images) {
-    const ImageF w = read_frame(path);
-    if (w.width != camera.sensor().width_px || w.height != camera.sensor().height_px)
-      throw InputError(path + ": white image is " + std::to_string(w.width) + " x " + std::to_string(w.height) +
-                       ", the camera's sensor is " + std::to_string(camera.sensor().width_px) + " x " +
-                       std::to_string(camera.sensor().height_px));
-    if (white.empty()) white = ImageF(w.width, w.height, 0.0f);
-    for (std::size_t k = 0; k < w.size(); ++k) white.pixels[k] += w.pixels[k] / float(o.white_images.size());
+  calib::CalibrationFrames frames;
+  frames.white = io::read_mean_frame(o.white_images, "white");
+  frames.white_frames = int(o.white_images.size());
+  if (!o.calibration_image.empty()) {
+    frames.calibration = read_frame(o.calibration_image);
+    frames.calibration_frames = 1;
   }
-  cal.white_correction = calib::make_white_correction(cal, white, cal.image_stats.background);
+  if (!o.dark_images.empty()) {
+    frames.dark = io::read_mean_frame(o.dark_images, "dark");
+    frames.dark_frames = int(o.dark_images.size());
+  }
+  const calib::Calibration cal = calib::calibrate_camera(camera, frames);
   return {cal.microlens_array(), cal.white_correction};
 }
 
@@ -243,7 +241,7 @@ void run_reprocess(const ProcessOptions& o) {
     if (!other->empty())
       throw InputError("--run takes the camera, frames, settings and calibration from the run folder; "
                        "give only --run, -o and --threads");
-  if (!o.white_images.empty() || o.nominal)
+  if (!o.white_images.empty() || !o.dark_images.empty() || o.nominal)
     throw InputError("--run takes the calibration from the run folder (manifest.json: calibration)");
   const auto limit = thread_limit(o.threads);
   const std::filesystem::path run = o.run;
@@ -324,14 +322,17 @@ void add_process_commands(CLI::App& app) {
                   "a run folder recorded by plenopivd: reprocess every pair with the run's own settings, "
                   "camera and calibration into <run>/reprocessed/ (or -o DIR)");
   cmd->add_option("camera", o->camera, "camera file (YAML)");
-  cmd->add_option("frame_a", o->frame_a, "raw plenoptic frame A (16-bit TIFF, sensor-sized)");
+  cmd->add_option("frame_a", o->frame_a, "raw plenoptic frame A (PNG or TIFF, sensor-sized)");
   cmd->add_option("frame_b", o->frame_b, "raw plenoptic frame B");
   cmd->add_option("--config", o->config,
                   "run config YAML: dt_s, volume {x_mm, y_mm, z_mm, voxel_mm}, reconstruction, correlation "
                   "(systemd/config/process.yaml)");
   cmd->add_option("--calibration", o->calibration, "calibration file (HDF5, from `plenopiv calibrate`)");
-  cmd->add_option("--calibration-image", o->calibration_image, "calibration TIFF (aperture stopped down)");
-  cmd->add_option("--white", o->white_images, "white TIFF(s) for --calibration-image (averaged)");
+  cmd->add_option("--calibration-image", o->calibration_image,
+                  "calibration frame (aperture stopped down), with --white; without it the centres come from the "
+                  "white");
+  cmd->add_option("--white", o->white_images, "white frame(s) (averaged): calibrate from them as `plenopiv calibrate`");
+  cmd->add_option("--dark", o->dark_images, "dark frame(s) for --white (averaged, subtracted)");
   cmd->add_flag("--nominal", o->nominal, "no calibration: the camera's nominal lattice and geometric white image "
                                           "(simulated frames)");
   cmd->add_option("-o,--output", o->output,
