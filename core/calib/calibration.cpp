@@ -356,47 +356,53 @@ Measured measure_micro_images(const optics::CameraModel& camera, const ImageF& i
   m.whole.assign(n, 0);
   m.present.assign(n, 0);
   m.flawed.assign(n, 0);
-  std::vector<double> amps, sigmas, cell_means;
-  // The light in each cell: its mean without its brightest 2 % (a stray hot pixel is not a lens).
-  std::vector<double> cell_mean(n, 0.0);
-  std::vector<int> cell_pixels(n, 0);
+  std::vector<double> amps, sigmas;
   for (std::size_t k = 0; k < n; ++k) {
-    std::vector<float> values;
-    for_each_cell_pixel(lat, m.sites[k][0], m.sites[k][1], w, h, [&](int x, int y) { values.push_back(clean.at(x, y)); });
-    if (!values.empty()) {
-      const std::size_t keep_n = values.size() - std::max<std::size_t>(1, values.size() / 50);
-      std::nth_element(values.begin(), values.begin() + std::ptrdiff_t(keep_n), values.end());
-      double sum = 0;
-      for (std::size_t q = 0; q < keep_n; ++q) sum += values[q];
-      cell_mean[k] = keep_n > 0 ? sum / double(keep_n) : 0.0;
-      cell_pixels[k] = int(keep_n);
-    }
-    const auto s = lat.site(m.sites[k][0], m.sites[k][1]);
-    m.whole[k] = inside(s, radius + 0.5);
+    m.whole[k] = inside(lat.site(m.sites[k][0], m.sites[k][1]), radius + 0.5);
     if (m.whole[k] && fits[k].converged) {
       amps.push_back(fits[k].amplitude);
       sigmas.push_back(fits[k].sigma);
-      cell_means.push_back(cell_mean[k]);
     }
   }
-  const double amp_med = median(amps), sigma_med = median(sigmas), cell_med = median(cell_means);
+  const double amp_med = median(amps), sigma_med = median(sigmas);
   std::vector<double> backgrounds;
   for (std::size_t k = 0; k < n; ++k) {
     const LensFit& f = fits[k];
-    if (m.whole[k]) {
-      m.present[k] = f.converged && f.amplitude > 0.15 * amp_med && f.amplitude > 5 * f.amplitude_sigma;
-      m.flawed[k] = m.present[k] && (f.outliers > 0.1 || f.sigma > 5 * sigma_med ||
-                                     std::hypot(f.centre[0] - lat.site(m.sites[k][0], m.sites[k][1])[0],
-                                                f.centre[1] - lat.site(m.sites[k][0], m.sites[k][1])[1]) > 0.3 * lat.px);
-      if (m.present[k] && !m.flawed[k]) backgrounds.push_back(f.background);
-    } else {
-      // Cut by the sensor edge: a quarter of its cell at least on the sensor, and clearly lit.
-      const double excess = cell_mean[k] - cand.background;
-      m.present[k] = f.visible >= 0.25 && excess > 0.2 * (cell_med - cand.background) &&
-                     excess > 5 * noise / std::sqrt(std::max(1, cell_pixels[k]));
-    }
+    if (!m.whole[k]) continue;
+    const auto site = lat.site(m.sites[k][0], m.sites[k][1]);
+    m.present[k] = f.converged && f.amplitude > 0.15 * amp_med && f.amplitude > 5 * f.amplitude_sigma;
+    m.flawed[k] = m.present[k] && (f.outliers > 0.1 || f.sigma > 5 * sigma_med ||
+                                   std::hypot(f.centre[0] - site[0], f.centre[1] - site[1]) > 0.3 * lat.px);
+    if (m.present[k] && !m.flawed[k]) backgrounds.push_back(f.background);
   }
-  m.stats.background = backgrounds.empty() ? cand.background : median(backgrounds);
+  const double b_med = backgrounds.empty() ? cand.background : median(backgrounds);
+  // A lens cut by the sensor edge is there when its visible pixels would hold a tenth of a whole
+  // micro-image's light, hold at least half of what the mean micro-image puts there (their mean
+  // without the brightest 2 %: a hot pixel is no lens), and that light stands out of the noise.
+  double whole_light = 0;
+  for (double y = -radius; y <= radius; y += 1)
+    for (double x = -radius; x <= radius; x += 1) whole_light += amp_med * shape.value(x, y);
+  for (std::size_t k = 0; k < n; ++k) {
+    if (m.whole[k]) continue;
+    const auto site = lat.site(m.sites[k][0], m.sites[k][1]);
+    std::vector<float> values;
+    double expected = 0;
+    for_each_cell_pixel(lat, m.sites[k][0], m.sites[k][1], w, h, [&](int x, int y) {
+      values.push_back(clean.at(x, y));
+      expected += amp_med * shape.value(x - site[0], y - site[1]);
+    });
+    if (values.size() < 4) continue;
+    expected /= double(values.size());
+    const std::size_t keep_n = values.size() - std::max<std::size_t>(1, values.size() / 50);
+    std::nth_element(values.begin(), values.begin() + std::ptrdiff_t(keep_n), values.end());
+    double observed = 0;
+    for (std::size_t q = 0; q < keep_n; ++q) observed += values[q] - b_med;
+    observed /= double(keep_n);
+    const double floor = std::max(noise, 1e-3 * amp_med);
+    m.present[k] = expected * double(values.size()) > 0.1 * whole_light && observed > 0.5 * expected &&
+                   expected > 5 * floor / std::sqrt(double(keep_n));
+  }
+  m.stats.background = b_med;
 
   // Hex: the array's first row must be an even row of the lattice (optics::Lattice shifts even
   // rows left, odd rows right). If it is odd, count rows from the one before: lens (i, j) becomes
