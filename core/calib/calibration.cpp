@@ -54,6 +54,12 @@ std::string count_str(long v) {
   return out;
 }
 
+// Tukey's biweight at 4.685 (normalised residual z).
+double tukey_weight(double z) {
+  const double u = z / 4.685;
+  return std::abs(u) < 1 ? (1 - u * u) * (1 - u * u) : 0.0;
+}
+
 double median(std::vector<double> v) {
   if (v.empty()) return std::nan("");
   const std::size_t k = v.size() / 2;
@@ -76,6 +82,20 @@ void check_image(const optics::SensorSpec& sensor, const ImageF& image, const st
   }
 }
 
+// Cat's-eye vignetting by a second stop (the lens barrel): every micro-image is the aperture's
+// disk, and beyond a field radius r0 from the optical axis a second disk, moving off it in
+// proportion to the field, cuts a sliver off one side whose depth grows in proportion to
+// r - r0, its area as depth^1.5 (then faster). So the micro-images' areas follow
+//   A(r) = A0 - k1 (r - r0)_+^1.5 - k2 (r - r0)_+^2.5,  r = |lens - axis|,
+// which a few hundred lenses fix far better than any one lens's area: where the lenses stop being
+// whole (r0), and the optical axis (the fall-off's centre, whatever the target's lighting).
+struct Vignetting {
+  bool found = false;
+  std::array<double, 2> axis{0, 0};
+  double axis_sigma = 0, r0 = 0, r0_sigma = 0, a0 = 0;
+  double drop = 0;  // relative area lost at the farthest lens
+};
+
 // What the per-lens stage measured, before the array is chosen.
 struct Measured {
   RawLattice lattice;
@@ -84,6 +104,8 @@ struct Measured {
   std::vector<std::uint8_t> whole;    // micro-image wholly on the sensor
   std::vector<std::uint8_t> present;  // a lit micro-image (whole or partial)
   std::vector<std::uint8_t> flawed;   // present and whole, but its fit is not to be trusted
+  std::vector<std::uint8_t> vignetted;  // present and whole, its micro-image cut by vignetting
+  Vignetting vignetting;                // the cat's-eye fall-off, where found
   SpotImageStats stats;
   double image_radius_px = 0;  // the micro-image's extent from its centre
 };
@@ -168,6 +190,200 @@ void smooth_tilt(const std::vector<LensFit>& free, const std::vector<std::uint8_
       held[k].tilt[std::size_t(axis)] = m;
     }
   }
+}
+
+// Each lens's light over its centre's level (both above its fitted background): the area its
+// micro-image would have as a flat disk. The lens barrel cuts off-axis micro-images into cat's
+// eyes, which pass less light for the same centre level; natural vignetting and an unevenly lit
+// target dim both alike and leave it. NaN where it cannot be taken.
+std::vector<double> micro_image_areas(const ImageF& image, const RawLattice& lat,
+                                      const std::vector<std::array<int, 2>>& sites, const std::vector<LensFit>& fits) {
+  std::vector<double> area(sites.size(), std::nan(""));
+  tbb::parallel_for(std::size_t(0), sites.size(), [&](std::size_t k) {
+    const LensFit& f = fits[k];
+    if (!f.converged) return;
+    double light = 0, centre = 0;
+    int central = 0;
+    for_each_cell_pixel(lat, sites[k][0], sites[k][1], image.width, image.height, [&](int x, int y) {
+      const double v = image.at(x, y) - f.background;
+      light += v;
+      if (std::hypot(x - f.centre[0], y - f.centre[1]) <= 0.2 * lat.px) {
+        centre += v;
+        ++central;
+      }
+    });
+    if (central > 0 && centre > 0) area[k] = light / (centre / central);
+  });
+  return area;
+}
+
+// Each value replaced by the median of those of the lenses within one row and column of it (the
+// lens itself left out), over lenses with a finite value in `use`; NaN where none.
+std::vector<double> neighbourhood_median(const std::vector<std::array<int, 2>>& sites, const std::vector<double>& value,
+                                         const std::vector<std::uint8_t>& use) {
+  int i0 = 1 << 30, j0 = 1 << 30, i1 = -(1 << 30), j1 = -(1 << 30);
+  for (const auto& s : sites) {
+    i0 = std::min(i0, s[0]);
+    i1 = std::max(i1, s[0]);
+    j0 = std::min(j0, s[1]);
+    j1 = std::max(j1, s[1]);
+  }
+  const int nx = i1 - i0 + 1, ny = j1 - j0 + 1;
+  std::vector<int> at(std::size_t(std::max(nx, 0)) * std::max(ny, 0), -1);
+  for (std::size_t k = 0; k < sites.size(); ++k) at[std::size_t(sites[k][1] - j0) * nx + (sites[k][0] - i0)] = int(k);
+  std::vector<double> out(sites.size(), std::nan(""));
+  for (std::size_t k = 0; k < sites.size(); ++k) {
+    std::vector<double> near;
+    for (int j = std::max(j0, sites[k][1] - 1); j <= std::min(j1, sites[k][1] + 1); ++j) {
+      for (int i = std::max(i0, sites[k][0] - 1); i <= std::min(i1, sites[k][0] + 1); ++i) {
+        const int q = at[std::size_t(j - j0) * nx + (i - i0)];
+        if (q >= 0 && std::size_t(q) != k && use[std::size_t(q)] && std::isfinite(value[std::size_t(q)])) {
+          near.push_back(value[std::size_t(q)]);
+        }
+      }
+    }
+    if (!near.empty()) out[k] = median(near);
+  }
+  return out;
+}
+
+// Without a radial cat's-eye fall-off (fit_vignetting), lenses whose micro-image areas fall short
+// of their neighbours' by more than five times one area's noise: a shadow or a stop that cuts
+// them unlike the rest; their centres are pulled like a cat's eye's.
+std::vector<std::uint8_t> vignetted_lenses(const std::vector<std::array<int, 2>>& sites, const std::vector<double>& area,
+                                           const std::vector<std::uint8_t>& use) {
+  std::vector<std::uint8_t> out(area.size(), 0);
+  const std::vector<double> near = neighbourhood_median(sites, area, use);
+  std::vector<double> dev;
+  for (std::size_t k = 0; k < area.size(); ++k) {
+    if (use[k] && std::isfinite(area[k]) && std::isfinite(near[k])) dev.push_back(std::abs(area[k] - near[k]));
+  }
+  if (dev.size() < 10) return out;
+  // |area - neighbours' median| spreads by one area's noise and the median's: ~1.06 of one.
+  const double single = 1.4826 * median(dev) / 1.06;
+  for (std::size_t k = 0; k < area.size(); ++k) {
+    out[k] = std::isfinite(area[k]) && std::isfinite(near[k]) && area[k] < near[k] - std::max(0.003 * near[k], 5 * single);
+  }
+  return out;
+}
+
+// The cat's-eye model fitted to per-lens areas at positions p (pixels), robustly (dust).
+Vignetting fit_vignetting(const std::vector<std::array<double, 2>>& p, const std::vector<double>& area, double pitch) {
+  Vignetting v;
+  std::vector<double> sorted;
+  for (double a : area) if (std::isfinite(a)) sorted.push_back(a);
+  if (sorted.size() < 30) return v;
+  std::sort(sorted.begin(), sorted.end());
+  const double a_ref = sorted[std::size_t(0.9 * double(sorted.size() - 1))];
+  // Start: the centroid of the lenses within 1 % of the full area, and their reach from it.
+  double cx = 0, cy = 0;
+  int nc = 0;
+  for (std::size_t k = 0; k < p.size(); ++k) {
+    if (std::isfinite(area[k]) && area[k] > 0.99 * a_ref) {
+      cx += p[k][0];
+      cy += p[k][1];
+      ++nc;
+    }
+  }
+  if (nc < 5 || nc == int(sorted.size())) return v;
+  cx /= nc;
+  cy /= nc;
+  std::vector<double> reach;
+  for (std::size_t k = 0; k < p.size(); ++k)
+    if (std::isfinite(area[k]) && area[k] > 0.99 * a_ref) reach.push_back(std::hypot(p[k][0] - cx, p[k][1] - cy));
+  std::sort(reach.begin(), reach.end());
+  // Parameters: axis x, y, A0, r0, k1, k2 (r in pitches for conditioning).
+  double th[6] = {cx, cy, a_ref, reach[std::size_t(0.8 * double(reach.size() - 1))] / pitch, 0, 0};
+  auto model = [&](const double* t, const std::array<double, 2>& q) {
+    const double r = std::hypot(q[0] - t[0], q[1] - t[1]) / pitch;
+    const double x = std::max(0.0, r - t[3]);
+    return t[2] - t[4] * std::pow(x, 1.5) - t[5] * std::pow(x, 2.5);
+  };
+  std::vector<double> w(p.size(), 1.0);
+  double s2 = 0;
+  cv::Matx<double, 6, 6> jtj;
+  for (int it = 0; it < 40; ++it) {
+    jtj = cv::Matx<double, 6, 6>::zeros();
+    cv::Vec<double, 6> jtr = cv::Vec<double, 6>::all(0);
+    std::vector<double> res;
+    double chi2 = 0, wsum = 0;
+    for (std::size_t k = 0; k < p.size(); ++k) {
+      if (!std::isfinite(area[k])) continue;
+      const double m0 = model(th, p[k]);
+      const double r = area[k] - m0;
+      res.push_back(std::abs(r));
+      double j[6];
+      for (int a = 0; a < 6; ++a) {
+        double t2[6];
+        std::copy(th, th + 6, t2);
+        const double h = a < 2 ? 0.01 * pitch : a == 2 ? 1e-6 * a_ref : a == 3 ? 1e-3 : 1e-6 * a_ref + 1e-3 * std::abs(th[a]);
+        t2[a] += h;
+        j[a] = (model(t2, p[k]) - m0) / h;
+      }
+      for (int a = 0; a < 6; ++a) {
+        jtr[a] += w[k] * j[a] * r;
+        for (int b = 0; b < 6; ++b) jtj(a, b) += w[k] * j[a] * j[b];
+      }
+      chi2 += w[k] * r * r;
+      wsum += w[k];
+    }
+    s2 = chi2 / std::max(1.0, wsum - 6);
+    // Tukey weights against dust and flawed lenses, from the robust scale of the residuals.
+    const double scale = 1.4826 * median(res) + 1e-12;
+    std::size_t q = 0;
+    for (std::size_t k = 0; k < p.size(); ++k) {
+      if (!std::isfinite(area[k])) continue;
+      w[k] = tukey_weight((area[k] - model(th, p[k])) / scale);
+      (void)q;
+    }
+    cv::Matx<double, 6, 6> damped = jtj;
+    for (int a = 0; a < 6; ++a) damped(a, a) = damped(a, a) * (1 + 1e-3) + 1e-12;
+    cv::Vec<double, 6> step;
+    if (!cv::solve(damped, jtr, step, cv::DECOMP_CHOLESKY)) return v;
+    const double move = std::hypot(step[0], step[1]);
+    const double shrink = move > 2 * pitch ? 2 * pitch / move : 1.0;
+    for (int a = 0; a < 6; ++a) th[a] += shrink * step[a];
+    th[3] = std::max(0.0, th[3]);
+    if (move < 1e-3 && it > 5) break;
+  }
+  cv::Matx<double, 6, 6> cov;
+  if (cv::invert(jtj, cov, cv::DECOMP_SVD) == 0) return v;
+  double far = 0;
+  for (const auto& q : p) far = std::max(far, std::hypot(q[0] - th[0], q[1] - th[1]) / pitch);
+  const double x = std::max(0.0, far - th[3]);
+  v.drop = (th[4] * std::pow(x, 1.5) + th[5] * std::pow(x, 2.5)) / th[2];
+  v.axis = {th[0], th[1]};
+  v.axis_sigma = std::sqrt(std::max(0.0, 0.5 * (cov(0, 0) + cov(1, 1)) * s2));
+  v.r0 = th[3] * pitch;
+  v.r0_sigma = std::sqrt(std::max(0.0, cov(3, 3) * s2)) * pitch;
+  v.a0 = th[2];
+  // A fall-off well above the areas' noise, an axis it places to within a few pixels.
+  v.found = v.drop > 0.01 && v.drop * th[2] > 10 * std::sqrt(s2) && v.axis_sigma < 5 && std::isfinite(v.axis_sigma);
+  return v;
+}
+
+// Lenses cut by vignetting: beyond the cat's-eye radius (less a margin of three sigmas and a
+// quarter pitch) where the radial model finds one; else (vignetting that is no radial fall-off)
+// those whose areas fall short of the rest (vignetted_lenses). `found` receives the model.
+std::vector<std::uint8_t> find_vignetted(const std::vector<std::array<int, 2>>& sites, const std::vector<LensFit>& fits,
+                                         const std::vector<double>& area, const std::vector<std::uint8_t>& use,
+                                         double pitch, Vignetting* found) {
+  std::vector<std::array<double, 2>> p;
+  std::vector<double> a;
+  for (std::size_t k = 0; k < sites.size(); ++k) {
+    if (!use[k] || !std::isfinite(area[k])) continue;
+    p.push_back(fits[k].centre);
+    a.push_back(area[k]);
+  }
+  const Vignetting v = fit_vignetting(p, a, pitch);
+  if (found) *found = v;
+  if (!v.found) return vignetted_lenses(sites, area, use);
+  std::vector<std::uint8_t> out(sites.size(), 0);
+  const double inner = v.r0 - 3 * v.r0_sigma - 0.25 * pitch;
+  for (std::size_t k = 0; k < sites.size(); ++k) {
+    out[k] = std::hypot(fits[k].centre[0] - v.axis[0], fits[k].centre[1] - v.axis[1]) > inner;
+  }
+  return out;
 }
 
 Measured measure_micro_images(const optics::CameraModel& camera, const ImageF& image, CentreSource kind) {
@@ -323,8 +539,14 @@ Measured measure_micro_images(const optics::CameraModel& camera, const ImageF& i
   MicroImageTemplate shape(clean, lat, m.sites, start, use);
   std::vector<LensFit> fits = fit_round(start, shape, NoiseModel{}, use, false);
   double radius = std::max(1.5, shape.radius_at(0.05));
+  std::vector<std::uint8_t> vignetted(n, 0);
   for (int round = 0; round < 2; ++round) {
     use = bright_whole(fits, radius, true);
+    // Cat's-eye micro-images are no copies of the mean one: they neither shape it nor fix the lattice.
+    if (white) {
+      vignetted = find_vignetted(m.sites, fits, micro_image_areas(clean, lat, m.sites, fits), use, lat.px, nullptr);
+      for (std::size_t k = 0; k < n; ++k) use[k] = use[k] && !vignetted[k];
+    }
     const NoiseModel noise_model = estimate_noise_model(clean, lat, m.sites, fits, use, shape);
     // The lattice from the fitted centres; each lens keeps its index.
     std::vector<std::array<double, 2>> pts;
@@ -348,9 +570,14 @@ Measured measure_micro_images(const optics::CameraModel& camera, const ImageF& i
     radius = std::max(1.5, shape.radius_at(0.05));
     fits = fit_round(fits, shape, noise_model, use, round == 0);
   }
+  if (white) {
+    vignetted = find_vignetted(m.sites, fits, micro_image_areas(clean, lat, m.sites, fits), bright_whole(fits, radius, true),
+                               lat.px, &m.vignetting);
+  }
   m.lattice = lat;
   m.fits = fits;
   m.image_radius_px = radius;
+  m.vignetted = vignetted;
 
   // 5. Which sites hold a lens, whole or cut by the sensor edge, and which fits are flawed.
   m.whole.assign(n, 0);
@@ -438,7 +665,7 @@ Model choose_centres(Measured& m, const CalibrationOptions& options) {
   Model out;
   double array_var = 0;
   std::vector<std::uint8_t> good(n, 0);
-  for (std::size_t k = 0; k < n; ++k) good[k] = m.whole[k] && m.present[k] && !m.flawed[k];
+  for (std::size_t k = 0; k < n; ++k) good[k] = m.whole[k] && m.present[k] && !m.flawed[k] && !m.vignetted[k];
   for (int round = 0; round < 3; ++round) {
     std::vector<std::array<double, 2>> pts;
     std::vector<std::array<int, 2>> idx;
@@ -452,7 +679,23 @@ Model choose_centres(Measured& m, const CalibrationOptions& options) {
     if (pts.size() < 6) {
       throw InputError("too few whole micro-images measured (" + std::to_string(pts.size()) + ") to fit a lattice");
     }
-    out.model = fit_model(pts, idx, wts, m.lattice, options.max_distortion_degree);
+    // A distortion is fitted only where the lenses it rests on span most of the array: a
+    // polynomial fitted over a vignetting-free core would run wild towards the edges, where the
+    // lattice (a lithographed array) holds.
+    int extent[4] = {1 << 30, -(1 << 30), 1 << 30, -(1 << 30)}, all[4] = {1 << 30, -(1 << 30), 1 << 30, -(1 << 30)};
+    for (std::size_t k = 0; k < n; ++k) {
+      if (!m.present[k]) continue;
+      int* e = good[k] ? extent : all;
+      for (int* box : {e, all}) {
+        box[0] = std::min(box[0], m.sites[k][0]);
+        box[1] = std::max(box[1], m.sites[k][0]);
+        box[2] = std::min(box[2], m.sites[k][1]);
+        box[3] = std::max(box[3], m.sites[k][1]);
+      }
+    }
+    const double span = std::min(double(extent[1] - extent[0] + 1) / double(all[1] - all[0] + 1),
+                                 double(extent[3] - extent[2] + 1) / double(all[3] - all[2] + 1));
+    out.model = fit_model(pts, idx, wts, m.lattice, span >= 0.8 ? options.max_distortion_degree : 0);
     // Residuals, the measurements' own scatter and what the array adds to it (robust, per axis).
     std::vector<double> res, var;
     for (std::size_t k = 0; k < n; ++k) {
@@ -638,7 +881,9 @@ Calibration assemble(const optics::CameraModel& camera, Measured& m, CentreSourc
       ++cal.lenses_rejected;
       continue;
     }
-    const double wgt = chosen.weight[k];
+    // A vignetted lens's own centre is pulled by its cat's eye: the model's is the better one.
+    const double wgt = m.vignetted[k] ? 0.0 : chosen.weight[k];
+    cal.lenses_vignetted += m.vignetted[k];
     cal.spots_px[id] = {chosen.predicted[k][0] + wgt * r[0], chosen.predicted[k][1] + wgt * r[1]};
     cal.residuals_px[id] = r;
     cal.status[id] = wgt >= 0.5 ? LensStatus::measured : LensStatus::lattice;
@@ -670,6 +915,11 @@ Calibration assemble(const optics::CameraModel& camera, Measured& m, CentreSourc
                         fmt(camera.microlens().pitch_mm * ratio, 5) + " mm instead of " +
                         fmt(camera.microlens().pitch_mm, 5) + " mm) in calibration, refocusing and reconstruction." +
                         alternative);
+  }
+  if (cal.lenses_vignetted > 0) {
+    cal.notes.push_back(std::to_string(cal.lenses_vignetted) +
+                        " lenses show cat's-eye (vignetted) micro-images, passing less light for their brightness: "
+                        "centred on the fitted lattice, which the unvignetted ones fix");
   }
   if (cal.lenses_partial > 0) {
     cal.notes.push_back(std::to_string(cal.lenses_partial) +
@@ -824,8 +1074,23 @@ void measure_white(Calibration& cal, const ImageF& white, const CalibrationOptio
   // (what it spills into its neighbours' cells they spill into its own), so the light over the
   // centre's level is the micro-image's area, whatever its blur or overlap: diameter
   // 2 sqrt(area / pi). A micro-image that dims towards its rim reads a little small.
+  // Cat's-eye vignetting (micro-image areas falling off radially): its centre is the optical
+  // axis, whatever the target's lighting, and only the lenses inside it show the whole aperture.
+  const std::vector<double> areas = micro_image_areas(white, lat, sites, fits);
+  std::vector<std::array<double, 2>> at;
+  std::vector<double> area_at;
+  for (std::size_t k = 0; k < sites.size(); ++k) {
+    if (!std::isfinite(areas[k])) continue;
+    at.push_back(fits[k].centre);
+    area_at.push_back(areas[k]);
+  }
+  const Vignetting vignetting = fit_vignetting(at, area_at, pitch);
   std::vector<double> diameters;
   for (std::size_t k = 0; k < sites.size(); ++k) {
+    if (vignetting.found &&
+        std::hypot(lenses[k].centre[0] - vignetting.axis[0], lenses[k].centre[1] - vignetting.axis[1]) > vignetting.r0) {
+      continue;
+    }
     double sum = 0, centre = 0;
     int cells = 0, central = 0;
     const auto& c = lenses[k].centre;
@@ -863,21 +1128,32 @@ void measure_white(Calibration& cal, const ImageF& white, const CalibrationOptio
                         (black_level ? "" : " (no dark frame: the fill assumes the black level between the images)"));
   }
 
-  // The optical axis: the centre of the white's radial fall-off, where it has one.
+  // The optical axis: the centre of the cat's-eye fall-off, else of the white's brightness
+  // fall-off (natural vignetting, which an unevenly lit target biases), where it has one.
   const double diagonal = std::hypot(double(white.width), double(white.height));
   std::array<double, 2> centre{};
   double sigma = 0;
   const std::array<double, 2> frame{optics::sensor_mm_to_column(cal.sensor, 0.0), optics::sensor_mm_to_row(cal.sensor, 0.0)};
-  if (radial_centre(where, level, frame, diagonal, centre, sigma)) {
+  bool placed = vignetting.found;
+  if (placed) {
+    centre = vignetting.axis;
+    sigma = vignetting.axis_sigma;
+  } else {
+    placed = radial_centre(where, level, frame, diagonal, centre, sigma);
+  }
+  if (placed) {
     cal.measured_axis_px = centre;
     cal.measured_axis_sigma_px = sigma;
     const double off = std::hypot(centre[0] - frame[0], centre[1] - frame[1]);
     if (off > std::max(3 * sigma, 2.0)) {
-      cal.notes.push_back("the white's fall-off is centred at column " + fmt(centre[0], 1) + ", row " +
+      cal.notes.push_back(std::string(vignetting.found ? "the micro-images' cat's-eye vignetting" : "the white's fall-off") +
+                        " is centred at column " + fmt(centre[0], 1) + ", row " +
                           fmt(centre[1], 1) + " (+-" + fmt(sigma, 1) + " px), " + fmt(off, 1) +
                           " px from the optical axis used (" +
                           (cal.sensor.optical_axis_px ? std::string("sensor.optical_axis_px") : std::string("the sensor centre")) +
-                          "): if the white target was evenly lit, that is where the optical axis meets the sensor; "
+                          (vignetting.found ? std::string("): that is where the optical axis meets the sensor; ")
+                                            : std::string("): if the white target was evenly lit, that is where the "
+                                                          "optical axis meets the sensor; ")) +
                           "add `optical_axis_px: [" + fmt(centre[0], 1) + ", " + fmt(centre[1], 1) +
                           "]` to the camera file's sensor section and calibrate again");
     }

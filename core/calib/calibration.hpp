@@ -52,6 +52,7 @@ struct Calibration {
   int lenses_lattice = 0;      // status lattice
   int lenses_partial = 0;
   int lenses_rejected = 0;
+  int lenses_vignetted = 0;    // among status lattice: cat's-eye micro-images (white images)
   // Evidence for lattice against per-lens centres (pixels): the scatter of the measurements (RMS
   // of their uncertainties), the departures of the array from its model that the measurements
   // show beyond that scatter, and the model's smooth distortion (0: the lattice alone).

@@ -152,6 +152,7 @@ void write_calibration_h5(const std::filesystem::path& path, const Calibration& 
     write_attr(f, g, "lenses_lattice", cal.lenses_lattice);
     write_attr(f, g, "lenses_partial", cal.lenses_partial);
     write_attr(f, g, "lenses_rejected", cal.lenses_rejected);
+    write_attr(f, g, "lenses_vignetted", cal.lenses_vignetted);
     write_attr(f, g, "centres_from", cal.source == CentreSource::white ? 1 : 0);
     write_attr(f, g, "measurement_scatter_px", cal.measurement_scatter_px);
     write_attr(f, g, "array_scatter_px", cal.array_scatter_px);
@@ -239,6 +240,7 @@ Calibration read_calibration_h5(const std::filesystem::path& path) {
   cal.lenses_lattice = int(lat_or("lenses_lattice", 0));
   cal.lenses_partial = int(lat_or("lenses_partial", 0));
   cal.lenses_rejected = int(lat_or("lenses_rejected", 0));
+  cal.lenses_vignetted = int(lat_or("lenses_vignetted", 0));
   cal.source = lat_or("centres_from", 0) == 1 ? CentreSource::white : CentreSource::spots;
   cal.measurement_scatter_px = lat_or("measurement_scatter_px", 0);
   cal.array_scatter_px = lat_or("array_scatter_px", 0);

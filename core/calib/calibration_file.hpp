@@ -27,7 +27,7 @@ namespace plenopiv::calib {
 //     spot_pitch_y_px, rotation_rad (counter-clockwise on the upright image), spot_offset_x_px,
 //     spot_offset_y_px (spot lattice centre from the sensor centre), lens_pitch_x_mm, lens_pitch_y_mm,
 //     lens_offset_x_mm, lens_offset_y_mm, rms_residual_px, max_residual_px, spots_found, lenses_measured,
-//     lenses_lattice, lenses_partial, lenses_rejected, centres_from (0 calibration image, 1 white),
+//     lenses_lattice, lenses_partial, lenses_rejected, lenses_vignetted, centres_from (0 calibration image, 1 white),
 //     measurement_scatter_px, array_scatter_px, distortion_degree, nominal_spot_pitch_px, pitch_ratio
 //   /camera attributes (float64): sensor_width_px, sensor_height_px, pixel_pitch_mm,
 //     image_distance_mm (s_i), microlens_focal_length_mm (f_l), optical_axis_given (0/1),

@@ -247,7 +247,9 @@ void refine_lattice(const std::vector<std::array<double, 2>>& p, const std::vect
 std::array<double, 2> LatticeModel::position(int i, int j) const {
   auto q = lattice.site(i, j);
   if (degree == 0) return q;
-  const double u = (i + lattice.shift(j) - centre[0]) / scale[0], v = (j - centre[1]) / scale[1];
+  // Within the fitted lenses' extent (-1..1); beyond it the distortion is held, not extrapolated.
+  const double u = std::clamp((i + lattice.shift(j) - centre[0]) / scale[0], -1.0, 1.0);
+  const double v = std::clamp((j - centre[1]) / scale[1], -1.0, 1.0);
   const auto t = terms(degree);
   for (std::size_t k = 0; k < t.size(); ++k) {
     const double f = std::pow(u, t[k][0]) * std::pow(v, t[k][1]);

@@ -50,7 +50,8 @@ void refine_lattice(const std::vector<std::array<double, 2>>& points, const std:
                     const std::vector<double>& weight, RawLattice& lattice);
 
 // A lattice plus a smooth distortion: lens (i, j) at lattice.site(i, j) plus polynomials of total
-// degree `degree` in the lattice coordinates (scaled to about -1..1 over the fitted lenses).
+// degree `degree` in the lattice coordinates (scaled to -1..1 over the fitted lenses, and held at
+// the edge of that range beyond it).
 // degree 0: the lattice alone; 1: affine (adds shear); 2, 3: bending the array.
 struct LatticeModel {
   RawLattice lattice;
