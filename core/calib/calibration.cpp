@@ -108,7 +108,20 @@ struct Measured {
   Vignetting vignetting;                // the cat's-eye fall-off, where found
   SpotImageStats stats;
   double image_radius_px = 0;  // the micro-image's extent from its centre
+  // Non-empty when the lattice took the camera file's pitch to be found: it stands only if the
+  // white shows overlapping micro-images (measure_white refuses them), else this error is the answer.
+  std::string doubt;
 };
+
+// When the rows are as far apart as the other layout's: say so.
+std::string layout_hint(const RawLattice& lat, const optics::CameraModel& camera) {
+  const double ratio = lat.py / lat.px;
+  const bool looks_hex = std::abs(ratio - std::sqrt(3.0) / 2) < 0.03, looks_rect = std::abs(ratio - 1) < 0.03;
+  const bool file_hex = camera.microlens().layout == optics::LensletLayout::hex;
+  if (looks_hex && !file_hex) return "; its rows are sqrt(3)/2 of the pitch apart, as a hex array's: microlens.layout";
+  if (looks_rect && file_hex) return "; its rows are one pitch apart, as a rect array's: microlens.layout";
+  return "";
+}
 
 // "spots" or "micro-images", as the messages name what they found.
 const char* things(CentreSource kind) { return kind == CentreSource::spots ? "spots" : "micro-images"; }
@@ -386,16 +399,16 @@ std::vector<std::uint8_t> find_vignetted(const std::vector<std::array<int, 2>>& 
   return out;
 }
 
-Measured measure_micro_images(const optics::CameraModel& camera, const ImageF& image, CentreSource kind) {
+// The lattice the candidates sit on: its scale from the image itself (their nearest-neighbour
+// distance), then neighbour statistics and a fit. InputError saying what was found and what to
+// check when they are too few, too far from the camera file's pitch, or on no lattice.
+// `trust_file`: take the camera file's pitch for the neighbour statistics and accept a lattice
+// that holds a quarter of the candidates (overlapping micro-images add maxima between lenses).
+RawLattice lattice_from_candidates(const Candidates& cand, const optics::CameraModel& camera, CentreSource kind,
+                                   bool trust_file) {
   const std::string what = image_name(kind);
   const bool hex = camera.microlens().layout == optics::LensletLayout::hex;
   const double p0 = camera.spot_pitch_px();
-  const int w = image.width, h = image.height;
-  Measured m;
-
-  // 1. Rough centres: maxima of the smoothed image.
-  const Candidates cand = find_candidates(image, p0);
-  m.stats.threshold = cand.threshold;
   const long expected = expected_lenses(camera);
   auto levels = [&] {
     return " (smoothed image: background " + fmt(cand.background, 1) + ", bright level " + fmt(cand.bright, 1) +
@@ -411,7 +424,7 @@ Measured measure_micro_images(const optics::CameraModel& camera, const ImageF& i
                             "target, not saturated)?"));
   }
   // 2. The lattice: its scale from the image itself, then neighbour statistics and a fit.
-  const double seen = median_neighbour_distance(cand.points);
+  const double seen = trust_file ? p0 : median_neighbour_distance(cand.points);
   if (!(std::abs(seen / p0 - 1) <= 0.35)) {
     throw InputError(what + ": its " + count_str(long(cand.points.size())) + " brightest " + things(kind) + " lie " +
                      fmt(seen, 2) + " px from their nearest neighbours, the camera file puts micro-images " +
@@ -419,7 +432,12 @@ Measured measure_micro_images(const optics::CameraModel& camera, const ImageF& i
                      "check those keys" +
                      (kind == CentreSource::spots ? "" : ", and that the image is in focus on the microlenses"));
   }
-  RawLattice lat = estimate_lattice(cand.points, hex, seen, things(kind));
+  RawLattice lat;
+  try {
+    lat = estimate_lattice(cand.points, hex, seen, things(kind));
+  } catch (const InputError& e) {
+    throw InputError(what + ": " + e.what());
+  }
   std::vector<std::array<int, 2>> ij(cand.points.size());
   std::vector<double> wt(cand.points.size());
   int on_lattice = 0;
@@ -434,13 +452,50 @@ Measured measure_micro_images(const optics::CameraModel& camera, const ImageF& i
     }
     refine_lattice(cand.points, ij, wt, lat);
   }
-  if (on_lattice < std::max<long>(10, long(cand.points.size()) / 2)) {
+  if (on_lattice < std::max<long>(10, long(cand.points.size()) / (trust_file ? 4 : 2))) {
     throw InputError(what + ": of " + count_str(long(cand.points.size())) + " " + things(kind) + " only " +
                      count_str(on_lattice) + " lie within a quarter pitch of a " + (hex ? "hex" : "rect") +
                      " lattice of " + fmt(lat.px, 2) + " x " + fmt(lat.py, 2) +
-                     " px: they do not form the camera file's lattice (check microlens.layout and pitch_mm)");
+                     " px: they do not form the camera file's lattice (check microlens.layout and pitch_mm" +
+                     (kind == CentreSource::spots ? ")" : "; is this a white image through the microlens array?)") +
+                     layout_hint(lat, camera));
   }
+  return lat;
+}
 
+Measured measure_micro_images(const optics::CameraModel& camera, const ImageF& image, CentreSource kind) {
+  const std::string what = image_name(kind);
+  const bool hex = camera.microlens().layout == optics::LensletLayout::hex;
+  const double p0 = camera.spot_pitch_px();
+  const int w = image.width, h = image.height;
+  Measured m;
+
+  // 1. Rough centres: maxima of the smoothed image.
+  // Smoothed at a fifth of the pitch each micro-image has one maximum; where neighbours overlap
+  // the doubled light between them makes more, and a coarser smoothing (a third) is tried.
+  Candidates cand;
+  RawLattice lat;
+  std::string first_error;
+  // Last, the camera file's pitch for the neighbour statistics: maxima between overlapping
+  // micro-images hide the image's own pitch, and measure_white then says they overlap.
+  // Only a white can overlap; a lattice so found stands only if the white then shows the overlap
+  // (Measured::doubt), else the first attempt's error is the answer.
+  const std::array<std::pair<double, bool>, 3> attempts{{{0.2, false}, {0.35, false}, {0.2, true}}};
+  bool found = false;
+  for (const auto& [scale, trust_file] : attempts) {
+    if (trust_file && kind != CentreSource::white) break;
+    try {
+      cand = find_candidates(image, p0, scale);
+      lat = lattice_from_candidates(cand, camera, kind, trust_file);
+      found = true;
+      if (trust_file) m.doubt = first_error;
+      break;
+    } catch (const InputError& e) {
+      if (first_error.empty()) first_error = e.what();
+    }
+  }
+  if (!found) throw InputError(first_error);
+  m.stats.threshold = cand.threshold;
   // 3. Hot pixels out, but not where a spot may fall in one pixel.
   ImageF clean = image;
   const double noise = pixel_noise(image);
@@ -767,7 +822,8 @@ Calibration assemble(const optics::CameraModel& camera, Measured& m, CentreSourc
                      count_str(expected) + " (one per microlens; " + count_str(whole_found) +
                      " whole, on a lattice of " + fmt(m.lattice.px, 2) + " x " + fmt(m.lattice.py, 2) +
                      " px): is the whole sensor lit" +
-                     (kind == CentreSource::spots ? ", and the stopped-down spots bright enough?" : "?") +
+                     (kind == CentreSource::spots ? ", and the stopped-down spots bright enough?"
+                                                  : ", and is this a white image through the microlens array?") +
                      (camera.counts_given() ? " The camera file's microlens.count_x/count_y say how many lenses "
                                               "the array has; remove them if the sensor shows fewer."
                                             : ""));
@@ -784,7 +840,7 @@ Calibration assemble(const optics::CameraModel& camera, Measured& m, CentreSourc
                      " px, more than " + fmt(100 * options.pitch_tolerance, 0) + " % from the camera file's " +
                      fmt(p0) + " x " + fmt(row0) +
                      " px (microlens.pitch_mm x (1 + f_l / s_i) / sensor.pixel_pitch_mm): check microlens.pitch_mm, "
-                     "sensor.pixel_pitch_mm and microlens.focal_length_mm");
+                     "sensor.pixel_pitch_mm and microlens.focal_length_mm" + layout_hint(lat, camera));
   }
 
   // The array: the sites holding a lens, as a block of whole rows and columns (hex: starting on
@@ -917,9 +973,15 @@ Calibration assemble(const optics::CameraModel& camera, Measured& m, CentreSourc
                         alternative);
   }
   if (cal.lenses_vignetted > 0) {
+    const int whole = cal.lenses_measured + cal.lenses_lattice + cal.lenses_rejected;
+    const int core = whole - cal.lenses_vignetted - cal.lenses_rejected;
     cal.notes.push_back(std::to_string(cal.lenses_vignetted) +
                         " lenses show cat's-eye (vignetted) micro-images, passing less light for their brightness: "
-                        "centred on the fitted lattice, which the unvignetted ones fix");
+                        "centred on the fitted lattice, which the " + std::to_string(core) + " unvignetted ones fix" +
+                        (core < whole / 4 ? std::string(". So few lenses reach far only if the array is regular: "
+                                                         "a stopped-down calibration image (--calibration-image), "
+                                                         "which the barrel does not cut, fixes the edges better")
+                                          : std::string()));
   }
   if (cal.lenses_partial > 0) {
     cal.notes.push_back(std::to_string(cal.lenses_partial) +
@@ -1003,6 +1065,27 @@ bool radial_centre(const std::vector<std::array<double, 2>>& p, const std::vecto
 
 }  // namespace
 
+namespace {
+
+// A white's calibration from its micro-images, then the white's evidence. Where the lattice
+// needed the camera file's pitch (Measured::doubt), only overlapping micro-images (refused by
+// measure_white) explain the image; anything else, the first error stands.
+Calibration assemble_white(const optics::CameraModel& camera, Measured& m, const ImageF& white,
+                           const CalibrationOptions& options, std::optional<double> black_level) {
+  Calibration cal;
+  try {
+    cal = assemble(camera, m, CentreSource::white, options);
+  } catch (const InputError&) {
+    if (!m.doubt.empty()) throw InputError(m.doubt);
+    throw;
+  }
+  measure_white(cal, white, options, black_level);
+  if (!m.doubt.empty()) throw InputError(m.doubt);
+  return cal;
+}
+
+}  // namespace
+
 Calibration calibrate(const optics::CameraModel& camera, const ImageF& image, const CalibrationOptions& options) {
   check_image(camera.sensor(), image, "calibration image");
   Measured m = measure_micro_images(camera, image, CentreSource::spots);
@@ -1013,8 +1096,7 @@ Calibration calibrate_from_white(const optics::CameraModel& camera, const ImageF
                                  const CalibrationOptions& options) {
   check_image(camera.sensor(), white, "white image");
   Measured m = measure_micro_images(camera, white, CentreSource::white);
-  Calibration cal = assemble(camera, m, CentreSource::white, options);
-  measure_white(cal, white, options, std::nullopt);
+  Calibration cal = assemble_white(camera, m, white, options, std::nullopt);
   return cal;
 }
 
@@ -1186,8 +1268,8 @@ Calibration calibrate_camera(const optics::CameraModel& camera, const Calibratio
   } else {
     check_image(sensor, white, "white image");
     Measured m = measure_micro_images(camera, white, CentreSource::white);
-    cal = assemble(camera, m, CentreSource::white, options);
-    measure_white(cal, white, options, frames.dark.empty() ? std::nullopt : std::optional<double>(0.0));
+    cal = assemble_white(camera, m, white, options, frames.dark.empty() ? std::nullopt : std::optional<double>(0.0));
+
     if (frames.dark.empty()) {
       dark_level = cal.white_black_level;
       cal.notes.push_back("no dark frame: the white's black level is taken from between its micro-images (" +

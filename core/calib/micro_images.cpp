@@ -36,11 +36,11 @@ double tukey(double z) {
 
 }  // namespace
 
-Candidates find_candidates(const ImageF& image, double pitch_px, double fraction) {
+Candidates find_candidates(const ImageF& image, double pitch_px, double smoothing, double fraction) {
   Candidates out;
   const cv::Mat src(image.height, image.width, CV_32F, const_cast<float*>(image.pixels.data()));
   cv::Mat smooth;
-  cv::GaussianBlur(src, smooth, cv::Size(0, 0), std::max(0.7, 0.2 * pitch_px), 0, cv::BORDER_REPLICATE);
+  cv::GaussianBlur(src, smooth, cv::Size(0, 0), std::max(0.7, smoothing * pitch_px), 0, cv::BORDER_REPLICATE);
   const std::vector<float> s = sample_of(smooth);
   out.background = percentile(s, 0.02);
   out.bright = percentile(s, 0.995);

@@ -13,8 +13,8 @@
 
 namespace plenopiv::calib {
 
-// Local maxima of the image smoothed by a Gaussian of a fifth of the pitch, at least a third of a
-// pitch apart and above background + `fraction` x (bright level - background): one near the
+// Local maxima of the image smoothed by a Gaussian of `smoothing` x the pitch, at least a third
+// of a pitch apart and above background + `fraction` x (bright level - background): one near the
 // centre of each lit micro-image, white (a vignetted disk) or stopped down (a spot). Levels are
 // percentiles of the smoothed image (background 2 %, bright 99.5 %).
 struct Candidates {
@@ -23,7 +23,7 @@ struct Candidates {
   double bright = 0;
   double threshold = 0;
 };
-Candidates find_candidates(const ImageF& image, double pitch_px, double fraction = 0.3);
+Candidates find_candidates(const ImageF& image, double pitch_px, double smoothing = 0.2, double fraction = 0.3);
 
 // Robust pixel noise (counts): 1.4826 x the median absolute difference between the image and its
 // 3 x 3 median, scaled to one pixel's noise.
