@@ -44,7 +44,9 @@
 #include <vector>
 
 #include "bench/bench_support.hpp"
+#include "core/calib/nominal_calibration.hpp"
 #include "core/optics/camera_file.hpp"
+#include "core/process/pair_processor.hpp"
 #include "core/process/process.hpp"
 #include "core/sim/exact_volume.hpp"
 #include "core/sim/field_errors.hpp"
@@ -212,7 +214,8 @@ int main(int argc, char** argv) {
   const std::size_t count = sim::particle_count_from_ppm(camera, box, 0.5);
   const auto pa = sim::random_particles(box, count, 2015);
   const auto pb = sim::displace(pa, flow);
-  const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera));
+  const calib::LoadedCalibration nominal = calib::nominal_calibration(camera);
+  const optics::MicrolensArray& lenses = nominal.lenses;
   sim::RenderOptions ro;
   ro.rays_per_particle = rays;
   double t = now_s();
@@ -226,14 +229,17 @@ int main(int argc, char** argv) {
   const double render_s = now_s() - t;
 
   t = now_s();
-  const process::PairOperator op(camera, lenses, recon::geometric_white_image(camera, lenses), settings);
+  // The headline goes through the owner every caller uses (process::PairProcessor); the variants
+  // below re-run its operator with other settings.
+  const process::PairProcessor processor(camera, nominal, settings);
+  const process::PairOperator& op = processor.op();
   const double weights_s = now_s() - t;
   std::printf("bench=e2e case=%s particles=%zu voxels=%zu render_s=%.2f weights_s=%.2f\n", scale.c_str(), count,
               settings.grid.count(), render_s, weights_s);
 
   // The paper's settings: reconstruction and correlation, stage by stage.
-  recon::MartWorkspace workspace;  // kept for --steady
-  const auto base = process::process_pair(op, a, b, settings, {}, &workspace);
+  recon::MartWorkspace workspace;  // kept for --steady and the sweeps
+  const auto base = processor.process(a, b);
   const Errors e = errors_against(base.correlation.field, flow, voxel);
   std::printf("bench=e2e case=%s variant=reconstructed iterations=%d mu=%.2f accelerate=%d dark_cutoff=%.3g sensor_blur_mm=%.4g "
               "intensity_threshold=%.3g final_smoothing=%d depth_prefilter=%d recon_a_s=%.2f recon_b_s=%.2f "
@@ -266,12 +272,13 @@ int main(int argc, char** argv) {
   };
   print_w_by_depth(base.correlation.field, "reconstructed");
   if (steady) {
-    // The same pair again in the kept MART workspace: what each pair costs in a run of many
-    // (the daemon and `plenopiv process --run` keep one per pair in flight).
+    // The same pair again, the processor's MART buffers kept: what each pair costs in a run of many
+    // (the daemon and `plenopiv process --run` keep them from pair to pair).
     std::vector<double> marks;  // seconds since the start at each progress call
     const double t_again = now_s();
-    const auto again = process::process_pair(
-        op, a, b, settings, [&](const std::string&, double) { marks.push_back(now_s() - t_again); }, &workspace);
+    process::PairOptions timed;
+    timed.progress = [&](const std::string&, double) { marks.push_back(now_s() - t_again); };
+    const auto again = processor.process(a, b, timed);
     // Seconds between progress calls: per frame set-up with its first iteration, then one per
     // iteration; then the correlation's passes.
     std::string steps;
@@ -336,17 +343,19 @@ int main(int argc, char** argv) {
 
   // Correlation variants on the same volumes (reconstructed and exact), side by side.
   {
-    piv::CorrelationSettings previous = settings.correlation;  // the default until 2026-11-23
+    // Three passes with the residual added to the predictor's window mean, unsmoothed: what the
+    // centre predictor, its smoothing and the fourth pass are compared against.
+    piv::CorrelationSettings previous = settings.correlation;
     previous.passes = {{{32, 32, 32}, 50}, {{16, 16, 16}, 50}, {{16, 16, 16}, 75}};
     previous.predictor = piv::PredictorBase::window_mean;
     previous.predictor_smoothing = 0;
     piv::CorrelationSettings centre3 = previous;
     centre3.predictor = piv::PredictorBase::centre;
     centre3.predictor_smoothing = 1;
-    // The passes without their depth margins (core/piv's default until 2026-11-24).
+    // The passes without their depth margins.
     piv::CorrelationSettings no_margin = settings.correlation;
     for (piv::PassSettings& p : no_margin.passes) p.depth_margin = 0;
-    // The ghost floor toggled: off when the headline has it, 4 (measured best) when not.
+    // The ghost floor toggled: off when the headline has it, 4 (process.yaml's) when not.
     piv::CorrelationSettings toggled = settings.correlation;
     toggled.intensity_threshold_of_mean = intensity_threshold > 0 ? 0.0 : 4.0;
     correlate_both("correlation", "no_depth_margin", no_margin, false);
@@ -384,7 +393,7 @@ int main(int argc, char** argv) {
     };
     std::vector<Row> rows;
     const int np = int(settings.correlation.passes.size());
-    // Floor 3 is run-paper.yaml's with the depth prefilter, 4 process.yaml's ("Depth prefilter").
+    // Floor 3 is run-paper.yaml's, 4 process.yaml's.
     for (const Setting& st : {Setting{"paper_5_it_mu_0.5", 5, 0.5, false, 0}, Setting{"7_acc_floor_3", 7, 1, true, 3},
                               Setting{"8_acc_floor_3", 8, 1, true, 3}, Setting{"8_acc_floor_4", 8, 1, true, 4},
                               Setting{"9_acc_floor_3", 9, 1, true, 3}, Setting{"10_acc_floor_3", 10, 1, true, 3},
@@ -454,7 +463,7 @@ int main(int argc, char** argv) {
     // Without the depth guard: particles beyond the depth ends pin light in the end slices.
     process::ProcessSettings s = settings;
     s.depth_guard_mm = 0;
-    const process::PairOperator op0(camera, lenses, recon::geometric_white_image(camera, lenses), s);
+    const process::PairOperator op0(camera, lenses, nominal.white_correction, s);
     const auto r = process::process_pair(op0, a, b, s);
     const Errors er = errors_against(r.correlation.field, flow, voxel);
     rows.push_back({"no_depth_guard", 5, np, 16, 0.5,
@@ -467,7 +476,7 @@ int main(int argc, char** argv) {
     process::ProcessSettings s = settings;
     s.angular_sampling = sampling;
     t = now_s();
-    const process::PairOperator op_a(camera, lenses, recon::geometric_white_image(camera, lenses), s);
+    const process::PairOperator op_a(camera, lenses, nominal.white_correction, s);
     const double tables_s = now_s() - t;
     const auto r = process::process_pair(op_a, a, b, s);
     const Errors er = errors_against(r.correlation.field, flow, voxel);
@@ -500,7 +509,7 @@ int main(int argc, char** argv) {
     process::ProcessSettings s = settings;
     s.grid = process::grid_for_extent({-hx, -hy, -hz}, {hx, hy, hz}, {2 * voxel, 2 * voxel, 2 * voxel}, "bench");
     s.correlation.passes = {{{16, 16, 16}, 50.0}, {{12, 12, 12}, 75.0}, {{8, 8, 8}, 75.0}};
-    const process::PairOperator op2(camera, lenses, recon::geometric_white_image(camera, lenses), s);
+    const process::PairOperator op2(camera, lenses, nominal.white_correction, s);
     const auto r = process::process_pair(op2, a, b, s);
     const Errors er = errors_against(r.correlation.field, flow, voxel);  // still in 0.125 mm voxels
     rows.push_back({"binning", 5, 3, 8, 0.5, r.times.reconstruct_a_s + r.times.reconstruct_b_s + r.times.correlate_s,

@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "core/calib/nominal_calibration.hpp"
 #include "core/lightfield/lattice_resampling.hpp"
 #include "core/optics/camera_file.hpp"
 #include "core/recon/weights.hpp"
@@ -29,7 +30,7 @@ int main() {
       optics::Lattice l = optics::Lattice::nominal(camera);
       l.rotation_rad = degrees * std::numbers::pi / 180;
       const auto array = sim::jittered_array(l, 0.001, 5);
-      const ImageF white = recon::geometric_white_image(camera, array);
+      const ImageF white = calib::geometric_white_image(camera, array);
       auto t0 = std::chrono::steady_clock::now();
       const lightfield::LatticeResampler r(camera, array, white);
       const double setup = seconds_since(t0);

@@ -4,11 +4,10 @@
 #include <iostream>
 #include <memory>
 
+#include "clients/cli/calibration_frames.hpp"
 #include "clients/cli/commands.hpp"
-#include "core/base/errors.hpp"
 #include "core/calib/calibration.hpp"
 #include "core/calib/calibration_file.hpp"
-#include "core/io/raw_frame.hpp"
 #include "core/optics/camera_file.hpp"
 
 namespace plenopiv::client {
@@ -22,41 +21,12 @@ struct CalibrateArgs {
   std::string output;
 };
 
-// "a.png" or "a.png (+2 more)": the files an error is about.
-std::string files(const std::vector<std::string>& paths) {
-  return paths.front() + (paths.size() > 1 ? " (+" + std::to_string(paths.size() - 1) + " more)" : "");
-}
-
 void run_calibrate(const CalibrateArgs& args) {
   const auto start = std::chrono::steady_clock::now();
   const optics::CameraModel camera = optics::load_camera_file(args.camera);
-  calib::CalibrationFrames frames;
-  std::cerr << "reading " << args.white_images.size() << " white, " << args.calibration_images.size()
-            << " calibration and " << args.dark_images.size() << " dark frame(s)\n";
-  frames.white = io::read_mean_frame(args.white_images, "white");
-  frames.white_frames = int(args.white_images.size());
-  if (!args.calibration_images.empty()) {
-    frames.calibration = io::read_mean_frame(args.calibration_images, "calibration");
-    frames.calibration_frames = int(args.calibration_images.size());
-  }
-  if (!args.dark_images.empty()) {
-    frames.dark = io::read_mean_frame(args.dark_images, "dark");
-    frames.dark_frames = int(args.dark_images.size());
-  }
-  std::cerr << "calibrating from the " << (frames.calibration.empty() ? "white" : "calibration") << " image\n";
   double white_outside = 0;
-  calib::Calibration cal;
-  try {
-    cal = calib::calibrate_camera(camera, frames, {}, &white_outside);
-  } catch (const InputError& e) {
-    // Name the files: the message says which image (calibration, white or dark) it is about.
-    const std::string what = e.what();
-    const auto& culprit = what.rfind("white", 0) == 0 ? args.white_images
-                          : what.rfind("dark", 0) == 0 ? (args.dark_images.empty() ? args.white_images : args.dark_images)
-                          : args.calibration_images.empty() ? args.white_images
-                                                            : args.calibration_images;
-    throw InputError(files(culprit) + ": " + what);
-  }
+  const calib::Calibration cal =
+      calibrate_from_files(camera, {args.white_images, args.calibration_images, args.dark_images}, &white_outside);
   calib::write_calibration_h5(args.output, cal);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   std::cout << args.output << "\n"

@@ -12,6 +12,7 @@
 #include "clients/cli/commands.hpp"
 #include "core/base/errors.hpp"
 #include "core/calib/calibration_file.hpp"
+#include "core/calib/nominal_calibration.hpp"
 #include "core/io/hdf5_files.hpp"
 #include "core/io/raw_frame.hpp"
 #include "core/io/vtk_files.hpp"
@@ -80,12 +81,13 @@ void run(const ReconOptions& o) {
   optics::MicrolensArray lenses;
   ImageF white;
   if (o.calibration.empty()) {
-    lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera));
-    white = recon::geometric_white_image(camera, lenses);
+    calib::LoadedCalibration nominal = calib::nominal_calibration(camera);
+    lenses = std::move(nominal.lenses);
+    white = std::move(nominal.white_correction);
   } else {
     calib::LoadedCalibration c = calib::load_calibration(o.calibration, camera);
     lenses = std::move(c.lenses);
-    white = c.white_correction.empty() ? recon::geometric_white_image(camera, lenses) : std::move(c.white_correction);
+    white = c.white_correction.empty() ? calib::geometric_white_image(camera, lenses) : std::move(c.white_correction);
   }
   // Raw pixels, or the image resampled onto an axis-aligned lattice for a rotated/warped/hex array.
   const process::PairOperator pair_op(camera, lenses, white, grid);

@@ -3,6 +3,9 @@
 
 #include <chrono>
 #include <algorithm>
+#include <limits>
+#include <span>
+#include <sstream>
 #include <cmath>
 #include <cstdio>
 #include <numbers>
@@ -74,7 +77,10 @@ Volume depth_crop(Volume v, int first, const Grid3& grid) {
 }
 }  // namespace
 
-ProcessSettings process_settings_from(const YamlMap& root) {
+namespace {
+
+// dt_s, volume, reconstruction and correlation of one tier.
+ProcessSettings parse_settings(const YamlMap& root) {
   root.reject_unknown({"dt_s", "volume", "reconstruction", "correlation"});
   ProcessSettings s;
 
@@ -91,22 +97,19 @@ ProcessSettings process_settings_from(const YamlMap& root) {
     r->reject_unknown(
         {"iterations", "mu", "acceleration", "start", "noise_threshold", "dark_weight_cutoff", "convergence",
          "angular_sampling", "sensor_blur_sigma_mm"});
-    s.mart.iterations = r->integer_in("iterations", s.mart.iterations, 1, 1000);
+    // Read here, checked by recon::check (the one owner of MART's ranges); the integer is only kept
+    // from wrapping as it narrows.
+    s.mart.iterations =
+        r->integer_in("iterations", s.mart.iterations, std::numeric_limits<int>::min(), std::numeric_limits<int>::max());
     s.mart.mu = r->number_or("mu", s.mart.mu);
-    if (!(s.mart.mu > 0 && s.mart.mu <= 1)) r->fail("mu", "must be in (0, 1]");
     s.mart.accelerate = r->choice_or("acceleration", {"none", "nesterov"}, "none") == "nesterov";
     s.mart.start = r->choice_or("start", {"mlos", "ones"}, "mlos") == "ones" ? recon::MartStart::ones
                                                                           : recon::MartStart::mlos;
     s.mart.noise_threshold = float(r->number_or("noise_threshold", s.mart.noise_threshold));
-    if (!(s.mart.noise_threshold >= 0)) r->fail("noise_threshold", "must be >= 0 counts");
     s.mart.dark_weight_cutoff = r->number_or("dark_weight_cutoff", s.mart.dark_weight_cutoff);
-    if (!(s.mart.dark_weight_cutoff >= 0 && s.mart.dark_weight_cutoff < 1))
-      r->fail("dark_weight_cutoff", "must be in [0, 1)");
     s.mart.convergence = r->number_or("convergence", s.mart.convergence);
-    if (!(s.mart.convergence >= 0)) r->fail("convergence", "must be >= 0");
     s.mart.sensor_blur_sigma_mm = r->number_or("sensor_blur_sigma_mm", s.mart.sensor_blur_sigma_mm);
-    if (!(s.mart.sensor_blur_sigma_mm >= 0 && s.mart.sensor_blur_sigma_mm <= recon::kMaxSensorBlurSigmaMm))
-      r->fail("sensor_blur_sigma_mm", "must be in [0, " + std::to_string(recon::kMaxSensorBlurSigmaMm) + "] mm");
+    if (const auto problem = recon::check(s.mart)) r->fail(problem->key, problem->reason);
     s.angular_sampling = r->number_or("angular_sampling", s.angular_sampling);
     if (!(s.angular_sampling > 0 && s.angular_sampling <= 8)) r->fail("angular_sampling", "must be in (0, 8]");
   }
@@ -127,8 +130,54 @@ ProcessSettings process_settings_from(const YamlMap& root) {
   return s;
 }
 
-ProcessSettings load_process_settings(const std::filesystem::path& path) {
-  return process_settings_from(YamlMap(load_yaml_file(path), path.string()));
+}  // namespace
+
+ProcessSpec process_spec_from(const YamlMap& root) {
+  root.reject_unknown(std::span<const std::string_view>(kProcessKeys));
+  YAML::Node full = YAML::Clone(root.node());
+  full.remove("live");
+  ProcessSpec spec;
+  spec.full = parse_settings(YamlMap(full, root.source()));
+  if (const auto live = root.optional_map("live")) {
+    live->reject_unknown({"volume", "reconstruction", "correlation"});
+    // Each key of a live section overrides the same key of the full settings' section.
+    YAML::Node merged = YAML::Clone(full);
+    for (const char* section : {"volume", "reconstruction", "correlation"}) {
+      if (!live->has(section)) continue;
+      const YamlMap overrides = live->map(section);
+      if (!merged[section]) merged[section] = YAML::Node(YAML::NodeType::Map);
+      for (const auto& item : overrides.node()) merged[section][item.first.Scalar()] = YAML::Clone(item.second);
+    }
+    spec.live = parse_settings(YamlMap(merged, root.source() + " (live tier)"));
+  }
+  return spec;
+}
+
+ProcessSpec load_process_spec(const std::filesystem::path& path) {
+  return process_spec_from(YamlMap(load_yaml_file(path), path.string()));
+}
+
+ProcessSettings process_settings_from(const YamlMap& root) { return process_spec_from(root).full; }
+
+ProcessSettings load_process_settings(const std::filesystem::path& path) { return load_process_spec(path).full; }
+
+YAML::Node processing_part(const YAML::Node& root) {
+  YAML::Node out(YAML::NodeType::Map);
+  for (std::string_view key : kProcessKeys) {
+    const std::string k(key);
+    if (root[k]) out[k] = YAML::Clone(root[k]);
+  }
+  return out;
+}
+
+std::string spec_text(const YAML::Node& node, const std::string& comment) {
+  YAML::Emitter out;
+  out.SetDoublePrecision(17);
+  out << node;
+  std::string text;
+  std::istringstream lines(comment);
+  for (std::string line; std::getline(lines, line);) text += "# " + line + "\n";
+  return text + out.c_str() + "\n";
 }
 
 PairResult process_pair(const recon::WeightingOperator& op, const ImageF& frame_a, const ImageF& frame_b,

@@ -7,11 +7,13 @@
 #include <functional>
 #include <memory>
 #include <optional>
+#include <string>
 #include <span>
 #include <vector>
 
 #include "core/base/grid.hpp"
 #include "core/base/image.hpp"
+#include "core/recon/explicit_matrix.hpp"
 #include "core/recon/weights.hpp"
 
 namespace plenopiv::recon {
@@ -40,17 +42,18 @@ struct MartSettings {
   MartMethod method = MartMethod::smart;
   MartStart start = MartStart::mlos;
   int iterations = 5;
-  double mu = 0.5;                 // relaxation, 0 < mu <= 1
+  double mu = 0.5;  // relaxation, 0 < mu <= 1
   // Nesterov's momentum on ln E with FISTA's schedule and a gradient restart: the same cost per
-  // iteration as SMART (a few operations per voxel), far fewer iterations for a converged depth
-  // (docs/recon.md, "MART"). Off: the paper's iteration.
+  // iteration as SMART (a few operations per voxel), fewer iterations for a converged depth
+  // (docs/recon.md, "MART"). Off (default): the paper's iteration.
   bool accelerate = false;
-  float noise_threshold = 0.f;     // pixels at or below it count as dark (zero)
+  float noise_threshold = 0.f;  // pixels at or below it count as dark (zero)
   // A dark pixel zeroes a voxel (eq 9: ratio 0) only where the voxel's column and row weights at
   // that pixel both exceed this fraction of their largest value. Fainter dark pixels (where the
   // weights are wider than a real particle image) pull the voxel down as if they had recorded the
   // floor: the noise threshold, or half the faintest lit pixel. 0 applies eq 9 literally: any
-  // dark pixel with weight zeroes the voxel. 0.9 measured best (docs/benchmarks.md).
+  // dark pixel with weight zeroes the voxel. Range [0, 1); default 0.9, chosen by measurement
+  // (docs/recon.md, "What is skipped").
   double dark_weight_cutoff = 0.9;
   double convergence = 0.0;        // stop when the residual changes by less than this fraction
   std::optional<RegionMm> region;  // solve only here
@@ -61,13 +64,23 @@ struct MartSettings {
   // best, and particles come out compressed toward it (docs/recon.md, "Sensor blur"). 0: the
   // weights alone, as the paper. core/sim's diffraction (the paper's sec 4.1) is 0.0052 mm.
   double sensor_blur_sigma_mm = 0.0;
-  // One more projection after the last update, for MartResult::final_residual (~7 % of a 5-iteration
-  // paper-scale reconstruction). Off where nothing reads it (process::process_pair); the volume is
-  // the same either way.
+  // One more projection after the last update, for MartResult::final_residual (the cost of half
+  // an iteration). Off where nothing reads it (process::process_pair); the volume is the same
+  // either way. Default on.
   bool final_residual = true;
 };
 // A Gaussian wider than this is no sensor blur (the paper's lens images are 0.125 mm across).
 inline constexpr double kMaxSensorBlurSigmaMm = 0.05;
+
+// A setting outside its range: the YAML key (as core/process reads it under `reconstruction:`) and
+// the reason, e.g. {"mu", "must be in (0, 1], got 1.5"}.
+struct SettingProblem {
+  std::string key, reason;
+};
+// The one place MART's ranges are checked (reconstruct() refuses what it finds, core/process names
+// the config key): iterations 1..10000, mu (0, 1], noise_threshold finite >= 0, dark_weight_cutoff
+// [0, 1), convergence finite >= 0, sensor_blur_sigma_mm [0, kMaxSensorBlurSigmaMm].
+std::optional<SettingProblem> check(const MartSettings& settings);
 
 // The sensor blur of MartSettings::sensor_blur_sigma_mm on an image of op's sensor, in place: what
 // MART with that setting does to each projection W E.
@@ -76,22 +89,27 @@ void apply_sensor_blur(const WeightingOperator& op, double sigma_mm, std::span<f
 // What was skipped, so a run can report how much of the box the scene needed.
 struct SkipReport {
   std::size_t pixels = 0;
-  std::size_t dark_pixels = 0;           // at or below the noise threshold (inside microlens images)
+  std::size_t dark_pixels = 0;  // at or below the noise threshold (inside microlens images)
   std::size_t voxels = 0;
-  std::size_t voxels_unseen = 0;         // see no pixel (outside the field of view)
+  std::size_t voxels_unseen = 0;  // see no pixel (outside the field of view)
   std::size_t voxels_outside_region = 0;
-  std::size_t voxels_dark = 0;           // seen by a dark pixel: zero under MART, never updated
+  std::size_t voxels_dark = 0;  // seen by a dark pixel: zero under MART, never updated
   std::size_t voxels_active = 0;
   int slices = 0;
-  int slices_empty = 0;                  // no active voxel
-  double fraction_skipped() const { return voxels ? 1.0 - double(voxels_active) / double(voxels) : 0.0; }
+  int slices_empty = 0;  // no active voxel
+  double fraction_skipped() const {
+    return voxels ? 1.0 - double(voxels_active) / double(voxels) : 0.0;
+  }
 };
 
 struct IterationReport {
-  int iteration = 0;           // 1-based
-  double residual = 0;         // ||I - W E|| / ||I|| (B W E with the sensor blur) before the update
+  int iteration = 0;    // 1-based
+  double residual = 0;  // ||I - W E|| / ||I|| (B W E with the sensor blur) before the update
   double seconds = 0;
 };
+
+// Called after each iteration.
+using IterationCallback = std::function<void(const IterationReport&)>;
 
 struct MartResult {
   Volume volume;
@@ -100,7 +118,7 @@ struct MartResult {
   // ||I - W E|| / ||I|| after the last update; empty when MartSettings::final_residual is off.
   std::optional<double> final_residual;
   bool converged = false;
-  double setup_seconds = 0;    // active set and start
+  double setup_seconds = 0;  // active set and start
   // The setup's parts (wall seconds): choosing the active voxels, grouping them for the kernels
   // (ActiveSet), and the MLOS start (one two-image back-projection, one projection).
   double select_seconds = 0, active_set_seconds = 0, start_seconds = 0;
@@ -116,10 +134,10 @@ struct MartBuffers;
 
 // The buffers of one reconstruction: the thresholded image, ln I, the projection and log-ratio
 // images, the per-voxel arrays, the active-set selection's scratch and the kernels' workspace
-// (~0.6 GB on the paper case). A caller that reconstructs frame after frame (core/process: frame A
-// then B; the daemon and `plenopiv process --run`: pair after pair) keeps one, so that later
-// frames neither allocate these buffers nor page-fault and zero them again (docs/recon.md, "Buffers
-// kept across frames").
+// (about the size of four sensor images plus a few arrays per active voxel). A caller that
+// reconstructs frame after frame (core/process: frame A then B; the daemon and `plenopiv process
+// --run`: pair after pair) keeps one, so that later frames neither allocate these buffers nor
+// page-fault and zero them again (docs/recon.md, "Buffers kept across frames").
 //
 // It carries nothing from one frame to the next: reconstruct writes every buffer before reading
 // it, so a volume has the same bits with a new workspace, a used one, or none. It takes any
@@ -138,20 +156,21 @@ class MartWorkspace {
 
  private:
   std::unique_ptr<detail::MartBuffers> buffers_;
-  friend MartResult reconstruct(const WeightingOperator&, const ImageF&, const MartSettings&, MartWorkspace&,
-                                const std::function<void(const IterationReport&)>&);
+  friend MartResult reconstruct(const WeightingOperator&, const ImageF&, const MartSettings&,
+                                MartWorkspace&, const IterationCallback&);
 };
 
 // Reconstructs a volume from a raw plenoptic image (float, counts) with the matrix-free operator.
 // `progress` (optional) is called after each iteration. Bit-identical at any thread count.
-MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const MartSettings& settings,
-                       const std::function<void(const IterationReport&)>& progress = {});
+MartResult reconstruct(const WeightingOperator& op, const ImageF& image,
+                       const MartSettings& settings, const IterationCallback& progress = {});
 // The same in `workspace`'s buffers (the same bits).
-MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const MartSettings& settings,
-                       MartWorkspace& workspace, const std::function<void(const IterationReport&)>& progress = {});
+MartResult reconstruct(const WeightingOperator& op, const ImageF& image,
+                       const MartSettings& settings, MartWorkspace& workspace,
+                       const IterationCallback& progress = {});
 
 // The reference: eq 9 row by row on the explicit matrix (rows = pixels in storage order).
-Volume reconstruct_row_action(const WeightingOperator& op, const SparseMatrix& w, const ImageF& image,
-                              const MartSettings& settings);
+Volume reconstruct_row_action(const WeightingOperator& op, const SparseMatrix& w,
+                              const ImageF& image, const MartSettings& settings);
 
 }  // namespace plenopiv::recon

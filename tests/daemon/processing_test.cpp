@@ -40,7 +40,8 @@ TEST(Processing, UniformDisplacementOfARayTracedPairComesBack) {
   const RunConfig config = parse_run_config(kConfig, "run.yaml");
   const auto t0 = std::chrono::steady_clock::now();
   const ProcessFn process = plenoptic_processing(camera)(config, RunCalibration{});
-  const ProcessedPair out = process(pair);
+  const CancelFlag go{false};
+  const ProcessedPair out = process(pair, go);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 
   const VectorField& f = out.vectors;
@@ -68,6 +69,10 @@ TEST(Processing, UniformDisplacementOfARayTracedPairComesBack) {
   EXPECT_EQ(valid, f.valid.size());
   EXPECT_NEAR(mean_dx, shift_mm, 0.02);
   EXPECT_NEAR(mean_dy, 0.0, 0.01);
+
+  // A stopping run: the same pair gives up at the first MART iteration's check.
+  const CancelFlag stop{true};
+  EXPECT_THROW(process(pair, stop), Cancelled);
 }
 
 TEST(Processing, BadSettingsAndWrongImagesAreNamed) {
@@ -75,20 +80,34 @@ TEST(Processing, BadSettingsAndWrongImagesAreNamed) {
       optics::load_camera_file(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml");
   const ProcessFactory factory = plenoptic_processing(camera);
   const std::string bad =
-      "volume: {x_mm: [-1, 1], y_mm: [-1, 1], z_mm: [-1, 1], voxel_mm: 0.125}\n"
+      "dt_s: 0.001\nvolume: {x_mm: [-1, 1], y_mm: [-1, 1], z_mm: [-1, 1], voxel_mm: 0.125}\n"
       "reconstruction: {iteratons: 3}\n";
   try {
-    factory(parse_run_config(bad, "run.yaml"), RunCalibration{});
+    parse_run_config(bad, "run.yaml");
     FAIL() << "a misspelt reconstruction key was accepted";
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find("reconstruction.iteratons: unknown key"), std::string::npos)
         << e.what();
   }
+  // A volume whose pairs in flight would not fit this machine's memory: refused with the estimate
+  // before any table is built (2^29 voxels is what run.yaml itself allows).
+  try {
+    factory(parse_run_config("dt_s: 0.001\nvolume: {x_mm: [-100, 100], y_mm: [-100, 100], z_mm: [-5, 5], voxel_mm: 0.125}\n"
+                             "max_pairs_in_flight: 4\n",
+                             "run.yaml"),
+            RunCalibration{});
+    FAIL() << "a 1600 x 1600 x 96 voxel volume with 4 pairs in flight was accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("processing 4 pair(s) at once on a 1600 x 1600 x"), std::string::npos)
+        << e.what();
+    EXPECT_NE(std::string(e.what()).find("GB of memory"), std::string::npos) << e.what();
+  }
   const ProcessFn process = factory(parse_run_config(kConfig, "run.yaml"), RunCalibration{});
   drivers::FramePair small;
   small.a.image = ImageU16(64, 48);
   small.b.image = ImageU16(64, 48);
-  EXPECT_THROW(process(small), InputError);  // not the camera's sensor size
+  const CancelFlag go{false};
+  EXPECT_THROW(process(small, go), InputError);  // not the camera's sensor size
 }
 
 }  // namespace

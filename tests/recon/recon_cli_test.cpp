@@ -5,6 +5,7 @@
 #include <cmath>
 #include <filesystem>
 
+#include "core/calib/nominal_calibration.hpp"
 #include "core/io/hdf5_files.hpp"
 #include "core/io/tiff.hpp"
 #include "core/optics/camera_file.hpp"
@@ -30,7 +31,7 @@ TEST(ReconstructCli, WritesVolumesWhoseBrightestVoxelIsTheParticle) {
   g.origin_mm = {-0.5625, -0.5625, -1.75};
   const auto cam = optics::load_camera_file(kCamera);
   const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(cam));
-  const WeightingOperator op(cam, lenses, g, geometric_white_image(cam, lenses));
+  const WeightingOperator op(cam, lenses, g, calib::geometric_white_image(cam, lenses));
   Volume truth(g, 0.f);
   truth.at(3, 6, 2) = 1.f;  // one particle at (-0.1875, 0.1875, -0.75) mm
   ImageF projected(850, 850, 0.f);
@@ -92,7 +93,7 @@ TEST(ReconstructCli, RefusesBadArgumentsClearly) {
                             "-1", "1", "-1", "1", "-1", "1", "--sensor-blur-mm", "-0.001", "-o",
                             (dir / "x.h5").string()},
                            out));
-  EXPECT_NE(out.find("sensor blur"), std::string::npos) << out;
+  EXPECT_NE(out.find("sensor_blur_sigma_mm"), std::string::npos) << out;
   EXPECT_FALSE(std::filesystem::exists(dir / "x.h5"));
 }
 

@@ -12,7 +12,10 @@
 #include <tuple>
 
 #include "core/base/errors.hpp"
+#include "core/calib/nominal_calibration.hpp"
 #include "core/optics/camera_file.hpp"
+#include "core/recon/active_set.hpp"
+#include "core/recon/explicit_matrix.hpp"
 #include "core/recon/mart.hpp"
 #include "core/recon/quality.hpp"
 #include "core/recon/weights.hpp"
@@ -36,7 +39,7 @@ Grid3 centred_grid(int n, int nz, double dz, double z0) {
 
 WeightingOperator make_operator(const optics::CameraModel& cam, const Grid3& g) {
   const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(cam));
-  return WeightingOperator(cam, lenses, g, geometric_white_image(cam, lenses));
+  return WeightingOperator(cam, lenses, g, calib::geometric_white_image(cam, lenses));
 }
 
 // Particles as Gaussian blobs (sigma in voxels) at voxel positions: the truth for Q*.
@@ -266,9 +269,9 @@ TEST(WeightsInput, AngularSamplingScalesTheSamplesOfEverySlice) {
   const auto cam = small_camera();
   const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(cam));
   const Grid3 g = centred_grid(4, 2, 9, 0);  // slices from -4 to +4 mm: the sec 5.2 count varies
-  const WeightingOperator base(cam, lenses, g, geometric_white_image(cam, lenses));
-  const WeightingOperator fine(cam, lenses, g, geometric_white_image(cam, lenses), 2.0);
-  const WeightingOperator coarse(cam, lenses, g, geometric_white_image(cam, lenses), 0.5);
+  const WeightingOperator base(cam, lenses, g, calib::geometric_white_image(cam, lenses));
+  const WeightingOperator fine(cam, lenses, g, calib::geometric_white_image(cam, lenses), 2.0);
+  const WeightingOperator coarse(cam, lenses, g, calib::geometric_white_image(cam, lenses), 0.5);
   for (int z = 0; z < g.shape[2]; ++z) {
     const int n = base.slice(z).samples;
     EXPECT_GE(n, base.geometry().nominal_samples) << "slice " << z;
@@ -277,7 +280,7 @@ TEST(WeightsInput, AngularSamplingScalesTheSamplesOfEverySlice) {
   }
   for (double bad : {0.0, -1.0, 9.0}) {
     try {
-      WeightingOperator(cam, lenses, g, geometric_white_image(cam, lenses), bad);
+      WeightingOperator(cam, lenses, g, calib::geometric_white_image(cam, lenses), bad);
       ADD_FAILURE() << bad;
     } catch (const InputError& e) {
       EXPECT_NE(std::string(e.what()).find("angular_sampling"), std::string::npos) << e.what();
@@ -553,7 +556,7 @@ TEST_F(Mart, RejectsNaNAndNegativePixelsAndBadSettings) {
       reconstruct(*op_, ImageF(850, 850, 1.f), blurred);
       ADD_FAILURE() << "sensor blur " << blur << " accepted";
     } catch (const InputError& e) {
-      EXPECT_NE(std::string(e.what()).find("sensor blur"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("sensor_blur_sigma_mm"), std::string::npos) << e.what();
     }
   }
 
@@ -751,7 +754,7 @@ double fig16_ncc(const optics::CameraModel& cam, const optics::MicrolensArray& l
   g.shape = {1, 1, 1};
   g.spacing_mm = {0.125, 0.125, 0.125};
   g.origin_mm = {0.3, -0.2, z};
-  const WeightingOperator op(cam, lenses, g, geometric_white_image(cam, lenses));
+  const WeightingOperator op(cam, lenses, g, calib::geometric_white_image(cam, lenses));
   std::vector<float> weights(op.pixel_count());
   op.project(std::vector<float>{1.f}, weights);
   apply_sensor_blur(op, sensor_blur_mm, weights);
@@ -826,7 +829,7 @@ TEST(MartFig21, SingleRayTracedParticlesAreFoundWhereTheyAre) {
   g.shape = {24, 24, 64};
   g.spacing_mm = {0.125, 0.125, 0.125};
   g.origin_mm = {-1.4375, -1.4375, -3.9375};  // +-1.5 mm laterally, -4..4 mm in depth
-  const WeightingOperator op(cam, lenses, g, geometric_white_image(cam, lenses));
+  const WeightingOperator op(cam, lenses, g, calib::geometric_white_image(cam, lenses));
   double worst_lateral = 0, worst_depth = 0;
   for (double z : {-3.0, -1.5, 1.0, 2.5, 3.5}) {
     const std::array<double, 3> p{0.21, -0.13, z};
@@ -888,7 +891,7 @@ TEST(MartSensorBlur, SpreadsAPixelAsAGaussianOfTheSigmaInPixels) {
 TEST(MartSensorBlur, TakesBackPartOfTheDiffractionDepthCompression) {
   const auto cam = small_camera();
   const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(cam));
-  const ImageF white = geometric_white_image(cam, lenses);
+  const ImageF white = calib::geometric_white_image(cam, lenses);
   const std::vector<double> depths{-8.0, -5.0, -3.0, -1.5, 1.5, 3.0, 5.0, 8.0};
   std::vector<ImageF> images;
   for (double z : depths) {

@@ -1,0 +1,310 @@
+// Building an ActiveSet: the voxels grouped by column in the kernels' visiting order, then each
+// column's share of each band of sensor rows (its visits, entries and reached rows), then the
+// bands and strips ordered by cost for sharing out.
+#include "core/recon/active_set.hpp"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <xmmintrin.h>
+
+#include <algorithm>
+#include <bit>
+#include <functional>
+#include <limits>
+#include <numeric>
+#include <utility>
+
+#include "core/base/errors.hpp"
+#include "core/recon/kernels.hpp"
+
+namespace plenopiv::recon {
+
+using kernels::kQuad;
+
+struct ActiveSet::BandPlan {
+  // Per column: the first and last band its voxels' rows reach.
+  std::vector<int> first_band, last_band;
+  // Per (column c, band b) "block": block_offset[c] + b - first_band[c]; its entry count (counted
+  // down again as fill_entries writes them).
+  std::vector<std::size_t> block_offset;
+  std::vector<std::uint32_t> block_entries;
+};
+
+namespace {
+
+// Calls entry(b, p, first quad, count) for each voxel p in [begin, end) of a column of slice `t`
+// (y of voxel p: order_y[p]) whose y quads reach band b (a quad may reach two bands: it is in
+// both), for bands [first_band, last_band] only: voxel by voxel in y order, each voxel's bands in
+// order, so the entries of one band keep y order.
+template <typename Entry>
+void walk_column(const SliceTables& t, std::uint32_t begin, std::uint32_t end, const int* order_y,
+                 int first_band, int last_band, int band_rows, int height, Entry&& entry) {
+  for (std::uint32_t p = begin; p < end; ++p) {
+    const std::size_t y = std::size_t(order_y[p]);
+    const std::size_t q0 = t.y_quad_start[y], q1 = t.y_quad_start[y + 1];
+    if (q0 == q1) continue;
+    const int b0 = std::max(first_band, t.y_quad_first[q0] / band_rows);
+    const int b1 = std::min(last_band, (t.y_quad_first[q1 - 1] + kQuad - 1) / band_rows);
+    std::size_t k = q0;
+    for (int b = b0; b <= b1; ++b) {
+      const int r0 = b * band_rows, r1 = std::min(height, r0 + band_rows);
+      while (k < q1 && t.y_quad_first[k] + kQuad <= r0) ++k;
+      std::size_t e = k;
+      while (e < q1 && t.y_quad_first[e] < r1) ++e;
+      if (e > k) entry(b, p, k, e - k);
+    }
+  }
+}
+
+}  // namespace
+
+ActiveSet::ActiveSet(const WeightingOperator& op, std::vector<std::uint32_t> voxels)
+    : voxels_(std::move(voxels)) {
+  check_voxels(op);
+  const BigBuffer<int> order_y = group_by_column(op);
+  bands_ = (op.image_height() + kBandRows - 1) / kBandRows;
+  BandPlan plan = plan_bands(op, order_y);
+  const std::vector<std::size_t> block_visit = lay_out_visits(plan);
+  fill_entries(op, order_y, plan, block_visit);
+  order_by_cost(op);
+}
+
+ActiveSet ActiveSet::all(const WeightingOperator& op) {
+  std::vector<std::uint32_t> v(op.grid().count());
+  for (std::size_t i = 0; i < v.size(); ++i) v[i] = std::uint32_t(i);
+  return ActiveSet(op, std::move(v));
+}
+
+void ActiveSet::check_voxels(const WeightingOperator& op) const {
+  if (std::adjacent_find(voxels_.begin(), voxels_.end(), std::greater_equal<>()) != voxels_.end() ||
+      (!voxels_.empty() && voxels_.back() >= op.grid().count())) {
+    throw InputError("active set: voxel indices must be distinct, increasing and inside the grid");
+  }
+}
+
+BigBuffer<int> ActiveSet::group_by_column(const WeightingOperator& op) {
+  const Grid3& g = op.grid();
+  const std::uint32_t nx = std::uint32_t(g.shape[0]), nz = std::uint32_t(g.shape[2]);
+  const std::uint32_t nxy = nx * std::uint32_t(g.shape[1]);
+  // 16 voxel x per strip, fewer on small grids so that there are at least 8 strips to share
+  // out; fixed by the grid, so the sums' order is too.
+  strip_x_ = std::clamp(int(nx) / 8, 1, 16);
+  strips_ = (int(nx) + strip_x_ - 1) / strip_x_;
+  const std::uint32_t sx = std::uint32_t(strip_x_);
+  // A voxel column's place in the visiting order: strip, depth, x within the strip.
+  auto key_of = [&](std::uint32_t x, std::uint32_t z) {
+    return (std::size_t(x / sx) * nz + z) * sx + x % sx;
+  };
+  // Group by voxel column in that order with a counting sort, slice by slice in parallel (the
+  // voxels are sorted, so each slice is one stretch of them): y stays increasing within a
+  // column. A voxel that sees no pixel (n = 0) takes no part; its value is 0.
+  std::vector<std::size_t> slice_begin(std::size_t(nz) + 1);
+  for (std::uint32_t z = 0; z <= nz; ++z) {
+    slice_begin[z] = std::size_t(
+        std::lower_bound(voxels_.begin(), voxels_.end(), std::uint64_t(z) * nxy) - voxels_.begin());
+  }
+  std::vector<std::uint32_t> column_count(std::size_t(nz) * nx, 0);  // [z][x]
+  tbb::parallel_for(std::uint32_t(0), nz, [&](std::uint32_t z) {
+    for (std::size_t m = slice_begin[z]; m < slice_begin[z + 1]; ++m) {
+      if (op.normaliser(voxels_[m]) > 0.f) ++column_count[std::size_t(z) * nx + voxels_[m] % nx];
+    }
+  });
+  std::vector<std::uint32_t> start(std::size_t(strips_) * nz * sx + 1, 0);
+  for (std::uint32_t z = 0; z < nz; ++z) {
+    for (std::uint32_t x = 0; x < nx; ++x) {
+      start[key_of(x, z) + 1] = column_count[std::size_t(z) * nx + x];
+    }
+  }
+  for (std::size_t c = 1; c < start.size(); ++c) start[c] += start[c - 1];
+  order_.resize(start.back());
+  order_normaliser_.resize(start.back());
+  BigBuffer<int> order_y(start.back());  // written in full below
+  tbb::parallel_for(std::uint32_t(0), nz, [&](std::uint32_t z) {
+    // Now each column's next place.
+    std::uint32_t* fill = column_count.data() + std::size_t(z) * nx;
+    for (std::uint32_t x = 0; x < nx; ++x) fill[x] = start[key_of(x, z)];
+    for (std::size_t m = slice_begin[z]; m < slice_begin[z + 1]; ++m) {
+      const std::uint32_t v = voxels_[m];
+      const float n = op.normaliser(v);
+      if (!(n > 0.f)) continue;
+      const std::uint32_t p = fill[v % nx]++;
+      order_[p] = std::uint32_t(m);
+      order_y[p] = int((v % nxy) / nx);
+      order_normaliser_[p] = n;
+    }
+  });
+  strip_columns_.assign(std::size_t(strips_) + 1, 0);
+  for (std::size_t key = 0; key + 1 < start.size(); ++key) {
+    if (start[key + 1] == start[key]) continue;
+    const std::size_t strip = key / (std::size_t(nz) * sx);
+    columns_.push_back(
+        Column{int((key / sx) % nz), int(strip * sx + key % sx), start[key], start[key + 1]});
+    strip_columns_[strip + 1] = std::uint32_t(columns_.size());
+  }
+  for (std::size_t s = 1; s <= std::size_t(strips_); ++s) {
+    strip_columns_[s] = std::max(strip_columns_[s], strip_columns_[s - 1]);
+  }
+  return order_y;
+}
+
+ActiveSet::BandPlan ActiveSet::plan_bands(const WeightingOperator& op,
+                                          const BigBuffer<int>& order_y) const {
+  const int height = op.image_height();
+  BandPlan plan;
+  plan.first_band.resize(columns_.size());
+  plan.last_band.resize(columns_.size());
+  // Entries per (column, band), counted in parallel over columns.
+  plan.block_offset.assign(columns_.size() + 1, 0);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, columns_.size(), 64),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+                      for (std::size_t c = range.begin(); c != range.end(); ++c) {
+                        const Column& col = columns_[c];
+                        const SliceTables& t = op.slice(col.z);
+                        plan.first_band[c] = height;
+                        plan.last_band[c] = -1;
+                        for (std::uint32_t p = col.begin; p < col.end; ++p) {
+                          const WeightRun& run = t.y_runs[std::size_t(order_y[p])];
+                          plan.first_band[c] = std::min(plan.first_band[c], run.first / kBandRows);
+                          plan.last_band[c] = std::max(plan.last_band[c], run.last / kBandRows);
+                        }
+                        plan.block_offset[c + 1] =
+                            std::size_t(plan.last_band[c] - plan.first_band[c] + 1);
+                      }
+                    });
+  for (std::size_t c = 0; c < columns_.size(); ++c)
+    plan.block_offset[c + 1] += plan.block_offset[c];
+  plan.block_entries.assign(plan.block_offset.back(), 0);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, columns_.size(), 64),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+                      for (std::size_t c = range.begin(); c != range.end(); ++c) {
+                        const Column& col = columns_[c];
+                        const std::size_t offset = plan.block_offset[c];
+                        const int first = plan.first_band[c];
+                        walk_column(op.slice(col.z), col.begin, col.end, order_y.data(), first,
+                                    plan.last_band[c], kBandRows, height,
+                                    [&](int b, std::uint32_t, std::size_t, std::size_t) {
+                                      ++plan.block_entries[offset + std::size_t(b - first)];
+                                    });
+                      }
+                    });
+  return plan;
+}
+
+std::vector<std::size_t> ActiveSet::lay_out_visits(const BandPlan& plan) {
+  // The visits in the order the kernels read them: band by band, then strip by strip, depth by
+  // depth, x by x (columns_'s order), each with its entries; counted, then laid out.
+  auto for_each_visit = [&](auto&& f) {
+    for (int b = 0; b < bands_; ++b) {
+      for (int s = 0; s < strips_; ++s) {
+        for (std::uint32_t c = strip_columns_[std::size_t(s)];
+             c < strip_columns_[std::size_t(s) + 1]; ++c) {
+          if (b < plan.first_band[c] || b > plan.last_band[c]) continue;
+          const std::size_t block = plan.block_offset[c] + std::size_t(b - plan.first_band[c]);
+          if (plan.block_entries[block] > 0) f(b, s, c, block);
+        }
+      }
+    }
+  };
+  visit_start_.assign(std::size_t(bands_) * std::size_t(strips_) + 1, 0);
+  for_each_visit([&](int b, int s, std::uint32_t, std::size_t) {
+    ++visit_start_[std::size_t(b) * std::size_t(strips_) + std::size_t(s) + 1];
+  });
+  for (std::size_t i = 1; i < visit_start_.size(); ++i) visit_start_[i] += visit_start_[i - 1];
+  visits_.resize(visit_start_.back());
+  std::vector<std::size_t> block_visit(plan.block_offset.back());
+  std::size_t next_visit = 0, next_entry = 0;
+  for_each_visit([&](int, int, std::uint32_t c, std::size_t block) {
+    if (next_entry + plan.block_entries[block] > std::numeric_limits<std::uint32_t>::max()) {
+      throw InputError(
+          "reconstruction: more than 2^32 voxel-band entries; use a coarser volume grid");
+    }
+    Visit& v = visits_[next_visit];
+    v.column = c;
+    v.entry_begin = std::uint32_t(next_entry);
+    next_entry += plan.block_entries[block];
+    v.entry_end = std::uint32_t(next_entry);
+    v.rows = {};
+    block_visit[block] = next_visit++;
+  });
+  entries_.resize(next_entry);
+  return block_visit;
+}
+
+void ActiveSet::fill_entries(const WeightingOperator& op, const BigBuffer<int>& order_y,
+                             BandPlan& plan, const std::vector<std::size_t>& block_visit) {
+  const int height = op.image_height();
+  tbb::parallel_for(
+      tbb::blocked_range<std::size_t>(0, columns_.size(), 64),
+      [&](const tbb::blocked_range<std::size_t>& range) {
+        for (std::size_t c = range.begin(); c != range.end(); ++c) {
+          const Column& col = columns_[c];
+          const SliceTables& t = op.slice(col.z);
+          const std::size_t offset = plan.block_offset[c];
+          const int first_band = plan.first_band[c];
+          walk_column(t, col.begin, col.end, order_y.data(), first_band, plan.last_band[c],
+                      kBandRows, height, [&](int b, std::uint32_t p, std::size_t k, std::size_t n) {
+                        const std::size_t block = offset + std::size_t(b - first_band);
+                        Visit& v = visits_[block_visit[block]];
+                        // In y order.
+                        entries_[v.entry_end - plan.block_entries[block]--] =
+                            BandEntry{p, std::uint32_t(k), std::uint32_t(n)};
+                        const int r0 = b * kBandRows, r1 = std::min(height, r0 + kBandRows);
+                        // The rows with weight, a quad's lanes at a time: bit j for row first + j,
+                        // without the lanes in the neighbouring bands.
+                        for (std::size_t q = k; q < k + n; ++q) {
+                          const float* w = t.y_quad_weights.data() + kQuad * q;
+                          // Bit j: lane j's weight is not 0 (one SSE compare, not four scalar
+                          // ones).
+                          std::uint64_t lanes = std::uint64_t(
+                              _mm_movemask_ps(_mm_cmpneq_ps(_mm_loadu_ps(w), _mm_setzero_ps())));
+                          int at = t.y_quad_first[q] - r0;
+                          if (at < 0) {
+                            lanes >>= -at;
+                            at = 0;
+                          }
+                          if (r1 - r0 - at < kQuad)
+                            lanes &= (std::uint64_t(1) << (r1 - r0 - at)) - 1;
+                          v.rows[std::size_t(at >> 6)] |= lanes << (at & 63);
+                          if ((at & 63) > 64 - kQuad && (at >> 6) + 1 < kRowWords) {
+                            v.rows[std::size_t(at >> 6) + 1] |= lanes >> (64 - (at & 63));
+                          }
+                        }
+                      });
+        }
+      });
+}
+
+void ActiveSet::order_by_cost(const WeightingOperator& op) {
+  // The work of each band and strip, estimated as the kernels' quad operations (rows reached
+  // times x quads) plus a share per entry.
+  std::vector<double> band_cost(std::size_t(bands_), 0.0), strip_cost(std::size_t(strips_), 0.0);
+  for (int b = 0; b < bands_; ++b) {
+    for (int s = 0; s < strips_; ++s) {
+      const std::size_t slot = std::size_t(b) * std::size_t(strips_) + std::size_t(s);
+      for (std::size_t i = visit_start_[slot]; i < visit_start_[slot + 1]; ++i) {
+        const Visit& v = visits_[i];
+        const Column& col = columns_[v.column];
+        const SliceTables& t = op.slice(col.z);
+        int rows = 0;
+        for (std::uint64_t word : v.rows) rows += std::popcount(word);
+        const std::size_t x_quads =
+            t.x_quad_start[std::size_t(col.x) + 1] - t.x_quad_start[std::size_t(col.x)];
+        const double cost =
+            double(rows) * double(x_quads + 2) + 8.0 * double(v.entry_end - v.entry_begin);
+        band_cost[std::size_t(b)] += cost;
+        strip_cost[std::size_t(s)] += cost;
+      }
+    }
+  }
+  auto costliest_first = [](const std::vector<double>& cost) {
+    std::vector<int> order(cost.size());
+    std::iota(order.begin(), order.end(), 0);
+    std::stable_sort(order.begin(), order.end(),
+                     [&](int a, int b) { return cost[std::size_t(a)] > cost[std::size_t(b)]; });
+    return order;
+  };
+  band_order_ = costliest_first(band_cost);
+  strip_order_ = costliest_first(strip_cost);
+}
+
+}  // namespace plenopiv::recon

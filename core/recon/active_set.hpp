@@ -1,0 +1,143 @@
+// The voxels a reconstruction solves, laid out for the two-stage separable kernels, and the
+// matrix-free projection W·E and back-projection Wᵀ·r over them.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <functional>
+#include <span>
+#include <vector>
+
+#include "core/base/big_buffer.hpp"
+#include "core/recon/weights.hpp"
+
+namespace plenopiv::recon {
+
+// A set of voxels that take part in a reconstruction (sorted flat indices), grouped by voxel
+// column (z, x) and by bands of sensor rows for the two-stage separable kernels.
+//
+// Per column the kernels factor the weights: projection forms G(row) = Σ_y Ay_y(row) E_y / n_y
+// over the column's voxels, then adds G(row) · Ax(col) once per row; back-projection forms
+// B(row) = Σ_col Ax(col) r(row, col) once per row, then Σ_row Ay_y(row) B(row) per voxel. That
+// costs (rows any voxel of the column reaches) x |Ax| instead of Σ_voxels |Ay| x |Ax|: never
+// more (a column with one voxel is the per-voxel form), less the more the column's voxels
+// overlap on the sensor. Both walk the sensor in bands of rows and the voxels in strips of x so
+// that the pixels and weights they touch stay in cache: projection band by band (a band owns
+// its rows: no atomics), back-projection strip by strip (a strip owns its voxels, each summed
+// band after band). Within a band the x stages take a few dozen columns at a time, 16 rows at a
+// time, so the pixels those columns share stay in L1. They work on the image in row lanes (each
+// block of 16 rows stored column by column), so one x weight meets 16 rows in one vector
+// operation; every pixel and voxel still gets its sums in the same order as row by row.
+// docs/recon.md, "The kernels", has the layout and its reasons.
+class ActiveSet {
+ public:
+  // `voxels`: flat indices into the operator's grid, strictly increasing (InputError otherwise).
+  ActiveSet(const WeightingOperator& op, std::vector<std::uint32_t> voxels);
+  static ActiveSet all(const WeightingOperator& op);
+
+  const std::vector<std::uint32_t>& voxels() const { return voxels_; }
+  std::size_t size() const { return voxels_.size(); }
+
+  // Buffers a pass needs (E / n in column order, the per-voxel sums, the images in row lanes),
+  // kept by whoever runs many passes (MART) so that a pass neither allocates nor page-faults them.
+  struct Workspace {
+    BigBuffer<float> scaled;
+    BigBuffer<double> sums;
+    // The kernels' x stages take images in row lanes (blocks of 16 rows stored column by
+    // column): one band per thread for a projection, the whole images for a back-projection.
+    BigBuffer<float> band_lanes, image_lanes;
+  };
+  // Called once per band of sensor rows, pixels [first_pixel, end_pixel), as soon as a projection
+  // has finished them, on the thread that computed them: per-pixel work on the projection while
+  // the band is in cache. Bands are numbered 0..band_count() - 1 and cover the image in order.
+  using BandDone = std::function<void(int band, std::size_t first_pixel, std::size_t end_pixel)>;
+  int band_count() const { return bands_; }
+
+  // image = W·values (values per active voxel, image of the sensor's size, overwritten).
+  void project(const WeightingOperator& op, std::span<const float> values, std::span<float> image,
+               Workspace* workspace = nullptr, const BandDone& band_done = {}) const;
+  // values = Wᵀ·image for the active voxels. The image must be finite: the 4-pixel quads also
+  // read a few pixels beside a voxel's segments, with weight 0.
+  void back_project(const WeightingOperator& op, std::span<const float> image,
+                    std::span<float> values) const;
+  // The same for an image already multiplied pixel by pixel by the white correction (saves a
+  // pass and a buffer inside MART's loop).
+  void back_project_whitened(const WeightingOperator& op, std::span<const float> whitened_image,
+                             std::span<float> values, Workspace* workspace = nullptr) const;
+  // Two whitened images in one walk (MLOS needs the lit mask's and ln I's): each result has the
+  // same bits as its own back_project_whitened; the bookkeeping is paid once.
+  void back_project_whitened(const WeightingOperator& op, std::span<const float> whitened_a,
+                             std::span<float> values_a, std::span<const float> whitened_b,
+                             std::span<float> values_b, Workspace* workspace = nullptr) const;
+
+ private:
+  // One voxel column (z, x) of the set: its voxels are order_[begin, end), y increasing.
+  struct Column {
+    int z = 0, x = 0;
+    std::uint32_t begin = 0, end = 0;
+  };
+  // One voxel of a column in one band: its y quads that overlap the band (into its slice's
+  // y_quad_first / y_quad_weights).
+  struct BandEntry {         // no initialisers: millions are allocated, then each written once
+    std::uint32_t position;  // in order_
+    std::uint32_t quad_begin;
+    std::uint32_t quad_count;
+  };
+  // Sensor rows per band. Few bands per voxel keep the per-band bookkeeping small; the pixels a
+  // strip of voxel x reaches in one band stay in L2 (docs/recon.md, "Order and cache").
+  static constexpr int kBandRows = 256;
+  static constexpr int kRowWords = kBandRows / 64;
+  // One column's share of one band, as the kernels visit it: its entries and, as bits, the band's
+  // rows its voxels reach (the rows the two-stage kernels touch).
+  struct Visit {                                // no initialisers, as BandEntry
+    std::uint32_t column;                       // into columns_
+    std::uint32_t entry_begin, entry_end;       // into entries_
+    std::array<std::uint64_t, kRowWords> rows;  // bit r: row r0 + r of the band
+  };
+  // The construction's bookkeeping per column and band (active_set.cpp).
+  struct BandPlan;
+
+  // The construction, step by step (active_set.cpp).
+  void check_voxels(const WeightingOperator& op) const;
+  // order_, order_normaliser_, columns_ and the strips; returns each ordered voxel's y.
+  BigBuffer<int> group_by_column(const WeightingOperator& op);
+  // Which bands each column's voxels reach, and how many entries each (column, band) holds.
+  BandPlan plan_bands(const WeightingOperator& op, const BigBuffer<int>& order_y) const;
+  // visit_start_ and visits_ (without their rows) in the kernels' reading order.
+  std::vector<std::size_t> lay_out_visits(const BandPlan& plan);
+  // entries_ and each visit's reached rows.
+  void fill_entries(const WeightingOperator& op, const BigBuffer<int>& order_y, BandPlan& plan,
+                    const std::vector<std::size_t>& block_visit);
+  // band_order_ and strip_order_: costliest first.
+  void order_by_cost(const WeightingOperator& op);
+
+  std::vector<std::uint32_t> voxels_;
+  // Voxels with a positive normaliser, in the kernels' visiting order (strip, depth, x, then y
+  // increasing): position in voxels_ and n. A pass reads and writes its per-voxel arrays front to
+  // back, and each strip owns one contiguous range of them.
+  BigBuffer<std::uint32_t> order_;
+  BigBuffer<float> order_normaliser_;
+  std::vector<Column> columns_;  // in the same order
+  // Voxel x per strip: within a band the kernels walk strip by strip, depth by depth, x by x, so
+  // the y weights of one depth serve the whole strip and the pixels under the strip stay cached.
+  int strip_x_ = 1;
+  int strips_ = 0;
+  int bands_ = 0;
+  std::vector<int> band_order_, strip_order_;  // the order passes hand them out: costliest first
+  // strip s owns columns_[strip_columns_[s], strip_columns_[s + 1])
+  std::vector<std::uint32_t> strip_columns_;
+  // The visits of band b and strip s are visits_[visit_start_[b * strips_ + s],
+  // visit_start_[b * strips_ + s + 1]); visits and their entries lie in the kernels' reading
+  // order (band, strip, depth, x), so a pass streams through both.
+  std::vector<std::size_t> visit_start_;
+  BigBuffer<Visit> visits_;
+  BigBuffer<BandEntry> entries_;
+
+  // Back-projection of N whitened images at once (N = 1 or 2).
+  template <std::size_t N>
+  void back_project_images(const WeightingOperator& op, const std::array<const float*, N>& images,
+                           const std::array<float*, N>& values, Workspace& workspace) const;
+};
+
+}  // namespace plenopiv::recon

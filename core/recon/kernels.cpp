@@ -1,0 +1,275 @@
+// The reconstruction's vector micro-kernels: the x stages of the passes over row lanes and the
+// row-major quad dot products of the eq 13 normalisers, each built for several instruction sets
+// by GCC's function multiversioning (an ifunc resolved once at load time).
+#include "core/recon/kernels.hpp"
+
+#include <algorithm>
+
+namespace plenopiv::recon::kernels {
+namespace {
+
+// Row-major dot products over quads, for the eq 13 normalisers (one sensor row against every
+// voxel x of a slice), in two builds: the baseline x86-64 one works one quad (one SSE vector) at
+// a time; the AVX2 one pairs two quads in one 8-lane vector. Both do the same float operations
+// in the same order (a multiply, then an add), so they give the same bits; the passes' x stages
+// use the same order per row.
+using Lanes8 = float __attribute__((vector_size(32)));
+
+__attribute__((target("avx2"), always_inline)) inline Lanes8 load_pair(const float* lo,
+                                                                       const float* hi) {
+  Lanes4 a, b;
+  __builtin_memcpy(&a, lo, sizeof a);
+  __builtin_memcpy(&b, hi, sizeof b);
+  return __builtin_shufflevector(a, b, 0, 1, 2, 3, 4, 5, 6, 7);
+}
+__attribute__((target("avx2"), always_inline)) inline Lanes8 load8(const float* p) {
+  Lanes8 v;
+  __builtin_memcpy(&v, p, sizeof v);
+  return v;
+}
+
+// Σ_k Σ_j w[4 k + j] row[first[k] + j], in two vector
+// accumulators (even and odd quads) so consecutive adds do not wait on each other; a fixed order.
+inline float dot_quads_base(const float* row, const int* first, const float* w, std::size_t n) {
+  float even[kQuad] = {0.f, 0.f, 0.f, 0.f}, odd[kQuad] = {0.f, 0.f, 0.f, 0.f};
+  std::size_t k = 0;
+  for (; k + 2 <= n; k += 2) {
+    const float* p0 = row + first[k];
+    const float* p1 = row + first[k + 1];
+    const float* w0 = w + kQuad * k;
+    for (int j = 0; j < kQuad; ++j) {
+      even[j] += w0[j] * p0[j];
+      odd[j] += w0[kQuad + j] * p1[j];
+    }
+  }
+  if (k < n) {
+    const float* p0 = row + first[k];
+    const float* w0 = w + kQuad * k;
+    for (int j = 0; j < kQuad; ++j) even[j] += w0[j] * p0[j];
+  }
+  // Lanes added as one vector, then pairwise: the same order as adding them one by one.
+  float lane[kQuad];
+  for (int j = 0; j < kQuad; ++j) lane[j] = even[j] + odd[j];
+  return (lane[0] + lane[1]) + (lane[2] + lane[3]);
+}
+// The same sums: the even quads in lanes 0-3, the odd ones in lanes 4-7.
+__attribute__((target("avx2"), always_inline)) inline float dot_quads_avx2(const float* row,
+                                                                           const int* first,
+                                                                           const float* w,
+                                                                           std::size_t n) {
+  Lanes8 acc = {0.f, 0.f, 0.f, 0.f, 0.f, 0.f, 0.f, 0.f};
+  std::size_t k = 0;
+  for (; k + 2 <= n; k += 2)
+    acc += load8(w + kQuad * k) * load_pair(row + first[k], row + first[k + 1]);
+  Lanes4 even = __builtin_shufflevector(acc, acc, 0, 1, 2, 3);
+  const Lanes4 odd = __builtin_shufflevector(acc, acc, 4, 5, 6, 7);
+  if (k < n) {
+    Lanes4 p, wk;
+    __builtin_memcpy(&p, row + first[k], sizeof p);
+    __builtin_memcpy(&wk, w + kQuad * k, sizeof wk);
+    even += wk * p;
+  }
+  const Lanes4 lane = even + odd;
+  return (lane[0] + lane[1]) + (lane[2] + lane[3]);
+}
+
+// The same for two rows at once, each with dot_quads_avx2's sums in its order.
+__attribute__((target("avx2"), always_inline)) inline void dot_quads2_avx2(
+    const float* row_a, const float* row_b, const int* first, const float* w, std::size_t n,
+    float* out_a, float* out_b) {
+  Lanes8 acc_a = {0.f, 0.f, 0.f, 0.f, 0.f, 0.f, 0.f, 0.f}, acc_b = acc_a;
+  std::size_t k = 0;
+  for (; k + 2 <= n; k += 2) {
+    const int f0 = first[k], f1 = first[k + 1];
+    const Lanes8 wk = load8(w + kQuad * k);
+    acc_a += wk * load_pair(row_a + f0, row_a + f1);
+    acc_b += wk * load_pair(row_b + f0, row_b + f1);
+  }
+  Lanes4 even_a = __builtin_shufflevector(acc_a, acc_a, 0, 1, 2, 3),
+         even_b = __builtin_shufflevector(acc_b, acc_b, 0, 1, 2, 3);
+  const Lanes4 odd_a = __builtin_shufflevector(acc_a, acc_a, 4, 5, 6, 7),
+               odd_b = __builtin_shufflevector(acc_b, acc_b, 4, 5, 6, 7);
+  if (k < n) {
+    Lanes4 pa, pb, wk;
+    __builtin_memcpy(&pa, row_a + first[k], sizeof pa);
+    __builtin_memcpy(&pb, row_b + first[k], sizeof pb);
+    __builtin_memcpy(&wk, w + kQuad * k, sizeof wk);
+    even_a += wk * pa;
+    even_b += wk * pb;
+  }
+  const Lanes4 lane_a = even_a + odd_a, lane_b = even_b + odd_b;
+  *out_a = (lane_a[0] + lane_a[1]) + (lane_a[2] + lane_a[3]);
+  *out_b = (lane_b[0] + lane_b[1]) + (lane_b[2] + lane_b[3]);
+}
+
+using Rows = float __attribute__((vector_size(kSubRows * sizeof(float))));
+using RowBits = std::int32_t __attribute__((vector_size(kSubRows * sizeof(std::int32_t))));
+constexpr std::uint64_t kSubMask = ~std::uint64_t(0) >> (64 - kSubRows);
+
+// acc[l] += w[l] · (column l of a quad, kSubRows rows), skipping zero weights.
+__attribute__((always_inline)) inline void dot_quad(Rows* acc, const float* at, const float* w) {
+#pragma GCC unroll 4
+  for (int l = 0; l < kQuad; ++l) {
+    if (w[l] == 0.f) continue;
+    Rows p;
+    __builtin_memcpy(&p, at + l * kSubRows, sizeof p);
+    acc[l] += p * w[l];
+  }
+}
+
+// Projection stage 2 (add_columns in kernels.hpp), in every build.
+__attribute__((target_clones("avx512f", "avx2", "default"))) void add_columns_isa(
+    float* band, std::size_t width, int words, const ColumnJob* jobs, int count) {
+  for (int word = 0; word < words; ++word) {
+    for (int sub = 0; sub < 64; sub += kSubRows) {
+      float* block = band + std::size_t(64 * word + sub) * width;
+      for (int v = 0; v < count; ++v) {
+        const ColumnJob& j = jobs[v];
+        if (((j.rows[word] >> sub) & kSubMask) == 0) continue;
+        float* g = j.sums[0] + 64 * word + sub;
+        Rows gv;
+        __builtin_memcpy(&gv, g, sizeof gv);
+        std::fill_n(g, kSubRows, 0.f);
+        for (std::size_t k = 0; k < j.n; ++k) {
+          float* at = block + std::size_t(j.first[k]) * kSubRows;
+          const float* w = j.w + kQuad * k;
+#pragma GCC unroll 4
+          for (int l = 0; l < kQuad; ++l) {
+            if (w[l] == 0.f) continue;
+            Rows p;
+            __builtin_memcpy(&p, at + l * kSubRows, sizeof p);
+            p += gv * w[l];
+            __builtin_memcpy(at + l * kSubRows, &p, sizeof p);
+          }
+        }
+      }
+    }
+  }
+}
+
+// Back-projection stage 1 (dot_columns in kernels.hpp), in every build: each row's sum in
+// dot_quads_base's order, lane j of the even quads and of the odd ones in eight accumulators,
+// then even + odd and the lanes pairwise.
+__attribute__((target_clones("avx512f", "avx2", "default"))) void dot_columns_isa(
+    const float* const* band, int images, std::size_t width, int words, const ColumnJob* jobs,
+    int count) {
+  RowBits lane_bit;
+  for (int l = 0; l < kSubRows; ++l) lane_bit[l] = 1 << l;
+  for (int word = 0; word < words; ++word) {
+    for (int sub = 0; sub < 64; sub += kSubRows) {
+      const std::size_t block = std::size_t(64 * word + sub) * width;
+      for (int v = 0; v < count; ++v) {
+        const ColumnJob& j = jobs[v];
+        const std::int32_t bits = std::int32_t((j.rows[word] >> sub) & kSubMask);
+        if (bits == 0) continue;
+        const RowBits reached = (RowBits{} + bits) & lane_bit;
+        for (int i = 0; i < images; ++i) {
+          const float* lanes = band[i] + block;
+          Rows even[kQuad] = {}, odd[kQuad] = {};
+          std::size_t k = 0;
+          for (; k + 2 <= j.n; k += 2) {
+            dot_quad(even, lanes + std::size_t(j.first[k]) * kSubRows, j.w + kQuad * k);
+            dot_quad(odd, lanes + std::size_t(j.first[k + 1]) * kSubRows, j.w + kQuad * (k + 1));
+          }
+          if (k < j.n) dot_quad(even, lanes + std::size_t(j.first[k]) * kSubRows, j.w + kQuad * k);
+          const Rows lane0 = even[0] + odd[0], lane1 = even[1] + odd[1];
+          const Rows lane2 = even[2] + odd[2], lane3 = even[3] + odd[3];
+          const Rows sum = (lane0 + lane1) + (lane2 + lane3);
+          const Rows kept = reached != 0 ? sum : Rows{};
+          __builtin_memcpy(j.sums[std::size_t(i)] + 64 * word + sub, &kept, sizeof kept);
+        }
+      }
+    }
+  }
+}
+
+// The eq 13 normalisers' first stage (dot_slice_rows in kernels.hpp) in two hand-written builds.
+__attribute__((target("default"))) void dot_slice_rows_isa(const float* row_a, const float* row_b,
+                                                           const std::size_t* start,
+                                                           const int* first, const float* w, int nx,
+                                                           double* out_a, double* out_b) {
+  for (int x = 0; x < nx; ++x) {
+    const std::size_t q0 = start[x], n = start[x + 1] - q0;
+    out_a[x] = dot_quads_base(row_a, first + q0, w + kQuad * q0, n);
+    if (row_b) out_b[x] = dot_quads_base(row_b, first + q0, w + kQuad * q0, n);
+  }
+}
+__attribute__((target("avx2"))) void dot_slice_rows_isa(const float* row_a, const float* row_b,
+                                                        const std::size_t* start, const int* first,
+                                                        const float* w, int nx, double* out_a,
+                                                        double* out_b) {
+  for (int x = 0; x < nx; ++x) {
+    const std::size_t q0 = start[x], n = start[x + 1] - q0;
+    if (row_b) {
+      float a, b;
+      dot_quads2_avx2(row_a, row_b, first + q0, w + kQuad * q0, n, &a, &b);
+      out_a[x] = a;
+      out_b[x] = b;
+    } else {
+      out_a[x] = dot_quads_avx2(row_a, first + q0, w + kQuad * q0, n);
+    }
+  }
+}
+
+}  // namespace
+
+// `count` image rows from `rows` -> row lanes from `lanes`; the rest of the last block is 0.
+void rows_to_lanes(const float* rows, std::size_t width, int count, float* lanes) {
+  for (int b0 = 0; b0 < count; b0 += kSubRows) {
+    float* block = lanes + std::size_t(b0) * width;
+    const int in_block = std::min(kSubRows, count - b0);
+    for (std::size_t c0 = 0; c0 < width; c0 += kSubRows) {
+      const std::size_t c1 = std::min(width, c0 + kSubRows);
+      for (int l = 0; l < in_block; ++l) {
+        const float* in = rows + std::size_t(b0 + l) * width;
+        for (std::size_t c = c0; c < c1; ++c) block[c * kSubRows + std::size_t(l)] = in[c];
+      }
+      for (int l = in_block; l < kSubRows; ++l) {
+        for (std::size_t c = c0; c < c1; ++c) block[c * kSubRows + std::size_t(l)] = 0.f;
+      }
+    }
+  }
+}
+// The way back: row lanes from `lanes` -> `count` image rows from `rows`.
+void lanes_to_rows(const float* lanes, std::size_t width, int count, float* rows) {
+  for (int b0 = 0; b0 < count; b0 += kSubRows) {
+    const float* block = lanes + std::size_t(b0) * width;
+    const int in_block = std::min(kSubRows, count - b0);
+    for (std::size_t c0 = 0; c0 < width; c0 += kSubRows) {
+      const std::size_t c1 = std::min(width, c0 + kSubRows);
+      for (int l = 0; l < in_block; ++l) {
+        float* out = rows + std::size_t(b0 + l) * width;
+        for (std::size_t c = c0; c < c1; ++c) out[c] = block[c * kSubRows + std::size_t(l)];
+      }
+    }
+  }
+}
+
+void add_columns(float* band, std::size_t width, int words, const ColumnJob* jobs, int count) {
+  add_columns_isa(band, width, words, jobs, count);
+}
+
+void dot_columns(const float* const* band, int images, std::size_t width, int words,
+                 const ColumnJob* jobs, int count) {
+  dot_columns_isa(band, images, width, words, jobs, count);
+}
+
+void dot_slice_rows(const float* row_a, const float* row_b, const std::size_t* start,
+                    const int* first, const float* w, int nx, double* out_a, double* out_b) {
+  dot_slice_rows_isa(row_a, row_b, start, first, w, nx, out_a, out_b);
+}
+
+// 4 pixels per vector (-O2 leaves the plain loop scalar).
+void white_band(float* image, const float* white, std::size_t n) {
+  std::size_t i = 0;
+  for (; i + kQuad <= n; i += kQuad) {
+    Lanes4 p, w;
+    __builtin_memcpy(&p, image + i, sizeof p);
+    __builtin_memcpy(&w, white + i, sizeof w);
+    p *= w;
+    __builtin_memcpy(image + i, &p, sizeof p);
+  }
+  for (; i < n; ++i) image[i] *= white[i];
+}
+
+}  // namespace plenopiv::recon::kernels

@@ -1,0 +1,86 @@
+// The reconstruction's vector micro-kernels and their data layout (quads of 4 weights, row lanes
+// of 16 sensor rows, chunks of visits), built for AVX-512, AVX2 and baseline x86-64 and chosen at
+// run time. Internal to core/recon.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+
+#include "core/recon/weights.hpp"
+
+namespace plenopiv::recon::kernels {
+
+// Pixels per quad: one SSE vector, and at least as long as most segments away from focus (2-4
+// pixels behind each lens on the paper's camera beyond 5 mm from focus).
+inline constexpr int kQuad = 4;
+// The x stages take kChunk visits (voxel columns in one band) at a time and walk them one block
+// of kSubRows sensor rows at a time, so that the pixels those visits share in those rows (a few
+// KB) stay in L1 instead of being fetched again for every column (docs/recon.md, "Order and
+// cache"). kSubRows is also the width of the row lanes (below): one AVX-512 register of floats.
+inline constexpr int kChunk = 32;
+inline constexpr int kSubRows = 16;
+static_assert(64 % kSubRows == 0 && kSubRows <= 64);
+
+using Lanes4 = float __attribute__((vector_size(16)));
+using Doubles4 = double __attribute__((vector_size(32)));
+
+// One visit of a chunk as the x stages see it: its row sums over the band (G for the
+// projection; B, per image, for the back-projection; pointing at the band's first row), the
+// band's rows it reaches (one bit per row, `words` 64-bit words), and its column's x quads.
+struct ColumnJob {
+  std::array<float*, 2> sums;
+  const std::uint64_t* rows;
+  const int* first;
+  const float* w;
+  std::size_t n;
+};
+// The job of voxel column x of slice `t` reaching the band rows `rows`, its sums not yet set.
+inline ColumnJob x_job(const SliceTables& t, int x, const std::uint64_t* rows) {
+  const std::size_t q0 = t.x_quad_start[std::size_t(x)];
+  const std::size_t q1 = t.x_quad_start[std::size_t(x) + 1];
+  return ColumnJob{{nullptr, nullptr},
+                   rows,
+                   t.x_quad_first.data() + q0,
+                   t.x_quad_weights.data() + kQuad * q0,
+                   q1 - q0};
+}
+
+// The x stages work on images in "row lanes": each block of kSubRows sensor rows stored column
+// by column, the block's kSubRows pixels of one column side by side, so pixel (r, c) is at
+// ((r / kSubRows) * width + c) * kSubRows + r % kSubRows. One x weight then meets all of a
+// block's rows in one 16-lane vector operation (one AVX-512 register, two AVX2 ones) instead of
+// one 4-pixel quad per row.
+//
+// `count` image rows from `rows` -> row lanes from `lanes`; the rest of the last block is 0.
+void rows_to_lanes(const float* rows, std::size_t width, int count, float* lanes);
+// The way back: row lanes from `lanes` -> `count` image rows from `rows`.
+void lanes_to_rows(const float* lanes, std::size_t width, int count, float* rows);
+
+// The dispatched kernels (GCC's function multiversioning, resolved once at load time): one call
+// per chunk of visits in a band, so the loops over blocks, visits and weights run inside the
+// chosen build. Every build does the same float operations in the same order on each lane (a
+// multiply, then an add; core/recon is built with -ffp-contract=off, so nothing is fused), so
+// all give the same bits. A zero weight (a quad's padding) is skipped: it would add +0.
+//
+// Projection stage 2: lanes(r, ·) += G(r) Ax over the band's blocks of kSubRows rows that a
+// visit reaches, resetting G there. `band` points at the band's first block; every pixel gets
+// its visits' additions in visiting order, its quads' in quad order.
+void add_columns(float* band, std::size_t width, int words, const ColumnJob* jobs, int count);
+// Back-projection stage 1: B_i[r] = Σ_col Ax r_i(r, col) over the blocks a visit reaches, for
+// `images` (1 or 2) lanes images whose bands start at band[i]; rows the visit does not reach
+// are set to 0. Each row's sum in dot_quads order (below).
+void dot_columns(const float* const* band, int images, std::size_t width, int words,
+                 const ColumnJob* jobs, int count);
+
+// The eq 13 normalisers' first stage: out[x] = Σ_col Ax_x(col) row(col) for every voxel x of a
+// slice (its quads [start[x], start[x + 1])), for two rows at once (row_b null: one row). Each
+// sum runs lane j of the even quads and of the odd ones in separate accumulators, then even +
+// odd and the lanes pairwise; the same bits in every build.
+void dot_slice_rows(const float* row_a, const float* row_b, const std::size_t* start,
+                    const int* first, const float* w, int nx, double* out_a, double* out_b);
+
+// image[i] *= white[i] over n pixels.
+void white_band(float* image, const float* white, std::size_t n);
+
+}  // namespace plenopiv::recon::kernels

@@ -1,0 +1,249 @@
+// The matrix-free passes over an ActiveSet: projection W·E band by band and back-projection
+// Wᵀ·r strip by strip, each in a fixed order of sums whatever the thread count.
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/partitioner.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <vector>
+
+#include "core/recon/active_set.hpp"
+#include "core/recon/kernels.hpp"
+
+namespace plenopiv::recon {
+
+using kernels::ColumnJob;
+using kernels::Doubles4;
+using kernels::kChunk;
+using kernels::kQuad;
+using kernels::Lanes4;
+using kernels::x_job;
+
+namespace {
+
+// Runs f(item) for every item on the arena's threads, each thread taking the next item of the
+// list when it is free. With the costliest items first, a pass ends on short ones instead of
+// leaving a core idle while the other finishes a long last band or strip. Which thread runs an
+// item does not change any sum.
+template <typename F>
+void run_costliest_first(const std::vector<int>& items, F&& f) {
+  std::atomic<std::size_t> next{0};
+  const int workers =
+      std::max(1, std::min(tbb::this_task_arena::max_concurrency(), int(items.size())));
+  tbb::parallel_for(
+      0, workers,
+      [&](int) {
+        for (std::size_t i = next++; i < items.size(); i = next++) f(items[i]);
+      },
+      tbb::simple_partitioner());
+}
+
+}  // namespace
+
+void ActiveSet::project(const WeightingOperator& op, std::span<const float> values,
+                        std::span<float> image, Workspace* workspace,
+                        const BandDone& band_done) const {
+  const std::size_t width = std::size_t(op.image_width());
+  const int height = op.image_height();
+  Workspace local;
+  Workspace& ws = workspace ? *workspace : local;
+  // E / n once per voxel, in visiting order.
+  auto& scaled = ws.scaled;
+  scaled.resize(order_.size());
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, order_.size(), 1 << 14),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      for (std::size_t p = r.begin(); p != r.end(); ++p)
+                        scaled[p] = values[order_[p]] / order_normaliser_[p];
+                    });
+  const std::size_t band_size = std::size_t(kBandRows) * width;
+  ws.band_lanes.resize(std::size_t(tbb::this_task_arena::max_concurrency()) * band_size);
+  // Each band owns its sensor rows and adds its columns in a fixed order: no atomics, and the
+  // same sums whatever the thread count.
+  run_costliest_first(band_order_, [&](int b) {
+    const int r0 = b * kBandRows, r1 = std::min(height, r0 + kBandRows);
+    // The band in row lanes, this thread's own, copied into the image when finished.
+    float* lanes = ws.band_lanes.data() +
+                   std::size_t(tbb::this_task_arena::current_thread_index()) * band_size;
+    std::fill_n(lanes, band_size, 0.f);
+    // G(row) of kChunk consecutive visits over the band's rows, each with kQuad rows of margin on
+    // either side for the lanes of quads that straddle the band's edges (those belong to the
+    // neighbouring band). Zero between uses: stage 2 resets the rows it adds, then the margins.
+    std::array<std::array<float, kQuad + kBandRows + kQuad>, kChunk> padded_sums;
+    for (auto& p : padded_sums) p.fill(0.f);
+    const std::size_t v_begin = visit_start_[std::size_t(b) * std::size_t(strips_)];
+    const std::size_t v_end = visit_start_[std::size_t(b + 1) * std::size_t(strips_)];
+    for (std::size_t c0 = v_begin; c0 < v_end; c0 += kChunk) {
+      const std::size_t c1 = std::min(v_end, c0 + kChunk);
+      for (std::size_t v = c0; v < c1; ++v) {
+        const Visit& visit = visits_[v];
+        const SliceTables& t = op.slice(columns_[visit.column].z);
+        float* const column_sum = padded_sums[v - c0].data() + kQuad;
+        // Stage 1: G(row) = Σ_y Ay_y(row) E_y / n_y over the column's voxels that reach the band,
+        // one quad of rows at a time; a quad's padded lanes add s · 0 = +0, which leaves every sum
+        // as it was, so each row gets the same float additions in the same order as row by row.
+        for (std::size_t k = visit.entry_begin; k < visit.entry_end; ++k) {
+          const BandEntry& entry = entries_[k];
+          const float s = scaled[entry.position];
+          if (s == 0.f) continue;
+          const int* first = t.y_quad_first.data() + entry.quad_begin;
+          const float* w = t.y_quad_weights.data() + kQuad * std::size_t(entry.quad_begin);
+          for (std::uint32_t q = 0; q < entry.quad_count; ++q) {
+            float* g = column_sum + (first[q] - r0);
+            Lanes4 sum, wq;
+            __builtin_memcpy(&sum, g, sizeof sum);
+            __builtin_memcpy(&wq, w + kQuad * q, sizeof wq);
+            sum += s * wq;
+            __builtin_memcpy(g, &sum, sizeof sum);
+          }
+        }
+      }
+      // Stage 2: lanes(row, ·) += G(row) Ax over each 16-row block the column reaches (resets
+      // G there), one block at a time for all the chunk's visits, so the pixels they share stay
+      // in L1. Every pixel still gets its visits' additions in visiting order.
+      std::array<ColumnJob, kChunk> jobs;
+      for (std::size_t v = c0; v < c1; ++v) {
+        const Column& col = columns_[visits_[v].column];
+        jobs[v - c0] = x_job(op.slice(col.z), col.x, visits_[v].rows.data());
+        jobs[v - c0].sums[0] = padded_sums[v - c0].data() + kQuad;
+      }
+      kernels::add_columns(lanes, width, kRowWords, jobs.data(), int(c1 - c0));
+      for (std::size_t v = c0; v < c1; ++v) {
+        std::fill_n(padded_sums[v - c0].begin(), kQuad, 0.f);
+        std::fill_n(padded_sums[v - c0].end() - kQuad, kQuad, 0.f);
+      }
+    }
+    kernels::lanes_to_rows(lanes, width, r1 - r0, image.data() + std::size_t(r0) * width);
+    const float* white = op.white().pixels.data();
+    kernels::white_band(image.data() + std::size_t(r0) * width, white + std::size_t(r0) * width,
+                        std::size_t(r1 - r0) * width);
+    if (band_done) band_done(b, std::size_t(r0) * width, std::size_t(r1) * width);
+  });
+}
+
+void ActiveSet::back_project(const WeightingOperator& op, std::span<const float> image,
+                             std::span<float> values) const {
+  std::vector<float> whitened(image.size());
+  const float* white = op.white().pixels.data();
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, image.size(), 1 << 14),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      for (std::size_t i = r.begin(); i != r.end(); ++i)
+                        whitened[i] = image[i] * white[i];
+                    });
+  back_project_whitened(op, whitened, values);
+}
+
+void ActiveSet::back_project_whitened(const WeightingOperator& op, std::span<const float> image,
+                                      std::span<float> values, Workspace* workspace) const {
+  Workspace local;
+  back_project_images<1>(op, {image.data()}, {values.data()}, workspace ? *workspace : local);
+}
+
+void ActiveSet::back_project_whitened(const WeightingOperator& op,
+                                      std::span<const float> whitened_a, std::span<float> values_a,
+                                      std::span<const float> whitened_b, std::span<float> values_b,
+                                      Workspace* workspace) const {
+  Workspace local;
+  back_project_images<2>(op, {whitened_a.data(), whitened_b.data()},
+                         {values_a.data(), values_b.data()}, workspace ? *workspace : local);
+}
+
+template <std::size_t N>
+void ActiveSet::back_project_images(const WeightingOperator& op,
+                                    const std::array<const float*, N>& images,
+                                    const std::array<float*, N>& values,
+                                    Workspace& workspace) const {
+  static_assert(N == 1 || N == 2, "ColumnJob holds the sums of at most two images");
+  const std::size_t width = std::size_t(op.image_width());
+  for (float* v : values) std::fill(v, v + voxels_.size(), 0.f);  // voxels that see no pixel
+  // Per image and voxel in visiting order; each strip zeroes and sums its own range.
+  auto& sums = workspace.sums;
+  sums.resize(N * order_.size());
+  // The images in row lanes, band by band in parallel: the last block's rows past the sensor are
+  // 0; blocks wholly past it are left unwritten (no visit reaches them, so none is read).
+  const int height = op.image_height();
+  const std::size_t image_size = std::size_t(bands_) * std::size_t(kBandRows) * width;
+  workspace.image_lanes.resize(N * image_size);
+  tbb::parallel_for(0, int(N) * bands_, [&](int item) {
+    const std::size_t i = std::size_t(item / bands_);
+    const int r0 = (item % bands_) * kBandRows;
+    kernels::rows_to_lanes(images[i] + std::size_t(r0) * width, width,
+                           std::min(height, r0 + kBandRows) - r0,
+                           workspace.image_lanes.data() + i * image_size + std::size_t(r0) * width);
+  });
+  // Each strip owns its voxels (a contiguous range of order_), so their sums need no atomics,
+  // and every voxel adds its bands in order whatever the thread count.
+  run_costliest_first(strip_order_, [&](int strip) {
+    const std::uint32_t c0 = strip_columns_[std::size_t(strip)],
+                        c1 = strip_columns_[std::size_t(strip) + 1];
+    if (c0 == c1) return;
+    const std::uint32_t p0 = columns_[c0].begin, p1 = columns_[c1 - 1].end;
+    for (std::size_t i = 0; i < N; ++i)
+      std::fill_n(sums.begin() + std::ptrdiff_t(i * order_.size() + p0), p1 - p0, 0.0);
+    // B(row) of kChunk consecutive visits over the band's rows, with kQuad rows of margin on
+    // either side, all 0 except the rows the column reaches: the lanes of y quads outside the
+    // band, and their zero lanes on rows the column does not reach, then add 0 · 0 (a stale
+    // value from another column would give 0 too if finite, but not if a row sum overflowed).
+    std::array<std::array<std::array<float, kQuad + kBandRows + kQuad>, kChunk>, N> padded_sums;
+    for (int b = 0; b < bands_; ++b) {
+      const int r0 = b * kBandRows;
+      const std::size_t slot = std::size_t(b) * std::size_t(strips_) + std::size_t(strip);
+      for (std::size_t v0 = visit_start_[slot]; v0 < visit_start_[slot + 1]; v0 += kChunk) {
+        const std::size_t v1 = std::min(visit_start_[slot + 1], v0 + kChunk);
+        for (std::size_t i = 0; i < N; ++i) {
+          for (std::size_t v = v0; v < v1; ++v) padded_sums[i][v - v0].fill(0.f);
+        }
+        // Stage 1: B(row) = Σ_col Ax(col) r(row, col) over each 16-row block the column reaches
+        // (its unreached rows kept 0), one block at a time for all the chunk's visits, so the
+        // pixels they share stay in L1.
+        std::array<ColumnJob, kChunk> jobs;
+        for (std::size_t v = v0; v < v1; ++v) {
+          const Column& col = columns_[visits_[v].column];
+          jobs[v - v0] = x_job(op.slice(col.z), col.x, visits_[v].rows.data());
+          for (std::size_t i = 0; i < N; ++i)
+            jobs[v - v0].sums[i] = padded_sums[i][v - v0].data() + kQuad;
+        }
+        std::array<const float*, N> bands;
+        for (std::size_t i = 0; i < N; ++i)
+          bands[i] = workspace.image_lanes.data() + i * image_size + std::size_t(r0) * width;
+        kernels::dot_columns(bands.data(), int(N), width, kRowWords, jobs.data(), int(v1 - v0));
+        // Stage 2: per voxel Σ_row Ay(row) B(row) over the band's rows, one quad of rows at a
+        // time, lane after lane: the zero lanes add +0, so the sums are those row by row.
+        for (std::size_t v = v0; v < v1; ++v) {
+          const Visit& visit = visits_[v];
+          const SliceTables& t = op.slice(columns_[visit.column].z);
+          std::array<const float*, N> row_sum;
+          for (std::size_t i = 0; i < N; ++i) row_sum[i] = padded_sums[i][v - v0].data() + kQuad;
+          for (std::size_t k = visit.entry_begin; k < visit.entry_end; ++k) {
+            const BandEntry& entry = entries_[k];
+            const int* first = t.y_quad_first.data() + entry.quad_begin;
+            const float* w = t.y_quad_weights.data() + kQuad * std::size_t(entry.quad_begin);
+            std::array<double, N> s{};
+            for (std::uint32_t q = 0; q < entry.quad_count; ++q) {
+              Lanes4 wq;
+              __builtin_memcpy(&wq, w + kQuad * q, sizeof wq);
+              const Doubles4 wd = __builtin_convertvector(wq, Doubles4);
+              for (std::size_t i = 0; i < N; ++i) {
+                Lanes4 bq;
+                __builtin_memcpy(&bq, row_sum[i] + (first[q] - r0), sizeof bq);
+                // Products of floats are exact in double: only the order of the adds matters.
+                const Doubles4 p = wd * __builtin_convertvector(bq, Doubles4);
+                s[i] = (((s[i] + p[0]) + p[1]) + p[2]) + p[3];
+              }
+            }
+            for (std::size_t i = 0; i < N; ++i) sums[i * order_.size() + entry.position] += s[i];
+          }
+        }
+      }
+    }
+    for (std::size_t i = 0; i < N; ++i) {
+      for (std::uint32_t p = p0; p < p1; ++p) {
+        values[i][order_[p]] = float(sums[i * order_.size() + p] / order_normaliser_[p]);  // eq 13
+      }
+    }
+  });
+}
+
+}  // namespace plenopiv::recon

@@ -1,0 +1,282 @@
+// The simultaneous MART of one image, step by step (setup, start, iterate, accelerate).
+#include "core/recon/smart_solver.hpp"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <functional>
+#include <utility>
+
+#include "core/recon/mart_numerics.hpp"
+
+namespace plenopiv::recon::detail {
+namespace {
+
+double seconds_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+}  // namespace
+
+SmartSolver::SmartSolver(const WeightingOperator& op, const MartSettings& settings,
+                         MartBuffers& buffers)
+    : op_(op),
+      settings_(settings),
+      b_(buffers),
+      white_(op.white().pixels.data()),
+      blur_(op, settings.sensor_blur_sigma_mm) {}
+
+template <typename F>
+void SmartSolver::for_voxels(F&& f) const {
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n_, 1 << 12),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      for (std::size_t m = r.begin(); m != r.end(); ++m) f(m);
+                    });
+}
+
+MartResult SmartSolver::run(const ImageF& image, const IterationCallback& progress) {
+  const auto t_setup = std::chrono::steady_clock::now();
+  setup(image);
+  const auto t_start = std::chrono::steady_clock::now();
+  start();
+  result_.start_seconds = seconds_since(t_start);
+  result_.setup_seconds = seconds_since(t_setup);
+  prepare_iterations();
+
+  int momentum_step = 1;  // k of FISTA's beta_k
+  double previous = -1;   // the last iteration's residual
+  for (int it = 1; it <= settings_.iterations && n_ > 0; ++it) {
+    const auto t_it = std::chrono::steady_clock::now();
+    if (settings_.accelerate) extrapolate(float(momentum_step - 1) / float(momentum_step + 2));
+    project_and_compare(true);
+    const double r = residual();
+    if (previous >= 0 && settings_.convergence > 0 &&
+        std::abs(previous - r) <= settings_.convergence * previous) {
+      result_.converged = true;
+      if (settings_.accelerate) b_.e = b_.last;  // x_k, not the extrapolated point
+      break;
+    }
+    previous = r;
+    update();
+    if (settings_.accelerate) momentum_step = step_along_momentum() ? momentum_step + 1 : 1;
+    IterationReport rep{it, r, seconds_since(t_it)};
+    result_.iterations.push_back(rep);
+    if (progress) progress(rep);
+  }
+  if (settings_.final_residual) {
+    if (n_ > 0) {
+      project_and_compare(false);
+      result_.final_residual = residual();
+    } else {
+      result_.final_residual =
+          sum(b_.data) > 0 ? 1.0 : 0.0;  // nothing projected: ||I - 0|| / ||I||
+    }
+  }
+  write_volume();
+  return std::move(result_);
+}
+
+void SmartSolver::setup(const ImageF& image) {
+  const auto t0 = std::chrono::steady_clock::now();
+  result_.volume = Volume(op_.grid(), 0.f);
+  threshold_image(image, settings_.noise_threshold, b_.data);
+  std::vector<std::uint32_t> selected =
+      select_active(op_, b_.data, settings_, b_.select, result_.skipped);
+  result_.select_seconds = seconds_since(t0);
+  const auto t_active = std::chrono::steady_clock::now();
+  active_.emplace(op_, std::move(selected));
+  result_.active_set_seconds = seconds_since(t_active);
+  n_ = active_->size();
+}
+
+void SmartSolver::start() {
+  // Per active voxel; BigBuffers (huge pages: no page fault per 4 KB of these large arrays).
+  // `update` is written in full by every back-projection.
+  b_.e.assign(n_, 1.f);
+  fit(b_.update, n_);
+  // Written in full by every pass before being read. ratio: white · ln(I / W E).
+  fit(b_.projection, op_.pixel_count());
+  fit(b_.ratio, op_.pixel_count());
+
+  // What a dark pixel recorded at most: the noise threshold, or half the faintest lit pixel.
+  const BigBuffer<float>& data = b_.data;
+  dark_floor_ = settings_.noise_threshold;
+  if (!(dark_floor_ > 0.f)) {
+    // A minimum: the same whatever the order.
+    const float faintest = tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, data.size(), 1 << 14), kHuge,
+        [&](const tbb::blocked_range<std::size_t>& r, float m) {
+          for (std::size_t i = r.begin(); i != r.end(); ++i) {
+            if (data[i] > 0.f) m = std::min(m, data[i]);
+          }
+          return m;
+        },
+        [](float a, float b) { return std::min(a, b); });
+    dark_floor_ = 0.5f * faintest;
+  }
+  if (settings_.start == MartStart::mlos && n_ > 0) start_mlos();
+}
+
+void SmartSolver::start_mlos() {
+  const BigBuffer<float>& data = b_.data;
+  BigBuffer<float>& e = b_.e;
+  // The weighted geometric mean of the lit pixels a voxel sees (dark ones below the cutoff
+  // carry no ln I), renormalised over those pixels. The lit mask and ln I, each times the white
+  // image, in the ratio and projection buffers (not yet in use), back-projected in one walk.
+  BigBuffer<float>& weight = b_.weight;  // written in full by the back-projection
+  fit(weight, n_);
+  for_pixels(data.size(), [&](std::size_t i0, std::size_t i1) {
+    for (std::size_t i = i0; i < i1; ++i) {
+      b_.ratio[i] = (data[i] > 0.f ? 1.f : 0.f) * white_[i];
+      b_.projection[i] = log_pixel(data[i]) * white_[i];
+    }
+  });
+  active_->back_project_whitened(op_, b_.ratio, weight, b_.projection, b_.update, &b_.kernels);
+  for_voxels([&](std::size_t m) {
+    e[m] = weight[m] > 0.f ? clean(bounded_exp(b_.update[m] / weight[m])) : 0.f;
+  });
+  // Scale to the image's total light so the first ratios are near 1. The projection's total is
+  // Σ_j E_j (eq 13 makes each voxel's weights sum to 1 over the sensor), so no projection is
+  // needed; the two totals differ by the projection's float rounding only (docs/recon.md,
+  // "Buffers").
+  const double total = sum(e);
+  if (total > 0) {
+    const float scale = float(sum(data) / total);
+    for_voxels([&](std::size_t m) { e[m] = clean(e[m] * scale); });
+  }
+}
+
+void SmartSolver::prepare_iterations() {
+  // ln I and ln floor once, not per iteration.
+  const BigBuffer<float>& data = b_.data;
+  BigBuffer<float>& log_data = b_.log_data;
+  fit(log_data, data.size());
+  for_pixels(data.size(), [&](std::size_t i0, std::size_t i1) {
+    for (std::size_t i = i0; i < i1; ++i) log_data[i] = data[i] > 0.f ? std::log(data[i]) : 0.f;
+  });
+  log_floor_ = std::log(dark_floor_);
+  // The residual's two sums per band of the projection, added in band order: the same at any
+  // thread count.
+  band_sums_.assign(std::size_t(active_->band_count()), {0.0, 0.0});
+  // Nesterov's momentum on ln E: `last` holds x_(k-1), then x_k; `log_last` its ln (kept, so
+  // each iteration takes one log per voxel, not two); `momentum` ln x_k - ln x_(k-1) (0 where
+  // either is 0).
+  if (settings_.accelerate) {
+    b_.last.assign(b_.e.begin(), b_.e.end());
+    b_.log_last.resize(n_);  // written in full here
+    for_voxels(
+        [&](std::size_t m) { b_.log_last[m] = b_.last[m] > 0.f ? std::log(b_.last[m]) : 0.f; });
+    b_.momentum.assign(n_, 0.f);
+  }
+}
+
+void SmartSolver::extrapolate(float beta) {
+  // Each iteration starts from y = x_k (x_k / x_(k-1))^beta_k with FISTA's
+  // beta_k = (k - 1) / (k + 2).
+  BigBuffer<float>& e = b_.e;
+  for_voxels([&](std::size_t m) {
+    const float log_e = e[m] > 0.f ? std::log(e[m]) : 0.f;
+    b_.momentum[m] = e[m] > 0.f && b_.last[m] > 0.f ? log_e - b_.log_last[m] : 0.f;
+    b_.last[m] = e[m];
+    b_.log_last[m] = log_e;
+    e[m] = clean(e[m] * bounded_exp(beta * b_.momentum[m]));
+  });
+}
+
+void SmartSolver::residual_band(int band, std::size_t i0, std::size_t i1) {
+  const BigBuffer<float>& data = b_.data;
+  double num = 0, den = 0;
+  for (std::size_t i = i0; i < i1; ++i) {
+    const double diff = double(data[i]) - double(b_.projection[i]);
+    num += diff * diff;
+    den += double(data[i]) * double(data[i]);
+  }
+  band_sums_[std::size_t(band)] = {num, den};
+}
+
+double SmartSolver::residual() const {
+  double num = 0, den = 0;
+  for (const auto& b : band_sums_) {
+    num += b[0];
+    den += b[1];
+  }
+  return den > 0 ? std::sqrt(num / den) : 0.0;
+}
+
+// The log-ratio of each pixel MART uses, times `scale` (the white image, or 1 where the sensor
+// blur is applied before whitening).
+void SmartSolver::ratio_band(std::size_t i0, std::size_t i1, const float* scale) {
+  for (std::size_t i = i0; i < i1; ++i) {
+    const float p = b_.projection[i], d = b_.data[i], k = scale ? scale[i] : 1.f;
+    if (white_[i] == 0.f) {
+      b_.ratio[i] = 0.f;  // between microlens images: no voxel sees the pixel
+    } else if (d > 0.f) {
+      b_.ratio[i] = p > 0.f ? k * std::clamp(b_.log_data[i] - std::log(p), -kMaxLog, kMaxLog) : 0.f;
+    } else {
+      // A dark pixel the voxel sees only faintly: it recorded at most the floor, so it pulls the
+      // voxels that claim more light there down (never up).
+      b_.ratio[i] = p > dark_floor_ ? k * std::max(log_floor_ - std::log(p), -kMaxLog) : 0.f;
+    }
+  }
+}
+
+void SmartSolver::project_and_compare(bool with_ratio) {
+  // Without blur, each band is finished while its pixels are in cache; with it, the whole
+  // projection must exist before the blur.
+  if (!blur_.active()) {
+    active_->project(op_, b_.e, b_.projection, &b_.kernels,
+                     [&](int band, std::size_t i0, std::size_t i1) {
+                       residual_band(band, i0, i1);
+                       if (with_ratio) ratio_band(i0, i1, white_);
+                     });
+    return;
+  }
+  active_->project(op_, b_.e, b_.projection, &b_.kernels);
+  blur_.apply(b_.projection);
+  // The residual's sums in fixed pixel bands (the projection's own bands no longer apply).
+  const std::size_t pixels = b_.data.size();
+  const std::size_t bands = band_sums_.size(), per_band = (pixels + bands - 1) / bands;
+  tbb::parallel_for(std::size_t(0), bands, [&](std::size_t b) {
+    residual_band(int(b), std::min(pixels, b * per_band), std::min(pixels, (b + 1) * per_band));
+  });
+  if (!with_ratio) return;
+  for_pixels(pixels, [&](std::size_t i0, std::size_t i1) { ratio_band(i0, i1, nullptr); });
+  blur_.apply(b_.ratio);
+  for_pixels(pixels, [&](std::size_t i0, std::size_t i1) {
+    for (std::size_t i = i0; i < i1; ++i) b_.ratio[i] *= white_[i];
+  });
+}
+
+void SmartSolver::update() {
+  active_->back_project_whitened(op_, b_.ratio, b_.update, &b_.kernels);
+  const float mu = float(settings_.mu);
+  BigBuffer<float>& e = b_.e;
+  for_voxels([&](std::size_t m) { e[m] = clean(e[m] * bounded_exp(mu * b_.update[m])); });
+}
+
+bool SmartSolver::step_along_momentum() const {
+  // Does this step (ln x_(k+1) - ln y = mu * update) go along the momentum? Summed in fixed
+  // chunks, so the answer is the same at any thread count.
+  const double along = tbb::parallel_deterministic_reduce(
+      tbb::blocked_range<std::size_t>(0, n_, 1 << 14), 0.0,
+      [&](const tbb::blocked_range<std::size_t>& range, double acc) {
+        for (std::size_t m = range.begin(); m != range.end(); ++m) {
+          acc += double(b_.update[m]) * double(b_.momentum[m]);
+        }
+        return acc;
+      },
+      std::plus<double>());
+  return !(along < 0);
+}
+
+void SmartSolver::write_volume() {
+  const std::vector<std::uint32_t>& voxels = active_->voxels();
+  // Distinct voxels: no two writes to one value.
+  for_voxels([&](std::size_t m) { result_.volume.data[voxels[m]] = b_.e[m]; });
+}
+
+}  // namespace plenopiv::recon::detail

@@ -1,0 +1,82 @@
+// The simultaneous MART (SMART) of one image as an object with named steps: set up the voxels it
+// solves, start them (ones or MLOS), then iterate (an optional momentum step, a projection
+// compared with the image, a multiplicative update). Internal to core/recon.
+#pragma once
+
+#include <array>
+#include <atomic>
+#include <cstddef>
+#include <optional>
+#include <vector>
+
+#include "core/base/big_buffer.hpp"
+#include "core/base/image.hpp"
+#include "core/recon/active_set.hpp"
+#include "core/recon/mart.hpp"
+#include "core/recon/sensor_blur.hpp"
+#include "core/recon/voxel_selection.hpp"
+#include "core/recon/weights.hpp"
+
+namespace plenopiv::recon::detail {
+
+// What a MartWorkspace holds. Every reconstruction sizes and writes each buffer before reading it.
+struct MartBuffers {
+  std::atomic<bool> busy{false};
+  // Per sensor pixel: the thresholded image, ln I, W E and white · ln(I / W E).
+  BigBuffer<float> data, log_data, projection, ratio;
+  // Per active voxel: E, the back-projected update, MLOS's weight, and the momentum's three.
+  BigBuffer<float> e, update, weight, last, log_last, momentum;
+  ActiveSet::Workspace kernels;  // reused by every pass
+  SelectScratch select;
+};
+
+// One reconstruction: construct, then run() once. The settings must have been validated and the
+// image checked (validate_image); `buffers` are the caller's for the duration.
+class SmartSolver {
+ public:
+  SmartSolver(const WeightingOperator& op, const MartSettings& settings, MartBuffers& buffers);
+
+  MartResult run(const ImageF& image, const IterationCallback& progress);
+
+ private:
+  // The thresholded image, the active voxels (dark pixels, region, field of view) and their
+  // kernel layout; sizes the per-voxel and per-pixel buffers.
+  void setup(const ImageF& image);
+  // What a dark pixel recorded at most (the noise threshold, or half the faintest lit pixel),
+  // then E⁰: ones, or MLOS scaled to the image's total light.
+  void start();
+  void start_mlos();
+  // ln I, ln of the dark floor, and the momentum's buffers.
+  void prepare_iterations();
+  // Nesterov's momentum: E becomes the extrapolated y = x_k (x_k / x_(k-1))^beta.
+  void extrapolate(float beta);
+  // Projection W E (B W E with the sensor blur), the residual's sums and, if `with_ratio`, the
+  // whitened log-ratios the update back-projects.
+  void project_and_compare(bool with_ratio);
+  double residual() const;  // ||I - W E|| / ||I|| of the last projection
+  // E <- E exp(mu Wᵀ ratio).
+  void update();
+  // Whether the step just taken goes along the momentum (else the momentum restarts).
+  bool step_along_momentum() const;
+  // The active voxels' values into the result's volume.
+  void write_volume();
+
+  // The residual's sums and the log-ratios of pixels [i0, i1) of the projection (band `band`).
+  void residual_band(int band, std::size_t i0, std::size_t i1);
+  void ratio_band(std::size_t i0, std::size_t i1, const float* scale);
+  template <typename F>
+  void for_voxels(F&& f) const;
+
+  const WeightingOperator& op_;
+  const MartSettings& settings_;
+  MartBuffers& b_;
+  MartResult result_;
+  std::optional<ActiveSet> active_;
+  std::size_t n_ = 0;  // active voxels
+  const float* white_ = nullptr;
+  float dark_floor_ = 0, log_floor_ = 0;
+  std::vector<std::array<double, 2>> band_sums_;  // the residual's sums per projection band
+  SensorBlur blur_;
+};
+
+}  // namespace plenopiv::recon::detail
