@@ -33,6 +33,16 @@ ImageU16 to_u16(const ImageF& in) {
   return out;
 }
 
+// The share of a refocused page's light in its brightest pixel: highest where the particle is sharp.
+double peak_share(const ImageF& im) {
+  double sum = 0, top = 0;
+  for (float v : im.pixels) {
+    sum += v;
+    top = std::max(top, double(v));
+  }
+  return top / sum;
+}
+
 class CalibCli : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -82,14 +92,6 @@ TEST_F(CalibCli, CalibrateRefocusPerspective) {
   EXPECT_EQ(stack[0].width, 50);
   EXPECT_GT(std::filesystem::file_size(path("stack.png")), 100u);
   // The page at z = 4 mm is the sharpest (the peak holds most light).
-  auto peak_share = [](const ImageF& im) {
-    double sum = 0, top = 0;
-    for (float v : im.pixels) {
-      sum += v;
-      top = std::max(top, double(v));
-    }
-    return top / sum;
-  };
   for (int k : {0, 1, 2, 4}) EXPECT_GT(peak_share(stack[3]), peak_share(stack[k])) << k;
 
   ASSERT_EQ(run_command({binary("plenopiv"), "perspective", "--camera", camera_, "--calibration", path("cal.h5"),
@@ -155,14 +157,6 @@ TEST_F(CalibCli, WhiteOnlyFromPngFramesThenRefocusAndReconstruct) {
       << out;
   const auto stack = io::read_tiff_stack(path("stack.tif"));
   ASSERT_EQ(stack.size(), 5u);
-  auto peak_share = [](const ImageF& im) {
-    double sum = 0, top = 0;
-    for (float v : im.pixels) {
-      sum += v;
-      top = std::max(top, double(v));
-    }
-    return top / sum;
-  };
   for (int k : {0, 1, 2, 4}) EXPECT_GT(peak_share(stack[3]), peak_share(stack[k])) << k;
 
   // Reconstruct the same particle from an 8-bit PNG frame.
