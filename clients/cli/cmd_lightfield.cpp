@@ -12,6 +12,7 @@
 #include "core/base/errors.hpp"
 #include "core/calib/calibration_file.hpp"
 #include "core/io/atomic_file.hpp"
+#include "core/io/raw_frame.hpp"
 #include "core/io/tiff.hpp"
 #include "core/lightfield/light_field.hpp"
 #include "core/lightfield/refocus.hpp"
@@ -35,9 +36,7 @@ struct LightFieldArgs {
 lightfield::LightField load_field(const LightFieldArgs& args, optics::CameraModel& camera_out) {
   camera_out = optics::load_camera_file(args.camera);
   const calib::LoadedCalibration cal = calib::load_calibration(args.calibration, camera_out);
-  const ImageU16 raw16 = io::read_tiff_u16(args.raw);
-  ImageF raw(raw16.width, raw16.height);
-  for (std::size_t k = 0; k < raw16.size(); ++k) raw.pixels[k] = float(raw16.pixels[k]);
+  const ImageF raw = io::read_raw_frame(args.raw);
   try {
     return lightfield::rectify(camera_out, cal.lenses, raw, args.no_white ? nullptr : &cal.white_correction);
   } catch (const InputError& e) {
@@ -170,7 +169,7 @@ void run_perspective(const LightFieldArgs& args) {
 void add_common(CLI::App* cmd, LightFieldArgs& args) {
   cmd->add_option("--camera", args.camera, "camera file (YAML)")->required();
   cmd->add_option("--calibration", args.calibration, "calibration file from `plenopiv calibrate`")->required();
-  cmd->add_option("raw", args.raw, "raw plenoptic image (TIFF)")->required();
+  cmd->add_option("raw", args.raw, "raw plenoptic image (PNG, or TIFF of 8/16-bit or float)")->required();
   cmd->add_flag("--no-white", args.no_white, "do not divide by the white correction");
   cmd->add_option("-o,--output", args.output, "multi-page float32 TIFF to write")->required();
 }

@@ -17,6 +17,7 @@
 #include <google/protobuf/util/json_util.h>
 #include <tbb/global_control.h>
 
+#include "clients/cli/calibration_frames.hpp"
 #include "clients/cli/commands.hpp"
 #include "clients/cli/field_output.hpp"
 #include "clients/cli/progress.hpp"
@@ -28,7 +29,7 @@
 #include "core/io/atomic_file.hpp"
 #include "core/io/checksum.hpp"
 #include "core/io/hdf5_files.hpp"
-#include "core/io/tiff.hpp"
+#include "core/io/raw_frame.hpp"
 #include "core/io/vtk_files.hpp"
 #include "core/optics/camera_file.hpp"
 #include "core/piv/derived.hpp"
@@ -48,23 +49,19 @@ struct ProcessOptions {
   bool resume = false, merge = false;
   std::optional<double> dt_s;
   std::string camera, frame_a, frame_b, config, calibration, calibration_image, output, vti, preview;
-  std::vector<std::string> white_images;
+  std::vector<std::string> white_images, dark_images;
   bool nominal = false;
   int threads = 0;
 };
 
-// A raw frame as floats; a frame with nothing to measure (all zero, saturated) is said on stderr
-// under `name` and added to `warnings` when given.
-ImageF read_frame(const std::string& path, const std::string& name = "", std::vector<std::string>* warnings = nullptr) {
-  const ImageU16 raw = io::read_tiff_u16(path);
-  if (warnings) {
-    if (const auto problem = process::frame_problem(raw.pixels)) {
-      warnings->push_back(name + " (" + path + ") " + *problem);
-      std::fprintf(stderr, "warning: %s\n", warnings->back().c_str());
-    }
+// A raw frame (PNG, 8/16-bit or float TIFF) as floats; a frame with nothing to measure (all zero,
+// saturated) is said on stderr under `name` and added to `warnings`.
+ImageF read_frame(const std::string& path, const std::string& name, std::vector<std::string>& warnings) {
+  ImageF image = io::read_raw_frame(path);
+  if (const auto problem = process::frame_problem(image.pixels)) {
+    warnings.push_back(name + " (" + path + ") " + *problem);
+    std::fprintf(stderr, "warning: %s\n", warnings.back().c_str());
   }
-  ImageF image(raw.width, raw.height);
-  for (std::size_t i = 0; i < raw.size(); ++i) image.pixels[i] = raw.pixels[i];
   return image;
 }
 
@@ -78,27 +75,21 @@ void warn_if_few_valid(const VectorField& f, const std::string& what) {
                "the volume and correlation settings\n", what.c_str(), valid, f.valid.size());
 }
 
-// The lens centres and white correction from exactly one of the three sources.
+// The lens centres and white correction from exactly one of the three sources: a calibration
+// file, calibration frames (white, optionally stopped-down and dark; calibrated as `plenopiv
+// calibrate` does), or the nominal lattice.
 calib::LoadedCalibration calibration_for(const ProcessOptions& o, const optics::CameraModel& camera) {
-  const int given = int(!o.calibration.empty()) + int(!o.calibration_image.empty()) + int(o.nominal);
+  const bool from_frames = !o.calibration_image.empty() || !o.white_images.empty() || !o.dark_images.empty();
+  const int given = int(!o.calibration.empty()) + int(from_frames) + int(o.nominal);
   if (given != 1)
-    throw InputError("give exactly one of --calibration FILE.h5, --calibration-image TIFF (with --white), "
-                     "or --nominal");
+    throw InputError("give exactly one of --calibration FILE.h5, --white FRAMES (optionally with "
+                     "--calibration-image and --dark), or --nominal");
   if (!o.calibration.empty()) return calib::load_calibration(o.calibration, camera);
   if (o.nominal) return calib::nominal_calibration(camera);
-  if (o.white_images.empty()) throw InputError("--calibration-image: needs at least one --white image");
-  calib::Calibration cal = calib::calibrate(camera, read_frame(o.calibration_image));
-  ImageF white;
-  for (const std::string& path : o.white_images) {
-    const ImageF w = read_frame(path);
-    if (w.width != camera.sensor().width_px || w.height != camera.sensor().height_px)
-      throw InputError(path + ": white image is " + std::to_string(w.width) + " x " + std::to_string(w.height) +
-                       ", the camera's sensor is " + std::to_string(camera.sensor().width_px) + " x " +
-                       std::to_string(camera.sensor().height_px));
-    if (white.empty()) white = ImageF(w.width, w.height, 0.0f);
-    for (std::size_t k = 0; k < w.size(); ++k) white.pixels[k] += w.pixels[k] / float(o.white_images.size());
-  }
-  cal.white_correction = calib::make_white_correction(cal, white, cal.image_stats.background);
+  if (o.white_images.empty()) throw InputError("--calibration-image and --dark need --white frame(s)");
+  CalibrationFrameFiles files{o.white_images, {}, o.dark_images};
+  if (!o.calibration_image.empty()) files.calibration.push_back(o.calibration_image);
+  const calib::Calibration cal = calibrate_from_files(camera, files);
   return {cal.microlens_array(), cal.white_correction};
 }
 
@@ -222,7 +213,7 @@ void run_process(const ProcessOptions& o) {
   warn_if_recorded_dt_ignored(o);
   const optics::CameraModel camera = optics::load_camera_file(o.camera);
   std::vector<std::string> warnings;
-  const ImageF a = read_frame(o.frame_a, "frame A", &warnings), b = read_frame(o.frame_b, "frame B", &warnings);
+  const ImageF a = read_frame(o.frame_a, "frame A", warnings), b = read_frame(o.frame_b, "frame B", warnings);
   for (const auto* f : {&o.frame_a, &o.frame_b}) {
     const ImageF& img = f == &o.frame_a ? a : b;
     if (img.width != camera.sensor().width_px || img.height != camera.sensor().height_px)
@@ -274,7 +265,7 @@ void run_reprocess(const ProcessOptions& o) {
     if (!other->empty())
       throw InputError("--run takes the camera, frames and calibration from the run folder; give --run with -o, "
                        "--config, --tier, --pairs, --jobs, --resume, --shard, --merge and --threads only");
-  if (!o.white_images.empty() || o.nominal)
+  if (!o.white_images.empty() || !o.dark_images.empty() || o.nominal)
     throw InputError("--run takes the calibration from the run folder (manifest.json: calibration)");
   if (o.dt_s) throw InputError("--dt: --run uses each pair's measured dt (the run's dt_s where none was measured)");
   const auto limit = thread_limit(o.threads);
@@ -307,14 +298,17 @@ void add_process_commands(CLI::App& app) {
                   "own settings or --config, camera and calibration into <run>/reprocessed/ (or -o DIR), with "
                   "statistics.h5 and series.pvd");
   cmd->add_option("camera", o->camera, "camera file (YAML)");
-  cmd->add_option("frame_a", o->frame_a, "raw plenoptic frame A (16-bit TIFF, sensor-sized)");
+  cmd->add_option("frame_a", o->frame_a, "raw plenoptic frame A (PNG, or TIFF of 8/16-bit or float; sensor-sized)");
   cmd->add_option("frame_b", o->frame_b, "raw plenoptic frame B");
   cmd->add_option("--config", o->config,
                   "processing spec YAML: dt_s, volume {x_mm, y_mm, z_mm, voxel_mm}, reconstruction, correlation "
                   "(systemd/config/process.yaml); with --run: offline settings instead of the run's (or 'run')");
   cmd->add_option("--calibration", o->calibration, "calibration file (HDF5, from `plenopiv calibrate`)");
-  cmd->add_option("--calibration-image", o->calibration_image, "calibration TIFF (aperture stopped down)");
-  cmd->add_option("--white", o->white_images, "white TIFF(s) for --calibration-image (averaged)");
+  cmd->add_option("--calibration-image", o->calibration_image,
+                  "calibration frame (aperture stopped down), with --white; without it the centres come from the "
+                  "white");
+  cmd->add_option("--white", o->white_images, "white frame(s) (averaged): calibrate from them as `plenopiv calibrate`");
+  cmd->add_option("--dark", o->dark_images, "dark frame(s) for --white (averaged, subtracted)");
   cmd->add_flag("--nominal", o->nominal, "no calibration: the camera's nominal lattice and geometric white image "
                                           "(simulated frames)");
   cmd->add_option("-o,--output", o->output,

@@ -14,7 +14,7 @@
 #include "core/calib/calibration_file.hpp"
 #include "core/calib/nominal_calibration.hpp"
 #include "core/io/hdf5_files.hpp"
-#include "core/io/tiff.hpp"
+#include "core/io/raw_frame.hpp"
 #include "core/io/vtk_files.hpp"
 #include "core/optics/camera_file.hpp"
 #include "core/process/process.hpp"
@@ -74,9 +74,7 @@ void run(const ReconOptions& o) {
   } else {
     throw InputError("--start: mlos or ones, got '" + o.start + "'");
   }
-  const ImageU16 raw = io::read_tiff_u16(o.image);
-  ImageF image(raw.width, raw.height);
-  for (std::size_t i = 0; i < raw.size(); ++i) image.pixels[i] = raw.pixels[i];
+  const ImageF image = io::read_raw_frame(o.image);
 
   const bool tty = ::isatty(STDERR_FILENO);
   const auto t0 = std::chrono::steady_clock::now();
@@ -139,10 +137,11 @@ void add_recon_commands(CLI::App& app) {
       "white correction come from --calibration, else the camera's nominal lattice and the geometric "
       "white image");
   cmd->add_option("camera", o->camera, "camera file (YAML)")->required();
-  cmd->add_option("image", o->image, "raw plenoptic image (8/16-bit TIFF, sensor-sized)")->required();
+  cmd->add_option("image", o->image, "raw plenoptic image (PNG, or TIFF of 8/16-bit or float; sensor-sized)")
+      ->required();
   cmd->add_option("--calibration", o->calibration,
-                  "calibration file (HDF5 from core/calib); needs a rectangular array without "
-                  "measurable rotation");
+                  "calibration file (HDF5 from `plenopiv calibrate`); a rotated, warped or hex array is resampled "
+                  "onto an axis-aligned lattice first");
   cmd->add_option("--extent", o->extent, "volume box x0 x1 y0 y1 z0 z1 in mm (z = 0 at the focal plane)")
       ->expected(6)
       ->required();

@@ -3,6 +3,7 @@
 
 #include <hdf5.h>
 
+#include <array>
 #include <cmath>
 #include <string>
 #include <vector>
@@ -48,6 +49,12 @@ double read_attr(const File& f, hid_t parent, const std::string& group, const st
     throw InputError(f.where("/" + group + " attribute " + name + " is not one number"));
   }
   return value;
+}
+
+// An attribute added after the first files were written: `fallback` when an older file lacks it.
+double read_attr_or(const File& f, hid_t parent, const std::string& group, const std::string& name, double fallback) {
+  if (H5Aexists(parent, name.c_str()) <= 0) return fallback;
+  return read_attr(f, parent, group, name);
 }
 
 template <typename T>
@@ -115,6 +122,13 @@ void write_calibration_h5(const std::filesystem::path& path, const Calibration& 
     write_set(f, root, "status", {ny, nx}, H5T_STD_U8LE, H5T_NATIVE_UINT8, status.data());
     write_set(f, root, "white_correction", {hsize_t(cal.sensor.height_px), hsize_t(cal.sensor.width_px)},
               H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, cal.white_correction.pixels.data());
+    const double nan = std::nan("");
+    std::vector<std::array<double, 2>> measured = cal.measured_px;
+    std::vector<double> uncertainty = cal.uncertainty_px;
+    measured.resize(nx * ny, {nan, nan});
+    uncertainty.resize(nx * ny, nan);
+    write_set(f, root, "measured_px", {ny, nx, 2}, H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, flatten(measured).data());
+    write_set(f, root, "uncertainty_px", {ny, nx}, H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, uncertainty.data());
 
     Handle lattice(H5Gcreate2(root, "lattice", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT), H5Gclose);
     const optics::Lattice& sl = cal.spot_lattice;
@@ -135,6 +149,16 @@ void write_calibration_h5(const std::filesystem::path& path, const Calibration& 
     write_attr(f, g, "max_residual_px", cal.max_residual_px);
     write_attr(f, g, "spots_found", cal.spots_found);
     write_attr(f, g, "lenses_measured", cal.lenses_measured);
+    write_attr(f, g, "lenses_lattice", cal.lenses_lattice);
+    write_attr(f, g, "lenses_partial", cal.lenses_partial);
+    write_attr(f, g, "lenses_rejected", cal.lenses_rejected);
+    write_attr(f, g, "lenses_vignetted", cal.lenses_vignetted);
+    write_attr(f, g, "centres_from", cal.source == CentreSource::white ? 1 : 0);
+    write_attr(f, g, "measurement_scatter_px", cal.measurement_scatter_px);
+    write_attr(f, g, "array_scatter_px", cal.array_scatter_px);
+    write_attr(f, g, "distortion_degree", cal.distortion_degree);
+    write_attr(f, g, "nominal_spot_pitch_px", cal.nominal_spot_pitch_px);
+    write_attr(f, g, "pitch_ratio", cal.pitch_ratio);
 
     Handle camera(H5Gcreate2(root, "camera", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT), H5Gclose);
     write_attr(f, camera.get(), "sensor_width_px", cal.sensor.width_px);
@@ -142,12 +166,28 @@ void write_calibration_h5(const std::filesystem::path& path, const Calibration& 
     write_attr(f, camera.get(), "pixel_pitch_mm", pp);
     write_attr(f, camera.get(), "image_distance_mm", cal.image_distance_mm);
     write_attr(f, camera.get(), "microlens_focal_length_mm", cal.microlens_focal_length_mm);
+    write_attr(f, camera.get(), "optical_axis_given", cal.sensor.optical_axis_px ? 1 : 0);
+    write_attr(f, camera.get(), "optical_axis_x_px", optics::sensor_mm_to_column(cal.sensor, 0.0));
+    write_attr(f, camera.get(), "optical_axis_y_px", optics::sensor_mm_to_row(cal.sensor, 0.0));
+    write_attr(f, camera.get(), "camera_count_x", cal.camera_count_x);
+    write_attr(f, camera.get(), "camera_count_y", cal.camera_count_y);
 
     Handle image(H5Gcreate2(root, "image", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT), H5Gclose);
     write_attr(f, image.get(), "background", cal.image_stats.background);
     write_attr(f, image.get(), "noise_sigma", cal.image_stats.noise_sigma);
     write_attr(f, image.get(), "threshold", cal.image_stats.threshold);
     write_attr(f, image.get(), "hot_pixels", cal.image_stats.hot_pixels);
+
+    Handle white(H5Gcreate2(root, "white", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT), H5Gclose);
+    write_attr(f, white.get(), "fill", cal.fill);
+    write_attr(f, white.get(), "predicted_fill", cal.predicted_fill);
+    write_attr(f, white.get(), "measured_axis_x_px", cal.measured_axis_px[0]);
+    write_attr(f, white.get(), "measured_axis_y_px", cal.measured_axis_px[1]);
+    write_attr(f, white.get(), "measured_axis_sigma_px", cal.measured_axis_sigma_px);
+    write_attr(f, white.get(), "black_level", cal.white_black_level);
+    write_attr(f, white.get(), "calibration_frames", cal.calibration_frames);
+    write_attr(f, white.get(), "white_frames", cal.white_frames);
+    write_attr(f, white.get(), "dark_frames", cal.dark_frames);
   });
 }
 
@@ -174,6 +214,9 @@ Calibration read_calibration_h5(const std::filesystem::path& path) {
   cal.sensor.pixel_pitch_mm = cam("pixel_pitch_mm");
   cal.image_distance_mm = cam("image_distance_mm");
   cal.microlens_focal_length_mm = cam("microlens_focal_length_mm");
+  if (read_attr_or(f, camera.get(), "camera", "optical_axis_given", 0) == 1) {
+    cal.sensor.optical_axis_px = std::array<double, 2>{cam("optical_axis_x_px"), cam("optical_axis_y_px")};
+  }
   if (cal.sensor.width_px <= 0 || cal.sensor.height_px <= 0 || !(cal.sensor.pixel_pitch_mm > 0) ||
       !(cal.image_distance_mm > 0) || !(cal.microlens_focal_length_mm > 0)) {
     throw InputError(f.where("/camera attributes are not a valid camera"));
@@ -193,10 +236,38 @@ Calibration read_calibration_h5(const std::filesystem::path& path) {
   cal.max_residual_px = lat("max_residual_px");
   cal.spots_found = int(lat("spots_found"));
   cal.lenses_measured = int(lat("lenses_measured"));
+  auto lat_or = [&](const char* name, double fallback) { return read_attr_or(f, lattice.get(), "lattice", name, fallback); };
+  cal.lenses_lattice = int(lat_or("lenses_lattice", 0));
+  cal.lenses_partial = int(lat_or("lenses_partial", 0));
+  cal.lenses_rejected = int(lat_or("lenses_rejected", 0));
+  cal.lenses_vignetted = int(lat_or("lenses_vignetted", 0));
+  cal.source = lat_or("centres_from", 0) == 1 ? CentreSource::white : CentreSource::spots;
+  cal.measurement_scatter_px = lat_or("measurement_scatter_px", 0);
+  cal.array_scatter_px = lat_or("array_scatter_px", 0);
+  cal.distortion_degree = int(lat_or("distortion_degree", 0));
+  cal.nominal_spot_pitch_px = lat_or("nominal_spot_pitch_px", 0);
+  cal.pitch_ratio = lat_or("pitch_ratio", 1);
   cal.image_stats.background = img("background");
   cal.image_stats.noise_sigma = img("noise_sigma");
   cal.image_stats.threshold = img("threshold");
   cal.image_stats.hot_pixels = int(img("hot_pixels"));
+
+  // Lens counts the camera file gave when calibrated; files from before counts were optional
+  // were made with counts equal to the array's.
+  cal.camera_count_x = int(read_attr_or(f, camera.get(), "camera", "camera_count_x", sl.count_x));
+  cal.camera_count_y = int(read_attr_or(f, camera.get(), "camera", "camera_count_y", sl.count_y));
+  if (H5Lexists(root, "white", H5P_DEFAULT) > 0) {
+    Handle white(H5Gopen2(root, "white", H5P_DEFAULT), H5Gclose);
+    auto wh = [&](const char* name, double fallback) { return read_attr_or(f, white.get(), "white", name, fallback); };
+    cal.fill = wh("fill", std::nan(""));
+    cal.predicted_fill = wh("predicted_fill", 0);
+    cal.measured_axis_px = {wh("measured_axis_x_px", std::nan("")), wh("measured_axis_y_px", std::nan(""))};
+    cal.measured_axis_sigma_px = wh("measured_axis_sigma_px", std::nan(""));
+    cal.white_black_level = wh("black_level", 0);
+    cal.calibration_frames = int(wh("calibration_frames", 0));
+    cal.white_frames = int(wh("white_frames", 0));
+    cal.dark_frames = int(wh("dark_frames", 0));
+  }
 
   const hsize_t nx = hsize_t(sl.count_x), ny = hsize_t(sl.count_y);
   cal.spots_px = pairs(read_set<double>(f, root, "spots_px", {ny, nx, 2}, H5T_NATIVE_DOUBLE));
@@ -207,9 +278,21 @@ Calibration read_calibration_h5(const std::filesystem::path& path) {
   const auto status = read_set<std::uint8_t>(f, root, "status", {ny, nx}, H5T_NATIVE_UINT8);
   cal.status.resize(status.size());
   for (std::size_t k = 0; k < status.size(); ++k) {
-    if (status[k] > 2) throw InputError(f.where("/status holds an unknown value " + std::to_string(status[k])));
+    if (status[k] > 4) throw InputError(f.where("/status holds an unknown value " + std::to_string(status[k])));
     cal.status[k] = LensStatus(status[k]);
   }
+  const double nan = std::nan("");
+  if (H5Lexists(root, "measured_px", H5P_DEFAULT) > 0) {
+    cal.measured_px = pairs(read_set<double>(f, root, "measured_px", {ny, nx, 2}, H5T_NATIVE_DOUBLE));
+  } else {  // older files: the spot of every measured lens is its measurement
+    cal.measured_px.assign(cal.spots_px.size(), {nan, nan});
+    for (std::size_t k = 0; k < cal.spots_px.size(); ++k) {
+      if (cal.status[k] == LensStatus::measured) cal.measured_px[k] = cal.spots_px[k];
+    }
+  }
+  cal.uncertainty_px = H5Lexists(root, "uncertainty_px", H5P_DEFAULT) > 0
+                           ? read_set<double>(f, root, "uncertainty_px", {ny, nx}, H5T_NATIVE_DOUBLE)
+                           : std::vector<double>(cal.spots_px.size(), nan);
   cal.white_correction.width = cal.sensor.width_px;
   cal.white_correction.height = cal.sensor.height_px;
   cal.white_correction.pixels = read_set<float>(
@@ -237,13 +320,24 @@ LoadedCalibration load_calibration(const std::filesystem::path& path, const opti
                              std::to_string(cal.sensor.height_px) + " sensor, the camera file's is " +
                              std::to_string(s.width_px) + " x " + std::to_string(s.height_px)));
   }
-  if (cal.spot_lattice.count_x != camera.microlens().count_x || cal.spot_lattice.count_y != camera.microlens().count_y ||
-      cal.spot_lattice.layout != camera.microlens().layout) {
+  // A calibration belongs to the camera description it was made with: where the camera file gives
+  // lens counts they must be the ones it gave then (older files: the array's own counts).
+  const auto& ml = camera.microlens();
+  const bool counts_differ = camera.counts_given() && (ml.count_x != cal.camera_count_x || ml.count_y != cal.camera_count_y) &&
+                             !(cal.camera_count_x == 0 && ml.count_x == cal.spot_lattice.count_x &&
+                               ml.count_y == cal.spot_lattice.count_y);
+  if (counts_differ || cal.spot_lattice.layout != ml.layout) {
+    const std::string then = cal.camera_count_x == cal.spot_lattice.count_x && cal.camera_count_y == cal.spot_lattice.count_y
+                                 ? ""
+                                 : cal.camera_count_x > 0 ? " (its camera file gave " + std::to_string(cal.camera_count_x) + " x " +
+                                                               std::to_string(cal.camera_count_y) + ")"
+                                                          : " (its camera file gave no counts)";
     throw InputError(f.where(std::string("made for a ") + optics::to_string(cal.spot_lattice.layout) + " array of " +
                              std::to_string(cal.spot_lattice.count_x) + " x " + std::to_string(cal.spot_lattice.count_y) +
-                             " lenses, the camera file has " + optics::to_string(camera.microlens().layout) + " " +
-                             std::to_string(camera.microlens().count_x) + " x " +
-                             std::to_string(camera.microlens().count_y)));
+                             " lenses" + then + ", the camera file has " + optics::to_string(ml.layout) + " " +
+                             (camera.counts_given() ? std::to_string(ml.count_x) + " x " + std::to_string(ml.count_y)
+                                                    : std::string("(no counts)")) +
+                             ": calibrate again with this camera file"));
   }
   if (!close(cal.image_distance_mm, camera.image_distance_mm()) ||
       !close(cal.microlens_focal_length_mm, camera.microlens().focal_length_mm)) {
@@ -252,6 +346,13 @@ LoadedCalibration load_calibration(const std::filesystem::path& path, const opti
                              std::to_string(camera.image_distance_mm()) + " mm, f_l = " +
                              std::to_string(camera.microlens().focal_length_mm) + " mm"));
   }
+  // Lens centres in this camera's frame (its optical axis), so that every spot stays where the
+  // calibration measured it whatever the frame it was made in.
+  const std::array<double, 2> offset_px{optics::sensor_mm_to_column(cal.sensor, cal.spot_lattice.offset_x_mm),
+                                        optics::sensor_mm_to_row(cal.sensor, cal.spot_lattice.offset_y_mm)};
+  cal.sensor = camera.sensor();
+  cal.spot_lattice.offset_x_mm = optics::column_to_sensor_mm(cal.sensor, offset_px[0]);
+  cal.spot_lattice.offset_y_mm = optics::row_to_sensor_mm(cal.sensor, offset_px[1]);
   return {cal.microlens_array(), std::move(cal.white_correction)};
 }
 

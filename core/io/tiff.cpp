@@ -3,6 +3,7 @@
 
 #include <tiffio.h>
 
+#include <cmath>
 #include <cstdarg>
 #include <cstdio>
 #include <cstring>
@@ -119,6 +120,48 @@ ImageU16 read_tiff_u16(const std::filesystem::path& path) {
       std::memcpy(out.data(), row.data(), out.size() * sizeof(uint16_t));
     } else {
       for (uint32_t x = 0; x < p.width; ++x) out[x] = row[x];
+    }
+  });
+  return image;
+}
+
+ImageF read_tiff_float(const std::filesystem::path& path) {
+  TiffPtr t = open(path, "r");
+  const PageInfo p = page_info(t.get());
+  const bool uint = p.format == SAMPLEFORMAT_UINT && (p.bits == 8 || p.bits == 16);
+  const bool fp = p.format == SAMPLEFORMAT_IEEEFP && (p.bits == 32 || p.bits == 64);
+  if (p.samples != 1 || !(uint || fp)) {
+    throw InputError(path.string() + ": expected a single-channel TIFF of 8- or 16-bit unsigned or 32/64-bit float "
+                     "samples, got " + std::to_string(p.samples) + " channel(s) of " + std::to_string(p.bits) +
+                     "-bit " + (p.format == SAMPLEFORMAT_IEEEFP ? "float" : p.format == SAMPLEFORMAT_INT ? "signed" : "unsigned") +
+                     " samples");
+  }
+  if (p.width == 0 || p.height == 0) throw InputError(path.string() + ": TIFF has no pixels");
+  ImageF image(int(p.width), int(p.height));
+  std::vector<unsigned char> row(TIFFScanlineSize(t.get()));
+  if (row.size() < std::size_t(p.width) * (p.bits / 8)) throw InputError(path.string() + ": corrupt TIFF (short rows)");
+  read_rows(t.get(), path, p.height, row.data(), [&](uint32_t y) {
+    auto out = image.row(int(y));
+    for (uint32_t x = 0; x < p.width; ++x) {
+      double v = 0;
+      if (p.bits == 8) {
+        v = row[x];
+      } else if (p.bits == 16) {
+        uint16_t u;
+        std::memcpy(&u, row.data() + 2 * x, 2);
+        v = u;
+      } else if (p.bits == 32) {
+        float f;
+        std::memcpy(&f, row.data() + 4 * x, 4);
+        v = f;
+      } else {
+        std::memcpy(&v, row.data() + 8 * x, 8);
+      }
+      if (!std::isfinite(v) || std::abs(v) > 3.0e38) {
+        throw InputError(path.string() + ": pixel (" + std::to_string(x) + ", " + std::to_string(y) + ") is " +
+                         std::to_string(v) + "; a raw frame's values must be finite");
+      }
+      out[x] = float(v);
     }
   });
   return image;

@@ -11,6 +11,11 @@ namespace plenopiv::io {
 // Reads the first page of an 8- or 16-bit single-channel TIFF (8-bit values are kept as they
 // are, 0-255). Anything else (colour, float, corrupt, missing) is an InputError naming the file.
 ImageU16 read_tiff_u16(const std::filesystem::path& path);
+// Reads the first page of a single-channel TIFF as float: 8- or 16-bit unsigned (values as they
+// are), or 32/64-bit float whose every value is finite. Anything else is an InputError naming the
+// file (and, for a non-finite value, the pixel). Raw frames go through io::read_raw_frame.
+ImageF read_tiff_float(const std::filesystem::path& path);
+
 // A TIFF's first page as its header describes it, checked against the file: width, height, bits.
 struct TiffInfo {
   int width = 0, height = 0, bits = 0;

@@ -26,13 +26,17 @@ void check_image(const optics::SensorSpec& s, const ImageF& image, const std::st
   }
 }
 
+// The array comes from the calibration (or the camera's nominal lattice): its lens count is its
+// own, not necessarily the camera file's (arrays overfill the sensor; counts are optional).
 void check_lenses(const optics::CameraModel& camera, const optics::MicrolensArray& lenses) {
   const auto& l = lenses.lattice;
-  if (l.count_x != camera.microlens().count_x || l.count_y != camera.microlens().count_y ||
-      lenses.centres_mm.size() != std::size_t(l.count())) {
+  if (l.count_x < 1 || l.count_y < 1 || lenses.centres_mm.size() != std::size_t(l.count())) {
     throw InputError("microlens array of " + std::to_string(l.count_x) + " x " + std::to_string(l.count_y) +
-                     " lenses (" + std::to_string(lenses.centres_mm.size()) + " centres) does not match the camera file's " +
-                     std::to_string(camera.microlens().count_x) + " x " + std::to_string(camera.microlens().count_y));
+                     " lenses has " + std::to_string(lenses.centres_mm.size()) + " centres");
+  }
+  if (l.layout != camera.microlens().layout) {
+    throw InputError(std::string("microlens array: ") + optics::to_string(l.layout) + " lenses, the camera file's are " +
+                     optics::to_string(camera.microlens().layout));
   }
 }
 

@@ -1,6 +1,8 @@
 // The plenoptic camera: sensor, microlens array and main lens, validated, with derived geometry.
 #pragma once
 
+#include <array>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -12,13 +14,20 @@ struct SensorSpec {
   int width_px = 0;
   int height_px = 0;
   double pixel_pitch_mm = 0;
+  // Where the main lens's optical axis meets the sensor: (column, row) in continuous pixel
+  // coordinates (integer = pixel centre), on the sensor. The origin of sensor-plane millimetres
+  // (core/optics/microlens_array.hpp). Empty: the sensor centre, ((width - 1) / 2, (height - 1) / 2).
+  std::optional<std::array<double, 2>> optical_axis_px;
 };
 
 struct MicrolensSpec {
   double pitch_mm = 0;         // centre-to-centre distance of neighbours in a row
   double focal_length_mm = 0;  // sensor sits one focal length behind the array
-  int count_x = 0;             // lenses per row
-  int count_y = 0;             // rows
+  // Lenses per row and rows of the array as mounted; 0: not given. The array may overfill the
+  // sensor; the nominal (uncalibrated) array is the part the sensor sees whole (CameraModel::
+  // nominal_count_x), and calibration finds the lenses a white or calibration image shows.
+  int count_x = 0;
+  int count_y = 0;
   LensletLayout layout = LensletLayout::rect;  // hex: rows pitch*sqrt(3)/2 apart, odd rows shifted
 };
 
@@ -61,12 +70,27 @@ class CameraModel {
   double microlens_image_diameter_px() const;
 
   double pixels_per_microlens() const;  // pitch / pixel pitch (16.89 for the paper's camera)
+  // Distance of neighbouring micro-image centres on the sensor, pixels: the lens pitch scaled by
+  // 1 + f_l / s_i (the chief rays spread from the aperture centre; lens_centre_to_spot_mm).
+  double spot_pitch_px() const;
+  // Micro-image diameter over the spot pitch: 1 when neighbouring micro-images touch, above 1 when
+  // the camera file's f-number makes them overlap. Calibration measures the real one.
+  double predicted_fill() const;
   double sensor_width_mm() const;
   double sensor_height_mm() const;
-  double array_width_mm() const;   // extent of the lens array on the sensor
+  double array_width_mm() const;   // extent of the nominal lens array on the sensor
   double array_height_mm() const;
   double row_pitch_mm() const;     // pitch for rect, pitch*sqrt(3)/2 for hex
-  int lens_count() const { return spec_.microlens.count_x * spec_.microlens.count_y; }
+  // Whether the camera file gives microlens.count_x and count_y.
+  bool counts_given() const { return spec_.microlens.count_x > 0 && spec_.microlens.count_y > 0; }
+  // The nominal array: the camera file's counts where they fit on the sensor, else (counts not
+  // given, or an array that overfills the sensor) as many lenses as the sensor holds whole,
+  // centred on the optical axis.
+  int nominal_count_x() const { return nominal_count_x_; }
+  int nominal_count_y() const { return nominal_count_y_; }
+  int lens_count() const { return nominal_count_x_ * nominal_count_y_; }
+  // The optical axis on the sensor, (column, row) pixels: the camera file's, else the centre.
+  std::array<double, 2> optical_axis_px() const;
 
   // Object-space field of view covered by the lens array at the nominal focal plane.
   double field_of_view_x_mm() const;
@@ -75,7 +99,9 @@ class CameraModel {
   double nominal_voxel_size_mm() const;
 
   // Where the design differs from an ideal match without being wrong (e.g. a main lens stopped
-  // down below f-number matching leaves dark rings between microlens images).
+  // down below f-number matching leaves dark rings between microlens images; a main lens faster
+  // than matching predicts overlapping micro-images, which only a white image can confirm; an
+  // array that overfills the sensor).
   const std::vector<std::string>& notes() const { return notes_; }
 
   // A multi-line human summary with units.
@@ -85,6 +111,8 @@ class CameraModel {
   CameraSpec spec_;
   double s_i_ = 0;
   double s_o_ = 0;
+  int nominal_count_x_ = 0;
+  int nominal_count_y_ = 0;
   std::vector<std::string> notes_;
 };
 

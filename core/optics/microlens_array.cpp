@@ -8,8 +8,8 @@ namespace plenopiv::optics {
 Lattice Lattice::nominal(const CameraModel& camera) {
   Lattice l;
   l.layout = camera.microlens().layout;
-  l.count_x = camera.microlens().count_x;
-  l.count_y = camera.microlens().count_y;
+  l.count_x = camera.nominal_count_x();
+  l.count_y = camera.nominal_count_y();
   l.pitch_x_mm = camera.microlens().pitch_mm;
   l.pitch_y_mm = camera.row_pitch_mm();
   return l;

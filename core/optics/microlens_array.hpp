@@ -26,7 +26,8 @@ struct Lattice {
   double offset_x_mm = 0;
   double offset_y_mm = 0;
 
-  // The nominal lattice of a camera: centred on the sensor, not rotated.
+  // The nominal lattice of a camera: its nominal counts (CameraModel::nominal_count_x), centred on
+  // the optical axis, not rotated.
   static Lattice nominal(const CameraModel& camera);
   // Lattice position of lens (i, j), mm.
   std::array<double, 2> position(int i, int j) const;
@@ -44,19 +45,25 @@ struct MicrolensArray {
   const std::array<double, 2>& centre(int i, int j) const { return centres_mm[std::size_t(j) * lattice.count_x + i]; }
 };
 
-// Sensor coordinates (DESIGN.md): x_s = (column + 0.5 - width/2) * pitch, y_s likewise with rows.
-// `column` and `row` may be fractional: integer values are pixel centres, so pixel k covers
-// [k - 0.5, k + 0.5) in these continuous coordinates.
+// Sensor coordinates (DESIGN.md): x_s = (column + 0.5 - width/2) * pitch, y_s likewise with rows,
+// i.e. millimetres from the sensor centre; when the camera file gives sensor.optical_axis_px,
+// millimetres from that point instead (x_s = (column - axis column) * pitch): the optical axis is
+// the origin of the sensor plane, as of object space. `column` and `row` may be fractional:
+// integer values are pixel centres, so pixel k covers [k - 0.5, k + 0.5) in these coordinates.
 inline double column_to_sensor_mm(const SensorSpec& s, double column) {
+  if (s.optical_axis_px) return (column - (*s.optical_axis_px)[0]) * s.pixel_pitch_mm;
   return (column + 0.5 - 0.5 * s.width_px) * s.pixel_pitch_mm;
 }
 inline double row_to_sensor_mm(const SensorSpec& s, double row) {
+  if (s.optical_axis_px) return (row - (*s.optical_axis_px)[1]) * s.pixel_pitch_mm;
   return (row + 0.5 - 0.5 * s.height_px) * s.pixel_pitch_mm;
 }
 inline double sensor_mm_to_column(const SensorSpec& s, double x_mm) {
+  if (s.optical_axis_px) return x_mm / s.pixel_pitch_mm + (*s.optical_axis_px)[0];
   return x_mm / s.pixel_pitch_mm + 0.5 * s.width_px - 0.5;
 }
 inline double sensor_mm_to_row(const SensorSpec& s, double y_mm) {
+  if (s.optical_axis_px) return y_mm / s.pixel_pitch_mm + (*s.optical_axis_px)[1];
   return y_mm / s.pixel_pitch_mm + 0.5 * s.height_px - 0.5;
 }
 

@@ -14,5 +14,9 @@ namespace plenopiv::process {
 // in 8..16) so that particle images are clipped and their sub-pixel positions lost. The text names
 // the problem and what to check; it does not name the frame.
 std::optional<std::string> frame_problem(std::span<const std::uint16_t> pixels, int bit_depth = 0);
+// The same for a frame read as float (io::read_raw_frame: PNG, 8/16-bit or float TIFF). Values
+// are counts as the file holds them; a float file's values are full scale only if they reach
+// 2^k - 1 exactly, so saturation in a float frame of another scale goes unnoticed.
+std::optional<std::string> frame_problem(std::span<const float> pixels, int bit_depth = 0);
 
 }  // namespace plenopiv::process

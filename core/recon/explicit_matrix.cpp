@@ -33,7 +33,7 @@ SparseMatrix build_explicit_matrix(const WeightingOperator& op) {
   const Grid3& g = op.grid();
   const WeightingOperator::Geometry& geo = op.geometry();
   const int width = op.image_width(), height = op.image_height();
-  const optics::SensorSpec sensor{width, height, geo.pixel_pitch};
+  const optics::SensorSpec& sensor = op.sensor();
   auto column_of = [&](double mm) { return optics::sensor_mm_to_column(sensor, mm); };
   auto row_of = [&](double mm) { return optics::sensor_mm_to_row(sensor, mm); };
 

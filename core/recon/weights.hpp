@@ -146,6 +146,7 @@ class WeightingOperator {
     double max_centre_deviation_mm = 0;  // of any lens from its column/row mean
   };
   const Geometry& geometry() const { return geo_; }
+  const optics::SensorSpec& sensor() const { return sensor_; }  // with its optical axis
 
  private:
   // The construction, step by step: the inputs checked (weights.cpp), the geometry read from the

@@ -102,7 +102,8 @@ struct Emitter {
 class Tracer {
  public:
   Tracer(const optics::CameraModel& camera, const optics::MicrolensArray& array,
-         double aperture_diameter_mm, double overfill, double sigma_mm, std::uint32_t* counts)
+         double aperture_diameter_mm, double overfill, double sigma_mm, const VignettingStop& stop,
+         const std::vector<float>& transmission, std::uint32_t* counts)
       : s_o_(camera.object_distance_mm()),
         s_i_(camera.image_distance_mm()),
         inv_f_m_(1.0 / camera.main_lens().focal_length_mm),
@@ -112,6 +113,10 @@ class Tracer {
         sample_r_(0.5 * aperture_diameter_mm * overfill),
         overfilled_(overfill > 1.0),
         sigma_(sigma_mm),
+        stop_distance_(stop.distance_mm),
+        stop_r2_(0.25 * stop.diameter_mm * stop.diameter_mm),
+        vignetting_(stop.diameter_mm > 0),
+        transmission_(transmission.empty() ? nullptr : transmission.data()),
         lattice_(array.lattice),
         cos_(std::cos(array.lattice.rotation_rad)),
         sin_(std::sin(array.lattice.rotation_rad)),
@@ -121,6 +126,10 @@ class Tracer {
         width_(camera.sensor().width_px),
         height_(camera.sensor().height_px),
         inv_pp_(1.0 / camera.sensor().pixel_pitch_mm),
+        // Pixel k covers [k - 0.5, k + 0.5) in optics::sensor_mm_to_column's coordinates: the
+        // landing column plus 0.5, truncated, is the pixel.
+        column_origin_(camera.sensor().optical_axis_px ? (*camera.sensor().optical_axis_px)[0] + 0.5 : 0.5 * width_),
+        row_origin_(camera.sensor().optical_axis_px ? (*camera.sensor().optical_axis_px)[1] + 0.5 : 0.5 * height_),
         counts_(counts),
         normals_(NormalTable::get()) {
     // The nearest lattice point is the struck lens only for a rect lattice whose lenses sit
@@ -163,6 +172,13 @@ class Tracer {
       // 1 + 2: slope after the main lens; 3: position on the microlens plane.
       const double tx = (ax - xo) * inv_d - ax * inv_f_m_;
       const double ty = (ay - yo) * inv_d - ay * inv_f_m_;
+      if (vignetting_) {
+        const double vx = ax + stop_distance_ * tx, vy = ay + stop_distance_ * ty;
+        if (vx * vx + vy * vy > stop_r2_) {
+          ++c.outside_aperture;
+          continue;
+        }
+      }
       double xm = ax + s_i_ * tx;
       double ym = ay + s_i_ * ty;
       double jitter[4];
@@ -183,16 +199,19 @@ class Tracer {
         xs += sigma_ * jitter[2];
         ys += sigma_ * jitter[3];
       }
-      // Pixel k covers [k - 0.5, k + 0.5) in optics::sensor_mm_to_column's coordinates; the
-      // range check comes first, so truncation is floor.
-      const double col = xs * inv_pp_ + 0.5 * width_;
-      const double row = ys * inv_pp_ + 0.5 * height_;
+      // The range check comes first, so truncation is floor.
+      const double col = xs * inv_pp_ + column_origin_;
+      const double row = ys * inv_pp_ + row_origin_;
       if (!(col >= 0 && col < width_ && row >= 0 && row < height_)) {
         ++c.outside_sensor;
         continue;
       }
-      std::atomic_ref<std::uint32_t>(counts_[std::size_t(row) * width_ + std::size_t(col)])
-          .fetch_add(1, std::memory_order_relaxed);
+      const std::size_t pixel = std::size_t(row) * width_ + std::size_t(col);
+      if (transmission_ && transmission_[pixel] < 1.0f && rng.uniform() >= transmission_[pixel]) {
+        ++c.absorbed;
+        continue;
+      }
+      std::atomic_ref<std::uint32_t>(counts_[pixel]).fetch_add(1, std::memory_order_relaxed);
       ++c.landed;
     }
     c.emitted += rays;
@@ -239,12 +258,16 @@ class Tracer {
   double aperture_r2_, sample_r_;
   bool overfilled_;
   double sigma_;
+  double stop_distance_, stop_r2_;
+  bool vignetting_;
+  const float* transmission_;
   optics::Lattice lattice_;
   double cos_, sin_, inv_pitch_x_, inv_pitch_y_;
   const std::array<double, 2>* centres_;
   bool exact_rect_ = true;
   int width_, height_;
   double inv_pp_;
+  double column_origin_, row_origin_;
   std::uint32_t* counts_;
   const NormalTable& normals_;
 };
@@ -266,6 +289,40 @@ void check_sensor(const SensorModel& s) {
   if (s.bit_depth < 1 || s.bit_depth > 16) {
     throw InputError("render options: sensor.bit_depth: must be 1..16, got " + std::to_string(s.bit_depth));
   }
+  for (std::size_t k = 0; k < s.dust.size(); ++k) {
+    const DustSpot& d = s.dust[k];
+    if (!std::isfinite(d.column) || !std::isfinite(d.row) || !(d.radius_px >= 0) || !(d.edge_px >= 0) ||
+        !(d.opacity >= 0 && d.opacity <= 1) || !std::isfinite(d.radius_px + d.edge_px)) {
+      throw InputError("render options: sensor.dust[" + std::to_string(k) +
+                       "]: needs a finite position, radius and edge >= 0, opacity 0..1");
+    }
+  }
+}
+
+void check_vignetting(const VignettingStop& v) {
+  if (!std::isfinite(v.distance_mm) || !std::isfinite(v.diameter_mm) || v.diameter_mm < 0) {
+    throw InputError("render options: vignetting: needs a finite distance and a diameter >= 0 mm");
+  }
+}
+
+// Per pixel, the share of light the dust shadows pass (at the pixel centre); empty without dust.
+std::vector<float> dust_transmission(const SensorModel& sensor, int width, int height) {
+  std::vector<float> t;
+  if (sensor.dust.empty()) return t;
+  t.assign(std::size_t(width) * height, 1.0f);
+  for (const DustSpot& d : sensor.dust) {
+    const double reach = d.radius_px + 0.5 * d.edge_px;
+    const int x0 = std::max(0, int(std::floor(d.column - reach))), x1 = std::min(width - 1, int(std::ceil(d.column + reach)));
+    const int y0 = std::max(0, int(std::floor(d.row - reach))), y1 = std::min(height - 1, int(std::ceil(d.row + reach)));
+    for (int y = y0; y <= y1; ++y) {
+      for (int x = x0; x <= x1; ++x) {
+        const double r = std::hypot(x - d.column, y - d.row);
+        const double core = d.edge_px > 0 ? std::clamp((reach - r) / d.edge_px, 0.0, 1.0) : (r <= d.radius_px ? 1.0 : 0.0);
+        t[std::size_t(y) * width + x] *= float(1.0 - d.opacity * core);
+      }
+    }
+  }
+  return t;
 }
 
 void check_array(const optics::MicrolensArray& array) {
@@ -280,10 +337,11 @@ void check_array(const optics::MicrolensArray& array) {
 RenderResult trace_all(const optics::CameraModel& camera, const optics::MicrolensArray& array,
                        std::span<const Emitter> emitters, std::size_t rays_per_emitter,
                        double aperture_diameter_mm, double overfill, double sigma_mm,
-                       const SensorModel& sensor, const std::function<void(double)>& progress,
-                       std::uint64_t seed) {
+                       const VignettingStop& vignetting, const SensorModel& sensor,
+                       const std::function<void(double)>& progress, std::uint64_t seed) {
   check_array(array);
   check_sensor(sensor);
+  check_vignetting(vignetting);
   check_finite_nonnegative(sigma_mm, "diffraction_sigma_mm");
   if (!(aperture_diameter_mm > 0) || !std::isfinite(aperture_diameter_mm)) {
     throw InputError("render options: aperture diameter must be > 0");
@@ -292,13 +350,17 @@ RenderResult trace_all(const optics::CameraModel& camera, const optics::Microlen
     throw InputError("render options: aperture_overfill: must be >= 1, got " + std::to_string(overfill));
   }
   const int w = camera.sensor().width_px, h = camera.sensor().height_px;
-  // The counters, the ray image and the sensor image are held at once.
+  // The counters, the ray image, the sensor image and (with dust) its transmission are held at once.
   const std::size_t pixels = checked_count(
-      w, h, 1, sizeof(std::uint32_t) + sizeof(float) + sizeof(std::uint16_t),
+      w, h, 1,
+      sizeof(std::uint32_t) + sizeof(float) + sizeof(std::uint16_t) + (sensor.dust.empty() ? 0 : sizeof(float)),
       "rendering a " + std::to_string(w) + " x " + std::to_string(h) + " px frame");
   std::vector<std::uint32_t> counts(pixels, 0);
-  const Tracer tracer(camera, array, aperture_diameter_mm, overfill, sigma_mm, counts.data());
-  std::atomic<std::uint64_t> emitted{0}, outside_aperture{0}, missed{0}, outside_sensor{0}, landed{0};
+  const std::vector<float> transmission = dust_transmission(sensor, w, h);
+  const Tracer tracer(camera, array, aperture_diameter_mm, overfill, sigma_mm, vignetting, transmission,
+                      counts.data());
+  std::atomic<std::uint64_t> emitted{0}, outside_aperture{0}, missed{0}, outside_sensor{0}, landed{0},
+      absorbed{0};
   std::atomic<std::size_t> done{0};
   std::mutex progress_mutex;
   const std::size_t step = std::max<std::size_t>(1, emitters.size() / 100);
@@ -319,9 +381,10 @@ RenderResult trace_all(const optics::CameraModel& camera, const optics::Microlen
                       missed += c.missed_array;
                       outside_sensor += c.outside_sensor;
                       landed += c.landed;
+                      absorbed += c.absorbed;
                     });
   RenderResult result;
-  result.counts = {emitted, outside_aperture, missed, outside_sensor, landed};
+  result.counts = {emitted, outside_aperture, missed, outside_sensor, landed, absorbed};
   result.rays = ImageF(w, h);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, counts.size(), 1 << 16),
                     [&](const tbb::blocked_range<std::size_t>& r) {
@@ -354,8 +417,8 @@ RenderResult render(const optics::CameraModel& camera, const optics::MicrolensAr
   const double aperture = options.aperture_diameter_mm > 0 ? options.aperture_diameter_mm
                                                            : camera.aperture_diameter_mm();
   return trace_all(camera, array, emitters, options.rays_per_particle, aperture,
-                   options.aperture_overfill, options.diffraction_sigma_mm, options.sensor,
-                   options.progress, seed);
+                   options.aperture_overfill, options.diffraction_sigma_mm, options.vignetting,
+                   options.sensor, options.progress, seed);
 }
 
 TargetOptions calibration_target() {
@@ -381,7 +444,19 @@ RenderResult render_target(const optics::CameraModel& camera, const optics::Micr
       hi[a] = std::max(hi[a], c[a]);
     }
   }
+  // An array that overfills the sensor lights the target only where the sensor can see it: the
+  // sensor's footprint on the microlens plane plus two pitches.
   const double px = array.lattice.pitch_x_mm, py = array.lattice.pitch_y_mm;
+  const auto& sensor = camera.sensor();
+  const double seen_lo[2] = {optics::column_to_sensor_mm(sensor, -0.5) - 2 * px, optics::row_to_sensor_mm(sensor, -0.5) - 2 * py};
+  const double seen_hi[2] = {optics::column_to_sensor_mm(sensor, sensor.width_px - 0.5) + 2 * px,
+                             optics::row_to_sensor_mm(sensor, sensor.height_px - 0.5) + 2 * py};
+  for (int a = 0; a < 2; ++a) {
+    if (lo[a] < seen_lo[a] && hi[a] > seen_hi[a]) {
+      lo[a] = seen_lo[a];
+      hi[a] = seen_hi[a];
+    }
+  }
   const int tx = int(std::ceil((hi[0] - lo[0]) / px)) + 3, ty = int(std::ceil((hi[1] - lo[1]) / py)) + 3;
   const double x0 = 0.5 * (lo[0] + hi[0]) - 0.5 * (tx - 1) * px;
   const double y0 = 0.5 * (lo[1] + hi[1]) - 0.5 * (ty - 1) * py;
@@ -395,7 +470,7 @@ RenderResult render_target(const optics::CameraModel& camera, const optics::Micr
   }
   return trace_all(camera, array, tiles, options.rays_per_lens,
                    camera.main_lens().focal_length_mm / f_number, 1.0, options.diffraction_sigma_mm,
-                   options.sensor, options.progress, seed);
+                   options.vignetting, options.sensor, options.progress, seed);
 }
 
 ImageU16 apply_sensor(const ImageF& rays, const SensorModel& sensor, std::uint64_t seed) {
@@ -429,6 +504,37 @@ ImageU16 apply_sensor(const ImageF& rays, const SensorModel& sensor, std::uint64
     }
   });
   return out;
+}
+
+optics::Lattice overfilling_lattice(const optics::CameraModel& camera, optics::LensletLayout layout,
+                                    double pitch_mm, double rotation_rad, double offset_x_mm,
+                                    double offset_y_mm, int margin_lenses) {
+  if (!(pitch_mm > 0) || !std::isfinite(pitch_mm) || !std::isfinite(rotation_rad) || !std::isfinite(offset_x_mm) ||
+      !std::isfinite(offset_y_mm) || margin_lenses < 0) {
+    throw InputError("overfilling array: needs a positive pitch, finite rotation and offset, margin >= 0");
+  }
+  optics::Lattice l;
+  l.layout = layout;
+  l.pitch_x_mm = pitch_mm;
+  l.pitch_y_mm = layout == optics::LensletLayout::hex ? pitch_mm * std::sqrt(3.0) / 2 : pitch_mm;
+  l.rotation_rad = rotation_rad;
+  l.offset_x_mm = offset_x_mm;
+  l.offset_y_mm = offset_y_mm;
+  // The sensor's corners in the array's own (unrotated) frame bound the lenses it can see.
+  const auto& s = camera.sensor();
+  const double c = std::cos(rotation_rad), sn = std::sin(rotation_rad);
+  double reach_a = 0, reach_b = 0;
+  for (double col : {-0.5, s.width_px - 0.5}) {
+    for (double row : {-0.5, s.height_px - 0.5}) {
+      const double dx = optics::column_to_sensor_mm(s, col) - offset_x_mm;
+      const double dy = optics::row_to_sensor_mm(s, row) - offset_y_mm;
+      reach_a = std::max(reach_a, std::abs(c * dx - sn * dy));
+      reach_b = std::max(reach_b, std::abs(sn * dx + c * dy));
+    }
+  }
+  l.count_x = 2 * (int(std::ceil(reach_a / l.pitch_x_mm)) + margin_lenses) + 1;
+  l.count_y = 2 * (int(std::ceil(reach_b / l.pitch_y_mm)) + margin_lenses) + 1;
+  return l;
 }
 
 optics::MicrolensArray jittered_array(const optics::Lattice& lattice, double sigma_mm, std::uint64_t seed) {

@@ -4,6 +4,7 @@
 #include <cstdint>
 #include <functional>
 #include <span>
+#include <vector>
 
 #include "core/base/image.hpp"
 #include "core/optics/camera_model.hpp"
@@ -12,8 +13,19 @@
 
 namespace plenopiv::sim {
 
+// A dust particle on the sensor's cover glass: its shadow, a disk of `radius_px` whose edge blurs
+// over `edge_px`, passes 1 - opacity of the light in its core. Position in pixel coordinates
+// (integer = pixel centre).
+struct DustSpot {
+  double column = 0;
+  double row = 0;
+  double radius_px = 5;
+  double edge_px = 2;
+  double opacity = 0.5;  // 0..1
+};
+
 // The sensor's response to the rays that landed on a pixel. Defaults: a perfect linear sensor
-// (one count per ray, no noise, no offset, 16 bits), as the geometry tests want.
+// (one count per ray, no noise, no offset, 16 bits, clean), as the geometry tests want.
 struct SensorModel {
   double electrons_per_ray = 1.0;     // photo-electrons each landed ray frees (>= 0)
   bool shot_noise = false;            // Poisson photon shot noise on the electrons
@@ -21,6 +33,18 @@ struct SensorModel {
   double dark_offset_dn = 0.0;        // added after gain, counts (>= 0)
   double gain_dn_per_electron = 1.0;  // (> 0)
   int bit_depth = 16;                 // 1..16: values saturate at 2^bit_depth - 1
+  // Shadows on the sensor: a ray landing in one is absorbed with the shadow's local opacity
+  // (drawn from the ray's own random stream), so `RenderResult::rays` holds them too.
+  std::vector<DustSpot> dust;
+};
+
+// A second circular stop behind the main lens (a lens barrel or a field stop at the exit pupil
+// side): rays outside its diameter at `distance_mm` behind the main lens, on the optical axis,
+// are blocked. Off-axis microlenses then see the aperture cut into a cat's eye and the white image
+// falls off towards the edge of the field, as with real lenses. diameter_mm 0: no such stop.
+struct VignettingStop {
+  double distance_mm = 0;
+  double diameter_mm = 0;
 };
 
 struct RenderOptions {
@@ -34,21 +58,24 @@ struct RenderOptions {
   // diameter; those outside the aperture are blocked and counted. 1 (default) aims every ray
   // through the aperture, as the paper does (its theta_min..theta_max); > 1 exercises the stop.
   double aperture_overfill = 1.0;
+  VignettingStop vignetting;
   SensorModel sensor;
   // Called with the fraction of sources traced (about every 1 %, and at 1), from one thread at
   // a time; for progress displays. Empty: not called.
   std::function<void(double)> progress;
 };
 
-// Where the emitted rays went: landed + outside_sensor + missed_array + outside_aperture =
-// emitted. missed_array: passed the aperture but fell beside the microlens array (blocked by
-// its mount); outside_sensor: refracted by a microlens but beyond the sensor's edge.
+// Where the emitted rays went: landed + outside_sensor + missed_array + outside_aperture +
+// absorbed = emitted. outside_aperture: blocked by the aperture or the vignetting stop;
+// missed_array: passed the stops but fell beside the microlens array (blocked by its mount);
+// outside_sensor: refracted by a microlens but beyond the sensor's edge; absorbed: by dust.
 struct RayCounts {
   std::uint64_t emitted = 0;
   std::uint64_t outside_aperture = 0;
   std::uint64_t missed_array = 0;
   std::uint64_t outside_sensor = 0;
   std::uint64_t landed = 0;
+  std::uint64_t absorbed = 0;
 };
 
 struct RenderResult {
@@ -77,6 +104,7 @@ struct TargetOptions {
   double f_number = 0.0;  // 0: the camera's f-number (white image); large: stopped down
   std::size_t rays_per_lens = 2000;
   double diffraction_sigma_mm = 0.0052;
+  VignettingStop vignetting;
   SensorModel sensor;
   std::function<void(double)> progress;  // as RenderOptions::progress
 };
@@ -95,5 +123,13 @@ ImageU16 apply_sensor(const ImageF& rays, const SensorModel& sensor, std::uint64
 // An imperfect array: `lattice` with each lens centre moved by Gaussian jitter (sigma_mm per
 // axis), seeded.
 optics::MicrolensArray jittered_array(const optics::Lattice& lattice, double sigma_mm, std::uint64_t seed);
+
+// An array as mounted in a real camera: `layout` lenses of `pitch_mm` (row pitch sqrt(3)/2 of it
+// for hex), turned by `rotation_rad` and shifted by (offset_x_mm, offset_y_mm) on the microlens
+// plane, with enough lenses that the sensor sees the array reach past all four of its edges by at
+// least `margin_lenses` lenses (the outer ones cut by the sensor edge or beyond it).
+optics::Lattice overfilling_lattice(const optics::CameraModel& camera, optics::LensletLayout layout,
+                                    double pitch_mm, double rotation_rad, double offset_x_mm,
+                                    double offset_y_mm, int margin_lenses = 2);
 
 }  // namespace plenopiv::sim

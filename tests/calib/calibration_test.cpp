@@ -214,8 +214,7 @@ TEST(Calibrate, RefusesWrongSizeNoSpotsAndNoLattice) {
   ImageF bad(850, 850, 100);
   bad.at(3, 4) = std::nanf("");
   EXPECT_NE(error_of(cam, bad).find("pixel (3, 4)"), std::string::npos);
-  bad.at(3, 4) = -1;
-  EXPECT_NE(error_of(cam, bad).find("finite and non-negative"), std::string::npos);
+  EXPECT_NE(error_of(cam, bad).find("must be finite"), std::string::npos);
 }
 
 TEST(WhiteCorrection, OneInsideEachLensImageZeroInTheGaps) {

@@ -1,13 +1,16 @@
 // File formats: TIFF, HDF5 and VTI round trips, h5py reading our files, refused corrupt inputs.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstring>
+#include <opencv2/imgcodecs.hpp>
 #include <fstream>
 #include <sstream>
 
 #include "core/base/errors.hpp"
 #include "core/io/atomic_file.hpp"
 #include "core/io/hdf5_files.hpp"
+#include "core/io/raw_frame.hpp"
 #include "core/io/tiff.hpp"
 #include "core/io/vtk_files.hpp"
 #include "tests/support/child_process.hpp"
@@ -94,6 +97,90 @@ TEST(Tiff, FloatImageIsNotARawFrame) {
   write_tiff_stack(path, {ImageF(3, 3, 1.f)});
   const std::string err = message_of([&] { read_tiff_u16(path); });
   EXPECT_NE(err.find("expected a single-channel 8- or 16-bit unsigned TIFF"), std::string::npos) << err;
+}
+
+// One reader for raw frames, whatever a camera's software saved: PNG (8/16-bit), TIFF (8/16-bit or
+// float), told apart by their signature; everything else refused by name.
+TEST(RawFrame, PngAndTiffOfEveryDepthReadAsCounts) {
+  const auto dir = temp_dir() / "frames";
+  std::filesystem::create_directories(dir);
+  cv::Mat grey8(3, 4, CV_8U), grey16(3, 4, CV_16U);
+  for (int y = 0; y < 3; ++y)
+    for (int x = 0; x < 4; ++x) {
+      grey8.at<std::uint8_t>(y, x) = std::uint8_t(10 * y + x);
+      grey16.at<std::uint16_t>(y, x) = std::uint16_t(1000 * y + x);
+    }
+  ASSERT_TRUE(cv::imwrite((dir / "a.png").string(), grey8));
+  ASSERT_TRUE(cv::imwrite((dir / "b.png").string(), grey16));
+  ASSERT_TRUE(cv::imwrite((dir / "c.tif").string(), grey8));
+  ImageU16 u16(4, 3);
+  for (std::size_t k = 0; k < u16.size(); ++k) u16.pixels[k] = std::uint16_t(60000 + k);
+  write_tiff(dir / "d.tif", u16);
+  ImageF f32(4, 3);
+  for (std::size_t k = 0; k < f32.size(); ++k) f32.pixels[k] = 0.25f * float(k) - 1.0f;
+  write_tiff_stack(dir / "e.tif", {f32});
+  // A name says nothing: a PNG saved as .tif is read as the PNG it is.
+  std::filesystem::copy_file(dir / "a.png", dir / "a_really_png.tif", std::filesystem::copy_options::overwrite_existing);
+
+  const ImageF a = read_raw_frame(dir / "a.png"), b = read_raw_frame(dir / "b.png"), c = read_raw_frame(dir / "c.tif");
+  const ImageF d = read_raw_frame(dir / "d.tif"), e = read_raw_frame(dir / "e.tif");
+  const ImageF renamed = read_raw_frame(dir / "a_really_png.tif");
+  ASSERT_EQ(a.width, 4);
+  ASSERT_EQ(a.height, 3);
+  for (int y = 0; y < 3; ++y)
+    for (int x = 0; x < 4; ++x) {
+      EXPECT_EQ(a.at(x, y), float(10 * y + x));
+      EXPECT_EQ(b.at(x, y), float(1000 * y + x));
+      EXPECT_EQ(c.at(x, y), float(10 * y + x));
+      EXPECT_EQ(renamed.at(x, y), float(10 * y + x));
+    }
+  EXPECT_EQ(d.pixels[11], 60011.0f);
+  EXPECT_EQ(e.pixels, f32.pixels);  // float frames keep their values, negative ones too
+
+  // A series: averaged; a frame of another size named.
+  const ImageF mean = read_mean_frame({(dir / "a.png").string(), (dir / "c.tif").string(), (dir / "b.png").string()}, "white");
+  EXPECT_FLOAT_EQ(mean.at(3, 2), (23.0f + 23.0f + 2003.0f) / 3);
+  ASSERT_TRUE(cv::imwrite((dir / "small.png").string(), cv::Mat(2, 2, CV_8U, cv::Scalar(1))));
+  const std::string err = message_of([&] { read_mean_frame({(dir / "a.png").string(), (dir / "small.png").string()}, "dark"); });
+  EXPECT_NE(err.find("small.png: dark frame is 2 x 2 pixels, "), std::string::npos) << err;
+  EXPECT_NE(err.find("a.png is 4 x 3"), std::string::npos) << err;
+}
+
+TEST(RawFrame, ColourNonFiniteCorruptAndForeignFilesAreRefusedByName) {
+  const auto dir = temp_dir() / "bad-frames";
+  std::filesystem::create_directories(dir);
+  // Grey stored as colour (equal channels) is grey; real colour is not a raw frame.
+  ASSERT_TRUE(cv::imwrite((dir / "grey_rgb.png").string(), cv::Mat(2, 3, CV_8UC3, cv::Scalar(7, 7, 7))));
+  EXPECT_EQ(read_raw_frame(dir / "grey_rgb.png").pixels, std::vector<float>(6, 7.0f));
+  ASSERT_TRUE(cv::imwrite((dir / "colour.png").string(), cv::Mat(2, 3, CV_8UC3, cv::Scalar(7, 8, 9))));
+  std::string err = message_of([&] { read_raw_frame(dir / "colour.png"); });
+  EXPECT_NE(err.find("colour.png: a colour PNG"), std::string::npos) << err;
+
+  ImageF nan(3, 2, 1.0f);
+  nan.at(2, 1) = std::nanf("");
+  write_tiff_stack(dir / "nan.tif", {nan});
+  err = message_of([&] { read_raw_frame(dir / "nan.tif"); });
+  EXPECT_NE(err.find("nan.tif: pixel (2, 1) is nan; a raw frame's values must be finite"), std::string::npos) << err;
+
+  std::ofstream(dir / "text.png") << "just some text, not an image";
+  err = message_of([&] { read_raw_frame(dir / "text.png"); });
+  EXPECT_NE(err.find("text.png: not a PNG or TIFF file"), std::string::npos) << err;
+  {
+    std::ofstream bad(dir / "cut.png", std::ios::binary);
+    bad << "\x89PNG\r\n\x1a\n" << std::string(40, 'x');
+  }
+  err = message_of([&] { read_raw_frame(dir / "cut.png"); });
+  EXPECT_NE(err.find("cut.png: corrupt or unreadable PNG"), std::string::npos) << err;
+  err = message_of([&] { read_raw_frame(dir / "missing.png"); });
+  EXPECT_NE(err.find("missing.png: no such file"), std::string::npos) << err;
+  err = message_of([&] { read_raw_frame(dir / "cut.tif"); });
+  EXPECT_NE(err.find("cut.tif: no such file"), std::string::npos) << err;
+  {
+    const std::string head("II*\0 and then nothing useful", 29);
+    std::ofstream(dir / "cut.tif", std::ios::binary).write(head.data(), std::streamsize(head.size()));
+  }
+  err = message_of([&] { read_raw_frame(dir / "cut.tif"); });
+  EXPECT_NE(err.find("cut.tif: cannot open as TIFF"), std::string::npos) << err;
 }
 
 TEST(AtomicFile, AFailedWriteLeavesNothingBehind) {
