@@ -36,6 +36,8 @@ struct ReconOptions {
   double dark_cutoff = 0.9;
   double convergence = 0;
   double sensor_blur_mm = 0;
+  double prune_threshold = 0;
+  bool no_prune = false;
 };
 
 Grid3 grid_from(const ReconOptions& o) {
@@ -67,6 +69,8 @@ void run(const ReconOptions& o) {
   s.dark_weight_cutoff = o.dark_cutoff;
   s.convergence = o.convergence;
   s.sensor_blur_sigma_mm = o.sensor_blur_mm;
+  s.prune = !o.no_prune;
+  s.prune_threshold = o.prune_threshold;
   if (o.start == "mlos") {
     s.start = recon::MartStart::mlos;
   } else if (o.start == "ones") {
@@ -112,17 +116,19 @@ void run(const ReconOptions& o) {
                    std::string(std::size_t(width - done), ' ').c_str(), it.iteration, s.iterations, rate, eta, it.residual);
       if (it.iteration == s.iterations) std::fprintf(stderr, "\n");
     } else {
-      std::fprintf(stderr, "iteration %d/%d residual %.4f (%.2f s, ETA %.0f s)\n", it.iteration, s.iterations,
-                   it.residual, it.seconds, eta);
+      std::fprintf(stderr, "iteration %d/%d residual %.4f (%.2f s, ETA %.0f s; %zu live voxels, %.1f %% of the box skipped)\n",
+                   it.iteration, s.iterations, it.residual, it.seconds, eta, it.live_voxels, 100 * it.fraction_skipped());
     }
   });
   if (tty && r.iterations.size() < std::size_t(s.iterations)) std::fprintf(stderr, "\n");
   const recon::SkipReport& k = r.skipped;
   std::fprintf(stderr,
                "skipped %.1f %% of %zu voxels (seen by a dark pixel %zu, outside the field of view %zu), "
-               "%d of %d slices empty, %zu dark pixels; final residual %.4f%s\n",
+               "%d of %d slices empty, %zu dark pixels; voxel updates skipped %.1f %% (%zu voxels pruned); "
+               "final residual %.4f%s\n",
                100 * k.fraction_skipped(), k.voxels, k.voxels_dark, k.voxels_unseen, k.slices_empty, k.slices,
-               k.dark_pixels, r.final_residual.value(), r.converged ? " (converged)" : "");
+               k.dark_pixels, 100 * k.fraction_updates_skipped(), k.voxels_pruned, r.final_residual.value(),
+               r.converged ? " (converged)" : "");
   io::write_volume_h5(o.out, r.volume);
   const std::string vti = o.vti.empty() ? std::filesystem::path(o.out).replace_extension(".vti").string() : o.vti;
   io::write_volume_vti(vti, r.volume);
@@ -168,6 +174,11 @@ void add_recon_commands(CLI::App& app) {
                   "the camera's blur at the sensor as a Gaussian sigma, mm, modelled in MART (diffraction: "
                   "core/sim's is 0.0052; 0: sec 5.2's weights alone)")
       ->capture_default_str();
+  cmd->add_option("--prune-threshold", o->prune_threshold,
+                  "voxels at or below this fraction of the volume's peak leave the active set after the "
+                  "start and each iteration (0: only exact zeros, the same volume as without pruning)")
+      ->capture_default_str();
+  cmd->add_flag("--no-prune", o->no_prune, "update every active voxel on every iteration (the reference)");
   cmd->add_option("-o,--out", o->out, "output volume (HDF5: /volume, origin_mm, spacing_mm)")->required();
   cmd->add_option("--vti", o->vti, "also write VTK image data here (default: --out with .vti)");
   cmd->callback([o] { run(*o); });

@@ -90,7 +90,7 @@ ProcessSettings process_settings_from(const YamlMap& root) {
   if (auto r = root.optional_map("reconstruction")) {
     r->reject_unknown(
         {"iterations", "mu", "acceleration", "start", "noise_threshold", "dark_weight_cutoff", "convergence",
-         "angular_sampling", "sensor_blur_sigma_mm"});
+         "angular_sampling", "sensor_blur_sigma_mm", "prune", "prune_threshold"});
     s.mart.iterations = r->integer_in("iterations", s.mart.iterations, 1, 1000);
     s.mart.mu = r->number_or("mu", s.mart.mu);
     if (!(s.mart.mu > 0 && s.mart.mu <= 1)) r->fail("mu", "must be in (0, 1]");
@@ -107,6 +107,10 @@ ProcessSettings process_settings_from(const YamlMap& root) {
     s.mart.sensor_blur_sigma_mm = r->number_or("sensor_blur_sigma_mm", s.mart.sensor_blur_sigma_mm);
     if (!(s.mart.sensor_blur_sigma_mm >= 0 && s.mart.sensor_blur_sigma_mm <= recon::kMaxSensorBlurSigmaMm))
       r->fail("sensor_blur_sigma_mm", "must be in [0, " + std::to_string(recon::kMaxSensorBlurSigmaMm) + "] mm");
+    s.mart.prune = r->boolean_or("prune", s.mart.prune);
+    s.mart.prune_threshold = r->number_or("prune_threshold", s.mart.prune_threshold);
+    if (!(s.mart.prune_threshold >= 0 && s.mart.prune_threshold < 1))
+      r->fail("prune_threshold", "must be in [0, 1) (a fraction of the volume's peak)");
     s.angular_sampling = r->number_or("angular_sampling", s.angular_sampling);
     if (!(s.angular_sampling > 0 && s.angular_sampling <= 8)) r->fail("angular_sampling", "must be in (0, 8]");
   }

@@ -48,7 +48,7 @@ Grid3 grid_for_extent(const std::array<double, 3>& lo, const std::array<double, 
 //   dt_s: 0.0001                                   (required)
 //   volume: {x_mm: [a, b], y_mm: [..], z_mm: [..], voxel_mm: 0.125, voxel_z_mm: 0.125, depth_guard_mm: 1}
 //   reconstruction: {iterations, mu, start: mlos|ones, noise_threshold, dark_weight_cutoff, convergence,
-//                    angular_sampling, sensor_blur_sigma_mm}
+//                    angular_sampling, sensor_blur_sigma_mm, prune, prune_threshold}
 //   correlation: {passes, median, signal_threshold}    (as piv::load_correlation_settings)
 // Unknown keys are refused; every value is checked; InputError names the file and key.
 ProcessSettings process_settings_from(const YamlMap& root);

@@ -48,6 +48,10 @@ void validate_settings(const MartSettings& s) {
   if (!(s.convergence >= 0) || !std::isfinite(s.convergence)) {
     throw InputError("MART: convergence tolerance must be a finite number >= 0");
   }
+  if (!(s.prune_threshold >= 0 && s.prune_threshold < 1)) {
+    throw InputError("MART: prune threshold must lie in [0, 1) (a fraction of the peak), got " +
+                     std::to_string(s.prune_threshold));
+  }
   check_sensor_blur_sigma(s.sensor_blur_sigma_mm, "MART");
 }
 
@@ -109,7 +113,9 @@ std::size_t MartWorkspace::bytes() const {
   }
   total += b.kernels.scaled.capacity() * sizeof(float) + b.kernels.sums.capacity() * sizeof(double);
   total += (b.kernels.band_lanes.capacity() + b.kernels.image_lanes.capacity()) * sizeof(float);
-  total += b.select.dark.capacity() * sizeof(std::uint64_t);
+  total += b.select.dark.capacity() * sizeof(std::uint64_t) +
+           b.origin.capacity() * sizeof(std::uint32_t);
+  total += b.active.bytes();
   for (const auto& slice : b.select.per_slice) total += slice.capacity() * sizeof(std::uint32_t);
   return total;
 }

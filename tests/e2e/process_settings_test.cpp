@@ -97,6 +97,19 @@ TEST(ProcessSettings, SensorBlurReachesMart) {
   }
 }
 
+TEST(ProcessSettings, PruningReachesMart) {
+  const ProcessSettings defaults = parse(kVolume + "}\n" + kPasses);
+  EXPECT_TRUE(defaults.mart.prune);  // exact zeros only: the volume of no pruning
+  EXPECT_EQ(defaults.mart.prune_threshold, 0.0);
+  const ProcessSettings s = parse(kVolume + "}\nreconstruction: {prune: false, prune_threshold: 0.01}\n" + kPasses);
+  EXPECT_FALSE(s.mart.prune);
+  EXPECT_DOUBLE_EQ(s.mart.prune_threshold, 0.01);
+  for (const std::string bad : {"-0.001", "1", "faint"}) {
+    expect_refused_naming(kVolume + "}\nreconstruction: {prune_threshold: " + bad + "}\n" + kPasses, "prune_threshold");
+  }
+  expect_refused_naming(kVolume + "}\nreconstruction: {prune: sometimes}\n" + kPasses, "prune");
+}
+
 // Two particles at depths z and z + 0.5 mm through the small camera, as the camera records them.
 ImageF two_particle_frame(const optics::CameraModel& camera, const optics::MicrolensArray& lenses, double z) {
   sim::RenderOptions ro;
