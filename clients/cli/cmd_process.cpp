@@ -29,6 +29,7 @@
 #include "core/io/vtk_files.hpp"
 #include "core/optics/camera_file.hpp"
 #include "core/piv/derived.hpp"
+#include "core/process/operator_cache.hpp"
 #include "core/process/process.hpp"
 #include "core/recon/mart.hpp"
 #include "plenopiv.pb.h"
@@ -42,7 +43,21 @@ struct ProcessOptions {
   std::vector<std::string> white_images;
   bool nominal = false;
   int threads = 0;
+  std::string cache_dir;
+  bool no_cache = false;
 };
+
+// The weight tables' cache (core/process): --cache-dir, else the default folder; none with
+// --no-cache or when no folder is known (said).
+std::unique_ptr<process::WeightsDiskCache> weights_cache(const std::string& dir, bool off) {
+  if (off) return nullptr;
+  const std::filesystem::path folder = dir.empty() ? process::default_cache_folder() : std::filesystem::path(dir);
+  if (folder.empty()) {
+    std::fprintf(stderr, "weight tables are not cached: no --cache-dir, PLENOPIV_CACHE_DIR, XDG_CACHE_HOME or HOME\n");
+    return nullptr;
+  }
+  return std::make_unique<process::WeightsDiskCache>(folder);
+}
 
 ImageF read_frame(const std::string& path) {
   const ImageU16 raw = io::read_tiff_u16(path);
@@ -200,7 +215,10 @@ void run_process(const ProcessOptions& o) {
   const auto& g = settings.grid;
   std::fprintf(stderr, "volume %d x %d x %d voxels (+%d guard slices at each depth end); weights ...\n", g.shape[0],
                g.shape[1], g.shape[2], settings.guard_slices());
-  const process::PairOperator op(camera, cal.lenses, cal.white_correction, settings);
+  const auto cache = weights_cache(o.cache_dir, o.no_cache);
+  const process::PairOperator op(camera, cal.lenses, cal.white_correction, settings,
+                                 cache ? cache->source() : process::PairOperator::WeightsSource{});
+  if (cache) std::fprintf(stderr, "%s\n", cache->last_note().c_str());
   if (!op.note().empty()) std::fprintf(stderr, "%s\n", op.note().c_str());
   Progress progress("process", "pairs", 1.0);
   const auto r = process::process_pair(op, a, b, settings, [&](const std::string&, double f) { progress.update(f); });
@@ -240,7 +258,7 @@ void run_reprocess(const ProcessOptions& o) {
                             &o.vti, &o.preview})
     if (!other->empty())
       throw InputError("--run takes the camera, frames, settings and calibration from the run folder; "
-                       "give only --run, -o and --threads");
+                       "give only --run, -o, --threads and the cache options");
   if (!o.white_images.empty() || o.nominal)
     throw InputError("--run takes the calibration from the run folder (manifest.json: calibration)");
   const auto limit = thread_limit(o.threads);
@@ -291,7 +309,10 @@ void run_reprocess(const ProcessOptions& o) {
   const auto& g = settings.grid;
   std::fprintf(stderr, "%s: %d pairs; volume %d x %d x %d voxels (+%d guard slices at each depth end); weights ...\n",
                run.string().c_str(), m.pairs_size(), g.shape[0], g.shape[1], g.shape[2], settings.guard_slices());
-  const process::PairOperator op(camera, cal.lenses, cal.white_correction, settings);
+  const auto cache = weights_cache(o.cache_dir, o.no_cache);
+  const process::PairOperator op(camera, cal.lenses, cal.white_correction, settings,
+                                 cache ? cache->source() : process::PairOperator::WeightsSource{});
+  if (cache) std::fprintf(stderr, "%s\n", cache->last_note().c_str());
   if (!op.note().empty()) std::fprintf(stderr, "%s\n", op.note().c_str());
   const double pairs = double(m.pairs_size());
   Progress progress("process", "pairs", pairs);
@@ -337,6 +358,10 @@ void add_process_commands(CLI::App& app) {
   cmd->add_option("--vti", o->vti, "VTK image data for ParaView (default: --output with .vti)");
   cmd->add_option("--preview", o->preview, "PNG preview (default: --output with .png)");
   cmd->add_option("--threads", o->threads, "worker threads (0: all cores)")->capture_default_str();
+  cmd->add_option("--cache-dir", o->cache_dir,
+                  "folder that keeps weight tables between calls, keyed by camera, calibration, volume and "
+                  "settings (default: $PLENOPIV_CACHE_DIR, $XDG_CACHE_HOME/plenopiv or ~/.cache/plenopiv)");
+  cmd->add_flag("--no-cache", o->no_cache, "build the weight tables afresh and keep none");
   cmd->callback([o] { o->run.empty() ? run_process(*o) : run_reprocess(*o); });
 }
 

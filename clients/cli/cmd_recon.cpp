@@ -17,6 +17,7 @@
 #include "core/io/tiff.hpp"
 #include "core/io/vtk_files.hpp"
 #include "core/optics/camera_file.hpp"
+#include "core/process/operator_cache.hpp"
 #include "core/process/process.hpp"
 #include "core/recon/mart.hpp"
 #include "core/recon/weights.hpp"
@@ -38,6 +39,8 @@ struct ReconOptions {
   double sensor_blur_mm = 0;
   double prune_threshold = 0;
   bool no_prune = false;
+  std::string cache_dir;
+  bool no_cache = false;
 };
 
 Grid3 grid_from(const ReconOptions& o) {
@@ -96,7 +99,18 @@ void run(const ReconOptions& o) {
     white = c.white_correction.empty() ? calib::geometric_white_image(camera, lenses) : std::move(c.white_correction);
   }
   // Raw pixels, or the image resampled onto an axis-aligned lattice for a rotated/warped/hex array.
-  const process::PairOperator pair_op(camera, lenses, white, grid);
+  std::unique_ptr<process::WeightsDiskCache> cache;
+  if (!o.no_cache) {
+    const auto folder = o.cache_dir.empty() ? process::default_cache_folder() : std::filesystem::path(o.cache_dir);
+    if (folder.empty()) {
+      std::fprintf(stderr, "weight tables are not cached: no --cache-dir, PLENOPIV_CACHE_DIR, XDG_CACHE_HOME or HOME\n");
+    } else {
+      cache = std::make_unique<process::WeightsDiskCache>(folder);
+    }
+  }
+  const process::PairOperator pair_op(camera, lenses, white, grid, 1.0,
+                                      cache ? cache->source() : process::PairOperator::WeightsSource{});
+  if (cache) std::fprintf(stderr, "%s\n", cache->last_note().c_str());
   const recon::WeightingOperator& op = pair_op.weights();
   recon::validate_image(image, op, o.image.c_str());
   ImageF scratch;
@@ -179,6 +193,10 @@ void add_recon_commands(CLI::App& app) {
                   "start and each iteration (0: only exact zeros, the same volume as without pruning)")
       ->capture_default_str();
   cmd->add_flag("--no-prune", o->no_prune, "update every active voxel on every iteration (the reference)");
+  cmd->add_option("--cache-dir", o->cache_dir,
+                  "folder that keeps weight tables between calls (default: $PLENOPIV_CACHE_DIR, "
+                  "$XDG_CACHE_HOME/plenopiv or ~/.cache/plenopiv)");
+  cmd->add_flag("--no-cache", o->no_cache, "build the weight tables afresh and keep none");
   cmd->add_option("-o,--out", o->out, "output volume (HDF5: /volume, origin_mm, spacing_mm)")->required();
   cmd->add_option("--vti", o->vti, "also write VTK image data here (default: --out with .vti)");
   cmd->callback([o] { run(*o); });

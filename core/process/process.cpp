@@ -182,22 +182,26 @@ PairResult process_pair(const recon::WeightingOperator& op, const ImageF& frame_
 }
 
 PairOperator::PairOperator(const optics::CameraModel& camera, const optics::MicrolensArray& lenses,
-                           const ImageF& white, const ProcessSettings& settings)
-    : PairOperator(camera, lenses, white, settings.reconstruction_grid(), settings.angular_sampling) {}
+                           const ImageF& white, const ProcessSettings& settings, const WeightsSource& source)
+    : PairOperator(camera, lenses, white, settings.reconstruction_grid(), settings.angular_sampling, source) {}
 
 PairOperator::PairOperator(const optics::CameraModel& camera, const optics::MicrolensArray& lenses,
-                           const ImageF& white, const Grid3& grid, double angular_sampling) {
+                           const ImageF& white, const Grid3& grid, double angular_sampling,
+                           const WeightsSource& source) {
+  const WeightsSource build = source ? source : [](const optics::CameraModel& c, const optics::MicrolensArray& l,
+                                                   const ImageF& w, const Grid3& g, double a) {
+    return std::make_unique<const recon::WeightingOperator>(c, l, g, w, a);
+  };
   const optics::Lattice& l = lenses.lattice;
   const bool rect = l.layout == optics::LensletLayout::rect;
   const double pixel = camera.sensor().pixel_pitch_mm;
   const recon::SeparableLattice sep = recon::separable_lattice(lenses);
   if (rect && sep.separable(pixel)) {
-    weights_ = std::make_unique<const recon::WeightingOperator>(camera, lenses, grid, white, angular_sampling);
+    weights_ = build(camera, lenses, white, grid, angular_sampling);
     return;
   }
   resampler_ = std::make_unique<const lightfield::LatticeResampler>(camera, lenses, white);
-  weights_ = std::make_unique<const recon::WeightingOperator>(camera, resampler_->lenses(), grid, resampler_->white(),
-                                                               angular_sampling);
+  weights_ = build(camera, resampler_->lenses(), resampler_->white(), grid, angular_sampling);
   const auto& c = resampler_->coverage();
   const auto& v = resampler_->lenses().lattice;
   char text[320];

@@ -82,13 +82,20 @@ using PairProgress = std::function<void(const std::string& stage, double fractio
 // LatticeResampler do.
 class PairOperator {
  public:
+  // Where the weighting operator comes from, given the lenses and white image it works on (the
+  // calibrated ones, or the axis-aligned lattice's): built, or read from a cache
+  // (operator_cache.hpp). Empty: built.
+  using WeightsSource = std::function<std::unique_ptr<const recon::WeightingOperator>(
+      const optics::CameraModel& camera, const optics::MicrolensArray& lenses, const ImageF& white,
+      const Grid3& grid, double angular_sampling)>;
+
   // `grid` and `angular_sampling` as recon::WeightingOperator takes them.
   PairOperator(const optics::CameraModel& camera, const optics::MicrolensArray& lenses, const ImageF& white,
-               const Grid3& grid, double angular_sampling = 1.0);
+               const Grid3& grid, double angular_sampling = 1.0, const WeightsSource& source = {});
   // What process_pair needs for `settings`: reconstruction_grid() (the guard slices included) and
   // the settings' angular sampling.
   PairOperator(const optics::CameraModel& camera, const optics::MicrolensArray& lenses, const ImageF& white,
-               const ProcessSettings& settings);
+               const ProcessSettings& settings, const WeightsSource& source = {});
 
   const recon::WeightingOperator& weights() const { return *weights_; }
   // Null when the operator works on raw pixels.
