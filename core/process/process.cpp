@@ -137,7 +137,11 @@ ProcessSettings load_process_settings(const std::filesystem::path& path) {
 
 PairResult process_pair(const recon::WeightingOperator& op, const ImageF& frame_a, const ImageF& frame_b,
                         const ProcessSettings& settings, const PairProgress& progress,
-                        recon::MartWorkspace* workspace) {
+                        recon::MartWorkspace* workspace, const std::atomic<bool>* cancel) {
+  auto check_cancel = [cancel](const char* before) {
+    if (cancel && cancel->load(std::memory_order_relaxed))
+      throw recon::Cancelled(std::string("pair processing cancelled before ") + before);
+  };
   if (!(op.grid() == settings.reconstruction_grid()))
     throw InputError("process: the weighting operator was built for another volume grid than the run config's "
                      "(its volume plus the depth guard)");
@@ -155,25 +159,32 @@ PairResult process_pair(const recon::WeightingOperator& op, const ImageF& frame_
   recon::MartWorkspace& buffers = workspace ? *workspace : pair_workspace;
 
   auto t0 = std::chrono::steady_clock::now();
-  auto ra = recon::reconstruct(op, frame_a, mart, buffers, [&](const recon::IterationReport& it) {
-    report("reconstruct A", 0.4 * it.iteration / iterations);
-  });
+  auto ra = recon::reconstruct(
+      op, frame_a, mart, buffers,
+      [&](const recon::IterationReport& it) { report("reconstruct A", 0.4 * it.iteration / iterations); },
+      cancel);
   out.times.reconstruct_a_s = seconds_since(t0);
   out.skipped_a = ra.skipped;
 
   t0 = std::chrono::steady_clock::now();
-  auto rb = recon::reconstruct(op, frame_b, mart, buffers, [&](const recon::IterationReport& it) {
-    report("reconstruct B", 0.4 + 0.4 * it.iteration / iterations);
-  });
+  auto rb = recon::reconstruct(
+      op, frame_b, mart, buffers,
+      [&](const recon::IterationReport& it) { report("reconstruct B", 0.4 + 0.4 * it.iteration / iterations); },
+      cancel);
   out.times.reconstruct_b_s = seconds_since(t0);
   out.skipped_b = rb.skipped;
 
   // The guard slices are the correlation's depth context: no window lies in them, but the windows
   // at the box's depth faces see the rest of the streaks those faces cut (piv::correlate_volumes).
   t0 = std::chrono::steady_clock::now();
+  check_cancel("the correlation");
   out.correlation = piv::correlate_volumes(
       ra.volume, rb.volume, settings.correlation,
-      [&](const piv::PassReport& p) { report("correlate", 0.8 + 0.2 * p.pass / p.passes); }, settings.guard_slices());
+      [&](const piv::PassReport& p) {
+        report("correlate", 0.8 + 0.2 * p.pass / p.passes);
+        if (p.pass < p.passes) check_cancel("the next correlation pass");
+      },
+      settings.guard_slices());
   out.times.correlate_s = seconds_since(t0);
   out.volume_a = depth_crop(std::move(ra.volume), settings.guard_slices(), settings.grid);
   out.volume_b = depth_crop(std::move(rb.volume), settings.guard_slices(), settings.grid);
@@ -230,12 +241,12 @@ const ImageF& PairOperator::prepare(const ImageF& frame, ImageF& scratch) const 
 
 PairResult process_pair(const PairOperator& op, const ImageF& frame_a, const ImageF& frame_b,
                         const ProcessSettings& settings, const PairProgress& progress,
-                        recon::MartWorkspace* workspace) {
+                        recon::MartWorkspace* workspace, const std::atomic<bool>* cancel) {
   recon::validate_image(frame_a, op.weights(), "frame A");
   recon::validate_image(frame_b, op.weights(), "frame B");
   ImageF scratch_a, scratch_b;
   PairResult out = process_pair(op.weights(), op.prepare(frame_a, scratch_a), op.prepare(frame_b, scratch_b),
-                                settings, progress, workspace);
+                                settings, progress, workspace, cancel);
   out.lattice_note = op.note();
   return out;
 }

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <array>
+#include <atomic>
 #include <functional>
 #include <memory>
 #include <string>
@@ -117,14 +118,15 @@ class PairOperator {
 // "frame A" / "frame B" in errors. Bit-identical at any thread count. Frame B is reconstructed in
 // frame A's buffers: in `workspace` when given (a caller processing pair after pair keeps one per
 // pair in flight, so that no frame allocates them afresh), else in one kept for the pair. The
-// results are the same bits either way.
+// results are the same bits either way. `cancel` (optional): checked before every MART iteration
+// and every correlation pass; when it reads true the pair is abandoned with recon::Cancelled.
 PairResult process_pair(const recon::WeightingOperator& op, const ImageF& frame_a, const ImageF& frame_b,
                         const ProcessSettings& settings, const PairProgress& progress = {},
-                        recon::MartWorkspace* workspace = nullptr);
+                        recon::MartWorkspace* workspace = nullptr, const std::atomic<bool>* cancel = nullptr);
 // The same from raw frames through a PairOperator: the frames are validated as raw images, resampled
 // when the operator says so, and PairResult::lattice_note carries its note.
 PairResult process_pair(const PairOperator& op, const ImageF& frame_a, const ImageF& frame_b,
                         const ProcessSettings& settings, const PairProgress& progress = {},
-                        recon::MartWorkspace* workspace = nullptr);
+                        recon::MartWorkspace* workspace = nullptr, const std::atomic<bool>* cancel = nullptr);
 
 }  // namespace plenopiv::process

@@ -128,7 +128,7 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image,
 
 MartResult reconstruct(const WeightingOperator& op, const ImageF& image,
                        const MartSettings& settings, MartWorkspace& workspace,
-                       const IterationCallback& progress) {
+                       const IterationCallback& progress, const std::atomic<bool>* cancel) {
   if (!workspace.buffers_)
     throw InputError("MART: the workspace was moved from; use the one it was moved to");
   detail::MartBuffers& buffers = *workspace.buffers_;
@@ -148,7 +148,7 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image,
         "MART: the matrix-free reconstruction runs the simultaneous form; the row-action "
         "form needs the explicit matrix (reconstruct_row_action)");
   }
-  return detail::SmartSolver(op, settings, buffers).run(image, progress);
+  return detail::SmartSolver(op, settings, buffers).run(image, progress, cancel);
 }
 
 Volume reconstruct_row_action(const WeightingOperator& op, const SparseMatrix& w,

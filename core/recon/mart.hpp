@@ -3,11 +3,13 @@
 #pragma once
 
 #include <array>
+#include <atomic>
 #include <cstddef>
 #include <functional>
 #include <memory>
 #include <optional>
 #include <span>
+#include <stdexcept>
 #include <vector>
 
 #include "core/base/grid.hpp"
@@ -137,6 +139,13 @@ struct IterationReport {
 // Called after each iteration.
 using IterationCallback = std::function<void(const IterationReport&)>;
 
+// What reconstruct throws when its cancel flag is set: the reconstruction is abandoned (its
+// workspace is free for the next one). Not an input error: a caller asked for it.
+class Cancelled : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
 struct MartResult {
   Volume volume;
   SkipReport skipped;
@@ -186,17 +195,19 @@ class MartWorkspace {
  private:
   std::unique_ptr<detail::MartBuffers> buffers_;
   friend MartResult reconstruct(const WeightingOperator&, const ImageF&, const MartSettings&,
-                                MartWorkspace&, const IterationCallback&);
+                                MartWorkspace&, const IterationCallback&, const std::atomic<bool>*);
 };
 
 // Reconstructs a volume from a raw plenoptic image (float, counts) with the matrix-free operator.
 // `progress` (optional) is called after each iteration. Bit-identical at any thread count.
 MartResult reconstruct(const WeightingOperator& op, const ImageF& image,
                        const MartSettings& settings, const IterationCallback& progress = {});
-// The same in `workspace`'s buffers (the same bits).
+// The same in `workspace`'s buffers (the same bits). `cancel` (optional): when it reads true
+// after the start or before an iteration, the reconstruction stops there and throws Cancelled.
 MartResult reconstruct(const WeightingOperator& op, const ImageF& image,
                        const MartSettings& settings, MartWorkspace& workspace,
-                       const IterationCallback& progress = {});
+                       const IterationCallback& progress = {},
+                       const std::atomic<bool>* cancel = nullptr);
 
 // The reference: eq 9 row by row on the explicit matrix (rows = pixels in storage order).
 Volume reconstruct_row_action(const WeightingOperator& op, const SparseMatrix& w,

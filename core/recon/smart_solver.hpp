@@ -39,7 +39,9 @@ class SmartSolver {
  public:
   SmartSolver(const WeightingOperator& op, const MartSettings& settings, MartBuffers& buffers);
 
-  MartResult run(const ImageF& image, const IterationCallback& progress);
+  // `cancel`: checked after the start and before each iteration (Cancelled when set).
+  MartResult run(const ImageF& image, const IterationCallback& progress,
+                 const std::atomic<bool>* cancel = nullptr);
 
  private:
   // The thresholded image, the active voxels (dark pixels, region, field of view) and their

@@ -2,6 +2,7 @@
 // process_pair hands back the box the user asked for (guard slices reconstructed, then dropped).
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <vector>
 
 #include "core/base/errors.hpp"
@@ -167,6 +168,39 @@ TEST(ProcessSettings, AKeptWorkspaceGivesTheSameVolumesAndVectors) {
   EXPECT_EQ(kept.correlation.field.valid, alone.correlation.field.valid);
   EXPECT_NE(alone.volume_a.data, alone.volume_b.data);  // two different frames
   EXPECT_GT(workspace.bytes(), 0u);  // the pairs ran in it
+}
+
+// A cancel flag abandons the pair at the next MART iteration or correlation pass (recon::Cancelled)
+// and leaves the workspace usable.
+TEST(ProcessSettings, ACancelFlagAbandonsThePairAtTheNextStep) {
+  const auto camera = optics::load_camera_file(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml");
+  const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera));
+  ProcessSettings s = parse(kVolume + ", depth_guard_mm: 0.25}\n" +
+                            "correlation: {passes: [{window: 8, overlap_percent: 50}, {window: 8, overlap_percent: 50}]}\n");
+  const ImageF a = two_particle_frame(camera, lenses, 3.0), b = two_particle_frame(camera, lenses, 3.1);
+  const PairOperator op(camera, lenses, calib::geometric_white_image(camera, lenses), s);
+  recon::MartWorkspace workspace;
+  std::atomic<bool> cancel{false};
+  // During frame B's reconstruction, and during the correlation's first pass.
+  for (const std::string when : {"reconstruct B", "correlate"}) {
+    std::string last;
+    cancel = false;
+    try {
+      process_pair(
+          op, a, b, s,
+          [&](const std::string& stage, double) {
+            last = stage;
+            if (stage == when) cancel = true;
+          },
+          &workspace, &cancel);
+      ADD_FAILURE() << "not cancelled during " << when;
+    } catch (const recon::Cancelled& e) {
+      EXPECT_EQ(last, when) << e.what();
+    }
+  }
+  cancel = false;
+  const PairResult done = process_pair(op, a, b, s, {}, &workspace, &cancel);
+  EXPECT_EQ(done.volume_a.data, process_pair(op, a, b, s).volume_a.data);
 }
 
 }  // namespace

@@ -4,6 +4,7 @@
 #include <tbb/global_control.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstring>
 #include <iostream>
@@ -690,6 +691,39 @@ TEST_F(Mart, PruningAtASmallThresholdStaysCloseToNoPruning) {
     EXPECT_GT(pruned.skipped.fraction_updates_skipped(), off.skipped.fraction_updates_skipped());
     EXPECT_TRUE(all_finite_bounded(pruned.volume, 1e30f));
   }
+}
+
+// A caller's cancel flag stops a reconstruction before its next iteration (recon::Cancelled, not
+// an input error), and leaves the workspace free: the next reconstruction in it has the bits of
+// one without a workspace.
+TEST_F(Mart, ACancelFlagStopsBeforeTheNextIterationAndFreesTheWorkspace) {
+  const ImageF image = project_image(*op_, truth(), 1000.f);
+  MartSettings s;
+  s.iterations = 6;
+  s.accelerate = true;
+  MartWorkspace workspace;
+  std::atomic<bool> cancel{false};
+  int last = 0;
+  try {
+    reconstruct(
+        *op_, image, s, workspace,
+        [&](const IterationReport& it) {
+          last = it.iteration;
+          if (it.iteration == 2) cancel = true;
+        },
+        &cancel);
+    FAIL() << "not cancelled";
+  } catch (const Cancelled& e) {
+    EXPECT_NE(std::string(e.what()).find("before iteration 3"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(last, 2);
+  cancel = false;
+  const MartResult again = reconstruct(*op_, image, s, workspace, {}, &cancel);
+  const MartResult fresh = reconstruct(*op_, image, s);
+  EXPECT_EQ(0, std::memcmp(again.volume.data.data(), fresh.volume.data.data(), fresh.volume.data.size() * sizeof(float)));
+  // Set before the call: stopped after the start, before the first iteration.
+  cancel = true;
+  EXPECT_THROW(reconstruct(*op_, image, s, workspace, {}, &cancel), Cancelled);
 }
 
 // A kept workspace changes no bit: images of different scenes (and an empty one) in sequence, then
