@@ -36,6 +36,7 @@ Figures run(const std::vector<daemon::SharedPair>& pairs, const daemon::ProcessF
             double rate_hz, int in_flight) {
   daemon::LiveMailbox mailbox;
   daemon::PipelineStats stats;
+  const daemon::CancelFlag cancel{false};
   std::mutex mutex;
   std::map<std::uint64_t, Clock::time_point> handed;
   std::vector<double> latency;
@@ -62,7 +63,7 @@ Figures run(const std::vector<daemon::SharedPair>& pairs, const daemon::ProcessF
         std::lock_guard lock(mutex);
         latency.push_back(std::chrono::duration<double>(Clock::now() - handed[pair.pair_index]).count());
       },
-      stats);
+      stats, cancel);
   feeder.join();
   const double wall = std::chrono::duration<double>(Clock::now() - start).count();
   Figures f;
@@ -70,7 +71,7 @@ Figures run(const std::vector<daemon::SharedPair>& pairs, const daemon::ProcessF
   f.median_latency_s = latency.empty() ? 0 : latency[latency.size() / 2];
   f.max_latency_s = latency.empty() ? 0 : latency.back();
   f.processed = stats.output.processed;
-  f.skipped = stats.input.skipped;
+  f.skipped = mailbox.dropped();
   f.pairs_per_s = double(f.processed) / wall;
   return f;
 }

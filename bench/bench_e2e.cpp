@@ -46,6 +46,7 @@
 #include "bench/bench_support.hpp"
 #include "core/calib/nominal_calibration.hpp"
 #include "core/optics/camera_file.hpp"
+#include "core/process/pair_processor.hpp"
 #include "core/process/process.hpp"
 #include "core/sim/exact_volume.hpp"
 #include "core/sim/field_errors.hpp"
@@ -228,14 +229,17 @@ int main(int argc, char** argv) {
   const double render_s = now_s() - t;
 
   t = now_s();
-  const process::PairOperator op(camera, lenses, nominal.white_correction, settings);
+  // The headline goes through the owner every caller uses (process::PairProcessor); the variants
+  // below re-run its operator with other settings.
+  const process::PairProcessor processor(camera, nominal, settings);
+  const process::PairOperator& op = processor.op();
   const double weights_s = now_s() - t;
   std::printf("bench=e2e case=%s particles=%zu voxels=%zu render_s=%.2f weights_s=%.2f\n", scale.c_str(), count,
               settings.grid.count(), render_s, weights_s);
 
   // The paper's settings: reconstruction and correlation, stage by stage.
-  recon::MartWorkspace workspace;  // kept for --steady
-  const auto base = process::process_pair(op, a, b, settings, {}, &workspace);
+  recon::MartWorkspace workspace;  // kept for --steady and the sweeps
+  const auto base = processor.process(a, b);
   const Errors e = errors_against(base.correlation.field, flow, voxel);
   std::printf("bench=e2e case=%s variant=reconstructed iterations=%d mu=%.2f accelerate=%d dark_cutoff=%.3g sensor_blur_mm=%.4g "
               "intensity_threshold=%.3g final_smoothing=%d depth_prefilter=%d recon_a_s=%.2f recon_b_s=%.2f "
@@ -268,12 +272,13 @@ int main(int argc, char** argv) {
   };
   print_w_by_depth(base.correlation.field, "reconstructed");
   if (steady) {
-    // The same pair again in the kept MART workspace: what each pair costs in a run of many
-    // (the daemon and `plenopiv process --run` keep one per pair in flight).
+    // The same pair again, the processor's MART buffers kept: what each pair costs in a run of many
+    // (the daemon and `plenopiv process --run` keep them from pair to pair).
     std::vector<double> marks;  // seconds since the start at each progress call
     const double t_again = now_s();
-    const auto again = process::process_pair(
-        op, a, b, settings, [&](const std::string&, double) { marks.push_back(now_s() - t_again); }, &workspace);
+    process::PairOptions timed;
+    timed.progress = [&](const std::string&, double) { marks.push_back(now_s() - t_again); };
+    const auto again = processor.process(a, b, timed);
     // Seconds between progress calls: per frame set-up with its first iteration, then one per
     // iteration; then the correlation's passes.
     std::string steps;
@@ -338,17 +343,19 @@ int main(int argc, char** argv) {
 
   // Correlation variants on the same volumes (reconstructed and exact), side by side.
   {
-    piv::CorrelationSettings previous = settings.correlation;  // the default until 2026-11-23
+    // Three passes with the residual added to the predictor's window mean, unsmoothed: what the
+    // centre predictor, its smoothing and the fourth pass are compared against.
+    piv::CorrelationSettings previous = settings.correlation;
     previous.passes = {{{32, 32, 32}, 50}, {{16, 16, 16}, 50}, {{16, 16, 16}, 75}};
     previous.predictor = piv::PredictorBase::window_mean;
     previous.predictor_smoothing = 0;
     piv::CorrelationSettings centre3 = previous;
     centre3.predictor = piv::PredictorBase::centre;
     centre3.predictor_smoothing = 1;
-    // The passes without their depth margins (core/piv's default until 2026-11-24).
+    // The passes without their depth margins.
     piv::CorrelationSettings no_margin = settings.correlation;
     for (piv::PassSettings& p : no_margin.passes) p.depth_margin = 0;
-    // The ghost floor toggled: off when the headline has it, 4 (measured best) when not.
+    // The ghost floor toggled: off when the headline has it, 4 (process.yaml's) when not.
     piv::CorrelationSettings toggled = settings.correlation;
     toggled.intensity_threshold_of_mean = intensity_threshold > 0 ? 0.0 : 4.0;
     correlate_both("correlation", "no_depth_margin", no_margin, false);
@@ -386,7 +393,7 @@ int main(int argc, char** argv) {
     };
     std::vector<Row> rows;
     const int np = int(settings.correlation.passes.size());
-    // Floor 3 is run-paper.yaml's with the depth prefilter, 4 process.yaml's ("Depth prefilter").
+    // Floor 3 is run-paper.yaml's, 4 process.yaml's.
     for (const Setting& st : {Setting{"paper_5_it_mu_0.5", 5, 0.5, false, 0}, Setting{"7_acc_floor_3", 7, 1, true, 3},
                               Setting{"8_acc_floor_3", 8, 1, true, 3}, Setting{"8_acc_floor_4", 8, 1, true, 4},
                               Setting{"9_acc_floor_3", 9, 1, true, 3}, Setting{"10_acc_floor_3", 10, 1, true, 3},

@@ -121,7 +121,8 @@ void ring_vortex(const std::array<int, 3>& shape, bool all_variants, bool defaul
   const std::vector<Variant> variants{
       {"default_4pass_2threads", piv::CorrelationSettings{}.passes, 2, {}, true},
       {"default_4pass_1thread", piv::CorrelationSettings{}.passes, 1, {}, true},
-      // The default until 2026-11-23: three passes, residual added to the predictor's window mean.
+      // Three passes, residual added to the predictor's window mean, unsmoothed: the schedule the
+      // centre predictor, its smoothing and the fourth pass are compared against.
       {"previous_default_3pass_window_mean", three, 2, {}, true, true, mean, 0},
       {"centre_3pass", three, 2, {}, true},
       {"centre_4pass_16_75", with(three, {{16, 16, 16}, 75}), 2, {}, true},

@@ -151,9 +151,10 @@ void paper_scale(const std::string& source_dir, bool small, double ppm, int iter
                 double(workspace.bytes()) / (1 << 20));
     const auto reused = frame("reused", &workspace);
     const auto fresh = frame("fresh_again", nullptr);
-    std::printf("bench=recon_reuse ratio_reused_over_first wall=%.3f cpu=%.3f ratio_reused_over_fresh_again wall=%.3f "
-                "cpu=%.3f\n",
-                reused[0] / t_mart, reused[1] / c_mart, reused[0] / fresh[0], reused[1] / fresh[1]);
+    std::printf(
+        "bench=recon_reuse reused_over_first_wall=%.3f reused_over_first_cpu=%.3f "
+        "reused_over_fresh_again_wall=%.3f reused_over_fresh_again_cpu=%.3f\n",
+        reused[0] / t_mart, reused[1] / c_mart, reused[0] / fresh[0], reused[1] / fresh[1]);
   }
   const Volume exact = sim::render_exact_volume(g, positions);
   std::printf("bench=recon_paper quality_q_star=%.4f\n", recon::quality_factor(r.volume, exact));
@@ -183,9 +184,11 @@ void paper_scale(const std::string& source_dir, bool small, double ppm, int iter
     double cov = 0;
     for (std::size_t i = 0; i < dz.size(); ++i) cov += (z_true[i] - zt[0]) * (dz[i] - d[0]);
     const double slope = zt[1] > 0 ? cov / double(dz.size()) / (zt[1] * zt[1]) : 0.0;
-    std::printf("bench=recon_paper fit=%s fitted=%zu of %zu abs_x_err_vox_mean=%.3f sd=%.3f abs_z_err_vox_mean=%.3f "
-                "sd=%.3f depth_error_slope_percent=%.2f\n",
-                estimator, ex.size(), positions.size(), mx[0], mx[1], mz[0], mz[1], 100 * slope);
+    std::printf(
+        "bench=recon_paper fit=%s fitted=%zu particles=%zu abs_x_err_vox_mean=%.3f "
+        "abs_x_err_vox_sd=%.3f abs_z_err_vox_mean=%.3f abs_z_err_vox_sd=%.3f "
+        "depth_error_slope_percent=%.2f\n",
+        estimator, ex.size(), positions.size(), mx[0], mx[1], mz[0], mz[1], 100 * slope);
   };
   report("peak_rows", [&](const sim::Point3& p) { return recon::fit_particle(r.volume, p, {3, 3, 15}); });
   report("moments", [&](const sim::Point3& p) { return recon::fit_particle_moments(r.volume, p, {3, 3, 15}); });

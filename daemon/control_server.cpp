@@ -1,8 +1,14 @@
 // The control socket: a ZeroMQ ROUTER that answers every request with exactly one reply.
 #include "daemon/control_server.hpp"
 
+#include <grp.h>
 #include <spdlog/spdlog.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
+#include <cerrno>
+#include <cstring>
+#include <filesystem>
 #include <vector>
 
 #include "core/base/errors.hpp"
@@ -18,22 +24,98 @@ msg::Reply error_reply(std::uint64_t id, msg::Error::Code code, const std::strin
   return reply;
 }
 
-ControlServer::ControlServer(zmq::context_t& context, const std::string& endpoint,
-                             RequestHandler handler)
+namespace {
+
+// Runs `write` (the reply) and maps the exceptions a handler may throw to error replies.
+msg::Reply answer(std::uint64_t id, const std::function<msg::Reply()>& make) {
+  try {
+    msg::Reply reply = make();
+    reply.set_id(id);
+    return reply;
+  } catch (const InputError& e) {
+    return error_reply(id, msg::Error::INVALID, e.what());
+  } catch (const WrongStateError& e) {
+    return error_reply(id, msg::Error::WRONG_STATE, e.what());
+  } catch (const std::exception& e) {
+    spdlog::error("control request {} failed: {}", id, e.what());
+    return error_reply(id, msg::Error::INTERNAL, e.what());
+  }
+}
+
+// Binds an ipc:// socket so that only its owner and group can connect: the folder is made, the
+// file is created with no access for others (umask) and then given mode 0660 and `group_name`.
+void bind_ipc(zmq::socket_t& socket, const std::string& endpoint, const std::string& group_name) {
+  const std::filesystem::path file = endpoint.substr(6);
+  std::error_code ec;
+  if (file.has_parent_path()) std::filesystem::create_directories(file.parent_path(), ec);
+  if (ec) {
+    throw InputError("control endpoint " + endpoint + ": cannot make its folder " + file.parent_path().string() +
+                     ": " + ec.message());
+  }
+  gid_t gid = gid_t(-1);
+  if (!group_name.empty()) {
+    const struct group* g = getgrnam(group_name.c_str());
+    if (!g) throw InputError("control_socket_group: no group '" + group_name + "' on this machine");
+    gid = g->gr_gid;
+  }
+  const mode_t old_mask = ::umask(0117);
+  try {
+    socket.bind(endpoint);
+  } catch (const zmq::error_t& e) {
+    ::umask(old_mask);
+    throw InputError("control endpoint " + endpoint + ": cannot bind: " + e.what());
+  }
+  ::umask(old_mask);
+  if (::chmod(file.c_str(), 0660) != 0 || (gid != gid_t(-1) && ::chown(file.c_str(), uid_t(-1), gid) != 0)) {
+    throw InputError("control endpoint " + endpoint + ": cannot set the socket's owner and mode: " +
+                     std::strerror(errno));
+  }
+}
+
+}  // namespace
+
+ControlServer::ControlServer(zmq::context_t& context, const std::string& endpoint, RequestHandler handler,
+                             const ControlSecurity& security)
     : socket_(context, zmq::socket_type::router), endpoint_(endpoint), handler_(std::move(handler)) {
   socket_.set(zmq::sockopt::linger, 0);
-  try {
-    socket_.bind(endpoint);
-  } catch (const zmq::error_t& e) {
-    throw InputError("control endpoint " + endpoint + ": cannot bind: " + e.what());
+  socket_.set(zmq::sockopt::maxmsgsize, kMaxControlMessageBytes);
+  if (security.curve) wire::secure_server(socket_, *security.curve, "plenopiv-control");
+  if (endpoint.rfind("ipc://", 0) == 0) {
+    bind_ipc(socket_, endpoint, security.ipc_group);
+  } else {
+    try {
+      socket_.bind(endpoint);
+    } catch (const zmq::error_t& e) {
+      throw InputError("control endpoint " + endpoint + ": cannot bind: " + e.what());
+    }
   }
   endpoint_ = socket_.get(zmq::sockopt::last_endpoint);
 }
 
+void ControlServer::send(std::vector<zmq::message_t>& envelope, const msg::Reply& reply) {
+  std::string bytes;
+  reply.SerializeToString(&bytes);
+  for (zmq::message_t& frame : envelope) socket_.send(frame, zmq::send_flags::sndmore);
+  socket_.send(zmq::buffer(bytes), zmq::send_flags::none);
+}
+
+void ControlServer::send_ready_deferred() {
+  for (auto it = pending_.begin(); it != pending_.end();) {
+    if (it->reply.wait_for(std::chrono::seconds(0)) != std::future_status::ready) {
+      ++it;
+      continue;
+    }
+    const msg::Reply reply = answer(it->id, [&] { return it->reply.get(); });
+    send(it->envelope, reply);
+    it = pending_.erase(it);
+  }
+}
+
 bool ControlServer::serve_one(int timeout_ms) {
+  send_ready_deferred();
   zmq::pollitem_t item{socket_.handle(), 0, ZMQ_POLLIN, 0};
   try {
-    zmq::poll(&item, 1, std::chrono::milliseconds(timeout_ms));
+    zmq::poll(&item, 1, std::chrono::milliseconds(pending_.empty() ? timeout_ms : std::min(timeout_ms, 10)));
   } catch (const zmq::error_t& e) {
     if (e.num() == EINTR) return false;  // a signal: the caller checks why and goes on or stops
     throw;
@@ -51,7 +133,8 @@ bool ControlServer::serve_one(int timeout_ms) {
 
   msg::Request request;
   msg::Reply reply;
-  const zmq::message_t& body = frames.back();
+  const zmq::message_t body = std::move(frames.back());
+  frames.pop_back();
   if (!request.ParseFromArray(body.data(), int(body.size()))) {
     reply = error_reply(0, msg::Error::MALFORMED,
                         "the control message (" + std::to_string(body.size()) +
@@ -61,25 +144,21 @@ bool ControlServer::serve_one(int timeout_ms) {
                         "the request names no operation (status, start_run, stop_run, "
                         "list_devices, calibrate)");
   } else {
-    try {
-      reply = handler_(request);
-      reply.set_id(request.id());
-    } catch (const InputError& e) {
-      reply = error_reply(request.id(), msg::Error::INVALID, e.what());
-    } catch (const WrongStateError& e) {
-      reply = error_reply(request.id(), msg::Error::WRONG_STATE, e.what());
-    } catch (const std::exception& e) {
-      spdlog::error("control request {} failed: {}", request.id(), e.what());
-      reply = error_reply(request.id(), msg::Error::INTERNAL, e.what());
+    std::optional<DeferredReply> deferred;
+    reply = answer(request.id(), [&] {
+      HandlerResult result = handler_(request);
+      if (auto* later = std::get_if<DeferredReply>(&result)) {
+        deferred = std::move(*later);
+        return msg::Reply();
+      }
+      return std::get<msg::Reply>(std::move(result));
+    });
+    if (deferred) {
+      pending_.push_back({std::move(frames), request.id(), std::move(*deferred)});
+      return true;
     }
   }
-
-  std::string bytes;
-  reply.SerializeToString(&bytes);
-  for (std::size_t i = 0; i + 1 < frames.size(); ++i) {
-    socket_.send(frames[i], zmq::send_flags::sndmore);
-  }
-  socket_.send(zmq::buffer(bytes), zmq::send_flags::none);
+  send(frames, reply);
   return true;
 }
 

@@ -12,12 +12,8 @@
 namespace plenopiv::daemon {
 namespace {
 
-bool is_local(const std::string& endpoint) {
-  for (const char* prefix : {"ipc://", "inproc://", "tcp://127.0.0.1:", "tcp://localhost:",
-                             "tcp://[::1]:"}) {
-    if (endpoint.rfind(prefix, 0) == 0) return true;
-  }
-  return false;
+bool is_ipc(const std::string& endpoint) {
+  return endpoint.rfind("ipc://", 0) == 0 || endpoint.rfind("inproc://", 0) == 0;
 }
 
 bool is_endpoint(const std::string& endpoint) {
@@ -74,8 +70,9 @@ drivers::Schedule run_schedule(const RigTiming& timing, const drivers::TriggerIn
 
 DaemonConfig load_daemon_config(const std::filesystem::path& path) {
   const YamlMap map(load_yaml_file(path), path.string());
-  map.reject_unknown({"control_endpoint", "publish_endpoint", "data_dir", "camera_file",
-                      "calibration_file", "camera_uri", "trigger_uri", "log_level", "publish_high_water_mark", "timing"});
+  map.reject_unknown({"control_endpoint", "control_socket_group", "curve", "publish_endpoint", "simulation",
+                      "data_dir", "camera_file", "calibration_file", "camera_uri", "trigger_uri", "log_level",
+                      "publish_high_water_mark", "timing"});
   DaemonConfig config;
   const std::filesystem::path base = path.parent_path();
   auto resolve = [&](const std::string& p) {
@@ -83,7 +80,17 @@ DaemonConfig load_daemon_config(const std::filesystem::path& path) {
     return fp.is_absolute() ? fp : base / fp;
   };
   config.control_endpoint = map.string_or("control_endpoint", config.control_endpoint);
+  config.control_socket_group = map.string_or("control_socket_group", config.control_socket_group);
+  if (auto curve = map.optional_map("curve")) {
+    curve->reject_unknown({"server_certificate", "authorized_clients", "publish"});
+    CurveConfig c;
+    c.server_certificate = resolve(curve->string("server_certificate"));
+    c.authorized_clients = resolve(curve->string("authorized_clients"));
+    c.publish = curve->boolean_or("publish", false);
+    config.curve = c;
+  }
   config.publish_endpoint = map.string_or("publish_endpoint", config.publish_endpoint);
+  config.simulation = map.boolean_or("simulation", config.simulation);
   if (map.has("data_dir")) config.data_dir = resolve(map.string("data_dir"));
   if (map.has("camera_file")) config.camera_file = resolve(map.string("camera_file"));
   if (map.has("calibration_file")) config.calibration_file = resolve(map.string("calibration_file"));
@@ -102,10 +109,19 @@ void validate(const DaemonConfig& config, const std::string& source) {
     throw InputError(source + ": control_endpoint: '" + config.control_endpoint +
                      "' is not a ZeroMQ endpoint (tcp://host:port or ipc://path)");
   }
-  if (!is_local(config.control_endpoint)) {
+  if (!is_ipc(config.control_endpoint) && !config.curve) {
     throw InputError(source + ": control_endpoint: '" + config.control_endpoint +
-                     "' is reachable from other machines; control stays on 127.0.0.1 unless "
-                     "CURVE keys are configured, which this version does not support");
+                     "' is a network socket that any user of this machine (or others) could reach: use an "
+                     "ipc:// socket (its file permissions admit the daemon's user and control_socket_group), "
+                     "or configure curve: (server_certificate, authorized_clients; `plenopiv keys` makes them)");
+  }
+  if (!config.control_socket_group.empty() && config.control_endpoint.rfind("ipc://", 0) != 0) {
+    throw InputError(source + ": control_socket_group: only an ipc:// control_endpoint has a socket file");
+  }
+  if (!config.simulation && config.camera_uri.rfind("sim://", 0) == 0) {
+    throw InputError(source + ": camera_uri: '" + config.camera_uri +
+                     "' is the simulated camera, which this daemon does not enable (simulation: true, or "
+                     "--simulation)");
   }
   if (!config.calibration_file.empty() && config.camera_file.empty()) {
     throw InputError(source + ": calibration_file: '" + config.calibration_file.string() +

@@ -2,6 +2,7 @@
 #pragma once
 
 #include <filesystem>
+#include <optional>
 #include <string>
 
 #include "drivers/trigger/trigger.hpp"
@@ -22,15 +23,29 @@ struct RigTiming {
 drivers::Schedule run_schedule(const RigTiming& timing, const drivers::TriggerInfo& trigger,
                                double rate_hz, double dt_s);
 
+// CURVE authentication (plenopivd.yaml `curve:`; `plenopiv keys` makes the certificate files).
+struct CurveConfig {
+  std::filesystem::path server_certificate;  // the daemon's .key_secret file
+  std::filesystem::path authorized_clients;  // a folder of the admitted clients' *.key files
+  bool publish = false;                      // subscribers need an admitted key too
+};
+
 struct DaemonConfig {
-  std::string control_endpoint = "tcp://127.0.0.1:5555";
-  std::string publish_endpoint = "tcp://*:5556";
+  // Local by default: an ipc:// socket file that only the daemon's user and control_socket_group
+  // can open. tcp:// needs `curve:` (any host, local ones included).
+  std::string control_endpoint = "ipc:///run/plenopiv/control";
+  std::string control_socket_group;  // ipc:// only: the group allowed to connect (e.g. plenopiv)
+  std::optional<CurveConfig> curve;
+  std::string publish_endpoint = "tcp://127.0.0.1:5556";  // read-only data; binds wider when configured
+  // Whether the simulated camera (sim://) exists in this daemon. Off by default: a rig's daemon
+  // opens real devices only; the demo, tests and development turn it on.
+  bool simulation = false;
   std::filesystem::path data_dir = "/var/lib/plenopiv";
   std::filesystem::path camera_file;  // empty: the camera driver reports its own
   // The rig's calibration file (HDF5 from `plenopiv calibrate`, made for camera_file); empty: the
   // nominal lattice and geometric white image. Checked at start and at every run start.
   std::filesystem::path calibration_file;
-  std::string camera_uri = "sim://?seed=1";
+  std::string camera_uri;  // the default camera of runs that name none; empty: each run names its own
   std::string trigger_uri = "sim://";
   std::string log_level = "info";
   int publish_high_water_mark = 4;    // messages queued per subscriber before they are dropped
@@ -38,8 +53,7 @@ struct DaemonConfig {
 };
 
 // Reads plenopivd.yaml; relative paths are taken from the file's folder. Every bad key is an
-// InputError naming it. The control endpoint must stay on the local machine (remote control
-// needs CURVE keys, which this version does not configure).
+// InputError naming it. The control endpoint is an ipc:// socket unless `curve:` is configured.
 DaemonConfig load_daemon_config(const std::filesystem::path& path);
 // Checks a config however it was assembled (file and command-line overrides).
 void validate(const DaemonConfig& config, const std::string& source);

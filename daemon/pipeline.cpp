@@ -4,6 +4,8 @@
 #include <spdlog/spdlog.h>
 #include <tbb/parallel_pipeline.h>
 
+#include "core/base/errors.hpp"
+
 namespace plenopiv::daemon {
 
 using Clock = std::chrono::steady_clock;
@@ -12,6 +14,10 @@ void LiveMailbox::push(SharedPair pair) {
   {
     std::lock_guard lock(mutex_);
     pairs_.push_back(std::move(pair));
+    while (pairs_.size() > capacity_) {
+      pairs_.pop_front();
+      ++dropped_;
+    }
   }
   ready_.notify_one();
 }
@@ -24,12 +30,21 @@ void LiveMailbox::close() {
   ready_.notify_all();
 }
 
-std::optional<SharedPair> LiveMailbox::take(std::uint64_t& skipped) {
+void LiveMailbox::close_and_clear() {
+  {
+    std::lock_guard lock(mutex_);
+    closed_ = true;
+    dropped_ += pairs_.size();
+    pairs_.clear();
+  }
+  ready_.notify_all();
+}
+
+std::optional<SharedPair> LiveMailbox::take() {
   std::unique_lock lock(mutex_);
   ready_.wait(lock, [&] { return closed_ || !pairs_.empty(); });
-  skipped = 0;
   if (pairs_.empty()) return std::nullopt;
-  skipped = pairs_.size() - 1;
+  dropped_ += pairs_.size() - 1;
   SharedPair newest = std::move(pairs_.back());
   pairs_.clear();
   return newest;
@@ -40,11 +55,18 @@ std::size_t LiveMailbox::depth() const {
   return pairs_.size();
 }
 
-msg::StageCounters StageStats::to_message(const char* name, std::uint32_t queue_depth) const {
+std::uint64_t LiveMailbox::dropped() const {
+  std::lock_guard lock(mutex_);
+  return dropped_;
+}
+
+msg::StageCounters StageStats::to_message(const char* name, std::uint32_t queue_depth,
+                                          std::uint64_t dropped) const {
   msg::StageCounters m;
   m.set_name(name);
   m.set_processed(processed);
-  m.set_skipped(skipped);
+  m.set_skipped(skipped + cancelled);
+  m.set_dropped(dropped);
   m.set_queue_depth(queue_depth);
   const std::uint64_t n = processed;
   m.set_mean_time_s(n ? double(busy_ns) * 1e-9 / double(n) : 0.0);
@@ -59,15 +81,13 @@ struct Item {
 }  // namespace
 
 void run_live_pipeline(LiveMailbox& mailbox, int max_in_flight, const ProcessFn& process,
-                       const OutputFn& output, PipelineStats& stats) {
+                       const OutputFn& output, PipelineStats& stats, const CancelFlag& cancel) {
   tbb::parallel_pipeline(
       std::size_t(max_in_flight),
       tbb::make_filter<void, std::shared_ptr<Item>>(
           tbb::filter_mode::serial_in_order,
           [&](tbb::flow_control& fc) -> std::shared_ptr<Item> {
-            std::uint64_t skipped = 0;
-            std::optional<SharedPair> pair = mailbox.take(skipped);
-            stats.input.skipped += skipped;
+            std::optional<SharedPair> pair = mailbox.take();
             if (!pair) {
               fc.stop();
               return nullptr;
@@ -83,8 +103,11 @@ void run_live_pipeline(LiveMailbox& mailbox, int max_in_flight, const ProcessFn&
               [&](std::shared_ptr<Item> item) {
                 const auto start = Clock::now();
                 try {
-                  item->result = process(*item->pair);
+                  if (cancel) throw Cancelled("run stopping");
+                  item->result = process(*item->pair, cancel);
                   ++stats.process.processed;
+                } catch (const Cancelled&) {
+                  ++stats.process.cancelled;
                 } catch (const std::exception& e) {
                   ++stats.process.skipped;
                   spdlog::warn("pair {}: processing failed: {}", item->pair->pair_index, e.what());

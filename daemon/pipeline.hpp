@@ -1,6 +1,7 @@
 // The live path: a bounded tbb::parallel_pipeline from recorded pairs to published vector fields.
 #pragma once
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <condition_variable>
@@ -25,38 +26,51 @@ struct ProcessedPair {
   std::optional<Volume> volume_a, volume_b;  // when the run publishes volumes
 };
 
-// The processing stage: preprocess, reconstruct A and B, correlate. Called concurrently for
-// different pairs; it must not keep state between calls except read-only setup.
-using ProcessFn = std::function<ProcessedPair(const drivers::FramePair&)>;
+// Set when the run stops: processing in flight gives up (plenopiv::Cancelled) at its next MART
+// iteration or correlation pass.
+using CancelFlag = std::atomic<bool>;
 
-// Pairs recorded and waiting for the live path. The acquisition side pushes every recorded pair;
-// the pipeline takes only the newest and counts the ones it passed over as skipped (they are on
-// disk already). Thread safe.
+// The processing stage: preprocess, reconstruct A and B, correlate. Called concurrently for
+// different pairs; it must not keep state between calls except read-only setup. It checks
+// `cancel` as it goes and throws plenopiv::Cancelled once it is set.
+using ProcessFn = std::function<ProcessedPair(const drivers::FramePair&, const CancelFlag& cancel)>;
+
+// Pairs recorded and waiting for the live path: at most `capacity`, newest kept. The acquisition
+// side pushes every recorded pair; a push into a full mailbox drops the oldest waiting pair, and
+// take() hands out the newest and drops the older ones; either way the dropped pairs are counted
+// (they are on disk already). Memory stays bounded whatever the laser rate. Thread safe.
 class LiveMailbox {
  public:
+  explicit LiveMailbox(std::size_t capacity = 2) : capacity_(std::max<std::size_t>(capacity, 1)) {}
   void push(SharedPair pair);
   void close();  // no more pairs: take() returns nullopt once empty
-  // Blocks until a pair or close. Returns the newest pair; `skipped` gets the older ones' count.
-  std::optional<SharedPair> take(std::uint64_t& skipped);
+  // close() and forget what is waiting (a stop: the pairs are recorded, none is processed now).
+  void close_and_clear();
+  // Blocks until a pair or close. Returns the newest pair.
+  std::optional<SharedPair> take();
   std::size_t depth() const;
+  std::uint64_t dropped() const;  // pairs that left without being taken
 
  private:
   mutable std::mutex mutex_;
   std::condition_variable ready_;
   std::deque<SharedPair> pairs_;
+  std::size_t capacity_;
+  std::uint64_t dropped_ = 0;
   bool closed_ = false;
 };
 
 // Per-stage counters, updated by the stages, read by status at any time.
 struct StageStats {
   std::atomic<std::uint64_t> processed{0};
-  std::atomic<std::uint64_t> skipped{0};
+  std::atomic<std::uint64_t> skipped{0};     // processing threw: the pair stays on disk
+  std::atomic<std::uint64_t> cancelled{0};   // in flight when the run stopped
   std::atomic<std::uint64_t> busy_ns{0};
   std::atomic<std::uint32_t> in_flight{0};
   void add_time(std::chrono::steady_clock::duration d) {
     busy_ns += std::uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(d).count());
   }
-  msg::StageCounters to_message(const char* name, std::uint32_t queue_depth) const;
+  msg::StageCounters to_message(const char* name, std::uint32_t queue_depth, std::uint64_t dropped = 0) const;
 };
 
 struct PipelineStats {
@@ -68,8 +82,9 @@ using OutputFn = std::function<void(const drivers::FramePair&, ProcessedPair&)>;
 
 // Runs until the mailbox is closed and empty. At most `max_in_flight` pairs are between input
 // and output at once; output sees pairs in increasing pair order. A pair whose processing throws
-// is counted as skipped on the processing stage and not output; the run goes on.
+// is counted as skipped on the processing stage and not output; the run goes on. Once `cancel` is
+// set, pairs in flight give up (counted cancelled); those already done are still output.
 void run_live_pipeline(LiveMailbox& mailbox, int max_in_flight, const ProcessFn& process,
-                       const OutputFn& output, PipelineStats& stats);
+                       const OutputFn& output, PipelineStats& stats, const CancelFlag& cancel);
 
 }  // namespace plenopiv::daemon

@@ -12,10 +12,12 @@ namespace plenopiv::daemon {
 static_assert(std::endian::native == std::endian::little,
               "payloads are sent as the machine's float32: little-endian hosts only");
 
-Publisher::Publisher(zmq::context_t& context, const std::string& endpoint, int high_water_mark)
+Publisher::Publisher(zmq::context_t& context, const std::string& endpoint, int high_water_mark,
+                     const std::optional<wire::CurveCertificate>& curve)
     : socket_(context, zmq::socket_type::pub), endpoint_(endpoint) {
   socket_.set(zmq::sockopt::sndhwm, high_water_mark);
   socket_.set(zmq::sockopt::linger, 0);
+  if (curve) wire::secure_server(socket_, *curve, "plenopiv-publish");
   try {
     socket_.bind(endpoint);
   } catch (const zmq::error_t& e) {

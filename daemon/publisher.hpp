@@ -5,8 +5,11 @@
 #include <string>
 #include <zmq.hpp>
 
+#include <optional>
+
 #include "core/base/grid.hpp"
 #include "plenopiv.pb.h"
+#include "proto/curve.hpp"
 
 namespace plenopiv::daemon {
 
@@ -15,7 +18,9 @@ namespace plenopiv::daemon {
 // socket, which ZeroMQ does not allow two threads to use at once).
 class Publisher {
  public:
-  Publisher(zmq::context_t& context, const std::string& endpoint, int high_water_mark);
+  // With `curve`, subscribers must hold a key the context's ZAP handler admits.
+  Publisher(zmq::context_t& context, const std::string& endpoint, int high_water_mark,
+            const std::optional<wire::CurveCertificate>& curve = std::nullopt);
 
   void publish_status(const msg::Status& status);
   // The grid, speeds, payload names, published time and latency (from host_timestamp_ns) are

@@ -3,10 +3,15 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
 #include <ctime>
 
 #include "core/base/errors.hpp"
+#include "core/io/atomic_file.hpp"
 #include "core/optics/camera_file.hpp"
+#include "core/process/frame_check.hpp"
 #include "drivers/camera/camera_registry.hpp"
 #include "drivers/common/driver_errors.hpp"
 #include "drivers/trigger/camera_wiring.hpp"
@@ -17,12 +22,41 @@ namespace plenopiv::daemon {
 using Clock = std::chrono::steady_clock;
 using namespace std::chrono_literals;
 
+namespace {
+
+// Time between the two frames of a pair: B - A on the device clock when both frames carry it,
+// else on the host clock. (Not the laser's dt: frame B starts after the interline transfer.)
+double frame_gap_s(const drivers::FramePair& pair) {
+  if (pair.a.device_timestamp_ns != 0 && pair.b.device_timestamp_ns != 0) {
+    return (double(pair.b.device_timestamp_ns) - double(pair.a.device_timestamp_ns)) * 1e-9;
+  }
+  return (double(pair.b.host_timestamp_ns) - double(pair.a.host_timestamp_ns)) * 1e-9;
+}
+
+// Space kept free on the data directory's file system beyond the pairs themselves (manifest
+// rewrites, vector fields, statistics, the rest of the system).
+constexpr std::uint64_t kReserveBytes = 64ull * 1024 * 1024;
+// A run without a pair count or duration needs room for at least this many pairs to start.
+constexpr std::uint64_t kMinPairsUnbounded = 10;
+
+std::string megabytes(std::uint64_t bytes) {
+  char text[64];
+  std::snprintf(text, sizeof text, "%.1f MB", double(bytes) / 1e6);
+  return text;
+}
+
+}  // namespace
+
 Run::Run(RunConfig config, std::string run_id, RunEnvironment env)
     : config_(std::move(config)), run_id_(std::move(run_id)), env_(std::move(env)) {
   const std::string camera_uri =
       config_.camera_uri.empty() ? env_.default_camera_uri : config_.camera_uri;
   const std::string trigger_uri =
       config_.trigger_uri.empty() ? env_.default_trigger_uri : config_.trigger_uri;
+  if (camera_uri.empty()) {
+    throw InputError("camera_uri: the run names no camera and plenopivd.yaml has no camera_uri");
+  }
+  mailbox_ = std::make_unique<LiveMailbox>(std::size_t(config_.live_queue));
   camera_ = drivers::open_camera(camera_uri);
   camera_->configure(drivers::CameraSettings{});
   trigger_ = drivers::open_trigger(trigger_uri);
@@ -42,12 +76,39 @@ Run::Run(RunConfig config, std::string run_id, RunEnvironment env)
     }
     calibration = load_run_calibration(env_.calibration_file, optics::load_camera_file(env_.camera_file));
   }
-  Recorder::Setup setup{env_.data_dir, run_id_, &config_, camera_uri, trigger_uri, env_.camera_file,
-                        info.vendor + " " + info.model + " " + info.serial, wiring.description,
-                        &calibration};
+  // The raw frames of the pairs this run plans must fit on the disk before it starts.
+  bytes_per_pair_ = 2 * std::uint64_t(std::max(info.sensor_width_px, 0)) *
+                    std::uint64_t(std::max(info.sensor_height_px, 0)) * sizeof(std::uint16_t);
+  std::uint64_t planned = config_.pair_count;
+  if (planned == 0 && config_.duration_s > 0) planned = std::uint64_t(std::ceil(config_.duration_s * config_.rate_hz));
+  if (planned == 0) planned = kMinPairsUnbounded;
+  std::filesystem::create_directories(env_.data_dir);
+  if (const auto free = io::free_bytes(env_.data_dir)) {
+    const double needed = double(planned) * double(bytes_per_pair_) + double(kReserveBytes);
+    if (double(*free) < needed) {
+      throw InputError("data_dir: " + env_.data_dir.string() + " has " + megabytes(*free) + " free; " +
+                       std::to_string(planned) + " pairs of raw frames need " +
+                       megabytes(std::uint64_t(needed)) +
+                       (config_.pair_count || config_.duration_s > 0 ? "" : " to start an unbounded run") +
+                       ": free some space or record fewer pairs");
+    }
+  }
+  run_folder::Writer::Setup setup;
+  setup.data_dir = env_.data_dir;
+  setup.run_id = run_id_;
+  setup.run_yaml = config_.text;
+  setup.process_yaml = config_.process_yaml();
+  setup.nominal_dt_s = config_.dt_s;
+  setup.rate_hz = config_.rate_hz;
+  setup.camera_uri = camera_uri;
+  setup.trigger_uri = trigger_uri;
+  setup.camera_file = env_.camera_file;
+  setup.camera_model = info.vendor + " " + info.model + " " + info.serial;
+  setup.camera_triggering = wiring.description;
+  if (!calibration.nominal()) setup.calibration = run_folder::CalibrationCopy{calibration.source, calibration.bytes, calibration.crc32};
   // Bad processing settings and a bad calibration are refused before the run folder exists.
   if (env_.processing) process_ = env_.processing(config_, calibration);
-  recorder_ = std::make_unique<Recorder>(setup);
+  recorder_ = std::make_unique<run_folder::Writer>(setup);
   spdlog::info("run {}: calibration {}", run_id_, calibration.summary());
   spdlog::info("run {}: {} pairs at {} Hz, dt {} s, from {}, trigger {}, folder {}", run_id_,
                config_.pair_count ? std::to_string(config_.pair_count) : "unlimited",
@@ -69,12 +130,67 @@ void Run::join() {
   if (thread_.joinable()) thread_.join();
 }
 
+// Raw frames first: never dropped once delivered (unless the disk has no room for them).
 void Run::record(drivers::FramePair pair) {
   attach_shot(pair);
-  recorder_->record_pair(pair);  // raw frames first: never dropped once delivered
+  check_space();
+  run_folder::PairRecord record;
+  record.pair_index = pair.pair_index;
+  record.trigger_index = pair.trigger_index;
+  record.frame_a = &pair.a.image;
+  record.frame_b = &pair.b.image;
+  record.frame_id_a = pair.a.frame_id;
+  record.frame_id_b = pair.b.frame_id;
+  record.device_timestamp_a_ns = pair.a.device_timestamp_ns;
+  record.device_timestamp_b_ns = pair.b.device_timestamp_ns;
+  record.host_timestamp_a_ns = pair.a.host_timestamp_ns;
+  record.host_timestamp_b_ns = pair.b.host_timestamp_ns;
+  record.frame_gap_s = frame_gap_s(pair);
+  if (pair.measured) record.laser_pulses_ns = std::pair{pair.measured->pulse1_ns, pair.measured->pulse2_ns};
+  recorder_->record_pair(record);
   ++pairs_received_;
+  check_frames(pair);
   if (env_.heartbeat) env_.heartbeat();
-  mailbox_.push(std::make_shared<const drivers::FramePair>(std::move(pair)));
+  mailbox_->push(std::make_shared<const drivers::FramePair>(std::move(pair)));
+}
+
+// A disk that is about to fill ends the run before a frame write fails half way.
+void Run::check_space() const {
+  const auto free = io::free_bytes(recorder_->dir());
+  if (free && *free < bytes_per_pair_ + kReserveBytes / 4) {
+    throw std::runtime_error("no space left on device for the next pair: " + megabytes(*free) + " free in " +
+                             recorder_->dir().string() + ", a pair needs " + megabytes(bytes_per_pair_));
+  }
+}
+
+// Frames that hold no information are recorded as they are, and flagged (process::frame_problem:
+// all zero, or saturated), once per kind of problem in the log and manifest, counted in status.
+void Run::check_frames(const drivers::FramePair& pair) {
+  for (const auto& [frame, name] : {std::pair{&pair.a, "A"}, std::pair{&pair.b, "B"}}) {
+    const auto problem = process::frame_problem(frame->image.pixels, frame->bit_depth);
+    if (!problem) continue;
+    const std::string kind = std::string("frame ") + name + " " + *problem;
+    bool first = false;
+    {
+      std::lock_guard lock(warnings_mutex_);
+      auto [it, fresh] = warnings_.try_emplace(kind, 0, pair.pair_index);
+      ++it->second.first;
+      first = fresh;
+    }
+    if (first) {
+      spdlog::warn("run {}: pair {}: {}", run_id_, pair.pair_index, kind);
+      recorder_->add_warning(kind + ", first in pair " + std::to_string(pair.pair_index));
+    }
+  }
+}
+
+void Run::take_drops() {
+  const std::vector<drivers::PairDrop> drops = camera_->take_drops();
+  if (drops.empty()) return;
+  for (const drivers::PairDrop& d : drops) {
+    recorder_->record_drop(d.trigger_index, drivers::to_string(d.reason));
+    spdlog::warn("run {}: trigger {}: no pair recorded: {}", run_id_, d.trigger_index, drivers::to_string(d.reason));
+  }
 }
 
 // The shot of a pair may still be on its way (a camera can deliver before the Q-switches fire):
@@ -102,10 +218,26 @@ void Run::stop_devices() noexcept {
     spdlog::error("run {}: stopping the trigger: {}", run_id_, e.what());
   }
   try {
-    camera_->stop();
+    camera_->stop();  // bounded: what is not read out by then is dropped and counted
   } catch (const std::exception& e) {
     spdlog::error("run {}: stopping the camera: {}", run_id_, e.what());
   }
+}
+
+// Records the pairs the camera delivered before it stopped, for at most kStopRecordBound; any left
+// after that are counted (and listed) as not recorded, so that a stop never waits without end.
+void Run::drain_after_stop() {
+  const auto deadline = Clock::now() + kStopRecordBound;
+  while (auto pair = camera_->next_pair(0ms)) {
+    if (Clock::now() < deadline) {
+      record(std::move(*pair));
+      continue;
+    }
+    ++not_recorded_at_stop_;
+    spdlog::warn("run {}: trigger {}: not recorded: the stop's {} s bound was reached", run_id_,
+                 pair->trigger_index, kStopRecordBound.count() / 1000.0);
+  }
+  take_drops();
 }
 
 void Run::acquire() {
@@ -119,6 +251,10 @@ void Run::acquire() {
     std::uint64_t fired = 0;
     std::optional<Clock::time_point> last_shot;  // when the trigger had played all its shots
     while (!stop_) {
+      take_drops();
+      if (const drivers::CameraStatus cs = camera_->status(); cs.failed) {
+        throw drivers::DeviceError("camera " + camera_->info().uri + " failed: " + cs.last_error);
+      }
       const std::uint64_t received = pairs_received_;
       if (config_.pair_count && received >= config_.pair_count) break;
       const auto now = Clock::now();
@@ -127,7 +263,9 @@ void Run::acquire() {
         break;
       }
       if (!trigger_->running() && !last_shot) {
-        const std::uint64_t shots = trigger_->counters().shots_fired;
+        const drivers::TriggerCounters tc = trigger_->counters();
+        // Shots given up by the laser guard are played too: they count towards the run's shots.
+        const std::uint64_t shots = tc.shots_fired + tc.shots_abandoned;
         if (config_.pair_count == 0 || shots < config_.pair_count) {
           throw drivers::DeviceError("trigger " + trigger_->info().uri + " stopped by itself after " +
                                      std::to_string(shots) + " shots");
@@ -158,13 +296,22 @@ void Run::acquire() {
     }
     env_.state->finishing();
     stop_devices();
-    // Pairs the camera delivered before it stopped are recorded too.
-    while (auto pair = camera_->next_pair(0ms)) record(std::move(*pair));
+    drain_after_stop();
   } catch (const std::exception& e) {
     acquisition_error_ = e.what();
     stop_devices();
+    try {
+      take_drops();
+    } catch (const std::exception&) {
+    }
   }
-  mailbox_.close();
+  // A stop hands the waiting pairs to no one (they are on disk); a run that ended by itself lets the
+  // live path finish them.
+  if (stop_) {
+    mailbox_->close_and_clear();
+  } else {
+    mailbox_->close();
+  }
 }
 
 void Run::run() {
@@ -176,7 +323,7 @@ void Run::run() {
     if (process_) {
       try {
         run_live_pipeline(
-            mailbox_, config_.max_pairs_in_flight, process_,
+            *mailbox_, config_.max_pairs_in_flight, process_,
             [this](const drivers::FramePair& pair, ProcessedPair& result) {
               result.vectors.dt_s = result.vectors.dt_s > 0 ? result.vectors.dt_s : config_.dt_s;
               recorder_->record_vectors(pair.pair_index, result.vectors);
@@ -187,7 +334,7 @@ void Run::run() {
                 h.set_trigger_index(pair.trigger_index);
                 h.set_device_timestamp_ns(pair.a.device_timestamp_ns);
                 h.set_host_timestamp_ns(pair.a.host_timestamp_ns);
-                h.set_pairs_skipped(stats_.input.skipped + stats_.process.skipped);
+                h.set_pairs_skipped(mailbox_->dropped() + stats_.process.skipped + stats_.process.cancelled);
                 if (pair.measured) {
                   // Laser pulse 1 to now, just before sending, on the trigger's clock
                   // (CLOCK_MONOTONIC for gpiod and the real-time sim trigger). A value outside
@@ -214,15 +361,14 @@ void Run::run() {
               }
               if (env_.heartbeat) env_.heartbeat();
             },
-            stats_);
+            stats_, stop_);
       } catch (...) {
         request_stop();
         acquisition.join();
         throw;
       }
     } else {
-      std::uint64_t skipped = 0;
-      while (mailbox_.take(skipped)) {
+      while (mailbox_->take()) {
       }
     }
     acquisition.join();
@@ -230,42 +376,72 @@ void Run::run() {
   } catch (const std::exception& e) {
     failure = e.what();
   }
-  const std::uint64_t skipped = stats_.input.skipped + stats_.process.skipped;
+  const std::uint64_t skipped = mailbox_->dropped() + stats_.process.skipped + stats_.process.cancelled;
   try {
     recorder_->close(failure.empty() ? (stop_ ? "stopped" : "complete") : "failed: " + failure,
-                     stats_.output.processed, skipped);
+                     stats_.output.processed, skipped, losses(), frames_lost());
   } catch (const std::exception& e) {
     if (failure.empty()) failure = std::string("closing the run folder: ") + e.what();
   }
+  const std::uint64_t lost = frames_lost();
   if (failure.empty()) {
     env_.state->finishing();
     env_.state->drained();
     // Frames in no recorded pair (as the status counts them), said at the end where a log reader
     // looks: a warning when there were any.
-    const drivers::CameraCounters c = camera_->counters();
-    const std::uint64_t lost = c.frames_lost + c.frames_discarded;
-    spdlog::log(lost ? spdlog::level::warn : spdlog::level::info,
-                "run {} ended: {} pairs recorded, {} processed, {} skipped, {} frames lost", run_id_,
-                recorder_->pairs_recorded(), stats_.output.processed.load(), skipped, lost);
+    const drivers::TriggerCounters tc = trigger_->counters();
+    spdlog::log(lost || tc.shots_abandoned ? spdlog::level::warn : spdlog::level::info,
+                "run {} ended: {} pairs recorded, {} processed, {} skipped, {} frames lost{}{}", run_id_,
+                recorder_->pairs_recorded(), stats_.output.processed.load(), skipped, lost,
+                tc.shots_delayed ? ", " + std::to_string(tc.shots_delayed) + " laser shots delayed (playback late)" : "",
+                tc.shots_abandoned ? ", " + std::to_string(tc.shots_abandoned) + " laser shots abandoned" : "");
   } else {
     env_.state->fail("run " + run_id_ + ": " + failure);
-    spdlog::error("run {} failed: {}", run_id_, failure);
+    spdlog::error("run {} failed after {} pairs recorded ({} frames lost): {}", run_id_,
+                  recorder_->pairs_recorded(), lost, failure);
   }
   finished_ = true;
+}
+
+msg::Losses Run::losses() const {
+  const drivers::CameraCounters c = camera_->counters();
+  msg::Losses l;
+  l.set_frames_never_arrived(c.frames_lost);
+  l.set_frames_discarded(c.frames_discarded);
+  l.set_camera_queue_overflow(c.pairs_overflowed);
+  l.set_not_read_out(c.pairs_not_read_out);
+  l.set_not_recorded_at_stop(not_recorded_at_stop_);
+  l.set_shots_abandoned(trigger_->counters().shots_abandoned);
+  l.set_live_queue_dropped(mailbox_->dropped());
+  l.set_processing_failed(stats_.process.skipped);
+  l.set_processing_cancelled(stats_.process.cancelled);
+  return l;
+}
+
+// Every raw frame the camera made that is in no recorded pair.
+std::uint64_t Run::frames_lost() const {
+  const drivers::CameraCounters c = camera_->counters();
+  return c.frames_lost + c.frames_discarded + 2 * (c.pairs_overflowed + c.pairs_not_read_out + not_recorded_at_stop_);
 }
 
 void Run::fill_status(msg::Status& s) const {
   s.set_run_id(run_id_);
   s.set_run_dir(recorder_->dir().string());
-  const drivers::CameraCounters c = camera_->counters();
   s.set_pairs_acquired(pairs_received_);
   s.set_pairs_recorded(recorder_->pairs_recorded());
   s.set_pairs_processed(stats_.output.processed);
-  s.set_pairs_skipped(stats_.input.skipped + stats_.process.skipped);
-  // Every frame that is in no delivered pair: never arrived, or arrived and was discarded
-  // (incomplete, or its partner missing or late). Incomplete frames are among the discarded.
-  s.set_frames_lost(c.frames_lost + c.frames_discarded);
-  *s.add_stages() = stats_.input.to_message("input", std::uint32_t(mailbox_.depth()));
+  s.set_pairs_skipped(mailbox_->dropped() + stats_.process.skipped + stats_.process.cancelled);
+  s.set_frames_lost(frames_lost());
+  *s.mutable_losses() = losses();
+  {
+    std::lock_guard lock(warnings_mutex_);
+    for (const auto& [kind, seen] : warnings_) {
+      s.add_warnings(kind + ": " + std::to_string(seen.first) + " pair(s), first pair " + std::to_string(seen.second));
+    }
+  }
+  if (const auto free = io::free_bytes(recorder_->dir())) s.set_bytes_free(*free);
+  s.set_laser_shots_delayed(trigger_->counters().shots_delayed);
+  *s.add_stages() = stats_.input.to_message("input", std::uint32_t(mailbox_->depth()), mailbox_->dropped());
   *s.add_stages() = stats_.process.to_message("process", stats_.process.in_flight);
   *s.add_stages() = stats_.output.to_message("output", 0);
 }

@@ -4,20 +4,22 @@
 #include <atomic>
 #include <chrono>
 #include <filesystem>
+#include <map>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <thread>
 
 #include "daemon/daemon_config.hpp"
 #include "daemon/pipeline.hpp"
 #include "daemon/publisher.hpp"
-#include "daemon/recorder.hpp"
 #include "daemon/run_calibration.hpp"
 #include "daemon/run_config.hpp"
 #include "daemon/run_state.hpp"
 #include "drivers/camera/camera.hpp"
 #include "drivers/trigger/shot_joiner.hpp"
 #include "drivers/trigger/trigger.hpp"
+#include "proto/run_folder.hpp"
 
 namespace plenopiv::daemon {
 
@@ -25,6 +27,12 @@ namespace plenopiv::daemon {
 // sections and set up per-run tables) with the run's calibration (the one the run folder keeps).
 // Empty: this daemon has no processing stage, and runs record raw frames only.
 using ProcessFactory = std::function<ProcessFn(const RunConfig&, const RunCalibration&)>;
+
+// How long a stop may take, at most, for each of its steps: the camera delivering exposures already
+// triggered (drivers::Camera::stop), the recorder writing the pairs delivered before the stop, and
+// the processing giving up at its next iteration or pass. Together they keep a stop (and SIGTERM)
+// within the unit's TimeoutStopSec.
+inline constexpr std::chrono::milliseconds kStopRecordBound{4000};
 
 struct RunEnvironment {
   std::filesystem::path data_dir;
@@ -60,6 +68,8 @@ class Run {
   Run(const Run&) = delete;
   Run& operator=(const Run&) = delete;
 
+  // Stops the run: the trigger and camera stop, in-flight processing is cancelled, the pairs
+  // delivered so far are recorded (within kStopRecordBound), and the folder is closed "stopped".
   void request_stop() { stop_ = true; }
   bool finished() const { return finished_; }
   void join();
@@ -75,7 +85,13 @@ class Run {
   void acquire();
   void record(drivers::FramePair pair);
   void attach_shot(drivers::FramePair& pair);
+  void check_frames(const drivers::FramePair& pair);
+  void take_drops();
+  void drain_after_stop();
+  void check_space() const;
   void stop_devices() noexcept;
+  msg::Losses losses() const;
+  std::uint64_t frames_lost() const;
 
   RunConfig config_;
   std::string run_id_;
@@ -86,12 +102,17 @@ class Run {
   std::unique_ptr<drivers::Trigger> trigger_;
   drivers::TriggerSource camera_trigger_ = drivers::TriggerSource::External;
   drivers::ShotJoiner joiner_;  // acquisition thread only
-  std::unique_ptr<Recorder> recorder_;
+  std::unique_ptr<run_folder::Writer> recorder_;
   ProcessFn process_;
-  LiveMailbox mailbox_;
+  std::unique_ptr<LiveMailbox> mailbox_;
   PipelineStats stats_;
   std::atomic<bool> stop_{false}, finished_{false};
   std::atomic<std::uint64_t> pairs_received_{0};
+  std::atomic<std::uint64_t> not_recorded_at_stop_{0};
+  std::uint64_t bytes_per_pair_ = 0;  // raw frames on disk
+  // Bad data met (all-zero or saturated frames): kind -> (count, first pair), for status and manifest.
+  mutable std::mutex warnings_mutex_;
+  std::map<std::string, std::pair<std::uint64_t, std::uint64_t>> warnings_;
   std::string acquisition_error_;  // set by the acquisition thread before it ends
   std::thread thread_;
 };

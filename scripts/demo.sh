@@ -9,7 +9,8 @@ echo "demo: build ready in build/bin"
 
 data_dir="build/demo-data"
 mkdir -p "$data_dir"
-control="tcp://127.0.0.1:${PLENOPIV_DEMO_CONTROL_PORT:-5555}"
+# Control through a socket file only this user can open (tcp:// control needs CURVE keys).
+control="ipc://$PWD/build/demo-control"
 publish="tcp://127.0.0.1:${PLENOPIV_DEMO_PUBLISH_PORT:-5556}"
 client=(build/bin/plenopiv --endpoint "$control")
 
@@ -19,7 +20,7 @@ client=(build/bin/plenopiv --endpoint "$control")
 camera_file="${PLENOPIV_DEMO_CAMERA_FILE:-systemd/config/camera-small.yaml}"
 camera="${PLENOPIV_DEMO_CAMERA:-sim://?seed=1&ppm=0.3&dx_mm=0.25}"
 build/bin/plenopivd --config systemd/config/plenopivd.yaml --control "$control" \
-  --publish "$publish" --data-dir "$data_dir" --camera-file "$camera_file" --camera "$camera" &
+  --publish "$publish" --data-dir "$data_dir" --camera-file "$camera_file" --camera "$camera" --simulation &
 daemon=$!
 trap 'kill $daemon 2>/dev/null || true' EXIT
 

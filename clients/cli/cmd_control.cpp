@@ -22,8 +22,8 @@ void check(const msg::Reply& reply) {
 }
 
 ControlClient connect(const ControlOptions& options) {
-  return ControlClient(options.endpoint,
-                       std::chrono::milliseconds(static_cast<long>(options.timeout_s * 1000)));
+  return ControlClient(options.endpoint, std::chrono::milliseconds(static_cast<long>(options.timeout_s * 1000)),
+                       options.security());
 }
 
 void print_status(const msg::Status& s) {
@@ -40,9 +40,26 @@ void print_status(const msg::Status& s) {
               << s.pairs_skipped() << ", frames lost " << s.frames_lost() << "\n";
     for (const msg::StageCounters& c : s.stages()) {
       std::cout << "  " << std::left << std::setw(13) << c.name() << std::right << "processed "
-                << c.processed() << ", skipped " << c.skipped() << ", queue " << c.queue_depth()
-                << ", mean " << std::setprecision(3) << c.mean_time_s() << " s\n";
+                << c.processed() << ", skipped " << c.skipped() << ", dropped " << c.dropped() << ", queue "
+                << c.queue_depth() << ", mean " << std::setprecision(3) << c.mean_time_s() << " s\n";
     }
+    if (s.has_losses()) {
+      const msg::Losses& l = s.losses();
+      std::cout << "losses         frames never arrived " << l.frames_never_arrived() << ", discarded "
+                << l.frames_discarded() << "; pairs: camera queue " << l.camera_queue_overflow()
+                << ", not read out " << l.not_read_out() << ", not recorded at stop " << l.not_recorded_at_stop()
+                << "; laser shots abandoned " << l.shots_abandoned() << "\n"
+                << "               live path: queue dropped " << l.live_queue_dropped() << ", failed "
+                << l.processing_failed() << ", cancelled " << l.processing_cancelled() << " (on disk)\n";
+    }
+    if (s.laser_shots_delayed() > 0) {
+      std::cout << "laser          " << s.laser_shots_delayed()
+                << " shots fired late (the trigger ran late; the laser's interval was kept)\n";
+    }
+    if (s.bytes_free() > 0) {
+      std::cout << "disk free      " << std::setprecision(1) << double(s.bytes_free()) / 1e9 << " GB\n";
+    }
+    for (const std::string& w : s.warnings()) std::cout << "warning        " << w << "\n";
   }
   std::cout << "processing     " << s.processing() << "\n";
 }

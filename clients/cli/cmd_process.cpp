@@ -9,6 +9,7 @@
 #include <iostream>
 #include <memory>
 #include <optional>
+#include <set>
 #include <sstream>
 
 #include <opencv2/imgcodecs.hpp>
@@ -17,7 +18,10 @@
 #include <tbb/global_control.h>
 
 #include "clients/cli/commands.hpp"
+#include "clients/cli/field_output.hpp"
 #include "clients/cli/progress.hpp"
+#include "clients/cli/reprocess.hpp"
+#include "clients/cli/weights_cache.hpp"
 #include "core/base/errors.hpp"
 #include "core/calib/calibration.hpp"
 #include "core/calib/calibration_file.hpp"
@@ -29,8 +33,10 @@
 #include "core/io/vtk_files.hpp"
 #include "core/optics/camera_file.hpp"
 #include "core/piv/derived.hpp"
-#include "core/process/operator_cache.hpp"
+#include "core/process/frame_check.hpp"
+#include "core/process/pair_processor.hpp"
 #include "core/process/process.hpp"
+#include "proto/run_folder.hpp"
 #include "core/recon/mart.hpp"
 #include "plenopiv.pb.h"
 
@@ -38,7 +44,10 @@ namespace plenopiv::client {
 namespace {
 
 struct ProcessOptions {
-  std::string run;
+  std::string run, tier = "full", pairs, shard;
+  int jobs = 1;
+  bool resume = false, merge = false;
+  std::optional<double> dt_s;
   std::string camera, frame_a, frame_b, config, calibration, calibration_image, output, vti, preview;
   std::vector<std::string> white_images;
   bool nominal = false;
@@ -47,23 +56,29 @@ struct ProcessOptions {
   bool no_cache = false;
 };
 
-// The weight tables' cache (core/process): --cache-dir, else the default folder; none with
-// --no-cache or when no folder is known (said).
-std::unique_ptr<process::WeightsDiskCache> weights_cache(const std::string& dir, bool off) {
-  if (off) return nullptr;
-  const std::filesystem::path folder = dir.empty() ? process::default_cache_folder() : std::filesystem::path(dir);
-  if (folder.empty()) {
-    std::fprintf(stderr, "weight tables are not cached: no --cache-dir, PLENOPIV_CACHE_DIR, XDG_CACHE_HOME or HOME\n");
-    return nullptr;
-  }
-  return std::make_unique<process::WeightsDiskCache>(folder);
-}
-
-ImageF read_frame(const std::string& path) {
+// A raw frame as floats; a frame with nothing to measure (all zero, saturated) is said on stderr
+// under `name` and added to `warnings` when given.
+ImageF read_frame(const std::string& path, const std::string& name = "", std::vector<std::string>* warnings = nullptr) {
   const ImageU16 raw = io::read_tiff_u16(path);
+  if (warnings) {
+    if (const auto problem = process::frame_problem(raw.pixels)) {
+      warnings->push_back(name + " (" + path + ") " + *problem);
+      std::fprintf(stderr, "warning: %s\n", warnings->back().c_str());
+    }
+  }
   ImageF image(raw.width, raw.height);
   for (std::size_t i = 0; i < raw.size(); ++i) image.pixels[i] = raw.pixels[i];
   return image;
+}
+
+// Says on stderr when a field has no valid vector or hardly any: the frames or settings, not the
+// flow, are then the likely cause.
+void warn_if_few_valid(const VectorField& f, const std::string& what) {
+  std::size_t valid = 0;
+  for (auto v : f.valid) valid += v;
+  if (f.valid.empty() || 10 * valid >= f.valid.size()) return;
+  std::fprintf(stderr, "warning: %s: only %zu of %zu vectors valid: check the frames (light, focus, seeding) and "
+               "the volume and correlation settings\n", what.c_str(), valid, f.valid.size());
 }
 
 // The lens centres and white correction from exactly one of the three sources.
@@ -165,24 +180,34 @@ void write_png(const std::filesystem::path& path, const cv::Mat& image) {
   });
 }
 
-// The vector field with vorticity and flags, as HDF5 and as VTK image data.
-void write_field(const std::filesystem::path& h5, const std::filesystem::path& vti,
-                 const piv::CorrelationResult& r, const std::array<std::vector<float>, 3>& omega) {
-  std::vector<float> flags(r.flags.begin(), r.flags.end());
-  io::write_vector_field_h5(h5, r.field,
-                            {{"vorticity_x", omega[0]}, {"vorticity_y", omega[1]}, {"vorticity_z", omega[2]},
-                             {"flags", flags}});
-  std::vector<float> omega_vec(3 * omega[0].size());
-  for (std::size_t i = 0; i < omega[0].size(); ++i)
-    for (int c = 0; c < 3; ++c) omega_vec[3 * i + std::size_t(c)] = omega[std::size_t(c)][i];
-  io::write_vector_field_vti(vti, r.field, {{"vorticity_1_s_vec", omega_vec}, {"flags", flags}});
-}
-
 std::optional<tbb::global_control> thread_limit(int threads) {
   if (threads < 0) throw InputError("--threads: must be >= 0 (0: all cores)");
   std::optional<tbb::global_control> limit;
   if (threads > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, threads);
   return limit;
+}
+
+// Frames given one by one that plenopivd recorded (frames/pair-<n>-A.tif in a run folder): the
+// pair's measured dt is in the run's manifest, and without --dt the config's nominal dt is used
+// instead, which is said.
+void warn_if_recorded_dt_ignored(const ProcessOptions& o) {
+  const std::filesystem::path frame = std::filesystem::absolute(o.frame_a);
+  const std::filesystem::path run = frame.parent_path().parent_path();
+  if (o.dt_s || frame.parent_path().filename() != "frames" || !std::filesystem::exists(run / "manifest.json")) return;
+  try {
+    const run_folder::Reader reader(run);
+    for (const run_folder::PairEntry& p : reader.pairs()) {
+      if (std::filesystem::equivalent(p.frame_a, frame) && p.measured_dt_s) {
+        std::fprintf(stderr,
+                     "warning: %s is pair %llu of run %s, whose laser pulses were %.9g s apart (measured); this uses "
+                     "the config's nominal dt instead: give --dt %.9g, or use plenopiv process --run %s\n",
+                     o.frame_a.c_str(), static_cast<unsigned long long>(p.pair_index), run.c_str(),
+                     *p.measured_dt_s, *p.measured_dt_s, run.c_str());
+      }
+    }
+  } catch (const InputError&) {
+    // Not a readable run folder: nothing to compare with.
+  }
 }
 
 void run_process(const ProcessOptions& o) {
@@ -192,9 +217,15 @@ void run_process(const ProcessOptions& o) {
     if (value->empty()) throw InputError(std::string(name) + " is required (or --run <run folder>)");
   const auto limit = thread_limit(o.threads);
   // Every input is read and checked before any long work starts.
-  const process::ProcessSettings settings = process::load_process_settings(o.config);
+  process::ProcessSettings settings = process::load_process_settings(o.config);
+  if (o.dt_s) {
+    if (!(*o.dt_s > 0) || !std::isfinite(*o.dt_s)) throw InputError("--dt: must be > 0 s");
+    settings.correlation.dt_s = *o.dt_s;
+  }
+  warn_if_recorded_dt_ignored(o);
   const optics::CameraModel camera = optics::load_camera_file(o.camera);
-  const ImageF a = read_frame(o.frame_a), b = read_frame(o.frame_b);
+  std::vector<std::string> warnings;
+  const ImageF a = read_frame(o.frame_a, "frame A", &warnings), b = read_frame(o.frame_b, "frame B", &warnings);
   for (const auto* f : {&o.frame_a, &o.frame_b}) {
     const ImageF& img = f == &o.frame_a ? a : b;
     if (img.width != camera.sensor().width_px || img.height != camera.sensor().height_px)
@@ -215,17 +246,20 @@ void run_process(const ProcessOptions& o) {
   const auto& g = settings.grid;
   std::fprintf(stderr, "volume %d x %d x %d voxels (+%d guard slices at each depth end); weights ...\n", g.shape[0],
                g.shape[1], g.shape[2], settings.guard_slices());
-  const auto cache = weights_cache(o.cache_dir, o.no_cache);
-  const process::PairOperator op(camera, cal.lenses, cal.white_correction, settings,
-                                 cache ? cache->source() : process::PairOperator::WeightsSource{});
-  if (cache) std::fprintf(stderr, "%s\n", cache->last_note().c_str());
-  if (!op.note().empty()) std::fprintf(stderr, "%s\n", op.note().c_str());
+  const auto operators = weights_cache(o.cache_dir, o.no_cache);
+  const process::PairProcessor processor(camera, cal, settings, operators.get());
+  if (operators) std::fprintf(stderr, "%s\n", processor.setup_note().c_str());
+  if (!processor.note().empty()) std::fprintf(stderr, "%s\n", processor.note().c_str());
   Progress progress("process", "pairs", 1.0);
-  const auto r = process::process_pair(op, a, b, settings, [&](const std::string&, double f) { progress.update(f); });
+  process::PairOptions options;
+  options.progress = [&](const std::string&, double f) { progress.update(f); };
+  const auto r = processor.process(a, b, options);
 
   const auto omega = piv::vorticity(r.correlation.field);
-  write_field(out, vti, r.correlation, omega);
+  write_field_outputs(out, vti, r.correlation,
+                      {{"dt_source", o.dt_s ? "--dt" : "nominal (dt_s of " + o.config + ")"}});
   write_png(png, preview_image(r.correlation.field, omega[2]));
+  warn_if_few_valid(r.correlation.field, out.string());
 
   std::size_t valid = 0;
   for (auto v : r.correlation.field.valid) valid += v;
@@ -238,99 +272,35 @@ void run_process(const ProcessOptions& o) {
   std::cout << out.string() << "\n" << vti.string() << "\n" << png.string() << "\n";
 }
 
-// A file the manifest names, inside the run folder; missing is an InputError naming key and file.
-std::filesystem::path run_file(const std::filesystem::path& run, const std::string& key, const std::string& name) {
-  const std::filesystem::path manifest = run / "manifest.json";
-  if (name.empty())
-    throw InputError(manifest.string() + ": " + key + " is empty: the run folder does not say where it is");
-  const std::filesystem::path path = run / name;
-  if (!std::filesystem::is_regular_file(path))
-    throw InputError(manifest.string() + ": " + key + ": " + path.string() + " is missing");
-  return path;
-}
-
-// Every recorded pair again, from the run folder alone: process.yaml (the live settings),
-// camera.yaml, the calibration the manifest names (nominal, or the run's calibration.h5, whose
-// size and CRC-32 must match the manifest's), frames/, and each pair's measured dt as the
-// live path used it (the run's dt_s when none was measured).
+// Every recorded pair again, from the run folder alone (clients/cli/reprocess.hpp): the run's own
+// settings or offline ones, each pair's measured dt, ranges, jobs, resume, shards and the merge.
 void run_reprocess(const ProcessOptions& o) {
-  for (const auto* other : {&o.camera, &o.frame_a, &o.frame_b, &o.config, &o.calibration, &o.calibration_image,
-                            &o.vti, &o.preview})
+  for (const auto* other : {&o.camera, &o.frame_a, &o.frame_b, &o.calibration, &o.calibration_image, &o.vti,
+                            &o.preview})
     if (!other->empty())
-      throw InputError("--run takes the camera, frames, settings and calibration from the run folder; "
-                       "give only --run, -o, --threads and the cache options");
+      throw InputError("--run takes the camera, frames and calibration from the run folder; give --run with -o, "
+                       "--config, --tier, --pairs, --jobs, --resume, --shard, --merge, --threads and the cache options only");
   if (!o.white_images.empty() || o.nominal)
     throw InputError("--run takes the calibration from the run folder (manifest.json: calibration)");
+  if (o.dt_s) throw InputError("--dt: --run uses each pair's measured dt (the run's dt_s where none was measured)");
   const auto limit = thread_limit(o.threads);
-  const std::filesystem::path run = o.run;
-  if (!std::filesystem::is_directory(run)) throw InputError("--run: " + run.string() + " is not a folder");
-
-  // Every input is read and checked before any long work starts.
-  const std::filesystem::path manifest_path = run / "manifest.json";
-  std::ifstream in(manifest_path);
-  if (!in) throw InputError(manifest_path.string() + ": missing (not a plenopivd run folder?)");
-  std::stringstream text;
-  text << in.rdbuf();
-  msg::RunManifest m;
-  if (const auto status = google::protobuf::util::JsonStringToMessage(text.str(), &m); !status.ok())
-    throw InputError(manifest_path.string() + ": not a run manifest: " + std::string(status.message()));
-  const process::ProcessSettings settings = process::load_process_settings(run_file(run, "process_file", m.process_file()));
-  const std::filesystem::path camera_path = run_file(run, "camera_file", m.camera_file());
-  const optics::CameraModel camera = optics::load_camera_file(camera_path);
-  std::optional<std::filesystem::path> calibration_copy;
-  if (m.calibration() == "file") {
-    // The run's own copy, checked against what the daemon recorded when it copied it.
-    calibration_copy = run_file(run, "calibration_file", m.calibration_file());
-    const std::string bytes = io::read_file_bytes(*calibration_copy);
-    const std::string crc = io::crc32_hex(io::crc32_of(bytes));
-    if (bytes.size() != m.calibration_bytes() || crc != m.calibration_crc32())
-      throw InputError(calibration_copy->string() + ": " + std::to_string(bytes.size()) + " bytes, crc32 " + crc +
-                       "; the manifest recorded " + std::to_string(m.calibration_bytes()) + " bytes, crc32 " +
-                       m.calibration_crc32() + " (the copy was changed or damaged)");
-  } else if (m.calibration() != "nominal") {
-    throw InputError(manifest_path.string() + ": calibration: '" + m.calibration() +
-                     "' is not one this version can reprocess with (nominal, file)");
-  }
-  if (m.pairs_size() == 0) throw InputError(manifest_path.string() + ": pairs: the run recorded no pair");
-  for (const msg::ManifestPair& p : m.pairs()) {
-    run_file(run, "pairs[" + std::to_string(p.pair_index()) + "].frame_a", p.frame_a());
-    run_file(run, "pairs[" + std::to_string(p.pair_index()) + "].frame_b", p.frame_b());
-  }
-  const std::filesystem::path out_dir = o.output.empty() ? run / "reprocessed" : std::filesystem::path(o.output);
-  std::filesystem::create_directories(out_dir);
-
-  ProcessOptions source;
-  if (calibration_copy) {
-    source.calibration = calibration_copy->string();
-  } else {
-    source.nominal = true;
-  }
-  const calib::LoadedCalibration cal = calibration_for(source, camera);
-  const auto& g = settings.grid;
-  std::fprintf(stderr, "%s: %d pairs; volume %d x %d x %d voxels (+%d guard slices at each depth end); weights ...\n",
-               run.string().c_str(), m.pairs_size(), g.shape[0], g.shape[1], g.shape[2], settings.guard_slices());
-  const auto cache = weights_cache(o.cache_dir, o.no_cache);
-  const process::PairOperator op(camera, cal.lenses, cal.white_correction, settings,
-                                 cache ? cache->source() : process::PairOperator::WeightsSource{});
-  if (cache) std::fprintf(stderr, "%s\n", cache->last_note().c_str());
-  if (!op.note().empty()) std::fprintf(stderr, "%s\n", op.note().c_str());
-  const double pairs = double(m.pairs_size());
-  Progress progress("process", "pairs", pairs);
-  recon::MartWorkspace workspace;  // MART's buffers, kept from pair to pair
-  for (int k = 0; k < m.pairs_size(); ++k) {
-    const msg::ManifestPair& p = m.pairs(k);
-    const ImageF a = read_frame((run / p.frame_a()).string()), b = read_frame((run / p.frame_b()).string());
-    process::ProcessSettings s = settings;
-    if (p.measured_dt_s() > 0) s.correlation.dt_s = p.measured_dt_s();
-    const auto r = process::process_pair(op, a, b, s, [&](const std::string&, double f) {
-      progress.update((k + f) / pairs);
-    }, &workspace);
-    char name[32];
-    std::snprintf(name, sizeof name, "pair-%06llu", static_cast<unsigned long long>(p.pair_index()));
-    const std::filesystem::path h5 = out_dir / (std::string(name) + ".h5");
-    write_field(h5, out_dir / (std::string(name) + ".vti"), r.correlation, piv::vorticity(r.correlation.field));
-    std::cout << h5.string() << "\n";
-  }
+  ReprocessOptions r;
+  r.run = o.run;
+  r.output = o.output;
+  r.config = o.config;
+  r.tier = o.tier;
+  if (!o.pairs.empty()) r.pairs = parse_pair_range(o.pairs);
+  if (!o.shard.empty()) r.shard = parse_shard(o.shard);
+  r.jobs = o.jobs;
+  r.resume = o.resume;
+  r.merge_only = o.merge;
+  r.weights_cache = weights_cache_folder(o.cache_dir, o.no_cache);
+  if (r.merge_only && r.shard) throw InputError("--merge covers every pair: give it without --shard");
+  const ReprocessReport report = reprocess_run(r);
+  std::fprintf(stderr, "%s: %zu pair(s) selected, %zu processed, %zu up to date%s\n", report.output.string().c_str(),
+               report.selected, report.processed, report.skipped,
+               report.merged ? "; statistics.h5 and series.pvd written" : "");
+  std::cout << report.output.string() << "\n";
 }
 
 }  // namespace
@@ -340,14 +310,15 @@ void add_process_commands(CLI::App& app) {
   auto* cmd = app.add_subcommand(
       "process", "one frame pair to a 3D/3C vector field: reconstruct A and B (MART), correlate (multi-pass)");
   cmd->add_option("--run", o->run,
-                  "a run folder recorded by plenopivd: reprocess every pair with the run's own settings, "
-                  "camera and calibration into <run>/reprocessed/ (or -o DIR)");
+                  "a run folder recorded by plenopivd: reprocess its pairs (each with its measured dt) with the run's "
+                  "own settings or --config, camera and calibration into <run>/reprocessed/ (or -o DIR), with "
+                  "statistics.h5 and series.pvd");
   cmd->add_option("camera", o->camera, "camera file (YAML)");
   cmd->add_option("frame_a", o->frame_a, "raw plenoptic frame A (16-bit TIFF, sensor-sized)");
   cmd->add_option("frame_b", o->frame_b, "raw plenoptic frame B");
   cmd->add_option("--config", o->config,
-                  "run config YAML: dt_s, volume {x_mm, y_mm, z_mm, voxel_mm}, reconstruction, correlation "
-                  "(systemd/config/process.yaml)");
+                  "processing spec YAML: dt_s, volume {x_mm, y_mm, z_mm, voxel_mm}, reconstruction, correlation "
+                  "(systemd/config/process.yaml); with --run: offline settings instead of the run's (or 'run')");
   cmd->add_option("--calibration", o->calibration, "calibration file (HDF5, from `plenopiv calibrate`)");
   cmd->add_option("--calibration-image", o->calibration_image, "calibration TIFF (aperture stopped down)");
   cmd->add_option("--white", o->white_images, "white TIFF(s) for --calibration-image (averaged)");
@@ -362,6 +333,15 @@ void add_process_commands(CLI::App& app) {
                   "folder that keeps weight tables between calls, keyed by camera, calibration, volume and "
                   "settings (default: $PLENOPIV_CACHE_DIR, $XDG_CACHE_HOME/plenopiv or ~/.cache/plenopiv)");
   cmd->add_flag("--no-cache", o->no_cache, "build the weight tables afresh and keep none");
+  cmd->add_option("--dt", o->dt_s, "pulse separation, s (instead of the config's dt_s): a pair's measured dt");
+  cmd->add_option("--tier", o->tier, "with --run: the settings' tier, full or live (the live lane's)")
+      ->capture_default_str();
+  cmd->add_option("--pairs", o->pairs, "with --run: pair indices a:b (b excluded; a: or :b)");
+  cmd->add_option("--jobs", o->jobs, "with --run: pairs processed at once (each needs its own buffers)")
+      ->capture_default_str();
+  cmd->add_flag("--resume", o->resume, "with --run: skip pairs whose output is there with the same inputs");
+  cmd->add_option("--shard", o->shard, "with --run: process shard i/n of the pairs only (a cluster task); merge later");
+  cmd->add_flag("--merge", o->merge, "with --run: only check every pair's output and write statistics.h5 and series.pvd");
   cmd->callback([o] { o->run.empty() ? run_process(*o) : run_reprocess(*o); });
 }
 

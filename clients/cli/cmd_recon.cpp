@@ -8,8 +8,10 @@
 #include <filesystem>
 #include <iostream>
 #include <memory>
+#include <string>
 
 #include "clients/cli/commands.hpp"
+#include "clients/cli/weights_cache.hpp"
 #include "core/base/errors.hpp"
 #include "core/calib/calibration_file.hpp"
 #include "core/calib/nominal_calibration.hpp"
@@ -99,18 +101,13 @@ void run(const ReconOptions& o) {
     white = c.white_correction.empty() ? calib::geometric_white_image(camera, lenses) : std::move(c.white_correction);
   }
   // Raw pixels, or the image resampled onto an axis-aligned lattice for a rotated/warped/hex array.
-  std::unique_ptr<process::WeightsDiskCache> cache;
-  if (!o.no_cache) {
-    const auto folder = o.cache_dir.empty() ? process::default_cache_folder() : std::filesystem::path(o.cache_dir);
-    if (folder.empty()) {
-      std::fprintf(stderr, "weight tables are not cached: no --cache-dir, PLENOPIV_CACHE_DIR, XDG_CACHE_HOME or HOME\n");
-    } else {
-      cache = std::make_unique<process::WeightsDiskCache>(folder);
-    }
-  }
-  const process::PairOperator pair_op(camera, lenses, white, grid, 1.0,
-                                      cache ? cache->source() : process::PairOperator::WeightsSource{});
-  if (cache) std::fprintf(stderr, "%s\n", cache->last_note().c_str());
+  const auto operators = weights_cache(o.cache_dir, o.no_cache);
+  std::string setup_note;
+  const std::shared_ptr<const process::PairOperator> kept =
+      operators ? operators->get(camera, lenses, white, grid, 1.0, &setup_note)
+                : std::make_shared<const process::PairOperator>(camera, lenses, white, grid, 1.0);
+  if (operators) std::fprintf(stderr, "%s\n", setup_note.c_str());
+  const process::PairOperator& pair_op = *kept;
   const recon::WeightingOperator& op = pair_op.weights();
   recon::validate_image(image, op, o.image.c_str());
   ImageF scratch;

@@ -23,8 +23,8 @@ std::string seconds_text(double s) {
 }
 
 msg::Reply call(const ControlOptions& options, msg::Request request) {
-  ControlClient client(options.endpoint,
-                       std::chrono::milliseconds(static_cast<long>(options.timeout_s * 1000)));
+  ControlClient client(options.endpoint, std::chrono::milliseconds(static_cast<long>(options.timeout_s * 1000)),
+                       options.security());
   msg::Reply reply = client.call(std::move(request));
   if (reply.has_error()) {
     std::cerr << "plenopivd refused: " << msg::Error::Code_Name(reply.error().code()) << ": "
@@ -38,6 +38,7 @@ struct WatchOptions {
   std::string publish = "tcp://127.0.0.1:5556";
   long count = 0;
   double timeout_s = 10.0;
+  wire::ClientSecurity security;  // the control options' keys, when publishing uses CURVE
 };
 
 // Subscribes to `vectors` and prints one line per field; exits after `count` (0: never) or when
@@ -48,6 +49,7 @@ void watch(const WatchOptions& o) {
   sub.set(zmq::sockopt::linger, 0);
   sub.set(zmq::sockopt::rcvtimeo, int(o.timeout_s * 1000));
   sub.set(zmq::sockopt::subscribe, "vectors");
+  wire::secure_client(sub, o.security);
   sub.connect(o.publish);
   for (long n = 0; o.count == 0 || n < o.count;) {
     zmq::message_t topic;
@@ -129,7 +131,10 @@ void add_run_commands(CLI::App& app, ControlOptions& options) {
   watch_cmd->add_option("-n,--count", w->count, "exit after this many fields (0: never)");
   watch_cmd->add_option("--wait", w->timeout_s, "seconds without a field before giving up")
       ->capture_default_str();
-  watch_cmd->callback([w] { watch(*w); });
+  watch_cmd->callback([w, &options] {
+    w->security = options.security();
+    watch(*w);
+  });
 
   auto frames = std::make_shared<unsigned>(1);
   auto camera = std::make_shared<std::string>();

@@ -3,12 +3,17 @@
 
 #include <CLI/CLI.hpp>
 
+#include "proto/curve.hpp"
+
 namespace plenopiv::client {
 
 // Options every control command shares.
 struct ControlOptions {
-  std::string endpoint = "tcp://127.0.0.1:5555";
+  std::string endpoint = "ipc:///run/plenopiv/control";
   double timeout_s = 3.0;
+  std::string server_key;   // the daemon's public certificate (CURVE over tcp://)
+  std::string client_cert;  // this client's secret certificate (CURVE over tcp://)
+  wire::ClientSecurity security() const { return wire::client_security(server_key, client_cert); }
 };
 
 void add_control_commands(CLI::App& app, ControlOptions& options);
@@ -20,5 +25,6 @@ void add_process_commands(CLI::App& app);
 void add_calib_commands(CLI::App& app);
 void add_lightfield_commands(CLI::App& app);
 void add_run_commands(CLI::App& app, ControlOptions& options);
+void add_keys_commands(CLI::App& app);
 
 }  // namespace plenopiv::client

@@ -3,8 +3,9 @@
 
 namespace plenopiv::client {
 
-ControlClient::ControlClient(std::string endpoint, std::chrono::milliseconds timeout)
-    : endpoint_(std::move(endpoint)), timeout_(timeout) {}
+ControlClient::ControlClient(std::string endpoint, std::chrono::milliseconds timeout,
+                             wire::ClientSecurity security)
+    : endpoint_(std::move(endpoint)), timeout_(timeout), security_(std::move(security)) {}
 
 msg::Reply ControlClient::call(msg::Request request) {
   request.set_id(next_id_++);
@@ -16,6 +17,7 @@ msg::Reply ControlClient::call(msg::Request request) {
   socket.set(zmq::sockopt::linger, 0);
   socket.set(zmq::sockopt::rcvtimeo, int(timeout_.count()));
   socket.set(zmq::sockopt::sndtimeo, int(timeout_.count()));
+  wire::secure_client(socket, security_);
   try {
     socket.connect(endpoint_);
   } catch (const zmq::error_t& e) {
@@ -28,7 +30,11 @@ msg::Reply ControlClient::call(msg::Request request) {
   zmq::message_t answer;
   if (!socket.recv(answer, zmq::recv_flags::none)) {
     throw ControlError("no reply from plenopivd at " + endpoint_ + " within " + waited +
-                       ": is it running? (systemctl status plenopivd)");
+                       ": is it running? (systemctl status plenopivd)" +
+                       (security_.enabled() ? "; does it admit this client's key? (its curve: authorized_clients)"
+                        : endpoint_.rfind("tcp://", 0) == 0
+                            ? "; a tcp:// control socket needs CURVE: --server-key and --client-cert"
+                            : "; may this user open its socket? (the plenopiv group)"));
   }
   msg::Reply reply;
   if (!reply.ParseFromArray(answer.data(), int(answer.size()))) {

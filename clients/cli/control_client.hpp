@@ -7,6 +7,7 @@
 #include <zmq.hpp>
 
 #include "plenopiv.pb.h"
+#include "proto/curve.hpp"
 
 namespace plenopiv::client {
 
@@ -18,8 +19,11 @@ class ControlError : public std::runtime_error {
 
 class ControlClient {
  public:
+  // `security`: the server's key and this client's key pair when the daemon's control socket uses
+  // CURVE (tcp://); none for its local ipc:// socket.
   explicit ControlClient(std::string endpoint,
-                         std::chrono::milliseconds timeout = std::chrono::milliseconds(3000));
+                         std::chrono::milliseconds timeout = std::chrono::milliseconds(3000),
+                         wire::ClientSecurity security = {});
 
   // Sends `request` (its id is set here) and waits for the reply. Throws ControlError when no
   // reply arrives within the timeout; never hangs.
@@ -30,6 +34,7 @@ class ControlClient {
   zmq::context_t context_;
   std::string endpoint_;
   std::chrono::milliseconds timeout_;
+  wire::ClientSecurity security_;
   std::uint64_t next_id_ = 1;
 };
 

@@ -16,6 +16,14 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--timeout", control.timeout_s, "seconds to wait for plenopivd")
       ->capture_default_str();
+  app.add_option("--server-key", control.server_key,
+                 "plenopivd's public certificate (.key), for a tcp:// endpoint with CURVE")
+      ->check(CLI::ExistingFile);
+  app.add_option("--client-cert", control.client_cert,
+                 "this client's secret certificate (.key_secret, `plenopiv keys`), for CURVE")
+      ->check(CLI::ExistingFile);
+  // Options given after the subcommand reach the top level too (`plenopiv status --endpoint ...`).
+  app.fallthrough();
   client::add_control_commands(app, control);
   client::add_camera_commands(app);
   client::add_simulate_commands(app);
@@ -25,6 +33,7 @@ int main(int argc, char** argv) {
   client::add_calib_commands(app);
   client::add_lightfield_commands(app);
   client::add_run_commands(app, control);
+  client::add_keys_commands(app);
 
   try {
     setup_logging("plenopiv", "info", LogTarget::console);
@@ -34,6 +43,10 @@ int main(int argc, char** argv) {
     return app.exit(e);
   } catch (const InputError& e) {
     std::cerr << "plenopiv: " << e.what() << "\n";
+    return 2;
+  } catch (const std::bad_alloc&) {
+    std::cerr << "plenopiv: out of memory: the inputs ask for more than this machine has (check the sizes they "
+                 "give: sensor pixels, volume extent and voxel size, counts of particles, rays, depths)\n";
     return 2;
   } catch (const client::ControlError& e) {
     std::cerr << "plenopiv: " << e.what() << "\n";

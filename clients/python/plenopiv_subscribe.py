@@ -136,6 +136,10 @@ def main(argv=None):
     p.add_argument("--save", metavar="FILE.h5", help="append every field to this HDF5 file")
     p.add_argument("--plot", action="store_true", help="live matplotlib view of the middle z slice")
     p.add_argument("--png", metavar="FILE.png", help="with --plot: write the view here (headless)")
+    p.add_argument("--server-key", metavar="FILE.key",
+                   help="plenopivd's public certificate, when its publishing uses CURVE (curve: publish: true)")
+    p.add_argument("--client-cert", metavar="FILE.key_secret",
+                   help="this subscriber's secret certificate (`plenopiv keys`), admitted by the daemon")
     args = p.parse_args(argv)
 
     context = zmq.Context()
@@ -143,6 +147,17 @@ def main(argv=None):
     sub.setsockopt(zmq.LINGER, 0)
     sub.setsockopt(zmq.RCVTIMEO, int(args.wait * 1000))
     sub.setsockopt(zmq.SUBSCRIBE, b"vectors")
+    if bool(args.server_key) != bool(args.client_cert):
+        p.error("CURVE needs both --server-key and --client-cert")
+    if args.server_key:
+        from zmq import auth  # the certificate files `plenopiv keys` writes are zmq.auth's format
+        server_public, _ = auth.load_certificate(args.server_key)
+        client_public, client_secret = auth.load_certificate(args.client_cert)
+        if client_secret is None:
+            p.error(args.client_cert + ": holds no secret key: give the .key_secret file")
+        sub.curve_serverkey = server_public
+        sub.curve_publickey = client_public
+        sub.curve_secretkey = client_secret
     sub.connect(args.publish)
 
     h5 = None

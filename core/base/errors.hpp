@@ -13,4 +13,11 @@ class InputError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+// Work given up because whoever asked for it no longer wants it (a run stopping, a program
+// shutting down): not a failure of the work or its input. Thrown from a progress or cancel check.
+class Cancelled : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
 }  // namespace plenopiv

@@ -4,7 +4,10 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <string>
 #include <vector>
+
+#include "core/base/memory.hpp"
 
 namespace plenopiv {
 
@@ -21,6 +24,14 @@ struct Grid3 {
   }
   double coordinate_mm(int axis, int i) const { return origin_mm[axis] + i * spacing_mm[axis]; }
   bool operator==(const Grid3&) const = default;
+  // count(), checked first against this machine's memory for `element_bytes` per node (and
+  // `arrays` arrays of them): InputError naming the grid instead of std::bad_alloc.
+  std::size_t checked_count(std::size_t element_bytes, std::size_t arrays = 1) const {
+    const std::string what = "a grid of " + std::to_string(shape[0]) + " x " + std::to_string(shape[1]) + " x " +
+                             std::to_string(shape[2]) + " nodes";
+    return plenopiv::checked_count(shape[0], shape[1], double(shape[2]) * double(arrays), element_bytes, what) /
+           arrays;
+  }
 };
 
 // Reconstructed (or exact) particle intensity, float32.
@@ -29,7 +40,7 @@ struct Volume {
   std::vector<float> data;  // [z][y][x]
 
   Volume() = default;
-  explicit Volume(const Grid3& g, float fill = 0.f) : grid(g), data(g.count(), fill) {}
+  explicit Volume(const Grid3& g, float fill = 0.f) : grid(g), data(g.checked_count(sizeof(float)), fill) {}
   float& at(int x, int y, int z) { return data[grid.index(x, y, z)]; }
   float at(int x, int y, int z) const { return data[grid.index(x, y, z)]; }
 };
@@ -45,7 +56,7 @@ struct VectorField {
   VectorField() = default;
   explicit VectorField(const Grid3& g)
       : grid(g),
-        dx_mm(g.count(), 0.f),
+        dx_mm(g.checked_count(sizeof(float), 5), 0.f),
         dy_mm(g.count(), 0.f),
         dz_mm(g.count(), 0.f),
         valid(g.count(), 0),

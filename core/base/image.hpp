@@ -4,7 +4,10 @@
 #include <cstddef>
 #include <cstdint>
 #include <span>
+#include <string>
 #include <vector>
+
+#include "core/base/memory.hpp"
 
 namespace plenopiv {
 
@@ -15,7 +18,13 @@ struct Image {
   std::vector<T> pixels;  // row-major, row 0 = first stored row, x fastest
 
   Image() = default;
-  Image(int w, int h, T fill = T{}) : width(w), height(h), pixels(std::size_t(w) * h, fill) {}
+  // Sizes are checked against this machine's memory first (InputError naming them).
+  Image(int w, int h, T fill = T{})
+      : width(w),
+        height(h),
+        pixels(checked_count(w, h, 1, sizeof(T),
+                             "an image of " + std::to_string(w) + " x " + std::to_string(h) + " px"),
+               fill) {}
 
   T& at(int x, int y) { return pixels[std::size_t(y) * width + x]; }
   const T& at(int x, int y) const { return pixels[std::size_t(y) * width + x]; }

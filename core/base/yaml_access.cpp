@@ -35,20 +35,50 @@ std::string unit_hint(std::string_view key) {
   return {};
 }
 
+// Walks the document as readers will (aliases expanded), refusing more than kMaxYamlDepth levels
+// or kMaxYamlNodes nodes: a few lines of nested aliases can stand for billions of nodes.
+void check_yaml_shape(const YAML::Node& node, int depth, std::size_t& visited, const std::string& source) {
+  if (++visited > kMaxYamlNodes) {
+    throw InputError(source + ": more than " + std::to_string(kMaxYamlNodes) +
+                     " YAML nodes (aliases expanded): not a plenopiv config");
+  }
+  if (depth > kMaxYamlDepth) {
+    throw InputError(source + ": nested deeper than " + std::to_string(kMaxYamlDepth) + " levels" +
+                     line_of(node) + ": not a plenopiv config");
+  }
+  if (node.IsSequence()) {
+    for (const YAML::Node& item : node) check_yaml_shape(item, depth + 1, visited, source);
+  } else if (node.IsMap()) {
+    for (const auto& item : node) {
+      check_yaml_shape(item.first, depth + 1, visited, source);
+      check_yaml_shape(item.second, depth + 1, visited, source);
+    }
+  }
+}
+
 }  // namespace
 
 YAML::Node load_yaml_file(const std::filesystem::path& path) {
-  std::ifstream in(path);
+  std::ifstream in(path, std::ios::binary);
   if (!in) throw InputError(path.string() + ": cannot open file for reading");
-  std::stringstream text;
-  text << in.rdbuf();
-  return load_yaml_text(text.str(), path.string());
+  // At most one byte more than a config may have: a device or an endless pipe is not read to the end.
+  std::string text(kMaxYamlBytes + 1, '\0');
+  in.read(text.data(), std::streamsize(text.size()));
+  if (in.bad()) throw InputError(path.string() + ": cannot read the file");
+  text.resize(std::size_t(in.gcount()));
+  return load_yaml_text(text, path.string());
 }
 
 YAML::Node load_yaml_text(const std::string& text, const std::string& source) {
+  if (text.size() > kMaxYamlBytes) {
+    throw InputError(source + ": larger than " + std::to_string(kMaxYamlBytes / 1024) +
+                     " KiB: not a plenopiv config");
+  }
   try {
     YAML::Node root = YAML::Load(text);
     if (!root.IsMap()) throw InputError(source + ": expected a YAML mapping at the top level");
+    std::size_t visited = 0;
+    check_yaml_shape(root, 0, visited, source);
     return root;
   } catch (const YAML::Exception& e) {
     throw InputError(source + ": not valid YAML: " + e.msg + " (line " +

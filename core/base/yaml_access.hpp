@@ -3,6 +3,7 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <cstddef>
 #include <filesystem>
 #include <initializer_list>
 #include <optional>
@@ -12,9 +13,18 @@
 
 namespace plenopiv {
 
-// Parses a YAML file; an unreadable file or a syntax error is an InputError naming the file.
+// Limits on every YAML document plenopiv reads (configs, camera files, requests): the largest
+// text, the deepest nesting and the most nodes with aliases expanded. Real configs are a few KiB
+// and a few levels deep; the limits keep a hostile or mistaken document from taking the memory or
+// the time of whoever reads it.
+inline constexpr std::size_t kMaxYamlBytes = 1024 * 1024;
+inline constexpr int kMaxYamlDepth = 32;
+inline constexpr std::size_t kMaxYamlNodes = 100'000;
+
+// Parses a YAML file; an unreadable file, one over kMaxYamlBytes, a syntax error or a document
+// beyond the limits is an InputError naming the file.
 YAML::Node load_yaml_file(const std::filesystem::path& path);
-// Parses YAML text; `source` names it in messages.
+// Parses YAML text within the same limits; `source` names it in messages.
 YAML::Node load_yaml_text(const std::string& text, const std::string& source);
 
 // A YAML mapping read key by key. Every failure throws InputError worded as

@@ -214,6 +214,16 @@ Calibration read_calibration_h5(const std::filesystem::path& path) {
   cal.white_correction.height = cal.sensor.height_px;
   cal.white_correction.pixels = read_set<float>(
       f, root, "white_correction", {hsize_t(cal.sensor.height_px), hsize_t(cal.sensor.width_px)}, H5T_NATIVE_FLOAT);
+  // A NaN, infinite or negative gain would spread through every reconstruction as NaN (no valid
+  // vector, no error): refused here, where the file is named.
+  for (std::size_t k = 0; k < cal.white_correction.pixels.size(); ++k) {
+    const float w = cal.white_correction.pixels[k];
+    if (!std::isfinite(w) || w < 0) {
+      throw InputError(f.where("/white_correction holds " + std::string(std::isfinite(w) ? "a negative" : "a non-finite") +
+                               " value at pixel (" + std::to_string(k % std::size_t(cal.sensor.width_px)) + ", " +
+                               std::to_string(k / std::size_t(cal.sensor.width_px)) + "): the file is damaged"));
+    }
+  }
   return cal;
 }
 

@@ -3,7 +3,10 @@
 
 #include <hdf5.h>
 
+#include <algorithm>
 #include <array>
+#include <cstring>
+#include <stdexcept>
 
 #include "core/base/errors.hpp"
 #include "core/io/atomic_file.hpp"
@@ -14,9 +17,13 @@ namespace {
 
 using Handle = Hdf5Handle;
 
+// A failed write is the disk's failure, not the input's (write_atomically names a full disk).
 void check(herr_t status, const std::filesystem::path& path, const std::string& what) {
-  if (status < 0) throw InputError(path.string() + ": HDF5: cannot " + what);
+  if (status < 0) throw std::runtime_error(path.string() + ": HDF5: cannot " + what);
 }
+
+// Writes what HDF5 still buffers: a failure at close would otherwise go unnoticed.
+void flush(hid_t file, const std::filesystem::path& path) { check(H5Fflush(file, H5F_SCOPE_GLOBAL), path, "write"); }
 
 template <typename T>
 hid_t mem_type() {
@@ -50,6 +57,18 @@ void write_attribute(hid_t parent, const std::filesystem::path& path, const std:
               H5Aclose);
   if (!attr.ok()) throw InputError(path.string() + ": HDF5: cannot create attribute " + name);
   check(H5Awrite(attr.get(), H5T_NATIVE_DOUBLE, values), path, "write attribute " + name);
+}
+
+void write_text_attribute(hid_t parent, const std::filesystem::path& path, const std::string& name,
+                          const std::string& value) {
+  Handle type(H5Tcopy(H5T_C_S1), H5Tclose);
+  check(H5Tset_size(type.get(), std::max<std::size_t>(value.size(), 1)), path, "make a string type");
+  check(H5Tset_strpad(type.get(), H5T_STR_NULLTERM), path, "make a string type");
+  Handle space(H5Screate(H5S_SCALAR), H5Sclose);
+  Handle attr(H5Acreate2(parent, name.c_str(), type.get(), space.get(), H5P_DEFAULT, H5P_DEFAULT), H5Aclose);
+  if (!attr.ok()) throw std::runtime_error(path.string() + ": HDF5: cannot create attribute " + name);
+  const std::string padded = value.empty() ? std::string(1, '\0') : value;
+  check(H5Awrite(attr.get(), type.get(), padded.data()), path, "write attribute " + name);
 }
 
 std::vector<double> read_attribute(hid_t parent, const std::filesystem::path& path,
@@ -126,6 +145,7 @@ void write_volume_h5(const std::filesystem::path& path, const Volume& volume) {
     Handle set(H5Dopen2(file.get(), "volume", H5P_DEFAULT), H5Dclose);
     write_attribute(set.get(), path, "origin_mm", volume.grid.origin_mm.data(), 3);
     write_attribute(set.get(), path, "spacing_mm", volume.grid.spacing_mm.data(), 3);
+    flush(file.get(), path);
   });
 }
 
@@ -149,7 +169,7 @@ Volume read_volume_h5(const std::filesystem::path& path) {
 }
 
 void write_vector_field_h5(const std::filesystem::path& path, const VectorField& f,
-                           const std::vector<NamedField>& extra) {
+                           const std::vector<NamedField>& extra, const std::vector<TextAttribute>& text) {
   const std::string what = path.string() + ": vector field";
   check_grid(f.grid, f.dx_mm.size(), what);
   for (const auto* v : {&f.dy_mm, &f.dz_mm, &f.peak_ratio}) check_grid(f.grid, v->size(), what);
@@ -186,6 +206,8 @@ void write_vector_field_h5(const std::filesystem::path& path, const VectorField&
     write_attribute(group.get(), path, "dt_s", &f.dt_s, 1);
     write_attribute(group.get(), path, "origin_mm", f.grid.origin_mm.data(), 3);
     write_attribute(group.get(), path, "spacing_mm", f.grid.spacing_mm.data(), 3);
+    for (const auto& [name, value] : text) write_text_attribute(group.get(), path, name, value);
+    flush(file.get(), path);
   });
 }
 
@@ -213,6 +235,23 @@ VectorField read_vector_field_h5(const std::filesystem::path& path) {
   f.peak_ratio = read_dataset<float>(group.get(), path, "peak_ratio", nullptr, &dims);
   check_grid(f.grid, f.dx_mm.size(), path.string() + ": /vectors");
   return f;
+}
+
+std::optional<std::string> read_vector_field_text(const std::filesystem::path& path, const std::string& name) {
+  if (!std::filesystem::is_regular_file(path) || H5Fis_hdf5(path.c_str()) <= 0) return std::nullopt;
+  Handle file(H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose);
+  if (!file.ok() || H5Lexists(file.get(), "vectors", H5P_DEFAULT) <= 0) return std::nullopt;
+  Handle group(H5Gopen2(file.get(), "vectors", H5P_DEFAULT), H5Gclose);
+  if (!group.ok() || H5Aexists(group.get(), name.c_str()) <= 0) return std::nullopt;
+  Handle attr(H5Aopen(group.get(), name.c_str(), H5P_DEFAULT), H5Aclose);
+  Handle type(H5Aget_type(attr.get()), H5Tclose);
+  if (!attr.ok() || H5Tget_class(type.get()) != H5T_STRING || H5Tis_variable_str(type.get()) > 0) return std::nullopt;
+  const std::size_t size = H5Tget_size(type.get());
+  if (size == 0 || size > (1u << 20)) return std::nullopt;
+  std::string value(size, '\0');
+  if (H5Aread(attr.get(), type.get(), value.data()) < 0) return std::nullopt;
+  value.resize(std::strlen(value.c_str()));
+  return value;
 }
 
 }  // namespace plenopiv::io

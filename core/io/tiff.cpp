@@ -8,6 +8,7 @@
 #include <cstring>
 #include <functional>
 #include <memory>
+#include <stdexcept>
 #include <string>
 
 #include "core/base/errors.hpp"
@@ -85,11 +86,18 @@ void set_page_fields(TIFF* t, int width, int height, uint16_t bits, uint16_t for
   TIFFSetField(t, TIFFTAG_ROWSPERSTRIP, uint32_t(std::max(1, 65536 / std::max(1, width * bits / 8))));
 }
 
+// Write failures are the disk's, not the input's: std::runtime_error (write_atomically names a
+// full disk).
 void write_row(TIFF* t, const std::filesystem::path& path, const void* row, int y) {
   if (TIFFWriteScanline(t, const_cast<void*>(row), uint32_t(y), 0) < 0) {
-    throw InputError(path.string() + ": cannot write TIFF row " + std::to_string(y) + " (" +
-                     g_last_tiff_message + ")");
+    throw std::runtime_error(path.string() + ": cannot write TIFF row " + std::to_string(y) + " (" +
+                             g_last_tiff_message + ")");
   }
+}
+
+// Writes what libtiff still buffers; TIFFClose alone would lose a failure there.
+void flush(TIFF* t, const std::filesystem::path& path) {
+  if (!TIFFFlush(t)) throw std::runtime_error(path.string() + ": cannot write TIFF (" + g_last_tiff_message + ")");
 }
 
 }  // namespace
@@ -116,12 +124,13 @@ ImageU16 read_tiff_u16(const std::filesystem::path& path) {
   return image;
 }
 
-void write_tiff(const std::filesystem::path& path, const ImageU16& image) {
+void write_tiff(const std::filesystem::path& path, const ImageU16& image, bool sync_folder) {
   write_atomically(path, [&](const std::filesystem::path& tmp) {
     TiffPtr t = open(tmp, "w");
     set_page_fields(t.get(), image.width, image.height, 16, SAMPLEFORMAT_UINT);
     for (int y = 0; y < image.height; ++y) write_row(t.get(), path, image.row(y).data(), y);
-  });
+    flush(t.get(), path);
+  }, sync_folder);
 }
 
 void write_tiff_stack(const std::filesystem::path& path, const std::vector<ImageF>& pages) {
@@ -134,9 +143,10 @@ void write_tiff_stack(const std::filesystem::path& path, const std::vector<Image
       TIFFSetField(t.get(), TIFFTAG_PAGENUMBER, uint16_t(i), uint16_t(pages.size()));
       for (int y = 0; y < page.height; ++y) write_row(t.get(), path, page.row(y).data(), y);
       if (!TIFFWriteDirectory(t.get())) {
-        throw InputError(path.string() + ": cannot write TIFF page " + std::to_string(i));
+        throw std::runtime_error(path.string() + ": cannot write TIFF page " + std::to_string(i));
       }
     }
+    flush(t.get(), path);
   });
 }
 
@@ -168,6 +178,32 @@ std::vector<ImageF> read_tiff_stack(const std::filesystem::path& path) {
     pages.push_back(std::move(page));
   } while (TIFFReadDirectory(t.get()));
   return pages;
+}
+
+TiffInfo check_tiff(const std::filesystem::path& path) {
+  std::error_code ec;
+  const auto size = std::filesystem::file_size(path, ec);
+  if (ec) throw InputError(path.string() + ": cannot read: " + ec.message());
+  TiffPtr t = open(path, "r");
+  const PageInfo p = page_info(t.get());
+  if (p.width == 0 || p.height == 0) throw InputError(path.string() + ": TIFF has no pixels");
+  const bool tiled = TIFFIsTiled(t.get());
+  const uint32_t pieces = tiled ? TIFFNumberOfTiles(t.get()) : TIFFNumberOfStrips(t.get());
+  uint64_t* offsets = nullptr;
+  uint64_t* counts = nullptr;
+  if (!TIFFGetField(t.get(), tiled ? TIFFTAG_TILEOFFSETS : TIFFTAG_STRIPOFFSETS, &offsets) ||
+      !TIFFGetField(t.get(), tiled ? TIFFTAG_TILEBYTECOUNTS : TIFFTAG_STRIPBYTECOUNTS, &counts) || !offsets ||
+      !counts) {
+    throw InputError(path.string() + ": corrupt TIFF: no strip or tile table");
+  }
+  for (uint32_t i = 0; i < pieces; ++i) {
+    if (counts[i] > size || offsets[i] > size - counts[i]) {
+      throw InputError(path.string() + ": truncated or corrupt TIFF: " + (tiled ? "tile " : "strip ") +
+                       std::to_string(i) + " ends at byte " + std::to_string(offsets[i] + counts[i]) +
+                       ", the file has " + std::to_string(size));
+    }
+  }
+  return {int(p.width), int(p.height), int(p.bits)};
 }
 
 }  // namespace plenopiv::io

@@ -11,8 +11,17 @@ namespace plenopiv::io {
 // Reads the first page of an 8- or 16-bit single-channel TIFF (8-bit values are kept as they
 // are, 0-255). Anything else (colour, float, corrupt, missing) is an InputError naming the file.
 ImageU16 read_tiff_u16(const std::filesystem::path& path);
+// A TIFF's first page as its header describes it, checked against the file: width, height, bits.
+struct TiffInfo {
+  int width = 0, height = 0, bits = 0;
+};
+// Reads the header only and checks that every strip or tile the page names lies inside the file:
+// a truncated or damaged frame is found without reading its pixels. InputError naming the file.
+TiffInfo check_tiff(const std::filesystem::path& path);
+
 // Writes a 16-bit single-channel TIFF, atomically.
-void write_tiff(const std::filesystem::path& path, const ImageU16& image);
+// `sync_folder`: as io::write_atomically (false: the caller flushes the folder once for several files).
+void write_tiff(const std::filesystem::path& path, const ImageU16& image, bool sync_folder = true);
 // Writes float32 pages (a focal stack, say) as one multi-page TIFF, atomically.
 void write_tiff_stack(const std::filesystem::path& path, const std::vector<ImageF>& pages);
 // Reads every page of a float32 or 16-bit stack as float.

@@ -1,6 +1,7 @@
 // VTK XML image data (.vti) for ParaView: volumes as a scalar, vector fields as vectors.
 #include "core/io/vtk_files.hpp"
 
+#include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <fstream>
@@ -111,6 +112,28 @@ void write_vector_field_vti(const std::filesystem::path& path, const VectorField
     arrays.push_back(make_array(e.name, "Float32", vec ? 3 : 1, e.values));
   }
   write_image_data(path, f.grid, arrays);
+}
+
+void write_vtk_series(const std::filesystem::path& path, const std::vector<SeriesEntry>& entries) {
+  std::ostringstream xml;
+  xml.precision(17);
+  xml << "<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\" byte_order=\"LittleEndian\">\n"
+         "  <Collection>\n";
+  for (const SeriesEntry& e : entries) {
+    if (e.file.find_first_of("\"<>&") != std::string::npos) {
+      throw InputError(path.string() + ": series entry '" + e.file + "' is not a plain file name");
+    }
+    if (!std::isfinite(e.time_s)) throw InputError(path.string() + ": series entry " + e.file + " has no time");
+    xml << "    <DataSet timestep=\"" << e.time_s << "\" group=\"\" part=\"0\" file=\"" << e.file << "\"/>\n";
+  }
+  xml << "  </Collection>\n</VTKFile>\n";
+  const std::string text = xml.str();
+  write_atomically(path, [&](const std::filesystem::path& tmp) {
+    std::ofstream out(tmp, std::ios::binary);
+    out << text;
+    out.close();
+    if (!out) throw std::runtime_error(path.string() + ": cannot write");
+  });
 }
 
 }  // namespace plenopiv::io

@@ -2,6 +2,7 @@
 #pragma once
 
 #include <filesystem>
+#include <string>
 #include <vector>
 
 #include "core/base/grid.hpp"
@@ -15,5 +16,14 @@ void write_volume_vti(const std::filesystem::path& path, const Volume& volume);
 // "peak_ratio", and each extra field (1 component, or 3 when its name ends in "_vec"). Atomic.
 void write_vector_field_vti(const std::filesystem::path& path, const VectorField& field,
                             const std::vector<NamedField>& extra = {});
+
+// One file of a time series: its time (s) and its name relative to the series file.
+struct SeriesEntry {
+  double time_s = 0;
+  std::string file;
+};
+// A ParaView collection (.pvd) listing `entries` as time steps: ParaView opens the series as one
+// animated data set. Written atomically.
+void write_vtk_series(const std::filesystem::path& path, const std::vector<SeriesEntry>& entries);
 
 }  // namespace plenopiv::io

@@ -53,8 +53,8 @@ float sample_sinc7(std::span<const float> volume, const std::array<int, 3>& shap
 // Smooths a volume with the binomial kernel [1 2 1] / 4 along x, y and z (a Gaussian of sigma
 // ~0.7 voxel; the edges use the kernel's inner taps only). Why: exact and reconstructed particles
 // are only ~3 voxels wide, and their spectrum reaches the Nyquist frequency, where any short
-// interpolator's phase is wrong; shifting both volumes by +-d/2 then biases the residual by up to
-// 0.02 voxel (measured at d = 0.5). After this filter the same test measures 0.0004.
+// interpolator's phase is wrong; shifting both volumes by +-d/2 then biases the residual, most at
+// half a voxel's shift. This filter removes that bias (docs/benchmarks.md, "Uniform shifts").
 // `depth_passes` more [1 2 1] / 4 passes along z only follow (CorrelationSettings::
 // depth_prefilter: a reconstructed particle is ~4 times as long in depth as wide, so a volume's
 // depth detail finer than that is noise). `scratch` holds one volume. Parallel over z (TBB);

@@ -15,15 +15,15 @@ namespace plenopiv::piv {
 struct PassSettings {
   std::array<int, 3> window{32, 32, 32};  // voxels, x y z (elongated in z allowed)
   double overlap_percent = 50;            // 0 <= overlap < 100
-  // Voxels by which the second volume's window reaches further in depth at each end (0: the same
-  // window in both; 0 <= depth_margin <= window z). Reconstructed particles are streaks several
-  // voxels long in depth (paper sec 6.2: elongated about 4 times). A window's depth faces cut
-  // them at the same place in both volumes, and the cut ends pull the correlation's depth peak
-  // toward zero shift: w comes out short in proportion to the shift still to be measured. With a
-  // margin, every piece of a streak in the first window has its whole counterpart in the second,
-  // and the correlation, divided at each depth shift by the second window's spread of intensity
-  // under the first window, has no such pull. Depth shifts beyond the margin are not searched, so
-  // it belongs in passes after the first, whose predictor is already close. FFT size: times
+  // Voxels by which the second volume's window reaches further in depth at each end, 0..window z;
+  // default 0 (the same window in both). Reconstructed particles are streaks several voxels long
+  // in depth (paper sec 6.2: elongated about 4 times). A window's depth faces cut them at the
+  // same place in both volumes, and the cut ends pull the correlation's depth peak toward zero
+  // shift: w comes out short in proportion to the shift still to be measured. With a margin,
+  // every piece of a streak in the first window has its whole counterpart in the second, and the
+  // correlation, divided at each depth shift by the second window's spread of intensity under the
+  // first window, has no such pull. Depth shifts beyond the margin are not searched, so it
+  // belongs in passes after the first, whose predictor is already close. FFT size: times
   // (window z + 2 margin) / window z.
   int depth_margin = 0;
 };
@@ -40,11 +40,12 @@ struct CorrelationSettings {
   // Coarse to fine. Pass 1 correlates the volumes as they are; every later pass deforms both
   // volumes by the previous pass's validated field (VODIM). Default: four passes ending at the
   // paper's 16^3 with 75 % overlap; the 16^3, 50 % passes cost an eighth of the final pass's
-  // correlations, and each one moves the centre-based predictor closer to the unfiltered field
-  // (docs/benchmarks.md, "Ring vortex": error and time of each schedule). The first of them
-  // reaches 4 voxels further in depth in the second volume (depth_margin), so the passes after it
-  // start from the full depth shift. They have no margin: a margin's normalisation adds random
-  // error, more than the little bias left to remove there (docs/benchmarks.md, "Depth margin").
+  // correlations, and each one moves the centre-based predictor closer to the unfiltered field.
+  // The first of them reaches 4 voxels further in depth in the second volume (depth_margin), so
+  // the passes after it start from the full depth shift; they have no margin, whose
+  // normalisation would add more random error than the little bias left there removes
+  // (docs/benchmarks.md, "Ring vortex on exact-particle volumes" and "Paper scale: correlation
+  // knobs on the same volumes").
   std::vector<PassSettings> passes{
       {{32, 32, 32}, 50}, {{16, 16, 16}, 50, 4}, {{16, 16, 16}, 50}, {{16, 16, 16}, 75}};
   MedianTest median;
@@ -53,34 +54,31 @@ struct CorrelationSettings {
   double dt_s = 1.0;  // pulse separation: velocity = displacement / dt
   FftPlanning fft_planning = FftPlanning::estimate;
   // Before anything else, each volume loses this multiple of its mean intensity, clipped at zero
-  // (subtract_mean_floor in deform.hpp). A reconstructed volume's ghosts (the light MART leaves
-  // along lines of sight) are a faint haze that moves less than the particles, most of all in
-  // depth; the floor removes it from the correlation. On the paper's ring at full scale, 4 took
-  // the depth error from 0.743 to 0.647 voxel after 20 accelerated iterations, for +0.01 voxel
-  // laterally (docs/benchmarks.md, "Ghost floor"); with the default's depth margin it matters
-  // less: 0.573 -> 0.570 after 20 iterations, 0.746 -> 0.575 (floor 5) after 9 ("Depth
-  // margin"). 0: off, the paper's correlation.
+  // (subtract_mean_floor in deform.hpp), 0..100; default 0 (off, the paper's correlation). A
+  // reconstructed volume's ghosts (the light MART leaves along lines of sight) are a faint haze
+  // that moves less than the particles, most of all in depth; the floor removes it from the
+  // correlation at a small cost in lateral error. It pays most after few MART iterations; 3-4
+  // suits reconstructed volumes, exact-particle volumes need none (docs/benchmarks.md, "Paper
+  // scale: time against error" and "Paper scale: correlation knobs on the same volumes").
   double intensity_threshold_of_mean = 0.0;
   // Binomial [1 2 1]/4 smoothing of both volumes before correlating (deform.hpp: why).
   bool prefilter = true;
   // After the prefilter, this many more [1 2 1]/4 passes along depth (z) only, 0..8; needs the
-  // prefilter. A reconstructed particle is ~4 times as long in depth as wide (paper sec 6.2), so
-  // depth detail finer than that is reconstruction noise, and this takes it out where a second
-  // full prefilter pass would blur the particles laterally too. On the paper's ring at full
-  // scale (8 accelerated iterations) 4 took the error from 0.194 / 0.114 / 0.498 voxel to
-  // 0.189 / 0.110 / 0.451 at the same floor; it blurs exact (round) particles in depth, whose w
-  // went 0.115 -> 0.147 (docs/benchmarks.md, "Depth prefilter"). 0: off.
+  // prefilter; default 0 (off). A reconstructed particle is ~4 times as long in depth as wide
+  // (paper sec 6.2), so depth detail finer than that is reconstruction noise, and this takes it
+  // out where a second full prefilter pass would blur the particles laterally too. 4 suits
+  // MART's volumes; it blurs exact (round) particles in depth, hence the default
+  // (docs/benchmarks.md, "Paper scale: correlation knobs on the same volumes").
   int depth_prefilter = 0;
   PredictorBase predictor = PredictorBase::centre;
   // Binomial [1 2 1]/4 smoothing passes (per axis) over the predictor's nodes before it deforms
   // the next pass: removes the alternating mode the centre predictor lets grow. 0 to 4.
   int predictor_smoothing = 1;
   // Binomial [1 2 1]/4 passes (per axis) over the final field's valid vectors (smooth_valid in
-  // validation.hpp), 0..4. A spatial filter after the last pass: it trades resolution for random
-  // error. On the paper's ring at full scale one pass took the reconstructed volumes' error from
-  // 0.214 / 0.130 / 0.571 to 0.199 / 0.117 / 0.532 voxel, and cost the exact-particle volumes' v
-  // 0.043 -> 0.051 (docs/benchmarks.md, "Final smoothing and depth context"). 0: off, the
-  // paper's correlation.
+  // validation.hpp), 0..4; default 0 (off, the paper's correlation). A spatial filter after the
+  // last pass: it trades resolution (the vortex cores of exact-particle volumes lose a little)
+  // for random error, which dominates reconstructed volumes; 1 suits them (docs/benchmarks.md,
+  // "Paper scale: correlation knobs on the same volumes").
   int final_smoothing = 0;
 };
 

@@ -270,14 +270,14 @@ OperatorCache::OperatorCache(std::size_t capacity, std::filesystem::path disk_fo
 std::shared_ptr<const PairOperator> OperatorCache::get(const optics::CameraModel& camera,
                                                        const optics::MicrolensArray& lenses,
                                                        const ImageF& white,
-                                                       const ProcessSettings& settings) {
-  return get(camera, lenses, white, settings.reconstruction_grid(), settings.angular_sampling);
+                                                       const ProcessSettings& settings, std::string* note) {
+  return get(camera, lenses, white, settings.reconstruction_grid(), settings.angular_sampling, note);
 }
 
 std::shared_ptr<const PairOperator> OperatorCache::get(const optics::CameraModel& camera,
                                                        const optics::MicrolensArray& lenses,
                                                        const ImageF& white, const Grid3& grid,
-                                                       double angular_sampling) {
+                                                       double angular_sampling, std::string* note) {
   const std::string key = operator_key(camera, lenses, white, grid, angular_sampling);
   std::lock_guard lock(mutex_);
   for (auto it = kept_.begin(); it != kept_.end(); ++it) {
@@ -285,6 +285,7 @@ std::shared_ptr<const PairOperator> OperatorCache::get(const optics::CameraModel
     kept_.splice(kept_.begin(), kept_, it);
     ++counts_.hits;
     note_ = "operator kept in memory";
+    if (note) *note = note_;
     return kept_.front().second;
   }
   auto op =
@@ -292,6 +293,7 @@ std::shared_ptr<const PairOperator> OperatorCache::get(const optics::CameraModel
                                            disk_ ? disk_->source() : PairOperator::WeightsSource{});
   ++counts_.builds;
   note_ = disk_ ? disk_->last_note() : "operator built";
+  if (note) *note = note_;
   kept_.emplace_front(key, op);
   if (kept_.size() > capacity_) kept_.pop_back();
   return op;

@@ -72,12 +72,15 @@ class OperatorCache {
  public:
   explicit OperatorCache(std::size_t capacity = 2, std::filesystem::path disk_folder = {});
 
+  // The operator for these inputs. `note` (optional): where it came from, as last_note() says
+  // (for this call, whatever other threads do meanwhile).
   std::shared_ptr<const PairOperator> get(const optics::CameraModel& camera,
                                           const optics::MicrolensArray& lenses, const ImageF& white,
-                                          const ProcessSettings& settings);
+                                          const ProcessSettings& settings, std::string* note = nullptr);
   std::shared_ptr<const PairOperator> get(const optics::CameraModel& camera,
                                           const optics::MicrolensArray& lenses, const ImageF& white,
-                                          const Grid3& grid, double angular_sampling);
+                                          const Grid3& grid, double angular_sampling,
+                                          std::string* note = nullptr);
 
   struct Counts {
     std::size_t hits = 0, builds = 0;

@@ -3,6 +3,9 @@
 
 #include <chrono>
 #include <algorithm>
+#include <limits>
+#include <span>
+#include <sstream>
 #include <cmath>
 #include <cstdio>
 #include <numbers>
@@ -74,7 +77,10 @@ Volume depth_crop(Volume v, int first, const Grid3& grid) {
 }
 }  // namespace
 
-ProcessSettings process_settings_from(const YamlMap& root) {
+namespace {
+
+// dt_s, volume, reconstruction and correlation of one tier.
+ProcessSettings parse_settings(const YamlMap& root) {
   root.reject_unknown({"dt_s", "volume", "reconstruction", "correlation"});
   ProcessSettings s;
 
@@ -91,26 +97,21 @@ ProcessSettings process_settings_from(const YamlMap& root) {
     r->reject_unknown(
         {"iterations", "mu", "acceleration", "start", "noise_threshold", "dark_weight_cutoff", "convergence",
          "angular_sampling", "sensor_blur_sigma_mm", "prune", "prune_threshold"});
-    s.mart.iterations = r->integer_in("iterations", s.mart.iterations, 1, 1000);
+    // Read here, checked by recon::check (the one owner of MART's ranges); the integer is only kept
+    // from wrapping as it narrows.
+    s.mart.iterations =
+        r->integer_in("iterations", s.mart.iterations, std::numeric_limits<int>::min(), std::numeric_limits<int>::max());
     s.mart.mu = r->number_or("mu", s.mart.mu);
-    if (!(s.mart.mu > 0 && s.mart.mu <= 1)) r->fail("mu", "must be in (0, 1]");
     s.mart.accelerate = r->choice_or("acceleration", {"none", "nesterov"}, "none") == "nesterov";
     s.mart.start = r->choice_or("start", {"mlos", "ones"}, "mlos") == "ones" ? recon::MartStart::ones
                                                                           : recon::MartStart::mlos;
     s.mart.noise_threshold = float(r->number_or("noise_threshold", s.mart.noise_threshold));
-    if (!(s.mart.noise_threshold >= 0)) r->fail("noise_threshold", "must be >= 0 counts");
     s.mart.dark_weight_cutoff = r->number_or("dark_weight_cutoff", s.mart.dark_weight_cutoff);
-    if (!(s.mart.dark_weight_cutoff >= 0 && s.mart.dark_weight_cutoff < 1))
-      r->fail("dark_weight_cutoff", "must be in [0, 1)");
     s.mart.convergence = r->number_or("convergence", s.mart.convergence);
-    if (!(s.mart.convergence >= 0)) r->fail("convergence", "must be >= 0");
     s.mart.sensor_blur_sigma_mm = r->number_or("sensor_blur_sigma_mm", s.mart.sensor_blur_sigma_mm);
-    if (!(s.mart.sensor_blur_sigma_mm >= 0 && s.mart.sensor_blur_sigma_mm <= recon::kMaxSensorBlurSigmaMm))
-      r->fail("sensor_blur_sigma_mm", "must be in [0, " + std::to_string(recon::kMaxSensorBlurSigmaMm) + "] mm");
     s.mart.prune = r->boolean_or("prune", s.mart.prune);
     s.mart.prune_threshold = r->number_or("prune_threshold", s.mart.prune_threshold);
-    if (!(s.mart.prune_threshold >= 0 && s.mart.prune_threshold < 1))
-      r->fail("prune_threshold", "must be in [0, 1) (a fraction of the volume's peak)");
+    if (const auto problem = recon::check(s.mart)) r->fail(problem->key, problem->reason);
     s.angular_sampling = r->number_or("angular_sampling", s.angular_sampling);
     if (!(s.angular_sampling > 0 && s.angular_sampling <= 8)) r->fail("angular_sampling", "must be in (0, 8]");
   }
@@ -131,17 +132,59 @@ ProcessSettings process_settings_from(const YamlMap& root) {
   return s;
 }
 
-ProcessSettings load_process_settings(const std::filesystem::path& path) {
-  return process_settings_from(YamlMap(load_yaml_file(path), path.string()));
+}  // namespace
+
+ProcessSpec process_spec_from(const YamlMap& root) {
+  root.reject_unknown(std::span<const std::string_view>(kProcessKeys));
+  YAML::Node full = YAML::Clone(root.node());
+  full.remove("live");
+  ProcessSpec spec;
+  spec.full = parse_settings(YamlMap(full, root.source()));
+  if (const auto live = root.optional_map("live")) {
+    live->reject_unknown({"volume", "reconstruction", "correlation"});
+    // Each key of a live section overrides the same key of the full settings' section.
+    YAML::Node merged = YAML::Clone(full);
+    for (const char* section : {"volume", "reconstruction", "correlation"}) {
+      if (!live->has(section)) continue;
+      const YamlMap overrides = live->map(section);
+      if (!merged[section]) merged[section] = YAML::Node(YAML::NodeType::Map);
+      for (const auto& item : overrides.node()) merged[section][item.first.Scalar()] = YAML::Clone(item.second);
+    }
+    spec.live = parse_settings(YamlMap(merged, root.source() + " (live tier)"));
+  }
+  return spec;
+}
+
+ProcessSpec load_process_spec(const std::filesystem::path& path) {
+  return process_spec_from(YamlMap(load_yaml_file(path), path.string()));
+}
+
+ProcessSettings process_settings_from(const YamlMap& root) { return process_spec_from(root).full; }
+
+ProcessSettings load_process_settings(const std::filesystem::path& path) { return load_process_spec(path).full; }
+
+YAML::Node processing_part(const YAML::Node& root) {
+  YAML::Node out(YAML::NodeType::Map);
+  for (std::string_view key : kProcessKeys) {
+    const std::string k(key);
+    if (root[k]) out[k] = YAML::Clone(root[k]);
+  }
+  return out;
+}
+
+std::string spec_text(const YAML::Node& node, const std::string& comment) {
+  YAML::Emitter out;
+  out.SetDoublePrecision(17);
+  out << node;
+  std::string text;
+  std::istringstream lines(comment);
+  for (std::string line; std::getline(lines, line);) text += "# " + line + "\n";
+  return text + out.c_str() + "\n";
 }
 
 PairResult process_pair(const recon::WeightingOperator& op, const ImageF& frame_a, const ImageF& frame_b,
                         const ProcessSettings& settings, const PairProgress& progress,
-                        recon::MartWorkspace* workspace, const std::atomic<bool>* cancel) {
-  auto check_cancel = [cancel](const char* before) {
-    if (cancel && cancel->load(std::memory_order_relaxed))
-      throw recon::Cancelled(std::string("pair processing cancelled before ") + before);
-  };
+                        recon::MartWorkspace* workspace) {
   if (!(op.grid() == settings.reconstruction_grid()))
     throw InputError("process: the weighting operator was built for another volume grid than the run config's "
                      "(its volume plus the depth guard)");
@@ -159,32 +202,25 @@ PairResult process_pair(const recon::WeightingOperator& op, const ImageF& frame_
   recon::MartWorkspace& buffers = workspace ? *workspace : pair_workspace;
 
   auto t0 = std::chrono::steady_clock::now();
-  auto ra = recon::reconstruct(
-      op, frame_a, mart, buffers,
-      [&](const recon::IterationReport& it) { report("reconstruct A", 0.4 * it.iteration / iterations); },
-      cancel);
+  auto ra = recon::reconstruct(op, frame_a, mart, buffers, [&](const recon::IterationReport& it) {
+    report("reconstruct A", 0.4 * it.iteration / iterations);
+  });
   out.times.reconstruct_a_s = seconds_since(t0);
   out.skipped_a = ra.skipped;
 
   t0 = std::chrono::steady_clock::now();
-  auto rb = recon::reconstruct(
-      op, frame_b, mart, buffers,
-      [&](const recon::IterationReport& it) { report("reconstruct B", 0.4 + 0.4 * it.iteration / iterations); },
-      cancel);
+  auto rb = recon::reconstruct(op, frame_b, mart, buffers, [&](const recon::IterationReport& it) {
+    report("reconstruct B", 0.4 + 0.4 * it.iteration / iterations);
+  });
   out.times.reconstruct_b_s = seconds_since(t0);
   out.skipped_b = rb.skipped;
 
   // The guard slices are the correlation's depth context: no window lies in them, but the windows
   // at the box's depth faces see the rest of the streaks those faces cut (piv::correlate_volumes).
   t0 = std::chrono::steady_clock::now();
-  check_cancel("the correlation");
   out.correlation = piv::correlate_volumes(
       ra.volume, rb.volume, settings.correlation,
-      [&](const piv::PassReport& p) {
-        report("correlate", 0.8 + 0.2 * p.pass / p.passes);
-        if (p.pass < p.passes) check_cancel("the next correlation pass");
-      },
-      settings.guard_slices());
+      [&](const piv::PassReport& p) { report("correlate", 0.8 + 0.2 * p.pass / p.passes); }, settings.guard_slices());
   out.times.correlate_s = seconds_since(t0);
   out.volume_a = depth_crop(std::move(ra.volume), settings.guard_slices(), settings.grid);
   out.volume_b = depth_crop(std::move(rb.volume), settings.guard_slices(), settings.grid);
@@ -241,12 +277,12 @@ const ImageF& PairOperator::prepare(const ImageF& frame, ImageF& scratch) const 
 
 PairResult process_pair(const PairOperator& op, const ImageF& frame_a, const ImageF& frame_b,
                         const ProcessSettings& settings, const PairProgress& progress,
-                        recon::MartWorkspace* workspace, const std::atomic<bool>* cancel) {
+                        recon::MartWorkspace* workspace) {
   recon::validate_image(frame_a, op.weights(), "frame A");
   recon::validate_image(frame_b, op.weights(), "frame B");
   ImageF scratch_a, scratch_b;
   PairResult out = process_pair(op.weights(), op.prepare(frame_a, scratch_a), op.prepare(frame_b, scratch_b),
-                                settings, progress, workspace, cancel);
+                                settings, progress, workspace);
   out.lattice_note = op.note();
   return out;
 }

@@ -3,10 +3,12 @@
 #pragma once
 
 #include <array>
-#include <atomic>
+#include <filesystem>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
+#include <string_view>
 
 #include "core/base/grid.hpp"
 #include "core/base/image.hpp"
@@ -25,13 +27,14 @@ namespace plenopiv::process {
 // 0.5, 5 iterations) and core/piv's default correlation (piv::CorrelationSettings).
 struct ProcessSettings {
   Grid3 grid;                        // the volume the user asked for, mm: correlated and returned
-  // Slices reconstructed beyond each depth end of `grid` and then dropped. A particle just outside
-  // the box puts its elongated image (about ±1 mm at 4 mm from focus on the sec 5.4 camera) into
-  // the end slices, where it stays from frame to frame and pulls the correlation's depth peak
-  // towards zero: on a 0.25 mm depth shift measured 0.12 mm without a guard and 0.20 mm with
-  // 1 mm (docs/benchmarks.md, "Depth displacement").
+  // Depth reconstructed beyond each depth end of `grid`, mm, 0..100; default 1. A particle just
+  // outside the box puts its elongated image (about ±1 mm at 4 mm from focus on the sec 5.4
+  // camera) into the end slices, where it stays from frame to frame and pulls the correlation's
+  // depth peak towards zero. The correlation reads the guard slices as depth context; the
+  // results drop them (docs/benchmarks.md, "Reduced ring: knob sweep", the no-depth-guard row).
   double depth_guard_mm = 1.0;
-  // (u, v) samples per aperture axis relative to sec 5.2's count (recon::WeightingOperator).
+  // (u, v) samples per aperture axis relative to sec 5.2's count (recon::WeightingOperator),
+  // (0, 8]; default 1.
   double angular_sampling = 1.0;
   recon::MartSettings mart;
   piv::CorrelationSettings correlation;  // dt_s lives here
@@ -45,15 +48,39 @@ struct ProcessSettings {
 Grid3 grid_for_extent(const std::array<double, 3>& lo, const std::array<double, 3>& hi,
                       const std::array<double, 3>& voxel_mm, const std::string& where);
 
-// Reads a run config mapping (systemd/config/process.yaml):
-//   dt_s: 0.0001                                   (required)
+// The keys of a processing spec (process.yaml, and the processing part of run.yaml):
+//   dt_s: 0.0001                                   (required: the nominal pulse separation, s)
 //   volume: {x_mm: [a, b], y_mm: [..], z_mm: [..], voxel_mm: 0.125, voxel_z_mm: 0.125, depth_guard_mm: 1}
-//   reconstruction: {iterations, mu, start: mlos|ones, noise_threshold, dark_weight_cutoff, convergence,
-//                    angular_sampling, sensor_blur_sigma_mm, prune, prune_threshold}
-//   correlation: {passes, median, signal_threshold}    (as piv::load_correlation_settings)
-// Unknown keys are refused; every value is checked; InputError names the file and key.
+//           [a, b] are the faces of the box (the first voxel's lower face, the last one's upper face)
+//   reconstruction: {iterations, mu, acceleration, start: mlos|ones, noise_threshold, dark_weight_cutoff,
+//                    convergence, angular_sampling, sensor_blur_sigma_mm, prune, prune_threshold}
+//                                                  (ranges: recon::check)
+//   correlation: {passes, median, ...}             (piv::correlation_settings_from; ranges: piv::check)
+//   live: {volume: {..}, reconstruction: {..}, correlation: {..}}   (optional: the live lane's fast tier,
+//         each key overriding the one above it; everything else as above)
+inline constexpr std::string_view kProcessKeys[] = {"dt_s", "volume", "reconstruction", "correlation", "live"};
+
+// A processing spec, parsed and checked once: the full settings (the quality lane, offline
+// processing) and, when the config has a `live:` section, the live lane's fast tier.
+struct ProcessSpec {
+  ProcessSettings full;
+  std::optional<ProcessSettings> live;
+};
+
+// Reads a spec from a mapping holding only kProcessKeys. Unknown keys are refused; every value is
+// checked where its owner checks it (recon::check, piv::check, the volume here); InputError names
+// the source and key ("(live tier)" for the live section).
+ProcessSpec process_spec_from(const YamlMap& root);
+ProcessSpec load_process_spec(const std::filesystem::path& path);
+// The full settings alone (process_spec_from(root).full).
 ProcessSettings process_settings_from(const YamlMap& root);
 ProcessSettings load_process_settings(const std::filesystem::path& path);
+// The kProcessKeys entries of `root` as a mapping of their own (copied): what a run config hands to
+// process_spec_from and what its run folder keeps as process.yaml, so that live, reprocessed and
+// batch results read the same text the same way.
+YAML::Node processing_part(const YAML::Node& root);
+// YAML text for `node` (a spec mapping), with a comment line on top.
+std::string spec_text(const YAML::Node& node, const std::string& comment);
 
 // Where the time went and what was skipped.
 struct StageTimes {
@@ -118,15 +145,16 @@ class PairOperator {
 // "frame A" / "frame B" in errors. Bit-identical at any thread count. Frame B is reconstructed in
 // frame A's buffers: in `workspace` when given (a caller processing pair after pair keeps one per
 // pair in flight, so that no frame allocates them afresh), else in one kept for the pair. The
-// results are the same bits either way. `cancel` (optional): checked before every MART iteration
-// and every correlation pass; when it reads true the pair is abandoned with recon::Cancelled.
+// results are the same bits either way. `progress` is called after every MART iteration and
+// correlation pass; a caller cancels the pair by throwing plenopiv::Cancelled from it (the
+// workspace is then free for the next pair).
 PairResult process_pair(const recon::WeightingOperator& op, const ImageF& frame_a, const ImageF& frame_b,
                         const ProcessSettings& settings, const PairProgress& progress = {},
-                        recon::MartWorkspace* workspace = nullptr, const std::atomic<bool>* cancel = nullptr);
+                        recon::MartWorkspace* workspace = nullptr);
 // The same from raw frames through a PairOperator: the frames are validated as raw images, resampled
 // when the operator says so, and PairResult::lattice_note carries its note.
 PairResult process_pair(const PairOperator& op, const ImageF& frame_a, const ImageF& frame_b,
                         const ProcessSettings& settings, const PairProgress& progress = {},
-                        recon::MartWorkspace* workspace = nullptr, const std::atomic<bool>* cancel = nullptr);
+                        recon::MartWorkspace* workspace = nullptr);
 
 }  // namespace plenopiv::process

@@ -34,28 +34,36 @@ void check_sensor_blur_sigma(double sigma_mm, const char* who) {
 }
 
 void validate_settings(const MartSettings& s) {
-  if (!(s.mu > 0 && s.mu <= 1))
-    throw InputError("MART: mu must lie in (0, 1], got " + std::to_string(s.mu));
-  if (s.iterations < 1 || s.iterations > 10000) {
-    throw InputError("MART: iterations must be 1..10000, got " + std::to_string(s.iterations));
-  }
-  if (!(s.noise_threshold >= 0) || !std::isfinite(s.noise_threshold)) {
-    throw InputError("MART: noise threshold must be a finite number >= 0");
-  }
-  if (!(s.dark_weight_cutoff >= 0 && s.dark_weight_cutoff < 1)) {
-    throw InputError("MART: dark weight cutoff must lie in [0, 1)");
-  }
-  if (!(s.convergence >= 0) || !std::isfinite(s.convergence)) {
-    throw InputError("MART: convergence tolerance must be a finite number >= 0");
-  }
-  if (!(s.prune_threshold >= 0 && s.prune_threshold < 1)) {
-    throw InputError("MART: prune threshold must lie in [0, 1) (a fraction of the peak), got " +
-                     std::to_string(s.prune_threshold));
-  }
-  check_sensor_blur_sigma(s.sensor_blur_sigma_mm, "MART");
+  if (const auto problem = check(s)) throw InputError("MART: " + problem->key + ": " + problem->reason);
 }
 
 }  // namespace
+
+std::optional<SettingProblem> check(const MartSettings& s) {
+  const auto number = [](double v) { return std::to_string(v); };
+  if (s.iterations < 1 || s.iterations > 10000) {
+    return SettingProblem{"iterations", "must be 1 to 10000, got " + std::to_string(s.iterations)};
+  }
+  if (!(s.mu > 0 && s.mu <= 1)) return SettingProblem{"mu", "must be in (0, 1], got " + number(s.mu)};
+  if (!(s.noise_threshold >= 0) || !std::isfinite(s.noise_threshold)) {
+    return SettingProblem{"noise_threshold", "must be a finite number >= 0 counts, got " + number(s.noise_threshold)};
+  }
+  if (!(s.dark_weight_cutoff >= 0 && s.dark_weight_cutoff < 1)) {
+    return SettingProblem{"dark_weight_cutoff", "must be in [0, 1), got " + number(s.dark_weight_cutoff)};
+  }
+  if (!(s.convergence >= 0) || !std::isfinite(s.convergence)) {
+    return SettingProblem{"convergence", "must be a finite number >= 0, got " + number(s.convergence)};
+  }
+  if (!(s.sensor_blur_sigma_mm >= 0 && s.sensor_blur_sigma_mm <= kMaxSensorBlurSigmaMm)) {
+    return SettingProblem{"sensor_blur_sigma_mm", "must be in [0, " + number(kMaxSensorBlurSigmaMm) + "] mm, got " +
+                                                      number(s.sensor_blur_sigma_mm)};
+  }
+  if (!(s.prune_threshold >= 0 && s.prune_threshold < 1)) {
+    return SettingProblem{"prune_threshold",
+                          "must be in [0, 1) (a fraction of the volume's peak), got " + number(s.prune_threshold)};
+  }
+  return std::nullopt;
+}
 
 void apply_sensor_blur(const WeightingOperator& op, double sigma_mm, std::span<float> image) {
   check_sensor_blur_sigma(sigma_mm, "apply_sensor_blur");
@@ -128,7 +136,7 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image,
 
 MartResult reconstruct(const WeightingOperator& op, const ImageF& image,
                        const MartSettings& settings, MartWorkspace& workspace,
-                       const IterationCallback& progress, const std::atomic<bool>* cancel) {
+                       const IterationCallback& progress) {
   if (!workspace.buffers_)
     throw InputError("MART: the workspace was moved from; use the one it was moved to");
   detail::MartBuffers& buffers = *workspace.buffers_;
@@ -148,7 +156,7 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image,
         "MART: the matrix-free reconstruction runs the simultaneous form; the row-action "
         "form needs the explicit matrix (reconstruct_row_action)");
   }
-  return detail::SmartSolver(op, settings, buffers).run(image, progress, cancel);
+  return detail::SmartSolver(op, settings, buffers).run(image, progress);
 }
 
 Volume reconstruct_row_action(const WeightingOperator& op, const SparseMatrix& w,

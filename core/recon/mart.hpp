@@ -3,13 +3,12 @@
 #pragma once
 
 #include <array>
-#include <atomic>
 #include <cstddef>
 #include <functional>
 #include <memory>
 #include <optional>
+#include <string>
 #include <span>
-#include <stdexcept>
 #include <vector>
 
 #include "core/base/grid.hpp"
@@ -82,6 +81,16 @@ struct MartSettings {
 // A Gaussian wider than this is no sensor blur (the paper's lens images are 0.125 mm across).
 inline constexpr double kMaxSensorBlurSigmaMm = 0.05;
 
+// A setting outside its range: the YAML key (as core/process reads it under `reconstruction:`) and
+// the reason, e.g. {"mu", "must be in (0, 1], got 1.5"}.
+struct SettingProblem {
+  std::string key, reason;
+};
+// The one place MART's ranges are checked (reconstruct() refuses what it finds, core/process names
+// the config key): iterations 1..10000, mu (0, 1], noise_threshold finite >= 0, dark_weight_cutoff
+// [0, 1), convergence finite >= 0, sensor_blur_sigma_mm [0, kMaxSensorBlurSigmaMm].
+std::optional<SettingProblem> check(const MartSettings& settings);
+
 // The sensor blur of MartSettings::sensor_blur_sigma_mm on an image of op's sensor, in place: what
 // MART with that setting does to each projection W E.
 void apply_sensor_blur(const WeightingOperator& op, double sigma_mm, std::span<float> image);
@@ -139,13 +148,6 @@ struct IterationReport {
 // Called after each iteration.
 using IterationCallback = std::function<void(const IterationReport&)>;
 
-// What reconstruct throws when its cancel flag is set: the reconstruction is abandoned (its
-// workspace is free for the next one). Not an input error: a caller asked for it.
-class Cancelled : public std::runtime_error {
- public:
-  using std::runtime_error::runtime_error;
-};
-
 struct MartResult {
   Volume volume;
   SkipReport skipped;
@@ -195,19 +197,18 @@ class MartWorkspace {
  private:
   std::unique_ptr<detail::MartBuffers> buffers_;
   friend MartResult reconstruct(const WeightingOperator&, const ImageF&, const MartSettings&,
-                                MartWorkspace&, const IterationCallback&, const std::atomic<bool>*);
+                                MartWorkspace&, const IterationCallback&);
 };
 
 // Reconstructs a volume from a raw plenoptic image (float, counts) with the matrix-free operator.
 // `progress` (optional) is called after each iteration. Bit-identical at any thread count.
 MartResult reconstruct(const WeightingOperator& op, const ImageF& image,
                        const MartSettings& settings, const IterationCallback& progress = {});
-// The same in `workspace`'s buffers (the same bits). `cancel` (optional): when it reads true
-// after the start or before an iteration, the reconstruction stops there and throws Cancelled.
+// The same in `workspace`'s buffers (the same bits). A caller cancels by throwing
+// plenopiv::Cancelled from `progress`; the workspace is then free for the next reconstruction.
 MartResult reconstruct(const WeightingOperator& op, const ImageF& image,
                        const MartSettings& settings, MartWorkspace& workspace,
-                       const IterationCallback& progress = {},
-                       const std::atomic<bool>* cancel = nullptr);
+                       const IterationCallback& progress = {});
 
 // The reference: eq 9 row by row on the explicit matrix (rows = pixels in storage order).
 Volume reconstruct_row_action(const WeightingOperator& op, const SparseMatrix& w,

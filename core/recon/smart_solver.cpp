@@ -43,14 +43,7 @@ void SmartSolver::for_voxels(F&& f) const {
                     });
 }
 
-MartResult SmartSolver::run(const ImageF& image, const IterationCallback& progress,
-                            const std::atomic<bool>* cancel) {
-  auto check_cancel = [&](int next_iteration) {
-    if (cancel && cancel->load(std::memory_order_relaxed)) {
-      throw Cancelled("reconstruction cancelled before iteration " +
-                      std::to_string(next_iteration));
-    }
-  };
+MartResult SmartSolver::run(const ImageF& image, const IterationCallback& progress) {
   const auto t_setup = std::chrono::steady_clock::now();
   setup(image);
   const auto t_start = std::chrono::steady_clock::now();
@@ -63,7 +56,6 @@ MartResult SmartSolver::run(const ImageF& image, const IterationCallback& progre
   int momentum_step = 1;  // k of FISTA's beta_k
   double previous = -1;   // the last iteration's residual
   for (int it = 1; it <= settings_.iterations && n_ > 0; ++it) {
-    check_cancel(it);
     const auto t_it = std::chrono::steady_clock::now();
     if (settings_.accelerate) extrapolate(float(momentum_step - 1) / float(momentum_step + 2));
     project_and_compare(true);

@@ -39,9 +39,7 @@ class SmartSolver {
  public:
   SmartSolver(const WeightingOperator& op, const MartSettings& settings, MartBuffers& buffers);
 
-  // `cancel`: checked after the start and before each iteration (Cancelled when set).
-  MartResult run(const ImageF& image, const IterationCallback& progress,
-                 const std::atomic<bool>* cancel = nullptr);
+  MartResult run(const ImageF& image, const IterationCallback& progress);
 
  private:
   // The thresholded image, the active voxels (dark pixels, region, field of view) and their

@@ -13,6 +13,7 @@
 #include <string>
 
 #include "core/base/errors.hpp"
+#include "core/base/memory.hpp"
 
 namespace plenopiv::sim {
 namespace {
@@ -59,10 +60,9 @@ std::uint64_t stream_seed(std::uint64_t seed, std::uint64_t index) {
 }
 
 // Standard normal quantiles at the 2^12 cell midpoints (k + 0.5) / 2^12: one 64-bit draw gives
-// four normal samples by table look-up from a 16 KB table that stays in L1 (with a 2^16-entry
-// double table, 512 KB, a ray with diffraction cost 1.8x one without, cache misses; with this
-// one 1.2x: docs/benchmarks.md). The tails are cut at 3.5 sigma and the variance is 0.997; for the
-// diffraction jitter (sigma 5.2 um against a 7.4 um pixel) neither is visible.
+// four normal samples by table look-up from a 16 KB table that stays in L1 (a 2^16-entry double
+// table, 512 KB, misses the cache on every ray). The tails are cut at 3.5 sigma and the variance
+// is 0.997; for the diffraction jitter (sigma 5.2 um against a 7.4 um pixel) neither is visible.
 class NormalTable {
  public:
   static const NormalTable& get() {
@@ -292,7 +292,11 @@ RenderResult trace_all(const optics::CameraModel& camera, const optics::Microlen
     throw InputError("render options: aperture_overfill: must be >= 1, got " + std::to_string(overfill));
   }
   const int w = camera.sensor().width_px, h = camera.sensor().height_px;
-  std::vector<std::uint32_t> counts(std::size_t(w) * h, 0);
+  // The counters, the ray image and the sensor image are held at once.
+  const std::size_t pixels = checked_count(
+      w, h, 1, sizeof(std::uint32_t) + sizeof(float) + sizeof(std::uint16_t),
+      "rendering a " + std::to_string(w) + " x " + std::to_string(h) + " px frame");
+  std::vector<std::uint32_t> counts(pixels, 0);
   const Tracer tracer(camera, array, aperture_diameter_mm, overfill, sigma_mm, counts.data());
   std::atomic<std::uint64_t> emitted{0}, outside_aperture{0}, missed{0}, outside_sensor{0}, landed{0};
   std::atomic<std::size_t> done{0};

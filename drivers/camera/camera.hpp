@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "core/base/image.hpp"
 
@@ -87,8 +88,24 @@ struct CameraCounters {
   std::uint64_t pairs_delivered = 0;
   std::uint64_t pairs_discarded = 0;    // pairs not delivered because a frame was incomplete or lost
   std::uint64_t pairs_overflowed = 0;   // complete pairs dropped because next_pair() fell behind
+  std::uint64_t pairs_not_read_out = 0; // triggered but still in the camera when it was stopped
   std::uint64_t reconnects = 0;         // times the device was lost and opened again
 };
+
+// A trigger whose pair the camera did not deliver, and why (CameraCounters counts them; this says
+// which trigger it was).
+struct PairDrop {
+  enum class Reason {
+    Incomplete,     // a frame arrived with missing data
+    Unpaired,       // one frame came, its partner never did (or too late)
+    QueueOverflow,  // a complete pair dropped because next_pair() fell behind
+    NotReadOut,     // triggered, but still inside the camera when it was stopped
+  };
+  std::uint64_t trigger_index = 0;
+  Reason reason = Reason::Unpaired;
+};
+// "incomplete frame", "unpaired frame", "camera queue overflow", "not read out before stop".
+const char* to_string(PairDrop::Reason reason);
 
 // Idle → Armed → Running → (stop) → Armed. Lost while the device is gone (a backend that can
 // reconnect returns to the state it had). Calls in the wrong state throw StateError.
@@ -98,6 +115,9 @@ const char* to_string(CameraState state);
 struct CameraStatus {
   CameraState state = CameraState::Idle;
   bool connected = true;
+  // The camera cannot go on and will not come back by itself (a backend fault, not a
+  // disconnect it can recover from): a run using it fails with last_error.
+  bool failed = false;
   std::string last_error;  // empty when all is well; e.g. "control lost: heartbeat timed out"
 };
 
@@ -128,7 +148,10 @@ class Camera {
   // Sets the device up for two frames per trigger. Allowed in Idle and Armed; leads to Armed.
   virtual void arm(const DoubleExposureSettings& settings) = 0;
   virtual void start() = 0;  // Armed → Running
-  virtual void stop() = 0;   // Running → Armed; a no-op in other states, so it is always safe
+  // Running → Armed; a no-op in other states, so it is always safe. Exposures already triggered are
+  // delivered within a bound (a second or two); what the camera has not read out by then is
+  // dropped (PairDrop::NotReadOut), so that stopping never waits without end.
+  virtual void stop() = 0;
   // Fires one pair (TriggerSource::Software only).
   virtual void software_trigger() = 0;
   // Waits up to `timeout` for the next complete pair. nullopt on timeout, or at once when not
@@ -137,6 +160,9 @@ class Camera {
 
   virtual CameraCounters counters() const = 0;
   virtual CameraStatus status() const = 0;
+  // The pairs dropped since the last call, oldest first (bounded: when nobody takes them, the
+  // oldest are forgotten; the counters keep counting).
+  virtual std::vector<PairDrop> take_drops() { return {}; }
   // The simulated trigger input, or null for a camera triggered through a cable (or by software).
   virtual TriggerInput* trigger_input() { return nullptr; }
 };

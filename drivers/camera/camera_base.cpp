@@ -43,6 +43,16 @@ int bit_depth(PixelFormat format) {
   return 16;
 }
 
+const char* to_string(PairDrop::Reason reason) {
+  switch (reason) {
+    case PairDrop::Reason::Incomplete: return "incomplete frame";
+    case PairDrop::Reason::Unpaired: return "unpaired frame";
+    case PairDrop::Reason::QueueOverflow: return "camera queue overflow";
+    case PairDrop::Reason::NotReadOut: return "not read out before stop";
+  }
+  return "?";
+}
+
 const char* to_string(CameraState state) {
   switch (state) {
     case CameraState::Idle: return "idle";
@@ -142,11 +152,14 @@ void CameraBase::submit_frame(Frame frame, std::optional<std::uint64_t> trigger_
   std::lock_guard lock(mutex_);
   std::optional<FramePair> pair = pairer_.push(std::move(frame), trigger_index);
   if (!pair) return;
+  for (const PairDrop& d : pairer_.take_drops()) drops_.push_back(d);
   if (queue_.size() >= capacity_) {
-    // The consumer fell behind: keep the newest, count what was dropped.
+    // The consumer fell behind: keep the newest, count and list what was dropped.
+    drops_.push_back({queue_.front().trigger_index, PairDrop::Reason::QueueOverflow});
     queue_.pop_front();
     ++overflowed_;
   }
+  while (drops_.size() > FramePairer::kMaxDrops) drops_.pop_front();
   queue_.push_back(std::move(*pair));
   ready_.notify_one();
 }
@@ -180,6 +193,7 @@ CameraCounters CameraBase::counters() const {
   c.pairs_delivered = p.pairs_delivered;
   c.pairs_discarded = p.pairs_discarded;
   c.pairs_overflowed = overflowed_;
+  c.pairs_not_read_out = not_read_out_;
   c.packets_resent = resent;
   c.reconnects = reconnects_;
   return c;
@@ -187,7 +201,7 @@ CameraCounters CameraBase::counters() const {
 
 CameraStatus CameraBase::status() const {
   std::lock_guard lock(mutex_);
-  return {lost_ ? CameraState::Lost : state_, !lost_, last_error_};
+  return {lost_ ? CameraState::Lost : state_, !lost_, failed_, last_error_};
 }
 
 void CameraBase::report_lost(const std::string& reason) {
@@ -198,8 +212,33 @@ void CameraBase::report_lost(const std::string& reason) {
   ready_.notify_all();
 }
 
+void CameraBase::report_dropped(std::uint64_t trigger_index, PairDrop::Reason reason) {
+  std::lock_guard lock(mutex_);
+  if (reason == PairDrop::Reason::NotReadOut) ++not_read_out_;
+  drops_.push_back({trigger_index, reason});
+  while (drops_.size() > FramePairer::kMaxDrops) drops_.pop_front();
+}
+
+std::vector<PairDrop> CameraBase::take_drops() {
+  std::lock_guard lock(mutex_);
+  for (const PairDrop& d : pairer_.take_drops()) drops_.push_back(d);
+  std::vector<PairDrop> out(drops_.begin(), drops_.end());
+  drops_.clear();
+  return out;
+}
+
+void CameraBase::report_failed(const std::string& reason) {
+  std::lock_guard lock(mutex_);
+  lost_ = true;
+  failed_ = true;
+  last_error_ = reason;
+  pairer_.flush();
+  ready_.notify_all();
+}
+
 void CameraBase::report_reconnected() {
   std::lock_guard lock(mutex_);
+  if (failed_) return;
   lost_ = false;
   ++reconnects_;
   last_error_.clear();

@@ -25,6 +25,7 @@ class CameraBase : public Camera {
   std::optional<FramePair> next_pair(std::chrono::milliseconds timeout) override;
   CameraCounters counters() const override;
   CameraStatus status() const override;
+  std::vector<PairDrop> take_drops() override;
 
  protected:
   explicit CameraBase(CameraInfo info, PairerOptions pairing = {}, std::size_t queue_capacity = 16);
@@ -38,8 +39,13 @@ class CameraBase : public Camera {
 
   // Thread-safe; frames from one backend thread, in arrival order.
   void submit_frame(Frame frame, std::optional<std::uint64_t> trigger_index = {});
+  // Triggers the backend dropped itself (e.g. not read out before stop), counted and listed.
+  void report_dropped(std::uint64_t trigger_index, PairDrop::Reason reason);
   // The device went away: status shows Lost and `reason` until report_reconnected().
   void report_lost(const std::string& reason);
+  // The backend cannot go on (a fault it will not recover from): status shows Lost, failed and
+  // `reason`, for good.
+  void report_failed(const std::string& reason);
   // The device is back with its configuration re-applied; frame ids start afresh.
   void report_reconnected();
   void set_pairing(const PairerOptions& options);
@@ -55,11 +61,14 @@ class CameraBase : public Camera {
   CameraInfo info_;
   CameraState state_ = CameraState::Idle;  // wanted state; status() shows Lost while lost
   bool lost_ = false;
+  bool failed_ = false;
   std::string last_error_;
   FramePairer pairer_;
   std::deque<FramePair> queue_;
   std::size_t capacity_;
   std::uint64_t overflowed_ = 0;
+  std::uint64_t not_read_out_ = 0;
+  std::deque<PairDrop> drops_;  // from the pairer, the queue and the backend, oldest first
   std::uint64_t reconnects_ = 0;
 };
 

@@ -31,10 +31,23 @@ bool FramePairer::within_gap(const Frame& a, const Frame& b) const {
   return tb - ta <= options_.max_gap_ns;
 }
 
+void FramePairer::record_drop(std::uint64_t trigger_index, PairDrop::Reason reason) {
+  drops_.push_back({trigger_index, reason});
+  if (drops_.size() > kMaxDrops) drops_.pop_front();
+}
+
+std::vector<PairDrop> FramePairer::take_drops() {
+  std::vector<PairDrop> out(drops_.begin(), drops_.end());
+  drops_.clear();
+  return out;
+}
+
 void FramePairer::discard_pending() {
   if (!pending_) return;
   ++counts_.frames_discarded;
   ++counts_.pairs_discarded;
+  record_drop(pending_->trigger_index ? *pending_->trigger_index : pending_->sequence / 2,
+              pending_->frame.complete ? PairDrop::Reason::Unpaired : PairDrop::Reason::Incomplete);
   pending_.reset();
 }
 
@@ -94,6 +107,7 @@ std::optional<FramePair> FramePairer::push(Frame frame, std::optional<std::uint6
       if (!a.frame.complete || !frame.complete) {
         counts_.frames_discarded += 2;
         ++counts_.pairs_discarded;
+        record_drop(a.trigger_index ? *a.trigger_index : a.sequence / 2, PairDrop::Reason::Incomplete);
         return std::nullopt;
       }
       FramePair pair;

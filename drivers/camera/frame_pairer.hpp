@@ -4,6 +4,7 @@
 #include <cstdint>
 #include <deque>
 #include <optional>
+#include <vector>
 
 #include "drivers/camera/camera.hpp"
 
@@ -53,6 +54,9 @@ class FramePairer {
   void set_options(const PairerOptions& options) { options_ = options; }
   const PairerOptions& options() const { return options_; }
   const PairerCounts& counts() const { return counts_; }
+  // Discarded pairs with their trigger index, since the last call (at most kMaxDrops kept).
+  std::vector<PairDrop> take_drops();
+  static constexpr std::size_t kMaxDrops = 4096;
   int waiting() const { return pending_ ? 1 : 0; }
 
  private:
@@ -66,6 +70,7 @@ class FramePairer {
   std::uint64_t next_id(std::uint64_t id) const;
   bool within_gap(const Frame& a, const Frame& b) const;
   void discard_pending();
+  void record_drop(std::uint64_t trigger_index, PairDrop::Reason reason);
 
   PairerOptions options_;
   PairerCounts counts_;
@@ -75,6 +80,7 @@ class FramePairer {
   std::uint64_t unplaced_ = 0;  // frames with unknown id since the last placed one
   static constexpr std::size_t kRememberMissing = 64;
   std::deque<std::uint64_t> missing_;  // ids counted lost that may still arrive late
+  std::deque<PairDrop> drops_;
 };
 
 }  // namespace plenopiv::drivers

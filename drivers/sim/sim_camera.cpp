@@ -10,6 +10,7 @@
 #include <thread>
 
 #include "core/base/errors.hpp"
+#include "core/base/memory.hpp"
 #include "core/optics/camera_file.hpp"
 #include "core/optics/microlens_array.hpp"
 #include "core/sim/flows.hpp"
@@ -29,6 +30,7 @@ struct SceneSettings {
   std::uint64_t drop_every = 0;
   std::uint64_t incomplete_every = 0;
   std::uint64_t disconnect_after = 0;
+  std::uint64_t fail_after = 0;
   double readout_s = 0.01;
   // The pulse separation the flow's displacements belong to. When a simulated trigger reports an
   // exposure's two laser pulses, the scene moves by the flow scaled to the time between them.
@@ -84,6 +86,10 @@ class SimCamera : public CameraBase, public TriggerInput {
         readout_(std::chrono::duration_cast<std::chrono::steady_clock::duration>(
             std::chrono::duration<double>(scene.readout_s))) {
     options_.rays_per_particle = scene_.rays;
+    // Checked about a hundred times per frame: a stop gives up a long ray trace within a moment.
+    options_.progress = [this](double) {
+      if (abort_render_) throw Cancelled("simulated camera stopped");
+    };
     if (scene_.noise) {
       options_.sensor.shot_noise = true;
       options_.sensor.read_noise_electrons = 8.0;
@@ -144,10 +150,17 @@ class SimCamera : public CameraBase, public TriggerInput {
     external_ = settings.trigger == TriggerSource::External;
   }
   void do_start() override {}
-  // Exposures already triggered are delivered, as a real camera's would be: wait for them.
+  // Exposures already triggered are delivered, as a real camera's would be: waited for up to
+  // kStopDrain. What is not rendered by then (a ray trace takes seconds on a large camera) is
+  // dropped as not read out, and the render in progress is given up, so a stop is bounded.
   void do_stop() override {
     std::unique_lock lock(mutex_);
-    idle_.wait(lock, [this] { return pending_.empty() && !rendering_; });
+    if (idle_.wait_for(lock, kStopDrain, [this] { return pending_.empty() && !rendering_; })) return;
+    for (const Pending& p : pending_) report_dropped(p.trigger, PairDrop::Reason::NotReadOut);
+    pending_.clear();
+    abort_render_ = true;
+    idle_.wait(lock, [this] { return !rendering_; });
+    abort_render_ = false;
   }
 
   // The pair is rendered once frame B would have been read out: rendering during the laser
@@ -179,7 +192,17 @@ class SimCamera : public CameraBase, public TriggerInput {
       const double scale = exposure.pulses == 2 && exposure.pulse_ns[1] > exposure.pulse_ns[0]
                                ? double(exposure.pulse_ns[1] - exposure.pulse_ns[0]) * 1e-9 / scene_.flow_dt_s
                                : 1.0;
-      render_pair(exposure.trigger, scale);
+      try {
+        render_pair(exposure.trigger, scale);
+      } catch (const Cancelled&) {
+        report_dropped(exposure.trigger, PairDrop::Reason::NotReadOut);
+      } catch (const std::exception& e) {
+        // The render thread never dies silently: the camera fails, the run that uses it fails
+        // with this reason, and the daemon goes on.
+        report_failed("rendering trigger " + std::to_string(exposure.trigger) + " failed: " + e.what());
+        std::lock_guard lock(mutex_);
+        pending_.clear();
+      }
       {
         std::lock_guard lock(mutex_);
         rendering_ = false;
@@ -192,6 +215,9 @@ class SimCamera : public CameraBase, public TriggerInput {
     if (scene_.disconnect_after && trigger >= scene_.disconnect_after) {
       report_lost("simulated disconnect after " + std::to_string(scene_.disconnect_after) + " triggers");
       return;
+    }
+    if (scene_.fail_after && trigger >= scene_.fail_after) {
+      throw std::runtime_error("simulated render fault after " + std::to_string(scene_.fail_after) + " triggers");
     }
     // Pair k depends on (seed, k) only: the same run renders the same frames.
     const std::uint64_t pair_seed = scene_.seed * 0x9E3779B97F4A7C15ull + trigger;
@@ -238,7 +264,9 @@ class SimCamera : public CameraBase, public TriggerInput {
   std::chrono::steady_clock::duration readout_;
   sim::RenderOptions options_;
 
+  static constexpr std::chrono::milliseconds kStopDrain{2000};
   std::atomic<bool> external_{false};
+  std::atomic<bool> abort_render_{false};
   std::mutex mutex_;
   std::condition_variable wake_;
   std::condition_variable idle_;
@@ -257,16 +285,26 @@ class SimCamera : public CameraBase, public TriggerInput {
 
 }  // namespace
 
-std::unique_ptr<Camera> open_sim_camera(const DeviceUri& uri,
-                                        const std::filesystem::path& default_camera_file) {
-  uri.reject_unknown({"camera", "seed", "ppm", "depth_mm", "flow", "dx_mm", "dy_mm", "dz_mm",
+std::unique_ptr<Camera> open_sim_camera(const DeviceUri& uri, const std::filesystem::path& camera_file) {
+  if (uri.has("camera")) {
+    uri.fail("camera: a URI cannot name a file; the simulated camera renders the daemon's camera_file "
+             "(plenopivd.yaml or --camera-file)");
+  }
+  uri.reject_unknown({"seed", "ppm", "depth_mm", "flow", "dx_mm", "dy_mm", "dz_mm",
                       "voxel_mm", "angle_deg", "shear_per_mm", "rays", "noise", "drop_every",
-                      "incomplete_every", "disconnect_after", "readout_ms", "flow_dt_us",
+                      "incomplete_every", "disconnect_after", "fail_after", "readout_ms", "flow_dt_us",
                       "array_rotation_rad"});
   if (!uri.target().empty()) uri.fail("the simulated camera takes no device name, only ?parameters");
-  const std::string file = uri.string_or("camera", default_camera_file.string());
-  if (file.empty()) uri.fail("camera: no camera file given and no default configured");
-  optics::CameraModel camera = optics::load_camera_file(file);
+  if (camera_file.empty()) {
+    uri.fail("the simulated camera needs a camera file: plenopivd.yaml camera_file or --camera-file");
+  }
+  optics::CameraModel camera = optics::load_camera_file(camera_file);
+  // A pair in flight holds two frames, each a 16-bit image, its float ray counts and the tracer's
+  // counters: refused with the estimate before the render thread tries to allocate them.
+  const double pixels = double(camera.sensor().width_px) * double(camera.sensor().height_px);
+  require_memory(2.0 * pixels * (sizeof(std::uint16_t) + sizeof(float) + sizeof(std::uint32_t)),
+                 "the simulated camera's frames (" + std::to_string(camera.sensor().width_px) + " x " +
+                     std::to_string(camera.sensor().height_px) + " px, " + camera_file.string() + ")");
 
   SceneSettings scene;
   auto count = [&](const char* key, long long fallback) -> std::uint64_t {
@@ -287,6 +325,7 @@ std::unique_ptr<Camera> open_sim_camera(const DeviceUri& uri,
   scene.drop_every = count("drop_every", 0);
   scene.incomplete_every = count("incomplete_every", 0);
   scene.disconnect_after = count("disconnect_after", 0);
+  scene.fail_after = count("fail_after", 0);
   const double readout_ms = uri.number_or("readout_ms", scene.readout_s * 1e3);
   if (!(readout_ms >= 0) || readout_ms > 10000) uri.fail("readout_ms: must be in [0, 10000] ms");
   scene.readout_s = readout_ms * 1e-3;
@@ -299,10 +338,8 @@ std::unique_ptr<Camera> open_sim_camera(const DeviceUri& uri,
   return std::make_unique<SimCamera>(uri, std::move(camera), scene, std::move(flow));
 }
 
-void register_sim_camera(CameraRegistry& registry, const std::filesystem::path& default_camera_file) {
-  registry.add("sim", [default_camera_file](const DeviceUri& uri) {
-    return open_sim_camera(uri, default_camera_file);
-  });
+void register_sim_camera(CameraRegistry& registry, const std::filesystem::path& camera_file) {
+  registry.add("sim", [camera_file](const DeviceUri& uri) { return open_sim_camera(uri, camera_file); });
 }
 
 }  // namespace plenopiv::drivers

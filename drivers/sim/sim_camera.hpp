@@ -10,8 +10,8 @@
 
 namespace plenopiv::drivers {
 
-// Opens `sim://?key=value&...`. Parameters (all optional):
-//   camera=<file>       camera file (default: the one given to register_sim_camera)
+// Opens `sim://?key=value&...`, rendering the camera of `camera_file` (the daemon's camera file:
+// a URI, which may come from a request, never names a file). Parameters (all optional):
 //   seed=<n>            random seed; pair k uses (seed, k): a run is reproducible (default 1)
 //   ppm=<x>             particles per microlens over the field of view (default 0.05)
 //   depth_mm=<d>        particles fill z in [-d, d] (default 5)
@@ -25,6 +25,8 @@ namespace plenopiv::drivers {
 //   drop_every=<n>      fault: frame B of every n-th trigger never arrives
 //   incomplete_every=<n> fault: frame B of every n-th trigger arrives incomplete
 //   disconnect_after=<n> fault: the camera is lost after n triggers (status Lost)
+//   fail_after=<n>      fault: rendering trigger n throws (the camera fails for good, as an
+//                       out-of-memory render would)
 //   readout_ms=<ms>     a pair is rendered this long after its trigger, when frame B would have
 //                       been read out, not while the trigger times the laser pulses (default 10)
 //   array_rotation_rad=<r> the true lens array turned by r (counter-clockwise, |r| <= 0.1) from the
@@ -32,11 +34,13 @@ namespace plenopiv::drivers {
 // Armed for TriggerSource::External, the camera is fired by rising edges on its trigger_input()
 // (a simulated trigger's camera line, drivers/trigger/camera_wiring.hpp); for Software, by
 // software_trigger().
-// Unknown parameters, a missing camera file, or bad values are an InputError naming the URI.
-std::unique_ptr<Camera> open_sim_camera(const DeviceUri& uri,
-                                        const std::filesystem::path& default_camera_file);
+// A render that fails (e.g. out of memory) fails the camera (CameraStatus::failed) with the reason.
+// Unknown parameters, `camera=`, no camera file, frames larger than this machine's memory, or bad
+// values are an InputError naming the URI.
+std::unique_ptr<Camera> open_sim_camera(const DeviceUri& uri, const std::filesystem::path& camera_file);
 
-// Registers `sim` in `registry`, with `default_camera_file` for URIs that name none.
-void register_sim_camera(CameraRegistry& registry, const std::filesystem::path& default_camera_file);
+// Registers `sim` in `registry`, rendering `camera_file`. plenopivd does so only when its config
+// enables simulation (`simulation: true`).
+void register_sim_camera(CameraRegistry& registry, const std::filesystem::path& camera_file);
 
 }  // namespace plenopiv::drivers

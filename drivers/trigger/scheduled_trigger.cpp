@@ -3,7 +3,10 @@
 #include "drivers/trigger/scheduled_trigger.hpp"
 
 #include <algorithm>
+#include <array>
 #include <ctime>
+#include <limits>
+#include <map>
 
 #include "core/base/errors.hpp"
 #include "drivers/common/driver_errors.hpp"
@@ -38,6 +41,7 @@ std::uint64_t ScheduledTrigger::now_ns() const {
 
 void ScheduledTrigger::load(const Schedule& schedule) {
   if (running_) throw StateError("trigger " + info_.uri + ": load is not allowed while running");
+  check_schedule(schedule);
   for (const Edge& e : schedule.edges) {
     if (std::find(info_.outputs.begin(), info_.outputs.end(), e.line) == info_.outputs.end()) {
       throw InputError("trigger " + info_.uri + ": the schedule drives line '" +
@@ -81,34 +85,145 @@ void ScheduledTrigger::stop_playback() noexcept {
   running_ = false;
 }
 
+namespace {
+
+// When each laser line last rose in this process (steady clock, ns since its epoch), keyed by the
+// line's identity: a run that starts right after another on the same laser waits out the laser's
+// minimum interval too, although each run opens its own trigger.
+class LaserHistory {
+ public:
+  static LaserHistory& instance() {
+    static LaserHistory history;
+    return history;
+  }
+  std::optional<std::int64_t> last(const std::string& line) const {
+    std::lock_guard lock(mutex_);
+    auto it = last_.find(line);
+    if (it == last_.end()) return std::nullopt;
+    return it->second;
+  }
+  void rose(const std::string& line, std::int64_t when_ns) {
+    std::lock_guard lock(mutex_);
+    last_[line] = when_ns;
+  }
+
+ private:
+  mutable std::mutex mutex_;
+  std::map<std::string, std::int64_t> last_;
+};
+
+std::int64_t steady_ns() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(
+             std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+
+}  // namespace
+
+std::string ScheduledTrigger::line_identity(TriggerLine line) const {
+  return info_.uri + "#" + to_string(line);
+}
+
 void ScheduledTrigger::play(Schedule schedule, std::uint64_t shots) {
   using clock = std::chrono::steady_clock;
-  // A little lead so the first edges are not late just because the thread was starting.
-  const auto start = clock::now() + std::chrono::milliseconds(5);
+  const std::int64_t period = schedule.period_ns;
+  const std::int64_t min_interval = schedule.min_laser_interval_ns;
+  // A little lead so the first edges are not late just because the thread was starting; later
+  // still when a laser line fired in this process (a run just before this one) too recently for
+  // the first shot.
+  std::int64_t start_ns = steady_ns() + 5'000'000;
+  std::array<std::optional<std::int64_t>, kTriggerLines.size()> history;
+  if (!virtual_time()) {
+    for (const Edge& e : schedule.edges) {
+      if (!e.rising || !is_laser_line(e.line)) continue;
+      if (auto t = LaserHistory::instance().last(line_identity(e.line))) {
+        history[int(e.line)] = *t;
+        start_ns = std::max(start_ns, *t + min_interval - e.time_ns);
+      }
+    }
+  }
+  const auto start = clock::time_point(std::chrono::nanoseconds(start_ns));
+  // Times below are ns from `start` (virtual time: from the first planned edge). The last rising
+  // edge of each laser line, starting from what this process last fired on it.
+  std::array<std::optional<std::int64_t>, kTriggerLines.size()> last_rise;
+  for (TriggerLine l : kTriggerLines) {
+    if (history[int(l)]) last_rise[int(l)] = *history[int(l)] - start_ns;
+  }
+  std::array<bool, kTriggerLines.size()> high{};
+  std::int64_t last_written = std::numeric_limits<std::int64_t>::min();
+  // Lowers every line that is high, as edges written at `now` (a shot given up half way).
+  const auto lower_all = [&](std::uint64_t k, std::int64_t now) {
+    for (TriggerLine l : kTriggerLines) {
+      if (!high[int(l)]) continue;
+      write_line(l, false);
+      high[int(l)] = false;
+      const Edge down{now - std::int64_t(k) * period, double(now - std::int64_t(k) * period) * 1e-9, l, false};
+      // (time relative to the shot's planned start; only the sim trigger records it)
+      on_edge_written(down, k, double(now) * 1e-9, 0.0);
+    }
+  };
   try {
     for (std::uint64_t k = 0; (shots == 0 || k < shots) && !stop_requested_; ++k) {
+      // k * period + an edge's time stays within 64 bits (k beyond ~2.5e6 shots of the longest period).
+      if (k >= std::uint64_t(std::numeric_limits<std::int64_t>::max() / period) - 1) break;
+      // A shot that would fire a laser line sooner after that line's last rising edge than the laser
+      // allows (the playback wrote the previous shot late) is played later, whole, so that its own
+      // timing (flashlamp to Q-switch, dt, camera) holds too.
+      std::int64_t shot_start = std::int64_t(k) * period;
+      std::int64_t shift = 0;
       for (const Edge& e : schedule.edges) {
-        const double planned = double(k) * schedule.period_s + e.time_s;
-        double lateness = 0;
-        if (!virtual_time()) {
-          const auto target = start + std::chrono::duration_cast<clock::duration>(
-                                          std::chrono::duration<double>(planned));
-          {
-            std::unique_lock lock(mutex_);
-            if (cv_.wait_until(lock, target, [this] { return stop_requested_.load(); })) break;
+        if (!e.rising || !is_laser_line(e.line) || !last_rise[int(e.line)]) continue;
+        shift = std::max(shift, *last_rise[int(e.line)] + min_interval - (shot_start + e.time_ns));
+      }
+      if (shift > 0) {
+        shot_start += shift;
+        std::lock_guard lock(mutex_);
+        ++counters_.shots_delayed;
+      }
+      bool stopped = false;
+      for (std::size_t i = 0; i < schedule.edges.size(); ++i) {
+        const Edge& e = schedule.edges[i];
+        const std::int64_t planned = shot_start + e.time_ns;
+        std::int64_t now = planned;
+        if (virtual_time()) {
+          now = std::max(planned + std::max<std::int64_t>(0, virtual_delay_ns(k, i)), last_written);
+        } else {
+          const auto target = start + std::chrono::nanoseconds(planned);
+          std::unique_lock lock(mutex_);
+          if (cv_.wait_until(lock, target, [this] { return stop_requested_.load(); })) {
+            stopped = true;
+            break;
           }
-          lateness = std::chrono::duration<double>(clock::now() - target).count();
+          lock.unlock();
+          now = std::max(steady_ns() - start_ns, planned);
+        }
+        // A laser line never rises sooner after its previous rising edge than the laser allows: the
+        // shot was moved so that it does not, and should that ever fail, the rest of the shot is
+        // given up and counted rather than fired.
+        if (e.rising && is_laser_line(e.line) && last_rise[int(e.line)] &&
+            now - *last_rise[int(e.line)] < min_interval) {
+          lower_all(k, now);
+          last_written = now;
+          std::lock_guard lock(mutex_);
+          ++counters_.shots_abandoned;
+          break;
         }
         write_line(e.line, e.rising);
-        on_edge_written(e, k, planned, lateness);
+        high[int(e.line)] = e.rising;
+        last_written = now;
+        if (e.rising && is_laser_line(e.line)) {
+          last_rise[int(e.line)] = now;
+          if (!virtual_time()) LaserHistory::instance().rose(line_identity(e.line), start_ns + now);
+        }
+        const double lateness = double(now - planned) * 1e-9;
+        on_edge_written(e, k, double(planned) * 1e-9, lateness);
         std::lock_guard lock(mutex_);
         ++counters_.edges_written;
         if (lateness > info_.timing_uncertainty_s && !virtual_time()) ++counters_.edges_late;
         counters_.worst_lateness_s = std::max(counters_.worst_lateness_s, lateness);
+        if (i + 1 == schedule.edges.size()) ++counters_.shots_fired;
       }
-      if (stop_requested_) break;
-      std::lock_guard lock(mutex_);
-      ++counters_.shots_fired;
+      if (stopped || stop_requested_) break;
     }
   } catch (const std::exception& e) {
     std::lock_guard lock(mutex_);

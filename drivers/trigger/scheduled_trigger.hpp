@@ -54,8 +54,15 @@ class ScheduledTrigger : public Trigger {
   virtual std::uint64_t now_ns() const;
   // A Q-switch sync edge was seen at `edge_ns` (backend thread).
   void report_sync_edge(std::uint64_t edge_ns);
-  // Called by the playback thread just after an edge was written (sim records it).
+  // Called by the playback thread just after an edge was written (sim records it): the edge, its
+  // shot, when it was planned (s from the start of playback) and how late it was written (s).
   virtual void on_edge_written(const Edge&, std::uint64_t, double, double) {}
+  // Virtual time only: how late (ns, >= 0) the playback writes edge `edge_index` of shot `shot`,
+  // standing in for a thread that runs late. Edges are never written before the one before them.
+  virtual std::int64_t virtual_delay_ns(std::uint64_t /*shot*/, std::size_t /*edge_index*/) const { return 0; }
+  // Names the physical output behind `line` (the laser cavity it fires), the key under which this
+  // process remembers when that line last rose: the default is the URI and the line's name.
+  virtual std::string line_identity(TriggerLine line) const;
   // Stops and joins the playback thread; backends call it first thing in their destructor,
   // while their write_line/all_low still work.
   void stop_playback() noexcept;

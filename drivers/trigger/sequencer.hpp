@@ -3,6 +3,7 @@
 #pragma once
 
 #include <array>
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -39,16 +40,32 @@ struct TimingLimits {
   double camera_max_pair_rate_hz = 15.0;
 };
 
+// The laser lines: each fires a cavity (or, for Gate, the delay generator that fires the laser),
+// so no two of their rising edges may come closer than the laser's minimum period.
+bool is_laser_line(TriggerLine line);
+
 struct Edge {
-  double time_s = 0;  // from the start of the period
+  std::int64_t time_ns = 0;  // from the start of the period: what the trigger plays
+  double time_s = 0;         // the same time in seconds (time_ns * 1e-9), for reports
   TriggerLine line = TriggerLine::Camera;
   bool rising = true;
   bool operator==(const Edge&) const = default;
 };
 
-// One period of the timing, repeated at `period_s`. Times are relative to the first edge (t = 0).
+// The longest repetition period a schedule may have (the lowest rate is one pair an hour): keeps
+// every time the trigger computes, shot count times period, far inside 64-bit nanoseconds.
+inline constexpr std::int64_t kMaxPeriodNs = 3600'000'000'000;
+
+// One period of the timing, repeated every `period_ns`. Times are relative to the first edge
+// (t = 0). The integer nanoseconds are what a trigger plays and what check_schedule() checks; the
+// seconds beside them are the same times for reports.
 struct Schedule {
   std::vector<Edge> edges;  // sorted by time
+  std::int64_t period_ns = 0;
+  // The shortest time the laser allows between two rising edges of one laser line (1 / its
+  // maximum repetition rate, rounded up). Triggers never write a laser edge sooner than that after
+  // the same line's previous one, however late their thread runs.
+  std::int64_t min_laser_interval_ns = 0;
   double period_s = 0;
   double pulse1_s = 0;         // Q-switch 1 (laser pulse 1)
   double pulse2_s = 0;         // Q-switch 2 (laser pulse 2)
@@ -67,6 +84,14 @@ struct Schedule {
 // margin is below it is refused, pointing to hardware-timed mode.
 Schedule make_schedule(const TimingRequest& request, const TimingLimits& limits,
                        double timing_uncertainty_s, const std::string& backend = "this trigger");
+
+// Checks a schedule as a trigger will play it, in integer nanoseconds: a period within
+// (0, kMaxPeriodNs] and not shorter than min_laser_interval_ns (> 0), edges sorted inside one
+// period, and on every line alternating rising and falling edges that start rising and end low
+// within the period, one rising edge per period on each laser line. InputError naming what is
+// wrong. make_schedule and make_gate_schedule call it; Trigger::load calls it again, so a schedule
+// built any other way is held to the same rules.
+void check_schedule(const Schedule& schedule);
 
 // Hardware-timed mode: an external delay generator makes the laser and camera pulses from its own
 // clock; plenopiv only gates the shot train with one Gate pulse per shot, so the backend's jitter

@@ -73,6 +73,17 @@ void SimTrigger::set_edge_listener(EdgeListener listener) {
   listener_ = std::move(listener);
 }
 
+void SimTrigger::set_virtual_delays(DelayModel model) {
+  if (running()) throw StateError("trigger " + info().uri + ": set_virtual_delays while running");
+  std::lock_guard lock(mutex_);
+  delays_ = std::move(model);
+}
+
+std::int64_t SimTrigger::virtual_delay_ns(std::uint64_t shot, std::size_t edge) const {
+  std::lock_guard lock(mutex_);
+  return delays_ ? delays_(shot, edge) : 0;
+}
+
 bool SimTrigger::connect_camera_input(TriggerInput* input) {
   if (running()) throw StateError("trigger " + info().uri + ": connect_camera_input while running");
   std::lock_guard lock(mutex_);

@@ -37,6 +37,10 @@ class SimTrigger final : public ScheduledTrigger {
   using EdgeListener = std::function<void(const RecordedEdge&)>;
   void set_edge_listener(EdgeListener listener);
   bool connect_camera_input(TriggerInput* input) override;
+  // Virtual clock only: how late (ns) edge `edge` of shot `shot` is written, standing in for a
+  // playback thread on a busy machine; unset, every edge is on time. Set it before start().
+  using DelayModel = std::function<std::int64_t(std::uint64_t shot, std::size_t edge)>;
+  void set_virtual_delays(DelayModel model);
 
  protected:
   void write_line(TriggerLine line, bool level) override;
@@ -44,6 +48,7 @@ class SimTrigger final : public ScheduledTrigger {
   bool virtual_time() const override { return virtual_clock_; }
   void on_edge_written(const Edge& edge, std::uint64_t shot, double planned_s,
                        double lateness_s) override;
+  std::int64_t virtual_delay_ns(std::uint64_t shot, std::size_t edge) const override;
 
  private:
   bool virtual_clock_;
@@ -51,6 +56,7 @@ class SimTrigger final : public ScheduledTrigger {
   std::vector<RecordedEdge> edges_;
   bool levels_[6] = {};
   EdgeListener listener_;
+  DelayModel delays_;
   TriggerInput* camera_input_ = nullptr;
   std::uint64_t base_ns_ = 1'000'000'000;  // virtual clock origin for Q-switch sync times
 };

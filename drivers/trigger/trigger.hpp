@@ -31,7 +31,14 @@ struct MeasuredShot {
 };
 
 struct TriggerCounters {
-  std::uint64_t shots_fired = 0;
+  std::uint64_t shots_fired = 0;         // shots whose every edge was written
+  // Shots played later than planned because the playback had written the previous one late and a
+  // laser line would otherwise have risen sooner after its previous rising edge than the laser
+  // allows. They still fire, whole, with their own timing.
+  std::uint64_t shots_delayed = 0;
+  // Shots given up half way for the same reason (a defence that delaying should leave idle; lines
+  // already high went low at once).
+  std::uint64_t shots_abandoned = 0;
   std::uint64_t edges_written = 0;
   std::uint64_t edges_late = 0;           // written later than the backend's uncertainty
   double worst_lateness_s = 0;
@@ -41,13 +48,16 @@ struct TriggerCounters {
 
 // Thread safety: load/start/stop from one controlling thread; next_shot, counters and running
 // from any. Every backend keeps its output lines low whenever it is not playing a schedule, and
-// drives them all low on stop(), on any error, and in its destructor.
+// drives them all low on stop(), on any error, and in its destructor. No laser line (every line
+// but the camera's) rises sooner than Schedule::min_laser_interval_ns after its previous rising
+// edge, in this run or the one before it in the same process.
 class Trigger {
  public:
   virtual ~Trigger() = default;
   virtual TriggerInfo info() const = 0;
-  // Checks that the schedule only uses wired lines and that its margins exceed this backend's
-  // timing uncertainty; InputError otherwise. Not while running.
+  // Checks the schedule (check_schedule: integer times, the laser's minimum interval), that it only
+  // uses wired lines and that its margins exceed this backend's timing uncertainty; InputError
+  // otherwise. Not while running.
   virtual void load(const Schedule& schedule) = 0;
   // Plays the loaded schedule `shots` times (0: until stop()).
   virtual void start(std::uint64_t shots = 0) = 0;

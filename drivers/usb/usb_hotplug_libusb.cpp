@@ -38,8 +38,26 @@ struct UsbHotplugWatcher::Impl {
   std::atomic<bool> quit{false};
   std::thread thread;
 
-  static int LIBUSB_CALL on_event(libusb_context*, libusb_device* device,
-                                  libusb_hotplug_event event, void* self_ptr) {
+  // libusb's event thread (C): nothing may throw through it.
+  static int LIBUSB_CALL on_event(libusb_context* context, libusb_device* device, libusb_hotplug_event event,
+                                  void* self_ptr) noexcept {
+    try {
+      return handle_event(context, device, event, self_ptr);
+    } catch (const std::exception& ex) {
+      auto* self = static_cast<Impl*>(self_ptr);
+      UsbDeviceEvent e;
+      e.arrived = event == LIBUSB_HOTPLUG_EVENT_DEVICE_ARRIVED;
+      e.openable = false;
+      e.message = std::string("USB event could not be handled: ") + ex.what();
+      try {
+        self->on_change(e);
+      } catch (...) {
+      }
+      return 0;
+    }
+  }
+
+  static int handle_event(libusb_context*, libusb_device* device, libusb_hotplug_event event, void* self_ptr) {
     auto* self = static_cast<Impl*>(self_ptr);
     libusb_device_descriptor desc{};
     libusb_get_device_descriptor(device, &desc);

@@ -1,13 +1,22 @@
 // plenopivd as a real child process on real ZeroMQ sockets: replies, bad messages, timeouts, SIGTERM.
 #include <gtest/gtest.h>
 
+#include <sys/stat.h>
+#include <unistd.h>
+
 #include <csignal>
+#include <filesystem>
+#include <fstream>
 #include <thread>
 #include <zmq.hpp>
 
 #include "clients/cli/control_client.hpp"
+#include "proto/curve.hpp"
 #include "tests/support/child_process.hpp"
+#include "tests/support/temp_dir.hpp"
+#include "tests/support/tmpfs.hpp"
 #include "tests/support/daemon_status.hpp"
+#include "tests/support/run_manifest.hpp"
 
 namespace plenopiv {
 namespace {
@@ -18,7 +27,7 @@ using testing_support::ChildProcess;
 class Daemon : public ::testing::Test {
  protected:
   void SetUp() override {
-    control_ = "tcp://127.0.0.1:" + std::to_string(testing_support::free_tcp_port());
+    control_ = testing_support::ipc_endpoint("control");
     publish_ = "tcp://127.0.0.1:" + std::to_string(testing_support::free_tcp_port());
     daemon_ = std::make_unique<ChildProcess>(
         std::vector<std::string>{testing_support::binary("plenopivd"), "--control", control_,
@@ -162,12 +171,328 @@ TEST(ThinClient, RunStartToAMissingDaemonFailsWithinTheTimeout) {
   EXPECT_LT(std::chrono::steady_clock::now() - start, 10s);  // not the start's 120 s wait
 }
 
-TEST(Plenopivd, RefusesARemoteControlEndpoint) {
+TEST(Plenopivd, RefusesATcpControlEndpointWithoutCurve) {
+  for (const char* endpoint : {"tcp://0.0.0.0:5555", "tcp://127.0.0.1:5555"}) {
+    std::string out;
+    const int rc = testing_support::run_command({testing_support::binary("plenopivd"), "--control", endpoint}, out);
+    EXPECT_EQ(rc, 2) << out;
+    EXPECT_NE(out.find("control_endpoint"), std::string::npos) << out;
+    EXPECT_NE(out.find("curve:"), std::string::npos) << out;
+  }
+}
+
+// The local control socket admits the daemon's user and group only, whatever umask it was started
+// with: another local user cannot start runs (or make the daemon do anything).
+TEST(DaemonSocket, TheControlSocketAdmitsItsOwnerAndGroupOnly) {
+  const std::string control = testing_support::ipc_endpoint("open-umask");
+  const std::string file = control.substr(6);
+  // umask 000 would leave a socket file anyone may open.
+  ChildProcess daemon({"/bin/sh", "-c",
+                       "umask 000; exec " + testing_support::binary("plenopivd") + " --control " + control +
+                           " --publish tcp://127.0.0.1:" + std::to_string(testing_support::free_tcp_port())},
+                      std::filesystem::temp_directory_path() / "plenopiv-test" / "socket-mode.log");
+  for (int i = 0; i < 100 && !testing_support::probe_status(control); ++i) ASSERT_TRUE(daemon.running()) << daemon.output();
+  struct stat st{};
+  ASSERT_EQ(::stat(file.c_str(), &st), 0) << file;
+  EXPECT_TRUE(S_ISSOCK(st.st_mode));
+  EXPECT_EQ(st.st_mode & 0777, 0660u) << std::oct << (st.st_mode & 0777);
+  if (::geteuid() != 0 || ::access("/usr/sbin/runuser", X_OK) != 0) {
+    GTEST_SKIP() << "needs root and runuser to try the socket as another user (nobody)";
+  }
+  // The folder is open to everyone, so only the socket's own mode keeps `nobody` out.
+  std::filesystem::permissions(std::filesystem::path(file).parent_path(), std::filesystem::perms(0755));
   std::string out;
-  const int rc = testing_support::run_command(
-      {testing_support::binary("plenopivd"), "--control", "tcp://0.0.0.0:5555"}, out);
-  EXPECT_EQ(rc, 2) << out;
-  EXPECT_NE(out.find("control_endpoint"), std::string::npos) << out;
+  const int rc = testing_support::run_command({"/usr/sbin/runuser", "-u", "nobody", "--",
+                                               testing_support::binary("plenopiv"), "--endpoint", control,
+                                               "--timeout", "1", "status"},
+                                              out);
+  EXPECT_EQ(rc, 3) << out;
+  EXPECT_NE(out.find("no reply from plenopivd"), std::string::npos) << out;
+  EXPECT_TRUE(testing_support::probe_status(control)) << "the owner still controls it";
+}
+
+// Oversized control messages are dropped by ZeroMQ before the daemon reads them; configs beyond the
+// YAML limits are refused by name and quickly; the daemon serves on.
+TEST_F(Daemon, OversizedAndHostileRequestsAreRefusedWithoutStallingTheDaemon) {
+  {
+    zmq::context_t ctx;
+    zmq::socket_t req(ctx, zmq::socket_type::req);
+    req.set(zmq::sockopt::linger, 0);
+    req.set(zmq::sockopt::rcvtimeo, 1000);
+    req.connect(control_);
+    msg::Request r;
+    r.mutable_start_run()->set_config_yaml(std::string(3 * 1024 * 1024, '#'));
+    req.send(zmq::buffer(r.SerializeAsString()), zmq::send_flags::none);
+    zmq::message_t answer;
+    EXPECT_FALSE(req.recv(answer, zmq::recv_flags::none)) << "a 3 MiB request was read and answered";
+  }
+  client::ControlClient client(control_, 3000ms);
+  const auto start_with = [&](const std::string& yaml) {
+    msg::Request r;
+    r.mutable_start_run()->set_config_yaml(yaml);
+    return client.call(r);
+  };
+  const auto t0 = std::chrono::steady_clock::now();
+  const msg::Reply big = start_with("# " + std::string(1536 * 1024, 'x') + "\npairs: 1\n");
+  ASSERT_TRUE(big.has_error());
+  EXPECT_EQ(big.error().code(), msg::Error::INVALID);
+  EXPECT_NE(big.error().message().find("larger than 1024 KiB"), std::string::npos) << big.error().message();
+  const msg::Reply deep = start_with("a: " + std::string(200, '[') + std::string(200, ']') + "\n");
+  ASSERT_TRUE(deep.has_error());
+  EXPECT_NE(deep.error().message().find("nested deeper than 32 levels"), std::string::npos)
+      << deep.error().message();
+  // Nine levels of ten aliases each stand for 10^9 nodes in a few hundred bytes.
+  std::string laughs = "l0: &l0 [lol, lol, lol, lol, lol, lol, lol, lol, lol, lol]\n";
+  for (int i = 1; i <= 9; ++i) {
+    laughs += "l" + std::to_string(i) + ": &l" + std::to_string(i) + " [";
+    for (int k = 0; k < 10; ++k) laughs += std::string(k ? ", " : "") + "*l" + std::to_string(i - 1);
+    laughs += "]\n";
+  }
+  const msg::Reply bomb = start_with(laughs);
+  ASSERT_TRUE(bomb.has_error());
+  EXPECT_NE(bomb.error().message().find("YAML nodes (aliases expanded)"), std::string::npos) << bomb.error().message();
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, 3s);  // a bound on stalling, not a timing figure
+  msg::Request status;
+  status.mutable_status();
+  EXPECT_TRUE(client.call(status).has_status());
+}
+
+// Requests never name files: a run config's device URIs cannot make the daemon open (or quote) a
+// file, and the simulated camera exists only where the config enables it.
+TEST_F(Daemon, DeviceUrisFromRequestsCannotNameFiles) {
+  client::ControlClient client(control_, 3000ms);
+  const auto refusal = [&](const std::string& camera_uri) {
+    msg::Request r;
+    r.mutable_start_run()->set_config_yaml("camera_uri: \"" + camera_uri +
+                                           "\"\ndt_s: 0.0001\nvolume: {x_mm: [0, 2], y_mm: [0, 2], z_mm: [0, 2], voxel_mm: "
+                                           "0.5}\ncorrelation: {passes: [{window: 4, overlap_percent: 50}]}\n");
+    const msg::Reply reply = client.call(r);
+    EXPECT_TRUE(reply.has_error()) << camera_uri;
+    EXPECT_EQ(reply.error().code(), msg::Error::INVALID) << reply.error().message();
+    EXPECT_EQ(reply.error().message().find("root:"), std::string::npos) << reply.error().message();
+    return reply.error().message();
+  };
+  // This daemon was started without simulation.
+  EXPECT_NE(refusal("sim://?camera=/etc/passwd").find("not enabled on this daemon"), std::string::npos);
+  EXPECT_NE(refusal("aravis://127.0.0.1?profile=/etc/passwd").find("not a path"), std::string::npos);
+  EXPECT_TRUE(daemon_->running());
+}
+
+// Device discovery (about a second for the Aravis and USB scans) runs off the control thread:
+// a status request sent after a list_devices request is answered first.
+TEST_F(Daemon, ListingDevicesDoesNotHoldTheControlLoop) {
+  zmq::context_t ctx;
+  zmq::socket_t dealer(ctx, zmq::socket_type::dealer);
+  dealer.set(zmq::sockopt::linger, 0);
+  dealer.set(zmq::sockopt::rcvtimeo, 5000);
+  dealer.connect(control_);
+  const auto send = [&](std::uint64_t id, bool list) {
+    msg::Request r;
+    r.set_id(id);
+    if (list) {
+      r.mutable_list_devices();
+    } else {
+      r.mutable_status();
+    }
+    dealer.send(zmq::str_buffer(""), zmq::send_flags::sndmore);  // REQ-style delimiter
+    dealer.send(zmq::buffer(r.SerializeAsString()), zmq::send_flags::none);
+  };
+  send(1, true);
+  std::this_thread::sleep_for(50ms);
+  send(2, false);
+  std::vector<std::uint64_t> order;
+  for (int i = 0; i < 2; ++i) {
+    zmq::message_t delimiter, body;
+    ASSERT_TRUE(dealer.recv(delimiter, zmq::recv_flags::none)) << "no reply within 5 s";
+    ASSERT_TRUE(dealer.recv(body, zmq::recv_flags::none));
+    msg::Reply reply;
+    ASSERT_TRUE(reply.ParseFromArray(body.data(), int(body.size())));
+    order.push_back(reply.id());
+    if (reply.id() == 1) {
+      EXPECT_TRUE(reply.has_devices()) << reply.DebugString();
+    }
+  }
+  EXPECT_EQ(order, (std::vector<std::uint64_t>{2, 1})) << "the status waited for the device scan";
+}
+
+// SIGTERM while pairs are being reconstructed (here at a thousand MART iterations each, minutes of
+// work) ends the daemon within 10 s: the processing gives up at its next iteration, the camera and
+// recorder drain within their bounds, and the folder is closed "stopped", listing what it holds.
+TEST(DaemonStop, SigtermWithHeavyProcessingInFlightEndsWithinTenSeconds) {
+  namespace fs = std::filesystem;
+  const fs::path dir = testing_support::temp_dir("stop") / "heavy";
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const std::string control = testing_support::ipc_endpoint("control");
+  ChildProcess daemon({testing_support::binary("plenopivd"), "--simulation", "--camera-file",
+                       std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml", "--camera",
+                       "sim://?rays=300&ppm=0.3", "--control", control, "--publish",
+                       "tcp://127.0.0.1:" + std::to_string(testing_support::free_tcp_port()), "--data-dir",
+                       (dir / "data").string()},
+                      dir / "plenopivd.log");
+  for (int i = 0; i < 100 && !testing_support::probe_status(control); ++i) ASSERT_TRUE(daemon.running()) << daemon.output();
+  std::ofstream(dir / "heavy.yaml") << "pairs: 0\nrate_hz: 5\ndt_s: 0.0001\n"
+                                       "volume: {x_mm: [-2, 2], y_mm: [-2, 2], z_mm: [-3, 3], voxel_mm: 0.125}\n"
+                                       "reconstruction: {iterations: 1000, mu: 1}\n"
+                                       "max_pairs_in_flight: 2\n";
+  std::string out;
+  ASSERT_EQ(testing_support::run_command({testing_support::binary("plenopiv"), "--endpoint", control, "run", "start",
+                                          "--config", (dir / "heavy.yaml").string()},
+                                         out),
+            0)
+      << out;
+  for (int i = 0; i < 200; ++i) {
+    const auto s = testing_support::probe_status(control);
+    if (s && s->pairs_recorded() >= 4) break;
+    std::this_thread::sleep_for(50ms);
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  daemon.signal(SIGTERM);
+  const auto status = daemon.wait(30s);
+  const double took = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  ASSERT_TRUE(status.has_value()) << daemon.output();
+  EXPECT_EQ(*status, 0) << daemon.output();
+  EXPECT_LT(took, 10.0) << "SIGTERM took " << took << " s:\n" << daemon.output();
+  fs::path run;
+  for (const auto& e : fs::directory_iterator(dir / "data")) run = e.path();
+  const msg::RunManifest m = testing_support::read_manifest(run);
+  EXPECT_EQ(m.state(), "stopped");
+  EXPECT_GE(m.pairs_size(), 4);
+  EXPECT_GE(m.losses().processing_cancelled(), 1u) << m.losses().DebugString();
+  for (const msg::ManifestPair& p : m.pairs()) {
+    EXPECT_TRUE(fs::exists(run / p.frame_a()));
+    EXPECT_TRUE(fs::exists(run / p.frame_b()));
+  }
+}
+
+// A disk that fills during a run ends the run as failed, naming the disk, with a consistent folder;
+// the daemon stays controllable and refuses a new run that would not fit, saying how much is free.
+TEST(DaemonDisk, AFullDiskFailsTheRunCleanlyAndRefusesTheNext) {
+  namespace fs = std::filesystem;
+  const fs::path dir = testing_support::temp_dir("disk");
+  testing_support::SmallTmpfs disk(dir / "data", 110);
+  if (!disk.mounted()) GTEST_SKIP() << disk.why_not();
+  const std::string control = testing_support::ipc_endpoint("control");
+  ChildProcess daemon({testing_support::binary("plenopivd"), "--simulation", "--camera-file",
+                       std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml", "--camera",
+                       "sim://?rays=100&ppm=0.05", "--control", control, "--publish",
+                       "tcp://127.0.0.1:" + std::to_string(testing_support::free_tcp_port()), "--data-dir",
+                       disk.dir().string()},
+                      dir / "plenopivd.log");
+  for (int i = 0; i < 100 && !testing_support::probe_status(control); ++i) ASSERT_TRUE(daemon.running()) << daemon.output();
+  // 2.9 MB of raw frames per pair (850 x 850 px, 16 bit): the 110 MB disk holds about 30.
+  std::ofstream(dir / "long.yaml") << "pairs: 0\nrate_hz: 10\ndt_s: 0.0001\n"
+                                      "volume: {x_mm: [-1, 1], y_mm: [-1, 1], z_mm: [-1, 1], voxel_mm: 0.25}\n"
+                                      "reconstruction: {iterations: 1}\n"
+                                      "correlation: {passes: [{window: 8, overlap_percent: 50}]}\n";
+  const auto start = [&](std::string& out) {
+    return testing_support::run_command({testing_support::binary("plenopiv"), "--endpoint", control, "run", "start",
+                                         "--config", (dir / "long.yaml").string()},
+                                        out);
+  };
+  std::string out;
+  ASSERT_EQ(start(out), 0) << out;
+  std::optional<msg::Status> s;
+  for (int i = 0; i < 400; ++i) {
+    s = testing_support::probe_status(control);
+    if (s && s->state() == "Error") break;
+    std::this_thread::sleep_for(50ms);
+  }
+  ASSERT_TRUE(s);
+  ASSERT_EQ(s->state(), "Error") << daemon.output();
+  EXPECT_NE(s->message().find("no space left on device"), std::string::npos) << s->message();
+  fs::path run;
+  for (const auto& e : fs::directory_iterator(disk.dir())) {
+    if (e.path().filename().string().rfind("run-", 0) == 0) run = e.path();
+  }
+  const msg::RunManifest m = testing_support::read_manifest(run);
+  EXPECT_EQ(m.state().rfind("failed: no space left on device", 0), 0u) << m.state();
+  EXPECT_GT(m.pairs_size(), 10);
+  for (const msg::ManifestPair& p : m.pairs()) {
+    EXPECT_TRUE(fs::exists(run / p.frame_a())) << p.frame_a();
+    EXPECT_TRUE(fs::exists(run / p.frame_b())) << p.frame_b();
+  }
+  // Still controllable; a new run is refused up front, naming the free space.
+  EXPECT_EQ(start(out), 4) << out;
+  EXPECT_NE(out.find("data_dir: " + disk.dir().string() + " has"), std::string::npos) << out;
+  EXPECT_NE(out.find("free some space or record fewer pairs"), std::string::npos) << out;
+  EXPECT_TRUE(testing_support::probe_status(control));
+  daemon.signal(SIGTERM);
+  EXPECT_TRUE(daemon.wait(10s).has_value());
+}
+
+// CURVE: over tcp:// the daemon admits only the clients whose public keys it was given, for control
+// and (curve.publish) for its published data.
+TEST(DaemonCurve, AdmitsOnlyAuthorizedKeysOverTcp) {
+  namespace fs = std::filesystem;
+  const fs::path dir = testing_support::temp_dir("curve");
+  fs::remove_all(dir);
+  fs::create_directories(dir / "clients");
+  std::string out;
+  for (const auto& [name, where] : {std::pair{"plenopivd", dir}, std::pair{"desk", dir / "clients"},
+                                    std::pair{"stranger", dir}}) {
+    ASSERT_EQ(testing_support::run_command({testing_support::binary("plenopiv"), "keys", name, "-o", where.string()}, out),
+              0)
+        << out;
+  }
+  EXPECT_EQ(fs::status(dir / "plenopivd.key_secret").permissions() & fs::perms::all,
+            fs::perms::owner_read | fs::perms::owner_write);
+  std::ofstream(dir / "plenopivd.yaml") << "curve: {server_certificate: plenopivd.key_secret, "
+                                           "authorized_clients: clients, publish: true}\n";
+  const std::string control = "tcp://127.0.0.1:" + std::to_string(testing_support::free_tcp_port());
+  const std::string publish = "tcp://127.0.0.1:" + std::to_string(testing_support::free_tcp_port());
+  ChildProcess daemon({testing_support::binary("plenopivd"), "--config", (dir / "plenopivd.yaml").string(),
+                       "--control", control, "--publish", publish, "--data-dir", (dir / "data").string()},
+                      dir / "plenopivd.log");
+  const auto status_as = [&](const std::vector<std::string>& keys) {
+    std::vector<std::string> argv{testing_support::binary("plenopiv"), "--endpoint", control, "--timeout", "1"};
+    argv.insert(argv.end(), keys.begin(), keys.end());
+    argv.push_back("status");
+    return testing_support::run_command(argv, out);
+  };
+  const std::vector<std::string> desk{"--server-key", (dir / "plenopivd.key").string(), "--client-cert",
+                                      (dir / "clients" / "desk.key_secret").string()};
+  int rc = 3;
+  for (int i = 0; i < 50 && (rc = status_as(desk)) != 0; ++i) ASSERT_TRUE(daemon.running()) << daemon.output();
+  ASSERT_EQ(rc, 0) << out << daemon.output();
+  EXPECT_NE(out.find("state          Idle"), std::string::npos) << out;
+  // A key the daemon was not given, and no key at all, get no answer.
+  EXPECT_EQ(status_as({"--server-key", (dir / "plenopivd.key").string(), "--client-cert",
+                       (dir / "stranger.key_secret").string()}),
+            3)
+      << out;
+  EXPECT_NE(out.find("does it admit this client's key"), std::string::npos) << out;
+  EXPECT_EQ(status_as({}), 3) << out;
+  EXPECT_NE(out.find("needs CURVE"), std::string::npos) << out;
+  // Half a key pair is a usage error, named.
+  EXPECT_EQ(status_as({"--server-key", (dir / "plenopivd.key").string()}), 2) << out;
+  EXPECT_NE(daemon.output().find("refused a CURVE connection"), std::string::npos) << daemon.output();
+
+  // Publishing: the authorized subscriber gets the status topic, a stranger gets nothing.
+  const auto first_status = [&](const std::string& client_cert) {
+    zmq::context_t ctx;
+    zmq::socket_t sub(ctx, zmq::socket_type::sub);
+    sub.set(zmq::sockopt::linger, 0);
+    sub.set(zmq::sockopt::rcvtimeo, 2500);
+    sub.set(zmq::sockopt::subscribe, "status");
+    wire::secure_client(sub, wire::client_security(dir / "plenopivd.key", client_cert));
+    sub.connect(publish);
+    zmq::message_t topic;
+    return bool(sub.recv(topic, zmq::recv_flags::none));
+  };
+  EXPECT_TRUE(first_status((dir / "clients" / "desk.key_secret").string()));
+  EXPECT_FALSE(first_status((dir / "stranger.key_secret").string()));
+  // The Python subscriber loads the same certificate files (zmq.auth) and connects with them: no run
+  // is going, so it waits and says so (exit 3), with no traceback.
+  const int py = testing_support::run_command(
+      {"/usr/bin/python3", std::string(PLENOPIV_SOURCE_DIR) + "/clients/python/plenopiv_subscribe.py", "--publish",
+       publish, "--server-key", (dir / "plenopivd.key").string(), "--client-cert",
+       (dir / "clients" / "desk.key_secret").string(), "--count", "1", "--wait", "1"},
+      out);
+  EXPECT_EQ(py, 3) << out;
+  EXPECT_EQ(out.find("Traceback"), std::string::npos) << out;
+  daemon.signal(SIGTERM);
+  EXPECT_TRUE(daemon.wait(10s).has_value());
 }
 
 }  // namespace

@@ -44,8 +44,8 @@ TEST(DaemonCalibration, ABadFileIsRefusedByNameAndAGoodOneIsUsedOnceItIsThere) {
   const fs::path rig = dir / "rig.h5";  // what plenopivd.yaml names: corrupt at first
   std::ofstream(rig) << "not a calibration file";
   std::ofstream(dir / "plenopivd.yaml") << "camera_file: " << kCameraFile << "\ncalibration_file: rig.h5\n"
-                                        << "data_dir: data\ncamera_uri: sim://?seed=2&ppm=0.1&rays=200\n";
-  const std::string control = "tcp://127.0.0.1:" + std::to_string(testing_support::free_tcp_port());
+                                        << "data_dir: data\ncamera_uri: sim://?seed=2&ppm=0.1&rays=200\nsimulation: true\n";
+  const std::string control = testing_support::ipc_endpoint("control");
   const std::string publish = "tcp://127.0.0.1:" + std::to_string(testing_support::free_tcp_port());
   testing_support::ChildProcess daemon({binary("plenopivd"), "--config", (dir / "plenopivd.yaml").string(),
                                         "--control", control, "--publish", publish},

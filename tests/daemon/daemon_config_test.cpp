@@ -29,8 +29,9 @@ std::string error_of(const std::string& text) {
 TEST(DaemonConfig, ShippedDefaultLoads) {
   const DaemonConfig c =
       load_daemon_config(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/plenopivd.yaml");
-  EXPECT_EQ(c.control_endpoint, "tcp://127.0.0.1:5555");
-  EXPECT_EQ(c.publish_endpoint, "tcp://*:5556");
+  EXPECT_EQ(c.control_endpoint, "ipc:///run/plenopiv/control");
+  EXPECT_EQ(c.publish_endpoint, "tcp://127.0.0.1:5556");
+  EXPECT_TRUE(c.simulation);
   EXPECT_TRUE(std::filesystem::exists(c.camera_file)) << c.camera_file;
   EXPECT_TRUE(c.calibration_file.empty());  // nominal until the rig is calibrated
 }
@@ -49,10 +50,35 @@ TEST(DaemonConfig, CalibrationFileIsTakenFromTheConfigFolderAndNeedsTheCamera) {
   EXPECT_NE(err.find("calibration_file: '/etc/plenopiv/rig.h5' needs camera_file"), std::string::npos) << err;
 }
 
-TEST(DaemonConfig, RemoteControlEndpointIsRefused) {
-  const std::string err = error_of("control_endpoint: tcp://*:5555\n");
-  EXPECT_NE(err.find("control_endpoint"), std::string::npos) << err;
-  EXPECT_NE(err.find("CURVE"), std::string::npos) << err;
+TEST(DaemonConfig, TcpControlEndpointsNeedCurveLocalOnesToo) {
+  for (const char* endpoint : {"tcp://*:5555", "tcp://127.0.0.1:5555", "tcp://localhost:5555"}) {
+    const std::string err = error_of(std::string("control_endpoint: ") + endpoint + "\n");
+    EXPECT_NE(err.find("control_endpoint"), std::string::npos) << err;
+    EXPECT_NE(err.find("curve:"), std::string::npos) << err;
+  }
+  const auto path = write_temp("curve.yaml",
+                               "control_endpoint: tcp://*:5555\n"
+                               "curve: {server_certificate: keys/d.key_secret, authorized_clients: keys/clients, "
+                               "publish: true}\n");
+  const DaemonConfig c = load_daemon_config(path);
+  ASSERT_TRUE(c.curve);
+  EXPECT_EQ(c.curve->server_certificate, path.parent_path() / "keys/d.key_secret");
+  EXPECT_EQ(c.curve->authorized_clients, path.parent_path() / "keys/clients");
+  EXPECT_TRUE(c.curve->publish);
+  EXPECT_NE(error_of("curve: {server_certificate: a.key_secret}\n").find("curve.authorized_clients: missing"),
+            std::string::npos)
+      << error_of("curve: {server_certificate: a.key_secret}\n");
+  EXPECT_NE(error_of("control_endpoint: tcp://*:1\ncontrol_socket_group: plenopiv\n"
+                     "curve: {server_certificate: a, authorized_clients: b}\n")
+                .find("control_socket_group: only an ipc://"),
+            std::string::npos);
+}
+
+TEST(DaemonConfig, TheSimulatedCameraExistsOnlyWhereTheConfigEnablesIt) {
+  EXPECT_FALSE(DaemonConfig{}.simulation);  // built-in default: real devices only
+  const std::string err = error_of("camera_uri: sim://?seed=1\n");
+  EXPECT_NE(err.find("simulation: true"), std::string::npos) << err;
+  EXPECT_EQ(error_of("camera_uri: sim://?seed=1\nsimulation: true\n"), "");
 }
 
 TEST(DaemonConfig, BadKeysAreNamed) {

@@ -16,7 +16,6 @@
 #include "core/io/tiff.hpp"
 #include "daemon/pipeline.hpp"
 #include "daemon/publisher.hpp"
-#include "daemon/recorder.hpp"
 #include "daemon/run.hpp"
 #include "drivers/sim/sim_camera.hpp"
 #include "drivers/trigger/sim_trigger.hpp"
@@ -44,7 +43,7 @@ drivers::FramePair make_pair(std::uint64_t index) {
 }
 
 // A field whose x displacement is the pair index (mm): tells which pair a result came from.
-ProcessedPair tagged_field(const drivers::FramePair& pair) {
+ProcessedPair tagged_field(const drivers::FramePair& pair, const CancelFlag& = CancelFlag{false}) {
   Grid3 g;
   g.shape = {3, 2, 2};
   ProcessedPair out;
@@ -73,17 +72,19 @@ TEST_P(Concurrency, OutputSeesEveryTakenPairInOrderWithItsOwnResult) {
     }
     mailbox.close();
   });
-  run_live_pipeline(mailbox, 3, tagged_field,
-                    [&](const drivers::FramePair& pair, ProcessedPair& result) {
-                      EXPECT_EQ(result.vectors.dx_mm[0], float(pair.pair_index));
-                      seen.push_back(pair.pair_index);
-                    },
-                    stats);
+  CancelFlag cancel{false};
+  run_live_pipeline(
+      mailbox, 3, [](const drivers::FramePair& pair, const CancelFlag& c) { return tagged_field(pair, c); },
+      [&](const drivers::FramePair& pair, ProcessedPair& result) {
+        EXPECT_EQ(result.vectors.dx_mm[0], float(pair.pair_index));
+        seen.push_back(pair.pair_index);
+      },
+      stats, cancel);
   producer.join();
   ASSERT_FALSE(seen.empty());
   for (std::size_t i = 1; i < seen.size(); ++i) EXPECT_LT(seen[i - 1], seen[i]);
   EXPECT_EQ(seen.back(), 39u);  // the newest pair is never skipped
-  EXPECT_EQ(stats.output.processed + stats.input.skipped, 40u);
+  EXPECT_EQ(stats.output.processed + mailbox.dropped(), 40u);
   EXPECT_EQ(stats.process.processed, stats.output.processed);
 }
 
@@ -103,18 +104,81 @@ TEST_P(Concurrency, SlowProcessingSkipsToTheNewestPairAndCountsTheRest) {
     release.count_down();
     mailbox.close();
   });
+  CancelFlag cancel{false};
   run_live_pipeline(
       mailbox, 1,
-      [&](const drivers::FramePair& pair) {
+      [&](const drivers::FramePair& pair, const CancelFlag&) {
         release.wait();
         return tagged_field(pair);
       },
       [&](const drivers::FramePair& pair, ProcessedPair&) { seen.push_back(pair.pair_index); },
-      stats);
+      stats, cancel);
   feeder.join();
   // One pair in flight: pair 0 blocks; when it finishes, the input takes the newest (10).
   EXPECT_EQ(seen, (std::vector<std::uint64_t>{0, 10}));
-  EXPECT_EQ(stats.input.skipped, 9u);
+  EXPECT_EQ(mailbox.dropped(), 9u);
+}
+
+TEST_P(Concurrency, TheLiveQueueStaysBoundedAtAnyRateAndCountsWhatItDrops) {
+  tbb::global_control limit(tbb::global_control::max_allowed_parallelism, GetParam());
+  LiveMailbox mailbox(3);
+  PipelineStats stats;
+  std::atomic<std::size_t> deepest{0};
+  std::thread producer([&] {
+    // Far faster than the processing below: without a bound the queue would hold most of them.
+    for (std::uint64_t i = 0; i < 500; ++i) {
+      mailbox.push(std::make_shared<const drivers::FramePair>(make_pair(i)));
+      deepest = std::max(deepest.load(), mailbox.depth());
+    }
+    mailbox.close();
+  });
+  CancelFlag cancel{false};
+  run_live_pipeline(
+      mailbox, 2,
+      [](const drivers::FramePair& pair, const CancelFlag&) {
+        std::this_thread::sleep_for(2ms);
+        return tagged_field(pair);
+      },
+      [](const drivers::FramePair&, ProcessedPair&) {}, stats, cancel);
+  producer.join();
+  EXPECT_LE(deepest.load(), 3u);
+  EXPECT_GT(mailbox.dropped(), 0u);
+  EXPECT_EQ(stats.output.processed + mailbox.dropped(), 500u) << "every pair processed or counted dropped";
+}
+
+TEST_P(Concurrency, ACancelGivesUpThePairsInFlightAtTheirNextCheck) {
+  tbb::global_control limit(tbb::global_control::max_allowed_parallelism, GetParam());
+  LiveMailbox mailbox;
+  PipelineStats stats;
+  CancelFlag cancel{false};
+  std::atomic<int> started{0};
+  std::thread feeder([&] {
+    mailbox.push(std::make_shared<const drivers::FramePair>(make_pair(0)));
+    while (started == 0) std::this_thread::sleep_for(1ms);
+    cancel = true;  // what Run::request_stop sets
+    mailbox.close_and_clear();
+  });
+  const auto t0 = std::chrono::steady_clock::now();
+  std::vector<std::uint64_t> seen;
+  run_live_pipeline(
+      mailbox, 2,
+      [&](const drivers::FramePair& pair, const CancelFlag& c) {
+        ++started;
+        // Work in "iterations" that check the flag, as MART and the correlation do through
+        // process_pair's progress callback; without a cancel this would take 60 s.
+        for (int iteration = 0; iteration < 6000; ++iteration) {
+          if (c) throw Cancelled("run stopping");
+          std::this_thread::sleep_for(10ms);
+        }
+        return tagged_field(pair);
+      },
+      [&](const drivers::FramePair& pair, ProcessedPair&) { seen.push_back(pair.pair_index); }, stats, cancel);
+  feeder.join();
+  const double took = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_LT(took, 5.0) << "the pipeline did not give up its pair in flight";
+  EXPECT_TRUE(seen.empty());
+  EXPECT_EQ(stats.process.cancelled, 1u);
+  EXPECT_EQ(stats.process.skipped, 0u) << "a cancelled pair is not a failed one";
 }
 
 TEST_P(Concurrency, AProcessingFailureSkipsThatPairOnly) {
@@ -131,81 +195,22 @@ TEST_P(Concurrency, AProcessingFailureSkipsThatPairOnly) {
     }
     one_by_one.close();
   });
+  CancelFlag cancel{false};
   run_live_pipeline(
       one_by_one, 2,
-      [&](const drivers::FramePair& pair) {
+      [&](const drivers::FramePair& pair, const CancelFlag&) {
         if (pair.pair_index == 1) throw std::runtime_error("no particles");
         return tagged_field(pair);
       },
       [&](const drivers::FramePair& pair, ProcessedPair&) { seen.push_back(pair.pair_index); },
-      stats);
+      stats, cancel);
   feeder.join();
   EXPECT_EQ(seen, (std::vector<std::uint64_t>{0, 2}));
   EXPECT_EQ(stats.process.skipped, 1u);
-  EXPECT_EQ(stats.input.skipped, 0u);
+  EXPECT_EQ(one_by_one.dropped(), 0u);
 }
 
 INSTANTIATE_TEST_SUITE_P(Threads, Concurrency, ::testing::Values(1, 2, 4));
-
-TEST(Recorder, FolderHoldsFramesVectorsStatisticsAndAManifestListingThem) {
-  const fs::path data = testing_support::temp_dir("daemon") / "recorder";
-  fs::remove_all(data);
-  RunConfig config = parse_run_config(
-      "dt_s: 0.001\nvolume: {x_mm: [0, 1], y_mm: [0, 1], z_mm: [0, 1], voxel_mm: 0.5}\n", "run.yaml");
-  Recorder recorder({data, "r1", &config, "test://", "sim://", {}, "plenopiv test camera", "software: test", nullptr});
-  EXPECT_EQ(read_manifest(recorder.dir()).state(), "recording");
-  for (std::uint64_t i = 0; i < 3; ++i) recorder.record_pair(make_pair(i));
-  // Vectors for pairs 0 and 2: u = 1 m/s and 3 m/s → mean 2, RMS fluctuation 1.
-  ProcessedPair a = tagged_field(make_pair(1)), b = tagged_field(make_pair(3));
-  recorder.record_vectors(0, a.vectors);
-  recorder.record_vectors(2, b.vectors);
-  msg::RunManifest m = read_manifest(recorder.dir());
-  ASSERT_EQ(m.pairs_size(), 3);
-  EXPECT_EQ(m.pairs(0).vectors(), "vectors/pair-000000.h5");
-  EXPECT_EQ(m.pairs(1).vectors(), "");
-  EXPECT_NEAR(m.pairs(1).frame_gap_s(), 100e-6, 1e-12);
-  EXPECT_EQ(m.pairs(1).measured_dt_s(), 0.0);  // no laser sync measured
-  recorder.close("complete", 2, 1);
-
-  m = read_manifest(recorder.dir());
-  EXPECT_EQ(m.state(), "complete");
-  EXPECT_EQ(m.run_id(), "r1");
-  EXPECT_EQ(m.config_file(), "run.yaml");
-  EXPECT_EQ(m.statistics_file(), "statistics.h5");
-  EXPECT_EQ(m.pairs_processed(), 2u);
-  EXPECT_EQ(m.pairs_skipped(), 1u);
-  for (const msg::ManifestPair& p : m.pairs()) {
-    const ImageU16 image = io::read_tiff_u16(recorder.dir() / p.frame_b());
-    EXPECT_EQ(image.pixels, make_pair(p.pair_index()).b.image.pixels);
-    EXPECT_EQ(p.frame_id_b(), 2 * p.pair_index() + 2);
-  }
-  const VectorField stats = io::read_vector_field_h5(recorder.dir() / "statistics.h5");
-  // Mean u = 2 m/s, stored as displacement over the nominal dt (1 ms): 2 mm.
-  EXPECT_NEAR(stats.dx_mm[0], 2.0, 1e-6);
-  std::ifstream config_copy(recorder.dir() / "run.yaml");
-  std::stringstream text;
-  text << config_copy.rdbuf();
-  EXPECT_EQ(text.str(), config.text);
-  for (const auto& entry : fs::recursive_directory_iterator(recorder.dir())) {
-    EXPECT_EQ(entry.path().filename().string().find(".tmp"), std::string::npos)
-        << "temporary file left: " << entry.path();
-  }
-}
-
-TEST(RunningStatistics, WelfordMeanAndRmsOfValidVectors) {
-  RunningStatistics s;
-  for (float d : {1.f, 3.f, 5.f}) {
-    ProcessedPair p = tagged_field(make_pair(0));
-    for (auto& x : p.vectors.dx_mm) x = d;
-    p.vectors.valid[1] = d == 5.f ? 0 : 1;  // node 1 misses the last sample
-    s.add(p.vectors);
-  }
-  EXPECT_NEAR(s.mean(0)[0], 3.0, 1e-6);            // u = 1, 3, 5 m/s
-  EXPECT_NEAR(s.rms(0)[0], std::sqrt(8.0 / 3), 1e-6);
-  EXPECT_NEAR(s.mean(0)[1], 2.0, 1e-6);            // u = 1, 3
-  EXPECT_NEAR(s.rms(0)[1], 1.0, 1e-6);
-  EXPECT_EQ(s.count()[1], 2u);
-}
 
 // A whole run in-process on the test camera.
 class RunTest : public ::testing::Test {
@@ -219,7 +224,9 @@ class RunTest : public ::testing::Test {
     env_.default_camera_uri = "test://";
     env_.default_trigger_uri = "sim://";
     env_.state = &state_;
-    env_.processing = [](const RunConfig&, const RunCalibration&) { return ProcessFn(tagged_field); };
+    env_.processing = [](const RunConfig&, const RunCalibration&) {
+      return ProcessFn([](const drivers::FramePair& pair, const CancelFlag& c) { return tagged_field(pair, c); });
+    };
     // Faster than a real laser, so runs stay short: frame B must end within the period.
     env_.timing.limits.laser_max_rate_hz = 200;
     env_.timing.limits.camera_max_pair_rate_hz = 200;
@@ -228,12 +235,22 @@ class RunTest : public ::testing::Test {
 
   RunConfig config(const std::string& extra) {
     return parse_run_config(
-        "volume: {x_mm: [0, 1], y_mm: [0, 1], z_mm: [0, 1], voxel_mm: 0.5}\n" + extra, "run.yaml");
+        (extra.find("dt_s:") == std::string::npos ? "dt_s: 0.0001\n" : "") +
+            std::string("volume: {x_mm: [0, 2], y_mm: [0, 2], z_mm: [0, 2], voxel_mm: 0.5}\n"
+                        "correlation: {passes: [{window: 4, overlap_percent: 50}]}\n") +
+            extra,
+        "run.yaml");
   }
 
   void wait_finished(daemon::Run& run) {
     for (int i = 0; i < 1000 && !run.finished(); ++i) std::this_thread::sleep_for(10ms);
     ASSERT_TRUE(run.finished());
+  }
+
+  static std::uint64_t recorded(const daemon::Run& run) {
+    msg::Status s;
+    run.fill_status(s);
+    return s.pairs_recorded();
   }
 
   // The sim trigger's lines, as it reports them.
@@ -399,13 +416,61 @@ TEST_F(RunTest, ACameraWithoutATriggerInputIsSoftwareTriggeredAndTheManifestSays
   expect_all_lines_low(run);
 }
 
+// A stop is bounded however long the processing would take: pairs in flight give up at their next
+// check (they stay on disk), the folder is closed "stopped" and says what was cancelled.
+TEST_F(RunTest, AStopWithSlowProcessingInFlightIsBounded) {
+  env_.processing = [](const RunConfig&, const RunCalibration&) {
+    return ProcessFn([](const drivers::FramePair& pair, const CancelFlag& cancel) {
+      for (int iteration = 0; iteration < 6000; ++iteration) {  // a minute of "MART iterations"
+        if (cancel) throw Cancelled("run stopping");
+        std::this_thread::sleep_for(10ms);
+      }
+      return tagged_field(pair);
+    });
+  };
+  state_.start("slow");
+  daemon::Run run(config("pairs: 0\nrate_hz: 20\nmax_pairs_in_flight: 2\nlive_queue: 3\n"), "slow", env_);
+  for (int i = 0; i < 500 && recorded(run) < 10; ++i) std::this_thread::sleep_for(10ms);
+  const auto stop = std::chrono::steady_clock::now();
+  state_.stop();
+  run.request_stop();
+  wait_finished(run);
+  const double took = std::chrono::duration<double>(std::chrono::steady_clock::now() - stop).count();
+  EXPECT_LT(took, 10.0) << "the stop waited for the processing";
+  EXPECT_EQ(state_.state(), RunState::Idle) << state_.error();
+  const msg::RunManifest m = read_manifest(run.dir());
+  EXPECT_EQ(m.state(), "stopped");
+  EXPECT_GE(m.pairs_size(), 10);
+  EXPECT_EQ(m.pairs_processed(), 0u);
+  EXPECT_GE(m.losses().processing_cancelled(), 1u);
+  // Every recorded pair was processed, cancelled, or dropped from the bounded live queue.
+  EXPECT_EQ(m.losses().processing_cancelled() + m.losses().live_queue_dropped(), std::uint64_t(m.pairs_size()))
+      << m.losses().DebugString();
+  EXPECT_EQ(m.frames_lost(), 0u);
+  expect_all_lines_low(run);
+}
+
+TEST_F(RunTest, ATooSlowOrNotANumberRateIsRefusedBeforeAnythingFires) {
+  state_.start("rate");
+  for (const char* rate : {"1e-12", ".nan"}) {
+    try {
+      daemon::Run run(config(std::string("pairs: 3\nrate_hz: ") + rate + "\n"), "rate", env_);
+      ADD_FAILURE() << "rate_hz " << rate << " was accepted";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("rate"), std::string::npos) << e.what();
+    }
+  }
+  state_.cancel_start();
+  EXPECT_FALSE(fs::exists(data_ / "run-rate"));
+}
+
 TEST_F(RunTest, ASubscriberThatNeverReadsDoesNotSlowAcquisition) {
   zmq::context_t context;
   auto publisher = std::make_optional<Publisher>(context, "tcp://127.0.0.1:*", 2);
   env_.publisher = &*publisher;
   // Big fields (32^3 nodes, 4 arrays: 512 KiB a message) fill the socket buffers quickly.
   env_.processing = [](const RunConfig&, const RunCalibration&) {
-    return ProcessFn([](const drivers::FramePair& pair) {
+    return ProcessFn([](const drivers::FramePair& pair, const CancelFlag&) {
       Grid3 g;
       g.shape = {32, 32, 32};
       ProcessedPair out;
@@ -423,15 +488,15 @@ TEST_F(RunTest, ASubscriberThatNeverReadsDoesNotSlowAcquisition) {
 
   const auto start = std::chrono::steady_clock::now();
   state_.start("deaf");
-  daemon::Run run(config("pairs: 40\nrate_hz: 100\nmax_pairs_in_flight: 2\n"), "deaf", env_);
+  daemon::Run run(config("pairs: 40\nrate_hz: 20\nmax_pairs_in_flight: 2\n"), "deaf", env_);
   wait_finished(run);
   const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   const msg::RunManifest m = read_manifest(run.dir());
   EXPECT_EQ(m.pairs_size(), 40);  // raw frame count unchanged
   EXPECT_EQ(m.pairs_processed() + m.pairs_skipped(), 40u);
   EXPECT_GE(publisher->messages_sent(), m.pairs_processed());  // every send returned
-  // 40 pairs at 100 Hz take 0.4 s; a publisher that blocked on the deaf subscriber would never
-  // finish. A bound on hanging, not a timing figure (measured: ~0.5 s on 2 loaded cores).
+  // 40 pairs at 20 Hz take 2 s; a publisher that blocked on the deaf subscriber would never
+  // finish. A bound on hanging, not a timing figure.
   EXPECT_LT(elapsed, 10.0);
 
   // The subscriber leaves first and the publisher closes once it has seen it go. libzmq 4.3.4

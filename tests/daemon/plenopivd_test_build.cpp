@@ -6,7 +6,8 @@
 
 namespace {
 
-plenopiv::daemon::ProcessedPair tagged_field(const plenopiv::drivers::FramePair& pair) {
+plenopiv::daemon::ProcessedPair tagged_field(const plenopiv::drivers::FramePair& pair,
+                                             const plenopiv::daemon::CancelFlag&) {
   plenopiv::Grid3 g;
   g.shape = {4, 3, 2};
   g.spacing_mm = {0.5, 0.5, 0.5};

@@ -1,7 +1,11 @@
 // The live processing stage on ray-traced pairs (core/sim): a known uniform displacement comes back.
 #include <gtest/gtest.h>
 
+#include <spdlog/sinks/ringbuffer_sink.h>
+#include <spdlog/spdlog.h>
+
 #include <chrono>
+#include <memory>
 
 #include "core/base/errors.hpp"
 #include "core/optics/camera_file.hpp"
@@ -40,7 +44,8 @@ TEST(Processing, UniformDisplacementOfARayTracedPairComesBack) {
   const RunConfig config = parse_run_config(kConfig, "run.yaml");
   const auto t0 = std::chrono::steady_clock::now();
   const ProcessFn process = plenoptic_processing(camera)(config, RunCalibration{});
-  const ProcessedPair out = process(pair);
+  const CancelFlag go{false};
+  const ProcessedPair out = process(pair, go);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 
   const VectorField& f = out.vectors;
@@ -68,6 +73,10 @@ TEST(Processing, UniformDisplacementOfARayTracedPairComesBack) {
   EXPECT_EQ(valid, f.valid.size());
   EXPECT_NEAR(mean_dx, shift_mm, 0.02);
   EXPECT_NEAR(mean_dy, 0.0, 0.01);
+
+  // A stopping run: the same pair gives up at the first MART iteration's check.
+  const CancelFlag stop{true};
+  EXPECT_THROW(process(pair, stop), Cancelled);
 }
 
 TEST(Processing, BadSettingsAndWrongImagesAreNamed) {
@@ -75,20 +84,58 @@ TEST(Processing, BadSettingsAndWrongImagesAreNamed) {
       optics::load_camera_file(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml");
   const ProcessFactory factory = plenoptic_processing(camera);
   const std::string bad =
-      "volume: {x_mm: [-1, 1], y_mm: [-1, 1], z_mm: [-1, 1], voxel_mm: 0.125}\n"
+      "dt_s: 0.001\nvolume: {x_mm: [-1, 1], y_mm: [-1, 1], z_mm: [-1, 1], voxel_mm: 0.125}\n"
       "reconstruction: {iteratons: 3}\n";
   try {
-    factory(parse_run_config(bad, "run.yaml"), RunCalibration{});
+    parse_run_config(bad, "run.yaml");
     FAIL() << "a misspelt reconstruction key was accepted";
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find("reconstruction.iteratons: unknown key"), std::string::npos)
         << e.what();
   }
+  // A volume whose pairs in flight would not fit this machine's memory: refused with the estimate
+  // before any table is built (2^29 voxels is what run.yaml itself allows).
+  try {
+    factory(parse_run_config("dt_s: 0.001\nvolume: {x_mm: [-100, 100], y_mm: [-100, 100], z_mm: [-5, 5], voxel_mm: 0.125}\n"
+                             "max_pairs_in_flight: 4\n",
+                             "run.yaml"),
+            RunCalibration{});
+    FAIL() << "a 1600 x 1600 x 96 voxel volume with 4 pairs in flight was accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("processing 4 pair(s) at once on a 1600 x 1600 x"), std::string::npos)
+        << e.what();
+    EXPECT_NE(std::string(e.what()).find("GB of memory"), std::string::npos) << e.what();
+  }
   const ProcessFn process = factory(parse_run_config(kConfig, "run.yaml"), RunCalibration{});
   drivers::FramePair small;
   small.a.image = ImageU16(64, 48);
   small.b.image = ImageU16(64, 48);
-  EXPECT_THROW(process(small), InputError);  // not the camera's sensor size
+  const CancelFlag go{false};
+  EXPECT_THROW(process(small, go), InputError);  // not the camera's sensor size
+}
+
+// The factory keeps the operators it built (process::OperatorCache): a second run on the same
+// camera, calibration and volume builds no weight tables, a run on another volume does; each run
+// says which in its log line.
+TEST(Processing, ARunOnAnEarlierRunsGeometryBuildsNoTables) {
+  const optics::CameraModel camera =
+      optics::load_camera_file(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml");
+  auto sink = std::make_shared<spdlog::sinks::ringbuffer_sink_mt>(8);
+  const auto previous = spdlog::default_logger();
+  spdlog::set_default_logger(std::make_shared<spdlog::logger>("processing-test", sink));
+  const ProcessFactory factory = plenoptic_processing(camera);
+  const RunConfig config = parse_run_config(kConfig, "run.yaml");
+  std::string other = kConfig;
+  other.replace(other.find("x_mm: [-1, 1]"), 13, "x_mm: [-1.25, 1.25]");
+  factory(config, RunCalibration{});
+  factory(config, RunCalibration{});
+  factory(parse_run_config(other, "run.yaml"), RunCalibration{});
+  spdlog::set_default_logger(previous);
+  const std::vector<std::string> lines = sink->last_formatted();
+  ASSERT_EQ(lines.size(), 3u);
+  EXPECT_NE(lines[0].find("operator built"), std::string::npos) << lines[0];
+  EXPECT_NE(lines[1].find("operator kept in memory"), std::string::npos) << lines[1];
+  EXPECT_NE(lines[2].find("operator built"), std::string::npos) << lines[2];
 }
 
 }  // namespace

@@ -8,7 +8,9 @@
 
 #include <fstream>
 #include <sstream>
+#include <algorithm>
 #include <cmath>
+#include <csignal>
 #include <thread>
 #include <tuple>
 
@@ -219,6 +221,171 @@ TEST(Reprocess, ACalibratedRunKeepsItsCalibrationAndReprocessesWithIt) {
   }
 }
 
+// `plenopiv process` with `args` (after the program name); the output, and the exit status checked.
+std::string plenopiv_ok(const std::vector<std::string>& args) {
+  std::vector<std::string> argv{testing_support::binary("plenopiv")};
+  argv.insert(argv.end(), args.begin(), args.end());
+  std::string out;
+  EXPECT_EQ(testing_support::run_command(argv, out, 300s), 0) << out;
+  return out;
+}
+
+// Every array of two vector field files, bit for bit.
+void expect_same_field(const fs::path& a, const fs::path& b) {
+  const VectorField fa = io::read_vector_field_h5(a), fb = io::read_vector_field_h5(b);
+  EXPECT_EQ(fa.grid, fb.grid) << a << " " << b;
+  EXPECT_EQ(fa.dx_mm, fb.dx_mm) << a << " " << b;
+  EXPECT_EQ(fa.dy_mm, fb.dy_mm) << a << " " << b;
+  EXPECT_EQ(fa.dz_mm, fb.dz_mm) << a << " " << b;
+  EXPECT_EQ(fa.valid, fb.valid) << a << " " << b;
+  EXPECT_EQ(fa.dt_s, fb.dt_s) << a << " " << b;
+}
+
+std::vector<fs::path> pair_outputs(const fs::path& dir) {
+  std::vector<fs::path> out;
+  for (const auto& e : fs::directory_iterator(dir)) {
+    if (e.path().extension() == ".h5" && e.path().filename().string().rfind("pair-", 0) == 0) out.push_back(e.path());
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+// Pairs in parallel, and shards run apart and merged, give the bits of one local pass: the per-pair
+// fields and the run statistics; the merge also writes a ParaView series of the pairs in order.
+TEST(Reprocess, ParallelPairsAndShardsGiveTheBitsOfOneLocalPass) {
+  const fs::path& run = recorded_run();
+  const fs::path base = testing_support::temp_dir("reprocess") / "batch";
+  fs::remove_all(base);
+  plenopiv_ok({"process", "--run", run.string(), "-o", (base / "local").string()});
+  plenopiv_ok({"process", "--run", run.string(), "-o", (base / "jobs").string(), "--jobs", "2"});
+  for (const char* shard : {"1/2", "0/2"}) {
+    const std::string out = plenopiv_ok({"process", "--run", run.string(), "-o", (base / "shards").string(),
+                                         "--shard", shard});
+    EXPECT_EQ(out.find("statistics.h5 and series.pvd written"), std::string::npos) << "a shard merged: " << out;
+  }
+  EXPECT_FALSE(fs::exists(base / "shards" / "statistics.h5"));
+  plenopiv_ok({"process", "--run", run.string(), "-o", (base / "shards").string(), "--merge"});
+  const std::vector<fs::path> local = pair_outputs(base / "local");
+  ASSERT_EQ(local.size(), 3u);
+  for (const char* other : {"jobs", "shards"}) {
+    ASSERT_EQ(pair_outputs(base / other).size(), local.size()) << other;
+    for (const fs::path& f : local) expect_same_field(f, base / other / f.filename());
+    expect_same_field(base / "local" / "statistics.h5", base / other / "statistics.h5");
+  }
+  // The statistics and the series open where users open them.
+  std::string out;
+  ASSERT_EQ(testing_support::run_command(
+                {"/usr/bin/python3", "-c",
+                 "import h5py, sys, xml.etree.ElementTree as ET; f = h5py.File(sys.argv[1]); "
+                 "print(f['vectors'].attrs['fields'].decode(), float(f['vectors/valid_fraction'][()].max()), "
+                 "[d.get('file') for d in ET.parse(sys.argv[2]).getroot().iter('DataSet')])",
+                 (base / "shards" / "statistics.h5").string(), (base / "shards" / "series.pvd").string()},
+                out),
+            0)
+      << out;
+  EXPECT_EQ(out, "3 1.0 ['pair-000000.vti', 'pair-000001.vti', 'pair-000002.vti']\n");
+  // A merge with a pair missing says so, naming the first.
+  fs::remove(base / "shards" / "pair-000001.h5");
+  std::vector<std::string> argv{testing_support::binary("plenopiv"), "process", "--run", run.string(), "-o",
+                                (base / "shards").string(), "--merge"};
+  EXPECT_EQ(testing_support::run_command(argv, out), 2) << out;
+  EXPECT_NE(out.find("1 of 3 pairs have no up-to-date result (first: pair 1)"), std::string::npos) << out;
+}
+
+// --resume redoes only what is missing, half written (a temporary file) or stale (other settings),
+// and counts what it skips; a killed reprocess is finished by a resumed one.
+TEST(Reprocess, ResumeRedoesOnlyMissingOrStalePairs) {
+  const fs::path& run = recorded_run();
+  const fs::path out_dir = testing_support::temp_dir("reprocess") / "resume";
+  fs::remove_all(out_dir);
+  plenopiv_ok({"process", "--run", run.string(), "-o", out_dir.string()});
+  fs::remove(out_dir / "pair-000001.h5");
+  std::ofstream(out_dir / ".pair-000002.h5.tmp-1234-0") << "half written";
+  std::string out = plenopiv_ok({"process", "--run", run.string(), "-o", out_dir.string(), "--resume"});
+  EXPECT_NE(out.find("3 pair(s) selected, 1 processed, 2 up to date"), std::string::npos) << out;
+  out = plenopiv_ok({"process", "--run", run.string(), "-o", out_dir.string(), "--resume"});
+  EXPECT_NE(out.find("3 pair(s) selected, 0 processed, 3 up to date"), std::string::npos) << out;
+  // Other settings: every pair is stale.
+  std::string spec = io::read_file_bytes(run / "process.yaml");
+  spec.replace(spec.find("iterations: 2"), std::string("iterations: 2").size(), "iterations: 1");
+  std::ofstream(out_dir.parent_path() / "offline.yaml") << spec;
+  out = plenopiv_ok({"process", "--run", run.string(), "-o", out_dir.string(), "--resume", "--config",
+                     (out_dir.parent_path() / "offline.yaml").string()});
+  EXPECT_NE(out.find("3 pair(s) selected, 3 processed, 0 up to date"), std::string::npos) << out;
+  EXPECT_EQ(io::read_file_bytes(out_dir / "process.yaml"), spec) << "the settings used are kept beside the outputs";
+
+  // Killed after its first pair, then resumed: only the rest is processed.
+  const fs::path killed = out_dir.parent_path() / "killed";
+  fs::remove_all(killed);
+  testing_support::ChildProcess job({testing_support::binary("plenopiv"), "process", "--run", run.string(), "-o",
+                                     killed.string()},
+                                    out_dir.parent_path() / "killed.log");
+  for (int i = 0; i < 3000 && !fs::exists(killed / "pair-000000.vti"); ++i) std::this_thread::sleep_for(10ms);
+  job.signal(SIGKILL);
+  ASSERT_TRUE(job.wait(10s).has_value());
+  const std::size_t done = pair_outputs(killed).size();
+  ASSERT_GE(done, 1u);
+  out = plenopiv_ok({"process", "--run", run.string(), "-o", killed.string(), "--resume"});
+  EXPECT_NE(out.find("3 pair(s) selected, " + std::to_string(3 - done) + " processed, " + std::to_string(done) +
+                     " up to date"),
+            std::string::npos)
+      << out;
+  const fs::path reference = out_dir.parent_path() / "reference";
+  fs::remove_all(reference);
+  plenopiv_ok({"process", "--run", run.string(), "-o", reference.string()});
+  for (const fs::path& f : pair_outputs(reference)) expect_same_field(f, killed / f.filename());
+}
+
+// A range of pairs, offline settings, and the refusals of bad ranges, shards and tiers.
+TEST(Reprocess, RangesAndOfflineSettingsAreTheUsersChoice) {
+  const fs::path& run = recorded_run();
+  const fs::path dir = testing_support::temp_dir("reprocess") / "range";
+  fs::remove_all(dir);
+  plenopiv_ok({"process", "--run", run.string(), "-o", dir.string(), "--pairs", "1:"});
+  ASSERT_EQ(pair_outputs(dir).size(), 2u);
+  EXPECT_EQ(pair_outputs(dir).front().filename(), "pair-000001.h5");
+  std::string out;
+  for (const auto& [args, culprit] :
+       {std::pair{std::vector<std::string>{"--pairs", "2:1"}, "--pairs: '2:1'"},
+        std::pair{std::vector<std::string>{"--pairs", "7:9"}, "no recorded pair"},
+        std::pair{std::vector<std::string>{"--shard", "2/2"}, "--shard: '2/2': needs 0 <= i < n"},
+        std::pair{std::vector<std::string>{"--tier", "live"}, "has no live: section"},
+        std::pair{std::vector<std::string>{"--jobs", "0"}, "--jobs: 1 to 64"},
+        std::pair{std::vector<std::string>{"--dt", "0.001"}, "--dt: --run uses each pair's measured dt"}}) {
+    std::vector<std::string> argv{testing_support::binary("plenopiv"), "process", "--run", run.string(), "-o",
+                                  (dir / "refused").string()};
+    argv.insert(argv.end(), args.begin(), args.end());
+    EXPECT_EQ(testing_support::run_command(argv, out), 2) << out;
+    EXPECT_NE(out.find(culprit), std::string::npos) << culprit << ": " << out;
+    EXPECT_FALSE(fs::exists(dir / "refused")) << culprit;
+  }
+}
+
+// A recorded pair processed on its own (frames given by name) uses the config's nominal dt unless
+// --dt says otherwise, and says that the run measured another.
+TEST(Reprocess, OnePairFromARunFolderSaysItsMeasuredDtIsNotUsed) {
+  const fs::path& run = recorded_run();
+  const msg::RunManifest m = read_manifest(run);
+  const msg::ManifestPair& p = m.pairs(0);
+  ASSERT_GT(p.measured_dt_s(), 0);
+  const fs::path out_file = testing_support::temp_dir("reprocess") / "single.h5";
+  const std::vector<std::string> single{"process", kCameraFile, (run / p.frame_a()).string(),
+                                        (run / p.frame_b()).string(), "--config", (run / "process.yaml").string(),
+                                        "--nominal", "-o", out_file.string()};
+  std::string out = plenopiv_ok(single);
+  EXPECT_NE(out.find("warning: " + (run / p.frame_a()).string() + " is pair 0 of run"), std::string::npos) << out;
+  EXPECT_DOUBLE_EQ(io::read_vector_field_h5(out_file).dt_s, 0.001);  // the nominal dt
+  char dt[64];
+  std::snprintf(dt, sizeof dt, "%.17g", p.measured_dt_s());
+  std::vector<std::string> with_dt = single;
+  with_dt.insert(with_dt.end(), {"--dt", dt});
+  out = plenopiv_ok(with_dt);
+  EXPECT_EQ(out.find("warning:"), std::string::npos) << out;
+  EXPECT_DOUBLE_EQ(io::read_vector_field_h5(out_file).dt_s, p.measured_dt_s());
+  // ... and the field is then the live one, bit for bit.
+  if (!p.vectors().empty()) expect_same_field(run / p.vectors(), out_file);
+}
+
 // A run started with `file` as the rig's calibration (and `camera_file`) must be refused before it
 // has a folder, naming the file and `culprit`.
 void expect_run_refused(const fs::path& file, const std::string& culprit, const fs::path& camera_file = kCameraFile) {
@@ -298,6 +465,31 @@ TEST(Reprocess, ADamagedFolderIsRefusedNamingWhatIsMissing) {
     s.replace(at, std::string("\"process_file\": \"process.yaml\"").size(), "\"process_file\": \"\"");
     std::ofstream(d / "manifest.json") << s;
   }, "process_file is empty");
+  // A manifest edited to point outside the folder, or to list a frame twice; a frame cut short.
+  const auto edit_manifest = [](const fs::path& d, const std::string& from, const std::string& to) {
+    std::ifstream in(d / "manifest.json");
+    std::stringstream text;
+    text << in.rdbuf();
+    std::string s = text.str();
+    const auto at = s.find(from);
+    ASSERT_NE(at, std::string::npos) << from;
+    s.replace(at, from.size(), to);
+    std::ofstream(d / "manifest.json") << s;
+  };
+  expect_refused("outside", [&](const fs::path& d) {
+    edit_manifest(d, "\"frames/pair-000001-A.tif\"", "\"../../../../etc/passwd\"");
+  }, "is not a path inside the run folder");
+  expect_refused("absolute", [&](const fs::path& d) {
+    edit_manifest(d, "\"frames/pair-000001-A.tif\"", "\"/etc/passwd\"");
+  }, "is not a path inside the run folder");
+  expect_refused("twice", [&](const fs::path& d) {
+    edit_manifest(d, "\"frames/pair-000002-A.tif\"", "\"frames/pair-000001-A.tif\"");
+  }, "frames/pair-000001-A.tif is listed twice");
+  // The last pair's frame truncated: found before the first pair is processed (nothing written).
+  expect_refused("truncated", [](const fs::path& d) {
+    const fs::path frame = d / "frames/pair-000002-B.tif";
+    fs::resize_file(frame, fs::file_size(frame) / 2);
+  }, "frames/pair-000002-B.tif: ");
   // The calibrated run without its calibration, or with a changed one.
   expect_refused("calibration", [](const fs::path& d) { fs::remove(d / "calibration.h5"); },
                  "calibration_file: " , calibrated_run());

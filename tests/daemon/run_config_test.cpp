@@ -11,7 +11,11 @@
 namespace plenopiv::daemon {
 namespace {
 
-const std::string kVolume = "volume: {x_mm: [-1, 1], y_mm: [-2, 2], z_mm: [0, 1], voxel_mm: 0.5}\n";
+// A run config's processing keys are core/process's, so they need what process.yaml needs: dt_s, and
+// windows that fit the volume.
+const std::string kVolume =
+    "dt_s: 0.0001\nvolume: {x_mm: [-1, 1], y_mm: [-2, 2], z_mm: [0, 2], voxel_mm: 0.5}\n"
+    "correlation: {passes: [{window: 4, overlap_percent: 50}]}\n";
 
 std::string error_of(const std::string& text) {
   try {
@@ -31,10 +35,10 @@ TEST(RunConfig, ShippedDefaultParses) {
   EXPECT_DOUBLE_EQ(c.rate_hz, 2.0);
   EXPECT_DOUBLE_EQ(c.dt_s, 1e-4);
   EXPECT_TRUE(c.camera_uri.empty());  // the daemon's default camera
-  EXPECT_EQ(c.reconstruction["iterations"].as<int>(), 3);
-  EXPECT_EQ(c.correlation["passes"][0]["window"].as<int>(), 16);
+  EXPECT_EQ(c.spec.full.mart.iterations, 3);
   const process::ProcessSettings s =
       process::process_settings_from(YamlMap(load_yaml_text(c.process_yaml(), "process.yaml"), "process.yaml"));
+  EXPECT_EQ(s.grid.shape, (std::array<int, 3>{32, 32, 32}));  // [-2, 2] mm at 0.125 mm: the box's faces
   ASSERT_EQ(s.correlation.passes.size(), 2u);
   EXPECT_EQ(s.correlation.passes[0].depth_margin, 4);  // depth motion recovered twice over (benchmarks.md)
   EXPECT_EQ(s.correlation.passes[1].window, (std::array<int, 3>{8, 8, 8}));
@@ -45,7 +49,7 @@ TEST(RunConfig, ShippedDefaultParses) {
 }
 
 // The paper-scale live config gives core/process the paper's box and the setting measured to fit
-// 30 s per pair (docs/benchmarks.md, "Full scale, now").
+// 30 s per pair (docs/benchmarks.md, "Paper scale: time against error").
 TEST(RunConfig, ShippedPaperScaleConfigParses) {
   std::ifstream in(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/run-paper.yaml");
   std::stringstream text;
@@ -68,14 +72,39 @@ TEST(RunConfig, ShippedPaperScaleConfigParses) {
   EXPECT_EQ(s.correlation.final_smoothing, 1);
 }
 
-TEST(RunConfig, VolumeGridCoversTheExtent) {
+// volume ranges are the box's faces, as in process.yaml: one meaning wherever the key is read.
+TEST(RunConfig, VolumeRangesAreTheBoxFacesAsInProcessYaml) {
   const RunConfig c = parse_run_config(kVolume, "run.yaml");
   const Grid3 g = c.volume_grid();
-  EXPECT_EQ(g.shape, (std::array<int, 3>{5, 9, 3}));
-  EXPECT_EQ(g.origin_mm, (std::array<double, 3>{-1, -2, 0}));
+  EXPECT_EQ(g.shape, (std::array<int, 3>{4, 8, 4}));
+  EXPECT_EQ(g.origin_mm, (std::array<double, 3>{-0.75, -1.75, 0.25}));
   EXPECT_EQ(g.spacing_mm, (std::array<double, 3>{0.5, 0.5, 0.5}));
   EXPECT_EQ(c.pair_count, 0u);  // until stopped
-  EXPECT_TRUE(c.reconstruction.IsMap());
+  EXPECT_EQ(g, process::process_settings_from(YamlMap(load_yaml_text(kVolume, "process.yaml"), "process.yaml")).grid);
+}
+
+// A live section overrides the full settings key by key: the live lane's fast tier.
+TEST(RunConfig, ALiveSectionIsTheFastTierOverridingTheFullSettings) {
+  const RunConfig c = parse_run_config(
+      "dt_s: 0.0001\nvolume: {x_mm: [-2, 2], y_mm: [-2, 2], z_mm: [0, 4], voxel_mm: 0.25}\n"
+      "reconstruction: {iterations: 8, mu: 1}\ncorrelation: {passes: [{window: 8, overlap_percent: 50}]}\n"
+      "live: {volume: {voxel_mm: 0.5}, reconstruction: {iterations: 2},\n"
+      "       correlation: {passes: [{window: 4, overlap_percent: 0}]}}\n",
+      "run.yaml");
+  ASSERT_TRUE(c.spec.live);
+  EXPECT_EQ(c.spec.full.grid.shape, (std::array<int, 3>{16, 16, 16}));
+  EXPECT_EQ(c.spec.live->grid.shape, (std::array<int, 3>{8, 8, 8}));  // coarser voxels, the same box
+  EXPECT_EQ(c.spec.full.mart.iterations, 8);
+  EXPECT_EQ(c.spec.live->mart.iterations, 2);
+  EXPECT_DOUBLE_EQ(c.spec.live->mart.mu, 1.0);  // not overridden: the full tier's
+  EXPECT_DOUBLE_EQ(c.spec.live->correlation.passes[0].overlap_percent, 0.0);
+  EXPECT_DOUBLE_EQ(c.spec.live->correlation.dt_s, 1e-4);
+  EXPECT_FALSE(parse_run_config(kVolume, "run.yaml").spec.live);
+  // A bad key in the live section is named as the live tier's.
+  const std::string e = error_of(kVolume + "live: {reconstruction: {iterations: 0}}\n");
+  EXPECT_NE(e.find("run.yaml (live tier): reconstruction.iterations: must be 1 to 10000"), std::string::npos) << e;
+  EXPECT_NE(error_of(kVolume + "live: {dt_s: 0.1}\n").find("live.dt_s: unknown key"), std::string::npos)
+      << error_of(kVolume + "live: {dt_s: 0.1}\n");
 }
 
 TEST(RunConfig, UnknownKeyIsNamed) {
@@ -92,23 +121,26 @@ TEST(RunConfig, UnknownVolumeKeyIsNamedWithItsPath) {
 TEST(RunConfig, BadValuesAreNamed) {
   EXPECT_NE(error_of(kVolume + "pairs: -1\n").find("pairs: must be >= 0"), std::string::npos);
   EXPECT_NE(error_of(kVolume + "rate_hz: 0\n").find("rate_hz"), std::string::npos);
-  EXPECT_NE(error_of(kVolume + "rate_hz: 10\ndt_s: 0.2\n").find("dt_s"), std::string::npos);
   EXPECT_NE(error_of(kVolume + "reconstruction: 3\n").find("reconstruction: expected a mapping"),
             std::string::npos);
   EXPECT_NE(error_of(kVolume + "max_pairs_in_flight: 0\n").find("max_pairs_in_flight"),
             std::string::npos);
-  EXPECT_NE(error_of("volume: {x_mm: [1, -1], y_mm: [-1, 1], z_mm: [0, 1], voxel_mm: 1}\n")
-                .find("volume.x_mm: max must be greater than min"),
+  EXPECT_NE(error_of("dt_s: 0.001\nvolume: {x_mm: [1, -1], y_mm: [-1, 1], z_mm: [0, 1], voxel_mm: 1}\n")
+                .find("x extent needs min < max"),
             std::string::npos);
-  EXPECT_NE(error_of("volume: {x_mm: [-1, 1], y_mm: [-1, 1], z_mm: [0, 1]}\n").find("voxel_mm"),
+  EXPECT_NE(error_of("dt_s: 0.001\nvolume: {x_mm: [-1, 1], y_mm: [-1, 1], z_mm: [0, 1]}\n").find("voxel_mm"),
             std::string::npos);
-  EXPECT_NE(error_of("pairs: 3\n").find("volume"), std::string::npos);
+  EXPECT_NE(error_of("dt_s: 0.001\npairs: 3\n").find("volume"), std::string::npos);
+  // MART's ranges are recon's (one owner): the same bound whether run.yaml or process.yaml says it.
+  EXPECT_NE(error_of(kVolume + "reconstruction: {iterations: 20000}\n").find("reconstruction.iterations: must be 1 to 10000"),
+            std::string::npos)
+      << error_of(kVolume + "reconstruction: {iterations: 20000}\n");
   EXPECT_NE(error_of("pairs: [3\n").find("run.yaml"), std::string::npos);  // YAML syntax
 }
 
-// process.yaml, as the live stage and `plenopiv process --run` read it: the run's grid,
-// the run's dt, its sections, and the depth guard when the run sets one.
-TEST(RunConfig, ProcessYamlGivesCoreProcessTheLiveGridAndSettings) {
+// process.yaml, as the run folder keeps it and `plenopiv process --run` reads it: the same spec the
+// live stage used, key for key.
+TEST(RunConfig, ProcessYamlGivesCoreProcessTheSameSpec) {
   for (const std::string& volume :
        {std::string("volume: {x_mm: [-1, 1], y_mm: [-2, 2], z_mm: [0, 2], voxel_mm: 0.5}\n"),
         std::string("volume: {x_mm: [-2, 2], y_mm: [-2, 2], z_mm: [-2, 2], voxel_mm: 0.125}\n"),
@@ -116,21 +148,21 @@ TEST(RunConfig, ProcessYamlGivesCoreProcessTheLiveGridAndSettings) {
                     "depth_guard_mm: 0.25}\n")}) {
     const RunConfig c = parse_run_config(
         "dt_s: 0.0004\n" + volume + "reconstruction: {iterations: 2, mu: 0.7}\n"
-        "correlation: {passes: [{window: 4, overlap_percent: 50}]}\n", "run.yaml");
-    const process::ProcessSettings s =
-        process::process_settings_from(YamlMap(load_yaml_text(c.process_yaml(), "process.yaml"), "process.yaml"));
-    EXPECT_EQ(s.grid.shape, c.volume_grid().shape) << volume;
-    // The same voxels: exactly for binary fractions like 0.125, to a rounding of the extent's
-    // midpoint otherwise (both the live stage and --run read process.yaml, so they agree exactly).
-    for (int a = 0; a < 3; ++a) EXPECT_NEAR(s.grid.origin_mm[a], c.volume_grid().origin_mm[a], 1e-12) << volume;
-    EXPECT_EQ(s.grid.spacing_mm, c.volume_grid().spacing_mm) << volume;
-    EXPECT_DOUBLE_EQ(s.correlation.dt_s, 4e-4);
-    EXPECT_EQ(s.mart.iterations, 2);
-    EXPECT_DOUBLE_EQ(s.mart.mu, 0.7);
-    EXPECT_EQ(s.correlation.passes.size(), 1u);
-    EXPECT_DOUBLE_EQ(s.depth_guard_mm, c.depth_guard_mm.value_or(process::ProcessSettings{}.depth_guard_mm));
+        "correlation: {passes: [{window: 4, overlap_percent: 50}]}\nlive: {reconstruction: {iterations: 1}}\n",
+        "run.yaml");
+    const process::ProcessSpec s =
+        process::process_spec_from(YamlMap(load_yaml_text(c.process_yaml(), "process.yaml"), "process.yaml"));
+    EXPECT_EQ(s.full.grid, c.volume_grid()) << volume;
+    EXPECT_DOUBLE_EQ(s.full.correlation.dt_s, 4e-4);
+    EXPECT_EQ(s.full.mart.iterations, 2);
+    EXPECT_DOUBLE_EQ(s.full.mart.mu, 0.7);
+    EXPECT_EQ(s.full.correlation.passes.size(), 1u);
+    EXPECT_DOUBLE_EQ(s.full.depth_guard_mm, c.spec.full.depth_guard_mm);
+    ASSERT_TRUE(s.live);
+    EXPECT_EQ(s.live->mart.iterations, 1);
   }
-  EXPECT_NE(error_of(kVolume.substr(0, kVolume.size() - 2) + ", depth_guard_mm: -1}\n").find("volume.depth_guard_mm"),
+  EXPECT_NE(error_of(kVolume.substr(0, kVolume.find("voxel_mm: 0.5}")) + "voxel_mm: 0.5, depth_guard_mm: -1}\n")
+                .find("volume.depth_guard_mm"),
             std::string::npos);
 }
 

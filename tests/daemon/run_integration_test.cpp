@@ -30,7 +30,8 @@ using testing_support::ChildProcess;
 
 const std::string kRun =
     "rate_hz: 10\ndt_s: 0.001\n"
-    "volume: {x_mm: [-1, 1], y_mm: [-1, 1], z_mm: [0, 1], voxel_mm: 0.5}\n";
+    "volume: {x_mm: [-1, 1], y_mm: [-1, 1], z_mm: [0, 2], voxel_mm: 0.5}\n"
+    "correlation: {passes: [{window: 4, overlap_percent: 50}]}\n";
 
 class DaemonRuns : public ::testing::Test {
  protected:
@@ -39,12 +40,23 @@ class DaemonRuns : public ::testing::Test {
     scratch_ = testing_support::temp_dir("daemon-runs") / name;
     fs::remove_all(scratch_);
     fs::create_directories(scratch_);
-    control_ = "tcp://127.0.0.1:" + std::to_string(testing_support::free_tcp_port());
+    start_daemon();
+  }
+
+  // A fresh plenopivd on the same data directory (after the last one ended).
+  void restart_daemon() {
+    daemon_.reset();
+    start_daemon();
+  }
+
+  void start_daemon() {
+    control_ = testing_support::ipc_endpoint("control");
     publish_ = "tcp://127.0.0.1:" + std::to_string(testing_support::free_tcp_port());
     daemon_ = std::make_unique<ChildProcess>(
         std::vector<std::string>{binary("plenopivd-testcam"), "--control", control_, "--publish",
-                                 publish_, "--camera", "test://", "--data-dir",
-                                 (scratch_ / "data").string()},
+                                 publish_, "--camera", "test://", "--data-dir", (scratch_ / "data").string(),
+                                 "--simulation", "--camera-file",
+                                 std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml"},
         scratch_ / "plenopivd.log");
     for (int i = 0; i < 100; ++i) {
       if (status_or_null()) return;
@@ -192,15 +204,65 @@ TEST_F(DaemonRuns, IllegalAndInvalidRequestsAreRefusedAndTheDaemonServesOn) {
 
   ASSERT_EQ(client({"capture-calibration", "--frames", "2"}, out), 0) << out;
   EXPECT_NE(out.find("2 calibration images in"), std::string::npos) << out;
+  // A repetition rate that would overflow the trigger's nanosecond clock is refused, naming it.
+  const std::string slow = "rate_hz: 1.0e-12\n" + kRun.substr(kRun.find("dt_s"));
+  EXPECT_EQ(client({"run", "start", "--config", write_config(slow).string()}, out), 4);
+  EXPECT_NE(out.find("INVALID"), std::string::npos) << out;
+  EXPECT_NE(out.find("below one pair per 3600 s"), std::string::npos) << out;
   EXPECT_TRUE(daemon_->running());
+}
+
+// A camera whose render thread fails ends the run as failed, with the reason, and the daemon serves
+// on: a new run can start.
+TEST_F(DaemonRuns, ACameraThatFailsFailsTheRunNotTheDaemon) {
+  std::string out;
+  ASSERT_EQ(client({"run", "start", "--config",
+                    write_config(kRun + "camera_uri: \"sim://?rays=200&ppm=0.02&fail_after=1\"\n").string(),
+                    "--pairs", "5"},
+                   out),
+            0)
+      << out;
+  for (int i = 0; i < 200; ++i) {
+    const auto s = status_or_null();
+    if (s && s->state() == "Error") break;
+    std::this_thread::sleep_for(50ms);
+  }
+  const auto s = status_or_null();
+  ASSERT_TRUE(s);
+  EXPECT_EQ(s->state(), "Error");
+  EXPECT_NE(s->message().find("simulated render fault"), std::string::npos) << s->message();
+  EXPECT_EQ(manifest(only_run_dir()).state().rfind("failed: camera sim://", 0), 0u) << manifest(only_run_dir()).state();
+  EXPECT_TRUE(daemon_->running());
+  ASSERT_EQ(client({"run", "start", "--config", write_config(kRun).string(), "--pairs", "2"}, out), 0) << out;
+}
+
+// SIGKILL leaves the folder "recording"; the next daemon marks it "interrupted", and it still lists
+// exactly the pairs on disk.
+TEST_F(DaemonRuns, AFolderLeftRecordingByAKilledDaemonIsMarkedInterrupted) {
+  std::string out;
+  ASSERT_EQ(client({"run", "start", "--config", write_config(kRun).string()}, out), 0) << out;
+  wait_for_state("Acquiring");
+  for (int i = 0; i < 100 && status_or_null()->pairs_recorded() < 3; ++i) std::this_thread::sleep_for(50ms);
+  daemon_->signal(SIGKILL);
+  ASSERT_TRUE(daemon_->wait(5s).has_value());
+  const fs::path run = only_run_dir();
+  EXPECT_EQ(manifest(run).state(), "recording");
+  restart_daemon();
+  const msg::RunManifest m = manifest(run);
+  EXPECT_EQ(m.state(), "interrupted");
+  ASSERT_GT(m.pairs_size(), 0);
+  for (const msg::ManifestPair& p : m.pairs()) {
+    EXPECT_TRUE(fs::exists(run / p.frame_a())) << p.frame_a();
+    EXPECT_TRUE(fs::exists(run / p.frame_b())) << p.frame_b();
+  }
+  EXPECT_NE(daemon_->output().find("marked interrupted"), std::string::npos) << daemon_->output();
 }
 
 // Frames that reach the camera driver but no recorded pair are reported: a frame A whose B never
 // came was discarded by the pairer and used to be left out of the status's "frames lost".
 TEST_F(DaemonRuns, UnpairedFramesCountAsLost) {
   std::string out;
-  const std::string camera = "sim://?rays=200&ppm=0.02&drop_every=2&camera=" + std::string(PLENOPIV_SOURCE_DIR) +
-                             "/systemd/config/camera-small.yaml";
+  const std::string camera = "sim://?rays=200&ppm=0.02&drop_every=2";
   ASSERT_EQ(client({"run", "start", "--config", write_config(kRun + "camera_uri: \"" + camera + "\"\n").string(),
                     "--pairs", "4"},
                    out),
@@ -217,6 +279,14 @@ TEST_F(DaemonRuns, UnpairedFramesCountAsLost) {
   // ... and the log says so at the run's end.
   EXPECT_NE(daemon_->output().find("2 pairs recorded, 2 processed, 0 skipped, 3 frames lost"), std::string::npos)
       << daemon_->output();
+  // The manifest names the triggers with no pair and why, and counts every loss.
+  const msg::RunManifest m = manifest(only_run_dir());
+  ASSERT_EQ(m.dropped_size(), 2) << m.DebugString();
+  EXPECT_EQ(m.dropped(0).trigger_index(), 1u);
+  EXPECT_EQ(m.dropped(1).trigger_index(), 3u);
+  for (const msg::ManifestDrop& d : m.dropped()) EXPECT_EQ(d.reason(), "unpaired frame");
+  EXPECT_EQ(m.frames_lost(), 3u);
+  EXPECT_EQ(m.losses().frames_never_arrived() + m.losses().frames_discarded(), 3u);
 }
 
 TEST_F(DaemonRuns, SigtermMidRunDrainsAndLeavesTheFolderConsistent) {
@@ -286,7 +356,7 @@ class NotifySocket {
 TEST(DaemonNotify, ReadyStatusAndAWatchdogThatStopsWhenTheRunStalls) {
   const fs::path scratch = testing_support::temp_dir("daemon-notify");
   NotifySocket notify(scratch / "notify.sock");
-  const std::string control = "tcp://127.0.0.1:" + std::to_string(testing_support::free_tcp_port());
+  const std::string control = testing_support::ipc_endpoint("control");
   const std::string publish = "tcp://127.0.0.1:" + std::to_string(testing_support::free_tcp_port());
   ::setenv("NOTIFY_SOCKET", (scratch / "notify.sock").c_str(), 1);
   ::setenv("WATCHDOG_USEC", "1000000", 1);  // 1 s: pings needed every 0.5 s

@@ -40,6 +40,20 @@ TEST(CameraProfile, UnknownProfileListsTheShippedOnes) {
   }
 }
 
+// A URI may come from a control request: its profile is a name in the profile folder, never a
+// file the daemon would open (and quote in its error).
+TEST(CameraProfile, APathIsNotAProfileName) {
+  for (const std::string bad : {"/etc/passwd", "../../etc/passwd", "profiles/x", ".hidden", "a b", ""}) {
+    try {
+      find_camera_profile(bad);
+      FAIL() << "'" << bad << "' was accepted";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("not a path"), std::string::npos) << e.what();
+      EXPECT_EQ(std::string(e.what()).find("root:"), std::string::npos) << e.what();
+    }
+  }
+}
+
 TEST(CameraProfile, MissingFeaturesAndValuesAreNamed) {
   const CameraProfile p = find_camera_profile("sfnc-burst");
   auto fake_like = device({{"AcquisitionMode", {"Continuous"}},

@@ -105,6 +105,14 @@ TEST(Camera, DeliversTheRightFramesAndCountsFaults) {
   EXPECT_EQ(c.pairs_discarded, 2u);
   EXPECT_EQ(c.frames_received + c.frames_lost, 2 * 5u);
   EXPECT_EQ(c.frames_received, 2 * c.pairs_delivered + c.frames_discarded);
+  // Which triggers gave no pair, and why: 1 lost its frame B (A left unpaired), 2 was incomplete.
+  const std::vector<PairDrop> drops = cam.take_drops();
+  ASSERT_EQ(drops.size(), 2u);
+  EXPECT_EQ(drops[0].trigger_index, 1u);
+  EXPECT_EQ(drops[0].reason, PairDrop::Reason::Unpaired);
+  EXPECT_EQ(drops[1].trigger_index, 2u);
+  EXPECT_EQ(drops[1].reason, PairDrop::Reason::Incomplete);
+  EXPECT_TRUE(cam.take_drops().empty()) << "each drop is handed out once";
 }
 
 TEST(Camera, SlowConsumerKeepsTheNewestPairsAndCountsTheRest) {
@@ -116,6 +124,14 @@ TEST(Camera, SlowConsumerKeepsTheNewestPairsAndCountsTheRest) {
   auto first = cam.next_pair(10ms);
   ASSERT_TRUE(first);
   EXPECT_EQ(first->trigger_index, 4u);
+  // The dropped ones are named, so a run's manifest can say which pairs are missing and why.
+  const std::vector<PairDrop> drops = cam.take_drops();
+  ASSERT_EQ(drops.size(), 4u);
+  for (std::uint64_t i = 0; i < 4; ++i) {
+    EXPECT_EQ(drops[i].trigger_index, i);
+    EXPECT_EQ(drops[i].reason, PairDrop::Reason::QueueOverflow);
+  }
+  EXPECT_STREQ(to_string(PairDrop::Reason::QueueOverflow), "camera queue overflow");
 }
 
 TEST(CameraConformance, TestCamera) {

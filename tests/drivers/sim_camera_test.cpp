@@ -1,5 +1,9 @@
 // The simulated camera `sim://`: conformance, reproducible frames, injected faults, refused URIs.
 #include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
 
 #include <cstdio>
 #include <string>
@@ -145,8 +149,60 @@ TEST(SimCamera, BadUrisAreNamed) {
   EXPECT_NE(message("sim://?ppm=-1").find("ppm"), std::string::npos);
   EXPECT_NE(message("sim://?rays=0").find("rays"), std::string::npos);
   EXPECT_NE(message("sim://?flow_dt_us=0").find("flow_dt_us"), std::string::npos);
-  EXPECT_NE(message("sim://?camera=/nonexistent.yaml").find("/nonexistent.yaml"), std::string::npos);
+  // A URI may come from a control request: it never names a file for the daemon to open.
+  const std::string named_file = message("sim://?camera=/etc/passwd");
+  EXPECT_NE(named_file.find("a URI cannot name a file"), std::string::npos) << named_file;
+  EXPECT_EQ(named_file.find("root:"), std::string::npos) << named_file;
   EXPECT_NE(message("sim://cam0").find("sim://cam0"), std::string::npos);
+}
+
+// Sizes that cannot be allocated are refused with the estimate, before the render thread tries.
+TEST(SimCamera, AFrameLargerThanTheMachinesMemoryIsRefusedWithTheEstimate) {
+  const auto file = std::filesystem::temp_directory_path() / ("plenopiv-huge-camera-" + std::to_string(::getpid()) + ".yaml");
+  std::ofstream(file) << "sensor:    {width_px: 1000000000, height_px: 1000000000, pixel_pitch_mm: 0.0074}\n"
+                         "microlens: {pitch_mm: 0.125, focal_length_mm: 0.5, count_x: 289, count_y: 193}\n"
+                         "main_lens: {focal_length_mm: 50, f_number: 2, magnification: -1}\n";
+  try {
+    open_sim_camera(DeviceUri::parse("sim://?rays=10"), file);
+    FAIL() << "a 10^9 x 10^9 px camera was opened";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("the simulated camera's frames (1000000000 x 1000000000 px"),
+              std::string::npos)
+        << e.what();
+    EXPECT_NE(std::string(e.what()).find("GB of memory"), std::string::npos) << e.what();
+  }
+  std::filesystem::remove(file);
+}
+
+// A render that throws fails the camera with the reason instead of ending the program.
+TEST(SimCamera, ARenderFaultFailsTheCameraWithItsReason) {
+  auto camera = open("fail_after=1");
+  run_triggers(*camera, 2);
+  EXPECT_TRUE(camera->next_pair(20s));   // trigger 0 renders
+  EXPECT_FALSE(camera->next_pair(2s));   // trigger 1 throws in the render thread
+  const CameraStatus s = camera->status();
+  EXPECT_TRUE(s.failed);
+  EXPECT_EQ(s.state, CameraState::Lost);
+  EXPECT_NE(s.last_error.find("simulated render fault"), std::string::npos) << s.last_error;
+}
+
+// stop() waits for exposures already triggered only so long: what the camera has not read out by
+// then is dropped and named, so a run's stop is bounded whatever the renderer's backlog.
+TEST(SimCamera, StopIsBoundedAndNamesWhatWasNotReadOut) {
+  auto camera = open("readout_ms=8000");  // each pair rendered 8 s after its trigger
+  run_triggers(*camera, 3);
+  const auto t0 = std::chrono::steady_clock::now();
+  camera->stop();
+  const double took = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_LT(took, 5.0) << "stop waited for the whole backlog";
+  EXPECT_EQ(camera->counters().pairs_not_read_out, 3u);
+  const std::vector<PairDrop> drops = camera->take_drops();
+  ASSERT_EQ(drops.size(), 3u);
+  for (std::uint64_t i = 0; i < 3; ++i) {
+    EXPECT_EQ(drops[i].trigger_index, i);
+    EXPECT_EQ(drops[i].reason, PairDrop::Reason::NotReadOut);
+  }
+  EXPECT_FALSE(camera->next_pair(0ms));
 }
 
 TEST(SimCamera, RegistersUnderSim) {

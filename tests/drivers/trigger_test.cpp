@@ -147,6 +147,13 @@ TEST(GpioLineMap, ParsesTheUriAndNamesEveryMistake) {
             std::string::npos);
   EXPECT_NE(error("gpiod://gpiochip0?qsync=3").find("no output line given"), std::string::npos);
   EXPECT_NE(error("gpiod://?camera=3").find("needs a chip"), std::string::npos);
+  // A chip, never another file: URIs may come from control requests.
+  EXPECT_EQ(parse_gpio_line_map(DeviceUri::parse("gpiod:///dev/gpiochip3?camera=1")).chip, "/dev/gpiochip3");
+  for (const char* uri : {"gpiod:///etc/shadow?camera=1", "gpiod://../../etc/shadow?camera=1",
+                          "gpiod:///dev/zero?camera=1", "gpiod://gpiochip?camera=1", "gpiod://gpiochip0x?camera=1"}) {
+    EXPECT_NE(error(uri).find("is not a GPIO chip: give gpiochipN or /dev/gpiochipN"), std::string::npos)
+        << uri << ": " << error(uri);
+  }
   try {
     check_gpio_lines(m, 24, "gpiod://gpiochip0?...");
     FAIL();

@@ -12,6 +12,7 @@
 #include "core/io/vtk_files.hpp"
 #include "tests/support/child_process.hpp"
 #include "tests/support/temp_dir.hpp"
+#include "tests/support/tmpfs.hpp"
 
 namespace plenopiv::io {
 namespace {
@@ -203,6 +204,38 @@ TEST(Vti, HeaderAndAppendedSizesDescribeTheArrays) {
   std::stringstream fs;
   fs << fin.rdbuf();
   EXPECT_NE(fs.str().find("Name=\"velocity_m_s\" NumberOfComponents=\"3\""), std::string::npos);
+}
+
+// A full disk is named as such with the path and the space left, and leaves neither a temporary
+// file nor a damaged target behind.
+TEST(AtomicFile, AFullDiskIsNamedAndLeavesTheOldFileWhole) {
+  testing_support::SmallTmpfs disk(temp_dir() / "full-disk", 1);
+  if (!disk.mounted()) GTEST_SKIP() << disk.why_not();
+  const std::filesystem::path target = disk.dir() / "frame.tif";
+  write_tiff(target, ImageU16(100, 100, 7));  // an old version that fits
+  try {
+    write_tiff(target, ImageU16(1024, 1024, 9));  // 2 MiB: does not fit in 1 MiB
+    FAIL() << "a 2 MiB frame was written to a 1 MiB disk";
+  } catch (const std::runtime_error& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find(target.string() + ": no space left on device"), std::string::npos) << what;
+    EXPECT_NE(what.find("free in " + disk.dir().string()), std::string::npos) << what;
+    EXPECT_EQ(what.find("Success"), std::string::npos) << what;
+  }
+  EXPECT_EQ(read_tiff_u16(target).pixels, ImageU16(100, 100, 7).pixels);
+  for (const auto& entry : std::filesystem::directory_iterator(disk.dir())) {
+    EXPECT_EQ(entry.path().filename().string().find(".tmp"), std::string::npos) << entry.path();
+  }
+  // HDF5 the same way.
+  Grid3 g;
+  g.shape = {128, 128, 32};
+  try {
+    write_volume_h5(disk.dir() / "volume.h5", Volume(g, 1.f));
+    FAIL() << "a 2 MiB volume was written to a 1 MiB disk";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("no space left on device"), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(std::filesystem::exists(disk.dir() / "volume.h5"));
 }
 
 }  // namespace

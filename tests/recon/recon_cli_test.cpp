@@ -93,7 +93,7 @@ TEST(ReconstructCli, RefusesBadArgumentsClearly) {
                             "-1", "1", "-1", "1", "-1", "1", "--sensor-blur-mm", "-0.001", "-o",
                             (dir / "x.h5").string()},
                            out));
-  EXPECT_NE(out.find("sensor blur"), std::string::npos) << out;
+  EXPECT_NE(out.find("sensor_blur_sigma_mm"), std::string::npos) << out;
   EXPECT_FALSE(std::filesystem::exists(dir / "x.h5"));
 }
 

@@ -4,7 +4,6 @@
 #include <tbb/global_control.h>
 
 #include <algorithm>
-#include <atomic>
 #include <cmath>
 #include <cstring>
 #include <iostream>
@@ -557,7 +556,7 @@ TEST_F(Mart, RejectsNaNAndNegativePixelsAndBadSettings) {
       reconstruct(*op_, ImageF(850, 850, 1.f), blurred);
       ADD_FAILURE() << "sensor blur " << blur << " accepted";
     } catch (const InputError& e) {
-      EXPECT_NE(std::string(e.what()).find("sensor blur"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("sensor_blur_sigma_mm"), std::string::npos) << e.what();
     }
   }
   for (const double threshold : {-0.001, std::nan(""), 1.0}) {
@@ -567,7 +566,7 @@ TEST_F(Mart, RejectsNaNAndNegativePixelsAndBadSettings) {
       reconstruct(*op_, ImageF(850, 850, 1.f), pruned);
       ADD_FAILURE() << "prune threshold " << threshold << " accepted";
     } catch (const InputError& e) {
-      EXPECT_NE(std::string(e.what()).find("prune threshold"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("prune_threshold"), std::string::npos) << e.what();
     }
   }
 }
@@ -693,37 +692,28 @@ TEST_F(Mart, PruningAtASmallThresholdStaysCloseToNoPruning) {
   }
 }
 
-// A caller's cancel flag stops a reconstruction before its next iteration (recon::Cancelled, not
-// an input error), and leaves the workspace free: the next reconstruction in it has the bits of
-// one without a workspace.
-TEST_F(Mart, ACancelFlagStopsBeforeTheNextIterationAndFreesTheWorkspace) {
+// A caller cancels by throwing plenopiv::Cancelled from the progress callback (what the daemon
+// does when a run stops): the reconstruction stops there, and the workspace is free: the next
+// reconstruction in it has the bits of one without a workspace, pruning's smaller active set
+// included.
+TEST_F(Mart, CancellingFromProgressStopsAndFreesTheWorkspace) {
   const ImageF image = project_image(*op_, truth(), 1000.f);
   MartSettings s;
   s.iterations = 6;
   s.accelerate = true;
+  s.prune_threshold = 1e-2;
   MartWorkspace workspace;
-  std::atomic<bool> cancel{false};
   int last = 0;
-  try {
-    reconstruct(
-        *op_, image, s, workspace,
-        [&](const IterationReport& it) {
-          last = it.iteration;
-          if (it.iteration == 2) cancel = true;
-        },
-        &cancel);
-    FAIL() << "not cancelled";
-  } catch (const Cancelled& e) {
-    EXPECT_NE(std::string(e.what()).find("before iteration 3"), std::string::npos) << e.what();
-  }
+  EXPECT_THROW(reconstruct(*op_, image, s, workspace,
+                           [&](const IterationReport& it) {
+                             last = it.iteration;
+                             if (it.iteration == 2) throw plenopiv::Cancelled("run stopping");
+                           }),
+               plenopiv::Cancelled);
   EXPECT_EQ(last, 2);
-  cancel = false;
-  const MartResult again = reconstruct(*op_, image, s, workspace, {}, &cancel);
+  const MartResult again = reconstruct(*op_, image, s, workspace);
   const MartResult fresh = reconstruct(*op_, image, s);
   EXPECT_EQ(0, std::memcmp(again.volume.data.data(), fresh.volume.data.data(), fresh.volume.data.size() * sizeof(float)));
-  // Set before the call: stopped after the start, before the first iteration.
-  cancel = true;
-  EXPECT_THROW(reconstruct(*op_, image, s, workspace, {}, &cancel), Cancelled);
 }
 
 // A kept workspace changes no bit: images of different scenes (and an empty one) in sequence, then

@@ -107,17 +107,15 @@ void expect_one_lens(const optics::MicrolensArray& array, int i, int j) {
         if (d < radius + 1.5) inside += r.rays.at(x, y);
       }
     if (sigma == 0) {
-      // Every lit pixel centre within the disk plus half a pixel diagonal (0.71 px); lit
-      // pixels: the disk's 224 px^2 plus its rim. Measured: farthest 9.02-9.11 px (the bound,
-      // 9.16 px, is exact geometry), lit 251-255; centroid within 0.04 px of the spot.
-      EXPECT_LT(farthest, radius + 0.71);
-      EXPECT_GT(lit, 200);
-      EXPECT_LT(lit, 260);
+      // Every lit pixel centre within the disk plus half a pixel diagonal (0.71 px: exact
+      // geometry); lit pixels: the disk's 224 px^2 plus its rim.
+      EXPECT_LT(farthest, radius + 0.71) << "measured 9.02-9.11 px";
+      EXPECT_GT(lit, 200) << "measured 251-255";
+      EXPECT_LT(lit, 260) << "measured 251-255";
     } else {
-      // Measured: 99.8 % within radius + 1.5 px; farthest 10.6-11.0 px (the jitter's tails
-      // reach the neighbour's rim, nothing more).
-      EXPECT_GT(inside / r.counts.landed, 0.99);
-      EXPECT_LT(farthest, radius + 3.5);
+      // Diffraction: the jitter's tails reach the neighbour's rim, nothing more.
+      EXPECT_GT(inside / r.counts.landed, 0.99) << "measured 0.998";
+      EXPECT_LT(farthest, radius + 3.5) << "measured 10.6-11.0 px";
     }
     const Moments m = moments(r.rays);
     EXPECT_NEAR(m.x, spot[0], 0.1);
@@ -189,12 +187,13 @@ TEST(Render, DefocusSpreadsOverManyLensesWithOppositePatterns) {
       EXPECT_LT(far, blur_r + 0.25);
     } else {
       const double square = 6.25 * 6.25, disk = std::numbers::pi * blur_r * blur_r;
-      // Binomial sd 0.0008 at 4e5 rays; measured 0.4346 against 0.4333.
-      EXPECT_NEAR(double(r.counts.landed) / r.counts.emitted, square / disk, 0.004);
+      // Binomial sd 0.0008 at 4e5 rays.
+      EXPECT_NEAR(double(r.counts.landed) / r.counts.emitted, square / disk, 0.004)
+          << "measured 0.4346 against 0.4333";
     }
     // Sub-image offset from its spot against the lens's offset from the blur centre, for lenses
-    // well inside the blur (at its rim the sub-images reach the cell edge, see above).
-    // Measured: +30 mm 1008 along, 0 against; -30 mm 0 along, 2444 against.
+    // well inside the blur (at its rim the sub-images reach the cell edge, see above): all of
+    // them along it behind the focal plane, all against it in front.
     int along = 0, against = 0;
     for (const auto& [k, m] : lenses) {
       const auto c = nominal_array().centre(k.first, k.second);
@@ -226,9 +225,9 @@ TEST(Render, LateralShiftShiftsThePattern) {
   const auto mb = moments(render(cam, nominal_array(), std::span<const Point3>(&b, 1), options, 3).rays);
   const auto mc = moments(render(cam, nominal_array(), std::span<const Point3>(&c, 1), options, 3).rays);
   const double expected_px = -0.1 * (s_i() + f_l()) / (cam.object_distance_mm() + dz) / cam.sensor().pixel_pitch_mm;
-  // -10.45 px; measured -10.47 and +10.45 px (lens quantisation averages out over many lenses).
-  EXPECT_NEAR(mb.y - ma.y, expected_px, 0.1);
-  EXPECT_NEAR(mc.y - ma.y, -expected_px, 0.1);
+  // -10.45 px (lens quantisation averages out over many lenses).
+  EXPECT_NEAR(mb.y - ma.y, expected_px, 0.1) << "measured -10.47 px";
+  EXPECT_NEAR(mc.y - ma.y, -expected_px, 0.1) << "measured +10.45 px";
   EXPECT_NEAR(mb.x - ma.x, 0.0, 0.05);
 }
 
@@ -237,8 +236,7 @@ TEST(Render, EveryRayIsAccountedFor) {
   RenderOptions options;
   options.rays_per_particle = 40000;
   options.aperture_overfill = 1.25;
-  // Centre: only the stop blocks rays, a fraction 1 - 1/1.25^2 = 0.36 (binomial sd 0.0024;
-  // measured 0.3619).
+  // Centre: only the stop blocks rays, a fraction 1 - 1/1.25^2 = 0.36 (binomial sd 0.0024).
   const Point3 centre{0, 0, 0};
   RenderResult r = render(cam, nominal_array(), std::span<const Point3>(&centre, 1), options, 5);
   expect_accounted(r.counts);
@@ -261,10 +259,9 @@ TEST(Render, EveryRayIsAccountedFor) {
   const Point3 edge = on_axis_of(array.centre(49, 25));
   r = render(cam, array, std::span<const Point3>(&edge, 1), options, 5);
   expect_accounted(r.counts);
-  // The lens's image disk (radius 62.5 um) starts 9 um inside the sensor edge: a sliver lands
-  // (measured 880 landed, 24646 off the sensor).
-  EXPECT_GT(r.counts.outside_sensor, 20000u);
-  EXPECT_GT(r.counts.landed, 300u);
+  // The lens's image disk (radius 62.5 um) starts 9 um inside the sensor edge: a sliver lands.
+  EXPECT_GT(r.counts.outside_sensor, 20000u) << "measured 24646";
+  EXPECT_GT(r.counts.landed, 300u) << "measured 880";
 }
 
 TEST(Render, SameSeedSameImageAtAnyThreadCount) {
@@ -318,15 +315,15 @@ WhiteProfile white_profile(double f_number) {
 TEST(Render, WhiteImageDisksFillTheirCellWithoutSpilling) {
   // Matched (f/2, image side f/4 = the lenses' f/4): the disk reaches the cell edge (edge
   // pixels lit as much as the centre; a spill would add the neighbour's light) and leaves the
-  // corners dark. Measured: edge 0.93, corner 0.00; f/2.8 edge 0.002; f/1.6 edge 1.99.
+  // corners dark.
   const WhiteProfile matched = white_profile(0);
-  EXPECT_GT(matched.edge_ratio, 0.8);
-  EXPECT_LT(matched.edge_ratio, 1.15);
-  EXPECT_LT(matched.corner_ratio, 0.15);
+  EXPECT_GT(matched.edge_ratio, 0.8) << "measured 0.93";
+  EXPECT_LT(matched.edge_ratio, 1.15) << "measured 0.93";
+  EXPECT_LT(matched.corner_ratio, 0.15) << "measured 0.00";
   // Stopped down to f/2.8 the disks shrink (14.2 px < 16.9 px): dark gaps between them.
-  EXPECT_LT(white_profile(2.8).edge_ratio, 0.05);
+  EXPECT_LT(white_profile(2.8).edge_ratio, 0.05) << "measured 0.002";
   // Opened to f/1.6 (faster than matching) the disks overlap: the edge gets light twice.
-  EXPECT_GT(white_profile(1.6).edge_ratio, 1.6);
+  EXPECT_GT(white_profile(1.6).edge_ratio, 1.6) << "measured 1.99";
 }
 
 TEST(Render, CalibrationSpotsSitAtLensCentresSeenFromTheApertureCentre) {
@@ -353,8 +350,8 @@ TEST(Render, CalibrationSpotsSitAtLensCentresSeenFromTheApertureCentre) {
       worst = std::max(worst, std::hypot(sx / s - spot[0], sy / s - spot[1]));
     }
   // Spot of f/16: 2.1 px across; the centroid of whole pixels lies within 0.15 px of the true
-  // spot (measured 0.063 px worst over 48 x 48 lenses at 3000 rays per lens).
-  EXPECT_LT(worst, 0.15);
+  // spot.
+  EXPECT_LT(worst, 0.15) << "measured 0.063 px worst over 48 x 48 lenses at 3000 rays per lens";
 }
 
 TEST(Render, SensorModel) {
@@ -376,10 +373,9 @@ TEST(Render, SensorModel) {
   mean /= out.size();
   for (auto v : out.pixels) var += (v - mean) * (v - mean);
   var /= out.size() - 1;
-  // Poisson variance 100 + read 25 (+ 1/12 rounding); sd of the estimate ~0.9. Measured:
-  // mean 100.008, variance 126.2.
-  EXPECT_NEAR(mean, 100, 0.3);
-  EXPECT_NEAR(var, 125.08, 4);
+  // Poisson variance 100 + read 25 (+ 1/12 rounding); sd of the estimate ~0.9.
+  EXPECT_NEAR(mean, 100, 0.3) << "measured 100.008";
+  EXPECT_NEAR(var, 125.08, 4) << "measured 126.2";
   SensorModel bad;
   bad.bit_depth = 17;
   EXPECT_THROW(apply_sensor(flat, bad, 1), InputError);

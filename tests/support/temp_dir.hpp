@@ -16,4 +16,11 @@ inline std::filesystem::path temp_dir(const std::string& area) {
   return dir;
 }
 
+// A control endpoint of its own for a daemon a test starts: an ipc:// socket file in this
+// process's scratch folder (the daemon's local default kind; tcp:// needs CURVE).
+inline std::string ipc_endpoint(const std::string& name) {
+  static int counter = 0;
+  return "ipc://" + (temp_dir("ipc") / (name + "-" + std::to_string(counter++))).string();
+}
+
 }  // namespace plenopiv::testing_support

@@ -134,13 +134,18 @@ class AravisCamera final : public CameraBase {
     done.get();
   }
 
+  // Aravis's stream thread (C): nothing may throw through it. A buffer that cannot be queued goes
+  // back to the stream (its frame is then counted lost by the pairer's id gap).
   static void on_new_buffer(ArvStream* stream, gpointer self_ptr) {
     auto* self = static_cast<AravisCamera*>(self_ptr);
     ArvBuffer* buffer = arv_stream_try_pop_buffer(stream);
     if (!buffer) return;
-    {
+    try {
       std::lock_guard lock(self->mutex_);
       self->buffers_.push_back(buffer);
+    } catch (...) {
+      arv_stream_push_buffer(stream, buffer);
+      return;
     }
     self->wake_.notify_all();
   }
@@ -165,13 +170,19 @@ class AravisCamera final : public CameraBase {
         commands.swap(commands_);
         buffers.swap(buffers_);
       }
-      for (ArvBuffer* b : buffers) take_buffer(b);
-      for (auto& c : commands) c();
-      if (control_lost_ && camera_) handle_loss("control lost: the camera stopped answering");
-      if (!camera_ && lost_ && std::chrono::steady_clock::now() >= next_retry_) try_reconnect();
-      if (std::chrono::steady_clock::now() - last_stats > std::chrono::milliseconds(200)) {
-        update_statistics();
-        last_stats = std::chrono::steady_clock::now();
+      // This thread never dies silently: a failure here fails the camera with its reason (a run
+      // using it then fails), and the loop keeps serving commands such as stop.
+      try {
+        for (ArvBuffer* b : buffers) take_buffer(b);
+        for (auto& c : commands) c();
+        if (control_lost_ && camera_) handle_loss("control lost: the camera stopped answering");
+        if (!camera_ && lost_ && std::chrono::steady_clock::now() >= next_retry_) try_reconnect();
+        if (std::chrono::steady_clock::now() - last_stats > std::chrono::milliseconds(200)) {
+          update_statistics();
+          last_stats = std::chrono::steady_clock::now();
+        }
+      } catch (const std::exception& e) {
+        report_failed(std::string("camera driver thread: ") + e.what());
       }
     }
   }

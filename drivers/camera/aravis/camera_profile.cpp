@@ -79,15 +79,18 @@ std::filesystem::path camera_profile_dir() {
   return PLENOPIV_CAMERA_PROFILE_DIR;
 }
 
-CameraProfile find_camera_profile(const std::string& name_or_path) {
-  const std::filesystem::path as_path(name_or_path);
-  if (name_or_path.find('/') != std::string::npos || as_path.extension() == ".yaml") {
-    if (!std::filesystem::exists(as_path)) {
-      throw InputError("camera profile '" + name_or_path + "': no such file");
-    }
-    return load_camera_profile(as_path);
+CameraProfile find_camera_profile(const std::string& name) {
+  // A name, never a path: a URI may come from a control request, and must not make the daemon open
+  // a file of its choosing. Profiles are added to the profile folder instead.
+  const bool plain = !name.empty() && name[0] != '.' && name.size() <= 64 &&
+                     name.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789._-") ==
+                         std::string::npos;
+  if (!plain) {
+    throw InputError("camera profile '" + name + "': a profile name (letters, digits, '.', '_', '-'), not a path: "
+                     "put the profile's YAML file into " + camera_profile_dir().string() +
+                     " (or the folder PLENOPIV_CAMERA_PROFILE_DIR names) and give its name");
   }
-  const std::filesystem::path shipped = camera_profile_dir() / (name_or_path + ".yaml");
+  const std::filesystem::path shipped = camera_profile_dir() / (name + ".yaml");
   if (!std::filesystem::exists(shipped)) {
     std::string known;
     std::error_code ec;
@@ -96,7 +99,7 @@ CameraProfile find_camera_profile(const std::string& name_or_path) {
         known += (known.empty() ? "" : ", ") + e.path().stem().string();
       }
     }
-    throw InputError("camera profile '" + name_or_path + "': not found in " +
+    throw InputError("camera profile '" + name + "': not found in " +
                      camera_profile_dir().string() + " (shipped: " + known + ")");
   }
   return load_camera_profile(shipped);

@@ -45,8 +45,9 @@ struct CameraProfile {
 
 // Reads a profile; InputError naming the file and key on any mistake.
 CameraProfile load_camera_profile(const std::filesystem::path& file);
-// `name_or_path`: a file path, or the name of a shipped profile (e.g. "sfnc-burst").
-CameraProfile find_camera_profile(const std::string& name_or_path);
+// The profile `name` (e.g. "sfnc-burst") from camera_profile_dir(). Names only: a path (or any
+// character beyond letters, digits, '.', '_', '-') is an InputError, since URIs may come from requests.
+CameraProfile find_camera_profile(const std::string& name);
 // Where the shipped profiles are (PLENOPIV_CAMERA_PROFILE_DIR overrides).
 std::filesystem::path camera_profile_dir();
 

@@ -10,6 +10,14 @@ GpioLineMap parse_gpio_line_map(const DeviceUri& uri) {
   GpioLineMap map;
   map.chip = uri.target();
   if (map.chip.empty()) uri.fail("needs a chip, e.g. gpiod://gpiochip0?camera=27");
+  // A chip name or its /dev path, nothing else: a URI may come from a request and must not make
+  // the daemon open any other file.
+  const std::string name = map.chip.rfind("/dev/", 0) == 0 ? map.chip.substr(5) : map.chip;
+  const bool chip_name = name.size() > 8 && name.rfind("gpiochip", 0) == 0 && name.size() <= 12 &&
+                         name.find_first_not_of("0123456789", 8) == std::string::npos;
+  if (!chip_name) {
+    uri.fail("'" + map.chip + "' is not a GPIO chip: give gpiochipN or /dev/gpiochipN");
+  }
   std::map<long long, std::string> used;
   auto line = [&](const std::string& key) -> std::optional<unsigned> {
     if (!uri.has(key)) return std::nullopt;

@@ -1,11 +1,11 @@
 // Running mean and RMS fluctuation of u, v, w per node over a run (Welford), valid vectors only.
-#include "daemon/statistics.hpp"
+#include "core/piv/statistics.hpp"
 
 #include <cmath>
 
 #include "core/base/errors.hpp"
 
-namespace plenopiv::daemon {
+namespace plenopiv::piv {
 
 void RunningStatistics::add(const VectorField& field) {
   if (!(field.dt_s > 0)) throw InputError("statistics: vector field has no pulse separation (dt_s)");
@@ -46,4 +46,4 @@ std::vector<float> RunningStatistics::rms(int component) const {
   return out;
 }
 
-}  // namespace plenopiv::daemon
+}  // namespace plenopiv::piv

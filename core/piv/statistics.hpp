@@ -7,7 +7,7 @@
 
 #include "core/base/grid.hpp"
 
-namespace plenopiv::daemon {
+namespace plenopiv::piv {
 
 class RunningStatistics {
  public:
@@ -29,4 +29,4 @@ class RunningStatistics {
   std::array<std::vector<double>, 3> mean_, m2_;
 };
 
-}  // namespace plenopiv::daemon
+}  // namespace plenopiv::piv

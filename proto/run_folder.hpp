@@ -1,0 +1,164 @@
+// The run folder: written by plenopivd as a run goes, read by `plenopiv process --run` and the
+// cluster jobs; the one library that knows its layout and its manifest.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/base/grid.hpp"
+#include "core/base/image.hpp"
+#include "core/piv/statistics.hpp"
+#include "plenopiv.pb.h"
+
+namespace plenopiv::run_folder {
+
+// run-<id>/:
+//   run.yaml                 the run config as sent
+//   process.yaml             its processing keys (core/process schema): what reprocessing reads
+//   camera.yaml              the daemon's camera file, if it has one
+//   calibration.h5           the calibration file the run processed with, byte for byte, if any
+//   frames/pair-<n>-A.tif    raw frames, 16-bit TIFF, every pair the camera delivered
+//   frames/pair-<n>-B.tif
+//   vectors/pair-<n>.h5      vector fields of the pairs the live path processed
+//   statistics.h5            mean velocity (u, v, w) and u_rms, v_rms, w_rms, count per node
+//   manifest.json            msg::RunManifest as JSON (64-bit integers as JSON numbers)
+// Every file is written under a temporary name, fsynced and renamed; the manifest is rewritten the
+// same way after each pair and each field, so whatever stops the writer, the manifest lists exactly
+// the complete files.
+
+// The manifest as JSON: protobuf's JSON mapping, but with 64-bit integers as numbers (protobuf
+// writes them as strings; its parser takes either).
+std::string manifest_json(const msg::RunManifest& manifest);
+// Parses manifest.json text; InputError naming `source` when it is not a run manifest.
+msg::RunManifest parse_manifest(const std::string& json, const std::string& source);
+
+// One recorded pair as the writer stores it (what a camera delivered, and the laser pulses the
+// trigger measured for it).
+struct PairRecord {
+  std::uint64_t pair_index = 0, trigger_index = 0;
+  const ImageU16* frame_a = nullptr;
+  const ImageU16* frame_b = nullptr;
+  std::uint64_t frame_id_a = 0, frame_id_b = 0;
+  std::uint64_t device_timestamp_a_ns = 0, device_timestamp_b_ns = 0;
+  std::uint64_t host_timestamp_a_ns = 0, host_timestamp_b_ns = 0;
+  double frame_gap_s = 0;  // B - A, device clock when both frames carry it, else host
+  std::optional<std::pair<std::uint64_t, std::uint64_t>> laser_pulses_ns;  // measured pulse 1 and 2
+};
+
+// A calibration file copied into the folder.
+struct CalibrationCopy {
+  std::filesystem::path source;  // where it was read
+  std::string bytes;             // what was read (and processed with)
+  std::uint32_t crc32 = 0;
+};
+
+// Writes a run folder as a run goes. Thread safe: frames, vectors and close may come from
+// different threads.
+class Writer {
+ public:
+  struct Setup {
+    std::filesystem::path data_dir;
+    std::string run_id;
+    std::string run_yaml;      // the run config as sent
+    std::string process_yaml;  // its processing keys (RunConfig::process_yaml)
+    double nominal_dt_s = 0, rate_hz = 0;
+    std::string camera_uri, trigger_uri;
+    std::filesystem::path camera_file;  // copied as camera.yaml; empty: none
+    std::string camera_model;
+    std::string camera_triggering;  // drivers::CameraWiring::description
+    std::optional<CalibrationCopy> calibration;  // none: the camera's nominal lattice
+  };
+  // Creates the folder (InputError if it exists or cannot be made) and the first manifest.
+  explicit Writer(const Setup& setup);
+
+  const std::filesystem::path& dir() const { return dir_; }
+  // Writes both frames (together, each fsynced) and lists the pair. Throws if the disk refuses.
+  void record_pair(const PairRecord& pair);
+  // Writes the pair's vector field, lists it, and adds it to the running statistics.
+  void record_vectors(std::uint64_t pair_index, const VectorField& field);
+  // Lists pairs the camera dropped, with the reason, in the manifest (the first kMaxListedDrops;
+  // the losses count them all). The manifest is rewritten with the next file or at close.
+  void record_drop(std::uint64_t trigger_index, const std::string& reason);
+  static constexpr int kMaxListedDrops = 10000;
+  // Bad data met on the way (all-zero or saturated frames, ...): listed once each.
+  void add_warning(const std::string& warning);
+  // Writes the final manifest with `state` ("complete", "stopped", "failed: ..."), the losses and
+  // the raw frames lost, then statistics (if any field was recorded). Later calls do nothing.
+  void close(const std::string& state, std::uint64_t processed, std::uint64_t skipped,
+             const msg::Losses& losses = {}, std::uint64_t frames_lost = 0);
+
+  std::uint64_t pairs_recorded() const;
+  msg::RunManifest manifest() const;
+
+ private:
+  void write_manifest_locked();
+  void write_statistics_locked();
+
+  mutable std::mutex mutex_;
+  std::filesystem::path dir_;
+  msg::RunManifest manifest_;
+  piv::RunningStatistics statistics_;
+  double nominal_dt_s_ = 0;
+  bool closed_ = false;
+};
+
+// A pair as a reader sees it: its frames (checked to lie inside the folder), its measured dt.
+struct PairEntry {
+  std::uint64_t pair_index = 0, trigger_index = 0;
+  std::filesystem::path frame_a, frame_b;  // absolute
+  std::optional<double> measured_dt_s;     // the laser's pulse separation for this pair, if measured
+  std::string vectors;                     // the live path's field (relative), empty if none
+};
+
+// Reads a run folder from the folder alone, checking everything before anything is processed: the
+// manifest parses; process.yaml and camera.yaml exist; the calibration is nominal, or the folder's
+// calibration.h5 with the size and CRC-32 the manifest recorded; every frame path lies inside the
+// folder, is listed once and exists. InputError naming the manifest key and file otherwise.
+class Reader {
+ public:
+  explicit Reader(const std::filesystem::path& dir);
+
+  const std::filesystem::path& dir() const { return dir_; }
+  const msg::RunManifest& manifest() const { return manifest_; }
+  std::filesystem::path process_file() const;
+  std::filesystem::path camera_file() const;
+  // The folder's calibration.h5, or nullopt when the run used the camera's nominal lattice.
+  const std::optional<std::filesystem::path>& calibration_file() const { return calibration_; }
+  const std::vector<PairEntry>& pairs() const { return pairs_; }
+  // Checks every frame's TIFF header (a whole file of `width` x `height` px): a truncated frame is
+  // found before the first pair is processed.
+  void check_frames(int width, int height) const;
+
+ private:
+  std::filesystem::path file(const std::string& key, const std::string& name) const;
+
+  std::filesystem::path dir_;
+  msg::RunManifest manifest_;
+  std::optional<std::filesystem::path> calibration_;
+  std::vector<PairEntry> pairs_;
+};
+
+// Marks every run folder under `data_dir` whose manifest still says "recording" (its daemon ended
+// without closing it: a crash, SIGKILL, power cut) as "interrupted", with the time it was found;
+// its files stay as the manifest lists them. Returns the folders marked. Folders that cannot be
+// read are skipped and named in `problems`.
+std::vector<std::filesystem::path> mark_interrupted_runs(const std::filesystem::path& data_dir,
+                                                         std::vector<std::string>* problems = nullptr);
+
+// statistics.h5: a vector field holding the mean velocity (over the nominal dt: u, v, w read back
+// as the mean, in m/s), beside it u_rms, v_rms, w_rms (m/s), count (valid samples per node) and
+// valid_fraction (count / fields); the attribute `fields` says how many fields went in (paper
+// sec 7). One writer for the live run's and the reprocessed run's statistics.
+void write_statistics(const std::filesystem::path& path, const piv::RunningStatistics& statistics,
+                      double nominal_dt_s, std::uint64_t fields);
+
+// A file name-safe run id from the current UTC time: 20261123-035512.
+std::string new_run_id();
+// "pair-000042": the stem of a pair's files.
+std::string pair_name(std::uint64_t pair_index);
+
+}  // namespace plenopiv::run_folder

@@ -1,0 +1,638 @@
+#!/usr/bin/python3
+"""Regenerates the tables of docs/benchmarks.md from the benchmarks' machine-readable lines.
+
+  /usr/bin/python3 scripts/bench_tables.py               tables from the saved results
+  /usr/bin/python3 scripts/bench_tables.py --run quick   rerun the quick benchmarks first (~5 min)
+  /usr/bin/python3 scripts/bench_tables.py --run paper   rerun the paper-scale ones (~30 min, nice 10)
+  /usr/bin/python3 scripts/bench_tables.py --run all     both
+  /usr/bin/python3 scripts/bench_tables.py --run e2e-full piv   named results only
+  /usr/bin/python3 scripts/bench_tables.py --list        the results, their commands and sets
+
+--run builds the bench targets in build/ (configured as the README says), runs each benchmark from
+the repository root and saves its standard output, headed by the command, date, commit, machine
+and load average, as docs/bench-results/<name>.txt. Then every table between
+`<!-- generated: NAME -->` and `<!-- end: NAME -->` in docs/benchmarks.md is rewritten from those
+files, and the time-against-error plots (docs/e2e_pareto*.png) are redrawn by bench/plot_e2e.py.
+"""
+import argparse
+import datetime
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+RESULTS = ROOT / "docs" / "bench-results"
+DOC = ROOT / "docs" / "benchmarks.md"
+
+# run-paper.yaml's reconstruction and correlation settings, as bench_e2e's flags.
+RUN_PAPER = ["--mu", "1", "--accelerate", "--iterations", "8", "--intensity-threshold", "3",
+             "--final-smoothing", "1", "--depth-prefilter", "4",
+             "--passes", "32@50,16@50+4,16@50,16@50,16@75"]
+# process.yaml's (its passes are core/piv's default).
+PROCESS = ["--mu", "1", "--accelerate", "--iterations", "20", "--intensity-threshold", "4",
+           "--final-smoothing", "1", "--depth-prefilter", "4"]
+# run.yaml's (the live preview on the small camera).
+RUN = ["--mu", "1", "--iterations", "3", "--intensity-threshold", "4", "--final-smoothing", "1",
+       "--depth-prefilter", "4", "--passes", "16@50+4,8@50"]
+
+# name: (set, command from the repository root, plot drawn from its sweep rows or None)
+BENCHES = {
+    "e2e-reduced": ("quick", ["build/bin/bench_e2e", "reduced"], "e2e_pareto.png"),
+    "e2e-full": ("paper", ["build/bin/bench_e2e", "full", "--no-sweep", "--steady"] + RUN_PAPER
+                 + ["--compare-passes", "32@50,16@50+4,16@50,16@50,16@75"], None),
+    "e2e-full-sweep": ("paper", ["build/bin/bench_e2e", "full", "--no-sweep", "--time-sweep"] + RUN_PAPER,
+                       "e2e_pareto_full.png"),
+    "e2e-full-process": ("paper", ["build/bin/bench_e2e", "full", "--no-sweep", "--steady"] + PROCESS,
+                         None),
+    "e2e-reduced-process": ("quick", ["build/bin/bench_e2e", "reduced", "--no-sweep", "--steady"] + PROCESS,
+                            None),
+    "e2e-reduced-live": ("quick", ["build/bin/bench_e2e", "reduced", "--no-sweep", "--steady"] + RUN, None),
+    "recon-small": ("quick", ["build/bin/bench_recon", "small"], None),
+    "recon-paper": ("paper", ["build/bin/bench_recon", "paper"], None),
+    "recon-mid": ("quick", ["build/bin/bench_recon", "mid"], None),
+    "recon-figures": ("quick", ["build/bin/bench_recon", "figures", "0.9"], None),
+    "recon-fig22": ("quick", ["build/bin/bench_recon", "fig22", "0.9"], None),
+    "recon-fig22-accurate": ("quick", ["build/bin/bench_recon", "fig22", "0.9", "20", "1", "nesterov",
+                                       "0.0052"], None),
+    "piv": ("paper", ["build/bin/bench_piv"], None),
+    "daemon": ("quick", ["build/bin/bench_daemon", "6", "1.0"], None),
+    "sim": ("quick", ["build/bin/bench_sim"], None),
+    "calib": ("quick", ["build/bin/bench_calib"], None),
+    "resampling": ("quick", ["build/bin/bench_resampling"], None),
+}
+
+
+# ---------------------------------------------------------------------------------------------
+# Running
+
+
+def machine():
+    model = "unknown CPU"
+    for line in open("/proc/cpuinfo"):
+        if line.startswith("model name"):
+            model = line.split(":", 1)[1].strip()
+            break
+    debian = Path("/etc/debian_version")
+    system = f"Debian {debian.read_text().strip()}" if debian.exists() else "Linux"
+    return f"{os.cpu_count()} cores ({model}), {system}"
+
+
+def run(name):
+    scale, command, _ = BENCHES[name]
+    commit = subprocess.run(["git", "rev-parse", "--short=7", "HEAD"], cwd=ROOT, capture_output=True,
+                            text=True).stdout.strip()
+    # Uncommitted changes outside docs/ may change what was measured: say so.
+    changed = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--", ".",
+                              ":(exclude)docs"], cwd=ROOT, capture_output=True, text=True).stdout
+    if changed.strip():
+        commit += " with uncommitted changes"
+    load = open("/proc/loadavg").read().split()[:3]
+    start = datetime.datetime.now(datetime.timezone.utc)
+    argv = (["nice", "-n", "10"] if scale == "paper" else []) + command
+    print(f"bench_tables: {name}: {' '.join(argv)}", file=sys.stderr, flush=True)
+    out = subprocess.run(argv, cwd=ROOT, stdout=subprocess.PIPE, text=True)
+    if out.returncode != 0:
+        sys.exit(f"bench_tables: {name} failed (exit {out.returncode}); nothing saved")
+    minutes = (datetime.datetime.now(datetime.timezone.utc) - start).total_seconds() / 60
+    header = [f"# command: {' '.join(command)}",
+              f"# date: {start:%Y-%m-%d %H:%M} UTC ({minutes:.1f} min)",
+              f"# commit: {commit}",
+              f"# machine: {machine()}",
+              f"# load: {' '.join(load)} (load average at the start, 1 / 5 / 15 min)"]
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    (RESULTS / f"{name}.txt").write_text("\n".join(header) + "\n" + out.stdout)
+
+
+def build(names):
+    targets = sorted({Path(BENCHES[n][1][0]).name for n in names})
+    subprocess.run(["cmake", "--build", "build", "-j2", "--target", *targets], cwd=ROOT, check=True)
+
+
+# ---------------------------------------------------------------------------------------------
+# Reading
+
+
+class Result:
+    """One saved run: its header and its `bench=` lines as dictionaries of strings."""
+
+    def __init__(self, name):
+        self.name = name
+        self.meta, self.lines = {}, []
+        path = RESULTS / f"{name}.txt"
+        self.exists = path.exists()
+        if not self.exists:
+            return
+        for line in path.read_text().splitlines():
+            if line.startswith("# ") and ":" in line and not self.lines:
+                key, value = line[2:].split(":", 1)
+                self.meta[key.strip()] = value.strip()
+            elif line.startswith("bench="):
+                self.lines.append(dict(t.split("=", 1) for t in line.split() if "=" in t))
+
+    def find(self, **match):
+        return [d for d in self.lines if all(d.get(k) == v for k, v in match.items())]
+
+    def one(self, **match):
+        found = self.find(**match)
+        return found[0] if found else None
+
+    def provenance(self):
+        carried = self.meta.get("carried over")
+        if carried:
+            m = self.meta
+            return (f"*Carried over, not rerun: measured {m.get('date', '?')} on the code of commit "
+                    f"{m.get('commit', '?')}, {m.get('machine', '?')}, {m.get('load', '?')}; {carried}. "
+                    f"Rerun: `/usr/bin/python3 scripts/bench_tables.py --run {self.name}`.*")
+        if not self.exists:
+            command = " ".join(BENCHES[self.name][1])
+            return f"*Not measured yet: `/usr/bin/python3 scripts/bench_tables.py --run {self.name}` " \
+                   f"(runs `{command}`).*"
+        m = self.meta
+        return (f"*`{m.get('command', '?')}` · {m.get('date', '?')} · commit {m.get('commit', '?')} · "
+                f"{m.get('machine', '?')} · load {m.get('load', '?').split(' (')[0]}*")
+
+
+def uvw(d, prefix="rms_", keys=("u", "v", "w")):
+    return " / ".join(d.get(prefix + k, "?") for k in keys)
+
+
+def table(header, rows):
+    out = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    out += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
+    return out
+
+
+def pct(x):
+    return f"{100 * float(x):.1f} %"
+
+
+# ---------------------------------------------------------------------------------------------
+# Tables: each takes the results it needs and returns markdown lines (provenance included).
+
+HEADLINE_ROWS = [
+    # (result, shipped config, what it ran, paper, targets); the time-sweep row with the same settings
+    ("e2e-full", "run-paper.yaml",
+     "sec 6.4 ring vortex: paper camera, 300x200x200 voxels, 0.5 ppm",
+     "0.165 / 0.23 / 0.98; 30 min per image on 12 cores",
+     "<= 0.10 / 0.10 / 0.50 and <= 30 s per pair (#7); <= 10 s per pair in a run (#21)"),
+    ("e2e-full-process", "process.yaml's MART and correlation",
+     "the same pair", "as above", "as above"),
+    ("e2e-reduced-process", "process.yaml's MART and correlation",
+     "the ring scaled to camera-small: 48³ voxels, across the focal plane", "—", "—"),
+    ("e2e-reduced-live", "run.yaml's MART and correlation",
+     "the same small pair", "—", "keep up with the laser (#22: every pair at 1 Hz)"),
+]
+
+
+# The headline row whose settings the paper-scale time sweep also ran: its time there, when that
+# sweep ran on another day (another load), is shown beside the headline's.
+SWEEP_TWIN = {"e2e-full": "8_acc_floor_3"}
+
+
+def t_headline(R):
+    rows = []
+    for name, config, case, paper, target in HEADLINE_ROWS:
+        r = R(name)
+        rec = r.one(variant="reconstructed") or {}
+        steady = r.one(variant="steady_state") or {}
+        time = f"{steady.get('pair_s', '?')} s" if r.exists else "—"
+        sweep = R("e2e-full-sweep")
+        twin = sweep.one(variant="mart_floor", value=SWEEP_TWIN.get(name, ""))
+        if twin and sweep.meta.get("date") != r.meta.get("date"):
+            time += (f" (load {r.meta.get('load', '?').split()[0]}); {twin['total_s']} s on "
+                     f"{sweep.meta.get('date', '?').split()[0]}, {sweep.meta.get('load', '?')}")
+        rows.append([config, case, f"{uvw(rec)} ({uvw(rec, 'off_axis_band_rms_')})" if r.exists else "—",
+                     time, paper, target, r.meta.get("date", "—").split(" (")[0],
+                     r.meta.get("commit", "—")])
+    out = table(["config", "case", "RMS u / v / w, voxels (off the axis band)", "time per pair in a run",
+                 "paper", "target (issue)", "measured", "commit"], rows)
+    machines = {R(n).meta.get("machine") for n, *_ in HEADLINE_ROWS if R(n).exists}
+    loads = ", ".join(f"{n} {R(n).meta.get('load', '?').split(' (')[0]}" for n, *_ in HEADLINE_ROWS
+                      if R(n).exists)
+    out.append("")
+    out.append(f"*Machine: {'; '.join(sorted(m for m in machines if m)) or '—'}; load average at the "
+               f"start: {loads or '—'}. Commands: the End to end section.*")
+    return out
+
+
+def e2e_row(r, label):
+    rec = r.one(variant="reconstructed")
+    ex = r.one(variant="exact_volumes")
+    steady = r.one(variant="steady_state")
+    if not rec:
+        return [label] + ["—"] * 6
+    times = f"{rec.get('recon_a_s', '?')} + {rec.get('recon_b_s', '?')} + {rec.get('correlate_s', '?')}"
+    if steady:
+        times += f"; in a run {steady['pair_s']} (first {steady['first_pair_s']})"
+    mart = f"{rec['iterations']} it, mu {float(rec['mu']):g}" + (", accelerated" if rec["accelerate"] == "1" else "")
+    skipped = pct(rec["skipped_a"]) if "skipped_a" in rec else "?"
+    return [label, mart, times, f"**{uvw(rec)}** ({rec['rms']})", uvw(rec, "off_axis_band_rms_"),
+            f"{uvw(ex)}" if ex else "—", f"{skipped}, {rec.get('peak_rss_gb', '?')} GB"]
+
+
+def t_e2e_cases(R):
+    cases = (("e2e-full", "full, run-paper.yaml's"), ("e2e-full-process", "full, process.yaml's"),
+             ("e2e-reduced-process", "reduced, process.yaml's"), ("e2e-reduced-live", "reduced, run.yaml's"))
+    rows = [e2e_row(R(name), label) for name, label in cases]
+    out = table(["case, settings", "MART", "s: recon A + B + correlate", "RMS u / v / w (all)",
+                 "off the axis band", "exact-particle volumes", "skipped, peak memory"], rows)
+    out.append("")
+    out += [R(n).provenance() + "  " for n, _ in cases]
+    return out
+
+
+VARIANT_LABELS = {
+    "no_depth_margin": "no depth margin", "no_intensity_threshold": "no ghost floor",
+    "intensity_threshold_4": "ghost floor 4", "final_smoothing_0": "no final smoothing",
+    "depth_prefilter_0": "no depth prefilter", "depth_prefilter_4": "depth prefilter 4",
+    "previous_default_3pass_window_mean": "32/50, 16/50, 16/75, window-mean predictor, unsmoothed",
+    "centre_3pass": "32/50, 16/50, 16/75, centre predictor",
+}
+
+
+def t_e2e_variants(name):
+    def make(R):
+        r = R(name)
+        rows = []
+        for d in r.find(volumes="reconstructed"):
+            if "rms" not in d or d.get("correlation") == "centre_3pass":  # bench_piv compares schedules
+                continue
+            key = "passes" if "passes" in d else "correlation"
+            value = d[key]
+            label = f"as the headline ({value})" if key == "passes" else VARIANT_LABELS.get(
+                value, value.replace("_", " "))
+            ex = next((e for e in r.find(volumes="exact") if e.get(key) == value), {})
+            rows.append([label, f"{uvw(d)} ({d['rms']})", uvw(d, "off_axis_band_rms_"),
+                         f"{uvw(ex)}" if ex else "—", d["correlate_s"]])
+        out = table(["correlation of the same volumes (no depth context)", "RMS u / v / w (RMS)",
+                     "off the axis band", "exact-particle volumes", "correlate s"], rows)
+        return out + [""]  # the w-by-depth table that follows gives the run's provenance
+    return make
+
+
+MART_FLOOR_LABELS = {"paper_5_it_mu_0.5": "the paper's: 5 plain iterations at mu 0.5, no floor",
+                     "8_acc_floor_3": "**8 accelerated, floor 3 (run-paper.yaml)**",
+                     "20_acc": "20 accelerated, no floor",
+                     "20_acc_floor_4": "20 accelerated, floor 4 (process.yaml's)"}
+
+
+def t_full_sweep(R):
+    r = R("e2e-full-sweep")
+    rows = []
+    for d in r.find(variant="mart_floor"):
+        label = MART_FLOOR_LABELS.get(d["value"], d["value"].replace("_acc_floor_", " accelerated, floor "))
+        rows.append([label, d["total_s"], uvw(d), d["rms"], uvw(d, "off_axis_band_rms_"),
+                     "**yes**" if d["pareto"] == "yes" else "no"])
+    out = table(["MART (mu 1 unless stated), ghost floor", "s per pair", "RMS u / v / w", "RMS",
+                 "off the axis band", "Pareto"], rows)
+    return out + ["", r.provenance()]
+
+
+KNOBS = [  # (variant, knob label, how a row's setting is named)
+    ("paper", "paper's MART, default passes", lambda d: "5 it, mu 0.5"),
+    ("iterations", "iterations at mu 0.5", lambda d: d["iterations"]),
+    ("mu", "mu", lambda d: f"{float(d['mu']):g}, {d['iterations']} it"),
+    ("acceleration", "accelerated at mu 1", lambda d: f"{d['iterations']} it"),
+    ("no_depth_guard", "depth guard", lambda d: "none"),
+    ("angular_sampling", "angular sampling", lambda d: d["value"].split(",")[0]),
+    ("dark_cutoff", "dark cutoff", lambda d: d["value"]),
+    ("noise_threshold", "noise floor, counts", lambda d: d["value"]),
+    ("binning", "2x binning (windows 16/12/8)", lambda d: "0.25 mm voxels"),
+    ("final_window", "final window", lambda d: f"{d['final_window']}³"),
+    ("passes", "passes", lambda d: d["passes"]),
+    ("intensity_threshold", "ghost floor, x the mean", lambda d: d["value"]),
+    ("depth_prefilter", "depth prefilter passes", lambda d: d["value"]),
+]
+
+
+def t_reduced_sweep(R):
+    r = R("e2e-reduced")
+    rows = []
+    for variant, label, name in KNOBS:
+        cells = []
+        for d in r.find(variant=variant):
+            if "pareto" not in d:
+                continue
+            cell = f"{name(d)}: {d['rms']} ({d['total_s']} s)"
+            if variant == "paper":
+                cell += f"; u / v / w {uvw(d)}"
+            cells.append(f"**{cell}**" if d["pareto"] == "yes" else cell)
+        if cells:
+            rows.append([label, " · ".join(cells)])
+    out = table(["knob", "setting: RMS of u, v, w together (s per pair); bold: on the Pareto front"], rows)
+    return out + ["", r.provenance()]
+
+
+def t_e2e_depth(R):
+    r = R("e2e-full")
+    rows = []
+    for volumes in ("reconstructed", "exact"):
+        d = next((x for x in r.lines if x.get("volumes") == volumes and "rms_w_by_depth_mm" in x), None)
+        if not d:
+            continue
+        bands = re.findall(r"(-?\w+)\.\.(-?\w+):([\d.]+)\((\d+),gain=([-\w.]+)", d["rms_w_by_depth_mm"])
+        if not rows:
+            rows.append(["z band, mm"] + [f"{lo}..{hi}".replace("inf", "∞") for lo, hi, *_ in bands])
+            rows.append(["vectors"] + [b[3] for b in bands])
+        rows.append([f"w RMS (gain), {volumes}"] + [f"{b[2]} ({b[4]})" for b in bands])
+    if not rows:
+        return [r.provenance()]
+    out = table(rows[0], rows[1:])
+    return out + ["", r.provenance()]
+
+
+def t_recon_phases(R):
+    cases = [("small camera, 60x60x200", R("recon-small")), ("paper camera, 300x200x200", R("recon-paper"))]
+
+    def phase(r, name, key="seconds"):
+        d = r.one(phase=name)
+        return d.get(key, "—") if d else "—"
+
+    def val(r, key):
+        d = next((x for x in r.lines if key in x), None)
+        return d[key] if d else "—"
+
+    rows = [
+        ["once per run: white image + weight tables and eq 13 normalisers, s",
+         *[f"{phase(r, 'white_image')} + {phase(r, 'tables_and_normalisers')}" for _, r in cases]],
+        ["setup: selection, active set, MLOS start, s", *[phase(r, "active_set_and_mlos") for _, r in cases]],
+        ["per SMART iteration, s", *[phase(r, "iterations", "per_iteration") for _, r in cases]],
+        ["**reconstruction, s wall (CPU s)**",
+         *[f"**{phase(r, 'reconstruct_total')}** ({phase(r, 'reconstruct_total', 'cpu_s')})" for _, r in cases]],
+        ["voxels skipped", *[pct(val(r, "skipped_fraction")) if r.exists else "—" for _, r in cases]],
+        ["Q* / final residual", *[f"{val(r, 'quality_q_star')} / {phase(r, 'reconstruct_total', 'final_residual')}"
+                                  for _, r in cases]],
+        ["volume hash", *[f"`{phase(r, 'reconstruct_total', 'volume_hash')}`" for _, r in cases]],
+        ["peak memory, GB", *[val(r, "peak_rss_gb") for _, r in cases]],
+    ]
+    reuse = {v: R("recon-paper").one(bench="recon_reuse", variant=v) for v in ("first", "reused", "fresh_again")}
+    if reuse["first"]:
+        rows.append(["paper: first frame / kept workspace / fresh again, s",
+                     "", " / ".join(reuse[v]["seconds"] for v in reuse if reuse[v])])
+    out = table(["5 SMART iterations at mu 0.5, MLOS start, cutoff 0.9, 0.5 ppm"] + [c for c, _ in cases], rows)
+    return out + [""] + [r.provenance() + "  " for _, r in cases]
+
+
+FIG22_PAPER = ["paper (its own fit)", "0.38", "0.066 / 0.80; 1.04 / 2.98", "", "", "", "30 min on 12 cores"]
+FIG22_TARGET = ["target (#5), either fit", ">= 0.38", "X sd <= 0.4; Z sd <= 1.5", "", "", "", "<= 10 s"]
+
+
+def t_fig22(R):
+    rows = []
+    for name, label in (("recon-fig22", "5 it, mu 0.5 (the paper's)"),
+                        ("recon-fig22-accurate", "20 accelerated at mu 1, sensor blur 0.0052 mm")):
+        r = R(name)
+        if not r.exists:
+            rows.append([label] + ["—"] * 6)
+            continue
+        q = next((x["quality_q_star"] for x in r.lines if "quality_q_star" in x), "?")
+        fits = {d["fit"]: d for d in r.find(bench="recon_paper") if "fit" in d}
+        total = r.one(phase="reconstruct_total")
+
+        def xz(d, axis):
+            return f"{d[f'abs_{axis}_err_vox_mean']} / {d[f'abs_{axis}_err_vox_sd']}"
+        rows.append([label, q,
+                     f"{xz(fits['peak_rows'], 'x')}; {xz(fits['peak_rows'], 'z')}",
+                     xz(fits["moments"], "x"), xz(fits["moments"], "z"),
+                     fits["moments"]["depth_error_slope_percent"] + " %", f"{total['seconds']}"])
+    rows.append(FIG22_PAPER)
+    rows.append(FIG22_TARGET)
+    out = table(["500 particles, 300x200x200", "Q*", "peak rows: abs X; abs Z (mean / sd)",
+                 "moments: abs X", "moments: abs Z", "depth slope", "reconstruction s"], rows)
+    a, b = R("recon-fig22"), R("recon-fig22-accurate")
+    if a.exists and b.exists and not a.meta.get("carried over") and all(
+            a.meta.get(k) == b.meta.get(k) for k in ("commit", "machine")):
+        m = a.meta
+        return out + ["", f"*`{m['command']}` and `{b.meta['command']}` · {m.get('date', '?')} · commit "
+                      f"{m['commit']} · {m['machine']} · load {m.get('load', '?').split(' (')[0]}*"]
+    return out + ["", a.provenance() + "  ", b.provenance()]
+
+
+def t_figures(R):
+    r = R("recon-figures")
+    fig21 = r.find(bench="recon_fig21")
+    out = []
+    if fig21:
+        lateral = [f"{float(d.get('lateral_err_vox', 'nan')):.2f}" for d in fig21]
+        rows = [["depth error, voxels"] + [f"{float(d.get('depth_err_vox', 'nan')):.2f}" for d in fig21]]
+        if any(x != "0.00" for x in lateral):
+            rows.append(["lateral error, voxels"] + lateral)
+        out += table(["fig 21: z, mm"] + [f"{float(d['z_mm']):g}" for d in fig21], rows)
+        out.append("")
+        if len(rows) == 1:
+            out[-1:] = ["", "Fig 21's lateral error is 0.00 voxel at every depth."]
+    b = r.find(bench="recon_fig23b")
+    c5 = [d for d in r.find(bench="recon_fig23c") if d["iterations"] == "5"]
+    c20 = [d for d in r.find(bench="recon_fig23c") if d["iterations"] == "20"]
+    note = ["Fig 23b, Q* after " + " / ".join(d["iterations"] for d in b) + " iterations (0.5 ppm): "
+            + " / ".join(d["q_star"] for d in b) + "."]
+    if out and out[-1].startswith("Fig 21's"):
+        note = [out.pop() + " " + note[0]]
+    out += note + [""]
+    out += table(["fig 23c: ppm"] + [f"{float(d['ppm']):g}" for d in c5],
+                 [["Q*, 5 it"] + [d["q_star"] for d in c5],
+                  ["voxels skipped, 5 it"] + [pct(d["skipped"]) for d in c5],
+                  ["Q*, 20 accelerated at mu 1, sensor blur"] + [d["q_star"] for d in c20]])
+    return out + ["", r.provenance()]
+
+
+def t_recon_mid(R):
+    r = R("recon-mid")
+    head = next((d for d in r.lines if "nonzeros" in d), None)
+    parts = []
+    for op in ("project", "back_project"):
+        ex, mf = r.one(op=op, variant="explicit"), r.one(op=op, variant="matrix_free")
+        if ex and mf:
+            parts.append(f"{op.replace('_', '-')}ion {ex['median_s']} s explicit, {mf['median_s']} s matrix-free "
+                         f"({mf['ratio']}x)")
+    if not head:
+        return [r.provenance()]
+    return [f"32³ voxels on the small camera; the explicit CSR matrix holds {int(head['nonzeros']):,} non-zeros "
+            f"({int(head['explicit_bytes']) / 1e9:.2f} GB, built in {head['build_s']} s on 1 thread): "
+            + "; ".join(parts) + ".", "", r.provenance()]
+
+
+def t_piv_uniform(name):
+    def make(R):
+        r = R(name)
+        rows = []
+        for d in r.find(bench="piv_uniform", prefilter="1", vectors="all"):
+            if d["shift_voxel"] not in ("0.1", "0.3", "0.5", "1.0"):
+                continue
+            nopre = r.one(bench="piv_uniform", prefilter="0", vectors="all", shift_voxel=d["shift_voxel"]) or {}
+            inner = r.one(bench="piv_uniform", prefilter="1", vectors="interior", shift_voxel=d["shift_voxel"]) or {}
+            rows.append([d["shift_voxel"], uvw(d, "bias_", "xyz"), uvw(d, "rms_", "xyz"),
+                         uvw(inner, "rms_", "xyz"), f"{nopre.get('bias_x', '?')} / {nopre.get('rms_x', '?')}"])
+        vol = rows and r.find(bench="piv_uniform")[0]["volume"]
+        out = table([f"shift (t, t, t), voxels ({vol})", "bias x / y / z", "RMS x / y / z",
+                     "RMS, interior vectors", "no prefilter: bias x / RMS x"], rows)
+        return out + [""]  # the ring table of the same run follows with the provenance
+    return make
+
+
+PIV_LABELS = {"default_4pass_2threads": "default, 2 threads", "default_4pass_1thread": "default, 1 thread",
+              "previous_default_3pass_window_mean": "32/50, 16/50, 16/75, window-mean predictor, unsmoothed",
+              "centre_3pass": "32/50, 16/50, 16/75", "centre_4pass_16_75": "32/50, 16/50, 16/75, 16/75",
+              "centre_5pass": "32/50, 16/50, 16/75 x 3", "default_no_prefilter": "default without the prefilter",
+              "default_fftw_measure": "default, FFTW_MEASURE plans", "single_pass_16": "one 16³@75 % pass",
+              "window_mean_4pass": "default passes, window-mean predictor"}
+
+
+def t_piv_ring(name):
+    def make(R):
+        r = R(name)
+        rows = []
+        for d in r.find(bench="piv_ring"):
+            rows.append([PIV_LABELS.get(d["variant"], d["variant"].replace("_", " ")), d["threads"], f"{d['seconds']} ({d['cpu_s']})",
+                         d["cpu_ratio"], " / ".join(f"{float(d['rms_' + k]):.3f}" for k in "xyz"),
+                         uvw(d, "off_axis_band_rms_"), d["outliers"], f"`{d['field_hash']}`"])
+        vol = rows and r.find(bench="piv_ring")[0]["volume"]
+        out = table([f"variant ({vol})", "threads", "s wall (CPU)", "CPU ratio", "RMS u / v / w",
+                     "off the axis band", "outliers", "field hash"], rows)
+        return out + ["", r.provenance()]
+    return make
+
+
+def t_daemon(R):
+    r = R("daemon")
+    rows = [[d["variant"], d["voxels"], d["setup_s"], d["sustained_pairs_per_s"], d["ratio"],
+             f"{d['paced_median_latency_s']} / {d['paced_max_latency_s']}",
+             f"{d['paced_skipped']} of {int(d['paced_processed']) + int(d['paced_skipped'])}"]
+            for d in r.find(bench="daemon_live")]
+    out = table(["variant", "voxels", "setup s", "sustained pairs/s", "ratio",
+                 "latency at 1 Hz, median / max s", "skipped at 1 Hz"], rows)
+    return out + ["", r.provenance()]
+
+
+def t_sim(R):
+    r = R("sim")
+    rows = []
+    over = {d["threads"]: d for d in r.find(bench="sim_frame_overhead")}
+    if over:
+        rows.append(["frame without particles (clear, convert 16 Mpx)",
+                     " / ".join(f"{over[t]['median_s']} ({over[t]['cpu_s']})" for t in sorted(over)), "", "", ""])
+    for variant in ("no_diffraction", "diffraction_5.2um"):
+        runs = {d["threads"]: d for d in r.find(bench="sim_rays", variant=variant)}
+        if "2" not in runs:
+            continue
+        d = runs["2"]
+        rows.append([f"{int(d['rays']):.1e} rays, {variant.replace('_', ' ')}",
+                     " / ".join(f"{runs[t]['median_s']} ({runs[t]['cpu_s']})" for t in sorted(runs)),
+                     d["mrays_per_s"], d["tracing_mrays_per_s"], d["speedup_vs_1_thread"]])
+    for d in r.find(bench="sim_paper_image"):
+        rows.append([f"paper image: 0.5 ppm, {int(d['rays']):.2e} rays, diffraction",
+                     f"2 threads: {d['seconds']} ({d['cpu_s']})", d["mrays_per_s"], "", ""])
+    out = table(["run (paper camera)", "s wall (CPU), 1 / 2 threads", "Mrays/s, 2 threads",
+                 "tracing alone", "speed-up"], rows)
+    return out + ["", r.provenance()]
+
+def t_calib(R):
+    r = R("calib")
+    rows = []
+    for stage in ("calibrate", "white_correction", "total"):
+        cells = []
+        for threads in ("1", "2"):
+            d = r.one(bench="calib", stage=stage, threads=threads)
+            cells.append(f"{d['median_s']} ({d['cpu_s']})" if d else "—")
+        rows.append([stage.replace("_", " ")] + cells)
+    fit = r.one(bench="calib", stage="calibrate") or {}
+    out = table([f"stage ({fit.get('lenses_measured', '?')} lenses measured, residual "
+                 f"{fit.get('rms_residual_px', '?')} px)", "1 thread: s wall (CPU)", "2 threads: s wall (CPU)"], rows)
+    return out + ["", r.provenance()]
+
+
+def t_resampling(R):
+    r = R("resampling")
+    cams = ("camera-small", "camera-fahringer2015")
+    rows = []
+    for deg in sorted({d["rotation_deg"] for d in r.find(bench="resampling")}, key=float):
+        row = [deg]
+        for cam in cams:
+            d = r.one(bench="resampling", camera=cam, rotation_deg=deg)
+            row.append(f"{d['max_departure_px']} px; {d['setup_s']} s; {d['frame_median_s']} s" if d else "—")
+        rows.append(row)
+    out = table(["rotation, deg", "camera-small (850x850): departure; setup; per frame",
+                 "paper camera (4904x3280): departure; setup; per frame"], rows)
+    return out + ["", r.provenance()]
+
+
+TABLES = {
+    "headline": t_headline,
+    "e2e-cases": t_e2e_cases,
+    "e2e-full-variants": t_e2e_variants("e2e-full"),
+    "e2e-full-sweep": t_full_sweep,
+    "e2e-full-depth": t_e2e_depth,
+    "e2e-reduced-sweep": t_reduced_sweep,
+    "recon-phases": t_recon_phases,
+    "recon-fig22": t_fig22,
+    "recon-figures": t_figures,
+    "recon-mid": t_recon_mid,
+    "piv-uniform": t_piv_uniform("piv"),
+    "piv-ring": t_piv_ring("piv"),
+    "daemon": t_daemon,
+    "sim": t_sim,
+    "calib": t_calib,
+    "resampling": t_resampling,
+}
+
+
+def regenerate():
+    cache = {}
+
+    def R(name):
+        if name not in cache:
+            cache[name] = Result(name)
+        return cache[name]
+
+    text = DOC.read_text()
+    pattern = re.compile(r"(<!-- generated: ([\w-]+) -->\n)(.*?)(<!-- end: \2 -->)", re.S)
+    seen = set()
+
+    def replace(m):
+        name = m.group(2)
+        if name not in TABLES:
+            sys.exit(f"bench_tables: docs/benchmarks.md asks for table '{name}', which this script lacks")
+        seen.add(name)
+        return m.group(1) + "\n".join(TABLES[name](R)) + "\n" + m.group(4)
+
+    text = pattern.sub(replace, text)
+    missing = set(TABLES) - seen
+    if missing:
+        sys.exit(f"bench_tables: no markers in docs/benchmarks.md for {', '.join(sorted(missing))}")
+    DOC.write_text(text)
+    for name, (_, _, plot) in BENCHES.items():
+        path = RESULTS / f"{name}.txt"
+        text = path.read_text() if path.exists() else ""
+        if plot and "pareto=" in text and "# carried over:" not in text:
+            subprocess.run(["/usr/bin/python3", "bench/plot_e2e.py", f"docs/{plot}"], cwd=ROOT, check=True,
+                           input=text, text=True)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--run", nargs="+", metavar="NAME", help="quick, paper, all, or result names")
+    parser.add_argument("--list", action="store_true", help="list the results and their commands")
+    args = parser.parse_args()
+    if args.list:
+        for name, (scale, command, _) in BENCHES.items():
+            print(f"{name:22} {scale:6} {' '.join(command)}")
+        return
+    if args.run:
+        names = []
+        for item in args.run:
+            if item in ("quick", "paper", "all"):
+                names += [n for n, b in BENCHES.items() if item in ("all", b[0])]
+            elif item in BENCHES:
+                names.append(item)
+            else:
+                sys.exit(f"bench_tables: no result named '{item}' (see --list)")
+        build(names)
+        for name in names:
+            run(name)
+    regenerate()
+
+
+if __name__ == "__main__":
+    main()
