@@ -24,29 +24,36 @@ ImageF to_float(const ImageU16& raw);
 // pair when there is one (> 0), else the nominal dt_s of the settings.
 double pair_dt_s(const ProcessSettings& settings, std::optional<double> measured_dt_s);
 
-// MART's buffers (recon::MartWorkspace, about half a gigabyte each at the paper's scale) kept from
-// pair to pair: a pair takes a free one, or a new one when all are in use, and gives it back when
-// done (also when processing throws). As many exist as pairs were ever in flight at once. Thread
-// safe. Not per thread: a TBB thread waiting inside one pair's reconstruction may run another pair.
+// The buffers of one pair in flight: MART's (recon::MartWorkspace, about half a gigabyte at the
+// paper's scale; frame B reuses frame A's) and the correlation's (four volumes).
+struct PairWorkspace {
+  recon::MartWorkspace mart;
+  piv::CorrelationWorkspace correlation;
+};
+
+// Pair workspaces kept from pair to pair: a pair takes a free one, or a new one when all are in
+// use, and gives it back when done (also when processing throws). As many exist as pairs were ever
+// in flight at once. Thread safe. Not per thread: a TBB thread waiting inside one pair's
+// reconstruction may run another pair.
 class WorkspacePool {
  public:
   class Lease {
    public:
-    Lease(WorkspacePool& pool, std::unique_ptr<recon::MartWorkspace> workspace);
+    Lease(WorkspacePool& pool, std::unique_ptr<PairWorkspace> workspace);
     Lease(const Lease&) = delete;
     Lease& operator=(const Lease&) = delete;
     ~Lease();
-    recon::MartWorkspace& operator*() const { return *workspace_; }
+    PairWorkspace& operator*() const { return *workspace_; }
 
    private:
     WorkspacePool& pool_;
-    std::unique_ptr<recon::MartWorkspace> workspace_;
+    std::unique_ptr<PairWorkspace> workspace_;
   };
   Lease take();
 
  private:
   std::mutex mutex_;
-  std::vector<std::unique_ptr<recon::MartWorkspace>> free_;
+  std::vector<std::unique_ptr<PairWorkspace>> free_;
 };
 
 // What one call needs besides the frames.
@@ -71,7 +78,8 @@ class PairProcessor {
 
   // Raw frames A and B (the camera's counts) to vectors: validated (sensor-sized; named "frame A"
   // and "frame B"), resampled when the operator says so, reconstructed and correlated
-  // (process_pair), with the dt pair_dt_s gives. MART's buffers come from the processor's pool.
+  // (process_pair), with the dt pair_dt_s gives. MART's and the correlation's buffers come from the
+  // processor's pool.
   PairResult process(const ImageU16& frame_a, const ImageU16& frame_b, const PairOptions& options = {}) const;
   PairResult process(const ImageF& frame_a, const ImageF& frame_b, const PairOptions& options = {}) const;
 

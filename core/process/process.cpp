@@ -184,7 +184,7 @@ std::string spec_text(const YAML::Node& node, const std::string& comment) {
 
 PairResult process_pair(const recon::WeightingOperator& op, const ImageF& frame_a, const ImageF& frame_b,
                         const ProcessSettings& settings, const PairProgress& progress,
-                        recon::MartWorkspace* workspace) {
+                        recon::MartWorkspace* workspace, piv::CorrelationWorkspace* correlation_workspace) {
   if (!(op.grid() == settings.reconstruction_grid()))
     throw InputError("process: the weighting operator was built for another volume grid than the run config's "
                      "(its volume plus the depth guard)");
@@ -220,7 +220,8 @@ PairResult process_pair(const recon::WeightingOperator& op, const ImageF& frame_
   t0 = std::chrono::steady_clock::now();
   out.correlation = piv::correlate_volumes(
       ra.volume, rb.volume, settings.correlation,
-      [&](const piv::PassReport& p) { report("correlate", 0.8 + 0.2 * p.pass / p.passes); }, settings.guard_slices());
+      [&](const piv::PassReport& p) { report("correlate", 0.8 + 0.2 * p.pass / p.passes); }, settings.guard_slices(),
+      correlation_workspace);
   out.times.correlate_s = seconds_since(t0);
   out.volume_a = depth_crop(std::move(ra.volume), settings.guard_slices(), settings.grid);
   out.volume_b = depth_crop(std::move(rb.volume), settings.guard_slices(), settings.grid);
@@ -277,12 +278,12 @@ const ImageF& PairOperator::prepare(const ImageF& frame, ImageF& scratch) const 
 
 PairResult process_pair(const PairOperator& op, const ImageF& frame_a, const ImageF& frame_b,
                         const ProcessSettings& settings, const PairProgress& progress,
-                        recon::MartWorkspace* workspace) {
+                        recon::MartWorkspace* workspace, piv::CorrelationWorkspace* correlation_workspace) {
   recon::validate_image(frame_a, op.weights(), "frame A");
   recon::validate_image(frame_b, op.weights(), "frame B");
   ImageF scratch_a, scratch_b;
   PairResult out = process_pair(op.weights(), op.prepare(frame_a, scratch_a), op.prepare(frame_b, scratch_b),
-                                settings, progress, workspace);
+                                settings, progress, workspace, correlation_workspace);
   out.lattice_note = op.note();
   return out;
 }

@@ -147,14 +147,17 @@ class PairOperator {
 // pair in flight, so that no frame allocates them afresh), else in one kept for the pair. The
 // results are the same bits either way. `progress` is called after every MART iteration and
 // correlation pass; a caller cancels the pair by throwing plenopiv::Cancelled from it (the
-// workspace is then free for the next pair).
+// workspace is then free for the next pair). `correlation_workspace` (optional): the correlation's
+// volume-sized buffers, kept by the caller likewise (piv::CorrelationWorkspace; the same bits).
 PairResult process_pair(const recon::WeightingOperator& op, const ImageF& frame_a, const ImageF& frame_b,
                         const ProcessSettings& settings, const PairProgress& progress = {},
-                        recon::MartWorkspace* workspace = nullptr);
+                        recon::MartWorkspace* workspace = nullptr,
+                        piv::CorrelationWorkspace* correlation_workspace = nullptr);
 // The same from raw frames through a PairOperator: the frames are validated as raw images, resampled
 // when the operator says so, and PairResult::lattice_note carries its note.
 PairResult process_pair(const PairOperator& op, const ImageF& frame_a, const ImageF& frame_b,
                         const ProcessSettings& settings, const PairProgress& progress = {},
-                        recon::MartWorkspace* workspace = nullptr);
+                        recon::MartWorkspace* workspace = nullptr,
+                        piv::CorrelationWorkspace* correlation_workspace = nullptr);
 
 }  // namespace plenopiv::process

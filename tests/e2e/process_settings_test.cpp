@@ -145,9 +145,9 @@ TEST(ProcessSettings, ProcessPairReturnsTheRequestedBoxAndRefusesAnUnguardedOper
   EXPECT_THROW(process_pair(unguarded, a, b, s), InputError);
 }
 
-// A caller's kept MART workspace (the daemon's, pair after pair) changes no bit: a pair processed
-// after another in the same workspace gives the volumes and vectors of one processed alone, and
-// frame B (reconstructed in A's buffers) the volume of B reconstructed first.
+// A caller's kept MART and correlation workspaces (the daemon's, pair after pair) change no bit: a
+// pair processed after another in the same workspaces gives the volumes and vectors of one
+// processed alone, and frame B (reconstructed in A's buffers) the volume of B reconstructed first.
 TEST(ProcessSettings, AKeptWorkspaceGivesTheSameVolumesAndVectors) {
   const auto camera = optics::load_camera_file(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml");
   const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera));
@@ -156,8 +156,9 @@ TEST(ProcessSettings, AKeptWorkspaceGivesTheSameVolumesAndVectors) {
   const PairOperator op(camera, lenses, calib::geometric_white_image(camera, lenses), s);
   const PairResult alone = process_pair(op, a, b, s);
   recon::MartWorkspace workspace;
-  const PairResult reversed = process_pair(op, b, a, s, {}, &workspace);
-  const PairResult kept = process_pair(op, a, b, s, {}, &workspace);
+  piv::CorrelationWorkspace correlation;
+  const PairResult reversed = process_pair(op, b, a, s, {}, &workspace, &correlation);
+  const PairResult kept = process_pair(op, a, b, s, {}, &workspace, &correlation);
   EXPECT_EQ(reversed.volume_a.data, alone.volume_b.data);
   EXPECT_EQ(kept.volume_a.data, alone.volume_a.data);
   EXPECT_EQ(kept.volume_b.data, alone.volume_b.data);
@@ -167,6 +168,7 @@ TEST(ProcessSettings, AKeptWorkspaceGivesTheSameVolumesAndVectors) {
   EXPECT_EQ(kept.correlation.field.valid, alone.correlation.field.valid);
   EXPECT_NE(alone.volume_a.data, alone.volume_b.data);  // two different frames
   EXPECT_GT(workspace.bytes(), 0u);  // the pairs ran in it
+  EXPECT_GT(correlation.bytes(), 0u);
 }
 
 // Cancelling from the progress callback (plenopiv::Cancelled, as the daemon's stop does) abandons
