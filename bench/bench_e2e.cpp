@@ -400,7 +400,7 @@ int main(int argc, char** argv) {
   if (sparse_sweep) {
     // The value-adaptive active set on this pair: pruning off, exact zeros, then thresholds
     // (fractions of each volume's peak), every pair in the kept workspaces, the variants
-    // interleaved `sparse_repeats` times; times are medians. updates_skipped: the share of the
+    // interleaved `sparse_repeats` times; times (wall, and the process's CPU seconds) are medians. updates_skipped: the share of the
     // box's voxel updates over the iterations not done (not solved, or pruned); work_pruned: the
     // share of the kernels' work the pruning saved against the start's active set.
     struct Prune {
@@ -419,12 +419,15 @@ int main(int argc, char** argv) {
     }
     piv::CorrelationWorkspace correlation_workspace;
     std::vector<std::vector<process::PairResult>> runs(variants.size());
+    std::vector<std::vector<double>> cpu(variants.size());  // CPU seconds per pair
     for (int rep = 0; rep < sparse_repeats; ++rep) {
       for (std::size_t v = 0; v < variants.size(); ++v) {
         process::ProcessSettings s = settings;
         s.mart.prune = variants[v].on;
         s.mart.prune_threshold = variants[v].threshold;
+        const double cpu0 = bench::cpu_seconds();
         process::PairResult r = process::process_pair(op, a, b, s, {}, &workspace, &correlation_workspace);
+        cpu[v].push_back(bench::cpu_seconds() - cpu0);
         if (rep > 0) {  // only the times are kept from the repeats (the same bits)
           r.volume_a = {};
           r.volume_b = {};
@@ -436,7 +439,7 @@ int main(int argc, char** argv) {
       std::sort(x.begin(), x.end());
       return x.size() % 2 ? x[x.size() / 2] : 0.5 * (x[x.size() / 2 - 1] + x[x.size() / 2]);
     };
-    double off_pair_s = 0;
+    double off_pair_s = 0, off_cpu_s = 0;
     const process::PairResult& off = runs[0][0];
     for (std::size_t v = 0; v < variants.size(); ++v) {
       std::vector<double> ra, rb, co, pair;
@@ -447,7 +450,8 @@ int main(int argc, char** argv) {
         pair.push_back(r.times.reconstruct_a_s + r.times.reconstruct_b_s + r.times.correlate_s);
       }
       const double pair_s = median(pair);
-      if (v == 0) off_pair_s = pair_s;
+      const double cpu_s = median(cpu[v]);
+      if (v == 0) off_pair_s = pair_s, off_cpu_s = cpu_s;
       const process::PairResult& r = runs[v][0];
       const Errors er = errors_against(r.correlation.field, flow, voxel);
       // The volumes against pruning off: L2 of the difference over L2 of off's.
@@ -460,11 +464,12 @@ int main(int argc, char** argv) {
         }
       }
       std::printf("bench=e2e case=%s variant=sparse prune=%s repeats=%d recon_a_s=%.2f recon_b_s=%.2f correlate_s=%.2f "
-                  "pair_s=%.2f pair_over_off=%.3f updates_skipped_a=%.3f updates_skipped_b=%.3f work_pruned_a=%.3f "
+                  "pair_s=%.2f pair_over_off=%.3f pair_cpu_s=%.2f cpu_over_off=%.3f updates_skipped_a=%.3f updates_skipped_b=%.3f work_pruned_a=%.3f "
                   "work_pruned_b=%.3f volume_l2_vs_off=%.4f rms_u=%.3f rms_v=%.3f rms_w=%.3f off_axis_band_rms_u=%.3f "
                   "off_axis_band_rms_v=%.3f off_axis_band_rms_w=%.3f valid=%.3f same_field_as_off=%d\n",
                   scale.c_str(), variants[v].name, sparse_repeats, median(ra), median(rb), median(co), pair_s,
-                  off_pair_s > 0 ? pair_s / off_pair_s : 1.0, r.skipped_a.fraction_updates_skipped(),
+                  off_pair_s > 0 ? pair_s / off_pair_s : 1.0, cpu_s, off_cpu_s > 0 ? cpu_s / off_cpu_s : 1.0,
+                  r.skipped_a.fraction_updates_skipped(),
                   r.skipped_b.fraction_updates_skipped(), r.skipped_a.fraction_work_pruned(),
                   r.skipped_b.fraction_work_pruned(), norm > 0 ? std::sqrt(diff / norm) : 0.0, er.rms[0], er.rms[1],
                   er.rms[2], er.off_band[0], er.off_band[1], er.off_band[2], er.valid_fraction,
