@@ -207,6 +207,7 @@ PairResult process_pair(const recon::WeightingOperator& op, const ImageF& frame_
   });
   out.times.reconstruct_a_s = seconds_since(t0);
   out.skipped_a = ra.skipped;
+  out.iterations_a = ra.iterations;
 
   t0 = std::chrono::steady_clock::now();
   auto rb = recon::reconstruct(op, frame_b, mart, buffers, [&](const recon::IterationReport& it) {
@@ -214,6 +215,7 @@ PairResult process_pair(const recon::WeightingOperator& op, const ImageF& frame_
   });
   out.times.reconstruct_b_s = seconds_since(t0);
   out.skipped_b = rb.skipped;
+  out.iterations_b = rb.iterations;
 
   // The guard slices are the correlation's depth context: no window lies in them, but the windows
   // at the box's depth faces see the rest of the streaks those faces cut (piv::correlate_volumes).

@@ -90,6 +90,8 @@ struct StageTimes {
 struct PairResult {
   Volume volume_a, volume_b;
   recon::SkipReport skipped_a, skipped_b;
+  // Each MART iteration's report (live voxels, work, residual), frames A and B.
+  std::vector<recon::IterationReport> iterations_a, iterations_b;
   piv::CorrelationResult correlation;
   StageTimes times;
   std::string lattice_note;  // PairOperator::note: why and how the frames were resampled; empty if not
