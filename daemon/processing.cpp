@@ -19,8 +19,9 @@ ReconstructionWork reconstruction_work(const process::PairResult& r) {
   w.voxels = r.skipped_a.voxels;
   for (const auto& it : r.iterations_a) w.live_a.push_back(it.live_voxels);
   for (const auto& it : r.iterations_b) w.live_b.push_back(it.live_voxels);
+  // Over both frames' iterations; a pair whose frames lit no voxel ran none and skipped everything.
   const double all = double(r.skipped_a.voxels) * r.skipped_a.iterations + double(r.skipped_b.voxels) * r.skipped_b.iterations;
-  w.updates_skipped = all > 0 ? 1.0 - double(r.skipped_a.voxel_updates + r.skipped_b.voxel_updates) / all : 0.0;
+  w.updates_skipped = all > 0 ? 1.0 - double(r.skipped_a.voxel_updates + r.skipped_b.voxel_updates) / all : 1.0;
   const double unpruned = r.skipped_a.work_unpruned + r.skipped_b.work_unpruned;
   w.work_pruned = unpruned > 0 ? 1.0 - (r.skipped_a.work_done + r.skipped_b.work_done) / unpruned : 0.0;
   return w;

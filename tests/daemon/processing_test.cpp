@@ -74,6 +74,25 @@ TEST(Processing, UniformDisplacementOfARayTracedPairComesBack) {
   EXPECT_NEAR(mean_dx, shift_mm, 0.02);
   EXPECT_NEAR(mean_dy, 0.0, 0.01);
 
+  // What MART skipped, for the status and the log: 3 iterations per frame, each updating the live
+  // voxels of a box mostly dark at 30 particles, the shares consistent with those counts.
+  ASSERT_TRUE(out.work);
+  const ReconstructionWork& w = *out.work;
+  ASSERT_EQ(w.live_a.size(), 3u);
+  ASSERT_EQ(w.live_b.size(), 3u);
+  std::size_t updates = 0;
+  for (const auto* live : {&w.live_a, &w.live_b}) {
+    for (const std::size_t n : *live) {
+      EXPECT_GT(n, 0u);
+      EXPECT_LT(n, w.voxels);
+      updates += n;
+    }
+  }
+  EXPECT_NEAR(w.updates_skipped, 1.0 - double(updates) / (6.0 * double(w.voxels)), 1e-12);
+  std::printf("processing: voxel updates skipped %.4f of %zu voxels x 6 iterations\n", w.updates_skipped, w.voxels);
+  EXPECT_GT(w.updates_skipped, 0.5) << "measured " << w.updates_skipped;
+  EXPECT_EQ(w.work_pruned, 0.0);  // no exact zeros in ray-traced frames; no threshold
+
   // A stopping run: the same pair gives up at the first MART iteration's check.
   const CancelFlag stop{true};
   EXPECT_THROW(process(pair, stop), Cancelled);
