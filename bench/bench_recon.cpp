@@ -30,12 +30,7 @@ namespace {
 
 double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
 
-// Process CPU time (all threads): on a shared machine wall time says more about the neighbours.
-double cpu_seconds() {
-  rusage u{};
-  getrusage(RUSAGE_SELF, &u);
-  return double(u.ru_utime.tv_sec + u.ru_stime.tv_sec) + 1e-6 * double(u.ru_utime.tv_usec + u.ru_stime.tv_usec);
-}
+using bench::cpu_seconds;
 
 // Minor page faults of the process so far (a fresh buffer faults once per page it touches).
 long minor_faults() {
