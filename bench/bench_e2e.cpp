@@ -6,12 +6,19 @@
 //   bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate]
 //             [--dark-cutoff F] [--intensity-threshold K] [--final-smoothing K] [--depth-prefilter K]
 //             [--passes P] [--steady] [--time-sweep] [--z-centre MM] [--compare-passes 'P1;P2;...']
+//             [--prune-threshold F] [--sparse-sweep [--sparse-repeats N] [--sparse-variants V,..]]
 //     --iterations/--mu/--accelerate/--dark-cutoff: MART for the headline rows (default the
 //              paper's 5 at mu 0.5, not accelerated, MartSettings' dark-pixel cutoff; the sweep's
 //              rows still start from the paper's settings).
 //     --time-sweep: MART iterations and the ghost floor against time per pair at this scale (with
 //              --no-sweep; ten pairs in a kept workspace; rows marked pareto= for plot_e2e.py).
 //     --steady: the headline pair once more in the kept MART workspace (time per pair in a run).
+//     --prune-threshold: MART's prune threshold for the headline rows (default 0: exact zeros).
+//     --sparse-sweep: the headline settings with pruning off, on for exact zeros, and at thresholds
+//              1e-3 .. 3e-2, every pair in the kept workspaces (with --no-sweep; rows variant=sparse
+//              for docs/benchmarks.md, "Sparse reconstruction"); --sparse-repeats N:
+//              the variants interleaved N times, times the medians (default 1); --sparse-variants:
+//              a subset of off,zeros,1e-3,3e-3,1e-2,3e-2 starting with off (default all).
 //     --intensity-threshold: the correlation's ghost floor for the headline rows, times each
 //              volume's mean (default 0, the paper's correlation); they then also print the
 //              correlation without it on the same volumes.
@@ -140,7 +147,10 @@ int main(int argc, char** argv) {
   double intensity_threshold = piv::CorrelationSettings{}.intensity_threshold_of_mean;
   int final_smoothing = piv::CorrelationSettings{}.final_smoothing;
   int depth_prefilter = piv::CorrelationSettings{}.depth_prefilter;
-  bool steady = false, time_sweep = false;
+  bool steady = false, time_sweep = false, sparse_sweep = false;
+  int sparse_repeats = 1;
+  std::string sparse_variants;  // empty: all
+  double prune_threshold = recon::MartSettings{}.prune_threshold;
   std::string compare_passes;  // pass lists separated by ';'
   std::string passes;          // the headline's passes (--passes syntax); empty: core/piv's default
   for (int i = 1; i < argc; ++i) {
@@ -157,6 +167,10 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--depth-prefilter") && i + 1 < argc) depth_prefilter = std::stoi(argv[++i]);
     else if (!std::strcmp(argv[i], "--steady")) steady = true;
     else if (!std::strcmp(argv[i], "--time-sweep")) time_sweep = true;
+    else if (!std::strcmp(argv[i], "--sparse-sweep")) sparse_sweep = true;
+    else if (!std::strcmp(argv[i], "--sparse-repeats") && i + 1 < argc) sparse_repeats = std::max(1, std::stoi(argv[++i]));
+    else if (!std::strcmp(argv[i], "--sparse-variants") && i + 1 < argc) sparse_variants = argv[++i];
+    else if (!std::strcmp(argv[i], "--prune-threshold") && i + 1 < argc) prune_threshold = std::stod(argv[++i]);
     else if (!std::strcmp(argv[i], "--compare-passes") && i + 1 < argc) compare_passes = argv[++i];
     else if (!std::strcmp(argv[i], "--passes") && i + 1 < argc) passes = argv[++i];
     else scale = argv[i];
@@ -166,7 +180,8 @@ int main(int argc, char** argv) {
                 sensor_blur_mm != recon::MartSettings{}.sensor_blur_sigma_mm ||
                 intensity_threshold != piv::CorrelationSettings{}.intensity_threshold_of_mean ||
                 final_smoothing != piv::CorrelationSettings{}.final_smoothing ||
-                depth_prefilter != piv::CorrelationSettings{}.depth_prefilter)) {
+                depth_prefilter != piv::CorrelationSettings{}.depth_prefilter ||
+                prune_threshold != recon::MartSettings{}.prune_threshold)) {
     std::fprintf(stderr, "bench_e2e: --iterations/--mu/--accelerate/--dark-cutoff/--sensor-blur-mm/--intensity-threshold/--final-smoothing/--depth-prefilter/--passes/--z-centre change the "
                          "headline rows only; use them with --no-sweep\n");
     return 2;
@@ -176,7 +191,7 @@ int main(int argc, char** argv) {
   const bool mid = scale == "mid";
   const bool full = scale == "full" || mid;
   if (!full && scale != "reduced") {
-    std::fprintf(stderr, "usage: bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate] [--dark-cutoff F] [--sensor-blur-mm S] [--intensity-threshold K] [--final-smoothing K] [--depth-prefilter K] [--passes P] [--steady] [--time-sweep] [--z-centre MM] [--compare-passes 'P1;P2']\n");
+    std::fprintf(stderr, "usage: bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate] [--dark-cutoff F] [--sensor-blur-mm S] [--intensity-threshold K] [--final-smoothing K] [--depth-prefilter K] [--passes P] [--steady] [--time-sweep] [--z-centre MM] [--compare-passes 'P1;P2'] [--prune-threshold F] [--sparse-sweep [--sparse-repeats N] [--sparse-variants V,..]]\n");
     return 2;
   }
   const std::string dir = std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/";
@@ -194,6 +209,7 @@ int main(int argc, char** argv) {
   settings.mart.accelerate = accelerate;
   settings.mart.dark_weight_cutoff = dark_cutoff;
   settings.mart.sensor_blur_sigma_mm = sensor_blur_mm;
+  settings.mart.prune_threshold = prune_threshold;
   settings.correlation.intensity_threshold_of_mean = intensity_threshold;
   settings.correlation.final_smoothing = final_smoothing;
   settings.correlation.depth_prefilter = depth_prefilter;
@@ -380,6 +396,88 @@ int main(int argc, char** argv) {
                    true);
     correlate_both("correlation", "previous_default_3pass_window_mean", previous, false);
     correlate_both("correlation", "centre_3pass", centre3, false);
+  }
+  if (sparse_sweep) {
+    // The value-adaptive active set on this pair: pruning off, exact zeros, then thresholds
+    // (fractions of each volume's peak), every pair in the kept workspaces, the variants
+    // interleaved `sparse_repeats` times; times (wall, and the process's CPU seconds) are medians. updates_skipped: the share of the
+    // box's voxel updates over the iterations not done (not solved, or pruned); work_pruned: the
+    // share of the kernels' work the pruning saved against the start's active set.
+    struct Prune {
+      const char* name;
+      bool on;
+      double threshold;
+    };
+    std::vector<Prune> variants;
+    for (const Prune& pr : {Prune{"off", false, 0.0}, Prune{"zeros", true, 0.0}, Prune{"1e-3", true, 1e-3},
+                            Prune{"3e-3", true, 3e-3}, Prune{"1e-2", true, 1e-2}, Prune{"3e-2", true, 3e-2}})
+      if (sparse_variants.empty() || ("," + sparse_variants + ",").find("," + std::string(pr.name) + ",") != std::string::npos)
+        variants.push_back(pr);
+    if (variants.empty() || variants[0].on) {
+      std::fprintf(stderr, "bench_e2e: --sparse-variants must start with off (the reference), e.g. off,zeros,1e-2\n");
+      return 2;
+    }
+    piv::CorrelationWorkspace correlation_workspace;
+    std::vector<std::vector<process::PairResult>> runs(variants.size());
+    std::vector<std::vector<double>> cpu(variants.size());  // CPU seconds per pair
+    for (int rep = 0; rep < sparse_repeats; ++rep) {
+      for (std::size_t v = 0; v < variants.size(); ++v) {
+        process::ProcessSettings s = settings;
+        s.mart.prune = variants[v].on;
+        s.mart.prune_threshold = variants[v].threshold;
+        const double cpu0 = bench::cpu_seconds();
+        process::PairResult r = process::process_pair(op, a, b, s, {}, &workspace, &correlation_workspace);
+        cpu[v].push_back(bench::cpu_seconds() - cpu0);
+        if (rep > 0) {  // only the times are kept from the repeats (the same bits)
+          r.volume_a = {};
+          r.volume_b = {};
+        }
+        runs[v].push_back(std::move(r));
+      }
+    }
+    const auto median = [](std::vector<double> x) {
+      std::sort(x.begin(), x.end());
+      return x.size() % 2 ? x[x.size() / 2] : 0.5 * (x[x.size() / 2 - 1] + x[x.size() / 2]);
+    };
+    double off_pair_s = 0, off_cpu_s = 0;
+    const process::PairResult& off = runs[0][0];
+    for (std::size_t v = 0; v < variants.size(); ++v) {
+      std::vector<double> ra, rb, co, pair;
+      for (const auto& r : runs[v]) {
+        ra.push_back(r.times.reconstruct_a_s);
+        rb.push_back(r.times.reconstruct_b_s);
+        co.push_back(r.times.correlate_s);
+        pair.push_back(r.times.reconstruct_a_s + r.times.reconstruct_b_s + r.times.correlate_s);
+      }
+      const double pair_s = median(pair);
+      const double cpu_s = median(cpu[v]);
+      if (v == 0) off_pair_s = pair_s, off_cpu_s = cpu_s;
+      const process::PairResult& r = runs[v][0];
+      const Errors er = errors_against(r.correlation.field, flow, voxel);
+      // The volumes against pruning off: L2 of the difference over L2 of off's.
+      double diff = 0, norm = 0;
+      for (const auto* pv : {&r.volume_a, &r.volume_b}) {
+        const Volume& o = pv == &r.volume_a ? off.volume_a : off.volume_b;
+        for (std::size_t i = 0; i < o.data.size(); ++i) {
+          diff += (double(pv->data[i]) - o.data[i]) * (double(pv->data[i]) - o.data[i]);
+          norm += double(o.data[i]) * o.data[i];
+        }
+      }
+      std::printf("bench=e2e case=%s variant=sparse prune=%s repeats=%d recon_a_s=%.2f recon_b_s=%.2f correlate_s=%.2f "
+                  "pair_s=%.2f pair_over_off=%.3f pair_cpu_s=%.2f cpu_over_off=%.3f updates_skipped_a=%.3f updates_skipped_b=%.3f work_pruned_a=%.3f "
+                  "work_pruned_b=%.3f volume_l2_vs_off=%.4f rms_u=%.3f rms_v=%.3f rms_w=%.3f off_axis_band_rms_u=%.3f "
+                  "off_axis_band_rms_v=%.3f off_axis_band_rms_w=%.3f valid=%.3f same_field_as_off=%d\n",
+                  scale.c_str(), variants[v].name, sparse_repeats, median(ra), median(rb), median(co), pair_s,
+                  off_pair_s > 0 ? pair_s / off_pair_s : 1.0, cpu_s, off_cpu_s > 0 ? cpu_s / off_cpu_s : 1.0,
+                  r.skipped_a.fraction_updates_skipped(),
+                  r.skipped_b.fraction_updates_skipped(), r.skipped_a.fraction_work_pruned(),
+                  r.skipped_b.fraction_work_pruned(), norm > 0 ? std::sqrt(diff / norm) : 0.0, er.rms[0], er.rms[1],
+                  er.rms[2], er.off_band[0], er.off_band[1], er.off_band[2], er.valid_fraction,
+                  int(r.correlation.field.dx_mm == off.correlation.field.dx_mm &&
+                      r.correlation.field.dy_mm == off.correlation.field.dy_mm &&
+                      r.correlation.field.dz_mm == off.correlation.field.dz_mm));
+    }
+    std::printf("bench=e2e case=%s peak_rss_gb=%.2f\n", scale.c_str(), bench::peak_rss_gb());
   }
   if (time_sweep) {
     // Time against error at this scale: MART iterations and the ghost floor, every pair in the kept

@@ -30,12 +30,7 @@ namespace {
 
 double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
 
-// Process CPU time (all threads): on a shared machine wall time says more about the neighbours.
-double cpu_seconds() {
-  rusage u{};
-  getrusage(RUSAGE_SELF, &u);
-  return double(u.ru_utime.tv_sec + u.ru_stime.tv_sec) + 1e-6 * double(u.ru_utime.tv_usec + u.ru_stime.tv_usec);
-}
+using bench::cpu_seconds;
 
 // Minor page faults of the process so far (a fresh buffer faults once per page it touches).
 long minor_faults() {
@@ -233,6 +228,72 @@ void mid_size(const std::string& source_dir) {
   std::printf("bench=recon_mid op=back_project variant=matrix_free median_s=%.4f ratio=%.2f\n", mf_b, ex_b / mf_b);
 }
 
+// The value-adaptive active set side by side on one image: pruning off, exact zeros only, and
+// relative thresholds; each variant's time (wall, CPU), voxel updates skipped over the
+// iterations, Q*, the moments fit's errors and the volume's hash. `small`: the sec 5.4 camera.
+// `bench_recon prune [paper|small] [ppm] [iterations] [mu] [nesterov|none] [variants, e.g. off,1e-2]`.
+void prune_sweep(const std::string& source_dir, bool small, double ppm, int iterations, double mu, bool accelerate,
+                 const std::string& only) {
+  const auto cam = optics::load_camera_file(source_dir + (small ? "/systemd/config/camera-small.yaml"
+                                                                : "/systemd/config/camera-fahringer2015.yaml"));
+  const calib::LoadedCalibration nominal = calib::nominal_calibration(cam);
+  const Grid3 g = small ? grid_of(60, 60, 200, 0.1, 20.0) : grid_of(300, 200, 200, 0.1, 20.0);
+  const recon::WeightingOperator op(cam, nominal.lenses, g, nominal.white_correction);
+  const sim::Box box = small ? sim::Box{{-3, -3, -10}, {3, 3, 10}} : sim::Box{{-15, -10, -10}, {15, 10, 10}};
+  const auto positions = sim::random_particles(box, sim::particle_count_from_ppm(cam, box, ppm), 1);
+  const ImageF image = traced_12bit(cam, nominal.lenses, positions, 1);
+  const Volume exact = sim::render_exact_volume(g, positions);
+  recon::MartWorkspace workspace;
+  struct Variant {
+    const char* name;
+    bool prune;
+    double threshold;
+  };
+  std::uint64_t reference = 0;
+  for (const Variant& v : {Variant{"off", false, 0.0}, Variant{"zeros", true, 0.0}, Variant{"1e-4", true, 1e-4},
+                           Variant{"1e-3", true, 1e-3}, Variant{"3e-3", true, 3e-3}, Variant{"1e-2", true, 1e-2}}) {
+    if (!only.empty() && ("," + only + ",").find("," + std::string(v.name) + ",") == std::string::npos) continue;
+    recon::MartSettings s;
+    s.iterations = iterations;
+    s.mu = mu;
+    s.accelerate = accelerate;
+    s.final_residual = false;
+    s.prune = v.prune;
+    s.prune_threshold = v.threshold;
+    std::string live, seconds, work;
+    const auto t = Clock::now();
+    const double c = cpu_seconds();
+    const recon::MartResult r = recon::reconstruct(op, image, s, workspace, [&](const recon::IterationReport& it) {
+      live += (live.empty() ? "" : ",") + std::to_string(it.live_voxels);
+      work += (work.empty() ? "" : ",") + std::to_string(it.work_fraction).substr(0, 5);
+      char t[32];
+      std::snprintf(t, sizeof t, "%s%.2f", seconds.empty() ? "" : ",", it.seconds);
+      seconds += t;
+    });
+    const double wall = since(t), cpu = cpu_seconds() - c;
+    const std::uint64_t hash = bench::bits_hash(r.volume.data);
+    if (!v.prune) reference = hash;
+    double ex = 0, ez = 0;
+    std::size_t fitted = 0;
+    for (const auto& p : positions) {
+      const auto fit = recon::fit_particle_moments(r.volume, p, {3, 3, 15});
+      if (!fit) continue;
+      ex += std::abs(fit->position_mm[0] - p[0]) / g.spacing_mm[0];
+      ez += std::abs(fit->position_mm[2] - p[2]) / g.spacing_mm[2];
+      ++fitted;
+    }
+    std::printf("bench=recon_prune case=%s variant=%s iterations=%d mu=%.2f accelerate=%d seconds=%.3f cpu_s=%.3f "
+                "setup_s=%.3f start_s=%.3f prune_s=%.3f iteration_s=%s skipped=%.4f updates_skipped=%.4f pruned=%zu live_per_iteration=%s work_per_iteration=%s work_pruned=%.4f "
+                "q_star=%.4f moments_abs_x_vox=%.3f abs_z_vox=%.3f fitted=%zu volume_hash=%016llx same_as_off=%d\n",
+                small ? "small" : "paper", v.name, iterations, mu, int(accelerate), wall, cpu, r.setup_seconds,
+                r.start_seconds, r.prune_seconds, seconds.c_str(), r.skipped.fraction_skipped(), r.skipped.fraction_updates_skipped(),
+                r.skipped.voxels_pruned, live.c_str(), work.c_str(), r.skipped.fraction_work_pruned(), recon::quality_factor(r.volume, exact),
+                ex / double(std::max<std::size_t>(1, fitted)), ez / double(std::max<std::size_t>(1, fitted)), fitted,
+                static_cast<unsigned long long>(hash), int(hash == reference));
+  }
+  std::printf("bench=recon_prune peak_rss_gb=%.3f\n", bench::peak_rss_gb());
+}
+
 }  // namespace
 
 // The paper's accuracy figures on the sec 5.4 small camera: fig 21 (single particles along the
@@ -304,6 +365,13 @@ int main(int argc, char** argv) {
   std::setvbuf(stdout, nullptr, _IOLBF, 0);  // lines appear as they are measured
   std::string which = argc > 1 ? argv[1] : "all";
   const std::string source_dir = PLENOPIV_SOURCE_DIR;
+  if (which == "prune") {
+    const bool small = argc > 2 && std::string(argv[2]) == "small";
+    prune_sweep(source_dir, small, argc > 3 ? std::stod(argv[3]) : 0.5, argc > 4 ? std::stoi(argv[4]) : 8,
+                argc > 5 ? std::stod(argv[5]) : 1.0, !(argc > 6 && std::string(argv[6]) == "none"),
+                argc > 7 ? argv[7] : "");
+    return 0;
+  }
   const double ppm = argc > 2 ? std::stod(argv[2]) : 0.5;
   const float threshold = argc > 3 ? std::stof(argv[3]) : 0.f;
   const double cutoff = argc > 4 ? std::stod(argv[4]) : 0.9;
@@ -317,6 +385,7 @@ int main(int argc, char** argv) {
                 argc > 4 ? std::stod(argv[4]) : 0.5, argc > 5 && std::string(argv[5]) == "nesterov",
                 argc > 6 ? std::stod(argv[6]) : 0.0);
   if (which == "small") paper_scale(source_dir, true, ppm, iterations, threshold, cutoff);
+
   // `paper [ppm] [threshold] [cutoff] [iterations] [sensor blur sigma, mm] [mlos|ones]`, and the
   // first frame against a kept workspace (bench=recon_reuse).
   if (which == "paper" || which == "all")

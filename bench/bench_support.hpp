@@ -2,6 +2,8 @@
 // process's peak memory.
 #pragma once
 
+#include <sys/resource.h>
+
 #include <cstdint>
 #include <cstring>
 #include <fstream>
@@ -22,6 +24,14 @@ inline std::uint64_t bits_hash(std::span<const float> values, std::uint64_t hash
     hash = (hash ^ bits) * 1099511628211ull;
   }
   return hash;
+}
+
+// Process CPU seconds so far (user + system, every thread): on a shared machine wall time
+// includes waiting for a core, CPU time much less so.
+inline double cpu_seconds() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return double(u.ru_utime.tv_sec + u.ru_stime.tv_sec) + 1e-6 * double(u.ru_utime.tv_usec + u.ru_stime.tv_usec);
 }
 
 // Peak resident memory of this process so far (VmHWM), GB; -1 where /proc does not say.

@@ -51,8 +51,10 @@ function(plenopiv_test name)
   target_compile_definitions(${name} PRIVATE
     PLENOPIV_SOURCE_DIR="${PROJECT_SOURCE_DIR}" PLENOPIV_BINARY_DIR="${PROJECT_BINARY_DIR}")
   plenopiv_defaults(${name})
+  # The CLIs' weight-table cache goes to the build folder, not the user's ~/.cache.
   gtest_discover_tests(${name}
     WORKING_DIRECTORY ${PROJECT_BINARY_DIR}
     PROPERTIES LABELS ${ARG_LABEL} TIMEOUT ${ARG_TIMEOUT} ${lock}
+               ENVIRONMENT PLENOPIV_CACHE_DIR=${PROJECT_BINARY_DIR}/test-cache
     DISCOVERY_TIMEOUT 60)
 endfunction()

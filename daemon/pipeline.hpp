@@ -11,6 +11,7 @@
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <vector>
 
 #include "core/base/grid.hpp"
 #include "drivers/camera/camera.hpp"
@@ -20,10 +21,19 @@ namespace plenopiv::daemon {
 
 using SharedPair = std::shared_ptr<const drivers::FramePair>;
 
+// What MART left alone on a pair (both frames), for the status and the log.
+struct ReconstructionWork {
+  std::size_t voxels = 0;                   // in the reconstructed box
+  std::vector<std::size_t> live_a, live_b;  // voxels each iteration updated, frames A and B
+  double updates_skipped = 0;               // share of the box's voxel updates not done
+  double work_pruned = 0;                   // share of the kernels' work pruning saved
+};
+
 // What the processing stage makes of a pair.
 struct ProcessedPair {
   VectorField vectors;
   std::optional<Volume> volume_a, volume_b;  // when the run publishes volumes
+  std::optional<ReconstructionWork> work;    // when the stage reconstructs (plenoptic_processing)
 };
 
 // Set when the run stops: processing in flight gives up (plenopiv::Cancelled) at its next MART

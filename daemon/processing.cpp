@@ -1,6 +1,7 @@
 // The live processing stage: a thin adapter from recorded pairs to process::PairProcessor.
 #include "daemon/processing.hpp"
 
+#include <spdlog/fmt/ranges.h>
 #include <spdlog/spdlog.h>
 
 #include <memory>
@@ -11,9 +12,27 @@
 #include "core/process/pair_processor.hpp"
 
 namespace plenopiv::daemon {
+namespace {
+
+ReconstructionWork reconstruction_work(const process::PairResult& r) {
+  ReconstructionWork w;
+  w.voxels = r.skipped_a.voxels;
+  for (const auto& it : r.iterations_a) w.live_a.push_back(it.live_voxels);
+  for (const auto& it : r.iterations_b) w.live_b.push_back(it.live_voxels);
+  // Over both frames' iterations; a pair whose frames lit no voxel ran none and skipped everything.
+  const double all = double(r.skipped_a.voxels) * r.skipped_a.iterations + double(r.skipped_b.voxels) * r.skipped_b.iterations;
+  w.updates_skipped = all > 0 ? 1.0 - double(r.skipped_a.voxel_updates + r.skipped_b.voxel_updates) / all : 1.0;
+  const double unpruned = r.skipped_a.work_unpruned + r.skipped_b.work_unpruned;
+  w.work_pruned = unpruned > 0 ? 1.0 - (r.skipped_a.work_done + r.skipped_b.work_done) / unpruned : 0.0;
+  return w;
+}
+
+}  // namespace
 
 ProcessFactory plenoptic_processing(const optics::CameraModel& camera) {
-  return [camera](const RunConfig& config, const RunCalibration& calibration) -> ProcessFn {
+  // Kept for the factory's life (the daemon's): runs with the same geometry share their operator.
+  auto operators = std::make_shared<process::OperatorCache>();
+  return [camera, operators](const RunConfig& config, const RunCalibration& calibration) -> ProcessFn {
     const process::ProcessSettings& settings = config.spec.full;
     // A run's volume is refused before any table is built when the pairs it keeps in flight would not
     // fit this machine.
@@ -23,8 +42,9 @@ ProcessFactory plenoptic_processing(const optics::CameraModel& camera) {
                        std::to_string(g.shape[0]) + " x " + std::to_string(g.shape[1]) + " x " +
                        std::to_string(g.shape[2]) + " voxel volume (volume, max_pairs_in_flight)");
     auto processor = std::make_shared<const process::PairProcessor>(
-        camera, calibration.loaded ? *calibration.loaded : calib::nominal_calibration(camera), settings);
-    spdlog::info("run processing: calibration {}; {}", calibration.summary(),
+        camera, calibration.loaded ? *calibration.loaded : calib::nominal_calibration(camera), settings,
+        operators.get());
+    spdlog::info("run processing: calibration {}; {}; {}", calibration.summary(), processor->setup_note(),
                  processor->note().empty() ? "frames reconstructed on raw pixels" : processor->note());
     const bool keep_volumes = config.publish_volumes;
     return [processor, keep_volumes](const drivers::FramePair& pair, const CancelFlag& cancel) {
@@ -37,6 +57,11 @@ ProcessFactory plenoptic_processing(const optics::CameraModel& camera) {
       process::PairResult r = processor->process(pair.a.image, pair.b.image, options);
       ProcessedPair out;
       out.vectors = std::move(r.correlation.field);
+      out.work = reconstruction_work(r);
+      spdlog::debug("pair {}: MART skipped {:.1f} % of the voxel updates ({:.1f} % of the work pruned); live voxels "
+                    "per iteration A {}, B {}",
+                    pair.pair_index, 100 * out.work->updates_skipped, 100 * out.work->work_pruned,
+                    fmt::join(out.work->live_a, " "), fmt::join(out.work->live_b, " "));
       if (keep_volumes) {
         out.volume_a = std::move(r.volume_a);
         out.volume_b = std::move(r.volume_b);

@@ -11,6 +11,8 @@ namespace plenopiv::daemon {
 // built once and shared by the concurrent pairs; each pair goes through it with its measured dt
 // and the run's cancel flag. A run whose pairs in flight would not fit this machine's memory, or
 // whose settings do not fit the camera, is refused (InputError) before the run folder exists.
+// The factory keeps the operators (weight tables) of its latest runs (process::OperatorCache, in
+// memory): a run on the camera, calibration and volume of an earlier one builds no tables.
 ProcessFactory plenoptic_processing(const optics::CameraModel& camera);
 
 }  // namespace plenopiv::daemon

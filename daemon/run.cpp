@@ -355,6 +355,10 @@ void Run::run() {
         run_live_pipeline(
             *mailbox_, config_.max_pairs_in_flight, process_,
             [this](const drivers::FramePair& pair, ProcessedPair& result) {
+              if (result.work) {
+                std::lock_guard lock(work_mutex_);
+                last_work_.emplace(pair.pair_index, std::move(*result.work));
+              }
               result.vectors.dt_s = result.vectors.dt_s > 0 ? result.vectors.dt_s : config_.dt_s;
               recorder_->record_vectors(pair.pair_index, result.vectors);
               if (env_.publisher) {
@@ -477,6 +481,19 @@ void Run::fill_status(msg::Status& s) const {
     std::lock_guard lock(warnings_mutex_);
     for (const auto& [kind, seen] : warnings_) {
       s.add_warnings(kind + ": " + std::to_string(seen.first) + " pair(s), first pair " + std::to_string(seen.second));
+    }
+  }
+  {
+    std::lock_guard lock(work_mutex_);
+    if (last_work_) {
+      const ReconstructionWork& w = last_work_->second;
+      msg::ReconstructionWork& m = *s.mutable_reconstruction();
+      m.set_pair_index(last_work_->first);
+      m.set_voxels(w.voxels);
+      for (const std::size_t n : w.live_a) m.add_live_voxels_a(n);
+      for (const std::size_t n : w.live_b) m.add_live_voxels_b(n);
+      m.set_voxel_updates_skipped(w.updates_skipped);
+      m.set_work_pruned(w.work_pruned);
     }
   }
   if (const auto free = io::free_bytes(recorder_->dir())) s.set_bytes_free(*free);

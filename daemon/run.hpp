@@ -7,6 +7,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <thread>
 
@@ -126,6 +127,9 @@ class Run {
   // Bad data met (all-zero or saturated frames): kind -> (count, first pair), for status and manifest.
   mutable std::mutex warnings_mutex_;
   std::map<std::string, std::pair<std::uint64_t, std::uint64_t>> warnings_;
+  // MART's skipped work on the latest processed pair (its index), for status.
+  mutable std::mutex work_mutex_;
+  std::optional<std::pair<std::uint64_t, ReconstructionWork>> last_work_;
   std::string acquisition_error_;  // set by the acquisition thread before it ends
   std::thread thread_;
 };

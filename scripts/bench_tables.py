@@ -44,6 +44,10 @@ BENCHES = {
                  + ["--compare-passes", "32@50,16@50+4,16@50,16@50,16@75"], None),
     "e2e-full-sweep": ("paper", ["build/bin/bench_e2e", "full", "--no-sweep", "--time-sweep"] + RUN_PAPER,
                        "e2e_pareto_full.png"),
+    "e2e-full-sparse": ("paper", ["build/bin/bench_e2e", "full", "--no-sweep", "--sparse-sweep", "--sparse-repeats",
+                                  "1", "--sparse-variants", "off,zeros,1e-2"] + RUN_PAPER, None),
+    "e2e-reduced-sparse": ("quick", ["build/bin/bench_e2e", "reduced", "--no-sweep", "--sparse-sweep",
+                                     "--sparse-repeats", "5"] + RUN_PAPER[:-2], None),
     "e2e-full-process": ("paper", ["build/bin/bench_e2e", "full", "--no-sweep", "--steady"] + PROCESS,
                          None),
     "e2e-reduced-process": ("quick", ["build/bin/bench_e2e", "reduced", "--no-sweep", "--steady"] + PROCESS,
@@ -288,6 +292,26 @@ def t_full_sweep(R):
     out = table(["MART (mu 1 unless stated), ghost floor", "s per pair", "RMS u / v / w", "RMS",
                  "off the axis band", "Pareto"], rows)
     return out + ["", r.provenance()]
+
+
+SPARSE_LABELS = {"off": "off (every active voxel, every iteration)", "zeros": "exact zeros (default)"}
+
+
+def t_sparse(R):
+    rows = []
+    for name, case in (("e2e-full-sparse", "paper"), ("e2e-reduced-sparse", "reduced")):
+        r = R(name)
+        for d in r.find(variant="sparse"):
+            label = SPARSE_LABELS.get(d["prune"], "threshold " + d["prune"] + " of the peak")
+            cpu = f"; CPU {d['pair_cpu_s']} ({float(d['cpu_over_off']):.2f})" if "pair_cpu_s" in d else ""
+            rows.append([case, label, f"{d['pair_s']} ({float(d['pair_over_off']):.2f}){cpu}",
+                         f"{d['recon_a_s']} + {d['recon_b_s']} + {d['correlate_s']}",
+                         f"{pct(d['updates_skipped_a'])} / {pct(d['work_pruned_a'])}", d["volume_l2_vs_off"],
+                         uvw(d), uvw(d, "off_axis_band_rms_"), "yes" if d["same_field_as_off"] == "1" else "no"])
+    out = table(["case", "prune", "s per pair (over off): wall; CPU", "s: recon A + B + correlate",
+                 "A: updates skipped / work pruned", "volume L2 vs off", "RMS u / v / w",
+                 "off the axis band", "same vectors as off"], rows)
+    return out + ["", R("e2e-full-sparse").provenance() + "  ", R("e2e-reduced-sparse").provenance()]
 
 
 KNOBS = [  # (variant, knob label, how a row's setting is named)
@@ -563,6 +587,7 @@ TABLES = {
     "e2e-cases": t_e2e_cases,
     "e2e-full-variants": t_e2e_variants("e2e-full"),
     "e2e-full-sweep": t_full_sweep,
+    "e2e-sparse": t_sparse,
     "e2e-full-depth": t_e2e_depth,
     "e2e-reduced-sweep": t_reduced_sweep,
     "recon-phases": t_recon_phases,

@@ -59,6 +59,18 @@ void print_status(const msg::Status& s) {
     if (s.bytes_free() > 0) {
       std::cout << "disk free      " << std::setprecision(1) << double(s.bytes_free()) / 1e9 << " GB\n";
     }
+    if (s.has_reconstruction()) {
+      const msg::ReconstructionWork& r = s.reconstruction();
+      const auto live = [](const auto& counts) {
+        std::string text;
+        for (const auto n : counts) text += (text.empty() ? "" : " ") + std::to_string(n);
+        return text;
+      };
+      std::cout << "reconstruction pair " << r.pair_index() << ": " << std::setprecision(1)
+                << 100 * r.voxel_updates_skipped() << " % of the voxel updates skipped ("
+                << 100 * r.work_pruned() << " % of the work pruned); live voxels per iteration of "
+                << r.voxels() << ": A " << live(r.live_voxels_a()) << "; B " << live(r.live_voxels_b()) << "\n";
+    }
     for (const std::string& w : s.warnings()) std::cout << "warning        " << w << "\n";
   }
   std::cout << "processing     " << s.processing() << "\n";

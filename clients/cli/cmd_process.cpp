@@ -22,6 +22,7 @@
 #include "clients/cli/field_output.hpp"
 #include "clients/cli/progress.hpp"
 #include "clients/cli/reprocess.hpp"
+#include "clients/cli/weights_cache.hpp"
 #include "core/base/errors.hpp"
 #include "core/calib/calibration.hpp"
 #include "core/calib/calibration_file.hpp"
@@ -52,6 +53,8 @@ struct ProcessOptions {
   std::vector<std::string> white_images, dark_images;
   bool nominal = false;
   int threads = 0;
+  std::string cache_dir;
+  bool no_cache = false;
 };
 
 // A raw frame (PNG, 8/16-bit or float TIFF) as floats; a frame with nothing to measure (all zero,
@@ -234,7 +237,9 @@ void run_process(const ProcessOptions& o) {
   const auto& g = settings.grid;
   std::fprintf(stderr, "volume %d x %d x %d voxels (+%d guard slices at each depth end); weights ...\n", g.shape[0],
                g.shape[1], g.shape[2], settings.guard_slices());
-  const process::PairProcessor processor(camera, cal, settings);
+  const auto operators = weights_cache(o.cache_dir, o.no_cache);
+  const process::PairProcessor processor(camera, cal, settings, operators.get());
+  if (operators) std::fprintf(stderr, "%s\n", processor.setup_note().c_str());
   if (!processor.note().empty()) std::fprintf(stderr, "%s\n", processor.note().c_str());
   Progress progress("process", "pairs", 1.0);
   process::PairOptions options;
@@ -250,10 +255,11 @@ void run_process(const ProcessOptions& o) {
   std::size_t valid = 0;
   for (auto v : r.correlation.field.valid) valid += v;
   std::fprintf(stderr,
-               "reconstruct A %.2f s (skipped %.1f %%), B %.2f s (skipped %.1f %%), correlate %.2f s; "
+               "reconstruct A %.2f s (voxel updates skipped %.1f %%), B %.2f s (skipped %.1f %%), correlate %.2f s; "
                "%zu vectors, %zu valid\n",
-               r.times.reconstruct_a_s, 100 * r.skipped_a.fraction_skipped(), r.times.reconstruct_b_s,
-               100 * r.skipped_b.fraction_skipped(), r.times.correlate_s, r.correlation.field.grid.count(), valid);
+               r.times.reconstruct_a_s, 100 * r.skipped_a.fraction_updates_skipped(), r.times.reconstruct_b_s,
+               100 * r.skipped_b.fraction_updates_skipped(), r.times.correlate_s, r.correlation.field.grid.count(),
+               valid);
   std::cout << out.string() << "\n" << vti.string() << "\n" << png.string() << "\n";
 }
 
@@ -264,7 +270,7 @@ void run_reprocess(const ProcessOptions& o) {
                             &o.preview})
     if (!other->empty())
       throw InputError("--run takes the camera, frames and calibration from the run folder; give --run with -o, "
-                       "--config, --tier, --pairs, --jobs, --resume, --shard, --merge and --threads only");
+                       "--config, --tier, --pairs, --jobs, --resume, --shard, --merge, --threads and the cache options only");
   if (!o.white_images.empty() || !o.dark_images.empty() || o.nominal)
     throw InputError("--run takes the calibration from the run folder (manifest.json: calibration)");
   if (o.dt_s) throw InputError("--dt: --run uses each pair's measured dt (the run's dt_s where none was measured)");
@@ -279,6 +285,7 @@ void run_reprocess(const ProcessOptions& o) {
   r.jobs = o.jobs;
   r.resume = o.resume;
   r.merge_only = o.merge;
+  r.weights_cache = weights_cache_folder(o.cache_dir, o.no_cache);
   if (r.merge_only && r.shard) throw InputError("--merge covers every pair: give it without --shard");
   const ReprocessReport report = reprocess_run(r);
   std::fprintf(stderr, "%s: %zu pair(s) selected, %zu processed, %zu up to date%s\n", report.output.string().c_str(),
@@ -316,6 +323,10 @@ void add_process_commands(CLI::App& app) {
   cmd->add_option("--vti", o->vti, "VTK image data for ParaView (default: --output with .vti)");
   cmd->add_option("--preview", o->preview, "PNG preview (default: --output with .png)");
   cmd->add_option("--threads", o->threads, "worker threads (0: all cores)")->capture_default_str();
+  cmd->add_option("--cache-dir", o->cache_dir,
+                  "folder that keeps weight tables between calls, keyed by camera, calibration, volume and "
+                  "settings (default: $PLENOPIV_CACHE_DIR, $XDG_CACHE_HOME/plenopiv or ~/.cache/plenopiv)");
+  cmd->add_flag("--no-cache", o->no_cache, "build the weight tables afresh and keep none");
   cmd->add_option("--dt", o->dt_s, "pulse separation, s (instead of the config's dt_s): a pair's measured dt");
   cmd->add_option("--tier", o->tier, "with --run: the settings' tier, full or live (the live lane's)")
       ->capture_default_str();

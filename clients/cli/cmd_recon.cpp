@@ -8,8 +8,10 @@
 #include <filesystem>
 #include <iostream>
 #include <memory>
+#include <string>
 
 #include "clients/cli/commands.hpp"
+#include "clients/cli/weights_cache.hpp"
 #include "core/base/errors.hpp"
 #include "core/calib/calibration_file.hpp"
 #include "core/calib/nominal_calibration.hpp"
@@ -17,6 +19,7 @@
 #include "core/io/raw_frame.hpp"
 #include "core/io/vtk_files.hpp"
 #include "core/optics/camera_file.hpp"
+#include "core/process/operator_cache.hpp"
 #include "core/process/process.hpp"
 #include "core/recon/mart.hpp"
 #include "core/recon/weights.hpp"
@@ -36,6 +39,10 @@ struct ReconOptions {
   double dark_cutoff = 0.9;
   double convergence = 0;
   double sensor_blur_mm = 0;
+  double prune_threshold = 0;
+  bool no_prune = false;
+  std::string cache_dir;
+  bool no_cache = false;
 };
 
 Grid3 grid_from(const ReconOptions& o) {
@@ -67,6 +74,8 @@ void run(const ReconOptions& o) {
   s.dark_weight_cutoff = o.dark_cutoff;
   s.convergence = o.convergence;
   s.sensor_blur_sigma_mm = o.sensor_blur_mm;
+  s.prune = !o.no_prune;
+  s.prune_threshold = o.prune_threshold;
   if (o.start == "mlos") {
     s.start = recon::MartStart::mlos;
   } else if (o.start == "ones") {
@@ -90,7 +99,13 @@ void run(const ReconOptions& o) {
     white = c.white_correction.empty() ? calib::geometric_white_image(camera, lenses) : std::move(c.white_correction);
   }
   // Raw pixels, or the image resampled onto an axis-aligned lattice for a rotated/warped/hex array.
-  const process::PairOperator pair_op(camera, lenses, white, grid);
+  const auto operators = weights_cache(o.cache_dir, o.no_cache);
+  std::string setup_note;
+  const std::shared_ptr<const process::PairOperator> kept =
+      operators ? operators->get(camera, lenses, white, grid, 1.0, &setup_note)
+                : std::make_shared<const process::PairOperator>(camera, lenses, white, grid, 1.0);
+  if (operators) std::fprintf(stderr, "%s\n", setup_note.c_str());
+  const process::PairOperator& pair_op = *kept;
   const recon::WeightingOperator& op = pair_op.weights();
   recon::validate_image(image, op, o.image.c_str());
   ImageF scratch;
@@ -110,17 +125,19 @@ void run(const ReconOptions& o) {
                    std::string(std::size_t(width - done), ' ').c_str(), it.iteration, s.iterations, rate, eta, it.residual);
       if (it.iteration == s.iterations) std::fprintf(stderr, "\n");
     } else {
-      std::fprintf(stderr, "iteration %d/%d residual %.4f (%.2f s, ETA %.0f s)\n", it.iteration, s.iterations,
-                   it.residual, it.seconds, eta);
+      std::fprintf(stderr, "iteration %d/%d residual %.4f (%.2f s, ETA %.0f s; %zu live voxels, %.1f %% of the box skipped)\n",
+                   it.iteration, s.iterations, it.residual, it.seconds, eta, it.live_voxels, 100 * it.fraction_skipped());
     }
   });
   if (tty && r.iterations.size() < std::size_t(s.iterations)) std::fprintf(stderr, "\n");
   const recon::SkipReport& k = r.skipped;
   std::fprintf(stderr,
                "skipped %.1f %% of %zu voxels (seen by a dark pixel %zu, outside the field of view %zu), "
-               "%d of %d slices empty, %zu dark pixels; final residual %.4f%s\n",
+               "%d of %d slices empty, %zu dark pixels; voxel updates skipped %.1f %% (%zu voxels pruned); "
+               "final residual %.4f%s\n",
                100 * k.fraction_skipped(), k.voxels, k.voxels_dark, k.voxels_unseen, k.slices_empty, k.slices,
-               k.dark_pixels, r.final_residual.value(), r.converged ? " (converged)" : "");
+               k.dark_pixels, 100 * k.fraction_updates_skipped(), k.voxels_pruned, r.final_residual.value(),
+               r.converged ? " (converged)" : "");
   io::write_volume_h5(o.out, r.volume);
   const std::string vti = o.vti.empty() ? std::filesystem::path(o.out).replace_extension(".vti").string() : o.vti;
   io::write_volume_vti(vti, r.volume);
@@ -167,6 +184,15 @@ void add_recon_commands(CLI::App& app) {
                   "the camera's blur at the sensor as a Gaussian sigma, mm, modelled in MART (diffraction: "
                   "core/sim's is 0.0052; 0: sec 5.2's weights alone)")
       ->capture_default_str();
+  cmd->add_option("--prune-threshold", o->prune_threshold,
+                  "voxels at or below this fraction of the volume's peak leave the active set after the "
+                  "start and each iteration (0: only exact zeros, the same volume as without pruning)")
+      ->capture_default_str();
+  cmd->add_flag("--no-prune", o->no_prune, "update every active voxel on every iteration (the reference)");
+  cmd->add_option("--cache-dir", o->cache_dir,
+                  "folder that keeps weight tables between calls (default: $PLENOPIV_CACHE_DIR, "
+                  "$XDG_CACHE_HOME/plenopiv or ~/.cache/plenopiv)");
+  cmd->add_flag("--no-cache", o->no_cache, "build the weight tables afresh and keep none");
   cmd->add_option("-o,--out", o->out, "output volume (HDF5: /volume, origin_mm, spacing_mm)")->required();
   cmd->add_option("--vti", o->vti, "also write VTK image data here (default: --out with .vti)");
   cmd->callback([o] { run(*o); });

@@ -8,6 +8,7 @@
 #include <fstream>
 #include <iostream>
 #include <mutex>
+#include <optional>
 #include <thread>
 #include <vector>
 
@@ -192,7 +193,10 @@ ReprocessReport reprocess_run(const ReprocessOptions& o) {
                        : "",
                in.settings.grid.shape[0], in.settings.grid.shape[1], in.settings.grid.shape[2],
                in.settings.guard_slices(), per_pair / 1e9, o.jobs);
-  const process::PairProcessor processor(in.camera, calibration, in.settings);
+  std::optional<process::OperatorCache> operators;
+  if (!o.weights_cache.empty()) operators.emplace(1, o.weights_cache);
+  const process::PairProcessor processor(in.camera, calibration, in.settings, operators ? &*operators : nullptr);
+  if (operators) std::fprintf(stderr, "%s\n", processor.setup_note().c_str());
   if (!processor.note().empty()) std::fprintf(stderr, "%s\n", processor.note().c_str());
   // The settings the outputs were made with, beside them.
   io::write_text_atomically(in.output / "process.yaml", in.settings_text);

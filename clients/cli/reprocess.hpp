@@ -26,6 +26,9 @@ struct ReprocessOptions {
   int jobs = 1;           // pairs processed at once (they share the operator; each needs its buffers)
   bool resume = false;    // skip pairs whose output exists with the same input hash
   bool merge_only = false;  // only check the outputs and write statistics.h5 and series.pvd
+  // The folder that keeps weight tables between calls (process::OperatorCache over its files);
+  // empty: the tables are built and kept nowhere.
+  std::filesystem::path weights_cache;
 };
 
 // What happened, for the caller's summary line and for tests.

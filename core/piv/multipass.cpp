@@ -6,7 +6,9 @@
 #include <xmmintrin.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
+#include <stdexcept>
 #include <cmath>
 #include <span>
 #include <sstream>
@@ -253,14 +255,45 @@ Candidates correlate_windows(std::span<const float> va, std::span<const float> v
 
 }  // namespace
 
+struct CorrelationWorkspace::Buffers {
+  std::atomic<bool> busy{false};
+  BigBuffer<float> smoothed_a, smoothed_b, deformed_a, deformed_b;
+};
+
+CorrelationWorkspace::CorrelationWorkspace() : buffers_(std::make_unique<Buffers>()) {}
+CorrelationWorkspace::~CorrelationWorkspace() = default;
+CorrelationWorkspace::CorrelationWorkspace(CorrelationWorkspace&&) noexcept = default;
+CorrelationWorkspace& CorrelationWorkspace::operator=(CorrelationWorkspace&&) noexcept = default;
+
+std::size_t CorrelationWorkspace::bytes() const {
+  if (!buffers_) return 0;  // moved from
+  const Buffers& b = *buffers_;
+  return (b.smoothed_a.capacity() + b.smoothed_b.capacity() + b.deformed_a.capacity() + b.deformed_b.capacity()) *
+         sizeof(float);
+}
+
 CorrelationResult correlate_volumes(const Volume& a, const Volume& b,
                                     const CorrelationSettings& settings,
-                                    const std::function<void(const PassReport&)>& on_pass, int depth_context) {
+                                    const std::function<void(const PassReport&)>& on_pass, int depth_context,
+                                    CorrelationWorkspace* workspace) {
   check_inputs(a, b, settings, depth_context);
   const std::array<int, 3> shape = a.grid.shape;
-  // Volume-sized copies (4 x 48 MB on the paper's grid), neither zeroed nor kept: each is written
-  // in full before it is read.
-  BigBuffer<float> smoothed_a, smoothed_b, deformed_a, deformed_b;
+  // Volume-sized copies (four volumes), neither zeroed nor carried between calls: each is written
+  // in full before it is read. The caller's, or this call's.
+  CorrelationWorkspace local;
+  CorrelationWorkspace& ws = workspace ? *workspace : local;
+  if (!ws.buffers_) throw std::logic_error("correlation: the workspace was moved from");
+  CorrelationWorkspace::Buffers& buffers = *ws.buffers_;
+  if (buffers.busy.exchange(true))
+    throw std::logic_error("correlation: the workspace is in use by another correlation; give each its own");
+  struct Release {
+    std::atomic<bool>& busy;
+    ~Release() { busy.store(false); }
+  } release{buffers.busy};
+  BigBuffer<float>& smoothed_a = buffers.smoothed_a;
+  BigBuffer<float>& smoothed_b = buffers.smoothed_b;
+  BigBuffer<float>& deformed_a = buffers.deformed_a;
+  BigBuffer<float>& deformed_b = buffers.deformed_b;
   std::span<const float> input_a = a.data, input_b = b.data;
   if (settings.intensity_threshold_of_mean > 0) {
     // Floored copies, in the deformed buffers (unused until pass 2) when the prefilter follows.

@@ -5,6 +5,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <vector>
 
 #include "core/base/grid.hpp"
@@ -32,6 +33,29 @@ struct CorrelationResult {
   std::vector<PassReport> passes;
 };
 
+// The correlation's volume-sized buffers (the floored, smoothed and deformed copies of both
+// volumes: four volumes), kept by a caller that correlates pair after pair, so that no call
+// allocates and page-faults them again. It carries nothing from one call to the next (every
+// buffer is written before it is read): the same bits with a new workspace, a used one, or none.
+// Buffers grow to the largest volume seen. One correlation at a time: a second one while the
+// first runs is a bug in the caller (std::logic_error).
+class CorrelationWorkspace {
+ public:
+  CorrelationWorkspace();
+  ~CorrelationWorkspace();
+  CorrelationWorkspace(CorrelationWorkspace&&) noexcept;
+  CorrelationWorkspace& operator=(CorrelationWorkspace&&) noexcept;
+  std::size_t bytes() const;  // held (the buffers' capacities)
+
+  struct Buffers;
+
+ private:
+  std::unique_ptr<Buffers> buffers_;
+  friend CorrelationResult correlate_volumes(const Volume&, const Volume&, const CorrelationSettings&,
+                                             const std::function<void(const PassReport&)>&, int,
+                                             CorrelationWorkspace*);
+};
+
 // Correlates volume `a` (first exposure) with `b` (second). Both must be on the same grid
 // (InputError otherwise, as for non-finite voxels and windows larger than the volume). The
 // vector grid's node (i, j, k) is the centre of its window, in mm. `on_pass` is called after
@@ -44,10 +68,10 @@ struct CorrelationResult {
 // them (the same nodes), measured with what lies beyond its depth faces in view.
 // core/process passes its depth guard here: a reconstructed particle is a streak in depth, and
 // a box face cuts it as a window face does (PassSettings::depth_margin). 0 to less than half the
-// volume's depth.
+// volume's depth. `workspace`: the buffers, kept by the caller (the same bits without one).
 CorrelationResult correlate_volumes(const Volume& a, const Volume& b,
                                     const CorrelationSettings& settings,
                                     const std::function<void(const PassReport&)>& on_pass = {},
-                                    int depth_context = 0);
+                                    int depth_context = 0, CorrelationWorkspace* workspace = nullptr);
 
 }  // namespace plenopiv::piv

@@ -14,7 +14,7 @@ double pair_dt_s(const ProcessSettings& settings, std::optional<double> measured
   return measured_dt_s && *measured_dt_s > 0 ? *measured_dt_s : settings.correlation.dt_s;
 }
 
-WorkspacePool::Lease::Lease(WorkspacePool& pool, std::unique_ptr<recon::MartWorkspace> workspace)
+WorkspacePool::Lease::Lease(WorkspacePool& pool, std::unique_ptr<PairWorkspace> workspace)
     : pool_(pool), workspace_(std::move(workspace)) {}
 
 WorkspacePool::Lease::~Lease() {
@@ -24,16 +24,22 @@ WorkspacePool::Lease::~Lease() {
 
 WorkspacePool::Lease WorkspacePool::take() {
   std::lock_guard lock(mutex_);
-  if (free_.empty()) return Lease(*this, std::make_unique<recon::MartWorkspace>());
-  std::unique_ptr<recon::MartWorkspace> workspace = std::move(free_.back());
+  if (free_.empty()) return Lease(*this, std::make_unique<PairWorkspace>());
+  std::unique_ptr<PairWorkspace> workspace = std::move(free_.back());
   free_.pop_back();
   return Lease(*this, std::move(workspace));
 }
 
 PairProcessor::PairProcessor(const optics::CameraModel& camera, const calib::LoadedCalibration& calibration,
-                             ProcessSettings settings)
-    : settings_(std::move(settings)),
-      op_(std::make_unique<const PairOperator>(camera, calibration.lenses, calibration.white_correction, settings_)) {}
+                             ProcessSettings settings, OperatorCache* operators)
+    : settings_(std::move(settings)) {
+  if (operators) {
+    op_ = operators->get(camera, calibration.lenses, calibration.white_correction, settings_, &setup_note_);
+  } else {
+    op_ = std::make_shared<const PairOperator>(camera, calibration.lenses, calibration.white_correction, settings_);
+    setup_note_ = "operator built";
+  }
+}
 
 PairResult PairProcessor::process(const ImageU16& frame_a, const ImageU16& frame_b, const PairOptions& options) const {
   return process(to_float(frame_a), to_float(frame_b), options);
@@ -43,7 +49,7 @@ PairResult PairProcessor::process(const ImageF& frame_a, const ImageF& frame_b, 
   ProcessSettings s = settings_;
   s.correlation.dt_s = pair_dt_s(settings_, options.measured_dt_s);
   const WorkspacePool::Lease workspace = workspaces_.take();
-  return process_pair(*op_, frame_a, frame_b, s, options.progress, &*workspace);
+  return process_pair(*op_, frame_a, frame_b, s, options.progress, &(*workspace).mart, &(*workspace).correlation);
 }
 
 }  // namespace plenopiv::process

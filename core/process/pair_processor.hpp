@@ -11,6 +11,7 @@
 #include "core/base/image.hpp"
 #include "core/calib/calibration_file.hpp"
 #include "core/optics/camera_model.hpp"
+#include "core/process/operator_cache.hpp"
 #include "core/process/process.hpp"
 #include "core/recon/mart.hpp"
 
@@ -23,29 +24,36 @@ ImageF to_float(const ImageU16& raw);
 // pair when there is one (> 0), else the nominal dt_s of the settings.
 double pair_dt_s(const ProcessSettings& settings, std::optional<double> measured_dt_s);
 
-// MART's buffers (recon::MartWorkspace, about half a gigabyte each at the paper's scale) kept from
-// pair to pair: a pair takes a free one, or a new one when all are in use, and gives it back when
-// done (also when processing throws). As many exist as pairs were ever in flight at once. Thread
-// safe. Not per thread: a TBB thread waiting inside one pair's reconstruction may run another pair.
+// The buffers of one pair in flight: MART's (recon::MartWorkspace, about half a gigabyte at the
+// paper's scale; frame B reuses frame A's) and the correlation's (four volumes).
+struct PairWorkspace {
+  recon::MartWorkspace mart;
+  piv::CorrelationWorkspace correlation;
+};
+
+// Pair workspaces kept from pair to pair: a pair takes a free one, or a new one when all are in
+// use, and gives it back when done (also when processing throws). As many exist as pairs were ever
+// in flight at once. Thread safe. Not per thread: a TBB thread waiting inside one pair's
+// reconstruction may run another pair.
 class WorkspacePool {
  public:
   class Lease {
    public:
-    Lease(WorkspacePool& pool, std::unique_ptr<recon::MartWorkspace> workspace);
+    Lease(WorkspacePool& pool, std::unique_ptr<PairWorkspace> workspace);
     Lease(const Lease&) = delete;
     Lease& operator=(const Lease&) = delete;
     ~Lease();
-    recon::MartWorkspace& operator*() const { return *workspace_; }
+    PairWorkspace& operator*() const { return *workspace_; }
 
    private:
     WorkspacePool& pool_;
-    std::unique_ptr<recon::MartWorkspace> workspace_;
+    std::unique_ptr<PairWorkspace> workspace_;
   };
   Lease take();
 
  private:
   std::mutex mutex_;
-  std::vector<std::unique_ptr<recon::MartWorkspace>> free_;
+  std::vector<std::unique_ptr<PairWorkspace>> free_;
 };
 
 // What one call needs besides the frames.
@@ -61,13 +69,17 @@ struct PairOptions {
 class PairProcessor {
  public:
   // InputError when the settings and camera do not fit (the volume behind the main lens's focal
-  // length, windows larger than the volume, ...).
+  // length, windows larger than the volume, ...). `operators` (optional, outliving the call): where
+  // the operator comes from when it was built before from the same camera, calibration, volume
+  // and sampling (kept in memory, or its tables on disk), and where a new one is kept; without
+  // it the operator is built. The results are the same bits either way.
   PairProcessor(const optics::CameraModel& camera, const calib::LoadedCalibration& calibration,
-                ProcessSettings settings);
+                ProcessSettings settings, OperatorCache* operators = nullptr);
 
   // Raw frames A and B (the camera's counts) to vectors: validated (sensor-sized; named "frame A"
   // and "frame B"), resampled when the operator says so, reconstructed and correlated
-  // (process_pair), with the dt pair_dt_s gives. MART's buffers come from the processor's pool.
+  // (process_pair), with the dt pair_dt_s gives. MART's and the correlation's buffers come from the
+  // processor's pool.
   PairResult process(const ImageU16& frame_a, const ImageU16& frame_b, const PairOptions& options = {}) const;
   PairResult process(const ImageF& frame_a, const ImageF& frame_b, const PairOptions& options = {}) const;
 
@@ -75,10 +87,14 @@ class PairProcessor {
   const PairOperator& op() const { return *op_; }
   // Why and how frames are resampled (PairOperator::note), empty when they are not.
   const std::string& note() const { return op_->note(); }
+  // Where the weight tables came from, for the user: "operator built", "operator kept in memory",
+  // or the disk cache's line (WeightsDiskCache::last_note).
+  const std::string& setup_note() const { return setup_note_; }
 
  private:
   ProcessSettings settings_;
-  std::unique_ptr<const PairOperator> op_;
+  std::shared_ptr<const PairOperator> op_;
+  std::string setup_note_;
   mutable WorkspacePool workspaces_;
 };
 

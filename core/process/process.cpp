@@ -101,7 +101,7 @@ ProcessSettings parse_settings(const YamlMap& root) {
   if (auto r = root.optional_map("reconstruction")) {
     r->reject_unknown(
         {"iterations", "mu", "acceleration", "start", "noise_threshold", "dark_weight_cutoff", "convergence",
-         "angular_sampling", "sensor_blur_sigma_mm"});
+         "angular_sampling", "sensor_blur_sigma_mm", "prune", "prune_threshold"});
     // Read here, checked by recon::check (the one owner of MART's ranges); the integer is only kept
     // from wrapping as it narrows.
     s.mart.iterations =
@@ -114,6 +114,8 @@ ProcessSettings parse_settings(const YamlMap& root) {
     s.mart.dark_weight_cutoff = r->number_or("dark_weight_cutoff", s.mart.dark_weight_cutoff);
     s.mart.convergence = r->number_or("convergence", s.mart.convergence);
     s.mart.sensor_blur_sigma_mm = r->number_or("sensor_blur_sigma_mm", s.mart.sensor_blur_sigma_mm);
+    s.mart.prune = r->boolean_or("prune", s.mart.prune);
+    s.mart.prune_threshold = r->number_or("prune_threshold", s.mart.prune_threshold);
     if (const auto problem = recon::check(s.mart)) r->fail(problem->key, problem->reason);
     s.angular_sampling = r->number_or("angular_sampling", s.angular_sampling);
     if (!(s.angular_sampling > 0 && s.angular_sampling <= 8)) r->fail("angular_sampling", "must be in (0, 8]");
@@ -187,7 +189,7 @@ std::string spec_text(const YAML::Node& node, const std::string& comment) {
 
 PairResult process_pair(const recon::WeightingOperator& op, const ImageF& frame_a, const ImageF& frame_b,
                         const ProcessSettings& settings, const PairProgress& progress,
-                        recon::MartWorkspace* workspace) {
+                        recon::MartWorkspace* workspace, piv::CorrelationWorkspace* correlation_workspace) {
   if (!(op.grid() == settings.reconstruction_grid()))
     throw InputError("process: the weighting operator was built for another volume grid than the run config's "
                      "(its volume plus the depth guard)");
@@ -210,6 +212,7 @@ PairResult process_pair(const recon::WeightingOperator& op, const ImageF& frame_
   });
   out.times.reconstruct_a_s = seconds_since(t0);
   out.skipped_a = ra.skipped;
+  out.iterations_a = ra.iterations;
 
   t0 = std::chrono::steady_clock::now();
   auto rb = recon::reconstruct(op, frame_b, mart, buffers, [&](const recon::IterationReport& it) {
@@ -217,13 +220,15 @@ PairResult process_pair(const recon::WeightingOperator& op, const ImageF& frame_
   });
   out.times.reconstruct_b_s = seconds_since(t0);
   out.skipped_b = rb.skipped;
+  out.iterations_b = rb.iterations;
 
   // The guard slices are the correlation's depth context: no window lies in them, but the windows
   // at the box's depth faces see the rest of the streaks those faces cut (piv::correlate_volumes).
   t0 = std::chrono::steady_clock::now();
   out.correlation = piv::correlate_volumes(
       ra.volume, rb.volume, settings.correlation,
-      [&](const piv::PassReport& p) { report("correlate", 0.8 + 0.2 * p.pass / p.passes); }, settings.guard_slices());
+      [&](const piv::PassReport& p) { report("correlate", 0.8 + 0.2 * p.pass / p.passes); }, settings.guard_slices(),
+      correlation_workspace);
   out.times.correlate_s = seconds_since(t0);
   out.volume_a = depth_crop(std::move(ra.volume), settings.guard_slices(), settings.grid);
   out.volume_b = depth_crop(std::move(rb.volume), settings.guard_slices(), settings.grid);
@@ -232,22 +237,26 @@ PairResult process_pair(const recon::WeightingOperator& op, const ImageF& frame_
 }
 
 PairOperator::PairOperator(const optics::CameraModel& camera, const optics::MicrolensArray& lenses,
-                           const ImageF& white, const ProcessSettings& settings)
-    : PairOperator(camera, lenses, white, settings.reconstruction_grid(), settings.angular_sampling) {}
+                           const ImageF& white, const ProcessSettings& settings, const WeightsSource& source)
+    : PairOperator(camera, lenses, white, settings.reconstruction_grid(), settings.angular_sampling, source) {}
 
 PairOperator::PairOperator(const optics::CameraModel& camera, const optics::MicrolensArray& lenses,
-                           const ImageF& white, const Grid3& grid, double angular_sampling) {
+                           const ImageF& white, const Grid3& grid, double angular_sampling,
+                           const WeightsSource& source) {
+  const WeightsSource build = source ? source : [](const optics::CameraModel& c, const optics::MicrolensArray& l,
+                                                   const ImageF& w, const Grid3& g, double a) {
+    return std::make_unique<const recon::WeightingOperator>(c, l, g, w, a);
+  };
   const optics::Lattice& l = lenses.lattice;
   const bool rect = l.layout == optics::LensletLayout::rect;
   const double pixel = camera.sensor().pixel_pitch_mm;
   const recon::SeparableLattice sep = recon::separable_lattice(lenses);
   if (rect && sep.separable(pixel)) {
-    weights_ = std::make_unique<const recon::WeightingOperator>(camera, lenses, grid, white, angular_sampling);
+    weights_ = build(camera, lenses, white, grid, angular_sampling);
     return;
   }
   resampler_ = std::make_unique<const lightfield::LatticeResampler>(camera, lenses, white);
-  weights_ = std::make_unique<const recon::WeightingOperator>(camera, resampler_->lenses(), grid, resampler_->white(),
-                                                               angular_sampling);
+  weights_ = build(camera, resampler_->lenses(), resampler_->white(), grid, angular_sampling);
   const auto& c = resampler_->coverage();
   const auto& v = resampler_->lenses().lattice;
   char text[320];
@@ -276,12 +285,12 @@ const ImageF& PairOperator::prepare(const ImageF& frame, ImageF& scratch) const 
 
 PairResult process_pair(const PairOperator& op, const ImageF& frame_a, const ImageF& frame_b,
                         const ProcessSettings& settings, const PairProgress& progress,
-                        recon::MartWorkspace* workspace) {
+                        recon::MartWorkspace* workspace, piv::CorrelationWorkspace* correlation_workspace) {
   recon::validate_image(frame_a, op.weights(), "frame A");
   recon::validate_image(frame_b, op.weights(), "frame B");
   ImageF scratch_a, scratch_b;
   PairResult out = process_pair(op.weights(), op.prepare(frame_a, scratch_a), op.prepare(frame_b, scratch_b),
-                                settings, progress, workspace);
+                                settings, progress, workspace, correlation_workspace);
   out.lattice_note = op.note();
   return out;
 }

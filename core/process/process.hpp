@@ -57,7 +57,8 @@ Grid3 grid_for_extent(const std::array<double, 3>& lo, const std::array<double, 
 //   volume: {x_mm: [a, b], y_mm: [..], z_mm: [..], voxel_mm: 0.125, voxel_z_mm: 0.125, depth_guard_mm: 1}
 //           [a, b] are the faces of the box (the first voxel's lower face, the last one's upper face)
 //   reconstruction: {iterations, mu, acceleration, start: mlos|ones, noise_threshold, dark_weight_cutoff,
-//                    convergence, angular_sampling, sensor_blur_sigma_mm}   (ranges: recon::check)
+//                    convergence, angular_sampling, sensor_blur_sigma_mm, prune, prune_threshold}
+//                                                  (ranges: recon::check)
 //   correlation: {passes, median, ...}             (piv::correlation_settings_from; ranges: piv::check)
 //   live: {volume: {..}, reconstruction: {..}, correlation: {..}}   (optional: the live lane's fast tier,
 //         each key overriding the one above it; everything else as above)
@@ -93,6 +94,8 @@ struct StageTimes {
 struct PairResult {
   Volume volume_a, volume_b;
   recon::SkipReport skipped_a, skipped_b;
+  // Each MART iteration's report (live voxels, work, residual), frames A and B.
+  std::vector<recon::IterationReport> iterations_a, iterations_b;
   piv::CorrelationResult correlation;
   StageTimes times;
   std::string lattice_note;  // PairOperator::note: why and how the frames were resampled; empty if not
@@ -113,13 +116,20 @@ using PairProgress = std::function<void(const std::string& stage, double fractio
 // LatticeResampler do.
 class PairOperator {
  public:
+  // Where the weighting operator comes from, given the lenses and white image it works on (the
+  // calibrated ones, or the axis-aligned lattice's): built, or read from a cache
+  // (operator_cache.hpp). Empty: built.
+  using WeightsSource = std::function<std::unique_ptr<const recon::WeightingOperator>(
+      const optics::CameraModel& camera, const optics::MicrolensArray& lenses, const ImageF& white,
+      const Grid3& grid, double angular_sampling)>;
+
   // `grid` and `angular_sampling` as recon::WeightingOperator takes them.
   PairOperator(const optics::CameraModel& camera, const optics::MicrolensArray& lenses, const ImageF& white,
-               const Grid3& grid, double angular_sampling = 1.0);
+               const Grid3& grid, double angular_sampling = 1.0, const WeightsSource& source = {});
   // What process_pair needs for `settings`: reconstruction_grid() (the guard slices included) and
   // the settings' angular sampling.
   PairOperator(const optics::CameraModel& camera, const optics::MicrolensArray& lenses, const ImageF& white,
-               const ProcessSettings& settings);
+               const ProcessSettings& settings, const WeightsSource& source = {});
 
   const recon::WeightingOperator& weights() const { return *weights_; }
   // Null when the operator works on raw pixels.
@@ -141,14 +151,19 @@ class PairOperator {
 // "frame A" / "frame B" in errors. Bit-identical at any thread count. Frame B is reconstructed in
 // frame A's buffers: in `workspace` when given (a caller processing pair after pair keeps one per
 // pair in flight, so that no frame allocates them afresh), else in one kept for the pair. The
-// results are the same bits either way.
+// results are the same bits either way. `progress` is called after every MART iteration and
+// correlation pass; a caller cancels the pair by throwing plenopiv::Cancelled from it (the
+// workspace is then free for the next pair). `correlation_workspace` (optional): the correlation's
+// volume-sized buffers, kept by the caller likewise (piv::CorrelationWorkspace; the same bits).
 PairResult process_pair(const recon::WeightingOperator& op, const ImageF& frame_a, const ImageF& frame_b,
                         const ProcessSettings& settings, const PairProgress& progress = {},
-                        recon::MartWorkspace* workspace = nullptr);
+                        recon::MartWorkspace* workspace = nullptr,
+                        piv::CorrelationWorkspace* correlation_workspace = nullptr);
 // The same from raw frames through a PairOperator: the frames are validated as raw images, resampled
 // when the operator says so, and PairResult::lattice_note carries its note.
 PairResult process_pair(const PairOperator& op, const ImageF& frame_a, const ImageF& frame_b,
                         const ProcessSettings& settings, const PairProgress& progress = {},
-                        recon::MartWorkspace* workspace = nullptr);
+                        recon::MartWorkspace* workspace = nullptr,
+                        piv::CorrelationWorkspace* correlation_workspace = nullptr);
 
 }  // namespace plenopiv::process

@@ -58,8 +58,18 @@ void walk_column(const SliceTables& t, std::uint32_t begin, std::uint32_t end, c
 
 }  // namespace
 
-ActiveSet::ActiveSet(const WeightingOperator& op, std::vector<std::uint32_t> voxels)
-    : voxels_(std::move(voxels)) {
+ActiveSet::ActiveSet(const WeightingOperator& op, std::vector<std::uint32_t> voxels) {
+  assign(op, std::move(voxels));
+}
+
+void ActiveSet::assign(const WeightingOperator& op, std::vector<std::uint32_t> voxels) {
+  voxels_ = std::move(voxels);
+  // Emptied, capacity kept: every step below sizes and writes what it uses.
+  order_.clear();
+  order_normaliser_.clear();
+  columns_.clear();
+  visits_.clear();
+  entries_.clear();
   check_voxels(op);
   const BigBuffer<int> order_y = group_by_column(op);
   bands_ = (op.image_height() + kBandRows - 1) / kBandRows;
@@ -73,6 +83,13 @@ ActiveSet ActiveSet::all(const WeightingOperator& op) {
   std::vector<std::uint32_t> v(op.grid().count());
   for (std::size_t i = 0; i < v.size(); ++i) v[i] = std::uint32_t(i);
   return ActiveSet(op, std::move(v));
+}
+
+std::size_t ActiveSet::bytes() const {
+  return voxels_.capacity() * sizeof(std::uint32_t) + order_.capacity() * sizeof(std::uint32_t) +
+         order_normaliser_.capacity() * sizeof(float) + columns_.capacity() * sizeof(Column) +
+         visits_.capacity() * sizeof(Visit) + entries_.capacity() * sizeof(BandEntry) +
+         visit_start_.capacity() * sizeof(std::size_t);
 }
 
 void ActiveSet::check_voxels(const WeightingOperator& op) const {
@@ -303,6 +320,7 @@ void ActiveSet::order_by_cost(const WeightingOperator& op) {
                      [&](int a, int b) { return cost[std::size_t(a)] > cost[std::size_t(b)]; });
     return order;
   };
+  pass_work_ = std::accumulate(band_cost.begin(), band_cost.end(), 0.0);
   band_order_ = costliest_first(band_cost);
   strip_order_ = costliest_first(strip_cost);
 }

@@ -35,9 +35,19 @@ class ActiveSet {
   // `voxels`: flat indices into the operator's grid, strictly increasing (InputError otherwise).
   ActiveSet(const WeightingOperator& op, std::vector<std::uint32_t> voxels);
   static ActiveSet all(const WeightingOperator& op);
+  ActiveSet() = default;  // empty, for assign()
+  // Lays out another set in this one's storage (kept from set to set, so that a caller laying
+  // out set after set neither allocates nor page-faults its large arrays again). The same
+  // layout as a new ActiveSet(op, voxels).
+  void assign(const WeightingOperator& op, std::vector<std::uint32_t> voxels);
 
   const std::vector<std::uint32_t>& voxels() const { return voxels_; }
   std::size_t size() const { return voxels_.size(); }
+  // The work of one pass, estimated as the kernels' vector operations: per visit, the rows it
+  // reaches times its column's x quads (the x stage) plus its voxels' y quads (the y stage).
+  double pass_work() const { return pass_work_; }
+  // Bytes held (the arrays' capacities).
+  std::size_t bytes() const;
 
   // Buffers a pass needs (E / n in column order, the per-voxel sums, the images in row lanes),
   // kept by whoever runs many passes (MART) so that a pass neither allocates nor page-faults them.
@@ -121,6 +131,7 @@ class ActiveSet {
   std::vector<Column> columns_;  // in the same order
   // Voxel x per strip: within a band the kernels walk strip by strip, depth by depth, x by x, so
   // the y weights of one depth serve the whole strip and the pixels under the strip stay cached.
+  double pass_work_ = 0;
   int strip_x_ = 1;
   int strips_ = 0;
   int bands_ = 0;

@@ -59,6 +59,10 @@ std::optional<SettingProblem> check(const MartSettings& s) {
     return SettingProblem{"sensor_blur_sigma_mm", "must be in [0, " + number(kMaxSensorBlurSigmaMm) + "] mm, got " +
                                                       number(s.sensor_blur_sigma_mm)};
   }
+  if (!(s.prune_threshold >= 0 && s.prune_threshold < 1)) {
+    return SettingProblem{"prune_threshold",
+                          "must be in [0, 1) (a fraction of the volume's peak), got " + number(s.prune_threshold)};
+  }
   return std::nullopt;
 }
 
@@ -118,7 +122,9 @@ std::size_t MartWorkspace::bytes() const {
   }
   total += b.kernels.scaled.capacity() * sizeof(float) + b.kernels.sums.capacity() * sizeof(double);
   total += (b.kernels.band_lanes.capacity() + b.kernels.image_lanes.capacity()) * sizeof(float);
-  total += b.select.dark.capacity() * sizeof(std::uint64_t);
+  total += b.select.dark.capacity() * sizeof(std::uint64_t) +
+           b.origin.capacity() * sizeof(std::uint32_t);
+  total += b.active.bytes();
   for (const auto& slice : b.select.per_slice) total += slice.capacity() * sizeof(std::uint32_t);
   return total;
 }

@@ -68,6 +68,15 @@ struct MartSettings {
   // an iteration). Off where nothing reads it (process::process_pair); the volume is the same
   // either way. Default on.
   bool final_residual = true;
+  // Value-adaptive active set: after the start and after each iteration, voxels at or below
+  // `prune_threshold` times the volume's peak leave the active set (set to 0), and the passes
+  // walk only the live ones. MART's update is multiplicative, so a voxel at exactly 0 stays 0:
+  // with threshold 0 only those leave and the volume has the same bits as without pruning. Above
+  // 0 a faint voxel that might still have grown is dropped: faster, an approximation whose cost
+  // docs/benchmarks.md measures ("Sparse reconstruction"). Range [0, 1); default 0.
+  double prune_threshold = 0.0;
+  // Off: every active voxel is updated on every iteration (the reference). Default on.
+  bool prune = true;
 };
 // A Gaussian wider than this is no sensor blur (the paper's lens images are 0.125 mm across).
 inline constexpr double kMaxSensorBlurSigmaMm = 0.05;
@@ -97,8 +106,27 @@ struct SkipReport {
   std::size_t voxels_active = 0;
   int slices = 0;
   int slices_empty = 0;  // no active voxel
+  // Voxels left out of the active set by pruning (MartSettings::prune), over the whole run.
+  std::size_t voxels_pruned = 0;
+  // Voxel updates done over the iterations (the live voxels of each iteration, summed), and how
+  // many iterations ran.
+  std::size_t voxel_updates = 0;
+  int iterations = 0;
+  // The kernels' work over the iterations (ActiveSet::pass_work, summed) against the start's
+  // active set's work times the iterations.
+  double work_done = 0, work_unpruned = 0;
+  double fraction_work_pruned() const {
+    return work_unpruned > 0 ? 1.0 - work_done / work_unpruned : 0.0;
+  }
+  // Share of the box not solved at all (dark, unseen, outside the region).
   double fraction_skipped() const {
     return voxels ? 1.0 - double(voxels_active) / double(voxels) : 0.0;
+  }
+  // Share of the box's voxel updates over the iterations that were not done (not solved, or
+  // pruned): 1 - voxel_updates / (iterations x voxels).
+  double fraction_updates_skipped() const {
+    const double all = double(voxels) * double(iterations);
+    return all > 0 ? 1.0 - double(voxel_updates) / all : fraction_skipped();
   }
 };
 
@@ -106,6 +134,15 @@ struct IterationReport {
   int iteration = 0;    // 1-based
   double residual = 0;  // ||I - W E|| / ||I|| (B W E with the sensor blur) before the update
   double seconds = 0;
+  std::size_t live_voxels = 0;  // voxels this iteration updated
+  std::size_t voxels = 0;       // in the box
+  // This iteration's kernel work (ActiveSet::pass_work) against the start's active set's: below 1
+  // once pruning has shrunk the set.
+  double work_fraction = 1.0;
+  // Share of the box's voxels this iteration did not update.
+  double fraction_skipped() const {
+    return voxels ? 1.0 - double(live_voxels) / double(voxels) : 0.0;
+  }
 };
 
 // Called after each iteration.
@@ -122,6 +159,9 @@ struct MartResult {
   // The setup's parts (wall seconds): choosing the active voxels, grouping them for the kernels
   // (ActiveSet), and the MLOS start (one two-image back-projection, one projection).
   double select_seconds = 0, active_set_seconds = 0, start_seconds = 0;
+  // Wall seconds spent pruning (MartSettings::prune), most of it laying out the smaller active
+  // sets; inside the iterations' seconds, apart from the prune after the start.
+  double prune_seconds = 0;
 };
 
 // Checks an image for the reconstruction: sensor-sized, finite, non-negative; InputError otherwise
@@ -164,7 +204,8 @@ class MartWorkspace {
 // `progress` (optional) is called after each iteration. Bit-identical at any thread count.
 MartResult reconstruct(const WeightingOperator& op, const ImageF& image,
                        const MartSettings& settings, const IterationCallback& progress = {});
-// The same in `workspace`'s buffers (the same bits).
+// The same in `workspace`'s buffers (the same bits). A caller cancels by throwing
+// plenopiv::Cancelled from `progress`; the workspace is then free for the next reconstruction.
 MartResult reconstruct(const WeightingOperator& op, const ImageF& image,
                        const MartSettings& settings, MartWorkspace& workspace,
                        const IterationCallback& progress = {});

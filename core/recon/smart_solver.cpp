@@ -9,12 +9,16 @@
 #include <chrono>
 #include <cmath>
 #include <functional>
+#include <string>
 #include <utility>
 
 #include "core/recon/mart_numerics.hpp"
 
 namespace plenopiv::recon::detail {
 namespace {
+
+// SmartSolver::prune rebuilds the active set once 1 / kRebuildShare of its voxels are zero.
+constexpr std::size_t kRebuildShare = 8;
 
 double seconds_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -27,6 +31,7 @@ SmartSolver::SmartSolver(const WeightingOperator& op, const MartSettings& settin
     : op_(op),
       settings_(settings),
       b_(buffers),
+      active_(buffers.active),
       white_(op.white().pixels.data()),
       blur_(op, settings.sensor_blur_sigma_mm) {}
 
@@ -46,6 +51,7 @@ MartResult SmartSolver::run(const ImageF& image, const IterationCallback& progre
   result_.start_seconds = seconds_since(t_start);
   result_.setup_seconds = seconds_since(t_setup);
   prepare_iterations();
+  if (settings_.prune) prune();
 
   int momentum_step = 1;  // k of FISTA's beta_k
   double previous = -1;   // the last iteration's residual
@@ -63,7 +69,14 @@ MartResult SmartSolver::run(const ImageF& image, const IterationCallback& progre
     previous = r;
     update();
     if (settings_.accelerate) momentum_step = step_along_momentum() ? momentum_step + 1 : 1;
-    IterationReport rep{it, r, seconds_since(t_it)};
+    result_.skipped.voxel_updates += n_;
+    result_.skipped.iterations = it;
+    result_.skipped.work_done += active_.pass_work();
+    result_.skipped.work_unpruned += start_work_;
+    const std::size_t updated = n_;
+    const double work = start_work_ > 0 ? active_.pass_work() / start_work_ : 1.0;
+    if (settings_.prune) prune();
+    IterationReport rep{it, r, seconds_since(t_it), updated, op_.grid().count(), work};
     result_.iterations.push_back(rep);
     if (progress) progress(rep);
   }
@@ -88,9 +101,12 @@ void SmartSolver::setup(const ImageF& image) {
       select_active(op_, b_.data, settings_, b_.select, result_.skipped);
   result_.select_seconds = seconds_since(t0);
   const auto t_active = std::chrono::steady_clock::now();
-  active_.emplace(op_, std::move(selected));
+  active_.assign(op_, std::move(selected));
   result_.active_set_seconds = seconds_since(t_active);
-  n_ = active_->size();
+  n_ = n_start_ = active_.size();
+  start_work_ = active_.pass_work();
+  fit(b_.origin, n_);
+  for_voxels([&](std::size_t m) { b_.origin[m] = std::uint32_t(m); });
 }
 
 void SmartSolver::start() {
@@ -135,7 +151,7 @@ void SmartSolver::start_mlos() {
       b_.projection[i] = log_pixel(data[i]) * white_[i];
     }
   });
-  active_->back_project_whitened(op_, b_.ratio, weight, b_.projection, b_.update, &b_.kernels);
+  active_.back_project_whitened(op_, b_.ratio, weight, b_.projection, b_.update, &b_.kernels);
   for_voxels([&](std::size_t m) {
     e[m] = weight[m] > 0.f ? clean(bounded_exp(b_.update[m] / weight[m])) : 0.f;
   });
@@ -161,7 +177,7 @@ void SmartSolver::prepare_iterations() {
   log_floor_ = std::log(dark_floor_);
   // The residual's two sums per band of the projection, added in band order: the same at any
   // thread count.
-  band_sums_.assign(std::size_t(active_->band_count()), {0.0, 0.0});
+  band_sums_.assign(std::size_t(active_.band_count()), {0.0, 0.0});
   // Nesterov's momentum on ln E: `last` holds x_(k-1), then x_k; `log_last` its ln (kept, so
   // each iteration takes one log per voxel, not two); `momentum` ln x_k - ln x_(k-1) (0 where
   // either is 0).
@@ -228,14 +244,14 @@ void SmartSolver::project_and_compare(bool with_ratio) {
   // Without blur, each band is finished while its pixels are in cache; with it, the whole
   // projection must exist before the blur.
   if (!blur_.active()) {
-    active_->project(op_, b_.e, b_.projection, &b_.kernels,
-                     [&](int band, std::size_t i0, std::size_t i1) {
-                       residual_band(band, i0, i1);
-                       if (with_ratio) ratio_band(i0, i1, white_);
-                     });
+    active_.project(op_, b_.e, b_.projection, &b_.kernels,
+                    [&](int band, std::size_t i0, std::size_t i1) {
+                      residual_band(band, i0, i1);
+                      if (with_ratio) ratio_band(i0, i1, white_);
+                    });
     return;
   }
-  active_->project(op_, b_.e, b_.projection, &b_.kernels);
+  active_.project(op_, b_.e, b_.projection, &b_.kernels);
   blur_.apply(b_.projection);
   // The residual's sums in fixed pixel bands (the projection's own bands no longer apply).
   const std::size_t pixels = b_.data.size();
@@ -252,29 +268,115 @@ void SmartSolver::project_and_compare(bool with_ratio) {
 }
 
 void SmartSolver::update() {
-  active_->back_project_whitened(op_, b_.ratio, b_.update, &b_.kernels);
+  active_.back_project_whitened(op_, b_.ratio, b_.update, &b_.kernels);
   const float mu = float(settings_.mu);
   BigBuffer<float>& e = b_.e;
   for_voxels([&](std::size_t m) { e[m] = clean(e[m] * bounded_exp(mu * b_.update[m])); });
 }
 
 bool SmartSolver::step_along_momentum() const {
-  // Does this step (ln x_(k+1) - ln y = mu * update) go along the momentum? Summed in fixed
-  // chunks, so the answer is the same at any thread count.
-  const double along = tbb::parallel_deterministic_reduce(
-      tbb::blocked_range<std::size_t>(0, n_, 1 << 14), 0.0,
-      [&](const tbb::blocked_range<std::size_t>& range, double acc) {
-        for (std::size_t m = range.begin(); m != range.end(); ++m) {
-          acc += double(b_.update[m]) * double(b_.momentum[m]);
-        }
-        return acc;
+  // Does this step (ln x_(k+1) - ln y = mu * update) go along the momentum? Summed over a fixed
+  // tree of the start's active set, as tbb::parallel_deterministic_reduce sums a range with grain
+  // kGrain: halves until a range is no longer than the grain, each leaf from 0 in order, then left
+  // + right. So the answer is the same at any thread count, and pruning changes no bit: a pruned
+  // voxel's term was update x 0 = ±0, which leaves a sum as it was.
+  constexpr std::size_t kGrain = std::size_t(1) << 14;
+  std::vector<std::array<std::size_t, 2>> leaves;  // [begin, end) in start positions
+  auto split = [&](auto&& self, std::size_t begin, std::size_t end) -> void {
+    if (end - begin > kGrain) {
+      const std::size_t mid = begin + (end - begin) / 2;
+      self(self, begin, mid);
+      self(self, mid, end);
+    } else {
+      leaves.push_back({begin, end});
+    }
+  };
+  split(split, 0, n_start_);
+  std::vector<double> leaf_sum(leaves.size());
+  const std::uint32_t* origin = b_.origin.data();
+  tbb::parallel_for(std::size_t(0), leaves.size(), [&](std::size_t k) {
+    const std::size_t m0 =
+        std::size_t(std::lower_bound(origin, origin + n_, leaves[k][0]) - origin);
+    const std::size_t m1 =
+        std::size_t(std::lower_bound(origin, origin + n_, leaves[k][1]) - origin);
+    double acc = 0.0;
+    for (std::size_t m = m0; m < m1; ++m) acc += double(b_.update[m]) * double(b_.momentum[m]);
+    leaf_sum[k] = acc;
+  });
+  std::size_t next = 0;
+  auto combine = [&](auto&& self, std::size_t begin, std::size_t end) -> double {
+    if (end - begin > kGrain) {
+      const std::size_t mid = begin + (end - begin) / 2;
+      const double left = self(self, begin, mid);
+      return left + self(self, mid, end);
+    }
+    return leaf_sum[next++];
+  };
+  return !(combine(combine, 0, n_start_) < 0);
+}
+
+void SmartSolver::prune() {
+  const auto t0 = std::chrono::steady_clock::now();
+  struct Timer {
+    std::chrono::steady_clock::time_point t0;
+    double& total;
+    ~Timer() { total += seconds_since(t0); }
+  } timer{t0, result_.prune_seconds};
+  BigBuffer<float>& e = b_.e;
+  if (n_ == 0) return;
+  if (settings_.prune_threshold > 0) {
+    // The peak: a maximum, the same in any order.
+    const float peak = tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, n_, 1 << 14), 0.f,
+        [&](const tbb::blocked_range<std::size_t>& r, float top) {
+          for (std::size_t m = r.begin(); m != r.end(); ++m) top = std::max(top, e[m]);
+          return top;
+        },
+        [](float a, float b) { return std::max(a, b); });
+    const float cut = float(settings_.prune_threshold * double(peak));
+    for_voxels([&](std::size_t m) {
+      if (e[m] <= cut) e[m] = 0.f;
+    });
+  }
+  const std::size_t dead = tbb::parallel_reduce(
+      tbb::blocked_range<std::size_t>(0, n_, 1 << 14), std::size_t(0),
+      [&](const tbb::blocked_range<std::size_t>& r, std::size_t count) {
+        for (std::size_t m = r.begin(); m != r.end(); ++m) count += e[m] == 0.f;
+        return count;
       },
-      std::plus<double>());
-  return !(along < 0);
+      std::plus<std::size_t>());
+  // A zero costs a pass a little work; a new layout costs about what the passes save on
+  // kRebuildShare of the live voxels over one iteration. Rebuild once that many are zero.
+  if (dead == 0 || dead * kRebuildShare < n_) return;
+  const std::vector<std::uint32_t>& old_voxels = active_.voxels();  // read before assign()
+  std::vector<std::uint32_t> voxels;
+  voxels.reserve(n_ - dead);
+  // Compacted in place, in order: position m' <= m, so nothing is overwritten before it is read.
+  std::size_t live = 0;
+  for (std::size_t m = 0; m < n_; ++m) {
+    if (e[m] == 0.f) continue;
+    voxels.push_back(old_voxels[m]);
+    e[live] = e[m];
+    b_.origin[live] = b_.origin[m];
+    if (settings_.accelerate) {
+      b_.last[live] = b_.last[m];
+      b_.log_last[live] = b_.log_last[m];
+      b_.momentum[live] = b_.momentum[m];
+    }
+    ++live;
+  }
+  result_.skipped.voxels_pruned += n_ - live;
+  n_ = live;
+  for (BigBuffer<float>* b : {&b_.e, &b_.update}) b->resize(n_);
+  b_.origin.resize(n_);
+  if (settings_.accelerate) {
+    for (BigBuffer<float>* b : {&b_.last, &b_.log_last, &b_.momentum}) b->resize(n_);
+  }
+  active_.assign(op_, std::move(voxels));
 }
 
 void SmartSolver::write_volume() {
-  const std::vector<std::uint32_t>& voxels = active_->voxels();
+  const std::vector<std::uint32_t>& voxels = active_.voxels();
   // Distinct voxels: no two writes to one value.
   for_voxels([&](std::size_t m) { result_.volume.data[voxels[m]] = b_.e[m]; });
 }

@@ -6,7 +6,7 @@
 #include <array>
 #include <atomic>
 #include <cstddef>
-#include <optional>
+#include <cstdint>
 #include <vector>
 
 #include "core/base/big_buffer.hpp"
@@ -26,6 +26,9 @@ struct MartBuffers {
   BigBuffer<float> data, log_data, projection, ratio;
   // Per active voxel: E, the back-projected update, MLOS's weight, and the momentum's three.
   BigBuffer<float> e, update, weight, last, log_last, momentum;
+  // Per live voxel: its position in the active set the start had (pruning keeps the order).
+  BigBuffer<std::uint32_t> origin;
+  ActiveSet active;              // the live voxels, laid out again in place when pruned
   ActiveSet::Workspace kernels;  // reused by every pass
   SelectScratch select;
 };
@@ -58,6 +61,9 @@ class SmartSolver {
   void update();
   // Whether the step just taken goes along the momentum (else the momentum restarts).
   bool step_along_momentum() const;
+  // MartSettings::prune: voxels at or below the threshold set to 0, and the active set rebuilt
+  // without the zeros once enough of them have gathered.
+  void prune();
   // The active voxels' values into the result's volume.
   void write_volume();
 
@@ -71,8 +77,10 @@ class SmartSolver {
   const MartSettings& settings_;
   MartBuffers& b_;
   MartResult result_;
-  std::optional<ActiveSet> active_;
-  std::size_t n_ = 0;  // active voxels
+  ActiveSet& active_;        // b_.active
+  std::size_t n_ = 0;        // live voxels (the active set's)
+  std::size_t n_start_ = 0;  // active voxels at the start, before any pruning
+  double start_work_ = 0;    // their pass work
   const float* white_ = nullptr;
   float dark_floor_ = 0, log_floor_ = 0;
   std::vector<std::array<double, 2>> band_sums_;  // the residual's sums per projection band

@@ -6,6 +6,8 @@
 #include <cstddef>
 #include <cstdint>
 #include <span>
+#include <string>
+#include <string_view>
 #include <vector>
 
 #include "core/base/grid.hpp"
@@ -148,7 +150,18 @@ class WeightingOperator {
   const Geometry& geometry() const { return geo_; }
   const optics::SensorSpec& sensor() const { return sensor_; }  // with its optical axis
 
+  // The operator as bytes (everything the constructor computed: tables, normalisers, white
+  // image, geometry), appended to `out`, and back: a cache of operators (core/process) keeps
+  // them between runs. The layout is this build's; a reader of another layout or of damaged
+  // bytes gets an InputError, never a wrong operator (the caller keys and checksums the bytes).
+  void serialize(std::string& out) const;
+  static constexpr std::uint32_t kBytesFormat = 1;  // changes with serialize's layout
+  static WeightingOperator deserialize(std::string_view bytes);
+  // Bytes held by the tables, normalisers and white image.
+  std::size_t bytes() const;
+
  private:
+  WeightingOperator() = default;  // for deserialize
   // The construction, step by step: the inputs checked (weights.cpp), the geometry read from the
   // camera and lens array (weights.cpp), the 1-D tables of every slice and the eq 13 normalisers
   // (slice_tables.cpp).

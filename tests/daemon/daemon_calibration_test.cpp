@@ -91,6 +91,19 @@ TEST(DaemonCalibration, ABadFileIsRefusedByNameAndAGoodOneIsUsedOnceItIsThere) {
   EXPECT_EQ(m.calibration_source(), rig.string());
   EXPECT_EQ(io::read_file_bytes(run_dir / m.calibration_file()), io::read_file_bytes(dir / "good.h5"));
   EXPECT_EQ(m.pairs_processed(), 1u);
+  // MART's skipped work on that pair in the status: the 8^3 box and its 1 mm guard slices at each
+  // depth end (8 x 8 x 24 voxels), at most one iteration per frame (none when the sparse frames
+  // light no voxel of this small box: then every update is skipped).
+  ASSERT_TRUE(s->has_reconstruction()) << s->DebugString();
+  const msg::ReconstructionWork& work = s->reconstruction();
+  EXPECT_EQ(work.pair_index(), m.pairs(0).pair_index());
+  EXPECT_EQ(work.voxels(), 8u * 8u * 24u);
+  EXPECT_LE(work.live_voxels_a_size(), 1);
+  EXPECT_LE(work.live_voxels_b_size(), 1);
+  EXPECT_GT(work.voxel_updates_skipped(), 0.0);
+  EXPECT_LE(work.voxel_updates_skipped(), 1.0);
+  ASSERT_EQ(client({"status"}), 0) << out;
+  EXPECT_NE(out.find("of the voxel updates skipped"), std::string::npos) << out;
   daemon.signal(SIGTERM);
   EXPECT_EQ(daemon.wait(10s), 0) << daemon.output();
 }

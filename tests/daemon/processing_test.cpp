@@ -1,7 +1,11 @@
 // The live processing stage on ray-traced pairs (core/sim): a known uniform displacement comes back.
 #include <gtest/gtest.h>
 
+#include <spdlog/sinks/ringbuffer_sink.h>
+#include <spdlog/spdlog.h>
+
 #include <chrono>
+#include <memory>
 
 #include "core/base/errors.hpp"
 #include "core/optics/camera_file.hpp"
@@ -70,6 +74,25 @@ TEST(Processing, UniformDisplacementOfARayTracedPairComesBack) {
   EXPECT_NEAR(mean_dx, shift_mm, 0.02);
   EXPECT_NEAR(mean_dy, 0.0, 0.01);
 
+  // What MART skipped, for the status and the log: 3 iterations per frame, each updating the live
+  // voxels of a box mostly dark at 30 particles, the shares consistent with those counts.
+  ASSERT_TRUE(out.work);
+  const ReconstructionWork& w = *out.work;
+  ASSERT_EQ(w.live_a.size(), 3u);
+  ASSERT_EQ(w.live_b.size(), 3u);
+  std::size_t updates = 0;
+  for (const auto* live : {&w.live_a, &w.live_b}) {
+    for (const std::size_t n : *live) {
+      EXPECT_GT(n, 0u);
+      EXPECT_LT(n, w.voxels);
+      updates += n;
+    }
+  }
+  EXPECT_NEAR(w.updates_skipped, 1.0 - double(updates) / (6.0 * double(w.voxels)), 1e-12);
+  std::printf("processing: voxel updates skipped %.4f of %zu voxels x 6 iterations\n", w.updates_skipped, w.voxels);
+  EXPECT_GT(w.updates_skipped, 0.5) << "measured " << w.updates_skipped;
+  EXPECT_EQ(w.work_pruned, 0.0);  // no exact zeros in ray-traced frames; no threshold
+
   // A stopping run: the same pair gives up at the first MART iteration's check.
   const CancelFlag stop{true};
   EXPECT_THROW(process(pair, stop), Cancelled);
@@ -108,6 +131,30 @@ TEST(Processing, BadSettingsAndWrongImagesAreNamed) {
   small.b.image = ImageU16(64, 48);
   const CancelFlag go{false};
   EXPECT_THROW(process(small, go), InputError);  // not the camera's sensor size
+}
+
+// The factory keeps the operators it built (process::OperatorCache): a second run on the same
+// camera, calibration and volume builds no weight tables, a run on another volume does; each run
+// says which in its log line.
+TEST(Processing, ARunOnAnEarlierRunsGeometryBuildsNoTables) {
+  const optics::CameraModel camera =
+      optics::load_camera_file(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml");
+  auto sink = std::make_shared<spdlog::sinks::ringbuffer_sink_mt>(8);
+  const auto previous = spdlog::default_logger();
+  spdlog::set_default_logger(std::make_shared<spdlog::logger>("processing-test", sink));
+  const ProcessFactory factory = plenoptic_processing(camera);
+  const RunConfig config = parse_run_config(kConfig, "run.yaml");
+  std::string other = kConfig;
+  other.replace(other.find("x_mm: [-1, 1]"), 13, "x_mm: [-1.25, 1.25]");
+  factory(config, RunCalibration{});
+  factory(config, RunCalibration{});
+  factory(parse_run_config(other, "run.yaml"), RunCalibration{});
+  spdlog::set_default_logger(previous);
+  const std::vector<std::string> lines = sink->last_formatted();
+  ASSERT_EQ(lines.size(), 3u);
+  EXPECT_NE(lines[0].find("operator built"), std::string::npos) << lines[0];
+  EXPECT_NE(lines[1].find("operator kept in memory"), std::string::npos) << lines[1];
+  EXPECT_NE(lines[2].find("operator built"), std::string::npos) << lines[2];
 }
 
 }  // namespace

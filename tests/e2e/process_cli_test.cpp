@@ -43,9 +43,13 @@ const fs::path& pair_dir() {
   return dir;
 }
 
+// The weight tables' cache of these tests: a folder of their own, not the user's.
+fs::path cache_dir() { return testing_support::temp_dir("process-cli") / "cache"; }
+
 std::vector<std::string> process_args(const fs::path& dir, const std::string& config, const fs::path& out) {
   return {binary("plenopiv"), "process", kCamera, (dir / "pair/frame_A.tif").string(),
-          (dir / "pair/frame_B.tif").string(), "--config", config, "--nominal", "-o", out.string()};
+          (dir / "pair/frame_B.tif").string(), "--config", config, "--nominal", "-o", out.string(),
+          "--cache-dir", cache_dir().string()};
 }
 
 // Mean (dx, dy, dz) over the valid vectors of a field file.
@@ -87,6 +91,32 @@ TEST(ProcessCli, RecoversTheUniformDisplacement) {
       EXPECT_LT(mean, kTruth[2] + 0.03);
     }
   }
+}
+
+// Setup once per geometry: a second `process` of the same camera, calibration, volume and
+// settings reads the weight tables its first call kept, and gives the same field, bit for bit.
+TEST(ProcessCli, ASecondCallReadsTheWeightTablesTheFirstKept) {
+  const fs::path& dir = pair_dir();
+  const fs::path own_cache = testing_support::temp_dir("process-cli") / "cache-twice";
+  fs::remove_all(own_cache);
+  auto args = process_args(dir, kConfig, dir / "first.h5");
+  args.back() = own_cache.string();
+  std::string out;
+  ASSERT_EQ(run_command(args, out, std::chrono::seconds(300)), 0) << out;
+  EXPECT_NE(out.find("weight tables built and kept in the cache: " + own_cache.string()), std::string::npos) << out;
+  args[args.size() - 3] = (dir / "second.h5").string();
+  ASSERT_EQ(run_command(args, out, std::chrono::seconds(300)), 0) << out;
+  EXPECT_NE(out.find("weight tables from the cache: " + own_cache.string()), std::string::npos) << out;
+  const VectorField a = io::read_vector_field_h5(dir / "first.h5"), b = io::read_vector_field_h5(dir / "second.h5");
+  EXPECT_EQ(a.dx_mm, b.dx_mm);
+  EXPECT_EQ(a.dy_mm, b.dy_mm);
+  EXPECT_EQ(a.dz_mm, b.dz_mm);
+  EXPECT_EQ(a.valid, b.valid);
+  // --no-cache: built afresh, nothing said about a cache.
+  args.back() = "--no-cache";
+  args.erase(args.end() - 2);
+  ASSERT_EQ(run_command(args, out, std::chrono::seconds(300)), 0) << out;
+  EXPECT_EQ(out.find("cache"), std::string::npos) << out;
 }
 
 // The shipped settings with the volume moved to z [2, 6] mm, the given depth guard and, unless

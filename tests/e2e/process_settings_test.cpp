@@ -97,6 +97,19 @@ TEST(ProcessSettings, SensorBlurReachesMart) {
   }
 }
 
+TEST(ProcessSettings, PruningReachesMart) {
+  const ProcessSettings defaults = parse(kVolume + "}\n" + kPasses);
+  EXPECT_TRUE(defaults.mart.prune);  // exact zeros only: the volume of no pruning
+  EXPECT_EQ(defaults.mart.prune_threshold, 0.0);
+  const ProcessSettings s = parse(kVolume + "}\nreconstruction: {prune: false, prune_threshold: 0.01}\n" + kPasses);
+  EXPECT_FALSE(s.mart.prune);
+  EXPECT_DOUBLE_EQ(s.mart.prune_threshold, 0.01);
+  for (const std::string bad : {"-0.001", "1", "faint"}) {
+    expect_refused_naming(kVolume + "}\nreconstruction: {prune_threshold: " + bad + "}\n" + kPasses, "prune_threshold");
+  }
+  expect_refused_naming(kVolume + "}\nreconstruction: {prune: sometimes}\n" + kPasses, "prune");
+}
+
 // Two particles at depths z and z + 0.5 mm through the small camera, as the camera records them.
 ImageF two_particle_frame(const optics::CameraModel& camera, const optics::MicrolensArray& lenses, double z) {
   sim::RenderOptions ro;
@@ -132,9 +145,9 @@ TEST(ProcessSettings, ProcessPairReturnsTheRequestedBoxAndRefusesAnUnguardedOper
   EXPECT_THROW(process_pair(unguarded, a, b, s), InputError);
 }
 
-// A caller's kept MART workspace (the daemon's, pair after pair) changes no bit: a pair processed
-// after another in the same workspace gives the volumes and vectors of one processed alone, and
-// frame B (reconstructed in A's buffers) the volume of B reconstructed first.
+// A caller's kept MART and correlation workspaces (the daemon's, pair after pair) change no bit: a
+// pair processed after another in the same workspaces gives the volumes and vectors of one
+// processed alone, and frame B (reconstructed in A's buffers) the volume of B reconstructed first.
 TEST(ProcessSettings, AKeptWorkspaceGivesTheSameVolumesAndVectors) {
   const auto camera = optics::load_camera_file(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml");
   const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera));
@@ -143,8 +156,9 @@ TEST(ProcessSettings, AKeptWorkspaceGivesTheSameVolumesAndVectors) {
   const PairOperator op(camera, lenses, calib::geometric_white_image(camera, lenses), s);
   const PairResult alone = process_pair(op, a, b, s);
   recon::MartWorkspace workspace;
-  const PairResult reversed = process_pair(op, b, a, s, {}, &workspace);
-  const PairResult kept = process_pair(op, a, b, s, {}, &workspace);
+  piv::CorrelationWorkspace correlation;
+  const PairResult reversed = process_pair(op, b, a, s, {}, &workspace, &correlation);
+  const PairResult kept = process_pair(op, a, b, s, {}, &workspace, &correlation);
   EXPECT_EQ(reversed.volume_a.data, alone.volume_b.data);
   EXPECT_EQ(kept.volume_a.data, alone.volume_a.data);
   EXPECT_EQ(kept.volume_b.data, alone.volume_b.data);
@@ -154,6 +168,35 @@ TEST(ProcessSettings, AKeptWorkspaceGivesTheSameVolumesAndVectors) {
   EXPECT_EQ(kept.correlation.field.valid, alone.correlation.field.valid);
   EXPECT_NE(alone.volume_a.data, alone.volume_b.data);  // two different frames
   EXPECT_GT(workspace.bytes(), 0u);  // the pairs ran in it
+  EXPECT_GT(correlation.bytes(), 0u);
+}
+
+// Cancelling from the progress callback (plenopiv::Cancelled, as the daemon's stop does) abandons
+// the pair during frame B or the correlation and leaves the workspace usable.
+TEST(ProcessSettings, CancellingFromProgressAbandonsThePairAndFreesTheWorkspace) {
+  const auto camera = optics::load_camera_file(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml");
+  const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera));
+  ProcessSettings s = parse(kVolume + ", depth_guard_mm: 0.25}\n" +
+                            "correlation: {passes: [{window: 8, overlap_percent: 50}, {window: 8, overlap_percent: 50}]}\n");
+  const ImageF a = two_particle_frame(camera, lenses, 3.0), b = two_particle_frame(camera, lenses, 3.1);
+  const PairOperator op(camera, lenses, calib::geometric_white_image(camera, lenses), s);
+  recon::MartWorkspace workspace;
+  // During frame B's reconstruction, and after the correlation's first pass.
+  for (const std::string when : {"reconstruct B", "correlate"}) {
+    std::string last;
+    EXPECT_THROW(process_pair(
+                     op, a, b, s,
+                     [&](const std::string& stage, double) {
+                       last = stage;
+                       if (stage == when) throw plenopiv::Cancelled("run stopping");
+                     },
+                     &workspace),
+                 plenopiv::Cancelled)
+        << when;
+    EXPECT_EQ(last, when);
+  }
+  const PairResult done = process_pair(op, a, b, s, {}, &workspace);
+  EXPECT_EQ(done.volume_a.data, process_pair(op, a, b, s).volume_a.data);
 }
 
 }  // namespace

@@ -1,0 +1,312 @@
+// Pair operators kept in memory and weight tables kept on disk, keyed by what they are built from.
+#include "core/process/operator_cache.hpp"
+
+#include <algorithm>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <fstream>
+#include <system_error>
+#include <vector>
+
+#include "core/base/errors.hpp"
+#include "core/io/atomic_file.hpp"
+#include "core/io/checksum.hpp"
+
+namespace plenopiv::process {
+namespace {
+
+constexpr char kMagic[8] = {'P', 'L', 'W', 'C', 'A', 'C', 'H', 'E'};
+constexpr std::uint32_t kFileFormat = 1;
+
+template <typename T>
+void put(std::string& out, const T& v) {
+  out.append(reinterpret_cast<const char*>(&v), sizeof v);
+}
+
+std::uint64_t fnv1a(std::string_view bytes) {
+  std::uint64_t h = 14695981039346656037ull;
+  for (unsigned char c : bytes) h = (h ^ c) * 1099511628211ull;
+  return h;
+}
+
+std::string hex64(std::uint64_t v) {
+  char text[17];
+  std::snprintf(text, sizeof text, "%016llx", static_cast<unsigned long long>(v));
+  return text;
+}
+
+// The file's header: magic, format, key, payload length and CRC-32; then the payload.
+std::string header(const std::string& key, std::string_view payload) {
+  std::string out(kMagic, sizeof kMagic);
+  put(out, kFileFormat);
+  put(out, std::uint64_t(key.size()));
+  out += key;
+  put(out, std::uint64_t(payload.size()));
+  put(out, io::crc32_of(payload));
+  return out;
+}
+
+// Reads a file written with header(): the payload, or why it cannot be used (stale: another key
+// or format; corrupt: truncated, wrong length or checksum).
+struct Parsed {
+  std::string_view payload;
+  WeightsDiskCache::Outcome problem = WeightsDiskCache::Outcome::hit;
+  std::string why;
+};
+Parsed parse(std::string_view file, const std::string& key) {
+  using Outcome = WeightsDiskCache::Outcome;
+  auto bad = [](Outcome o, std::string why) { return Parsed{{}, o, std::move(why)}; };
+  std::size_t at = 0;
+  auto take = [&](std::size_t n) -> std::string_view {
+    if (n > file.size() - at) return {};
+    const std::string_view v = file.substr(at, n);
+    at += n;
+    return v;
+  };
+  auto take_u64 = [&](std::uint64_t& v) {
+    const std::string_view b = take(sizeof v);
+    if (b.size() != sizeof v) return false;
+    std::memcpy(&v, b.data(), sizeof v);
+    return true;
+  };
+  const std::string_view magic = take(sizeof kMagic);
+  if (magic.size() != sizeof kMagic || std::memcmp(magic.data(), kMagic, sizeof kMagic) != 0)
+    return bad(Outcome::corrupt, "not a plenopiv weights cache file");
+  std::uint32_t format = 0;
+  const std::string_view f = take(sizeof format);
+  if (f.size() != sizeof format) return bad(Outcome::corrupt, "truncated");
+  std::memcpy(&format, f.data(), sizeof format);
+  if (format != kFileFormat) return bad(Outcome::stale, "written by another version");
+  std::uint64_t key_size = 0, payload_size = 0;
+  if (!take_u64(key_size) || key_size > file.size()) return bad(Outcome::corrupt, "truncated");
+  const std::string_view stored_key = take(std::size_t(key_size));
+  if (stored_key.size() != key_size) return bad(Outcome::corrupt, "truncated");
+  if (stored_key != key)
+    return bad(Outcome::stale, "made for another camera, calibration, volume or settings");
+  std::uint32_t crc = 0;
+  if (!take_u64(payload_size)) return bad(Outcome::corrupt, "truncated");
+  const std::string_view c = take(sizeof crc);
+  if (c.size() != sizeof crc) return bad(Outcome::corrupt, "truncated");
+  std::memcpy(&crc, c.data(), sizeof crc);
+  const std::string_view payload = file.substr(at);
+  if (payload.size() != payload_size)
+    return bad(Outcome::corrupt, "holds " + std::to_string(payload.size()) +
+                                     " bytes of tables, its header says " +
+                                     std::to_string(payload_size));
+  if (io::crc32_of(payload) != crc)
+    return bad(Outcome::corrupt, "checksum does not match its tables");
+  return Parsed{payload, Outcome::hit, {}};
+}
+
+// The whole file, read in one piece (a cache file holds hundreds of MB).
+std::string read_whole(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary | std::ios::ate);
+  if (!in) throw InputError(path.string() + ": cannot open");
+  const std::streamoff size = in.tellg();
+  if (size < 0) throw InputError(path.string() + ": cannot read");
+  std::string bytes(std::size_t(size), '\0');
+  in.seekg(0);
+  in.read(bytes.data(), size);
+  if (!in) throw InputError(path.string() + ": cannot read");
+  return bytes;
+}
+
+// Keeps the `keep` most recently used weights-*.bin files of `folder`.
+void trim(const std::filesystem::path& folder, std::size_t keep) {
+  std::error_code ec;
+  std::vector<std::pair<std::filesystem::file_time_type, std::filesystem::path>> files;
+  for (const auto& entry : std::filesystem::directory_iterator(folder, ec)) {
+    const std::string name = entry.path().filename().string();
+    if (name.rfind("weights-", 0) != 0 || entry.path().extension() != ".bin") continue;
+    files.emplace_back(std::filesystem::last_write_time(entry.path(), ec), entry.path());
+  }
+  if (files.size() <= keep) return;
+  std::sort(files.begin(), files.end(),
+            [](const auto& a, const auto& b) { return a.first > b.first; });
+  for (std::size_t i = keep; i < files.size(); ++i) std::filesystem::remove(files[i].second, ec);
+}
+
+}  // namespace
+
+std::string operator_key(const optics::CameraModel& camera, const optics::MicrolensArray& lenses,
+                         const ImageF& white, const Grid3& grid, double angular_sampling) {
+  std::string key = "plenopiv weighting operator\n";
+  put(key, recon::WeightingOperator::kBytesFormat);
+  const optics::CameraSpec& c = camera.spec();
+  for (const int v : {c.sensor.width_px, c.sensor.height_px, c.microlens.count_x,
+                      c.microlens.count_y, int(c.microlens.layout)})
+    put(key, v);
+  for (const double v :
+       {c.sensor.pixel_pitch_mm, c.microlens.pitch_mm, c.microlens.focal_length_mm,
+        c.main_lens.focal_length_mm, c.main_lens.f_number, c.main_lens.magnification,
+        camera.image_distance_mm(), camera.object_distance_mm(), camera.aperture_diameter_mm(),
+        camera.microlens_image_diameter_px()})
+    put(key, v);
+  const optics::Lattice& l = lenses.lattice;
+  for (const int v : {int(l.layout), l.count_x, l.count_y}) put(key, v);
+  for (const double v : {l.pitch_x_mm, l.pitch_y_mm, l.rotation_rad, l.offset_x_mm, l.offset_y_mm})
+    put(key, v);
+  put(key, std::uint64_t(lenses.centres_mm.size()));
+  key.append(reinterpret_cast<const char*>(lenses.centres_mm.data()),
+             lenses.centres_mm.size() * sizeof(lenses.centres_mm[0]));
+  const std::string_view white_bytes(reinterpret_cast<const char*>(white.pixels.data()),
+                                     white.pixels.size() * sizeof(float));
+  put(key, white.width);
+  put(key, white.height);
+  put(key, fnv1a(white_bytes));
+  put(key, io::crc32_of(white_bytes));
+  put(key, grid.shape);
+  put(key, grid.origin_mm);
+  put(key, grid.spacing_mm);
+  put(key, angular_sampling);
+  return key;
+}
+
+const char* WeightsDiskCache::name(Outcome o) {
+  switch (o) {
+    case Outcome::hit:
+      return "hit";
+    case Outcome::missing:
+      return "missing";
+    case Outcome::stale:
+      return "stale";
+    case Outcome::corrupt:
+      return "corrupt";
+    case Outcome::unwritable:
+      return "unwritable";
+  }
+  return "?";
+}
+
+WeightsDiskCache::WeightsDiskCache(std::filesystem::path folder, std::size_t keep)
+    : folder_(std::move(folder)), keep_(std::max<std::size_t>(keep, 1)) {}
+
+std::filesystem::path WeightsDiskCache::file_for(const std::string& key) const {
+  return folder_ / ("weights-" + hex64(fnv1a(key)) + ".bin");
+}
+
+std::unique_ptr<const recon::WeightingOperator> WeightsDiskCache::weights(
+    const optics::CameraModel& camera, const optics::MicrolensArray& lenses, const ImageF& white,
+    const Grid3& grid, double angular_sampling) {
+  const std::string key = operator_key(camera, lenses, white, grid, angular_sampling);
+  const std::filesystem::path file = file_for(key);
+  std::error_code ec;
+  outcome_ = Outcome::missing;
+  std::string why = "no file yet";
+  if (std::filesystem::exists(file, ec)) {
+    std::string bytes;
+    try {
+      bytes = read_whole(file);
+    } catch (const InputError& e) {
+      outcome_ = Outcome::corrupt;
+      why = e.what();
+    }
+    if (outcome_ != Outcome::corrupt) {
+      const Parsed p = parse(bytes, key);
+      outcome_ = p.problem;
+      why = p.why;
+      if (outcome_ == Outcome::hit) {
+        try {
+          auto op = std::make_unique<const recon::WeightingOperator>(
+              recon::WeightingOperator::deserialize(p.payload));
+          std::filesystem::last_write_time(file, std::filesystem::file_time_type::clock::now(),
+                                           ec);  // used
+          note_ = "weight tables from the cache: " + file.string();
+          return op;
+        } catch (const InputError& e) {
+          outcome_ = Outcome::corrupt;
+          why = e.what();
+        }
+      }
+    }
+  }
+  auto op = std::make_unique<const recon::WeightingOperator>(camera, lenses, grid, white,
+                                                             angular_sampling);
+  const Outcome found = outcome_;
+  try {
+    std::filesystem::create_directories(folder_);
+    std::string payload;
+    op->serialize(payload);
+    const std::string head = header(key, payload);
+    io::write_atomically(file, [&](const std::filesystem::path& tmp) {
+      std::ofstream out(tmp, std::ios::binary);
+      out.write(head.data(), std::streamsize(head.size()));
+      out.write(payload.data(), std::streamsize(payload.size()));
+      out.close();
+      if (!out) throw InputError(tmp.string() + ": cannot write");
+    });
+    trim(folder_, keep_);
+    note_ =
+        std::string("weight tables built and kept in the cache: ") + file.string() +
+        (found == Outcome::missing ? ""
+                                   : std::string(" (replaced: ") + name(found) + ", " + why + ")");
+  } catch (const std::exception& e) {
+    outcome_ = Outcome::unwritable;
+    note_ = std::string("weight tables built; the cache could not keep them (") + e.what() + ")";
+  }
+  return op;
+}
+
+PairOperator::WeightsSource WeightsDiskCache::source() {
+  return [this](const optics::CameraModel& c, const optics::MicrolensArray& l, const ImageF& w,
+                const Grid3& g, double a) { return weights(c, l, w, g, a); };
+}
+
+std::filesystem::path default_cache_folder() {
+  if (const char* dir = std::getenv("PLENOPIV_CACHE_DIR"); dir && *dir) return dir;
+  if (const char* dir = std::getenv("XDG_CACHE_HOME"); dir && *dir)
+    return std::filesystem::path(dir) / "plenopiv";
+  if (const char* home = std::getenv("HOME"); home && *home)
+    return std::filesystem::path(home) / ".cache" / "plenopiv";
+  return {};
+}
+
+OperatorCache::OperatorCache(std::size_t capacity, std::filesystem::path disk_folder)
+    : capacity_(std::max<std::size_t>(capacity, 1)) {
+  if (!disk_folder.empty()) disk_ = std::make_unique<WeightsDiskCache>(std::move(disk_folder));
+}
+
+std::shared_ptr<const PairOperator> OperatorCache::get(const optics::CameraModel& camera,
+                                                       const optics::MicrolensArray& lenses,
+                                                       const ImageF& white,
+                                                       const ProcessSettings& settings, std::string* note) {
+  return get(camera, lenses, white, settings.reconstruction_grid(), settings.angular_sampling, note);
+}
+
+std::shared_ptr<const PairOperator> OperatorCache::get(const optics::CameraModel& camera,
+                                                       const optics::MicrolensArray& lenses,
+                                                       const ImageF& white, const Grid3& grid,
+                                                       double angular_sampling, std::string* note) {
+  const std::string key = operator_key(camera, lenses, white, grid, angular_sampling);
+  std::lock_guard lock(mutex_);
+  for (auto it = kept_.begin(); it != kept_.end(); ++it) {
+    if (it->first != key) continue;
+    kept_.splice(kept_.begin(), kept_, it);
+    ++counts_.hits;
+    note_ = "operator kept in memory";
+    if (note) *note = note_;
+    return kept_.front().second;
+  }
+  auto op =
+      std::make_shared<const PairOperator>(camera, lenses, white, grid, angular_sampling,
+                                           disk_ ? disk_->source() : PairOperator::WeightsSource{});
+  ++counts_.builds;
+  note_ = disk_ ? disk_->last_note() : "operator built";
+  if (note) *note = note_;
+  kept_.emplace_front(key, op);
+  if (kept_.size() > capacity_) kept_.pop_back();
+  return op;
+}
+
+OperatorCache::Counts OperatorCache::counts() const {
+  std::lock_guard lock(mutex_);
+  return counts_;
+}
+
+std::string OperatorCache::last_note() const {
+  std::lock_guard lock(mutex_);
+  return note_;
+}
+
+}  // namespace plenopiv::process

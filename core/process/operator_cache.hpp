@@ -1,0 +1,103 @@
+// Setup once per geometry: pair operators kept in the process (the daemon, run after run) and
+// their weight tables kept on disk (the CLI, call after call), keyed by what they are built from.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <filesystem>
+#include <list>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <utility>
+
+#include "core/base/grid.hpp"
+#include "core/base/image.hpp"
+#include "core/optics/camera_model.hpp"
+#include "core/optics/microlens_array.hpp"
+#include "core/process/process.hpp"
+#include "core/recon/weights.hpp"
+
+namespace plenopiv::process {
+
+// What a weighting operator is built from, as bytes: the camera's optics and sensor, the lens
+// centres, the white image's size and checksums, the grid, the angular sampling, and the
+// operator's byte format. Two inputs with the same key give the same operator.
+std::string operator_key(const optics::CameraModel& camera, const optics::MicrolensArray& lenses,
+                         const ImageF& white, const Grid3& grid, double angular_sampling);
+
+// Weight tables in files of a folder, one per key (weights-<hash of the key>.bin: a header with
+// the full key, the payload's length and CRC-32, then recon::WeightingOperator::serialize's
+// bytes). A file is used only when its key, length and checksum all match and its bytes read
+// back; a stale (other key or format) or damaged file is rebuilt and replaced, never trusted.
+// Files are written atomically (io::write_atomically); the folder keeps the `keep` most recently
+// used ones.
+class WeightsDiskCache {
+ public:
+  // What the last weights() call did.
+  enum class Outcome { hit, missing, stale, corrupt, unwritable };
+  static const char* name(Outcome o);
+
+  explicit WeightsDiskCache(std::filesystem::path folder, std::size_t keep = 4);
+
+  // The operator for these inputs: read from its file, or built and written there.
+  std::unique_ptr<const recon::WeightingOperator> weights(const optics::CameraModel& camera,
+                                                          const optics::MicrolensArray& lenses,
+                                                          const ImageF& white, const Grid3& grid,
+                                                          double angular_sampling);
+  // weights() as a PairOperator's source of weights (this cache must outlive the call).
+  PairOperator::WeightsSource source();
+  Outcome last_outcome() const { return outcome_; }
+  // One line for the user: which file, and why it was (not) used.
+  const std::string& last_note() const { return note_; }
+  std::filesystem::path file_for(const std::string& key) const;
+  const std::filesystem::path& folder() const { return folder_; }
+
+ private:
+  std::filesystem::path folder_;
+  std::size_t keep_;
+  Outcome outcome_ = Outcome::missing;
+  std::string note_;
+};
+
+// The folder the CLI keeps weight tables in: $PLENOPIV_CACHE_DIR, else $XDG_CACHE_HOME/plenopiv,
+// else $HOME/.cache/plenopiv; empty when none of them is set.
+std::filesystem::path default_cache_folder();
+
+// Pair operators kept in memory, the `capacity` most recently used, keyed by operator_key of the
+// inputs they were built from: a daemon keeps one for its life, so that a run on the geometry of
+// an earlier one starts without building tables. Optionally backed by a WeightsDiskCache for the
+// operators it builds. Thread-safe; the operators are shared read-only.
+class OperatorCache {
+ public:
+  explicit OperatorCache(std::size_t capacity = 2, std::filesystem::path disk_folder = {});
+
+  // The operator for these inputs. `note` (optional): where it came from, as last_note() says
+  // (for this call, whatever other threads do meanwhile).
+  std::shared_ptr<const PairOperator> get(const optics::CameraModel& camera,
+                                          const optics::MicrolensArray& lenses, const ImageF& white,
+                                          const ProcessSettings& settings, std::string* note = nullptr);
+  std::shared_ptr<const PairOperator> get(const optics::CameraModel& camera,
+                                          const optics::MicrolensArray& lenses, const ImageF& white,
+                                          const Grid3& grid, double angular_sampling,
+                                          std::string* note = nullptr);
+
+  struct Counts {
+    std::size_t hits = 0, builds = 0;
+  };
+  Counts counts() const;
+  // Where the last get() took its operator from: "kept in memory", or the disk cache's note, or
+  // "built".
+  std::string last_note() const;
+
+ private:
+  std::size_t capacity_;
+  std::unique_ptr<WeightsDiskCache> disk_;
+  mutable std::mutex mutex_;
+  std::list<std::pair<std::string, std::shared_ptr<const PairOperator>>>
+      kept_;  // most recent first
+  Counts counts_;
+  std::string note_;
+};
+
+}  // namespace plenopiv::process

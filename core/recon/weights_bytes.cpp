@@ -1,0 +1,201 @@
+// The weighting operator as bytes and back, for a cache of operators kept between runs.
+#include <array>
+#include <cstring>
+#include <string>
+#include <type_traits>
+#include <vector>
+
+#include "core/base/errors.hpp"
+#include "core/recon/weights.hpp"
+
+namespace plenopiv::recon {
+namespace {
+
+// Written in the layout of this build (structs without padding, or field by field); the format
+// number changes with any member.
+constexpr char kMagic[8] = {'P', 'L', 'W', 'E', 'I', 'G', 'H', 'T'};
+constexpr std::uint32_t kFormat = WeightingOperator::kBytesFormat;
+
+class Writer {
+ public:
+  explicit Writer(std::string& out) : out_(out) {}
+  template <typename T>
+  void pod(const T& v) {
+    static_assert(std::is_trivially_copyable_v<T>);
+    out_.append(reinterpret_cast<const char*>(&v), sizeof v);
+  }
+  template <typename T, typename A>
+  void vec(const std::vector<T, A>& v) {
+    static_assert(std::is_trivially_copyable_v<T>);
+    pod(std::uint64_t(v.size()));
+    out_.append(reinterpret_cast<const char*>(v.data()), v.size() * sizeof(T));
+  }
+
+ private:
+  std::string& out_;
+};
+
+class Reader {
+ public:
+  explicit Reader(std::string_view in) : in_(in) {}
+  template <typename T>
+  T pod() {
+    static_assert(std::is_trivially_copyable_v<T>);
+    T v;
+    take(&v, sizeof v);
+    return v;
+  }
+  template <typename T, typename A>
+  void vec(std::vector<T, A>& v) {
+    const auto n = pod<std::uint64_t>();
+    if (n > (in_.size() - at_) / sizeof(T)) fail("an array runs past the end");
+    v.resize(std::size_t(n));
+    take(v.data(), std::size_t(n) * sizeof(T));
+  }
+  bool done() const { return at_ == in_.size(); }
+  [[noreturn]] static void fail(const std::string& why) {
+    throw InputError("weighting operator bytes: " + why);
+  }
+
+ private:
+  void take(void* dst, std::size_t n) {
+    if (n > in_.size() - at_) fail("truncated");
+    std::memcpy(dst, in_.data() + at_, n);
+    at_ += n;
+  }
+  std::string_view in_;
+  std::size_t at_ = 0;
+};
+
+}  // namespace
+
+void WeightingOperator::serialize(std::string& out) const {
+  Writer w(out);
+  out.append(kMagic, sizeof kMagic);
+  w.pod(kFormat);
+  w.pod(grid_.shape);
+  w.pod(grid_.origin_mm);
+  w.pod(grid_.spacing_mm);
+  w.pod(width_);
+  w.pod(height_);
+  w.pod(sensor_);
+  w.pod(white_.width);
+  w.pod(white_.height);
+  w.vec(white_.pixels);
+  w.pod(geo_.s_o);
+  w.pod(geo_.s_i);
+  w.pod(geo_.f_main);
+  w.pod(geo_.f_lens);
+  w.pod(geo_.aperture);
+  w.pod(geo_.pixel_pitch);
+  w.pod(geo_.nominal_samples);
+  w.pod(geo_.angular_sampling);
+  w.pod(geo_.min_pitch);
+  w.vec(geo_.lens_x);
+  w.vec(geo_.lens_y);
+  w.pod(geo_.max_centre_deviation_mm);
+  w.pod(std::uint64_t(slices_.size()));
+  for (const SliceTables& t : slices_) {
+    w.pod(t.z_mm);
+    w.pod(t.alpha);
+    w.pod(t.magnification);
+    w.pod(t.samples);
+    w.vec(t.x_runs);
+    w.vec(t.y_runs);
+    w.vec(t.x_segments);
+    w.vec(t.y_segments);
+    w.vec(t.x_table);
+    w.vec(t.y_table);
+    w.vec(t.x_quad_start);
+    w.vec(t.x_quad_first);
+    w.vec(t.x_quad_weights);
+    w.vec(t.y_quad_start);
+    w.vec(t.y_quad_first);
+    w.vec(t.y_quad_weights);
+  }
+  w.vec(normaliser_);
+}
+
+WeightingOperator WeightingOperator::deserialize(std::string_view bytes) {
+  if (bytes.size() < sizeof kMagic || std::memcmp(bytes.data(), kMagic, sizeof kMagic) != 0) {
+    Reader::fail("not a weighting operator");
+  }
+  Reader r(bytes.substr(sizeof kMagic));
+  if (r.pod<std::uint32_t>() != kFormat) Reader::fail("written in another format");
+  WeightingOperator op;
+  op.grid_.shape = r.pod<std::array<int, 3>>();
+  op.grid_.origin_mm = r.pod<std::array<double, 3>>();
+  op.grid_.spacing_mm = r.pod<std::array<double, 3>>();
+  op.width_ = r.pod<int>();
+  op.height_ = r.pod<int>();
+  op.sensor_ = r.pod<optics::SensorSpec>();
+  op.white_.width = r.pod<int>();
+  op.white_.height = r.pod<int>();
+  r.vec(op.white_.pixels);
+  op.geo_.s_o = r.pod<double>();
+  op.geo_.s_i = r.pod<double>();
+  op.geo_.f_main = r.pod<double>();
+  op.geo_.f_lens = r.pod<double>();
+  op.geo_.aperture = r.pod<double>();
+  op.geo_.pixel_pitch = r.pod<double>();
+  op.geo_.nominal_samples = r.pod<int>();
+  op.geo_.angular_sampling = r.pod<double>();
+  op.geo_.min_pitch = r.pod<double>();
+  r.vec(op.geo_.lens_x);
+  r.vec(op.geo_.lens_y);
+  op.geo_.max_centre_deviation_mm = r.pod<double>();
+  const auto slices = r.pod<std::uint64_t>();
+  if (slices != std::uint64_t(op.grid_.shape[2]))
+    Reader::fail("slice count does not match the grid");
+  op.slices_.resize(std::size_t(slices));
+  for (SliceTables& t : op.slices_) {
+    t.z_mm = r.pod<double>();
+    t.alpha = r.pod<double>();
+    t.magnification = r.pod<double>();
+    t.samples = r.pod<int>();
+    r.vec(t.x_runs);
+    r.vec(t.y_runs);
+    r.vec(t.x_segments);
+    r.vec(t.y_segments);
+    r.vec(t.x_table);
+    r.vec(t.y_table);
+    r.vec(t.x_quad_start);
+    r.vec(t.x_quad_first);
+    r.vec(t.x_quad_weights);
+    r.vec(t.y_quad_start);
+    r.vec(t.y_quad_first);
+    r.vec(t.y_quad_weights);
+  }
+  r.vec(op.normaliser_);
+  if (!r.done()) Reader::fail("bytes left after the operator");
+  // Sizes the kernels rely on; the caller's checksum vouches for the values.
+  const std::size_t nx = std::size_t(op.grid_.shape[0]), ny = std::size_t(op.grid_.shape[1]);
+  bool sound = op.normaliser_.size() == op.grid_.count() && op.white_.width == op.width_ &&
+               op.white_.height == op.height_ && op.white_.pixels.size() == op.pixel_count();
+  for (const SliceTables& t : op.slices_) {
+    sound = sound && t.x_runs.size() == nx && t.y_runs.size() == ny &&
+            t.x_quad_start.size() == nx + 1 && t.y_quad_start.size() == ny + 1 &&
+            t.x_quad_weights.size() == 4 * t.x_quad_first.size() &&
+            t.y_quad_weights.size() == 4 * t.y_quad_first.size() &&
+            t.x_quad_start.back() == t.x_quad_first.size() &&
+            t.y_quad_start.back() == t.y_quad_first.size();
+  }
+  if (!sound) Reader::fail("inconsistent table sizes");
+  return op;
+}
+
+std::size_t WeightingOperator::bytes() const {
+  std::size_t total = white_.pixels.size() * sizeof(float) + normaliser_.size() * sizeof(float);
+  for (const SliceTables& t : slices_) {
+    total +=
+        (t.x_runs.size() + t.y_runs.size()) * sizeof(WeightRun) +
+        (t.x_segments.size() + t.y_segments.size()) * sizeof(Segment) +
+        (t.x_table.size() + t.y_table.size() + t.x_quad_weights.size() + t.y_quad_weights.size()) *
+            sizeof(float) +
+        (t.x_quad_start.size() + t.y_quad_start.size()) * sizeof(std::size_t) +
+        (t.x_quad_first.size() + t.y_quad_first.size()) * sizeof(int);
+  }
+  return total;
+}
+
+}  // namespace plenopiv::recon
