@@ -461,6 +461,7 @@ std::uint64_t Run::frames_lost() const {
 void Run::fill_status(msg::Status& s) const {
   s.set_run_id(run_id_);
   s.set_run_dir(dir_.string());
+  s.set_run_set_up(prepared_);
   if (!prepared_) {
     if (s.message().empty() && !finished_) {
       const double elapsed = double(std::chrono::duration_cast<std::chrono::nanoseconds>(

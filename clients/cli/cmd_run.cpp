@@ -126,7 +126,11 @@ void add_run_commands(CLI::App& app, ControlOptions& options) {
         continue;
       }
       if (!last.empty() && isatty(STDERR_FILENO)) std::cerr << "\n";
-      if (s.state() == "Error") throw std::runtime_error(s.message());
+      if (s.state() == "Error" && !s.run_set_up()) throw std::runtime_error(s.message());
+      if (s.state() == "Error") {  // set up and acquiring, then failed: the start itself succeeded
+        std::cout << "run " << id << " acquired, then failed: " << s.message() << "\n";
+        return;
+      }
       std::cout << "run " << id << " " << (s.state() == "Acquiring" ? "acquiring" : "state " + s.state()) << "\n";
       return;
     }
