@@ -1,0 +1,81 @@
+// Fuzz target: the control request handler, bytes in and reply out: a control message answered by
+// the daemon's own handler (daemon/control_server answer_message over daemon::Daemon::handle), on a
+// daemon with the simulated camera (the seed camera) and the test camera, in a scratch data folder.
+// Every message gets exactly one reply that parses, with the request's id, and an error reply says
+// why; started runs really run (and are stopped by later messages or end by themselves).
+#include <chrono>
+#include <memory>
+#include <spdlog/spdlog.h>
+
+#include "daemon/control_server.hpp"
+#include "daemon/daemon.hpp"
+#include "drivers/camera/camera_registry.hpp"
+#include "tests/drivers/test_camera.hpp"
+#include "tests/fuzz/seed_camera.hpp"
+
+using namespace plenopiv;
+namespace fs = std::filesystem;
+
+namespace {
+
+daemon::Daemon& the_daemon() {
+  static const std::unique_ptr<daemon::Daemon> d = [] {
+    testing_support::register_test_camera(drivers::CameraRegistry::instance());
+    daemon::DaemonConfig config;
+    config.control_endpoint = "ipc://" + (fuzzing::scratch_dir() / "control").string();
+    config.publish_endpoint = "ipc://" + (fuzzing::scratch_dir() / "publish").string();
+    config.simulation = true;
+    config.camera_file = fuzzing::seed_camera_file();
+    config.camera_uri = "sim://?rays=50&ppm=0.2";
+    config.data_dir = fuzzing::scratch_dir() / "data";
+    return std::make_unique<daemon::Daemon>(config, daemon::DaemonExtensions{});
+  }();
+  return *d;
+}
+
+// Finished runs' folders go, so that a long fuzzing session does not fill the scratch folder.
+void remove_finished_runs(daemon::Daemon& d) {
+  const std::string state = d.status().state();
+  if (state != "Idle" && state != "Error") return;
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(fuzzing::scratch_dir() / "data", ec)) fs::remove_all(e.path(), ec);
+}
+
+}  // namespace
+
+extern "C" int LLVMFuzzerInitialize(int*, char***) {
+  spdlog::set_level(spdlog::level::off);
+  the_daemon();
+  return 0;
+}
+
+extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
+  daemon::Daemon& d = the_daemon();
+  daemon::Answer answer = daemon::answer_message(data, size, [&](const msg::Request& r) { return d.handle(r); });
+  msg::Reply reply = answer.reply;
+  if (answer.deferred) {
+    fuzzing::require(answer.deferred->wait_for(std::chrono::seconds(30)) == std::future_status::ready,
+                     "a deferred reply not ready within 30 s");
+    reply = daemon::finish_deferred(answer.reply.id(), *answer.deferred);
+  }
+  fuzzing::require(reply.kind_case() != msg::Reply::KIND_NOT_SET, "a reply that says nothing");
+  msg::Request request;
+  if (request.ParseFromArray(data, int(size))) {
+    fuzzing::require(reply.id() == request.id(), "a reply with another id than its request");
+  }
+  if (reply.has_error()) {
+    fuzzing::require(!reply.error().message().empty() && reply.error().code() != msg::Error::UNSPECIFIED,
+                     "an error reply that does not say what went wrong");
+  }
+  if (reply.has_run_started()) {
+    fuzzing::require(fs::path(reply.run_started().run_dir()).parent_path() == fuzzing::scratch_dir() / "data",
+                     "a run folder outside the data folder");
+  }
+  std::string bytes;
+  fuzzing::require(reply.SerializeToString(&bytes), "a reply that does not serialize");
+  msg::Reply back;
+  fuzzing::require(back.ParseFromString(bytes), "a reply that does not parse");
+  static int served = 0;
+  if (++served % 200 == 0) remove_finished_runs(d);
+  return 0;
+}
