@@ -2,9 +2,11 @@
 // the daemon's own handler (daemon/control_server answer_message over daemon::Daemon::handle), on a
 // daemon with the simulated camera (the seed camera) and the test camera, in a scratch data folder.
 // Every message gets exactly one reply that parses, with the request's id, and an error reply says
-// why; started runs really run (and are stopped by later messages or end by themselves).
+// why; a run it started really runs, and is stopped (a stop_run request) before the next input, so
+// that each input is answered by an idle daemon and no run thread outlives the process's statics.
 #include <chrono>
 #include <memory>
+#include <thread>
 #include <spdlog/spdlog.h>
 
 #include "daemon/control_server.hpp"
@@ -75,6 +77,18 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   fuzzing::require(reply.SerializeToString(&bytes), "a reply that does not serialize");
   msg::Reply back;
   fuzzing::require(back.ParseFromString(bytes), "a reply that does not parse");
+  const std::string state = d.status().state();
+  if (state != "Idle" && state != "Error") {
+    msg::Request stop;
+    stop.mutable_stop_run();
+    const std::string stop_bytes = stop.SerializeAsString();
+    (void)daemon::answer_message(stop_bytes.data(), stop_bytes.size(), [&](const msg::Request& r) { return d.handle(r); });
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+    while (d.status().state() != "Idle" && d.status().state() != "Error") {
+      fuzzing::require(std::chrono::steady_clock::now() < deadline, "a run not stopped within 30 s");
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+  }
   static int served = 0;
   if (++served % 200 == 0) remove_finished_runs(d);
   return 0;
