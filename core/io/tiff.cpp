@@ -93,6 +93,14 @@ void check_pieces(TIFF* t, const std::filesystem::path& path, std::uint64_t file
                      " x " + std::to_string(p.height) + " px (" + std::to_string(std::uint64_t(declared)) +
                      " bytes), its strips hold " + std::to_string(stored) + " bytes");
   }
+  // Compressed strips expand at most ~64x (PackBits), ~1032x (deflate), ~2700x (LZW's 12-bit codes
+  // for strings of up to 4096 bytes): a header that declares more is damage or a decompression bomb.
+  constexpr double kMaxExpansion = 4096;
+  if (compression != COMPRESSION_NONE && declared > double(stored) * kMaxExpansion) {
+    throw InputError(path.string() + ": corrupt TIFF: its header declares " + std::to_string(p.width) + " x " +
+                     std::to_string(p.height) + " px (" + std::to_string(std::uint64_t(declared)) +
+                     " bytes), more than its " + std::to_string(stored) + " compressed bytes can hold");
+  }
 }
 
 std::uint64_t file_size_of(const std::filesystem::path& path) {
@@ -142,8 +150,8 @@ void flush(TIFF* t, const std::filesystem::path& path) {
 }  // namespace
 
 ImageU16 read_tiff_u16(const std::filesystem::path& path) {
-  const std::uint64_t file_size = file_size_of(path);
   TiffPtr t = open(path, "r");
+  const std::uint64_t file_size = file_size_of(path);
   const PageInfo p = page_info(t.get());
   if (p.samples != 1 || (p.bits != 8 && p.bits != 16) || p.format != SAMPLEFORMAT_UINT) {
     throw InputError(path.string() + ": expected a single-channel 8- or 16-bit unsigned TIFF, got " +
@@ -191,8 +199,8 @@ void write_tiff_stack(const std::filesystem::path& path, const std::vector<Image
 }
 
 std::vector<ImageF> read_tiff_stack(const std::filesystem::path& path) {
-  const std::uint64_t file_size = file_size_of(path);
   TiffPtr t = open(path, "r");
+  const std::uint64_t file_size = file_size_of(path);
   std::vector<ImageF> pages;
   do {
     const PageInfo p = page_info(t.get());
