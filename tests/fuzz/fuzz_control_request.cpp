@@ -4,10 +4,12 @@
 // Every message gets exactly one reply that parses, with the request's id, and an error reply says
 // why; a run it started really runs, and is stopped (a stop_run request) before the next input, so
 // that each input is answered by an idle daemon and no run thread outlives the process's statics.
+#include <google/protobuf/stubs/logging.h>
+#include <spdlog/spdlog.h>
+
 #include <chrono>
 #include <memory>
 #include <thread>
-#include <spdlog/spdlog.h>
 
 #include "daemon/control_server.hpp"
 #include "daemon/daemon.hpp"
@@ -47,6 +49,7 @@ void remove_finished_runs(daemon::Daemon& d) {
 
 extern "C" int LLVMFuzzerInitialize(int*, char***) {
   spdlog::set_level(spdlog::level::off);
+  google::protobuf::SetLogHandler(nullptr);  // its complaint about every non-UTF-8 string field
   the_daemon();
   return 0;
 }
