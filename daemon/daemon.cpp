@@ -258,10 +258,12 @@ void Daemon::notify_systemd(const msg::Status& s, std::string& last_state, bool 
                              (s.message().empty() ? "" : ": " + s.message());
     sd_notify(0, line.c_str());
   }
-  // The watchdog is fed while idle (the control loop is alive) and, during a run, only while pairs
-  // are being recorded or published: a stalled pipeline lets systemd restart us.
+  // The watchdog is fed while idle or arming (the control loop is alive; a run's setup is its own
+  // thread's) and, during a run, only while pairs are being recorded or published: a stalled
+  // pipeline lets systemd restart us.
   if (watchdog) {
-    const bool idle = state_.state() == RunState::Idle || state_.state() == RunState::Error;
+    const RunState state = state_.state();
+    const bool idle = state == RunState::Idle || state == RunState::Error || state == RunState::Armed;
     if (idle || now_ns() - last_progress_ns_ < std::int64_t(watchdog_us) * 1000 / 2) sd_notify(0, "WATCHDOG=1");
   }
 }

@@ -16,11 +16,9 @@ ProcessFactory plenoptic_processing(const optics::CameraModel& camera) {
   return [camera](const RunConfig& config, const RunCalibration& calibration) -> ProcessFn {
     const process::ProcessSettings& settings = config.spec.full;
     // A run's volume is refused before any table is built when the pairs it keeps in flight would not
-    // fit this machine: kPeakBytesPerVoxel is the measured peak per reconstructed voxel of one pair
-    // (tables, MART buffers, both volumes, correlation; docs/benchmarks.md "Speed and memory").
-    constexpr double kPeakBytesPerVoxel = 160;
+    // fit this machine.
     const Grid3 g = settings.reconstruction_grid();
-    require_memory(double(g.shape[0]) * g.shape[1] * g.shape[2] * kPeakBytesPerVoxel * config.max_pairs_in_flight,
+    require_memory(settings.peak_bytes_per_pair() * config.max_pairs_in_flight,
                    "processing " + std::to_string(config.max_pairs_in_flight) + " pair(s) at once on a " +
                        std::to_string(g.shape[0]) + " x " + std::to_string(g.shape[1]) + " x " +
                        std::to_string(g.shape[2]) + " voxel volume (volume, max_pairs_in_flight)");

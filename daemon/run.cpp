@@ -68,7 +68,7 @@ Run::Run(RunConfig config, std::string run_id, RunEnvironment env)
   const drivers::CameraInfo info = camera_->info();
   // Read once, checked against the camera file, and then the same bytes go to the processing and
   // into the run folder: a calibration file replaced later changes neither this run nor its copy.
-  RunCalibration calibration;
+  RunCalibration& calibration = calibration_;
   if (!env_.calibration_file.empty()) {
     if (env_.camera_file.empty()) {
       throw InputError("calibration_file: " + env_.calibration_file.string() +
@@ -93,7 +93,7 @@ Run::Run(RunConfig config, std::string run_id, RunEnvironment env)
                        ": free some space or record fewer pairs");
     }
   }
-  run_folder::Writer::Setup setup;
+  run_folder::Writer::Setup& setup = setup_;
   setup.data_dir = env_.data_dir;
   setup.run_id = run_id_;
   setup.run_yaml = config_.text;
@@ -106,13 +106,12 @@ Run::Run(RunConfig config, std::string run_id, RunEnvironment env)
   setup.camera_model = info.vendor + " " + info.model + " " + info.serial;
   setup.camera_triggering = wiring.description;
   if (!calibration.nominal()) setup.calibration = run_folder::CalibrationCopy{calibration.source, calibration.bytes, calibration.crc32};
-  // Bad processing settings and a bad calibration are refused before the run folder exists.
-  if (env_.processing) process_ = env_.processing(config_, calibration);
-  recorder_ = std::make_unique<run_folder::Writer>(setup);
+  dir_ = run_folder::run_dir(env_.data_dir, run_id_);
+  if (std::filesystem::exists(dir_)) throw InputError("run folder " + dir_.string() + ": exists already");
   spdlog::info("run {}: calibration {}", run_id_, calibration.summary());
   spdlog::info("run {}: {} pairs at {} Hz, dt {} s, from {}, trigger {}, folder {}", run_id_,
                config_.pair_count ? std::to_string(config_.pair_count) : "unlimited",
-               config_.rate_hz, config_.dt_s, camera_uri, trigger_uri, recorder_->dir().string());
+               config_.rate_hz, config_.dt_s, camera_uri, trigger_uri, dir_.string());
   if (wiring.source == drivers::TriggerSource::Software) {
     spdlog::warn("run {}: camera triggering {}", run_id_, wiring.description);
   } else {
@@ -314,7 +313,38 @@ void Run::acquire() {
   }
 }
 
+// The slow part of a start, on the run's thread while Armed: the processing (weight tables) and
+// then the folder. False when the run is not to acquire: stopped meanwhile (Armed → Draining →
+// Idle, nothing made) or failed (Error, with the reason; no folder).
+bool Run::prepare() {
+  setup_started_ns_ = std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now().time_since_epoch()).count();
+  try {
+    if (env_.processing) process_ = env_.processing(config_, calibration_);
+    if (stop_) {
+      env_.state->cancel_start();  // Armed (or Draining after `run stop`) → Idle
+      spdlog::info("run {} stopped while armed: nothing recorded, no folder made", run_id_);
+      return false;
+    }
+    recorder_ = std::make_unique<run_folder::Writer>(setup_);
+    prepared_ = true;
+    if (env_.heartbeat) env_.heartbeat();  // the setup's time is not a stalled pipeline
+    return true;
+  } catch (const std::exception& e) {
+    env_.state->fail("run " + run_id_ + ": setting up: " + e.what());
+    spdlog::error("run {}: setting up failed, nothing recorded: {}", run_id_, e.what());
+    return false;
+  }
+}
+
 void Run::run() {
+  if (!prepare()) {
+    try {
+      stop_devices();
+    } catch (...) {
+    }
+    finished_ = true;
+    return;
+  }
   std::string failure;
   try {
     camera_->start();  // before the trigger: its first edge must find the camera running
@@ -426,7 +456,17 @@ std::uint64_t Run::frames_lost() const {
 
 void Run::fill_status(msg::Status& s) const {
   s.set_run_id(run_id_);
-  s.set_run_dir(recorder_->dir().string());
+  s.set_run_dir(dir_.string());
+  if (!prepared_) {
+    if (s.message().empty() && !finished_) {
+      const double elapsed = double(std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                        Clock::now().time_since_epoch()).count() - setup_started_ns_) * 1e-9;
+      char text[96];
+      std::snprintf(text, sizeof text, "setting up: processing and weight tables, %.1f s so far", elapsed);
+      s.set_message(setup_started_ns_ ? text : "setting up");
+    }
+    return;
+  }
   s.set_pairs_acquired(pairs_received_);
   s.set_pairs_recorded(recorder_->pairs_recorded());
   s.set_pairs_processed(stats_.output.processed);

@@ -53,14 +53,18 @@ struct RunEnvironment {
 };
 
 // The state machine must already be Armed for `run_id` (RunStateMachine::start). The constructor
+// checks what is quick to check, so that a bad request is refused at once with nothing made: it
 // opens the camera and the trigger (the run's URIs, else the daemon's), wires the trigger's camera
-// line to the camera (drivers/trigger/camera_wiring.hpp), loads the schedule for rate_hz and dt_s
-// reads the calibration file (InputError naming it when missing, corrupt or made for another camera)
-// and creates the run folder (InputError on bad URIs, timing or folders); then the run acquires
-// on its own thread: the trigger fires the laser and camera lines once per pair, and each pair
-// gets the laser pulses measured for its shot (ShotJoiner). It ends by itself after the pair
-// count or duration, or when stopped; either way every delivered pair is recorded, the folder
-// closed, and every trigger line driven low (also on errors).
+// line to the camera (drivers/trigger/camera_wiring.hpp), loads the schedule for rate_hz and dt_s,
+// reads the calibration file (InputError naming it when missing, corrupt or made for another
+// camera) and checks the disk space (InputError on bad URIs, timing or folders). Then the run's
+// own thread sets it up while Armed (the processing: weight tables, seconds at paper scale; status
+// says so), creates the run folder and acquires: the trigger fires the laser and camera lines once
+// per pair, and each pair gets the laser pulses measured for its shot (ShotJoiner). A setup that
+// fails puts the state machine into Error with the reason and makes no folder; a stop while Armed
+// ends the run once the current setup step returns, with no folder. The run ends by itself after
+// the pair count or duration, or when stopped; either way every delivered pair is recorded, the
+// folder closed, and every trigger line driven low (also on errors).
 class Run {
  public:
   Run(RunConfig config, std::string run_id, RunEnvironment env);
@@ -73,7 +77,8 @@ class Run {
   void request_stop() { stop_ = true; }
   bool finished() const { return finished_; }
   void join();
-  const std::filesystem::path& dir() const { return recorder_->dir(); }
+  // The run folder (it exists once the run has left Armed).
+  const std::filesystem::path& dir() const { return dir_; }
   const std::string& run_id() const { return run_id_; }
   // The run's trigger (tests look at a sim trigger's lines through it).
   const drivers::Trigger& trigger() const { return *trigger_; }
@@ -82,6 +87,7 @@ class Run {
 
  private:
   void run();
+  bool prepare();
   void acquire();
   void record(drivers::FramePair pair);
   void attach_shot(drivers::FramePair& pair);
@@ -102,6 +108,13 @@ class Run {
   std::unique_ptr<drivers::Trigger> trigger_;
   drivers::TriggerSource camera_trigger_ = drivers::TriggerSource::External;
   drivers::ShotJoiner joiner_;  // acquisition thread only
+  std::filesystem::path dir_;
+  RunCalibration calibration_;
+  run_folder::Writer::Setup setup_;
+  // Set by the run thread once the processing and the folder exist (recorder_ set before it);
+  // status reads the recorder only then.
+  std::atomic<bool> prepared_{false};
+  std::atomic<std::int64_t> setup_started_ns_{0};
   std::unique_ptr<run_folder::Writer> recorder_;
   ProcessFn process_;
   std::unique_ptr<LiveMailbox> mailbox_;

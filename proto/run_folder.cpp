@@ -109,6 +109,8 @@ msg::RunManifest parse_manifest(const std::string& json, const std::string& sour
 
 std::string new_run_id() { return utc_now("%Y%m%d-%H%M%S"); }
 
+fs::path run_dir(const fs::path& data_dir, const std::string& run_id) { return data_dir / ("run-" + run_id); }
+
 void write_statistics(const fs::path& path, const piv::RunningStatistics& statistics, double nominal_dt_s,
                       std::uint64_t fields) {
   const Grid3& g = statistics.grid();
@@ -165,7 +167,7 @@ std::vector<fs::path> mark_interrupted_runs(const fs::path& data_dir, std::vecto
   return marked;
 }
 
-Writer::Writer(const Setup& setup) : dir_(setup.data_dir / ("run-" + setup.run_id)) {
+Writer::Writer(const Setup& setup) : dir_(run_dir(setup.data_dir, setup.run_id)) {
   std::error_code ec;
   fs::create_directories(setup.data_dir, ec);
   if (!fs::create_directory(dir_, ec)) {

@@ -159,6 +159,8 @@ void write_statistics(const std::filesystem::path& path, const piv::RunningStati
 
 // A file name-safe run id from the current UTC time: 20261123-035512.
 std::string new_run_id();
+// The folder a run of this id has under `data_dir`: <data_dir>/run-<id>.
+std::filesystem::path run_dir(const std::filesystem::path& data_dir, const std::string& run_id);
 // "pair-000042": the stem of a pair's files.
 std::string pair_name(std::uint64_t pair_index);
 

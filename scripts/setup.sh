@@ -19,6 +19,8 @@ packages=(
   python3 python3-numpy python3-zmq python3-protobuf python3-h5py python3-matplotlib
   # systemd unit checks
   systemd
+  # a real one-node Slurm for `plenopiv slurm` and its tests (scripts/slurm-local.sh)
+  slurm-wlm munge
 )
 
 missing=()

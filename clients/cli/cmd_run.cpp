@@ -2,6 +2,8 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <thread>
+#include <chrono>
 #include <fstream>
 #include <iomanip>
 #include <iostream>
@@ -93,7 +95,9 @@ void add_run_commands(CLI::App& app, ControlOptions& options) {
   auto* start = run->add_subcommand("start", "start a run with a run config (run.yaml)");
   start->add_option("-c,--config", *config, "run config (YAML)")->required()->check(CLI::ExistingFile);
   start->add_option("--pairs", *pairs, "number of pairs (overrides the config; 0: as configured)");
-  start->callback([&options, config, pairs] {
+  auto no_wait = std::make_shared<bool>(false);
+  start->add_flag("--no-wait", *no_wait, "answer once the daemon accepted the run, not once it acquires");
+  start->callback([&options, config, pairs, no_wait] {
     std::ifstream in(*config);
     std::stringstream text;
     text << in.rdbuf();
@@ -101,19 +105,31 @@ void add_run_commands(CLI::App& app, ControlOptions& options) {
     msg::Request request;
     request.mutable_start_run()->set_config_yaml(text.str());
     request.mutable_start_run()->set_pair_count(*pairs);
-    // plenopivd answers a start once the run is ready, its reconstruction tables built: about 7 s
-    // for the paper's camera and box (systemd/config/run-paper.yaml), beyond --timeout's default.
-    // So the daemon is asked for its status first, within --timeout (no daemon is still a quick,
-    // clear error), and the start's answer is then awaited for up to kRunStartWaitS.
+    // plenopivd answers a start at once, once the quick checks pass (devices, timing, calibration,
+    // disk space), and sets the run up while Armed (its weight tables: seconds at paper scale). Unless
+    // --no-wait, the client then follows the setup in the daemon's status until the run acquires,
+    // and says why when the setup fails.
+    const msg::Reply reply = call(options, request);
+    const std::string id = reply.run_started().run_id();
+    std::cout << "run " << id << " started: " << reply.run_started().run_dir() << "\n" << std::flush;
+    if (*no_wait) return;
     msg::Request status;
     status.mutable_status();
-    call(options, status);
-    constexpr double kRunStartWaitS = 120.0;
-    ControlOptions patient = options;
-    patient.timeout_s = std::max(options.timeout_s, kRunStartWaitS);
-    const msg::Reply reply = call(patient, request);
-    std::cout << "run " << reply.run_started().run_id() << " started: "
-              << reply.run_started().run_dir() << "\n";
+    std::string last;
+    for (;;) {
+      const msg::Status s = call(options, status).status();
+      if (s.run_id() != id) return;  // another run since: this one is long past its setup
+      if (s.state() == "Armed") {
+        if (s.message() != last && isatty(STDERR_FILENO)) std::cerr << "\r" << s.message() << std::flush;
+        last = s.message();
+        std::this_thread::sleep_for(std::chrono::milliseconds(200));
+        continue;
+      }
+      if (!last.empty() && isatty(STDERR_FILENO)) std::cerr << "\n";
+      if (s.state() == "Error") throw std::runtime_error(s.message());
+      std::cout << "run " << id << " " << (s.state() == "Acquiring" ? "acquiring" : "state " + s.state()) << "\n";
+      return;
+    }
   });
 
   run->add_subcommand("stop", "stop the current run (in-flight pairs finish, the folder is closed)")

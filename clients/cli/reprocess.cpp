@@ -32,10 +32,6 @@ namespace plenopiv::client {
 namespace fs = std::filesystem;
 namespace {
 
-// The measured peak per reconstructed voxel of one pair in flight (tables, MART buffers, both
-// volumes, correlation; docs/benchmarks.md "Speed and memory"), as plenopivd estimates it.
-constexpr double kPeakBytesPerVoxel = 160;
-
 // Everything about a run that every pair of it shares, read and checked once.
 struct RunInputs {
   run_folder::Reader reader;
@@ -57,6 +53,15 @@ process::ProcessSettings tier_of(const process::ProcessSpec& spec, const std::st
   throw InputError("--tier: 'full' or 'live', got '" + tier + "'");
 }
 
+// Shard i of n of the selected pairs (in pair order): a contiguous block, the blocks' sizes within
+// one of each other. Empty when there are more shards than pairs.
+std::vector<const run_folder::PairEntry*> shard_of(const std::vector<const run_folder::PairEntry*>& pairs, int i,
+                                                   int n) {
+  const std::size_t begin = pairs.size() * std::size_t(i) / std::size_t(n);
+  const std::size_t end = pairs.size() * std::size_t(i + 1) / std::size_t(n);
+  return {pairs.begin() + std::ptrdiff_t(begin), pairs.begin() + std::ptrdiff_t(end)};
+}
+
 RunInputs read_inputs(const ReprocessOptions& o) {
   run_folder::Reader reader(o.run);
   optics::CameraModel camera = optics::load_camera_file(reader.camera_file());
@@ -75,14 +80,7 @@ RunInputs read_inputs(const ReprocessOptions& o) {
   }
   std::sort(in_range.begin(), in_range.end(), [](auto* a, auto* b) { return a->pair_index < b->pair_index; });
   if (in_range.empty()) throw InputError("--pairs: no recorded pair of " + o.run.string() + " is in that range");
-  if (o.shard) {
-    const auto [i, n] = *o.shard;
-    const std::size_t begin = in_range.size() * std::size_t(i) / std::size_t(n);
-    const std::size_t end = in_range.size() * std::size_t(i + 1) / std::size_t(n);
-    in.selected.assign(in_range.begin() + std::ptrdiff_t(begin), in_range.begin() + std::ptrdiff_t(end));
-  } else {
-    in.selected = in_range;
-  }
+  in.selected = o.shard ? shard_of(in_range, o.shard->first, o.shard->second) : in_range;
   in.output = o.output.empty() ? o.run / "reprocessed" : o.output;
   return in;
 }
@@ -177,7 +175,7 @@ ReprocessReport reprocess_run(const ReprocessOptions& o) {
   // Every input is read and checked before any long work starts or any file is written.
   const RunInputs in = read_inputs(o);
   const Grid3 g = in.settings.reconstruction_grid();
-  const double per_pair = double(g.count()) * kPeakBytesPerVoxel;
+  const double per_pair = in.settings.peak_bytes_per_pair();
   require_memory(per_pair * o.jobs, "--jobs " + std::to_string(o.jobs) + ": " + std::to_string(o.jobs) +
                                         " pairs at once on a " + std::to_string(g.shape[0]) + " x " +
                                         std::to_string(g.shape[1]) + " x " + std::to_string(g.shape[2]) +
@@ -197,12 +195,7 @@ ReprocessReport reprocess_run(const ReprocessOptions& o) {
   const process::PairProcessor processor(in.camera, calibration, in.settings);
   if (!processor.note().empty()) std::fprintf(stderr, "%s\n", processor.note().c_str());
   // The settings the outputs were made with, beside them.
-  io::write_atomically(in.output / "process.yaml", [&](const fs::path& tmp) {
-    std::ofstream out(tmp, std::ios::binary);
-    out << in.settings_text;
-    out.close();
-    if (!out) throw std::runtime_error((in.output / "process.yaml").string() + ": cannot write");
-  });
+  io::write_text_atomically(in.output / "process.yaml", in.settings_text);
 
   ReprocessReport report;
   report.selected = in.selected.size();
@@ -302,6 +295,36 @@ ReprocessReport merge_outputs(const ReprocessOptions& o) {
   report.merged = true;
   report.output = in.output;
   return report;
+}
+
+ShardPlan plan_shards(const ReprocessOptions& o, int shards, bool verify) {
+  if (shards < 1) throw InputError("--shards: at least 1, got " + std::to_string(shards));
+  ReprocessOptions all = o;
+  all.shard.reset();
+  const RunInputs in = read_inputs(all);
+  ShardPlan plan;
+  plan.output = in.output;
+  plan.bytes_per_pair = in.settings.peak_bytes_per_pair();
+  fs::file_time_type newest_pair = fs::file_time_type::min();
+  bool all_there = true;
+  for (int i = 0; i < shards; ++i) {
+    ShardState s;
+    for (const run_folder::PairEntry* p : shard_of(in.selected, i, shards)) {
+      s.pairs += 1;
+      const fs::path h5 = output_of(in, *p, ".h5"), vti = output_of(in, *p, ".vti");
+      const bool there = fs::exists(h5) && fs::exists(vti);
+      if (there) newest_pair = std::max(newest_pair, fs::last_write_time(h5));
+      all_there = all_there && there;
+      const bool done =
+          verify ? up_to_date(in, *p, input_hash(in, *p, process::pair_dt_s(in.settings, p->measured_dt_s))) : there;
+      s.done += done ? 1 : 0;
+    }
+    plan.shards.push_back(s);
+  }
+  const fs::path statistics = in.output / "statistics.h5", series = in.output / "series.pvd";
+  plan.merged = all_there && fs::exists(statistics) && fs::exists(series) &&
+                fs::last_write_time(statistics) >= newest_pair;
+  return plan;
 }
 
 }  // namespace plenopiv::client

@@ -7,6 +7,7 @@
 #include <optional>
 #include <string>
 #include <utility>
+#include <vector>
 
 namespace plenopiv::client {
 
@@ -49,6 +50,22 @@ ReprocessReport reprocess_run(const ReprocessOptions& options);
 // (mean, RMS fluctuation, valid fraction per node, in pair order: the same bits however the pairs
 // were computed) and <output>/series.pvd (ParaView: the pairs' .vti in time order).
 ReprocessReport merge_outputs(const ReprocessOptions& options);
+
+// Each of `shards` shards of the selected pairs (as --shard i/n splits them): its pairs and how many
+// of them are done. `verify`: done means an output with the hash of its current inputs (reads every
+// frame); else its .h5 and .vti are there (cheap: what a status display shows; tasks and the merge
+// check the hashes).
+struct ShardState {
+  std::size_t pairs = 0, done = 0;
+  bool complete() const { return done == pairs; }
+};
+struct ShardPlan {
+  std::vector<ShardState> shards;
+  double bytes_per_pair = 0;  // the estimated peak memory of one pair in flight
+  std::filesystem::path output;
+  bool merged = false;  // statistics.h5 and series.pvd are there, newer than every pair's output
+};
+ShardPlan plan_shards(const ReprocessOptions& options, int shards, bool verify);
 
 // "a:b", "a:", ":b" → [a, b); InputError naming `--pairs` otherwise.
 std::pair<std::uint64_t, std::uint64_t> parse_pair_range(const std::string& text);

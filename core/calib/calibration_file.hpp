@@ -10,7 +10,7 @@
 
 namespace plenopiv::calib {
 
-// Layout (docs/architecture.md "Calibration file"); ny, nx = microlens rows, lenses per row:
+// Layout (docs/calibration.md, "Calibration file"); ny, nx = microlens rows, lenses per row:
 //   /spots_px          float64 [ny][nx][2]  (column, row) of each lens's calibration spot, pixels
 //                                            (integer = pixel centre); lattice position if not measured
 //   /lens_centres_mm   float64 [ny][nx][2]  (x, y) lens centres on the microlens plane, mm, origin at

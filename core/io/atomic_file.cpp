@@ -9,6 +9,7 @@
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
+#include <fstream>
 #include <string>
 #include <system_error>
 
@@ -59,6 +60,15 @@ std::optional<std::uint64_t> free_bytes(const std::filesystem::path& folder) {
   struct statvfs s{};
   if (::statvfs(folder.c_str(), &s) != 0) return std::nullopt;
   return std::uint64_t(s.f_bavail) * std::uint64_t(s.f_frsize);
+}
+
+void write_text_atomically(const std::filesystem::path& path, const std::string& bytes) {
+  write_atomically(path, [&](const std::filesystem::path& tmp) {
+    std::ofstream out(tmp, std::ios::binary);
+    out.write(bytes.data(), std::streamsize(bytes.size()));
+    out.close();
+    if (!out) throw std::runtime_error(path.string() + ": cannot write");
+  });
 }
 
 void sync_folder(const std::filesystem::path& folder) {

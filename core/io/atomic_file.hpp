@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <functional>
 #include <optional>
+#include <string>
 
 namespace plenopiv::io {
 
@@ -17,6 +18,9 @@ namespace plenopiv::io {
 // files into one folder and flushes it once for all of them.
 void write_atomically(const std::filesystem::path& path,
                       const std::function<void(const std::filesystem::path&)>& write, bool sync_folder = true);
+
+// write_atomically for a file whose whole content is `bytes` (text or binary).
+void write_text_atomically(const std::filesystem::path& path, const std::string& bytes);
 
 // Flushes a folder's entries (new and renamed files) to the disk; std::runtime_error naming it.
 void sync_folder(const std::filesystem::path& folder);

@@ -56,6 +56,11 @@ int ProcessSettings::guard_slices() const {
   return int(std::ceil(depth_guard_mm / grid.spacing_mm[2] - 1e-9));
 }
 
+double ProcessSettings::peak_bytes_per_pair() const {
+  constexpr double kPeakBytesPerVoxel = 160;
+  return double(reconstruction_grid().count()) * kPeakBytesPerVoxel;
+}
+
 Grid3 ProcessSettings::reconstruction_grid() const {
   Grid3 g = grid;
   const int guard = guard_slices();

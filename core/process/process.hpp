@@ -41,6 +41,10 @@ struct ProcessSettings {
 
   int guard_slices() const;           // depth_guard_mm in whole slices (rounded up)
   Grid3 reconstruction_grid() const;  // `grid` with the guard slices at both depth ends
+  // The peak memory one pair in flight needs (weight tables, MART buffers, both volumes, the
+  // correlation), bytes: the measured peak per reconstructed voxel (docs/benchmarks.md "Speed and
+  // memory") times the voxels. What a caller checks before it keeps several pairs in flight.
+  double peak_bytes_per_pair() const;
 };
 
 // The box of voxels centred on [lo, hi] per axis with `voxel_mm` spacing (x, y, z); InputError

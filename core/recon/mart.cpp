@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <stdexcept>
 #include <cmath>
 #include <cstdint>
 #include <string>
@@ -132,10 +133,10 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image,
                        const MartSettings& settings, MartWorkspace& workspace,
                        const IterationCallback& progress) {
   if (!workspace.buffers_)
-    throw InputError("MART: the workspace was moved from; use the one it was moved to");
+    throw std::logic_error("MART: the workspace was moved from; use the one it was moved to");
   detail::MartBuffers& buffers = *workspace.buffers_;
   if (buffers.busy.exchange(true)) {
-    throw InputError(
+    throw std::logic_error(
         "MART: the workspace is in use by another reconstruction; give each concurrent "
         "reconstruction its own");
   }

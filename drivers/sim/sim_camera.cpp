@@ -229,8 +229,8 @@ class SimCamera : public CameraBase, public TriggerInput {
         for (int k = 0; k < 3; ++k) b[i][k] = a[i][k] + flow_scale * (b[i][k] - a[i][k]);
     }
     // Both frames are rendered before either is delivered: a camera's frame B follows A by one
-    // read-out, not by a ray trace (on the paper's camera one frame's render takes ~1.5 s on two
-    // cores, beyond the pairer's 1 s wait for a B, and whole pairs were discarded).
+    // read-out, not by a ray trace (a large camera's render outlasts the pairer's wait for a B,
+    // which would discard whole pairs).
     const std::uint64_t t0 = now_ns();
     Frame fa = make_frame(a, 2 * trigger, pair_seed, t0);
     Frame fb = make_frame(b, 2 * trigger + 1, pair_seed + 1, t0 + 1000);

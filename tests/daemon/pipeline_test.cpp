@@ -2,6 +2,8 @@
 // and a subscriber that never reads; pipeline cases rerun at several concurrency levels.
 #include <google/protobuf/util/json_util.h>
 #include <gtest/gtest.h>
+
+#include <future>
 #include <tbb/global_control.h>
 
 #include <fstream>
@@ -328,6 +330,55 @@ TEST_F(RunTest, RunOfNPairsRecordsAllAndEndsIdle) {
   run.fill_status(s);
   EXPECT_EQ(s.pairs_recorded(), 6u);
   EXPECT_EQ(s.stages_size(), 3);
+}
+
+// A run is set up on its own thread while Armed (the processing's tables): status says so, and
+// the folder does not exist yet; a stop then ends the run once the setup step returns, going Idle
+// with nothing recorded and no folder made.
+TEST_F(RunTest, AStopWhileArmedEndsTheRunWithNoFolder) {
+  std::promise<void> release;
+  std::shared_future<void> released = release.get_future().share();
+  std::atomic<bool> building{false};
+  env_.processing = [&, released](const RunConfig&, const RunCalibration&) {
+    building = true;
+    released.wait();  // the weight tables, as long as the test wants
+    return ProcessFn([](const drivers::FramePair& pair, const CancelFlag& c) { return tagged_field(pair, c); });
+  };
+  state_.start("armed");
+  daemon::Run run(config("pairs: 3\nrate_hz: 50\n"), "armed", env_);
+  for (int i = 0; i < 500 && !building; ++i) std::this_thread::sleep_for(10ms);
+  ASSERT_TRUE(building);
+  EXPECT_EQ(state_.state(), RunState::Armed);
+  EXPECT_FALSE(fs::exists(run.dir())) << run.dir();
+  msg::Status s;
+  run.fill_status(s);
+  EXPECT_EQ(s.run_id(), "armed");
+  EXPECT_EQ(s.run_dir(), run.dir().string());
+  EXPECT_EQ(s.message().rfind("setting up: processing and weight tables", 0), 0u) << s.message();
+  state_.stop();  // what `run stop` does, in this order
+  run.request_stop();
+  EXPECT_EQ(state_.state(), RunState::Draining);
+  release.set_value();
+  wait_finished(run);
+  EXPECT_EQ(state_.state(), RunState::Idle) << state_.error();
+  EXPECT_FALSE(fs::exists(run.dir())) << run.dir();
+  expect_all_lines_low(run);
+  EXPECT_EQ(run.trigger().counters().shots_fired, 0u);
+}
+
+// Settings the processing refuses while the run is set up (after the start was answered) put the
+// daemon into Error with the reason, and make no folder.
+TEST_F(RunTest, ASetupFailureIsTheRunsErrorWithNoFolder) {
+  env_.processing = [](const RunConfig&, const RunCalibration&) -> ProcessFn {
+    throw InputError("volume: z_mm: the box reaches behind the main lens");
+  };
+  state_.start("bad-setup");
+  daemon::Run run(config("pairs: 3\nrate_hz: 50\n"), "bad-setup", env_);
+  wait_finished(run);
+  EXPECT_EQ(state_.state(), RunState::Error);
+  EXPECT_EQ(state_.error(), "run bad-setup: setting up: volume: z_mm: the box reaches behind the main lens");
+  EXPECT_FALSE(fs::exists(run.dir())) << run.dir();
+  expect_all_lines_low(run);
 }
 
 TEST_F(RunTest, StopMidRunLeavesAConsistentFolder) {

@@ -23,6 +23,7 @@
 #include "drivers/camera/camera_registry.hpp"
 #include "drivers/sim/sim_camera.hpp"
 #include "tests/support/child_process.hpp"
+#include "tests/support/recorded_run.hpp"
 #include "tests/support/run_manifest.hpp"
 #include "tests/support/temp_dir.hpp"
 
@@ -32,55 +33,17 @@ namespace {
 using namespace std::chrono_literals;
 namespace fs = std::filesystem;
 
-const std::string kCameraFile = std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml";
+const std::string& kCameraFile = testing_support::small_camera_file();
 
 using testing_support::read_manifest;
 
-const RunConfig& run_config() {
-  static const RunConfig config = parse_run_config(
-      "pairs: 3\nrate_hz: 2\ndt_s: 0.001\nmax_pairs_in_flight: 3\n"
-      "volume: {x_mm: [-1, 1], y_mm: [-1, 1], z_mm: [-0.5, 0.5], voxel_mm: 0.125}\n"
-      "reconstruction: {iterations: 2, start: ones, dark_weight_cutoff: 0.99}\n"
-      "correlation: {passes: [{window: 8, overlap_percent: 50}]}\n",
-      "run.yaml");
-  return config;
-}
-
-// 0.25 mm along x in the flow's dt; `extra` adds URI parameters.
-std::string sim_uri(const std::string& extra = "") {
-  return "sim://?seed=3&ppm=0.2&rays=500&dx_mm=0.25&flow_dt_us=1000" + extra;
-}
-
-RunEnvironment environment(const fs::path& data, RunStateMachine& state, const std::string& camera_uri,
-                           const fs::path& calibration_file) {
-  drivers::register_sim_camera(drivers::CameraRegistry::instance(), kCameraFile);
-  RunEnvironment env;
-  env.data_dir = data;
-  env.default_camera_uri = camera_uri;
-  env.default_trigger_uri = "sim://";
-  env.camera_file = kCameraFile;
-  env.calibration_file = calibration_file;
-  env.state = &state;
-  env.processing = plenoptic_processing(optics::load_camera_file(kCameraFile));
-  return env;
-}
-
-// One short live run of 3 pairs into `data`.
-fs::path record_run(const fs::path& data, const std::string& camera_uri, const fs::path& calibration_file) {
-  fs::remove_all(data);
-  RunStateMachine state;
-  const RunEnvironment env = environment(data, state, camera_uri, calibration_file);
-  state.start("r");
-  Run run(run_config(), "r", env);
-  for (int i = 0; i < 3000 && !run.finished(); ++i) std::this_thread::sleep_for(10ms);
-  EXPECT_TRUE(run.finished());
-  EXPECT_EQ(state.state(), RunState::Idle) << state.error();
-  return run.dir();
-}
+using testing_support::record_small_run;
+using testing_support::small_run_environment;
+using testing_support::small_sim_uri;
 
 // One short live run with the nominal lattice, recorded once for all tests of this file.
 const fs::path& recorded_run() {
-  static const fs::path dir = record_run(testing_support::temp_dir("reprocess") / "data", sim_uri(), {});
+  static const fs::path dir = record_small_run(testing_support::temp_dir("reprocess") / "data", small_sim_uri());
   return dir;
 }
 
@@ -115,8 +78,8 @@ const fs::path& calibration_file() {
 // A live run of the rotated array's frames processed with the calibration, recorded once.
 const fs::path& calibrated_run() {
   static const fs::path dir =
-      record_run(testing_support::temp_dir("reprocess") / "data-calibrated",
-                 sim_uri("&array_rotation_rad=" + std::to_string(kArrayRotationRad)), calibration_file());
+      record_small_run(testing_support::temp_dir("reprocess") / "data-calibrated",
+                       small_sim_uri("&array_rotation_rad=" + std::to_string(kArrayRotationRad)), calibration_file());
   return dir;
 }
 
@@ -392,11 +355,11 @@ void expect_run_refused(const fs::path& file, const std::string& culprit, const 
   const fs::path data = testing_support::temp_dir("reprocess") / "data-refused";
   fs::remove_all(data);
   RunStateMachine state;
-  RunEnvironment env = environment(data, state, sim_uri(), file);
+  RunEnvironment env = small_run_environment(data, state, small_sim_uri(), file);
   env.camera_file = camera_file;
   state.start("bad");
   try {
-    Run run(run_config(), "bad", env);
+    Run run(testing_support::small_run_config(), "bad", env);
     ADD_FAILURE() << "a run started with calibration " << file;
   } catch (const InputError& e) {
     const std::string what = e.what();

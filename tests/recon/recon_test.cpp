@@ -649,7 +649,8 @@ TEST_F(Mart, WorkspaceServesOperatorsOfOtherSensorsAndGrids) {
 }
 
 // A workspace serves one reconstruction at a time: a second one started while the first runs
-// (here from its progress callback) is refused, and the first is unharmed.
+// (here from its progress callback) is refused as a programming error (std::logic_error, not the
+// bad-input InputError), and the first is unharmed; a moved-from workspace likewise.
 TEST_F(Mart, WorkspaceInUseIsRefused) {
   const ImageF image = project_image(*op_, truth(), 1000.f);
   MartSettings s;
@@ -659,7 +660,7 @@ TEST_F(Mart, WorkspaceInUseIsRefused) {
   const MartResult r = reconstruct(*op_, image, s, workspace, [&](const IterationReport&) {
     try {
       reconstruct(*op_, image, s, workspace);
-    } catch (const InputError& e) {
+    } catch (const std::logic_error& e) {
       EXPECT_NE(std::string(e.what()).find("in use"), std::string::npos) << e.what();
       ++refused;
     }
@@ -669,6 +670,9 @@ TEST_F(Mart, WorkspaceInUseIsRefused) {
   EXPECT_EQ(0, std::memcmp(fresh.data.data(), r.volume.data.data(), fresh.data.size() * sizeof(float)));
   // Free again once it returned.
   EXPECT_NO_THROW(reconstruct(*op_, image, s, workspace));
+  MartWorkspace moved_to = std::move(workspace);
+  EXPECT_THROW(reconstruct(*op_, image, s, workspace), std::logic_error);  // NOLINT(bugprone-use-after-move)
+  EXPECT_NO_THROW(reconstruct(*op_, image, s, moved_to));
 }
 
 // ---------------------------------------------------------------------------------------------
