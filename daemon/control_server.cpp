@@ -9,6 +9,7 @@
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
+#include <limits>
 #include <vector>
 
 #include "core/base/errors.hpp"
@@ -74,6 +75,33 @@ void bind_ipc(zmq::socket_t& socket, const std::string& endpoint, const std::str
 
 }  // namespace
 
+Answer answer_message(const void* data, std::size_t size, const RequestHandler& handler) {
+  msg::Request request;
+  Answer out;
+  if (size > std::size_t(std::numeric_limits<int>::max()) || !request.ParseFromArray(data, int(size))) {
+    out.reply = error_reply(0, msg::Error::MALFORMED,
+                            "the control message (" + std::to_string(size) + " bytes) is not a plenopiv.msg.Request");
+  } else if (request.kind_case() == msg::Request::KIND_NOT_SET) {
+    out.reply = error_reply(request.id(), msg::Error::MALFORMED,
+                            "the request names no operation (status, start_run, stop_run, "
+                            "list_devices, calibrate)");
+  } else {
+    out.reply = answer(request.id(), [&] {
+      HandlerResult result = handler(request);
+      if (auto* later = std::get_if<DeferredReply>(&result)) {
+        out.deferred = std::move(*later);
+        return msg::Reply();
+      }
+      return std::get<msg::Reply>(std::move(result));
+    });
+  }
+  return out;
+}
+
+msg::Reply finish_deferred(std::uint64_t id, DeferredReply& reply) {
+  return answer(id, [&] { return reply.get(); });
+}
+
 ControlServer::ControlServer(zmq::context_t& context, const std::string& endpoint, RequestHandler handler,
                              const ControlSecurity& security)
     : socket_(context, zmq::socket_type::router), endpoint_(endpoint), handler_(std::move(handler)) {
@@ -105,8 +133,7 @@ void ControlServer::send_ready_deferred() {
       ++it;
       continue;
     }
-    const msg::Reply reply = answer(it->id, [&] { return it->reply.get(); });
-    send(it->envelope, reply);
+    send(it->envelope, finish_deferred(it->id, it->reply));
     it = pending_.erase(it);
   }
 }
@@ -131,34 +158,14 @@ bool ControlServer::serve_one(int timeout_ms) {
   } while (socket_.get(zmq::sockopt::rcvmore));
   if (frames.size() < 2) return true;  // no body to answer: nothing a client waits for
 
-  msg::Request request;
-  msg::Reply reply;
   const zmq::message_t body = std::move(frames.back());
   frames.pop_back();
-  if (!request.ParseFromArray(body.data(), int(body.size()))) {
-    reply = error_reply(0, msg::Error::MALFORMED,
-                        "the control message (" + std::to_string(body.size()) +
-                            " bytes) is not a plenopiv.msg.Request");
-  } else if (request.kind_case() == msg::Request::KIND_NOT_SET) {
-    reply = error_reply(request.id(), msg::Error::MALFORMED,
-                        "the request names no operation (status, start_run, stop_run, "
-                        "list_devices, calibrate)");
-  } else {
-    std::optional<DeferredReply> deferred;
-    reply = answer(request.id(), [&] {
-      HandlerResult result = handler_(request);
-      if (auto* later = std::get_if<DeferredReply>(&result)) {
-        deferred = std::move(*later);
-        return msg::Reply();
-      }
-      return std::get<msg::Reply>(std::move(result));
-    });
-    if (deferred) {
-      pending_.push_back({std::move(frames), request.id(), std::move(*deferred)});
-      return true;
-    }
+  Answer answered = answer_message(body.data(), body.size(), handler_);
+  if (answered.deferred) {
+    pending_.push_back({std::move(frames), answered.reply.id(), std::move(*answered.deferred)});
+    return true;
   }
-  send(frames, reply);
+  send(frames, answered.reply);
   return true;
 }
 

@@ -69,4 +69,15 @@ class ControlServer {
 // An Error reply with a code and message.
 msg::Reply error_reply(std::uint64_t id, msg::Error::Code code, const std::string& message);
 
+// One control message as the server answers it: the bytes parsed as a Request (MALFORMED when they
+// are not one or name no operation) and handed to `handler`, whose exceptions become error replies.
+// A deferred reply comes back in `deferred`, `reply` then holding only the request's id.
+struct Answer {
+  msg::Reply reply;
+  std::optional<DeferredReply> deferred;
+};
+Answer answer_message(const void* data, std::size_t size, const RequestHandler& handler);
+// A deferred reply once it is ready, with the request's id; its exception mapped as above.
+msg::Reply finish_deferred(std::uint64_t id, DeferredReply& reply);
+
 }  // namespace plenopiv::daemon

@@ -45,9 +45,10 @@ class Daemon {
   msg::Status status() const;
   const std::string& control_endpoint() const { return server_->endpoint(); }
   const std::string& publish_endpoint() const { return publisher_->endpoint(); }
+  // Answers one request: the control server's handler (tests/fuzz calls it directly).
+  HandlerResult handle(const msg::Request& request);
 
  private:
-  HandlerResult handle(const msg::Request& request);
   msg::Reply start_run(const msg::StartRun& request);
   msg::Reply stop_run();
   DeferredReply list_devices();

@@ -347,16 +347,10 @@ Reader::Reader(const fs::path& dir) : dir_(dir) {
     e.trigger_index = p.trigger_index();
     for (const auto& [key, name, out] : {std::tuple{".frame_a", &p.frame_a(), &e.frame_a},
                                          std::tuple{".frame_b", &p.frame_b(), &e.frame_b}}) {
-      const fs::path rel(*name);
-      const bool escapes = std::any_of(rel.begin(), rel.end(), [](const fs::path& part) { return part == ".."; });
-      if (rel.empty() || rel.is_absolute() || escapes) {
-        throw InputError(manifest_path.string() + ": " + where + key + ": '" + *name +
-                         "' is not a path inside the run folder");
-      }
-      if (!names.insert(rel.lexically_normal().string()).second) {
+      *out = file(where + key, *name);
+      if (!names.insert(fs::path(*name).lexically_normal().string()).second) {
         throw InputError(manifest_path.string() + ": " + where + key + ": " + *name + " is listed twice");
       }
-      *out = file(where + key, *name);
     }
     if (p.measured_dt_s() > 0) e.measured_dt_s = p.measured_dt_s();
     e.vectors = p.vectors();
@@ -367,6 +361,11 @@ Reader::Reader(const fs::path& dir) : dir_(dir) {
 fs::path Reader::file(const std::string& key, const std::string& name) const {
   const fs::path manifest = dir_ / "manifest.json";
   if (name.empty()) throw InputError(manifest.string() + ": " + key + " is empty: the run folder does not say where it is");
+  // Every file a manifest names lies inside the folder: relative, never through "..".
+  const fs::path rel(name);
+  if (rel.is_absolute() || std::any_of(rel.begin(), rel.end(), [](const fs::path& part) { return part == ".."; })) {
+    throw InputError(manifest.string() + ": " + key + ": '" + name + "' is not a path inside the run folder");
+  }
   const fs::path path = dir_ / name;
   if (!fs::is_regular_file(path)) throw InputError(manifest.string() + ": " + key + ": " + path.string() + " is missing");
   return path;

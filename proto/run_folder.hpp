@@ -116,8 +116,9 @@ struct PairEntry {
 
 // Reads a run folder from the folder alone, checking everything before anything is processed: the
 // manifest parses; process.yaml and camera.yaml exist; the calibration is nominal, or the folder's
-// calibration.h5 with the size and CRC-32 the manifest recorded; every frame path lies inside the
-// folder, is listed once and exists. InputError naming the manifest key and file otherwise.
+// calibration.h5 with the size and CRC-32 the manifest recorded; every file the manifest names
+// (settings, camera, calibration, frames) lies inside the folder and exists; every frame is listed
+// once. InputError naming the manifest key and file otherwise.
 class Reader {
  public:
   explicit Reader(const std::filesystem::path& dir);

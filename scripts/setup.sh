@@ -6,6 +6,9 @@ set -euo pipefail
 packages=(
   # toolchain
   g++ cmake ninja-build pkg-config git
+  # .ci/run's sanitizer and fuzzing builds: clang with libFuzzer and the sanitizer runtimes,
+  # llvm-symbolizer for their stack traces, ccache for the rebuilds
+  clang libclang-rt-14-dev llvm ccache
   # design card: camera, USB, GPIO, images, messaging, logging, threads, tests
   libaravis-dev aravis-tools libusb-1.0-0-dev libgpiod-dev gpiod libopencv-dev
   libzmq3-dev cppzmq-dev libprotobuf-dev protobuf-compiler libspdlog-dev libtbb-dev

@@ -203,7 +203,11 @@ std::string YamlMap::choice_or(std::string_view key,
 
 void YamlMap::reject_unknown(std::span<const std::string_view> known) const {
   for (const auto& entry : node_) {
-    const std::string name = entry.first.as<std::string>();
+    if (!entry.first.IsScalar()) {
+      throw InputError(source_ + ": " + (path_.empty() ? std::string("top level") : path_) + ": a key that is " +
+                       scalar_text(entry.first) + ", not a name" + line_of(entry.first));
+    }
+    const std::string name = entry.first.Scalar();
     bool found = false;
     std::string list;
     for (std::string_view k : known) {

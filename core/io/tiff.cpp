@@ -64,6 +64,53 @@ PageInfo page_info(TIFF* t) {
   return p;
 }
 
+// Checks that every strip or tile of the current page lies inside the file and, for uncompressed
+// data, that together they hold the pixels the header declares: a header that promises more than
+// the file holds (a truncated or damaged file) is refused before any pixel buffer is allocated.
+void check_pieces(TIFF* t, const std::filesystem::path& path, std::uint64_t file_size, const PageInfo& p) {
+  if (p.width == 0 || p.height == 0) throw InputError(path.string() + ": TIFF has no pixels");
+  const bool tiled = TIFFIsTiled(t);
+  const uint32_t pieces = tiled ? TIFFNumberOfTiles(t) : TIFFNumberOfStrips(t);
+  uint64_t* offsets = nullptr;
+  uint64_t* counts = nullptr;
+  if (!TIFFGetField(t, tiled ? TIFFTAG_TILEOFFSETS : TIFFTAG_STRIPOFFSETS, &offsets) ||
+      !TIFFGetField(t, tiled ? TIFFTAG_TILEBYTECOUNTS : TIFFTAG_STRIPBYTECOUNTS, &counts) || !offsets || !counts) {
+    throw InputError(path.string() + ": corrupt TIFF: no strip or tile table");
+  }
+  uint64_t stored = 0;
+  for (uint32_t i = 0; i < pieces; ++i) {
+    if (counts[i] > file_size || offsets[i] > file_size - counts[i]) {
+      throw InputError(path.string() + ": truncated or corrupt TIFF: " + (tiled ? "tile " : "strip ") +
+                       std::to_string(i) + " ends at byte " + std::to_string(offsets[i] + counts[i]) +
+                       ", the file has " + std::to_string(file_size));
+    }
+    stored += counts[i];
+  }
+  uint16_t compression = COMPRESSION_NONE;
+  TIFFGetFieldDefaulted(t, TIFFTAG_COMPRESSION, &compression);
+  const double declared = double(p.width) * double(p.height) * double(p.samples) * double(p.bits) / 8.0;
+  if (compression == COMPRESSION_NONE && double(stored) < declared) {
+    throw InputError(path.string() + ": truncated or corrupt TIFF: its header declares " + std::to_string(p.width) +
+                     " x " + std::to_string(p.height) + " px (" + std::to_string(std::uint64_t(declared)) +
+                     " bytes), its strips hold " + std::to_string(stored) + " bytes");
+  }
+  // Compressed strips expand at most ~64x (PackBits), ~1032x (deflate), ~2700x (LZW's 12-bit codes
+  // for strings of up to 4096 bytes): a header that declares more is damage or a decompression bomb.
+  constexpr double kMaxExpansion = 4096;
+  if (compression != COMPRESSION_NONE && declared > double(stored) * kMaxExpansion) {
+    throw InputError(path.string() + ": corrupt TIFF: its header declares " + std::to_string(p.width) + " x " +
+                     std::to_string(p.height) + " px (" + std::to_string(std::uint64_t(declared)) +
+                     " bytes), more than its " + std::to_string(stored) + " compressed bytes can hold");
+  }
+}
+
+std::uint64_t file_size_of(const std::filesystem::path& path) {
+  std::error_code ec;
+  const auto size = std::filesystem::file_size(path, ec);
+  if (ec) throw InputError(path.string() + ": cannot read: " + ec.message());
+  return size;
+}
+
 void read_rows(TIFF* t, const std::filesystem::path& path, uint32_t height, void* row_buffer,
                const std::function<void(uint32_t)>& use_row) {
   for (uint32_t y = 0; y < height; ++y) {
@@ -105,13 +152,14 @@ void flush(TIFF* t, const std::filesystem::path& path) {
 
 ImageU16 read_tiff_u16(const std::filesystem::path& path) {
   TiffPtr t = open(path, "r");
+  const std::uint64_t file_size = file_size_of(path);
   const PageInfo p = page_info(t.get());
   if (p.samples != 1 || (p.bits != 8 && p.bits != 16) || p.format != SAMPLEFORMAT_UINT) {
     throw InputError(path.string() + ": expected a single-channel 8- or 16-bit unsigned TIFF, got " +
                      std::to_string(p.samples) + " channel(s) of " + std::to_string(p.bits) +
                      "-bit " + (p.format == SAMPLEFORMAT_IEEEFP ? "float" : "integer") + " samples");
   }
-  if (p.width == 0 || p.height == 0) throw InputError(path.string() + ": TIFF has no pixels");
+  check_pieces(t.get(), path, file_size, p);
   ImageU16 image(int(p.width), int(p.height));
   std::vector<unsigned char> row(TIFFScanlineSize(t.get()));
   read_rows(t.get(), path, p.height, row.data(), [&](uint32_t y) {
@@ -195,6 +243,7 @@ void write_tiff_stack(const std::filesystem::path& path, const std::vector<Image
 
 std::vector<ImageF> read_tiff_stack(const std::filesystem::path& path) {
   TiffPtr t = open(path, "r");
+  const std::uint64_t file_size = file_size_of(path);
   std::vector<ImageF> pages;
   do {
     const PageInfo p = page_info(t.get());
@@ -204,6 +253,7 @@ std::vector<ImageF> read_tiff_stack(const std::filesystem::path& path) {
       throw InputError(path.string() + ": page " + std::to_string(pages.size()) +
                        ": expected single-channel float32 or uint16 samples");
     }
+    check_pieces(t.get(), path, file_size, p);
     ImageF page(int(p.width), int(p.height));
     std::vector<unsigned char> row(TIFFScanlineSize(t.get()));
     read_rows(t.get(), path, p.height, row.data(), [&](uint32_t y) {
@@ -224,28 +274,10 @@ std::vector<ImageF> read_tiff_stack(const std::filesystem::path& path) {
 }
 
 TiffInfo check_tiff(const std::filesystem::path& path) {
-  std::error_code ec;
-  const auto size = std::filesystem::file_size(path, ec);
-  if (ec) throw InputError(path.string() + ": cannot read: " + ec.message());
+  const std::uint64_t file_size = file_size_of(path);
   TiffPtr t = open(path, "r");
   const PageInfo p = page_info(t.get());
-  if (p.width == 0 || p.height == 0) throw InputError(path.string() + ": TIFF has no pixels");
-  const bool tiled = TIFFIsTiled(t.get());
-  const uint32_t pieces = tiled ? TIFFNumberOfTiles(t.get()) : TIFFNumberOfStrips(t.get());
-  uint64_t* offsets = nullptr;
-  uint64_t* counts = nullptr;
-  if (!TIFFGetField(t.get(), tiled ? TIFFTAG_TILEOFFSETS : TIFFTAG_STRIPOFFSETS, &offsets) ||
-      !TIFFGetField(t.get(), tiled ? TIFFTAG_TILEBYTECOUNTS : TIFFTAG_STRIPBYTECOUNTS, &counts) || !offsets ||
-      !counts) {
-    throw InputError(path.string() + ": corrupt TIFF: no strip or tile table");
-  }
-  for (uint32_t i = 0; i < pieces; ++i) {
-    if (counts[i] > size || offsets[i] > size - counts[i]) {
-      throw InputError(path.string() + ": truncated or corrupt TIFF: " + (tiled ? "tile " : "strip ") +
-                       std::to_string(i) + " ends at byte " + std::to_string(offsets[i] + counts[i]) +
-                       ", the file has " + std::to_string(size));
-    }
-  }
+  check_pieces(t.get(), path, file_size, p);
   return {int(p.width), int(p.height), int(p.bits)};
 }
 

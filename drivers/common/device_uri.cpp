@@ -9,9 +9,33 @@
 
 namespace plenopiv::drivers {
 
+namespace {
+
+// The URI as messages quote it: bytes outside printable ASCII as \xNN.
+std::string printable(const std::string& text) {
+  std::string out;
+  for (const unsigned char c : text) {
+    if (c >= 0x20 && c < 0x7f) {
+      out += char(c);
+    } else {
+      static const char* hex = "0123456789abcdef";
+      out += {'\\', 'x', hex[c >> 4], hex[c & 15]};
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
 DeviceUri DeviceUri::parse(std::string_view text) {
   DeviceUri uri;
   uri.text_ = std::string(text);
+  for (std::size_t i = 0; i < text.size(); ++i) {
+    const auto c = static_cast<unsigned char>(text[i]);
+    if (c < 0x20 || c >= 0x7f) {
+      uri.fail("byte " + std::to_string(i) + " is not printable ASCII (a URI is plain text)");
+    }
+  }
   const std::size_t sep = text.find("://");
   if (sep == std::string_view::npos) {
     uri.fail("expected <scheme>://<device>[?key=value&...]");
@@ -103,7 +127,7 @@ void DeviceUri::reject_unknown(std::initializer_list<std::string_view> known) co
 }
 
 void DeviceUri::fail(const std::string& reason) const {
-  throw InputError("device URI '" + text_ + "': " + reason);
+  throw InputError("device URI '" + printable(text_) + "': " + reason);
 }
 
 }  // namespace plenopiv::drivers

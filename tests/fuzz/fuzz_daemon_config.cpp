@@ -1,0 +1,21 @@
+// Fuzz target: plenopivd.yaml (daemon/daemon_config), read from a file as the daemon reads it, then
+// checked as the daemon checks it.
+#include "daemon/daemon_config.hpp"
+#include "tests/fuzz/fuzz_support.hpp"
+
+using namespace plenopiv;
+
+extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
+  const auto path = fuzzing::input_file(data, size, "plenopivd.yaml");
+  try {
+    const daemon::DaemonConfig config = daemon::load_daemon_config(path);
+    daemon::validate(config, path.string());
+    fuzzing::require(!config.control_endpoint.empty() && !config.publish_endpoint.empty(),
+                     "an accepted daemon config has no endpoint");
+    fuzzing::require(config.control_endpoint.rfind("ipc://", 0) == 0 || config.curve.has_value(),
+                     "an accepted daemon config has a tcp:// control endpoint without CURVE");
+  } catch (const InputError& e) {
+    fuzzing::require_names(e, path.string());
+  }
+  return 0;
+}
