@@ -37,7 +37,8 @@ Timing median_seconds(int repeats, const std::function<void()>& work) {
     const auto start = std::chrono::steady_clock::now();
     const double cpu0 = cpu_seconds();
     work();
-    t.push_back({std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(), cpu_seconds() - cpu0});
+    t.push_back(
+        {std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(), cpu_seconds() - cpu0});
   }
   std::sort(t.begin(), t.end(), [](const Timing& a, const Timing& b) { return a.wall_s < b.wall_s; });
   return t[t.size() / 2];
@@ -70,14 +71,14 @@ int main(int argc, char** argv) {
     const Timing t_spots = median_seconds(repeats, [&] { calib::find_spots(spots.image, so); });
     calib::Calibration cal;
     const Timing t_fit = median_seconds(repeats, [&] { cal = calib::calibrate(camera, spots.image); });
-    const Timing t_white =
-        median_seconds(repeats, [&] { calib::make_white_correction(cal, white, scene.background); });
+    const Timing t_white = median_seconds(repeats, [&] { calib::make_white_correction(cal, white, scene.background); });
     const double total = t_fit.wall_s + t_white.wall_s;
     if (threads == 1) base_total = total;
     std::printf("bench=calib stage=find_spots threads=%d median_s=%.3f cpu_s=%.3f\n", threads, t_spots.wall_s,
                 t_spots.cpu_s);
-    std::printf("bench=calib stage=calibrate threads=%d median_s=%.3f cpu_s=%.3f lenses_measured=%d rms_residual_px=%.4f\n",
-                threads, t_fit.wall_s, t_fit.cpu_s, cal.lenses_measured, cal.rms_residual_px);
+    std::printf(
+        "bench=calib stage=calibrate threads=%d median_s=%.3f cpu_s=%.3f lenses_measured=%d rms_residual_px=%.4f\n",
+        threads, t_fit.wall_s, t_fit.cpu_s, cal.lenses_measured, cal.rms_residual_px);
     std::printf("bench=calib stage=white_correction threads=%d median_s=%.3f cpu_s=%.3f\n", threads, t_white.wall_s,
                 t_white.cpu_s);
     std::printf("bench=calib stage=total threads=%d median_s=%.3f cpu_s=%.3f ratio_to_1_thread=%.2f\n", threads, total,

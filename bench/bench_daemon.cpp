@@ -32,8 +32,8 @@ struct Figures {
 
 // Feeds `pairs` at `rate_hz` (0: as fast as the pipeline takes them, one waiting at a time) and
 // times each from hand-over to output.
-Figures run(const std::vector<daemon::SharedPair>& pairs, const daemon::ProcessFn& process,
-            double rate_hz, int in_flight) {
+Figures run(const std::vector<daemon::SharedPair>& pairs, const daemon::ProcessFn& process, double rate_hz,
+            int in_flight) {
   daemon::LiveMailbox mailbox;
   daemon::PipelineStats stats;
   const daemon::CancelFlag cancel{false};
@@ -44,8 +44,8 @@ Figures run(const std::vector<daemon::SharedPair>& pairs, const daemon::ProcessF
   std::thread feeder([&] {
     for (std::size_t i = 0; i < pairs.size(); ++i) {
       if (rate_hz > 0) {
-        std::this_thread::sleep_until(start + std::chrono::duration_cast<Clock::duration>(
-                                                  std::chrono::duration<double>(i / rate_hz)));
+        std::this_thread::sleep_until(
+            start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(i / rate_hz)));
       } else {
         while (mailbox.depth() > 0) std::this_thread::sleep_for(std::chrono::milliseconds(1));
       }
@@ -116,13 +116,13 @@ int main(int argc, char** argv) {
     const Figures paced = run(pairs, process, rate_hz, 2);
     if (reference == 0) reference = sustained.pairs_per_s;
     const auto g = config.volume_grid();
-    std::printf("bench=daemon_live variant=%s voxels=%dx%dx%d setup_s=%.2f sustained_pairs_per_s=%.3f "
-                "ratio=%.2f paced_rate_hz=%.2f paced_median_latency_s=%.3f paced_max_latency_s=%.3f "
-                "paced_processed=%llu paced_skipped=%llu\n",
-                v.name, g.shape[0], g.shape[1], g.shape[2], setup, sustained.pairs_per_s,
-                sustained.pairs_per_s / reference, rate_hz, paced.median_latency_s,
-                paced.max_latency_s, static_cast<unsigned long long>(paced.processed),
-                static_cast<unsigned long long>(paced.skipped));
+    std::printf(
+        "bench=daemon_live variant=%s voxels=%dx%dx%d setup_s=%.2f sustained_pairs_per_s=%.3f "
+        "ratio=%.2f paced_rate_hz=%.2f paced_median_latency_s=%.3f paced_max_latency_s=%.3f "
+        "paced_processed=%llu paced_skipped=%llu\n",
+        v.name, g.shape[0], g.shape[1], g.shape[2], setup, sustained.pairs_per_s, sustained.pairs_per_s / reference,
+        rate_hz, paced.median_latency_s, paced.max_latency_s, static_cast<unsigned long long>(paced.processed),
+        static_cast<unsigned long long>(paced.skipped));
     std::fflush(stdout);
   }
   return 0;

@@ -65,15 +65,13 @@ using namespace plenopiv;
 
 namespace {
 
-double now_s() {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
+double now_s() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
 
 struct Errors {
   double rms[3] = {0, 0, 0};
   double total = 0;
   double valid_fraction = 0;
-  double off_band[3] = {0, 0, 0};  // RMS away from the ring's axis band
+  double off_band[3] = {0, 0, 0};       // RMS away from the ring's axis band
   double off_band_gain[3] = {0, 0, 0};  // measured against true displacement there (FieldErrors::gain)
 };
 
@@ -85,9 +83,8 @@ struct Errors {
 Errors errors_against(const VectorField& f, const sim::RingVortexFlow& flow, double voxel_mm) {
   const double band_mm = 0.5 * piv::CorrelationSettings{}.passes.back().window[0] * voxel_mm;
   const sim::FieldErrors s = sim::field_errors(f, flow, voxel_mm, 3);
-  const sim::FieldErrors off = sim::field_errors(f, flow, voxel_mm, 3, 0, [&](const sim::Point3& x) {
-    return !sim::in_ring_axis_band(flow, x, band_mm);
-  });
+  const sim::FieldErrors off = sim::field_errors(
+      f, flow, voxel_mm, 3, 0, [&](const sim::Point3& x) { return !sim::in_ring_axis_band(flow, x, band_mm); });
   Errors e;
   for (int a = 0; a < 3; ++a) e.rms[a] = s.rms[a], e.off_band[a] = off.rms[a], e.off_band_gain[a] = off.gain[a];
   e.total = s.rms_total;
@@ -104,12 +101,13 @@ struct Row {
 };
 
 void print_row(const char* scale, const Row& r, bool pareto) {
-  std::printf("bench=e2e case=%s variant=%s value=%s iterations=%d mu=%.2f final_window=%d passes=%d total_s=%.2f "
-              "rms_u=%.3f rms_v=%.3f rms_w=%.3f rms=%.3f valid=%.3f off_axis_band_rms_u=%.3f off_axis_band_rms_v=%.3f "
-              "off_axis_band_rms_w=%.3f pareto=%s\n",
-              scale, r.variant.c_str(), r.value.c_str(), r.iterations, r.mu, r.window, r.passes, r.seconds, r.e.rms[0],
-              r.e.rms[1], r.e.rms[2], r.e.total, r.e.valid_fraction, r.e.off_band[0], r.e.off_band[1], r.e.off_band[2],
-              pareto ? "yes" : "no");
+  std::printf(
+      "bench=e2e case=%s variant=%s value=%s iterations=%d mu=%.2f final_window=%d passes=%d total_s=%.2f "
+      "rms_u=%.3f rms_v=%.3f rms_w=%.3f rms=%.3f valid=%.3f off_axis_band_rms_u=%.3f off_axis_band_rms_v=%.3f "
+      "off_axis_band_rms_w=%.3f pareto=%s\n",
+      scale, r.variant.c_str(), r.value.c_str(), r.iterations, r.mu, r.window, r.passes, r.seconds, r.e.rms[0],
+      r.e.rms[1], r.e.rms[2], r.e.total, r.e.valid_fraction, r.e.off_band[0], r.e.off_band[1], r.e.off_band[2],
+      pareto ? "yes" : "no");
 }
 
 // Every row, marked pareto=yes where no other row is both faster and more accurate.
@@ -154,26 +152,46 @@ int main(int argc, char** argv) {
   std::string compare_passes;  // pass lists separated by ';'
   std::string passes;          // the headline's passes (--passes syntax); empty: core/piv's default
   for (int i = 1; i < argc; ++i) {
-    if (!std::strcmp(argv[i], "--no-sweep")) sweep = false;
-    else if (!std::strcmp(argv[i], "--rays") && i + 1 < argc) rays = std::stoul(argv[++i]);
-    else if (!std::strcmp(argv[i], "--iterations") && i + 1 < argc) iterations = std::stoi(argv[++i]);
-    else if (!std::strcmp(argv[i], "--mu") && i + 1 < argc) mu = std::stod(argv[++i]);
-    else if (!std::strcmp(argv[i], "--accelerate")) accelerate = true;
-    else if (!std::strcmp(argv[i], "--z-centre") && i + 1 < argc) z_centre = std::stod(argv[++i]);
-    else if (!std::strcmp(argv[i], "--dark-cutoff") && i + 1 < argc) dark_cutoff = std::stod(argv[++i]);
-    else if (!std::strcmp(argv[i], "--sensor-blur-mm") && i + 1 < argc) sensor_blur_mm = std::stod(argv[++i]);
-    else if (!std::strcmp(argv[i], "--intensity-threshold") && i + 1 < argc) intensity_threshold = std::stod(argv[++i]);
-    else if (!std::strcmp(argv[i], "--final-smoothing") && i + 1 < argc) final_smoothing = std::stoi(argv[++i]);
-    else if (!std::strcmp(argv[i], "--depth-prefilter") && i + 1 < argc) depth_prefilter = std::stoi(argv[++i]);
-    else if (!std::strcmp(argv[i], "--steady")) steady = true;
-    else if (!std::strcmp(argv[i], "--time-sweep")) time_sweep = true;
-    else if (!std::strcmp(argv[i], "--sparse-sweep")) sparse_sweep = true;
-    else if (!std::strcmp(argv[i], "--sparse-repeats") && i + 1 < argc) sparse_repeats = std::max(1, std::stoi(argv[++i]));
-    else if (!std::strcmp(argv[i], "--sparse-variants") && i + 1 < argc) sparse_variants = argv[++i];
-    else if (!std::strcmp(argv[i], "--prune-threshold") && i + 1 < argc) prune_threshold = std::stod(argv[++i]);
-    else if (!std::strcmp(argv[i], "--compare-passes") && i + 1 < argc) compare_passes = argv[++i];
-    else if (!std::strcmp(argv[i], "--passes") && i + 1 < argc) passes = argv[++i];
-    else scale = argv[i];
+    if (!std::strcmp(argv[i], "--no-sweep"))
+      sweep = false;
+    else if (!std::strcmp(argv[i], "--rays") && i + 1 < argc)
+      rays = std::stoul(argv[++i]);
+    else if (!std::strcmp(argv[i], "--iterations") && i + 1 < argc)
+      iterations = std::stoi(argv[++i]);
+    else if (!std::strcmp(argv[i], "--mu") && i + 1 < argc)
+      mu = std::stod(argv[++i]);
+    else if (!std::strcmp(argv[i], "--accelerate"))
+      accelerate = true;
+    else if (!std::strcmp(argv[i], "--z-centre") && i + 1 < argc)
+      z_centre = std::stod(argv[++i]);
+    else if (!std::strcmp(argv[i], "--dark-cutoff") && i + 1 < argc)
+      dark_cutoff = std::stod(argv[++i]);
+    else if (!std::strcmp(argv[i], "--sensor-blur-mm") && i + 1 < argc)
+      sensor_blur_mm = std::stod(argv[++i]);
+    else if (!std::strcmp(argv[i], "--intensity-threshold") && i + 1 < argc)
+      intensity_threshold = std::stod(argv[++i]);
+    else if (!std::strcmp(argv[i], "--final-smoothing") && i + 1 < argc)
+      final_smoothing = std::stoi(argv[++i]);
+    else if (!std::strcmp(argv[i], "--depth-prefilter") && i + 1 < argc)
+      depth_prefilter = std::stoi(argv[++i]);
+    else if (!std::strcmp(argv[i], "--steady"))
+      steady = true;
+    else if (!std::strcmp(argv[i], "--time-sweep"))
+      time_sweep = true;
+    else if (!std::strcmp(argv[i], "--sparse-sweep"))
+      sparse_sweep = true;
+    else if (!std::strcmp(argv[i], "--sparse-repeats") && i + 1 < argc)
+      sparse_repeats = std::max(1, std::stoi(argv[++i]));
+    else if (!std::strcmp(argv[i], "--sparse-variants") && i + 1 < argc)
+      sparse_variants = argv[++i];
+    else if (!std::strcmp(argv[i], "--prune-threshold") && i + 1 < argc)
+      prune_threshold = std::stod(argv[++i]);
+    else if (!std::strcmp(argv[i], "--compare-passes") && i + 1 < argc)
+      compare_passes = argv[++i];
+    else if (!std::strcmp(argv[i], "--passes") && i + 1 < argc)
+      passes = argv[++i];
+    else
+      scale = argv[i];
   }
   if (sweep && (iterations != 5 || mu != 0.5 || accelerate || z_centre != 0.0 || !passes.empty() ||
                 dark_cutoff != recon::MartSettings{}.dark_weight_cutoff ||
@@ -182,8 +200,11 @@ int main(int argc, char** argv) {
                 final_smoothing != piv::CorrelationSettings{}.final_smoothing ||
                 depth_prefilter != piv::CorrelationSettings{}.depth_prefilter ||
                 prune_threshold != recon::MartSettings{}.prune_threshold)) {
-    std::fprintf(stderr, "bench_e2e: --iterations/--mu/--accelerate/--dark-cutoff/--sensor-blur-mm/--intensity-threshold/--final-smoothing/--depth-prefilter/--passes/--z-centre change the "
-                         "headline rows only; use them with --no-sweep\n");
+    std::fprintf(stderr,
+                 "bench_e2e: "
+                 "--iterations/--mu/--accelerate/--dark-cutoff/--sensor-blur-mm/--intensity-threshold/"
+                 "--final-smoothing/--depth-prefilter/--passes/--z-centre change the "
+                 "headline rows only; use them with --no-sweep\n");
     return 2;
   }
   // mid: the paper's camera and depth with the box cut laterally to the ring (120 x 80 voxels):
@@ -191,7 +212,11 @@ int main(int argc, char** argv) {
   const bool mid = scale == "mid";
   const bool full = scale == "full" || mid;
   if (!full && scale != "reduced") {
-    std::fprintf(stderr, "usage: bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate] [--dark-cutoff F] [--sensor-blur-mm S] [--intensity-threshold K] [--final-smoothing K] [--depth-prefilter K] [--passes P] [--steady] [--time-sweep] [--z-centre MM] [--compare-passes 'P1;P2'] [--prune-threshold F] [--sparse-sweep [--sparse-repeats N] [--sparse-variants V,..]]\n");
+    std::fprintf(stderr,
+                 "usage: bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate] "
+                 "[--dark-cutoff F] [--sensor-blur-mm S] [--intensity-threshold K] [--final-smoothing K] "
+                 "[--depth-prefilter K] [--passes P] [--steady] [--time-sweep] [--z-centre MM] [--compare-passes "
+                 "'P1;P2'] [--prune-threshold F] [--sparse-sweep [--sparse-repeats N] [--sparse-variants V,..]]\n");
     return 2;
   }
   const std::string dir = std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/";
@@ -201,8 +226,8 @@ int main(int argc, char** argv) {
   const double hx = 0.5 * nx * voxel, hy = 0.5 * ny * voxel, hz = 0.5 * nz * voxel;
 
   process::ProcessSettings settings;
-  settings.grid = process::grid_for_extent({-hx, -hy, z_centre - hz}, {hx, hy, z_centre + hz}, {voxel, voxel, voxel},
-                                          "bench");
+  settings.grid =
+      process::grid_for_extent({-hx, -hy, z_centre - hz}, {hx, hy, z_centre + hz}, {voxel, voxel, voxel}, "bench");
   settings.correlation.dt_s = 1.0;
   settings.mart.iterations = iterations;
   settings.mart.mu = mu;
@@ -257,15 +282,18 @@ int main(int argc, char** argv) {
   recon::MartWorkspace workspace;  // kept for --steady and the sweeps
   const auto base = processor.process(a, b);
   const Errors e = errors_against(base.correlation.field, flow, voxel);
-  std::printf("bench=e2e case=%s variant=reconstructed iterations=%d mu=%.2f accelerate=%d dark_cutoff=%.3g sensor_blur_mm=%.4g "
-              "intensity_threshold=%.3g final_smoothing=%d depth_prefilter=%d recon_a_s=%.2f recon_b_s=%.2f "
-              "correlate_s=%.2f skipped_a=%.3f skipped_b=%.3f rms_u=%.3f rms_v=%.3f rms_w=%.3f rms=%.3f valid=%.3f "
-              "off_axis_band_rms_u=%.3f off_axis_band_rms_v=%.3f off_axis_band_rms_w=%.3f off_axis_band_gain_u=%.3f "
-              "off_axis_band_gain_v=%.3f off_axis_band_gain_w=%.3f peak_rss_gb=%.2f\n",
-              scale.c_str(), iterations, mu, int(accelerate), dark_cutoff, sensor_blur_mm, intensity_threshold, final_smoothing, depth_prefilter, base.times.reconstruct_a_s, base.times.reconstruct_b_s, base.times.correlate_s,
-              base.skipped_a.fraction_skipped(), base.skipped_b.fraction_skipped(), e.rms[0], e.rms[1], e.rms[2],
-              e.total, e.valid_fraction, e.off_band[0], e.off_band[1], e.off_band[2], e.off_band_gain[0],
-              e.off_band_gain[1], e.off_band_gain[2], bench::peak_rss_gb());
+  std::printf(
+      "bench=e2e case=%s variant=reconstructed iterations=%d mu=%.2f accelerate=%d dark_cutoff=%.3g "
+      "sensor_blur_mm=%.4g "
+      "intensity_threshold=%.3g final_smoothing=%d depth_prefilter=%d recon_a_s=%.2f recon_b_s=%.2f "
+      "correlate_s=%.2f skipped_a=%.3f skipped_b=%.3f rms_u=%.3f rms_v=%.3f rms_w=%.3f rms=%.3f valid=%.3f "
+      "off_axis_band_rms_u=%.3f off_axis_band_rms_v=%.3f off_axis_band_rms_w=%.3f off_axis_band_gain_u=%.3f "
+      "off_axis_band_gain_v=%.3f off_axis_band_gain_w=%.3f peak_rss_gb=%.2f\n",
+      scale.c_str(), iterations, mu, int(accelerate), dark_cutoff, sensor_blur_mm, intensity_threshold, final_smoothing,
+      depth_prefilter, base.times.reconstruct_a_s, base.times.reconstruct_b_s, base.times.correlate_s,
+      base.skipped_a.fraction_skipped(), base.skipped_b.fraction_skipped(), e.rms[0], e.rms[1], e.rms[2], e.total,
+      e.valid_fraction, e.off_band[0], e.off_band[1], e.off_band[2], e.off_band_gain[0], e.off_band_gain[1],
+      e.off_band_gain[2], bench::peak_rss_gb());
 
   // Where depth is lost: RMS of w (voxels) per band of the vectors' depth (mm from the focal plane),
   // with the band's gain (slope of measured against true w: below 1 where w falls short in
@@ -278,10 +306,10 @@ int main(int argc, char** argv) {
         return x[2] - z_centre >= edges[k] && x[2] - z_centre < edges[k + 1];
       });
       char item[256];
-      std::snprintf(item, sizeof item, "%s%s..%s:%.3f(%zu,gain=%.3f,u=%.3f,v=%.3f,true_rms_uvw=%.2f/%.2f/%.2f)", k ? "," : "",
-                    k ? std::to_string(int(edges[k])).c_str() : "-inf",
-                    k + 2 < int(std::size(edges)) ? std::to_string(int(edges[k + 1])).c_str() : "inf", fe.rms[2], fe.compared,
-                    fe.gain[2], fe.rms[0], fe.rms[1], fe.truth_rms[0], fe.truth_rms[1], fe.truth_rms[2]);
+      std::snprintf(item, sizeof item, "%s%s..%s:%.3f(%zu,gain=%.3f,u=%.3f,v=%.3f,true_rms_uvw=%.2f/%.2f/%.2f)",
+                    k ? "," : "", k ? std::to_string(int(edges[k])).c_str() : "-inf",
+                    k + 2 < int(std::size(edges)) ? std::to_string(int(edges[k + 1])).c_str() : "inf", fe.rms[2],
+                    fe.compared, fe.gain[2], fe.rms[0], fe.rms[1], fe.truth_rms[0], fe.truth_rms[1], fe.truth_rms[2]);
       bands += item;
     }
     std::printf("bench=e2e case=%s volumes=%s rms_w_by_depth_mm=%s\n", scale.c_str(), volumes, bands.c_str());
@@ -304,13 +332,14 @@ int main(int argc, char** argv) {
       steps += item;
     }
     std::printf("bench=e2e case=%s steady_state_marks_s=%s\n", scale.c_str(), steps.c_str());
-    std::printf("bench=e2e case=%s variant=steady_state recon_a_s=%.2f recon_b_s=%.2f correlate_s=%.2f pair_s=%.2f "
-                "first_pair_s=%.2f same_field=%d\n",
-                scale.c_str(), again.times.reconstruct_a_s, again.times.reconstruct_b_s, again.times.correlate_s,
-                again.times.reconstruct_a_s + again.times.reconstruct_b_s + again.times.correlate_s,
-                base.times.reconstruct_a_s + base.times.reconstruct_b_s + base.times.correlate_s,
-                int(again.correlation.field.dz_mm == base.correlation.field.dz_mm &&
-                    again.correlation.field.dx_mm == base.correlation.field.dx_mm));
+    std::printf(
+        "bench=e2e case=%s variant=steady_state recon_a_s=%.2f recon_b_s=%.2f correlate_s=%.2f pair_s=%.2f "
+        "first_pair_s=%.2f same_field=%d\n",
+        scale.c_str(), again.times.reconstruct_a_s, again.times.reconstruct_b_s, again.times.correlate_s,
+        again.times.reconstruct_a_s + again.times.reconstruct_b_s + again.times.correlate_s,
+        base.times.reconstruct_a_s + base.times.reconstruct_b_s + base.times.correlate_s,
+        int(again.correlation.field.dz_mm == base.correlation.field.dz_mm &&
+            again.correlation.field.dx_mm == base.correlation.field.dx_mm));
     std::fflush(stdout);
   }
 
@@ -319,12 +348,12 @@ int main(int argc, char** argv) {
   const Volume ea = sim::render_exact_volume(settings.grid, pa), eb = sim::render_exact_volume(settings.grid, pb);
   const auto exact = piv::correlate_volumes(ea, eb, settings.correlation);
   const Errors ex = errors_against(exact.field, flow, voxel);
-  std::printf("bench=e2e case=%s variant=exact_volumes correlate_s=%.2f rms_u=%.3f rms_v=%.3f rms_w=%.3f rms=%.3f "
-              "valid=%.3f off_axis_band_rms_u=%.3f off_axis_band_rms_v=%.3f off_axis_band_rms_w=%.3f "
-              "off_axis_band_gain_u=%.3f off_axis_band_gain_v=%.3f off_axis_band_gain_w=%.3f\n",
-              scale.c_str(), now_s() - t, ex.rms[0], ex.rms[1], ex.rms[2], ex.total, ex.valid_fraction,
-              ex.off_band[0], ex.off_band[1], ex.off_band[2], ex.off_band_gain[0], ex.off_band_gain[1],
-              ex.off_band_gain[2]);
+  std::printf(
+      "bench=e2e case=%s variant=exact_volumes correlate_s=%.2f rms_u=%.3f rms_v=%.3f rms_w=%.3f rms=%.3f "
+      "valid=%.3f off_axis_band_rms_u=%.3f off_axis_band_rms_v=%.3f off_axis_band_rms_w=%.3f "
+      "off_axis_band_gain_u=%.3f off_axis_band_gain_v=%.3f off_axis_band_gain_w=%.3f\n",
+      scale.c_str(), now_s() - t, ex.rms[0], ex.rms[1], ex.rms[2], ex.total, ex.valid_fraction, ex.off_band[0],
+      ex.off_band[1], ex.off_band[2], ex.off_band_gain[0], ex.off_band_gain[1], ex.off_band_gain[2]);
   print_w_by_depth(exact.field, "exact");
 
   // Another correlation of the same volumes (reconstructed, then exact): one row each, labelled
@@ -335,13 +364,16 @@ int main(int argc, char** argv) {
                                   bool by_depth) {
     for (bool recon : {true, false}) {
       t = now_s();
-      const auto r = recon ? piv::correlate_volumes(base.volume_a, base.volume_b, c) : piv::correlate_volumes(ea, eb, c);
+      const auto r =
+          recon ? piv::correlate_volumes(base.volume_a, base.volume_b, c) : piv::correlate_volumes(ea, eb, c);
       const double cs = now_s() - t;
       const Errors er = errors_against(r.field, flow, voxel);
-      std::printf("bench=e2e case=%s %s=%s volumes=%s depth_context=0 correlate_s=%.2f rms_u=%.3f rms_v=%.3f rms_w=%.3f rms=%.3f "
-                  "off_axis_band_rms_u=%.3f off_axis_band_rms_v=%.3f off_axis_band_rms_w=%.3f\n",
-                  scale.c_str(), key, name.c_str(), recon ? "reconstructed" : "exact", cs, er.rms[0], er.rms[1],
-                  er.rms[2], er.total, er.off_band[0], er.off_band[1], er.off_band[2]);
+      std::printf(
+          "bench=e2e case=%s %s=%s volumes=%s depth_context=0 correlate_s=%.2f rms_u=%.3f rms_v=%.3f rms_w=%.3f "
+          "rms=%.3f "
+          "off_axis_band_rms_u=%.3f off_axis_band_rms_v=%.3f off_axis_band_rms_w=%.3f\n",
+          scale.c_str(), key, name.c_str(), recon ? "reconstructed" : "exact", cs, er.rms[0], er.rms[1], er.rms[2],
+          er.total, er.off_band[0], er.off_band[1], er.off_band[2]);
       if (recon && by_depth) print_w_by_depth(r.field, ("reconstructed_" + name).c_str());
     }
     std::fflush(stdout);
@@ -400,9 +432,9 @@ int main(int argc, char** argv) {
   if (sparse_sweep) {
     // The value-adaptive active set on this pair: pruning off, exact zeros, then thresholds
     // (fractions of each volume's peak), every pair in the kept workspaces, the variants
-    // interleaved `sparse_repeats` times; times (wall, and the process's CPU seconds) are medians. updates_skipped: the share of the
-    // box's voxel updates over the iterations not done (not solved, or pruned); work_pruned: the
-    // share of the kernels' work the pruning saved against the start's active set.
+    // interleaved `sparse_repeats` times; times (wall, and the process's CPU seconds) are medians. updates_skipped: the
+    // share of the box's voxel updates over the iterations not done (not solved, or pruned); work_pruned: the share of
+    // the kernels' work the pruning saved against the start's active set.
     struct Prune {
       const char* name;
       bool on;
@@ -411,7 +443,8 @@ int main(int argc, char** argv) {
     std::vector<Prune> variants;
     for (const Prune& pr : {Prune{"off", false, 0.0}, Prune{"zeros", true, 0.0}, Prune{"1e-3", true, 1e-3},
                             Prune{"3e-3", true, 3e-3}, Prune{"1e-2", true, 1e-2}, Prune{"3e-2", true, 3e-2}})
-      if (sparse_variants.empty() || ("," + sparse_variants + ",").find("," + std::string(pr.name) + ",") != std::string::npos)
+      if (sparse_variants.empty() ||
+          ("," + sparse_variants + ",").find("," + std::string(pr.name) + ",") != std::string::npos)
         variants.push_back(pr);
     if (variants.empty() || variants[0].on) {
       std::fprintf(stderr, "bench_e2e: --sparse-variants must start with off (the reference), e.g. off,zeros,1e-2\n");
@@ -463,19 +496,21 @@ int main(int argc, char** argv) {
           norm += double(o.data[i]) * o.data[i];
         }
       }
-      std::printf("bench=e2e case=%s variant=sparse prune=%s repeats=%d recon_a_s=%.2f recon_b_s=%.2f correlate_s=%.2f "
-                  "pair_s=%.2f pair_over_off=%.3f pair_cpu_s=%.2f cpu_over_off=%.3f updates_skipped_a=%.3f updates_skipped_b=%.3f work_pruned_a=%.3f "
-                  "work_pruned_b=%.3f volume_l2_vs_off=%.4f rms_u=%.3f rms_v=%.3f rms_w=%.3f off_axis_band_rms_u=%.3f "
-                  "off_axis_band_rms_v=%.3f off_axis_band_rms_w=%.3f valid=%.3f same_field_as_off=%d\n",
-                  scale.c_str(), variants[v].name, sparse_repeats, median(ra), median(rb), median(co), pair_s,
-                  off_pair_s > 0 ? pair_s / off_pair_s : 1.0, cpu_s, off_cpu_s > 0 ? cpu_s / off_cpu_s : 1.0,
-                  r.skipped_a.fraction_updates_skipped(),
-                  r.skipped_b.fraction_updates_skipped(), r.skipped_a.fraction_work_pruned(),
-                  r.skipped_b.fraction_work_pruned(), norm > 0 ? std::sqrt(diff / norm) : 0.0, er.rms[0], er.rms[1],
-                  er.rms[2], er.off_band[0], er.off_band[1], er.off_band[2], er.valid_fraction,
-                  int(r.correlation.field.dx_mm == off.correlation.field.dx_mm &&
-                      r.correlation.field.dy_mm == off.correlation.field.dy_mm &&
-                      r.correlation.field.dz_mm == off.correlation.field.dz_mm));
+      std::printf(
+          "bench=e2e case=%s variant=sparse prune=%s repeats=%d recon_a_s=%.2f recon_b_s=%.2f correlate_s=%.2f "
+          "pair_s=%.2f pair_over_off=%.3f pair_cpu_s=%.2f cpu_over_off=%.3f updates_skipped_a=%.3f "
+          "updates_skipped_b=%.3f work_pruned_a=%.3f "
+          "work_pruned_b=%.3f volume_l2_vs_off=%.4f rms_u=%.3f rms_v=%.3f rms_w=%.3f off_axis_band_rms_u=%.3f "
+          "off_axis_band_rms_v=%.3f off_axis_band_rms_w=%.3f valid=%.3f same_field_as_off=%d\n",
+          scale.c_str(), variants[v].name, sparse_repeats, median(ra), median(rb), median(co), pair_s,
+          off_pair_s > 0 ? pair_s / off_pair_s : 1.0, cpu_s, off_cpu_s > 0 ? cpu_s / off_cpu_s : 1.0,
+          r.skipped_a.fraction_updates_skipped(), r.skipped_b.fraction_updates_skipped(),
+          r.skipped_a.fraction_work_pruned(), r.skipped_b.fraction_work_pruned(),
+          norm > 0 ? std::sqrt(diff / norm) : 0.0, er.rms[0], er.rms[1], er.rms[2], er.off_band[0], er.off_band[1],
+          er.off_band[2], er.valid_fraction,
+          int(r.correlation.field.dx_mm == off.correlation.field.dx_mm &&
+              r.correlation.field.dy_mm == off.correlation.field.dy_mm &&
+              r.correlation.field.dz_mm == off.correlation.field.dz_mm));
     }
     std::printf("bench=e2e case=%s peak_rss_gb=%.2f\n", scale.c_str(), bench::peak_rss_gb());
   }
@@ -504,8 +539,10 @@ int main(int argc, char** argv) {
       s.correlation.intensity_threshold_of_mean = st.floor;
       const auto r = process::process_pair(op, a, b, s, {}, &workspace);
       const Errors er = errors_against(r.correlation.field, flow, voxel);
-      Row row{"mart_floor", st.iterations, np, 16, st.mu,
-              r.times.reconstruct_a_s + r.times.reconstruct_b_s + r.times.correlate_s, er.total, er};
+      Row row{"mart_floor", st.iterations,
+              np,           16,
+              st.mu,        r.times.reconstruct_a_s + r.times.reconstruct_b_s + r.times.correlate_s,
+              er.total,     er};
       row.value = st.name;
       rows.push_back(row);
       std::fprintf(stderr, "bench_e2e: %s done (%.1f s)\n", st.name, row.seconds);
@@ -520,8 +557,7 @@ int main(int argc, char** argv) {
   std::vector<Row> rows;
   const double recon_s = base.times.reconstruct_a_s + base.times.reconstruct_b_s;
   const int np = int(settings.correlation.passes.size());  // the default passes
-  rows.push_back({"paper", 5, np, 16, 0.5, recon_s + base.times.correlate_s,
-                  e.total, e});
+  rows.push_back({"paper", 5, np, 16, 0.5, recon_s + base.times.correlate_s, e.total, e});
   for (int it : {1, 2, 3, 10}) {
     for (double mu : {0.5}) {
       process::ProcessSettings s = settings;
@@ -554,8 +590,8 @@ int main(int argc, char** argv) {
     s.mart.accelerate = true;
     const auto r = process::process_pair(op, a, b, s);
     const Errors er = errors_against(r.correlation.field, flow, voxel);
-    rows.push_back({"acceleration", it, np, 16, 1.0, r.times.reconstruct_a_s + r.times.reconstruct_b_s + r.times.correlate_s,
-                    er.total, er, "nesterov"});
+    rows.push_back({"acceleration", it, np, 16, 1.0,
+                    r.times.reconstruct_a_s + r.times.reconstruct_b_s + r.times.correlate_s, er.total, er, "nesterov"});
   }
   {
     // Without the depth guard: particles beyond the depth ends pin light in the end slices.
@@ -590,8 +626,9 @@ int main(int argc, char** argv) {
     s.mart.dark_weight_cutoff = cutoff;
     const auto r = process::process_pair(op, a, b, s);
     const Errors er = errors_against(r.correlation.field, flow, voxel);
-    rows.push_back({"dark_cutoff", 5, np, 16, 0.5, r.times.reconstruct_a_s + r.times.reconstruct_b_s + r.times.correlate_s,
-                    er.total, er, std::to_string(cutoff).substr(0, 4)});
+    rows.push_back({"dark_cutoff", 5, np, 16, 0.5,
+                    r.times.reconstruct_a_s + r.times.reconstruct_b_s + r.times.correlate_s, er.total, er,
+                    std::to_string(cutoff).substr(0, 4)});
   }
   for (float floor_counts : {2.f, 5.f}) {
     process::ProcessSettings s = settings;

@@ -14,8 +14,8 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <cstdio>
 #include <cstdint>
+#include <cstdio>
 #include <cstring>
 #include <functional>
 #include <string>
@@ -66,8 +66,7 @@ std::pair<double, double> seconds_of(const std::function<void()>& f) {
   const double c0 = cpu_seconds();
   const auto t0 = std::chrono::steady_clock::now();
   f();
-  return {std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(),
-          cpu_seconds() - c0};
+  return {std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), cpu_seconds() - c0};
 }
 
 void uniform_shifts(int n) {
@@ -75,22 +74,23 @@ void uniform_shifts(int n) {
   const auto pa = particles_for(g, 1);
   const Volume a = sim::render_exact_volume(g, pa);
   for (bool prefilter : {true, false})
-  for (int step = 0; step <= 10; ++step) {
-    piv::CorrelationSettings settings;  // the default three passes
-    settings.prefilter = prefilter;
-    const double t = 0.1 * step;
-    const sim::UniformFlow flow({t * voxel_mm, t * voxel_mm, t * voxel_mm});
-    const Volume b = sim::render_exact_volume(g, sim::displace(pa, flow));
-    const auto r = piv::correlate_volumes(a, b, settings);
-    for (int skip : {0, 1}) {
-      // skip: vector-grid layers left out at every face.
-      const sim::FieldErrors s = sim::field_errors(r.field, flow, voxel_mm, 1, skip);
-      std::printf("bench=piv_uniform volume=%d^3 prefilter=%d shift_voxel=%.1f vectors=%s n=%zu "
-                  "bias_x=%.4f bias_y=%.4f bias_z=%.4f rms_x=%.4f rms_y=%.4f rms_z=%.4f\n",
-                  n, int(prefilter), t, skip ? "interior" : "all", s.compared, s.bias[0], s.bias[1], s.bias[2],
-                  s.rms[0], s.rms[1], s.rms[2]);
+    for (int step = 0; step <= 10; ++step) {
+      piv::CorrelationSettings settings;  // the default three passes
+      settings.prefilter = prefilter;
+      const double t = 0.1 * step;
+      const sim::UniformFlow flow({t * voxel_mm, t * voxel_mm, t * voxel_mm});
+      const Volume b = sim::render_exact_volume(g, sim::displace(pa, flow));
+      const auto r = piv::correlate_volumes(a, b, settings);
+      for (int skip : {0, 1}) {
+        // skip: vector-grid layers left out at every face.
+        const sim::FieldErrors s = sim::field_errors(r.field, flow, voxel_mm, 1, skip);
+        std::printf(
+            "bench=piv_uniform volume=%d^3 prefilter=%d shift_voxel=%.1f vectors=%s n=%zu "
+            "bias_x=%.4f bias_y=%.4f bias_z=%.4f rms_x=%.4f rms_y=%.4f rms_z=%.4f\n",
+            n, int(prefilter), t, skip ? "interior" : "all", s.compared, s.bias[0], s.bias[1], s.bias[2], s.rms[0],
+            s.rms[1], s.rms[2]);
+      }
     }
-  }
 }
 
 // `all_variants`: also the slower pass schedules and FFTW_MEASURE (quick mode only: at full
@@ -166,19 +166,17 @@ void ring_vortex(const std::array<int, 3>& shape, bool all_variants, bool defaul
     const sim::FieldErrors off = sim::field_errors(r.field, flow, voxel_mm, 1, 0, [&](const sim::Point3& x) {
       return !sim::in_ring_axis_band(flow, x, half_window_mm);
     });
-    std::printf("bench=piv_ring volume=%dx%dx%d variant=%s threads=%d seconds=%.2f cpu_s=%.2f cpu_ratio=%.2f "
-                "deform_s=%.2f correlate_s=%.2f final_windows=%zu final_us_per_window=%.1f "
-                "outliers=%zu rms_x=%.5f rms_y=%.5f rms_z=%.5f rms=%.5f max_displacement=%.2f "
-                "rms_over_max=%.4f off_axis_band_n=%zu off_axis_band_rms_u=%.3f off_axis_band_rms_v=%.3f "
-                "off_axis_band_rms_w=%.3f field_hash=%016llx\n",
-                shape[0], shape[1], shape[2], v.name.c_str(), v.threads, s, cpu, cpu / reference_s,
-                deform, correlate, last.windows, 1e6 * last.correlate_s / double(last.windows),
-                outliers, e.rms[0], e.rms[1], e.rms[2],
-                std::sqrt(e.rms[0] * e.rms[0] + e.rms[1] * e.rms[1] + e.rms[2] * e.rms[2]),
-                e.max_truth_voxels,
-                std::sqrt(e.rms[0] * e.rms[0] + e.rms[1] * e.rms[1] + e.rms[2] * e.rms[2]) /
-                    e.max_truth_voxels,
-                off.compared, off.rms[0], off.rms[1], off.rms[2], (unsigned long long)hash);
+    std::printf(
+        "bench=piv_ring volume=%dx%dx%d variant=%s threads=%d seconds=%.2f cpu_s=%.2f cpu_ratio=%.2f "
+        "deform_s=%.2f correlate_s=%.2f final_windows=%zu final_us_per_window=%.1f "
+        "outliers=%zu rms_x=%.5f rms_y=%.5f rms_z=%.5f rms=%.5f max_displacement=%.2f "
+        "rms_over_max=%.4f off_axis_band_n=%zu off_axis_band_rms_u=%.3f off_axis_band_rms_v=%.3f "
+        "off_axis_band_rms_w=%.3f field_hash=%016llx\n",
+        shape[0], shape[1], shape[2], v.name.c_str(), v.threads, s, cpu, cpu / reference_s, deform, correlate,
+        last.windows, 1e6 * last.correlate_s / double(last.windows), outliers, e.rms[0], e.rms[1], e.rms[2],
+        std::sqrt(e.rms[0] * e.rms[0] + e.rms[1] * e.rms[1] + e.rms[2] * e.rms[2]), e.max_truth_voxels,
+        std::sqrt(e.rms[0] * e.rms[0] + e.rms[1] * e.rms[1] + e.rms[2] * e.rms[2]) / e.max_truth_voxels, off.compared,
+        off.rms[0], off.rms[1], off.rms[2], (unsigned long long)hash);
     std::fflush(stdout);
   }
 }
@@ -237,8 +235,7 @@ class Decomposition {
           near_face |= first[a] < 8 || first[a] + window - 1 > g_.shape[a] - 1 - 8;
         }
         const double rho = std::hypot(x[0] - p.centre_mm[0], x[2] - p.centre_mm[2]);
-        const double r_core =
-            std::hypot(rho - 0.5 * p.ring_diameter_mm, x[1] - p.centre_mm[1]) / p.voxel_mm;
+        const double r_core = std::hypot(rho - 0.5 * p.ring_diameter_mm, x[1] - p.centre_mm[1]) / p.voxel_mm;
         region[n] = sim::in_ring_axis_band(flow_, x, h * voxel_mm) ? axis
                     : near_face                                    ? border
                     : r_core < p.core_radius_voxels                ? core
@@ -278,12 +275,13 @@ class Decomposition {
       auto rms = [&](const double* v, int a) { return std::sqrt(v[a] / double(std::max<std::size_t>(t.n, 1))); };
       // share: the region's part of the all-vector mean square error, per component.
       auto share = [&](int a) { return s[regions].meas[a] > 0 ? t.meas[a] / s[regions].meas[a] : 0.0; };
-      std::printf("bench=piv_ring_regions variant=%s region=%s n=%zu rms_u=%.3f rms_v=%.3f rms_w=%.3f "
-                  "share_u=%.3f share_v=%.3f share_w=%.3f vs_window_mean_u=%.3f vs_window_mean_v=%.3f "
-                  "vs_window_mean_w=%.3f filtering_u=%.3f filtering_v=%.3f filtering_w=%.3f\n",
-                  variant.c_str(), r == regions ? "all" : names[r], t.n, rms(t.meas, 0), rms(t.meas, 1),
-                  rms(t.meas, 2), share(0), share(1), share(2), rms(t.filt, 0), rms(t.filt, 1), rms(t.filt, 2),
-                  rms(t.box, 0), rms(t.box, 1), rms(t.box, 2));
+      std::printf(
+          "bench=piv_ring_regions variant=%s region=%s n=%zu rms_u=%.3f rms_v=%.3f rms_w=%.3f "
+          "share_u=%.3f share_v=%.3f share_w=%.3f vs_window_mean_u=%.3f vs_window_mean_v=%.3f "
+          "vs_window_mean_w=%.3f filtering_u=%.3f filtering_v=%.3f filtering_w=%.3f\n",
+          variant.c_str(), r == regions ? "all" : names[r], t.n, rms(t.meas, 0), rms(t.meas, 1), rms(t.meas, 2),
+          share(0), share(1), share(2), rms(t.filt, 0), rms(t.filt, 1), rms(t.filt, 2), rms(t.box, 0), rms(t.box, 1),
+          rms(t.box, 2));
     }
     // Outside the band, by distance from the axis: how far the jump's influence reaches.
     for (int lo = 0; lo < 40; lo += 4) {
@@ -293,16 +291,18 @@ class Decomposition {
         if (!f.valid[n] || region[n] == border) continue;
         const int i = int(n % fg.shape[0]), k = int(n / (std::size_t(fg.shape[0]) * fg.shape[1]));
         const double cheb = std::max(std::abs(fg.coordinate_mm(0, i) - p.centre_mm[0]),
-                                     std::abs(fg.coordinate_mm(2, k) - p.centre_mm[2])) / voxel_mm;
+                                     std::abs(fg.coordinate_mm(2, k) - p.centre_mm[2])) /
+                            voxel_mm;
         if (cheb < lo || cheb >= lo + 4) continue;
         ++n_bin;
         for (int a = 0; a < 3; ++a) m[a] += sq[n][a], fl[a] += sq[n][3 + a];
       }
       const double d = double(std::max<std::size_t>(n_bin, 1));
-      std::printf("bench=piv_ring_axis_distance variant=%s chebyshev_voxels=%d-%d n=%zu rms_u=%.3f rms_v=%.3f "
-                  "rms_w=%.3f vs_window_mean_u=%.3f vs_window_mean_v=%.3f vs_window_mean_w=%.3f\n",
-                  variant.c_str(), lo, lo + 4, n_bin, std::sqrt(m[0] / d), std::sqrt(m[1] / d), std::sqrt(m[2] / d),
-                  std::sqrt(fl[0] / d), std::sqrt(fl[1] / d), std::sqrt(fl[2] / d));
+      std::printf(
+          "bench=piv_ring_axis_distance variant=%s chebyshev_voxels=%d-%d n=%zu rms_u=%.3f rms_v=%.3f "
+          "rms_w=%.3f vs_window_mean_u=%.3f vs_window_mean_v=%.3f vs_window_mean_w=%.3f\n",
+          variant.c_str(), lo, lo + 4, n_bin, std::sqrt(m[0] / d), std::sqrt(m[1] / d), std::sqrt(m[2] / d),
+          std::sqrt(fl[0] / d), std::sqrt(fl[1] / d), std::sqrt(fl[2] / d));
     }
     std::fflush(stdout);
   }

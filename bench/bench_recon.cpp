@@ -64,8 +64,8 @@ Grid3 grid_of(int nx, int ny, int nz, double voxel_mm, double depth_mm) {
 void paper_scale(const std::string& source_dir, bool small, double ppm, int iterations, float threshold_counts,
                  double dark_cutoff, std::size_t count_override = 0, double mu = 0.5, bool accelerate = false,
                  double sensor_blur_mm = 0.0, recon::MartStart start = recon::MartStart::mlos, bool reuse = false) {
-  const auto cam = optics::load_camera_file(source_dir + (small ? "/systemd/config/camera-small.yaml"
-                                                                : "/systemd/config/camera-fahringer2015.yaml"));
+  const auto cam = optics::load_camera_file(
+      source_dir + (small ? "/systemd/config/camera-small.yaml" : "/systemd/config/camera-fahringer2015.yaml"));
   const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(cam));
   // The paper's 500-particle box: 30 x 20 x 20 mm in 300 x 200 x 200 voxels of 0.1 mm; or the sec
   // 5.4 small camera's 6 x 6 x 20 mm in 60 x 60 x 200 voxels.
@@ -111,20 +111,22 @@ void paper_scale(const std::string& source_dir, bool small, double ppm, int iter
   for (const auto& it : r.iterations) iter_total += it.seconds;
   const recon::SkipReport& k = r.skipped;
   const std::uint64_t hash = bench::bits_hash(r.volume.data);
-  std::printf("bench=recon_paper particles=%zu ppm=%.2f lit_pixel_fraction=%.4f threshold_counts=%.1f dark_cutoff=%.2f "
-              "iterations=%d mu=%.2f accelerate=%d sensor_blur_mm=%.4f start=%s\n",
-              count, ppm, double(lit) / double(image.size()), double(s.noise_threshold), dark_cutoff, iterations, mu,
-              int(accelerate), sensor_blur_mm, start == recon::MartStart::ones ? "ones" : "mlos");
+  std::printf(
+      "bench=recon_paper particles=%zu ppm=%.2f lit_pixel_fraction=%.4f threshold_counts=%.1f dark_cutoff=%.2f "
+      "iterations=%d mu=%.2f accelerate=%d sensor_blur_mm=%.4f start=%s\n",
+      count, ppm, double(lit) / double(image.size()), double(s.noise_threshold), dark_cutoff, iterations, mu,
+      int(accelerate), sensor_blur_mm, start == recon::MartStart::ones ? "ones" : "mlos");
   std::printf("bench=recon_paper phase=active_set_and_mlos seconds=%.3f select=%.3f active_set=%.3f start=%.3f\n",
               r.setup_seconds, r.select_seconds, r.active_set_seconds, r.start_seconds);
   std::printf("bench=recon_paper phase=iterations seconds=%.3f per_iteration=%.3f\n", iter_total,
               iter_total / double(std::max<std::size_t>(1, r.iterations.size())));
-  std::printf("bench=recon_paper phase=reconstruct_total seconds=%.3f cpu_s=%.3f final_residual=%.4f volume_hash=%016llx\n",
-              t_mart, c_mart, r.final_residual.value(), static_cast<unsigned long long>(hash));
-  std::printf("bench=recon_paper voxels=%zu active=%zu skipped_fraction=%.4f dark=%zu unseen=%zu slices_empty=%d "
-              "dark_pixels=%zu\n",
-              k.voxels, k.voxels_active, k.fraction_skipped(), k.voxels_dark, k.voxels_unseen, k.slices_empty,
-              k.dark_pixels);
+  std::printf(
+      "bench=recon_paper phase=reconstruct_total seconds=%.3f cpu_s=%.3f final_residual=%.4f volume_hash=%016llx\n",
+      t_mart, c_mart, r.final_residual.value(), static_cast<unsigned long long>(hash));
+  std::printf(
+      "bench=recon_paper voxels=%zu active=%zu skipped_fraction=%.4f dark=%zu unseen=%zu slices_empty=%d "
+      "dark_pixels=%zu\n",
+      k.voxels, k.voxels_active, k.fraction_skipped(), k.voxels_dark, k.voxels_unseen, k.slices_empty, k.dark_pixels);
   if (reuse) {
     // The first frame above against the steady state of a caller that keeps its workspace (the
     // same image again: the same bits), and a second frame without one (the process is warm, so
@@ -135,15 +137,17 @@ void paper_scale(const std::string& source_dir, bool small, double ppm, int iter
       const long f0 = minor_faults();
       const recon::MartResult again = ws ? recon::reconstruct(op, image, s, *ws) : recon::reconstruct(op, image, s);
       const double wall = since(t0), cpu = cpu_seconds() - c0;
-      std::printf("bench=recon_reuse variant=%s seconds=%.3f cpu_s=%.3f setup_s=%.3f minor_faults=%ld volume_hash=%016llx\n",
-                  variant, wall, cpu, again.setup_seconds, minor_faults() - f0,
-                  static_cast<unsigned long long>(bench::bits_hash(again.volume.data)));
+      std::printf(
+          "bench=recon_reuse variant=%s seconds=%.3f cpu_s=%.3f setup_s=%.3f minor_faults=%ld volume_hash=%016llx\n",
+          variant, wall, cpu, again.setup_seconds, minor_faults() - f0,
+          static_cast<unsigned long long>(bench::bits_hash(again.volume.data)));
       return std::array<double, 2>{wall, cpu};
     };
-    std::printf("bench=recon_reuse variant=first seconds=%.3f cpu_s=%.3f setup_s=%.3f minor_faults=%ld volume_hash=%016llx "
-                "workspace_mb=%.0f\n",
-                t_mart, c_mart, r.setup_seconds, faults_mart, static_cast<unsigned long long>(hash),
-                double(workspace.bytes()) / (1 << 20));
+    std::printf(
+        "bench=recon_reuse variant=first seconds=%.3f cpu_s=%.3f setup_s=%.3f minor_faults=%ld volume_hash=%016llx "
+        "workspace_mb=%.0f\n",
+        t_mart, c_mart, r.setup_seconds, faults_mart, static_cast<unsigned long long>(hash),
+        double(workspace.bytes()) / (1 << 20));
     const auto reused = frame("reused", &workspace);
     const auto fresh = frame("fresh_again", nullptr);
     std::printf(
@@ -234,8 +238,8 @@ void mid_size(const std::string& source_dir) {
 // `bench_recon prune [paper|small] [ppm] [iterations] [mu] [nesterov|none] [variants, e.g. off,1e-2]`.
 void prune_sweep(const std::string& source_dir, bool small, double ppm, int iterations, double mu, bool accelerate,
                  const std::string& only) {
-  const auto cam = optics::load_camera_file(source_dir + (small ? "/systemd/config/camera-small.yaml"
-                                                                : "/systemd/config/camera-fahringer2015.yaml"));
+  const auto cam = optics::load_camera_file(
+      source_dir + (small ? "/systemd/config/camera-small.yaml" : "/systemd/config/camera-fahringer2015.yaml"));
   const calib::LoadedCalibration nominal = calib::nominal_calibration(cam);
   const Grid3 g = small ? grid_of(60, 60, 200, 0.1, 20.0) : grid_of(300, 200, 200, 0.1, 20.0);
   const recon::WeightingOperator op(cam, nominal.lenses, g, nominal.white_correction);
@@ -282,14 +286,17 @@ void prune_sweep(const std::string& source_dir, bool small, double ppm, int iter
       ez += std::abs(fit->position_mm[2] - p[2]) / g.spacing_mm[2];
       ++fitted;
     }
-    std::printf("bench=recon_prune case=%s variant=%s iterations=%d mu=%.2f accelerate=%d seconds=%.3f cpu_s=%.3f "
-                "setup_s=%.3f start_s=%.3f prune_s=%.3f iteration_s=%s skipped=%.4f updates_skipped=%.4f pruned=%zu live_per_iteration=%s work_per_iteration=%s work_pruned=%.4f "
-                "q_star=%.4f moments_abs_x_vox=%.3f abs_z_vox=%.3f fitted=%zu volume_hash=%016llx same_as_off=%d\n",
-                small ? "small" : "paper", v.name, iterations, mu, int(accelerate), wall, cpu, r.setup_seconds,
-                r.start_seconds, r.prune_seconds, seconds.c_str(), r.skipped.fraction_skipped(), r.skipped.fraction_updates_skipped(),
-                r.skipped.voxels_pruned, live.c_str(), work.c_str(), r.skipped.fraction_work_pruned(), recon::quality_factor(r.volume, exact),
-                ex / double(std::max<std::size_t>(1, fitted)), ez / double(std::max<std::size_t>(1, fitted)), fitted,
-                static_cast<unsigned long long>(hash), int(hash == reference));
+    std::printf(
+        "bench=recon_prune case=%s variant=%s iterations=%d mu=%.2f accelerate=%d seconds=%.3f cpu_s=%.3f "
+        "setup_s=%.3f start_s=%.3f prune_s=%.3f iteration_s=%s skipped=%.4f updates_skipped=%.4f pruned=%zu "
+        "live_per_iteration=%s work_per_iteration=%s work_pruned=%.4f "
+        "q_star=%.4f moments_abs_x_vox=%.3f abs_z_vox=%.3f fitted=%zu volume_hash=%016llx same_as_off=%d\n",
+        small ? "small" : "paper", v.name, iterations, mu, int(accelerate), wall, cpu, r.setup_seconds, r.start_seconds,
+        r.prune_seconds, seconds.c_str(), r.skipped.fraction_skipped(), r.skipped.fraction_updates_skipped(),
+        r.skipped.voxels_pruned, live.c_str(), work.c_str(), r.skipped.fraction_work_pruned(),
+        recon::quality_factor(r.volume, exact), ex / double(std::max<std::size_t>(1, fitted)),
+        ez / double(std::max<std::size_t>(1, fitted)), fitted, static_cast<unsigned long long>(hash),
+        int(hash == reference));
   }
   std::printf("bench=recon_prune peak_rss_gb=%.3f\n", bench::peak_rss_gb());
 }
@@ -347,17 +354,20 @@ void figures(const std::string& source_dir, double dark_cutoff) {
   };
   for (int it : {1, 2, 5, 10, 20}) {
     const auto q = run(0.5, it);
-    std::printf("bench=recon_fig23b ppm=0.5 iterations=%d q_star=%.4f skipped=%.4f residual=%.4f\n", it, q[0], q[1], q[2]);
+    std::printf("bench=recon_fig23b ppm=0.5 iterations=%d q_star=%.4f skipped=%.4f residual=%.4f\n", it, q[0], q[1],
+                q[2]);
   }
   for (double ppm : {0.1, 0.5, 1.0, 2.0, 3.0}) {
     const auto q = run(ppm, 5);
-    std::printf("bench=recon_fig23c ppm=%.1f iterations=5 q_star=%.4f skipped=%.4f residual=%.4f\n", ppm, q[0], q[1], q[2]);
+    std::printf("bench=recon_fig23c ppm=%.1f iterations=5 q_star=%.4f skipped=%.4f residual=%.4f\n", ppm, q[0], q[1],
+                q[2]);
   }
   for (double ppm : {0.1, 0.5, 1.0, 2.0, 3.0}) {
     const auto q = run(ppm, 20, true);
-    std::printf("bench=recon_fig23c ppm=%.1f iterations=20 mu=1 accelerate=1 sensor_blur_mm=%.4f q_star=%.4f "
-                "skipped=%.4f residual=%.4f\n",
-                ppm, sim::RenderOptions{}.diffraction_sigma_mm, q[0], q[1], q[2]);
+    std::printf(
+        "bench=recon_fig23c ppm=%.1f iterations=20 mu=1 accelerate=1 sensor_blur_mm=%.4f q_star=%.4f "
+        "skipped=%.4f residual=%.4f\n",
+        ppm, sim::RenderOptions{}.diffraction_sigma_mm, q[0], q[1], q[2]);
   }
 }
 
@@ -389,8 +399,8 @@ int main(int argc, char** argv) {
   // `paper [ppm] [threshold] [cutoff] [iterations] [sensor blur sigma, mm] [mlos|ones]`, and the
   // first frame against a kept workspace (bench=recon_reuse).
   if (which == "paper" || which == "all")
-    paper_scale(source_dir, false, ppm, iterations, threshold, cutoff, 0, 0.5, false, argc > 6 ? std::stod(argv[6]) : 0.0,
-                argc > 7 && std::string(argv[7]) == "ones" ? recon::MartStart::ones : recon::MartStart::mlos,
-                which == "paper");
+    paper_scale(
+        source_dir, false, ppm, iterations, threshold, cutoff, 0, 0.5, false, argc > 6 ? std::stod(argv[6]) : 0.0,
+        argc > 7 && std::string(argv[7]) == "ones" ? recon::MartStart::ones : recon::MartStart::mlos, which == "paper");
   return 0;
 }

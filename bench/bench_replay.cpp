@@ -38,8 +38,7 @@ double rss_gb() {
 double cpu_s() {
   rusage u{};
   getrusage(RUSAGE_SELF, &u);
-  return double(u.ru_utime.tv_sec + u.ru_stime.tv_sec) +
-         double(u.ru_utime.tv_usec + u.ru_stime.tv_usec) * 1e-6;
+  return double(u.ru_utime.tv_sec + u.ru_stime.tv_sec) + double(u.ru_utime.tv_usec + u.ru_stime.tv_usec) * 1e-6;
 }
 
 // `pairs` recorded pairs of `width` x `height` px in `dir` (made once; reused when present).
@@ -50,8 +49,7 @@ void write_recording(const fs::path& dir, int pairs, int width, int height) {
     char name[32];
     std::snprintf(name, sizeof name, "frame-%04d.tif", k);
     if (fs::exists(dir / name)) continue;
-    for (std::size_t i = 0; i < image.pixels.size(); ++i)
-      image.pixels[i] = std::uint16_t((i * 7919u + k) & 0x0fff);
+    for (std::size_t i = 0; i < image.pixels.size(); ++i) image.pixels[i] = std::uint16_t((i * 7919u + k) & 0x0fff);
     io::write_tiff(dir / name, image, false);
   }
 }
@@ -79,8 +77,7 @@ Figures run(const std::string& uri, const drivers::ReplaySource& source, double 
   });
   const double cpu0 = cpu_s();
   camera->start();
-  const auto end = Clock::now() + std::chrono::duration_cast<Clock::duration>(
-                                      std::chrono::duration<double>(seconds));
+  const auto end = Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(seconds));
   std::uint64_t first_ns = 0, last_ns = 0;
   // As the daemon's run loop: pull promptly, never block on anything else.
   while (Clock::now() < end) {
@@ -97,8 +94,7 @@ Figures run(const std::string& uri, const drivers::ReplaySource& source, double 
   const drivers::CameraCounters c = camera->counters();
   f.frames_lost = c.frames_lost;
   f.overflowed = c.pairs_overflowed;
-  if (f.delivered > 1)
-    f.sustained_hz = double(f.delivered - 1) / (double(last_ns - first_ns) * 1e-9);
+  if (f.delivered > 1) f.sustained_hz = double(f.delivered - 1) / (double(last_ns - first_ns) * 1e-9);
   return f;
 }
 
@@ -108,8 +104,7 @@ int main(int argc, char** argv) {
   const int recorded = argc > 1 ? std::atoi(argv[1]) : 24;
   const double seconds = argc > 2 ? std::atof(argv[2]) : 30;
   const double rate_hz = argc > 3 ? std::atof(argv[3]) : 10;
-  const fs::path camera_file =
-      fs::path(PLENOPIV_SOURCE_DIR) / "systemd/config/camera-fahringer2015.yaml";
+  const fs::path camera_file = fs::path(PLENOPIV_SOURCE_DIR) / "systemd/config/camera-fahringer2015.yaml";
   const optics::CameraModel camera = optics::load_camera_file(camera_file);
   const int width = camera.sensor().width_px, height = camera.sensor().height_px;
   const fs::path root = fs::temp_directory_path() / "plenopiv-bench-replay";
@@ -118,11 +113,11 @@ int main(int argc, char** argv) {
   const drivers::ReplaySource source{root, camera_file};
   const double pair_mb = 2.0 * width * height * 2 / (1 << 20);
   // Preloaded: the whole recording decoded at open. Read ahead: a buffer of 4 pairs.
-  const std::vector<std::pair<const char*, int>> variants{
-      {"preloaded", int(pair_mb * (recorded + 1))}, {"read_ahead", int(pair_mb * 4) + 1}};
+  const std::vector<std::pair<const char*, int>> variants{{"preloaded", int(pair_mb * (recorded + 1))},
+                                                          {"read_ahead", int(pair_mb * 4) + 1}};
   for (const auto& [name, buffer_mb] : variants) {
-    const std::string uri = "replay://" + folder + "?loop=1&rate_hz=" + std::to_string(rate_hz) +
-                            "&buffer_mb=" + std::to_string(buffer_mb);
+    const std::string uri =
+        "replay://" + folder + "?loop=1&rate_hz=" + std::to_string(rate_hz) + "&buffer_mb=" + std::to_string(buffer_mb);
     const Figures f = run(uri, source, seconds);
     std::printf(
         "bench=replay variant=%s frame=%dx%d recorded_pairs=%d buffer_mb=%d rate_hz=%.1f "
@@ -131,8 +126,8 @@ int main(int argc, char** argv) {
         "rss_min_gb=%.2f rss_max_gb=%.2f\n",
         name, width, height, recorded, buffer_mb, rate_hz, seconds, f.open_s,
         static_cast<unsigned long long>(f.delivered), f.sustained_hz, f.cpu_ms_per_pair,
-        static_cast<unsigned long long>(f.frames_lost),
-        static_cast<unsigned long long>(f.overflowed), f.rss_min_gb, f.rss_max_gb);
+        static_cast<unsigned long long>(f.frames_lost), static_cast<unsigned long long>(f.overflowed), f.rss_min_gb,
+        f.rss_max_gb);
     std::fflush(stdout);
   }
   std::printf("bench=replay peak_rss_gb=%.2f\n", bench::peak_rss_gb());

@@ -25,7 +25,8 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
 
 int main() {
   for (const std::string name : {"camera-small", "camera-fahringer2015"}) {
-    const auto camera = optics::load_camera_file(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/" + name + ".yaml");
+    const auto camera =
+        optics::load_camera_file(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/" + name + ".yaml");
     for (double degrees : {0.05, 0.3, 1.0, 2.0}) {
       optics::Lattice l = optics::Lattice::nominal(camera);
       l.rotation_rad = degrees * std::numbers::pi / 180;
@@ -43,9 +44,10 @@ int main() {
         times.push_back(seconds_since(t0));
       }
       std::sort(times.begin(), times.end());
-      std::printf("bench=resampling camera=%s rotation_deg=%.2f max_departure_px=%.1f setup_s=%.3f frame_median_s=%.4f\n",
-                  name.c_str(), degrees,
-                  recon::separable_lattice(array).max_departure_mm / camera.sensor().pixel_pitch_mm, setup, times[2]);
+      std::printf(
+          "bench=resampling camera=%s rotation_deg=%.2f max_departure_px=%.1f setup_s=%.3f frame_median_s=%.4f\n",
+          name.c_str(), degrees, recon::separable_lattice(array).max_departure_mm / camera.sensor().pixel_pitch_mm,
+          setup, times[2]);
     }
   }
 }

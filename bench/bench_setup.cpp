@@ -28,14 +28,11 @@ using namespace plenopiv;
 
 namespace {
 
-double now_s() {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
+double now_s() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
 double cpu_s() {
   rusage u{};
   getrusage(RUSAGE_SELF, &u);
-  return double(u.ru_utime.tv_sec + u.ru_stime.tv_sec) +
-         1e-6 * double(u.ru_utime.tv_usec + u.ru_stime.tv_usec);
+  return double(u.ru_utime.tv_sec + u.ru_stime.tv_sec) + 1e-6 * double(u.ru_utime.tv_usec + u.ru_stime.tv_usec);
 }
 
 struct Timing {
@@ -71,21 +68,18 @@ int main(int argc, char** argv) {
     return 2;
   }
   const std::string dir = std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/";
-  const auto camera =
-      optics::load_camera_file(dir + (paper ? "camera-fahringer2015.yaml" : "camera-small.yaml"));
+  const auto camera = optics::load_camera_file(dir + (paper ? "camera-fahringer2015.yaml" : "camera-small.yaml"));
   optics::Lattice lattice = optics::Lattice::nominal(camera);
   lattice.rotation_rad = rotation;
   const optics::MicrolensArray lenses = optics::MicrolensArray::from_lattice(lattice);
   double t = now_s(), c = cpu_s();
   const ImageF white = calib::geometric_white_image(camera, lenses);
-  std::printf("bench=setup case=%s rotation_rad=%g phase=white_image seconds=%.3f cpu_s=%.3f\n",
-              scale.c_str(), rotation, now_s() - t, cpu_s() - c);
+  std::printf("bench=setup case=%s rotation_rad=%g phase=white_image seconds=%.3f cpu_s=%.3f\n", scale.c_str(),
+              rotation, now_s() - t, cpu_s() - c);
   process::ProcessSettings settings;
   const double voxel = 0.125, hx = paper ? 18.75 : 2, hy = paper ? 12.5 : 2, hz = paper ? 12.5 : 2;
-  settings.grid =
-      process::grid_for_extent({-hx, -hy, -hz}, {hx, hy, hz}, {voxel, voxel, voxel}, "bench");
-  const std::filesystem::path folder =
-      std::filesystem::temp_directory_path() / "plenopiv-bench-setup";
+  settings.grid = process::grid_for_extent({-hx, -hy, -hz}, {hx, hy, hz}, {voxel, voxel, voxel}, "bench");
+  const std::filesystem::path folder = std::filesystem::temp_directory_path() / "plenopiv-bench-setup";
   std::filesystem::remove_all(folder);
 
   Timing build, first_write, read, memory;
@@ -134,9 +128,8 @@ int main(int argc, char** argv) {
   std::printf(
       "bench=setup case=%s rotation_rad=%g voxels=%zu table_mb=%.1f file_mb=%.1f same_tables=%d "
       "peak_rss_gb=%.2f\n",
-      scale.c_str(), rotation, settings.reconstruction_grid().count(),
-      double(table_bytes) / (1 << 20), double(file_bytes) / (1 << 20), int(hash_built == hash_read),
-      bench::peak_rss_gb());
+      scale.c_str(), rotation, settings.reconstruction_grid().count(), double(table_bytes) / (1 << 20),
+      double(file_bytes) / (1 << 20), int(hash_built == hash_read), bench::peak_rss_gb());
   std::filesystem::remove_all(folder);
   return 0;
 }

@@ -6,9 +6,9 @@
 
 #include <algorithm>
 #include <chrono>
-#include <ctime>
 #include <cstdio>
 #include <cstring>
+#include <ctime>
 #include <string>
 #include <vector>
 
@@ -22,8 +22,7 @@ namespace {
 
 // The paper's prototype camera (tables 1-2), as shipped.
 optics::CameraModel paper_camera() {
-  return optics::load_camera_file(std::string(PLENOPIV_SOURCE_DIR) +
-                                  "/systemd/config/camera-fahringer2015.yaml");
+  return optics::load_camera_file(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-fahringer2015.yaml");
 }
 
 double seconds_since(std::chrono::steady_clock::time_point t0) {
@@ -32,8 +31,8 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
 
 // Median of `repeats` timed renders.
 double time_render(const optics::CameraModel& camera, const optics::MicrolensArray& array,
-                   const std::vector<sim::Point3>& particles, const sim::RenderOptions& options,
-                   int threads, int repeats, sim::RayCounts& counts, double& cpu_s) {
+                   const std::vector<sim::Point3>& particles, const sim::RenderOptions& options, int threads,
+                   int repeats, sim::RayCounts& counts, double& cpu_s) {
   tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
   std::vector<double> times, cpu;
   for (int r = 0; r < repeats; ++r) {
@@ -82,12 +81,13 @@ int main(int argc, char** argv) {
       const double t = time_render(camera, array, some, options, threads, 3, counts, cpu);
       if (threads == 1) t1 = t;
       // CPU seconds are steadier than wall time on a shared machine: both are printed.
-      std::printf("bench=sim_rays variant=%s threads=%d particles=%zu rays=%llu median_s=%.3f "
-                  "mrays_per_s=%.1f tracing_mrays_per_s=%.1f cpu_s=%.3f mrays_per_cpu_s=%.1f "
-                  "speedup_vs_1_thread=%.2f\n",
-                  sigma > 0 ? "diffraction_5.2um" : "no_diffraction", threads, some.size(),
-                  (unsigned long long)counts.emitted, t, counts.emitted / t * 1e-6,
-                  counts.emitted / (t - overhead[threads]) * 1e-6, cpu, counts.emitted / cpu * 1e-6, t1 / t);
+      std::printf(
+          "bench=sim_rays variant=%s threads=%d particles=%zu rays=%llu median_s=%.3f "
+          "mrays_per_s=%.1f tracing_mrays_per_s=%.1f cpu_s=%.3f mrays_per_cpu_s=%.1f "
+          "speedup_vs_1_thread=%.2f\n",
+          sigma > 0 ? "diffraction_5.2um" : "no_diffraction", threads, some.size(), (unsigned long long)counts.emitted,
+          t, counts.emitted / t * 1e-6, counts.emitted / (t - overhead[threads]) * 1e-6, cpu,
+          counts.emitted / cpu * 1e-6, t1 / t);
     }
   }
   if (paper) {
@@ -97,10 +97,11 @@ int main(int argc, char** argv) {
     sim::RayCounts counts;
     double cpu = 0;
     const double t = time_render(camera, array, particles, options, 2, 1, counts, cpu);
-    std::printf("bench=sim_paper_image variant=4904x3280_0.5ppm threads=2 particles=%zu rays=%llu "
-                "seconds=%.2f mrays_per_s=%.1f cpu_s=%.2f landed_fraction=%.4f\n",
-                n, (unsigned long long)counts.emitted, t, counts.emitted / t * 1e-6, cpu,
-                double(counts.landed) / counts.emitted);
+    std::printf(
+        "bench=sim_paper_image variant=4904x3280_0.5ppm threads=2 particles=%zu rays=%llu "
+        "seconds=%.2f mrays_per_s=%.1f cpu_s=%.2f landed_fraction=%.4f\n",
+        n, (unsigned long long)counts.emitted, t, counts.emitted / t * 1e-6, cpu,
+        double(counts.landed) / counts.emitted);
   }
   return 0;
 }

@@ -50,8 +50,8 @@ void bind_ipc(zmq::socket_t& socket, const std::string& endpoint, const std::str
   std::error_code ec;
   if (file.has_parent_path()) std::filesystem::create_directories(file.parent_path(), ec);
   if (ec) {
-    throw InputError("control endpoint " + endpoint + ": cannot make its folder " + file.parent_path().string() +
-                     ": " + ec.message());
+    throw InputError("control endpoint " + endpoint + ": cannot make its folder " + file.parent_path().string() + ": " +
+                     ec.message());
   }
   gid_t gid = gid_t(-1);
   if (!group_name.empty()) {
@@ -68,8 +68,8 @@ void bind_ipc(zmq::socket_t& socket, const std::string& endpoint, const std::str
   }
   ::umask(old_mask);
   if (::chmod(file.c_str(), 0660) != 0 || (gid != gid_t(-1) && ::chown(file.c_str(), uid_t(-1), gid) != 0)) {
-    throw InputError("control endpoint " + endpoint + ": cannot set the socket's owner and mode: " +
-                     std::strerror(errno));
+    throw InputError("control endpoint " + endpoint +
+                     ": cannot set the socket's owner and mode: " + std::strerror(errno));
   }
 }
 

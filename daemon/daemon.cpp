@@ -57,9 +57,10 @@ std::pair<ProcessFactory, std::string> choose_processing(const DaemonConfig& con
   // stop the daemon: it still serves status and takes calibration images for a new one, and
   // refuses runs, naming the file, until the file is fixed.
   if (config.calibration_file.empty()) {
-    spdlog::info("calibration: none configured (calibration_file): runs use the nominal lattice of {} and the "
-                 "geometric white image",
-                 config.camera_file.string());
+    spdlog::info(
+        "calibration: none configured (calibration_file): runs use the nominal lattice of {} and the "
+        "geometric white image",
+        config.camera_file.string());
   } else {
     try {
       spdlog::info("calibration: {}", load_run_calibration(config.calibration_file, camera).summary());
@@ -88,12 +89,11 @@ Daemon::Daemon(DaemonConfig config, const DaemonExtensions& extensions)
                                     drivers::ReplaySource{config_.replay_dir, config_.camera_file});
   } else {
     drivers::CameraRegistry::instance().add_unavailable(
-        "replay",
-        config_.simulation
-            ? "the replay camera is not enabled on this daemon: it needs replay_dir "
-              "(plenopivd.yaml, or --replay-dir), the only folder it may read"
-            : "the replay camera is not enabled on this daemon (plenopivd.yaml simulation: true "
-              "and replay_dir, or --simulation --replay-dir)");
+        "replay", config_.simulation
+                      ? "the replay camera is not enabled on this daemon: it needs replay_dir "
+                        "(plenopivd.yaml, or --replay-dir), the only folder it may read"
+                      : "the replay camera is not enabled on this daemon (plenopivd.yaml simulation: true "
+                        "and replay_dir, or --simulation --replay-dir)");
   }
   std::tie(processing_factory_, processing_) = choose_processing(config_, extensions);
 
@@ -105,13 +105,11 @@ Daemon::Daemon(DaemonConfig config, const DaemonExtensions& extensions)
                        " holds no secret-key: give the server's .key_secret file");
     }
     const std::vector<std::string> keys = wire::read_public_keys(config_.curve->authorized_clients);
-    spdlog::info("CURVE: {} authorized client key(s) from {}", keys.size(),
-                 config_.curve->authorized_clients.string());
+    spdlog::info("CURVE: {} authorized client key(s) from {}", keys.size(), config_.curve->authorized_clients.string());
     zap_ = std::make_unique<ZapAuthenticator>(context_, std::set<std::string>(keys.begin(), keys.end()));
   }
-  publisher_ = std::make_unique<Publisher>(
-      context_, config_.publish_endpoint, config_.publish_high_water_mark,
-      config_.curve && config_.curve->publish ? server_certificate : std::nullopt);
+  publisher_ = std::make_unique<Publisher>(context_, config_.publish_endpoint, config_.publish_high_water_mark,
+                                           config_.curve && config_.curve->publish ? server_certificate : std::nullopt);
   ControlSecurity security;
   security.curve = server_certificate;
   security.ipc_group = config_.control_socket_group;
@@ -210,8 +208,7 @@ DeferredReply Daemon::list_devices() {
     discovery_ = std::async(std::launch::async, [] { return drivers::discover_devices(); }).share();
   }
   const bool simulation = config_.simulation;
-  const std::filesystem::path replay_dir =
-      simulation ? config_.replay_dir : std::filesystem::path();
+  const std::filesystem::path replay_dir = simulation ? config_.replay_dir : std::filesystem::path();
   return std::async(std::launch::async, [found = discovery_, simulation, replay_dir] {
     msg::Reply reply;
     reply.mutable_devices();  // an empty list is still an answer
@@ -273,8 +270,7 @@ msg::Reply Daemon::calibrate(const msg::Calibrate& request) {
   return reply;
 }
 
-void Daemon::notify_systemd(const msg::Status& s, std::string& last_state, bool watchdog,
-                            std::uint64_t watchdog_us) {
+void Daemon::notify_systemd(const msg::Status& s, std::string& last_state, bool watchdog, std::uint64_t watchdog_us) {
   if (s.state() != last_state) {
     last_state = s.state();
     const std::string line = "STATUS=" + s.state() + (s.run_id().empty() ? "" : " run " + s.run_id()) +
@@ -294,12 +290,11 @@ void Daemon::notify_systemd(const msg::Status& s, std::string& last_state, bool 
 void Daemon::serve(const std::atomic<bool>& stop) {
   std::uint64_t watchdog_us = 0;
   const bool watchdog = sd_watchdog_enabled(0, &watchdog_us) > 0;
-  spdlog::info(
-      "plenopivd {} ready: control {}{}, publishing {}{}, data {}{}{}", PLENOPIV_VERSION,
-      server_->endpoint(), config_.curve ? " (CURVE)" : "", publisher_->endpoint(),
-      config_.curve && config_.curve->publish ? " (CURVE)" : "", config_.data_dir.string(),
-      config_.simulation ? ", simulation enabled" : "",
-      config_.replay_dir.empty() ? "" : ", replay:// reads under " + config_.replay_dir.string());
+  spdlog::info("plenopivd {} ready: control {}{}, publishing {}{}, data {}{}{}", PLENOPIV_VERSION, server_->endpoint(),
+               config_.curve ? " (CURVE)" : "", publisher_->endpoint(),
+               config_.curve && config_.curve->publish ? " (CURVE)" : "", config_.data_dir.string(),
+               config_.simulation ? ", simulation enabled" : "",
+               config_.replay_dir.empty() ? "" : ", replay:// reads under " + config_.replay_dir.string());
   sd_notify(0, "READY=1\nSTATUS=Idle");
   auto last_status = Clock::now();
   std::string last_state;

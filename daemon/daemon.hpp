@@ -53,8 +53,7 @@ class Daemon {
   msg::Reply stop_run();
   DeferredReply list_devices();
   msg::Reply calibrate(const msg::Calibrate& request);
-  void notify_systemd(const msg::Status& status, std::string& last_state, bool watchdog,
-                      std::uint64_t watchdog_us);
+  void notify_systemd(const msg::Status& status, std::string& last_state, bool watchdog, std::uint64_t watchdog_us);
 
   DaemonConfig config_;
   std::string processing_;  // what runs' processing does, for status

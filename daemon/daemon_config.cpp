@@ -28,20 +28,19 @@ RigTiming timing_from(const YamlMap& map) {
   RigTiming t;
   drivers::TimingRequest& r = t.request;
   drivers::TimingLimits& l = t.limits;
-  const std::pair<const char*, double*> keys[] = {
-      {"flashlamp_to_qswitch_s", &r.flashlamp_to_qswitch_s},
-      {"camera_pretrigger_s", &r.camera_pretrigger_s},
-      {"exposure_a_s", &r.exposure_a_s},
-      {"flashlamp_pulse_width_s", &r.flashlamp_pulse_width_s},
-      {"qswitch_pulse_width_s", &r.qswitch_pulse_width_s},
-      {"camera_pulse_width_s", &r.camera_pulse_width_s},
-      {"laser_max_rate_hz", &l.laser_max_rate_hz},
-      {"min_flashlamp_to_qswitch_s", &l.min_flashlamp_to_qswitch_s},
-      {"max_flashlamp_to_qswitch_s", &l.max_flashlamp_to_qswitch_s},
-      {"interline_transfer_s", &l.interline_transfer_s},
-      {"frame_b_s", &l.frame_b_s},
-      {"camera_max_pair_rate_hz", &l.camera_max_pair_rate_hz},
-      {"gate_width_s", &t.gate_width_s}};
+  const std::pair<const char*, double*> keys[] = {{"flashlamp_to_qswitch_s", &r.flashlamp_to_qswitch_s},
+                                                  {"camera_pretrigger_s", &r.camera_pretrigger_s},
+                                                  {"exposure_a_s", &r.exposure_a_s},
+                                                  {"flashlamp_pulse_width_s", &r.flashlamp_pulse_width_s},
+                                                  {"qswitch_pulse_width_s", &r.qswitch_pulse_width_s},
+                                                  {"camera_pulse_width_s", &r.camera_pulse_width_s},
+                                                  {"laser_max_rate_hz", &l.laser_max_rate_hz},
+                                                  {"min_flashlamp_to_qswitch_s", &l.min_flashlamp_to_qswitch_s},
+                                                  {"max_flashlamp_to_qswitch_s", &l.max_flashlamp_to_qswitch_s},
+                                                  {"interline_transfer_s", &l.interline_transfer_s},
+                                                  {"frame_b_s", &l.frame_b_s},
+                                                  {"camera_max_pair_rate_hz", &l.camera_max_pair_rate_hz},
+                                                  {"gate_width_s", &t.gate_width_s}};
   std::vector<std::string_view> known;
   for (const auto& key : keys) known.push_back(key.first);
   map.reject_unknown(known);
@@ -54,8 +53,8 @@ RigTiming timing_from(const YamlMap& map) {
 
 }  // namespace
 
-drivers::Schedule run_schedule(const RigTiming& timing, const drivers::TriggerInfo& trigger,
-                               double rate_hz, double dt_s) {
+drivers::Schedule run_schedule(const RigTiming& timing, const drivers::TriggerInfo& trigger, double rate_hz,
+                               double dt_s) {
   const auto wired = [&](drivers::TriggerLine line) {
     return std::find(trigger.outputs.begin(), trigger.outputs.end(), line) != trigger.outputs.end();
   };
@@ -70,10 +69,9 @@ drivers::Schedule run_schedule(const RigTiming& timing, const drivers::TriggerIn
 
 DaemonConfig load_daemon_config(const std::filesystem::path& path) {
   const YamlMap map(load_yaml_file(path), path.string());
-  map.reject_unknown({"control_endpoint", "control_socket_group", "curve", "publish_endpoint",
-                      "simulation", "replay_dir", "data_dir", "camera_file", "calibration_file",
-                      "camera_uri", "trigger_uri", "log_level", "publish_high_water_mark",
-                      "timing"});
+  map.reject_unknown({"control_endpoint", "control_socket_group", "curve", "publish_endpoint", "simulation",
+                      "replay_dir", "data_dir", "camera_file", "calibration_file", "camera_uri", "trigger_uri",
+                      "log_level", "publish_high_water_mark", "timing"});
   DaemonConfig config;
   const std::filesystem::path base = path.parent_path();
   auto resolve = [&](const std::string& p) {
@@ -98,8 +96,7 @@ DaemonConfig load_daemon_config(const std::filesystem::path& path) {
   if (map.has("calibration_file")) config.calibration_file = resolve(map.string("calibration_file"));
   config.camera_uri = map.string_or("camera_uri", config.camera_uri);
   config.trigger_uri = map.string_or("trigger_uri", config.trigger_uri);
-  config.log_level = map.choice_or("log_level", {"trace", "debug", "info", "warn", "error"},
-                                   config.log_level);
+  config.log_level = map.choice_or("log_level", {"trace", "debug", "info", "warn", "error"}, config.log_level);
   config.publish_high_water_mark = map.integer_in("publish_high_water_mark", config.publish_high_water_mark, 1, 1000);
   if (auto timing = map.optional_map("timing")) config.timing = timing_from(*timing);
   validate(config, path.string());
@@ -126,16 +123,14 @@ void validate(const DaemonConfig& config, const std::string& source) {
                      "--simulation)");
   }
   if (!config.simulation && config.camera_uri.rfind("replay://", 0) == 0) {
-    throw InputError(
-        source + ": camera_uri: '" + config.camera_uri +
-        "' is the replay camera, which this daemon does not enable (simulation: true, or "
-        "--simulation, and replay_dir)");
+    throw InputError(source + ": camera_uri: '" + config.camera_uri +
+                     "' is the replay camera, which this daemon does not enable (simulation: true, or "
+                     "--simulation, and replay_dir)");
   }
   if (!config.simulation && !config.replay_dir.empty()) {
-    throw InputError(
-        source + ": replay_dir: '" + config.replay_dir.string() +
-        "' is for the replay camera, a test and bench tool that exists only with simulation: true "
-        "(or --simulation)");
+    throw InputError(source + ": replay_dir: '" + config.replay_dir.string() +
+                     "' is for the replay camera, a test and bench tool that exists only with simulation: true "
+                     "(or --simulation)");
   }
   if (!config.calibration_file.empty() && config.camera_file.empty()) {
     throw InputError(source + ": calibration_file: '" + config.calibration_file.string() +

@@ -14,14 +14,14 @@ namespace plenopiv::daemon {
 struct RigTiming {
   drivers::TimingRequest request;  // repetition_rate_hz and pulse_separation_s unused: per run
   drivers::TimingLimits limits;
-  double gate_width_s = 10e-6;     // hardware-timed mode: the delay generator's trigger pulse
+  double gate_width_s = 10e-6;  // hardware-timed mode: the delay generator's trigger pulse
 };
 
 // The schedule a run plays on `trigger`: the full sequence (both cavities and the camera) at
 // `rate_hz` with `dt_s`; when the trigger wires `gate` and no Q-switch line, hardware-timed mode
 // (one gate pulse per shot; the delay generator makes dt). InputError naming what to change.
-drivers::Schedule run_schedule(const RigTiming& timing, const drivers::TriggerInfo& trigger,
-                               double rate_hz, double dt_s);
+drivers::Schedule run_schedule(const RigTiming& timing, const drivers::TriggerInfo& trigger, double rate_hz,
+                               double dt_s);
 
 // CURVE authentication (plenopivd.yaml `curve:`; `plenopiv keys` makes the certificate files).
 struct CurveConfig {
@@ -51,7 +51,7 @@ struct DaemonConfig {
   std::string camera_uri;  // the default camera of runs that name none; empty: each run names its own
   std::string trigger_uri = "sim://";
   std::string log_level = "info";
-  int publish_high_water_mark = 4;    // messages queued per subscriber before they are dropped
+  int publish_high_water_mark = 4;  // messages queued per subscriber before they are dropped
   RigTiming timing;
 };
 

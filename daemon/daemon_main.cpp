@@ -1,9 +1,9 @@
 // plenopivd's command line: reads the config, runs the Daemon until SIGTERM/SIGINT, stops cleanly.
 #include "daemon/daemon_main.hpp"
 
-#include <CLI/CLI.hpp>
 #include <spdlog/spdlog.h>
 #include <systemd/sd-daemon.h>
+#include <CLI/CLI.hpp>
 
 #include <atomic>
 #include <csignal>
@@ -26,8 +26,7 @@ int daemon_main(int argc, char** argv, const DaemonExtensions& extensions) {
   CLI::App app{"plenopivd: single-camera plenoptic 3D/3C PIV daemon"};
   app.set_version_flag("--version", std::string(PLENOPIV_VERSION));
   std::filesystem::path config_path;
-  std::string control, publish, data_dir, log_level, camera_uri, camera_file, calibration_file,
-      replay_dir;
+  std::string control, publish, data_dir, log_level, camera_uri, camera_file, calibration_file, replay_dir;
   bool simulation = false;
   app.add_option("-c,--config", config_path, "daemon config (plenopivd.yaml)")->check(CLI::ExistingFile);
   app.add_option("--control", control,

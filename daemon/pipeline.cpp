@@ -60,8 +60,7 @@ std::uint64_t LiveMailbox::dropped() const {
   return dropped_;
 }
 
-msg::StageCounters StageStats::to_message(const char* name, std::uint32_t queue_depth,
-                                          std::uint64_t dropped) const {
+msg::StageCounters StageStats::to_message(const char* name, std::uint32_t queue_depth, std::uint64_t dropped) const {
   msg::StageCounters m;
   m.set_name(name);
   m.set_processed(processed);
@@ -80,24 +79,23 @@ struct Item {
 };
 }  // namespace
 
-void run_live_pipeline(LiveMailbox& mailbox, int max_in_flight, const ProcessFn& process,
-                       const OutputFn& output, PipelineStats& stats, const CancelFlag& cancel) {
+void run_live_pipeline(LiveMailbox& mailbox, int max_in_flight, const ProcessFn& process, const OutputFn& output,
+                       PipelineStats& stats, const CancelFlag& cancel) {
   tbb::parallel_pipeline(
       std::size_t(max_in_flight),
-      tbb::make_filter<void, std::shared_ptr<Item>>(
-          tbb::filter_mode::serial_in_order,
-          [&](tbb::flow_control& fc) -> std::shared_ptr<Item> {
-            std::optional<SharedPair> pair = mailbox.take();
-            if (!pair) {
-              fc.stop();
-              return nullptr;
-            }
-            ++stats.input.processed;
-            ++stats.process.in_flight;
-            auto item = std::make_shared<Item>();
-            item->pair = std::move(*pair);
-            return item;
-          }) &
+      tbb::make_filter<void, std::shared_ptr<Item>>(tbb::filter_mode::serial_in_order,
+                                                    [&](tbb::flow_control& fc) -> std::shared_ptr<Item> {
+                                                      std::optional<SharedPair> pair = mailbox.take();
+                                                      if (!pair) {
+                                                        fc.stop();
+                                                        return nullptr;
+                                                      }
+                                                      ++stats.input.processed;
+                                                      ++stats.process.in_flight;
+                                                      auto item = std::make_shared<Item>();
+                                                      item->pair = std::move(*pair);
+                                                      return item;
+                                                    }) &
           tbb::make_filter<std::shared_ptr<Item>, std::shared_ptr<Item>>(
               tbb::filter_mode::parallel,
               [&](std::shared_ptr<Item> item) {
@@ -116,14 +114,14 @@ void run_live_pipeline(LiveMailbox& mailbox, int max_in_flight, const ProcessFn&
                 --stats.process.in_flight;
                 return item;
               }) &
-          tbb::make_filter<std::shared_ptr<Item>, void>(
-              tbb::filter_mode::serial_in_order, [&](std::shared_ptr<Item> item) {
-                if (!item->result) return;
-                const auto start = Clock::now();
-                output(*item->pair, *item->result);
-                ++stats.output.processed;
-                stats.output.add_time(Clock::now() - start);
-              }));
+          tbb::make_filter<std::shared_ptr<Item>, void>(tbb::filter_mode::serial_in_order,
+                                                        [&](std::shared_ptr<Item> item) {
+                                                          if (!item->result) return;
+                                                          const auto start = Clock::now();
+                                                          output(*item->pair, *item->result);
+                                                          ++stats.output.processed;
+                                                          stats.output.add_time(Clock::now() - start);
+                                                        }));
 }
 
 }  // namespace plenopiv::daemon

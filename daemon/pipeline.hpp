@@ -73,8 +73,8 @@ class LiveMailbox {
 // Per-stage counters, updated by the stages, read by status at any time.
 struct StageStats {
   std::atomic<std::uint64_t> processed{0};
-  std::atomic<std::uint64_t> skipped{0};     // processing threw: the pair stays on disk
-  std::atomic<std::uint64_t> cancelled{0};   // in flight when the run stopped
+  std::atomic<std::uint64_t> skipped{0};    // processing threw: the pair stays on disk
+  std::atomic<std::uint64_t> cancelled{0};  // in flight when the run stopped
   std::atomic<std::uint64_t> busy_ns{0};
   std::atomic<std::uint32_t> in_flight{0};
   void add_time(std::chrono::steady_clock::duration d) {
@@ -94,7 +94,7 @@ using OutputFn = std::function<void(const drivers::FramePair&, ProcessedPair&)>;
 // and output at once; output sees pairs in increasing pair order. A pair whose processing throws
 // is counted as skipped on the processing stage and not output; the run goes on. Once `cancel` is
 // set, pairs in flight give up (counted cancelled); those already done are still output.
-void run_live_pipeline(LiveMailbox& mailbox, int max_in_flight, const ProcessFn& process,
-                       const OutputFn& output, PipelineStats& stats, const CancelFlag& cancel);
+void run_live_pipeline(LiveMailbox& mailbox, int max_in_flight, const ProcessFn& process, const OutputFn& output,
+                       PipelineStats& stats, const CancelFlag& cancel);
 
 }  // namespace plenopiv::daemon

@@ -20,7 +20,8 @@ ReconstructionWork reconstruction_work(const process::PairResult& r) {
   for (const auto& it : r.iterations_a) w.live_a.push_back(it.live_voxels);
   for (const auto& it : r.iterations_b) w.live_b.push_back(it.live_voxels);
   // Over both frames' iterations; a pair whose frames lit no voxel ran none and skipped everything.
-  const double all = double(r.skipped_a.voxels) * r.skipped_a.iterations + double(r.skipped_b.voxels) * r.skipped_b.iterations;
+  const double all =
+      double(r.skipped_a.voxels) * r.skipped_a.iterations + double(r.skipped_b.voxels) * r.skipped_b.iterations;
   w.updates_skipped = all > 0 ? 1.0 - double(r.skipped_a.voxel_updates + r.skipped_b.voxel_updates) / all : 1.0;
   const double unpruned = r.skipped_a.work_unpruned + r.skipped_b.work_unpruned;
   w.work_pruned = unpruned > 0 ? 1.0 - (r.skipped_a.work_done + r.skipped_b.work_done) / unpruned : 0.0;
@@ -58,10 +59,11 @@ ProcessFactory plenoptic_processing(const optics::CameraModel& camera) {
       ProcessedPair out;
       out.vectors = std::move(r.correlation.field);
       out.work = reconstruction_work(r);
-      spdlog::debug("pair {}: MART skipped {:.1f} % of the voxel updates ({:.1f} % of the work pruned); live voxels "
-                    "per iteration A {}, B {}",
-                    pair.pair_index, 100 * out.work->updates_skipped, 100 * out.work->work_pruned,
-                    fmt::join(out.work->live_a, " "), fmt::join(out.work->live_b, " "));
+      spdlog::debug(
+          "pair {}: MART skipped {:.1f} % of the voxel updates ({:.1f} % of the work pruned); live voxels "
+          "per iteration A {}, B {}",
+          pair.pair_index, 100 * out.work->updates_skipped, 100 * out.work->work_pruned,
+          fmt::join(out.work->live_a, " "), fmt::join(out.work->live_b, " "));
       if (keep_volumes) {
         out.volume_a = std::move(r.volume_a);
         out.volume_b = std::move(r.volume_b);

@@ -32,13 +32,12 @@ void Publisher::send(const std::string& topic, const std::string& header,
   // A PUB socket never blocks: at the high-water mark it drops the whole message for that
   // subscriber (multipart messages are delivered whole or not at all).
   socket_.send(zmq::buffer(topic), zmq::send_flags::sndmore | zmq::send_flags::dontwait);
-  socket_.send(zmq::buffer(header), (payloads.empty() ? zmq::send_flags::none
-                                                      : zmq::send_flags::sndmore) |
-                                        zmq::send_flags::dontwait);
+  socket_.send(zmq::buffer(header),
+               (payloads.empty() ? zmq::send_flags::none : zmq::send_flags::sndmore) | zmq::send_flags::dontwait);
   for (std::size_t i = 0; i < payloads.size(); ++i) {
-    socket_.send(zmq::buffer(payloads[i]),
-                 (i + 1 < payloads.size() ? zmq::send_flags::sndmore : zmq::send_flags::none) |
-                     zmq::send_flags::dontwait);
+    socket_.send(
+        zmq::buffer(payloads[i]),
+        (i + 1 < payloads.size() ? zmq::send_flags::sndmore : zmq::send_flags::none) | zmq::send_flags::dontwait);
   }
   ++sent_;
 }
@@ -48,9 +47,7 @@ std::uint64_t Publisher::messages_sent() const {
   return sent_;
 }
 
-void Publisher::publish_status(const msg::Status& status) {
-  send("status", status.SerializeAsString(), {});
-}
+void Publisher::publish_status(const msg::Status& status) { send("status", status.SerializeAsString(), {}); }
 
 FieldSummary summarize(const VectorField& field) {
   FieldSummary s;
@@ -59,8 +56,7 @@ FieldSummary summarize(const VectorField& field) {
   const double to_m_s = field.dt_s > 0 ? 1e-3 / field.dt_s : 0.0;
   for (std::size_t i = 0; i < field.valid.size(); ++i) {
     if (!field.valid[i]) continue;
-    const double speed = std::sqrt(double(field.dx_mm[i]) * field.dx_mm[i] +
-                                   double(field.dy_mm[i]) * field.dy_mm[i] +
+    const double speed = std::sqrt(double(field.dx_mm[i]) * field.dx_mm[i] + double(field.dy_mm[i]) * field.dy_mm[i] +
                                    double(field.dz_mm[i]) * field.dz_mm[i]) *
                          to_m_s;
     ++valid;
@@ -97,9 +93,9 @@ void Publisher::publish_vectors(msg::VectorFieldHeader header, const VectorField
     payloads[3][i] = field.valid[i] ? 1.f : 0.f;
   }
   for (const char* name : {"u", "v", "w", "valid"}) header.add_payloads(name);
-  const auto now_ns = std::uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(
-                                        std::chrono::system_clock::now().time_since_epoch())
-                                        .count());
+  const auto now_ns = std::uint64_t(
+      std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
+          .count());
   header.set_published_ns(now_ns);
   if (header.host_timestamp_ns() != 0) {
     header.set_latency_s((double(now_ns) - double(header.host_timestamp_ns())) * 1e-9);

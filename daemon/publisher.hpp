@@ -31,8 +31,7 @@ class Publisher {
   std::uint64_t messages_sent() const;
 
  private:
-  void send(const std::string& topic, const std::string& header,
-            const std::vector<std::vector<float>>& payloads);
+  void send(const std::string& topic, const std::string& header, const std::vector<std::vector<float>>& payloads);
   mutable std::mutex mutex_;
   zmq::socket_t socket_;
   std::string endpoint_;

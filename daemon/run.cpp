@@ -49,10 +49,8 @@ std::string megabytes(std::uint64_t bytes) {
 
 Run::Run(RunConfig config, std::string run_id, RunEnvironment env)
     : config_(std::move(config)), run_id_(std::move(run_id)), env_(std::move(env)) {
-  const std::string camera_uri =
-      config_.camera_uri.empty() ? env_.default_camera_uri : config_.camera_uri;
-  const std::string trigger_uri =
-      config_.trigger_uri.empty() ? env_.default_trigger_uri : config_.trigger_uri;
+  const std::string camera_uri = config_.camera_uri.empty() ? env_.default_camera_uri : config_.camera_uri;
+  const std::string trigger_uri = config_.trigger_uri.empty() ? env_.default_trigger_uri : config_.trigger_uri;
   if (camera_uri.empty()) {
     throw InputError("camera_uri: the run names no camera and plenopivd.yaml has no camera_uri");
   }
@@ -87,8 +85,7 @@ Run::Run(RunConfig config, std::string run_id, RunEnvironment env)
     const double needed = double(planned) * double(bytes_per_pair_) + double(kReserveBytes);
     if (double(*free) < needed) {
       throw InputError("data_dir: " + env_.data_dir.string() + " has " + megabytes(*free) + " free; " +
-                       std::to_string(planned) + " pairs of raw frames need " +
-                       megabytes(std::uint64_t(needed)) +
+                       std::to_string(planned) + " pairs of raw frames need " + megabytes(std::uint64_t(needed)) +
                        (config_.pair_count || config_.duration_s > 0 ? "" : " to start an unbounded run") +
                        ": free some space or record fewer pairs");
     }
@@ -105,13 +102,14 @@ Run::Run(RunConfig config, std::string run_id, RunEnvironment env)
   setup.camera_file = env_.camera_file;
   setup.camera_model = info.vendor + " " + info.model + " " + info.serial;
   setup.camera_triggering = wiring.description;
-  if (!calibration.nominal()) setup.calibration = run_folder::CalibrationCopy{calibration.source, calibration.bytes, calibration.crc32};
+  if (!calibration.nominal())
+    setup.calibration = run_folder::CalibrationCopy{calibration.source, calibration.bytes, calibration.crc32};
   dir_ = run_folder::run_dir(env_.data_dir, run_id_);
   if (std::filesystem::exists(dir_)) throw InputError("run folder " + dir_.string() + ": exists already");
   spdlog::info("run {}: calibration {}", run_id_, calibration.summary());
   spdlog::info("run {}: {} pairs at {} Hz, dt {} s, from {}, trigger {}, folder {}", run_id_,
-               config_.pair_count ? std::to_string(config_.pair_count) : "unlimited",
-               config_.rate_hz, config_.dt_s, camera_uri, trigger_uri, dir_.string());
+               config_.pair_count ? std::to_string(config_.pair_count) : "unlimited", config_.rate_hz, config_.dt_s,
+               camera_uri, trigger_uri, dir_.string());
   if (wiring.source == drivers::TriggerSource::Software) {
     spdlog::warn("run {}: camera triggering {}", run_id_, wiring.description);
   } else {
@@ -233,16 +231,16 @@ void Run::drain_after_stop() {
       continue;
     }
     ++not_recorded_at_stop_;
-    spdlog::warn("run {}: trigger {}: not recorded: the stop's {} s bound was reached", run_id_,
-                 pair->trigger_index, kStopRecordBound.count() / 1000.0);
+    spdlog::warn("run {}: trigger {}: not recorded: the stop's {} s bound was reached", run_id_, pair->trigger_index,
+                 kStopRecordBound.count() / 1000.0);
   }
   take_drops();
 }
 
 void Run::acquire() {
   try {
-    const auto period = std::chrono::duration_cast<Clock::duration>(
-        std::chrono::duration<double>(1.0 / config_.rate_hz));
+    const auto period =
+        std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / config_.rate_hz));
     const bool software = camera_trigger_ == drivers::TriggerSource::Software;
     trigger_->start(config_.pair_count);  // 0: until stopped
     const auto started = Clock::now();
@@ -257,8 +255,7 @@ void Run::acquire() {
       const std::uint64_t received = pairs_received_;
       if (config_.pair_count && received >= config_.pair_count) break;
       const auto now = Clock::now();
-      if (config_.duration_s > 0 &&
-          now - started >= std::chrono::duration<double>(config_.duration_s)) {
+      if (config_.duration_s > 0 && now - started >= std::chrono::duration<double>(config_.duration_s)) {
         break;
       }
       if (!trigger_->running() && !last_shot) {
@@ -281,10 +278,10 @@ void Run::acquire() {
       }
       // All shots fired and the missing pairs never came (lost frames): end after a grace time.
       if (last_shot && (!software || !more_to_fire) && now - *last_shot > 2 * period + 1s) break;
-      const auto wait = software ? std::clamp(std::chrono::duration_cast<std::chrono::milliseconds>(
-                                                  next_trigger - Clock::now()),
-                                              0ms, 50ms)
-                                 : 50ms;
+      const auto wait =
+          software ? std::clamp(std::chrono::duration_cast<std::chrono::milliseconds>(next_trigger - Clock::now()), 0ms,
+                                50ms)
+                   : 50ms;
       if (auto pair = camera_->next_pair(wait)) record(std::move(*pair));
     }
     // The last pair can come before its shot has finished (its falling edges): let the trigger
@@ -381,8 +378,7 @@ void Run::run() {
                 }
                 env_.publisher->publish_vectors(h, result.vectors);
                 if (config_.publish_volumes) {
-                  for (auto [volume, name] : {std::pair{&result.volume_a, "A"},
-                                              std::pair{&result.volume_b, "B"}}) {
+                  for (auto [volume, name] : {std::pair{&result.volume_a, "A"}, std::pair{&result.volume_b, "B"}}) {
                     if (!*volume) continue;
                     msg::VolumeHeader vh;
                     vh.set_run_id(run_id_);
@@ -412,8 +408,8 @@ void Run::run() {
   }
   const std::uint64_t skipped = mailbox_->dropped() + stats_.process.skipped + stats_.process.cancelled;
   try {
-    recorder_->close(failure.empty() ? (stop_ ? "stopped" : "complete") : "failed: " + failure,
-                     stats_.output.processed, skipped, losses(), frames_lost());
+    recorder_->close(failure.empty() ? (stop_ ? "stopped" : "complete") : "failed: " + failure, stats_.output.processed,
+                     skipped, losses(), frames_lost());
   } catch (const std::exception& e) {
     if (failure.empty()) failure = std::string("closing the run folder: ") + e.what();
   }
@@ -424,15 +420,16 @@ void Run::run() {
     // Frames in no recorded pair (as the status counts them), said at the end where a log reader
     // looks: a warning when there were any.
     const drivers::TriggerCounters tc = trigger_->counters();
-    spdlog::log(lost || tc.shots_abandoned ? spdlog::level::warn : spdlog::level::info,
-                "run {} ended: {} pairs recorded, {} processed, {} skipped, {} frames lost{}{}", run_id_,
-                recorder_->pairs_recorded(), stats_.output.processed.load(), skipped, lost,
-                tc.shots_delayed ? ", " + std::to_string(tc.shots_delayed) + " laser shots delayed (playback late)" : "",
-                tc.shots_abandoned ? ", " + std::to_string(tc.shots_abandoned) + " laser shots abandoned" : "");
+    spdlog::log(
+        lost || tc.shots_abandoned ? spdlog::level::warn : spdlog::level::info,
+        "run {} ended: {} pairs recorded, {} processed, {} skipped, {} frames lost{}{}", run_id_,
+        recorder_->pairs_recorded(), stats_.output.processed.load(), skipped, lost,
+        tc.shots_delayed ? ", " + std::to_string(tc.shots_delayed) + " laser shots delayed (playback late)" : "",
+        tc.shots_abandoned ? ", " + std::to_string(tc.shots_abandoned) + " laser shots abandoned" : "");
   } else {
     env_.state->fail("run " + run_id_ + ": " + failure);
-    spdlog::error("run {} failed after {} pairs recorded ({} frames lost): {}", run_id_,
-                  recorder_->pairs_recorded(), lost, failure);
+    spdlog::error("run {} failed after {} pairs recorded ({} frames lost): {}", run_id_, recorder_->pairs_recorded(),
+                  lost, failure);
   }
   finished_ = true;
 }
@@ -464,8 +461,10 @@ void Run::fill_status(msg::Status& s) const {
   s.set_run_set_up(prepared_);
   if (!prepared_) {
     if (s.message().empty() && !finished_) {
-      const double elapsed = double(std::chrono::duration_cast<std::chrono::nanoseconds>(
-                                        Clock::now().time_since_epoch()).count() - setup_started_ns_) * 1e-9;
+      const double elapsed =
+          double(std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now().time_since_epoch()).count() -
+                 setup_started_ns_) *
+          1e-9;
       char text[96];
       std::snprintf(text, sizeof text, "setting up: processing and weight tables, %.1f s so far", elapsed);
       s.set_message(setup_started_ns_ ? text : "setting up");

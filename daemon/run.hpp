@@ -46,7 +46,7 @@ struct RunEnvironment {
   // What the laser and camera need and allow; the run's rate_hz and dt_s must fit (run_schedule).
   RigTiming timing;
   RunStateMachine* state = nullptr;
-  Publisher* publisher = nullptr;     // null: nothing published
+  Publisher* publisher = nullptr;  // null: nothing published
   ProcessFactory processing;
   // Called whenever the run makes progress (a pair recorded, a field published): the heartbeat
   // that the systemd watchdog pings follow.

@@ -20,8 +20,8 @@ std::string RunConfig::process_yaml() const {
 RunConfig parse_run_config(const std::string& text, const std::string& source) {
   const YAML::Node root = load_yaml_text(text, source);
   const YamlMap map(root, source);
-  std::vector<std::string_view> known{"camera_uri", "trigger_uri", "pairs",           "duration_s",
-                                      "rate_hz",    "publish_volumes", "max_pairs_in_flight", "live_queue"};
+  std::vector<std::string_view> known{"camera_uri",      "trigger_uri",         "pairs",     "duration_s", "rate_hz",
+                                      "publish_volumes", "max_pairs_in_flight", "live_queue"};
   known.insert(known.end(), std::begin(process::kProcessKeys), std::end(process::kProcessKeys));
   map.reject_unknown(std::span<const std::string_view>(known));
   RunConfig c;

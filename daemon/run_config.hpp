@@ -13,9 +13,9 @@
 namespace plenopiv::daemon {
 
 struct RunConfig {
-  std::string text;         // the YAML as the operator wrote it (saved in the run folder)
-  std::string camera_uri;   // empty: the daemon's default
-  std::string trigger_uri;  // empty: the daemon's default
+  std::string text;              // the YAML as the operator wrote it (saved in the run folder)
+  std::string camera_uri;        // empty: the daemon's default
+  std::string trigger_uri;       // empty: the daemon's default
   std::uint64_t pair_count = 0;  // 0: until stopped or duration_s
   double duration_s = 0.0;       // 0: until stopped or pair_count
   double rate_hz = 1.0;          // laser repetition rate: pairs per second

@@ -5,11 +5,16 @@ namespace plenopiv::daemon {
 
 const char* to_string(RunState state) {
   switch (state) {
-    case RunState::Idle: return "Idle";
-    case RunState::Armed: return "Armed";
-    case RunState::Acquiring: return "Acquiring";
-    case RunState::Draining: return "Draining";
-    case RunState::Error: return "Error";
+    case RunState::Idle:
+      return "Idle";
+    case RunState::Armed:
+      return "Armed";
+    case RunState::Acquiring:
+      return "Acquiring";
+    case RunState::Draining:
+      return "Draining";
+    case RunState::Error:
+      return "Error";
   }
   return "?";
 }

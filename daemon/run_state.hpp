@@ -29,18 +29,18 @@ class RunStateMachine {
   std::string error() const;   // what put it into Error
 
   // Operator requests: each throws WrongStateError (and changes nothing) when not allowed.
-  void start(const std::string& run_id);  // Idle|Error → Armed
-  void stop();                            // Armed|Acquiring → Draining; Error → Idle
-  void check_calibration_allowed() const; // Idle|Error only: calibration needs the camera
+  void start(const std::string& run_id);   // Idle|Error → Armed
+  void stop();                             // Armed|Acquiring → Draining; Error → Idle
+  void check_calibration_allowed() const;  // Idle|Error only: calibration needs the camera
   // The run could not be set up (camera not found, folder not writable): Armed → Idle, as if the
   // start had been refused.
   void cancel_start();
 
   // Progress reported by the run itself. These are the run thread's own steps, so a call in
   // another state is a bug and throws std::logic_error.
-  void acquiring();       // Armed → Acquiring
-  void finishing();       // Acquiring → Draining (pair count or duration reached); no-op if Draining
-  void drained();         // Draining → Idle
+  void acquiring();                   // Armed → Acquiring
+  void finishing();                   // Acquiring → Draining (pair count or duration reached); no-op if Draining
+  void drained();                     // Draining → Idle
   void fail(const std::string& why);  // any → Error
 
  private:

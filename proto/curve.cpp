@@ -126,8 +126,9 @@ std::vector<std::string> read_public_keys(const fs::path& dir) {
 ClientSecurity client_security(const fs::path& server_certificate, const fs::path& client_certificate) {
   if (server_certificate.empty() && client_certificate.empty()) return {};
   if (server_certificate.empty() || client_certificate.empty()) {
-    throw InputError("CURVE needs both the server's certificate (--server-key) and this client's secret "
-                     "certificate (--client-cert)");
+    throw InputError(
+        "CURVE needs both the server's certificate (--server-key) and this client's secret "
+        "certificate (--client-cert)");
   }
   ClientSecurity s;
   s.server_public_key = read_certificate(server_certificate).public_key;

@@ -47,9 +47,8 @@ void write_text(const fs::path& path, const std::string& text) {
 // quotes them; the manifest writes them as numbers).
 std::set<std::string> integer64_fields() {
   std::set<std::string> names;
-  for (const google::protobuf::Descriptor* d :
-       {msg::RunManifest::descriptor(), msg::ManifestPair::descriptor(), msg::ManifestDrop::descriptor(),
-        msg::Losses::descriptor()}) {
+  for (const google::protobuf::Descriptor* d : {msg::RunManifest::descriptor(), msg::ManifestPair::descriptor(),
+                                                msg::ManifestDrop::descriptor(), msg::Losses::descriptor()}) {
     for (int i = 0; i < d->field_count(); ++i) {
       const auto type = d->field(i)->cpp_type();
       if (type == google::protobuf::FieldDescriptor::CPPTYPE_INT64 ||
@@ -171,8 +170,7 @@ Writer::Writer(const Setup& setup) : dir_(run_dir(setup.data_dir, setup.run_id))
   std::error_code ec;
   fs::create_directories(setup.data_dir, ec);
   if (!fs::create_directory(dir_, ec)) {
-    throw InputError("run folder " + dir_.string() + ": " +
-                     (ec ? ec.message() : std::string("already exists")));
+    throw InputError("run folder " + dir_.string() + ": " + (ec ? ec.message() : std::string("already exists")));
   }
   fs::create_directory(dir_ / "frames");
   fs::create_directory(dir_ / "vectors");
@@ -202,8 +200,7 @@ Writer::Writer(const Setup& setup) : dir_(run_dir(setup.data_dir, setup.run_id))
     manifest_.set_calibration("nominal");
   }
   if (!setup.camera_file.empty()) {
-    io::write_atomically(dir_ / "camera.yaml",
-                         [&](const fs::path& tmp) { fs::copy_file(setup.camera_file, tmp); });
+    io::write_atomically(dir_ / "camera.yaml", [&](const fs::path& tmp) { fs::copy_file(setup.camera_file, tmp); });
     manifest_.set_camera_file("camera.yaml");
   }
   std::lock_guard lock(mutex_);
@@ -281,8 +278,8 @@ void Writer::add_warning(const std::string& warning) {
   manifest_.add_warnings(warning);
 }
 
-void Writer::close(const std::string& state, std::uint64_t processed, std::uint64_t skipped,
-                     const msg::Losses& losses, std::uint64_t frames_lost) {
+void Writer::close(const std::string& state, std::uint64_t processed, std::uint64_t skipped, const msg::Losses& losses,
+                   std::uint64_t frames_lost) {
   std::lock_guard lock(mutex_);
   if (closed_) return;
   closed_ = true;
@@ -316,7 +313,8 @@ void Writer::write_manifest_locked() { write_text(dir_ / "manifest.json", manife
 Reader::Reader(const fs::path& dir) : dir_(dir) {
   if (!fs::is_directory(dir_)) throw InputError("--run: " + dir_.string() + " is not a folder");
   const fs::path manifest_path = dir_ / "manifest.json";
-  if (!fs::is_regular_file(manifest_path)) throw InputError(manifest_path.string() + ": missing (not a plenopivd run folder?)");
+  if (!fs::is_regular_file(manifest_path))
+    throw InputError(manifest_path.string() + ": missing (not a plenopivd run folder?)");
   manifest_ = parse_manifest(read_text(manifest_path), manifest_path.string());
   file("process_file", manifest_.process_file());
   file("camera_file", manifest_.camera_file());
@@ -345,8 +343,8 @@ Reader::Reader(const fs::path& dir) : dir_(dir) {
     PairEntry e;
     e.pair_index = p.pair_index();
     e.trigger_index = p.trigger_index();
-    for (const auto& [key, name, out] : {std::tuple{".frame_a", &p.frame_a(), &e.frame_a},
-                                         std::tuple{".frame_b", &p.frame_b(), &e.frame_b}}) {
+    for (const auto& [key, name, out] :
+         {std::tuple{".frame_a", &p.frame_a(), &e.frame_a}, std::tuple{".frame_b", &p.frame_b(), &e.frame_b}}) {
       *out = file(where + key, *name);
       if (!names.insert(fs::path(*name).lexically_normal().string()).second) {
         throw InputError(manifest_path.string() + ": " + where + key + ": " + *name + " is listed twice");
@@ -360,14 +358,16 @@ Reader::Reader(const fs::path& dir) : dir_(dir) {
 
 fs::path Reader::file(const std::string& key, const std::string& name) const {
   const fs::path manifest = dir_ / "manifest.json";
-  if (name.empty()) throw InputError(manifest.string() + ": " + key + " is empty: the run folder does not say where it is");
+  if (name.empty())
+    throw InputError(manifest.string() + ": " + key + " is empty: the run folder does not say where it is");
   // Every file a manifest names lies inside the folder: relative, never through "..".
   const fs::path rel(name);
   if (rel.is_absolute() || std::any_of(rel.begin(), rel.end(), [](const fs::path& part) { return part == ".."; })) {
     throw InputError(manifest.string() + ": " + key + ": '" + name + "' is not a path inside the run folder");
   }
   const fs::path path = dir_ / name;
-  if (!fs::is_regular_file(path)) throw InputError(manifest.string() + ": " + key + ": " + path.string() + " is missing");
+  if (!fs::is_regular_file(path))
+    throw InputError(manifest.string() + ": " + key + ": " + path.string() + " is missing");
   return path;
 }
 

@@ -69,7 +69,7 @@ class Writer {
     std::string camera_uri, trigger_uri;
     std::filesystem::path camera_file;  // copied as camera.yaml; empty: none
     std::string camera_model;
-    std::string camera_triggering;  // drivers::CameraWiring::description
+    std::string camera_triggering;               // drivers::CameraWiring::description
     std::optional<CalibrationCopy> calibration;  // none: the camera's nominal lattice
   };
   // Creates the folder (InputError if it exists or cannot be made) and the first manifest.
@@ -88,8 +88,8 @@ class Writer {
   void add_warning(const std::string& warning);
   // Writes the final manifest with `state` ("complete", "stopped", "failed: ..."), the losses and
   // the raw frames lost, then statistics (if any field was recorded). Later calls do nothing.
-  void close(const std::string& state, std::uint64_t processed, std::uint64_t skipped,
-             const msg::Losses& losses = {}, std::uint64_t frames_lost = 0);
+  void close(const std::string& state, std::uint64_t processed, std::uint64_t skipped, const msg::Losses& losses = {},
+             std::uint64_t frames_lost = 0);
 
   std::uint64_t pairs_recorded() const;
   msg::RunManifest manifest() const;
@@ -154,8 +154,8 @@ std::vector<std::filesystem::path> mark_interrupted_runs(const std::filesystem::
 // as the mean, in m/s), beside it u_rms, v_rms, w_rms (m/s), count (valid samples per node) and
 // valid_fraction (count / fields); the attribute `fields` says how many fields went in (paper
 // sec 7). One writer for the live run's and the reprocessed run's statistics.
-void write_statistics(const std::filesystem::path& path, const piv::RunningStatistics& statistics,
-                      double nominal_dt_s, std::uint64_t fields);
+void write_statistics(const std::filesystem::path& path, const piv::RunningStatistics& statistics, double nominal_dt_s,
+                      std::uint64_t fields);
 
 // A file name-safe run id from the current UTC time: 20261123-035512.
 std::string new_run_id();

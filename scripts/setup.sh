@@ -9,6 +9,8 @@ packages=(
   # .ci/run's sanitizer and fuzzing builds: clang with libFuzzer and the sanitizer runtimes,
   # llvm-symbolizer for their stack traces, ccache for the rebuilds
   clang libclang-rt-14-dev llvm ccache
+  # the source format (.clang-format; scripts/format.sh)
+  clang-format-14
   # design card: camera, USB, GPIO, images, messaging, logging, threads, tests
   libaravis-dev aravis-tools libusb-1.0-0-dev libgpiod-dev gpiod libopencv-dev
   libzmq3-dev cppzmq-dev libprotobuf-dev protobuf-compiler libspdlog-dev libtbb-dev

@@ -39,10 +39,10 @@ calib::Calibration calibrate_from_files(const optics::CameraModel& camera, const
   } catch (const InputError& e) {
     // The message says which image (calibration, white or dark) it is about; name its files.
     const std::string what = e.what();
-    const auto& culprit = what.rfind("white", 0) == 0 ? files.white
+    const auto& culprit = what.rfind("white", 0) == 0  ? files.white
                           : what.rfind("dark", 0) == 0 ? (files.dark.empty() ? files.white : files.dark)
-                          : files.calibration.empty() ? files.white
-                                                      : files.calibration;
+                          : files.calibration.empty()  ? files.white
+                                                       : files.calibration;
     throw InputError(named(culprit) + ": " + what);
   }
 }

@@ -10,8 +10,7 @@ namespace plenopiv::client {
 void add_camera_commands(CLI::App& app) {
   auto* camera = app.add_subcommand("camera", "validate a camera file and show its geometry");
   auto file = std::make_shared<std::string>();  // owned by the callback, which the app keeps
-  camera->add_option("file", *file, "camera file (YAML: sensor, microlens, main_lens)")
-      ->required();
+  camera->add_option("file", *file, "camera file (YAML: sensor, microlens, main_lens)")->required();
   camera->callback([file] {
     const optics::CameraModel model = optics::load_camera_file(*file);
     std::cout << *file << "\n" << model.summary();

@@ -15,8 +15,8 @@ namespace {
 // Prints an Error reply and turns it into the exit status 4.
 void check(const msg::Reply& reply) {
   if (reply.has_error()) {
-    std::cerr << "plenopivd refused: " << msg::Error::Code_Name(reply.error().code()) << ": "
-              << reply.error().message() << "\n";
+    std::cerr << "plenopivd refused: " << msg::Error::Code_Name(reply.error().code()) << ": " << reply.error().message()
+              << "\n";
     throw CLI::RuntimeError(4);
   }
 }
@@ -27,27 +27,26 @@ ControlClient connect(const ControlOptions& options) {
 }
 
 void print_status(const msg::Status& s) {
-  std::cout << "state          " << s.state() << (s.message().empty() ? "" : " (" + s.message() + ")")
-            << "\n"
+  std::cout << "state          " << s.state() << (s.message().empty() ? "" : " (" + s.message() + ")") << "\n"
             << "version        " << s.version() << "\n"
             << "uptime         " << std::fixed << std::setprecision(1) << s.uptime_s() << " s\n"
             << "camera         " << s.camera_uri() << "\n"
             << "trigger        " << s.trigger_uri() << "\n";
   if (!s.run_id().empty()) {
     std::cout << "run            " << s.run_id() << "  " << s.run_dir() << "\n"
-              << "pairs          acquired " << s.pairs_acquired() << ", recorded "
-              << s.pairs_recorded() << ", processed " << s.pairs_processed() << ", skipped "
-              << s.pairs_skipped() << ", frames lost " << s.frames_lost() << "\n";
+              << "pairs          acquired " << s.pairs_acquired() << ", recorded " << s.pairs_recorded()
+              << ", processed " << s.pairs_processed() << ", skipped " << s.pairs_skipped() << ", frames lost "
+              << s.frames_lost() << "\n";
     for (const msg::StageCounters& c : s.stages()) {
-      std::cout << "  " << std::left << std::setw(13) << c.name() << std::right << "processed "
-                << c.processed() << ", skipped " << c.skipped() << ", dropped " << c.dropped() << ", queue "
-                << c.queue_depth() << ", mean " << std::setprecision(3) << c.mean_time_s() << " s\n";
+      std::cout << "  " << std::left << std::setw(13) << c.name() << std::right << "processed " << c.processed()
+                << ", skipped " << c.skipped() << ", dropped " << c.dropped() << ", queue " << c.queue_depth()
+                << ", mean " << std::setprecision(3) << c.mean_time_s() << " s\n";
     }
     if (s.has_losses()) {
       const msg::Losses& l = s.losses();
       std::cout << "losses         frames never arrived " << l.frames_never_arrived() << ", discarded "
-                << l.frames_discarded() << "; pairs: camera queue " << l.camera_queue_overflow()
-                << ", not read out " << l.not_read_out() << ", not recorded at stop " << l.not_recorded_at_stop()
+                << l.frames_discarded() << "; pairs: camera queue " << l.camera_queue_overflow() << ", not read out "
+                << l.not_read_out() << ", not recorded at stop " << l.not_recorded_at_stop()
                 << "; laser shots abandoned " << l.shots_abandoned() << "\n"
                 << "               live path: queue dropped " << l.live_queue_dropped() << ", failed "
                 << l.processing_failed() << ", cancelled " << l.processing_cancelled() << " (on disk)\n";
@@ -67,9 +66,9 @@ void print_status(const msg::Status& s) {
         return text;
       };
       std::cout << "reconstruction pair " << r.pair_index() << ": " << std::setprecision(1)
-                << 100 * r.voxel_updates_skipped() << " % of the voxel updates skipped ("
-                << 100 * r.work_pruned() << " % of the work pruned); live voxels per iteration of "
-                << r.voxels() << ": A " << live(r.live_voxels_a()) << "; B " << live(r.live_voxels_b()) << "\n";
+                << 100 * r.voxel_updates_skipped() << " % of the voxel updates skipped (" << 100 * r.work_pruned()
+                << " % of the work pruned); live voxels per iteration of " << r.voxels() << ": A "
+                << live(r.live_voxels_a()) << "; B " << live(r.live_voxels_b()) << "\n";
     }
     for (const std::string& w : s.warnings()) std::cout << "warning        " << w << "\n";
   }
@@ -98,20 +97,18 @@ void add_control_commands(CLI::App& app, ControlOptions& options) {
     } while (live);
   });
 
-  app.add_subcommand("devices", "list the cameras and trigger lines plenopivd can use")
-      ->callback([&options] {
-        ControlClient client = connect(options);
-        msg::Request request;
-        request.mutable_list_devices();
-        const msg::Reply reply = client.call(request);
-        check(reply);
-        for (const msg::Device& d : reply.devices().devices()) {
-          std::cout << std::left << std::setw(8) << d.kind() << " " << std::setw(28) << d.uri()
-                    << " " << d.model() << (d.detail().empty() ? "" : "  (" + d.detail() + ")")
-                    << "\n";
-        }
-        if (reply.devices().devices_size() == 0) std::cout << "no devices found\n";
-      });
+  app.add_subcommand("devices", "list the cameras and trigger lines plenopivd can use")->callback([&options] {
+    ControlClient client = connect(options);
+    msg::Request request;
+    request.mutable_list_devices();
+    const msg::Reply reply = client.call(request);
+    check(reply);
+    for (const msg::Device& d : reply.devices().devices()) {
+      std::cout << std::left << std::setw(8) << d.kind() << " " << std::setw(28) << d.uri() << " " << d.model()
+                << (d.detail().empty() ? "" : "  (" + d.detail() + ")") << "\n";
+    }
+    if (reply.devices().devices_size() == 0) std::cout << "no devices found\n";
+  });
 }
 
 }  // namespace plenopiv::client

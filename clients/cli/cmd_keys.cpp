@@ -11,9 +11,10 @@ namespace plenopiv::client {
 void add_keys_commands(CLI::App& app) {
   auto dir = std::make_shared<std::string>(".");
   auto name = std::make_shared<std::string>();
-  auto* keys = app.add_subcommand(
-      "keys", "make a CURVE key pair: <name>.key (public: give it to the other side) and <name>.key_secret "
-              "(keep it: mode 0600)");
+  auto* keys =
+      app.add_subcommand("keys",
+                         "make a CURVE key pair: <name>.key (public: give it to the other side) and <name>.key_secret "
+                         "(keep it: mode 0600)");
   keys->add_option("name", *name, "certificate name, e.g. plenopivd or operator-desk")->required();
   keys->add_option("-o,--output", *dir, "folder to write the two files to")->capture_default_str();
   keys->callback([dir, name] {

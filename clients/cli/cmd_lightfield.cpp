@@ -46,7 +46,8 @@ lightfield::LightField load_field(const LightFieldArgs& args, optics::CameraMode
 }
 
 // One tile per image, a common grey scale (so relative sharpness shows), the label under each.
-void write_contact_sheet(const std::string& path, const std::vector<ImageF>& pages, const std::vector<std::string>& labels) {
+void write_contact_sheet(const std::string& path, const std::vector<ImageF>& pages,
+                         const std::vector<std::string>& labels) {
   float top = 0;
   for (const auto& p : pages)
     for (float v : p.pixels) top = std::max(top, v);
@@ -63,8 +64,8 @@ void write_contact_sheet(const std::string& path, const std::vector<ImageF>& pag
     cv::resize(tile8, big, cv::Size(tw, h * scale), 0, 0, cv::INTER_NEAREST);
     const int x = int(k % cols) * tw, y = int(k / cols) * th;
     big.copyTo(sheet(cv::Rect(x, y, tw, h * scale)));
-    cv::putText(sheet, labels[k], cv::Point(x + 2, y + h * scale + 14), cv::FONT_HERSHEY_SIMPLEX, 0.4,
-                cv::Scalar(255), 1);
+    cv::putText(sheet, labels[k], cv::Point(x + 2, y + h * scale + 14), cv::FONT_HERSHEY_SIMPLEX, 0.4, cv::Scalar(255),
+                1);
   }
   std::vector<unsigned char> png;
   if (!cv::imencode(".png", sheet, png)) throw InputError(path + ": cannot encode PNG");
@@ -104,9 +105,8 @@ void run_refocus(const LightFieldArgs& args) {
     progress.update(double(k + 1) / double(alphas.size()));
   }
   io::write_tiff_stack(args.output, stack);
-  const std::string sheet = args.sheet.empty()
-                                ? std::filesystem::path(args.output).replace_extension(".png").string()
-                                : args.sheet;
+  const std::string sheet =
+      args.sheet.empty() ? std::filesystem::path(args.output).replace_extension(".png").string() : args.sheet;
   write_contact_sheet(sheet, stack, labels);
   std::cout << args.output << ": " << stack.size() << " refocused images of " << stack[0].width << " x "
             << stack[0].height << " (one pixel per microlens)\n"
@@ -146,7 +146,8 @@ void add_common(CLI::App* cmd, LightFieldArgs& args) {
 
 void add_lightfield_commands(CLI::App& app) {
   auto refocus_args = std::make_shared<LightFieldArgs>();
-  auto* refocus = app.add_subcommand("refocus", "computational refocusing (eqs 2-4): a focal stack and a contact sheet");
+  auto* refocus =
+      app.add_subcommand("refocus", "computational refocusing (eqs 2-4): a focal stack and a contact sheet");
   add_common(refocus, *refocus_args);
   refocus->add_option("--z", refocus_args->depths, "object depths in mm: start:stop:step or a,b,c (default -10:10:1)");
   refocus->add_option("--alpha", refocus_args->alphas, "refocus at these alpha = s'_i/s_i instead of depths");

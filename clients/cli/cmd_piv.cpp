@@ -43,9 +43,8 @@ std::string pass_line(const piv::PassReport& r) {
                 "unresolved %zu); fallback fits %zu parabolic, %zu centroid; %.2f s (deform "
                 "%.2f, correlate %.2f, %.0f windows/s)",
                 r.pass, r.passes, w[0], w[1], w[2], r.settings.overlap_percent, r.settings.depth_margin, r.vectors[0],
-                r.vectors[1], r.vectors[2], r.no_signal, v.outliers, v.second_peak, v.third_peak,
-                v.interpolated, v.unresolved, r.flag_parabolic, r.flag_centroid, seconds,
-                r.deform_s, r.correlate_s,
+                r.vectors[1], r.vectors[2], r.no_signal, v.outliers, v.second_peak, v.third_peak, v.interpolated,
+                v.unresolved, r.flag_parabolic, r.flag_centroid, seconds, r.deform_s, r.correlate_s,
                 r.correlate_s > 0 ? double(r.windows) / r.correlate_s : 0.0);
   return line;
 }
@@ -73,10 +72,9 @@ void run_correlate(const CorrelateOptions& o) {
   const Volume a = io::read_volume_h5(o.first);
   const Volume b = io::read_volume_h5(o.second);
   if (!(a.grid == b.grid))
-    throw InputError(o.first + " and " + o.second + " are on different grids (" +
-                     std::to_string(a.grid.shape[0]) + "x" + std::to_string(a.grid.shape[1]) + "x" +
-                     std::to_string(a.grid.shape[2]) + " vs " + std::to_string(b.grid.shape[0]) +
-                     "x" + std::to_string(b.grid.shape[1]) + "x" +
+    throw InputError(o.first + " and " + o.second + " are on different grids (" + std::to_string(a.grid.shape[0]) +
+                     "x" + std::to_string(a.grid.shape[1]) + "x" + std::to_string(a.grid.shape[2]) + " vs " +
+                     std::to_string(b.grid.shape[0]) + "x" + std::to_string(b.grid.shape[1]) + "x" +
                      std::to_string(b.grid.shape[2]) +
                      " voxels, or different origin/spacing): correlate volumes of one grid");
   // A pass is the unit of progress: one line each with its counts, and on a terminal the shared
@@ -109,8 +107,7 @@ void run_correlate(const CorrelateOptions& o) {
 
 void add_piv_commands(CLI::App& app) {
   auto o = std::make_shared<CorrelateOptions>();  // owned by the callback, which the app keeps
-  auto* cmd = app.add_subcommand(
-      "correlate", "cross-correlate two volumes (HDF5) into a 3D/3C vector field (sec 6.3)");
+  auto* cmd = app.add_subcommand("correlate", "cross-correlate two volumes (HDF5) into a 3D/3C vector field (sec 6.3)");
   cmd->add_option("first", o->first, "volume of exposure A (HDF5 /volume)")->required();
   cmd->add_option("second", o->second, "volume of exposure B, same grid")->required();
   cmd->add_option("-o,--output", o->output, "vector field to write (HDF5 /vectors)")->required();
@@ -137,7 +134,7 @@ void add_piv_commands(CLI::App& app) {
                   "estimate (default; bit-identical between runs) or measure (faster FFTs)")
       ->check(CLI::IsMember({"estimate", "measure"}));
   cmd->add_flag("--no-prefilter", o->no_prefilter,
-               "correlate the volumes as they are (default: binomial smoothing first)");
+                "correlate the volumes as they are (default: binomial smoothing first)");
   cmd->add_option("--threads", o->threads, "worker threads (0: all cores)")->capture_default_str();
   cmd->callback([o] { run_correlate(*o); });
 }

@@ -12,10 +12,10 @@
 #include <set>
 #include <sstream>
 
-#include <opencv2/imgcodecs.hpp>
-#include <opencv2/imgproc.hpp>
 #include <google/protobuf/util/json_util.h>
 #include <tbb/global_control.h>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "clients/cli/calibration_frames.hpp"
 #include "clients/cli/commands.hpp"
@@ -37,9 +37,9 @@
 #include "core/process/frame_check.hpp"
 #include "core/process/pair_processor.hpp"
 #include "core/process/process.hpp"
-#include "proto/run_folder.hpp"
 #include "core/recon/mart.hpp"
 #include "plenopiv.pb.h"
+#include "proto/run_folder.hpp"
 
 namespace plenopiv::client {
 namespace {
@@ -74,8 +74,10 @@ void warn_if_few_valid(const VectorField& f, const std::string& what) {
   std::size_t valid = 0;
   for (auto v : f.valid) valid += v;
   if (f.valid.empty() || 10 * valid >= f.valid.size()) return;
-  std::fprintf(stderr, "warning: %s: only %zu of %zu vectors valid: check the frames (light, focus, seeding) and "
-               "the volume and correlation settings\n", what.c_str(), valid, f.valid.size());
+  std::fprintf(stderr,
+               "warning: %s: only %zu of %zu vectors valid: check the frames (light, focus, seeding) and "
+               "the volume and correlation settings\n",
+               what.c_str(), valid, f.valid.size());
 }
 
 // The lens centres and white correction from exactly one of the three sources: a calibration
@@ -85,8 +87,9 @@ calib::LoadedCalibration calibration_for(const ProcessOptions& o, const optics::
   const bool from_frames = !o.calibration_image.empty() || !o.white_images.empty() || !o.dark_images.empty();
   const int given = int(!o.calibration.empty()) + int(from_frames) + int(o.nominal);
   if (given != 1)
-    throw InputError("give exactly one of --calibration FILE.h5, --white FRAMES (optionally with "
-                     "--calibration-image and --dark), or --nominal");
+    throw InputError(
+        "give exactly one of --calibration FILE.h5, --white FRAMES (optionally with "
+        "--calibration-image and --dark), or --nominal");
   if (!o.calibration.empty()) return calib::load_calibration(o.calibration, camera);
   if (o.nominal) return calib::nominal_calibration(camera);
   if (o.white_images.empty()) throw InputError("--calibration-image and --dark need --white frame(s)");
@@ -155,8 +158,8 @@ cv::Mat preview_image(const VectorField& f, const std::vector<float>& omega_z) {
   label(text, {w + 43, top + h - 2});
   label("wz 1/s", {w + 43, top + h / 2 + 14});
   const double z_mm = f.grid.origin_mm[2] + k * f.grid.spacing_mm[2];
-  std::snprintf(text, sizeof text, "slice z = %.3f mm; longest arrow %.4g mm (%.4g m/s); grey: invalid", z_mm,
-                disp_max, f.dt_s > 0 ? disp_max * 1e-3 / f.dt_s : 0.0);
+  std::snprintf(text, sizeof text, "slice z = %.3f mm; longest arrow %.4g mm (%.4g m/s); grey: invalid", z_mm, disp_max,
+                f.dt_s > 0 ? disp_max * 1e-3 / f.dt_s : 0.0);
   label(text, {4, 18});
   return canvas;
 }
@@ -192,8 +195,8 @@ void warn_if_recorded_dt_ignored(const ProcessOptions& o) {
         std::fprintf(stderr,
                      "warning: %s is pair %llu of run %s, whose laser pulses were %.9g s apart (measured); this uses "
                      "the config's nominal dt instead: give --dt %.9g, or use plenopiv process --run %s\n",
-                     o.frame_a.c_str(), static_cast<unsigned long long>(p.pair_index), run.c_str(),
-                     *p.measured_dt_s, *p.measured_dt_s, run.c_str());
+                     o.frame_a.c_str(), static_cast<unsigned long long>(p.pair_index), run.c_str(), *p.measured_dt_s,
+                     *p.measured_dt_s, run.c_str());
       }
     }
   } catch (const InputError&) {
@@ -202,9 +205,9 @@ void warn_if_recorded_dt_ignored(const ProcessOptions& o) {
 }
 
 void run_process(const ProcessOptions& o) {
-  for (const auto& [value, name] : {std::pair{&o.camera, "camera"}, std::pair{&o.frame_a, "frame_a"},
-                                    std::pair{&o.frame_b, "frame_b"}, std::pair{&o.config, "--config"},
-                                    std::pair{&o.output, "--output"}})
+  for (const auto& [value, name] :
+       {std::pair{&o.camera, "camera"}, std::pair{&o.frame_a, "frame_a"}, std::pair{&o.frame_b, "frame_b"},
+        std::pair{&o.config, "--config"}, std::pair{&o.output, "--output"}})
     if (value->empty()) throw InputError(std::string(name) + " is required (or --run <run folder>)");
   const auto limit = thread_limit(o.threads);
   // Every input is read and checked before any long work starts.
@@ -225,12 +228,14 @@ void run_process(const ProcessOptions& o) {
                        " x " + std::to_string(camera.sensor().height_px));
   }
   const std::filesystem::path out = o.output;
-  const std::filesystem::path vti = o.vti.empty() ? std::filesystem::path(out).replace_extension(".vti") : std::filesystem::path(o.vti);
+  const std::filesystem::path vti =
+      o.vti.empty() ? std::filesystem::path(out).replace_extension(".vti") : std::filesystem::path(o.vti);
   const std::filesystem::path png =
       o.preview.empty() ? std::filesystem::path(out).replace_extension(".png") : std::filesystem::path(o.preview);
   for (const auto& p : {out, vti, png}) {
     const auto dir = p.parent_path().empty() ? std::filesystem::path(".") : p.parent_path();
-    if (!std::filesystem::is_directory(dir)) throw InputError(p.string() + ": folder " + dir.string() + " does not exist");
+    if (!std::filesystem::is_directory(dir))
+      throw InputError(p.string() + ": folder " + dir.string() + " does not exist");
   }
 
   const calib::LoadedCalibration cal = calibration_for(o, camera);
@@ -247,8 +252,7 @@ void run_process(const ProcessOptions& o) {
   const auto r = processor.process(a, b, options);
 
   const auto omega = piv::vorticity(r.correlation.field);
-  write_field_outputs(out, vti, r.correlation,
-                      {{"dt_source", o.dt_s ? "--dt" : "nominal (dt_s of " + o.config + ")"}});
+  write_field_outputs(out, vti, r.correlation, {{"dt_source", o.dt_s ? "--dt" : "nominal (dt_s of " + o.config + ")"}});
   write_png(png, preview_image(r.correlation.field, omega[2]));
   warn_if_few_valid(r.correlation.field, out.string());
 
@@ -266,11 +270,12 @@ void run_process(const ProcessOptions& o) {
 // Every recorded pair again, from the run folder alone (clients/cli/reprocess.hpp): the run's own
 // settings or offline ones, each pair's measured dt, ranges, jobs, resume, shards and the merge.
 void run_reprocess(const ProcessOptions& o) {
-  for (const auto* other : {&o.camera, &o.frame_a, &o.frame_b, &o.calibration, &o.calibration_image, &o.vti,
-                            &o.preview})
+  for (const auto* other :
+       {&o.camera, &o.frame_a, &o.frame_b, &o.calibration, &o.calibration_image, &o.vti, &o.preview})
     if (!other->empty())
-      throw InputError("--run takes the camera, frames and calibration from the run folder; give --run with -o, "
-                       "--config, --tier, --pairs, --jobs, --resume, --shard, --merge, --threads and the cache options only");
+      throw InputError(
+          "--run takes the camera, frames and calibration from the run folder; give --run with -o, "
+          "--config, --tier, --pairs, --jobs, --resume, --shard, --merge, --threads and the cache options only");
   if (!o.white_images.empty() || !o.dark_images.empty() || o.nominal)
     throw InputError("--run takes the calibration from the run folder (manifest.json: calibration)");
   if (o.dt_s) throw InputError("--dt: --run uses each pair's measured dt (the run's dt_s where none was measured)");
@@ -316,8 +321,9 @@ void add_process_commands(CLI::App& app) {
                   "white");
   cmd->add_option("--white", o->white_images, "white frame(s) (averaged): calibrate from them as `plenopiv calibrate`");
   cmd->add_option("--dark", o->dark_images, "dark frame(s) for --white (averaged, subtracted)");
-  cmd->add_flag("--nominal", o->nominal, "no calibration: the camera's nominal lattice and geometric white image "
-                                          "(simulated frames)");
+  cmd->add_flag("--nominal", o->nominal,
+                "no calibration: the camera's nominal lattice and geometric white image "
+                "(simulated frames)");
   cmd->add_option("-o,--output", o->output,
                   "vector field (HDF5 /vectors with vorticity and flags); with --run, the output folder");
   cmd->add_option("--vti", o->vti, "VTK image data for ParaView (default: --output with .vti)");
@@ -335,7 +341,8 @@ void add_process_commands(CLI::App& app) {
       ->capture_default_str();
   cmd->add_flag("--resume", o->resume, "with --run: skip pairs whose output is there with the same inputs");
   cmd->add_option("--shard", o->shard, "with --run: process shard i/n of the pairs only (a cluster task); merge later");
-  cmd->add_flag("--merge", o->merge, "with --run: only check every pair's output and write statistics.h5 and series.pvd");
+  cmd->add_flag("--merge", o->merge,
+                "with --run: only check every pair's output and write statistics.h5 and series.pvd");
   cmd->callback([o] { o->run.empty() ? run_process(*o) : run_reprocess(*o); });
 }
 

@@ -121,12 +121,14 @@ void run(const ReconOptions& o) {
     const double eta = (s.iterations - it.iteration) / rate;
     if (tty) {
       const int width = 30, done = width * it.iteration / s.iterations;
-      std::fprintf(stderr, "\r[%s%s] %d/%d  %.2f it/s  ETA %.0f s  residual %.4f", std::string(std::size_t(done), '#').c_str(),
-                   std::string(std::size_t(width - done), ' ').c_str(), it.iteration, s.iterations, rate, eta, it.residual);
+      std::fprintf(stderr, "\r[%s%s] %d/%d  %.2f it/s  ETA %.0f s  residual %.4f",
+                   std::string(std::size_t(done), '#').c_str(), std::string(std::size_t(width - done), ' ').c_str(),
+                   it.iteration, s.iterations, rate, eta, it.residual);
       if (it.iteration == s.iterations) std::fprintf(stderr, "\n");
     } else {
-      std::fprintf(stderr, "iteration %d/%d residual %.4f (%.2f s, ETA %.0f s; %zu live voxels, %.1f %% of the box skipped)\n",
-                   it.iteration, s.iterations, it.residual, it.seconds, eta, it.live_voxels, 100 * it.fraction_skipped());
+      std::fprintf(
+          stderr, "iteration %d/%d residual %.4f (%.2f s, ETA %.0f s; %zu live voxels, %.1f %% of the box skipped)\n",
+          it.iteration, s.iterations, it.residual, it.seconds, eta, it.live_voxels, 100 * it.fraction_skipped());
     }
   });
   if (tty && r.iterations.size() < std::size_t(s.iterations)) std::fprintf(stderr, "\n");

@@ -2,12 +2,12 @@
 #include <unistd.h>
 
 #include <algorithm>
-#include <thread>
 #include <chrono>
 #include <fstream>
 #include <iomanip>
 #include <iostream>
 #include <sstream>
+#include <thread>
 #include <zmq.hpp>
 
 #include "clients/cli/commands.hpp"
@@ -29,8 +29,8 @@ msg::Reply call(const ControlOptions& options, msg::Request request) {
                        options.security());
   msg::Reply reply = client.call(std::move(request));
   if (reply.has_error()) {
-    std::cerr << "plenopivd refused: " << msg::Error::Code_Name(reply.error().code()) << ": "
-              << reply.error().message() << "\n";
+    std::cerr << "plenopivd refused: " << msg::Error::Code_Name(reply.error().code()) << ": " << reply.error().message()
+              << "\n";
     throw CLI::RuntimeError(4);
   }
   return reply;
@@ -56,8 +56,8 @@ void watch(const WatchOptions& o) {
   for (long n = 0; o.count == 0 || n < o.count;) {
     zmq::message_t topic;
     if (!sub.recv(topic, zmq::recv_flags::none)) {
-      throw ControlError("no vector field published on " + o.publish + " within " +
-                         std::to_string(int(o.timeout_s)) + " s: is a run going? (plenopiv status)");
+      throw ControlError("no vector field published on " + o.publish + " within " + std::to_string(int(o.timeout_s)) +
+                         " s: is a run going? (plenopiv status)");
     }
     std::vector<zmq::message_t> frames;
     while (sub.get(zmq::sockopt::rcvmore)) {
@@ -70,15 +70,15 @@ void watch(const WatchOptions& o) {
       std::cerr << "plenopiv watch: a message on 'vectors' without a header, ignored\n";
       continue;
     }
-    std::cout << "pair " << std::setw(6) << h.pair_index() << std::fixed << std::setprecision(4)
-              << "  mean " << h.mean_speed_m_s() << " m/s  max " << h.max_speed_m_s()
-              << " m/s  valid " << std::setprecision(1) << 100.0 * h.valid_fraction() << " %"
+    std::cout << "pair " << std::setw(6) << h.pair_index() << std::fixed << std::setprecision(4) << "  mean "
+              << h.mean_speed_m_s() << " m/s  max " << h.max_speed_m_s() << " m/s  valid " << std::setprecision(1)
+              << 100.0 * h.valid_fraction() << " %"
               << "  latency " << std::setprecision(3) << h.latency_s() << " s"
               << (h.trigger_latency_s() > 0 ? "  from laser " + seconds_text(h.trigger_latency_s()) : std::string())
               << "  grid "
-              << (h.shape_size() == 3 ? std::to_string(h.shape(0)) + "x" + std::to_string(h.shape(1)) +
-                                            "x" + std::to_string(h.shape(2))
-                                      : std::string("?"))
+              << (h.shape_size() == 3
+                      ? std::to_string(h.shape(0)) + "x" + std::to_string(h.shape(1)) + "x" + std::to_string(h.shape(2))
+                      : std::string("?"))
               << "  run " << h.run_id() << std::endl;
     ++n;
   }
@@ -141,16 +141,14 @@ void add_run_commands(CLI::App& app, ControlOptions& options) {
         msg::Request request;
         request.mutable_stop_run();
         const msg::Reply reply = call(options, request);
-        std::cout << "run " << reply.run_stopping().run_id() << " stopping: "
-                  << reply.run_stopping().run_dir() << "\n";
+        std::cout << "run " << reply.run_stopping().run_id() << " stopping: " << reply.run_stopping().run_dir() << "\n";
       });
 
   auto w = std::make_shared<WatchOptions>();
   auto* watch_cmd = app.add_subcommand("watch", "print a summary of each published vector field");
   watch_cmd->add_option("--publish", w->publish, "plenopivd publishing endpoint")->capture_default_str();
   watch_cmd->add_option("-n,--count", w->count, "exit after this many fields (0: never)");
-  watch_cmd->add_option("--wait", w->timeout_s, "seconds without a field before giving up")
-      ->capture_default_str();
+  watch_cmd->add_option("--wait", w->timeout_s, "seconds without a field before giving up")->capture_default_str();
   watch_cmd->callback([w, &options] {
     w->security = options.security();
     watch(*w);
@@ -158,8 +156,8 @@ void add_run_commands(CLI::App& app, ControlOptions& options) {
 
   auto frames = std::make_shared<unsigned>(1);
   auto camera = std::make_shared<std::string>();
-  auto* cal = app.add_subcommand(
-      "capture-calibration", "take calibration images on plenopivd's camera into its data directory");
+  auto* cal = app.add_subcommand("capture-calibration",
+                                 "take calibration images on plenopivd's camera into its data directory");
   cal->add_option("--frames", *frames, "number of images")->capture_default_str();
   cal->add_option("--camera", *camera, "camera URI (default: the daemon's)");
   cal->callback([&options, frames, camera] {
@@ -167,8 +165,7 @@ void add_run_commands(CLI::App& app, ControlOptions& options) {
     request.mutable_calibrate()->set_frame_count(*frames);
     request.mutable_calibrate()->set_camera_uri(*camera);
     const msg::Reply reply = call(options, request);
-    std::cout << reply.calibration().frame_count() << " calibration images in "
-              << reply.calibration().dir() << "\n";
+    std::cout << reply.calibration().frame_count() << " calibration images in " << reply.calibration().dir() << "\n";
   });
 }
 

@@ -46,19 +46,15 @@ void add_common(CLI::App* cmd, CommonOptions& o, const std::string& output_help)
   cmd->add_option("--array-offset-mm", o.array_offset_mm, "offset x,y of the true lens array, mm")
       ->delimiter(',')
       ->expected(2);
-  cmd->add_option("--lens-jitter-mm", o.lens_jitter_mm, "per-lens Gaussian position jitter, mm")
-      ->capture_default_str();
+  cmd->add_option("--lens-jitter-mm", o.lens_jitter_mm, "per-lens Gaussian position jitter, mm")->capture_default_str();
   cmd->add_option("--electrons-per-ray", o.sensor.electrons_per_ray, "sensor: electrons per landed ray")
       ->capture_default_str();
   cmd->add_flag("--shot-noise", o.sensor.shot_noise, "sensor: Poisson shot noise");
   cmd->add_option("--read-noise-e", o.sensor.read_noise_electrons, "sensor: read noise sigma, electrons")
       ->capture_default_str();
-  cmd->add_option("--dark-offset-dn", o.sensor.dark_offset_dn, "sensor: dark offset, counts")
-      ->capture_default_str();
-  cmd->add_option("--gain", o.sensor.gain_dn_per_electron, "sensor: counts per electron")
-      ->capture_default_str();
-  cmd->add_option("--bit-depth", o.sensor.bit_depth, "sensor: bits (saturates at 2^bits - 1)")
-      ->capture_default_str();
+  cmd->add_option("--dark-offset-dn", o.sensor.dark_offset_dn, "sensor: dark offset, counts")->capture_default_str();
+  cmd->add_option("--gain", o.sensor.gain_dn_per_electron, "sensor: counts per electron")->capture_default_str();
+  cmd->add_option("--bit-depth", o.sensor.bit_depth, "sensor: bits (saturates at 2^bits - 1)")->capture_default_str();
 }
 
 double diffraction_mm(const CommonOptions& o) {
@@ -99,7 +95,8 @@ void report(const std::string& what, const sim::RayCounts& c) {
 sim::RenderResult render_with_progress(const optics::CameraModel& camera, const optics::MicrolensArray& array,
                                        const std::vector<sim::Point3>& particles, sim::RenderOptions options,
                                        std::uint64_t seed, const std::string& label) {
-  auto progress = std::make_shared<Progress>(label, "Mrays", double(particles.size()) * options.rays_per_particle * 1e-6);
+  auto progress =
+      std::make_shared<Progress>(label, "Mrays", double(particles.size()) * options.rays_per_particle * 1e-6);
   options.progress = [progress](double f) { progress->update(f); };
   return sim::render(camera, array, particles, options, seed);
 }
@@ -136,9 +133,8 @@ std::string lens_truth_csv(const optics::CameraModel& camera, const optics::Micr
     for (int i = 0; i < array.lattice.count_x; ++i) {
       const auto& c = array.centre(i, j);
       text += std::to_string(i) + "," + std::to_string(j) + "," + num(c[0]) + "," + num(c[1]) + "," +
-              num(optics::sensor_mm_to_column(camera.sensor(), optics::lens_centre_to_spot_mm(c[0], s_i, f_l))) +
-              "," + num(optics::sensor_mm_to_row(camera.sensor(), optics::lens_centre_to_spot_mm(c[1], s_i, f_l))) +
-              "\n";
+              num(optics::sensor_mm_to_column(camera.sensor(), optics::lens_centre_to_spot_mm(c[0], s_i, f_l))) + "," +
+              num(optics::sensor_mm_to_row(camera.sensor(), optics::lens_centre_to_spot_mm(c[1], s_i, f_l))) + "\n";
     }
   }
   return text;
@@ -176,8 +172,7 @@ void add_target_command(CLI::App& simulate, const std::string& name, bool calibr
   auto rays = std::make_shared<long long>(static_cast<long long>(t->rays_per_lens));
   auto truth = std::make_shared<std::string>();
   add_common(cmd, *o, "output image (16-bit TIFF)");
-  cmd->add_option("--truth", *truth,
-                  "also write the true lens centres (CSV: i, j, centre x/y mm, spot column/row px)");
+  cmd->add_option("--truth", *truth, "also write the true lens centres (CSV: i, j, centre x/y mm, spot column/row px)");
   cmd->add_option("--f-number", t->f_number,
                   calibration ? "main-lens f-number while calibrating" : "main-lens f-number (0: the camera's)")
       ->capture_default_str();
@@ -189,7 +184,8 @@ void add_target_command(CLI::App& simulate, const std::string& name, bool calibr
     options.diffraction_sigma_mm = diffraction_mm(*o);
     options.sensor = o->sensor;
     check_output_folder(o->output);
-    auto progress = std::make_shared<Progress>(name, "Mrays", double(camera.lens_count()) * options.rays_per_lens * 1e-6);
+    auto progress =
+        std::make_shared<Progress>(name, "Mrays", double(camera.lens_count()) * options.rays_per_lens * 1e-6);
     options.progress = [progress](double f) { progress->update(f); };
     const optics::MicrolensArray array = true_array(camera, *o);
     if (!truth->empty()) check_output_folder(*truth);
@@ -201,8 +197,8 @@ void add_target_command(CLI::App& simulate, const std::string& name, bool calibr
 }
 
 void add_pair_command(CLI::App& simulate) {
-  auto* cmd = simulate.add_subcommand(
-      "pair", "frame pair A/B: a seeded particle field and the same field moved by a flow");
+  auto* cmd =
+      simulate.add_subcommand("pair", "frame pair A/B: a seeded particle field and the same field moved by a flow");
   auto o = std::make_shared<CommonOptions>();
   struct PairOptions {
     double ppm = -1, ppp = -1;
@@ -226,7 +222,8 @@ void add_pair_command(CLI::App& simulate) {
       ->expected(6);
   cmd->add_option("--z-range", p->z_range, "depth range z0,z1 of the default box, mm")->delimiter(',')->expected(2);
   auto* flow = cmd->add_option_group("flow", "the displacement from A to B (one of)");
-  flow->add_option("--flow", p->flow_file, "flow YAML file (type: uniform | ring_vortex | solid_body_rotation | linear_shear)");
+  flow->add_option("--flow", p->flow_file,
+                   "flow YAML file (type: uniform | ring_vortex | solid_body_rotation | linear_shear)");
   flow->add_option("--uniform", p->uniform, "uniform displacement dx,dy,dz in mm")->delimiter(',')->expected(3);
   flow->add_option("--ring-vortex", p->ring_vortex_voxel_mm,
                    "paper's ring vortex (eqs 15-16) at the box centre, in voxels of this size (mm)");
@@ -281,9 +278,9 @@ void add_pair_command(CLI::App& simulate) {
     write_text(dir / "flow.yaml", flow->parameters_yaml());
     std::ostringstream meta;
     meta << "# how frame_A.tif / frame_B.tif were made (plenopiv simulate pair)\n"
-         << "camera: " << o->camera << "\nseed: " << seed << "\nparticles: " << count
-         << "\nbox_min_mm: [" << num(box.min_mm[0]) << ", " << num(box.min_mm[1]) << ", " << num(box.min_mm[2])
-         << "]\nbox_max_mm: [" << num(box.max_mm[0]) << ", " << num(box.max_mm[1]) << ", " << num(box.max_mm[2])
+         << "camera: " << o->camera << "\nseed: " << seed << "\nparticles: " << count << "\nbox_min_mm: ["
+         << num(box.min_mm[0]) << ", " << num(box.min_mm[1]) << ", " << num(box.min_mm[2]) << "]\nbox_max_mm: ["
+         << num(box.max_mm[0]) << ", " << num(box.max_mm[1]) << ", " << num(box.max_mm[2])
          << "]\nrays_per_particle: " << options.rays_per_particle
          << "\ndiffraction_sigma_mm: " << num(options.diffraction_sigma_mm) << "\nflow: flow.yaml\n";
     write_text(dir / "simulation.yaml", meta.str());

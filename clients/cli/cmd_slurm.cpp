@@ -37,7 +37,7 @@ struct SlurmOptions {
   std::string partition;
   std::string time;  // Slurm's time limit format (minutes, "HH:MM:SS", "D-HH"); empty: the partition's
   int cpus = 2;
-  std::string mem;   // Slurm's --mem (e.g. 4G); empty: the estimate for one pair in flight
+  std::string mem;  // Slurm's --mem (e.g. 4G); empty: the estimate for one pair in flight
   bool resume = false;
   bool dry_run = false;
   fs::path program;  // the plenopiv the tasks run; default: this one
@@ -116,15 +116,14 @@ std::string task_list(const std::vector<int>& tasks) {
 // The arguments of `plenopiv process --run` every job of a submission shares.
 std::vector<std::string> process_arguments(const SlurmOptions& o, const fs::path& run, const fs::path& output,
                                            const std::string& config) {
-  std::vector<std::string> args{"process", "--run", run.string(), "-o", output.string(), "--config", config,
-                                "--tier", o.tier};
+  std::vector<std::string> args{"process",  "--run", run.string(), "-o",  output.string(),
+                                "--config", config,  "--tier",     o.tier};
   if (!o.pairs.empty()) args.insert(args.end(), {"--pairs", o.pairs});
   return args;
 }
 
 std::string sbatch_script(const std::string& comment, const std::vector<std::string>& directives,
-                          const std::string& program, const std::vector<std::string>& args,
-                          const std::string& tail) {
+                          const std::string& program, const std::vector<std::string>& args, const std::string& tail) {
   std::string s = "#!/bin/bash\n# " + comment + " (written by `plenopiv slurm submit`)\n";
   for (const std::string& d : directives) s += "#SBATCH " + d + "\n";
   s += "set -euo pipefail\nexec " + quoted(program);
@@ -140,8 +139,7 @@ std::string submit(const std::vector<std::string>& argv) {
   if (r.exit_code != 0 || !numeric) {
     std::string command;
     for (const std::string& a : argv) command += (command.empty() ? "" : " ") + a;
-    throw InputError("sbatch refused the job (exit " + std::to_string(r.exit_code) + "): " + command + ": " +
-                     r.output);
+    throw InputError("sbatch refused the job (exit " + std::to_string(r.exit_code) + "): " + command + ": " + r.output);
   }
   return id;
 }
@@ -270,9 +268,9 @@ void run_submit(const SlurmOptions& o) {
   io::write_text_atomically(dir / "shards.sbatch", shard_script);
   io::write_text_atomically(dir / "merge.sbatch", merge_script);
 
-  std::fprintf(stderr, "%zu pairs in %d shards; %zu shard(s) to run: %s; %.2f GB per pair in flight, --mem=%s\n",
-               pairs, o.shards, tasks.size(), tasks.empty() ? "none" : task_list(tasks).c_str(),
-               plan.bytes_per_pair / 1e9, mem.c_str());
+  std::fprintf(stderr, "%zu pairs in %d shards; %zu shard(s) to run: %s; %.2f GB per pair in flight, --mem=%s\n", pairs,
+               o.shards, tasks.size(), tasks.empty() ? "none" : task_list(tasks).c_str(), plan.bytes_per_pair / 1e9,
+               mem.c_str());
   std::vector<std::string> array_command{"sbatch", "--parsable", "--array=" + task_list(tasks),
                                          (dir / "shards.sbatch").string()};
   std::vector<std::string> merge_command{"sbatch", "--parsable", "--kill-on-invalid-dep=yes",
@@ -293,10 +291,10 @@ void run_submit(const SlurmOptions& o) {
   std::vector<Submission> all = before;
   all.push_back(s);
   write_submissions(r.output, all);
-  std::fprintf(stderr, "submitted: array job %s (tasks %s), merge job %s after it; `plenopiv slurm status --run %s%s`\n",
-               s.array_job.empty() ? "none" : s.array_job.c_str(), tasks.empty() ? "none" : task_list(tasks).c_str(),
-               s.merge_job.c_str(), r.run.string().c_str(),
-               o.output.empty() ? "" : (" -o " + r.output.string()).c_str());
+  std::fprintf(
+      stderr, "submitted: array job %s (tasks %s), merge job %s after it; `plenopiv slurm status --run %s%s`\n",
+      s.array_job.empty() ? "none" : s.array_job.c_str(), tasks.empty() ? "none" : task_list(tasks).c_str(),
+      s.merge_job.c_str(), r.run.string().c_str(), o.output.empty() ? "" : (" -o " + r.output.string()).c_str());
   std::cout << s.array_job << " " << s.merge_job << "\n";
 }
 
@@ -304,7 +302,8 @@ void run_status(const SlurmOptions& o) {
   const ReprocessOptions r = reprocess_options(o);
   const std::vector<Submission> submissions = read_submissions(r.output);
   if (submissions.empty())
-    throw InputError(r.output.string() + ": no Slurm submission recorded (slurm/jobs.yaml); `plenopiv slurm submit` first");
+    throw InputError(r.output.string() +
+                     ": no Slurm submission recorded (slurm/jobs.yaml); `plenopiv slurm submit` first");
   const Submission& last = submissions.back();
   const ShardPlan plan = plan_shards(r, last.shards, false);
   const std::vector<std::string> lines = queued({last.array_job, last.merge_job});
@@ -317,7 +316,8 @@ void run_status(const SlurmOptions& o) {
               r.run.string().c_str(), r.output.string().c_str(), last.time.c_str(),
               last.array_job.empty() ? "none" : last.array_job.c_str(), task_list(last.tasks).c_str(),
               last.merge_job.c_str());
-  std::printf("pairs      %zu of %zu have outputs (%.0f %%)\n", done, pairs, pairs ? 100.0 * double(done) / double(pairs) : 0.0);
+  std::printf("pairs      %zu of %zu have outputs (%.0f %%)\n", done, pairs,
+              pairs ? 100.0 * double(done) / double(pairs) : 0.0);
   std::size_t incomplete = 0;
   for (std::size_t i = 0; i < plan.shards.size(); ++i) {
     const ShardState& s = plan.shards[i];
@@ -325,8 +325,9 @@ void run_status(const SlurmOptions& o) {
     for (const std::string& line : lines) {
       if (names_task(line.substr(0, line.find(' ')), last.array_job, int(i))) state = line.substr(line.find(' ') + 1);
     }
-    if (state.empty()) state = s.complete() ? "done" : "not in the queue: failed or cancelled (slurm/shard-" +
-                                                        std::to_string(i) + ".out)";
+    if (state.empty())
+      state =
+          s.complete() ? "done" : "not in the queue: failed or cancelled (slurm/shard-" + std::to_string(i) + ".out)";
     if (!s.complete()) ++incomplete;
     std::printf("shard %-4zu %zu/%zu  %s\n", i, s.done, s.pairs, state.c_str());
   }

@@ -3,8 +3,7 @@
 
 namespace plenopiv::client {
 
-ControlClient::ControlClient(std::string endpoint, std::chrono::milliseconds timeout,
-                             wire::ClientSecurity security)
+ControlClient::ControlClient(std::string endpoint, std::chrono::milliseconds timeout, wire::ClientSecurity security)
     : endpoint_(std::move(endpoint)), timeout_(timeout), security_(std::move(security)) {}
 
 msg::Reply ControlClient::call(msg::Request request) {

@@ -21,8 +21,7 @@ class ControlClient {
  public:
   // `security`: the server's key and this client's key pair when the daemon's control socket uses
   // CURVE (tcp://); none for its local ipc:// socket.
-  explicit ControlClient(std::string endpoint,
-                         std::chrono::milliseconds timeout = std::chrono::milliseconds(3000),
+  explicit ControlClient(std::string endpoint, std::chrono::milliseconds timeout = std::chrono::milliseconds(3000),
                          wire::ClientSecurity security = {});
 
   // Sends `request` (its id is set here) and waits for the reply. Throws ControlError when no

@@ -11,10 +11,10 @@ void write_field_outputs(const std::filesystem::path& h5, const std::filesystem:
                          const piv::CorrelationResult& r, const std::vector<io::TextAttribute>& text) {
   const auto omega = piv::vorticity(r.field);
   std::vector<float> flags(r.flags.begin(), r.flags.end());
-  io::write_vector_field_h5(h5, r.field,
-                            {{"vorticity_x", omega[0], "1/s"}, {"vorticity_y", omega[1], "1/s"},
-                             {"vorticity_z", omega[2], "1/s"}},
-                            text, io::FlagField{"flags", r.flags, piv::kVectorFlagLegend});
+  io::write_vector_field_h5(
+      h5, r.field,
+      {{"vorticity_x", omega[0], "1/s"}, {"vorticity_y", omega[1], "1/s"}, {"vorticity_z", omega[2], "1/s"}}, text,
+      io::FlagField{"flags", r.flags, piv::kVectorFlagLegend});
   if (vti.empty()) return;
   std::vector<float> omega_vec(3 * omega[0].size());
   for (std::size_t i = 0; i < omega[0].size(); ++i)

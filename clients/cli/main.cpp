@@ -12,10 +12,8 @@ int main(int argc, char** argv) {
   app.set_version_flag("--version", std::string(PLENOPIV_VERSION));
   app.require_subcommand(1);
   client::ControlOptions control;
-  app.add_option("--endpoint", control.endpoint, "plenopivd control endpoint")
-      ->capture_default_str();
-  app.add_option("--timeout", control.timeout_s, "seconds to wait for plenopivd")
-      ->capture_default_str();
+  app.add_option("--endpoint", control.endpoint, "plenopivd control endpoint")->capture_default_str();
+  app.add_option("--timeout", control.timeout_s, "seconds to wait for plenopivd")->capture_default_str();
   app.add_option("--server-key", control.server_key,
                  "plenopivd's public certificate (.key), for a tcp:// endpoint with CURVE")
       ->check(CLI::ExistingFile);

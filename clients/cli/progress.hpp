@@ -13,7 +13,10 @@ class Progress {
  public:
   // `label` names the work; `units` and `total` give the rate (e.g. "Mrays", 280.0).
   Progress(std::string label, std::string units, double total)
-      : label_(std::move(label)), units_(std::move(units)), total_(total), tty_(::isatty(2) != 0),
+      : label_(std::move(label)),
+        units_(std::move(units)),
+        total_(total),
+        tty_(::isatty(2) != 0),
         start_(std::chrono::steady_clock::now()) {}
 
   // fraction in [0, 1]; cheap to call often.
@@ -24,13 +27,13 @@ class Progress {
     if (tty_) {
       const int width = 30, filled = int(fraction * width + 0.5);
       std::fprintf(stderr, "\r%s [%s%s] %3.0f%% %.1f %s/s ETA %.0f s ", label_.c_str(),
-                   std::string(filled, '#').c_str(), std::string(width - filled, ' ').c_str(),
-                   100 * fraction, rate, units_.c_str(), eta);
+                   std::string(filled, '#').c_str(), std::string(width - filled, ' ').c_str(), 100 * fraction, rate,
+                   units_.c_str(), eta);
       if (fraction >= 1) std::fputc('\n', stderr);
     } else if (fraction >= next_line_ || fraction >= 1) {
       // Not a terminal (a log, a pipe): a line per 10 %.
-      std::fprintf(stderr, "%s: %.0f%% (%.1f %s/s, ETA %.0f s)\n", label_.c_str(), 100 * fraction, rate,
-                   units_.c_str(), eta);
+      std::fprintf(stderr, "%s: %.0f%% (%.1f %s/s, ETA %.0f s)\n", label_.c_str(), 100 * fraction, rate, units_.c_str(),
+                   eta);
       while (next_line_ <= fraction) next_line_ += 0.1;
     }
   }

@@ -93,8 +93,8 @@ std::string input_hash(const RunInputs& in, const run_folder::PairEntry& p, doub
   char dt[64];
   std::snprintf(dt, sizeof dt, "%.17g", dt_s);
   const std::string description = std::string("plenopiv ") + PLENOPIV_VERSION + "\nsettings " +
-                                  io::crc32_hex(io::crc32_of(in.settings_text)) + " tier " + in.tier + "\ncamera " + in.camera_crc +
-                                  "\ncalibration " + in.calibration_crc + "\nframe A " +
+                                  io::crc32_hex(io::crc32_of(in.settings_text)) + " tier " + in.tier + "\ncamera " +
+                                  in.camera_crc + "\ncalibration " + in.calibration_crc + "\nframe A " +
                                   io::crc32_hex(io::crc32_of(io::read_file_bytes(p.frame_a))) + "\nframe B " +
                                   io::crc32_hex(io::crc32_of(io::read_file_bytes(p.frame_b))) + "\ndt_s " + dt + "\n";
   return io::crc32_hex(io::crc32_of(description));
@@ -150,7 +150,8 @@ std::pair<std::uint64_t, std::uint64_t> parse_pair_range(const std::string& text
     }
     return std::stoull(part);
   };
-  if (colon == std::string::npos) throw InputError("--pairs: '" + text + "': give a:b (pair indices, b excluded), a: or :b");
+  if (colon == std::string::npos)
+    throw InputError("--pairs: '" + text + "': give a:b (pair indices, b excluded), a: or :b");
   const std::uint64_t a = number(text.substr(0, colon), 0);
   const std::uint64_t b = number(text.substr(colon + 1), UINT64_MAX);
   if (!(a < b)) throw InputError("--pairs: '" + text + "': the first index must be below the second");
@@ -185,14 +186,15 @@ ReprocessReport reprocess_run(const ReprocessOptions& o) {
                                                    ? calib::load_calibration(*in.reader.calibration_file(), in.camera)
                                                    : calib::nominal_calibration(in.camera);
   fs::create_directories(in.output);
-  std::fprintf(stderr,
-               "%s: %zu pair(s)%s; volume %d x %d x %d voxels (+%d guard slices each depth end), about %.2f GB per pair "
-               "in flight, %d at once; weights ...\n",
-               o.run.string().c_str(), in.selected.size(),
-               o.shard ? (" (shard " + std::to_string(o.shard->first) + "/" + std::to_string(o.shard->second) + ")").c_str()
-                       : "",
-               in.settings.grid.shape[0], in.settings.grid.shape[1], in.settings.grid.shape[2],
-               in.settings.guard_slices(), per_pair / 1e9, o.jobs);
+  std::fprintf(
+      stderr,
+      "%s: %zu pair(s)%s; volume %d x %d x %d voxels (+%d guard slices each depth end), about %.2f GB per pair "
+      "in flight, %d at once; weights ...\n",
+      o.run.string().c_str(), in.selected.size(),
+      o.shard ? (" (shard " + std::to_string(o.shard->first) + "/" + std::to_string(o.shard->second) + ")").c_str()
+              : "",
+      in.settings.grid.shape[0], in.settings.grid.shape[1], in.settings.grid.shape[2], in.settings.guard_slices(),
+      per_pair / 1e9, o.jobs);
   std::optional<process::OperatorCache> operators;
   if (!o.weights_cache.empty()) operators.emplace(1, o.weights_cache);
   const process::PairProcessor processor(in.camera, calibration, in.settings, operators ? &*operators : nullptr);
@@ -272,7 +274,8 @@ ReprocessReport merge_outputs(const ReprocessOptions& o) {
   const RunInputs in = read_inputs(all);
   std::vector<const run_folder::PairEntry*> missing;
   for (const run_folder::PairEntry* p : in.selected) {
-    if (!up_to_date(in, *p, input_hash(in, *p, process::pair_dt_s(in.settings, p->measured_dt_s)))) missing.push_back(p);
+    if (!up_to_date(in, *p, input_hash(in, *p, process::pair_dt_s(in.settings, p->measured_dt_s))))
+      missing.push_back(p);
   }
   if (!missing.empty()) {
     throw InputError(in.output.string() + ": " + std::to_string(missing.size()) + " of " +
@@ -326,8 +329,8 @@ ShardPlan plan_shards(const ReprocessOptions& o, int shards, bool verify) {
     plan.shards.push_back(s);
   }
   const fs::path statistics = in.output / "statistics.h5", series = in.output / "series.pvd";
-  plan.merged = all_there && fs::exists(statistics) && fs::exists(series) &&
-                fs::last_write_time(statistics) >= newest_pair;
+  plan.merged =
+      all_there && fs::exists(statistics) && fs::exists(series) && fs::last_write_time(statistics) >= newest_pair;
   return plan;
 }
 

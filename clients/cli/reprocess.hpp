@@ -23,8 +23,8 @@ struct ReprocessOptions {
   // This process does shard `first` of `second` (contiguous blocks of the selected pairs) and
   // leaves the merge to a later call with `merge_only`.
   std::optional<std::pair<int, int>> shard;
-  int jobs = 1;           // pairs processed at once (they share the operator; each needs its buffers)
-  bool resume = false;    // skip pairs whose output exists with the same input hash
+  int jobs = 1;             // pairs processed at once (they share the operator; each needs its buffers)
+  bool resume = false;      // skip pairs whose output exists with the same input hash
   bool merge_only = false;  // only check the outputs and write statistics.h5 and series.pvd
   // The folder that keeps weight tables between calls (process::OperatorCache over its files);
   // empty: the tables are built and kept nowhere.

@@ -14,14 +14,12 @@ namespace plenopiv {
 // A regular grid, axes as DESIGN.md: x right, y down, z away from the camera, z = 0 at the
 // nominal focal plane. Arrays on it are [z][y][x], x fastest.
 struct Grid3 {
-  std::array<int, 3> shape{0, 0, 0};            // nx, ny, nz
-  std::array<double, 3> origin_mm{0, 0, 0};     // centre of node [0][0][0]: x, y, z
-  std::array<double, 3> spacing_mm{1, 1, 1};    // dx, dy, dz
+  std::array<int, 3> shape{0, 0, 0};          // nx, ny, nz
+  std::array<double, 3> origin_mm{0, 0, 0};   // centre of node [0][0][0]: x, y, z
+  std::array<double, 3> spacing_mm{1, 1, 1};  // dx, dy, dz
 
   std::size_t count() const { return std::size_t(shape[0]) * shape[1] * shape[2]; }
-  std::size_t index(int x, int y, int z) const {
-    return (std::size_t(z) * shape[1] + y) * shape[0] + x;
-  }
+  std::size_t index(int x, int y, int z) const { return (std::size_t(z) * shape[1] + y) * shape[0] + x; }
   double coordinate_mm(int axis, int i) const { return origin_mm[axis] + i * spacing_mm[axis]; }
   bool operator==(const Grid3&) const = default;
   // count(), checked first against this machine's memory for `element_bytes` per node (and
@@ -29,8 +27,7 @@ struct Grid3 {
   std::size_t checked_count(std::size_t element_bytes, std::size_t arrays = 1) const {
     const std::string what = "a grid of " + std::to_string(shape[0]) + " x " + std::to_string(shape[1]) + " x " +
                              std::to_string(shape[2]) + " nodes";
-    return plenopiv::checked_count(shape[0], shape[1], double(shape[2]) * double(arrays), element_bytes, what) /
-           arrays;
+    return plenopiv::checked_count(shape[0], shape[1], double(shape[2]) * double(arrays), element_bytes, what) / arrays;
   }
 };
 

@@ -22,16 +22,14 @@ struct Image {
   Image(int w, int h, T fill = T{})
       : width(w),
         height(h),
-        pixels(checked_count(w, h, 1, sizeof(T),
-                             "an image of " + std::to_string(w) + " x " + std::to_string(h) + " px"),
-               fill) {}
+        pixels(
+            checked_count(w, h, 1, sizeof(T), "an image of " + std::to_string(w) + " x " + std::to_string(h) + " px"),
+            fill) {}
 
   T& at(int x, int y) { return pixels[std::size_t(y) * width + x]; }
   const T& at(int x, int y) const { return pixels[std::size_t(y) * width + x]; }
   std::span<T> row(int y) { return {pixels.data() + std::size_t(y) * width, std::size_t(width)}; }
-  std::span<const T> row(int y) const {
-    return {pixels.data() + std::size_t(y) * width, std::size_t(width)};
-  }
+  std::span<const T> row(int y) const { return {pixels.data() + std::size_t(y) * width, std::size_t(width)}; }
   std::size_t size() const { return pixels.size(); }
   bool empty() const { return pixels.empty(); }
 };

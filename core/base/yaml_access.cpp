@@ -43,8 +43,8 @@ void check_yaml_shape(const YAML::Node& node, int depth, std::size_t& visited, c
                      " YAML nodes (aliases expanded): not a plenopiv config");
   }
   if (depth > kMaxYamlDepth) {
-    throw InputError(source + ": nested deeper than " + std::to_string(kMaxYamlDepth) + " levels" +
-                     line_of(node) + ": not a plenopiv config");
+    throw InputError(source + ": nested deeper than " + std::to_string(kMaxYamlDepth) + " levels" + line_of(node) +
+                     ": not a plenopiv config");
   }
   if (node.IsSequence()) {
     for (const YAML::Node& item : node) check_yaml_shape(item, depth + 1, visited, source);
@@ -71,8 +71,7 @@ YAML::Node load_yaml_file(const std::filesystem::path& path) {
 
 YAML::Node load_yaml_text(const std::string& text, const std::string& source) {
   if (text.size() > kMaxYamlBytes) {
-    throw InputError(source + ": larger than " + std::to_string(kMaxYamlBytes / 1024) +
-                     " KiB: not a plenopiv config");
+    throw InputError(source + ": larger than " + std::to_string(kMaxYamlBytes / 1024) + " KiB: not a plenopiv config");
   }
   try {
     YAML::Node root = YAML::Load(text);
@@ -81,8 +80,7 @@ YAML::Node load_yaml_text(const std::string& text, const std::string& source) {
     check_yaml_shape(root, 0, visited, source);
     return root;
   } catch (const YAML::Exception& e) {
-    throw InputError(source + ": not valid YAML: " + e.msg + " (line " +
-                     std::to_string(e.mark.line + 1) + ")");
+    throw InputError(source + ": not valid YAML: " + e.msg + " (line " + std::to_string(e.mark.line + 1) + ")");
   }
 }
 
@@ -98,9 +96,7 @@ std::string YamlMap::key_path(std::string_view key) const {
   return path_.empty() ? std::string(key) : path_ + "." + std::string(key);
 }
 
-std::string YamlMap::where(std::string_view key) const {
-  return source_ + ": " + key_path(key);
-}
+std::string YamlMap::where(std::string_view key) const { return source_ + ": " + key_path(key); }
 
 void YamlMap::fail(std::string_view key, const std::string& reason) const {
   const YAML::Node child = node_[std::string(key)];
@@ -120,9 +116,7 @@ YAML::Node YamlMap::required(std::string_view key) const {
   return child;
 }
 
-YamlMap YamlMap::map(std::string_view key) const {
-  return YamlMap(required(key), source_, key_path(key));
-}
+YamlMap YamlMap::map(std::string_view key) const { return YamlMap(required(key), source_, key_path(key)); }
 
 std::optional<YamlMap> YamlMap::optional_map(std::string_view key) const {
   if (!has(key)) return std::nullopt;
@@ -139,9 +133,7 @@ double YamlMap::number(std::string_view key) const {
   return value;
 }
 
-double YamlMap::number_or(std::string_view key, double fallback) const {
-  return has(key) ? number(key) : fallback;
-}
+double YamlMap::number_or(std::string_view key, double fallback) const { return has(key) ? number(key) : fallback; }
 
 long long YamlMap::integer(std::string_view key) const {
   const YAML::Node child = required(key);
@@ -184,8 +176,7 @@ std::string YamlMap::string_or(std::string_view key, std::string fallback) const
   return has(key) ? string(key) : fallback;
 }
 
-std::string YamlMap::choice(std::string_view key,
-                            std::initializer_list<std::string_view> allowed) const {
+std::string YamlMap::choice(std::string_view key, std::initializer_list<std::string_view> allowed) const {
   const std::string value = string(key);
   std::string list;
   for (std::string_view a : allowed) {
@@ -195,8 +186,7 @@ std::string YamlMap::choice(std::string_view key,
   fail(key, "expected one of " + list + ", got '" + value + "'");
 }
 
-std::string YamlMap::choice_or(std::string_view key,
-                               std::initializer_list<std::string_view> allowed,
+std::string YamlMap::choice_or(std::string_view key, std::initializer_list<std::string_view> allowed,
                                std::string fallback) const {
   return has(key) ? choice(key, allowed) : fallback;
 }
@@ -215,8 +205,7 @@ void YamlMap::reject_unknown(std::span<const std::string_view> known) const {
       list += (list.empty() ? "" : ", ") + std::string(k);
     }
     if (!found) {
-      throw InputError(where(name) + ": unknown key (known keys here: " + list + ")" +
-                       line_of(entry.first));
+      throw InputError(where(name) + ": unknown key (known keys here: " + list + ")" + line_of(entry.first));
     }
   }
 }

@@ -101,9 +101,9 @@ struct Measured {
   RawLattice lattice;
   std::vector<std::array<int, 2>> sites;
   std::vector<LensFit> fits;
-  std::vector<std::uint8_t> whole;    // micro-image wholly on the sensor
-  std::vector<std::uint8_t> present;  // a lit micro-image (whole or partial)
-  std::vector<std::uint8_t> flawed;   // present and whole, but its fit is not to be trusted
+  std::vector<std::uint8_t> whole;      // micro-image wholly on the sensor
+  std::vector<std::uint8_t> present;    // a lit micro-image (whole or partial)
+  std::vector<std::uint8_t> flawed;     // present and whole, but its fit is not to be trusted
   std::vector<std::uint8_t> vignetted;  // present and whole, its micro-image cut by vignetting
   Vignetting vignetting;                // the cat's-eye fall-off, where found
   SpotImageStats stats;
@@ -126,9 +126,7 @@ std::string layout_hint(const RawLattice& lat, const optics::CameraModel& camera
 // "spots" or "micro-images", as the messages name what they found.
 const char* things(CentreSource kind) { return kind == CentreSource::spots ? "spots" : "micro-images"; }
 
-std::string image_name(CentreSource kind) {
-  return kind == CentreSource::spots ? "calibration image" : "white image";
-}
+std::string image_name(CentreSource kind) { return kind == CentreSource::spots ? "calibration image" : "white image"; }
 
 // The lenses a calibration should find when all goes well: the camera file's counts when they
 // fit on the sensor, else as many as the sensor holds whole.
@@ -263,8 +261,8 @@ std::vector<double> neighbourhood_median(const std::vector<std::array<int, 2>>& 
 // Without a radial cat's-eye fall-off (fit_vignetting), lenses whose micro-image areas fall short
 // of their neighbours' by more than five times one area's noise: a shadow or a stop that cuts
 // them unlike the rest; their centres are pulled like a cat's eye's.
-std::vector<std::uint8_t> vignetted_lenses(const std::vector<std::array<int, 2>>& sites, const std::vector<double>& area,
-                                           const std::vector<std::uint8_t>& use) {
+std::vector<std::uint8_t> vignetted_lenses(const std::vector<std::array<int, 2>>& sites,
+                                           const std::vector<double>& area, const std::vector<std::uint8_t>& use) {
   std::vector<std::uint8_t> out(area.size(), 0);
   const std::vector<double> near = neighbourhood_median(sites, area, use);
   std::vector<double> dev;
@@ -275,7 +273,8 @@ std::vector<std::uint8_t> vignetted_lenses(const std::vector<std::array<int, 2>>
   // |area - neighbours' median| spreads by one area's noise and the median's: ~1.06 of one.
   const double single = 1.4826 * median(dev) / 1.06;
   for (std::size_t k = 0; k < area.size(); ++k) {
-    out[k] = std::isfinite(area[k]) && std::isfinite(near[k]) && area[k] < near[k] - std::max(0.003 * near[k], 5 * single);
+    out[k] =
+        std::isfinite(area[k]) && std::isfinite(near[k]) && area[k] < near[k] - std::max(0.003 * near[k], 5 * single);
   }
   return out;
 }
@@ -284,7 +283,8 @@ std::vector<std::uint8_t> vignetted_lenses(const std::vector<std::array<int, 2>>
 Vignetting fit_vignetting(const std::vector<std::array<double, 2>>& p, const std::vector<double>& area, double pitch) {
   Vignetting v;
   std::vector<double> sorted;
-  for (double a : area) if (std::isfinite(a)) sorted.push_back(a);
+  for (double a : area)
+    if (std::isfinite(a)) sorted.push_back(a);
   if (sorted.size() < 30) return v;
   std::sort(sorted.begin(), sorted.end());
   const double a_ref = sorted[std::size_t(0.9 * double(sorted.size() - 1))];
@@ -329,7 +329,10 @@ Vignetting fit_vignetting(const std::vector<std::array<double, 2>>& p, const std
       for (int a = 0; a < 6; ++a) {
         double t2[6];
         std::copy(th, th + 6, t2);
-        const double h = a < 2 ? 0.01 * pitch : a == 2 ? 1e-6 * a_ref : a == 3 ? 1e-3 : 1e-6 * a_ref + 1e-3 * std::abs(th[a]);
+        const double h = a < 2    ? 0.01 * pitch
+                         : a == 2 ? 1e-6 * a_ref
+                         : a == 3 ? 1e-3
+                                  : 1e-6 * a_ref + 1e-3 * std::abs(th[a]);
         t2[a] += h;
         j[a] = (model(t2, p[k]) - m0) / h;
       }
@@ -428,7 +431,8 @@ RawLattice lattice_from_candidates(const Candidates& cand, const optics::CameraM
   if (!(std::abs(seen / p0 - 1) <= 0.35)) {
     throw InputError(what + ": its " + count_str(long(cand.points.size())) + " brightest " + things(kind) + " lie " +
                      fmt(seen, 2) + " px from their nearest neighbours, the camera file puts micro-images " +
-                     fmt(p0, 2) + " px apart (microlens.pitch_mm x (1 + f_l / s_i) / sensor.pixel_pitch_mm): "
+                     fmt(p0, 2) +
+                     " px apart (microlens.pitch_mm x (1 + f_l / s_i) / sensor.pixel_pitch_mm): "
                      "check those keys" +
                      (kind == CentreSource::spots ? "" : ", and that the image is in focus on the microlenses"));
   }
@@ -515,7 +519,8 @@ Measured measure_micro_images(const optics::CameraModel& camera, const ImageF& i
     for (int j = int(std::floor(bmin)) - 1; j <= int(std::ceil(bmax)) + 1; ++j) {
       for (int i = int(std::floor(amin)) - 2; i <= int(std::ceil(amax)) + 2; ++i) {
         const auto s = lat.site(i, j);
-        if (s[0] < -0.5 - margin || s[1] < -0.5 - margin || s[0] > w - 0.5 + margin || s[1] > h - 0.5 + margin) continue;
+        if (s[0] < -0.5 - margin || s[1] < -0.5 - margin || s[0] > w - 0.5 + margin || s[1] > h - 0.5 + margin)
+          continue;
         m.sites.push_back({i, j});
       }
     }
@@ -626,8 +631,8 @@ Measured measure_micro_images(const optics::CameraModel& camera, const ImageF& i
     fits = fit_round(fits, shape, noise_model, use, round == 0);
   }
   if (white) {
-    vignetted = find_vignetted(m.sites, fits, micro_image_areas(clean, lat, m.sites, fits), bright_whole(fits, radius, true),
-                               lat.px, &m.vignetting);
+    vignetted = find_vignetted(m.sites, fits, micro_image_areas(clean, lat, m.sites, fits),
+                               bright_whole(fits, radius, true), lat.px, &m.vignetting);
   }
   m.lattice = lat;
   m.fits = fits;
@@ -840,7 +845,8 @@ Calibration assemble(const optics::CameraModel& camera, Measured& m, CentreSourc
                      " px, more than " + fmt(100 * options.pitch_tolerance, 0) + " % from the camera file's " +
                      fmt(p0) + " x " + fmt(row0) +
                      " px (microlens.pitch_mm x (1 + f_l / s_i) / sensor.pixel_pitch_mm): check microlens.pitch_mm, "
-                     "sensor.pixel_pitch_mm and microlens.focal_length_mm" + layout_hint(lat, camera));
+                     "sensor.pixel_pitch_mm and microlens.focal_length_mm" +
+                     layout_hint(lat, camera));
   }
 
   // The array: the sites holding a lens, as a block of whole rows and columns (hex: starting on
@@ -867,7 +873,8 @@ Calibration assemble(const optics::CameraModel& camera, Measured& m, CentreSourc
         if (lat.hex && (jj & 1)) continue;
         for (int ii = i1 - cx + 1; ii <= i0; ++ii) {
           const auto c = lat.at(ii + 0.5 * (cx - 1) + (lat.hex ? 0.25 : 0.0), jj + 0.5 * (cy - 1));
-          const double d = std::hypot(optics::column_to_sensor_mm(sensor, c[0]), optics::row_to_sensor_mm(sensor, c[1]));
+          const double d =
+              std::hypot(optics::column_to_sensor_mm(sensor, c[0]), optics::row_to_sensor_mm(sensor, c[1]));
           if (d < best) {
             best = d;
             bi = ii;
@@ -884,7 +891,8 @@ Calibration assemble(const optics::CameraModel& camera, Measured& m, CentreSourc
     } else if (fits) {
       cal.notes.push_back("the sensor shows " + std::to_string(nx) + " x " + std::to_string(ny) +
                           " lenses, more than the camera file's count_x x count_y = " + std::to_string(cx) + " x " +
-                          std::to_string(cy) + ": the calibration keeps all of them (the counts are a minimum; "
+                          std::to_string(cy) +
+                          ": the calibration keeps all of them (the counts are a minimum; "
                           "remove them or write the array's real counts)");
     }
   }
@@ -977,10 +985,11 @@ Calibration assemble(const optics::CameraModel& camera, Measured& m, CentreSourc
     const int core = whole - cal.lenses_vignetted - cal.lenses_rejected;
     cal.notes.push_back(std::to_string(cal.lenses_vignetted) +
                         " lenses show cat's-eye (vignetted) micro-images, passing less light for their brightness: "
-                        "centred on the fitted lattice, which the " + std::to_string(core) + " unvignetted ones fix" +
+                        "centred on the fitted lattice, which the " +
+                        std::to_string(core) + " unvignetted ones fix" +
                         (core < whole / 4 ? std::string(". So few lenses reach far only if the array is regular: "
-                                                         "a stopped-down calibration image (--calibration-image), "
-                                                         "which the barrel does not cut, fixes the edges better")
+                                                        "a stopped-down calibration image (--calibration-image), "
+                                                        "which the barrel does not cut, fixes the edges better")
                                           : std::string()));
   }
   if (cal.lenses_partial > 0) {
@@ -1169,8 +1178,8 @@ void measure_white(Calibration& cal, const ImageF& white, const CalibrationOptio
   const Vignetting vignetting = fit_vignetting(at, area_at, pitch);
   std::vector<double> diameters;
   for (std::size_t k = 0; k < sites.size(); ++k) {
-    if (vignetting.found &&
-        std::hypot(lenses[k].centre[0] - vignetting.axis[0], lenses[k].centre[1] - vignetting.axis[1]) > vignetting.r0) {
+    if (vignetting.found && std::hypot(lenses[k].centre[0] - vignetting.axis[0],
+                                       lenses[k].centre[1] - vignetting.axis[1]) > vignetting.r0) {
       continue;
     }
     double sum = 0, centre = 0;
@@ -1198,8 +1207,9 @@ void measure_white(Calibration& cal, const ImageF& white, const CalibrationOptio
     throw InputError("white image: the micro-images overlap: they are " + fmt(diameter, 2) + " px across (from the " +
                      "light each lens passes), " + fmt(100 * cal.fill, 1) + " % of the " + fmt(pitch, 2) +
                      " px pitch, so neighbours share pixels whose aperture point is ambiguous (the camera file's "
-                     "f-number predicts " + fmt(100 * predicted, 1) + " %): stop the main lens down by " +
-                     fmt(cal.fill, 2) + " x in f-number or more and take the white and the frames again");
+                     "f-number predicts " +
+                     fmt(100 * predicted, 1) + " %): stop the main lens down by " + fmt(cal.fill, 2) +
+                     " x in f-number or more and take the white and the frames again");
   }
   if (predicted > 0 && std::abs(cal.fill / predicted - 1) > 0.05) {
     cal.notes.push_back("the white's micro-images fill " + fmt(100 * cal.fill, 1) + " % of the pitch (" +
@@ -1215,7 +1225,8 @@ void measure_white(Calibration& cal, const ImageF& white, const CalibrationOptio
   const double diagonal = std::hypot(double(white.width), double(white.height));
   std::array<double, 2> centre{};
   double sigma = 0;
-  const std::array<double, 2> frame{optics::sensor_mm_to_column(cal.sensor, 0.0), optics::sensor_mm_to_row(cal.sensor, 0.0)};
+  const std::array<double, 2> frame{optics::sensor_mm_to_column(cal.sensor, 0.0),
+                                    optics::sensor_mm_to_row(cal.sensor, 0.0)};
   bool placed = vignetting.found;
   if (placed) {
     centre = vignetting.axis;
@@ -1228,20 +1239,21 @@ void measure_white(Calibration& cal, const ImageF& white, const CalibrationOptio
     cal.measured_axis_sigma_px = sigma;
     const double off = std::hypot(centre[0] - frame[0], centre[1] - frame[1]);
     if (off > std::max(3 * sigma, 2.0)) {
-      cal.notes.push_back(std::string(vignetting.found ? "the micro-images' cat's-eye vignetting" : "the white's fall-off") +
-                        " is centred at column " + fmt(centre[0], 1) + ", row " +
-                          fmt(centre[1], 1) + " (+-" + fmt(sigma, 1) + " px), " + fmt(off, 1) +
-                          " px from the optical axis used (" +
-                          (cal.sensor.optical_axis_px ? std::string("sensor.optical_axis_px") : std::string("the sensor centre")) +
-                          (vignetting.found ? std::string("): that is where the optical axis meets the sensor; ")
-                                            : std::string("): if the white target was evenly lit, that is where the "
-                                                          "optical axis meets the sensor; ")) +
-                          "add `optical_axis_px: [" + fmt(centre[0], 1) + ", " + fmt(centre[1], 1) +
-                          "]` to the camera file's sensor section and calibrate again");
+      cal.notes.push_back(
+          std::string(vignetting.found ? "the micro-images' cat's-eye vignetting" : "the white's fall-off") +
+          " is centred at column " + fmt(centre[0], 1) + ", row " + fmt(centre[1], 1) + " (+-" + fmt(sigma, 1) +
+          " px), " + fmt(off, 1) + " px from the optical axis used (" +
+          (cal.sensor.optical_axis_px ? std::string("sensor.optical_axis_px") : std::string("the sensor centre")) +
+          (vignetting.found ? std::string("): that is where the optical axis meets the sensor; ")
+                            : std::string("): if the white target was evenly lit, that is where the "
+                                          "optical axis meets the sensor; ")) +
+          "add `optical_axis_px: [" + fmt(centre[0], 1) + ", " + fmt(centre[1], 1) +
+          "]` to the camera file's sensor section and calibrate again");
     }
   } else if (!cal.sensor.optical_axis_px) {
-    cal.notes.push_back("the optical axis: not given in the camera file, and the white is too flat to place it "
-                        "(its fall-off centre); the sensor centre is used (sensor.optical_axis_px sets it)");
+    cal.notes.push_back(
+        "the optical axis: not given in the camera file, and the white is too flat to place it "
+        "(its fall-off centre); the sensor centre is used (sensor.optical_axis_px sets it)");
   }
 }
 
@@ -1273,7 +1285,8 @@ Calibration calibrate_camera(const optics::CameraModel& camera, const Calibratio
     if (frames.dark.empty()) {
       dark_level = cal.white_black_level;
       cal.notes.push_back("no dark frame: the white's black level is taken from between its micro-images (" +
-                          fmt(dark_level, 2) + " counts); `--dark` with frames taken with the lens capped is "
+                          fmt(dark_level, 2) +
+                          " counts); `--dark` with frames taken with the lens capped is "
                           "more exact");
     }
   }
@@ -1290,32 +1303,36 @@ std::string describe(const Calibration& cal) {
   int missing = 0;
   for (LensStatus s : cal.status) missing += s == LensStatus::missing;
   const double deg = 180 / std::numbers::pi;
-  o << "  centres from       " << (cal.source == CentreSource::spots ? "the calibration (stopped-down) image" : "the white image")
-    << "\n"
+  o << "  centres from       "
+    << (cal.source == CentreSource::spots ? "the calibration (stopped-down) image" : "the white image") << "\n"
     << "  lenses             " << cal.spot_lattice.count_x << " x " << cal.spot_lattice.count_y << " "
-    << optics::to_string(cal.spot_lattice.layout) << " (" << cal.spots_found << " found on the sensor): "
-    << cal.lenses_measured << " measured, " << cal.lenses_lattice << " on the fitted lattice (measurement scatter larger than the array's), "
-    << cal.lenses_rejected << " rejected (dust, flaws), " << cal.lenses_partial << " cut by the sensor edge, " << missing
+    << optics::to_string(cal.spot_lattice.layout) << " (" << cal.spots_found
+    << " found on the sensor): " << cal.lenses_measured << " measured, " << cal.lenses_lattice
+    << " on the fitted lattice (measurement scatter larger than the array's), " << cal.lenses_rejected
+    << " rejected (dust, flaws), " << cal.lenses_partial << " cut by the sensor edge, " << missing
     << " not on the sensor\n"
-    << "  spot pitch         " << fmt(cal.spot_lattice.pitch_x_mm / pp, 4) << " x " << fmt(cal.spot_lattice.pitch_y_mm / pp, 4)
-    << " px (camera file " << fmt(cal.nominal_spot_pitch_px, 4) << " px along rows; measured / file " << fmt(cal.pitch_ratio, 5)
-    << ")\n"
+    << "  spot pitch         " << fmt(cal.spot_lattice.pitch_x_mm / pp, 4) << " x "
+    << fmt(cal.spot_lattice.pitch_y_mm / pp, 4) << " px (camera file " << fmt(cal.nominal_spot_pitch_px, 4)
+    << " px along rows; measured / file " << fmt(cal.pitch_ratio, 5) << ")\n"
     << "  rotation           " << fmt(cal.spot_lattice.rotation_rad * deg, 4) << " deg\n"
-    << "  array centre       " << fmt(cal.spot_lattice.offset_x_mm / pp, 2) << ", " << fmt(cal.spot_lattice.offset_y_mm / pp, 2)
-    << " px from the optical axis (column " << fmt(optics::sensor_mm_to_column(cal.sensor, 0.0), 2) << ", row "
-    << fmt(optics::sensor_mm_to_row(cal.sensor, 0.0), 2) << (cal.sensor.optical_axis_px ? ", camera file" : ", sensor centre")
-    << ")\n"
-    << "  model              " << (cal.distortion_degree == 0 ? std::string("lattice") : "lattice + degree-" + std::to_string(cal.distortion_degree) + " distortion")
+    << "  array centre       " << fmt(cal.spot_lattice.offset_x_mm / pp, 2) << ", "
+    << fmt(cal.spot_lattice.offset_y_mm / pp, 2) << " px from the optical axis (column "
+    << fmt(optics::sensor_mm_to_column(cal.sensor, 0.0), 2) << ", row "
+    << fmt(optics::sensor_mm_to_row(cal.sensor, 0.0), 2)
+    << (cal.sensor.optical_axis_px ? ", camera file" : ", sensor centre") << ")\n"
+    << "  model              "
+    << (cal.distortion_degree == 0 ? std::string("lattice")
+                                   : "lattice + degree-" + std::to_string(cal.distortion_degree) + " distortion")
     << "; measured - model " << fmt(cal.rms_residual_px, 4) << " px rms, " << fmt(cal.max_residual_px, 3) << " px max\n"
     << "  per lens           measurement scatter " << fmt(cal.measurement_scatter_px, 4)
     << " px rms; the array departs from its model by " << fmt(cal.array_scatter_px, 4) << " px rms beyond it\n";
   if (std::isfinite(cal.fill)) {
-    o << "  micro-image fill   " << fmt(100 * cal.fill, 1) << " % of the pitch measured, " << fmt(100 * cal.predicted_fill, 1)
-      << " % predicted from the camera file\n";
+    o << "  micro-image fill   " << fmt(100 * cal.fill, 1) << " % of the pitch measured, "
+      << fmt(100 * cal.predicted_fill, 1) << " % predicted from the camera file\n";
   }
   if (std::isfinite(cal.measured_axis_px[0])) {
-    o << "  white's fall-off   centred at column " << fmt(cal.measured_axis_px[0], 1) << ", row " << fmt(cal.measured_axis_px[1], 1)
-      << " (+-" << fmt(cal.measured_axis_sigma_px, 1) << " px)\n";
+    o << "  white's fall-off   centred at column " << fmt(cal.measured_axis_px[0], 1) << ", row "
+      << fmt(cal.measured_axis_px[1], 1) << " (+-" << fmt(cal.measured_axis_sigma_px, 1) << " px)\n";
   }
   if (cal.white_frames > 0) {
     o << "  frames             " << cal.calibration_frames << " calibration, " << cal.white_frames << " white, "
@@ -1372,8 +1389,8 @@ class LensFinder {
         departure = std::max(departure, std::hypot(m[0] - cx_ - q[0], m[1] - cy_ - q[1]));
       }
     }
-    const double inscribed = 0.5 * (lat_.hex ? std::min(lat_.px, std::hypot(0.5 * lat_.px, lat_.py))
-                                             : std::min(lat_.px, lat_.py));
+    const double inscribed =
+        0.5 * (lat_.hex ? std::min(lat_.px, std::hypot(0.5 * lat_.px, lat_.py)) : std::min(lat_.px, lat_.py));
     const double sure = std::max(0.0, inscribed - departure - 0.01);
     sure2_ = sure * sure;
   }
@@ -1433,8 +1450,9 @@ ImageF make_white_correction(const Calibration& cal, const ImageF& white, double
                      std::to_string(sensor.height_px));
   }
   if (!(cal.microlens_image_diameter_px > 0)) {
-    throw InputError("white correction: the calibration carries no microlens image diameter (calibrate() "
-                     "sets it from the camera)");
+    throw InputError(
+        "white correction: the calibration carries no microlens image diameter (calibrate() "
+        "sets it from the camera)");
   }
   // Finite; a dark-subtracted white may dip below 0 in its gaps (clamped to 0 below).
   for (std::size_t k = 0; k < white.size(); ++k) {

@@ -39,20 +39,20 @@ struct Calibration {
   double microlens_focal_length_mm = 0;    // f_l
   double microlens_image_diameter_px = 0;  // the camera model's micro-image diameter (not stored)
   CentreSource source = CentreSource::spots;
-  optics::Lattice spot_lattice;            // sensor-plane mm, origin at the optical axis
-  std::vector<std::array<double, 2>> spots_px;      // (column, row) of each lens's centre on the sensor
+  optics::Lattice spot_lattice;                 // sensor-plane mm, origin at the optical axis
+  std::vector<std::array<double, 2>> spots_px;  // (column, row) of each lens's centre on the sensor
   std::vector<LensStatus> status;
   std::vector<std::array<double, 2>> residuals_px;  // measured - model (lattice + distortion); 0 if none
   std::vector<std::array<double, 2>> measured_px;   // each lens's own measurement; NaN if none
   std::vector<double> uncertainty_px;               // its 1-sigma uncertainty per axis; NaN if none
-  double rms_residual_px = 0;  // measured - model over the lenses measured whole (status 1 and 4)
+  double rms_residual_px = 0;                       // measured - model over the lenses measured whole (status 1 and 4)
   double max_residual_px = 0;
-  int spots_found = 0;         // micro-images (or spots) found on the lattice, whole and partial
-  int lenses_measured = 0;     // status measured
-  int lenses_lattice = 0;      // status lattice
+  int spots_found = 0;      // micro-images (or spots) found on the lattice, whole and partial
+  int lenses_measured = 0;  // status measured
+  int lenses_lattice = 0;   // status lattice
   int lenses_partial = 0;
   int lenses_rejected = 0;
-  int lenses_vignetted = 0;    // among status lattice: cat's-eye micro-images (white images)
+  int lenses_vignetted = 0;  // among status lattice: cat's-eye micro-images (white images)
   // Evidence for lattice against per-lens centres (pixels): the scatter of the measurements (RMS
   // of their uncertainties), the departures of the array from its model that the measurements
   // show beyond that scatter, and the model's smooth distortion (0: the lattice alone).

@@ -22,11 +22,10 @@ struct File {
   std::string where(const std::string& what) const { return path.string() + ": " + what; }
 };
 
-void write_set(const File& f, hid_t parent, const std::string& name, const std::vector<hsize_t>& dims,
-               hid_t file_type, hid_t mem_type, const void* data) {
+void write_set(const File& f, hid_t parent, const std::string& name, const std::vector<hsize_t>& dims, hid_t file_type,
+               hid_t mem_type, const void* data) {
   Handle space(H5Screate_simple(int(dims.size()), dims.data(), nullptr), H5Sclose);
-  Handle set(H5Dcreate2(parent, name.c_str(), file_type, space.get(), H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT),
-             H5Dclose);
+  Handle set(H5Dcreate2(parent, name.c_str(), file_type, space.get(), H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT), H5Dclose);
   if (!set.ok() || H5Dwrite(set.get(), mem_type, H5S_ALL, H5S_ALL, H5P_DEFAULT, data) < 0) {
     throw InputError(f.where("HDF5: cannot write dataset " + name));
   }
@@ -236,7 +235,9 @@ Calibration read_calibration_h5(const std::filesystem::path& path) {
   cal.max_residual_px = lat("max_residual_px");
   cal.spots_found = int(lat("spots_found"));
   cal.lenses_measured = int(lat("lenses_measured"));
-  auto lat_or = [&](const char* name, double fallback) { return read_attr_or(f, lattice.get(), "lattice", name, fallback); };
+  auto lat_or = [&](const char* name, double fallback) {
+    return read_attr_or(f, lattice.get(), "lattice", name, fallback);
+  };
   cal.lenses_lattice = int(lat_or("lenses_lattice", 0));
   cal.lenses_partial = int(lat_or("lenses_partial", 0));
   cal.lenses_rejected = int(lat_or("lenses_rejected", 0));
@@ -302,8 +303,9 @@ Calibration read_calibration_h5(const std::filesystem::path& path) {
   for (std::size_t k = 0; k < cal.white_correction.pixels.size(); ++k) {
     const float w = cal.white_correction.pixels[k];
     if (!std::isfinite(w) || w < 0) {
-      throw InputError(f.where("/white_correction holds " + std::string(std::isfinite(w) ? "a negative" : "a non-finite") +
-                               " value at pixel (" + std::to_string(k % std::size_t(cal.sensor.width_px)) + ", " +
+      throw InputError(f.where("/white_correction holds " +
+                               std::string(std::isfinite(w) ? "a negative" : "a non-finite") + " value at pixel (" +
+                               std::to_string(k % std::size_t(cal.sensor.width_px)) + ", " +
                                std::to_string(k / std::size_t(cal.sensor.width_px)) + "): the file is damaged"));
     }
   }
@@ -315,7 +317,8 @@ LoadedCalibration load_calibration(const std::filesystem::path& path, const opti
   const File f{path};
   const auto& s = camera.sensor();
   auto close = [](double a, double b) { return std::abs(a - b) <= 1e-9 * std::max(std::abs(a), std::abs(b)); };
-  if (cal.sensor.width_px != s.width_px || cal.sensor.height_px != s.height_px || !close(cal.sensor.pixel_pitch_mm, s.pixel_pitch_mm)) {
+  if (cal.sensor.width_px != s.width_px || cal.sensor.height_px != s.height_px ||
+      !close(cal.sensor.pixel_pitch_mm, s.pixel_pitch_mm)) {
     throw InputError(f.where("made for a " + std::to_string(cal.sensor.width_px) + " x " +
                              std::to_string(cal.sensor.height_px) + " sensor, the camera file's is " +
                              std::to_string(s.width_px) + " x " + std::to_string(s.height_px)));
@@ -323,28 +326,29 @@ LoadedCalibration load_calibration(const std::filesystem::path& path, const opti
   // A calibration belongs to the camera description it was made with: where the camera file gives
   // lens counts they must be the ones it gave then (older files: the array's own counts).
   const auto& ml = camera.microlens();
-  const bool counts_differ = camera.counts_given() && (ml.count_x != cal.camera_count_x || ml.count_y != cal.camera_count_y) &&
-                             !(cal.camera_count_x == 0 && ml.count_x == cal.spot_lattice.count_x &&
-                               ml.count_y == cal.spot_lattice.count_y);
+  const bool counts_differ =
+      camera.counts_given() && (ml.count_x != cal.camera_count_x || ml.count_y != cal.camera_count_y) &&
+      !(cal.camera_count_x == 0 && ml.count_x == cal.spot_lattice.count_x && ml.count_y == cal.spot_lattice.count_y);
   if (counts_differ || cal.spot_lattice.layout != ml.layout) {
-    const std::string then = cal.camera_count_x == cal.spot_lattice.count_x && cal.camera_count_y == cal.spot_lattice.count_y
-                                 ? ""
-                                 : cal.camera_count_x > 0 ? " (its camera file gave " + std::to_string(cal.camera_count_x) + " x " +
-                                                               std::to_string(cal.camera_count_y) + ")"
-                                                          : " (its camera file gave no counts)";
+    const std::string then =
+        cal.camera_count_x == cal.spot_lattice.count_x && cal.camera_count_y == cal.spot_lattice.count_y ? ""
+        : cal.camera_count_x > 0 ? " (its camera file gave " + std::to_string(cal.camera_count_x) + " x " +
+                                       std::to_string(cal.camera_count_y) + ")"
+                                 : " (its camera file gave no counts)";
     throw InputError(f.where(std::string("made for a ") + optics::to_string(cal.spot_lattice.layout) + " array of " +
-                             std::to_string(cal.spot_lattice.count_x) + " x " + std::to_string(cal.spot_lattice.count_y) +
-                             " lenses" + then + ", the camera file has " + optics::to_string(ml.layout) + " " +
+                             std::to_string(cal.spot_lattice.count_x) + " x " +
+                             std::to_string(cal.spot_lattice.count_y) + " lenses" + then + ", the camera file has " +
+                             optics::to_string(ml.layout) + " " +
                              (camera.counts_given() ? std::to_string(ml.count_x) + " x " + std::to_string(ml.count_y)
                                                     : std::string("(no counts)")) +
                              ": calibrate again with this camera file"));
   }
   if (!close(cal.image_distance_mm, camera.image_distance_mm()) ||
       !close(cal.microlens_focal_length_mm, camera.microlens().focal_length_mm)) {
-    throw InputError(f.where("made with s_i = " + std::to_string(cal.image_distance_mm) + " mm, f_l = " +
-                             std::to_string(cal.microlens_focal_length_mm) + " mm; the camera file gives s_i = " +
-                             std::to_string(camera.image_distance_mm()) + " mm, f_l = " +
-                             std::to_string(camera.microlens().focal_length_mm) + " mm"));
+    throw InputError(f.where("made with s_i = " + std::to_string(cal.image_distance_mm) +
+                             " mm, f_l = " + std::to_string(cal.microlens_focal_length_mm) +
+                             " mm; the camera file gives s_i = " + std::to_string(camera.image_distance_mm()) +
+                             " mm, f_l = " + std::to_string(camera.microlens().focal_length_mm) + " mm"));
   }
   // Lens centres in this camera's frame (its optical axis), so that every spot stays where the
   // calibration measured it whatever the frame it was made in.

@@ -173,10 +173,10 @@ RawLattice estimate_lattice(const std::vector<std::array<double, 2>>& p, bool he
     });
   }
   if (row_len.size() < 10 || cross.size() < 10) {
-    throw InputError("found " + std::to_string(p.size()) + " " + what + " but only " +
-                     std::to_string(row_len.size()) + " in-row and " + std::to_string(cross.size()) +
-                     " next-row neighbour pairs near a pitch of " + fmt(pitch_px) + " px: they do not form a " +
-                     (hex ? "hex" : "rect") + " lattice (check microlens.layout, and that the array's rows run "
+    throw InputError("found " + std::to_string(p.size()) + " " + what + " but only " + std::to_string(row_len.size()) +
+                     " in-row and " + std::to_string(cross.size()) + " next-row neighbour pairs near a pitch of " +
+                     fmt(pitch_px) + " px: they do not form a " + (hex ? "hex" : "rect") +
+                     " lattice (check microlens.layout, and that the array's rows run "
                      "within 14 deg of the sensor's)");
   }
   lat.rotation = median(row_angle);
@@ -310,7 +310,8 @@ LatticeModel fit_model(const std::vector<std::array<double, 2>>& p, const std::v
       if (!(w > 0)) continue;
       const double u = (ij[q][0] + lattice.shift(ij[q][1]) - m.centre[0]) / m.scale[0];
       const double v = (ij[q][1] - m.centre[1]) / m.scale[1];
-      for (int r = 0; r < k; ++r) f[std::size_t(r)] = std::pow(u, t[std::size_t(r)][0]) * std::pow(v, t[std::size_t(r)][1]);
+      for (int r = 0; r < k; ++r)
+        f[std::size_t(r)] = std::pow(u, t[std::size_t(r)][0]) * std::pow(v, t[std::size_t(r)][1]);
       const auto s = m.lattice.site(ij[q][0], ij[q][1]);
       const double rx = p[q][0] - s[0], ry = p[q][1] - s[1];
       for (int r = 0; r < k; ++r) {

@@ -24,7 +24,8 @@ std::vector<float> sample_of(const cv::Mat& m) {
   const std::size_t step = std::max<std::size_t>(1, n / 1000000) | 1;
   std::vector<float> s;
   s.reserve(n / step + 1);
-  for (std::size_t k = 0; k < n; k += step) s.push_back(m.at<float>(int(k / std::size_t(m.cols)), int(k % std::size_t(m.cols))));
+  for (std::size_t k = 0; k < n; k += step)
+    s.push_back(m.at<float>(int(k / std::size_t(m.cols)), int(k % std::size_t(m.cols))));
   return s;
 }
 
@@ -125,8 +126,8 @@ int remove_hot_pixels(ImageF& image, double background, double noise, double rat
 }
 
 MicroImageTemplate::MicroImageTemplate(const ImageF& image, const RawLattice& lattice,
-                                       const std::vector<std::array<int, 2>>& sites,
-                                       const std::vector<LensFit>& lenses, const std::vector<std::uint8_t>& use)
+                                       const std::vector<std::array<int, 2>>& sites, const std::vector<LensFit>& lenses,
+                                       const std::vector<std::uint8_t>& use)
     : lattice_(lattice) {
   // The cell's corners: rect (px/2, py/2); hex the hexagon's vertices (0, y0) and (px/2, y1).
   if (lattice.hex) {
@@ -156,33 +157,36 @@ MicroImageTemplate::MicroImageTemplate(const ImageF& image, const RawLattice& la
     // Every pixel within the grid's reach, not only the lens's cell: a lens that moves by a
     // fraction of a pixel from its lattice site reads the template beyond its cell's edge (where
     // the mean includes its neighbours' light, as its own pixels do).
-    const int x0 = std::max(0, int(std::floor(l.centre[0] - radius_))), x1 = std::min(image.width - 1, int(std::ceil(l.centre[0] + radius_)));
-    const int y0 = std::max(0, int(std::floor(l.centre[1] - radius_))), y1 = std::min(image.height - 1, int(std::ceil(l.centre[1] + radius_)));
-    for (int y = y0; y <= y1; ++y) for (int x = x0; x <= x1; ++x) {
-      const double dx = x - l.centre[0], dy = y - l.centre[1];
-      const double u = dx * S + c, v = dy * S + c;
-      if (u < 0 || v < 0 || u >= n_ - 1 || v >= n_ - 1) continue;
-      const double scale = l.amplitude + (l.tilt[0] * dx + l.tilt[1] * dy) / pitch;
-      if (scale < 0.2 * l.amplitude) continue;
-      const double value = (image.at(x, y) - l.background) / scale;
-      const int u0 = int(u), v0 = int(v);
-      for (int bv = v0; bv <= v0 + 1; ++bv) {
-        for (int bu = u0; bu <= u0 + 1; ++bu) {
-          const double ex = u - bu, ey = v - bv;  // sample offset from the bin centre, in bins
-          const double wq = (1 - std::abs(ex)) * (1 - std::abs(ey));
-          Moments& m = mom[std::size_t(bv) * n_ + bu];
-          m.w += wq;
-          m.x += wq * ex;
-          m.y += wq * ey;
-          m.xx += wq * ex * ex;
-          m.xy += wq * ex * ey;
-          m.yy += wq * ey * ey;
-          m.v += wq * value;
-          m.vx += wq * value * ex;
-          m.vy += wq * value * ey;
+    const int x0 = std::max(0, int(std::floor(l.centre[0] - radius_))),
+              x1 = std::min(image.width - 1, int(std::ceil(l.centre[0] + radius_)));
+    const int y0 = std::max(0, int(std::floor(l.centre[1] - radius_))),
+              y1 = std::min(image.height - 1, int(std::ceil(l.centre[1] + radius_)));
+    for (int y = y0; y <= y1; ++y)
+      for (int x = x0; x <= x1; ++x) {
+        const double dx = x - l.centre[0], dy = y - l.centre[1];
+        const double u = dx * S + c, v = dy * S + c;
+        if (u < 0 || v < 0 || u >= n_ - 1 || v >= n_ - 1) continue;
+        const double scale = l.amplitude + (l.tilt[0] * dx + l.tilt[1] * dy) / pitch;
+        if (scale < 0.2 * l.amplitude) continue;
+        const double value = (image.at(x, y) - l.background) / scale;
+        const int u0 = int(u), v0 = int(v);
+        for (int bv = v0; bv <= v0 + 1; ++bv) {
+          for (int bu = u0; bu <= u0 + 1; ++bu) {
+            const double ex = u - bu, ey = v - bv;  // sample offset from the bin centre, in bins
+            const double wq = (1 - std::abs(ex)) * (1 - std::abs(ey));
+            Moments& m = mom[std::size_t(bv) * n_ + bu];
+            m.w += wq;
+            m.x += wq * ex;
+            m.y += wq * ey;
+            m.xx += wq * ex * ex;
+            m.xy += wq * ex * ey;
+            m.yy += wq * ey * ey;
+            m.v += wq * value;
+            m.vx += wq * value * ex;
+            m.vy += wq * value * ey;
+          }
         }
       }
-    }
   }
   // Mean per bin, then point symmetry; empty bins take their mirror's value, or none.
   const std::size_t n2 = std::size_t(n_) * n_;
@@ -264,7 +268,6 @@ double MicroImageTemplate::sample(const std::vector<float>& grid, double dx, dou
 }
 
 double MicroImageTemplate::value(double dx, double dy) const { return sample(value_, dx, dy); }
-
 
 double MicroImageTemplate::radius_at(double level) const {
   // Directions to the cell's corners in the lattice's own frame, turned by its rotation.

@@ -44,11 +44,11 @@ struct LensFit {
   double sigma = 0;                    // centre uncertainty per axis, pixels (1 sigma)
   double amplitude = 0;                // a
   double amplitude_sigma = 0;
-  double background = 0;               // b
-  std::array<double, 2> tilt{0, 0};    // g: brightness change across one pitch, counts
-  double visible = 0;                  // share of the lens's cell on the sensor
-  double outliers = 0;                 // share of its pixels the robust weights set aside
-  double noise = 0;                    // robust residual scale, counts
+  double background = 0;             // b
+  std::array<double, 2> tilt{0, 0};  // g: brightness change across one pitch, counts
+  double visible = 0;                // share of the lens's cell on the sensor
+  double outliers = 0;               // share of its pixels the robust weights set aside
+  double noise = 0;                  // robust residual scale, counts
   bool converged = false;
 };
 

@@ -12,8 +12,7 @@
 
 namespace plenopiv::calib {
 
-ImageF geometric_white_image(const optics::CameraModel& camera,
-                             const optics::MicrolensArray& lenses) {
+ImageF geometric_white_image(const optics::CameraModel& camera, const optics::MicrolensArray& lenses) {
   const optics::SensorSpec& s = camera.sensor();
   ImageF white(s.width_px, s.height_px, 0.f);
   const double radius_px = 0.5 * camera.microlens_image_diameter_px();
@@ -33,10 +32,8 @@ ImageF geometric_white_image(const optics::CameraModel& camera,
   std::vector<std::array<int, 2>> rows(spots.size());
   for (std::size_t lens = 0; lens < spots.size(); ++lens) {
     Spot& p = spots[lens];
-    p.cx = optics::sensor_mm_to_column(
-        s, optics::lens_centre_to_spot_mm(lenses.centres_mm[lens][0], s_i, f_l));
-    p.cy = optics::sensor_mm_to_row(
-        s, optics::lens_centre_to_spot_mm(lenses.centres_mm[lens][1], s_i, f_l));
+    p.cx = optics::sensor_mm_to_column(s, optics::lens_centre_to_spot_mm(lenses.centres_mm[lens][0], s_i, f_l));
+    p.cy = optics::sensor_mm_to_row(s, optics::lens_centre_to_spot_mm(lenses.centres_mm[lens][1], s_i, f_l));
     p.x0 = std::max(0, int(std::floor(p.cx - radius_px - 1)));
     p.x1 = std::min(s.width_px - 1, int(std::ceil(p.cx + radius_px + 1)));
     rows[lens] = {std::max(0, int(std::floor(p.cy - radius_px - 1))),
@@ -47,8 +44,7 @@ ImageF geometric_white_image(const optics::CameraModel& camera,
   std::vector<std::uint32_t> row_lenses(row_start.back());
   std::vector<std::uint32_t> fill(row_start.begin(), row_start.end() - 1);
   for (std::size_t lens = 0; lens < spots.size(); ++lens) {
-    for (int y = rows[lens][0]; y <= rows[lens][1]; ++y)
-      row_lenses[fill[std::size_t(y)]++] = std::uint32_t(lens);
+    for (int y = rows[lens][0]; y <= rows[lens][1]; ++y) row_lenses[fill[std::size_t(y)]++] = std::uint32_t(lens);
   }
   tbb::parallel_for(0, s.height_px, [&](int y) {
     for (std::uint32_t k = row_start[std::size_t(y)]; k < row_start[std::size_t(y) + 1]; ++k) {

@@ -13,8 +13,7 @@ namespace plenopiv::calib {
 // its area inside the disk of diameter CameraModel::microlens_image_diameter_px() around the spot
 // of each lens of `lenses` (1 inside a microlens image, 0 outside, fractions on the rim). The
 // same disk make_white_correction keeps of a measured white image.
-ImageF geometric_white_image(const optics::CameraModel& camera,
-                             const optics::MicrolensArray& lenses);
+ImageF geometric_white_image(const optics::CameraModel& camera, const optics::MicrolensArray& lenses);
 
 // The camera's nominal lattice (optics::Lattice::nominal: centred, not rotated) and its geometric
 // white image.

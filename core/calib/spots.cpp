@@ -46,15 +46,14 @@ Levels image_levels(const ImageF& image) {
 std::vector<Spot> find_spots(const ImageF& image, const SpotOptions& options, SpotImageStats* stats) {
   const int w = image.width, h = image.height;
   if (w < 3 || h < 3 || image.size() != std::size_t(w) * h) {
-    throw InputError("calibration image: empty or malformed (" + std::to_string(w) + " x " +
-                     std::to_string(h) + " pixels)");
+    throw InputError("calibration image: empty or malformed (" + std::to_string(w) + " x " + std::to_string(h) +
+                     " pixels)");
   }
   for (std::size_t k = 0; k < image.size(); ++k) {
     const float v = image.pixels[k];
     if (!std::isfinite(v) || v < 0) {
-      throw InputError("calibration image: pixel (" + std::to_string(k % w) + ", " +
-                       std::to_string(k / w) + ") is " + std::to_string(v) +
-                       "; values must be finite and non-negative");
+      throw InputError("calibration image: pixel (" + std::to_string(k % w) + ", " + std::to_string(k / w) + ") is " +
+                       std::to_string(v) + "; values must be finite and non-negative");
     }
   }
   const Levels levels = image_levels(image);

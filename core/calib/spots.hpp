@@ -18,12 +18,12 @@ struct Spot {
 
 // What the detector measured about the image, reported to the user and kept in the file.
 struct SpotImageStats {
-  double background = 0;   // median of the image: the dark level between spots
-  double noise_sigma = 0;  // 1.4826 * median absolute deviation
-  double threshold = 0;    // detection level (absolute)
-  int hot_pixels = 0;      // isolated bright pixels replaced by their neighbours' median
-  int rejected_large = 0;  // components larger than max_area_px (merged or saturated blobs)
-  int rejected_border = 0; // components touching the image border (centroid would be biased)
+  double background = 0;    // median of the image: the dark level between spots
+  double noise_sigma = 0;   // 1.4826 * median absolute deviation
+  double threshold = 0;     // detection level (absolute)
+  int hot_pixels = 0;       // isolated bright pixels replaced by their neighbours' median
+  int rejected_large = 0;   // components larger than max_area_px (merged or saturated blobs)
+  int rejected_border = 0;  // components touching the image border (centroid would be biased)
 };
 
 struct SpotOptions {
@@ -37,7 +37,6 @@ struct SpotOptions {
 // Hot pixels are removed before detection; each spot's centroid is taken over its bounding box
 // grown by one pixel, weights = max(value - background, 0), pixels of other spots excluded.
 // Spots come out in raster order of their first pixel; the result does not depend on threads.
-std::vector<Spot> find_spots(const ImageF& image, const SpotOptions& options,
-                             SpotImageStats* stats = nullptr);
+std::vector<Spot> find_spots(const ImageF& image, const SpotOptions& options, SpotImageStats* stats = nullptr);
 
 }  // namespace plenopiv::calib

@@ -57,7 +57,7 @@ bool out_of_space(const std::filesystem::path& folder, int error) {
 }  // namespace
 
 std::optional<std::uint64_t> free_bytes(const std::filesystem::path& folder) {
-  struct statvfs s{};
+  struct statvfs s {};
   if (::statvfs(folder.c_str(), &s) != 0) return std::nullopt;
   return std::uint64_t(s.f_bavail) * std::uint64_t(s.f_frsize);
 }
@@ -78,8 +78,8 @@ void sync_folder(const std::filesystem::path& folder) {
   }
 }
 
-void write_atomically(const std::filesystem::path& path,
-                      const std::function<void(const std::filesystem::path&)>& write, bool sync_folder) {
+void write_atomically(const std::filesystem::path& path, const std::function<void(const std::filesystem::path&)>& write,
+                      bool sync_folder) {
   static std::atomic<unsigned> counter{0};
   if (!path.has_filename()) throw InputError("'" + path.string() + "': not a file name to write");
   const std::filesystem::path folder = path.has_parent_path() ? path.parent_path() : ".";
@@ -87,9 +87,8 @@ void write_atomically(const std::filesystem::path& path,
     throw InputError(path.string() + ": cannot write: folder " + folder.string() + " does not exist");
   }
   // Same folder as the target, so the rename stays on one file system and is atomic.
-  const std::filesystem::path tmp =
-      folder / ("." + path.filename().string() + ".tmp-" + std::to_string(::getpid()) + "-" +
-                std::to_string(counter++));
+  const std::filesystem::path tmp = folder / ("." + path.filename().string() + ".tmp-" + std::to_string(::getpid()) +
+                                              "-" + std::to_string(counter++));
   const auto discard = [&] {
     std::error_code ignored;
     std::filesystem::remove(tmp, ignored);

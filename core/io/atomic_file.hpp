@@ -16,8 +16,8 @@ namespace plenopiv::io {
 // "no space left on device" with the space left in the folder. The folder must exist.
 // `sync_folder` false leaves the folder's flush to the caller (sync_folder()), who writes several
 // files into one folder and flushes it once for all of them.
-void write_atomically(const std::filesystem::path& path,
-                      const std::function<void(const std::filesystem::path&)>& write, bool sync_folder = true);
+void write_atomically(const std::filesystem::path& path, const std::function<void(const std::filesystem::path&)>& write,
+                      bool sync_folder = true);
 
 // write_atomically for a file whose whole content is `bytes` (text or binary).
 void write_text_atomically(const std::filesystem::path& path, const std::string& bytes);

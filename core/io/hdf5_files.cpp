@@ -44,19 +44,16 @@ template <typename T>
 void write_dataset(hid_t parent, const std::filesystem::path& path, const std::string& name,
                    const std::vector<hsize_t>& dims, const T* data) {
   Handle space(H5Screate_simple(int(dims.size()), dims.data(), nullptr), H5Sclose);
-  Handle set(H5Dcreate2(parent, name.c_str(), file_type<T>(), space.get(), H5P_DEFAULT,
-                        H5P_DEFAULT, H5P_DEFAULT),
+  Handle set(H5Dcreate2(parent, name.c_str(), file_type<T>(), space.get(), H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT),
              H5Dclose);
   if (!set.ok()) throw InputError(path.string() + ": HDF5: cannot create dataset " + name);
-  check(H5Dwrite(set.get(), mem_type<T>(), H5S_ALL, H5S_ALL, H5P_DEFAULT, data), path,
-        "write dataset " + name);
+  check(H5Dwrite(set.get(), mem_type<T>(), H5S_ALL, H5S_ALL, H5P_DEFAULT, data), path, "write dataset " + name);
 }
 
-void write_attribute(hid_t parent, const std::filesystem::path& path, const std::string& name,
-                     const double* values, hsize_t count) {
+void write_attribute(hid_t parent, const std::filesystem::path& path, const std::string& name, const double* values,
+                     hsize_t count) {
   Handle space(H5Screate_simple(1, &count, nullptr), H5Sclose);
-  Handle attr(H5Acreate2(parent, name.c_str(), H5T_IEEE_F64LE, space.get(), H5P_DEFAULT, H5P_DEFAULT),
-              H5Aclose);
+  Handle attr(H5Acreate2(parent, name.c_str(), H5T_IEEE_F64LE, space.get(), H5P_DEFAULT, H5P_DEFAULT), H5Aclose);
   if (!attr.ok()) throw InputError(path.string() + ": HDF5: cannot create attribute " + name);
   check(H5Awrite(attr.get(), H5T_NATIVE_DOUBLE, values), path, "write attribute " + name);
 }
@@ -112,9 +109,8 @@ void attach_axes(hid_t parent, const std::filesystem::path& path, const std::str
   }
 }
 
-std::vector<double> read_attribute(hid_t parent, const std::filesystem::path& path,
-                                   const std::string& owner, const std::string& name,
-                                   hsize_t expected) {
+std::vector<double> read_attribute(hid_t parent, const std::filesystem::path& path, const std::string& owner,
+                                   const std::string& name, hsize_t expected) {
   if (H5Aexists(parent, name.c_str()) <= 0) {
     throw InputError(path.string() + ": " + owner + " has no attribute " + name);
   }
@@ -122,8 +118,8 @@ std::vector<double> read_attribute(hid_t parent, const std::filesystem::path& pa
   Handle space(H5Aget_space(attr.get()), H5Sclose);
   const hssize_t n = H5Sget_simple_extent_npoints(space.get());
   if (n != hssize_t(expected)) {
-    throw InputError(path.string() + ": " + owner + " attribute " + name + " has " +
-                     std::to_string(n) + " values, expected " + std::to_string(expected));
+    throw InputError(path.string() + ": " + owner + " attribute " + name + " has " + std::to_string(n) +
+                     " values, expected " + std::to_string(expected));
   }
   std::vector<double> values(expected);
   check(H5Aread(attr.get(), H5T_NATIVE_DOUBLE, values.data()), path, "read attribute " + name);
@@ -149,8 +145,7 @@ std::vector<T> read_dataset(hid_t parent, const std::filesystem::path& path, con
   std::size_t count = 1;
   for (hsize_t d : dims) count *= d;
   std::vector<T> data(count);
-  check(H5Dread(set.get(), mem_type<T>(), H5S_ALL, H5S_ALL, H5P_DEFAULT, data.data()), path,
-        "read dataset " + name);
+  check(H5Dread(set.get(), mem_type<T>(), H5S_ALL, H5S_ALL, H5P_DEFAULT, data.data()), path, "read dataset " + name);
   if (dims_out) *dims_out = dims;
   return data;
 }
@@ -163,9 +158,7 @@ Handle open_for_reading(const std::filesystem::path& path) {
   return file;
 }
 
-std::vector<hsize_t> dims_of(const Grid3& g) {
-  return {hsize_t(g.shape[2]), hsize_t(g.shape[1]), hsize_t(g.shape[0])};
-}
+std::vector<hsize_t> dims_of(const Grid3& g) { return {hsize_t(g.shape[2]), hsize_t(g.shape[1]), hsize_t(g.shape[0])}; }
 
 void check_grid(const Grid3& g, std::size_t size, const std::string& what) {
   for (int a = 0; a < 3; ++a) {

@@ -3,8 +3,8 @@
 
 #include <algorithm>
 #include <fstream>
-#include <stdexcept>
 #include <opencv2/imgcodecs.hpp>
+#include <stdexcept>
 #include <string>
 
 #include "core/base/errors.hpp"
@@ -72,7 +72,8 @@ ImageF read_raw_frame(const std::filesystem::path& path) {
     case Format::unknown:
       break;
   }
-  throw InputError(path.string() + ": not a PNG or TIFF file (raw frames are read as PNG, or TIFF of 8/16-bit "
+  throw InputError(path.string() +
+                   ": not a PNG or TIFF file (raw frames are read as PNG, or TIFF of 8/16-bit "
                    "unsigned or float samples)");
 }
 

@@ -115,8 +115,8 @@ void read_rows(TIFF* t, const std::filesystem::path& path, uint32_t height, void
                const std::function<void(uint32_t)>& use_row) {
   for (uint32_t y = 0; y < height; ++y) {
     if (TIFFReadScanline(t, row_buffer, y, 0) < 0) {
-      throw InputError(path.string() + ": corrupt TIFF: row " + std::to_string(y) +
-                       " cannot be read (" + g_last_tiff_message + ")");
+      throw InputError(path.string() + ": corrupt TIFF: row " + std::to_string(y) + " cannot be read (" +
+                       g_last_tiff_message + ")");
     }
     use_row(y);
   }
@@ -156,8 +156,8 @@ ImageU16 read_tiff_u16(const std::filesystem::path& path) {
   const PageInfo p = page_info(t.get());
   if (p.samples != 1 || (p.bits != 8 && p.bits != 16) || p.format != SAMPLEFORMAT_UINT) {
     throw InputError(path.string() + ": expected a single-channel 8- or 16-bit unsigned TIFF, got " +
-                     std::to_string(p.samples) + " channel(s) of " + std::to_string(p.bits) +
-                     "-bit " + (p.format == SAMPLEFORMAT_IEEEFP ? "float" : "integer") + " samples");
+                     std::to_string(p.samples) + " channel(s) of " + std::to_string(p.bits) + "-bit " +
+                     (p.format == SAMPLEFORMAT_IEEEFP ? "float" : "integer") + " samples");
   }
   check_pieces(t.get(), path, file_size, p);
   ImageU16 image(int(p.width), int(p.height));
@@ -179,9 +179,13 @@ ImageF read_tiff_float(const std::filesystem::path& path) {
   const bool uint = p.format == SAMPLEFORMAT_UINT && (p.bits == 8 || p.bits == 16);
   const bool fp = p.format == SAMPLEFORMAT_IEEEFP && (p.bits == 32 || p.bits == 64);
   if (p.samples != 1 || !(uint || fp)) {
-    throw InputError(path.string() + ": expected a single-channel TIFF of 8- or 16-bit unsigned or 32/64-bit float "
-                     "samples, got " + std::to_string(p.samples) + " channel(s) of " + std::to_string(p.bits) +
-                     "-bit " + (p.format == SAMPLEFORMAT_IEEEFP ? "float" : p.format == SAMPLEFORMAT_INT ? "signed" : "unsigned") +
+    throw InputError(path.string() +
+                     ": expected a single-channel TIFF of 8- or 16-bit unsigned or 32/64-bit float "
+                     "samples, got " +
+                     std::to_string(p.samples) + " channel(s) of " + std::to_string(p.bits) + "-bit " +
+                     (p.format == SAMPLEFORMAT_IEEEFP ? "float"
+                      : p.format == SAMPLEFORMAT_INT  ? "signed"
+                                                      : "unsigned") +
                      " samples");
   }
   if (p.width == 0 || p.height == 0) throw InputError(path.string() + ": TIFF has no pixels");
@@ -216,12 +220,15 @@ ImageF read_tiff_float(const std::filesystem::path& path) {
 }
 
 void write_tiff(const std::filesystem::path& path, const ImageU16& image, bool sync_folder) {
-  write_atomically(path, [&](const std::filesystem::path& tmp) {
-    TiffPtr t = open(tmp, "w");
-    set_page_fields(t.get(), image.width, image.height, 16, SAMPLEFORMAT_UINT);
-    for (int y = 0; y < image.height; ++y) write_row(t.get(), path, image.row(y).data(), y);
-    flush(t.get(), path);
-  }, sync_folder);
+  write_atomically(
+      path,
+      [&](const std::filesystem::path& tmp) {
+        TiffPtr t = open(tmp, "w");
+        set_page_fields(t.get(), image.width, image.height, 16, SAMPLEFORMAT_UINT);
+        for (int y = 0; y < image.height; ++y) write_row(t.get(), path, image.row(y).data(), y);
+        flush(t.get(), path);
+      },
+      sync_folder);
 }
 
 void write_tiff_stack(const std::filesystem::path& path, const std::vector<ImageF>& pages) {

@@ -22,16 +22,15 @@ struct Array {
 };
 
 template <typename T>
-Array make_array(const std::string& name, const std::string& type, int components,
-                 const std::vector<T>& values) {
+Array make_array(const std::string& name, const std::string& type, int components, const std::vector<T>& values) {
   Array a{name, type, components, {}};
   a.bytes.resize(values.size() * sizeof(T));
   std::memcpy(a.bytes.data(), values.data(), a.bytes.size());
   return a;
 }
 
-std::vector<float> interleave(const std::vector<float>& x, const std::vector<float>& y,
-                              const std::vector<float>& z, double scale) {
+std::vector<float> interleave(const std::vector<float>& x, const std::vector<float>& y, const std::vector<float>& z,
+                              double scale) {
   std::vector<float> out(3 * x.size());
   for (std::size_t i = 0; i < x.size(); ++i) {
     out[3 * i] = float(x[i] * scale);
@@ -43,8 +42,7 @@ std::vector<float> interleave(const std::vector<float>& x, const std::vector<flo
 
 // Writes <VTKFile type="ImageData"> with raw appended data (UInt64 byte-count headers), the
 // compact binary form ParaView reads directly. VTK's point order is x fastest, as ours.
-void write_image_data(const std::filesystem::path& path, const Grid3& g,
-                      const std::vector<Array>& arrays) {
+void write_image_data(const std::filesystem::path& path, const Grid3& g, const std::vector<Array>& arrays) {
   write_atomically(path, [&](const std::filesystem::path& tmp) {
     std::ofstream out(tmp, std::ios::binary);
     if (!out) throw InputError(path.string() + ": cannot create file");
@@ -53,18 +51,15 @@ void write_image_data(const std::filesystem::path& path, const Grid3& g,
     head << "<?xml version=\"1.0\"?>\n"
          << "<VTKFile type=\"ImageData\" version=\"1.0\" byte_order=\"LittleEndian\" "
             "header_type=\"UInt64\">\n"
-         << "  <ImageData WholeExtent=\"0 " << g.shape[0] - 1 << " 0 " << g.shape[1] - 1 << " 0 "
-         << g.shape[2] - 1 << "\" Origin=\"" << g.origin_mm[0] << " " << g.origin_mm[1] << " "
-         << g.origin_mm[2] << "\" Spacing=\"" << g.spacing_mm[0] << " " << g.spacing_mm[1] << " "
-         << g.spacing_mm[2] << "\">\n"
-         << "    <Piece Extent=\"0 " << g.shape[0] - 1 << " 0 " << g.shape[1] - 1 << " 0 "
-         << g.shape[2] - 1 << "\">\n"
+         << "  <ImageData WholeExtent=\"0 " << g.shape[0] - 1 << " 0 " << g.shape[1] - 1 << " 0 " << g.shape[2] - 1
+         << "\" Origin=\"" << g.origin_mm[0] << " " << g.origin_mm[1] << " " << g.origin_mm[2] << "\" Spacing=\""
+         << g.spacing_mm[0] << " " << g.spacing_mm[1] << " " << g.spacing_mm[2] << "\">\n"
+         << "    <Piece Extent=\"0 " << g.shape[0] - 1 << " 0 " << g.shape[1] - 1 << " 0 " << g.shape[2] - 1 << "\">\n"
          << "      <PointData>\n";
     std::uint64_t offset = 0;
     for (const Array& a : arrays) {
-      head << "        <DataArray type=\"" << a.type << "\" Name=\"" << a.name
-           << "\" NumberOfComponents=\"" << a.components << "\" format=\"appended\" offset=\""
-           << offset << "\"/>\n";
+      head << "        <DataArray type=\"" << a.type << "\" Name=\"" << a.name << "\" NumberOfComponents=\""
+           << a.components << "\" format=\"appended\" offset=\"" << offset << "\"/>\n";
       offset += sizeof(std::uint64_t) + a.bytes.size();
     }
     head << "      </PointData>\n    </Piece>\n  </ImageData>\n"
@@ -93,15 +88,14 @@ void write_volume_vti(const std::filesystem::path& path, const Volume& volume) {
 void write_vector_field_vti(const std::filesystem::path& path, const VectorField& f,
                             const std::vector<NamedField>& extra) {
   const std::size_t n = f.grid.count();
-  if (n == 0 || f.dx_mm.size() != n || f.dy_mm.size() != n || f.dz_mm.size() != n ||
-      f.valid.size() != n || f.peak_ratio.size() != n) {
+  if (n == 0 || f.dx_mm.size() != n || f.dy_mm.size() != n || f.dz_mm.size() != n || f.valid.size() != n ||
+      f.peak_ratio.size() != n) {
     throw InputError(path.string() + ": vector field arrays do not match its grid");
   }
   if (!(f.dt_s > 0)) throw InputError(path.string() + ": dt_s must be > 0 to give velocities");
   std::vector<Array> arrays;
   arrays.push_back(make_array("displacement_mm", "Float32", 3, interleave(f.dx_mm, f.dy_mm, f.dz_mm, 1.0)));
-  arrays.push_back(
-      make_array("velocity_m_s", "Float32", 3, interleave(f.dx_mm, f.dy_mm, f.dz_mm, 1e-3 / f.dt_s)));
+  arrays.push_back(make_array("velocity_m_s", "Float32", 3, interleave(f.dx_mm, f.dy_mm, f.dz_mm, 1e-3 / f.dt_s)));
   arrays.push_back(make_array("valid", "UInt8", 1, f.valid));
   arrays.push_back(make_array("peak_ratio", "Float32", 1, f.peak_ratio));
   for (const NamedField& e : extra) {

@@ -30,13 +30,12 @@ optics::MicrolensArray axis_aligned_lattice(const optics::MicrolensArray& calibr
 
 LatticeResampler::LatticeResampler(const optics::CameraModel& camera, const optics::MicrolensArray& calibrated,
                                    const ImageF& white)
-    : virtual_(axis_aligned_lattice(calibrated)),
-      width_(camera.sensor().width_px),
-      height_(camera.sensor().height_px) {
+    : virtual_(axis_aligned_lattice(calibrated)), width_(camera.sensor().width_px), height_(camera.sensor().height_px) {
   const optics::SensorSpec& s = camera.sensor();
   if (white.width != width_ || white.height != height_) {
     throw InputError("white correction is " + std::to_string(white.width) + " x " + std::to_string(white.height) +
-                     " pixels, the camera file's sensor is " + std::to_string(width_) + " x " + std::to_string(height_));
+                     " pixels, the camera file's sensor is " + std::to_string(width_) + " x " +
+                     std::to_string(height_));
   }
   for (std::size_t k = 0; k < white.size(); ++k) {
     if (!std::isfinite(white.pixels[k]) || white.pixels[k] < 0) {
@@ -67,8 +66,10 @@ LatticeResampler::LatticeResampler(const optics::CameraModel& camera, const opti
   const double pitch_r = virtual_spots[std::size_t(vl.count_x)][1] - virtual_spots[0][1];
   lens_column_.resize(std::size_t(width_));
   lens_row_.resize(std::size_t(height_));
-  for (int c = 0; c < width_; ++c) lens_column_[std::size_t(c)] = nearest((c - virtual_spots[0][0]) / pitch_c, vl.count_x);
-  for (int r = 0; r < height_; ++r) lens_row_[std::size_t(r)] = nearest((r - virtual_spots[0][1]) / pitch_r, vl.count_y);
+  for (int c = 0; c < width_; ++c)
+    lens_column_[std::size_t(c)] = nearest((c - virtual_spots[0][0]) / pitch_c, vl.count_x);
+  for (int r = 0; r < height_; ++r)
+    lens_row_[std::size_t(r)] = nearest((r - virtual_spots[0][1]) / pitch_r, vl.count_y);
 
   // Per virtual lens, the calibrated lenses around its centre and their raw-pixel taps.
   const LatticeInterpolator interpolator(cl);
@@ -91,7 +92,9 @@ LatticeResampler::LatticeResampler(const optics::CameraModel& camera, const opti
       if (sum < kWhole) break;
       std::array<double, 2> blend{0, 0};
       for (int q = 0; q < n; ++q)
-        for (int a = 0; a < 2; ++a) blend[std::size_t(a)] += weight[std::size_t(q)] * calibrated.centres_mm[std::size_t(lens[std::size_t(q)])][std::size_t(a)];
+        for (int a = 0; a < 2; ++a)
+          blend[std::size_t(a)] +=
+              weight[std::size_t(q)] * calibrated.centres_mm[std::size_t(lens[std::size_t(q)])][std::size_t(a)];
       for (int a = 0; a < 2; ++a) at[std::size_t(a)] += target[std::size_t(a)] - blend[std::size_t(a)];
     }
     const int n = interpolator.weights(at[0], at[1], lens, weight);

@@ -89,7 +89,7 @@ class LatticeResampler {
   int width_ = 0, height_ = 0;
   // The virtual lens of pixel (col, row) is lens_column_[col] + count_x * lens_row_[row].
   std::vector<std::int32_t> lens_column_, lens_row_;
-  std::vector<std::uint32_t> tap_start_;     // per virtual lens: taps [tap_start_[v], tap_start_[v + 1])
+  std::vector<std::uint32_t> tap_start_;  // per virtual lens: taps [tap_start_[v], tap_start_[v + 1])
   std::vector<Tap> taps_;
   ImageF white_;
   Coverage coverage_;

@@ -20,8 +20,8 @@ void check_image(const optics::SensorSpec& s, const ImageF& image, const std::st
   }
   for (std::size_t k = 0; k < image.size(); ++k) {
     if (!std::isfinite(image.pixels[k]) || image.pixels[k] < 0) {
-      throw InputError(what + ": pixel (" + std::to_string(k % image.width) + ", " +
-                       std::to_string(k / image.width) + ") is not a finite, non-negative value");
+      throw InputError(what + ": pixel (" + std::to_string(k % image.width) + ", " + std::to_string(k / image.width) +
+                       ") is not a finite, non-negative value");
     }
   }
 }
@@ -35,8 +35,8 @@ void check_lenses(const optics::CameraModel& camera, const optics::MicrolensArra
                      " lenses has " + std::to_string(lenses.centres_mm.size()) + " centres");
   }
   if (l.layout != camera.microlens().layout) {
-    throw InputError(std::string("microlens array: ") + optics::to_string(l.layout) + " lenses, the camera file's are " +
-                     optics::to_string(camera.microlens().layout));
+    throw InputError(std::string("microlens array: ") + optics::to_string(l.layout) +
+                     " lenses, the camera file's are " + optics::to_string(camera.microlens().layout));
   }
 }
 
@@ -86,8 +86,10 @@ PixelRays pixel_rays(const optics::CameraModel& camera, const optics::MicrolensA
       if (id < 0) continue;
       rays.x_mm[k] = float(lenses.centres_mm[id][0]);
       rays.y_mm[k] = float(lenses.centres_mm[id][1]);
-      rays.u_mm[k] = float(optics::aperture_from_sensor_mm(optics::column_to_sensor_mm(s, col), spots_mm[id][0], s_i, f_l));
-      rays.v_mm[k] = float(optics::aperture_from_sensor_mm(optics::row_to_sensor_mm(s, row), spots_mm[id][1], s_i, f_l));
+      rays.u_mm[k] =
+          float(optics::aperture_from_sensor_mm(optics::column_to_sensor_mm(s, col), spots_mm[id][0], s_i, f_l));
+      rays.v_mm[k] =
+          float(optics::aperture_from_sensor_mm(optics::row_to_sensor_mm(s, row), spots_mm[id][1], s_i, f_l));
     }
   });
   return rays;
@@ -157,8 +159,7 @@ std::array<double, 2> LatticeInterpolator::to_lattice(double dx, double dy) cons
   return {(cos_ * dx - sin_ * dy) / lattice_.pitch_x_mm, (sin_ * dx + cos_ * dy) / lattice_.pitch_y_mm};
 }
 
-int LatticeInterpolator::weights_at(double a, double b, std::array<int, 4>& lens,
-                                    std::array<float, 4>& weight) const {
+int LatticeInterpolator::weights_at(double a, double b, std::array<int, 4>& lens, std::array<float, 4>& weight) const {
   const auto& l = lattice_;
   const bool hex = l.layout == optics::LensletLayout::hex;
   const double fb = std::floor(b);

@@ -29,12 +29,11 @@ double focus_measure(const ImageF& image) {
   return s1 > 0 ? s2 / (s1 * s1) : 0;
 }
 
-double sharpest_depth_mm(const LightField& field, const optics::CameraModel& camera, double z_min_mm,
-                         double z_max_mm, double step_mm) {
+double sharpest_depth_mm(const LightField& field, const optics::CameraModel& camera, double z_min_mm, double z_max_mm,
+                         double step_mm) {
   if (!(step_mm > 0) || !(z_max_mm >= z_min_mm)) {
-    throw InputError("depth from focus: need step > 0 and z_max >= z_min, got " +
-                     std::to_string(z_min_mm) + ".." + std::to_string(z_max_mm) + " step " +
-                     std::to_string(step_mm));
+    throw InputError("depth from focus: need step > 0 and z_max >= z_min, got " + std::to_string(z_min_mm) + ".." +
+                     std::to_string(z_max_mm) + " step " + std::to_string(step_mm));
   }
   double best_z = z_min_mm, best = -1;
   for (int k = 0; z_min_mm + k * step_mm <= z_max_mm + 1e-9 * step_mm; ++k) {
@@ -49,7 +48,8 @@ double sharpest_depth_mm(const LightField& field, const optics::CameraModel& cam
 }
 
 ImageF refocus(const LightField& field, double alpha) {
-  if (!(alpha > 0) || !std::isfinite(alpha)) throw InputError("refocus: alpha must be positive, got " + std::to_string(alpha));
+  if (!(alpha > 0) || !std::isfinite(alpha))
+    throw InputError("refocus: alpha must be positive, got " + std::to_string(alpha));
   const int nx = field.nx(), ny = field.ny();
   const ApertureSampling& a = field.sampling;
   const LatticeInterpolator interp(field.lenses.lattice);
@@ -58,7 +58,8 @@ ImageF refocus(const LightField& field, double alpha) {
   // coordinates a constant (da, db) per view, so no trigonometry in the loop.
   std::vector<std::array<double, 2>> shift(std::size_t(a.n_u) * a.n_v);
   for (int iv = 0; iv < a.n_v; ++iv) {
-    for (int iu = 0; iu < a.n_u; ++iu) shift[std::size_t(iv) * a.n_u + iu] = interp.to_lattice(a.u(iu) * k, a.v(iv) * k);
+    for (int iu = 0; iu < a.n_u; ++iu)
+      shift[std::size_t(iv) * a.n_u + iu] = interp.to_lattice(a.u(iu) * k, a.v(iv) * k);
   }
   const bool hex = field.lenses.lattice.layout == optics::LensletLayout::hex;
   ImageF out(nx, ny, 0.0f);

@@ -29,8 +29,8 @@ std::vector<ImageF> focal_stack(const LightField& field, const std::vector<doubl
 double focus_measure(const ImageF& image);
 // Depth from focus: the object depth z (mm) in z_min, z_min + step, ... <= z_max whose refocused
 // image has the largest focus_measure (the first such depth on ties).
-double sharpest_depth_mm(const LightField& field, const optics::CameraModel& camera, double z_min_mm,
-                         double z_max_mm, double step_mm);
+double sharpest_depth_mm(const LightField& field, const optics::CameraModel& camera, double z_min_mm, double z_max_mm,
+                         double step_mm);
 
 // Sec 3.4: the view from aperture point (u, v) mm: per lens, L interpolated bilinearly between
 // the four nearest aperture samples (invalid samples left out). InputError when (u, v) lies

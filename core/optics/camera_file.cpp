@@ -86,13 +86,11 @@ std::string to_yaml(const CameraSpec& spec) {
         << "]";
   }
   out << "}\n"
-      << "microlens: {pitch_mm: " << spec.microlens.pitch_mm
-      << ", focal_length_mm: " << spec.microlens.focal_length_mm;
+      << "microlens: {pitch_mm: " << spec.microlens.pitch_mm << ", focal_length_mm: " << spec.microlens.focal_length_mm;
   if (spec.microlens.count_x > 0) out << ", count_x: " << spec.microlens.count_x;
   if (spec.microlens.count_y > 0) out << ", count_y: " << spec.microlens.count_y;
   out << ", layout: " << to_string(spec.microlens.layout) << "}\n"
-      << "main_lens: {focal_length_mm: " << spec.main_lens.focal_length_mm
-      << ", f_number: " << spec.main_lens.f_number
+      << "main_lens: {focal_length_mm: " << spec.main_lens.focal_length_mm << ", f_number: " << spec.main_lens.f_number
       << ", magnification: " << spec.main_lens.magnification << "}\n";
   return out.str();
 }

@@ -1,8 +1,8 @@
 // The plenoptic camera: sensor, microlens array and main lens, validated, with derived geometry.
 #include "core/optics/camera_model.hpp"
 
-#include <cmath>
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <sstream>
 
@@ -23,9 +23,7 @@ std::string fmt(double v) {
 
 }  // namespace
 
-const char* to_string(LensletLayout layout) {
-  return layout == LensletLayout::hex ? "hex" : "rect";
-}
+const char* to_string(LensletLayout layout) { return layout == LensletLayout::hex ? "hex" : "rect"; }
 
 CameraModel::CameraModel(const CameraSpec& spec, const std::string& source) : spec_(spec) {
   auto fail = [&](const std::string& key, const std::string& reason) {
@@ -52,8 +50,7 @@ CameraModel::CameraModel(const CameraSpec& spec, const std::string& source) : sp
   positive("main_lens.focal_length_mm", m.focal_length_mm);
   positive("main_lens.f_number", m.f_number);
   if (!std::isfinite(m.magnification) || m.magnification == 0) {
-    fail("main_lens.magnification",
-         "must be non-zero (M = -s_i/s_o; -1 for 1:1 imaging), got " + fmt(m.magnification));
+    fail("main_lens.magnification", "must be non-zero (M = -s_i/s_o; -1 for 1:1 imaging), got " + fmt(m.magnification));
   }
   if (m.magnification > 0) {
     fail("main_lens.magnification",
@@ -62,13 +59,12 @@ CameraModel::CameraModel(const CameraSpec& spec, const std::string& source) : sp
   }
   if (s.optical_axis_px) {
     const auto& a = *s.optical_axis_px;
-    if (!std::isfinite(a[0]) || !std::isfinite(a[1]) || a[0] < -0.5 || a[1] < -0.5 ||
-        a[0] > s.width_px - 0.5 || a[1] > s.height_px - 0.5) {
-      fail("sensor.optical_axis_px", "[" + fmt(a[0]) + ", " + fmt(a[1]) +
-                                         "] is not on the sensor: give [column, row] in pixels, 0 to " +
-                                         fmt(s.width_px - 1) + " and 0 to " + fmt(s.height_px - 1) +
-                                         " (the centre is [" + fmt(0.5 * (s.width_px - 1)) + ", " +
-                                         fmt(0.5 * (s.height_px - 1)) + "])");
+    if (!std::isfinite(a[0]) || !std::isfinite(a[1]) || a[0] < -0.5 || a[1] < -0.5 || a[0] > s.width_px - 0.5 ||
+        a[1] > s.height_px - 0.5) {
+      fail("sensor.optical_axis_px",
+           "[" + fmt(a[0]) + ", " + fmt(a[1]) + "] is not on the sensor: give [column, row] in pixels, 0 to " +
+               fmt(s.width_px - 1) + " and 0 to " + fmt(s.height_px - 1) + " (the centre is [" +
+               fmt(0.5 * (s.width_px - 1)) + ", " + fmt(0.5 * (s.height_px - 1)) + "])");
     }
   }
 
@@ -89,8 +85,8 @@ CameraModel::CameraModel(const CameraSpec& spec, const std::string& source) : sp
   nominal_count_y_ = counts_given() ? std::min(l.count_y, fit_y) : fit_y;
   if (counts_given() && (l.count_x > fit_x || l.count_y > fit_y)) {
     notes_.push_back("the array of " + fmt(l.count_x) + " x " + fmt(l.count_y) + " lenses overfills the " +
-                     fmt(sensor_width_mm()) + " x " + fmt(sensor_height_mm()) + " mm sensor: " +
-                     fmt(nominal_count_x_) + " x " + fmt(nominal_count_y_) +
+                     fmt(sensor_width_mm()) + " x " + fmt(sensor_height_mm()) + " mm sensor: " + fmt(nominal_count_x_) +
+                     " x " + fmt(nominal_count_y_) +
                      " whole lenses before calibration, which finds the lenses the sensor shows");
   }
 
@@ -106,10 +102,10 @@ CameraModel::CameraModel(const CameraSpec& spec, const std::string& source) : sp
   const double lenslet = microlens_f_number();
   if (image_side < lenslet * (1 - kFNumberTolerance)) {
     notes_.push_back("main lens f/" + fmt(m.f_number) + " at M = " + fmt(m.magnification) + " gives an image-side f/" +
-                     fmt(image_side) + ", faster than the f/" + fmt(lenslet) +
-                     " microlenses: micro-images of " + fmt(microlens_image_diameter_px()) +
-                     " px would overlap, " + fmt(100.0 * predicted_fill()) + " % of the " + fmt(spot_pitch_px()) +
-                     " px spot pitch (eq 7 matches at f/" + fmt(matched_main_f_number()) +
+                     fmt(image_side) + ", faster than the f/" + fmt(lenslet) + " microlenses: micro-images of " +
+                     fmt(microlens_image_diameter_px()) + " px would overlap, " + fmt(100.0 * predicted_fill()) +
+                     " % of the " + fmt(spot_pitch_px()) + " px spot pitch (eq 7 matches at f/" +
+                     fmt(matched_main_f_number()) +
                      "); `plenopiv calibrate` measures the fill from a white image and refuses real overlap");
   }
   if (image_side > lenslet * (1 + kFNumberTolerance)) {
@@ -119,15 +115,11 @@ CameraModel::CameraModel(const CameraSpec& spec, const std::string& source) : sp
   }
 }
 
-double CameraModel::aperture_diameter_mm() const {
-  return spec_.main_lens.focal_length_mm / spec_.main_lens.f_number;
-}
+double CameraModel::aperture_diameter_mm() const { return spec_.main_lens.focal_length_mm / spec_.main_lens.f_number; }
 double CameraModel::image_side_f_number() const {
   return spec_.main_lens.f_number * (1.0 - spec_.main_lens.magnification);
 }
-double CameraModel::microlens_f_number() const {
-  return spec_.microlens.focal_length_mm / spec_.microlens.pitch_mm;
-}
+double CameraModel::microlens_f_number() const { return spec_.microlens.focal_length_mm / spec_.microlens.pitch_mm; }
 double CameraModel::matched_main_f_number() const {
   return microlens_f_number() / (1.0 - spec_.main_lens.magnification);
 }
@@ -136,9 +128,7 @@ double CameraModel::microlens_image_diameter_px() const {
   // centre onto the sensor one focal length behind it.
   return aperture_diameter_mm() * spec_.microlens.focal_length_mm / s_i_ / spec_.sensor.pixel_pitch_mm;
 }
-double CameraModel::pixels_per_microlens() const {
-  return spec_.microlens.pitch_mm / spec_.sensor.pixel_pitch_mm;
-}
+double CameraModel::pixels_per_microlens() const { return spec_.microlens.pitch_mm / spec_.sensor.pixel_pitch_mm; }
 double CameraModel::spot_pitch_px() const {
   return pixels_per_microlens() * (1.0 + spec_.microlens.focal_length_mm / s_i_);
 }
@@ -151,7 +141,7 @@ double CameraModel::sensor_width_mm() const { return spec_.sensor.width_px * spe
 double CameraModel::sensor_height_mm() const { return spec_.sensor.height_px * spec_.sensor.pixel_pitch_mm; }
 double CameraModel::row_pitch_mm() const {
   return spec_.microlens.layout == LensletLayout::hex ? spec_.microlens.pitch_mm * std::sqrt(3.0) / 2
-                                                     : spec_.microlens.pitch_mm;
+                                                      : spec_.microlens.pitch_mm;
 }
 double CameraModel::array_width_mm() const {
   const double rows_shift = spec_.microlens.layout == LensletLayout::hex && nominal_count_y_ > 1 ? 0.5 : 0.0;
@@ -161,12 +151,8 @@ double CameraModel::array_height_mm() const {
   // Each lens occupies one pitch across; rows are row_pitch apart.
   return (nominal_count_y_ - 1) * row_pitch_mm() + spec_.microlens.pitch_mm;
 }
-double CameraModel::field_of_view_x_mm() const {
-  return array_width_mm() / std::abs(spec_.main_lens.magnification);
-}
-double CameraModel::field_of_view_y_mm() const {
-  return array_height_mm() / std::abs(spec_.main_lens.magnification);
-}
+double CameraModel::field_of_view_x_mm() const { return array_width_mm() / std::abs(spec_.main_lens.magnification); }
+double CameraModel::field_of_view_y_mm() const { return array_height_mm() / std::abs(spec_.main_lens.magnification); }
 double CameraModel::nominal_voxel_size_mm() const {
   return spec_.microlens.pitch_mm / std::abs(spec_.main_lens.magnification);
 }
@@ -174,27 +160,25 @@ double CameraModel::nominal_voxel_size_mm() const {
 std::string CameraModel::summary() const {
   std::ostringstream out;
   out << "sensor        " << sensor().width_px << " x " << sensor().height_px << " px, pitch "
-      << fmt(sensor().pixel_pitch_mm * 1000) << " um (" << fmt(sensor_width_mm()) << " x "
-      << fmt(sensor_height_mm()) << " mm)\n"
-      << "microlenses   " << nominal_count_x_ << " x " << nominal_count_y_ << " "
-      << to_string(microlens().layout)
-      << (counts_given() ? (nominal_count_x_ == microlens().count_x && nominal_count_y_ == microlens().count_y
-                                ? ""
-                                : " on the sensor (array " + fmt(microlens().count_x) + " x " +
-                                      fmt(microlens().count_y) + ")")
-                         : " fit on the sensor (counts not given)")
+      << fmt(sensor().pixel_pitch_mm * 1000) << " um (" << fmt(sensor_width_mm()) << " x " << fmt(sensor_height_mm())
+      << " mm)\n"
+      << "microlenses   " << nominal_count_x_ << " x " << nominal_count_y_ << " " << to_string(microlens().layout)
+      << (counts_given()
+              ? (nominal_count_x_ == microlens().count_x && nominal_count_y_ == microlens().count_y
+                     ? ""
+                     : " on the sensor (array " + fmt(microlens().count_x) + " x " + fmt(microlens().count_y) + ")")
+              : " fit on the sensor (counts not given)")
       << ", pitch " << fmt(microlens().pitch_mm) << " mm (" << fmt(pixels_per_microlens()) << " px; spots "
       << fmt(spot_pitch_px()) << " px apart), f/" << fmt(microlens_f_number()) << "\n"
       << "optical axis  column " << fmt(optical_axis_px()[0]) << ", row " << fmt(optical_axis_px()[1])
       << (sensor().optical_axis_px ? "" : " (the sensor centre: sensor.optical_axis_px not given)") << "\n"
-      << "main lens     f = " << fmt(main_lens().focal_length_mm) << " mm, f/"
-      << fmt(main_lens().f_number) << ", M = " << fmt(main_lens().magnification)
-      << " -> s_o = " << fmt(s_o_) << " mm, s_i = " << fmt(s_i_) << " mm, image side f/"
-      << fmt(image_side_f_number()) << "\n"
+      << "main lens     f = " << fmt(main_lens().focal_length_mm) << " mm, f/" << fmt(main_lens().f_number)
+      << ", M = " << fmt(main_lens().magnification) << " -> s_o = " << fmt(s_o_) << " mm, s_i = " << fmt(s_i_)
+      << " mm, image side f/" << fmt(image_side_f_number()) << "\n"
       << "micro-images  " << fmt(microlens_image_diameter_px()) << " px across, fill " << fmt(100 * predicted_fill())
       << " % of the spot pitch (predicted from the f-number)\n"
-      << "field of view " << fmt(field_of_view_x_mm()) << " x " << fmt(field_of_view_y_mm())
-      << " mm, nominal voxel " << fmt(nominal_voxel_size_mm()) << " mm\n";
+      << "field of view " << fmt(field_of_view_x_mm()) << " x " << fmt(field_of_view_y_mm()) << " mm, nominal voxel "
+      << fmt(nominal_voxel_size_mm()) << " mm\n";
   for (const std::string& note : notes_) out << "note          " << note << "\n";
   return out.str();
 }

@@ -78,9 +78,9 @@ class CameraModel {
   double predicted_fill() const;
   double sensor_width_mm() const;
   double sensor_height_mm() const;
-  double array_width_mm() const;   // extent of the nominal lens array on the sensor
+  double array_width_mm() const;  // extent of the nominal lens array on the sensor
   double array_height_mm() const;
-  double row_pitch_mm() const;     // pitch for rect, pitch*sqrt(3)/2 for hex
+  double row_pitch_mm() const;  // pitch for rect, pitch*sqrt(3)/2 for hex
   // Whether the camera file gives microlens.count_x and count_y.
   bool counts_given() const { return spec_.microlens.count_x > 0 && spec_.microlens.count_y > 0; }
   // The nominal array: the camera file's counts where they fit on the sensor, else (counts not

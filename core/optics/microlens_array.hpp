@@ -69,12 +69,8 @@ inline double sensor_mm_to_row(const SensorSpec& s, double y_mm) {
 
 // The chief ray from the aperture centre through a microlens centre x_l lands one microlens focal
 // length behind it at x_l (1 + f_l / s_i): the centre of that lens's image (its calibration spot).
-inline double lens_centre_to_spot_mm(double lens_mm, double s_i, double f_l) {
-  return lens_mm * (1.0 + f_l / s_i);
-}
-inline double spot_to_lens_centre_mm(double spot_mm, double s_i, double f_l) {
-  return spot_mm / (1.0 + f_l / s_i);
-}
+inline double lens_centre_to_spot_mm(double lens_mm, double s_i, double f_l) { return lens_mm * (1.0 + f_l / s_i); }
+inline double spot_to_lens_centre_mm(double spot_mm, double s_i, double f_l) { return spot_mm / (1.0 + f_l / s_i); }
 // Eq 1 with its sign: a ray from aperture point u through the microlens at x_l arrives (the lens
 // focuses parallel rays) at x_s = x_spot - u f_l / s_i, so u = (x_spot - x_s) s_i / f_l. A pixel
 // right of its spot sees the left of the aperture.

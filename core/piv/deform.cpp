@@ -33,9 +33,8 @@ struct SincTable {
       std::array<double, sinc_taps> w;
       for (int k = 0; k < sinc_taps; ++k) {
         const double t = f - (k - sinc_taps / 2);
-        w[k] = std::abs(t) < hann_half_width
-                   ? sinc(t) * (0.5 + 0.5 * std::cos(std::numbers::pi * t / hann_half_width))
-                   : 0.0;
+        w[k] = std::abs(t) < hann_half_width ? sinc(t) * (0.5 + 0.5 * std::cos(std::numbers::pi * t / hann_half_width))
+                                             : 0.0;
         sum += w[k];
       }
       for (int k = 0; k < sinc_taps; ++k) rows[r][k] = float(w[k] / sum);
@@ -49,8 +48,7 @@ const SincTable& sinc_table() {
 }
 
 // Weights for the fractional offset f in [-0.5, 0.5] from the table, linearly interpolated.
-[[gnu::always_inline]] inline void weights_from(const SincTable& table, double f,
-                                                std::array<float, sinc_taps>& w) {
+[[gnu::always_inline]] inline void weights_from(const SincTable& table, double f, std::array<float, sinc_taps>& w) {
   const auto& rows = table.rows;
   const double u = std::clamp((f + 0.5) * table_steps, 0.0, double(table_steps));
   const int r = std::min(int(u), table_steps - 1);
@@ -81,8 +79,8 @@ using Stencil = std::array<Taps, 3>;
 
 // Whether the stencil, read as 8 voxels per row (below), lies inside the volume.
 [[gnu::always_inline]] inline bool inside(const std::array<int, 3>& s, const Stencil& t) {
-  return t[0].base >= 0 && t[0].base + sinc_taps + 1 <= s[0] && t[1].base >= 0 &&
-         t[1].base + sinc_taps <= s[1] && t[2].base >= 0 && t[2].base + sinc_taps <= s[2];
+  return t[0].base >= 0 && t[0].base + sinc_taps + 1 <= s[0] && t[1].base >= 0 && t[1].base + sinc_taps <= s[1] &&
+         t[2].base >= 0 && t[2].base + sinc_taps <= s[2];
 }
 
 // N samples inside their volumes (v[n] with stencil t[n]), summed over the 7x7x7 stencil: each
@@ -93,12 +91,11 @@ using Stencil = std::array<Taps, 3>;
 // every N give the same bits. Why N samples at once: each sample's 49 additions form one
 // dependent chain; N independent chains side by side keep the adders busy.
 template <int N>
-[[gnu::always_inline]] inline void sample_inside(const float* const* v, const std::array<int, 3>& s,
-                                                 const Stencil* t, float* out) {
+[[gnu::always_inline]] inline void sample_inside(const float* const* v, const std::array<int, 3>& s, const Stencil* t,
+                                                 float* out) {
   const std::size_t plane = std::size_t(s[0]) * s[1];
   const float* slab[N];
-  for (int n = 0; n < N; ++n)
-    slab[n] = v[n] + t[n][2].base * plane + std::size_t(t[n][1].base) * s[0] + t[n][0].base;
+  for (int n = 0; n < N; ++n) slab[n] = v[n] + t[n][2].base * plane + std::size_t(t[n][1].base) * s[0] + t[n][0].base;
   Lanes8 acc[N];
   for (int n = 0; n < N; ++n) acc[n] = Lanes8{0, 0, 0, 0, 0, 0, 0, 0};
   for (int kz = 0; kz < sinc_taps; ++kz)
@@ -117,8 +114,7 @@ template <int N>
 }
 
 // One sample anywhere; voxels outside the volume count as 0.
-[[gnu::always_inline]] inline float sample(const float* v, const std::array<int, 3>& s,
-                                           const Stencil& t) {
+[[gnu::always_inline]] inline float sample(const float* v, const std::array<int, 3>& s, const Stencil& t) {
   if (inside(s, t)) {
     float out;
     sample_inside<1>(&v, s, &t, &out);
@@ -159,8 +155,7 @@ typedef float Floats4 __attribute__((vector_size(16)));
 // adds a zero here, which leaves a sum that started at +0 unchanged.
 class RowPredictor {
  public:
-  RowPredictor(const NodeField& f, const Located& ly, const Located& lz)
-      : f_(f), ly_(ly), lz_(lz) {}
+  RowPredictor(const NodeField& f, const Located& ly, const Located& lz) : f_(f), ly_(ly), lz_(lz) {}
 
   [[gnu::always_inline]] std::array<float, 3> at(const Located& lx) {
     if (lx.first != cell_) load(lx.first);
@@ -179,8 +174,7 @@ class RowPredictor {
     cell_ = i0;
     for (int c = 0; c < 8; ++c) {
       const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
-      const std::size_t k = f_.index(std::min(i0 + dx, f_.count[0] - 1),
-                                     std::min(ly_.first + dy, f_.count[1] - 1),
+      const std::size_t k = f_.index(std::min(i0 + dx, f_.count[0] - 1), std::min(ly_.first + dy, f_.count[1] - 1),
                                      std::min(lz_.first + dz, f_.count[2] - 1));
       corner_[c] = Doubles4{f_.d[0][k], f_.d[1][k], f_.d[2][k], 0};
     }
@@ -197,10 +191,9 @@ constexpr int block_voxels = 4;
 
 // One row (y, z) of both deformed volumes. `lx`: the predictor's node location of every x;
 // `ly`, `lz`: of this row. The AVX-512 or AVX2 clone is chosen at run time where the CPU has it.
-__attribute__((target_clones("avx512f", "avx2", "default")))
-void deform_row(const float* a, const float* b, const std::array<int, 3>& shape,
-                const NodeField& predictor, const SincTable& table, const Located* lx,
-                const Located& ly, const Located& lz, int y, int z, float* a_out, float* b_out) {
+__attribute__((target_clones("avx512f", "avx2", "default"))) void deform_row(
+    const float* a, const float* b, const std::array<int, 3>& shape, const NodeField& predictor, const SincTable& table,
+    const Located* lx, const Located& ly, const Located& lz, int y, int z, float* a_out, float* b_out) {
   constexpr int samples = 2 * block_voxels;
   const float* const src[samples] = {a, b, a, b, a, b, a, b};
   static_assert(samples == 8);
@@ -235,8 +228,7 @@ void deform_row(const float* a, const float* b, const std::array<int, 3>& shape,
 
 }  // namespace
 
-NodeField::NodeField(std::array<int, 3> n, std::array<double, 3> first_node,
-                     std::array<double, 3> node_step)
+NodeField::NodeField(std::array<int, 3> n, std::array<double, 3> first_node, std::array<double, 3> node_step)
     : count(n), first(first_node), step(node_step) {
   for (auto& c : d) c.assign(size(), 0.f);
 }
@@ -252,13 +244,12 @@ std::array<float, 3> NodeField::at(double x, double y, double z) const {
   std::array<float, 3> out{0, 0, 0};
   for (int c = 0; c < 8; ++c) {
     const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
-    const double w = (dx ? where[0].second : 1 - where[0].second) *
-                     (dy ? where[1].second : 1 - where[1].second) *
+    const double w = (dx ? where[0].second : 1 - where[0].second) * (dy ? where[1].second : 1 - where[1].second) *
                      (dz ? where[2].second : 1 - where[2].second);
     if (w == 0) continue;
-    const std::size_t k = index(std::min(where[0].first + dx, count[0] - 1),
-                                std::min(where[1].first + dy, count[1] - 1),
-                                std::min(where[2].first + dz, count[2] - 1));
+    const std::size_t k =
+        index(std::min(where[0].first + dx, count[0] - 1), std::min(where[1].first + dy, count[1] - 1),
+              std::min(where[2].first + dz, count[2] - 1));
     for (int a = 0; a < 3; ++a) out[a] += float(w * d[a][k]);
   }
   return out;
@@ -276,8 +267,7 @@ std::vector<double> NodeField::mean_weights(int axis, int first_voxel, int n) co
 
 void sinc7_weights(double f, std::array<float, sinc_taps>& w) { weights_from(sinc_table(), f, w); }
 
-float sample_sinc7(std::span<const float> volume, const std::array<int, 3>& shape, double x,
-                   double y, double z) {
+float sample_sinc7(std::span<const float> volume, const std::array<int, 3>& shape, double x, double y, double z) {
   const SincTable& table = sinc_table();
   return sample(volume.data(), shape, {taps_for(table, x), taps_for(table, y), taps_for(table, z)});
 }
@@ -309,8 +299,8 @@ void binomial_pass(const float* s, float* d, const std::array<int, 3>& shape, in
 
 }  // namespace
 
-void binomial_smooth(std::span<const float> in, const std::array<int, 3>& shape,
-                     std::span<float> out, std::span<float> scratch, int depth_passes) {
+void binomial_smooth(std::span<const float> in, const std::array<int, 3>& shape, std::span<float> out,
+                     std::span<float> scratch, int depth_passes) {
   // x: in -> out, y: out -> scratch, z: scratch -> out; then the depth passes, out -> scratch ->
   // out in turn, and a copy home after an odd number of them.
   binomial_pass(in.data(), out.data(), shape, 0);
@@ -343,9 +333,8 @@ float subtract_mean_floor(std::span<const float> in, const std::array<int, 3>& s
   return floor;
 }
 
-void deform_pair(std::span<const float> a, std::span<const float> b,
-                 const std::array<int, 3>& shape, const NodeField& predictor,
-                 std::span<float> a_out, std::span<float> b_out) {
+void deform_pair(std::span<const float> a, std::span<const float> b, const std::array<int, 3>& shape,
+                 const NodeField& predictor, std::span<float> a_out, std::span<float> b_out) {
   const std::size_t plane = std::size_t(shape[0]) * shape[1];
   const SincTable& table = sinc_table();
   std::array<std::vector<Located>, 3> where;
@@ -355,8 +344,8 @@ void deform_pair(std::span<const float> a, std::span<const float> b,
     for (int z = r.begin(); z < r.end(); ++z)
       for (int y = 0; y < shape[1]; ++y) {
         const std::size_t row = z * plane + std::size_t(y) * shape[0];
-        deform_row(a.data(), b.data(), shape, predictor, table, where[0].data(), where[1][y],
-                   where[2][z], y, z, a_out.data() + row, b_out.data() + row);
+        deform_row(a.data(), b.data(), shape, predictor, table, where[0].data(), where[1][y], where[2][z], y, z,
+                   a_out.data() + row, b_out.data() + row);
       }
   });
 }

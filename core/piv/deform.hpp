@@ -21,9 +21,7 @@ struct NodeField {
   NodeField() = default;
   NodeField(std::array<int, 3> n, std::array<double, 3> first_node, std::array<double, 3> node_step);
   std::size_t size() const { return std::size_t(count[0]) * count[1] * count[2]; }
-  std::size_t index(int i, int j, int k) const {
-    return (std::size_t(k) * count[1] + j) * count[0] + i;
-  }
+  std::size_t index(int i, int j, int k) const { return (std::size_t(k) * count[1] + j) * count[0] + i; }
   // Trilinear interpolation at voxel coordinates (x, y, z); constant beyond the outer nodes.
   std::array<float, 3> at(double x, double y, double z) const;
   // Lower node and fraction towards the next one of coordinate p along `axis` (what at()
@@ -47,8 +45,7 @@ void sinc7_weights(double f, std::array<float, sinc_taps>& w);
 
 // Value of `volume` (shape nx, ny, nz; [z][y][x]) at voxel coordinates (x, y, z); voxels outside
 // the volume count as 0.
-float sample_sinc7(std::span<const float> volume, const std::array<int, 3>& shape, double x,
-                   double y, double z);
+float sample_sinc7(std::span<const float> volume, const std::array<int, 3>& shape, double x, double y, double z);
 
 // Smooths a volume with the binomial kernel [1 2 1] / 4 along x, y and z (a Gaussian of sigma
 // ~0.7 voxel; the edges use the kernel's inner taps only). Why: exact and reconstructed particles
@@ -59,8 +56,8 @@ float sample_sinc7(std::span<const float> volume, const std::array<int, 3>& shap
 // depth_prefilter: a reconstructed particle is ~4 times as long in depth as wide, so a volume's
 // depth detail finer than that is noise). `scratch` holds one volume. Parallel over z (TBB);
 // deterministic.
-void binomial_smooth(std::span<const float> in, const std::array<int, 3>& shape,
-                     std::span<float> out, std::span<float> scratch, int depth_passes = 0);
+void binomial_smooth(std::span<const float> in, const std::array<int, 3>& shape, std::span<float> out,
+                     std::span<float> scratch, int depth_passes = 0);
 
 // out = max(0, in - multiple * mean(in)): every voxel loses a floor proportional to the volume's
 // mean intensity, and what lies below it becomes zero. Why (CorrelationSettings::
@@ -74,8 +71,7 @@ float subtract_mean_floor(std::span<const float> in, const std::array<int, 3>& s
 // Symmetric deformation (Scarano & Poelma's VODIM): with d the predictor at voxel x,
 // a_out(x) = a(x - d/2) and b_out(x) = b(x + d/2), so a particle displaced by d appears at the
 // same place in both outputs. Parallel over z-slices (TBB); deterministic.
-void deform_pair(std::span<const float> a, std::span<const float> b,
-                 const std::array<int, 3>& shape, const NodeField& predictor,
-                 std::span<float> a_out, std::span<float> b_out);
+void deform_pair(std::span<const float> a, std::span<const float> b, const std::array<int, 3>& shape,
+                 const NodeField& predictor, std::span<float> a_out, std::span<float> b_out);
 
 }  // namespace plenopiv::piv

@@ -10,8 +10,7 @@
 namespace plenopiv::piv {
 
 std::array<std::vector<float>, 3> vorticity(const VectorField& f) {
-  if (!(f.dt_s > 0))
-    throw InputError("vorticity: dt_s must be > 0, got " + std::to_string(f.dt_s));
+  if (!(f.dt_s > 0)) throw InputError("vorticity: dt_s must be > 0, got " + std::to_string(f.dt_s));
   const Grid3& g = f.grid;
   const std::array<const std::vector<float>*, 3> comp{&f.dx_mm, &f.dy_mm, &f.dz_mm};
   const float nan = std::numeric_limits<float>::quiet_NaN();

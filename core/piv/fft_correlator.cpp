@@ -6,8 +6,8 @@
 
 #include <map>
 #include <mutex>
-#include <utility>
 #include <new>
+#include <utility>
 
 namespace plenopiv::piv {
 namespace {
@@ -115,17 +115,14 @@ std::span<float> FftCorrelator::Workspace::correlate() {
 FftCorrelator::FftCorrelator(std::array<int, 3> shape, FftPlanning planning) : shape_(shape) {
   const std::size_t n = size();
   const std::size_t n_half = std::size_t(shape[2]) * shape[1] * (shape[0] / 2 + 1);
-  plans_ = std::make_unique<Plans>([this, n, n_half] {
-    return Workspace(*this, std::make_unique<Workspace::Buffers>(n, n_half));
-  });
+  plans_ = std::make_unique<Plans>(
+      [this, n, n_half] { return Workspace(*this, std::make_unique<Workspace::Buffers>(n, n_half)); });
   Workspace::Buffers probe(n, n_half);
   std::lock_guard lock(fftw_planner_mutex());
   // FFTW takes the slowest-varying dimension first: [z][y][x].
   const unsigned flags = planning == FftPlanning::measure ? FFTW_MEASURE : FFTW_ESTIMATE;
-  plans_->forward =
-      fftwf_plan_dft_3d(shape[2], shape[1], shape[0], probe.z, probe.spec, FFTW_FORWARD, flags);
-  plans_->inverse =
-      fftwf_plan_dft_c2r_3d(shape[2], shape[1], shape[0], probe.cross, probe.corr, flags);
+  plans_->forward = fftwf_plan_dft_3d(shape[2], shape[1], shape[0], probe.z, probe.spec, FFTW_FORWARD, flags);
+  plans_->inverse = fftwf_plan_dft_c2r_3d(shape[2], shape[1], shape[0], probe.cross, probe.corr, flags);
   if (!plans_->forward || !plans_->inverse) throw std::bad_alloc();
 }
 

@@ -8,10 +8,10 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
-#include <stdexcept>
 #include <cmath>
 #include <span>
 #include <sstream>
+#include <stdexcept>
 
 #include "core/base/big_buffer.hpp"
 #include "core/base/errors.hpp"
@@ -23,15 +23,13 @@ namespace plenopiv::piv {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
+double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
 std::string describe(const Grid3& g) {
   std::ostringstream s;
-  s << g.shape[0] << "x" << g.shape[1] << "x" << g.shape[2] << " voxels, origin (" << g.origin_mm[0]
-    << ", " << g.origin_mm[1] << ", " << g.origin_mm[2] << ") mm, spacing (" << g.spacing_mm[0]
-    << ", " << g.spacing_mm[1] << ", " << g.spacing_mm[2] << ") mm";
+  s << g.shape[0] << "x" << g.shape[1] << "x" << g.shape[2] << " voxels, origin (" << g.origin_mm[0] << ", "
+    << g.origin_mm[1] << ", " << g.origin_mm[2] << ") mm, spacing (" << g.spacing_mm[0] << ", " << g.spacing_mm[1]
+    << ", " << g.spacing_mm[2] << ") mm";
   return s.str();
 }
 
@@ -41,8 +39,8 @@ void check_inputs(const Volume& a, const Volume& b, const CorrelationSettings& s
     throw InputError("depth context: " + std::to_string(depth_context) + " slices at each depth end of a volume " +
                      std::to_string(a.grid.shape[2]) + " slices deep (0 to less than half of it)");
   if (!(a.grid == b.grid))
-    throw InputError("the two volumes are on different grids: first " + describe(a.grid) +
-                     ", second " + describe(b.grid));
+    throw InputError("the two volumes are on different grids: first " + describe(a.grid) + ", second " +
+                     describe(b.grid));
   if (a.data.size() != a.grid.count() || b.data.size() != b.grid.count())
     throw InputError("volume data does not match its grid (" + describe(a.grid) + ")");
   for (const Volume* v : {&a, &b})
@@ -54,9 +52,8 @@ void check_inputs(const Volume& a, const Volume& b, const CorrelationSettings& s
     for (int axis = 0; axis < 3; ++axis) {
       const int room = a.grid.shape[axis] - (axis == 2 ? 2 * depth_context : 0);
       if (s.passes[p].window[axis] > room)
-        throw InputError("passes[" + std::to_string(p) + "].window: " +
-                         std::to_string(s.passes[p].window[axis]) + " voxels along " +
-                         "xyz"[axis] + " exceed the volume's " + std::to_string(room) +
+        throw InputError("passes[" + std::to_string(p) + "].window: " + std::to_string(s.passes[p].window[axis]) +
+                         " voxels along " + "xyz"[axis] + " exceed the volume's " + std::to_string(room) +
                          (axis == 2 && depth_context ? " (its depth context left out)" : ""));
     }
 }
@@ -140,10 +137,9 @@ void normalise_by_depth_shift(std::span<float> corr, std::size_t slice, int dept
 // Correlates every window of `va` with the same window of `vb`; a window's candidates are the
 // predictor (at its centre, or its mean over the window: settings.hpp, PredictorBase) plus each
 // correlation peak.
-Candidates correlate_windows(std::span<const float> va, std::span<const float> vb,
-                             const std::array<int, 3>& shape, const Layout& l,
-                             const NodeField* predictor, float signal_threshold,
-                             FftPlanning planning, bool at_centre, std::vector<float>& ratio) {
+Candidates correlate_windows(std::span<const float> va, std::span<const float> vb, const std::array<int, 3>& shape,
+                             const Layout& l, const NodeField* predictor, float signal_threshold, FftPlanning planning,
+                             bool at_centre, std::vector<float>& ratio) {
   const int margin = l.depth_margin;
   const std::array<int, 3> fft_shape{l.window[0], l.window[1], l.window[2] + 2 * margin};
   const FftCorrelator& correlator = FftCorrelator::shared(fft_shape, planning);
@@ -165,8 +161,7 @@ Candidates correlate_windows(std::span<const float> va, std::span<const float> v
       const int i = int(node % l.count[0]);
       const int j = int((node / l.count[0]) % l.count[1]);
       const int k = int(node / (std::size_t(l.count[0]) * l.count[1]));
-      const int x0 = l.start[0] + i * l.step[0], y0 = l.start[1] + j * l.step[1],
-                z0 = l.start[2] + k * l.step[2];
+      const int x0 = l.start[0] + i * l.step[0], y0 = l.start[1] + j * l.step[1], z0 = l.start[2] + k * l.step[2];
       auto wa = ws.window_a();
       auto wb = ws.window_b();
       // Slices -margin .. window + margin of B; A's are its window's, zeros in the margins.
@@ -214,8 +209,7 @@ Candidates correlate_windows(std::span<const float> va, std::span<const float> v
       const auto peaks = find_peaks(corr, fft_shape);
       std::array<float, 3> base{0, 0, 0};
       if (predictor && at_centre) {
-        base = predictor->at(x0 + 0.5 * (l.window[0] - 1), y0 + 0.5 * (l.window[1] - 1),
-                             z0 + 0.5 * (l.window[2] - 1));
+        base = predictor->at(x0 + 0.5 * (l.window[0] - 1), y0 + 0.5 * (l.window[1] - 1), z0 + 0.5 * (l.window[2] - 1));
       } else if (predictor) {
         const auto& wx = mean_weights[0][i];
         const auto& wy = mean_weights[1][j];
@@ -272,8 +266,7 @@ std::size_t CorrelationWorkspace::bytes() const {
          sizeof(float);
 }
 
-CorrelationResult correlate_volumes(const Volume& a, const Volume& b,
-                                    const CorrelationSettings& settings,
+CorrelationResult correlate_volumes(const Volume& a, const Volume& b, const CorrelationSettings& settings,
                                     const std::function<void(const PassReport&)>& on_pass, int depth_context,
                                     CorrelationWorkspace* workspace) {
   check_inputs(a, b, settings, depth_context);
@@ -345,9 +338,8 @@ CorrelationResult correlate_volumes(const Volume& a, const Volume& b,
     report.deform_s = seconds_since(t0);
 
     t0 = Clock::now();
-    last = correlate_windows(va, vb, shape, layout, have_predictor ? &predictor : nullptr,
-                             settings.signal_threshold, settings.fft_planning,
-                             settings.predictor == PredictorBase::centre, ratio);
+    last = correlate_windows(va, vb, shape, layout, have_predictor ? &predictor : nullptr, settings.signal_threshold,
+                             settings.fft_planning, settings.predictor == PredictorBase::centre, ratio);
     report.correlate_s = seconds_since(t0);
     report.windows = last.size();
     for (std::size_t n = 0; n < last.size(); ++n) {

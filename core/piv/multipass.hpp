@@ -28,8 +28,8 @@ struct PassReport {
 };
 
 struct CorrelationResult {
-  VectorField field;                 // displacement (mm), valid, peak ratio, dt_s, grid (mm)
-  std::vector<std::uint8_t> flags;   // VectorFlag bits per node (peak_fit.hpp)
+  VectorField field;                // displacement (mm), valid, peak ratio, dt_s, grid (mm)
+  std::vector<std::uint8_t> flags;  // VectorFlag bits per node (peak_fit.hpp)
   std::vector<PassReport> passes;
 };
 
@@ -52,8 +52,7 @@ class CorrelationWorkspace {
  private:
   std::unique_ptr<Buffers> buffers_;
   friend CorrelationResult correlate_volumes(const Volume&, const Volume&, const CorrelationSettings&,
-                                             const std::function<void(const PassReport&)>&, int,
-                                             CorrelationWorkspace*);
+                                             const std::function<void(const PassReport&)>&, int, CorrelationWorkspace*);
 };
 
 // Correlates volume `a` (first exposure) with `b` (second). Both must be on the same grid
@@ -69,9 +68,8 @@ class CorrelationWorkspace {
 // core/process passes its depth guard here: a reconstructed particle is a streak in depth, and
 // a box face cuts it as a window face does (PassSettings::depth_margin). 0 to less than half the
 // volume's depth. `workspace`: the buffers, kept by the caller (the same bits without one).
-CorrelationResult correlate_volumes(const Volume& a, const Volume& b,
-                                    const CorrelationSettings& settings,
-                                    const std::function<void(const PassReport&)>& on_pass = {},
-                                    int depth_context = 0, CorrelationWorkspace* workspace = nullptr);
+CorrelationResult correlate_volumes(const Volume& a, const Volume& b, const CorrelationSettings& settings,
+                                    const std::function<void(const PassReport&)>& on_pass = {}, int depth_context = 0,
+                                    CorrelationWorkspace* workspace = nullptr);
 
 }  // namespace plenopiv::piv

@@ -19,8 +19,7 @@ std::size_t index_of(const std::array<int, 3>& s, int x, int y, int z) {
 
 }  // namespace
 
-Peak fit_peak(std::span<const float> corr, const std::array<int, 3>& shape,
-              const std::array<int, 3>& at) {
+Peak fit_peak(std::span<const float> corr, const std::array<int, 3>& shape, const std::array<int, 3>& at) {
   Peak p;
   p.value = corr[index_of(shape, at[0], at[1], at[2])];
   for (int axis = 0; axis < 3; ++axis) {
@@ -99,8 +98,8 @@ std::array<Peak, 3> find_peaks(std::span<const float> corr, const std::array<int
         if (beaten(row[x + offset[k]], v, offset[k] < 0)) return;
     } else {
       for (int k = 0; k < 26; ++k) {
-        const float w = corr[index_of(shape, wrap(x + step[k][0], nx), wrap(y + step[k][1], ny),
-                                      wrap(z + step[k][2], nz))];
+        const float w =
+            corr[index_of(shape, wrap(x + step[k][0], nx), wrap(y + step[k][1], ny), wrap(z + step[k][2], nz))];
         if (beaten(w, v, offset[k] < 0)) return;
       }
     }

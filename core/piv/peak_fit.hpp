@@ -10,13 +10,13 @@ namespace plenopiv::piv {
 // Per-vector flags (bits), stored beside the field: how the peak was fitted and what the
 // validation did with it.
 enum VectorFlag : std::uint8_t {
-  flag_parabolic = 1,     // 3-point Gaussian impossible (a value <= 0): parabolic fit on an axis
-  flag_centroid = 2,      // peak on the window border (|shift| = n/2): centroid on that axis
-  flag_no_signal = 4,     // window without particle signal: skipped, invalid
-  flag_second_peak = 8,   // median-test outlier replaced by the second correlation peak
-  flag_third_peak = 16,   // ... by the third peak
-  flag_interpolated = 32, // ... by the mean of valid neighbours
-  flag_unresolved = 64,   // outlier with no valid replacement: invalid
+  flag_parabolic = 1,      // 3-point Gaussian impossible (a value <= 0): parabolic fit on an axis
+  flag_centroid = 2,       // peak on the window border (|shift| = n/2): centroid on that axis
+  flag_no_signal = 4,      // window without particle signal: skipped, invalid
+  flag_second_peak = 8,    // median-test outlier replaced by the second correlation peak
+  flag_third_peak = 16,    // ... by the third peak
+  flag_interpolated = 32,  // ... by the mean of valid neighbours
+  flag_unresolved = 64,    // outlier with no valid replacement: invalid
 };
 
 // The meaning of each VectorFlag bit, for files that store the flags ("1: ...; 2: ...").
@@ -38,8 +38,7 @@ struct Peak {
 // `corr` ([z][y][x], shift 0 at index 0) of the given shape: 3-point Gaussian fit per axis; a
 // parabolic fit where a value is <= 0, the centroid of the three values where the peak sits on
 // the border of the unambiguous shift range (-n/2 or n/2 - 1).
-Peak fit_peak(std::span<const float> corr, const std::array<int, 3>& shape,
-              const std::array<int, 3>& at);
+Peak fit_peak(std::span<const float> corr, const std::array<int, 3>& shape, const std::array<int, 3>& at);
 
 // The three highest local maxima (26-neighbourhood, cyclic) in decreasing order, each fitted by
 // fit_peak. Only positive maxima count; missing peaks have value 0 and zero shift. Ties are broken

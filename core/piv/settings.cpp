@@ -20,8 +20,8 @@ void check(const CorrelationSettings& s, const std::string& source) {
     if (!(pass.overlap_percent >= 0 && pass.overlap_percent < 100))
       fail(at + ".overlap_percent: must be in [0, 100), got " + std::to_string(pass.overlap_percent));
     if (pass.depth_margin < 0 || pass.depth_margin > pass.window[2])
-      fail(at + ".depth_margin: must be 0 to the window's depth (" + std::to_string(pass.window[2]) +
-           " voxels), got " + std::to_string(pass.depth_margin));
+      fail(at + ".depth_margin: must be 0 to the window's depth (" + std::to_string(pass.window[2]) + " voxels), got " +
+           std::to_string(pass.depth_margin));
   }
   if (!(s.median.threshold > 0)) fail("median.threshold: must be > 0");
   if (!(s.median.epsilon > 0)) fail("median.epsilon_voxel: must be > 0");
@@ -72,9 +72,12 @@ std::vector<PassSettings> parse_passes(const std::string& text) {
         w.push_back(std::stoi(size, &used));
         if (used != size.size()) bad("not a whole number: " + size);
       }
-      if (w.size() == 1) pass.window = {w[0], w[0], w[0]};
-      else if (w.size() == 3) pass.window = {w[0], w[1], w[2]};
-      else bad("give one size or three");
+      if (w.size() == 1)
+        pass.window = {w[0], w[0], w[0]};
+      else if (w.size() == 3)
+        pass.window = {w[0], w[1], w[2]};
+      else
+        bad("give one size or three");
     } catch (const std::logic_error&) {
       bad("not a number");
     }
@@ -87,9 +90,8 @@ std::vector<PassSettings> parse_passes(const std::string& text) {
 }
 
 CorrelationSettings correlation_settings_from(const YamlMap& root) {
-  root.reject_unknown({"passes", "median", "signal_threshold", "dt_s", "fft_planning", "prefilter",
-                      "depth_prefilter", "predictor", "predictor_smoothing",
-                      "intensity_threshold_of_mean", "final_smoothing"});
+  root.reject_unknown({"passes", "median", "signal_threshold", "dt_s", "fft_planning", "prefilter", "depth_prefilter",
+                       "predictor", "predictor_smoothing", "intensity_threshold_of_mean", "final_smoothing"});
   CorrelationSettings s;
   if (root.has("passes")) {
     const YAML::Node list = root.node()["passes"];

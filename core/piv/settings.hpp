@@ -46,8 +46,7 @@ struct CorrelationSettings {
   // normalisation would add more random error than the little bias left there removes
   // (docs/benchmarks.md, "Ring vortex on exact-particle volumes" and "Paper scale: correlation
   // knobs on the same volumes").
-  std::vector<PassSettings> passes{
-      {{32, 32, 32}, 50}, {{16, 16, 16}, 50, 4}, {{16, 16, 16}, 50}, {{16, 16, 16}, 75}};
+  std::vector<PassSettings> passes{{{32, 32, 32}, 50}, {{16, 16, 16}, 50, 4}, {{16, 16, 16}, 50}, {{16, 16, 16}, 75}};
   MedianTest median;
   // A window whose largest intensity in either volume is <= this has no particle signal.
   float signal_threshold = 0.f;

@@ -67,8 +67,8 @@ bool passes(const std::array<float, 3>& u, const Reference& ref, const MedianTes
   return true;
 }
 
-bool mean_of_valid(const ValidatedField& f, const std::array<int, 3>& count, std::size_t node,
-                   int radius, std::array<float, 3>& out) {
+bool mean_of_valid(const ValidatedField& f, const std::array<int, 3>& count, std::size_t node, int radius,
+                   std::array<float, 3>& out) {
   double sum[3] = {0, 0, 0};
   int n = 0;
   for_neighbours(count, node, radius, [&](std::size_t m) {
@@ -156,8 +156,7 @@ void smooth_valid(ValidatedField& f, std::array<int, 3> count, int passes) {
       tbb::parallel_for(tbb::blocked_range<std::size_t>(0, in.size()), [&](const auto& r) {
         for (std::size_t node = r.begin(); node < r.end(); ++node) {
           const int c = int((node / st) % std::size_t(count[axis]));
-          if (!f.valid[node] || c == 0 || c == count[axis] - 1 || !f.valid[node - st] || !f.valid[node + st])
-            continue;
+          if (!f.valid[node] || c == 0 || c == count[axis] - 1 || !f.valid[node - st] || !f.valid[node + st]) continue;
           for (int a = 0; a < 3; ++a)
             f.d[node][a] = 0.25f * in[node - st][a] + 0.5f * in[node][a] + 0.25f * in[node + st][a];
         }

@@ -22,9 +22,9 @@ struct Candidates {
 };
 
 struct MedianTest {
-  double threshold = 2.0;     // normalised residual above which a vector is an outlier
-  double epsilon = 0.1;       // voxels: the expected noise floor of the residuals
-  int radius = 2;             // neighbourhood (2 r + 1)^3: 5x5x5
+  double threshold = 2.0;  // normalised residual above which a vector is an outlier
+  double epsilon = 0.1;    // voxels: the expected noise floor of the residuals
+  int radius = 2;          // neighbourhood (2 r + 1)^3: 5x5x5
 };
 
 struct ValidationCounts {

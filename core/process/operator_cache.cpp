@@ -82,8 +82,7 @@ Parsed parse(std::string_view file, const std::string& key) {
   if (!take_u64(key_size) || key_size > file.size()) return bad(Outcome::corrupt, "truncated");
   const std::string_view stored_key = take(std::size_t(key_size));
   if (stored_key.size() != key_size) return bad(Outcome::corrupt, "truncated");
-  if (stored_key != key)
-    return bad(Outcome::stale, "made for another camera, calibration, volume or settings");
+  if (stored_key != key) return bad(Outcome::stale, "made for another camera, calibration, volume or settings");
   std::uint32_t crc = 0;
   if (!take_u64(payload_size)) return bad(Outcome::corrupt, "truncated");
   const std::string_view c = take(sizeof crc);
@@ -91,11 +90,9 @@ Parsed parse(std::string_view file, const std::string& key) {
   std::memcpy(&crc, c.data(), sizeof crc);
   const std::string_view payload = file.substr(at);
   if (payload.size() != payload_size)
-    return bad(Outcome::corrupt, "holds " + std::to_string(payload.size()) +
-                                     " bytes of tables, its header says " +
+    return bad(Outcome::corrupt, "holds " + std::to_string(payload.size()) + " bytes of tables, its header says " +
                                      std::to_string(payload_size));
-  if (io::crc32_of(payload) != crc)
-    return bad(Outcome::corrupt, "checksum does not match its tables");
+  if (io::crc32_of(payload) != crc) return bad(Outcome::corrupt, "checksum does not match its tables");
   return Parsed{payload, Outcome::hit, {}};
 }
 
@@ -122,31 +119,28 @@ void trim(const std::filesystem::path& folder, std::size_t keep) {
     files.emplace_back(std::filesystem::last_write_time(entry.path(), ec), entry.path());
   }
   if (files.size() <= keep) return;
-  std::sort(files.begin(), files.end(),
-            [](const auto& a, const auto& b) { return a.first > b.first; });
+  std::sort(files.begin(), files.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
   for (std::size_t i = keep; i < files.size(); ++i) std::filesystem::remove(files[i].second, ec);
 }
 
 }  // namespace
 
-std::string operator_key(const optics::CameraModel& camera, const optics::MicrolensArray& lenses,
-                         const ImageF& white, const Grid3& grid, double angular_sampling) {
+std::string operator_key(const optics::CameraModel& camera, const optics::MicrolensArray& lenses, const ImageF& white,
+                         const Grid3& grid, double angular_sampling) {
   std::string key = "plenopiv weighting operator\n";
   put(key, recon::WeightingOperator::kBytesFormat);
   const optics::CameraSpec& c = camera.spec();
-  for (const int v : {c.sensor.width_px, c.sensor.height_px, c.microlens.count_x,
-                      c.microlens.count_y, int(c.microlens.layout)})
+  for (const int v :
+       {c.sensor.width_px, c.sensor.height_px, c.microlens.count_x, c.microlens.count_y, int(c.microlens.layout)})
     put(key, v);
   for (const double v :
-       {c.sensor.pixel_pitch_mm, c.microlens.pitch_mm, c.microlens.focal_length_mm,
-        c.main_lens.focal_length_mm, c.main_lens.f_number, c.main_lens.magnification,
-        camera.image_distance_mm(), camera.object_distance_mm(), camera.aperture_diameter_mm(),
-        camera.microlens_image_diameter_px()})
+       {c.sensor.pixel_pitch_mm, c.microlens.pitch_mm, c.microlens.focal_length_mm, c.main_lens.focal_length_mm,
+        c.main_lens.f_number, c.main_lens.magnification, camera.image_distance_mm(), camera.object_distance_mm(),
+        camera.aperture_diameter_mm(), camera.microlens_image_diameter_px()})
     put(key, v);
   const optics::Lattice& l = lenses.lattice;
   for (const int v : {int(l.layout), l.count_x, l.count_y}) put(key, v);
-  for (const double v : {l.pitch_x_mm, l.pitch_y_mm, l.rotation_rad, l.offset_x_mm, l.offset_y_mm})
-    put(key, v);
+  for (const double v : {l.pitch_x_mm, l.pitch_y_mm, l.rotation_rad, l.offset_x_mm, l.offset_y_mm}) put(key, v);
   put(key, std::uint64_t(lenses.centres_mm.size()));
   key.append(reinterpret_cast<const char*>(lenses.centres_mm.data()),
              lenses.centres_mm.size() * sizeof(lenses.centres_mm[0]));
@@ -186,9 +180,10 @@ std::filesystem::path WeightsDiskCache::file_for(const std::string& key) const {
   return folder_ / ("weights-" + hex64(fnv1a(key)) + ".bin");
 }
 
-std::unique_ptr<const recon::WeightingOperator> WeightsDiskCache::weights(
-    const optics::CameraModel& camera, const optics::MicrolensArray& lenses, const ImageF& white,
-    const Grid3& grid, double angular_sampling) {
+std::unique_ptr<const recon::WeightingOperator> WeightsDiskCache::weights(const optics::CameraModel& camera,
+                                                                          const optics::MicrolensArray& lenses,
+                                                                          const ImageF& white, const Grid3& grid,
+                                                                          double angular_sampling) {
   const std::string key = operator_key(camera, lenses, white, grid, angular_sampling);
   const std::filesystem::path file = file_for(key);
   std::error_code ec;
@@ -208,8 +203,7 @@ std::unique_ptr<const recon::WeightingOperator> WeightsDiskCache::weights(
       why = p.why;
       if (outcome_ == Outcome::hit) {
         try {
-          auto op = std::make_unique<const recon::WeightingOperator>(
-              recon::WeightingOperator::deserialize(p.payload));
+          auto op = std::make_unique<const recon::WeightingOperator>(recon::WeightingOperator::deserialize(p.payload));
           std::filesystem::last_write_time(file, std::filesystem::file_time_type::clock::now(),
                                            ec);  // used
           note_ = "weight tables from the cache: " + file.string();
@@ -221,8 +215,7 @@ std::unique_ptr<const recon::WeightingOperator> WeightsDiskCache::weights(
       }
     }
   }
-  auto op = std::make_unique<const recon::WeightingOperator>(camera, lenses, grid, white,
-                                                             angular_sampling);
+  auto op = std::make_unique<const recon::WeightingOperator>(camera, lenses, grid, white, angular_sampling);
   const Outcome found = outcome_;
   try {
     std::filesystem::create_directories(folder_);
@@ -237,10 +230,8 @@ std::unique_ptr<const recon::WeightingOperator> WeightsDiskCache::weights(
       if (!out) throw InputError(tmp.string() + ": cannot write");
     });
     trim(folder_, keep_);
-    note_ =
-        std::string("weight tables built and kept in the cache: ") + file.string() +
-        (found == Outcome::missing ? ""
-                                   : std::string(" (replaced: ") + name(found) + ", " + why + ")");
+    note_ = std::string("weight tables built and kept in the cache: ") + file.string() +
+            (found == Outcome::missing ? "" : std::string(" (replaced: ") + name(found) + ", " + why + ")");
   } catch (const std::exception& e) {
     outcome_ = Outcome::unwritable;
     note_ = std::string("weight tables built; the cache could not keep them (") + e.what() + ")";
@@ -249,16 +240,14 @@ std::unique_ptr<const recon::WeightingOperator> WeightsDiskCache::weights(
 }
 
 PairOperator::WeightsSource WeightsDiskCache::source() {
-  return [this](const optics::CameraModel& c, const optics::MicrolensArray& l, const ImageF& w,
-                const Grid3& g, double a) { return weights(c, l, w, g, a); };
+  return [this](const optics::CameraModel& c, const optics::MicrolensArray& l, const ImageF& w, const Grid3& g,
+                double a) { return weights(c, l, w, g, a); };
 }
 
 std::filesystem::path default_cache_folder() {
   if (const char* dir = std::getenv("PLENOPIV_CACHE_DIR"); dir && *dir) return dir;
-  if (const char* dir = std::getenv("XDG_CACHE_HOME"); dir && *dir)
-    return std::filesystem::path(dir) / "plenopiv";
-  if (const char* home = std::getenv("HOME"); home && *home)
-    return std::filesystem::path(home) / ".cache" / "plenopiv";
+  if (const char* dir = std::getenv("XDG_CACHE_HOME"); dir && *dir) return std::filesystem::path(dir) / "plenopiv";
+  if (const char* home = std::getenv("HOME"); home && *home) return std::filesystem::path(home) / ".cache" / "plenopiv";
   return {};
 }
 
@@ -268,16 +257,14 @@ OperatorCache::OperatorCache(std::size_t capacity, std::filesystem::path disk_fo
 }
 
 std::shared_ptr<const PairOperator> OperatorCache::get(const optics::CameraModel& camera,
-                                                       const optics::MicrolensArray& lenses,
-                                                       const ImageF& white,
+                                                       const optics::MicrolensArray& lenses, const ImageF& white,
                                                        const ProcessSettings& settings, std::string* note) {
   return get(camera, lenses, white, settings.reconstruction_grid(), settings.angular_sampling, note);
 }
 
 std::shared_ptr<const PairOperator> OperatorCache::get(const optics::CameraModel& camera,
-                                                       const optics::MicrolensArray& lenses,
-                                                       const ImageF& white, const Grid3& grid,
-                                                       double angular_sampling, std::string* note) {
+                                                       const optics::MicrolensArray& lenses, const ImageF& white,
+                                                       const Grid3& grid, double angular_sampling, std::string* note) {
   const std::string key = operator_key(camera, lenses, white, grid, angular_sampling);
   std::lock_guard lock(mutex_);
   for (auto it = kept_.begin(); it != kept_.end(); ++it) {
@@ -288,9 +275,8 @@ std::shared_ptr<const PairOperator> OperatorCache::get(const optics::CameraModel
     if (note) *note = note_;
     return kept_.front().second;
   }
-  auto op =
-      std::make_shared<const PairOperator>(camera, lenses, white, grid, angular_sampling,
-                                           disk_ ? disk_->source() : PairOperator::WeightsSource{});
+  auto op = std::make_shared<const PairOperator>(camera, lenses, white, grid, angular_sampling,
+                                                 disk_ ? disk_->source() : PairOperator::WeightsSource{});
   ++counts_.builds;
   note_ = disk_ ? disk_->last_note() : "operator built";
   if (note) *note = note_;

@@ -23,8 +23,8 @@ namespace plenopiv::process {
 // What a weighting operator is built from, as bytes: the camera's optics and sensor, the lens
 // centres, the white image's size and checksums, the grid, the angular sampling, and the
 // operator's byte format. Two inputs with the same key give the same operator.
-std::string operator_key(const optics::CameraModel& camera, const optics::MicrolensArray& lenses,
-                         const ImageF& white, const Grid3& grid, double angular_sampling);
+std::string operator_key(const optics::CameraModel& camera, const optics::MicrolensArray& lenses, const ImageF& white,
+                         const Grid3& grid, double angular_sampling);
 
 // Weight tables in files of a folder, one per key (weights-<hash of the key>.bin: a header with
 // the full key, the payload's length and CRC-32, then recon::WeightingOperator::serialize's
@@ -42,9 +42,8 @@ class WeightsDiskCache {
 
   // The operator for these inputs: read from its file, or built and written there.
   std::unique_ptr<const recon::WeightingOperator> weights(const optics::CameraModel& camera,
-                                                          const optics::MicrolensArray& lenses,
-                                                          const ImageF& white, const Grid3& grid,
-                                                          double angular_sampling);
+                                                          const optics::MicrolensArray& lenses, const ImageF& white,
+                                                          const Grid3& grid, double angular_sampling);
   // weights() as a PairOperator's source of weights (this cache must outlive the call).
   PairOperator::WeightsSource source();
   Outcome last_outcome() const { return outcome_; }
@@ -74,12 +73,11 @@ class OperatorCache {
 
   // The operator for these inputs. `note` (optional): where it came from, as last_note() says
   // (for this call, whatever other threads do meanwhile).
-  std::shared_ptr<const PairOperator> get(const optics::CameraModel& camera,
-                                          const optics::MicrolensArray& lenses, const ImageF& white,
-                                          const ProcessSettings& settings, std::string* note = nullptr);
-  std::shared_ptr<const PairOperator> get(const optics::CameraModel& camera,
-                                          const optics::MicrolensArray& lenses, const ImageF& white,
-                                          const Grid3& grid, double angular_sampling,
+  std::shared_ptr<const PairOperator> get(const optics::CameraModel& camera, const optics::MicrolensArray& lenses,
+                                          const ImageF& white, const ProcessSettings& settings,
+                                          std::string* note = nullptr);
+  std::shared_ptr<const PairOperator> get(const optics::CameraModel& camera, const optics::MicrolensArray& lenses,
+                                          const ImageF& white, const Grid3& grid, double angular_sampling,
                                           std::string* note = nullptr);
 
   struct Counts {
@@ -94,8 +92,7 @@ class OperatorCache {
   std::size_t capacity_;
   std::unique_ptr<WeightsDiskCache> disk_;
   mutable std::mutex mutex_;
-  std::list<std::pair<std::string, std::shared_ptr<const PairOperator>>>
-      kept_;  // most recent first
+  std::list<std::pair<std::string, std::shared_ptr<const PairOperator>>> kept_;  // most recent first
   Counts counts_;
   std::string note_;
 };

@@ -1,14 +1,14 @@
 // One frame pair to a vector field: run config parsing and the reconstruct/correlate composition.
 #include "core/process/process.hpp"
 
-#include <chrono>
 #include <algorithm>
-#include <limits>
-#include <span>
-#include <sstream>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <numbers>
+#include <span>
+#include <sstream>
 #include <utility>
 
 #include "core/base/errors.hpp"
@@ -52,9 +52,7 @@ Grid3 grid_for_extent(const std::array<double, 3>& lo, const std::array<double, 
   return g;
 }
 
-int ProcessSettings::guard_slices() const {
-  return int(std::ceil(depth_guard_mm / grid.spacing_mm[2] - 1e-9));
-}
+int ProcessSettings::guard_slices() const { return int(std::ceil(depth_guard_mm / grid.spacing_mm[2] - 1e-9)); }
 
 double ProcessSettings::peak_bytes_per_pair() const {
   constexpr double kPeakBytesPerVoxel = 160;
@@ -99,17 +97,16 @@ ProcessSettings parse_settings(const YamlMap& root) {
   if (!(s.depth_guard_mm >= 0 && s.depth_guard_mm <= 100)) vol.fail("depth_guard_mm", "must be in [0, 100] mm");
 
   if (auto r = root.optional_map("reconstruction")) {
-    r->reject_unknown(
-        {"iterations", "mu", "acceleration", "start", "noise_threshold", "dark_weight_cutoff", "convergence",
-         "angular_sampling", "sensor_blur_sigma_mm", "prune", "prune_threshold"});
+    r->reject_unknown({"iterations", "mu", "acceleration", "start", "noise_threshold", "dark_weight_cutoff",
+                       "convergence", "angular_sampling", "sensor_blur_sigma_mm", "prune", "prune_threshold"});
     // Read here, checked by recon::check (the one owner of MART's ranges); the integer is only kept
     // from wrapping as it narrows.
-    s.mart.iterations =
-        r->integer_in("iterations", s.mart.iterations, std::numeric_limits<int>::min(), std::numeric_limits<int>::max());
+    s.mart.iterations = r->integer_in("iterations", s.mart.iterations, std::numeric_limits<int>::min(),
+                                      std::numeric_limits<int>::max());
     s.mart.mu = r->number_or("mu", s.mart.mu);
     s.mart.accelerate = r->choice_or("acceleration", {"none", "nesterov"}, "none") == "nesterov";
-    s.mart.start = r->choice_or("start", {"mlos", "ones"}, "mlos") == "ones" ? recon::MartStart::ones
-                                                                          : recon::MartStart::mlos;
+    s.mart.start =
+        r->choice_or("start", {"mlos", "ones"}, "mlos") == "ones" ? recon::MartStart::ones : recon::MartStart::mlos;
     s.mart.noise_threshold = float(r->number_or("noise_threshold", s.mart.noise_threshold));
     s.mart.dark_weight_cutoff = r->number_or("dark_weight_cutoff", s.mart.dark_weight_cutoff);
     s.mart.convergence = r->number_or("convergence", s.mart.convergence);
@@ -188,11 +185,12 @@ std::string spec_text(const YAML::Node& node, const std::string& comment) {
 }
 
 PairResult process_pair(const recon::WeightingOperator& op, const ImageF& frame_a, const ImageF& frame_b,
-                        const ProcessSettings& settings, const PairProgress& progress,
-                        recon::MartWorkspace* workspace, piv::CorrelationWorkspace* correlation_workspace) {
+                        const ProcessSettings& settings, const PairProgress& progress, recon::MartWorkspace* workspace,
+                        piv::CorrelationWorkspace* correlation_workspace) {
   if (!(op.grid() == settings.reconstruction_grid()))
-    throw InputError("process: the weighting operator was built for another volume grid than the run config's "
-                     "(its volume plus the depth guard)");
+    throw InputError(
+        "process: the weighting operator was built for another volume grid than the run config's "
+        "(its volume plus the depth guard)");
   recon::validate_image(frame_a, op, "frame A");
   recon::validate_image(frame_b, op, "frame B");
   // Shares of the pair's work for the progress fraction: each reconstruction 40 %, correlation 20 %.
@@ -236,17 +234,16 @@ PairResult process_pair(const recon::WeightingOperator& op, const ImageF& frame_
   return out;
 }
 
-PairOperator::PairOperator(const optics::CameraModel& camera, const optics::MicrolensArray& lenses,
-                           const ImageF& white, const ProcessSettings& settings, const WeightsSource& source)
+PairOperator::PairOperator(const optics::CameraModel& camera, const optics::MicrolensArray& lenses, const ImageF& white,
+                           const ProcessSettings& settings, const WeightsSource& source)
     : PairOperator(camera, lenses, white, settings.reconstruction_grid(), settings.angular_sampling, source) {}
 
-PairOperator::PairOperator(const optics::CameraModel& camera, const optics::MicrolensArray& lenses,
-                           const ImageF& white, const Grid3& grid, double angular_sampling,
-                           const WeightsSource& source) {
-  const WeightsSource build = source ? source : [](const optics::CameraModel& c, const optics::MicrolensArray& l,
-                                                   const ImageF& w, const Grid3& g, double a) {
-    return std::make_unique<const recon::WeightingOperator>(c, l, g, w, a);
-  };
+PairOperator::PairOperator(const optics::CameraModel& camera, const optics::MicrolensArray& lenses, const ImageF& white,
+                           const Grid3& grid, double angular_sampling, const WeightsSource& source) {
+  const WeightsSource build =
+      source ? source
+             : [](const optics::CameraModel& c, const optics::MicrolensArray& l, const ImageF& w, const Grid3& g,
+                  double a) { return std::make_unique<const recon::WeightingOperator>(c, l, g, w, a); };
   const optics::Lattice& l = lenses.lattice;
   const bool rect = l.layout == optics::LensletLayout::rect;
   const double pixel = camera.sensor().pixel_pitch_mm;
@@ -261,11 +258,12 @@ PairOperator::PairOperator(const optics::CameraModel& camera, const optics::Micr
   const auto& v = resampler_->lenses().lattice;
   char text[320];
   if (rect) {
-    std::snprintf(text, sizeof text,
-                  "image resampled onto an axis-aligned lattice: calibrated array rotated %.2f deg, max departure %.1f px "
-                  "(the separable weights allow %.2f px); virtual lenses: %d inside the array, %d at its edge, %d beyond",
-                  l.rotation_rad * 180 / std::numbers::pi, sep.max_departure_mm / pixel,
-                  recon::kSeparableTolerancePx, c.full, c.partial, c.none);
+    std::snprintf(
+        text, sizeof text,
+        "image resampled onto an axis-aligned lattice: calibrated array rotated %.2f deg, max departure %.1f px "
+        "(the separable weights allow %.2f px); virtual lenses: %d inside the array, %d at its edge, %d beyond",
+        l.rotation_rad * 180 / std::numbers::pi, sep.max_departure_mm / pixel, recon::kSeparableTolerancePx, c.full,
+        c.partial, c.none);
   } else {
     std::snprintf(text, sizeof text,
                   "image resampled onto an axis-aligned lattice: calibrated array hexagonal (%d x %d lenses, rotated "
@@ -284,13 +282,13 @@ const ImageF& PairOperator::prepare(const ImageF& frame, ImageF& scratch) const 
 }
 
 PairResult process_pair(const PairOperator& op, const ImageF& frame_a, const ImageF& frame_b,
-                        const ProcessSettings& settings, const PairProgress& progress,
-                        recon::MartWorkspace* workspace, piv::CorrelationWorkspace* correlation_workspace) {
+                        const ProcessSettings& settings, const PairProgress& progress, recon::MartWorkspace* workspace,
+                        piv::CorrelationWorkspace* correlation_workspace) {
   recon::validate_image(frame_a, op.weights(), "frame A");
   recon::validate_image(frame_b, op.weights(), "frame B");
   ImageF scratch_a, scratch_b;
-  PairResult out = process_pair(op.weights(), op.prepare(frame_a, scratch_a), op.prepare(frame_b, scratch_b),
-                                settings, progress, workspace, correlation_workspace);
+  PairResult out = process_pair(op.weights(), op.prepare(frame_a, scratch_a), op.prepare(frame_b, scratch_b), settings,
+                                progress, workspace, correlation_workspace);
   out.lattice_note = op.note();
   return out;
 }

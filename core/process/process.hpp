@@ -26,7 +26,7 @@ namespace plenopiv::process {
 // Everything one pair needs besides the camera and calibration. Defaults: the paper's MART (mu
 // 0.5, 5 iterations) and core/piv's default correlation (piv::CorrelationSettings).
 struct ProcessSettings {
-  Grid3 grid;                        // the volume the user asked for, mm: correlated and returned
+  Grid3 grid;  // the volume the user asked for, mm: correlated and returned
   // Depth reconstructed beyond each depth end of `grid`, mm, 0..100; default 1. A particle just
   // outside the box puts its elongated image (about ±1 mm at 4 mm from focus on the sec 5.4
   // camera) into the end slices, where it stays from frame to frame and pulls the correlation's
@@ -120,8 +120,8 @@ class PairOperator {
   // calibrated ones, or the axis-aligned lattice's): built, or read from a cache
   // (operator_cache.hpp). Empty: built.
   using WeightsSource = std::function<std::unique_ptr<const recon::WeightingOperator>(
-      const optics::CameraModel& camera, const optics::MicrolensArray& lenses, const ImageF& white,
-      const Grid3& grid, double angular_sampling)>;
+      const optics::CameraModel& camera, const optics::MicrolensArray& lenses, const ImageF& white, const Grid3& grid,
+      double angular_sampling)>;
 
   // `grid` and `angular_sampling` as recon::WeightingOperator takes them.
   PairOperator(const optics::CameraModel& camera, const optics::MicrolensArray& lenses, const ImageF& white,

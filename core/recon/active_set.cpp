@@ -37,8 +37,8 @@ namespace {
 // both), for bands [first_band, last_band] only: voxel by voxel in y order, each voxel's bands in
 // order, so the entries of one band keep y order.
 template <typename Entry>
-void walk_column(const SliceTables& t, std::uint32_t begin, std::uint32_t end, const int* order_y,
-                 int first_band, int last_band, int band_rows, int height, Entry&& entry) {
+void walk_column(const SliceTables& t, std::uint32_t begin, std::uint32_t end, const int* order_y, int first_band,
+                 int last_band, int band_rows, int height, Entry&& entry) {
   for (std::uint32_t p = begin; p < end; ++p) {
     const std::size_t y = std::size_t(order_y[p]);
     const std::size_t q0 = t.y_quad_start[y], q1 = t.y_quad_start[y + 1];
@@ -58,9 +58,7 @@ void walk_column(const SliceTables& t, std::uint32_t begin, std::uint32_t end, c
 
 }  // namespace
 
-ActiveSet::ActiveSet(const WeightingOperator& op, std::vector<std::uint32_t> voxels) {
-  assign(op, std::move(voxels));
-}
+ActiveSet::ActiveSet(const WeightingOperator& op, std::vector<std::uint32_t> voxels) { assign(op, std::move(voxels)); }
 
 void ActiveSet::assign(const WeightingOperator& op, std::vector<std::uint32_t> voxels) {
   voxels_ = std::move(voxels);
@@ -109,16 +107,14 @@ BigBuffer<int> ActiveSet::group_by_column(const WeightingOperator& op) {
   strips_ = (int(nx) + strip_x_ - 1) / strip_x_;
   const std::uint32_t sx = std::uint32_t(strip_x_);
   // A voxel column's place in the visiting order: strip, depth, x within the strip.
-  auto key_of = [&](std::uint32_t x, std::uint32_t z) {
-    return (std::size_t(x / sx) * nz + z) * sx + x % sx;
-  };
+  auto key_of = [&](std::uint32_t x, std::uint32_t z) { return (std::size_t(x / sx) * nz + z) * sx + x % sx; };
   // Group by voxel column in that order with a counting sort, slice by slice in parallel (the
   // voxels are sorted, so each slice is one stretch of them): y stays increasing within a
   // column. A voxel that sees no pixel (n = 0) takes no part; its value is 0.
   std::vector<std::size_t> slice_begin(std::size_t(nz) + 1);
   for (std::uint32_t z = 0; z <= nz; ++z) {
-    slice_begin[z] = std::size_t(
-        std::lower_bound(voxels_.begin(), voxels_.end(), std::uint64_t(z) * nxy) - voxels_.begin());
+    slice_begin[z] =
+        std::size_t(std::lower_bound(voxels_.begin(), voxels_.end(), std::uint64_t(z) * nxy) - voxels_.begin());
   }
   std::vector<std::uint32_t> column_count(std::size_t(nz) * nx, 0);  // [z][x]
   tbb::parallel_for(std::uint32_t(0), nz, [&](std::uint32_t z) {
@@ -154,8 +150,7 @@ BigBuffer<int> ActiveSet::group_by_column(const WeightingOperator& op) {
   for (std::size_t key = 0; key + 1 < start.size(); ++key) {
     if (start[key + 1] == start[key]) continue;
     const std::size_t strip = key / (std::size_t(nz) * sx);
-    columns_.push_back(
-        Column{int((key / sx) % nz), int(strip * sx + key % sx), start[key], start[key + 1]});
+    columns_.push_back(Column{int((key / sx) % nz), int(strip * sx + key % sx), start[key], start[key + 1]});
     strip_columns_[strip + 1] = std::uint32_t(columns_.size());
   }
   for (std::size_t s = 1; s <= std::size_t(strips_); ++s) {
@@ -164,8 +159,7 @@ BigBuffer<int> ActiveSet::group_by_column(const WeightingOperator& op) {
   return order_y;
 }
 
-ActiveSet::BandPlan ActiveSet::plan_bands(const WeightingOperator& op,
-                                          const BigBuffer<int>& order_y) const {
+ActiveSet::BandPlan ActiveSet::plan_bands(const WeightingOperator& op, const BigBuffer<int>& order_y) const {
   const int height = op.image_height();
   BandPlan plan;
   plan.first_band.resize(columns_.size());
@@ -184,12 +178,10 @@ ActiveSet::BandPlan ActiveSet::plan_bands(const WeightingOperator& op,
                           plan.first_band[c] = std::min(plan.first_band[c], run.first / kBandRows);
                           plan.last_band[c] = std::max(plan.last_band[c], run.last / kBandRows);
                         }
-                        plan.block_offset[c + 1] =
-                            std::size_t(plan.last_band[c] - plan.first_band[c] + 1);
+                        plan.block_offset[c + 1] = std::size_t(plan.last_band[c] - plan.first_band[c] + 1);
                       }
                     });
-  for (std::size_t c = 0; c < columns_.size(); ++c)
-    plan.block_offset[c + 1] += plan.block_offset[c];
+  for (std::size_t c = 0; c < columns_.size(); ++c) plan.block_offset[c + 1] += plan.block_offset[c];
   plan.block_entries.assign(plan.block_offset.back(), 0);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, columns_.size(), 64),
                     [&](const tbb::blocked_range<std::size_t>& range) {
@@ -197,9 +189,8 @@ ActiveSet::BandPlan ActiveSet::plan_bands(const WeightingOperator& op,
                         const Column& col = columns_[c];
                         const std::size_t offset = plan.block_offset[c];
                         const int first = plan.first_band[c];
-                        walk_column(op.slice(col.z), col.begin, col.end, order_y.data(), first,
-                                    plan.last_band[c], kBandRows, height,
-                                    [&](int b, std::uint32_t, std::size_t, std::size_t) {
+                        walk_column(op.slice(col.z), col.begin, col.end, order_y.data(), first, plan.last_band[c],
+                                    kBandRows, height, [&](int b, std::uint32_t, std::size_t, std::size_t) {
                                       ++plan.block_entries[offset + std::size_t(b - first)];
                                     });
                       }
@@ -213,8 +204,7 @@ std::vector<std::size_t> ActiveSet::lay_out_visits(const BandPlan& plan) {
   auto for_each_visit = [&](auto&& f) {
     for (int b = 0; b < bands_; ++b) {
       for (int s = 0; s < strips_; ++s) {
-        for (std::uint32_t c = strip_columns_[std::size_t(s)];
-             c < strip_columns_[std::size_t(s) + 1]; ++c) {
+        for (std::uint32_t c = strip_columns_[std::size_t(s)]; c < strip_columns_[std::size_t(s) + 1]; ++c) {
           if (b < plan.first_band[c] || b > plan.last_band[c]) continue;
           const std::size_t block = plan.block_offset[c] + std::size_t(b - plan.first_band[c]);
           if (plan.block_entries[block] > 0) f(b, s, c, block);
@@ -232,8 +222,7 @@ std::vector<std::size_t> ActiveSet::lay_out_visits(const BandPlan& plan) {
   std::size_t next_visit = 0, next_entry = 0;
   for_each_visit([&](int, int, std::uint32_t c, std::size_t block) {
     if (next_entry + plan.block_entries[block] > std::numeric_limits<std::uint32_t>::max()) {
-      throw InputError(
-          "reconstruction: more than 2^32 voxel-band entries; use a coarser volume grid");
+      throw InputError("reconstruction: more than 2^32 voxel-band entries; use a coarser volume grid");
     }
     Visit& v = visits_[next_visit];
     v.column = c;
@@ -247,46 +236,44 @@ std::vector<std::size_t> ActiveSet::lay_out_visits(const BandPlan& plan) {
   return block_visit;
 }
 
-void ActiveSet::fill_entries(const WeightingOperator& op, const BigBuffer<int>& order_y,
-                             BandPlan& plan, const std::vector<std::size_t>& block_visit) {
+void ActiveSet::fill_entries(const WeightingOperator& op, const BigBuffer<int>& order_y, BandPlan& plan,
+                             const std::vector<std::size_t>& block_visit) {
   const int height = op.image_height();
   tbb::parallel_for(
-      tbb::blocked_range<std::size_t>(0, columns_.size(), 64),
-      [&](const tbb::blocked_range<std::size_t>& range) {
+      tbb::blocked_range<std::size_t>(0, columns_.size(), 64), [&](const tbb::blocked_range<std::size_t>& range) {
         for (std::size_t c = range.begin(); c != range.end(); ++c) {
           const Column& col = columns_[c];
           const SliceTables& t = op.slice(col.z);
           const std::size_t offset = plan.block_offset[c];
           const int first_band = plan.first_band[c];
-          walk_column(t, col.begin, col.end, order_y.data(), first_band, plan.last_band[c],
-                      kBandRows, height, [&](int b, std::uint32_t p, std::size_t k, std::size_t n) {
-                        const std::size_t block = offset + std::size_t(b - first_band);
-                        Visit& v = visits_[block_visit[block]];
-                        // In y order.
-                        entries_[v.entry_end - plan.block_entries[block]--] =
-                            BandEntry{p, std::uint32_t(k), std::uint32_t(n)};
-                        const int r0 = b * kBandRows, r1 = std::min(height, r0 + kBandRows);
-                        // The rows with weight, a quad's lanes at a time: bit j for row first + j,
-                        // without the lanes in the neighbouring bands.
-                        for (std::size_t q = k; q < k + n; ++q) {
-                          const float* w = t.y_quad_weights.data() + kQuad * q;
-                          // Bit j: lane j's weight is not 0 (one SSE compare, not four scalar
-                          // ones).
-                          std::uint64_t lanes = std::uint64_t(
-                              _mm_movemask_ps(_mm_cmpneq_ps(_mm_loadu_ps(w), _mm_setzero_ps())));
-                          int at = t.y_quad_first[q] - r0;
-                          if (at < 0) {
-                            lanes >>= -at;
-                            at = 0;
-                          }
-                          if (r1 - r0 - at < kQuad)
-                            lanes &= (std::uint64_t(1) << (r1 - r0 - at)) - 1;
-                          v.rows[std::size_t(at >> 6)] |= lanes << (at & 63);
-                          if ((at & 63) > 64 - kQuad && (at >> 6) + 1 < kRowWords) {
-                            v.rows[std::size_t(at >> 6) + 1] |= lanes >> (64 - (at & 63));
-                          }
-                        }
-                      });
+          walk_column(
+              t, col.begin, col.end, order_y.data(), first_band, plan.last_band[c], kBandRows, height,
+              [&](int b, std::uint32_t p, std::size_t k, std::size_t n) {
+                const std::size_t block = offset + std::size_t(b - first_band);
+                Visit& v = visits_[block_visit[block]];
+                // In y order.
+                entries_[v.entry_end - plan.block_entries[block]--] = BandEntry{p, std::uint32_t(k), std::uint32_t(n)};
+                const int r0 = b * kBandRows, r1 = std::min(height, r0 + kBandRows);
+                // The rows with weight, a quad's lanes at a time: bit j for row first + j,
+                // without the lanes in the neighbouring bands.
+                for (std::size_t q = k; q < k + n; ++q) {
+                  const float* w = t.y_quad_weights.data() + kQuad * q;
+                  // Bit j: lane j's weight is not 0 (one SSE compare, not four scalar
+                  // ones).
+                  std::uint64_t lanes =
+                      std::uint64_t(_mm_movemask_ps(_mm_cmpneq_ps(_mm_loadu_ps(w), _mm_setzero_ps())));
+                  int at = t.y_quad_first[q] - r0;
+                  if (at < 0) {
+                    lanes >>= -at;
+                    at = 0;
+                  }
+                  if (r1 - r0 - at < kQuad) lanes &= (std::uint64_t(1) << (r1 - r0 - at)) - 1;
+                  v.rows[std::size_t(at >> 6)] |= lanes << (at & 63);
+                  if ((at & 63) > 64 - kQuad && (at >> 6) + 1 < kRowWords) {
+                    v.rows[std::size_t(at >> 6) + 1] |= lanes >> (64 - (at & 63));
+                  }
+                }
+              });
         }
       });
 }
@@ -304,10 +291,8 @@ void ActiveSet::order_by_cost(const WeightingOperator& op) {
         const SliceTables& t = op.slice(col.z);
         int rows = 0;
         for (std::uint64_t word : v.rows) rows += std::popcount(word);
-        const std::size_t x_quads =
-            t.x_quad_start[std::size_t(col.x) + 1] - t.x_quad_start[std::size_t(col.x)];
-        const double cost =
-            double(rows) * double(x_quads + 2) + 8.0 * double(v.entry_end - v.entry_begin);
+        const std::size_t x_quads = t.x_quad_start[std::size_t(col.x) + 1] - t.x_quad_start[std::size_t(col.x)];
+        const double cost = double(rows) * double(x_quads + 2) + 8.0 * double(v.entry_end - v.entry_begin);
         band_cost[std::size_t(b)] += cost;
         strip_cost[std::size_t(s)] += cost;
       }

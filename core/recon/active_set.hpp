@@ -69,17 +69,16 @@ class ActiveSet {
                Workspace* workspace = nullptr, const BandDone& band_done = {}) const;
   // values = Wᵀ·image for the active voxels. The image must be finite: the 4-pixel quads also
   // read a few pixels beside a voxel's segments, with weight 0.
-  void back_project(const WeightingOperator& op, std::span<const float> image,
-                    std::span<float> values) const;
+  void back_project(const WeightingOperator& op, std::span<const float> image, std::span<float> values) const;
   // The same for an image already multiplied pixel by pixel by the white correction (saves a
   // pass and a buffer inside MART's loop).
   void back_project_whitened(const WeightingOperator& op, std::span<const float> whitened_image,
                              std::span<float> values, Workspace* workspace = nullptr) const;
   // Two whitened images in one walk (MLOS needs the lit mask's and ln I's): each result has the
   // same bits as its own back_project_whitened; the bookkeeping is paid once.
-  void back_project_whitened(const WeightingOperator& op, std::span<const float> whitened_a,
-                             std::span<float> values_a, std::span<const float> whitened_b,
-                             std::span<float> values_b, Workspace* workspace = nullptr) const;
+  void back_project_whitened(const WeightingOperator& op, std::span<const float> whitened_a, std::span<float> values_a,
+                             std::span<const float> whitened_b, std::span<float> values_b,
+                             Workspace* workspace = nullptr) const;
 
  private:
   // One voxel column (z, x) of the set: its voxels are order_[begin, end), y increasing.

@@ -14,8 +14,7 @@ namespace plenopiv::recon {
 void SparseMatrix::multiply(std::span<const float> x, std::span<float> y) const {
   for (std::size_t r = 0; r < rows; ++r) {
     double s = 0;
-    for (std::size_t k = row_start[r]; k < row_start[r + 1]; ++k)
-      s += double(values[k]) * x[col_index[k]];
+    for (std::size_t k = row_start[r]; k < row_start[r + 1]; ++k) s += double(values[k]) * x[col_index[k]];
     y[r] = float(s);
   }
 }
@@ -23,8 +22,7 @@ void SparseMatrix::multiply(std::span<const float> x, std::span<float> y) const 
 void SparseMatrix::multiply_transpose(std::span<const float> y, std::span<float> x) const {
   std::vector<double> acc(cols, 0.0);
   for (std::size_t r = 0; r < rows; ++r) {
-    for (std::size_t k = row_start[r]; k < row_start[r + 1]; ++k)
-      acc[col_index[k]] += double(values[k]) * y[r];
+    for (std::size_t k = row_start[r]; k < row_start[r + 1]; ++k) acc[col_index[k]] += double(values[k]) * y[r];
   }
   for (std::size_t c = 0; c < cols; ++c) x[c] = float(acc[c]);
 }
@@ -40,8 +38,7 @@ SparseMatrix build_explicit_matrix(const WeightingOperator& op) {
   // Columns of W (one per voxel), each a list of (pixel, weight).
   std::vector<std::vector<std::pair<std::uint32_t, float>>> columns(g.count());
   tbb::parallel_for(
-      tbb::blocked_range<std::size_t>(0, g.count(), 16),
-      [&](const tbb::blocked_range<std::size_t>& range) {
+      tbb::blocked_range<std::size_t>(0, g.count(), 16), [&](const tbb::blocked_range<std::size_t>& range) {
         std::vector<std::pair<std::uint32_t, double>> entries;
         for (std::size_t j = range.begin(); j != range.end(); ++j) {
           const int x = int(j % std::size_t(g.shape[0]));
@@ -57,26 +54,22 @@ SparseMatrix build_explicit_matrix(const WeightingOperator& op) {
             const double u = detail::sample_position(geo.aperture, o.samples, ku);
             int cu[4];
             double wu[4];
-            const int nu =
-                detail::ray_coefficients(geo, geo.lens_x, o.alpha, xp, u, width, column_of, cu, wu);
+            const int nu = detail::ray_coefficients(geo, geo.lens_x, o.alpha, xp, u, width, column_of, cu, wu);
             for (int kv = 0; kv < o.samples; ++kv) {
               const double v = detail::sample_position(geo.aperture, o.samples, kv);
               int rv[4];
               double wv[4];
-              const int nv =
-                  detail::ray_coefficients(geo, geo.lens_y, o.alpha, yp, v, height, row_of, rv, wv);
+              const int nv = detail::ray_coefficients(geo, geo.lens_y, o.alpha, yp, v, height, row_of, rv, wv);
               for (int a = 0; a < nu; ++a) {
                 for (int b = 0; b < nv; ++b) {
-                  const std::uint32_t pixel =
-                      std::uint32_t(rv[b]) * std::uint32_t(width) + std::uint32_t(cu[a]);
+                  const std::uint32_t pixel = std::uint32_t(rv[b]) * std::uint32_t(width) + std::uint32_t(cu[a]);
                   const double w = wu[a] * wv[b] * op.white().pixels[pixel];
                   if (w > 0) entries.emplace_back(pixel, w);
                 }
               }
             }
           }
-          std::sort(entries.begin(), entries.end(),
-                    [](const auto& p, const auto& q) { return p.first < q.first; });
+          std::sort(entries.begin(), entries.end(), [](const auto& p, const auto& q) { return p.first < q.first; });
           double total = 0;
           for (const auto& e : entries) total += e.second;
           auto& col = columns[j];

@@ -15,8 +15,7 @@ namespace {
 // use the same order per row.
 using Lanes8 = float __attribute__((vector_size(32)));
 
-__attribute__((target("avx2"), always_inline)) inline Lanes8 load_pair(const float* lo,
-                                                                       const float* hi) {
+__attribute__((target("avx2"), always_inline)) inline Lanes8 load_pair(const float* lo, const float* hi) {
   Lanes4 a, b;
   __builtin_memcpy(&a, lo, sizeof a);
   __builtin_memcpy(&b, hi, sizeof b);
@@ -53,14 +52,11 @@ inline float dot_quads_base(const float* row, const int* first, const float* w, 
   return (lane[0] + lane[1]) + (lane[2] + lane[3]);
 }
 // The same sums: the even quads in lanes 0-3, the odd ones in lanes 4-7.
-__attribute__((target("avx2"), always_inline)) inline float dot_quads_avx2(const float* row,
-                                                                           const int* first,
-                                                                           const float* w,
-                                                                           std::size_t n) {
+__attribute__((target("avx2"), always_inline)) inline float dot_quads_avx2(const float* row, const int* first,
+                                                                           const float* w, std::size_t n) {
   Lanes8 acc = {0.f, 0.f, 0.f, 0.f, 0.f, 0.f, 0.f, 0.f};
   std::size_t k = 0;
-  for (; k + 2 <= n; k += 2)
-    acc += load8(w + kQuad * k) * load_pair(row + first[k], row + first[k + 1]);
+  for (; k + 2 <= n; k += 2) acc += load8(w + kQuad * k) * load_pair(row + first[k], row + first[k + 1]);
   Lanes4 even = __builtin_shufflevector(acc, acc, 0, 1, 2, 3);
   const Lanes4 odd = __builtin_shufflevector(acc, acc, 4, 5, 6, 7);
   if (k < n) {
@@ -74,9 +70,9 @@ __attribute__((target("avx2"), always_inline)) inline float dot_quads_avx2(const
 }
 
 // The same for two rows at once, each with dot_quads_avx2's sums in its order.
-__attribute__((target("avx2"), always_inline)) inline void dot_quads2_avx2(
-    const float* row_a, const float* row_b, const int* first, const float* w, std::size_t n,
-    float* out_a, float* out_b) {
+__attribute__((target("avx2"), always_inline)) inline void dot_quads2_avx2(const float* row_a, const float* row_b,
+                                                                           const int* first, const float* w,
+                                                                           std::size_t n, float* out_a, float* out_b) {
   Lanes8 acc_a = {0.f, 0.f, 0.f, 0.f, 0.f, 0.f, 0.f, 0.f}, acc_b = acc_a;
   std::size_t k = 0;
   for (; k + 2 <= n; k += 2) {
@@ -118,8 +114,9 @@ __attribute__((always_inline)) inline void dot_quad(Rows* acc, const float* at, 
 }
 
 // Projection stage 2 (add_columns in kernels.hpp), in every build.
-__attribute__((target_clones("avx512f", "avx2", "default"))) void add_columns_isa(
-    float* band, std::size_t width, int words, const ColumnJob* jobs, int count) {
+__attribute__((target_clones("avx512f", "avx2", "default"))) void add_columns_isa(float* band, std::size_t width,
+                                                                                  int words, const ColumnJob* jobs,
+                                                                                  int count) {
   for (int word = 0; word < words; ++word) {
     for (int sub = 0; sub < 64; sub += kSubRows) {
       float* block = band + std::size_t(64 * word + sub) * width;
@@ -150,9 +147,9 @@ __attribute__((target_clones("avx512f", "avx2", "default"))) void add_columns_is
 // Back-projection stage 1 (dot_columns in kernels.hpp), in every build: each row's sum in
 // dot_quads_base's order, lane j of the even quads and of the odd ones in eight accumulators,
 // then even + odd and the lanes pairwise.
-__attribute__((target_clones("avx512f", "avx2", "default"))) void dot_columns_isa(
-    const float* const* band, int images, std::size_t width, int words, const ColumnJob* jobs,
-    int count) {
+__attribute__((target_clones("avx512f", "avx2", "default"))) void dot_columns_isa(const float* const* band, int images,
+                                                                                  std::size_t width, int words,
+                                                                                  const ColumnJob* jobs, int count) {
   RowBits lane_bit;
   for (int l = 0; l < kSubRows; ++l) lane_bit[l] = 1 << l;
   for (int word = 0; word < words; ++word) {
@@ -185,9 +182,8 @@ __attribute__((target_clones("avx512f", "avx2", "default"))) void dot_columns_is
 
 // The eq 13 normalisers' first stage (dot_slice_rows in kernels.hpp) in two hand-written builds.
 __attribute__((target("default"))) void dot_slice_rows_isa(const float* row_a, const float* row_b,
-                                                           const std::size_t* start,
-                                                           const int* first, const float* w, int nx,
-                                                           double* out_a, double* out_b) {
+                                                           const std::size_t* start, const int* first, const float* w,
+                                                           int nx, double* out_a, double* out_b) {
   for (int x = 0; x < nx; ++x) {
     const std::size_t q0 = start[x], n = start[x + 1] - q0;
     out_a[x] = dot_quads_base(row_a, first + q0, w + kQuad * q0, n);
@@ -195,9 +191,8 @@ __attribute__((target("default"))) void dot_slice_rows_isa(const float* row_a, c
   }
 }
 __attribute__((target("avx2"))) void dot_slice_rows_isa(const float* row_a, const float* row_b,
-                                                        const std::size_t* start, const int* first,
-                                                        const float* w, int nx, double* out_a,
-                                                        double* out_b) {
+                                                        const std::size_t* start, const int* first, const float* w,
+                                                        int nx, double* out_a, double* out_b) {
   for (int x = 0; x < nx; ++x) {
     const std::size_t q0 = start[x], n = start[x + 1] - q0;
     if (row_b) {
@@ -249,13 +244,12 @@ void add_columns(float* band, std::size_t width, int words, const ColumnJob* job
   add_columns_isa(band, width, words, jobs, count);
 }
 
-void dot_columns(const float* const* band, int images, std::size_t width, int words,
-                 const ColumnJob* jobs, int count) {
+void dot_columns(const float* const* band, int images, std::size_t width, int words, const ColumnJob* jobs, int count) {
   dot_columns_isa(band, images, width, words, jobs, count);
 }
 
-void dot_slice_rows(const float* row_a, const float* row_b, const std::size_t* start,
-                    const int* first, const float* w, int nx, double* out_a, double* out_b) {
+void dot_slice_rows(const float* row_a, const float* row_b, const std::size_t* start, const int* first, const float* w,
+                    int nx, double* out_a, double* out_b) {
   dot_slice_rows_isa(row_a, row_b, start, first, w, nx, out_a, out_b);
 }
 

@@ -39,11 +39,7 @@ struct ColumnJob {
 inline ColumnJob x_job(const SliceTables& t, int x, const std::uint64_t* rows) {
   const std::size_t q0 = t.x_quad_start[std::size_t(x)];
   const std::size_t q1 = t.x_quad_start[std::size_t(x) + 1];
-  return ColumnJob{{nullptr, nullptr},
-                   rows,
-                   t.x_quad_first.data() + q0,
-                   t.x_quad_weights.data() + kQuad * q0,
-                   q1 - q0};
+  return ColumnJob{{nullptr, nullptr}, rows, t.x_quad_first.data() + q0, t.x_quad_weights.data() + kQuad * q0, q1 - q0};
 }
 
 // The x stages work on images in "row lanes": each block of kSubRows sensor rows stored column
@@ -70,15 +66,14 @@ void add_columns(float* band, std::size_t width, int words, const ColumnJob* job
 // Back-projection stage 1: B_i[r] = Σ_col Ax r_i(r, col) over the blocks a visit reaches, for
 // `images` (1 or 2) lanes images whose bands start at band[i]; rows the visit does not reach
 // are set to 0. Each row's sum in dot_quads order (below).
-void dot_columns(const float* const* band, int images, std::size_t width, int words,
-                 const ColumnJob* jobs, int count);
+void dot_columns(const float* const* band, int images, std::size_t width, int words, const ColumnJob* jobs, int count);
 
 // The eq 13 normalisers' first stage: out[x] = Σ_col Ax_x(col) row(col) for every voxel x of a
 // slice (its quads [start[x], start[x + 1])), for two rows at once (row_b null: one row). Each
 // sum runs lane j of the even quads and of the odd ones in separate accumulators, then even +
 // odd and the lanes pairwise; the same bits in every build.
-void dot_slice_rows(const float* row_a, const float* row_b, const std::size_t* start,
-                    const int* first, const float* w, int nx, double* out_a, double* out_b);
+void dot_slice_rows(const float* row_a, const float* row_b, const std::size_t* start, const int* first, const float* w,
+                    int nx, double* out_a, double* out_b);
 
 // image[i] *= white[i] over n pixels.
 void white_band(float* image, const float* white, std::size_t n);

@@ -5,9 +5,9 @@
 
 #include <algorithm>
 #include <atomic>
-#include <stdexcept>
 #include <cmath>
 #include <cstdint>
+#include <stdexcept>
 #include <string>
 #include <utility>
 
@@ -28,9 +28,8 @@ using detail::sum;
 
 void check_sensor_blur_sigma(double sigma_mm, const char* who) {
   if (!(sigma_mm >= 0 && sigma_mm <= kMaxSensorBlurSigmaMm)) {
-    throw InputError(std::string(who) + ": sensor blur sigma must lie in [0, " +
-                     std::to_string(kMaxSensorBlurSigmaMm) + "] mm, got " +
-                     std::to_string(sigma_mm));
+    throw InputError(std::string(who) + ": sensor blur sigma must lie in [0, " + std::to_string(kMaxSensorBlurSigmaMm) +
+                     "] mm, got " + std::to_string(sigma_mm));
   }
 }
 
@@ -68,8 +67,7 @@ std::optional<SettingProblem> check(const MartSettings& s) {
 
 void apply_sensor_blur(const WeightingOperator& op, double sigma_mm, std::span<float> image) {
   check_sensor_blur_sigma(sigma_mm, "apply_sensor_blur");
-  if (image.size() != op.pixel_count())
-    throw InputError("sensor blur: the image is not the operator's sensor");
+  if (image.size() != op.pixel_count()) throw InputError("sensor blur: the image is not the operator's sensor");
   detail::SensorBlur blur(op, sigma_mm);
   if (blur.active()) blur.apply(image);
 }
@@ -77,8 +75,8 @@ void apply_sensor_blur(const WeightingOperator& op, double sigma_mm, std::span<f
 void validate_image(const ImageF& image, const WeightingOperator& op, const char* source) {
   if (image.width != op.image_width() || image.height != op.image_height()) {
     throw InputError(std::string(source) + ": image is " + std::to_string(image.width) + " x " +
-                     std::to_string(image.height) + " px, the camera's sensor is " +
-                     std::to_string(op.image_width()) + " x " + std::to_string(op.image_height()));
+                     std::to_string(image.height) + " px, the camera's sensor is " + std::to_string(op.image_width()) +
+                     " x " + std::to_string(op.image_height()));
   }
   // Checked in parallel; only an image that fails is scanned again in order to name its first
   // bad pixel.
@@ -95,8 +93,7 @@ void validate_image(const ImageF& image, const WeightingOperator& op, const char
   for (std::size_t i = 0; i < image.pixels.size(); ++i) {
     const float v = image.pixels[i];
     if (!std::isfinite(v) || v < 0.f) {
-      throw InputError(std::string(source) + ": pixel (" +
-                       std::to_string(i % std::size_t(image.width)) + ", " +
+      throw InputError(std::string(source) + ": pixel (" + std::to_string(i % std::size_t(image.width)) + ", " +
                        std::to_string(i / std::size_t(image.width)) + ") is " + std::to_string(v) +
                        "; intensities must be finite and non-negative");
     }
@@ -116,30 +113,27 @@ std::size_t MartWorkspace::bytes() const {
   if (!buffers_) return 0;  // moved from
   const detail::MartBuffers& b = *buffers_;
   std::size_t total = 0;
-  for (const auto* v : {&b.data, &b.log_data, &b.projection, &b.ratio, &b.e, &b.update, &b.weight,
-                        &b.last, &b.log_last, &b.momentum}) {
+  for (const auto* v :
+       {&b.data, &b.log_data, &b.projection, &b.ratio, &b.e, &b.update, &b.weight, &b.last, &b.log_last, &b.momentum}) {
     total += v->capacity() * sizeof(float);
   }
   total += b.kernels.scaled.capacity() * sizeof(float) + b.kernels.sums.capacity() * sizeof(double);
   total += (b.kernels.band_lanes.capacity() + b.kernels.image_lanes.capacity()) * sizeof(float);
-  total += b.select.dark.capacity() * sizeof(std::uint64_t) +
-           b.origin.capacity() * sizeof(std::uint32_t);
+  total += b.select.dark.capacity() * sizeof(std::uint64_t) + b.origin.capacity() * sizeof(std::uint32_t);
   total += b.active.bytes();
   for (const auto& slice : b.select.per_slice) total += slice.capacity() * sizeof(std::uint32_t);
   return total;
 }
 
-MartResult reconstruct(const WeightingOperator& op, const ImageF& image,
-                       const MartSettings& settings, const IterationCallback& progress) {
+MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const MartSettings& settings,
+                       const IterationCallback& progress) {
   MartWorkspace workspace;
   return reconstruct(op, image, settings, workspace, progress);
 }
 
-MartResult reconstruct(const WeightingOperator& op, const ImageF& image,
-                       const MartSettings& settings, MartWorkspace& workspace,
-                       const IterationCallback& progress) {
-  if (!workspace.buffers_)
-    throw std::logic_error("MART: the workspace was moved from; use the one it was moved to");
+MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const MartSettings& settings,
+                       MartWorkspace& workspace, const IterationCallback& progress) {
+  if (!workspace.buffers_) throw std::logic_error("MART: the workspace was moved from; use the one it was moved to");
   detail::MartBuffers& buffers = *workspace.buffers_;
   if (buffers.busy.exchange(true)) {
     throw std::logic_error(
@@ -160,8 +154,8 @@ MartResult reconstruct(const WeightingOperator& op, const ImageF& image,
   return detail::SmartSolver(op, settings, buffers).run(image, progress);
 }
 
-Volume reconstruct_row_action(const WeightingOperator& op, const SparseMatrix& w,
-                              const ImageF& image, const MartSettings& settings) {
+Volume reconstruct_row_action(const WeightingOperator& op, const SparseMatrix& w, const ImageF& image,
+                              const MartSettings& settings) {
   validate_settings(settings);
   validate_image(image, op, "image");
   const Grid3& g = op.grid();
@@ -193,8 +187,7 @@ Volume reconstruct_row_action(const WeightingOperator& op, const SparseMatrix& w
     for (int y = 0; y < g.shape[1]; ++y) {
       for (int x = 0; x < g.shape[0]; ++x) {
         const std::size_t j = g.index(x, y, z);
-        if (!detail::in_region(g, settings.region, x, y, z) || !(op.normaliser(j) > 0.f))
-          e[j] = 0.f;
+        if (!detail::in_region(g, settings.region, x, y, z) || !(op.normaliser(j) > 0.f)) e[j] = 0.f;
       }
     }
   }
@@ -210,8 +203,7 @@ Volume reconstruct_row_action(const WeightingOperator& op, const SparseMatrix& w
         continue;
       }
       if (!(p > 0)) continue;
-      const double log_ratio =
-          std::clamp(std::log(double(data[i]) / p), -double(kMaxLog), double(kMaxLog));
+      const double log_ratio = std::clamp(std::log(double(data[i]) / p), -double(kMaxLog), double(kMaxLog));
       for (std::size_t k = k0; k < k1; ++k) {
         float& v = e[w.col_index[k]];
         v = clean(float(v * std::exp(mu * w.values[k] * log_ratio)));

@@ -7,8 +7,8 @@
 #include <functional>
 #include <memory>
 #include <optional>
-#include <string>
 #include <span>
+#include <string>
 #include <vector>
 
 #include "core/base/grid.hpp"
@@ -115,13 +115,9 @@ struct SkipReport {
   // The kernels' work over the iterations (ActiveSet::pass_work, summed) against the start's
   // active set's work times the iterations.
   double work_done = 0, work_unpruned = 0;
-  double fraction_work_pruned() const {
-    return work_unpruned > 0 ? 1.0 - work_done / work_unpruned : 0.0;
-  }
+  double fraction_work_pruned() const { return work_unpruned > 0 ? 1.0 - work_done / work_unpruned : 0.0; }
   // Share of the box not solved at all (dark, unseen, outside the region).
-  double fraction_skipped() const {
-    return voxels ? 1.0 - double(voxels_active) / double(voxels) : 0.0;
-  }
+  double fraction_skipped() const { return voxels ? 1.0 - double(voxels_active) / double(voxels) : 0.0; }
   // Share of the box's voxel updates over the iterations that were not done (not solved, or
   // pruned): 1 - voxel_updates / (iterations x voxels).
   double fraction_updates_skipped() const {
@@ -140,9 +136,7 @@ struct IterationReport {
   // once pruning has shrunk the set.
   double work_fraction = 1.0;
   // Share of the box's voxels this iteration did not update.
-  double fraction_skipped() const {
-    return voxels ? 1.0 - double(live_voxels) / double(voxels) : 0.0;
-  }
+  double fraction_skipped() const { return voxels ? 1.0 - double(live_voxels) / double(voxels) : 0.0; }
 };
 
 // Called after each iteration.
@@ -196,22 +190,21 @@ class MartWorkspace {
 
  private:
   std::unique_ptr<detail::MartBuffers> buffers_;
-  friend MartResult reconstruct(const WeightingOperator&, const ImageF&, const MartSettings&,
-                                MartWorkspace&, const IterationCallback&);
+  friend MartResult reconstruct(const WeightingOperator&, const ImageF&, const MartSettings&, MartWorkspace&,
+                                const IterationCallback&);
 };
 
 // Reconstructs a volume from a raw plenoptic image (float, counts) with the matrix-free operator.
 // `progress` (optional) is called after each iteration. Bit-identical at any thread count.
-MartResult reconstruct(const WeightingOperator& op, const ImageF& image,
-                       const MartSettings& settings, const IterationCallback& progress = {});
+MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const MartSettings& settings,
+                       const IterationCallback& progress = {});
 // The same in `workspace`'s buffers (the same bits). A caller cancels by throwing
 // plenopiv::Cancelled from `progress`; the workspace is then free for the next reconstruction.
-MartResult reconstruct(const WeightingOperator& op, const ImageF& image,
-                       const MartSettings& settings, MartWorkspace& workspace,
-                       const IterationCallback& progress = {});
+MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const MartSettings& settings,
+                       MartWorkspace& workspace, const IterationCallback& progress = {});
 
 // The reference: eq 9 row by row on the explicit matrix (rows = pixels in storage order).
-Volume reconstruct_row_action(const WeightingOperator& op, const SparseMatrix& w,
-                              const ImageF& image, const MartSettings& settings);
+Volume reconstruct_row_action(const WeightingOperator& op, const SparseMatrix& w, const ImageF& image,
+                              const MartSettings& settings);
 
 }  // namespace plenopiv::recon

@@ -31,8 +31,7 @@ namespace {
 template <typename F>
 void run_costliest_first(const std::vector<int>& items, F&& f) {
   std::atomic<std::size_t> next{0};
-  const int workers =
-      std::max(1, std::min(tbb::this_task_arena::max_concurrency(), int(items.size())));
+  const int workers = std::max(1, std::min(tbb::this_task_arena::max_concurrency(), int(items.size())));
   tbb::parallel_for(
       0, workers,
       [&](int) {
@@ -43,9 +42,8 @@ void run_costliest_first(const std::vector<int>& items, F&& f) {
 
 }  // namespace
 
-void ActiveSet::project(const WeightingOperator& op, std::span<const float> values,
-                        std::span<float> image, Workspace* workspace,
-                        const BandDone& band_done) const {
+void ActiveSet::project(const WeightingOperator& op, std::span<const float> values, std::span<float> image,
+                        Workspace* workspace, const BandDone& band_done) const {
   const std::size_t width = std::size_t(op.image_width());
   const int height = op.image_height();
   Workspace local;
@@ -65,8 +63,7 @@ void ActiveSet::project(const WeightingOperator& op, std::span<const float> valu
   run_costliest_first(band_order_, [&](int b) {
     const int r0 = b * kBandRows, r1 = std::min(height, r0 + kBandRows);
     // The band in row lanes, this thread's own, copied into the image when finished.
-    float* lanes = ws.band_lanes.data() +
-                   std::size_t(tbb::this_task_arena::current_thread_index()) * band_size;
+    float* lanes = ws.band_lanes.data() + std::size_t(tbb::this_task_arena::current_thread_index()) * band_size;
     std::fill_n(lanes, band_size, 0.f);
     // G(row) of kChunk consecutive visits over the band's rows, each with kQuad rows of margin on
     // either side for the lanes of quads that straddle the band's edges (those belong to the
@@ -123,14 +120,12 @@ void ActiveSet::project(const WeightingOperator& op, std::span<const float> valu
   });
 }
 
-void ActiveSet::back_project(const WeightingOperator& op, std::span<const float> image,
-                             std::span<float> values) const {
+void ActiveSet::back_project(const WeightingOperator& op, std::span<const float> image, std::span<float> values) const {
   std::vector<float> whitened(image.size());
   const float* white = op.white().pixels.data();
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, image.size(), 1 << 14),
                     [&](const tbb::blocked_range<std::size_t>& r) {
-                      for (std::size_t i = r.begin(); i != r.end(); ++i)
-                        whitened[i] = image[i] * white[i];
+                      for (std::size_t i = r.begin(); i != r.end(); ++i) whitened[i] = image[i] * white[i];
                     });
   back_project_whitened(op, whitened, values);
 }
@@ -141,20 +136,17 @@ void ActiveSet::back_project_whitened(const WeightingOperator& op, std::span<con
   back_project_images<1>(op, {image.data()}, {values.data()}, workspace ? *workspace : local);
 }
 
-void ActiveSet::back_project_whitened(const WeightingOperator& op,
-                                      std::span<const float> whitened_a, std::span<float> values_a,
-                                      std::span<const float> whitened_b, std::span<float> values_b,
-                                      Workspace* workspace) const {
+void ActiveSet::back_project_whitened(const WeightingOperator& op, std::span<const float> whitened_a,
+                                      std::span<float> values_a, std::span<const float> whitened_b,
+                                      std::span<float> values_b, Workspace* workspace) const {
   Workspace local;
-  back_project_images<2>(op, {whitened_a.data(), whitened_b.data()},
-                         {values_a.data(), values_b.data()}, workspace ? *workspace : local);
+  back_project_images<2>(op, {whitened_a.data(), whitened_b.data()}, {values_a.data(), values_b.data()},
+                         workspace ? *workspace : local);
 }
 
 template <std::size_t N>
-void ActiveSet::back_project_images(const WeightingOperator& op,
-                                    const std::array<const float*, N>& images,
-                                    const std::array<float*, N>& values,
-                                    Workspace& workspace) const {
+void ActiveSet::back_project_images(const WeightingOperator& op, const std::array<const float*, N>& images,
+                                    const std::array<float*, N>& values, Workspace& workspace) const {
   static_assert(N == 1 || N == 2, "ColumnJob holds the sums of at most two images");
   const std::size_t width = std::size_t(op.image_width());
   for (float* v : values) std::fill(v, v + voxels_.size(), 0.f);  // voxels that see no pixel
@@ -169,15 +161,13 @@ void ActiveSet::back_project_images(const WeightingOperator& op,
   tbb::parallel_for(0, int(N) * bands_, [&](int item) {
     const std::size_t i = std::size_t(item / bands_);
     const int r0 = (item % bands_) * kBandRows;
-    kernels::rows_to_lanes(images[i] + std::size_t(r0) * width, width,
-                           std::min(height, r0 + kBandRows) - r0,
+    kernels::rows_to_lanes(images[i] + std::size_t(r0) * width, width, std::min(height, r0 + kBandRows) - r0,
                            workspace.image_lanes.data() + i * image_size + std::size_t(r0) * width);
   });
   // Each strip owns its voxels (a contiguous range of order_), so their sums need no atomics,
   // and every voxel adds its bands in order whatever the thread count.
   run_costliest_first(strip_order_, [&](int strip) {
-    const std::uint32_t c0 = strip_columns_[std::size_t(strip)],
-                        c1 = strip_columns_[std::size_t(strip) + 1];
+    const std::uint32_t c0 = strip_columns_[std::size_t(strip)], c1 = strip_columns_[std::size_t(strip) + 1];
     if (c0 == c1) return;
     const std::uint32_t p0 = columns_[c0].begin, p1 = columns_[c1 - 1].end;
     for (std::size_t i = 0; i < N; ++i)
@@ -202,8 +192,7 @@ void ActiveSet::back_project_images(const WeightingOperator& op,
         for (std::size_t v = v0; v < v1; ++v) {
           const Column& col = columns_[visits_[v].column];
           jobs[v - v0] = x_job(op.slice(col.z), col.x, visits_[v].rows.data());
-          for (std::size_t i = 0; i < N; ++i)
-            jobs[v - v0].sums[i] = padded_sums[i][v - v0].data() + kQuad;
+          for (std::size_t i = 0; i < N; ++i) jobs[v - v0].sums[i] = padded_sums[i][v - v0].data() + kQuad;
         }
         std::array<const float*, N> bands;
         for (std::size_t i = 0; i < N; ++i)

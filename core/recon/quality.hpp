@@ -16,7 +16,7 @@ double quality_factor(const Volume& reconstructed, const Volume& exact);
 struct ParticleFit {
   std::array<double, 3> position_mm{0, 0, 0};     // fitted peak, object space
   std::array<double, 3> position_voxel{0, 0, 0};  // fractional voxel indices (x, y, z)
-  float peak = 0;                                  // intensity of the brightest voxel
+  float peak = 0;                                 // intensity of the brightest voxel
 };
 
 // Fits a Gaussian to the intensity around the brightest voxel within `half_size` voxels (x, y, z)

@@ -50,9 +50,8 @@ inline std::pair<Hit, Hit> bracket(const std::vector<double>& centres, double x)
 // `pixel_of_mm` maps sensor mm to a fractional pixel index; `pixels` is the sensor's size along
 // the axis (pixels beyond it are dropped).
 template <typename PixelOf>
-int ray_coefficients(const WeightingOperator::Geometry& g, const std::vector<double>& centres,
-                     double alpha, double prime_mm, double u, int pixels, PixelOf pixel_of_mm,
-                     int* out_pixel, double* out_weight) {
+int ray_coefficients(const WeightingOperator::Geometry& g, const std::vector<double>& centres, double alpha,
+                     double prime_mm, double u, int pixels, PixelOf pixel_of_mm, int* out_pixel, double* out_weight) {
   // Eq 2: where the ray from aperture point u through the image-space point x' meets the
   // microlens plane.
   const double x_ml = u * (1.0 - 1.0 / alpha) + prime_mm / alpha;
@@ -61,8 +60,7 @@ int ray_coefficients(const WeightingOperator::Geometry& g, const std::vector<dou
   for (const Hit& lens : {a, b}) {
     if (lens.index < 0 || lens.weight <= 0) continue;
     // Eq 1 inverted: behind that lens the ray lands at spot - u f_l / s_i.
-    const double spot =
-        optics::lens_centre_to_spot_mm(centres[std::size_t(lens.index)], g.s_i, g.f_lens);
+    const double spot = optics::lens_centre_to_spot_mm(centres[std::size_t(lens.index)], g.s_i, g.f_lens);
     const double p = pixel_of_mm(spot - u * g.f_lens / g.s_i);
     double p0 = std::floor(p);
     double t = p - p0;

@@ -6,9 +6,7 @@
 namespace plenopiv::recon::detail {
 
 SensorBlur::SensorBlur(const WeightingOperator& op, double sigma_mm)
-    : width_(op.image_width()),
-      height_(op.image_height()),
-      sigma_px_(sigma_mm / op.geometry().pixel_pitch) {}
+    : width_(op.image_width()), height_(op.image_height()), sigma_px_(sigma_mm / op.geometry().pixel_pitch) {}
 
 void SensorBlur::apply(std::span<float> image) {
   cv::Mat in(height_, width_, CV_32F, image.data());

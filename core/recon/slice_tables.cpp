@@ -27,11 +27,10 @@ static_assert(kGap + 1 >= kQuad - 1, "the quads of different segments must not o
 // interpolation behind each lens), kept as segments of consecutive pixels with weight.
 // `scratch` holds one double per pixel of the axis, all 0 (and left so).
 template <typename PixelOf>
-void build_axis_weights(const WeightingOperator::Geometry& geo, const Grid3& grid,
-                        const SliceOptics& o, int axis, int count,
-                        const std::vector<double>& centres, int pixels, PixelOf pixel_of,
-                        std::vector<double>& scratch, std::vector<WeightRun>& runs,
-                        std::vector<Segment>& segments, std::vector<float>& table) {
+void build_axis_weights(const WeightingOperator::Geometry& geo, const Grid3& grid, const SliceOptics& o, int axis,
+                        int count, const std::vector<double>& centres, int pixels, PixelOf pixel_of,
+                        std::vector<double>& scratch, std::vector<WeightRun>& runs, std::vector<Segment>& segments,
+                        std::vector<float>& table) {
   runs.resize(std::size_t(count));
   for (int v = 0; v < count; ++v) {
     const double prime = o.magnification * grid.coordinate_mm(axis, v);
@@ -40,8 +39,7 @@ void build_axis_weights(const WeightingOperator::Geometry& geo, const Grid3& gri
       int pix[4];
       double w[4];
       const double u = detail::sample_position(geo.aperture, o.samples, k);
-      const int n =
-          detail::ray_coefficients(geo, centres, o.alpha, prime, u, pixels, pixel_of, pix, w);
+      const int n = detail::ray_coefficients(geo, centres, o.alpha, prime, u, pixels, pixel_of, pix, w);
       for (int h = 0; h < n; ++h) {
         scratch[std::size_t(pix[h])] += w[h];
         lo = std::min(lo, pix[h]);
@@ -114,14 +112,11 @@ void WeightingOperator::build_slice_tables() {
     t.magnification = o.magnification;
     t.samples = o.samples;
     std::vector<double> scratch(std::size_t(std::max(width_, height_)), 0.0);
-    build_axis_weights(geo_, grid_, o, 0, nx, geo_.lens_x, width_, column_of, scratch, t.x_runs,
-                       t.x_segments, t.x_table);
-    build_axis_weights(geo_, grid_, o, 1, ny, geo_.lens_y, height_, row_of, scratch, t.y_runs,
-                       t.y_segments, t.y_table);
-    build_quads(t.x_runs, t.x_segments, t.x_table, width_, t.x_quad_start, t.x_quad_first,
-                t.x_quad_weights);
-    build_quads(t.y_runs, t.y_segments, t.y_table, 0, t.y_quad_start, t.y_quad_first,
-                t.y_quad_weights);
+    build_axis_weights(geo_, grid_, o, 0, nx, geo_.lens_x, width_, column_of, scratch, t.x_runs, t.x_segments,
+                       t.x_table);
+    build_axis_weights(geo_, grid_, o, 1, ny, geo_.lens_y, height_, row_of, scratch, t.y_runs, t.y_segments, t.y_table);
+    build_quads(t.x_runs, t.x_segments, t.x_table, width_, t.x_quad_start, t.x_quad_first, t.x_quad_weights);
+    build_quads(t.y_runs, t.y_segments, t.y_table, 0, t.y_quad_start, t.y_quad_first, t.y_quad_weights);
   });
 }
 
@@ -143,8 +138,8 @@ void WeightingOperator::compute_normalisers() {
     for (std::size_t r = 0; r < rows; r += 2) {
       const float* wrow = white_.pixels.data() + (std::size_t(r_lo) + r) * std::size_t(width_);
       kernels::dot_slice_rows(wrow, r + 1 < rows ? wrow + width_ : nullptr, t.x_quad_start.data(),
-                              t.x_quad_first.data(), t.x_quad_weights.data(), nx,
-                              g.data() + r * std::size_t(nx), g.data() + (r + 1) * std::size_t(nx));
+                              t.x_quad_first.data(), t.x_quad_weights.data(), nx, g.data() + r * std::size_t(nx),
+                              g.data() + (r + 1) * std::size_t(nx));
     }
     for (int y = 0; y < ny; ++y) {
       const AxisWeights ay = y_weights(z, y);

@@ -26,8 +26,7 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
 
 }  // namespace
 
-SmartSolver::SmartSolver(const WeightingOperator& op, const MartSettings& settings,
-                         MartBuffers& buffers)
+SmartSolver::SmartSolver(const WeightingOperator& op, const MartSettings& settings, MartBuffers& buffers)
     : op_(op),
       settings_(settings),
       b_(buffers),
@@ -37,10 +36,9 @@ SmartSolver::SmartSolver(const WeightingOperator& op, const MartSettings& settin
 
 template <typename F>
 void SmartSolver::for_voxels(F&& f) const {
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n_, 1 << 12),
-                    [&](const tbb::blocked_range<std::size_t>& r) {
-                      for (std::size_t m = r.begin(); m != r.end(); ++m) f(m);
-                    });
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n_, 1 << 12), [&](const tbb::blocked_range<std::size_t>& r) {
+    for (std::size_t m = r.begin(); m != r.end(); ++m) f(m);
+  });
 }
 
 MartResult SmartSolver::run(const ImageF& image, const IterationCallback& progress) {
@@ -60,8 +58,7 @@ MartResult SmartSolver::run(const ImageF& image, const IterationCallback& progre
     if (settings_.accelerate) extrapolate(float(momentum_step - 1) / float(momentum_step + 2));
     project_and_compare(true);
     const double r = residual();
-    if (previous >= 0 && settings_.convergence > 0 &&
-        std::abs(previous - r) <= settings_.convergence * previous) {
+    if (previous >= 0 && settings_.convergence > 0 && std::abs(previous - r) <= settings_.convergence * previous) {
       result_.converged = true;
       if (settings_.accelerate) b_.e = b_.last;  // x_k, not the extrapolated point
       break;
@@ -85,8 +82,7 @@ MartResult SmartSolver::run(const ImageF& image, const IterationCallback& progre
       project_and_compare(false);
       result_.final_residual = residual();
     } else {
-      result_.final_residual =
-          sum(b_.data) > 0 ? 1.0 : 0.0;  // nothing projected: ||I - 0|| / ||I||
+      result_.final_residual = sum(b_.data) > 0 ? 1.0 : 0.0;  // nothing projected: ||I - 0|| / ||I||
     }
   }
   write_volume();
@@ -97,8 +93,7 @@ void SmartSolver::setup(const ImageF& image) {
   const auto t0 = std::chrono::steady_clock::now();
   result_.volume = Volume(op_.grid(), 0.f);
   threshold_image(image, settings_.noise_threshold, b_.data);
-  std::vector<std::uint32_t> selected =
-      select_active(op_, b_.data, settings_, b_.select, result_.skipped);
+  std::vector<std::uint32_t> selected = select_active(op_, b_.data, settings_, b_.select, result_.skipped);
   result_.select_seconds = seconds_since(t0);
   const auto t_active = std::chrono::steady_clock::now();
   active_.assign(op_, std::move(selected));
@@ -152,9 +147,7 @@ void SmartSolver::start_mlos() {
     }
   });
   active_.back_project_whitened(op_, b_.ratio, weight, b_.projection, b_.update, &b_.kernels);
-  for_voxels([&](std::size_t m) {
-    e[m] = weight[m] > 0.f ? clean(bounded_exp(b_.update[m] / weight[m])) : 0.f;
-  });
+  for_voxels([&](std::size_t m) { e[m] = weight[m] > 0.f ? clean(bounded_exp(b_.update[m] / weight[m])) : 0.f; });
   // Scale to the image's total light so the first ratios are near 1. The projection's total is
   // Σ_j E_j (eq 13 makes each voxel's weights sum to 1 over the sensor), so no projection is
   // needed; the two totals differ by the projection's float rounding only (docs/recon.md,
@@ -184,8 +177,7 @@ void SmartSolver::prepare_iterations() {
   if (settings_.accelerate) {
     b_.last.assign(b_.e.begin(), b_.e.end());
     b_.log_last.resize(n_);  // written in full here
-    for_voxels(
-        [&](std::size_t m) { b_.log_last[m] = b_.last[m] > 0.f ? std::log(b_.last[m]) : 0.f; });
+    for_voxels([&](std::size_t m) { b_.log_last[m] = b_.last[m] > 0.f ? std::log(b_.last[m]) : 0.f; });
     b_.momentum.assign(n_, 0.f);
   }
 }
@@ -244,11 +236,10 @@ void SmartSolver::project_and_compare(bool with_ratio) {
   // Without blur, each band is finished while its pixels are in cache; with it, the whole
   // projection must exist before the blur.
   if (!blur_.active()) {
-    active_.project(op_, b_.e, b_.projection, &b_.kernels,
-                    [&](int band, std::size_t i0, std::size_t i1) {
-                      residual_band(band, i0, i1);
-                      if (with_ratio) ratio_band(i0, i1, white_);
-                    });
+    active_.project(op_, b_.e, b_.projection, &b_.kernels, [&](int band, std::size_t i0, std::size_t i1) {
+      residual_band(band, i0, i1);
+      if (with_ratio) ratio_band(i0, i1, white_);
+    });
     return;
   }
   active_.project(op_, b_.e, b_.projection, &b_.kernels);
@@ -295,10 +286,8 @@ bool SmartSolver::step_along_momentum() const {
   std::vector<double> leaf_sum(leaves.size());
   const std::uint32_t* origin = b_.origin.data();
   tbb::parallel_for(std::size_t(0), leaves.size(), [&](std::size_t k) {
-    const std::size_t m0 =
-        std::size_t(std::lower_bound(origin, origin + n_, leaves[k][0]) - origin);
-    const std::size_t m1 =
-        std::size_t(std::lower_bound(origin, origin + n_, leaves[k][1]) - origin);
+    const std::size_t m0 = std::size_t(std::lower_bound(origin, origin + n_, leaves[k][0]) - origin);
+    const std::size_t m1 = std::size_t(std::lower_bound(origin, origin + n_, leaves[k][1]) - origin);
     double acc = 0.0;
     for (std::size_t m = m0; m < m1; ++m) acc += double(b_.update[m]) * double(b_.momentum[m]);
     leaf_sum[k] = acc;

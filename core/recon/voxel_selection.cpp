@@ -14,8 +14,7 @@ namespace plenopiv::recon::detail {
 void threshold_image(const ImageF& image, float threshold, BigBuffer<float>& out) {
   fit(out, image.pixels.size());
   for_pixels(out.size(), [&](std::size_t i0, std::size_t i1) {
-    for (std::size_t i = i0; i < i1; ++i)
-      out[i] = image.pixels[i] > threshold ? image.pixels[i] : 0.f;
+    for (std::size_t i = i0; i < i1; ++i) out[i] = image.pixels[i] > threshold ? image.pixels[i] : 0.f;
   });
 }
 
@@ -30,8 +29,7 @@ bool in_region(const Grid3& g, const std::optional<RegionMm>& region, int x, int
 }
 
 std::vector<std::uint32_t> select_active(const WeightingOperator& op, std::span<const float> image,
-                                         const MartSettings& settings, SelectScratch& scratch,
-                                         SkipReport& report) {
+                                         const MartSettings& settings, SelectScratch& scratch, SkipReport& report) {
   const Grid3& g = op.grid();
   const int width = op.image_width(), height = op.image_height();
   const std::size_t words = std::size_t(height + 63) / 64;  // per sensor column
@@ -64,8 +62,7 @@ std::vector<std::uint32_t> select_active(const WeightingOperator& op, std::span<
   report.slices = nz;
   std::vector<std::vector<std::uint32_t>>& per_slice = scratch.per_slice;
   per_slice.resize(std::size_t(nz));
-  std::vector<std::array<std::size_t, 3>> counts(std::size_t(nz),
-                                                 {0, 0, 0});  // unseen, outside, dark
+  std::vector<std::array<std::size_t, 3>> counts(std::size_t(nz), {0, 0, 0});  // unseen, outside, dark
   auto peak_of = [](const AxisWeights& a) {
     float peak = 0.f;
     for (const Segment& s : a.segments) {

@@ -40,7 +40,6 @@ struct SelectScratch {
 // costs one AND over the words of y's strong rows.
 // Fills the voxel and pixel counts of `report`; returns the active voxels, increasing.
 std::vector<std::uint32_t> select_active(const WeightingOperator& op, std::span<const float> image,
-                                         const MartSettings& settings, SelectScratch& scratch,
-                                         SkipReport& report);
+                                         const MartSettings& settings, SelectScratch& scratch, SkipReport& report);
 
 }  // namespace plenopiv::recon::detail

@@ -16,8 +16,8 @@ namespace plenopiv::recon {
 SeparableLattice separable_lattice(const optics::MicrolensArray& lenses) {
   const optics::Lattice& lat = lenses.lattice;
   if (lenses.centres_mm.size() != std::size_t(lat.count()))
-    throw InputError("microlens array: " + std::to_string(lenses.centres_mm.size()) +
-                     " centres for " + std::to_string(lat.count()) + " lenses");
+    throw InputError("microlens array: " + std::to_string(lenses.centres_mm.size()) + " centres for " +
+                     std::to_string(lat.count()) + " lenses");
   SeparableLattice out;
   // Separability: one x per lens column and one y per lens row (their means). A measured array
   // may scatter about them by a fraction of a pixel; a rotated or warped one cannot be separated.
@@ -42,9 +42,8 @@ SeparableLattice separable_lattice(const optics::MicrolensArray& lenses) {
   return out;
 }
 
-WeightingOperator::WeightingOperator(const optics::CameraModel& camera,
-                                     const optics::MicrolensArray& lenses, const Grid3& grid,
-                                     ImageF white, double angular_sampling)
+WeightingOperator::WeightingOperator(const optics::CameraModel& camera, const optics::MicrolensArray& lenses,
+                                     const Grid3& grid, ImageF white, double angular_sampling)
     : grid_(grid),
       width_(camera.sensor().width_px),
       height_(camera.sensor().height_px),
@@ -56,18 +55,14 @@ WeightingOperator::WeightingOperator(const optics::CameraModel& camera,
   compute_normalisers();
 }
 
-void WeightingOperator::check_inputs(const optics::MicrolensArray& lenses,
-                                     double angular_sampling) const {
+void WeightingOperator::check_inputs(const optics::MicrolensArray& lenses, double angular_sampling) const {
   if (white_.width != width_ || white_.height != height_) {
-    throw InputError("white image: " + std::to_string(white_.width) + " x " +
-                     std::to_string(white_.height) + " px, the sensor is " +
-                     std::to_string(width_) + " x " + std::to_string(height_));
+    throw InputError("white image: " + std::to_string(white_.width) + " x " + std::to_string(white_.height) +
+                     " px, the sensor is " + std::to_string(width_) + " x " + std::to_string(height_));
   }
-  if (width_ < kernels::kQuad)
-    throw InputError("sensor: the reconstruction needs at least 4 pixels per row");
+  if (width_ < kernels::kQuad) throw InputError("sensor: the reconstruction needs at least 4 pixels per row");
   if (!(angular_sampling > 0 && angular_sampling <= 8)) {
-    throw InputError("angular_sampling: must be in (0, 8], got " +
-                     std::to_string(angular_sampling));
+    throw InputError("angular_sampling: must be in (0, 8], got " + std::to_string(angular_sampling));
   }
   for (int a = 0; a < 3; ++a) {
     if (grid_.shape[a] <= 0 || !(grid_.spacing_mm[a] > 0)) {
@@ -85,8 +80,7 @@ void WeightingOperator::check_inputs(const optics::MicrolensArray& lenses,
   }
 }
 
-void WeightingOperator::read_geometry(const optics::CameraModel& camera,
-                                      const optics::MicrolensArray& lenses,
+void WeightingOperator::read_geometry(const optics::CameraModel& camera, const optics::MicrolensArray& lenses,
                                       double angular_sampling) {
   geo_.s_o = camera.object_distance_mm();
   geo_.s_i = camera.image_distance_mm();
@@ -111,17 +105,15 @@ void WeightingOperator::read_geometry(const optics::CameraModel& camera,
     geo_.min_pitch = std::min(geo_.min_pitch, geo_.lens_x[i] - geo_.lens_x[i - 1]);
   for (std::size_t j = 1; j < geo_.lens_y.size(); ++j)
     geo_.min_pitch = std::min(geo_.min_pitch, geo_.lens_y[j] - geo_.lens_y[j - 1]);
-  if (!(geo_.min_pitch > 0))
-    throw InputError("microlens array: centres must increase along rows and columns");
+  if (!(geo_.min_pitch > 0)) throw InputError("microlens array: centres must increase along rows and columns");
 }
 
 SliceOptics WeightingOperator::slice_optics(double z_mm) const {
   // Eq 10 with s'_o = s_o + z_o (DESIGN.md: the printed s_i + z_o holds only at M = -1).
   const double so = geo_.s_o + z_mm;
   if (!(so > geo_.f_main * (1 + 1e-9))) {
-    throw InputError(
-        "volume grid: depth z = " + std::to_string(z_mm) +
-        " mm lies at or inside the main lens's focal length; no real image forms there");
+    throw InputError("volume grid: depth z = " + std::to_string(z_mm) +
+                     " mm lies at or inside the main lens's focal length; no real image forms there");
   }
   const double si = geo_.f_main * so / (so - geo_.f_main);
   SliceOptics o;
@@ -137,8 +129,7 @@ SliceOptics WeightingOperator::slice_optics(double z_mm) const {
 }
 
 namespace {
-AxisWeights axis_weights(const WeightRun& r, const std::vector<Segment>& segments,
-                         const std::vector<float>& table) {
+AxisWeights axis_weights(const WeightRun& r, const std::vector<Segment>& segments, const std::vector<float>& table) {
   AxisWeights w;
   w.segments = {segments.data() + r.segment_begin, r.segment_end - r.segment_begin};
   w.table = table.data();

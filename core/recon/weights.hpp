@@ -28,9 +28,7 @@ inline constexpr double kSeparableTolerancePx = 0.25;
 struct SeparableLattice {
   std::vector<double> lens_x, lens_y;  // mm on the microlens plane, per lens column / row
   double max_departure_mm = 0;         // of any lens centre from its column's x or row's y
-  bool separable(double pixel_pitch_mm) const {
-    return max_departure_mm <= kSeparableTolerancePx * pixel_pitch_mm;
-  }
+  bool separable(double pixel_pitch_mm) const { return max_departure_mm <= kSeparableTolerancePx * pixel_pitch_mm; }
 };
 // Reads `lenses` as rows and columns (the layout is not checked: a hex array's shifted rows show
 // as a departure of a quarter pitch).
@@ -114,8 +112,8 @@ class WeightingOperator {
   // microlens plane may exceed a lens: cheaper tables, a coarser operator). Throws InputError on a
   // grid inside the main lens's focal length, an unsupported lens array, a white image of the
   // wrong size, or angular_sampling outside (0, 8].
-  WeightingOperator(const optics::CameraModel& camera, const optics::MicrolensArray& lenses,
-                    const Grid3& grid, ImageF white, double angular_sampling = 1.0);
+  WeightingOperator(const optics::CameraModel& camera, const optics::MicrolensArray& lenses, const Grid3& grid,
+                    ImageF white, double angular_sampling = 1.0);
 
   const Grid3& grid() const { return grid_; }
   int image_width() const { return width_; }
@@ -166,8 +164,7 @@ class WeightingOperator {
   // camera and lens array (weights.cpp), the 1-D tables of every slice and the eq 13 normalisers
   // (slice_tables.cpp).
   void check_inputs(const optics::MicrolensArray& lenses, double angular_sampling) const;
-  void read_geometry(const optics::CameraModel& camera, const optics::MicrolensArray& lenses,
-                     double angular_sampling);
+  void read_geometry(const optics::CameraModel& camera, const optics::MicrolensArray& lenses, double angular_sampling);
   void build_slice_tables();
   void compute_normalisers();
 

@@ -53,9 +53,7 @@ class Reader {
     take(v.data(), std::size_t(n) * sizeof(T));
   }
   bool done() const { return at_ == in_.size(); }
-  [[noreturn]] static void fail(const std::string& why) {
-    throw InputError("weighting operator bytes: " + why);
-  }
+  [[noreturn]] static void fail(const std::string& why) { throw InputError("weighting operator bytes: " + why); }
 
  private:
   void take(void* dst, std::size_t n) {
@@ -145,8 +143,7 @@ WeightingOperator WeightingOperator::deserialize(std::string_view bytes) {
   r.vec(op.geo_.lens_y);
   op.geo_.max_centre_deviation_mm = r.pod<double>();
   const auto slices = r.pod<std::uint64_t>();
-  if (slices != std::uint64_t(op.grid_.shape[2]))
-    Reader::fail("slice count does not match the grid");
+  if (slices != std::uint64_t(op.grid_.shape[2])) Reader::fail("slice count does not match the grid");
   op.slices_.resize(std::size_t(slices));
   for (SliceTables& t : op.slices_) {
     t.z_mm = r.pod<double>();
@@ -173,11 +170,9 @@ WeightingOperator WeightingOperator::deserialize(std::string_view bytes) {
   bool sound = op.normaliser_.size() == op.grid_.count() && op.white_.width == op.width_ &&
                op.white_.height == op.height_ && op.white_.pixels.size() == op.pixel_count();
   for (const SliceTables& t : op.slices_) {
-    sound = sound && t.x_runs.size() == nx && t.y_runs.size() == ny &&
-            t.x_quad_start.size() == nx + 1 && t.y_quad_start.size() == ny + 1 &&
-            t.x_quad_weights.size() == 4 * t.x_quad_first.size() &&
-            t.y_quad_weights.size() == 4 * t.y_quad_first.size() &&
-            t.x_quad_start.back() == t.x_quad_first.size() &&
+    sound = sound && t.x_runs.size() == nx && t.y_runs.size() == ny && t.x_quad_start.size() == nx + 1 &&
+            t.y_quad_start.size() == ny + 1 && t.x_quad_weights.size() == 4 * t.x_quad_first.size() &&
+            t.y_quad_weights.size() == 4 * t.y_quad_first.size() && t.x_quad_start.back() == t.x_quad_first.size() &&
             t.y_quad_start.back() == t.y_quad_first.size();
   }
   if (!sound) Reader::fail("inconsistent table sizes");
@@ -187,13 +182,11 @@ WeightingOperator WeightingOperator::deserialize(std::string_view bytes) {
 std::size_t WeightingOperator::bytes() const {
   std::size_t total = white_.pixels.size() * sizeof(float) + normaliser_.size() * sizeof(float);
   for (const SliceTables& t : slices_) {
-    total +=
-        (t.x_runs.size() + t.y_runs.size()) * sizeof(WeightRun) +
-        (t.x_segments.size() + t.y_segments.size()) * sizeof(Segment) +
-        (t.x_table.size() + t.y_table.size() + t.x_quad_weights.size() + t.y_quad_weights.size()) *
-            sizeof(float) +
-        (t.x_quad_start.size() + t.y_quad_start.size()) * sizeof(std::size_t) +
-        (t.x_quad_first.size() + t.y_quad_first.size()) * sizeof(int);
+    total += (t.x_runs.size() + t.y_runs.size()) * sizeof(WeightRun) +
+             (t.x_segments.size() + t.y_segments.size()) * sizeof(Segment) +
+             (t.x_table.size() + t.y_table.size() + t.x_quad_weights.size() + t.y_quad_weights.size()) * sizeof(float) +
+             (t.x_quad_start.size() + t.y_quad_start.size()) * sizeof(std::size_t) +
+             (t.x_quad_first.size() + t.y_quad_first.size()) * sizeof(int);
   }
   return total;
 }

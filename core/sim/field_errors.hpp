@@ -18,9 +18,9 @@ struct FieldErrors {
   // below 1 where a measurement falls short in proportion to the motion (NaN where the truth is 0).
   std::array<double, 3> gain{0, 0, 0};
   std::array<double, 3> truth_rms{0, 0, 0};  // RMS of the true displacement per component, voxels
-  double rms_total = 0;                 // RMS of the error vector's length, voxels
-  double max_truth_voxels = 0;          // largest true displacement among the nodes compared
-  std::size_t compared = 0;             // valid nodes compared (bias and RMS are NaN when none)
+  double rms_total = 0;                      // RMS of the error vector's length, voxels
+  double max_truth_voxels = 0;               // largest true displacement among the nodes compared
+  std::size_t compared = 0;                  // valid nodes compared (bias and RMS are NaN when none)
 };
 
 // Errors of the valid vectors of `field` against `flow`. The truth at a node x is the displacement

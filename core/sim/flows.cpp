@@ -50,16 +50,13 @@ Flow::~Flow() = default;
 
 UniformFlow::UniformFlow(const Point3& d_mm) : d_mm_(d_mm) {}
 Point3 UniformFlow::displacement_mm(const Point3&) const { return d_mm_; }
-std::string UniformFlow::parameters_yaml() const {
-  return "type: uniform\ndisplacement_mm: " + vec(d_mm_) + "\n";
-}
+std::string UniformFlow::parameters_yaml() const { return "type: uniform\ndisplacement_mm: " + vec(d_mm_) + "\n"; }
 
 RingVortexFlow::RingVortexFlow(const Parameters& p) : p_(p) {
   if (!(p.ring_diameter_mm > 0) || !(p.voxel_mm > 0) || !(p.core_radius_voxels > 0) || !(p.gamma > 0)) {
     throw InputError("ring vortex: ring_diameter_mm, voxel_mm, core_radius_voxels and gamma must be > 0");
   }
-  circulation_ = 2 * std::numbers::pi * p.core_radius_voxels * p.core_displacement_voxels /
-                 (1 - std::exp(-p.gamma));
+  circulation_ = 2 * std::numbers::pi * p.core_radius_voxels * p.core_displacement_voxels / (1 - std::exp(-p.gamma));
   c_theta_ = p.core_radius_voxels * p.core_radius_voxels / p.gamma;
 }
 
@@ -86,12 +83,11 @@ Point3 RingVortexFlow::displacement_mm(const Point3& p_mm) const {
 }
 
 std::string RingVortexFlow::parameters_yaml() const {
-  return "type: ring_vortex\ncentre_mm: " + vec(p_.centre_mm) +
-         "\nring_diameter_mm: " + num(p_.ring_diameter_mm) + "\nvoxel_mm: " + num(p_.voxel_mm) +
-         "\ncore_radius_voxels: " + num(p_.core_radius_voxels) +
-         "\ncore_displacement_voxels: " + num(p_.core_displacement_voxels) +
-         "\ngamma: " + num(p_.gamma) + "\n# Gamma = 2 pi r_c v_rc / (1 - exp(-gamma)) = " +
-         num(circulation_) + " voxel^2, so that |V_theta(r_c)| = v_rc\n";
+  return "type: ring_vortex\ncentre_mm: " + vec(p_.centre_mm) + "\nring_diameter_mm: " + num(p_.ring_diameter_mm) +
+         "\nvoxel_mm: " + num(p_.voxel_mm) + "\ncore_radius_voxels: " + num(p_.core_radius_voxels) +
+         "\ncore_displacement_voxels: " + num(p_.core_displacement_voxels) + "\ngamma: " + num(p_.gamma) +
+         "\n# Gamma = 2 pi r_c v_rc / (1 - exp(-gamma)) = " + num(circulation_) +
+         " voxel^2, so that |V_theta(r_c)| = v_rc\n";
 }
 
 SolidBodyRotation::SolidBodyRotation(const Point3& centre_mm, const Point3& axis, double angle_rad)
@@ -130,16 +126,15 @@ Point3 LinearShear::displacement_mm(const Point3& p) const {
 
 std::string LinearShear::parameters_yaml() const {
   static const char* axes[3] = {"x", "y", "z"};
-  return "type: linear_shear\nrate_per_mm: " + vec(rate_per_mm_) + "\ngradient_axis: " +
-         axes[gradient_axis_] + "\nreference_mm: " + num(reference_mm_) + "\n";
+  return "type: linear_shear\nrate_per_mm: " + vec(rate_per_mm_) + "\ngradient_axis: " + axes[gradient_axis_] +
+         "\nreference_mm: " + num(reference_mm_) + "\n";
 }
 
 std::unique_ptr<Flow> make_flow(const YamlMap& map) {
   const std::string type = map.string("type");
-  if (type != "uniform" && type != "ring_vortex" && type != "solid_body_rotation" &&
-      type != "linear_shear") {
-    map.fail("type", "unknown flow '" + type +
-                         "'; expected one of uniform, ring_vortex, solid_body_rotation, linear_shear");
+  if (type != "uniform" && type != "ring_vortex" && type != "solid_body_rotation" && type != "linear_shear") {
+    map.fail("type",
+             "unknown flow '" + type + "'; expected one of uniform, ring_vortex, solid_body_rotation, linear_shear");
   }
   if (type == "uniform") {
     map.reject_unknown({"type", "displacement_mm"});

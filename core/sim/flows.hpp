@@ -54,8 +54,8 @@ class RingVortexFlow : public Flow {
     Point3 centre_mm{0, 0, 0};
     double ring_diameter_mm = 8.0;
     double voxel_mm = 0.1;
-    double core_radius_voxels = 40.0;        // r_c
-    double core_displacement_voxels = 8.0;   // v_rc, |V_theta| at r = r_c
+    double core_radius_voxels = 40.0;       // r_c
+    double core_displacement_voxels = 8.0;  // v_rc, |V_theta| at r = r_c
     double gamma = 1.256431;
   };
   explicit RingVortexFlow(const Parameters& p);

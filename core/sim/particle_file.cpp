@@ -86,8 +86,7 @@ std::vector<Point3> read_particles_csv(const std::filesystem::path& path) {
     }
     for (std::size_t k = 0; k < 3; ++k) {
       if (!parse_number(fields[k], p[k]) || !std::isfinite(p[k])) {
-        throw InputError(where + "column " + std::to_string(k + 1) + " ('" + fields[k] +
-                         "') is not a finite number");
+        throw InputError(where + "column " + std::to_string(k + 1) + " ('" + fields[k] + "') is not a finite number");
       }
     }
     particles.push_back(p);

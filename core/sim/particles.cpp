@@ -13,19 +13,17 @@ namespace {
 void check_box(const Box& box) {
   static const char* axes[3] = {"x", "y", "z"};
   for (int a = 0; a < 3; ++a) {
-    if (!std::isfinite(box.min_mm[a]) || !std::isfinite(box.max_mm[a]) ||
-        !(box.max_mm[a] > box.min_mm[a])) {
-      throw InputError(std::string("particle box: ") + axes[a] + " range [" +
-                       std::to_string(box.min_mm[a]) + ", " + std::to_string(box.max_mm[a]) +
-                       "] mm is empty or not finite");
+    if (!std::isfinite(box.min_mm[a]) || !std::isfinite(box.max_mm[a]) || !(box.max_mm[a] > box.min_mm[a])) {
+      throw InputError(std::string("particle box: ") + axes[a] + " range [" + std::to_string(box.min_mm[a]) + ", " +
+                       std::to_string(box.max_mm[a]) + "] mm is empty or not finite");
     }
   }
 }
 
 void check_density(double density, const char* unit) {
   if (!std::isfinite(density) || density < 0) {
-    throw InputError(std::string("particle density: must be a finite number >= 0 ") + unit +
-                     ", got " + std::to_string(density));
+    throw InputError(std::string("particle density: must be a finite number >= 0 ") + unit + ", got " +
+                     std::to_string(density));
   }
 }
 

@@ -30,7 +30,7 @@ class SplitMix64 {
  public:
   explicit SplitMix64(std::uint64_t state) : state_(state) {}
   std::uint64_t next() { return mix64(state_ += 0x9e3779b97f4a7c15ULL); }
-  double uniform() { return double(next() >> 11) * 0x1.0p-53; }  // [0, 1)
+  double uniform() { return double(next() >> 11) * 0x1.0p-53; }                  // [0, 1)
   double symmetric() { return double(std::int64_t(next()) >> 11) * 0x1.0p-52; }  // [-1, 1)
   // Two values in [-1, 1) from one draw, 32 bits each (3e-9 of the aperture radius: plenty).
   void symmetric_pair(double& a, double& b) {
@@ -101,9 +101,9 @@ struct Emitter {
 // Everything a ray needs, resolved once per render.
 class Tracer {
  public:
-  Tracer(const optics::CameraModel& camera, const optics::MicrolensArray& array,
-         double aperture_diameter_mm, double overfill, double sigma_mm, const VignettingStop& stop,
-         const std::vector<float>& transmission, std::uint32_t* counts)
+  Tracer(const optics::CameraModel& camera, const optics::MicrolensArray& array, double aperture_diameter_mm,
+         double overfill, double sigma_mm, const VignettingStop& stop, const std::vector<float>& transmission,
+         std::uint32_t* counts)
       : s_o_(camera.object_distance_mm()),
         s_i_(camera.image_distance_mm()),
         inv_f_m_(1.0 / camera.main_lens().focal_length_mm),
@@ -312,12 +312,15 @@ std::vector<float> dust_transmission(const SensorModel& sensor, int width, int h
   t.assign(std::size_t(width) * height, 1.0f);
   for (const DustSpot& d : sensor.dust) {
     const double reach = d.radius_px + 0.5 * d.edge_px;
-    const int x0 = std::max(0, int(std::floor(d.column - reach))), x1 = std::min(width - 1, int(std::ceil(d.column + reach)));
-    const int y0 = std::max(0, int(std::floor(d.row - reach))), y1 = std::min(height - 1, int(std::ceil(d.row + reach)));
+    const int x0 = std::max(0, int(std::floor(d.column - reach))),
+              x1 = std::min(width - 1, int(std::ceil(d.column + reach)));
+    const int y0 = std::max(0, int(std::floor(d.row - reach))),
+              y1 = std::min(height - 1, int(std::ceil(d.row + reach)));
     for (int y = y0; y <= y1; ++y) {
       for (int x = x0; x <= x1; ++x) {
         const double r = std::hypot(x - d.column, y - d.row);
-        const double core = d.edge_px > 0 ? std::clamp((reach - r) / d.edge_px, 0.0, 1.0) : (r <= d.radius_px ? 1.0 : 0.0);
+        const double core =
+            d.edge_px > 0 ? std::clamp((reach - r) / d.edge_px, 0.0, 1.0) : (r <= d.radius_px ? 1.0 : 0.0);
         t[std::size_t(y) * width + x] *= float(1.0 - d.opacity * core);
       }
     }
@@ -335,9 +338,8 @@ void check_array(const optics::MicrolensArray& array) {
 
 // Traces every emitter in parallel; counts are integers, so any order gives the same sums.
 RenderResult trace_all(const optics::CameraModel& camera, const optics::MicrolensArray& array,
-                       std::span<const Emitter> emitters, std::size_t rays_per_emitter,
-                       double aperture_diameter_mm, double overfill, double sigma_mm,
-                       const VignettingStop& vignetting, const SensorModel& sensor,
+                       std::span<const Emitter> emitters, std::size_t rays_per_emitter, double aperture_diameter_mm,
+                       double overfill, double sigma_mm, const VignettingStop& vignetting, const SensorModel& sensor,
                        const std::function<void(double)>& progress, std::uint64_t seed) {
   check_array(array);
   check_sensor(sensor);
@@ -357,10 +359,8 @@ RenderResult trace_all(const optics::CameraModel& camera, const optics::Microlen
       "rendering a " + std::to_string(w) + " x " + std::to_string(h) + " px frame");
   std::vector<std::uint32_t> counts(pixels, 0);
   const std::vector<float> transmission = dust_transmission(sensor, w, h);
-  const Tracer tracer(camera, array, aperture_diameter_mm, overfill, sigma_mm, vignetting, transmission,
-                      counts.data());
-  std::atomic<std::uint64_t> emitted{0}, outside_aperture{0}, missed{0}, outside_sensor{0}, landed{0},
-      absorbed{0};
+  const Tracer tracer(camera, array, aperture_diameter_mm, overfill, sigma_mm, vignetting, transmission, counts.data());
+  std::atomic<std::uint64_t> emitted{0}, outside_aperture{0}, missed{0}, outside_sensor{0}, landed{0}, absorbed{0};
   std::atomic<std::size_t> done{0};
   std::mutex progress_mutex;
   const std::size_t step = std::max<std::size_t>(1, emitters.size() / 100);
@@ -397,8 +397,7 @@ RenderResult trace_all(const optics::CameraModel& camera, const optics::Microlen
 }  // namespace
 
 RenderResult render(const optics::CameraModel& camera, const optics::MicrolensArray& array,
-                    std::span<const Point3> particles_mm, const RenderOptions& options,
-                    std::uint64_t seed) {
+                    std::span<const Point3> particles_mm, const RenderOptions& options, std::uint64_t seed) {
   check_finite_nonnegative(options.aperture_diameter_mm, "aperture_diameter_mm");
   std::vector<Emitter> emitters;
   emitters.reserve(particles_mm.size());
@@ -414,11 +413,10 @@ RenderResult render(const optics::CameraModel& camera, const optics::MicrolensAr
     }
     emitters.push_back({p[0], p[1], p[2], 0, 0});
   }
-  const double aperture = options.aperture_diameter_mm > 0 ? options.aperture_diameter_mm
-                                                           : camera.aperture_diameter_mm();
-  return trace_all(camera, array, emitters, options.rays_per_particle, aperture,
-                   options.aperture_overfill, options.diffraction_sigma_mm, options.vignetting,
-                   options.sensor, options.progress, seed);
+  const double aperture =
+      options.aperture_diameter_mm > 0 ? options.aperture_diameter_mm : camera.aperture_diameter_mm();
+  return trace_all(camera, array, emitters, options.rays_per_particle, aperture, options.aperture_overfill,
+                   options.diffraction_sigma_mm, options.vignetting, options.sensor, options.progress, seed);
 }
 
 TargetOptions calibration_target() {
@@ -448,7 +446,8 @@ RenderResult render_target(const optics::CameraModel& camera, const optics::Micr
   // sensor's footprint on the microlens plane plus two pitches.
   const double px = array.lattice.pitch_x_mm, py = array.lattice.pitch_y_mm;
   const auto& sensor = camera.sensor();
-  const double seen_lo[2] = {optics::column_to_sensor_mm(sensor, -0.5) - 2 * px, optics::row_to_sensor_mm(sensor, -0.5) - 2 * py};
+  const double seen_lo[2] = {optics::column_to_sensor_mm(sensor, -0.5) - 2 * px,
+                             optics::row_to_sensor_mm(sensor, -0.5) - 2 * py};
   const double seen_hi[2] = {optics::column_to_sensor_mm(sensor, sensor.width_px - 0.5) + 2 * px,
                              optics::row_to_sensor_mm(sensor, sensor.height_px - 0.5) + 2 * py};
   for (int a = 0; a < 2; ++a) {
@@ -468,9 +467,8 @@ RenderResult render_target(const optics::CameraModel& camera, const optics::Micr
       tiles.push_back({(x0 + i * px) / m, (y0 + j * py) / m, 0.0, px / std::abs(m), py / std::abs(m)});
     }
   }
-  return trace_all(camera, array, tiles, options.rays_per_lens,
-                   camera.main_lens().focal_length_mm / f_number, 1.0, options.diffraction_sigma_mm,
-                   options.vignetting, options.sensor, options.progress, seed);
+  return trace_all(camera, array, tiles, options.rays_per_lens, camera.main_lens().focal_length_mm / f_number, 1.0,
+                   options.diffraction_sigma_mm, options.vignetting, options.sensor, options.progress, seed);
 }
 
 ImageU16 apply_sensor(const ImageF& rays, const SensorModel& sensor, std::uint64_t seed) {
@@ -506,9 +504,8 @@ ImageU16 apply_sensor(const ImageF& rays, const SensorModel& sensor, std::uint64
   return out;
 }
 
-optics::Lattice overfilling_lattice(const optics::CameraModel& camera, optics::LensletLayout layout,
-                                    double pitch_mm, double rotation_rad, double offset_x_mm,
-                                    double offset_y_mm, int margin_lenses) {
+optics::Lattice overfilling_lattice(const optics::CameraModel& camera, optics::LensletLayout layout, double pitch_mm,
+                                    double rotation_rad, double offset_x_mm, double offset_y_mm, int margin_lenses) {
   if (!(pitch_mm > 0) || !std::isfinite(pitch_mm) || !std::isfinite(rotation_rad) || !std::isfinite(offset_x_mm) ||
       !std::isfinite(offset_y_mm) || margin_lenses < 0) {
     throw InputError("overfilling array: needs a positive pitch, finite rotation and offset, margin >= 0");

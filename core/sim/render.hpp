@@ -94,8 +94,7 @@ struct RenderResult {
 // and pixels accumulate integer counts, so the image is bit-identical at any thread count.
 // Throws InputError for bad options (negative or non-finite values, array/camera mismatch).
 RenderResult render(const optics::CameraModel& camera, const optics::MicrolensArray& array,
-                    std::span<const Point3> particles_mm, const RenderOptions& options,
-                    std::uint64_t seed);
+                    std::span<const Point3> particles_mm, const RenderOptions& options, std::uint64_t seed);
 
 // A uniformly lit, Lambertian white target at the nominal focal plane, covering the field of
 // view of the array plus one pitch. rays_per_lens rays per lens area, from points uniform over
@@ -128,8 +127,7 @@ optics::MicrolensArray jittered_array(const optics::Lattice& lattice, double sig
 // for hex), turned by `rotation_rad` and shifted by (offset_x_mm, offset_y_mm) on the microlens
 // plane, with enough lenses that the sensor sees the array reach past all four of its edges by at
 // least `margin_lenses` lenses (the outer ones cut by the sensor edge or beyond it).
-optics::Lattice overfilling_lattice(const optics::CameraModel& camera, optics::LensletLayout layout,
-                                    double pitch_mm, double rotation_rad, double offset_x_mm,
-                                    double offset_y_mm, int margin_lenses = 2);
+optics::Lattice overfilling_lattice(const optics::CameraModel& camera, optics::LensletLayout layout, double pitch_mm,
+                                    double rotation_rad, double offset_x_mm, double offset_y_mm, int margin_lenses = 2);
 
 }  // namespace plenopiv::sim

@@ -22,12 +22,10 @@ void setup_logging(const std::string& program, const std::string& level, LogTarg
   std::shared_ptr<spdlog::logger> logger;
   if (target == LogTarget::journal) {
     // The journal keeps its own time stamps and levels: the sink maps levels to priorities.
-    logger = std::make_shared<spdlog::logger>(
-        program, std::make_shared<spdlog::sinks::systemd_sink_mt>(program));
+    logger = std::make_shared<spdlog::logger>(program, std::make_shared<spdlog::sinks::systemd_sink_mt>(program));
     logger->set_pattern("%v");
   } else {
-    logger = std::make_shared<spdlog::logger>(
-        program, std::make_shared<spdlog::sinks::stderr_color_sink_mt>());
+    logger = std::make_shared<spdlog::logger>(program, std::make_shared<spdlog::sinks::stderr_color_sink_mt>());
     logger->set_pattern("%Y-%m-%d %H:%M:%S.%e %^%-5l%$ [%n] %v");
   }
   logger->set_level(parsed);

@@ -18,7 +18,7 @@ PixelFormat pixel_format_from_string(const std::string& name);
 int bit_depth(PixelFormat format);
 
 struct CameraInfo {
-  std::string uri;          // as opened
+  std::string uri;  // as opened
   std::string vendor;
   std::string model;
   std::string serial;
@@ -86,10 +86,10 @@ struct CameraCounters {
   std::uint64_t frames_discarded = 0;   // arrived but not delivered (incomplete, or partner missing)
   std::uint64_t packets_resent = 0;     // transport retransmissions (GigE Vision), if any
   std::uint64_t pairs_delivered = 0;
-  std::uint64_t pairs_discarded = 0;    // pairs not delivered because a frame was incomplete or lost
-  std::uint64_t pairs_overflowed = 0;   // complete pairs dropped because next_pair() fell behind
-  std::uint64_t pairs_not_read_out = 0; // triggered but still in the camera when it was stopped
-  std::uint64_t reconnects = 0;         // times the device was lost and opened again
+  std::uint64_t pairs_discarded = 0;     // pairs not delivered because a frame was incomplete or lost
+  std::uint64_t pairs_overflowed = 0;    // complete pairs dropped because next_pair() fell behind
+  std::uint64_t pairs_not_read_out = 0;  // triggered but still in the camera when it was stopped
+  std::uint64_t reconnects = 0;          // times the device was lost and opened again
 };
 
 // A trigger whose pair the camera did not deliver, and why (CameraCounters counts them; this says

@@ -11,18 +11,21 @@ namespace plenopiv::drivers {
 namespace {
 
 std::uint64_t host_now_ns() {
-  return std::uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(
-                           std::chrono::system_clock::now().time_since_epoch())
-                           .count());
+  return std::uint64_t(
+      std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
+          .count());
 }
 
 }  // namespace
 
 const char* to_string(PixelFormat format) {
   switch (format) {
-    case PixelFormat::Mono8: return "Mono8";
-    case PixelFormat::Mono12: return "Mono12";
-    case PixelFormat::Mono16: return "Mono16";
+    case PixelFormat::Mono8:
+      return "Mono8";
+    case PixelFormat::Mono12:
+      return "Mono12";
+    case PixelFormat::Mono16:
+      return "Mono16";
   }
   return "?";
 }
@@ -36,29 +39,40 @@ PixelFormat pixel_format_from_string(const std::string& name) {
 
 int bit_depth(PixelFormat format) {
   switch (format) {
-    case PixelFormat::Mono8: return 8;
-    case PixelFormat::Mono12: return 12;
-    case PixelFormat::Mono16: return 16;
+    case PixelFormat::Mono8:
+      return 8;
+    case PixelFormat::Mono12:
+      return 12;
+    case PixelFormat::Mono16:
+      return 16;
   }
   return 16;
 }
 
 const char* to_string(PairDrop::Reason reason) {
   switch (reason) {
-    case PairDrop::Reason::Incomplete: return "incomplete frame";
-    case PairDrop::Reason::Unpaired: return "unpaired frame";
-    case PairDrop::Reason::QueueOverflow: return "camera queue overflow";
-    case PairDrop::Reason::NotReadOut: return "not read out before stop";
+    case PairDrop::Reason::Incomplete:
+      return "incomplete frame";
+    case PairDrop::Reason::Unpaired:
+      return "unpaired frame";
+    case PairDrop::Reason::QueueOverflow:
+      return "camera queue overflow";
+    case PairDrop::Reason::NotReadOut:
+      return "not read out before stop";
   }
   return "?";
 }
 
 const char* to_string(CameraState state) {
   switch (state) {
-    case CameraState::Idle: return "idle";
-    case CameraState::Armed: return "armed";
-    case CameraState::Running: return "running";
-    case CameraState::Lost: return "lost";
+    case CameraState::Idle:
+      return "idle";
+    case CameraState::Armed:
+      return "armed";
+    case CameraState::Running:
+      return "running";
+    case CameraState::Lost:
+      return "lost";
   }
   return "?";
 }
@@ -79,12 +93,10 @@ void CameraBase::set_info(const CameraInfo& info) {
 void CameraBase::require(std::initializer_list<CameraState> allowed, const char* call) const {
   std::lock_guard lock(mutex_);
   if (lost_) {
-    throw DeviceError("camera " + info_.uri + ": " + call + " refused: the camera is lost (" +
-                      last_error_ + ")");
+    throw DeviceError("camera " + info_.uri + ": " + call + " refused: the camera is lost (" + last_error_ + ")");
   }
   if (std::find(allowed.begin(), allowed.end(), state_) == allowed.end()) {
-    throw StateError("camera " + info_.uri + ": " + call + " is not allowed while " +
-                     to_string(state_));
+    throw StateError("camera " + info_.uri + ": " + call + " is not allowed while " + to_string(state_));
   }
 }
 
@@ -92,18 +104,15 @@ void CameraBase::configure(const CameraSettings& settings) {
   require({CameraState::Idle, CameraState::Armed}, "configure");
   const CameraInfo info = this->info();
   if (!(settings.exposure_s > 0)) {
-    throw InputError("camera " + info.uri + ": exposure_s must be > 0, got " +
-                     std::to_string(settings.exposure_s));
+    throw InputError("camera " + info.uri + ": exposure_s must be > 0, got " + std::to_string(settings.exposure_s));
   }
   const Roi& r = settings.roi;
   if (r.x < 0 || r.y < 0 || r.width < 0 || r.height < 0 ||
       (info.sensor_width_px > 0 && r.x + r.width > info.sensor_width_px) ||
       (info.sensor_height_px > 0 && r.y + r.height > info.sensor_height_px)) {
-    throw InputError("camera " + info.uri + ": roi " + std::to_string(r.x) + "," +
-                     std::to_string(r.y) + " " + std::to_string(r.width) + "x" +
-                     std::to_string(r.height) + " does not fit the " +
-                     std::to_string(info.sensor_width_px) + "x" +
-                     std::to_string(info.sensor_height_px) + " sensor");
+    throw InputError("camera " + info.uri + ": roi " + std::to_string(r.x) + "," + std::to_string(r.y) + " " +
+                     std::to_string(r.width) + "x" + std::to_string(r.height) + " does not fit the " +
+                     std::to_string(info.sensor_width_px) + "x" + std::to_string(info.sensor_height_px) + " sensor");
   }
   do_configure(settings);
 }
@@ -173,8 +182,8 @@ std::optional<FramePair> CameraBase::next_pair(std::chrono::milliseconds timeout
     const auto now = std::chrono::steady_clock::now();
     if (now >= deadline) return std::nullopt;
     // Wake now and then to give up on a frame A whose B never comes.
-    ready_.wait_for(lock, std::min<std::chrono::steady_clock::duration>(
-                              deadline - now, std::chrono::milliseconds(100)));
+    ready_.wait_for(lock,
+                    std::min<std::chrono::steady_clock::duration>(deadline - now, std::chrono::milliseconds(100)));
   }
   FramePair pair = std::move(queue_.front());
   queue_.pop_front();

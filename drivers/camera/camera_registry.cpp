@@ -57,16 +57,13 @@ std::unique_ptr<Camera> CameraRegistry::open(std::string_view text) const {
       uri.fail("unknown camera scheme '" + uri.scheme() + "' (known: " + known + ")");
     }
     if (!it->second.factory) {
-      uri.fail("camera backend '" + uri.scheme() + "' is not available: " +
-               it->second.why_unavailable);
+      uri.fail("camera backend '" + uri.scheme() + "' is not available: " + it->second.why_unavailable);
     }
     factory = it->second.factory;
   }
   return factory(uri);
 }
 
-std::unique_ptr<Camera> open_camera(std::string_view uri) {
-  return CameraRegistry::instance().open(uri);
-}
+std::unique_ptr<Camera> open_camera(std::string_view uri) { return CameraRegistry::instance().open(uri); }
 
 }  // namespace plenopiv::drivers

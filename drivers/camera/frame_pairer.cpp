@@ -67,9 +67,8 @@ std::optional<FramePair> FramePairer::push(Frame frame, std::optional<std::uint6
   if (last_id_) {
     const bool repeated = frame.frame_id == *last_id_;
     distance = id_distance(*last_id_, frame.frame_id);
-    const bool late = !repeated && (options_.frame_id_modulus == 0
-                                        ? frame.frame_id < *last_id_
-                                        : id_distance(frame.frame_id, *last_id_) < distance);
+    const bool late = !repeated && (options_.frame_id_modulus == 0 ? frame.frame_id < *last_id_
+                                                                   : id_distance(frame.frame_id, *last_id_) < distance);
     if (repeated || late) {
       // A frame finished after a later one (e.g. it waited for resent packets) was counted lost
       // when the later one came: now it has arrived, but it cannot be paired. Anything else with
@@ -99,8 +98,7 @@ std::optional<FramePair> FramePairer::push(Frame frame, std::optional<std::uint6
 
   if (pending_) {
     const bool partner = distance == 1 && within_gap(pending_->frame, frame) &&
-                         (!pending_->trigger_index || !trigger_index ||
-                          *pending_->trigger_index == *trigger_index);
+                         (!pending_->trigger_index || !trigger_index || *pending_->trigger_index == *trigger_index);
     if (partner) {
       Pending a = std::move(*pending_);
       pending_.reset();

@@ -43,8 +43,8 @@ DeviceUri DeviceUri::parse(std::string_view text) {
   uri.scheme_ = std::string(text.substr(0, sep));
   if (uri.scheme_.empty()) uri.fail("the scheme before :// is empty");
   for (char c : uri.scheme_) {
-    if (!std::islower(static_cast<unsigned char>(c)) && !std::isdigit(static_cast<unsigned char>(c)) &&
-        c != '-' && c != '+') {
+    if (!std::islower(static_cast<unsigned char>(c)) && !std::isdigit(static_cast<unsigned char>(c)) && c != '-' &&
+        c != '+') {
       uri.fail("scheme '" + uri.scheme_ + "' may hold only lower-case letters, digits, '-' and '+'");
     }
   }

@@ -26,9 +26,8 @@ void add_aravis(DiscoveryReport& report) {
     const char* model = arv_get_device_model(i);
     const char* protocol = arv_get_device_protocol(i);
     const char* address = arv_get_device_address(i);
-    report.devices.push_back({std::string("aravis://") + (id ? id : "?"), "camera",
-                              model ? model : "", std::string(protocol ? protocol : "") +
-                                                      (address ? std::string(" ") + address : "")});
+    report.devices.push_back({std::string("aravis://") + (id ? id : "?"), "camera", model ? model : "",
+                              std::string(protocol ? protocol : "") + (address ? std::string(" ") + address : "")});
   }
 }
 #endif
@@ -41,12 +40,13 @@ void add_gpio_chips(DiscoveryReport& report) {
     if (name.rfind("gpiochip", 0) != 0) continue;
     gpiod_chip* chip = gpiod_chip_open(entry.path().c_str());
     if (!chip) {
-      report.devices.push_back({"gpiod://" + name, "trigger", "", "present but cannot be opened "
+      report.devices.push_back({"gpiod://" + name, "trigger", "",
+                                "present but cannot be opened "
                                 "(permissions: install systemd/60-plenopiv.rules)"});
       continue;
     }
-    report.devices.push_back({"gpiod://" + name, "trigger", gpiod_chip_label(chip),
-                              std::to_string(gpiod_chip_num_lines(chip)) + " lines"});
+    report.devices.push_back(
+        {"gpiod://" + name, "trigger", gpiod_chip_label(chip), std::to_string(gpiod_chip_num_lines(chip)) + " lines"});
     gpiod_chip_close(chip);
   }
 }
@@ -66,8 +66,7 @@ void add_usb3_vision(DiscoveryReport& report) {
     for (int k = 0; k < config->bNumInterfaces && !u3v; ++k) {
       const libusb_interface& itf = config->interface[k];
       for (int a = 0; a < itf.num_altsetting; ++a) {
-        u3v = u3v || (itf.altsetting[a].bInterfaceClass == 0xEF &&
-                      itf.altsetting[a].bInterfaceSubClass == 0x05);
+        u3v = u3v || (itf.altsetting[a].bInterfaceClass == 0xEF && itf.altsetting[a].bInterfaceSubClass == 0x05);
       }
     }
     libusb_free_config_descriptor(config);
@@ -77,8 +76,8 @@ void add_usb3_vision(DiscoveryReport& report) {
     char ids[32];
     std::snprintf(ids, sizeof ids, "%04x:%04x", desc.idVendor, desc.idProduct);
     report.devices.push_back({"usb://" + std::string(ids), "usb", "USB3 Vision device",
-                              "bus " + std::to_string(libusb_get_bus_number(list[i])) +
-                                  " address " + std::to_string(libusb_get_device_address(list[i]))});
+                              "bus " + std::to_string(libusb_get_bus_number(list[i])) + " address " +
+                                  std::to_string(libusb_get_device_address(list[i]))});
   }
   if (list) libusb_free_device_list(list, 1);
   libusb_exit(ctx);

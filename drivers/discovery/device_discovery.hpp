@@ -7,8 +7,8 @@
 namespace plenopiv::drivers {
 
 struct DiscoveredDevice {
-  std::string uri;     // how a run config names it, e.g. aravis://Fake_1, gpiod://gpiochip0
-  std::string kind;    // camera, trigger, usb
+  std::string uri;   // how a run config names it, e.g. aravis://Fake_1, gpiod://gpiochip0
+  std::string kind;  // camera, trigger, usb
   std::string model;
   std::string detail;  // protocol, address, line count, or why it cannot be opened
 };

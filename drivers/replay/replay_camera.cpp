@@ -39,9 +39,9 @@ struct ReplaySettings {
 };
 
 std::uint64_t realtime_ns() {
-  return std::uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(
-                           std::chrono::system_clock::now().time_since_epoch())
-                           .count());
+  return std::uint64_t(
+      std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
+          .count());
 }
 
 bool inside(const fs::path& path, const fs::path& root) {
@@ -79,8 +79,7 @@ std::vector<PairFiles> tiff_pairs(const DeviceUri& uri, const fs::path& folder) 
   std::vector<fs::path> files;
   for (const fs::directory_entry& e : fs::directory_iterator(folder)) {
     std::string ext = e.path().extension().string();
-    std::transform(ext.begin(), ext.end(), ext.begin(),
-                   [](unsigned char c) { return char(std::tolower(c)); });
+    std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
     if (ext != ".tif" && ext != ".tiff") continue;
     // No FIFOs, devices or links out of the folder: only plain files are read.
     if (!e.is_regular_file() || e.is_symlink()) {
@@ -89,8 +88,7 @@ std::vector<PairFiles> tiff_pairs(const DeviceUri& uri, const fs::path& folder) 
     files.push_back(e.path());
   }
   std::sort(files.begin(), files.end());
-  if (files.empty())
-    uri.fail("folder '" + folder.string() + "' holds no manifest.json and no *.tif frames");
+  if (files.empty()) uri.fail("folder '" + folder.string() + "' holds no manifest.json and no *.tif frames");
   if (files.size() % 2 != 0) {
     uri.fail("folder '" + folder.string() + "' holds " + std::to_string(files.size()) +
              " TIFF files, an odd number: '" + files.back().filename().string() +
@@ -106,8 +104,7 @@ std::vector<PairFiles> run_pairs(const DeviceUri& uri, const fs::path& folder) {
   const run_folder::Reader reader(folder);
   for (const run_folder::PairEntry& p : reader.pairs()) {
     for (const fs::path& f : {p.frame_a, p.frame_b}) {
-      if (!fs::is_regular_file(fs::symlink_status(f)))
-        uri.fail("'" + f.string() + "' is not a regular file");
+      if (!fs::is_regular_file(fs::symlink_status(f))) uri.fail("'" + f.string() + "' is not a regular file");
     }
     pairs.push_back({p.frame_a, p.frame_b});
   }
@@ -115,9 +112,7 @@ std::vector<PairFiles> run_pairs(const DeviceUri& uri, const fs::path& folder) {
   return pairs;
 }
 
-DecodedPair decode(const PairFiles& files) {
-  return {io::read_tiff_u16(files.a), io::read_tiff_u16(files.b)};
-}
+DecodedPair decode(const PairFiles& files) { return {io::read_tiff_u16(files.a), io::read_tiff_u16(files.b)}; }
 
 // Plays the recording on its own thread. Triggers (edges, software triggers, or the free-running
 // clock) queue up as pending exposures; the player delivers each from decoded frames: the
@@ -129,8 +124,8 @@ class ReplayCamera : public CameraBase, public TriggerInput {
     std::uint64_t trigger = 0;
     Clock::time_point at;
   };
-  ReplayCamera(CameraInfo info, std::vector<PairFiles> files, ReplaySettings settings,
-               int bit_depth, std::uint64_t pair_bytes)
+  ReplayCamera(CameraInfo info, std::vector<PairFiles> files, ReplaySettings settings, int bit_depth,
+               std::uint64_t pair_bytes)
       : CameraBase(std::move(info)),
         files_(std::move(files)),
         settings_(settings),
@@ -266,15 +261,14 @@ class ReplayCamera : public CameraBase, public TriggerInput {
       std::lock_guard lock(mutex_);
       ended_ = true;
       if (settings_.rate_hz > 0) return;  // free-running: the acquisition just ends
-      report_failed("end of the recording: all " + std::to_string(files_.size()) +
-                    " pairs played, trigger " + std::to_string(exposure.trigger) +
-                    " has none (loop=1 plays the recording again)");
+      report_failed("end of the recording: all " + std::to_string(files_.size()) + " pairs played, trigger " +
+                    std::to_string(exposure.trigger) + " has none (loop=1 plays the recording again)");
       return;
     }
     std::optional<DecodedPair> pair = next_recorded();
     if (!pair) return;  // not decoded in time: both frames lost (a gap in the frame ids)
-    const std::uint64_t device_ns = std::uint64_t(
-        std::chrono::duration_cast<std::chrono::nanoseconds>(exposure.at - epoch_).count());
+    const std::uint64_t device_ns =
+        std::uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(exposure.at - epoch_).count());
     Frame a = frame(std::move(pair->a), 2 * exposure.trigger + 1, device_ns);
     Frame b = frame(std::move(pair->b), 2 * exposure.trigger + 2, device_ns + 1000);
     a.host_timestamp_ns = realtime_ns();
@@ -356,8 +350,7 @@ std::unique_ptr<Camera> open_replay_camera(const DeviceUri& uri, const ReplaySou
   uri.reject_unknown({"rate_hz", "loop", "buffer_mb"});
   ReplaySettings settings;
   settings.rate_hz = uri.number_or("rate_hz", 0.0);
-  if (!(settings.rate_hz >= 0) || settings.rate_hz > 1000)
-    uri.fail("rate_hz: must be in [0, 1000] Hz (0: triggered)");
+  if (!(settings.rate_hz >= 0) || settings.rate_hz > 1000) uri.fail("rate_hz: must be in [0, 1000] Hz (0: triggered)");
   const long long loop = uri.integer_or("loop", 0);
   if (loop != 0 && loop != 1) uri.fail("loop: 0 or 1");
   settings.loop = loop == 1;
@@ -381,16 +374,14 @@ std::unique_ptr<Camera> open_replay_camera(const DeviceUri& uri, const ReplaySou
     for (const fs::path& f : {p.a, p.b}) {
       const io::TiffInfo info = io::check_tiff(f);
       if (info.width != width || info.height != height) {
-        uri.fail("frame '" + f.string() + "' is " + std::to_string(info.width) + " x " +
-                 std::to_string(info.height) + " px, the camera file (" +
-                 source.camera_file.string() + ") has a " + std::to_string(width) + " x " +
+        uri.fail("frame '" + f.string() + "' is " + std::to_string(info.width) + " x " + std::to_string(info.height) +
+                 " px, the camera file (" + source.camera_file.string() + ") has a " + std::to_string(width) + " x " +
                  std::to_string(height) + " px sensor");
       }
       bits = std::max(bits, info.bits);
     }
   }
-  const std::uint64_t pair_bytes =
-      2 * std::uint64_t(width) * std::uint64_t(height) * sizeof(std::uint16_t);
+  const std::uint64_t pair_bytes = 2 * std::uint64_t(width) * std::uint64_t(height) * sizeof(std::uint16_t);
   if (settings.buffer_bytes < 2 * pair_bytes) {
     uri.fail("buffer_mb: " + std::to_string(buffer_mb) + " MB holds fewer than two pairs of " +
              std::to_string(pair_bytes >> 20) + " MB");
@@ -405,14 +396,13 @@ std::unique_ptr<Camera> open_replay_camera(const DeviceUri& uri, const ReplaySou
   info.serial = folder.filename().string();
   info.sensor_width_px = width;
   info.sensor_height_px = height;
-  info.double_exposure = "recorded frame pair per " +
-                         std::string(settings.rate_hz > 0 ? "tick of its own clock" : "trigger");
+  info.double_exposure =
+      "recorded frame pair per " + std::string(settings.rate_hz > 0 ? "tick of its own clock" : "trigger");
   return std::make_unique<ReplayCamera>(std::move(info), files, settings, bits, pair_bytes);
 }
 
 void register_replay_camera(CameraRegistry& registry, const ReplaySource& source) {
-  registry.add("replay",
-               [source](const DeviceUri& uri) { return open_replay_camera(uri, source); });
+  registry.add("replay", [source](const DeviceUri& uri) { return open_replay_camera(uri, source); });
 }
 
 }  // namespace plenopiv::drivers

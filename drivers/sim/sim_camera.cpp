@@ -41,16 +41,16 @@ struct SceneSettings {
 };
 
 std::uint64_t now_ns() {
-  return std::uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(
-                           std::chrono::system_clock::now().time_since_epoch())
-                           .count());
+  return std::uint64_t(
+      std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
+          .count());
 }
 
 std::unique_ptr<sim::Flow> flow_from_uri(const DeviceUri& uri, const optics::CameraModel& camera) {
   const std::string name = uri.string_or("flow", "uniform");
   if (name == "uniform") {
-    return std::make_unique<sim::UniformFlow>(sim::Point3{
-        uri.number_or("dx_mm", 0.25), uri.number_or("dy_mm", 0.0), uri.number_or("dz_mm", 0.0)});
+    return std::make_unique<sim::UniformFlow>(
+        sim::Point3{uri.number_or("dx_mm", 0.25), uri.number_or("dy_mm", 0.0), uri.number_or("dz_mm", 0.0)});
   }
   if (name == "ring") {
     sim::RingVortexFlow::Parameters p;
@@ -62,8 +62,7 @@ std::unique_ptr<sim::Flow> flow_from_uri(const DeviceUri& uri, const optics::Cam
     return std::make_unique<sim::SolidBodyRotation>(sim::Point3{0, 0, 0}, sim::Point3{0, 1, 0}, angle);
   }
   if (name == "shear") {
-    return std::make_unique<sim::LinearShear>(sim::Point3{uri.number_or("shear_per_mm", 0.02), 0, 0},
-                                              1, 0.0);
+    return std::make_unique<sim::LinearShear>(sim::Point3{uri.number_or("shear_per_mm", 0.02), 0, 0}, 1, 0.0);
   }
   uri.fail("flow: unknown flow '" + name + "' (uniform, ring, rotation, shear)");
 }
@@ -74,8 +73,7 @@ std::unique_ptr<sim::Flow> flow_from_uri(const DeviceUri& uri, const optics::Cam
 // by software_trigger().
 class SimCamera : public CameraBase, public TriggerInput {
  public:
-  SimCamera(const DeviceUri& uri, optics::CameraModel camera, SceneSettings scene,
-            std::unique_ptr<sim::Flow> flow)
+  SimCamera(const DeviceUri& uri, optics::CameraModel camera, SceneSettings scene, std::unique_ptr<sim::Flow> flow)
       : CameraBase(make_info(uri, camera)),
         camera_(std::move(camera)),
         array_(true_array(camera_, scene.array_rotation_rad)),
@@ -130,8 +128,7 @@ class SimCamera : public CameraBase, public TriggerInput {
 
   void do_configure(const CameraSettings& settings) override {
     const Roi& roi = settings.roi;
-    if (roi.x != 0 || roi.y != 0 ||
-        (roi.width != 0 && roi.width != camera_.sensor().width_px) ||
+    if (roi.x != 0 || roi.y != 0 || (roi.width != 0 && roi.width != camera_.sensor().width_px) ||
         (roi.height != 0 && roi.height != camera_.sensor().height_px)) {
       throw InputError(info().uri + ": roi: the simulated camera renders the full sensor only");
     }
@@ -287,13 +284,13 @@ class SimCamera : public CameraBase, public TriggerInput {
 
 std::unique_ptr<Camera> open_sim_camera(const DeviceUri& uri, const std::filesystem::path& camera_file) {
   if (uri.has("camera")) {
-    uri.fail("camera: a URI cannot name a file; the simulated camera renders the daemon's camera_file "
-             "(plenopivd.yaml or --camera-file)");
+    uri.fail(
+        "camera: a URI cannot name a file; the simulated camera renders the daemon's camera_file "
+        "(plenopivd.yaml or --camera-file)");
   }
-  uri.reject_unknown({"seed", "ppm", "depth_mm", "flow", "dx_mm", "dy_mm", "dz_mm",
-                      "voxel_mm", "angle_deg", "shear_per_mm", "rays", "noise", "drop_every",
-                      "incomplete_every", "disconnect_after", "fail_after", "readout_ms", "flow_dt_us",
-                      "array_rotation_rad"});
+  uri.reject_unknown({"seed", "ppm", "depth_mm", "flow", "dx_mm", "dy_mm", "dz_mm", "voxel_mm", "angle_deg",
+                      "shear_per_mm", "rays", "noise", "drop_every", "incomplete_every", "disconnect_after",
+                      "fail_after", "readout_ms", "flow_dt_us", "array_rotation_rad"});
   if (!uri.target().empty()) uri.fail("the simulated camera takes no device name, only ?parameters");
   if (camera_file.empty()) {
     uri.fail("the simulated camera needs a camera file: plenopivd.yaml camera_file or --camera-file");

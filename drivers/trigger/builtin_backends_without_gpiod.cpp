@@ -4,8 +4,9 @@
 namespace plenopiv::drivers {
 
 void register_builtin_trigger_backends(TriggerRegistry& registry) {
-  registry.add_unavailable("gpiod", "this build has no GPIO backend (configure with "
-                                    "-DPLENOPIV_WITH_GPIOD=ON and install libgpiod-dev)");
+  registry.add_unavailable("gpiod",
+                           "this build has no GPIO backend (configure with "
+                           "-DPLENOPIV_WITH_GPIOD=ON and install libgpiod-dev)");
 }
 
 }  // namespace plenopiv::drivers

@@ -16,11 +16,10 @@ CameraWiring wire_camera(Trigger& trigger, Camera& camera) {
                                          "synchronised with the laser"};
   }
   if (t.simulated) {
-    return {TriggerSource::Software, "software: the simulated lines of " + t.uri + " cannot reach the camera " +
-                                         c.uri + "; pairs are not synchronised with the laser"};
+    return {TriggerSource::Software, "software: the simulated lines of " + t.uri + " cannot reach the camera " + c.uri +
+                                         "; pairs are not synchronised with the laser"};
   }
-  return {TriggerSource::External,
-          "external: camera line of " + t.uri + " -> trigger input of " + c.uri + " (cable)"};
+  return {TriggerSource::External, "external: camera line of " + t.uri + " -> trigger input of " + c.uri + " (cable)"};
 }
 
 }  // namespace plenopiv::drivers

@@ -44,16 +44,14 @@ void ScheduledTrigger::load(const Schedule& schedule) {
   check_schedule(schedule);
   for (const Edge& e : schedule.edges) {
     if (std::find(info_.outputs.begin(), info_.outputs.end(), e.line) == info_.outputs.end()) {
-      throw InputError("trigger " + info_.uri + ": the schedule drives line '" +
-                       to_string(e.line) + "' but it is not wired (add " + to_string(e.line) +
-                       "=<line> to the URI)");
+      throw InputError("trigger " + info_.uri + ": the schedule drives line '" + to_string(e.line) +
+                       "' but it is not wired (add " + to_string(e.line) + "=<line> to the URI)");
     }
   }
   if (info_.timing_uncertainty_s > 0 && schedule.smallest_margin_s < info_.timing_uncertainty_s) {
     throw InputError("trigger " + info_.uri + ": " + info_.backend + " places edges to within +-" +
                      std::to_string(info_.timing_uncertainty_s * 1e6) +
-                     " us, more than the schedule's smallest margin (" +
-                     schedule.smallest_margin_what + ": " +
+                     " us, more than the schedule's smallest margin (" + schedule.smallest_margin_what + ": " +
                      std::to_string(schedule.smallest_margin_s * 1e6) +
                      " us). Use hardware-timed mode (make_gate_schedule): an external delay "
                      "generator makes the pulses, plenopiv only arms it and gates the shot train");
@@ -113,16 +111,13 @@ class LaserHistory {
 };
 
 std::int64_t steady_ns() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(
-             std::chrono::steady_clock::now().time_since_epoch())
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
       .count();
 }
 
 }  // namespace
 
-std::string ScheduledTrigger::line_identity(TriggerLine line) const {
-  return info_.uri + "#" + to_string(line);
-}
+std::string ScheduledTrigger::line_identity(TriggerLine line) const { return info_.uri + "#" + to_string(line); }
 
 void ScheduledTrigger::play(Schedule schedule, std::uint64_t shots) {
   using clock = std::chrono::steady_clock;

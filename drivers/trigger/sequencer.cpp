@@ -24,9 +24,7 @@ std::string hz_text(double f) {
   return buf;
 }
 
-[[noreturn]] void refuse(const std::string& message) {
-  throw InputError("trigger schedule refused: " + message);
-}
+[[noreturn]] void refuse(const std::string& message) { throw InputError("trigger schedule refused: " + message); }
 
 void require_positive(double v, const char* name) {
   if (!(v > 0) || !std::isfinite(v)) refuse(std::string(name) + " must be > 0, got " + us(v));
@@ -45,10 +43,10 @@ void require_rate(double hz, const char* name) {
 void check_limits(const TimingLimits& l) {
   require_rate(l.laser_max_rate_hz, "laser_max_rate_hz");
   require_rate(l.camera_max_pair_rate_hz, "camera_max_pair_rate_hz");
-  for (const auto& [v, name] : {std::pair{l.min_flashlamp_to_qswitch_s, "min_flashlamp_to_qswitch_s"},
-                                std::pair{l.max_flashlamp_to_qswitch_s, "max_flashlamp_to_qswitch_s"},
-                                std::pair{l.interline_transfer_s, "interline_transfer_s"},
-                                std::pair{l.frame_b_s, "frame_b_s"}}) {
+  for (const auto& [v, name] :
+       {std::pair{l.min_flashlamp_to_qswitch_s, "min_flashlamp_to_qswitch_s"},
+        std::pair{l.max_flashlamp_to_qswitch_s, "max_flashlamp_to_qswitch_s"},
+        std::pair{l.interline_transfer_s, "interline_transfer_s"}, std::pair{l.frame_b_s, "frame_b_s"}}) {
     if (!(v >= 0) || !std::isfinite(v)) refuse(std::string(name) + " must be >= 0, got " + us(v));
   }
 }
@@ -57,9 +55,7 @@ void check_limits(const TimingLimits& l) {
 std::int64_t to_ns(double s) { return std::llround(s * 1e9); }
 
 // The laser's minimum time between two rising edges of one laser line, rounded up to whole ns.
-std::int64_t min_interval_ns(double max_rate_hz) {
-  return std::int64_t(std::ceil(1e9 / max_rate_hz - 1e-6));
-}
+std::int64_t min_interval_ns(double max_rate_hz) { return std::int64_t(std::ceil(1e9 / max_rate_hz - 1e-6)); }
 
 std::string ns_text(std::int64_t ns) {
   char buf[64];
@@ -76,8 +72,7 @@ void set_integer_times(Schedule& s, double rate_hz, const TimingLimits& limits) 
     e.time_ns = to_ns(e.time_s);
     e.time_s = double(e.time_ns) * 1e-9;
   }
-  std::stable_sort(s.edges.begin(), s.edges.end(),
-                   [](const Edge& a, const Edge& b) { return a.time_ns < b.time_ns; });
+  std::stable_sort(s.edges.begin(), s.edges.end(), [](const Edge& a, const Edge& b) { return a.time_ns < b.time_ns; });
   check_schedule(s);
 }
 
@@ -128,18 +123,24 @@ void check_schedule(const Schedule& s) {
 
 const char* to_string(TriggerLine line) {
   switch (line) {
-    case TriggerLine::Flashlamp1: return "flashlamp1";
-    case TriggerLine::QSwitch1: return "qswitch1";
-    case TriggerLine::Flashlamp2: return "flashlamp2";
-    case TriggerLine::QSwitch2: return "qswitch2";
-    case TriggerLine::Camera: return "camera";
-    case TriggerLine::Gate: return "gate";
+    case TriggerLine::Flashlamp1:
+      return "flashlamp1";
+    case TriggerLine::QSwitch1:
+      return "qswitch1";
+    case TriggerLine::Flashlamp2:
+      return "flashlamp2";
+    case TriggerLine::QSwitch2:
+      return "qswitch2";
+    case TriggerLine::Camera:
+      return "camera";
+    case TriggerLine::Gate:
+      return "gate";
   }
   return "?";
 }
 
-Schedule make_schedule(const TimingRequest& r, const TimingLimits& limits,
-                       double timing_uncertainty_s, const std::string& backend) {
+Schedule make_schedule(const TimingRequest& r, const TimingLimits& limits, double timing_uncertainty_s,
+                       const std::string& backend) {
   check_limits(limits);
   require_rate(r.repetition_rate_hz, "repetition_rate_hz");
   require_positive(r.pulse_separation_s, "pulse_separation_s (dt)");
@@ -148,7 +149,8 @@ Schedule make_schedule(const TimingRequest& r, const TimingLimits& limits,
   require_positive(r.flashlamp_pulse_width_s, "flashlamp_pulse_width_s");
   require_positive(r.qswitch_pulse_width_s, "qswitch_pulse_width_s");
   require_positive(r.camera_pulse_width_s, "camera_pulse_width_s");
-  if (!(r.camera_pretrigger_s >= 0) || !std::isfinite(r.camera_pretrigger_s)) refuse("camera_pretrigger_s must be >= 0, got " + us(r.camera_pretrigger_s));
+  if (!(r.camera_pretrigger_s >= 0) || !std::isfinite(r.camera_pretrigger_s))
+    refuse("camera_pretrigger_s must be >= 0, got " + us(r.camera_pretrigger_s));
 
   // Rates: each cavity fires once per period.
   if (r.repetition_rate_hz > limits.laser_max_rate_hz) {
@@ -161,15 +163,15 @@ Schedule make_schedule(const TimingRequest& r, const TimingLimits& limits,
   }
   if (r.flashlamp_to_qswitch_s < limits.min_flashlamp_to_qswitch_s ||
       r.flashlamp_to_qswitch_s > limits.max_flashlamp_to_qswitch_s) {
-    refuse("flashlamp-to-Q-switch delay " + us(r.flashlamp_to_qswitch_s) +
-           " is outside the laser's window " + us(limits.min_flashlamp_to_qswitch_s) + " .. " +
-           us(limits.max_flashlamp_to_qswitch_s) + " (typically 150-200 us)");
+    refuse("flashlamp-to-Q-switch delay " + us(r.flashlamp_to_qswitch_s) + " is outside the laser's window " +
+           us(limits.min_flashlamp_to_qswitch_s) + " .. " + us(limits.max_flashlamp_to_qswitch_s) +
+           " (typically 150-200 us)");
   }
   // The camera: frame A from its trigger for exposure_a, then the interline transfer, then frame B.
   if (r.pulse_separation_s < limits.interline_transfer_s) {
     refuse("pulse separation dt = " + us(r.pulse_separation_s) +
-           " is shorter than the camera's interline transfer time " +
-           us(limits.interline_transfer_s) + ": pulse 2 would come before frame B starts");
+           " is shorter than the camera's interline transfer time " + us(limits.interline_transfer_s) +
+           ": pulse 2 would come before frame B starts");
   }
 
   // Time axis with pulse 1 at 0 first; shifted so that the earliest edge is at 0 afterwards.
@@ -194,14 +196,13 @@ Schedule make_schedule(const TimingRequest& r, const TimingLimits& limits,
        "flashlamp-to-Q-switch delay below the laser's maximum"},
   };
   if (a_end - p1 < 0) {
-    refuse("pulse 1 falls after frame A ends (" + us(p1 - a_end) +
-           " late): raise exposure_a_s or camera_pretrigger_s");
+    refuse("pulse 1 falls after frame A ends (" + us(p1 - a_end) + " late): raise exposure_a_s or camera_pretrigger_s");
   }
   if (cam > p1) refuse("the camera trigger comes after pulse 1");
   if (p2 < b_start) {
-    refuse("pulse 2 falls before frame B starts (" + us(b_start - p2) +
-           " early): frame A ends " + us(a_end - p1) + " after pulse 1 and the transfer takes " +
-           us(limits.interline_transfer_s) + "; raise dt or shorten exposure_a_s / the pretrigger");
+    refuse("pulse 2 falls before frame B starts (" + us(b_start - p2) + " early): frame A ends " + us(a_end - p1) +
+           " after pulse 1 and the transfer takes " + us(limits.interline_transfer_s) +
+           "; raise dt or shorten exposure_a_s / the pretrigger");
   }
   if (p2 > b_end) {
     refuse("pulse 2 falls after frame B ends (" + us(p2 - b_end) + " late): shorten dt");
@@ -224,17 +225,16 @@ Schedule make_schedule(const TimingRequest& r, const TimingLimits& limits,
     refuse("flashlamp_pulse_width_s " + us(r.flashlamp_pulse_width_s) +
            " must be shorter than the flashlamp-to-Q-switch delay " + us(r.flashlamp_to_qswitch_s));
   }
-  const auto [lo, hi] = std::minmax_element(edges.begin(), edges.end(), [](const Edge& a, const Edge& b) {
-    return a.time_s < b.time_s;
-  });
+  const auto [lo, hi] =
+      std::minmax_element(edges.begin(), edges.end(), [](const Edge& a, const Edge& b) { return a.time_s < b.time_s; });
   const double t0 = lo->time_s;
   const double span = hi->time_s - t0;
   const double period = 1.0 / r.repetition_rate_hz;
   const double busy = std::max(span, b_end - t0);  // edges, and frame B still collecting light
   margins.push_back({period - busy, "one period holds the whole sequence and frame B"});
   if (margins.back().slack < 0) {
-    refuse("the sequence (edges and frame B: " + us(busy) + ") does not fit one period of " +
-           us(period) + ": lower the repetition rate");
+    refuse("the sequence (edges and frame B: " + us(busy) + ") does not fit one period of " + us(period) +
+           ": lower the repetition rate");
   }
   for (Edge& e : edges) e.time_s -= t0;
   s.edges = std::move(edges);
@@ -251,8 +251,8 @@ Schedule make_schedule(const TimingRequest& r, const TimingLimits& limits,
   s.smallest_margin_what = tight->what;
   if (timing_uncertainty_s > 0 && s.smallest_margin_s < timing_uncertainty_s) {
     refuse(backend + " places edges to within +-" + us(timing_uncertainty_s) +
-           ", more than this schedule's smallest margin (" + s.smallest_margin_what + ": " +
-           us(s.smallest_margin_s) + "). Use hardware-timed mode: an external delay generator "
+           ", more than this schedule's smallest margin (" + s.smallest_margin_what + ": " + us(s.smallest_margin_s) +
+           "). Use hardware-timed mode: an external delay generator "
            "makes the laser and camera pulses, and plenopiv only arms it and gates the shot train");
   }
   return s;

@@ -14,17 +14,17 @@ namespace plenopiv::drivers {
 enum class TriggerLine { Flashlamp1, QSwitch1, Flashlamp2, QSwitch2, Camera, Gate };
 constexpr std::array<TriggerLine, 6> kTriggerLines{TriggerLine::Flashlamp1, TriggerLine::QSwitch1,
                                                    TriggerLine::Flashlamp2, TriggerLine::QSwitch2,
-                                                   TriggerLine::Camera, TriggerLine::Gate};
+                                                   TriggerLine::Camera,     TriggerLine::Gate};
 // "flashlamp1", "qswitch1", "flashlamp2", "qswitch2", "camera", "gate" (the gpiod URI keys).
 const char* to_string(TriggerLine line);
 
 // What the experiment asks for. Seconds throughout.
 struct TimingRequest {
-  double repetition_rate_hz = 10.0;         // double pulses (= frame pairs) per second
-  double pulse_separation_s = 100e-6;       // dt: laser pulse 1 to laser pulse 2
-  double flashlamp_to_qswitch_s = 180e-6;   // the laser's optimum delay, about 150-200 us
-  double camera_pretrigger_s = 10e-6;       // camera trigger edge this long before pulse 1
-  double exposure_a_s = 20e-6;              // frame A: from the camera trigger to the transfer
+  double repetition_rate_hz = 10.0;        // double pulses (= frame pairs) per second
+  double pulse_separation_s = 100e-6;      // dt: laser pulse 1 to laser pulse 2
+  double flashlamp_to_qswitch_s = 180e-6;  // the laser's optimum delay, about 150-200 us
+  double camera_pretrigger_s = 10e-6;      // camera trigger edge this long before pulse 1
+  double exposure_a_s = 20e-6;             // frame A: from the camera trigger to the transfer
   double flashlamp_pulse_width_s = 10e-6;
   double qswitch_pulse_width_s = 10e-6;
   double camera_pulse_width_s = 10e-6;
@@ -32,11 +32,11 @@ struct TimingRequest {
 
 // What the devices allow.
 struct TimingLimits {
-  double laser_max_rate_hz = 15.0;              // per cavity
-  double min_flashlamp_to_qswitch_s = 100e-6;   // the laser's usable Q-switch delay window
+  double laser_max_rate_hz = 15.0;             // per cavity
+  double min_flashlamp_to_qswitch_s = 100e-6;  // the laser's usable Q-switch delay window
   double max_flashlamp_to_qswitch_s = 250e-6;
-  double interline_transfer_s = 5e-6;           // camera: end of frame A to start of frame B
-  double frame_b_s = 0.05;                      // camera: how long frame B collects light
+  double interline_transfer_s = 5e-6;  // camera: end of frame A to start of frame B
+  double frame_b_s = 0.05;             // camera: how long frame B collects light
   double camera_max_pair_rate_hz = 15.0;
 };
 
@@ -72,8 +72,8 @@ struct Schedule {
   double frame_a_end_s = 0;    // the interline transfer starts
   double frame_b_start_s = 0;  // the transfer is done
   double frame_b_end_s = 0;
-  double smallest_margin_s = 0;     // the tightest constraint's slack...
-  std::string smallest_margin_what; // ...and which one it is
+  double smallest_margin_s = 0;      // the tightest constraint's slack...
+  std::string smallest_margin_what;  // ...and which one it is
   double dt_s() const { return pulse2_s - pulse1_s; }
 };
 
@@ -82,8 +82,8 @@ struct Schedule {
 // rate above the laser's or the camera's, a Q-switch delay outside the laser's window, edges that
 // overlap. `timing_uncertainty_s` is the trigger backend's jitter: a schedule whose smallest
 // margin is below it is refused, pointing to hardware-timed mode.
-Schedule make_schedule(const TimingRequest& request, const TimingLimits& limits,
-                       double timing_uncertainty_s, const std::string& backend = "this trigger");
+Schedule make_schedule(const TimingRequest& request, const TimingLimits& limits, double timing_uncertainty_s,
+                       const std::string& backend = "this trigger");
 
 // Checks a schedule as a trigger will play it, in integer nanoseconds: a period within
 // (0, kMaxPeriodNs] and not shorter than min_laser_interval_ns (> 0), edges sorted inside one

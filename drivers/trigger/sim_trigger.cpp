@@ -8,8 +8,8 @@
 namespace plenopiv::drivers {
 
 SimTrigger::SimTrigger(const std::string& uri, bool virtual_clock, double uncertainty_s)
-    : ScheduledTrigger(TriggerInfo{uri, "sim", uncertainty_s,
-                                   {kTriggerLines.begin(), kTriggerLines.end()}, true, true}),
+    : ScheduledTrigger(
+          TriggerInfo{uri, "sim", uncertainty_s, {kTriggerLines.begin(), kTriggerLines.end()}, true, true}),
       virtual_clock_(virtual_clock) {}
 
 SimTrigger::~SimTrigger() { stop_playback(); }
@@ -35,8 +35,7 @@ void SimTrigger::all_low() noexcept {
   for (bool& l : levels_) l = false;
 }
 
-void SimTrigger::on_edge_written(const Edge& edge, std::uint64_t shot, double planned_s,
-                                 double lateness_s) {
+void SimTrigger::on_edge_written(const Edge& edge, std::uint64_t shot, double planned_s, double lateness_s) {
   RecordedEdge r{edge.line, edge.rising, shot, planned_s, planned_s + lateness_s};
   EdgeListener listener;
   TriggerInput* camera_input = nullptr;

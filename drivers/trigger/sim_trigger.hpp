@@ -46,8 +46,7 @@ class SimTrigger final : public ScheduledTrigger {
   void write_line(TriggerLine line, bool level) override;
   void all_low() noexcept override;
   bool virtual_time() const override { return virtual_clock_; }
-  void on_edge_written(const Edge& edge, std::uint64_t shot, double planned_s,
-                       double lateness_s) override;
+  void on_edge_written(const Edge& edge, std::uint64_t shot, double planned_s, double lateness_s) override;
   std::int64_t virtual_delay_ns(std::uint64_t shot, std::size_t edge) const override;
 
  private:

@@ -14,11 +14,11 @@ namespace plenopiv::drivers {
 
 struct TriggerInfo {
   std::string uri;
-  std::string backend;                 // "sim", "gpiod"
-  double timing_uncertainty_s = 0;     // how precisely it places an edge (jitter)
-  std::vector<TriggerLine> outputs;    // lines wired
-  bool measures_qswitch = false;       // an input line on the laser's Q-switch sync
-  bool simulated = false;              // no hardware: its lines reach only simulated devices
+  std::string backend;               // "sim", "gpiod"
+  double timing_uncertainty_s = 0;   // how precisely it places an edge (jitter)
+  std::vector<TriggerLine> outputs;  // lines wired
+  bool measures_qswitch = false;     // an input line on the laser's Q-switch sync
+  bool simulated = false;            // no hardware: its lines reach only simulated devices
 };
 
 // The laser pulses of one shot as measured on the Q-switch sync input (kernel timestamps,
@@ -31,7 +31,7 @@ struct MeasuredShot {
 };
 
 struct TriggerCounters {
-  std::uint64_t shots_fired = 0;         // shots whose every edge was written
+  std::uint64_t shots_fired = 0;  // shots whose every edge was written
   // Shots played later than planned because the playback had written the previous one late and a
   // laser line would otherwise have risen sooner after its previous rising edge than the laser
   // allows. They still fire, whole, with their own timing.
@@ -40,10 +40,10 @@ struct TriggerCounters {
   // already high went low at once).
   std::uint64_t shots_abandoned = 0;
   std::uint64_t edges_written = 0;
-  std::uint64_t edges_late = 0;           // written later than the backend's uncertainty
+  std::uint64_t edges_late = 0;  // written later than the backend's uncertainty
   double worst_lateness_s = 0;
-  std::uint64_t sync_edges = 0;           // Q-switch sync edges measured
-  std::uint64_t sync_unpaired = 0;        // sync edges that did not make a (pulse 1, pulse 2) shot
+  std::uint64_t sync_edges = 0;     // Q-switch sync edges measured
+  std::uint64_t sync_unpaired = 0;  // sync edges that did not make a (pulse 1, pulse 2) shot
 };
 
 // Thread safety: load/start/stop from one controlling thread; next_shot, counters and running

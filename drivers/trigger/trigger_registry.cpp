@@ -50,16 +50,13 @@ std::unique_ptr<Trigger> TriggerRegistry::open(std::string_view text) const {
       uri.fail("unknown trigger scheme '" + uri.scheme() + "' (known: " + known + ")");
     }
     if (!it->second.factory) {
-      uri.fail("trigger backend '" + uri.scheme() + "' is not available: " +
-               it->second.why_unavailable);
+      uri.fail("trigger backend '" + uri.scheme() + "' is not available: " + it->second.why_unavailable);
     }
     factory = it->second.factory;
   }
   return factory(uri);
 }
 
-std::unique_ptr<Trigger> open_trigger(std::string_view uri) {
-  return TriggerRegistry::instance().open(uri);
-}
+std::unique_ptr<Trigger> open_trigger(std::string_view uri) { return TriggerRegistry::instance().open(uri); }
 
 }  // namespace plenopiv::drivers

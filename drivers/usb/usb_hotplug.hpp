@@ -20,8 +20,7 @@ struct UsbDeviceEvent {
 // USB3 Vision devices carry an interface of class 0xEF (miscellaneous), subclass 0x05.
 bool is_usb3_vision_interface(std::uint8_t interface_class, std::uint8_t interface_subclass);
 // The message for a USB3 Vision device the user may not open: names it and the udev rule.
-std::string usb_permission_hint(std::uint16_t vendor_id, std::uint16_t product_id, int bus,
-                                int address);
+std::string usb_permission_hint(std::uint16_t vendor_id, std::uint16_t product_id, int bus, int address);
 // Throws DeviceError with a clear message when hotplug is not available (libusb without hotplug
 // support, no /dev/bus/usb in a container): rediscovery then has to be asked for by hand.
 void require_usb_hotplug(bool supported, const std::string& why);

@@ -20,8 +20,8 @@ bool usb3_vision(libusb_device* device) {
   for (int k = 0; k < config->bNumInterfaces && !found; ++k) {
     const libusb_interface& itf = config->interface[k];
     for (int a = 0; a < itf.num_altsetting; ++a) {
-      found = found || is_usb3_vision_interface(itf.altsetting[a].bInterfaceClass,
-                                                itf.altsetting[a].bInterfaceSubClass);
+      found =
+          found || is_usb3_vision_interface(itf.altsetting[a].bInterfaceClass, itf.altsetting[a].bInterfaceSubClass);
     }
   }
   libusb_free_config_descriptor(config);
@@ -99,15 +99,13 @@ UsbHotplugWatcher::UsbHotplugWatcher(Callback on_change) : impl_(std::make_uniqu
   }
   const int r = libusb_hotplug_register_callback(
       impl_->context,
-      static_cast<libusb_hotplug_event>(LIBUSB_HOTPLUG_EVENT_DEVICE_ARRIVED |
-                                        LIBUSB_HOTPLUG_EVENT_DEVICE_LEFT),
-      LIBUSB_HOTPLUG_ENUMERATE, LIBUSB_HOTPLUG_MATCH_ANY, LIBUSB_HOTPLUG_MATCH_ANY,
-      LIBUSB_HOTPLUG_MATCH_ANY, &Impl::on_event, impl_.get(), &impl_->handle);
+      static_cast<libusb_hotplug_event>(LIBUSB_HOTPLUG_EVENT_DEVICE_ARRIVED | LIBUSB_HOTPLUG_EVENT_DEVICE_LEFT),
+      LIBUSB_HOTPLUG_ENUMERATE, LIBUSB_HOTPLUG_MATCH_ANY, LIBUSB_HOTPLUG_MATCH_ANY, LIBUSB_HOTPLUG_MATCH_ANY,
+      &Impl::on_event, impl_.get(), &impl_->handle);
   if (r != LIBUSB_SUCCESS) {
     libusb_exit(impl_->context);
     impl_->context = nullptr;
-    require_usb_hotplug(false, std::string("cannot register a hotplug callback: ") +
-                                   libusb_strerror(r));
+    require_usb_hotplug(false, std::string("cannot register a hotplug callback: ") + libusb_strerror(r));
   }
   impl_->registered = true;
   impl_->thread = std::thread([impl = impl_.get()] {

@@ -8,8 +8,8 @@
 
 #include "core/calib/calibration.hpp"
 #include "core/optics/camera_file.hpp"
-#include "tests/support/cameras.hpp"
 #include "core/sim/render.hpp"
+#include "tests/support/cameras.hpp"
 
 namespace plenopiv::calib {
 namespace {
@@ -55,8 +55,10 @@ TEST_P(SimCalibration, CentreErrorAgainstTheSimulatorsTrueCentres) {
   int n = 0;
   for (std::size_t k = 0; k < array.centres_mm.size(); ++k) {
     if (cal.status[k] != LensStatus::measured) continue;
-    const double col = optics::sensor_mm_to_column(cam.sensor(), optics::lens_centre_to_spot_mm(array.centres_mm[k][0], s_i, f_l));
-    const double row = optics::sensor_mm_to_row(cam.sensor(), optics::lens_centre_to_spot_mm(array.centres_mm[k][1], s_i, f_l));
+    const double col =
+        optics::sensor_mm_to_column(cam.sensor(), optics::lens_centre_to_spot_mm(array.centres_mm[k][0], s_i, f_l));
+    const double row =
+        optics::sensor_mm_to_row(cam.sensor(), optics::lens_centre_to_spot_mm(array.centres_mm[k][1], s_i, f_l));
     const double d = std::hypot(cal.spots_px[k][0] - col, cal.spots_px[k][1] - row);
     sum += d * d;
     worst = std::max(worst, d);
@@ -74,8 +76,9 @@ TEST_P(SimCalibration, CentreErrorAgainstTheSimulatorsTrueCentres) {
   double lens_sum = 0;
   for (std::size_t k = 0; k < array.centres_mm.size(); ++k) {
     if (cal.status[k] != LensStatus::measured) continue;
-    lens_sum += std::pow(std::hypot(lenses.centres_mm[k][0] - array.centres_mm[k][0],
-                                    lenses.centres_mm[k][1] - array.centres_mm[k][1]), 2);
+    lens_sum += std::pow(
+        std::hypot(lenses.centres_mm[k][0] - array.centres_mm[k][0], lenses.centres_mm[k][1] - array.centres_mm[k][1]),
+        2);
   }
   EXPECT_LT(std::sqrt(lens_sum / n), 0.02 * cam.sensor().pixel_pitch_mm);
 }
@@ -93,8 +96,8 @@ TEST(SimWhiteCorrection, OneAtTheLensImageCentresZeroBetweenThem) {
   sim::TargetOptions white = sim::white_target();
   white.rays_per_lens = 5000;
   white.sensor = noisy_sensor();
-  const ImageF corr = make_white_correction(cal, to_float(sim::render_target(cam, array, white, 12).image),
-                                            cal.image_stats.background);
+  const ImageF corr =
+      make_white_correction(cal, to_float(sim::render_target(cam, array, white, 12).image), cal.image_stats.background);
   double centre_sum = 0;
   int n = 0;
   for (std::size_t k = 0; k < cal.spots_px.size(); ++k) {

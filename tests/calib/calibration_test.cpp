@@ -15,8 +15,8 @@
 #include "core/calib/calibration.hpp"
 #include "core/calib/calibration_file.hpp"
 #include "core/optics/camera_file.hpp"
-#include "tests/support/cameras.hpp"
 #include "tests/calib/spot_render.hpp"
+#include "tests/support/cameras.hpp"
 #include "tests/support/temp_dir.hpp"
 
 namespace plenopiv::calib {
@@ -52,8 +52,8 @@ CentreError centre_error(const Calibration& cal, const RenderedSpots& truth) {
   double sum = 0;
   for (std::size_t k = 0; k < cal.spots_px.size(); ++k) {
     if (cal.status[k] != LensStatus::measured) continue;
-    const double d = std::hypot(cal.spots_px[k][0] - truth.true_spots_px[k][0],
-                                cal.spots_px[k][1] - truth.true_spots_px[k][1]);
+    const double d =
+        std::hypot(cal.spots_px[k][0] - truth.true_spots_px[k][0], cal.spots_px[k][1] - truth.true_spots_px[k][1]);
     sum += d * d;
     e.max = std::max(e.max, d);
     ++e.measured;
@@ -76,8 +76,8 @@ TEST(Calibrate, RectFigureSceneCentresWithinBound) {
   const RenderedSpots truth = render_calibration(cam, figure_scene());
   const Calibration cal = calibrate(cam, truth.image);
   const CentreError e = centre_error(cal, truth);
-  std::cout << "rect centre error rms " << e.rms << " px max " << e.max << " px, residual rms "
-            << cal.rms_residual_px << " px\n";
+  std::cout << "rect centre error rms " << e.rms << " px max " << e.max << " px, residual rms " << cal.rms_residual_px
+            << " px\n";
   // Measured 0.0130 px RMS (max 0.037) at noise 8 on peak 2000 with 30 % vignetting.
   EXPECT_LT(e.rms, 0.02);
   EXPECT_EQ(e.measured, 2500);
@@ -114,8 +114,10 @@ TEST(Calibrate, LensCentresAreSpotsScaledBackToTheMicrolensPlane) {
   const auto& sensor = cam.sensor();
   double worst = 0;
   for (std::size_t k = 0; k < lenses.centres_mm.size(); ++k) {
-    const double tx = optics::spot_to_lens_centre_mm(optics::column_to_sensor_mm(sensor, truth.true_spots_px[k][0]), s_i, f_l);
-    const double ty = optics::spot_to_lens_centre_mm(optics::row_to_sensor_mm(sensor, truth.true_spots_px[k][1]), s_i, f_l);
+    const double tx =
+        optics::spot_to_lens_centre_mm(optics::column_to_sensor_mm(sensor, truth.true_spots_px[k][0]), s_i, f_l);
+    const double ty =
+        optics::spot_to_lens_centre_mm(optics::row_to_sensor_mm(sensor, truth.true_spots_px[k][1]), s_i, f_l);
     worst = std::max(worst, std::hypot(lenses.centres_mm[k][0] - tx, lenses.centres_mm[k][1] - ty));
   }
   EXPECT_LT(worst, 0.03 * sensor.pixel_pitch_mm);
@@ -151,16 +153,16 @@ TEST_P(CalibrateRobust, RecoversLatticeAndCentres) {
   // Every lens is where the truth has it: measured lenses at their spot, the rest on the lattice.
   double worst_all = 0;
   for (std::size_t k = 0; k < cal.spots_px.size(); ++k) {
-    const double d = std::hypot(cal.spots_px[k][0] - truth.true_spots_px[k][0],
-                                cal.spots_px[k][1] - truth.true_spots_px[k][1]);
+    const double d =
+        std::hypot(cal.spots_px[k][0] - truth.true_spots_px[k][0], cal.spots_px[k][1] - truth.true_spots_px[k][1]);
     EXPECT_LT(d, 0.5) << "lens " << k << " status " << int(cal.status[k]);
     worst_all = std::max(worst_all, d);
   }
   const CentreError e = centre_error(cal, truth);
-  std::cout << r.layout << " rot " << r.rotation_deg << " pitch " << r.pitch_scale << ": centre error rms "
-            << e.rms << " px, worst lens (any status) " << worst_all << " px, measured " << e.measured << "\n";
+  std::cout << r.layout << " rot " << r.rotation_deg << " pitch " << r.pitch_scale << ": centre error rms " << e.rms
+            << " px, worst lens (any status) " << worst_all << " px, measured " << e.measured << "\n";
   EXPECT_LT(e.rms, 0.02);  // measured 0.011-0.013 px
-  int lit = 0;  // spots wholly on the sensor
+  int lit = 0;             // spots wholly on the sensor
   for (std::size_t k = 0; k < truth.lit.size(); ++k) {
     const auto& q = truth.true_spots_px[k];
     lit += truth.lit[k] && q[0] > 4 && q[1] > 4 && q[0] < 845 && q[1] < 845;
@@ -315,7 +317,9 @@ TEST(CalibrationFile, RoundTripH5pyAndLoader) {
   // Python reads the layout the docs give.
   const auto script = dir / "read.py";
   std::ofstream(script) << "import h5py, numpy as np\n"
-                           "f = h5py.File('" << file.string() << "', 'r')\n"
+                           "f = h5py.File('"
+                        << file.string()
+                        << "', 'r')\n"
                            "assert f['spots_px'].shape == (50, 49, 2)\n"
                            "assert f['lens_centres_mm'].shape == (50, 49, 2)\n"
                            "assert f['white_correction'].shape == (850, 850)\n"

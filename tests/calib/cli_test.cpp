@@ -9,13 +9,13 @@
 #include <filesystem>
 #include <fstream>
 
-#include <opencv2/imgcodecs.hpp>
 #include <numbers>
+#include <opencv2/imgcodecs.hpp>
 
 #include "core/calib/calibration_file.hpp"
-#include "core/sim/render.hpp"
 #include "core/io/tiff.hpp"
 #include "core/optics/camera_file.hpp"
+#include "core/sim/render.hpp"
 #include "tests/calib/spot_render.hpp"
 #include "tests/lightfield/particle_render.hpp"
 #include "tests/support/child_process.hpp"
@@ -29,7 +29,8 @@ using testing_support::run_command;
 
 ImageU16 to_u16(const ImageF& in) {
   ImageU16 out(in.width, in.height);
-  for (std::size_t k = 0; k < in.size(); ++k) out.pixels[k] = std::uint16_t(std::clamp(in.pixels[k] + 0.5f, 0.0f, 65535.0f));
+  for (std::size_t k = 0; k < in.size(); ++k)
+    out.pixels[k] = std::uint16_t(std::clamp(in.pixels[k] + 0.5f, 0.0f, 65535.0f));
   return out;
 }
 
@@ -45,9 +46,7 @@ double peak_share(const ImageF& im) {
 
 class CalibCli : public ::testing::Test {
  protected:
-  void SetUp() override {
-    dir_ = testing_support::temp_dir("calib-cli");
-  }
+  void SetUp() override { dir_ = testing_support::temp_dir("calib-cli"); }
   void TearDown() override {
     if (!std::getenv("PLENOPIV_KEEP_TEST_FILES")) std::filesystem::remove_all(dir_);
   }
@@ -176,7 +175,9 @@ TEST_F(CalibCli, WhiteOnlyFromPngFramesThenRefocusAndReconstruct) {
 
   // h5py reads the new parts of the file.
   std::ofstream(path("read.py")) << "import h5py, numpy as np\n"
-                                    "f = h5py.File('" << path("white.h5") << "', 'r')\n"
+                                    "f = h5py.File('"
+                                 << path("white.h5")
+                                 << "', 'r')\n"
                                     "assert f['measured_px'].shape == f['spots_px'].shape\n"
                                     "assert f['uncertainty_px'].shape == f['status'].shape\n"
                                     "assert f['lattice'].attrs['centres_from'] == 1\n"

@@ -14,15 +14,15 @@ namespace plenopiv::testing_support {
 
 struct SpotScene {
   double rotation_deg = 0;
-  double pitch_scale = 1;        // lens pitch relative to the camera file's
+  double pitch_scale = 1;  // lens pitch relative to the camera file's
   double offset_x_mm = 0, offset_y_mm = 0;
-  double jitter_mm = 0;          // each lens centre moves uniformly within +-jitter in x and y
+  double jitter_mm = 0;  // each lens centre moves uniformly within +-jitter in x and y
   double spot_sigma_px = 1.0;
-  double peak = 2000;            // spot amplitude at the sensor centre
-  double vignetting = 0;         // amplitude falls by this fraction at the sensor corner (quadratic)
+  double peak = 2000;     // spot amplitude at the sensor centre
+  double vignetting = 0;  // amplitude falls by this fraction at the sensor corner (quadratic)
   double background = 100;
-  double noise_sigma = 0;        // additive Gaussian noise
-  int hot_pixels = 0;            // single pixels set to hot_value at random places
+  double noise_sigma = 0;  // additive Gaussian noise
+  int hot_pixels = 0;      // single pixels set to hot_value at random places
   double hot_value = 4000;
   double missing_edge_fraction = 0;  // this fraction of the outermost ring of lenses gives no spot
   std::uint32_t seed = 1;

@@ -81,41 +81,112 @@ INSTANTIATE_TEST_SUITE_P(
     ::testing::Values(
         // The issue's camera: 1280 x 960 8-bit, 300 um lenses over 6.45 um pixels = 48.2 px,
         // rotated -0.13 deg, its centre 6.5 px off the axis, overfilling the sensor, dust.
-        WhiteCase{.name = "issue_camera_rect_48p2", .rotation_deg = -0.13, .dust = 6, .rays_per_px = 30,
-                  .bit_depth = 8},
-        WhiteCase{.name = "hex_48p2_plus2deg_axis_off", .layout = "hex", .rotation_deg = 2, .axis_offset_px = {6, -4},
-                  .axis_in_camera_file = true, .dust = 4, .rays_per_px = 30, .seed = 2},
+        WhiteCase{
+            .name = "issue_camera_rect_48p2", .rotation_deg = -0.13, .dust = 6, .rays_per_px = 30, .bit_depth = 8},
+        WhiteCase{.name = "hex_48p2_plus2deg_axis_off",
+                  .layout = "hex",
+                  .rotation_deg = 2,
+                  .axis_offset_px = {6, -4},
+                  .axis_in_camera_file = true,
+                  .dust = 4,
+                  .rays_per_px = 30,
+                  .seed = 2},
         // The lens barrel cuts 80 % of the micro-images into cat's eyes; the axis, 7 px off the
         // sensor centre, is not in the camera file.
-        WhiteCase{.name = "issue_camera_vignetted_axis_unknown", .rotation_deg = -0.13, .axis_offset_px = {6, -4},
-                  .dust = 6, .vignetting_stop_mm = 6, .rays_per_px = 30, .bit_depth = 8, .seed = 7},
-        WhiteCase{.name = "rect_13p07_plus2deg_jitter", .spot_pitch_px = 13.07, .width = 520, .height = 400,
-                  .pixel_pitch_mm = 0.0074, .microlens_focal_mm = 0.5, .image_distance_mm = 100,
-                  .rotation_deg = 2, .axis_offset_px = {6, 0}, .axis_in_camera_file = true, .jitter_px = 0.1,
-                  .dust = 3, .seed = 3},
-        WhiteCase{.name = "hex_13p07_minus2deg", .layout = "hex", .spot_pitch_px = 13.07, .width = 520, .height = 400,
-                  .pixel_pitch_mm = 0.0074, .microlens_focal_mm = 0.5, .image_distance_mm = 100,
-                  .rotation_deg = -2, .dust = 3, .seed = 4},
+        WhiteCase{.name = "issue_camera_vignetted_axis_unknown",
+                  .rotation_deg = -0.13,
+                  .axis_offset_px = {6, -4},
+                  .dust = 6,
+                  .vignetting_stop_mm = 6,
+                  .rays_per_px = 30,
+                  .bit_depth = 8,
+                  .seed = 7},
+        WhiteCase{.name = "rect_13p07_plus2deg_jitter",
+                  .spot_pitch_px = 13.07,
+                  .width = 520,
+                  .height = 400,
+                  .pixel_pitch_mm = 0.0074,
+                  .microlens_focal_mm = 0.5,
+                  .image_distance_mm = 100,
+                  .rotation_deg = 2,
+                  .axis_offset_px = {6, 0},
+                  .axis_in_camera_file = true,
+                  .jitter_px = 0.1,
+                  .dust = 3,
+                  .seed = 3},
+        WhiteCase{.name = "hex_13p07_minus2deg",
+                  .layout = "hex",
+                  .spot_pitch_px = 13.07,
+                  .width = 520,
+                  .height = 400,
+                  .pixel_pitch_mm = 0.0074,
+                  .microlens_focal_mm = 0.5,
+                  .image_distance_mm = 100,
+                  .rotation_deg = -2,
+                  .dust = 3,
+                  .seed = 4},
         // The issue's limit of rotation, +-5 deg.
-        WhiteCase{.name = "rect_13p07_minus5deg", .spot_pitch_px = 13.07, .width = 520, .height = 400,
-                  .pixel_pitch_mm = 0.0074, .microlens_focal_mm = 0.5, .image_distance_mm = 100,
-                  .rotation_deg = -5, .dust = 3, .seed = 8},
-        WhiteCase{.name = "hex_13p07_plus5deg_axis_off", .layout = "hex", .spot_pitch_px = 13.07, .width = 520,
-                  .height = 400, .pixel_pitch_mm = 0.0074, .microlens_focal_mm = 0.5, .image_distance_mm = 100,
-                  .rotation_deg = 5, .axis_offset_px = {-6, 3}, .axis_in_camera_file = true, .dust = 3,
+        WhiteCase{.name = "rect_13p07_minus5deg",
+                  .spot_pitch_px = 13.07,
+                  .width = 520,
+                  .height = 400,
+                  .pixel_pitch_mm = 0.0074,
+                  .microlens_focal_mm = 0.5,
+                  .image_distance_mm = 100,
+                  .rotation_deg = -5,
+                  .dust = 3,
+                  .seed = 8},
+        WhiteCase{.name = "hex_13p07_plus5deg_axis_off",
+                  .layout = "hex",
+                  .spot_pitch_px = 13.07,
+                  .width = 520,
+                  .height = 400,
+                  .pixel_pitch_mm = 0.0074,
+                  .microlens_focal_mm = 0.5,
+                  .image_distance_mm = 100,
+                  .rotation_deg = 5,
+                  .axis_offset_px = {-6, 3},
+                  .axis_in_camera_file = true,
+                  .dust = 3,
                   .seed = 9},
-        WhiteCase{.name = "rect_7p66_minus2deg_jitter", .spot_pitch_px = 7.66, .width = 400, .height = 320,
-                  .pixel_pitch_mm = 0.0074, .microlens_focal_mm = 0.25, .image_distance_mm = 100,
-                  .rotation_deg = -2, .jitter_px = 0.1, .dust = 3, .rays_per_px = 1000, .seed = 5},
-        WhiteCase{.name = "hex_7p66_plus2deg_axis_off", .layout = "hex", .spot_pitch_px = 7.66, .width = 400,
-                  .height = 320, .pixel_pitch_mm = 0.0074, .microlens_focal_mm = 0.25, .image_distance_mm = 100,
-                  .rotation_deg = 2, .axis_offset_px = {-6, 3}, .axis_in_camera_file = true, .dust = 3,
-                  .rays_per_px = 1000, .seed = 6}),
+        WhiteCase{.name = "rect_7p66_minus2deg_jitter",
+                  .spot_pitch_px = 7.66,
+                  .width = 400,
+                  .height = 320,
+                  .pixel_pitch_mm = 0.0074,
+                  .microlens_focal_mm = 0.25,
+                  .image_distance_mm = 100,
+                  .rotation_deg = -2,
+                  .jitter_px = 0.1,
+                  .dust = 3,
+                  .rays_per_px = 1000,
+                  .seed = 5},
+        WhiteCase{.name = "hex_7p66_plus2deg_axis_off",
+                  .layout = "hex",
+                  .spot_pitch_px = 7.66,
+                  .width = 400,
+                  .height = 320,
+                  .pixel_pitch_mm = 0.0074,
+                  .microlens_focal_mm = 0.25,
+                  .image_distance_mm = 100,
+                  .rotation_deg = 2,
+                  .axis_offset_px = {-6, 3},
+                  .axis_in_camera_file = true,
+                  .dust = 3,
+                  .rays_per_px = 1000,
+                  .seed = 6}),
     [](const ::testing::TestParamInfo<WhiteCase>& info) { return info.param.name; });
 
 WhiteCase small_case() {
-  return WhiteCase{.name = "small", .spot_pitch_px = 13.07, .width = 520, .height = 400, .pixel_pitch_mm = 0.0074,
-                   .microlens_focal_mm = 0.5, .image_distance_mm = 100, .rotation_deg = 1, .seed = 11};
+  return WhiteCase{.name = "small",
+                   .spot_pitch_px = 13.07,
+                   .width = 520,
+                   .height = 400,
+                   .pixel_pitch_mm = 0.0074,
+                   .microlens_focal_mm = 0.5,
+                   .image_distance_mm = 100,
+                   .rotation_deg = 1,
+                   .seed = 11};
 }
 
 // The camera file's pitch 0.9 % short of the array's: said, and applied as the lens pitch, so that
@@ -148,7 +219,8 @@ TEST(WhiteCalibration, OverlappingMicroImagesAreRefusedWithTheMeasuredFill) {
 optics::CameraModel edited(const optics::CameraModel& camera, double pitch_scale, const char* layout = nullptr) {
   optics::CameraSpec spec = camera.spec();
   spec.microlens.pitch_mm *= pitch_scale;
-  if (layout) spec.microlens.layout = std::string(layout) == "hex" ? optics::LensletLayout::hex : optics::LensletLayout::rect;
+  if (layout)
+    spec.microlens.layout = std::string(layout) == "hex" ? optics::LensletLayout::hex : optics::LensletLayout::rect;
   return optics::CameraModel(spec, "edited.yaml");
 }
 
@@ -165,8 +237,7 @@ TEST(WhiteCalibration, AWrongPitchAFlatImageAndAWrongLayoutAreNamed) {
 
   scene.camera = edited(right, 1.15);  // near enough to find the lattice, too far to be the camera file's
   err = error_of(scene);
-  EXPECT_NE(err.find("lattice of 13.070 x 13.070 px, more than 10 % from the camera file's 15.030"),
-            std::string::npos)
+  EXPECT_NE(err.find("lattice of 13.070 x 13.070 px, more than 10 % from the camera file's 15.030"), std::string::npos)
       << err;
 
   // The white read as a hex array's.

@@ -24,7 +24,8 @@ std::string camera_yaml(const WhiteCase& c, bool with_axis, double pitch_scale) 
     y << ", optical_axis_px: [" << 0.5 * (c.width - 1) + c.axis_offset_px[0] << ", "
       << 0.5 * (c.height - 1) + c.axis_offset_px[1] << "]";
   }
-  y << "}\nmicrolens: {pitch_mm: " << pitch_mm << ", focal_length_mm: " << c.microlens_focal_mm << ", layout: " << c.layout;
+  y << "}\nmicrolens: {pitch_mm: " << pitch_mm << ", focal_length_mm: " << c.microlens_focal_mm
+    << ", layout: " << c.layout;
   if (c.counts_in_camera_file) {
     // What a user reads off the white: the lenses whole on the sensor.
     y << ", count_x: " << int(c.width / c.spot_pitch_px) - 1 << ", count_y: " << int(c.height / c.spot_pitch_px) - 1;
@@ -38,14 +39,21 @@ std::string camera_yaml(const WhiteCase& c, bool with_axis, double pitch_scale) 
 
 WhiteScene render_white_scene(const WhiteCase& c) {
   const bool axis_off = c.axis_offset_px[0] != 0 || c.axis_offset_px[1] != 0;
-  const optics::CameraModel truth_camera = optics::parse_camera_yaml(camera_yaml(c, axis_off, 1.0), c.name + " (truth)");
-  WhiteScene s{optics::parse_camera_yaml(camera_yaml(c, axis_off && c.axis_in_camera_file, c.camera_pitch_scale), c.name),
-               truth_camera, {}, {}, {}, {}, {}};
+  const optics::CameraModel truth_camera =
+      optics::parse_camera_yaml(camera_yaml(c, axis_off, 1.0), c.name + " (truth)");
+  WhiteScene s{
+      optics::parse_camera_yaml(camera_yaml(c, axis_off && c.axis_in_camera_file, c.camera_pitch_scale), c.name),
+      truth_camera,
+      {},
+      {},
+      {},
+      {},
+      {}};
   const double s_i = truth_camera.image_distance_mm(), f_l = truth_camera.microlens().focal_length_mm;
   const double pp = c.pixel_pitch_mm, scale = 1 + f_l / s_i;
   const optics::Lattice lattice = sim::overfilling_lattice(
-      truth_camera, truth_camera.microlens().layout, truth_camera.microlens().pitch_mm, c.rotation_deg * std::numbers::pi / 180,
-      c.array_offset_px[0] * pp / scale, c.array_offset_px[1] * pp / scale, 2);
+      truth_camera, truth_camera.microlens().layout, truth_camera.microlens().pitch_mm,
+      c.rotation_deg * std::numbers::pi / 180, c.array_offset_px[0] * pp / scale, c.array_offset_px[1] * pp / scale, 2);
   s.truth = sim::jittered_array(lattice, c.jitter_px * pp / scale, c.seed + 17);
 
   sim::SensorModel sensor;
@@ -67,7 +75,8 @@ WhiteScene render_white_scene(const WhiteCase& c) {
     sensor.dust.push_back(d);
   }
   sim::TargetOptions target = sim::white_target();
-  target.rays_per_lens = std::size_t(c.rays_per_px * lattice.pitch_x_mm * lattice.pitch_y_mm * scale * scale / (pp * pp));
+  target.rays_per_lens =
+      std::size_t(c.rays_per_px * lattice.pitch_x_mm * lattice.pitch_y_mm * scale * scale / (pp * pp));
   target.sensor = sensor;
   if (c.vignetting_stop_mm > 0) target.vignetting = {0.5 * s_i, c.vignetting_stop_mm};
   const sim::RenderResult white = sim::render_target(truth_camera, s.truth, target, c.seed);
@@ -79,8 +88,10 @@ WhiteScene render_white_scene(const WhiteCase& c) {
 
   const double radius = 0.5 * truth_camera.microlens_image_diameter_px() + 1;
   for (const auto& centre : s.truth.centres_mm) {
-    const double col = optics::sensor_mm_to_column(truth_camera.sensor(), optics::lens_centre_to_spot_mm(centre[0], s_i, f_l));
-    const double row = optics::sensor_mm_to_row(truth_camera.sensor(), optics::lens_centre_to_spot_mm(centre[1], s_i, f_l));
+    const double col =
+        optics::sensor_mm_to_column(truth_camera.sensor(), optics::lens_centre_to_spot_mm(centre[0], s_i, f_l));
+    const double row =
+        optics::sensor_mm_to_row(truth_camera.sensor(), optics::lens_centre_to_spot_mm(centre[1], s_i, f_l));
     s.spots_px.push_back({col, row});
     s.whole.push_back(col - radius >= -0.5 && row - radius >= -0.5 && col + radius <= c.width - 0.5 &&
                       row + radius <= c.height - 0.5);

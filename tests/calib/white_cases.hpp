@@ -27,25 +27,25 @@ struct WhiteCase {
   std::array<double, 2> array_offset_px{6.5, -3.0};  // array centre from the optical axis
   std::array<double, 2> axis_offset_px{0, 0};        // optical axis from the sensor centre (given in the camera file)
   bool axis_in_camera_file = false;
-  double jitter_px = 0;              // per-lens Gaussian jitter of the true centres (on the sensor)
-  int dust = 0;                      // dust shadows
-  double vignetting_stop_mm = 0;     // diameter of a stop halfway to the array (0: none)
-  double rays_per_px = 100;          // white: rays per pixel of lens area
+  double jitter_px = 0;           // per-lens Gaussian jitter of the true centres (on the sensor)
+  int dust = 0;                   // dust shadows
+  double vignetting_stop_mm = 0;  // diameter of a stop halfway to the array (0: none)
+  double rays_per_px = 100;       // white: rays per pixel of lens area
   double electrons_per_ray = 20;
   int bit_depth = 12;
   bool counts_in_camera_file = false;
-  double camera_pitch_scale = 1;     // the camera file's lens pitch over the true one
+  double camera_pitch_scale = 1;  // the camera file's lens pitch over the true one
   std::uint64_t seed = 1;
 };
 
 struct WhiteScene {
-  optics::CameraModel camera;                 // as the user's camera file describes it
-  optics::CameraModel truth_camera;           // as the simulator rendered it
-  optics::MicrolensArray truth;               // the true array (overfilling the sensor)
+  optics::CameraModel camera;                   // as the user's camera file describes it
+  optics::CameraModel truth_camera;             // as the simulator rendered it
+  optics::MicrolensArray truth;                 // the true array (overfilling the sensor)
   std::vector<std::array<double, 2>> spots_px;  // true micro-image centres, per true lens
-  std::vector<std::uint8_t> whole;            // micro-image wholly on the sensor
-  ImageF white;                               // one rendered white frame, counts
-  ImageF dark;                                // the sensor's dark frame (offset + read noise)
+  std::vector<std::uint8_t> whole;              // micro-image wholly on the sensor
+  ImageF white;                                 // one rendered white frame, counts
+  ImageF dark;                                  // the sensor's dark frame (offset + read noise)
 };
 
 WhiteScene render_white_scene(const WhiteCase& c);

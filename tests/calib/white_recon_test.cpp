@@ -40,7 +40,9 @@ dt_s: 0.0001
 volume: {x_mm: [-2, 2], y_mm: [-2, 2], z_mm: [0, 4], voxel_mm: 0.125, voxel_z_mm: 0.125, depth_guard_mm: 1}
 reconstruction: {iterations: 20, mu: 1, start: mlos, noise_threshold: 0, dark_weight_cutoff: 0.9}
 correlation: {median: {threshold: 2, epsilon_voxel: 0.1, radius: 2}, signal_threshold: 0}
-)", "white_recon.yaml"), "white_recon.yaml"));
+)",
+                                                                                           "white_recon.yaml"),
+                                                                            "white_recon.yaml"));
   sim::SensorModel sensor;
   sensor.electrons_per_ray = 20;
   sensor.shot_noise = true;

@@ -72,7 +72,8 @@ void wait_for_jobs(const std::string& jobs) {
   std::string out;
   for (int i = 0; i < 600; ++i) {
     out.clear();
-    const int rc = testing_support::run_command({"/usr/bin/env", "squeue", "--noheader", "--jobs=" + jobs, "--format=%i %T %r"}, out);
+    const int rc = testing_support::run_command(
+        {"/usr/bin/env", "squeue", "--noheader", "--jobs=" + jobs, "--format=%i %T %r"}, out);
     if (rc == 0 && out.empty()) return;
     if (rc != 0 && out.find("Invalid job id") != std::string::npos) return;
     std::this_thread::sleep_for(500ms);
@@ -120,9 +121,8 @@ void expect_same_outputs(const fs::path& local, const fs::path& cluster, int pai
 // One small run of 8 pairs and its local reprocess, made once for the tests of this process.
 const fs::path& recorded_run() {
   static const fs::path run = [] {
-    const fs::path r =
-        testing_support::record_small_run(testing_support::temp_dir("slurm") / "data", testing_support::small_sim_uri(),
-                                          {}, 8);
+    const fs::path r = testing_support::record_small_run(testing_support::temp_dir("slurm") / "data",
+                                                         testing_support::small_sim_uri(), {}, 8);
     plenopiv_ok({"process", "--run", r.string(), "-o", (r.parent_path() / "local").string()});
     return r;
   }();

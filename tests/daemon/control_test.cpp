@@ -13,10 +13,10 @@
 #include "clients/cli/control_client.hpp"
 #include "proto/curve.hpp"
 #include "tests/support/child_process.hpp"
-#include "tests/support/temp_dir.hpp"
-#include "tests/support/tmpfs.hpp"
 #include "tests/support/daemon_status.hpp"
 #include "tests/support/run_manifest.hpp"
+#include "tests/support/temp_dir.hpp"
+#include "tests/support/tmpfs.hpp"
 
 namespace plenopiv {
 namespace {
@@ -30,8 +30,8 @@ class Daemon : public ::testing::Test {
     control_ = testing_support::ipc_endpoint("control");
     publish_ = "tcp://127.0.0.1:" + std::to_string(testing_support::free_tcp_port());
     daemon_ = std::make_unique<ChildProcess>(
-        std::vector<std::string>{testing_support::binary("plenopivd"), "--control", control_,
-                                 "--publish", publish_, "--log-level", "info"},
+        std::vector<std::string>{testing_support::binary("plenopivd"), "--control", control_, "--publish", publish_,
+                                 "--log-level", "info"},
         std::filesystem::temp_directory_path() / "plenopiv-test" /
             (std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()) + ".log"));
     // Wait for the control socket to answer.
@@ -109,8 +109,8 @@ TEST_F(Daemon, ListsDevices) {
 
 TEST_F(Daemon, ThinClientShowsStatus) {
   std::string out;
-  const int rc = testing_support::run_command(
-      {testing_support::binary("plenopiv"), "--endpoint", control_, "status"}, out);
+  const int rc =
+      testing_support::run_command({testing_support::binary("plenopiv"), "--endpoint", control_, "status"}, out);
   EXPECT_EQ(rc, 0) << out;
   EXPECT_NE(out.find("state          Idle"), std::string::npos) << out;
 }
@@ -141,8 +141,7 @@ TEST(ControlClient, MissingDaemonIsAClearErrorAfterTheTimeout) {
     client.call(r);
     FAIL() << "a call to no daemon returned";
   } catch (const client::ControlError& e) {
-    EXPECT_NE(std::string(e.what()).find("no reply from plenopivd at " + endpoint), std::string::npos)
-        << e.what();
+    EXPECT_NE(std::string(e.what()).find("no reply from plenopivd at " + endpoint), std::string::npos) << e.what();
   }
   EXPECT_LT(std::chrono::steady_clock::now() - start, 3s);  // a bound on hanging, not a timing figure
 }
@@ -162,10 +161,10 @@ TEST(ThinClient, RunStartToAMissingDaemonFailsWithinTheTimeout) {
   std::string out;
   const std::string endpoint = "tcp://127.0.0.1:" + std::to_string(testing_support::free_tcp_port());
   const auto start = std::chrono::steady_clock::now();
-  const int rc = testing_support::run_command({testing_support::binary("plenopiv"), "--endpoint", endpoint, "--timeout",
-                                               "0.3", "run", "start", "--config",
-                                               std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/run.yaml"},
-                                              out);
+  const int rc = testing_support::run_command(
+      {testing_support::binary("plenopiv"), "--endpoint", endpoint, "--timeout", "0.3", "run", "start", "--config",
+       std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/run.yaml"},
+      out);
   EXPECT_EQ(rc, 3) << out;
   EXPECT_NE(out.find("no reply from plenopivd"), std::string::npos) << out;
   EXPECT_LT(std::chrono::steady_clock::now() - start, 10s);  // not the start's 120 s wait
@@ -191,8 +190,9 @@ TEST(DaemonSocket, TheControlSocketAdmitsItsOwnerAndGroupOnly) {
                        "umask 000; exec " + testing_support::binary("plenopivd") + " --control " + control +
                            " --publish tcp://127.0.0.1:" + std::to_string(testing_support::free_tcp_port())},
                       std::filesystem::temp_directory_path() / "plenopiv-test" / "socket-mode.log");
-  for (int i = 0; i < 100 && !testing_support::probe_status(control); ++i) ASSERT_TRUE(daemon.running()) << daemon.output();
-  struct stat st{};
+  for (int i = 0; i < 100 && !testing_support::probe_status(control); ++i)
+    ASSERT_TRUE(daemon.running()) << daemon.output();
+  struct stat st {};
   ASSERT_EQ(::stat(file.c_str(), &st), 0) << file;
   EXPECT_TRUE(S_ISSOCK(st.st_mode));
   EXPECT_EQ(st.st_mode & 0777, 0660u) << std::oct << (st.st_mode & 0777);
@@ -202,10 +202,10 @@ TEST(DaemonSocket, TheControlSocketAdmitsItsOwnerAndGroupOnly) {
   // The folder is open to everyone, so only the socket's own mode keeps `nobody` out.
   std::filesystem::permissions(std::filesystem::path(file).parent_path(), std::filesystem::perms(0755));
   std::string out;
-  const int rc = testing_support::run_command({"/usr/sbin/runuser", "-u", "nobody", "--",
-                                               testing_support::binary("plenopiv"), "--endpoint", control,
-                                               "--timeout", "1", "status"},
-                                              out);
+  const int rc =
+      testing_support::run_command({"/usr/sbin/runuser", "-u", "nobody", "--", testing_support::binary("plenopiv"),
+                                    "--endpoint", control, "--timeout", "1", "status"},
+                                   out);
   EXPECT_EQ(rc, 3) << out;
   EXPECT_NE(out.find("no reply from plenopivd"), std::string::npos) << out;
   EXPECT_TRUE(testing_support::probe_status(control)) << "the owner still controls it";
@@ -239,8 +239,7 @@ TEST_F(Daemon, OversizedAndHostileRequestsAreRefusedWithoutStallingTheDaemon) {
   EXPECT_NE(big.error().message().find("larger than 1024 KiB"), std::string::npos) << big.error().message();
   const msg::Reply deep = start_with("a: " + std::string(200, '[') + std::string(200, ']') + "\n");
   ASSERT_TRUE(deep.has_error());
-  EXPECT_NE(deep.error().message().find("nested deeper than 32 levels"), std::string::npos)
-      << deep.error().message();
+  EXPECT_NE(deep.error().message().find("nested deeper than 32 levels"), std::string::npos) << deep.error().message();
   // Nine levels of ten aliases each stand for 10^9 nodes in a few hundred bytes.
   std::string laughs = "l0: &l0 [lol, lol, lol, lol, lol, lol, lol, lol, lol, lol]\n";
   for (int i = 1; i <= 9; ++i) {
@@ -263,9 +262,10 @@ TEST_F(Daemon, DeviceUrisFromRequestsCannotNameFiles) {
   client::ControlClient client(control_, 3000ms);
   const auto refusal = [&](const std::string& camera_uri) {
     msg::Request r;
-    r.mutable_start_run()->set_config_yaml("camera_uri: \"" + camera_uri +
-                                           "\"\ndt_s: 0.0001\nvolume: {x_mm: [0, 2], y_mm: [0, 2], z_mm: [0, 2], voxel_mm: "
-                                           "0.5}\ncorrelation: {passes: [{window: 4, overlap_percent: 50}]}\n");
+    r.mutable_start_run()->set_config_yaml(
+        "camera_uri: \"" + camera_uri +
+        "\"\ndt_s: 0.0001\nvolume: {x_mm: [0, 2], y_mm: [0, 2], z_mm: [0, 2], voxel_mm: "
+        "0.5}\ncorrelation: {passes: [{window: 4, overlap_percent: 50}]}\n");
     const msg::Reply reply = client.call(r);
     EXPECT_TRUE(reply.has_error()) << camera_uri;
     EXPECT_EQ(reply.error().code(), msg::Error::INVALID) << reply.error().message();
@@ -276,8 +276,7 @@ TEST_F(Daemon, DeviceUrisFromRequestsCannotNameFiles) {
   EXPECT_NE(refusal("sim://?camera=/etc/passwd").find("not enabled on this daemon"), std::string::npos);
   const std::string replay = refusal("replay:///etc?rate_hz=10");
   EXPECT_NE(replay.find("replay:///etc?rate_hz=10"), std::string::npos) << replay;
-  EXPECT_NE(replay.find("the replay camera is not enabled on this daemon"), std::string::npos)
-      << replay;
+  EXPECT_NE(replay.find("the replay camera is not enabled on this daemon"), std::string::npos) << replay;
   EXPECT_NE(refusal("aravis://127.0.0.1?profile=/etc/passwd").find("not a path"), std::string::npos);
   EXPECT_TRUE(daemon_->running());
 }
@@ -328,13 +327,14 @@ TEST(DaemonStop, SigtermWithHeavyProcessingInFlightEndsWithinTenSeconds) {
   fs::remove_all(dir);
   fs::create_directories(dir);
   const std::string control = testing_support::ipc_endpoint("control");
-  ChildProcess daemon({testing_support::binary("plenopivd"), "--simulation", "--camera-file",
-                       std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml", "--camera",
-                       "sim://?rays=300&ppm=0.3", "--control", control, "--publish",
-                       "tcp://127.0.0.1:" + std::to_string(testing_support::free_tcp_port()), "--data-dir",
-                       (dir / "data").string()},
-                      dir / "plenopivd.log");
-  for (int i = 0; i < 100 && !testing_support::probe_status(control); ++i) ASSERT_TRUE(daemon.running()) << daemon.output();
+  ChildProcess daemon(
+      {testing_support::binary("plenopivd"), "--simulation", "--camera-file",
+       std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml", "--camera", "sim://?rays=300&ppm=0.3",
+       "--control", control, "--publish", "tcp://127.0.0.1:" + std::to_string(testing_support::free_tcp_port()),
+       "--data-dir", (dir / "data").string()},
+      dir / "plenopivd.log");
+  for (int i = 0; i < 100 && !testing_support::probe_status(control); ++i)
+    ASSERT_TRUE(daemon.running()) << daemon.output();
   std::ofstream(dir / "heavy.yaml") << "pairs: 0\nrate_hz: 5\ndt_s: 0.0001\n"
                                        "volume: {x_mm: [-2, 2], y_mm: [-2, 2], z_mm: [-3, 3], voxel_mm: 0.125}\n"
                                        "reconstruction: {iterations: 1000, mu: 1}\n"
@@ -377,13 +377,14 @@ TEST(DaemonDisk, AFullDiskFailsTheRunCleanlyAndRefusesTheNext) {
   testing_support::SmallTmpfs disk(dir / "data", 110);
   if (!disk.mounted()) GTEST_SKIP() << disk.why_not();
   const std::string control = testing_support::ipc_endpoint("control");
-  ChildProcess daemon({testing_support::binary("plenopivd"), "--simulation", "--camera-file",
-                       std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml", "--camera",
-                       "sim://?rays=100&ppm=0.05", "--control", control, "--publish",
-                       "tcp://127.0.0.1:" + std::to_string(testing_support::free_tcp_port()), "--data-dir",
-                       disk.dir().string()},
-                      dir / "plenopivd.log");
-  for (int i = 0; i < 100 && !testing_support::probe_status(control); ++i) ASSERT_TRUE(daemon.running()) << daemon.output();
+  ChildProcess daemon(
+      {testing_support::binary("plenopivd"), "--simulation", "--camera-file",
+       std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml", "--camera", "sim://?rays=100&ppm=0.05",
+       "--control", control, "--publish", "tcp://127.0.0.1:" + std::to_string(testing_support::free_tcp_port()),
+       "--data-dir", disk.dir().string()},
+      dir / "plenopivd.log");
+  for (int i = 0; i < 100 && !testing_support::probe_status(control); ++i)
+    ASSERT_TRUE(daemon.running()) << daemon.output();
   // 2.9 MB of raw frames per pair (850 x 850 px, 16 bit): the 110 MB disk holds about 30.
   std::ofstream(dir / "long.yaml") << "pairs: 0\nrate_hz: 10\ndt_s: 0.0001\n"
                                       "volume: {x_mm: [-1, 1], y_mm: [-1, 1], z_mm: [-1, 1], voxel_mm: 0.25}\n"
@@ -433,10 +434,10 @@ TEST(DaemonCurve, AdmitsOnlyAuthorizedKeysOverTcp) {
   fs::remove_all(dir);
   fs::create_directories(dir / "clients");
   std::string out;
-  for (const auto& [name, where] : {std::pair{"plenopivd", dir}, std::pair{"desk", dir / "clients"},
-                                    std::pair{"stranger", dir}}) {
-    ASSERT_EQ(testing_support::run_command({testing_support::binary("plenopiv"), "keys", name, "-o", where.string()}, out),
-              0)
+  for (const auto& [name, where] :
+       {std::pair{"plenopivd", dir}, std::pair{"desk", dir / "clients"}, std::pair{"stranger", dir}}) {
+    ASSERT_EQ(
+        testing_support::run_command({testing_support::binary("plenopiv"), "keys", name, "-o", where.string()}, out), 0)
         << out;
   }
   EXPECT_EQ(fs::status(dir / "plenopivd.key_secret").permissions() & fs::perms::all,
@@ -445,8 +446,8 @@ TEST(DaemonCurve, AdmitsOnlyAuthorizedKeysOverTcp) {
                                            "authorized_clients: clients, publish: true}\n";
   const std::string control = "tcp://127.0.0.1:" + std::to_string(testing_support::free_tcp_port());
   const std::string publish = "tcp://127.0.0.1:" + std::to_string(testing_support::free_tcp_port());
-  ChildProcess daemon({testing_support::binary("plenopivd"), "--config", (dir / "plenopivd.yaml").string(),
-                       "--control", control, "--publish", publish, "--data-dir", (dir / "data").string()},
+  ChildProcess daemon({testing_support::binary("plenopivd"), "--config", (dir / "plenopivd.yaml").string(), "--control",
+                       control, "--publish", publish, "--data-dir", (dir / "data").string()},
                       dir / "plenopivd.log");
   const auto status_as = [&](const std::vector<std::string>& keys) {
     std::vector<std::string> argv{testing_support::binary("plenopiv"), "--endpoint", control, "--timeout", "1"};

@@ -35,7 +35,8 @@ TEST(DaemonCalibration, ABadFileIsRefusedByNameAndAGoodOneIsUsedOnceItIsThere) {
   std::string out;
   ASSERT_EQ(plenopiv({"simulate", "calibration", "--camera", kCameraFile, "-o", (dir / "cal.tif").string()}, out), 0)
       << out;
-  ASSERT_EQ(plenopiv({"simulate", "white", "--camera", kCameraFile, "-o", (dir / "white.tif").string()}, out), 0) << out;
+  ASSERT_EQ(plenopiv({"simulate", "white", "--camera", kCameraFile, "-o", (dir / "white.tif").string()}, out), 0)
+      << out;
   ASSERT_EQ(plenopiv({"calibrate", "--camera", kCameraFile, "--calibration-image", (dir / "cal.tif").string(),
                       "--white", (dir / "white.tif").string(), "-o", (dir / "good.h5").string()},
                      out),
@@ -43,13 +44,14 @@ TEST(DaemonCalibration, ABadFileIsRefusedByNameAndAGoodOneIsUsedOnceItIsThere) {
       << out;
   const fs::path rig = dir / "rig.h5";  // what plenopivd.yaml names: corrupt at first
   std::ofstream(rig) << "not a calibration file";
-  std::ofstream(dir / "plenopivd.yaml") << "camera_file: " << kCameraFile << "\ncalibration_file: rig.h5\n"
-                                        << "data_dir: data\ncamera_uri: sim://?seed=2&ppm=0.1&rays=200\nsimulation: true\n";
+  std::ofstream(dir / "plenopivd.yaml")
+      << "camera_file: " << kCameraFile << "\ncalibration_file: rig.h5\n"
+      << "data_dir: data\ncamera_uri: sim://?seed=2&ppm=0.1&rays=200\nsimulation: true\n";
   const std::string control = testing_support::ipc_endpoint("control");
   const std::string publish = "tcp://127.0.0.1:" + std::to_string(testing_support::free_tcp_port());
-  testing_support::ChildProcess daemon({binary("plenopivd"), "--config", (dir / "plenopivd.yaml").string(),
-                                        "--control", control, "--publish", publish},
-                                       dir / "plenopivd.log");
+  testing_support::ChildProcess daemon(
+      {binary("plenopivd"), "--config", (dir / "plenopivd.yaml").string(), "--control", control, "--publish", publish},
+      dir / "plenopivd.log");
   auto status = [&] { return testing_support::probe_status(control); };
   std::optional<msg::Status> s;
   for (int i = 0; i < 100 && !(s = status()); ++i) ASSERT_TRUE(daemon.running()) << daemon.output();

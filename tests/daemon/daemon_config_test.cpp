@@ -27,8 +27,7 @@ std::string error_of(const std::string& text) {
 }
 
 TEST(DaemonConfig, ShippedDefaultLoads) {
-  const DaemonConfig c =
-      load_daemon_config(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/plenopivd.yaml");
+  const DaemonConfig c = load_daemon_config(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/plenopivd.yaml");
   EXPECT_EQ(c.control_endpoint, "ipc:///run/plenopiv/control");
   EXPECT_EQ(c.publish_endpoint, "tcp://127.0.0.1:5556");
   EXPECT_TRUE(c.simulation);
@@ -85,25 +84,20 @@ TEST(DaemonConfig, TheSimulatedCameraExistsOnlyWhereTheConfigEnablesIt) {
 TEST(DaemonConfig, TheReplayCameraExistsOnlyWithSimulationAndReadsUnderReplayDir) {
   EXPECT_TRUE(DaemonConfig{}.replay_dir.empty());  // built-in default: no replay camera
   const std::string err = error_of("camera_uri: replay://recorded?rate_hz=10\n");
-  EXPECT_NE(err.find("camera_uri: 'replay://recorded?rate_hz=10' is the replay camera"),
-            std::string::npos)
-      << err;
+  EXPECT_NE(err.find("camera_uri: 'replay://recorded?rate_hz=10' is the replay camera"), std::string::npos) << err;
   EXPECT_NE(err.find("simulation: true"), std::string::npos) << err;
   const std::string dir_err = error_of("replay_dir: recordings\n");
   EXPECT_NE(dir_err.find("replay_dir: '"), std::string::npos) << dir_err;
   EXPECT_NE(dir_err.find("simulation: true"), std::string::npos) << dir_err;
-  const auto path = write_temp(
-      "replay.yaml", "simulation: true\nreplay_dir: recordings\ncamera_uri: replay://a\n");
+  const auto path = write_temp("replay.yaml", "simulation: true\nreplay_dir: recordings\ncamera_uri: replay://a\n");
   EXPECT_EQ(load_daemon_config(path).replay_dir, path.parent_path() / "recordings");
 }
 
 TEST(DaemonConfig, BadKeysAreNamed) {
-  EXPECT_NE(error_of("contrl_endpoint: tcp://127.0.0.1:1\n").find("contrl_endpoint: unknown key"),
-            std::string::npos);
+  EXPECT_NE(error_of("contrl_endpoint: tcp://127.0.0.1:1\n").find("contrl_endpoint: unknown key"), std::string::npos);
   EXPECT_NE(error_of("publish_endpoint: 5556\n").find("publish_endpoint"), std::string::npos);
   EXPECT_NE(error_of("log_level: loud\n").find("log_level"), std::string::npos);
-  EXPECT_NE(error_of("publish_high_water_mark: 0\n").find("publish_high_water_mark"),
-            std::string::npos);
+  EXPECT_NE(error_of("publish_high_water_mark: 0\n").find("publish_high_water_mark"), std::string::npos);
 }
 
 TEST(DaemonConfig, TimingSectionSetsTheRigAndBadKeysAreNamed) {
@@ -118,7 +112,8 @@ TEST(DaemonConfig, TimingSectionSetsTheRigAndBadKeysAreNamed) {
 
 TEST(RunSchedule, FullSequenceForQSwitchLinesGateAloneForHardwareTimedMode) {
   const RigTiming rig;
-  drivers::TriggerInfo sim{"sim://", "sim", 0, {drivers::kTriggerLines.begin(), drivers::kTriggerLines.end()}, true, true};
+  drivers::TriggerInfo sim{"sim://", "sim", 0, {drivers::kTriggerLines.begin(), drivers::kTriggerLines.end()},
+                           true,     true};
   const drivers::Schedule full = run_schedule(rig, sim, 10, 1e-3);
   EXPECT_NEAR(full.dt_s(), 1e-3, 1e-12);
   EXPECT_DOUBLE_EQ(full.period_s, 0.1);

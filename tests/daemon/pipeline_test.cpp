@@ -3,8 +3,8 @@
 #include <google/protobuf/util/json_util.h>
 #include <gtest/gtest.h>
 
-#include <future>
 #include <tbb/global_control.h>
+#include <future>
 
 #include <fstream>
 #include <latch>
@@ -113,8 +113,7 @@ TEST_P(Concurrency, SlowProcessingSkipsToTheNewestPairAndCountsTheRest) {
         release.wait();
         return tagged_field(pair);
       },
-      [&](const drivers::FramePair& pair, ProcessedPair&) { seen.push_back(pair.pair_index); },
-      stats, cancel);
+      [&](const drivers::FramePair& pair, ProcessedPair&) { seen.push_back(pair.pair_index); }, stats, cancel);
   feeder.join();
   // One pair in flight: pair 0 blocks; when it finishes, the input takes the newest (10).
   EXPECT_EQ(seen, (std::vector<std::uint64_t>{0, 10}));
@@ -204,8 +203,7 @@ TEST_P(Concurrency, AProcessingFailureSkipsThatPairOnly) {
         if (pair.pair_index == 1) throw std::runtime_error("no particles");
         return tagged_field(pair);
       },
-      [&](const drivers::FramePair& pair, ProcessedPair&) { seen.push_back(pair.pair_index); },
-      stats, cancel);
+      [&](const drivers::FramePair& pair, ProcessedPair&) { seen.push_back(pair.pair_index); }, stats, cancel);
   feeder.join();
   EXPECT_EQ(seen, (std::vector<std::uint64_t>{0, 2}));
   EXPECT_EQ(stats.process.skipped, 1u);
@@ -219,8 +217,7 @@ class RunTest : public ::testing::Test {
  protected:
   void SetUp() override {
     testing_support::register_test_camera(drivers::CameraRegistry::instance());
-    data_ = testing_support::temp_dir("daemon") /
-            ::testing::UnitTest::GetInstance()->current_test_info()->name();
+    data_ = testing_support::temp_dir("daemon") / ::testing::UnitTest::GetInstance()->current_test_info()->name();
     fs::remove_all(data_);
     env_.data_dir = data_;
     env_.default_camera_uri = "test://";
@@ -236,12 +233,11 @@ class RunTest : public ::testing::Test {
   }
 
   RunConfig config(const std::string& extra) {
-    return parse_run_config(
-        (extra.find("dt_s:") == std::string::npos ? "dt_s: 0.0001\n" : "") +
-            std::string("volume: {x_mm: [0, 2], y_mm: [0, 2], z_mm: [0, 2], voxel_mm: 0.5}\n"
-                        "correlation: {passes: [{window: 4, overlap_percent: 50}]}\n") +
-            extra,
-        "run.yaml");
+    return parse_run_config((extra.find("dt_s:") == std::string::npos ? "dt_s: 0.0001\n" : "") +
+                                std::string("volume: {x_mm: [0, 2], y_mm: [0, 2], z_mm: [0, 2], voxel_mm: 0.5}\n"
+                                            "correlation: {passes: [{window: 4, overlap_percent: 50}]}\n") +
+                                extra,
+                            "run.yaml");
   }
 
   void wait_finished(daemon::Run& run) {
@@ -290,8 +286,7 @@ class RunTest : public ::testing::Test {
       const auto& q = qswitch.at(p.trigger_index());
       const auto& q0 = qswitch.at(first.trigger_index());
       EXPECT_NEAR(p.measured_dt_s(), q[1] - q[0], 0.5e-3) << "pair " << p.pair_index();
-      EXPECT_NEAR(double(p.pulse1_ns() - first.pulse1_ns()) * 1e-9, q[0] - q0[0], 0.5e-3)
-          << "pair " << p.pair_index();
+      EXPECT_NEAR(double(p.pulse1_ns() - first.pulse1_ns()) * 1e-9, q[0] - q0[0], 0.5e-3) << "pair " << p.pair_index();
       worst = std::max(worst, std::abs(p.measured_dt_s() - dt_s));
     }
     // The sim trigger writes each edge when its thread wakes, so the measured dt carries the
@@ -436,8 +431,7 @@ TEST_F(RunTest, TheSimTriggersCameraLineFiresTheSimCamera) {
                                std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml");
   constexpr int n = 4;
   state_.start("sim");
-  daemon::Run run(config("camera_uri: sim://?rays=100&ppm=0.02\npairs: 4\nrate_hz: 10\ndt_s: 0.001\n"),
-                  "sim", env_);
+  daemon::Run run(config("camera_uri: sim://?rays=100&ppm=0.02\npairs: 4\nrate_hz: 10\ndt_s: 0.001\n"), "sim", env_);
   wait_finished(run);
   EXPECT_EQ(state_.state(), RunState::Idle) << state_.error();
   const msg::RunManifest m = read_manifest(run.dir());

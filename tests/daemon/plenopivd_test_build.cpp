@@ -16,7 +16,7 @@ plenopiv::daemon::ProcessedPair tagged_field(const plenopiv::drivers::FramePair&
   out.vectors.dt_s = 1e-3;
   for (std::size_t i = 0; i < g.count(); ++i) {
     out.vectors.dx_mm[i] = float(pair.pair_index);  // u = pair index in m/s (dt 1 ms)
-    out.vectors.valid[i] = i % 4 != 3;                       // 3/4 valid
+    out.vectors.valid[i] = i % 4 != 3;              // 3/4 valid
   }
   return out;
 }

@@ -62,9 +62,10 @@ TEST(Processing, UniformDisplacementOfARayTracedPairComesBack) {
   const double mean_dx = sum / double(valid), mean_dy = sum_y / double(valid);
   double sum_z = 0;
   for (std::size_t i = 0; i < f.valid.size(); ++i) sum_z += f.valid[i] ? f.dz_mm[i] : 0.0;
-  std::printf("processing: %zu of %zu vectors valid, mean dx %.9f mm (truth %.4f), mean dy %.9f mm, "
-              "mean dz %.9f mm, %.1f s\n",
-              valid, f.valid.size(), mean_dx, shift_mm, mean_dy, sum_z / double(valid), seconds);
+  std::printf(
+      "processing: %zu of %zu vectors valid, mean dx %.9f mm (truth %.4f), mean dy %.9f mm, "
+      "mean dz %.9f mm, %.1f s\n",
+      valid, f.valid.size(), mean_dx, shift_mm, mean_dy, sum_z / double(valid), seconds);
   // Measured: 27 of 27 valid, mean dx 0.250502232 mm, mean dy 0.000658094 mm, mean dz
   // 0.001815075 mm (3 iterations at mu 1, MLOS start, cutoff 0.9, 1 mm depth guard). With the
   // earlier live settings (5 iterations, uniform start, cutoff 0.99): 0.250505417 mm with the guard,
@@ -109,16 +110,16 @@ TEST(Processing, BadSettingsAndWrongImagesAreNamed) {
     parse_run_config(bad, "run.yaml");
     FAIL() << "a misspelt reconstruction key was accepted";
   } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("reconstruction.iteratons: unknown key"), std::string::npos)
-        << e.what();
+    EXPECT_NE(std::string(e.what()).find("reconstruction.iteratons: unknown key"), std::string::npos) << e.what();
   }
   // A volume whose pairs in flight would not fit this machine's memory: refused with the estimate
   // before any table is built (2^29 voxels is what run.yaml itself allows).
   try {
-    factory(parse_run_config("dt_s: 0.001\nvolume: {x_mm: [-100, 100], y_mm: [-100, 100], z_mm: [-5, 5], voxel_mm: 0.125}\n"
-                             "max_pairs_in_flight: 4\n",
-                             "run.yaml"),
-            RunCalibration{});
+    factory(
+        parse_run_config("dt_s: 0.001\nvolume: {x_mm: [-100, 100], y_mm: [-100, 100], z_mm: [-5, 5], voxel_mm: 0.125}\n"
+                         "max_pairs_in_flight: 4\n",
+                         "run.yaml"),
+        RunCalibration{});
     FAIL() << "a 1600 x 1600 x 96 voxel volume with 4 pairs in flight was accepted";
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find("processing 4 pair(s) at once on a 1600 x 1600 x"), std::string::npos)

@@ -6,11 +6,11 @@
 #include <google/protobuf/util/json_util.h>
 #include <gtest/gtest.h>
 
-#include <fstream>
-#include <sstream>
 #include <algorithm>
 #include <cmath>
 #include <csignal>
+#include <fstream>
+#include <sstream>
 #include <thread>
 #include <tuple>
 
@@ -60,8 +60,8 @@ const fs::path& calibration_file() {
     for (const std::vector<std::string>& args :
          {std::vector<std::string>{"simulate", "calibration", "--camera", kCameraFile, "--array-rotation-rad", rotation,
                                    "-o", (dir / "calibration.tif").string()},
-          std::vector<std::string>{"simulate", "white", "--camera", kCameraFile, "--array-rotation-rad", rotation,
-                                   "-o", (dir / "white.tif").string()},
+          std::vector<std::string>{"simulate", "white", "--camera", kCameraFile, "--array-rotation-rad", rotation, "-o",
+                                   (dir / "white.tif").string()},
           std::vector<std::string>{"calibrate", "--camera", kCameraFile, "--calibration-image",
                                    (dir / "calibration.tif").string(), "--white", (dir / "white.tif").string(), "-o",
                                    (dir / "rig.h5").string()}}) {
@@ -87,8 +87,8 @@ const fs::path& calibrated_run() {
 void expect_reprocessed_as_live(const fs::path& run, std::string& out) {
   const msg::RunManifest m = read_manifest(run);
   EXPECT_EQ(m.pairs_size(), 3);
-  const int status = testing_support::run_command(
-      {testing_support::binary("plenopiv"), "process", "--run", run.string()}, out, 300s);
+  const int status =
+      testing_support::run_command({testing_support::binary("plenopiv"), "process", "--run", run.string()}, out, 300s);
   EXPECT_EQ(status, 0) << out;
   EXPECT_NE(out.find("process: 100%"), std::string::npos) << out;
 
@@ -149,7 +149,9 @@ TEST(Reprocess, EveryPairComesBackAsTheLivePathRecordedIt) {
   std::string out;
   expect_reprocessed_as_live(run, out);
   const auto [dx, dy, valid] = mean_live_displacement(run);
-  std::printf("nominal live run: %zu valid vectors with the nominal dt, mean dx %.4f mm (truth 0.25), mean dy %.4f mm\n", valid, dx, dy);
+  std::printf(
+      "nominal live run: %zu valid vectors with the nominal dt, mean dx %.4f mm (truth 0.25), mean dy %.4f mm\n", valid,
+      dx, dy);
 }
 
 TEST(Reprocess, ACalibratedRunKeepsItsCalibrationAndReprocessesWithIt) {
@@ -176,8 +178,10 @@ TEST(Reprocess, ACalibratedRunKeepsItsCalibrationAndReprocessesWithIt) {
   // gives the same range). That the live path used the calibration is shown by the bit-for-bit
   // reprocess with the run's calibration.h5 above: the nominal lattice gives other numbers.
   const auto [dx, dy, valid] = mean_live_displacement(run);
-  std::printf("calibrated live run: %zu valid vectors with the nominal dt, mean dx %.4f mm (truth 0.25), "
-              "mean dy %.4f mm\n", valid, dx, dy);
+  std::printf(
+      "calibrated live run: %zu valid vectors with the nominal dt, mean dx %.4f mm (truth 0.25), "
+      "mean dy %.4f mm\n",
+      valid, dx, dy);
   if (valid > 0) {  // else every pulse separation was off (host load): nothing to compare
     EXPECT_NEAR(dx, 0.25, 0.1);
     EXPECT_NEAR(dy, 0.0, 0.03);
@@ -222,8 +226,8 @@ TEST(Reprocess, ParallelPairsAndShardsGiveTheBitsOfOneLocalPass) {
   plenopiv_ok({"process", "--run", run.string(), "-o", (base / "local").string()});
   plenopiv_ok({"process", "--run", run.string(), "-o", (base / "jobs").string(), "--jobs", "2"});
   for (const char* shard : {"1/2", "0/2"}) {
-    const std::string out = plenopiv_ok({"process", "--run", run.string(), "-o", (base / "shards").string(),
-                                         "--shard", shard});
+    const std::string out =
+        plenopiv_ok({"process", "--run", run.string(), "-o", (base / "shards").string(), "--shard", shard});
     EXPECT_EQ(out.find("statistics.h5 and series.pvd written"), std::string::npos) << "a shard merged: " << out;
   }
   EXPECT_FALSE(fs::exists(base / "shards" / "statistics.h5"));
@@ -250,7 +254,7 @@ TEST(Reprocess, ParallelPairsAndShardsGiveTheBitsOfOneLocalPass) {
   // A merge with a pair missing says so, naming the first.
   fs::remove(base / "shards" / "pair-000001.h5");
   std::vector<std::string> argv{testing_support::binary("plenopiv"), "process", "--run", run.string(), "-o",
-                                (base / "shards").string(), "--merge"};
+                                (base / "shards").string(),          "--merge"};
   EXPECT_EQ(testing_support::run_command(argv, out), 2) << out;
   EXPECT_NE(out.find("1 of 3 pairs have no up-to-date result (first: pair 1)"), std::string::npos) << out;
 }
@@ -280,9 +284,9 @@ TEST(Reprocess, ResumeRedoesOnlyMissingOrStalePairs) {
   // Killed after its first pair, then resumed: only the rest is processed.
   const fs::path killed = out_dir.parent_path() / "killed";
   fs::remove_all(killed);
-  testing_support::ChildProcess job({testing_support::binary("plenopiv"), "process", "--run", run.string(), "-o",
-                                     killed.string()},
-                                    out_dir.parent_path() / "killed.log");
+  testing_support::ChildProcess job(
+      {testing_support::binary("plenopiv"), "process", "--run", run.string(), "-o", killed.string()},
+      out_dir.parent_path() / "killed.log");
   for (int i = 0; i < 3000 && !fs::exists(killed / "pair-000000.vti"); ++i) std::this_thread::sleep_for(10ms);
   job.signal(SIGKILL);
   ASSERT_TRUE(job.wait(10s).has_value());
@@ -332,9 +336,15 @@ TEST(Reprocess, OnePairFromARunFolderSaysItsMeasuredDtIsNotUsed) {
   const msg::ManifestPair& p = m.pairs(0);
   ASSERT_GT(p.measured_dt_s(), 0);
   const fs::path out_file = testing_support::temp_dir("reprocess") / "single.h5";
-  const std::vector<std::string> single{"process", kCameraFile, (run / p.frame_a()).string(),
-                                        (run / p.frame_b()).string(), "--config", (run / "process.yaml").string(),
-                                        "--nominal", "-o", out_file.string()};
+  const std::vector<std::string> single{"process",
+                                        kCameraFile,
+                                        (run / p.frame_a()).string(),
+                                        (run / p.frame_b()).string(),
+                                        "--config",
+                                        (run / "process.yaml").string(),
+                                        "--nominal",
+                                        "-o",
+                                        out_file.string()};
   std::string out = plenopiv_ok(single);
   EXPECT_NE(out.find("warning: " + (run / p.frame_a()).string() + " is pair 0 of run"), std::string::npos) << out;
   EXPECT_DOUBLE_EQ(io::read_vector_field_h5(out_file).dt_s, 0.001);  // the nominal dt
@@ -403,31 +413,37 @@ void expect_refused(const std::string& label, const std::function<void(const fs:
   fs::remove_all(copy / "reprocessed");
   damage(copy);
   std::string out;
-  const int status = testing_support::run_command(
-      {testing_support::binary("plenopiv"), "process", "--run", copy.string()}, out, 120s);
+  const int status =
+      testing_support::run_command({testing_support::binary("plenopiv"), "process", "--run", copy.string()}, out, 120s);
   EXPECT_NE(status, 0) << out;
   EXPECT_NE(out.find(culprit), std::string::npos) << "expected '" << culprit << "' in:\n" << out;
   EXPECT_FALSE(fs::exists(copy / "reprocessed")) << label;
 }
 
 TEST(Reprocess, ADamagedFolderIsRefusedNamingWhatIsMissing) {
-  expect_refused("camera", [](const fs::path& d) { fs::remove(d / "camera.yaml"); }, "camera_file");
-  expect_refused("settings", [](const fs::path& d) { fs::remove(d / "process.yaml"); }, "process.yaml is missing");
-  expect_refused("frame", [](const fs::path& d) { fs::remove(d / "frames/pair-000001-B.tif"); },
-                 "pairs[1].frame_b");
-  expect_refused("manifest", [](const fs::path& d) { fs::remove(d / "manifest.json"); }, "manifest.json: missing");
-  expect_refused("json", [](const fs::path& d) { std::ofstream(d / "manifest.json") << "{\"pairs\": 3"; },
-                 "not a run manifest");
-  expect_refused("key", [](const fs::path& d) {
-    std::ifstream in(d / "manifest.json");
-    std::stringstream text;
-    text << in.rdbuf();
-    std::string s = text.str();
-    const auto at = s.find("\"process_file\": \"process.yaml\"");
-    ASSERT_NE(at, std::string::npos);
-    s.replace(at, std::string("\"process_file\": \"process.yaml\"").size(), "\"process_file\": \"\"");
-    std::ofstream(d / "manifest.json") << s;
-  }, "process_file is empty");
+  expect_refused(
+      "camera", [](const fs::path& d) { fs::remove(d / "camera.yaml"); }, "camera_file");
+  expect_refused(
+      "settings", [](const fs::path& d) { fs::remove(d / "process.yaml"); }, "process.yaml is missing");
+  expect_refused(
+      "frame", [](const fs::path& d) { fs::remove(d / "frames/pair-000001-B.tif"); }, "pairs[1].frame_b");
+  expect_refused(
+      "manifest", [](const fs::path& d) { fs::remove(d / "manifest.json"); }, "manifest.json: missing");
+  expect_refused(
+      "json", [](const fs::path& d) { std::ofstream(d / "manifest.json") << "{\"pairs\": 3"; }, "not a run manifest");
+  expect_refused(
+      "key",
+      [](const fs::path& d) {
+        std::ifstream in(d / "manifest.json");
+        std::stringstream text;
+        text << in.rdbuf();
+        std::string s = text.str();
+        const auto at = s.find("\"process_file\": \"process.yaml\"");
+        ASSERT_NE(at, std::string::npos);
+        s.replace(at, std::string("\"process_file\": \"process.yaml\"").size(), "\"process_file\": \"\"");
+        std::ofstream(d / "manifest.json") << s;
+      },
+      "process_file is empty");
   // A manifest edited to point outside the folder, or to list a frame twice; a frame cut short.
   const auto edit_manifest = [](const fs::path& d, const std::string& from, const std::string& to) {
     std::ifstream in(d / "manifest.json");
@@ -439,28 +455,37 @@ TEST(Reprocess, ADamagedFolderIsRefusedNamingWhatIsMissing) {
     s.replace(at, from.size(), to);
     std::ofstream(d / "manifest.json") << s;
   };
-  expect_refused("outside", [&](const fs::path& d) {
-    edit_manifest(d, "\"frames/pair-000001-A.tif\"", "\"../../../../etc/passwd\"");
-  }, "is not a path inside the run folder");
-  expect_refused("absolute", [&](const fs::path& d) {
-    edit_manifest(d, "\"frames/pair-000001-A.tif\"", "\"/etc/passwd\"");
-  }, "is not a path inside the run folder");
-  expect_refused("twice", [&](const fs::path& d) {
-    edit_manifest(d, "\"frames/pair-000002-A.tif\"", "\"frames/pair-000001-A.tif\"");
-  }, "frames/pair-000001-A.tif is listed twice");
+  expect_refused(
+      "outside",
+      [&](const fs::path& d) { edit_manifest(d, "\"frames/pair-000001-A.tif\"", "\"../../../../etc/passwd\""); },
+      "is not a path inside the run folder");
+  expect_refused(
+      "absolute", [&](const fs::path& d) { edit_manifest(d, "\"frames/pair-000001-A.tif\"", "\"/etc/passwd\""); },
+      "is not a path inside the run folder");
+  expect_refused(
+      "twice",
+      [&](const fs::path& d) { edit_manifest(d, "\"frames/pair-000002-A.tif\"", "\"frames/pair-000001-A.tif\""); },
+      "frames/pair-000001-A.tif is listed twice");
   // The last pair's frame truncated: found before the first pair is processed (nothing written).
-  expect_refused("truncated", [](const fs::path& d) {
-    const fs::path frame = d / "frames/pair-000002-B.tif";
-    fs::resize_file(frame, fs::file_size(frame) / 2);
-  }, "frames/pair-000002-B.tif: ");
+  expect_refused(
+      "truncated",
+      [](const fs::path& d) {
+        const fs::path frame = d / "frames/pair-000002-B.tif";
+        fs::resize_file(frame, fs::file_size(frame) / 2);
+      },
+      "frames/pair-000002-B.tif: ");
   // The calibrated run without its calibration, or with a changed one.
-  expect_refused("calibration", [](const fs::path& d) { fs::remove(d / "calibration.h5"); },
-                 "calibration_file: " , calibrated_run());
-  expect_refused("calibration-changed", [](const fs::path& d) {
-    std::fstream f(d / "calibration.h5", std::ios::in | std::ios::out | std::ios::binary);
-    f.seekp(-1, std::ios::end);
-    f.put('\x5a');
-  }, "the copy was changed or damaged", calibrated_run());
+  expect_refused(
+      "calibration", [](const fs::path& d) { fs::remove(d / "calibration.h5"); },
+      "calibration_file: ", calibrated_run());
+  expect_refused(
+      "calibration-changed",
+      [](const fs::path& d) {
+        std::fstream f(d / "calibration.h5", std::ios::in | std::ios::out | std::ios::binary);
+        f.seekp(-1, std::ios::end);
+        f.put('\x5a');
+      },
+      "the copy was changed or damaged", calibrated_run());
 }
 
 }  // namespace

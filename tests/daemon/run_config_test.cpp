@@ -113,18 +113,15 @@ TEST(RunConfig, UnknownKeyIsNamed) {
 }
 
 TEST(RunConfig, UnknownVolumeKeyIsNamedWithItsPath) {
-  const std::string e =
-      error_of("volume: {x_mm: [-1, 1], y_mm: [-1, 1], z_mm: [0, 1], voxel: 0.5}\n");
+  const std::string e = error_of("volume: {x_mm: [-1, 1], y_mm: [-1, 1], z_mm: [0, 1], voxel: 0.5}\n");
   EXPECT_NE(e.find("volume.voxel: unknown key"), std::string::npos) << e;
 }
 
 TEST(RunConfig, BadValuesAreNamed) {
   EXPECT_NE(error_of(kVolume + "pairs: -1\n").find("pairs: must be >= 0"), std::string::npos);
   EXPECT_NE(error_of(kVolume + "rate_hz: 0\n").find("rate_hz"), std::string::npos);
-  EXPECT_NE(error_of(kVolume + "reconstruction: 3\n").find("reconstruction: expected a mapping"),
-            std::string::npos);
-  EXPECT_NE(error_of(kVolume + "max_pairs_in_flight: 0\n").find("max_pairs_in_flight"),
-            std::string::npos);
+  EXPECT_NE(error_of(kVolume + "reconstruction: 3\n").find("reconstruction: expected a mapping"), std::string::npos);
+  EXPECT_NE(error_of(kVolume + "max_pairs_in_flight: 0\n").find("max_pairs_in_flight"), std::string::npos);
   EXPECT_NE(error_of("dt_s: 0.001\nvolume: {x_mm: [1, -1], y_mm: [-1, 1], z_mm: [0, 1], voxel_mm: 1}\n")
                 .find("x extent needs min < max"),
             std::string::npos);
@@ -132,8 +129,9 @@ TEST(RunConfig, BadValuesAreNamed) {
             std::string::npos);
   EXPECT_NE(error_of("dt_s: 0.001\npairs: 3\n").find("volume"), std::string::npos);
   // MART's ranges are recon's (one owner): the same bound whether run.yaml or process.yaml says it.
-  EXPECT_NE(error_of(kVolume + "reconstruction: {iterations: 20000}\n").find("reconstruction.iterations: must be 1 to 10000"),
-            std::string::npos)
+  EXPECT_NE(
+      error_of(kVolume + "reconstruction: {iterations: 20000}\n").find("reconstruction.iterations: must be 1 to 10000"),
+      std::string::npos)
       << error_of(kVolume + "reconstruction: {iterations: 20000}\n");
   EXPECT_NE(error_of("pairs: [3\n").find("run.yaml"), std::string::npos);  // YAML syntax
 }
@@ -147,8 +145,9 @@ TEST(RunConfig, ProcessYamlGivesCoreProcessTheSameSpec) {
         std::string("volume: {x_mm: [-0.3, 0.71], y_mm: [0.1, 1.3], z_mm: [-1.7, 0.2], voxel_mm: 0.1, "
                     "depth_guard_mm: 0.25}\n")}) {
     const RunConfig c = parse_run_config(
-        "dt_s: 0.0004\n" + volume + "reconstruction: {iterations: 2, mu: 0.7}\n"
-        "correlation: {passes: [{window: 4, overlap_percent: 50}]}\nlive: {reconstruction: {iterations: 1}}\n",
+        "dt_s: 0.0004\n" + volume +
+            "reconstruction: {iterations: 2, mu: 0.7}\n"
+            "correlation: {passes: [{window: 4, overlap_percent: 50}]}\nlive: {reconstruction: {iterations: 1}}\n",
         "run.yaml");
     const process::ProcessSpec s =
         process::process_spec_from(YamlMap(load_yaml_text(c.process_yaml(), "process.yaml"), "process.yaml"));

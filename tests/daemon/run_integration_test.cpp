@@ -8,9 +8,9 @@
 #include <unistd.h>
 
 #include <csignal>
+#include <fstream>
 #include <iomanip>
 #include <set>
-#include <fstream>
 #include <sstream>
 #include <thread>
 
@@ -53,9 +53,8 @@ class DaemonRuns : public ::testing::Test {
     control_ = testing_support::ipc_endpoint("control");
     publish_ = "tcp://127.0.0.1:" + std::to_string(testing_support::free_tcp_port());
     daemon_ = std::make_unique<ChildProcess>(
-        std::vector<std::string>{binary("plenopivd-testcam"), "--control", control_, "--publish",
-                                 publish_, "--camera", "test://", "--data-dir", (scratch_ / "data").string(),
-                                 "--simulation", "--camera-file",
+        std::vector<std::string>{binary("plenopivd-testcam"), "--control", control_, "--publish", publish_, "--camera",
+                                 "test://", "--data-dir", (scratch_ / "data").string(), "--simulation", "--camera-file",
                                  std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml"},
         scratch_ / "plenopivd.log");
     for (int i = 0; i < 100; ++i) {
@@ -107,23 +106,19 @@ class DaemonRuns : public ::testing::Test {
 TEST_F(DaemonRuns, RunOfNPairsReachesSubscribersAndTheRunFolder) {
   constexpr int n = 6;
   // A C++ subscriber: the thin client's `watch`, started before the run (PUB/SUB joins late).
-  ChildProcess watcher({binary("plenopiv"), "watch", "--publish", publish_, "--count",
-                        std::to_string(n), "--wait", "20"},
-                       scratch_ / "watch.log");
+  ChildProcess watcher(
+      {binary("plenopiv"), "watch", "--publish", publish_, "--count", std::to_string(n), "--wait", "20"},
+      scratch_ / "watch.log");
   // A Python subscriber (Debian's python3-zmq and python3-protobuf), saving to HDF5 and plotting.
   const fs::path h5 = scratch_ / "fields.h5", png = scratch_ / "view.png";
-  ChildProcess python({"/usr/bin/python3",
-                       std::string(PLENOPIV_SOURCE_DIR) + "/clients/python/plenopiv_subscribe.py",
-                       "--publish", publish_, "--count", std::to_string(n), "--wait", "20",
-                       "--save", h5.string(), "--png", png.string()},
-                      scratch_ / "python.log");
+  ChildProcess python(
+      {"/usr/bin/python3", std::string(PLENOPIV_SOURCE_DIR) + "/clients/python/plenopiv_subscribe.py", "--publish",
+       publish_, "--count", std::to_string(n), "--wait", "20", "--save", h5.string(), "--png", png.string()},
+      scratch_ / "python.log");
   std::this_thread::sleep_for(1500ms);  // both subscriptions reach the publisher
 
   std::string out;
-  ASSERT_EQ(client({"run", "start", "--config", write_config(kRun).string(), "--pairs",
-                    std::to_string(n)},
-                   out),
-            0)
+  ASSERT_EQ(client({"run", "start", "--config", write_config(kRun).string(), "--pairs", std::to_string(n)}, out), 0)
       << out;
   EXPECT_NE(out.find("started"), std::string::npos) << out;
 
@@ -134,8 +129,7 @@ TEST_F(DaemonRuns, RunOfNPairsReachesSubscribersAndTheRunFolder) {
   const std::string lines = watcher.output();
   for (int i = 0; i < n; ++i) {
     std::ostringstream expect;
-    expect << "pair " << std::setw(6) << i << "  mean " << std::fixed << std::setprecision(4)
-           << double(i) << " m/s";
+    expect << "pair " << std::setw(6) << i << "  mean " << std::fixed << std::setprecision(4) << double(i) << " m/s";
     EXPECT_NE(lines.find(expect.str()), std::string::npos) << expect.str() << "\n" << lines;
   }
   EXPECT_NE(lines.find("valid 75.0 %"), std::string::npos) << lines;
@@ -145,19 +139,18 @@ TEST_F(DaemonRuns, RunOfNPairsReachesSubscribersAndTheRunFolder) {
   const auto py = python.wait(30s);
   ASSERT_TRUE(py.has_value()) << "the Python subscriber did not see " << n << " fields";
   EXPECT_EQ(*py, 0) << python.output();
-  EXPECT_NE(python.output().find("pair      5  mean 5.0000 m/s"), std::string::npos)
-      << python.output();
+  EXPECT_NE(python.output().find("pair      5  mean 5.0000 m/s"), std::string::npos) << python.output();
   EXPECT_TRUE(fs::exists(png));
   // The saved arrays hold the decoded values: u = pair index at every node.
   std::string saved;
-  ASSERT_EQ(testing_support::run_command(
-                {"/usr/bin/python3", "-c",
-                 "import h5py, sys; f = h5py.File(sys.argv[1]); "
-                 "print(len(f), [float(f['pair-%06d/u' % i][1, 2, 3]) for i in range(len(f))], "
-                 "f['pair-000002/u'].shape)",
-                 h5.string()},
-                saved),
-            0)
+  ASSERT_EQ(
+      testing_support::run_command({"/usr/bin/python3", "-c",
+                                    "import h5py, sys; f = h5py.File(sys.argv[1]); "
+                                    "print(len(f), [float(f['pair-%06d/u' % i][1, 2, 3]) for i in range(len(f))], "
+                                    "f['pair-000002/u'].shape)",
+                                    h5.string()},
+                                   saved),
+      0)
       << saved;
   EXPECT_NE(saved.find("6 [0.0, 1.0, 2.0, 3.0, 4.0, 5.0] (2, 3, 4)"), std::string::npos) << saved;
 
@@ -216,11 +209,11 @@ TEST_F(DaemonRuns, IllegalAndInvalidRequestsAreRefusedAndTheDaemonServesOn) {
 // on: a new run can start.
 TEST_F(DaemonRuns, ACameraThatFailsFailsTheRunNotTheDaemon) {
   std::string out;
-  ASSERT_EQ(client({"run", "start", "--config",
-                    write_config(kRun + "camera_uri: \"sim://?rays=200&ppm=0.02&fail_after=1\"\n").string(),
-                    "--pairs", "5"},
-                   out),
-            0)
+  ASSERT_EQ(
+      client({"run", "start", "--config",
+              write_config(kRun + "camera_uri: \"sim://?rays=200&ppm=0.02&fail_after=1\"\n").string(), "--pairs", "5"},
+             out),
+      0)
       << out;
   for (int i = 0; i < 200; ++i) {
     const auto s = status_or_null();
@@ -360,8 +353,8 @@ TEST(DaemonNotify, ReadyStatusAndAWatchdogThatStopsWhenTheRunStalls) {
   const std::string publish = "tcp://127.0.0.1:" + std::to_string(testing_support::free_tcp_port());
   ::setenv("NOTIFY_SOCKET", (scratch / "notify.sock").c_str(), 1);
   ::setenv("WATCHDOG_USEC", "1000000", 1);  // 1 s: pings needed every 0.5 s
-  ChildProcess daemon({binary("plenopivd-testcam"), "--control", control, "--publish", publish,
-                       "--camera", "test://", "--data-dir", (scratch / "data").string()},
+  ChildProcess daemon({binary("plenopivd-testcam"), "--control", control, "--publish", publish, "--camera", "test://",
+                       "--data-dir", (scratch / "data").string()},
                       scratch / "plenopivd.log");
   ::unsetenv("NOTIFY_SOCKET");
   ::unsetenv("WATCHDOG_USEC");
@@ -384,9 +377,8 @@ TEST(DaemonNotify, ReadyStatusAndAWatchdogThatStopsWhenTheRunStalls) {
   const fs::path config = scratch / "stalled.yaml";
   std::ofstream(config) << kRun << "camera_uri: test://?lose=" << lost << "\n";
   std::string out;
-  ASSERT_EQ(testing_support::run_command({binary("plenopiv"), "--endpoint", control, "run", "start",
-                                          "--config", config.string()},
-                                         out),
+  ASSERT_EQ(testing_support::run_command(
+                {binary("plenopiv"), "--endpoint", control, "run", "start", "--config", config.string()}, out),
             0)
       << out;
   const auto started = std::chrono::steady_clock::now();
@@ -405,10 +397,7 @@ TEST(DaemonNotify, ReadyStatusAndAWatchdogThatStopsWhenTheRunStalls) {
   EXPECT_TRUE(saw_acquiring);
   EXPECT_EQ(late_pings, 0) << "the watchdog was fed although no pair arrived";
 
-  ASSERT_EQ(testing_support::run_command({binary("plenopiv"), "--endpoint", control, "run", "stop"},
-                                         out),
-            0)
-      << out;
+  ASSERT_EQ(testing_support::run_command({binary("plenopiv"), "--endpoint", control, "run", "stop"}, out), 0) << out;
   daemon.signal(SIGTERM);
   ASSERT_TRUE(daemon.wait(10s).has_value());
   bool stopping = false;

@@ -58,17 +58,21 @@ TEST(RunState, StopWhileArmingLeadsToDraining) {
 
 TEST(RunState, StopWhenIdleIsRefused) {
   RunStateMachine m;
-  expect_refused(m, [&] { m.stop(); }, "no run to stop");
+  expect_refused(
+      m, [&] { m.stop(); }, "no run to stop");
 }
 
 TEST(RunState, StartWhenRunningIsRefused) {
   RunStateMachine m;
   m.start("r1");
-  expect_refused(m, [&] { m.start("r2"); }, "cannot start a run");
+  expect_refused(
+      m, [&] { m.start("r2"); }, "cannot start a run");
   m.acquiring();
-  expect_refused(m, [&] { m.start("r2"); }, "cannot start a run");
+  expect_refused(
+      m, [&] { m.start("r2"); }, "cannot start a run");
   m.stop();
-  expect_refused(m, [&] { m.start("r2"); }, "cannot start a run");
+  expect_refused(
+      m, [&] { m.start("r2"); }, "cannot start a run");
   EXPECT_EQ(m.run_id(), "r1");
 }
 
@@ -77,18 +81,22 @@ TEST(RunState, StopWhileDrainingIsRefused) {
   m.start("r1");
   m.acquiring();
   m.stop();
-  expect_refused(m, [&] { m.stop(); }, "already stopping");
+  expect_refused(
+      m, [&] { m.stop(); }, "already stopping");
 }
 
 TEST(RunState, CalibrationDuringARunIsRefused) {
   RunStateMachine m;
   EXPECT_NO_THROW(m.check_calibration_allowed());
   m.start("r1");
-  expect_refused(m, [&] { m.check_calibration_allowed(); }, "calibration");
+  expect_refused(
+      m, [&] { m.check_calibration_allowed(); }, "calibration");
   m.acquiring();
-  expect_refused(m, [&] { m.check_calibration_allowed(); }, "calibration");
+  expect_refused(
+      m, [&] { m.check_calibration_allowed(); }, "calibration");
   m.stop();
-  expect_refused(m, [&] { m.check_calibration_allowed(); }, "calibration");
+  expect_refused(
+      m, [&] { m.check_calibration_allowed(); }, "calibration");
 }
 
 TEST(RunState, ErrorIsReportedAndLeftByStopOrANewStart) {

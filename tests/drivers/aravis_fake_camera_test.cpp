@@ -35,8 +35,7 @@ class FakeGvCamera : public ::testing::Test {
     }
   }
   void start_fake(int lost_per_thousand = 0) {
-    std::vector<std::string> argv{kFakeCamera, "-i", "127.0.0.1", "-s",
-                                  "PLT" + std::to_string(::getpid())};
+    std::vector<std::string> argv{kFakeCamera, "-i", "127.0.0.1", "-s", "PLT" + std::to_string(::getpid())};
     if (lost_per_thousand > 0) {
       argv.push_back("-r");
       argv.push_back(std::to_string(lost_per_thousand));
@@ -79,8 +78,7 @@ TEST_F(FakeGvCamera, ReportsInfoAndRefusesAProfileTheCameraCannotDo) {
     camera->configure(s);
     FAIL() << "the fake camera has no Mono12";
   } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("pixel_format: Mono12 is not offered"), std::string::npos)
-        << e.what();
+    EXPECT_NE(std::string(e.what()).find("pixel_format: Mono12 is not offered"), std::string::npos) << e.what();
   }
 }
 
@@ -89,9 +87,7 @@ TEST_F(FakeGvCamera, ADeviceThatIsNotThereIsAClearError) {
     open_camera("aravis://No-Such-Camera-42?profile=aravis-fake");
     FAIL();
   } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("camera 'No-Such-Camera-42' not found"),
-              std::string::npos)
-        << e.what();
+    EXPECT_NE(std::string(e.what()).find("camera 'No-Such-Camera-42' not found"), std::string::npos) << e.what();
   }
   EXPECT_THROW(open_camera("aravis://127.0.0.1?profile=aravis-fake&packet_size=big"), InputError);
   EXPECT_THROW(open_camera("aravis://?profile=aravis-fake"), InputError);
@@ -128,8 +124,7 @@ CameraCounters run_and_account(Camera& camera, int n, std::vector<FramePair>& pa
   // The fake camera makes a frame per trigger: every one arrived or is counted lost. Frames lost
   // after the last one that arrived cannot be seen by ids, hence the range.
   EXPECT_LE(c.frames_received + c.frames_lost, std::uint64_t(2 * n));
-  EXPECT_GE(c.frames_received + c.frames_lost + 2, std::uint64_t(2 * n))
-      << testing_support::describe(c);
+  EXPECT_GE(c.frames_received + c.frames_lost + 2, std::uint64_t(2 * n)) << testing_support::describe(c);
   return c;
 }
 

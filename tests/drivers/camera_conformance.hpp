@@ -13,10 +13,9 @@ namespace plenopiv::testing_support {
 
 // Counters in one line, for failure messages.
 inline std::string describe(const drivers::CameraCounters& c) {
-  return "received " + std::to_string(c.frames_received) + ", incomplete " +
-         std::to_string(c.frames_incomplete) + ", lost " + std::to_string(c.frames_lost) +
-         ", discarded " + std::to_string(c.frames_discarded) + ", pairs delivered " +
-         std::to_string(c.pairs_delivered) + ", pairs discarded " +
+  return "received " + std::to_string(c.frames_received) + ", incomplete " + std::to_string(c.frames_incomplete) +
+         ", lost " + std::to_string(c.frames_lost) + ", discarded " + std::to_string(c.frames_discarded) +
+         ", pairs delivered " + std::to_string(c.pairs_delivered) + ", pairs discarded " +
          std::to_string(c.pairs_discarded) + ", resent packets " + std::to_string(c.packets_resent);
 }
 

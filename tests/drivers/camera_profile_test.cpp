@@ -85,8 +85,8 @@ TEST(CameraProfile, MissingFeaturesAndValuesAreNamed) {
 }
 
 TEST(CameraProfile, BadFilesNameTheKey) {
-  const auto file = std::filesystem::temp_directory_path() /
-                    ("plenopiv-bad-profile-" + std::to_string(::getpid()) + ".yaml");
+  const auto file =
+      std::filesystem::temp_directory_path() / ("plenopiv-bad-profile-" + std::to_string(::getpid()) + ".yaml");
   std::ofstream(file) << "name: bad\nmode: triple\nfeatures: []\n";
   try {
     load_camera_profile(file);

@@ -70,8 +70,7 @@ TEST(Camera, BadSettingsNameTheSetting) {
     cam.configure(s);
     FAIL();
   } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("roi 60,0 10x10 does not fit the 64x48 sensor"),
-              std::string::npos)
+    EXPECT_NE(std::string(e.what()).find("roi 60,0 10x10 does not fit the 64x48 sensor"), std::string::npos)
         << e.what();
   }
   s = {};

@@ -47,8 +47,7 @@ TEST(DeviceUri, TypedParametersAndUnknownKeys) {
     u.reject_unknown({"camera", "rate"});
     FAIL();
   } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("unknown parameter 'typo' (known: camera, rate)"),
-              std::string::npos)
+    EXPECT_NE(std::string(e.what()).find("unknown parameter 'typo' (known: camera, rate)"), std::string::npos)
         << e.what();
   }
 }

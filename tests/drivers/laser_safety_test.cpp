@@ -51,18 +51,16 @@ TEST(LaserSafety, RatesThatOverflowNanosecondsOrAreNotNumbersAreRefused) {
   // Every other time of the request and every limit is a number too.
   const double nan = std::nan("");
   for (double TimingRequest::*field :
-       {&TimingRequest::pulse_separation_s, &TimingRequest::flashlamp_to_qswitch_s,
-        &TimingRequest::camera_pretrigger_s, &TimingRequest::exposure_a_s,
-        &TimingRequest::flashlamp_pulse_width_s, &TimingRequest::qswitch_pulse_width_s,
+       {&TimingRequest::pulse_separation_s, &TimingRequest::flashlamp_to_qswitch_s, &TimingRequest::camera_pretrigger_s,
+        &TimingRequest::exposure_a_s, &TimingRequest::flashlamp_pulse_width_s, &TimingRequest::qswitch_pulse_width_s,
         &TimingRequest::camera_pulse_width_s}) {
     TimingRequest bad;
     bad.*field = nan;
     EXPECT_NE(refusal(bad), "") << "a NaN request time was accepted";
   }
-  for (double TimingLimits::*field :
-       {&TimingLimits::laser_max_rate_hz, &TimingLimits::min_flashlamp_to_qswitch_s,
-        &TimingLimits::max_flashlamp_to_qswitch_s, &TimingLimits::interline_transfer_s,
-        &TimingLimits::frame_b_s, &TimingLimits::camera_max_pair_rate_hz}) {
+  for (double TimingLimits::*field : {&TimingLimits::laser_max_rate_hz, &TimingLimits::min_flashlamp_to_qswitch_s,
+                                      &TimingLimits::max_flashlamp_to_qswitch_s, &TimingLimits::interline_transfer_s,
+                                      &TimingLimits::frame_b_s, &TimingLimits::camera_max_pair_rate_hz}) {
     TimingLimits bad;
     bad.*field = nan;
     EXPECT_NE(refusal({}, bad), "") << "a NaN limit was accepted";
@@ -157,7 +155,7 @@ TEST(LaserSafety, NoCavityFiresFasterThanItsLimitWhateverThePlaybackDelays) {
     std::vector<std::int64_t> delays(40 * schedule.edges.size());
     for (auto& d : delays) {
       const double u = unit(random);
-      d = model == 0 ? 0
+      d = model == 0   ? 0
           : model == 1 ? std::int64_t(u * double(period))
                        : (u < 0.05 ? std::int64_t(3 * double(period) * unit(random)) : 0);
     }
@@ -165,9 +163,8 @@ TEST(LaserSafety, NoCavityFiresFasterThanItsLimitWhateverThePlaybackDelays) {
     auto* sim = dynamic_cast<SimTrigger*>(t.get());
     ASSERT_NE(sim, nullptr);
     const std::size_t per_shot = schedule.edges.size();
-    sim->set_virtual_delays([&](std::uint64_t shot, std::size_t edge) {
-      return delays[(shot * per_shot + edge) % delays.size()];
-    });
+    sim->set_virtual_delays(
+        [&](std::uint64_t shot, std::size_t edge) { return delays[(shot * per_shot + edge) % delays.size()]; });
     t->load(schedule);
     const std::uint64_t shots = 40;
     t->start(shots);

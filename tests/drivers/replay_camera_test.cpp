@@ -48,10 +48,8 @@ fs::path tiff_folder(const std::string& name, int pairs, int width = kSide) {
   fs::remove_all(dir);
   fs::create_directories(dir);
   for (int k = 0; k < pairs; ++k) {
-    io::write_tiff(dir / ("pair-" + std::to_string(k) + "-A.tif"), frame_image(2 * k, width),
-                   false);
-    io::write_tiff(dir / ("pair-" + std::to_string(k) + "-B.tif"), frame_image(2 * k + 1, width),
-                   false);
+    io::write_tiff(dir / ("pair-" + std::to_string(k) + "-A.tif"), frame_image(2 * k, width), false);
+    io::write_tiff(dir / ("pair-" + std::to_string(k) + "-B.tif"), frame_image(2 * k + 1, width), false);
   }
   return dir;
 }
@@ -106,8 +104,7 @@ TEST(ReplayCamera, ATiffFolderIsReplayedBitForBitInNameOrder) {
       EXPECT_EQ(pairs[i].b.frame_id, pairs[i].a.frame_id + 1);
       EXPECT_EQ(pairs[i].b.device_timestamp_ns, pairs[i].a.device_timestamp_ns + 1000);
     }
-    std::printf("buffer_mb=%s: %s\n", buffer.c_str(),
-                testing_support::describe(camera->counters()).c_str());
+    std::printf("buffer_mb=%s: %s\n", buffer.c_str(), testing_support::describe(camera->counters()).c_str());
     camera->stop();
   }
 }
@@ -174,11 +171,9 @@ TEST(ReplayCamera, FreeRunningPlaysAtRateHz) {
     EXPECT_EQ(pairs[i].a.device_timestamp_ns - pairs[i - 1].a.device_timestamp_ns, 50'000'000u);
     EXPECT_EQ(pairs[i].trigger_index, pairs[i - 1].trigger_index + 1);
   }
-  const double host_s =
-      double(pairs.back().a.host_timestamp_ns - pairs.front().a.host_timestamp_ns) * 1e-9;
+  const double host_s = double(pairs.back().a.host_timestamp_ns - pairs.front().a.host_timestamp_ns) * 1e-9;
   const double rate = double(pairs.size() - 1) / host_s;
-  std::printf("free-running at rate_hz=20: %.2f Hz on the host clock over %zu pairs\n", rate,
-              pairs.size());
+  std::printf("free-running at rate_hz=20: %.2f Hz on the host clock over %zu pairs\n", rate, pairs.size());
   EXPECT_GT(rate, 10.0) << "measured " << rate << " Hz";
   EXPECT_LT(rate, 40.0) << "measured " << rate << " Hz";
   EXPECT_EQ(camera->counters().frames_lost, 0u);
@@ -216,8 +211,7 @@ TEST(ReplayCamera, TheEndOfARecordingWithoutLoopIsNamed) {
   EXPECT_FALSE(triggered->next_pair(500ms));
   const CameraStatus s = triggered->status();
   EXPECT_TRUE(s.failed);
-  EXPECT_NE(s.last_error.find("end of the recording: all 2 pairs played"), std::string::npos)
-      << s.last_error;
+  EXPECT_NE(s.last_error.find("end of the recording: all 2 pairs played"), std::string::npos) << s.last_error;
 
   // Free-running, the acquisition just ends after the last pair.
   auto free = open("replay://short?rate_hz=50");
@@ -240,8 +234,8 @@ std::string refusal(const std::string& uri, const fs::path& camera_file = kCamer
   return "(accepted)";
 }
 
-void expect_refused(const std::string& uri, const std::string& words,
-                    const fs::path& camera_file = kCamera, const fs::path& root = replay_root()) {
+void expect_refused(const std::string& uri, const std::string& words, const fs::path& camera_file = kCamera,
+                    const fs::path& root = replay_root()) {
   const std::string m = refusal(uri, camera_file, root);
   EXPECT_NE(m.find(uri), std::string::npos) << uri << ": " << m;
   EXPECT_NE(m.find(words), std::string::npos) << uri << ": " << m;
@@ -291,8 +285,7 @@ TEST(ReplayCamera, BadUrisFoldersAndFramesAreRefusedByName) {
 
   const fs::path corrupt = tiff_folder("corrupt", 1);
   fs::resize_file(corrupt / "pair-0-B.tif", 1000);
-  EXPECT_NE(refusal("replay://corrupt").find("pair-0-B.tif"), std::string::npos)
-      << refusal("replay://corrupt");
+  EXPECT_NE(refusal("replay://corrupt").find("pair-0-B.tif"), std::string::npos) << refusal("replay://corrupt");
 }
 
 TEST(ReplayCamera, IsNotInTheRegistryUntilRegistered) {

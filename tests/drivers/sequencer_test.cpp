@@ -66,8 +66,7 @@ TEST(Sequencer, RefusesDtShorterThanTheTransferTime) {
 TEST(Sequencer, RefusesPulse2OutsideFrameB) {
   TimingRequest r;
   r.pulse_separation_s = 10e-6;  // frame B starts 15 us after pulse 1
-  EXPECT_NE(refusal(r).find("pulse 2 falls before frame B starts (5 us early)"), std::string::npos)
-      << refusal(r);
+  EXPECT_NE(refusal(r).find("pulse 2 falls before frame B starts (5 us early)"), std::string::npos) << refusal(r);
   r.pulse_separation_s = 0.06;  // frame B lasts 50 ms
   EXPECT_NE(refusal(r).find("pulse 2 falls after frame B ends"), std::string::npos) << refusal(r);
 }
@@ -78,8 +77,7 @@ TEST(Sequencer, RefusesPulse1OutsideFrameAAndRatesAboveTheLasers) {
   EXPECT_NE(refusal(r).find("pulse 1 falls after frame A ends"), std::string::npos) << refusal(r);
   r = {};
   r.repetition_rate_hz = 20;
-  EXPECT_NE(refusal(r).find("repetition rate 20 Hz is above the laser's maximum 15 Hz"),
-            std::string::npos)
+  EXPECT_NE(refusal(r).find("repetition rate 20 Hz is above the laser's maximum 15 Hz"), std::string::npos)
       << refusal(r);
   TimingLimits l;
   l.laser_max_rate_hz = 100;
@@ -94,8 +92,7 @@ TEST(Sequencer, RefusesPulse1OutsideFrameAAndRatesAboveTheLasers) {
 TEST(Sequencer, RefusesAQSwitchDelayOutsideTheLasersWindowAndBadValues) {
   TimingRequest r;
   r.flashlamp_to_qswitch_s = 400e-6;
-  EXPECT_NE(refusal(r).find("flashlamp-to-Q-switch delay 400 us is outside the laser's window"),
-            std::string::npos)
+  EXPECT_NE(refusal(r).find("flashlamp-to-Q-switch delay 400 us is outside the laser's window"), std::string::npos)
       << refusal(r);
   r = {};
   r.pulse_separation_s = -1;

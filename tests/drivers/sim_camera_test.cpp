@@ -158,7 +158,8 @@ TEST(SimCamera, BadUrisAreNamed) {
 
 // Sizes that cannot be allocated are refused with the estimate, before the render thread tries.
 TEST(SimCamera, AFrameLargerThanTheMachinesMemoryIsRefusedWithTheEstimate) {
-  const auto file = std::filesystem::temp_directory_path() / ("plenopiv-huge-camera-" + std::to_string(::getpid()) + ".yaml");
+  const auto file =
+      std::filesystem::temp_directory_path() / ("plenopiv-huge-camera-" + std::to_string(::getpid()) + ".yaml");
   std::ofstream(file) << "sensor:    {width_px: 1000000000, height_px: 1000000000, pixel_pitch_mm: 0.0074}\n"
                          "microlens: {pitch_mm: 0.125, focal_length_mm: 0.5, count_x: 289, count_y: 193}\n"
                          "main_lens: {focal_length_mm: 50, f_number: 2, magnification: -1}\n";
@@ -178,8 +179,8 @@ TEST(SimCamera, AFrameLargerThanTheMachinesMemoryIsRefusedWithTheEstimate) {
 TEST(SimCamera, ARenderFaultFailsTheCameraWithItsReason) {
   auto camera = open("fail_after=1");
   run_triggers(*camera, 2);
-  EXPECT_TRUE(camera->next_pair(20s));   // trigger 0 renders
-  EXPECT_FALSE(camera->next_pair(2s));   // trigger 1 throws in the render thread
+  EXPECT_TRUE(camera->next_pair(20s));  // trigger 0 renders
+  EXPECT_FALSE(camera->next_pair(2s));  // trigger 1 throws in the render thread
   const CameraStatus s = camera->status();
   EXPECT_TRUE(s.failed);
   EXPECT_EQ(s.state, CameraState::Lost);

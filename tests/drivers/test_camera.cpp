@@ -21,9 +21,9 @@ std::uint16_t TestCamera::test_pixel(std::uint64_t frame_id, int x, int y) {
 void TestCamera::do_configure(const CameraSettings& settings) { settings_ = settings; }
 
 void TestCamera::fire() {
-  const auto host = std::uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(
-                                      std::chrono::system_clock::now().time_since_epoch())
-                                      .count());
+  const auto host = std::uint64_t(
+      std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
+          .count());
   const int w = settings_.roi.width > 0 ? settings_.roi.width : 64;
   const int h = settings_.roi.height > 0 ? settings_.roi.height : 48;
   for (int k = 0; k < 2; ++k) {
@@ -59,8 +59,7 @@ void register_test_camera(CameraRegistry& registry) {
     uri.reject_unknown({"lose", "incomplete", "input"});
     const std::string input = uri.string_or("input", "line");
     if (input != "line" && input != "none") uri.fail("input: line or none, got '" + input + "'");
-    TestCameraFaults faults{numbers(uri.string_or("lose", "")),
-                            numbers(uri.string_or("incomplete", ""))};
+    TestCameraFaults faults{numbers(uri.string_or("lose", "")), numbers(uri.string_or("incomplete", ""))};
     return std::make_unique<TestCamera>(uri.text(), faults, input == "line");
   });
 }

@@ -38,8 +38,7 @@ Schedule fast_schedule(double rate_hz = 10) {
 }
 
 TEST(TriggerRegistry, UnknownSchemesAndBadUrisAreClearErrors) {
-  EXPECT_NE(open_error("ttl://x").find("unknown trigger scheme 'ttl' (known: gpiod, sim)"),
-            std::string::npos)
+  EXPECT_NE(open_error("ttl://x").find("unknown trigger scheme 'ttl' (known: gpiod, sim)"), std::string::npos)
       << open_error("ttl://x");
   EXPECT_NE(open_error("sim://?clock=fast").find("clock must be real or virtual"), std::string::npos);
   EXPECT_NE(open_error("sim://?jitter=1").find("unknown parameter 'jitter'"), std::string::npos);
@@ -123,8 +122,8 @@ TEST(SimTrigger, RefusesSchedulesTighterThanItsJitterAndUnwiredLines) {
 }
 
 TEST(GpioLineMap, ParsesTheUriAndNamesEveryMistake) {
-  const GpioLineMap m = parse_gpio_line_map(DeviceUri::parse(
-      "gpiod://gpiochip0?flashlamp1=17&qswitch1=18&flashlamp2=19&qswitch2=20&camera=27&qsync=22"));
+  const GpioLineMap m = parse_gpio_line_map(
+      DeviceUri::parse("gpiod://gpiochip0?flashlamp1=17&qswitch1=18&flashlamp2=19&qswitch2=20&camera=27&qsync=22"));
   EXPECT_EQ(m.chip, "gpiochip0");
   EXPECT_EQ(m.outputs.at(TriggerLine::Camera), 27u);
   EXPECT_EQ(m.outputs.at(TriggerLine::QSwitch2), 20u);
@@ -138,13 +137,11 @@ TEST(GpioLineMap, ParsesTheUriAndNamesEveryMistake) {
     }
     return std::string();
   };
-  EXPECT_NE(error("gpiod://gpiochip0?camera=17&qswitch1=17").find(
-                "line 17 is given to both qswitch1 and camera"),
+  EXPECT_NE(error("gpiod://gpiochip0?camera=17&qswitch1=17").find("line 17 is given to both qswitch1 and camera"),
             std::string::npos);
   EXPECT_NE(error("gpiod://gpiochip0?camera=-1").find("not a line number"), std::string::npos);
   EXPECT_NE(error("gpiod://gpiochip0?camera=x").find("'camera' must be an integer"), std::string::npos);
-  EXPECT_NE(error("gpiod://gpiochip0?flashlamp=3").find("unknown parameter 'flashlamp'"),
-            std::string::npos);
+  EXPECT_NE(error("gpiod://gpiochip0?flashlamp=3").find("unknown parameter 'flashlamp'"), std::string::npos);
   EXPECT_NE(error("gpiod://gpiochip0?qsync=3").find("no output line given"), std::string::npos);
   EXPECT_NE(error("gpiod://?camera=3").find("needs a chip"), std::string::npos);
   // A chip, never another file: URIs may come from control requests.

@@ -34,9 +34,7 @@ TEST(UsbHotplug, UnsupportedHotplugIsAClearError) {
     FAIL();
   } catch (const DeviceError& e) {
     const std::string m = e.what();
-    EXPECT_NE(m.find("USB hotplug is not available (libusb built without hotplug)"),
-              std::string::npos)
-        << m;
+    EXPECT_NE(m.find("USB hotplug is not available (libusb built without hotplug)"), std::string::npos) << m;
     EXPECT_NE(m.find("plenopiv devices"), std::string::npos) << m;
   }
   EXPECT_NO_THROW(require_usb_hotplug(true, ""));
@@ -49,8 +47,7 @@ TEST(UsbHotplug, WatcherStartsOrExplainsWhyNot) {
     UsbHotplugWatcher watcher([&](const UsbDeviceEvent&) { ++events; });
     SUCCEED() << "hotplug watcher running; " << events << " USB3 Vision devices present";
   } catch (const DeviceError& e) {
-    EXPECT_NE(std::string(e.what()).find("USB hotplug is not available"), std::string::npos)
-        << e.what();
+    EXPECT_NE(std::string(e.what()).find("USB hotplug is not available"), std::string::npos) << e.what();
   }
 }
 

@@ -44,7 +44,9 @@ dt_s: 0.0001
 volume: {x_mm: [-2, 2], y_mm: [-2, 2], z_mm: [0, 4], voxel_mm: 0.125, voxel_z_mm: 0.125, depth_guard_mm: 1}
 reconstruction: {iterations: 20, mu: 1, start: mlos, noise_threshold: 0, dark_weight_cutoff: 0.9}
 correlation: {median: {threshold: 2, epsilon_voxel: 0.1, radius: 2}, signal_threshold: 0}
-)", "measured_white.yaml"), "measured_white.yaml"));
+)",
+                                                                                           "measured_white.yaml"),
+                                                                            "measured_white.yaml"));
   const auto truth = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera));
 
   const calib::Calibration cal =
@@ -52,8 +54,8 @@ correlation: {median: {threshold: 2, epsilon_voxel: 0.1, radius: 2}, signal_thre
   sim::TargetOptions white_target = sim::white_target();
   white_target.rays_per_lens = 20000;
   double outside = 0;
-  const ImageF measured = calib::make_white_correction(
-      cal, sim::render_target(camera, truth, white_target, 12).rays, cal.image_stats.background, &outside);
+  const ImageF measured = calib::make_white_correction(cal, sim::render_target(camera, truth, white_target, 12).rays,
+                                                       cal.image_stats.background, &outside);
   // About 1 % of the white's light falls outside the microlens image disks.
   EXPECT_GT(outside, 0.005) << "measured 0.0093";
   EXPECT_LT(outside, 0.015) << "measured 0.0093";
@@ -82,8 +84,8 @@ correlation: {median: {threshold: 2, epsilon_voxel: 0.1, radius: 2}, signal_thre
   EXPECT_NEAR(with_measured[2], geometric[2], 0.02) << "measured 0.1987 against 0.2001 mm";
   EXPECT_NEAR(with_measured[0], geometric[0], 0.005) << "measured within 0.002 mm";
   EXPECT_NEAR(with_measured[1], geometric[1], 0.005) << "measured within 0.002 mm";
-  std::cout << "measured: test time "
-            << std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() << " s\n";
+  std::cout << "measured: test time " << std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count()
+            << " s\n";
 }
 
 }  // namespace

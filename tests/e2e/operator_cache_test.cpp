@@ -27,26 +27,22 @@ using Outcome = WeightsDiskCache::Outcome;
 class OperatorCacheTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    folder_ = testing_support::temp_dir("operator-cache") /
-              ::testing::UnitTest::GetInstance()->current_test_info()->name();
+    folder_ =
+        testing_support::temp_dir("operator-cache") / ::testing::UnitTest::GetInstance()->current_test_info()->name();
     std::filesystem::remove_all(folder_);
   }
   void TearDown() override { std::filesystem::remove_all(folder_); }
 
   static optics::CameraModel camera() {
-    return optics::load_camera_file(std::string(PLENOPIV_SOURCE_DIR) +
-                                    "/systemd/config/camera-small.yaml");
+    return optics::load_camera_file(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml");
   }
-  static Grid3 grid(double z0) {
-    return grid_for_extent({-1, -1, z0}, {1, 1, z0 + 2}, {0.125, 0.125, 0.125}, "test");
-  }
+  static Grid3 grid(double z0) { return grid_for_extent({-1, -1, z0}, {1, 1, z0 + 2}, {0.125, 0.125, 0.125}, "test"); }
 
   // A frame of a few ray-traced particles in the grid, reconstructed with `op`: the volume's bits.
   static std::vector<float> volume_through(const recon::WeightingOperator& op) {
     const optics::CameraModel cam = camera();
     const calib::LoadedCalibration nominal = calib::nominal_calibration(cam);
-    const auto particles =
-        sim::random_particles(sim::Box{{-0.8, -0.8, 0.2}, {0.8, 0.8, 1.8}}, 20, 3);
+    const auto particles = sim::random_particles(sim::Box{{-0.8, -0.8, 0.2}, {0.8, 0.8, 1.8}}, 20, 3);
     const ImageF image = sim::render(cam, nominal.lenses, particles, sim::RenderOptions{}, 3).rays;
     recon::MartSettings s;
     s.iterations = 3;
@@ -89,8 +85,7 @@ TEST_F(OperatorCacheTest, AMissWritesTheTablesAndAHitReadsTheSameBits) {
 TEST_F(OperatorCacheTest, AnotherGeometryIsAnotherKeyAndAStaleFileIsRebuilt) {
   const optics::CameraModel cam = camera();
   const calib::LoadedCalibration nominal = calib::nominal_calibration(cam);
-  const std::string key0 =
-      operator_key(cam, nominal.lenses, nominal.white_correction, grid(0), 1.0);
+  const std::string key0 = operator_key(cam, nominal.lenses, nominal.white_correction, grid(0), 1.0);
   // Every input is part of the key.
   EXPECT_NE(key0, operator_key(cam, nominal.lenses, nominal.white_correction, grid(0.5), 1.0));
   EXPECT_NE(key0, operator_key(cam, nominal.lenses, nominal.white_correction, grid(0), 2.0));
@@ -110,8 +105,7 @@ TEST_F(OperatorCacheTest, AnotherGeometryIsAnotherKeyAndAStaleFileIsRebuilt) {
   std::filesystem::rename(other, mine);
   const auto rebuilt = cache.weights(cam, nominal.lenses, nominal.white_correction, grid(0), 1.0);
   EXPECT_EQ(cache.last_outcome(), Outcome::stale) << cache.last_note();
-  EXPECT_NE(cache.last_note().find("another camera, calibration, volume or settings"),
-            std::string::npos)
+  EXPECT_NE(cache.last_note().find("another camera, calibration, volume or settings"), std::string::npos)
       << cache.last_note();
   EXPECT_EQ(rebuilt->grid(), grid(0));
   cache.weights(cam, nominal.lenses, nominal.white_correction, grid(0), 1.0);
@@ -149,8 +143,7 @@ TEST_F(OperatorCacheTest, ADamagedFileIsRebuiltNeverTrusted) {
     damage(how);
     const auto op = cache.weights(cam, nominal.lenses, nominal.white_correction, grid(0), 1.0);
     EXPECT_EQ(cache.last_outcome(), Outcome::corrupt) << how << ": " << cache.last_note();
-    EXPECT_NE(cache.last_note().find("replaced: corrupt"), std::string::npos)
-        << how << ": " << cache.last_note();
+    EXPECT_NE(cache.last_note().find("replaced: corrupt"), std::string::npos) << how << ": " << cache.last_note();
     std::string bytes;
     op->serialize(bytes);
     EXPECT_TRUE(bytes == reference) << how;
@@ -178,8 +171,7 @@ TEST_F(OperatorCacheTest, TheFolderKeepsTheMostRecentlyUsedFiles) {
   const optics::CameraModel cam = camera();
   const calib::LoadedCalibration nominal = calib::nominal_calibration(cam);
   WeightsDiskCache cache(folder_, 2);
-  for (const double z0 : {0.0, 0.5, 1.0})
-    cache.weights(cam, nominal.lenses, nominal.white_correction, grid(z0), 1.0);
+  for (const double z0 : {0.0, 0.5, 1.0}) cache.weights(cam, nominal.lenses, nominal.white_correction, grid(z0), 1.0);
   std::size_t files = 0;
   for ([[maybe_unused]] const auto& e : std::filesystem::directory_iterator(folder_)) ++files;
   EXPECT_EQ(files, 2u);
@@ -202,12 +194,10 @@ TEST_F(OperatorCacheTest, TheInProcessCacheHandsBackTheSameOperator) {
   EXPECT_EQ(cache.counts().builds, 3u);
   // Capacity 2: the first was forgotten, the last two kept.
   EXPECT_NE(cache.get(cam, nominal.lenses, nominal.white_correction, grid(0), 1.0).get(), a.get());
-  EXPECT_EQ(cache.get(cam, nominal.lenses, nominal.white_correction, grid(1.0), 1.0).get(),
-            c.get());
-  EXPECT_TRUE(same_bits(
-      volume_through(a->weights()),
-      volume_through(
-          cache.get(cam, nominal.lenses, nominal.white_correction, grid(0), 1.0)->weights())));
+  EXPECT_EQ(cache.get(cam, nominal.lenses, nominal.white_correction, grid(1.0), 1.0).get(), c.get());
+  EXPECT_TRUE(
+      same_bits(volume_through(a->weights()),
+                volume_through(cache.get(cam, nominal.lenses, nominal.white_correction, grid(0), 1.0)->weights())));
 }
 
 }  // namespace

@@ -33,10 +33,10 @@ const fs::path& pair_dir() {
   static const fs::path dir = [] {
     const auto d = testing_support::temp_dir("process-cli");
     std::string out;
-    const int status = run_command({binary("plenopiv"), "simulate", "pair", "--camera", kCamera, "--seed", "7",
-                                    "--ppm", "1", "--box", "-2.5,2.5,-2.5,2.5,-0.5,4.5", "--uniform",
-                                    "0.25,0.125,0.25", "--rays", "2000", "-o", (d / "pair").string()},
-                                   out, std::chrono::seconds(120));
+    const int status = run_command(
+        {binary("plenopiv"), "simulate", "pair", "--camera", kCamera, "--seed", "7", "--ppm", "1", "--box",
+         "-2.5,2.5,-2.5,2.5,-0.5,4.5", "--uniform", "0.25,0.125,0.25", "--rays", "2000", "-o", (d / "pair").string()},
+        out, std::chrono::seconds(120));
     EXPECT_EQ(status, 0) << out;
     return d;
   }();
@@ -47,9 +47,18 @@ const fs::path& pair_dir() {
 fs::path cache_dir() { return testing_support::temp_dir("process-cli") / "cache"; }
 
 std::vector<std::string> process_args(const fs::path& dir, const std::string& config, const fs::path& out) {
-  return {binary("plenopiv"), "process", kCamera, (dir / "pair/frame_A.tif").string(),
-          (dir / "pair/frame_B.tif").string(), "--config", config, "--nominal", "-o", out.string(),
-          "--cache-dir", cache_dir().string()};
+  return {binary("plenopiv"),
+          "process",
+          kCamera,
+          (dir / "pair/frame_A.tif").string(),
+          (dir / "pair/frame_B.tif").string(),
+          "--config",
+          config,
+          "--nominal",
+          "-o",
+          out.string(),
+          "--cache-dir",
+          cache_dir().string()};
 }
 
 // Mean (dx, dy, dz) over the valid vectors of a field file.
@@ -141,17 +150,18 @@ std::string off_focus_config(const std::string& guard_mm, bool floor) {
 TEST(ProcessCli, RecoversTheDepthDisplacementAwayFromFocus) {
   const auto dir = testing_support::temp_dir("process-cli-depth");
   std::string out;
-  ASSERT_EQ(run_command({binary("plenopiv"), "simulate", "pair", "--camera", kCamera, "--seed", "7", "--ppm", "0.25",
-                         "--box", "-2.5,2.5,-2.5,2.5,1.5,6.5", "--uniform", "0.25,0.125,0.25", "-o",
-                         (dir / "pair").string()},
-                        out, std::chrono::seconds(120)),
-            0)
+  ASSERT_EQ(
+      run_command({binary("plenopiv"), "simulate", "pair", "--camera", kCamera, "--seed", "7", "--ppm", "0.25", "--box",
+                   "-2.5,2.5,-2.5,2.5,1.5,6.5", "--uniform", "0.25,0.125,0.25", "-o", (dir / "pair").string()},
+                  out, std::chrono::seconds(120)),
+      0)
       << out;
   auto process = [&](const std::string& guard_mm, bool floor) {
     const std::string name = "off_focus_" + guard_mm + (floor ? "_floor" : "");
     std::ofstream(dir / (name + ".yaml")) << off_focus_config(guard_mm, floor);
     const fs::path field = dir / (name + ".h5");
-    EXPECT_EQ(run_command(process_args(dir, (dir / (name + ".yaml")).string(), field), out, std::chrono::seconds(300)), 0)
+    EXPECT_EQ(run_command(process_args(dir, (dir / (name + ".yaml")).string(), field), out, std::chrono::seconds(300)),
+              0)
         << out;
     const std::array<double, 3> mean = mean_displacement(field);
     std::printf("depth guard %s mm, intensity floor %s: mean %.4f %.4f %.4f mm (truth 0.25 0.125 0.25)\n",
@@ -180,8 +190,8 @@ TEST(ProcessCli, RecoversTheDepthDisplacementAwayFromFocus) {
 TEST(ProcessCli, ResamplesARotatedCalibrationAndSaysSo) {
   const fs::path& plain = pair_dir();
   const auto dir = testing_support::temp_dir("process-cli-rotated");
-  const std::vector<std::string> array{"--camera", kCamera, "--array-rotation-rad", "0.0174533", "--array-offset-mm",
-                                       "0.011,-0.007", "--lens-jitter-mm", "0.001"};
+  const std::vector<std::string> array{"--camera",          kCamera,        "--array-rotation-rad", "0.0174533",
+                                       "--array-offset-mm", "0.011,-0.007", "--lens-jitter-mm",     "0.001"};
   auto simulate = [&](std::vector<std::string> args) {
     args.insert(args.begin(), {binary("plenopiv"), "simulate"});
     args.insert(args.begin() + 3, array.begin(), array.end());
@@ -193,10 +203,10 @@ TEST(ProcessCli, ResamplesARotatedCalibrationAndSaysSo) {
   simulate({"pair", "--seed", "7", "--ppm", "1", "--box", "-2.5,2.5,-2.5,2.5,-0.5,4.5", "--uniform", "0.25,0.125,0.25",
             "--rays", "2000", "-o", (dir / "pair").string()});
   std::string out;
-  ASSERT_EQ(run_command({binary("plenopiv"), "calibrate", "--camera", kCamera, "--calibration-image",
-                         (dir / "cal.tif").string(), "--white", (dir / "white.tif").string(), "-o",
-                         (dir / "cal.h5").string()},
-                        out, std::chrono::seconds(120)),
+  ASSERT_EQ(run_command(
+                {binary("plenopiv"), "calibrate", "--camera", kCamera, "--calibration-image",
+                 (dir / "cal.tif").string(), "--white", (dir / "white.tif").string(), "-o", (dir / "cal.h5").string()},
+                out, std::chrono::seconds(120)),
             0)
       << out;
   // process.yaml with half a count of noise threshold: the simulator's frames are noise-free, and
@@ -209,7 +219,8 @@ TEST(ProcessCli, ResamplesARotatedCalibrationAndSaysSo) {
   const fs::path config = dir / "threshold.yaml";
   std::ofstream(config) << text;
 
-  ASSERT_EQ(run_command(process_args(plain, config.string(), dir / "plain.h5"), out, std::chrono::seconds(300)), 0) << out;
+  ASSERT_EQ(run_command(process_args(plain, config.string(), dir / "plain.h5"), out, std::chrono::seconds(300)), 0)
+      << out;
   EXPECT_EQ(out.find("resampled"), std::string::npos) << out;  // the nominal lattice: raw pixels
   auto args = process_args(dir, config.string(), dir / "rotated.h5");
   args.erase(std::find(args.begin(), args.end(), "--nominal"));
@@ -254,7 +265,8 @@ TEST(ProcessCli, FlagsFramesWithoutLightAndSaturatedFrames) {
   io::write_tiff(dir / "dark.tif", ImageU16(a.width, a.height, 0));
   ImageU16 bright = a;
   for (std::size_t i = 0; i < bright.size(); ++i) {
-    bright.pixels[i] = i % 20 == 0 ? 4095 : std::min<std::uint16_t>(bright.pixels[i], 4000);  // 5 % at 12-bit full scale
+    bright.pixels[i] =
+        i % 20 == 0 ? 4095 : std::min<std::uint16_t>(bright.pixels[i], 4000);  // 5 % at 12-bit full scale
   }
   io::write_tiff(dir / "bright.tif", bright);
   const fs::path out = dir / "flagged.h5";
@@ -264,7 +276,8 @@ TEST(ProcessCli, FlagsFramesWithoutLightAndSaturatedFrames) {
   std::string text;
   ASSERT_EQ(run_command(args, text, std::chrono::seconds(300)), 0) << text;
   EXPECT_NE(text.find("warning: frame A (" + (dir / "dark.tif").string() + ") all zero"), std::string::npos) << text;
-  EXPECT_NE(text.find("warning: frame B (" + (dir / "bright.tif").string() + ") saturated: 5.00 % of the pixels "
+  EXPECT_NE(text.find("warning: frame B (" + (dir / "bright.tif").string() +
+                      ") saturated: 5.00 % of the pixels "
                       "at full scale 4095"),
             std::string::npos)
       << text;
@@ -282,9 +295,11 @@ TEST(ProcessCli, RefusesBadInputsByName) {
   expect_refused(process_args(dir, (dir / "mu.yaml").string(), out), "reconstruction.mu", out);
   write_text(dir / "typo.yaml", "dt_s: 0.001\n" + vol + "reconstruction: {iteratons: 3}\n");
   expect_refused(process_args(dir, (dir / "typo.yaml").string(), out), "iteratons", out);
-  write_text(dir / "window.yaml", "dt_s: 0.001\n" + vol + "correlation: {passes: [{window: 64, overlap_percent: 50}]}\n");
+  write_text(dir / "window.yaml",
+             "dt_s: 0.001\n" + vol + "correlation: {passes: [{window: 64, overlap_percent: 50}]}\n");
   expect_refused(process_args(dir, (dir / "window.yaml").string(), out), "larger than the volume", out);
-  write_text(dir / "extent.yaml", "dt_s: 0.001\nvolume: {x_mm: [2, -2], y_mm: [-2, 2], z_mm: [-2, 2], voxel_mm: 0.125}\n");
+  write_text(dir / "extent.yaml",
+             "dt_s: 0.001\nvolume: {x_mm: [2, -2], y_mm: [-2, 2], z_mm: [-2, 2], voxel_mm: 0.125}\n");
   expect_refused(process_args(dir, (dir / "extent.yaml").string(), out), "x extent", out);
   expect_refused(process_args(dir, (dir / "missing.yaml").string(), out), "missing.yaml", out);
 

@@ -89,8 +89,9 @@ TEST(ProcessSettings, AccelerationReachesMart) {
 
 TEST(ProcessSettings, SensorBlurReachesMart) {
   EXPECT_EQ(parse(kVolume + "}\n" + kPasses).mart.sensor_blur_sigma_mm, 0.0);  // sec 5.2's weights alone
-  EXPECT_DOUBLE_EQ(parse(kVolume + "}\nreconstruction: {sensor_blur_sigma_mm: 0.0052}\n" + kPasses).mart.sensor_blur_sigma_mm,
-                   0.0052);
+  EXPECT_DOUBLE_EQ(
+      parse(kVolume + "}\nreconstruction: {sensor_blur_sigma_mm: 0.0052}\n" + kPasses).mart.sensor_blur_sigma_mm,
+      0.0052);
   for (const std::string bad : {"-0.001", "0.5", "wide"}) {
     expect_refused_naming(kVolume + "}\nreconstruction: {sensor_blur_sigma_mm: " + bad + "}\n" + kPasses,
                           "sensor_blur_sigma_mm");
@@ -126,7 +127,8 @@ TEST(ProcessSettings, ProcessPairReturnsTheRequestedBoxAndRefusesAnUnguardedOper
   const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera));
   ProcessSettings s = parse(kVolume + ", depth_guard_mm: 0.25}\n" + kPasses);
   const ImageF a = two_particle_frame(camera, lenses, 3.0), b = two_particle_frame(camera, lenses, 3.1);
-  const recon::WeightingOperator guarded(camera, lenses, s.reconstruction_grid(), calib::geometric_white_image(camera, lenses));
+  const recon::WeightingOperator guarded(camera, lenses, s.reconstruction_grid(),
+                                         calib::geometric_white_image(camera, lenses));
   const PairResult r = process_pair(guarded, a, b, s);
   EXPECT_EQ(r.volume_a.grid, s.grid);
   EXPECT_EQ(r.volume_b.grid, s.grid);
@@ -136,9 +138,9 @@ TEST(ProcessSettings, ProcessPairReturnsTheRequestedBoxAndRefusesAnUnguardedOper
   // Exactly the inner slices of the guarded reconstruction (deterministic kernels: bit for bit).
   const Volume full = recon::reconstruct(guarded, a, s.mart).volume;
   const std::size_t slice = std::size_t(s.grid.shape[0]) * std::size_t(s.grid.shape[1]);
-  const std::vector<float> inner(full.data.begin() + std::ptrdiff_t(std::size_t(s.guard_slices()) * slice),
-                                 full.data.begin() + std::ptrdiff_t(std::size_t(s.guard_slices()) * slice +
-                                                                    s.grid.count()));
+  const std::vector<float> inner(
+      full.data.begin() + std::ptrdiff_t(std::size_t(s.guard_slices()) * slice),
+      full.data.begin() + std::ptrdiff_t(std::size_t(s.guard_slices()) * slice + s.grid.count()));
   EXPECT_EQ(r.volume_a.data, inner);
 
   const recon::WeightingOperator unguarded(camera, lenses, s.grid, calib::geometric_white_image(camera, lenses));
@@ -167,7 +169,7 @@ TEST(ProcessSettings, AKeptWorkspaceGivesTheSameVolumesAndVectors) {
   EXPECT_EQ(kept.correlation.field.dz_mm, alone.correlation.field.dz_mm);
   EXPECT_EQ(kept.correlation.field.valid, alone.correlation.field.valid);
   EXPECT_NE(alone.volume_a.data, alone.volume_b.data);  // two different frames
-  EXPECT_GT(workspace.bytes(), 0u);  // the pairs ran in it
+  EXPECT_GT(workspace.bytes(), 0u);                     // the pairs ran in it
   EXPECT_GT(correlation.bytes(), 0u);
 }
 
@@ -176,8 +178,9 @@ TEST(ProcessSettings, AKeptWorkspaceGivesTheSameVolumesAndVectors) {
 TEST(ProcessSettings, CancellingFromProgressAbandonsThePairAndFreesTheWorkspace) {
   const auto camera = optics::load_camera_file(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml");
   const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera));
-  ProcessSettings s = parse(kVolume + ", depth_guard_mm: 0.25}\n" +
-                            "correlation: {passes: [{window: 8, overlap_percent: 50}, {window: 8, overlap_percent: 50}]}\n");
+  ProcessSettings s =
+      parse(kVolume + ", depth_guard_mm: 0.25}\n" +
+            "correlation: {passes: [{window: 8, overlap_percent: 50}, {window: 8, overlap_percent: 50}]}\n");
   const ImageF a = two_particle_frame(camera, lenses, 3.0), b = two_particle_frame(camera, lenses, 3.1);
   const PairOperator op(camera, lenses, calib::geometric_white_image(camera, lenses), s);
   recon::MartWorkspace workspace;

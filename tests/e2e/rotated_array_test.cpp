@@ -115,7 +115,8 @@ TEST(LatticeResampling, FollowsTheMeasuredCentresNotJustTheFittedLattice) {
   for (float& v : raw.pixels) v = value(rng);
   const ImageF out = r.resample(raw);
   const double s_i = camera().image_distance_mm(), f_l = camera().microlens().focal_length_mm;
-  const double spot0 = optics::sensor_mm_to_column(camera().sensor(), optics::lens_centre_to_spot_mm(l.position(0, 0)[0], s_i, f_l));
+  const double spot0 =
+      optics::sensor_mm_to_column(camera().sensor(), optics::lens_centre_to_spot_mm(l.position(0, 0)[0], s_i, f_l));
   const double spot_pitch = optics::lens_centre_to_spot_mm(l.pitch_x_mm, s_i, f_l) / camera().sensor().pixel_pitch_mm;
   std::size_t compared = 0, equal = 0;
   for (int row = 0; row < 850; ++row)
@@ -224,12 +225,11 @@ TEST(RotatedArray, ReconstructsAsWellAsTheUnrotatedCamera) {
     // smooths the volume, which Q* rewards).
     EXPECT_LT(e.lateral_rms_voxel, ref.lateral_rms_voxel + 0.1)
         << degrees << " deg (measured +0.04 at most, at 2 deg, against 0.425)";
-    EXPECT_LT(e.depth_rms_voxel, ref.depth_rms_voxel + 0.7)
-        << degrees << " deg (measured -0.01 to +0.42 against 1.86)";
+    EXPECT_LT(e.depth_rms_voxel, ref.depth_rms_voxel + 0.7) << degrees << " deg (measured -0.01 to +0.42 against 1.86)";
     EXPECT_GT(e.q, ref.q - 0.05) << degrees << " deg (measured 0.395-0.515 against 0.371)";
   }
-  std::cout << "measured: test time "
-            << std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() << " s\n";
+  std::cout << "measured: test time " << std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count()
+            << " s\n";
 }
 
 }  // namespace
@@ -252,7 +252,9 @@ reconstruction: {iterations: 20, mu: 1, start: mlos, noise_threshold: 0.5, dark_
 correlation:
   passes: [{window: 32, overlap_percent: 50}, {window: 24, overlap_percent: 75}, {window: 16, overlap_percent: 75}]
   median: {threshold: 2, epsilon_voxel: 0.1, radius: 2}
-)", "rotated.yaml"), "rotated.yaml"));
+)",
+                                                                                           "rotated.yaml"),
+                                                                            "rotated.yaml"));
   const sim::Point3 shift{0.25, 0.125, 0.25};  // 2, 1, 2 voxels
   // 1 particle per microlens over the field of view, in a box 0.5 mm beyond the volume's depth.
   const std::vector<sim::Point3> a = sim::random_particles({{-2.5, -2.5, -0.5}, {2.5, 2.5, 4.5}}, 1600, 21);
@@ -263,7 +265,8 @@ correlation:
   ro.rays_per_particle = 2000;
 
   auto mean_shift = [&](const optics::MicrolensArray& truth, const optics::MicrolensArray& lenses, std::string& note) {
-    const process::PairOperator op(camera(), lenses, calib::geometric_white_image(camera(), lenses), s.reconstruction_grid());
+    const process::PairOperator op(camera(), lenses, calib::geometric_white_image(camera(), lenses),
+                                   s.reconstruction_grid());
     const process::PairResult r = process::process_pair(op, sim::render(camera(), truth, a, ro, 3).rays,
                                                         sim::render(camera(), truth, b, ro, 4).rays, s);
     note = r.lattice_note;
@@ -284,11 +287,12 @@ correlation:
     target.rays_per_lens = 4000;
     const calib::Calibration cal = calib::calibrate(camera(), sim::render_target(camera(), array, target, 11).rays);
     const auto rot = mean_shift(array, cal.microlens_array(), note);
-    std::cout << "measured: " << degrees << " deg (calibrated " << cal.spot_lattice.rotation_rad * 180 / std::numbers::pi
-              << " deg): mean displacement " << rot[0] << " " << rot[1] << " " << rot[2] << " mm\n  " << note << "\n";
+    std::cout << "measured: " << degrees << " deg (calibrated "
+              << cal.spot_lattice.rotation_rad * 180 / std::numbers::pi << " deg): mean displacement " << rot[0] << " "
+              << rot[1] << " " << rot[2] << " mm\n  " << note << "\n";
     char expected[96];
-    std::snprintf(expected, sizeof expected, "image resampled onto an axis-aligned lattice: calibrated array rotated %.2f deg",
-                  degrees);
+    std::snprintf(expected, sizeof expected,
+                  "image resampled onto an axis-aligned lattice: calibrated array rotated %.2f deg", degrees);
     EXPECT_NE(note.find(expected), std::string::npos) << note;
     // Lateral within 0.01 mm of the unrotated camera's; the depth component recovers less as the
     // rotation grows (the blend across lenses widens each particle's image), at least 60 % of the
@@ -323,7 +327,8 @@ TEST(RotatedArray, AHexArrayIsResampledOntoARectangularLattice) {
   sim::RenderOptions o;
   o.rays_per_particle = 20000;
   ImageF scratch;
-  const Volume v = recon::reconstruct(op.weights(), op.prepare(sim::render(cam, array, particles, o, 3).rays, scratch), s).volume;
+  const Volume v =
+      recon::reconstruct(op.weights(), op.prepare(sim::render(cam, array, particles, o, 3).rays, scratch), s).volume;
   double lat = 0, dep = 0;
   for (const auto& p : particles) {
     const auto fit = recon::fit_particle(v, p, {3, 3, 10});

@@ -77,8 +77,8 @@ Case make_case(std::uint64_t index) {
   auto pick = [&](int n) { return int(std::uniform_int_distribution<int>(0, n - 1)(rng)); };
   Case c;
   c.depth = pick(3);
-  c.settings.grid = grid_for_extent({-0.6, -0.6, kDepths[c.depth][0]}, {0.6, 0.6, kDepths[c.depth][1]},
-                                    {0.1, 0.1, 0.1}, "stress");
+  c.settings.grid =
+      grid_for_extent({-0.6, -0.6, kDepths[c.depth][0]}, {0.6, 0.6, kDepths[c.depth][1]}, {0.1, 0.1, 0.1}, "stress");
   const double mus[] = {1e-4, 0.01, 0.5, 1.0};
   const int iterations[] = {1, 2, 5, 30};
   c.settings.mart.mu = mus[pick(4)];
@@ -125,15 +125,14 @@ Case make_case(std::uint64_t index) {
   c.settings.correlation.final_smoothing = smoothing[pick(3)];
   const int depth_passes[] = {0, 4, 8};  // none, the shipped configs', the most allowed
   c.settings.correlation.depth_prefilter = depth_passes[pick(3)];
-  c.description = "case " + std::to_string(index) + ": mode " + std::to_string(mode) + ", " +
-                  std::to_string(count) + " particles, mu " + std::to_string(c.settings.mart.mu) + ", " +
+  c.description = "case " + std::to_string(index) + ": mode " + std::to_string(mode) + ", " + std::to_string(count) +
+                  " particles, mu " + std::to_string(c.settings.mart.mu) + ", " +
                   std::to_string(c.settings.mart.iterations) + " iterations" +
                   (c.settings.mart.accelerate ? " accelerated" : "") + ", intensity floor " +
                   std::to_string(c.settings.correlation.intensity_threshold_of_mean) + "x the mean, depth margin " +
                   std::to_string(c.settings.correlation.passes[1].depth_margin) + ", final smoothing " +
                   std::to_string(c.settings.correlation.final_smoothing) + ", depth prefilter " +
-                  std::to_string(c.settings.correlation.depth_prefilter) + ", depth " +
-                  std::to_string(c.depth);
+                  std::to_string(c.settings.correlation.depth_prefilter) + ", depth " + std::to_string(c.depth);
   return c;
 }
 

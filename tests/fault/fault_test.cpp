@@ -59,9 +59,8 @@ struct Daemon {
 
   Daemon(const fs::path& data_dir, const fs::path& log, const std::string& camera_file, const std::string& camera) {
     process = std::make_unique<ChildProcess>(
-        std::vector<std::string>{binary("plenopivd"), "--simulation", "--camera-file", camera_file, "--camera",
-                                 camera, "--control", control, "--publish", publish,
-                                 "--data-dir", data_dir.string()},
+        std::vector<std::string>{binary("plenopivd"), "--simulation", "--camera-file", camera_file, "--camera", camera,
+                                 "--control", control, "--publish", publish, "--data-dir", data_dir.string()},
         log);
     for (int i = 0; i < 200 && !testing_support::probe_status(control); ++i) {
       if (!process->running()) break;
@@ -144,9 +143,9 @@ TEST(FaultSigkill, EveryRunFolderLeftByAKilledDaemonIsConsistentAndReprocessable
     ASSERT_NO_THROW(manifest = run_folder::parse_manifest(text, run.string())) << text;
     EXPECT_TRUE(manifest.state() == "interrupted" || manifest.state() == "complete") << manifest.state();
     std::string out;
-    const int status = testing_support::run_command(
-        {binary("plenopiv"), "process", "--run", run.string(), "-o", (run.parent_path() / ("re-" + run.filename().string())).string()},
-        out, 300s);
+    const int status = testing_support::run_command({binary("plenopiv"), "process", "--run", run.string(), "-o",
+                                                     (run.parent_path() / ("re-" + run.filename().string())).string()},
+                                                    out, 300s);
     if (manifest.pairs_size() == 0) {
       EXPECT_EQ(status, 2) << out;
       EXPECT_NE(out.find("the run recorded no pair"), std::string::npos) << out;
@@ -192,9 +191,9 @@ TEST(FaultSubscriber, ASubscriberThatNeverReadsLeavesAcquisitionUnaffected) {
   stuck.set(zmq::sockopt::rcvbuf, 4096);
   stuck.set(zmq::sockopt::subscribe, "");
   stuck.connect(daemon.publish);
-  ChildProcess reader({binary("plenopiv"), "watch", "--publish", daemon.publish, "--count", std::to_string(pairs),
-                       "--wait", "8"},
-                      dir / "watch.log");
+  ChildProcess reader(
+      {binary("plenopiv"), "watch", "--publish", daemon.publish, "--count", std::to_string(pairs), "--wait", "8"},
+      dir / "watch.log");
   std::this_thread::sleep_for(1500ms);  // both subscriptions reach the publisher
 
   std::string out;
@@ -209,7 +208,8 @@ TEST(FaultSubscriber, ASubscriberThatNeverReadsLeavesAcquisitionUnaffected) {
   const std::vector<fs::path> runs = run_folders(dir / "data");
   ASSERT_EQ(runs.size(), 1u);
   std::ifstream in(runs[0] / "manifest.json");
-  const msg::RunManifest m = run_folder::parse_manifest(std::string(std::istreambuf_iterator<char>(in), {}), "manifest");
+  const msg::RunManifest m =
+      run_folder::parse_manifest(std::string(std::istreambuf_iterator<char>(in), {}), "manifest");
   EXPECT_EQ(m.state(), "complete");
   EXPECT_EQ(m.pairs_size(), pairs);
   EXPECT_EQ(m.frames_lost(), 0u) << m.losses().DebugString();

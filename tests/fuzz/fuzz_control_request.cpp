@@ -85,7 +85,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     msg::Request stop;
     stop.mutable_stop_run();
     const std::string stop_bytes = stop.SerializeAsString();
-    (void)daemon::answer_message(stop_bytes.data(), stop_bytes.size(), [&](const msg::Request& r) { return d.handle(r); });
+    (void)daemon::answer_message(stop_bytes.data(), stop_bytes.size(),
+                                 [&](const msg::Request& r) { return d.handle(r); });
     const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
     while (d.status().state() != "Idle" && d.status().state() != "Error") {
       fuzzing::require(std::chrono::steady_clock::now() < deadline, "a run not stopped within 30 s");

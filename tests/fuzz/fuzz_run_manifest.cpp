@@ -60,9 +60,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     const run_folder::Reader reader(run);
     fuzzing::require(before.has_value(), "a Reader opened a folder whose manifest does not parse");
     fuzzing::require(!reader.pairs().empty(), "a Reader opened a folder without pairs");
-    fuzzing::require(inside(reader.process_file(), run) && inside(reader.camera_file(), run),
-                     "a Reader points outside its folder: " + reader.process_file().string() + ", " +
-                         reader.camera_file().string());
+    fuzzing::require(
+        inside(reader.process_file(), run) && inside(reader.camera_file(), run),
+        "a Reader points outside its folder: " + reader.process_file().string() + ", " + reader.camera_file().string());
     if (reader.calibration_file()) {
       fuzzing::require(inside(*reader.calibration_file(), run), "a Reader's calibration lies outside its folder");
     }

@@ -36,8 +36,8 @@ inline const std::filesystem::path& scratch_dir() {
 // Writes the input to `name` in the scratch folder and returns its path.
 inline std::filesystem::path input_file(const std::uint8_t* data, std::size_t size, const std::string& name) {
   const auto path = scratch_dir() / name;
-  std::ofstream(path, std::ios::binary | std::ios::trunc).write(reinterpret_cast<const char*>(data),
-                                                                std::streamsize(size));
+  std::ofstream(path, std::ios::binary | std::ios::trunc)
+      .write(reinterpret_cast<const char*>(data), std::streamsize(size));
   return path;
 }
 

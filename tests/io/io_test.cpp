@@ -3,8 +3,8 @@
 
 #include <cmath>
 #include <cstring>
-#include <opencv2/imgcodecs.hpp>
 #include <fstream>
+#include <opencv2/imgcodecs.hpp>
 #include <sstream>
 
 #include "core/base/errors.hpp"
@@ -120,7 +120,8 @@ TEST(RawFrame, PngAndTiffOfEveryDepthReadAsCounts) {
   for (std::size_t k = 0; k < f32.size(); ++k) f32.pixels[k] = 0.25f * float(k) - 1.0f;
   write_tiff_stack(dir / "e.tif", {f32});
   // A name says nothing: a PNG saved as .tif is read as the PNG it is.
-  std::filesystem::copy_file(dir / "a.png", dir / "a_really_png.tif", std::filesystem::copy_options::overwrite_existing);
+  std::filesystem::copy_file(dir / "a.png", dir / "a_really_png.tif",
+                             std::filesystem::copy_options::overwrite_existing);
 
   const ImageF a = read_raw_frame(dir / "a.png"), b = read_raw_frame(dir / "b.png"), c = read_raw_frame(dir / "c.tif");
   const ImageF d = read_raw_frame(dir / "d.tif"), e = read_raw_frame(dir / "e.tif");
@@ -138,10 +139,13 @@ TEST(RawFrame, PngAndTiffOfEveryDepthReadAsCounts) {
   EXPECT_EQ(e.pixels, f32.pixels);  // float frames keep their values, negative ones too
 
   // A series: averaged; a frame of another size named.
-  const ImageF mean = read_mean_frame({(dir / "a.png").string(), (dir / "c.tif").string(), (dir / "b.png").string()}, "white");
+  const ImageF mean =
+      read_mean_frame({(dir / "a.png").string(), (dir / "c.tif").string(), (dir / "b.png").string()}, "white");
   EXPECT_FLOAT_EQ(mean.at(3, 2), (23.0f + 23.0f + 2003.0f) / 3);
   ASSERT_TRUE(cv::imwrite((dir / "small.png").string(), cv::Mat(2, 2, CV_8U, cv::Scalar(1))));
-  const std::string err = message_of([&] { read_mean_frame({(dir / "a.png").string(), (dir / "small.png").string()}, "dark"); });
+  const std::string err = message_of([&] {
+    read_mean_frame({(dir / "a.png").string(), (dir / "small.png").string()}, "dark");
+  });
   EXPECT_NE(err.find("small.png: dark frame is 2 x 2 pixels, "), std::string::npos) << err;
   EXPECT_NE(err.find("a.png is 4 x 3"), std::string::npos) << err;
 }
@@ -262,8 +266,8 @@ TEST(Hdf5, PythonH5pyReadsTheLayoutOfTheDesign) {
   std::ofstream(script_path) << script;
   if (!std::filesystem::exists("/usr/bin/python3")) GTEST_SKIP() << "/usr/bin/python3 missing";
   std::string out;
-  const int rc = testing_support::run_command(
-      {"/usr/bin/python3", script_path.string(), vpath.string(), fpath.string()}, out);
+  const int rc =
+      testing_support::run_command({"/usr/bin/python3", script_path.string(), vpath.string(), fpath.string()}, out);
   EXPECT_EQ(rc, 0) << out;
   EXPECT_NE(out.find("h5py ok"), std::string::npos) << out;
 }
@@ -280,8 +284,7 @@ TEST(Hdf5, WrongFilesAreNamed) {
   EXPECT_NE(message_of([&] { read_vector_field_h5(vol); }).find("no group /vectors"), std::string::npos);
   VectorField no_dt = some_field();
   no_dt.dt_s = 0;
-  EXPECT_NE(message_of([&] { write_vector_field_h5(temp_dir() / "nodt.h5", no_dt); }).find("dt_s"),
-            std::string::npos);
+  EXPECT_NE(message_of([&] { write_vector_field_h5(temp_dir() / "nodt.h5", no_dt); }).find("dt_s"), std::string::npos);
 }
 
 TEST(Vti, HeaderAndAppendedSizesDescribeTheArrays) {

@@ -30,7 +30,8 @@ enum class Source { spots, white, white_pitch_off };
 
 // The small camera, its true (rotated, offset, jittered) array, and what calibration made of it.
 struct Rig {
-  optics::CameraModel camera = optics::load_camera_file(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml");
+  optics::CameraModel camera =
+      optics::load_camera_file(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml");
   optics::MicrolensArray truth;
   optics::MicrolensArray lenses;
   ImageF white;

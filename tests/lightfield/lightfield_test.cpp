@@ -10,9 +10,9 @@
 #include "core/lightfield/light_field.hpp"
 #include "core/lightfield/refocus.hpp"
 #include "core/optics/camera_file.hpp"
-#include "tests/support/cameras.hpp"
 #include "tests/lightfield/particle_render.hpp"
 #include "tests/lightfield/view_shift.hpp"
+#include "tests/support/cameras.hpp"
 
 namespace plenopiv::lightfield {
 namespace {
@@ -63,8 +63,10 @@ TEST(Rectify, SubApertureSamplesAreTheRawPixelsTheyMapTo) {
   const double s_i = cam.image_distance_mm(), f_l = cam.microlens().focal_length_mm;
   const auto& c = lenses.centre(10, 30);
   const int iu = 5, iv = 11;
-  const double col = optics::sensor_mm_to_column(cam.sensor(), optics::lens_centre_to_spot_mm(c[0], s_i, f_l) - f.sampling.u(iu) * f_l / s_i);
-  const double row = optics::sensor_mm_to_row(cam.sensor(), optics::lens_centre_to_spot_mm(c[1], s_i, f_l) - f.sampling.v(iv) * f_l / s_i);
+  const double col = optics::sensor_mm_to_column(
+      cam.sensor(), optics::lens_centre_to_spot_mm(c[0], s_i, f_l) - f.sampling.u(iu) * f_l / s_i);
+  const double row = optics::sensor_mm_to_row(
+      cam.sensor(), optics::lens_centre_to_spot_mm(c[1], s_i, f_l) - f.sampling.v(iv) * f_l / s_i);
   ASSERT_TRUE(f.valid[f.index(10, 30, iu, iv)]);
   EXPECT_NEAR(f.at(10, 30, iu, iv), 3 * col + 7 * row, 2e-3);
   EXPECT_FALSE(f.valid[f.index(10, 30, 0, 0)]);  // the corner of the (u, v) square is off the aperture

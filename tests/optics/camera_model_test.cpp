@@ -55,8 +55,7 @@ TEST(CameraModel, PaperConfigurationGivesTablesOneAndTwo) {
 TEST(CameraModel, ThinLensAtOtherMagnifications) {
   // M = -0.5 with f = 50: s_i = f (1 - M) = 75, s_o = f (1 - 1/M) = 150; 1/75 + 1/150 = 1/50.
   const CameraModel cam = parse_camera_yaml(
-      paper_with("magnification: -1", "magnification: -0.5").replace(
-          kPaper.find("f_number: 2"), 11, "f_number: 2.667"),
+      paper_with("magnification: -1", "magnification: -0.5").replace(kPaper.find("f_number: 2"), 11, "f_number: 2.667"),
       "m05");
   EXPECT_NEAR(cam.image_distance_mm(), 75.0, 1e-9);
   EXPECT_NEAR(cam.object_distance_mm(), 150.0, 1e-9);
@@ -84,10 +83,8 @@ TEST(CameraModel, FNumberMatchingNotesAFasterLensAndASlowerOne) {
 }
 
 TEST(CameraModel, HexLayoutUsesRowPitchAndHalfLensShift) {
-  const CameraModel cam =
-      parse_camera_yaml(paper_with("layout: rect", "layout: hex").replace(
-                            kPaper.find("count_y: 193"), 12, "count_y: 200"),
-                        "hex");
+  const CameraModel cam = parse_camera_yaml(
+      paper_with("layout: rect", "layout: hex").replace(kPaper.find("count_y: 193"), 12, "count_y: 200"), "hex");
   EXPECT_EQ(cam.microlens().layout, LensletLayout::hex);
   EXPECT_NEAR(cam.row_pitch_mm(), 0.125 * std::sqrt(3.0) / 2, 1e-12);
   EXPECT_NEAR(cam.array_width_mm(), 289.5 * 0.125, 1e-12);
@@ -95,13 +92,12 @@ TEST(CameraModel, HexLayoutUsesRowPitchAndHalfLensShift) {
 }
 
 TEST(CameraFile, ShippedDefaultIsThePaperCamera) {
-  const CameraModel cam = load_camera_file(std::string(PLENOPIV_SOURCE_DIR) +
-                                           "/systemd/config/camera-fahringer2015.yaml");
+  const CameraModel cam =
+      load_camera_file(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-fahringer2015.yaml");
   EXPECT_EQ(cam.sensor().width_px, 4904);
   EXPECT_EQ(cam.microlens().count_y, 193);
   EXPECT_NEAR(cam.image_distance_mm(), 100.0, 1e-12);
-  const CameraModel small =
-      load_camera_file(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml");
+  const CameraModel small = load_camera_file(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml");
   EXPECT_EQ(small.lens_count(), 2500);
 }
 
@@ -150,29 +146,35 @@ INSTANTIATE_TEST_SUITE_P(
                 "sensor: {width_px: 4904, height_px: 3280, pixel_pitch_mm: 0.0074}\n"
                 "microlens: {pitch_mm: 0.125, focal_length_mm: 0.5, count_x: 289, count_y: 193}\n",
                 {"main_lens", "missing"}},
-        BadCase{"wrong_type", paper_with("width_px: 4904", "width_px: wide"),
+        BadCase{"wrong_type",
+                paper_with("width_px: 4904", "width_px: wide"),
                 {"sensor.width_px", "expected a whole number in pixels", "'wide'"}},
-        BadCase{"unit_in_value", paper_with("pitch_mm: 0.125", "pitch_mm: 0.125 mm"),
+        BadCase{"unit_in_value",
+                paper_with("pitch_mm: 0.125", "pitch_mm: 0.125 mm"),
                 {"microlens.pitch_mm", "expected a number in millimetres", "'0.125 mm'"}},
-        BadCase{"wrong_unit_key", paper_with("pitch_mm: 0.125", "pitch_um: 125"),
-                {"microlens.pitch_um", "unknown key"}},
-        BadCase{"negative_pitch", paper_with("pitch_mm: 0.125", "pitch_mm: -0.125"),
+        BadCase{
+            "wrong_unit_key", paper_with("pitch_mm: 0.125", "pitch_um: 125"), {"microlens.pitch_um", "unknown key"}},
+        BadCase{"negative_pitch",
+                paper_with("pitch_mm: 0.125", "pitch_mm: -0.125"),
                 {"microlens.pitch_mm", "positive", "-0.125"}},
-        BadCase{"zero_pixel_pitch", paper_with("pixel_pitch_mm: 0.0074", "pixel_pitch_mm: 0"),
+        BadCase{"zero_pixel_pitch",
+                paper_with("pixel_pitch_mm: 0.0074", "pixel_pitch_mm: 0"),
                 {"sensor.pixel_pitch_mm", "positive"}},
-        BadCase{"magnification_zero", paper_with("magnification: -1", "magnification: 0"),
+        BadCase{"magnification_zero",
+                paper_with("magnification: -1", "magnification: 0"),
                 {"main_lens.magnification", "non-zero"}},
-        BadCase{"magnification_positive", paper_with("magnification: -1", "magnification: 1"),
+        BadCase{"magnification_positive",
+                paper_with("magnification: -1", "magnification: 1"),
                 {"main_lens.magnification", "negative"}},
-        BadCase{"bad_layout", paper_with("layout: rect", "layout: square"),
-                {"microlens.layout", "rect, hex", "'square'"}},
-        BadCase{"count_not_whole", paper_with("count_x: 289", "count_x: 28.9"),
-                {"microlens.count_x", "whole number"}},
-        BadCase{"section_not_map", paper_with("main_lens: {focal_length_mm: 50, f_number: 2, magnification: -1}",
-                                              "main_lens: 50"),
+        BadCase{
+            "bad_layout", paper_with("layout: rect", "layout: square"), {"microlens.layout", "rect, hex", "'square'"}},
+        BadCase{"count_not_whole", paper_with("count_x: 289", "count_x: 28.9"), {"microlens.count_x", "whole number"}},
+        BadCase{"section_not_map",
+                paper_with("main_lens: {focal_length_mm: 50, f_number: 2, magnification: -1}", "main_lens: 50"),
                 {"main_lens", "expected a mapping"}},
         BadCase{"not_yaml", "sensor: {width_px: 4904\n", {"not valid YAML"}},
-        BadCase{"lens_smaller_than_two_pixels", paper_with("pitch_mm: 0.125", "pitch_mm: 0.01"),
+        BadCase{"lens_smaller_than_two_pixels",
+                paper_with("pitch_mm: 0.125", "pitch_mm: 0.01"),
                 {"microlens.pitch_mm", "at least 2 pixels"}}),
     [](const testing::TestParamInfo<BadCase>& info) { return std::string(info.param.name); });
 

@@ -40,9 +40,8 @@ TEST(CorrelateCli, WritesTheVectorFieldAndVti) {
   const auto a = dir() / "a.h5", b = dir() / "b.h5", out = dir() / "field.h5", vti = dir() / "field.vti";
   write_pair(grid(48), a, b);
   std::string output;
-  const int status = run_command({binary("plenopiv"), "correlate", a.string(), b.string(), "-o",
-                                  out.string(), "--vti", vti.string(), "--dt", "0.002",
-                                  "--passes", "24@50,16@50,16@50"},
+  const int status = run_command({binary("plenopiv"), "correlate", a.string(), b.string(), "-o", out.string(), "--vti",
+                                  vti.string(), "--dt", "0.002", "--passes", "24@50,16@50,16@50"},
                                  output);
   ASSERT_EQ(status, 0) << output;
   EXPECT_NE(output.find("pass 3/3"), std::string::npos) << output;
@@ -62,8 +61,9 @@ TEST(CorrelateCli, WritesTheVectorFieldAndVti) {
   std::string py;
   const int py_status = run_command(
       {"/usr/bin/python3", "-c",
-       "import h5py,numpy as np; g=h5py.File('" + out.string() + "')['vectors'];"
-       "print(round(float(np.median(g['u'][...])),2), float(np.nanmax(np.abs(g['vorticity_z'][...]))) < 5)"},
+       "import h5py,numpy as np; g=h5py.File('" + out.string() +
+           "')['vectors'];"
+           "print(round(float(np.median(g['u'][...])),2), float(np.nanmax(np.abs(g['vorticity_z'][...]))) < 5)"},
       py);
   ASSERT_EQ(py_status, 0) << py;
   EXPECT_NE(py.find("0.06 True"), std::string::npos) << py;  // 0.12 mm / 2 ms = 0.06 m/s
@@ -78,9 +78,9 @@ TEST(CorrelateCli, DifferentGridsAreAClearError) {
   write_pair(grid(48), a, b);
   write_pair(grid(56), c, d);
   std::string output;
-  const int status = run_command({binary("plenopiv"), "correlate", a.string(), c.string(), "-o",
-                                  (dir() / "never.h5").string(), "--dt", "0.001"},
-                                 output);
+  const int status = run_command(
+      {binary("plenopiv"), "correlate", a.string(), c.string(), "-o", (dir() / "never.h5").string(), "--dt", "0.001"},
+      output);
   EXPECT_EQ(status, 2) << output;
   EXPECT_NE(output.find("different grids"), std::string::npos) << output;
   EXPECT_FALSE(std::filesystem::exists(dir() / "never.h5"));
@@ -90,28 +90,27 @@ TEST(CorrelateCli, MissingDtAndBadPassesAreRefused) {
   const auto a = dir() / "a2.h5", b = dir() / "b2.h5";
   write_pair(grid(48), a, b);
   std::string output;
-  EXPECT_EQ(run_command({binary("plenopiv"), "correlate", a.string(), b.string(), "-o",
-                         (dir() / "x.h5").string()},
-                        output),
-            2);
+  EXPECT_EQ(
+      run_command({binary("plenopiv"), "correlate", a.string(), b.string(), "-o", (dir() / "x.h5").string()}, output),
+      2);
   EXPECT_NE(output.find("--dt"), std::string::npos) << output;
-  EXPECT_EQ(run_command({binary("plenopiv"), "correlate", a.string(), b.string(), "-o",
-                         (dir() / "x.h5").string(), "--dt", "1", "--passes", "16"},
+  EXPECT_EQ(run_command({binary("plenopiv"), "correlate", a.string(), b.string(), "-o", (dir() / "x.h5").string(),
+                         "--dt", "1", "--passes", "16"},
                         output),
             2);
   EXPECT_NE(output.find("--passes"), std::string::npos) << output;
-  EXPECT_EQ(run_command({binary("plenopiv"), "correlate", a.string(), b.string(), "-o",
-                         (dir() / "x.h5").string(), "--dt", "1", "--final-smoothing", "5"},
+  EXPECT_EQ(run_command({binary("plenopiv"), "correlate", a.string(), b.string(), "-o", (dir() / "x.h5").string(),
+                         "--dt", "1", "--final-smoothing", "5"},
                         output),
             2);
   EXPECT_NE(output.find("final_smoothing"), std::string::npos) << output;
-  EXPECT_EQ(run_command({binary("plenopiv"), "correlate", a.string(), b.string(), "-o",
-                         (dir() / "x.h5").string(), "--dt", "1", "--depth-prefilter", "9"},
+  EXPECT_EQ(run_command({binary("plenopiv"), "correlate", a.string(), b.string(), "-o", (dir() / "x.h5").string(),
+                         "--dt", "1", "--depth-prefilter", "9"},
                         output),
             2);
   EXPECT_NE(output.find("depth_prefilter: must be 0 to 8, got 9"), std::string::npos) << output;
-  EXPECT_EQ(run_command({binary("plenopiv"), "correlate", a.string(), b.string(), "-o",
-                         (dir() / "x.h5").string(), "--dt", "1", "--depth-prefilter", "2", "--no-prefilter"},
+  EXPECT_EQ(run_command({binary("plenopiv"), "correlate", a.string(), b.string(), "-o", (dir() / "x.h5").string(),
+                         "--dt", "1", "--depth-prefilter", "2", "--no-prefilter"},
                         output),
             2);
   EXPECT_NE(output.find("the prefilter, which is off"), std::string::npos) << output;
@@ -129,8 +128,8 @@ PlainAndWith correlate_plain_and_with(const std::string& name, const std::vector
   const auto plain = dir() / (name + "_plain.h5"), with = dir() / (name + "_with.h5");
   write_pair(grid(48), a, b);
   PlainAndWith r;
-  std::vector<std::string> command{binary("plenopiv"), "correlate", a.string(), b.string(), "--dt", "0.002",
-                                   "--passes", "24@50,16@75", "-o"};
+  std::vector<std::string> command{binary("plenopiv"), "correlate",   a.string(), b.string(), "--dt", "0.002",
+                                   "--passes",         "24@50,16@75", "-o"};
   command.push_back(plain.string());
   EXPECT_EQ(run_command(command, r.plain_output), 0) << r.plain_output;
   command.back() = with.string();

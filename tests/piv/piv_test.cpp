@@ -41,10 +41,9 @@ Volume blobs(const Grid3& g, const std::vector<P3>& at, double sigma_z = 1) {
     for (int z = cz - reach_z; z <= cz + reach_z; ++z)
       for (int y = cy - 2; y <= cy + 2; ++y)
         for (int x = cx - 2; x <= cx + 2; ++x) {
-          if (x < 0 || y < 0 || z < 0 || x >= g.shape[0] || y >= g.shape[1] || z >= g.shape[2])
-            continue;
-          const double r2 = (x - p[0]) * (x - p[0]) + (y - p[1]) * (y - p[1]) +
-                            (z - p[2]) * (z - p[2]) / (sigma_z * sigma_z);
+          if (x < 0 || y < 0 || z < 0 || x >= g.shape[0] || y >= g.shape[1] || z >= g.shape[2]) continue;
+          const double r2 =
+              (x - p[0]) * (x - p[0]) + (y - p[1]) * (y - p[1]) + (z - p[2]) * (z - p[2]) / (sigma_z * sigma_z);
           v.at(x, y, z) += float(std::exp(-r2 / 2.0));
         }
   }
@@ -55,8 +54,7 @@ std::vector<P3> random_points(const Grid3& g, int count, unsigned seed) {
   std::mt19937_64 rng(seed);
   std::vector<P3> p(count);
   for (auto& q : p)
-    for (int a = 0; a < 3; ++a)
-      q[a] = std::uniform_real_distribution<double>(-4, g.shape[a] + 3)(rng);
+    for (int a = 0; a < 3; ++a) q[a] = std::uniform_real_distribution<double>(-4, g.shape[a] + 3)(rng);
   return p;
 }
 
@@ -95,8 +93,7 @@ TEST(FftCorrelator, IntegerShiftOfARandomWindowPeaksThere) {
 }
 
 // A sampled Gaussian correlation peak: the 3-point Gaussian fit is exact for it.
-std::vector<float> gaussian_peak(const std::array<int, 3>& s, const P3& centre, double sigma,
-                                 double floor_value = 0) {
+std::vector<float> gaussian_peak(const std::array<int, 3>& s, const P3& centre, double sigma, double floor_value = 0) {
   std::vector<float> c(std::size_t(s[0]) * s[1] * s[2]);
   for (int z = 0; z < s[2]; ++z)
     for (int y = 0; y < s[1]; ++y)
@@ -173,8 +170,8 @@ TEST(Sinc7, ExactAtVoxelsKeepsConstantsAndInterpolatesSmoothSignals) {
     double lin = 0;
     for (int c = 0; c < 8; ++c) {
       const int dx = c & 1, dy = c >> 1 & 1, dz = c >> 2 & 1;
-      lin += (dx ? x - x0 : 1 - (x - x0)) * (dy ? y - y0 : 1 - (y - y0)) *
-             (dz ? z - z0 : 1 - (z - z0)) * f(x0 + dx, y0 + dy, z0 + dz);
+      lin += (dx ? x - x0 : 1 - (x - x0)) * (dy ? y - y0 : 1 - (y - y0)) * (dz ? z - z0 : 1 - (z - z0)) *
+             f(x0 + dx, y0 + dy, z0 + dz);
     }
     worst_linear = std::max(worst_linear, std::abs(lin - f(x, y, z)));
   }
@@ -275,8 +272,7 @@ struct Errors {
   P3 bias{0, 0, 0}, rms{0, 0, 0};
   std::size_t valid = 0;
 };
-Errors errors_against(const CorrelationResult& r, const P3& truth_vox, const Grid3& g,
-                      int skip_border = 0) {
+Errors errors_against(const CorrelationResult& r, const P3& truth_vox, const Grid3& g, int skip_border = 0) {
   Errors e;
   const auto& f = r.field;
   const std::array<const std::vector<float>*, 3> comp{&f.dx_mm, &f.dy_mm, &f.dz_mm};
@@ -285,8 +281,7 @@ Errors errors_against(const CorrelationResult& r, const P3& truth_vox, const Gri
     const std::array<int, 3> i{int(n % f.grid.shape[0]), int(n / f.grid.shape[0] % f.grid.shape[1]),
                                int(n / (f.grid.shape[0] * f.grid.shape[1]))};
     bool border = false;
-    for (int a = 0; a < 3; ++a)
-      border |= i[a] < skip_border || i[a] >= f.grid.shape[a] - skip_border;
+    for (int a = 0; a < 3; ++a) border |= i[a] < skip_border || i[a] >= f.grid.shape[a] - skip_border;
     if (border) continue;
     ++e.valid;
     for (int a = 0; a < 3; ++a) {
@@ -390,8 +385,10 @@ TEST(Multipass, TheIntensityFloorRemovesAStationaryHazesPull) {
   floored.intensity_threshold_of_mean = 4;
   const Errors without = errors_against(correlate_volumes(a, b, plain), d, g, 1);
   const Errors with = errors_against(correlate_volumes(a, b, floored), d, g, 1);
-  std::printf("stationary haze, depth shift 1.5 voxel: bias %.3f without the floor, %.3f with 4x the mean; "
-              "RMS %.3f, %.3f\n", without.bias[2], with.bias[2], without.rms[2], with.rms[2]);
+  std::printf(
+      "stationary haze, depth shift 1.5 voxel: bias %.3f without the floor, %.3f with 4x the mean; "
+      "RMS %.3f, %.3f\n",
+      without.bias[2], with.bias[2], without.rms[2], with.rms[2]);
   // The haze pulls the depth shift short; the floor takes most of that pull away.
   EXPECT_LT(without.bias[2], -0.1) << "measured -0.134";
   EXPECT_GT(with.bias[2], 0.4 * without.bias[2]) << "measured -0.038 against -0.134";
@@ -409,16 +406,17 @@ TEST(Multipass, ADepthMarginRemovesThePullOfStreaksCutByTheWindow) {
   const P3 d{0, 0, 2.5};  // voxels
   for (P3& p : moved) p[2] += d[2];
   const Volume a = blobs(g, at, 4), b = blobs(g, moved, 4);  // streaks 4 times as long as wide
-  CorrelationSettings with;  // the default passes, a margin of 4 on the first 16^3, 50 % pass
+  CorrelationSettings with;              // the default passes, a margin of 4 on the first 16^3, 50 % pass
   with.passes[0].window = {24, 24, 24};  // the 48^3 volume holds 3 windows of 24^3 at 50 %
   CorrelationSettings without = with;
   for (PassSettings& p : without.passes) p.depth_margin = 0;
   ASSERT_EQ(with.passes[1].depth_margin, 4);
   const Errors e_with = errors_against(correlate_volumes(a, b, with), d, g, 1);
   const Errors e_without = errors_against(correlate_volumes(a, b, without), d, g, 1);
-  std::printf("streaks sigma_z 4, depth shift 2.5 voxels: bias %.3f without margins, %.3f with; RMS %.3f, %.3f; "
-              "lateral RMS %.3f %.3f with\n", e_without.bias[2], e_with.bias[2], e_without.rms[2], e_with.rms[2],
-              e_with.rms[0], e_with.rms[1]);
+  std::printf(
+      "streaks sigma_z 4, depth shift 2.5 voxels: bias %.3f without margins, %.3f with; RMS %.3f, %.3f; "
+      "lateral RMS %.3f %.3f with\n",
+      e_without.bias[2], e_with.bias[2], e_without.rms[2], e_with.rms[2], e_with.rms[0], e_with.rms[1]);
   // Without margins the depth shift comes out short by a large part of it; with the default's
   // margin the bias and the random error nearly vanish.
   EXPECT_LT(e_without.bias[2], -0.5) << "measured -0.727";
@@ -455,8 +453,7 @@ TEST(Multipass, FinalSmoothingLowersTheRandomErrorOfAUniformShift) {
   // 50 %: neighbouring windows share less than at 75 %, so their errors are less alike and the
   // smoothing takes more of them than on the paper's ring.)
   for (int a = 0; a < 3; ++a) {
-    EXPECT_LT(e1.rms[a], 0.7 * e0.rms[a])
-        << a << " (measured 0.0272 0.0280 0.0182 against 0.0501 0.0509 0.0441)";
+    EXPECT_LT(e1.rms[a], 0.7 * e0.rms[a]) << a << " (measured 0.0272 0.0280 0.0182 against 0.0501 0.0509 0.0441)";
     EXPECT_NEAR(e1.bias[a], e0.bias[a], 0.01) << a << " (measured moved by 0.002-0.003)";
   }
 }
@@ -536,8 +533,10 @@ TEST(Multipass, DepthContextLetsTheFaceWindowsSeeTheCutStreaks) {
   };
   const double cut = face_bias(cropped, true), seen = face_bias(with_context, true);
   const double inner_cut = face_bias(cropped, false), inner_seen = face_bias(with_context, false);
-  std::printf("depth streaks, shift 2.5 voxels, bias at the box's depth faces: %.3f cropped, %.3f with %d slices "
-              "of context; inside %.3f and %.3f\n", cut, seen, context, inner_cut, inner_seen);
+  std::printf(
+      "depth streaks, shift 2.5 voxels, bias at the box's depth faces: %.3f cropped, %.3f with %d slices "
+      "of context; inside %.3f and %.3f\n",
+      cut, seen, context, inner_cut, inner_seen);
   // Cropped, the face windows' depth shift comes out short (the default's depth margin already
   // takes most of the pull of the windows' own faces); with the context it does not.
   EXPECT_LT(cut, -0.04) << "measured -0.068";
@@ -557,7 +556,7 @@ TEST(Multipass, SameBitsAtOneAndTwoThreads) {
   const Volume b = sim::render_exact_volume(g, sim::displace(pa, shear));
   CorrelationSettings s = small_settings();
   s.passes[1].depth_margin = 4;  // both ways of filling the windows
-  s.final_smoothing = 2;  // and 4 slices of depth context below
+  s.final_smoothing = 2;         // and 4 slices of depth context below
   s.depth_prefilter = 3;
   CorrelationResult r1, r2;
   {
@@ -605,9 +604,10 @@ TEST(Multipass, AKeptWorkspaceGivesTheBitsOfNone) {
     EXPECT_EQ(kept.flags, alone.flags);
   }
   EXPECT_GE(workspace.bytes(), 4 * large.first.data.size() * sizeof(float));
-  EXPECT_THROW(correlate_volumes(large.first, large.second, s,
-                                 [&](const PassReport&) { correlate_volumes(small.first, small.second, s, {}, 0, &workspace); },
-                                 0, &workspace),
+  EXPECT_THROW(correlate_volumes(
+                   large.first, large.second, s,
+                   [&](const PassReport&) { correlate_volumes(small.first, small.second, s, {}, 0, &workspace); }, 0,
+                   &workspace),
                std::logic_error);
   EXPECT_EQ(correlate_volumes(small.first, small.second, s, {}, 0, &workspace).field.dx_mm,
             correlate_volumes(small.first, small.second, s).field.dx_mm);
@@ -644,13 +644,13 @@ TEST(Multipass, WindowDeformationReducesTheRingVortexError) {
   // Away from the axis band (the windows reaching the ring's axis, where the exact u and w jump).
   const auto off_band = [&](const sim::Point3& x) { return !sim::in_ring_axis_band(flow, x, 0.8); };
   const P3 o3 = sim::field_errors(r3.field, flow, 0.1, 1, 0, off_band).rms;
-  std::printf("ring vortex RMS (voxels) single pass %.3f %.3f %.3f, previous default %.3f %.3f %.3f, default "
-              "%.3f %.3f %.3f (off the axis band %.3f %.3f %.3f)\n",
-              e1[0], e1[1], e1[2], e0[0], e0[1], e0[2], e3[0], e3[1], e3[2], o3[0], o3[1], o3[2]);
+  std::printf(
+      "ring vortex RMS (voxels) single pass %.3f %.3f %.3f, previous default %.3f %.3f %.3f, default "
+      "%.3f %.3f %.3f (off the axis band %.3f %.3f %.3f)\n",
+      e1[0], e1[1], e1[2], e0[0], e0[1], e0[2], e3[0], e3[1], e3[2], o3[0], o3[1], o3[2]);
   // The default beats a single pass by about 3x and the three-pass window-mean schedule by 20 %
   // in every component (the crop cuts the cores: many windows here sit near its faces).
-  for (int c = 0; c < 3; ++c)
-    EXPECT_LT(e3[c], 0.35 * e1[c]) << c << " (measured 0.224 0.170 0.202; 1.028 0.706 0.729)";
+  for (int c = 0; c < 3; ++c) EXPECT_LT(e3[c], 0.35 * e1[c]) << c << " (measured 0.224 0.170 0.202; 1.028 0.706 0.729)";
   for (int c = 0; c < 3; ++c)
     EXPECT_LT(e3[c], 0.8 * e0[c]) << c << " (measured 0.224 0.170 0.202 against 0.34 0.30 0.32)";
   for (int c = 0; c < 3; ++c) EXPECT_LT(e3[c], 0.27) << c;

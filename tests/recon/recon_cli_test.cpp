@@ -39,7 +39,8 @@ TEST(ReconstructCli, WritesVolumesWhoseBrightestVoxelIsTheParticle) {
   float peak = 0;
   for (float v : projected.pixels) peak = std::max(peak, v);
   ImageU16 image(850, 850, 0);
-  for (std::size_t i = 0; i < image.size(); ++i) image.pixels[i] = std::uint16_t(std::lround(projected.pixels[i] / peak * 60000));
+  for (std::size_t i = 0; i < image.size(); ++i)
+    image.pixels[i] = std::uint16_t(std::lround(projected.pixels[i] / peak * 60000));
   io::write_tiff(dir / "particle.tif", image);
 
   std::string out;
@@ -61,9 +62,26 @@ TEST(ReconstructCli, WritesVolumesWhoseBrightestVoxelIsTheParticle) {
   EXPECT_NEAR(fit->position_mm[2], -0.75, 0.5);
 
   // --accelerate reaches MART: another volume, the particle still where it is.
-  ASSERT_EQ(run_command({binary("plenopiv"), "reconstruct", kCamera, (dir / "particle.tif").string(), "--extent",
-                         "-0.625", "0.625", "-0.625", "0.625", "-2", "2", "--voxel", "0.125", "--voxel-z", "0.5",
-                         "--iterations", "3", "--accelerate", "-o", (dir / "accelerated.h5").string()},
+  ASSERT_EQ(run_command({binary("plenopiv"),
+                         "reconstruct",
+                         kCamera,
+                         (dir / "particle.tif").string(),
+                         "--extent",
+                         "-0.625",
+                         "0.625",
+                         "-0.625",
+                         "0.625",
+                         "-2",
+                         "2",
+                         "--voxel",
+                         "0.125",
+                         "--voxel-z",
+                         "0.5",
+                         "--iterations",
+                         "3",
+                         "--accelerate",
+                         "-o",
+                         (dir / "accelerated.h5").string()},
                         out),
             0)
       << out;
@@ -80,18 +98,17 @@ TEST(ReconstructCli, RefusesBadArgumentsClearly) {
   const auto dir = testing_support::temp_dir("recon-cli");
   io::write_tiff(dir / "small.tif", ImageU16(100, 100, 5));
   std::string out;
-  EXPECT_EQ(2, run_command({binary("plenopiv"), "reconstruct", kCamera, (dir / "small.tif").string(), "--extent",
-                            "-1", "1", "-1", "1", "-1", "1", "-o", (dir / "x.h5").string()},
+  EXPECT_EQ(2, run_command({binary("plenopiv"), "reconstruct", kCamera, (dir / "small.tif").string(), "--extent", "-1",
+                            "1", "-1", "1", "-1", "1", "-o", (dir / "x.h5").string()},
                            out));
   EXPECT_NE(out.find("850 x 850"), std::string::npos) << out;
-  EXPECT_EQ(2, run_command({binary("plenopiv"), "reconstruct", kCamera, (dir / "small.tif").string(), "--extent",
-                            "1", "-1", "-1", "1", "-1", "1", "-o", (dir / "x.h5").string()},
+  EXPECT_EQ(2, run_command({binary("plenopiv"), "reconstruct", kCamera, (dir / "small.tif").string(), "--extent", "1",
+                            "-1", "-1", "1", "-1", "1", "-o", (dir / "x.h5").string()},
                            out));
   EXPECT_NE(out.find("--extent"), std::string::npos) << out;
   io::write_tiff(dir / "right.tif", ImageU16(850, 850, 5));
-  EXPECT_EQ(2, run_command({binary("plenopiv"), "reconstruct", kCamera, (dir / "right.tif").string(), "--extent",
-                            "-1", "1", "-1", "1", "-1", "1", "--sensor-blur-mm", "-0.001", "-o",
-                            (dir / "x.h5").string()},
+  EXPECT_EQ(2, run_command({binary("plenopiv"), "reconstruct", kCamera, (dir / "right.tif").string(), "--extent", "-1",
+                            "1", "-1", "1", "-1", "1", "--sensor-blur-mm", "-0.001", "-o", (dir / "x.h5").string()},
                            out));
   EXPECT_NE(out.find("sensor_blur_sigma_mm"), std::string::npos) << out;
   EXPECT_FALSE(std::filesystem::exists(dir / "x.h5"));

@@ -43,8 +43,7 @@ WeightingOperator make_operator(const optics::CameraModel& cam, const Grid3& g) 
 }
 
 // Particles as Gaussian blobs (sigma in voxels) at voxel positions: the truth for Q*.
-Volume blob_volume(const Grid3& g, const std::vector<std::array<double, 3>>& centres, double sigma_xy,
-                   double sigma_z) {
+Volume blob_volume(const Grid3& g, const std::vector<std::array<double, 3>>& centres, double sigma_xy, double sigma_z) {
   Volume v(g, 0.f);
   for (int z = 0; z < g.shape[2]; ++z) {
     for (int y = 0; y < g.shape[1]; ++y) {
@@ -225,8 +224,8 @@ TEST(WeightsActiveSet, SubsetOnAWideGridEqualsExplicitColumns) {
   set.back_project(op, y, back);
   w.multiply_transpose(y, reference);
   for (std::size_t m = 0; m < subset.size(); ++m) expected[m] = reference[subset[m]];
-  std::cout << "measured: subset back-projection relative difference " << max_abs_diff(back, expected) / max_abs(expected)
-            << "\n";
+  std::cout << "measured: subset back-projection relative difference "
+            << max_abs_diff(back, expected) / max_abs(expected) << "\n";
   EXPECT_LE(max_abs_diff(back, expected) / max_abs(expected), 1e-4);
   // Two images in one walk (MLOS) give each the bits of its own back-projection.
   std::vector<float> y2(op.pixel_count()), one_a(subset.size()), one_b(subset.size()), two_a(subset.size()),
@@ -306,8 +305,8 @@ TEST_F(Mart, QualityRisesWithIterations) {
     const MartResult r = reconstruct(*op_, image, s);
     const double q = quality_factor(r.volume, exact);
     ASSERT_TRUE(r.final_residual);
-    std::cout << "measured: Q* after " << iterations << " iterations " << q << ", residual "
-              << *r.final_residual << "\n";
+    std::cout << "measured: Q* after " << iterations << " iterations " << q << ", residual " << *r.final_residual
+              << "\n";
     // Measured (own forward operator, so an optimistic case until the simulator lands): Q* 0.897,
     // 0.963, 0.990 after 1, 5, 20 iterations.
     EXPECT_GT(q, previous) << iterations << " iterations";
@@ -619,8 +618,8 @@ TEST_F(Mart, PruningExactZerosGivesTheBitsOfNoPruning) {
       const MartResult zeros = reconstruct(op, image, s);
       const std::string what = std::string(accelerate ? "accelerated" : "plain") + ", blur " + std::to_string(blur);
       ASSERT_EQ(off.volume.data.size(), zeros.volume.data.size());
-      EXPECT_EQ(0, std::memcmp(off.volume.data.data(), zeros.volume.data.data(),
-                               off.volume.data.size() * sizeof(float)))
+      EXPECT_EQ(0,
+                std::memcmp(off.volume.data.data(), zeros.volume.data.data(), off.volume.data.size() * sizeof(float)))
           << what;
       ASSERT_EQ(off.iterations.size(), zeros.iterations.size()) << what;
       for (std::size_t i = 0; i < off.iterations.size(); ++i) {
@@ -645,10 +644,9 @@ TEST_F(Mart, PruningExactZerosGivesTheBitsOfNoPruning) {
       }
       EXPECT_EQ(updates, zeros.skipped.voxel_updates) << what;
       EXPECT_EQ(off.skipped.voxel_updates, off.skipped.voxels_active * off.iterations.size()) << what;
-      std::cout << "measured: " << what << ": " << zeros.skipped.voxels_pruned << " of "
-                << zeros.skipped.voxels_active << " active voxels pruned, voxel updates skipped "
-                << zeros.skipped.fraction_updates_skipped() << " (without pruning "
-                << off.skipped.fraction_updates_skipped() << ")\n";
+      std::cout << "measured: " << what << ": " << zeros.skipped.voxels_pruned << " of " << zeros.skipped.voxels_active
+                << " active voxels pruned, voxel updates skipped " << zeros.skipped.fraction_updates_skipped()
+                << " (without pruning " << off.skipped.fraction_updates_skipped() << ")\n";
     }
   }
 }
@@ -680,8 +678,8 @@ TEST_F(Mart, PruningAtASmallThresholdStaysCloseToNoPruning) {
     const double relative = std::sqrt(diff / norm);
     std::cout << "measured: prune threshold " << threshold << ": Q* " << q << " (unpruned " << q_off
               << "), volume differs by " << relative << " (relative L2), voxel updates skipped "
-              << pruned.skipped.fraction_updates_skipped() << " (unpruned "
-              << off.skipped.fraction_updates_skipped() << ")\n";
+              << pruned.skipped.fraction_updates_skipped() << " (unpruned " << off.skipped.fraction_updates_skipped()
+              << ")\n";
     // Measured: Q* 0.9976 / 0.9969 against 0.9948 unpruned; the volumes differ by 4.4 % / 5.6 %
     // (relative L2, most of it in the faint voxels the threshold removed).
     EXPECT_NEAR(q, q_off, 0.01) << "threshold " << threshold << ": Q* " << q << " against " << q_off;
@@ -713,7 +711,8 @@ TEST_F(Mart, CancellingFromProgressStopsAndFreesTheWorkspace) {
   EXPECT_EQ(last, 2);
   const MartResult again = reconstruct(*op_, image, s, workspace);
   const MartResult fresh = reconstruct(*op_, image, s);
-  EXPECT_EQ(0, std::memcmp(again.volume.data.data(), fresh.volume.data.data(), fresh.volume.data.size() * sizeof(float)));
+  EXPECT_EQ(0,
+            std::memcmp(again.volume.data.data(), fresh.volume.data.data(), fresh.volume.data.size() * sizeof(float)));
 }
 
 // A kept workspace changes no bit: images of different scenes (and an empty one) in sequence, then
@@ -721,7 +720,8 @@ TEST_F(Mart, CancellingFromProgressStopsAndFreesTheWorkspace) {
 // the accelerated, blurred one (which uses every buffer).
 TEST_F(Mart, WorkspaceReuseGivesTheBitsOfAFreshReconstruction) {
   const ImageF a = project_image(*op_, truth(), 1000.f);
-  const ImageF b = project_image(*op_, blob_volume(op_->grid(), {{2, 2, 1}, {7, 3, 6}, {5, 8, 3}, {8, 8, 8}}, 0.9, 0.6), 700.f);
+  const ImageF b =
+      project_image(*op_, blob_volume(op_->grid(), {{2, 2, 1}, {7, 3, 6}, {5, 8, 3}, {8, 8, 8}}, 0.9, 0.6), 700.f);
   const ImageF dark(850, 850, 0.f);
   for (const bool accelerate : {false, true}) {
     MartSettings s;
@@ -735,7 +735,8 @@ TEST_F(Mart, WorkspaceReuseGivesTheBitsOfAFreshReconstruction) {
       const MartResult fresh = reconstruct(*op_, *image, s);
       const MartResult kept = reconstruct(*op_, *image, s, workspace);
       ASSERT_EQ(fresh.volume.data.size(), kept.volume.data.size());
-      EXPECT_EQ(0, std::memcmp(fresh.volume.data.data(), kept.volume.data.data(), fresh.volume.data.size() * sizeof(float)))
+      EXPECT_EQ(
+          0, std::memcmp(fresh.volume.data.data(), kept.volume.data.data(), fresh.volume.data.size() * sizeof(float)))
           << "frame " << k << ", accelerated " << accelerate;
       EXPECT_EQ(fresh.final_residual, kept.final_residual) << "frame " << k;
       EXPECT_EQ(fresh.skipped.voxels_active, kept.skipped.voxels_active) << "frame " << k;
@@ -1011,7 +1012,8 @@ TEST(MartSensorBlur, SpreadsAPixelAsAGaussianOfTheSigmaInPixels) {
   EXPECT_NEAR(total, 1000.0, 1e-3);  // far from the edges no light is lost
   const double sigma_px = 0.0052 / 0.0074;
   EXPECT_NEAR(image[centre + 1] / image[centre], std::exp(-0.5 / (sigma_px * sigma_px)), 0.01);
-  EXPECT_NEAR(image[centre + std::size_t(op.image_width())] / image[centre], std::exp(-0.5 / (sigma_px * sigma_px)), 0.01);
+  EXPECT_NEAR(image[centre + std::size_t(op.image_width())] / image[centre], std::exp(-0.5 / (sigma_px * sigma_px)),
+              0.01);
   std::vector<float> untouched(op.pixel_count(), 2.f);
   apply_sensor_blur(op, 0.0, untouched);
   EXPECT_EQ(untouched[centre], 2.f);

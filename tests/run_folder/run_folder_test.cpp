@@ -23,8 +23,7 @@ using testing_support::read_manifest;
 // Frames whose pixels tell which pair and exposure they are.
 struct Frames {
   ImageU16 a, b;
-  explicit Frames(std::uint64_t index)
-      : a(8, 6, std::uint16_t(index)), b(8, 6, std::uint16_t(index + 1000)) {}
+  explicit Frames(std::uint64_t index) : a(8, 6, std::uint16_t(index)), b(8, 6, std::uint16_t(index + 1000)) {}
 };
 
 PairRecord record_of(std::uint64_t index, const Frames& f) {

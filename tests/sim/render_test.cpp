@@ -68,7 +68,8 @@ std::map<std::pair<int, int>, Moments> per_lens(const ImageF& img) {
       const double v = img.at(x, y);
       if (v == 0) continue;
       const int i = int(std::lround((x - 0.5 * (img.width - 1)) / spot_pitch_px + 0.5 * (cam.microlens().count_x - 1)));
-      const int j = int(std::lround((y - 0.5 * (img.height - 1)) / spot_pitch_px + 0.5 * (cam.microlens().count_y - 1)));
+      const int j =
+          int(std::lround((y - 0.5 * (img.height - 1)) / spot_pitch_px + 0.5 * (cam.microlens().count_y - 1)));
       Moments& m = lenses[{i, j}];
       m.sum += v;
       m.x += v * x;
@@ -168,8 +169,8 @@ TEST(Render, DefocusSpreadsOverManyLensesWithOppositePatterns) {
     // d = s_o + z: 2.885 mm at +30, 5.357 mm at -30 (wider than the 6.25 mm array: the rays
     // beyond it miss; the landed fraction is the square's share of the disk, 0.4330).
     const double d = cam.object_distance_mm() + dz;
-    const double blur_r = 0.5 * cam.aperture_diameter_mm() *
-                          std::abs(1 - s_i() * (1 / cam.main_lens().focal_length_mm - 1 / d));
+    const double blur_r =
+        0.5 * cam.aperture_diameter_mm() * std::abs(1 - s_i() * (1 / cam.main_lens().focal_length_mm - 1 / d));
     const auto lenses = per_lens(r.rays);
     EXPECT_GT(lenses.size(), 1000u);
     if (dz > 0) {
@@ -188,8 +189,7 @@ TEST(Render, DefocusSpreadsOverManyLensesWithOppositePatterns) {
     } else {
       const double square = 6.25 * 6.25, disk = std::numbers::pi * blur_r * blur_r;
       // Binomial sd 0.0008 at 4e5 rays.
-      EXPECT_NEAR(double(r.counts.landed) / r.counts.emitted, square / disk, 0.004)
-          << "measured 0.4346 against 0.4333";
+      EXPECT_NEAR(double(r.counts.landed) / r.counts.emitted, square / disk, 0.004) << "measured 0.4346 against 0.4333";
     }
     // Sub-image offset from its spot against the lens's offset from the blur centre, for lenses
     // well inside the blur (at its rim the sub-images reach the cell edge, see above): all of

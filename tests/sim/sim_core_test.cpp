@@ -17,8 +17,7 @@ namespace {
 
 // The paper's prototype camera (tables 1-2), as shipped.
 optics::CameraModel paper_camera() {
-  return optics::load_camera_file(std::string(PLENOPIV_SOURCE_DIR) +
-                                  "/systemd/config/camera-fahringer2015.yaml");
+  return optics::load_camera_file(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-fahringer2015.yaml");
 }
 
 std::unique_ptr<Flow> flow_from(const std::string& yaml) {
@@ -118,7 +117,8 @@ TEST(Flows, RingVortexEq15And16) {
 }
 
 TEST(Flows, SolidBodyRotationAndShearAreExact) {
-  const auto rot = flow_from("type: solid_body_rotation\ncentre_mm: [1, 0, 0]\naxis: [0, 0, 2]\nangle_rad: 1.5707963267948966\n");
+  const auto rot =
+      flow_from("type: solid_body_rotation\ncentre_mm: [1, 0, 0]\naxis: [0, 0, 2]\nangle_rad: 1.5707963267948966\n");
   // A quarter turn about z through (1,0,0): (2,0,0) -> (1,1,0).
   const Point3 d = rot->displacement_mm({2, 0, 0});
   EXPECT_NEAR(d[0], -1, 1e-12);

@@ -35,8 +35,8 @@ TEST(SimulateCli, ParticleListToTiff) {
   // 20 * 0.125, -3.0625 + 31 * 0.125) = (-0.5625, 0.8125) mm.
   write(dir() / "one.csv", "x [mm], y [mm], z [mm]\n0.5625,-0.8125,0\n");
   std::string out;
-  ASSERT_EQ(simulate({"particles", "--camera", camera, "--particles", (dir() / "one.csv").string(),
-                      "--rays", "5000", "-o", (dir() / "one.tif").string()},
+  ASSERT_EQ(simulate({"particles", "--camera", camera, "--particles", (dir() / "one.csv").string(), "--rays", "5000",
+                      "-o", (dir() / "one.tif").string()},
                      out),
             0)
       << out;
@@ -80,8 +80,8 @@ TEST(SimulateCli, CalibrationOfAnImperfectArrayWithItsTruth) {
   std::string out;
   const fs::path img = dir() / "cal-jitter.tif", truth = dir() / "cal-truth.csv";
   ASSERT_EQ(simulate({"calibration", "--camera", camera, "--rays-per-lens", "1000", "--lens-jitter-mm", "0.004",
-                      "--array-rotation-rad", "0.003", "--array-offset-mm", "0.01,-0.02", "--truth",
-                      truth.string(), "-o", img.string()},
+                      "--array-rotation-rad", "0.003", "--array-offset-mm", "0.01,-0.02", "--truth", truth.string(),
+                      "-o", img.string()},
                      out),
             0)
       << out;
@@ -116,12 +116,13 @@ TEST(SimulateCli, CalibrationOfAnImperfectArrayWithItsTruth) {
 TEST(SimulateCli, FramePairWithItsTruth) {
   std::string out;
   const fs::path pair = dir() / "pair";
-  ASSERT_EQ(simulate({"pair", "--camera", camera, "--count", "200", "--uniform", "0.1,-0.05,0.2", "--rays",
-                      "500", "--seed", "7", "-o", pair.string()},
+  ASSERT_EQ(simulate({"pair", "--camera", camera, "--count", "200", "--uniform", "0.1,-0.05,0.2", "--rays", "500",
+                      "--seed", "7", "-o", pair.string()},
                      out),
             0)
       << out;
-  for (const char* f : {"frame_A.tif", "frame_B.tif", "particles_A.csv", "particles_B.csv", "flow.yaml", "simulation.yaml"}) {
+  for (const char* f :
+       {"frame_A.tif", "frame_B.tif", "particles_A.csv", "particles_B.csv", "flow.yaml", "simulation.yaml"}) {
     EXPECT_TRUE(fs::exists(pair / f)) << f;
   }
   const auto a = sim::read_particles_csv(pair / "particles_A.csv");
@@ -139,8 +140,8 @@ TEST(SimulateCli, FramePairWithItsTruth) {
   EXPECT_NE(io::read_tiff_u16(pair / "frame_A.tif").pixels, io::read_tiff_u16(pair / "frame_B.tif").pixels);
   // The same seed makes the same pair.
   const fs::path again = dir() / "again";
-  ASSERT_EQ(simulate({"pair", "--camera", camera, "--count", "200", "--uniform", "0.1,-0.05,0.2", "--rays",
-                      "500", "--seed", "7", "-o", again.string()},
+  ASSERT_EQ(simulate({"pair", "--camera", camera, "--count", "200", "--uniform", "0.1,-0.05,0.2", "--rays", "500",
+                      "--seed", "7", "-o", again.string()},
                      out),
             0);
   EXPECT_EQ(io::read_tiff_u16(pair / "frame_B.tif").pixels, io::read_tiff_u16(again / "frame_B.tif").pixels);

@@ -20,8 +20,7 @@ extern char** environ;
 
 namespace plenopiv::testing_support {
 
-ChildProcess::ChildProcess(const std::vector<std::string>& argv,
-                           const std::filesystem::path& log_file)
+ChildProcess::ChildProcess(const std::vector<std::string>& argv, const std::filesystem::path& log_file)
     : log_file_(log_file) {
   std::filesystem::create_directories(log_file.parent_path());
   posix_spawn_file_actions_t actions;
@@ -75,8 +74,7 @@ std::string ChildProcess::output() const {
   return s.str();
 }
 
-int run_command(const std::vector<std::string>& argv, std::string& output,
-                std::chrono::milliseconds timeout) {
+int run_command(const std::vector<std::string>& argv, std::string& output, std::chrono::milliseconds timeout) {
   static int counter = 0;
   const auto log = std::filesystem::temp_directory_path() /
                    ("plenopiv-cmd-" + std::to_string(::getpid()) + "-" + std::to_string(counter++) + ".log");
@@ -101,8 +99,6 @@ int free_tcp_port() {
   return ntohs(addr.sin_port);
 }
 
-std::string binary(const std::string& name) {
-  return std::string(PLENOPIV_BINARY_DIR) + "/bin/" + name;
-}
+std::string binary(const std::string& name) { return std::string(PLENOPIV_BINARY_DIR) + "/bin/" + name; }
 
 }  // namespace plenopiv::testing_support

@@ -20,13 +20,12 @@ const std::string& small_camera_file() {
 }
 
 daemon::RunConfig small_run_config(int pairs) {
-  return daemon::parse_run_config(
-      "pairs: " + std::to_string(pairs) +
-          "\nrate_hz: 2\ndt_s: 0.001\nmax_pairs_in_flight: 3\n"
-          "volume: {x_mm: [-1, 1], y_mm: [-1, 1], z_mm: [-0.5, 0.5], voxel_mm: 0.125}\n"
-          "reconstruction: {iterations: 2, start: ones, dark_weight_cutoff: 0.99}\n"
-          "correlation: {passes: [{window: 8, overlap_percent: 50}]}\n",
-      "run.yaml");
+  return daemon::parse_run_config("pairs: " + std::to_string(pairs) +
+                                      "\nrate_hz: 2\ndt_s: 0.001\nmax_pairs_in_flight: 3\n"
+                                      "volume: {x_mm: [-1, 1], y_mm: [-1, 1], z_mm: [-0.5, 0.5], voxel_mm: 0.125}\n"
+                                      "reconstruction: {iterations: 2, start: ones, dark_weight_cutoff: 0.99}\n"
+                                      "correlation: {passes: [{window: 8, overlap_percent: 50}]}\n",
+                                  "run.yaml");
 }
 
 std::string small_sim_uri(const std::string& extra) {

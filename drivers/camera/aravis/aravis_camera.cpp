@@ -39,8 +39,7 @@ class AravisCamera final : public CameraBase {
       : CameraBase(CameraInfo{uri.text(), {}, {}, {}, 0, 0, {}}),
         uri_(uri),
         profile_(find_camera_profile(uri.string_or("profile", "sfnc-burst"))) {
-    uri.reject_unknown({"profile", "packet_size", "socket_buffer", "buffers", "resend",
-                        "reconnect_s"});
+    uri.reject_unknown({"profile", "packet_size", "socket_buffer", "buffers", "resend", "reconnect_s"});
     if (uri.target().empty()) uri.fail("needs a device id or address, e.g. aravis://127.0.0.1");
     packet_size_ = int(uri.integer_or("packet_size", 0));
     if (packet_size_ < 0 || packet_size_ > 65000) uri.fail("packet_size must be within 0..65000");
@@ -114,7 +113,8 @@ class AravisCamera final : public CameraBase {
   }
   void do_software_trigger() override {
     if (!armed_ || armed_->trigger != TriggerSource::Software) {
-      throw StateError("camera " + uri_.text() + ": software_trigger needs arm() with "
+      throw StateError("camera " + uri_.text() +
+                       ": software_trigger needs arm() with "
                        "TriggerSource::Software");
     }
     run([&] { fire_software_trigger(); });
@@ -163,9 +163,8 @@ class AravisCamera final : public CameraBase {
       std::deque<ArvBuffer*> buffers;
       {
         std::unique_lock lock(mutex_);
-        wake_.wait_for(lock, std::chrono::milliseconds(50), [this] {
-          return quit_ || !commands_.empty() || !buffers_.empty() || control_lost_;
-        });
+        wake_.wait_for(lock, std::chrono::milliseconds(50),
+                       [this] { return quit_ || !commands_.empty() || !buffers_.empty() || control_lost_; });
         if (quit_) break;
         commands.swap(commands_);
         buffers.swap(buffers_);
@@ -207,8 +206,7 @@ class AravisCamera final : public CameraBase {
         frame.bit_depth = 8;
         const auto* src = static_cast<const std::uint8_t*>(data);
         for (std::size_t i = 0; i < n; ++i) frame.image.pixels[i] = src[i];
-      } else if ((format == ARV_PIXEL_FORMAT_MONO_16 || format == ARV_PIXEL_FORMAT_MONO_12) &&
-                 data && size >= 2 * n) {
+      } else if ((format == ARV_PIXEL_FORMAT_MONO_16 || format == ARV_PIXEL_FORMAT_MONO_12) && data && size >= 2 * n) {
         frame.image = ImageU16(w, h);
         frame.bit_depth = format == ARV_PIXEL_FORMAT_MONO_12 ? 12 : 16;
         std::memcpy(frame.image.pixels.data(), data, 2 * n);
@@ -238,9 +236,9 @@ class AravisCamera final : public CameraBase {
     serial_ = or_empty(arv_camera_get_device_serial_number(camera_, nullptr));
     arv_camera_get_sensor_size(camera_, &sensor_w_, &sensor_h_, nullptr);
     ArvDevice* device = arv_camera_get_device(camera_);
-    check_camera_profile(profile_, [device](const std::string& name) {
-      return probe_feature(device, name);
-    }, uri_.text() + " (" + vendor_ + " " + model_ + ")");
+    check_camera_profile(
+        profile_, [device](const std::string& name) { return probe_feature(device, name); },
+        uri_.text() + " (" + vendor_ + " " + model_ + ")");
     if (packet_size_ > 0 && arv_camera_is_gv_device(camera_)) {
       arv_camera_gv_set_packet_size(camera_, packet_size_, &error);
       if (error) uri_.fail("packet_size " + std::to_string(packet_size_) + ": " + take_error(error));
@@ -249,16 +247,15 @@ class AravisCamera final : public CameraBase {
     g_signal_connect(device, "control-lost", G_CALLBACK(on_control_lost), this);
   }
 
-  static std::optional<std::vector<std::string>> probe_feature(ArvDevice* device,
-                                                                 const std::string& name) {
+  static std::optional<std::vector<std::string>> probe_feature(ArvDevice* device, const std::string& name) {
     ArvGcNode* node = arv_device_get_feature(device, name.c_str());
     if (!node) return std::nullopt;
     std::vector<std::string> values;
     if (ARV_IS_GC_ENUMERATION(node)) {
       guint n = 0;
       GError* error = nullptr;
-      const char** entries = arv_device_dup_available_enumeration_feature_values_as_strings(
-          device, name.c_str(), &n, &error);
+      const char** entries =
+          arv_device_dup_available_enumeration_feature_values_as_strings(device, name.c_str(), &n, &error);
       take_error(error);
       for (guint i = 0; entries && i < n; ++i) values.push_back(entries[i]);
       g_free(entries);
@@ -293,8 +290,8 @@ class AravisCamera final : public CameraBase {
     }
     g_free(formats);
     if (!offered) {
-      fail_setting("pixel_format", std::string(to_string(s.pixel_format)) +
-                                       " is not offered (the camera has: " + list + ")");
+      fail_setting("pixel_format",
+                   std::string(to_string(s.pixel_format)) + " is not offered (the camera has: " + list + ")");
     }
     arv_camera_set_pixel_format_from_string(camera_, to_string(s.pixel_format), &error);
     if (error) fail_setting("pixel_format", take_error(error));
@@ -315,21 +312,20 @@ class AravisCamera final : public CameraBase {
   void set_feature(const FeatureSetting& s) {
     ArvGcNode* node = arv_device_get_feature(arv_camera_get_device(camera_), s.feature.c_str());
     if (!node || !ARV_IS_GC_FEATURE_NODE(node)) {
-      throw InputError("camera " + uri_.text() + ": profile " + profile_.name + ": feature " +
-                       s.feature + " is missing");
+      throw InputError("camera " + uri_.text() + ": profile " + profile_.name + ": feature " + s.feature +
+                       " is missing");
     }
     GError* error = nullptr;
     arv_gc_feature_node_set_value_from_string(ARV_GC_FEATURE_NODE(node), s.value.c_str(), &error);
     if (error) {
-      throw InputError("camera " + uri_.text() + ": profile " + profile_.name + ": " + s.feature +
-                       "=" + s.value + ": " + take_error(error));
+      throw InputError("camera " + uri_.text() + ": profile " + profile_.name + ": " + s.feature + "=" + s.value +
+                       ": " + take_error(error));
     }
   }
 
   void apply_double_exposure(const DoubleExposureSettings& s) {
     for (const FeatureSetting& f : profile_.features) set_feature(f);
-    const auto& trigger =
-        s.trigger == TriggerSource::Software ? profile_.software_trigger : profile_.external_trigger;
+    const auto& trigger = s.trigger == TriggerSource::Software ? profile_.software_trigger : profile_.external_trigger;
     for (const FeatureSetting& f : trigger) set_feature(f);
     if (s.max_pair_gap_s > 0) {
       PairerOptions pairing;
@@ -345,12 +341,11 @@ class AravisCamera final : public CameraBase {
     if (!stream) throw DeviceError("camera " + uri_.text() + ": no stream: " + take_error(error));
     if (ARV_IS_GV_STREAM(stream)) {
       if (socket_buffer_ > 0) {
-        g_object_set(stream, "socket-buffer", ARV_GV_STREAM_SOCKET_BUFFER_FIXED,
-                     "socket-buffer-size", gint(socket_buffer_), nullptr);
+        g_object_set(stream, "socket-buffer", ARV_GV_STREAM_SOCKET_BUFFER_FIXED, "socket-buffer-size",
+                     gint(socket_buffer_), nullptr);
       }
       g_object_set(stream, "packet-resend",
-                   resend_ ? ARV_GV_STREAM_PACKET_RESEND_ALWAYS : ARV_GV_STREAM_PACKET_RESEND_NEVER,
-                   nullptr);
+                   resend_ ? ARV_GV_STREAM_PACKET_RESEND_ALWAYS : ARV_GV_STREAM_PACKET_RESEND_NEVER, nullptr);
     }
     const guint payload = arv_camera_get_payload(camera_, &error);
     if (error) {
@@ -413,8 +408,8 @@ class AravisCamera final : public CameraBase {
       GError* error = nullptr;
       arv_device_execute_command(device, profile_.software_trigger_command.c_str(), &error);
       if (error) {
-        throw DeviceError("camera " + uri_.text() + ": " + profile_.software_trigger_command +
-                          ": " + take_error(error));
+        throw DeviceError("camera " + uri_.text() + ": " + profile_.software_trigger_command + ": " +
+                          take_error(error));
       }
     }
   }

@@ -22,8 +22,8 @@ std::vector<FeatureSetting> read_settings(const YamlMap& map, std::string_view k
     }
     const auto it = item.begin();
     if (!it->second.IsScalar()) {
-      map.fail(key, "entry " + std::to_string(i + 1) + " (" + it->first.as<std::string>() +
-                        "): value must be a scalar");
+      map.fail(key,
+               "entry " + std::to_string(i + 1) + " (" + it->first.as<std::string>() + "): value must be a scalar");
     }
     out.push_back({it->first.as<std::string>(), it->second.as<std::string>()});
   }
@@ -41,9 +41,9 @@ std::vector<FeatureSetting> CameraProfile::all_settings() const {
 
 CameraProfile load_camera_profile(const std::filesystem::path& file) {
   const YamlMap map(load_yaml_file(file), file.string());
-  map.reject_unknown({"name", "description", "mode", "features", "external_trigger",
-                      "software_trigger", "software_trigger_command", "software_trigger_repeat",
-                      "software_trigger_spacing_s", "min_pair_period_s", "max_pair_gap_s", "frame_id_bits"});
+  map.reject_unknown({"name", "description", "mode", "features", "external_trigger", "software_trigger",
+                      "software_trigger_command", "software_trigger_repeat", "software_trigger_spacing_s",
+                      "min_pair_period_s", "max_pair_gap_s", "frame_id_bits"});
   CameraProfile p;
   p.source = file.string();
   p.name = map.string("name");
@@ -82,12 +82,14 @@ std::filesystem::path camera_profile_dir() {
 CameraProfile find_camera_profile(const std::string& name) {
   // A name, never a path: a URI may come from a control request, and must not make the daemon open
   // a file of its choosing. Profiles are added to the profile folder instead.
-  const bool plain = !name.empty() && name[0] != '.' && name.size() <= 64 &&
-                     name.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789._-") ==
-                         std::string::npos;
+  const bool plain =
+      !name.empty() && name[0] != '.' && name.size() <= 64 &&
+      name.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789._-") == std::string::npos;
   if (!plain) {
-    throw InputError("camera profile '" + name + "': a profile name (letters, digits, '.', '_', '-'), not a path: "
-                     "put the profile's YAML file into " + camera_profile_dir().string() +
+    throw InputError("camera profile '" + name +
+                     "': a profile name (letters, digits, '.', '_', '-'), not a path: "
+                     "put the profile's YAML file into " +
+                     camera_profile_dir().string() +
                      " (or the folder PLENOPIV_CAMERA_PROFILE_DIR names) and give its name");
   }
   const std::filesystem::path shipped = camera_profile_dir() / (name + ".yaml");
@@ -99,14 +101,13 @@ CameraProfile find_camera_profile(const std::string& name) {
         known += (known.empty() ? "" : ", ") + e.path().stem().string();
       }
     }
-    throw InputError("camera profile '" + name + "': not found in " +
-                     camera_profile_dir().string() + " (shipped: " + known + ")");
+    throw InputError("camera profile '" + name + "': not found in " + camera_profile_dir().string() +
+                     " (shipped: " + known + ")");
   }
   return load_camera_profile(shipped);
 }
 
-void check_camera_profile(const CameraProfile& profile, const FeatureProbe& probe,
-                          const std::string& camera) {
+void check_camera_profile(const CameraProfile& profile, const FeatureProbe& probe, const std::string& camera) {
   std::vector<std::string> problems;
   for (const FeatureSetting& s : profile.all_settings()) {
     const auto values = probe(s.feature);
@@ -117,8 +118,7 @@ void check_camera_profile(const CameraProfile& profile, const FeatureProbe& prob
     if (!values->empty() && std::find(values->begin(), values->end(), s.value) == values->end()) {
       std::string list;
       for (const std::string& v : *values) list += (list.empty() ? "" : ", ") + v;
-      problems.push_back("feature " + s.feature + " has no value " + s.value + " (it has: " + list +
-                         ")");
+      problems.push_back("feature " + s.feature + " has no value " + s.value + " (it has: " + list + ")");
     }
   }
   if (profile.software_trigger.size() && !probe(profile.software_trigger_command)) {
@@ -127,8 +127,8 @@ void check_camera_profile(const CameraProfile& profile, const FeatureProbe& prob
   if (problems.empty()) return;
   std::string text;
   for (const std::string& p : problems) text += (text.empty() ? "" : "; ") + p;
-  throw InputError("camera " + camera + " does not support camera profile '" + profile.name +
-                   "' (" + profile.source + "): " + text);
+  throw InputError("camera " + camera + " does not support camera profile '" + profile.name + "' (" + profile.source +
+                   "): " + text);
 }
 
 }  // namespace plenopiv::drivers

@@ -30,7 +30,7 @@ struct CameraProfile {
   std::vector<FeatureSetting> external_trigger;  // applied on arm for TriggerSource::External
   std::vector<FeatureSetting> software_trigger;  // applied on arm for TriggerSource::Software
   std::string software_trigger_command = "TriggerSoftware";
-  int software_trigger_repeat = 1;       // commands per pair (2 in two-frames mode)
+  int software_trigger_repeat = 1;  // commands per pair (2 in two-frames mode)
   // Pause between those commands; the second also waits (at most 0.5 s) for frame A to arrive.
   double software_trigger_spacing_s = 0;
   // Software triggers of consecutive pairs are at least this far apart, so that the gap between
@@ -53,12 +53,10 @@ std::filesystem::path camera_profile_dir();
 
 // What a device says about a feature: nullopt if it has no such feature; otherwise the values it
 // accepts if it is an enumeration (empty for other kinds).
-using FeatureProbe =
-    std::function<std::optional<std::vector<std::string>>(const std::string& feature)>;
+using FeatureProbe = std::function<std::optional<std::vector<std::string>>(const std::string& feature)>;
 
 // Checks every feature and enumeration value the profile needs against the device. Throws
 // InputError naming the camera, the profile and every missing feature or value.
-void check_camera_profile(const CameraProfile& profile, const FeatureProbe& probe,
-                          const std::string& camera);
+void check_camera_profile(const CameraProfile& profile, const FeatureProbe& probe, const std::string& camera);
 
 }  // namespace plenopiv::drivers

@@ -30,24 +30,23 @@ std::string list_chips() {
 class GpiodTrigger final : public ScheduledTrigger {
  public:
   GpiodTrigger(const DeviceUri& uri, const GpioLineMap& map)
-      : ScheduledTrigger(TriggerInfo{uri.text(), "gpiod (user-space GPIO)",
-                                     kGpiodTimingUncertainty_s, outputs_of(map),
+      : ScheduledTrigger(TriggerInfo{uri.text(), "gpiod (user-space GPIO)", kGpiodTimingUncertainty_s, outputs_of(map),
                                      map.qsync.has_value()}),
         map_(map) {
     chip_ = map.chip.find('/') != std::string::npos ? gpiod_chip_open(map.chip.c_str())
                                                     : gpiod_chip_open_by_name(map.chip.c_str());
     if (!chip_) {
-      uri.fail("cannot open GPIO chip '" + map.chip + "': " + std::strerror(errno) +
-               " (chips: " + list_chips() + "; permissions: install systemd/60-plenopiv.rules)");
+      uri.fail("cannot open GPIO chip '" + map.chip + "': " + std::strerror(errno) + " (chips: " + list_chips() +
+               "; permissions: install systemd/60-plenopiv.rules)");
     }
     try {
       check_gpio_lines(map, gpiod_chip_num_lines(chip_), uri.text());
       for (const auto& [line, offset] : map.outputs) {
         gpiod_line* l = gpiod_chip_get_line(chip_, offset);
         if (!l || gpiod_line_request_output(l, kConsumer, 0) != 0) {
-          throw DeviceError("trigger " + uri.text() + ": cannot request line " +
-                            std::to_string(offset) + " (" + to_string(line) + ") as output: " +
-                            std::strerror(errno) + " (is another program using it?)");
+          throw DeviceError("trigger " + uri.text() + ": cannot request line " + std::to_string(offset) + " (" +
+                            to_string(line) + ") as output: " + std::strerror(errno) +
+                            " (is another program using it?)");
         }
         lines_[int(line)] = l;
       }
@@ -55,9 +54,8 @@ class GpiodTrigger final : public ScheduledTrigger {
         sync_line_ = gpiod_chip_get_line(chip_, *map.qsync);
         if (!sync_line_ || gpiod_line_request_rising_edge_events(sync_line_, kConsumer) != 0) {
           sync_line_ = nullptr;
-          throw DeviceError("trigger " + uri.text() + ": cannot request line " +
-                            std::to_string(*map.qsync) + " (qsync) for edge events: " +
-                            std::strerror(errno));
+          throw DeviceError("trigger " + uri.text() + ": cannot request line " + std::to_string(*map.qsync) +
+                            " (qsync) for edge events: " + std::strerror(errno));
         }
         sync_thread_ = std::thread([this] { watch_sync(); });
       }
@@ -83,8 +81,7 @@ class GpiodTrigger final : public ScheduledTrigger {
   void write_line(TriggerLine line, bool level) override {
     gpiod_line* l = lines_[int(line)];
     if (!l || gpiod_line_set_value(l, level ? 1 : 0) != 0) {
-      throw DeviceError("trigger " + info().uri + ": cannot set " + to_string(line) + ": " +
-                        std::strerror(errno));
+      throw DeviceError("trigger " + info().uri + ": cannot set " + to_string(line) + ": " + std::strerror(errno));
     }
   }
 

@@ -44,8 +44,7 @@ void check_gpio_lines(const GpioLineMap& map, unsigned chip_lines, const std::st
   auto check = [&](const std::string& key, unsigned offset) {
     if (offset >= chip_lines) {
       throw InputError("device URI '" + uri + "': line " + std::to_string(offset) + " (" + key +
-                       ") does not exist on " + map.chip + ", which has lines 0.." +
-                       std::to_string(chip_lines - 1));
+                       ") does not exist on " + map.chip + ", which has lines 0.." + std::to_string(chip_lines - 1));
     }
   };
   for (const auto& [l, offset] : map.outputs) check(to_string(l), offset);

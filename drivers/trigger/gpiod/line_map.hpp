@@ -11,9 +11,9 @@
 namespace plenopiv::drivers {
 
 struct GpioLineMap {
-  std::string chip;                              // gpiochip0, or a path /dev/gpiochip0
-  std::map<TriggerLine, unsigned> outputs;       // e.g. camera → 27
-  std::optional<unsigned> qsync;                 // input: the laser's Q-switch sync output
+  std::string chip;                         // gpiochip0, or a path /dev/gpiochip0
+  std::map<TriggerLine, unsigned> outputs;  // e.g. camera → 27
+  std::optional<unsigned> qsync;            // input: the laser's Q-switch sync output
 };
 
 // `gpiod://<chip>?flashlamp1=..&qswitch1=..&flashlamp2=..&qswitch2=..&camera=..&gate=..&qsync=..`.
