@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Regenerates the tables of docs/benchmarks.md from the benchmarks' machine-readable lines.
+"""Regenerates the tables of docs/benchmarks.md and docs/paper-figures.md from the benchmarks' machine-readable lines.
 
   /usr/bin/python3 scripts/bench_tables.py               tables from the saved results
   /usr/bin/python3 scripts/bench_tables.py --run quick   rerun the quick benchmarks first (~5 min)
@@ -25,6 +25,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "docs" / "bench-results"
 DOC = ROOT / "docs" / "benchmarks.md"
+# The pages with generated tables: the benchmarks page, and the paper's figures reproduced.
+DOCS = [DOC, ROOT / "docs" / "paper-figures.md"]
 
 # run-paper.yaml's reconstruction and correlation settings, as bench_e2e's flags.
 RUN_PAPER = ["--mu", "1", "--accelerate", "--iterations", "8", "--intensity-threshold", "3",
@@ -611,22 +613,25 @@ def regenerate():
             cache[name] = Result(name)
         return cache[name]
 
-    text = DOC.read_text()
     pattern = re.compile(r"(<!-- generated: ([\w-]+) -->\n)(.*?)(<!-- end: \2 -->)", re.S)
     seen = set()
+    texts = {}
+    for doc in DOCS:
 
-    def replace(m):
-        name = m.group(2)
-        if name not in TABLES:
-            sys.exit(f"bench_tables: docs/benchmarks.md asks for table '{name}', which this script lacks")
-        seen.add(name)
-        return m.group(1) + "\n".join(TABLES[name](R)) + "\n" + m.group(4)
+        def replace(m, doc=doc):
+            name = m.group(2)
+            if name not in TABLES:
+                sys.exit(f"bench_tables: {doc.relative_to(ROOT)} asks for table '{name}', which this script lacks")
+            seen.add(name)
+            return m.group(1) + "\n".join(TABLES[name](R)) + "\n" + m.group(4)
 
-    text = pattern.sub(replace, text)
+        texts[doc] = pattern.sub(replace, doc.read_text())
     missing = set(TABLES) - seen
     if missing:
-        sys.exit(f"bench_tables: no markers in docs/benchmarks.md for {', '.join(sorted(missing))}")
-    DOC.write_text(text)
+        sys.exit(f"bench_tables: no markers in {', '.join(str(d.relative_to(ROOT)) for d in DOCS)} for "
+                 f"{', '.join(sorted(missing))}")
+    for doc, text in texts.items():
+        doc.write_text(text)
     for name, (_, _, plot) in BENCHES.items():
         path = RESULTS / f"{name}.txt"
         text = path.read_text() if path.exists() else ""
