@@ -32,6 +32,7 @@ struct ReconstructionWork {
 // What the processing stage makes of a pair.
 struct ProcessedPair {
   VectorField vectors;
+  std::vector<std::uint8_t> flags;           // the correlation's VectorFlag bits per node (none: not known)
   std::optional<Volume> volume_a, volume_b;  // when the run publishes volumes
   std::optional<ReconstructionWork> work;    // when the stage reconstructs (plenoptic_processing)
 };

@@ -58,6 +58,7 @@ ProcessFactory plenoptic_processing(const optics::CameraModel& camera) {
       process::PairResult r = processor->process(pair.a.image, pair.b.image, options);
       ProcessedPair out;
       out.vectors = std::move(r.correlation.field);
+      out.flags = std::move(r.correlation.flags);
       out.work = reconstruction_work(r);
       spdlog::debug(
           "pair {}: MART skipped {:.1f} % of the voxel updates ({:.1f} % of the work pruned); live voxels "

@@ -357,7 +357,7 @@ void Run::run() {
                 last_work_.emplace(pair.pair_index, std::move(*result.work));
               }
               result.vectors.dt_s = result.vectors.dt_s > 0 ? result.vectors.dt_s : config_.dt_s;
-              recorder_->record_vectors(pair.pair_index, result.vectors);
+              recorder_->record_vectors(pair.pair_index, result.vectors, result.flags);
               if (env_.publisher) {
                 msg::VectorFieldHeader h;
                 h.set_run_id(run_id_);

@@ -20,6 +20,7 @@
 #include "core/io/checksum.hpp"
 #include "core/io/hdf5_files.hpp"
 #include "core/io/tiff.hpp"
+#include "core/process/field_file.hpp"
 
 namespace plenopiv::run_folder {
 namespace fs = std::filesystem;
@@ -135,7 +136,7 @@ void write_statistics(const fs::path& path, const piv::RunningStatistics& statis
                              {"w_rms", statistics.rms(2), "m/s"},
                              {"count", count, "1"},
                              {"valid_fraction", valid_fraction, "1"}},
-                            {{"fields", std::to_string(fields)}});
+                            {{"fields", std::to_string(fields) + " vector fields averaged"}});
 }
 
 std::string pair_name(std::uint64_t index) {
@@ -187,6 +188,7 @@ Writer::Writer(const Setup& setup) : dir_(run_dir(setup.data_dir, setup.run_id))
   manifest_.set_rate_hz(setup.rate_hz);
   nominal_dt_s_ = setup.nominal_dt_s;
   write_text(dir_ / "process.yaml", setup.process_yaml);
+  process_yaml_ = setup.process_yaml;
   manifest_.set_process_file("process.yaml");
   if (setup.calibration) {
     const CalibrationCopy& c = *setup.calibration;
@@ -245,9 +247,29 @@ void Writer::record_pair(const PairRecord& pair) {
   write_manifest_locked();
 }
 
-void Writer::record_vectors(std::uint64_t pair_index, const VectorField& field) {
+void Writer::record_vectors(std::uint64_t pair_index, const VectorField& field, std::span<const std::uint8_t> flags) {
   const std::string file = "vectors/" + pair_name(pair_index) + ".h5";
-  io::write_vector_field_h5(dir_ / file, field);
+  std::string run_id, frame_a, frame_b;
+  double measured_dt_s = 0;
+  {
+    std::lock_guard lock(mutex_);
+    run_id = manifest_.run_id();
+    for (const msg::ManifestPair& p : manifest_.pairs()) {
+      if (p.pair_index() != pair_index) continue;
+      frame_a = p.frame_a();
+      frame_b = p.frame_b();
+      measured_dt_s = p.measured_dt_s();
+    }
+  }
+  const std::vector<io::TextAttribute> provenance{
+      {"run", run_id},
+      {"pair_index", std::to_string(pair_index)},
+      {"frame_a", frame_a},
+      {"frame_b", frame_b},
+      {"settings", process_yaml_},
+      {"dt_s", std::to_string(field.dt_s)},
+      {"dt_source", measured_dt_s > 0 ? "measured (laser Q-switch sync)" : "nominal (the run's dt_s)"}};
+  process::write_vector_field_files(dir_ / file, {}, field, flags, provenance);
   std::lock_guard lock(mutex_);
   statistics_.add(field);
   for (msg::ManifestPair& p : *manifest_.mutable_pairs()) {

@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <mutex>
 #include <optional>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -78,8 +79,9 @@ class Writer {
   const std::filesystem::path& dir() const { return dir_; }
   // Writes both frames (together, each fsynced) and lists the pair. Throws if the disk refuses.
   void record_pair(const PairRecord& pair);
-  // Writes the pair's vector field, lists it, and adds it to the running statistics.
-  void record_vectors(std::uint64_t pair_index, const VectorField& field);
+  // Writes the pair's vector field (process::write_vector_field_files: vorticity, `flags` when
+  // given, provenance), lists it, and adds it to the running statistics.
+  void record_vectors(std::uint64_t pair_index, const VectorField& field, std::span<const std::uint8_t> flags = {});
   // Lists pairs the camera dropped, with the reason, in the manifest (the first kMaxListedDrops;
   // the losses count them all). The manifest is rewritten with the next file or at close.
   void record_drop(std::uint64_t trigger_index, const std::string& reason);
@@ -101,6 +103,7 @@ class Writer {
   mutable std::mutex mutex_;
   std::filesystem::path dir_;
   msg::RunManifest manifest_;
+  std::string process_yaml_;  // the run's processing keys, each vector file's provenance
   piv::RunningStatistics statistics_;
   double nominal_dt_s_ = 0;
   bool closed_ = false;

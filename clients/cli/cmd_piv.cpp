@@ -9,13 +9,14 @@
 #include <tbb/global_control.h>
 
 #include "clients/cli/commands.hpp"
-#include "clients/cli/field_output.hpp"
 #include "clients/cli/progress.hpp"
 #include "core/base/errors.hpp"
+#include "core/io/checksum.hpp"
 #include "core/io/hdf5_files.hpp"
 #include "core/io/vtk_files.hpp"
 #include "core/piv/derived.hpp"
 #include "core/piv/multipass.hpp"
+#include "core/process/field_file.hpp"
 
 namespace plenopiv::client {
 namespace {
@@ -94,7 +95,10 @@ void run_correlate(const CorrelateOptions& o) {
               << (settings.final_smoothing > 1 ? "es" : "") << " over the valid vectors\n";
 
   const std::filesystem::path vti = o.vti.empty() ? std::filesystem::path() : std::filesystem::path(o.vti);
-  write_field_outputs(o.output, vti, result);
+  std::vector<io::TextAttribute> provenance{process::input_file_entry("volume_a", o.first),
+                                            process::input_file_entry("volume_b", o.second)};
+  if (!o.config.empty()) provenance.push_back({"settings", io::read_file_bytes(o.config)});
+  process::write_vector_field_files(o.output, vti, result.field, result.flags, provenance);
   std::size_t valid = 0;
   for (auto v : result.field.valid) valid += v;
   std::cout << o.output << ": " << result.field.grid.count() << " vectors, " << valid << " valid\n";

@@ -19,7 +19,6 @@
 
 #include "clients/cli/calibration_frames.hpp"
 #include "clients/cli/commands.hpp"
-#include "clients/cli/field_output.hpp"
 #include "clients/cli/progress.hpp"
 #include "clients/cli/reprocess.hpp"
 #include "clients/cli/weights_cache.hpp"
@@ -34,6 +33,7 @@
 #include "core/io/vtk_files.hpp"
 #include "core/optics/camera_file.hpp"
 #include "core/piv/derived.hpp"
+#include "core/process/field_file.hpp"
 #include "core/process/frame_check.hpp"
 #include "core/process/pair_processor.hpp"
 #include "core/process/process.hpp"
@@ -252,7 +252,26 @@ void run_process(const ProcessOptions& o) {
   const auto r = processor.process(a, b, options);
 
   const auto omega = piv::vorticity(r.correlation.field);
-  write_field_outputs(out, vti, r.correlation, {{"dt_source", o.dt_s ? "--dt" : "nominal (dt_s of " + o.config + ")"}});
+  std::vector<io::TextAttribute> provenance{process::input_file_entry("frame_a", o.frame_a),
+                                            process::input_file_entry("frame_b", o.frame_b),
+                                            process::input_file_entry("camera", o.camera),
+                                            {"settings", io::read_file_bytes(o.config)},
+                                            {"settings_file", o.config},
+                                            {"dt_s", std::to_string(r.correlation.field.dt_s)},
+                                            {"dt_source", o.dt_s ? "--dt" : "nominal (dt_s of " + o.config + ")"}};
+  if (!o.calibration.empty()) {
+    provenance.push_back(process::input_file_entry("calibration", o.calibration));
+  } else if (o.nominal) {
+    provenance.push_back({"calibration", "nominal (the camera file's lens array and a geometric white image)"});
+  } else {
+    for (std::size_t i = 0; i < o.white_images.size(); ++i)
+      provenance.push_back(process::input_file_entry("white_image_" + std::to_string(i + 1), o.white_images[i]));
+    for (std::size_t i = 0; i < o.dark_images.size(); ++i)
+      provenance.push_back(process::input_file_entry("dark_image_" + std::to_string(i + 1), o.dark_images[i]));
+    if (!o.calibration_image.empty())
+      provenance.push_back(process::input_file_entry("calibration_image", o.calibration_image));
+  }
+  process::write_vector_field_files(out, vti, r.correlation.field, r.correlation.flags, provenance);
   write_png(png, preview_image(r.correlation.field, omega[2]));
   warn_if_few_valid(r.correlation.field, out.string());
 

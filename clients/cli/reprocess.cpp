@@ -12,7 +12,6 @@
 #include <thread>
 #include <vector>
 
-#include "clients/cli/field_output.hpp"
 #include "clients/cli/progress.hpp"
 #include "core/base/errors.hpp"
 #include "core/base/memory.hpp"
@@ -25,6 +24,7 @@
 #include "core/io/vtk_files.hpp"
 #include "core/optics/camera_file.hpp"
 #include "core/piv/statistics.hpp"
+#include "core/process/field_file.hpp"
 #include "core/process/frame_check.hpp"
 #include "core/process/pair_processor.hpp"
 #include "proto/run_folder.hpp"
@@ -86,10 +86,10 @@ RunInputs read_inputs(const ReprocessOptions& o) {
   return in;
 }
 
-// What a pair's result depends on, as a CRC-32 over: this program's version, the settings text and
-// tier, the camera file, the calibration, the pair's frames and the dt it is processed with. An
-// output whose hash matches is up to date.
-std::string input_hash(const RunInputs& in, const run_folder::PairEntry& p, double dt_s) {
+// What a pair's result depends on, one line each: this program's version, the CRC-32 of the
+// settings text and tier, the camera file, the calibration, the pair's frames, and the dt it is
+// processed with. Its CRC-32 is the input hash: an output whose hash matches is up to date.
+std::string input_description(const RunInputs& in, const run_folder::PairEntry& p, double dt_s) {
   char dt[64];
   std::snprintf(dt, sizeof dt, "%.17g", dt_s);
   const std::string description = std::string("plenopiv ") + PLENOPIV_VERSION + "\nsettings " +
@@ -97,7 +97,11 @@ std::string input_hash(const RunInputs& in, const run_folder::PairEntry& p, doub
                                   in.camera_crc + "\ncalibration " + in.calibration_crc + "\nframe A " +
                                   io::crc32_hex(io::crc32_of(io::read_file_bytes(p.frame_a))) + "\nframe B " +
                                   io::crc32_hex(io::crc32_of(io::read_file_bytes(p.frame_b))) + "\ndt_s " + dt + "\n";
-  return io::crc32_hex(io::crc32_of(description));
+  return description;
+}
+
+std::string input_hash(const RunInputs& in, const run_folder::PairEntry& p, double dt_s) {
+  return io::crc32_hex(io::crc32_of(input_description(in, p, dt_s)));
 }
 
 fs::path output_of(const RunInputs& in, const run_folder::PairEntry& p, const char* extension) {
@@ -105,8 +109,7 @@ fs::path output_of(const RunInputs& in, const run_folder::PairEntry& p, const ch
 }
 
 bool up_to_date(const RunInputs& in, const run_folder::PairEntry& p, const std::string& hash) {
-  return fs::exists(output_of(in, p, ".vti")) &&
-         io::read_vector_field_text(output_of(in, p, ".h5"), "input_hash") == hash;
+  return fs::exists(output_of(in, p, ".vti")) && io::read_provenance(output_of(in, p, ".h5"), "input_hash") == hash;
 }
 
 // A progress bar several threads update (one pair's fraction each).
@@ -222,7 +225,8 @@ ReprocessReport reprocess_run(const ReprocessOptions& o) {
       const run_folder::PairEntry& p = *in.selected[k];
       try {
         const double dt = process::pair_dt_s(in.settings, p.measured_dt_s);
-        const std::string hash = input_hash(in, p, dt);
+        const std::string description = input_description(in, p, dt);
+        const std::string hash = io::crc32_hex(io::crc32_of(description));
         if (o.resume && up_to_date(in, p, hash)) {
           ++skipped;
           progress.pair_done(slot);
@@ -239,11 +243,15 @@ ReprocessReport reprocess_run(const ReprocessOptions& o) {
         options.measured_dt_s = p.measured_dt_s;
         options.progress = [&](const std::string&, double f) { progress.pair_progress(slot, f); };
         const process::PairResult r = processor.process(a, b, options);
-        write_field_outputs(output_of(in, p, ".h5"), output_of(in, p, ".vti"), r.correlation,
-                            {{"input_hash", hash},
-                             {"run", o.run.string()},
-                             {"pair_index", std::to_string(p.pair_index)},
-                             {"dt_source", p.measured_dt_s ? "measured (laser Q-switch sync)" : "nominal (dt_s)"}});
+        process::write_vector_field_files(
+            output_of(in, p, ".h5"), output_of(in, p, ".vti"), r.correlation.field, r.correlation.flags,
+            {{"input_hash", hash},
+             {"inputs", description},
+             {"run", o.run.string()},
+             {"pair_index", std::to_string(p.pair_index)},
+             {"dt_source", p.measured_dt_s ? "measured (laser Q-switch sync)" : "nominal (dt_s)"},
+             {"settings", in.settings_text},
+             {"tier", in.tier}});
         ++processed;
         progress.pair_done(slot);
       } catch (...) {

@@ -67,18 +67,34 @@ def summary(f):
                h.latency_s, h.run_id))
 
 
+# Units of the published arrays, as plenopiv's HDF5 files give them (`units` attribute).
+UNITS = {"u": "m/s", "v": "m/s", "w": "m/s", "dx": "mm", "dy": "mm", "dz": "mm",
+         "vorticity_x": "1/s", "vorticity_y": "1/s", "vorticity_z": "1/s"}
+
+
 def save(h5, f):
-    """Appends one field as group /pair-<n> (u, v, w, valid; axes x, y, z in mm; attributes)."""
+    """Appends one field as group /pair-<n> in the layout of plenopiv's vector files: the arrays
+    [nz][ny][nx] with `units`, the axes x, y, z (mm) attached as dimension scales, attribute dt_s,
+    and a provenance subgroup (run, pair, host timestamp, latency)."""
     h = f.header
     g = h5.create_group("pair-%06d" % h.pair_index)
-    for name, a in f.arrays.items():
-        g.create_dataset(name, data=a.astype(np.uint8) if name == "valid" else a)
     for axis, name in enumerate("xyz"):
-        g.create_dataset(name, data=f.axis_mm(axis))
+        scale = g.create_dataset(name, data=f.axis_mm(axis))
+        scale.make_scale(name)
+        scale.attrs["units"] = "mm"
+    for name, a in f.arrays.items():
+        ds = g.create_dataset(name, data=a.astype(np.uint8) if name == "valid" else a)
+        ds.attrs["units"] = UNITS.get(name, "1")
+        for dim, axis in enumerate("zyx"):
+            ds.dims[dim].attach_scale(g[axis])
     g.attrs["dt_s"] = h.dt_s
-    g.attrs["run_id"] = h.run_id
-    g.attrs["host_timestamp_ns"] = h.host_timestamp_ns
-    g.attrs["latency_s"] = h.latency_s
+    g.attrs["axis_order"] = "z, y, x: arrays are [nz][ny][nx] (C order, x fastest)"
+    p = g.create_group("provenance")
+    p.attrs["software"] = "plenopiv_subscribe.py (live, from plenopivd)"
+    p.attrs["run"] = h.run_id
+    p.attrs["pair_index"] = str(h.pair_index)
+    p.attrs["host_timestamp_ns"] = str(h.host_timestamp_ns)
+    p.attrs["latency_s"] = str(h.latency_s)
     h5.flush()
 
 

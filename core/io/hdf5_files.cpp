@@ -3,13 +3,16 @@
 
 #include <hdf5.h>
 #include <hdf5_hl.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <array>
 #include <cstring>
+#include <ctime>
 #include <optional>
 #include <stdexcept>
 
+#include "core/base/build_info.hpp"
 #include "core/base/errors.hpp"
 #include "core/io/atomic_file.hpp"
 #include "core/io/hdf5_handle.hpp"
@@ -109,6 +112,26 @@ void attach_axes(hid_t parent, const std::filesystem::path& path, const std::str
   }
 }
 
+// Group /provenance: what made the file (software, commit, host, time written, UTC) and the
+// caller's `entries` (settings, inputs and their checksums, dt and its source), all as text
+// attributes.
+void write_provenance(hid_t file, const std::filesystem::path& path, const std::vector<TextAttribute>& entries) {
+  Handle group(H5Gcreate2(file, "provenance", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT), H5Gclose);
+  if (!group.ok()) throw std::runtime_error(path.string() + ": HDF5: cannot create group /provenance");
+  char host[256] = {};
+  if (gethostname(host, sizeof host - 1) != 0) std::strcpy(host, "unknown");
+  char written[32] = {};
+  const std::time_t now = std::time(nullptr);
+  std::tm utc{};
+  gmtime_r(&now, &utc);
+  std::strftime(written, sizeof written, "%Y-%m-%dT%H:%M:%SZ", &utc);
+  write_text_attribute(group.get(), path, "software", "plenopiv " + std::string(build_version()));
+  write_text_attribute(group.get(), path, "commit", std::string(build_commit()));
+  write_text_attribute(group.get(), path, "host", host);
+  write_text_attribute(group.get(), path, "written_utc", written);
+  for (const auto& [name, value] : entries) write_text_attribute(group.get(), path, name, value);
+}
+
 std::vector<double> read_attribute(hid_t parent, const std::filesystem::path& path, const std::string& owner,
                                    const std::string& name, hsize_t expected) {
   if (H5Aexists(parent, name.c_str()) <= 0) {
@@ -170,7 +193,8 @@ void check_grid(const Grid3& g, std::size_t size, const std::string& what) {
 
 }  // namespace
 
-void write_volume_h5(const std::filesystem::path& path, const Volume& volume) {
+void write_volume_h5(const std::filesystem::path& path, const Volume& volume,
+                     const std::vector<TextAttribute>& provenance) {
   check_grid(volume.grid, volume.data.size(), path.string() + ": volume");
   write_atomically(path, [&](const std::filesystem::path& tmp) {
     Handle file(H5Fcreate(tmp.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT), H5Fclose);
@@ -185,6 +209,7 @@ void write_volume_h5(const std::filesystem::path& path, const Volume& volume) {
                 "particle intensity per voxel (MART)");
     write_axes(file.get(), path, volume.grid);
     attach_axes(file.get(), path, "volume");
+    write_provenance(file.get(), path, provenance);
     flush(file.get(), path);
   });
 }
@@ -209,7 +234,7 @@ Volume read_volume_h5(const std::filesystem::path& path) {
 }
 
 void write_vector_field_h5(const std::filesystem::path& path, const VectorField& f,
-                           const std::vector<NamedField>& extra, const std::vector<TextAttribute>& text,
+                           const std::vector<NamedField>& extra, const std::vector<TextAttribute>& provenance,
                            const std::optional<FlagField>& flags) {
   const std::string what = path.string() + ": vector field";
   check_grid(f.grid, f.dx_mm.size(), what);
@@ -265,7 +290,7 @@ void write_vector_field_h5(const std::filesystem::path& path, const VectorField&
     write_attribute(group.get(), path, "dt_s", &f.dt_s, 1);
     write_attribute(group.get(), path, "origin_mm", f.grid.origin_mm.data(), 3);
     write_attribute(group.get(), path, "spacing_mm", f.grid.spacing_mm.data(), 3);
-    for (const auto& [name, value] : text) write_text_attribute(group.get(), path, name, value);
+    write_provenance(file.get(), path, provenance);
     flush(file.get(), path);
   });
 }
@@ -296,11 +321,11 @@ VectorField read_vector_field_h5(const std::filesystem::path& path) {
   return f;
 }
 
-std::optional<std::string> read_vector_field_text(const std::filesystem::path& path, const std::string& name) {
+std::optional<std::string> read_provenance(const std::filesystem::path& path, const std::string& name) {
   if (!std::filesystem::is_regular_file(path) || H5Fis_hdf5(path.c_str()) <= 0) return std::nullopt;
   Handle file(H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose);
-  if (!file.ok() || H5Lexists(file.get(), "vectors", H5P_DEFAULT) <= 0) return std::nullopt;
-  Handle group(H5Gopen2(file.get(), "vectors", H5P_DEFAULT), H5Gclose);
+  if (!file.ok() || H5Lexists(file.get(), "provenance", H5P_DEFAULT) <= 0) return std::nullopt;
+  Handle group(H5Gopen2(file.get(), "provenance", H5P_DEFAULT), H5Gclose);
   if (!group.ok() || H5Aexists(group.get(), name.c_str()) <= 0) return std::nullopt;
   Handle attr(H5Aopen(group.get(), name.c_str(), H5P_DEFAULT), H5Aclose);
   Handle type(H5Aget_type(attr.get()), H5Tclose);

@@ -31,25 +31,30 @@ struct FlagField {
 // as HDF5 dimension scales, so that xarray, netCDF readers and MATLAB see their coordinates; the
 // group (or root) says so in `axis_order` and `axes`.
 //
+// A text attribute (name, value), e.g. one entry of a file's provenance.
+using TextAttribute = std::pair<std::string, std::string>;
+
+// Every file has a group /provenance of text attributes: software (plenopiv and its version),
+// commit (git describe of the build), host, written_utc (ISO 8601), then the writer's entries
+// (settings as YAML, inputs with their CRC-32, dt and how it was measured, ...).
+//
 // /volume float32 [nz][ny][nx] (units: arbitrary intensity) with attributes origin_mm (x, y, z of
 // voxel [0][0][0]) and spacing_mm (dx, dy, dz); /x, /y, /z its dimension scales. Written atomically.
-void write_volume_h5(const std::filesystem::path& path, const Volume& volume);
+void write_volume_h5(const std::filesystem::path& path, const Volume& volume,
+                     const std::vector<TextAttribute>& provenance = {});
 // Reads it back; a file that is not HDF5 or lacks /volume or its attributes is an InputError.
 Volume read_volume_h5(const std::filesystem::path& path);
 
-// A text attribute (name, value) of a file's group, e.g. where its inputs came from.
-using TextAttribute = std::pair<std::string, std::string>;
-
 // Group /vectors: 1-D axes x, y, z (mm, the dimension scales); on the [nz][ny][nx] grid dx, dy, dz
 // (mm), u, v, w (m/s, from dt_s, which must be > 0), valid (uint8, 1: a measured or replaced vector),
-// peak_ratio, any `extra` fields and `flags`; attribute dt_s, and the `text` attributes as strings.
+// peak_ratio, any `extra` fields and `flags`; attribute dt_s; /provenance with `provenance`.
 // Written atomically.
 void write_vector_field_h5(const std::filesystem::path& path, const VectorField& field,
-                           const std::vector<NamedField>& extra = {}, const std::vector<TextAttribute>& text = {},
+                           const std::vector<NamedField>& extra = {}, const std::vector<TextAttribute>& provenance = {},
                            const std::optional<FlagField>& flags = std::nullopt);
 VectorField read_vector_field_h5(const std::filesystem::path& path);
-// A text attribute of /vectors, or nullopt when the file has none of that name (or is no vector
-// field file: a file that cannot be opened reads as having none).
-std::optional<std::string> read_vector_field_text(const std::filesystem::path& path, const std::string& name);
+// An entry of a file's /provenance, or nullopt when it has none of that name (a file that cannot
+// be opened, or has no /provenance, reads as having none).
+std::optional<std::string> read_provenance(const std::filesystem::path& path, const std::string& name);
 
 }  // namespace plenopiv::io

@@ -244,13 +244,13 @@ TEST(Reprocess, ParallelPairsAndShardsGiveTheBitsOfOneLocalPass) {
   ASSERT_EQ(testing_support::run_command(
                 {"/usr/bin/python3", "-c",
                  "import h5py, sys, xml.etree.ElementTree as ET; f = h5py.File(sys.argv[1]); "
-                 "print(f['vectors'].attrs['fields'].decode(), float(f['vectors/valid_fraction'][()].max()), "
+                 "print(f['provenance'].attrs['fields'].decode(), float(f['vectors/valid_fraction'][()].max()), "
                  "[d.get('file') for d in ET.parse(sys.argv[2]).getroot().iter('DataSet')])",
                  (base / "shards" / "statistics.h5").string(), (base / "shards" / "series.pvd").string()},
                 out),
             0)
       << out;
-  EXPECT_EQ(out, "3 1.0 ['pair-000000.vti', 'pair-000001.vti', 'pair-000002.vti']\n");
+  EXPECT_EQ(out, "3 vector fields averaged 1.0 ['pair-000000.vti', 'pair-000001.vti', 'pair-000002.vti']\n");
   // A merge with a pair missing says so, naming the first.
   fs::remove(base / "shards" / "pair-000001.h5");
   std::vector<std::string> argv{testing_support::binary("plenopiv"), "process", "--run", run.string(), "-o",

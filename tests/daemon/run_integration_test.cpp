@@ -147,12 +147,17 @@ TEST_F(DaemonRuns, RunOfNPairsReachesSubscribersAndTheRunFolder) {
       testing_support::run_command({"/usr/bin/python3", "-c",
                                     "import h5py, sys; f = h5py.File(sys.argv[1]); "
                                     "print(len(f), [float(f['pair-%06d/u' % i][1, 2, 3]) for i in range(len(f))], "
-                                    "f['pair-000002/u'].shape)",
+                                    "f['pair-000002/u'].shape, f['pair-000002/u'].attrs['units'], "
+                                    "[d[0].name for d in f['pair-000002/u'].dims], "
+                                    "f['pair-000002/provenance'].attrs['pair_index'])",
                                     h5.string()},
                                    saved),
       0)
       << saved;
-  EXPECT_NE(saved.find("6 [0.0, 1.0, 2.0, 3.0, 4.0, 5.0] (2, 3, 4)"), std::string::npos) << saved;
+  EXPECT_NE(saved.find("6 [0.0, 1.0, 2.0, 3.0, 4.0, 5.0] (2, 3, 4) m/s "
+                       "['/pair-000002/z', '/pair-000002/y', '/pair-000002/x'] 2"),
+            std::string::npos)
+      << saved;
 
   wait_for_state("Idle");
   const fs::path run = only_run_dir();

@@ -10,6 +10,7 @@
 #include <iterator>
 
 #include "core/base/image.hpp"
+#include "core/io/checksum.hpp"
 #include "core/io/hdf5_files.hpp"
 #include "core/io/tiff.hpp"
 #include "tests/support/child_process.hpp"
@@ -84,6 +85,11 @@ TEST(ProcessCli, RecoversTheUniformDisplacement) {
   EXPECT_EQ(std::string(magic + 1, 3), "PNG");
 
   EXPECT_DOUBLE_EQ(io::read_vector_field_h5(dir / "v.h5").dt_s, 0.0001);
+  // Provenance: which frames (by CRC-32), which settings, how dt was chosen.
+  const auto frame_a = io::read_provenance(dir / "v.h5", "frame_a").value_or("");
+  EXPECT_NE(frame_a.find("(CRC-32 "), std::string::npos) << frame_a;
+  EXPECT_EQ(io::read_provenance(dir / "v.h5", "settings"), io::read_file_bytes(kConfig));
+  EXPECT_NE(io::read_provenance(dir / "v.h5", "dt_source").value_or("").find("nominal"), std::string::npos);
   const std::array<double, 3> mean_of = mean_displacement(dir / "v.h5");
   // The shipped process.yaml (z 0 to 4 mm, one side of the focal plane) on 1 ppm with particles
   // 0.5 mm beyond both depth faces: the lateral mean within 0.01 mm of the truth, and most of the

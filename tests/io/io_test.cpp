@@ -223,6 +223,9 @@ TEST(Hdf5, VectorFieldRoundTrip) {
   EXPECT_EQ(back.valid, f.valid);
   EXPECT_EQ(back.peak_ratio, f.peak_ratio);
   EXPECT_DOUBLE_EQ(back.dt_s, f.dt_s);
+  EXPECT_EQ(read_provenance(path, "software").value_or("").rfind("plenopiv ", 0), 0u);
+  EXPECT_FALSE(read_provenance(path, "no_such_entry").has_value());
+  EXPECT_FALSE(read_provenance(temp_dir() / "no_such_file.h5", "software").has_value());
 }
 
 TEST(Hdf5, PythonH5pyReadsTheLayoutOfTheDesign) {
@@ -232,8 +235,8 @@ TEST(Hdf5, PythonH5pyReadsTheLayoutOfTheDesign) {
   const VectorField field = some_field();
   std::vector<std::uint8_t> bits(field.grid.count(), 0);
   bits[1] = 5;
-  write_vector_field_h5(fpath, field, {{"vorticity_z", std::vector<float>(field.grid.count(), 2.f), "1/s"}}, {},
-                        FlagField{"flags", bits, "1: one; 4: four"});
+  write_vector_field_h5(fpath, field, {{"vorticity_z", std::vector<float>(field.grid.count(), 2.f), "1/s"}},
+                        {{"settings", "mart:\n  iterations: 8\n"}}, FlagField{"flags", bits, "1: one; 4: four"});
   const std::string script =
       "import h5py, numpy as np, sys\n"
       "v = h5py.File(sys.argv[1], 'r')['volume']\n"
@@ -261,6 +264,12 @@ TEST(Hdf5, PythonH5pyReadsTheLayoutOfTheDesign) {
       "vf = h5py.File(sys.argv[1], 'r')\n"
       "assert [d[0].name for d in vf['volume'].dims] == ['/z', '/y', '/x']\n"
       "assert np.allclose(vf['x'][:], -1.0 + 0.125 * np.arange(5))\n"
+      "def text(a): return a.decode() if isinstance(a, bytes) else a\n"
+      "p = f['provenance'].attrs\n"
+      "assert text(p['software']).startswith('plenopiv '), p['software']\n"
+      "assert text(p['commit']) and text(p['host']) and text(p['written_utc']).endswith('Z')\n"
+      "assert text(p['settings']) == 'mart:\\n  iterations: 8\\n', p['settings']\n"
+      "assert text(vf['provenance'].attrs['software']).startswith('plenopiv ')\n"
       "print('h5py ok')\n";
   const auto script_path = temp_dir() / "check.py";
   std::ofstream(script_path) << script;

@@ -75,7 +75,15 @@ TEST(RunFolder, TheWriterListsFramesVectorsStatisticsAndDropsAsTheyAreWritten) {
   for (std::uint64_t i = 0; i < 3; ++i) writer.record_pair(record_of(i, Frames(i)));
   // Vectors for pairs 0 and 2: u = 1 m/s and 3 m/s -> mean 2, RMS fluctuation 1.
   writer.record_vectors(0, field(1));
-  writer.record_vectors(2, field(3));
+  const VectorField f3 = field(3);
+  writer.record_vectors(2, f3, std::vector<std::uint8_t>(f3.grid.count(), 1));
+  // The live files have the layout of `plenopiv process`: provenance, vorticity, flags when given.
+  const fs::path v2 = writer.dir() / "vectors/pair-000002.h5";
+  EXPECT_EQ(io::read_provenance(v2, "run"), "r1");
+  EXPECT_EQ(io::read_provenance(v2, "pair_index"), "2");
+  EXPECT_EQ(io::read_provenance(v2, "settings"), "dt_s: 0.001\n");
+  EXPECT_EQ(io::read_provenance(v2, "dt_source"), "nominal (the run's dt_s)");
+  EXPECT_EQ(io::read_provenance(v2, "frame_a").value_or("").rfind("frames/", 0), 0u);
   writer.record_drop(3, "camera queue overflow");
   writer.add_warning("frame A all zero, first in pair 1");
   writer.add_warning("frame A all zero, first in pair 1");  // listed once

@@ -1,0 +1,13 @@
+// What built this binary: the project's version and the source's git commit, for provenance.
+#pragma once
+
+#include <string_view>
+
+namespace plenopiv {
+
+std::string_view build_version();  // the CMake project version, e.g. "0.1.0"
+// `git describe --always --dirty` of the source tree at build time ("-dirty": uncommitted changes;
+// "unknown": built outside a git checkout).
+std::string_view build_commit();
+
+}  // namespace plenopiv
