@@ -280,9 +280,8 @@ class RunTest : public ::testing::Test {
       EXPECT_GT(p.pulse1_ns(), 0u) << "pair " << p.pair_index();
       EXPECT_DOUBLE_EQ(p.measured_dt_s(), double(p.pulse2_ns() - p.pulse1_ns()) * 1e-9);
       // The trigger stamps a sync edge just after it wrote the Q-switch line, its edge record
-      // just before: the same times up to what passes between the two clock reads (measured up
-      // to 55 us when the thread was preempted there). A pulse from another shot would be a
-      // whole period (100 ms) off.
+      // just before: the same times up to what passes between the two clock reads (a preempted
+      // thread: tens of us). A pulse from another shot would be a whole period (100 ms) off.
       const auto& q = qswitch.at(p.trigger_index());
       const auto& q0 = qswitch.at(first.trigger_index());
       EXPECT_NEAR(p.measured_dt_s(), q[1] - q[0], 0.5e-3) << "pair " << p.pair_index();
@@ -290,10 +289,9 @@ class RunTest : public ::testing::Test {
       worst = std::max(worst, std::abs(p.measured_dt_s() - dt_s));
     }
     // The sim trigger writes each edge when its thread wakes, so the measured dt carries the
-    // thread's wake-up jitter (Q-switch 1 written late makes dt short). Measured on the 2 shared
-    // cores under parallel builds, 24 runs of 4 or 6 pairs: worst |dt - 1 ms| per run mostly
-    // 10-300 us, often ~0.93 ms, once 9.1 ms (the thread preempted between the pulses). The bound
-    // is a quarter of the 100 ms period: a dt from the wrong shot or the wrong clock fails it.
+    // thread's wake-up jitter (Q-switch 1 written late makes dt short; a thread preempted between
+    // the pulses: milliseconds). The bound is a quarter of the 100 ms period: a dt from the wrong
+    // shot or the wrong clock fails it.
     std::printf("measured dt: worst |dt - nominal| %.1f us over %d pairs\n", worst * 1e6, m.pairs_size());
     EXPECT_LT(worst, 25e-3);
   }

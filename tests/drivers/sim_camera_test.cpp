@@ -93,8 +93,8 @@ TEST(SimCamera, TheFramesOfAPairArriveTogether) {
     ASSERT_TRUE(p);
     const double gap_ms = double(p->b.host_timestamp_ns - p->a.host_timestamp_ns) * 1e-6;
     std::printf("pair %d: frame B %.3f ms after frame A (host clock)\n", k, gap_ms);
-    // Measured 0.002 ms; when B was delivered after its own render, 153-172 ms here.
-    EXPECT_LT(gap_ms, 10.0);
+    // Frame B is delivered with frame A, not after a render of its own (which takes 100s of ms).
+    EXPECT_LT(gap_ms, 10.0) << "measured 0.002 ms";
   }
   camera->stop();
 }
