@@ -212,20 +212,26 @@ DeferredReply Daemon::list_devices() {
   return std::async(std::launch::async, [found = discovery_, simulation, replay_dir] {
     msg::Reply reply;
     reply.mutable_devices();  // an empty list is still an answer
-    if (simulation) {
-      msg::Device* sim = reply.mutable_devices()->add_devices();
-      sim->set_uri("sim://");
-      sim->set_kind("camera");
-      sim->set_model("simulated plenoptic camera");
-      sim->set_detail("renders the daemon's camera_file (simulation: true)");
-    }
+    // The simulated backends first, marked as such: sim:// always (said how to enable it when it
+    // is not), replay:// when this daemon registered it, and the sim:// trigger, always there.
+    const auto add_simulated = [&](const std::string& uri, const std::string& kind, const std::string& model,
+                                   const std::string& detail) {
+      msg::Device* d = reply.mutable_devices()->add_devices();
+      d->set_uri(uri);
+      d->set_kind(kind);
+      d->set_model(model);
+      d->set_detail(detail);
+      d->set_simulated(true);
+    };
+    add_simulated("sim://", "camera", "simulated plenoptic camera",
+                  simulation ? "renders the daemon's camera_file; enabled by simulation: true"
+                             : "not enabled on this daemon: plenopivd.yaml simulation: true, or --simulation");
     if (!replay_dir.empty()) {
-      msg::Device* replay = reply.mutable_devices()->add_devices();
-      replay->set_uri("replay://");
-      replay->set_kind("camera");
-      replay->set_model("replay camera");
-      replay->set_detail("plays recorded frame pairs from folders under " + replay_dir.string());
+      add_simulated("replay://", "camera", "replay camera",
+                    "plays recorded frame pairs from folders under " + replay_dir.string());
     }
+    add_simulated("sim://", "trigger", "simulated trigger",
+                  "no hardware: records every edge with its time; the simulated camera listens to it");
     for (const auto& d : found.get().devices) {
       msg::Device* out = reply.mutable_devices()->add_devices();
       out->set_uri(d.uri);

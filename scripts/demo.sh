@@ -30,8 +30,8 @@ for _ in $(seq 1 50); do
   kill -0 $daemon 2>/dev/null || { echo "demo: plenopivd exited" >&2; exit 1; }
 done
 
-echo "== plenopiv camera $camera_file"
-build/bin/plenopiv camera "$camera_file"
+echo "== plenopiv camera --camera $camera_file"
+build/bin/plenopiv camera --camera "$camera_file"
 echo "== plenopiv devices"
 "${client[@]}" devices
 echo "== plenopiv watch --count 4 (subscribed before the run starts)"

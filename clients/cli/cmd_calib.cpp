@@ -6,6 +6,7 @@
 
 #include "clients/cli/calibration_frames.hpp"
 #include "clients/cli/commands.hpp"
+#include "clients/cli/options.hpp"
 #include "core/calib/calibration.hpp"
 #include "core/calib/calibration_file.hpp"
 #include "core/optics/camera_file.hpp"
@@ -19,9 +20,11 @@ struct CalibrateArgs {
   std::vector<std::string> white_images;
   std::vector<std::string> dark_images;
   std::string output;
+  int threads = 0;
 };
 
 void run_calibrate(const CalibrateArgs& args) {
+  const auto limit = thread_limit(args.threads);
   const auto start = std::chrono::steady_clock::now();
   const optics::CameraModel camera = optics::load_camera_file(args.camera);
   double white_outside = 0;
@@ -45,7 +48,7 @@ void add_calib_commands(CLI::App& app) {
       "calibrate",
       "find the microlens centres and the white correction; write a calibration file (HDF5). Centres come "
       "from the calibration image when given, else from the white image alone (docs/calibration.md)");
-  cmd->add_option("--camera", args->camera, "camera file (YAML)")->required();
+  add_camera_option(cmd, args->camera)->required();
   cmd->add_option("--calibration-image", args->calibration_images,
                   "optional: frame(s) taken with the aperture stopped down, white target (one spot per microlens; "
                   "averaged); the preferred source of the centres when given")
@@ -60,6 +63,7 @@ void add_calib_commands(CLI::App& app) {
                   "white and calibration images)")
       ->expected(1, -1);
   cmd->add_option("-o,--output", args->output, "calibration file to write (.h5)")->required();
+  add_threads_option(cmd, args->threads);
   cmd->footer("Frames: PNG (8/16-bit) or TIFF (8/16-bit, or float with finite values).");
   cmd->callback([args] { run_calibrate(*args); });
 }

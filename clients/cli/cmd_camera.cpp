@@ -3,6 +3,7 @@
 #include <memory>
 
 #include "clients/cli/commands.hpp"
+#include "clients/cli/options.hpp"
 #include "core/optics/camera_file.hpp"
 
 namespace plenopiv::client {
@@ -10,7 +11,7 @@ namespace plenopiv::client {
 void add_camera_commands(CLI::App& app) {
   auto* camera = app.add_subcommand("camera", "validate a camera file and show its geometry");
   auto file = std::make_shared<std::string>();  // owned by the callback, which the app keeps
-  camera->add_option("file", *file, "camera file (YAML: sensor, microlens, main_lens)")->required();
+  add_camera_option(camera, *file)->required();
   camera->callback([file] {
     const optics::CameraModel model = optics::load_camera_file(*file);
     std::cout << *file << "\n" << model.summary();

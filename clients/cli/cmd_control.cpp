@@ -1,6 +1,8 @@
 // `plenopiv status` and `plenopiv devices`: ask plenopivd and print its answer.
 #include <unistd.h>
 
+#include <google/protobuf/util/json_util.h>
+
 #include <iomanip>
 #include <iostream>
 #include <memory>
@@ -24,6 +26,18 @@ void check(const msg::Reply& reply) {
 ControlClient connect(const ControlOptions& options) {
   return ControlClient(options.endpoint, std::chrono::milliseconds(static_cast<long>(options.timeout_s * 1000)),
                        options.security());
+}
+
+// One message as JSON on one line: proto field names, every field printed (defaults too), 64-bit
+// counters as strings (the proto3 JSON mapping).
+std::string json_of(const google::protobuf::Message& message) {
+  google::protobuf::util::JsonPrintOptions options;
+  options.always_print_primitive_fields = true;
+  options.preserve_proto_field_names = true;
+  std::string json;
+  const auto status = google::protobuf::util::MessageToJsonString(message, &json, options);
+  if (!status.ok()) throw std::runtime_error("JSON of " + message.GetTypeName() + ": " + status.ToString());
+  return json;
 }
 
 void print_status(const msg::Status& s) {
@@ -79,9 +93,14 @@ void print_status(const msg::Status& s) {
 
 void add_control_commands(CLI::App& app, ControlOptions& options) {
   auto refresh = std::make_shared<bool>(false);
+  auto status_json = std::make_shared<bool>(false);
   auto* status = app.add_subcommand("status", "show the daemon's state and counters");
-  status->add_flag("-w,--watch", *refresh, "refresh every second until interrupted (on a terminal)");
-  status->callback([&options, refresh] {
+  auto* watch = status->add_flag("-w,--watch", *refresh, "refresh every second until interrupted (on a terminal)");
+  status
+      ->add_flag("--json", *status_json,
+                 "print the Status message as one JSON object (proto field names; 64-bit counters as strings)")
+      ->excludes(watch);
+  status->callback([&options, refresh, status_json] {
     ControlClient client = connect(options);
     // Refreshing only makes sense on a terminal; piped output gets one report.
     const bool live = *refresh && ::isatty(STDOUT_FILENO);
@@ -90,6 +109,10 @@ void add_control_commands(CLI::App& app, ControlOptions& options) {
       request.mutable_status();
       const msg::Reply reply = client.call(request);
       check(reply);
+      if (*status_json) {
+        std::cout << json_of(reply.status()) << "\n";
+        return;
+      }
       if (live) std::cout << "\033[H\033[2J";  // home and clear
       print_status(reply.status());
       std::cout.flush();
@@ -97,15 +120,26 @@ void add_control_commands(CLI::App& app, ControlOptions& options) {
     } while (live);
   });
 
-  app.add_subcommand("devices", "list the cameras and trigger lines plenopivd can use")->callback([&options] {
+  auto devices_json = std::make_shared<bool>(false);
+  auto* devices = app.add_subcommand("devices", "list the cameras and trigger lines plenopivd can use");
+  devices->add_flag("--json", *devices_json,
+                    "print a JSON array of devices: uri, kind, model, detail, simulated (true: no hardware)");
+  devices->callback([&options, devices_json] {
     ControlClient client = connect(options);
     msg::Request request;
     request.mutable_list_devices();
     const msg::Reply reply = client.call(request);
     check(reply);
+    if (*devices_json) {
+      std::string array;
+      for (const msg::Device& d : reply.devices().devices()) array += (array.empty() ? "" : ",") + json_of(d);
+      std::cout << "[" << array << "]\n";
+      return;
+    }
     for (const msg::Device& d : reply.devices().devices()) {
       std::cout << std::left << std::setw(8) << d.kind() << " " << std::setw(28) << d.uri() << " " << d.model()
-                << (d.detail().empty() ? "" : "  (" + d.detail() + ")") << "\n";
+                << (d.simulated() ? " [simulated]" : "") << (d.detail().empty() ? "" : "  (" + d.detail() + ")")
+                << "\n";
     }
     if (reply.devices().devices_size() == 0) std::cout << "no devices found\n";
   });

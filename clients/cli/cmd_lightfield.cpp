@@ -9,6 +9,7 @@
 
 #include "clients/cli/commands.hpp"
 #include "clients/cli/depth_list.hpp"
+#include "clients/cli/options.hpp"
 #include "clients/cli/progress.hpp"
 #include "core/base/errors.hpp"
 #include "core/calib/calibration_file.hpp"
@@ -32,6 +33,7 @@ struct LightFieldArgs {
   std::string output;
   std::string sheet;
   std::vector<double> u, v;
+  int threads = 0;
 };
 
 lightfield::LightField load_field(const LightFieldArgs& args, optics::CameraModel& camera_out) {
@@ -78,6 +80,7 @@ void write_contact_sheet(const std::string& path, const std::vector<ImageF>& pag
 }
 
 void run_refocus(const LightFieldArgs& args) {
+  const auto limit = thread_limit(args.threads);
   optics::CameraModel camera = optics::load_camera_file(args.camera);
   std::vector<double> alphas;
   std::vector<std::string> labels;
@@ -118,6 +121,7 @@ void run_perspective(const LightFieldArgs& args) {
     throw InputError("--u and --v: give as many u as v values (" + std::to_string(args.u.size()) + " vs " +
                      std::to_string(args.v.size()) + ")");
   }
+  const auto limit = thread_limit(args.threads);
   optics::CameraModel camera = optics::load_camera_file(args.camera);
   const lightfield::LightField field = load_field(args, camera);
   std::vector<ImageF> views;
@@ -135,11 +139,12 @@ void run_perspective(const LightFieldArgs& args) {
 }
 
 void add_common(CLI::App* cmd, LightFieldArgs& args) {
-  cmd->add_option("--camera", args.camera, "camera file (YAML)")->required();
+  add_camera_option(cmd, args.camera)->required();
   cmd->add_option("--calibration", args.calibration, "calibration file from `plenopiv calibrate`")->required();
   cmd->add_option("raw", args.raw, "raw plenoptic image (PNG, or TIFF of 8/16-bit or float)")->required();
   cmd->add_flag("--no-white", args.no_white, "do not divide by the white correction");
   cmd->add_option("-o,--output", args.output, "multi-page float32 TIFF to write")->required();
+  add_threads_option(cmd, args.threads);
 }
 
 }  // namespace

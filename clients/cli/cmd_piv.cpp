@@ -6,9 +6,8 @@
 #include <memory>
 #include <optional>
 
-#include <tbb/global_control.h>
-
 #include "clients/cli/commands.hpp"
+#include "clients/cli/options.hpp"
 #include "clients/cli/progress.hpp"
 #include "core/base/errors.hpp"
 #include "core/io/checksum.hpp"
@@ -65,10 +64,7 @@ void run_correlate(const CorrelateOptions& o) {
   if (o.config.empty() && !o.dt_s)
     throw InputError("--dt: the pulse separation (s) is needed for velocities (or dt_s in --config)");
   piv::check(settings, o.config.empty() ? "command line" : o.config);
-  if (o.threads < 0) throw InputError("--threads: must be >= 0 (0: all cores)");
-
-  std::optional<tbb::global_control> limit;
-  if (o.threads > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, o.threads);
+  const auto limit = thread_limit(o.threads);
 
   const Volume a = io::read_volume_h5(o.first);
   const Volume b = io::read_volume_h5(o.second);
@@ -116,7 +112,7 @@ void add_piv_commands(CLI::App& app) {
   cmd->add_option("second", o->second, "volume of exposure B, same grid")->required();
   cmd->add_option("-o,--output", o->output, "vector field to write (HDF5 /vectors)")->required();
   cmd->add_option("--vti", o->vti, "also write VTK image data for ParaView");
-  cmd->add_option("--config", o->config,
+  cmd->add_option("-c,--config", o->config,
                   "YAML with passes, median, signal_threshold, dt_s, predictor, ... (flags override it)");
   cmd->add_option("--passes", o->passes,
                   "coarse to fine, e.g. 32@50,24@75,16@75 or 32x32x64@50; +M: the second window reaches M voxels "
@@ -139,7 +135,7 @@ void add_piv_commands(CLI::App& app) {
       ->check(CLI::IsMember({"estimate", "measure"}));
   cmd->add_flag("--no-prefilter", o->no_prefilter,
                 "correlate the volumes as they are (default: binomial smoothing first)");
-  cmd->add_option("--threads", o->threads, "worker threads (0: all cores)")->capture_default_str();
+  add_threads_option(cmd, o->threads);
   cmd->callback([o] { run_correlate(*o); });
 }
 

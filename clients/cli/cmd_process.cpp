@@ -13,12 +13,12 @@
 #include <sstream>
 
 #include <google/protobuf/util/json_util.h>
-#include <tbb/global_control.h>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "clients/cli/calibration_frames.hpp"
 #include "clients/cli/commands.hpp"
+#include "clients/cli/options.hpp"
 #include "clients/cli/progress.hpp"
 #include "clients/cli/reprocess.hpp"
 #include "clients/cli/weights_cache.hpp"
@@ -174,13 +174,6 @@ void write_png(const std::filesystem::path& path, const cv::Mat& image) {
   });
 }
 
-std::optional<tbb::global_control> thread_limit(int threads) {
-  if (threads < 0) throw InputError("--threads: must be >= 0 (0: all cores)");
-  std::optional<tbb::global_control> limit;
-  if (threads > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, threads);
-  return limit;
-}
-
 // Frames given one by one that plenopivd recorded (frames/pair-<n>-A.tif in a run folder): the
 // pair's measured dt is in the run's manifest, and without --dt the config's nominal dt is used
 // instead, which is said.
@@ -206,7 +199,7 @@ void warn_if_recorded_dt_ignored(const ProcessOptions& o) {
 
 void run_process(const ProcessOptions& o) {
   for (const auto& [value, name] :
-       {std::pair{&o.camera, "camera"}, std::pair{&o.frame_a, "frame_a"}, std::pair{&o.frame_b, "frame_b"},
+       {std::pair{&o.camera, "--camera"}, std::pair{&o.frame_a, "frame_a"}, std::pair{&o.frame_b, "frame_b"},
         std::pair{&o.config, "--config"}, std::pair{&o.output, "--output"}})
     if (value->empty()) throw InputError(std::string(name) + " is required (or --run <run folder>)");
   const auto limit = thread_limit(o.threads);
@@ -328,10 +321,10 @@ void add_process_commands(CLI::App& app) {
                   "a run folder recorded by plenopivd: reprocess its pairs (each with its measured dt) with the run's "
                   "own settings or --config, camera and calibration into <run>/reprocessed/ (or -o DIR), with "
                   "statistics.h5 and series.pvd");
-  cmd->add_option("camera", o->camera, "camera file (YAML)");
+  add_camera_option(cmd, o->camera);
   cmd->add_option("frame_a", o->frame_a, "raw plenoptic frame A (PNG, or TIFF of 8/16-bit or float; sensor-sized)");
   cmd->add_option("frame_b", o->frame_b, "raw plenoptic frame B");
-  cmd->add_option("--config", o->config,
+  cmd->add_option("-c,--config", o->config,
                   "processing spec YAML: dt_s, volume {x_mm, y_mm, z_mm, voxel_mm}, reconstruction, correlation "
                   "(systemd/config/process.yaml); with --run: offline settings instead of the run's (or 'run')");
   cmd->add_option("--calibration", o->calibration, "calibration file (HDF5, from `plenopiv calibrate`)");
@@ -347,7 +340,7 @@ void add_process_commands(CLI::App& app) {
                   "vector field (HDF5 /vectors with vorticity and flags); with --run, the output folder");
   cmd->add_option("--vti", o->vti, "VTK image data for ParaView (default: --output with .vti)");
   cmd->add_option("--preview", o->preview, "PNG preview (default: --output with .png)");
-  cmd->add_option("--threads", o->threads, "worker threads (0: all cores)")->capture_default_str();
+  add_threads_option(cmd, o->threads);
   cmd->add_option("--cache-dir", o->cache_dir,
                   "folder that keeps weight tables between calls, keyed by camera, calibration, volume and "
                   "settings (default: $PLENOPIV_CACHE_DIR, $XDG_CACHE_HOME/plenopiv or ~/.cache/plenopiv)");

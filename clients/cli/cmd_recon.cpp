@@ -11,6 +11,7 @@
 #include <string>
 
 #include "clients/cli/commands.hpp"
+#include "clients/cli/options.hpp"
 #include "clients/cli/weights_cache.hpp"
 #include "core/base/errors.hpp"
 #include "core/calib/calibration_file.hpp"
@@ -28,7 +29,7 @@ namespace plenopiv::client {
 namespace {
 
 struct ReconOptions {
-  std::string camera, image, out, vti, calibration;
+  std::string camera, image, output, vti, calibration;
   std::vector<double> extent;  // x0 x1 y0 y1 z0 z1, mm
   double voxel_mm = 0.125, voxel_z_mm = 0;
   int iterations = 5;
@@ -43,6 +44,7 @@ struct ReconOptions {
   bool no_prune = false;
   std::string cache_dir;
   bool no_cache = false;
+  int threads = 0;
 };
 
 Grid3 grid_from(const ReconOptions& o) {
@@ -64,6 +66,7 @@ Grid3 grid_from(const ReconOptions& o) {
 }
 
 void run(const ReconOptions& o) {
+  const auto limit = thread_limit(o.threads);
   const optics::CameraModel camera = optics::load_camera_file(o.camera);
   const Grid3 grid = grid_from(o);
   recon::MartSettings s;
@@ -140,10 +143,10 @@ void run(const ReconOptions& o) {
                100 * k.fraction_skipped(), k.voxels, k.voxels_dark, k.voxels_unseen, k.slices_empty, k.slices,
                k.dark_pixels, 100 * k.fraction_updates_skipped(), k.voxels_pruned, r.final_residual.value(),
                r.converged ? " (converged)" : "");
-  io::write_volume_h5(o.out, r.volume);
-  const std::string vti = o.vti.empty() ? std::filesystem::path(o.out).replace_extension(".vti").string() : o.vti;
+  io::write_volume_h5(o.output, r.volume);
+  const std::string vti = o.vti.empty() ? std::filesystem::path(o.output).replace_extension(".vti").string() : o.vti;
   io::write_volume_vti(vti, r.volume);
-  std::cout << o.out << "\n" << vti << "\n";
+  std::cout << o.output << "\n" << vti << "\n";
 }
 
 }  // namespace
@@ -155,7 +158,7 @@ void add_recon_commands(CLI::App& app) {
       "reconstruct a particle volume from one raw plenoptic image (MART, sec 5). Lens centres and the "
       "white correction come from --calibration, else the camera's nominal lattice and the geometric "
       "white image");
-  cmd->add_option("camera", o->camera, "camera file (YAML)")->required();
+  add_camera_option(cmd, o->camera)->required();
   cmd->add_option("image", o->image, "raw plenoptic image (PNG, or TIFF of 8/16-bit or float; sensor-sized)")
       ->required();
   cmd->add_option("--calibration", o->calibration,
@@ -195,8 +198,9 @@ void add_recon_commands(CLI::App& app) {
                   "folder that keeps weight tables between calls (default: $PLENOPIV_CACHE_DIR, "
                   "$XDG_CACHE_HOME/plenopiv or ~/.cache/plenopiv)");
   cmd->add_flag("--no-cache", o->no_cache, "build the weight tables afresh and keep none");
-  cmd->add_option("-o,--out", o->out, "output volume (HDF5: /volume, origin_mm, spacing_mm)")->required();
-  cmd->add_option("--vti", o->vti, "also write VTK image data here (default: --out with .vti)");
+  cmd->add_option("-o,--output", o->output, "output volume (HDF5: /volume, origin_mm, spacing_mm)")->required();
+  cmd->add_option("--vti", o->vti, "also write VTK image data here (default: --output with .vti)");
+  add_threads_option(cmd, o->threads);
   cmd->callback([o] { run(*o); });
 }
 

@@ -159,7 +159,7 @@ void add_run_commands(CLI::App& app, ControlOptions& options) {
   auto* cal = app.add_subcommand("capture-calibration",
                                  "take calibration images on plenopivd's camera into its data directory");
   cal->add_option("--frames", *frames, "number of images")->capture_default_str();
-  cal->add_option("--camera", *camera, "camera URI (default: the daemon's)");
+  cal->add_option("--camera-uri", *camera, "camera URI, e.g. aravis://Fake_1 (default: the daemon's camera_uri)");
   cal->callback([&options, frames, camera] {
     msg::Request request;
     request.mutable_calibrate()->set_frame_count(*frames);

@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "clients/cli/commands.hpp"
+#include "clients/cli/options.hpp"
 #include "clients/cli/progress.hpp"
 #include "core/base/errors.hpp"
 #include "core/base/yaml_access.hpp"
@@ -32,11 +33,13 @@ struct CommonOptions {
   std::vector<double> array_offset_mm{0, 0};
   double lens_jitter_mm = 0;
   sim::SensorModel sensor;
+  int threads = 0;
 };
 
 void add_common(CLI::App* cmd, CommonOptions& o, const std::string& output_help) {
-  cmd->add_option("--camera", o.camera, "camera file (YAML: sensor, microlens, main_lens)")->required();
+  add_camera_option(cmd, o.camera)->required();
   cmd->add_option("-o,--output", o.output, output_help)->required();
+  add_threads_option(cmd, o.threads);
   cmd->add_option("--seed", o.seed, "random seed (same seed, same image)")->capture_default_str();
   cmd->add_option("--diffraction-um", o.diffraction_um,
                   "diffraction jitter sigma at the microlens and sensor planes, um (0: off)")
@@ -149,6 +152,7 @@ void add_particles_command(CLI::App& simulate) {
   cmd->add_option("--particles", *csv, "particle list: CSV, x,y,z in mm, header allowed")->required();
   cmd->add_option("--rays", *rays, "rays per particle")->capture_default_str();
   cmd->callback([o, csv, rays] {
+    const auto limit = thread_limit(o->threads);
     const optics::CameraModel camera = optics::load_camera_file(o->camera);
     sim::RenderOptions options;
     options.rays_per_particle = ray_count(*rays, "--rays");
@@ -178,6 +182,7 @@ void add_target_command(CLI::App& simulate, const std::string& name, bool calibr
       ->capture_default_str();
   cmd->add_option("--rays-per-lens", *rays, "rays per microlens area")->capture_default_str();
   cmd->callback([o, t, rays, truth, name] {
+    const auto limit = thread_limit(o->threads);
     const optics::CameraModel camera = optics::load_camera_file(o->camera);
     sim::TargetOptions options = *t;
     options.rays_per_lens = ray_count(*rays, "--rays-per-lens");
@@ -231,6 +236,7 @@ void add_pair_command(CLI::App& simulate) {
   cmd->add_option("--rays", p->rays, "rays per particle")->capture_default_str();
 
   cmd->callback([o, p] {
+    const auto limit = thread_limit(o->threads);
     const optics::CameraModel camera = optics::load_camera_file(o->camera);
     const std::uint64_t seed = seed_of(*o);
     sim::RenderOptions options;

@@ -358,7 +358,7 @@ void add_slurm_commands(CLI::App& app) {
     cmd->add_option("-o,--output", o->output, "output folder (default <run>/reprocessed)");
     cmd->add_option("--pairs", o->pairs, "pair indices a:b (b excluded; a: or :b)");
   }
-  submit_cmd->add_option("--config", o->config,
+  submit_cmd->add_option("-c,--config", o->config,
                          "processing spec YAML (offline settings), or 'run' for the run's own (the default)");
   submit_cmd->add_option("--tier", o->tier, "full or live")->capture_default_str();
   submit_cmd->add_option("--shards", o->shards, "array tasks; each processes a contiguous block of pairs")

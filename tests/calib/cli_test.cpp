@@ -165,8 +165,25 @@ TEST_F(CalibCli, WhiteOnlyFromPngFramesThenRefocusAndReconstruct) {
   for (int y = 0; y < 850; ++y)
     for (int x = 0; x < 850; ++x) png.at<std::uint8_t>(y, x) = std::uint8_t(std::lround(255 * raw.at(x, y) / top));
   ASSERT_TRUE(cv::imwrite(path("raw.png"), png));
-  ASSERT_EQ(run_command({binary("plenopiv"), "reconstruct", camera_, path("raw.png"), "--calibration", path("white.h5"),
-                         "--extent", "-1", "1", "-1", "1", "2", "6", "--voxel", "0.25", "--iterations", "3", "-o",
+  ASSERT_EQ(run_command({binary("plenopiv"),
+                         "reconstruct",
+                         "--camera",
+                         camera_,
+                         path("raw.png"),
+                         "--calibration",
+                         path("white.h5"),
+                         "--extent",
+                         "-1",
+                         "1",
+                         "-1",
+                         "1",
+                         "2",
+                         "6",
+                         "--voxel",
+                         "0.25",
+                         "--iterations",
+                         "3",
+                         "-o",
                          path("volume.h5")},
                         out),
             0)

@@ -115,6 +115,55 @@ TEST_F(Daemon, ThinClientShowsStatus) {
   EXPECT_NE(out.find("state          Idle"), std::string::npos) << out;
 }
 
+// `--json` writes one JSON document on stdout alone: Python's json module reads it (and checks
+// what it holds) straight from the pipe.
+int json_check(const std::string& control, const std::string& command, const std::string& python_check,
+               std::string& out) {
+  const std::string line = testing_support::binary("plenopiv") + " --endpoint '" + control + "' " + command +
+                           " --json | /usr/bin/python3 -c 'import json, sys; d = json.load(sys.stdin); " +
+                           python_check + "'";
+  return testing_support::run_command({"/bin/bash", "-c", "set -o pipefail; " + line}, out);
+}
+
+TEST_F(Daemon, StatusJsonIsTheStatusMessage) {
+  std::string out;
+  EXPECT_EQ(
+      json_check(control_, "status", "assert d[\"state\"] == \"Idle\", d; assert \"pairs_acquired\" in d, d", out), 0)
+      << out;
+}
+
+TEST_F(Daemon, DevicesJsonIsAnArrayThatListsTheSimulatedBackends) {
+  std::string out;
+  EXPECT_EQ(json_check(control_, "devices",
+                       "assert isinstance(d, list), d; "
+                       "assert {(x[\"uri\"], x[\"kind\"]) for x in d if x[\"simulated\"]} >= "
+                       "{(\"sim://\", \"camera\"), (\"sim://\", \"trigger\")}, d",
+                       out),
+            0)
+      << out;
+  // The text form marks them too: never "no devices found" while sim:// exists.
+  ASSERT_EQ(testing_support::run_command({testing_support::binary("plenopiv"), "--endpoint", control_, "devices"}, out),
+            0)
+      << out;
+  EXPECT_NE(out.find("sim://"), std::string::npos) << out;
+  EXPECT_NE(out.find("simulated plenoptic camera [simulated]"), std::string::npos) << out;
+  EXPECT_NE(out.find("simulation: true"), std::string::npos) << out;  // how to enable it on this daemon
+  EXPECT_EQ(out.find("no devices found"), std::string::npos) << out;
+}
+
+// The control options are the main program's; they are taken after the command as well.
+TEST_F(Daemon, ControlOptionsWorkBeforeAndAfterTheCommand) {
+  for (const auto& argv : {std::vector<std::string>{testing_support::binary("plenopiv"), "--endpoint", control_,
+                                                    "--timeout", "2", "status"},
+                           std::vector<std::string>{testing_support::binary("plenopiv"), "status", "--endpoint",
+                                                    control_, "--timeout", "2"},
+                           std::vector<std::string>{testing_support::binary("plenopiv"), "devices", "--timeout", "2",
+                                                    "--endpoint=" + control_}}) {
+    std::string out;
+    EXPECT_EQ(testing_support::run_command(argv, out), 0) << argv[1] << ": " << out;
+  }
+}
+
 TEST_F(Daemon, PublishesStatusOnItsTopic) {
   zmq::context_t ctx;
   zmq::socket_t sub(ctx, zmq::socket_type::sub);

@@ -335,6 +335,7 @@ TEST(Reprocess, OnePairFromARunFolderSaysItsMeasuredDtIsNotUsed) {
   ASSERT_GT(p.measured_dt_s(), 0);
   const fs::path out_file = testing_support::temp_dir("reprocess") / "single.h5";
   const std::vector<std::string> single{"process",
+                                        "--camera",
                                         kCameraFile,
                                         (run / p.frame_a()).string(),
                                         (run / p.frame_b()).string(),

@@ -50,6 +50,7 @@ fs::path cache_dir() { return testing_support::temp_dir("process-cli") / "cache"
 std::vector<std::string> process_args(const fs::path& dir, const std::string& config, const fs::path& out) {
   return {binary("plenopiv"),
           "process",
+          "--camera",
           kCamera,
           (dir / "pair/frame_A.tif").string(),
           (dir / "pair/frame_B.tif").string(),
@@ -277,8 +278,8 @@ TEST(ProcessCli, FlagsFramesWithoutLightAndSaturatedFrames) {
   io::write_tiff(dir / "bright.tif", bright);
   const fs::path out = dir / "flagged.h5";
   auto args = process_args(dir, kConfig, out);
-  args[3] = (dir / "dark.tif").string();
-  args[4] = (dir / "bright.tif").string();
+  args[4] = (dir / "dark.tif").string();
+  args[5] = (dir / "bright.tif").string();
   std::string text;
   ASSERT_EQ(run_command(args, text, std::chrono::seconds(300)), 0) << text;
   EXPECT_NE(text.find("warning: frame A (" + (dir / "dark.tif").string() + ") all zero"), std::string::npos) << text;
@@ -310,13 +311,13 @@ TEST(ProcessCli, RefusesBadInputsByName) {
   expect_refused(process_args(dir, (dir / "missing.yaml").string(), out), "missing.yaml", out);
 
   auto args = process_args(dir, kConfig, out);
-  args[3] = (dir / "nope.tif").string();
+  args[4] = (dir / "nope.tif").string();
   expect_refused(args, "nope.tif", out);
 
   ImageU16 small(100, 80, 5);
   io::write_tiff(dir / "small.tif", small);
   args = process_args(dir, kConfig, out);
-  args[4] = (dir / "small.tif").string();
+  args[5] = (dir / "small.tif").string();
   expect_refused(args, "small.tif", out);
 
   args = process_args(dir, kConfig, out);

@@ -44,9 +44,26 @@ TEST(ReconstructCli, WritesVolumesWhoseBrightestVoxelIsTheParticle) {
   io::write_tiff(dir / "particle.tif", image);
 
   std::string out;
-  const int status = run_command({binary("plenopiv"), "reconstruct", kCamera, (dir / "particle.tif").string(),
-                                  "--extent", "-0.625", "0.625", "-0.625", "0.625", "-2", "2", "--voxel", "0.125",
-                                  "--voxel-z", "0.5", "--iterations", "3", "-o", (dir / "v.h5").string()},
+  const int status = run_command({binary("plenopiv"),
+                                  "reconstruct",
+                                  "--camera",
+                                  kCamera,
+                                  (dir / "particle.tif").string(),
+                                  "--extent",
+                                  "-0.625",
+                                  "0.625",
+                                  "-0.625",
+                                  "0.625",
+                                  "-2",
+                                  "2",
+                                  "--voxel",
+                                  "0.125",
+                                  "--voxel-z",
+                                  "0.5",
+                                  "--iterations",
+                                  "3",
+                                  "-o",
+                                  (dir / "v.h5").string()},
                                  out);
   ASSERT_EQ(status, 0) << out;
   EXPECT_NE(out.find("iteration 3/3 residual"), std::string::npos) << out;
@@ -64,6 +81,7 @@ TEST(ReconstructCli, WritesVolumesWhoseBrightestVoxelIsTheParticle) {
   // --accelerate reaches MART: another volume, the particle still where it is.
   ASSERT_EQ(run_command({binary("plenopiv"),
                          "reconstruct",
+                         "--camera",
                          kCamera,
                          (dir / "particle.tif").string(),
                          "--extent",
@@ -98,18 +116,19 @@ TEST(ReconstructCli, RefusesBadArgumentsClearly) {
   const auto dir = testing_support::temp_dir("recon-cli");
   io::write_tiff(dir / "small.tif", ImageU16(100, 100, 5));
   std::string out;
-  EXPECT_EQ(2, run_command({binary("plenopiv"), "reconstruct", kCamera, (dir / "small.tif").string(), "--extent", "-1",
-                            "1", "-1", "1", "-1", "1", "-o", (dir / "x.h5").string()},
+  EXPECT_EQ(2, run_command({binary("plenopiv"), "reconstruct", "--camera", kCamera, (dir / "small.tif").string(),
+                            "--extent", "-1", "1", "-1", "1", "-1", "1", "-o", (dir / "x.h5").string()},
                            out));
   EXPECT_NE(out.find("850 x 850"), std::string::npos) << out;
-  EXPECT_EQ(2, run_command({binary("plenopiv"), "reconstruct", kCamera, (dir / "small.tif").string(), "--extent", "1",
-                            "-1", "-1", "1", "-1", "1", "-o", (dir / "x.h5").string()},
+  EXPECT_EQ(2, run_command({binary("plenopiv"), "reconstruct", "--camera", kCamera, (dir / "small.tif").string(),
+                            "--extent", "1", "-1", "-1", "1", "-1", "1", "-o", (dir / "x.h5").string()},
                            out));
   EXPECT_NE(out.find("--extent"), std::string::npos) << out;
   io::write_tiff(dir / "right.tif", ImageU16(850, 850, 5));
-  EXPECT_EQ(2, run_command({binary("plenopiv"), "reconstruct", kCamera, (dir / "right.tif").string(), "--extent", "-1",
-                            "1", "-1", "1", "-1", "1", "--sensor-blur-mm", "-0.001", "-o", (dir / "x.h5").string()},
-                           out));
+  EXPECT_EQ(
+      2, run_command({binary("plenopiv"), "reconstruct", "--camera", kCamera, (dir / "right.tif").string(), "--extent",
+                      "-1", "1", "-1", "1", "-1", "1", "--sensor-blur-mm", "-0.001", "-o", (dir / "x.h5").string()},
+                     out));
   EXPECT_NE(out.find("sensor_blur_sigma_mm"), std::string::npos) << out;
   EXPECT_FALSE(std::filesystem::exists(dir / "x.h5"));
 }
