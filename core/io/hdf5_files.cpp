@@ -73,6 +73,20 @@ void write_text_attribute(hid_t parent, const std::filesystem::path& path, const
   check(H5Awrite(attr.get(), type.get(), padded.data()), path, "write attribute " + name);
 }
 
+// A text too long for an attribute (HDF5 keeps attributes under 64 KiB in the object header), as a
+// scalar string dataset `name` of `parent`.
+void write_text_dataset(hid_t parent, const std::filesystem::path& path, const std::string& name,
+                        const std::string& value) {
+  Handle type(H5Tcopy(H5T_C_S1), H5Tclose);
+  check(H5Tset_size(type.get(), std::max<std::size_t>(value.size(), 1)), path, "make a string type");
+  check(H5Tset_strpad(type.get(), H5T_STR_NULLTERM), path, "make a string type");
+  Handle space(H5Screate(H5S_SCALAR), H5Sclose);
+  Handle set(H5Dcreate2(parent, name.c_str(), type.get(), space.get(), H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT),
+             H5Dclose);
+  if (!set.ok()) throw std::runtime_error(path.string() + ": HDF5: cannot create dataset " + name);
+  check(H5Dwrite(set.get(), type.get(), H5S_ALL, H5S_ALL, H5P_DEFAULT, value.data()), path, "write " + name);
+}
+
 // The axes' meaning, for the group that holds 3-D arrays.
 constexpr const char* kAxisOrder = "z, y, x: arrays are [nz][ny][nx] (C order, x fastest; MATLAB shows them x, y, z)";
 constexpr const char* kAxes =
@@ -129,7 +143,14 @@ void write_provenance(hid_t file, const std::filesystem::path& path, const std::
   write_text_attribute(group.get(), path, "commit", std::string(build_commit()));
   write_text_attribute(group.get(), path, "host", host);
   write_text_attribute(group.get(), path, "written_utc", written);
-  for (const auto& [name, value] : entries) write_text_attribute(group.get(), path, name, value);
+  // Entries up to 32 KiB are attributes; longer ones (a large settings file) string datasets.
+  for (const auto& [name, value] : entries) {
+    if (value.size() <= 32 * 1024) {
+      write_text_attribute(group.get(), path, name, value);
+    } else {
+      write_text_dataset(group.get(), path, name, value);
+    }
+  }
 }
 
 std::vector<double> read_attribute(hid_t parent, const std::filesystem::path& path, const std::string& owner,
@@ -326,7 +347,21 @@ std::optional<std::string> read_provenance(const std::filesystem::path& path, co
   Handle file(H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose);
   if (!file.ok() || H5Lexists(file.get(), "provenance", H5P_DEFAULT) <= 0) return std::nullopt;
   Handle group(H5Gopen2(file.get(), "provenance", H5P_DEFAULT), H5Gclose);
-  if (!group.ok() || H5Aexists(group.get(), name.c_str()) <= 0) return std::nullopt;
+  if (!group.ok()) return std::nullopt;
+  if (H5Aexists(group.get(), name.c_str()) <= 0) {  // a long entry is a string dataset
+    if (name.empty() || name.find('/') != std::string::npos || H5Lexists(group.get(), name.c_str(), H5P_DEFAULT) <= 0)
+      return std::nullopt;
+    Handle set(H5Dopen2(group.get(), name.c_str(), H5P_DEFAULT), H5Dclose);
+    if (!set.ok()) return std::nullopt;
+    Handle type(H5Dget_type(set.get()), H5Tclose);
+    if (H5Tget_class(type.get()) != H5T_STRING || H5Tis_variable_str(type.get()) > 0) return std::nullopt;
+    const std::size_t size = H5Tget_size(type.get());
+    if (size == 0 || size > (64u << 20)) return std::nullopt;
+    std::string value(size, '\0');
+    if (H5Dread(set.get(), type.get(), H5S_ALL, H5S_ALL, H5P_DEFAULT, value.data()) < 0) return std::nullopt;
+    value.resize(std::strlen(value.c_str()));
+    return value;
+  }
   Handle attr(H5Aopen(group.get(), name.c_str(), H5P_DEFAULT), H5Aclose);
   Handle type(H5Aget_type(attr.get()), H5Tclose);
   if (!attr.ok() || H5Tget_class(type.get()) != H5T_STRING || H5Tis_variable_str(type.get()) > 0) return std::nullopt;

@@ -226,6 +226,12 @@ TEST(Hdf5, VectorFieldRoundTrip) {
   EXPECT_EQ(read_provenance(path, "software").value_or("").rfind("plenopiv ", 0), 0u);
   EXPECT_FALSE(read_provenance(path, "no_such_entry").has_value());
   EXPECT_FALSE(read_provenance(temp_dir() / "no_such_file.h5", "software").has_value());
+  // A settings text too long for an HDF5 attribute is kept whole.
+  std::string long_settings;
+  for (int i = 0; i < 20000; ++i) long_settings += "k" + std::to_string(i) + ": 1\n";
+  ASSERT_GT(long_settings.size(), 65536u);
+  write_vector_field_h5(path, f, {}, {{"settings", long_settings}});
+  EXPECT_EQ(read_provenance(path, "settings"), long_settings);
 }
 
 TEST(Hdf5, PythonH5pyReadsTheLayoutOfTheDesign) {
