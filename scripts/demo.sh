@@ -54,6 +54,26 @@ echo "== $run_dir"
 ls "$run_dir"
 grep -m1 '"state"' "$run_dir/manifest.json"
 echo "frames on disk: $(ls "$run_dir/frames" | wc -l)"
+first=$(ls "$run_dir"/vectors/*.h5 | head -1)
+echo "== one vector field, as Python sees it ($first)"
+/usr/bin/python3 - "$first" <<'PY'
+import sys, h5py
+with h5py.File(sys.argv[1], "r") as f:
+    g = f["vectors"]
+    u = g["u"]
+    print("u: shape", u.shape, "(z, y, x),", u.attrs["units"].decode(), "- mean %.3f" % float(u[()].mean()))
+    print("axes:", ", ".join("%s %.2f..%.2f mm" % (a, g[a][0], g[a][-1]) for a in "xyz"))
+    print("provenance:", ", ".join("%s=%s" % (k, f["provenance"].attrs[k].decode())
+                                   for k in ("software", "run", "pair_index", "dt_source")))
+PY
+cat <<EOF
+== where the results are
+  $run_dir: run.yaml, camera.yaml, process.yaml, manifest.json (every pair, its frames and dt),
+  frames/pair-<n>-A.tif and -B.tif (raw 16-bit), vectors/pair-<n>.h5 (u, v, w in m/s, vorticity,
+  flags, x/y/z in mm, provenance), statistics.h5 (mean and RMS fluctuation).
+  Reprocessed offline into .h5 and .vti with a ParaView series:
+    build/bin/plenopiv process --run $run_dir    # then open $run_dir/reprocessed/series.pvd in ParaView
+EOF
 
 kill -TERM $daemon
 wait $daemon
