@@ -61,11 +61,17 @@ void write_attribute(hid_t parent, const std::filesystem::path& path, const std:
   check(H5Awrite(attr.get(), H5T_NATIVE_DOUBLE, values), path, "write attribute " + name);
 }
 
-void write_text_attribute(hid_t parent, const std::filesystem::path& path, const std::string& name,
-                          const std::string& value) {
+// A fixed-length, NUL-terminated string type that holds `value` (at least one byte).
+Handle text_type(const std::filesystem::path& path, const std::string& value) {
   Handle type(H5Tcopy(H5T_C_S1), H5Tclose);
   check(H5Tset_size(type.get(), std::max<std::size_t>(value.size(), 1)), path, "make a string type");
   check(H5Tset_strpad(type.get(), H5T_STR_NULLTERM), path, "make a string type");
+  return type;
+}
+
+void write_text_attribute(hid_t parent, const std::filesystem::path& path, const std::string& name,
+                          const std::string& value) {
+  const Handle type = text_type(path, value);
   Handle space(H5Screate(H5S_SCALAR), H5Sclose);
   Handle attr(H5Acreate2(parent, name.c_str(), type.get(), space.get(), H5P_DEFAULT, H5P_DEFAULT), H5Aclose);
   if (!attr.ok()) throw std::runtime_error(path.string() + ": HDF5: cannot create attribute " + name);
@@ -77,14 +83,13 @@ void write_text_attribute(hid_t parent, const std::filesystem::path& path, const
 // scalar string dataset `name` of `parent`.
 void write_text_dataset(hid_t parent, const std::filesystem::path& path, const std::string& name,
                         const std::string& value) {
-  Handle type(H5Tcopy(H5T_C_S1), H5Tclose);
-  check(H5Tset_size(type.get(), std::max<std::size_t>(value.size(), 1)), path, "make a string type");
-  check(H5Tset_strpad(type.get(), H5T_STR_NULLTERM), path, "make a string type");
+  const Handle type = text_type(path, value);
   Handle space(H5Screate(H5S_SCALAR), H5Sclose);
   Handle set(H5Dcreate2(parent, name.c_str(), type.get(), space.get(), H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT),
              H5Dclose);
   if (!set.ok()) throw std::runtime_error(path.string() + ": HDF5: cannot create dataset " + name);
-  check(H5Dwrite(set.get(), type.get(), H5S_ALL, H5S_ALL, H5P_DEFAULT, value.data()), path, "write " + name);
+  const std::string padded = value.empty() ? std::string(1, '\0') : value;
+  check(H5Dwrite(set.get(), type.get(), H5S_ALL, H5S_ALL, H5P_DEFAULT, padded.data()), path, "write " + name);
 }
 
 // The axes' meaning, for the group that holds 3-D arrays.
@@ -342,35 +347,43 @@ VectorField read_vector_field_h5(const std::filesystem::path& path) {
   return f;
 }
 
+namespace {
+
+// A fixed-length string of up to `limit` bytes read by `read` into a buffer of the type's size;
+// nullopt when `type` is no such string or the read fails.
+template <typename Read>
+std::optional<std::string> read_fixed_text(hid_t type, std::size_t limit, Read read) {
+  if (H5Tget_class(type) != H5T_STRING || H5Tis_variable_str(type) > 0) return std::nullopt;
+  const std::size_t size = H5Tget_size(type);
+  if (size == 0 || size > limit) return std::nullopt;
+  std::string value(size, '\0');
+  if (read(value.data()) < 0) return std::nullopt;
+  value.resize(std::strlen(value.c_str()));
+  return value;
+}
+
+}  // namespace
+
 std::optional<std::string> read_provenance(const std::filesystem::path& path, const std::string& name) {
   if (!std::filesystem::is_regular_file(path) || H5Fis_hdf5(path.c_str()) <= 0) return std::nullopt;
   Handle file(H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose);
   if (!file.ok() || H5Lexists(file.get(), "provenance", H5P_DEFAULT) <= 0) return std::nullopt;
   Handle group(H5Gopen2(file.get(), "provenance", H5P_DEFAULT), H5Gclose);
   if (!group.ok()) return std::nullopt;
-  if (H5Aexists(group.get(), name.c_str()) <= 0) {  // a long entry is a string dataset
-    if (name.empty() || name.find('/') != std::string::npos || H5Lexists(group.get(), name.c_str(), H5P_DEFAULT) <= 0)
-      return std::nullopt;
-    Handle set(H5Dopen2(group.get(), name.c_str(), H5P_DEFAULT), H5Dclose);
-    if (!set.ok()) return std::nullopt;
-    Handle type(H5Dget_type(set.get()), H5Tclose);
-    if (H5Tget_class(type.get()) != H5T_STRING || H5Tis_variable_str(type.get()) > 0) return std::nullopt;
-    const std::size_t size = H5Tget_size(type.get());
-    if (size == 0 || size > (64u << 20)) return std::nullopt;
-    std::string value(size, '\0');
-    if (H5Dread(set.get(), type.get(), H5S_ALL, H5S_ALL, H5P_DEFAULT, value.data()) < 0) return std::nullopt;
-    value.resize(std::strlen(value.c_str()));
-    return value;
+  if (H5Aexists(group.get(), name.c_str()) > 0) {
+    Handle attr(H5Aopen(group.get(), name.c_str(), H5P_DEFAULT), H5Aclose);
+    if (!attr.ok()) return std::nullopt;
+    Handle type(H5Aget_type(attr.get()), H5Tclose);
+    return read_fixed_text(type.get(), 1u << 20, [&](char* out) { return H5Aread(attr.get(), type.get(), out); });
   }
-  Handle attr(H5Aopen(group.get(), name.c_str(), H5P_DEFAULT), H5Aclose);
-  Handle type(H5Aget_type(attr.get()), H5Tclose);
-  if (!attr.ok() || H5Tget_class(type.get()) != H5T_STRING || H5Tis_variable_str(type.get()) > 0) return std::nullopt;
-  const std::size_t size = H5Tget_size(type.get());
-  if (size == 0 || size > (1u << 20)) return std::nullopt;
-  std::string value(size, '\0');
-  if (H5Aread(attr.get(), type.get(), value.data()) < 0) return std::nullopt;
-  value.resize(std::strlen(value.c_str()));
-  return value;
+  // A long entry is a string dataset.
+  if (name.empty() || name.find('/') != std::string::npos || H5Lexists(group.get(), name.c_str(), H5P_DEFAULT) <= 0)
+    return std::nullopt;
+  Handle set(H5Dopen2(group.get(), name.c_str(), H5P_DEFAULT), H5Dclose);
+  if (!set.ok()) return std::nullopt;
+  Handle type(H5Dget_type(set.get()), H5Tclose);
+  return read_fixed_text(type.get(), 64u << 20,
+                         [&](char* out) { return H5Dread(set.get(), type.get(), H5S_ALL, H5S_ALL, H5P_DEFAULT, out); });
 }
 
 }  // namespace plenopiv::io
