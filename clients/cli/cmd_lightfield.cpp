@@ -39,6 +39,7 @@ struct LightFieldArgs {
 lightfield::LightField load_field(const LightFieldArgs& args, optics::CameraModel& camera_out) {
   camera_out = optics::load_camera_file(args.camera);
   const calib::LoadedCalibration cal = calib::load_calibration(args.calibration, camera_out);
+  camera_out = calib::camera_in_frame(camera_out, cal);
   const ImageF raw = io::read_raw_frame(args.raw);
   try {
     return lightfield::rectify(camera_out, cal.lenses, raw, args.no_white ? nullptr : &cal.white_correction);

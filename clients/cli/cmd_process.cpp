@@ -96,7 +96,7 @@ calib::LoadedCalibration calibration_for(const ProcessOptions& o, const optics::
   CalibrationFrameFiles files{o.white_images, {}, o.dark_images};
   if (!o.calibration_image.empty()) files.calibration.push_back(o.calibration_image);
   const calib::Calibration cal = calibrate_from_files(camera, files);
-  return {cal.microlens_array(), cal.white_correction};
+  return calib::loaded_calibration(cal);
 }
 
 // The x-y slice through the middle of the vector grid: in-plane vectors over the out-of-plane

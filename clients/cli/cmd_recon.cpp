@@ -67,7 +67,7 @@ Grid3 grid_from(const ReconOptions& o) {
 
 void run(const ReconOptions& o) {
   const auto limit = thread_limit(o.threads);
-  const optics::CameraModel camera = optics::load_camera_file(o.camera);
+  const optics::CameraModel camera_file = optics::load_camera_file(o.camera);
   const Grid3 grid = grid_from(o);
   recon::MartSettings s;
   s.iterations = o.iterations;
@@ -90,17 +90,12 @@ void run(const ReconOptions& o) {
 
   const bool tty = ::isatty(STDERR_FILENO);
   const auto t0 = std::chrono::steady_clock::now();
-  optics::MicrolensArray lenses;
-  ImageF white;
-  if (o.calibration.empty()) {
-    calib::LoadedCalibration nominal = calib::nominal_calibration(camera);
-    lenses = std::move(nominal.lenses);
-    white = std::move(nominal.white_correction);
-  } else {
-    calib::LoadedCalibration c = calib::load_calibration(o.calibration, camera);
-    lenses = std::move(c.lenses);
-    white = c.white_correction.empty() ? calib::geometric_white_image(camera, lenses) : std::move(c.white_correction);
-  }
+  calib::LoadedCalibration c = o.calibration.empty() ? calib::nominal_calibration(camera_file)
+                                                     : calib::load_calibration(o.calibration, camera_file);
+  const optics::CameraModel camera = calib::camera_in_frame(camera_file, c);
+  optics::MicrolensArray lenses = std::move(c.lenses);
+  ImageF white =
+      c.white_correction.empty() ? calib::geometric_white_image(camera, lenses) : std::move(c.white_correction);
   // Raw pixels, or the image resampled onto an axis-aligned lattice for a rotated/warped/hex array.
   const auto operators = weights_cache(o.cache_dir, o.no_cache);
   std::string setup_note;

@@ -1109,6 +1109,19 @@ Calibration calibrate_from_white(const optics::CameraModel& camera, const ImageF
   return cal;
 }
 
+namespace {
+
+// Moves the calibration's frame to an optical axis at `axis_px`; every spot stays where it was measured.
+void set_optical_axis(Calibration& cal, const std::array<double, 2>& axis_px) {
+  const std::array<double, 2> offset_px{optics::sensor_mm_to_column(cal.sensor, cal.spot_lattice.offset_x_mm),
+                                        optics::sensor_mm_to_row(cal.sensor, cal.spot_lattice.offset_y_mm)};
+  cal.sensor.optical_axis_px = axis_px;
+  cal.spot_lattice.offset_x_mm = optics::column_to_sensor_mm(cal.sensor, offset_px[0]);
+  cal.spot_lattice.offset_y_mm = optics::row_to_sensor_mm(cal.sensor, offset_px[1]);
+}
+
+}  // namespace
+
 void measure_white(Calibration& cal, const ImageF& white, const CalibrationOptions& options,
                    std::optional<double> black_level) {
   check_image(cal.sensor, white, "white image");
@@ -1238,7 +1251,18 @@ void measure_white(Calibration& cal, const ImageF& white, const CalibrationOptio
     cal.measured_axis_px = centre;
     cal.measured_axis_sigma_px = sigma;
     const double off = std::hypot(centre[0] - frame[0], centre[1] - frame[1]);
-    if (off > std::max(3 * sigma, 2.0)) {
+    if (vignetting.found && !cal.sensor.optical_axis_px) {
+      // The cat's eye is geometry (the lens barrel cutting the cones), not lighting: where the
+      // camera file gives no axis, the calibration's frame becomes the measured one.
+      set_optical_axis(cal, centre);
+      cal.axis_measured = true;
+      cal.notes.push_back(
+          "the optical axis: not in the camera file; measured from the micro-images' cat's-eye "
+          "vignetting at column " +
+          fmt(centre[0], 1) + ", row " + fmt(centre[1], 1) + " (+-" + fmt(sigma, 1) + " px, " + fmt(off, 1) +
+          " px from the sensor centre) and used by refocus and reconstruction with this "
+          "calibration (`optical_axis_px` in the camera file's sensor section overrides it)");
+    } else if (off > std::max(3 * sigma, 2.0)) {
       cal.notes.push_back(
           std::string(vignetting.found ? "the micro-images' cat's-eye vignetting" : "the white's fall-off") +
           " is centred at column " + fmt(centre[0], 1) + ", row " + fmt(centre[1], 1) + " (+-" + fmt(sigma, 1) +
@@ -1246,7 +1270,8 @@ void measure_white(Calibration& cal, const ImageF& white, const CalibrationOptio
           (cal.sensor.optical_axis_px ? std::string("sensor.optical_axis_px") : std::string("the sensor centre")) +
           (vignetting.found ? std::string("): that is where the optical axis meets the sensor; ")
                             : std::string("): if the white target was evenly lit, that is where the "
-                                          "optical axis meets the sensor; ")) +
+                                          "optical axis meets the sensor (an unevenly lit target moves it, so "
+                                          "it is not applied); ")) +
           "add `optical_axis_px: [" + fmt(centre[0], 1) + ", " + fmt(centre[1], 1) +
           "]` to the camera file's sensor section and calibrate again");
     }
@@ -1319,7 +1344,10 @@ std::string describe(const Calibration& cal) {
     << fmt(cal.spot_lattice.offset_y_mm / pp, 2) << " px from the optical axis (column "
     << fmt(optics::sensor_mm_to_column(cal.sensor, 0.0), 2) << ", row "
     << fmt(optics::sensor_mm_to_row(cal.sensor, 0.0), 2)
-    << (cal.sensor.optical_axis_px ? ", camera file" : ", sensor centre") << ")\n"
+    << (cal.axis_measured            ? ", measured: cat's eye"
+        : cal.sensor.optical_axis_px ? ", camera file"
+                                     : ", sensor centre")
+    << ")\n"
     << "  model              "
     << (cal.distortion_degree == 0 ? std::string("lattice")
                                    : "lattice + degree-" + std::to_string(cal.distortion_degree) + " distortion")

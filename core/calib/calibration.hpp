@@ -69,6 +69,9 @@ struct Calibration {
   double predicted_fill = 0;
   std::array<double, 2> measured_axis_px{std::nan(""), std::nan("")};
   double measured_axis_sigma_px = std::nan("");
+  // Whether `sensor`'s optical axis is the measured one: a white with cat's-eye vignetting and a
+  // camera file without sensor.optical_axis_px (load_calibration then gives it to the consumers).
+  bool axis_measured = false;
   // The camera file's lens counts when calibrated (0: not given).
   int camera_count_x = 0, camera_count_y = 0;
   // Frames averaged, and the black level taken off the white.

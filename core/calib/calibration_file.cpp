@@ -166,6 +166,7 @@ void write_calibration_h5(const std::filesystem::path& path, const Calibration& 
     write_attr(f, camera.get(), "image_distance_mm", cal.image_distance_mm);
     write_attr(f, camera.get(), "microlens_focal_length_mm", cal.microlens_focal_length_mm);
     write_attr(f, camera.get(), "optical_axis_given", cal.sensor.optical_axis_px ? 1 : 0);
+    write_attr(f, camera.get(), "optical_axis_measured", cal.axis_measured ? 1 : 0);
     write_attr(f, camera.get(), "optical_axis_x_px", optics::sensor_mm_to_column(cal.sensor, 0.0));
     write_attr(f, camera.get(), "optical_axis_y_px", optics::sensor_mm_to_row(cal.sensor, 0.0));
     write_attr(f, camera.get(), "camera_count_x", cal.camera_count_x);
@@ -216,6 +217,8 @@ Calibration read_calibration_h5(const std::filesystem::path& path) {
   if (read_attr_or(f, camera.get(), "camera", "optical_axis_given", 0) == 1) {
     cal.sensor.optical_axis_px = std::array<double, 2>{cam("optical_axis_x_px"), cam("optical_axis_y_px")};
   }
+  cal.axis_measured =
+      cal.sensor.optical_axis_px && read_attr_or(f, camera.get(), "camera", "optical_axis_measured", 0) == 1;
   if (cal.sensor.width_px <= 0 || cal.sensor.height_px <= 0 || !(cal.sensor.pixel_pitch_mm > 0) ||
       !(cal.image_distance_mm > 0) || !(cal.microlens_focal_length_mm > 0)) {
     throw InputError(f.where("/camera attributes are not a valid camera"));
@@ -350,14 +353,29 @@ LoadedCalibration load_calibration(const std::filesystem::path& path, const opti
                              " mm; the camera file gives s_i = " + std::to_string(camera.image_distance_mm()) +
                              " mm, f_l = " + std::to_string(camera.microlens().focal_length_mm) + " mm"));
   }
-  // Lens centres in this camera's frame (its optical axis), so that every spot stays where the
-  // calibration measured it whatever the frame it was made in.
+  // Lens centres in this camera's frame (its optical axis: the camera file's, else the one the
+  // calibration measured, else the sensor centre), so that every spot stays where the calibration
+  // measured it whatever the frame it was made in.
+  std::optional<std::array<double, 2>> measured_axis;
+  if (!camera.sensor().optical_axis_px && cal.axis_measured) measured_axis = cal.sensor.optical_axis_px;
   const std::array<double, 2> offset_px{optics::sensor_mm_to_column(cal.sensor, cal.spot_lattice.offset_x_mm),
                                         optics::sensor_mm_to_row(cal.sensor, cal.spot_lattice.offset_y_mm)};
   cal.sensor = camera.sensor();
+  if (measured_axis) cal.sensor.optical_axis_px = measured_axis;
   cal.spot_lattice.offset_x_mm = optics::column_to_sensor_mm(cal.sensor, offset_px[0]);
   cal.spot_lattice.offset_y_mm = optics::row_to_sensor_mm(cal.sensor, offset_px[1]);
-  return {cal.microlens_array(), std::move(cal.white_correction)};
+  return {cal.microlens_array(), std::move(cal.white_correction), measured_axis};
+}
+
+LoadedCalibration loaded_calibration(Calibration cal) {
+  std::optional<std::array<double, 2>> measured_axis;
+  if (cal.axis_measured) measured_axis = cal.sensor.optical_axis_px;
+  return {cal.microlens_array(), std::move(cal.white_correction), measured_axis};
+}
+
+optics::CameraModel camera_in_frame(const optics::CameraModel& camera, const LoadedCalibration& calibration) {
+  if (!calibration.measured_optical_axis_px || camera.sensor().optical_axis_px) return camera;
+  return camera.with_optical_axis(*calibration.measured_optical_axis_px);
 }
 
 }  // namespace plenopiv::calib

@@ -1,7 +1,9 @@
 // The calibration file (HDF5, readable with h5py): lens centres, lattice, residuals, white correction.
 #pragma once
 
+#include <array>
 #include <filesystem>
+#include <optional>
 
 #include "core/base/image.hpp"
 #include "core/calib/calibration.hpp"
@@ -48,11 +50,19 @@ Calibration read_calibration_h5(const std::filesystem::path& path);
 struct LoadedCalibration {
   optics::MicrolensArray lenses;
   ImageF white_correction;
+  // The optical axis (column, row px) calibration measured, when the camera file gives none: the
+  // lenses are in its frame, and the camera for them is camera_in_frame's.
+  std::optional<std::array<double, 2>> measured_optical_axis_px;
 };
 // Loads a calibration file for `camera`; a file made for another sensor size, layout, s_i / f_l,
 // or with other lens counts in the camera file (when this one gives counts), is an InputError
-// saying which. Lens centres come out in `camera`'s frame (its optical axis): the spots stay
-// where the calibration measured them.
+// saying which. Lens centres come out in `camera`'s frame (its optical axis, or the one the
+// calibration measured when the camera file gives none): the spots stay where they were measured.
 LoadedCalibration load_calibration(const std::filesystem::path& path, const optics::CameraModel& camera);
+// The same for a calibration just made (its own frame).
+LoadedCalibration loaded_calibration(Calibration calibration);
+// The camera the calibration's lenses belong to: `camera` with the measured optical axis when
+// the calibration has one and the camera file gives none, else `camera` itself.
+optics::CameraModel camera_in_frame(const optics::CameraModel& camera, const LoadedCalibration& calibration);
 
 }  // namespace plenopiv::calib

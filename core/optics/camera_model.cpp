@@ -137,6 +137,11 @@ std::array<double, 2> CameraModel::optical_axis_px() const {
   if (spec_.sensor.optical_axis_px) return *spec_.sensor.optical_axis_px;
   return {0.5 * (spec_.sensor.width_px - 1), 0.5 * (spec_.sensor.height_px - 1)};
 }
+CameraModel CameraModel::with_optical_axis(const std::array<double, 2>& axis_px) const {
+  CameraSpec spec = spec_;
+  spec.sensor.optical_axis_px = axis_px;
+  return CameraModel(spec, "the optical axis measured by calibration");
+}
 double CameraModel::sensor_width_mm() const { return spec_.sensor.width_px * spec_.sensor.pixel_pitch_mm; }
 double CameraModel::sensor_height_mm() const { return spec_.sensor.height_px * spec_.sensor.pixel_pitch_mm; }
 double CameraModel::row_pitch_mm() const {

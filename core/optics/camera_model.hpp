@@ -91,6 +91,9 @@ class CameraModel {
   int lens_count() const { return nominal_count_x_ * nominal_count_y_; }
   // The optical axis on the sensor, (column, row) pixels: the camera file's, else the centre.
   std::array<double, 2> optical_axis_px() const;
+  // This camera with its optical axis at `axis_px` (column, row), e.g. where calibration measured
+  // it; InputError when it is not on the sensor.
+  CameraModel with_optical_axis(const std::array<double, 2>& axis_px) const;
 
   // Object-space field of view covered by the lens array at the nominal focal plane.
   double field_of_view_x_mm() const;

@@ -136,7 +136,8 @@ std::string operator_key(const optics::CameraModel& camera, const optics::Microl
   for (const double v :
        {c.sensor.pixel_pitch_mm, c.microlens.pitch_mm, c.microlens.focal_length_mm, c.main_lens.focal_length_mm,
         c.main_lens.f_number, c.main_lens.magnification, camera.image_distance_mm(), camera.object_distance_mm(),
-        camera.aperture_diameter_mm(), camera.microlens_image_diameter_px()})
+        camera.aperture_diameter_mm(), camera.microlens_image_diameter_px(), camera.optical_axis_px()[0],
+        camera.optical_axis_px()[1]})
     put(key, v);
   const optics::Lattice& l = lenses.lattice;
   for (const int v : {int(l.layout), l.count_x, l.count_y}) put(key, v);

@@ -33,10 +33,11 @@ WorkspacePool::Lease WorkspacePool::take() {
 PairProcessor::PairProcessor(const optics::CameraModel& camera, const calib::LoadedCalibration& calibration,
                              ProcessSettings settings, OperatorCache* operators)
     : settings_(std::move(settings)) {
+  const optics::CameraModel framed = calib::camera_in_frame(camera, calibration);
   if (operators) {
-    op_ = operators->get(camera, calibration.lenses, calibration.white_correction, settings_, &setup_note_);
+    op_ = operators->get(framed, calibration.lenses, calibration.white_correction, settings_, &setup_note_);
   } else {
-    op_ = std::make_shared<const PairOperator>(camera, calibration.lenses, calibration.white_correction, settings_);
+    op_ = std::make_shared<const PairOperator>(framed, calibration.lenses, calibration.white_correction, settings_);
     setup_note_ = "operator built";
   }
 }
