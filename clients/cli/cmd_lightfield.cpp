@@ -108,7 +108,16 @@ void run_refocus(const LightFieldArgs& args) {
     stack.push_back(lightfield::refocus(field, alphas[k]));
     progress.update(double(k + 1) / double(alphas.size()));
   }
-  io::write_tiff_stack(args.output, stack);
+  // Each page says what it is: the depth it brings into focus and its alpha (eqs 2-4).
+  std::vector<std::string> descriptions;
+  for (const double alpha : alphas) {
+    std::ostringstream d;
+    d.precision(9);
+    d << "plenopiv refocus: z_mm=" << lightfield::depth_for_alpha(camera, alpha) << " alpha=" << alpha
+      << " (depth from the nominal focal plane, object space; one pixel per microlens)";
+    descriptions.push_back(d.str());
+  }
+  io::write_tiff_stack(args.output, stack, descriptions);
   const std::string sheet =
       args.sheet.empty() ? std::filesystem::path(args.output).replace_extension(".png").string() : args.sheet;
   write_contact_sheet(sheet, stack, labels);
@@ -133,7 +142,15 @@ void run_perspective(const LightFieldArgs& args) {
     s << "u " << args.u[k] << " v " << args.v[k];
     labels.push_back(s.str());
   }
-  io::write_tiff_stack(args.output, views);
+  std::vector<std::string> descriptions;
+  for (std::size_t k = 0; k < args.u.size(); ++k) {
+    std::ostringstream d;
+    d.precision(9);
+    d << "plenopiv perspective: u_mm=" << args.u[k] << " v_mm=" << args.v[k]
+      << " (position on the main lens's aperture; one pixel per microlens)";
+    descriptions.push_back(d.str());
+  }
+  io::write_tiff_stack(args.output, views, descriptions);
   if (!args.sheet.empty()) write_contact_sheet(args.sheet, views, labels);
   std::cout << args.output << ": " << views.size() << " perspective views of " << views[0].width << " x "
             << views[0].height << "\n";

@@ -231,7 +231,12 @@ void write_tiff(const std::filesystem::path& path, const ImageU16& image, bool s
       sync_folder);
 }
 
-void write_tiff_stack(const std::filesystem::path& path, const std::vector<ImageF>& pages) {
+void write_tiff_stack(const std::filesystem::path& path, const std::vector<ImageF>& pages,
+                      const std::vector<std::string>& descriptions) {
+  if (!descriptions.empty() && descriptions.size() != pages.size()) {
+    throw std::logic_error("write_tiff_stack: " + std::to_string(descriptions.size()) + " descriptions for " +
+                           std::to_string(pages.size()) + " pages");
+  }
   write_atomically(path, [&](const std::filesystem::path& tmp) {
     TiffPtr t = open(tmp, "w");
     for (std::size_t i = 0; i < pages.size(); ++i) {
@@ -239,6 +244,7 @@ void write_tiff_stack(const std::filesystem::path& path, const std::vector<Image
       set_page_fields(t.get(), page.width, page.height, 32, SAMPLEFORMAT_IEEEFP);
       TIFFSetField(t.get(), TIFFTAG_SUBFILETYPE, FILETYPE_PAGE);
       TIFFSetField(t.get(), TIFFTAG_PAGENUMBER, uint16_t(i), uint16_t(pages.size()));
+      if (!descriptions.empty()) TIFFSetField(t.get(), TIFFTAG_IMAGEDESCRIPTION, descriptions[i].c_str());
       for (int y = 0; y < page.height; ++y) write_row(t.get(), path, page.row(y).data(), y);
       if (!TIFFWriteDirectory(t.get())) {
         throw std::runtime_error(path.string() + ": cannot write TIFF page " + std::to_string(i));
@@ -278,6 +284,16 @@ std::vector<ImageF> read_tiff_stack(const std::filesystem::path& path) {
     pages.push_back(std::move(page));
   } while (TIFFReadDirectory(t.get()));
   return pages;
+}
+
+std::vector<std::string> read_tiff_descriptions(const std::filesystem::path& path) {
+  TiffPtr t = open(path, "r");
+  std::vector<std::string> out;
+  do {
+    const char* text = nullptr;
+    out.emplace_back(TIFFGetField(t.get(), TIFFTAG_IMAGEDESCRIPTION, &text) == 1 && text ? text : "");
+  } while (TIFFReadDirectory(t.get()));
+  return out;
 }
 
 TiffInfo check_tiff(const std::filesystem::path& path) {

@@ -2,6 +2,7 @@
 #pragma once
 
 #include <filesystem>
+#include <string>
 #include <vector>
 
 #include "core/base/image.hpp"
@@ -27,9 +28,13 @@ TiffInfo check_tiff(const std::filesystem::path& path);
 // Writes a 16-bit single-channel TIFF, atomically.
 // `sync_folder`: as io::write_atomically (false: the caller flushes the folder once for several files).
 void write_tiff(const std::filesystem::path& path, const ImageU16& image, bool sync_folder = true);
-// Writes float32 pages (a focal stack, say) as one multi-page TIFF, atomically.
-void write_tiff_stack(const std::filesystem::path& path, const std::vector<ImageF>& pages);
+// Writes float32 pages (a focal stack, say) as one multi-page TIFF, atomically. `descriptions`
+// (empty, or one per page): each page's ImageDescription, what the page is (e.g. its depth).
+void write_tiff_stack(const std::filesystem::path& path, const std::vector<ImageF>& pages,
+                      const std::vector<std::string>& descriptions = {});
 // Reads every page of a float32 or 16-bit stack as float.
 std::vector<ImageF> read_tiff_stack(const std::filesystem::path& path);
+// Each page's ImageDescription ("" where a page has none).
+std::vector<std::string> read_tiff_descriptions(const std::filesystem::path& path);
 
 }  // namespace plenopiv::io

@@ -20,6 +20,13 @@ double alpha_for_depth(const optics::CameraModel& camera, double z_mm) {
   return f * s_o / (s_o - f) / camera.image_distance_mm();
 }
 
+double depth_for_alpha(const optics::CameraModel& camera, double alpha) {
+  const double f = camera.main_lens().focal_length_mm;
+  const double s_i = alpha * camera.image_distance_mm();
+  if (!(s_i > f)) return std::nan("");
+  return f * s_i / (s_i - f) - camera.object_distance_mm();
+}
+
 double focus_measure(const ImageF& image) {
   double s1 = 0, s2 = 0;
   for (float v : image.pixels) {

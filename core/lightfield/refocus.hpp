@@ -13,6 +13,10 @@ namespace plenopiv::lightfield {
 // focal plane): s'_i from the thin lens (eq 5) with s_o + z. InputError when z puts the object at
 // or inside the main lens's focal length.
 double alpha_for_depth(const optics::CameraModel& camera, double z_mm);
+// Its inverse: the depth z (mm from the nominal focal plane, object space) a refocus parameter
+// alpha brings into focus; NaN where alpha s_i is not beyond the main lens's focal length (no real
+// object plane).
+double depth_for_alpha(const optics::CameraModel& camera, double alpha);
 
 // Eq 4 on the lens lattice: output pixel (i, j) is the virtual-sensor point x' = alpha * p(i, j)
 // (p = lattice position of lens (i, j), so every image of a focal stack has the same scale and

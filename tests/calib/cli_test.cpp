@@ -88,6 +88,16 @@ TEST_F(CalibCli, CalibrateRefocusPerspective) {
       << out;
   const auto stack = io::read_tiff_stack(path("stack.tif"));
   ASSERT_EQ(stack.size(), 5u);
+  // Each page stores the depth it brings into focus.
+  const auto descriptions = io::read_tiff_descriptions(path("stack.tif"));
+  ASSERT_EQ(descriptions.size(), 5u);
+  for (int k = 0; k < 5; ++k) {
+    const std::string& d = descriptions[std::size_t(k)];
+    const auto at = d.find("z_mm=");
+    ASSERT_NE(at, std::string::npos) << d;
+    EXPECT_NEAR(std::stod(d.substr(at + 5)), -2.0 + 2 * k, 1e-6) << d;
+    EXPECT_NE(d.find("alpha="), std::string::npos) << d;
+  }
   EXPECT_EQ(stack[0].width, 50);
   EXPECT_GT(std::filesystem::file_size(path("stack.png")), 100u);
   // The page at z = 4 mm is the sharpest (the peak holds most light).

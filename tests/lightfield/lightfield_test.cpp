@@ -144,6 +144,15 @@ TEST(Refocus, SameImageAtOneAndTwoThreads) {
   EXPECT_THROW(alpha_for_depth(cam, -60), InputError);
 }
 
+// depth_for_alpha undoes alpha_for_depth across the volume and says NaN where no object plane is.
+TEST(Refocus, DepthForAlphaIsTheInverseOfAlphaForDepth) {
+  const auto cam = small_camera();
+  for (const double z : {-20.0, -3.5, 0.0, 2.25, 40.0}) {
+    EXPECT_NEAR(depth_for_alpha(cam, alpha_for_depth(cam, z)), z, 1e-9 * (1 + std::abs(z))) << z;
+  }
+  EXPECT_TRUE(std::isnan(depth_for_alpha(cam, cam.main_lens().focal_length_mm / cam.image_distance_mm())));
+}
+
 }  // namespace
 }  // namespace plenopiv::lightfield
 
