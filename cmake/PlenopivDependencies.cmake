@@ -73,6 +73,12 @@ if(PLENOPIV_WITH_USB)
 endif()
 plenopiv_find_pkgconfig(SYSTEMD libsystemd libsystemd-dev)
 
+# The man pages are made from the programs' --help (packaging/)
+find_program(HELP2MAN help2man)
+if(NOT HELP2MAN)
+  plenopiv_missing(help2man help2man)
+endif()
+
 if(PLENOPIV_BUILD_TESTS)
   find_package(GTest QUIET)
   if(NOT GTest_FOUND)
