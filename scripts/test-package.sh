@@ -5,9 +5,12 @@
 # config, asks it with the installed `plenopiv status` and `devices`, stops it, and purges the
 # package. Leaves the machine as it found it: the plenopiv user and group and plenopivd's folders
 # are removed again when this script made them. Every step prints its wall time.
+# PLENOPIV_PACKAGE_BUILD_TYPE: the CMake build type of the package (default Release; RelWithDebInfo
+# shares scripts/build.sh's flags, so right after it ccache has every object).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 build=build-package
+build_type=${PLENOPIV_PACKAGE_BUILD_TYPE:-Release}
 unit=/usr/lib/systemd/system/plenopivd.service
 config=/etc/plenopiv/plenopivd.yaml
 control_socket=/run/plenopiv/control
@@ -45,10 +48,10 @@ cleanup() {
 }
 trap cleanup EXIT
 
-# 1. The .deb from a Release build (ccache keeps rebuilds short).
+# 1. The .deb from a Release build (ccache keeps rebuilds short; stripped either way).
 launcher=()
 command -v ccache > /dev/null && launcher=(-DCMAKE_C_COMPILER_LAUNCHER=ccache -DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
-cmake -S . -B $build -G Ninja -DCMAKE_BUILD_TYPE=Release -DCMAKE_INSTALL_PREFIX=/usr -DPLENOPIV_BUILD_TESTS=OFF \
+cmake -S . -B $build -G Ninja -DCMAKE_BUILD_TYPE="$build_type" -DCMAKE_INSTALL_PREFIX=/usr -DPLENOPIV_BUILD_TESTS=OFF \
   -DPLENOPIV_BUILD_BENCH=OFF "${launcher[@]}" > /dev/null
 cmake --build $build --parallel "$(nproc)"
 rm -f $build/plenopiv_*.deb

@@ -39,7 +39,8 @@ TEST(SystemdUnit, PassesSystemdAnalyzeVerify) {
   const auto path = dir / "plenopivd.service";
   std::ofstream(path) << unit;
   std::string out;
-  const int rc = testing_support::run_command({analyze, "verify", path.string()}, out);
+  // Its man page plenopivd(8) exists once installed (scripts/test-package.sh verifies that unit in full).
+  const int rc = testing_support::run_command({analyze, "verify", "--man=no", path.string()}, out);
   EXPECT_EQ(rc, 0) << out;
   EXPECT_EQ(out, "") << "systemd-analyze verify warned";
 }
