@@ -64,14 +64,22 @@ endif()
 if(PLENOPIV_WITH_GPIOD)
   plenopiv_find_pkgconfig(GPIOD "libgpiod>=1.6" libgpiod-dev)
   if(GPIOD_VERSION VERSION_GREATER_EQUAL 2.0)
-    message(FATAL_ERROR "plenopiv: libgpiod ${GPIOD_VERSION} found; the trigger driver is written "
-                        "for the v1 API (libgpiod 1.6, Debian 12's libgpiod-dev)")
+    message(FATAL_ERROR "plenopiv: libgpiod ${GPIOD_VERSION} found; the gpiod:// trigger driver is written "
+                        "for the v1 API (libgpiod 1.6, Debian 12's libgpiod-dev) and has no v2 backend yet. "
+                        "Configure with -DPLENOPIV_WITH_GPIOD=OFF to build without it (gpiod:// then says "
+                        "how to build it), or build against libgpiod 1.6.")
   endif()
 endif()
 if(PLENOPIV_WITH_USB)
   plenopiv_find_pkgconfig(LIBUSB libusb-1.0 libusb-1.0-0-dev)
 endif()
 plenopiv_find_pkgconfig(SYSTEMD libsystemd libsystemd-dev)
+
+# The man pages are made from the programs' --help (packaging/)
+find_program(HELP2MAN help2man)
+if(NOT HELP2MAN)
+  plenopiv_missing(help2man help2man)
+endif()
 
 if(PLENOPIV_BUILD_TESTS)
   find_package(GTest QUIET)

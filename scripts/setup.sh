@@ -19,8 +19,9 @@ packages=(
   libfftw3-dev libhdf5-dev libyaml-cpp-dev libcli11-dev libsystemd-dev libtiff-dev zlib1g-dev
   # Python subscriber, plots and file checks (Debian's /usr/bin/python3)
   python3 python3-numpy python3-zmq python3-protobuf python3-h5py python3-matplotlib
-  # systemd unit checks
-  systemd
+  # systemd unit checks; man pages from --help, the bash completion's helpers and its test, the .deb
+  # (dpkg-shlibdeps for its Depends, man-db to render the pages; scripts/test-package.sh)
+  systemd help2man bash-completion dpkg-dev man-db
   # a real one-node Slurm for `plenopiv slurm` and its tests (scripts/slurm-local.sh)
   slurm-wlm munge
 )
