@@ -162,7 +162,7 @@ void draw_arrows(plstream& pls, const Slice& s, double scale) {
 Extent draw_panel(plstream& pls, const Slice& s, const Plane& colour, double max_abs, const std::string& bar_label,
                   const std::string& title, double left, double right, double arrow_mm_per_m_per_s) {
   const Extent e = extent_of(s);
-  const double bottom = 0.2, top = 0.86;
+  const double bottom = 0.22, top = 0.83;
   // Equal mm on both axes; the colour bar and its labels take the region's right fifth.
   pls.vpas(left + 0.07, right - 0.11, bottom, top, (e.yhi - e.ylo) / (e.xhi - e.xlo));
   PLFLT vx0, vx1, vy0, vy1;
@@ -216,10 +216,10 @@ Extent draw_panel(plstream& pls, const Slice& s, const Plane& colour, double max
 void draw_key(plstream& pls, const Slice& s, const Extent& left_viewport, double arrow_mm_per_m_per_s,
               double reference_m_per_s) {
   const Extent e = extent_of(s);
-  const double right = 0.97;
-  pls.vpor(left_viewport.xlo, right, 0.05, 0.1);
+  const double left = 0.04, right = 0.98;
+  pls.vpor(left, right, 0.02, 0.08);
   const double mm_per_page = (e.xhi - e.xlo) / (left_viewport.xhi - left_viewport.xlo);
-  const double width_mm = (right - left_viewport.xlo) * mm_per_page;
+  const double width_mm = (right - left) * mm_per_page;
   pls.wind(0, width_mm, 0, 1);
   const double length_mm = reference_m_per_s * arrow_mm_per_m_per_s, gap_mm = 0.012 * mm_per_page;
   double at = 0;
@@ -232,6 +232,7 @@ void draw_key(plstream& pls, const Slice& s, const Extent& left_viewport, double
     pls.width(1);
     at += length_mm + gap_mm;
   };
+  pls.schr(0, 0.75);
   // PLplot's API does not measure text: a sans-serif character is taken as 0.68 of the character
   // height wide (plgchr: height in mm of paper; plgspa: the page's width in the same mm).
   PLFLT page_x0, page_x1, page_y0, page_y1, default_height, height;
@@ -244,9 +245,9 @@ void draw_key(plstream& pls, const Slice& s, const Extent& left_viewport, double
   };
   if (reference_m_per_s > 0) {
     arrow(ink);
-    text(quantity_label(reference_m_per_s, "m/s") + " (reference)");
+    text(quantity_label(reference_m_per_s, "m/s"));
     arrow(replaced_ink);
-    text("replaced by validation (2nd/3rd peak or neighbour mean)");
+    text("replaced (2nd/3rd peak, neighbour mean)");
   }
   pls.col0(no_vector_grey);
   const PLFLT gx[] = {at, at + gap_mm, at + gap_mm, at}, gy[] = {0.2, 0.2, 0.8, 0.8};

@@ -13,7 +13,7 @@ namespace plenopiv::plot {
 namespace {
 
 // Margins around a panel, in pixels: its title above, tick labels and axis label below and left.
-constexpr double kTitlePx = 26, kBelowPx = 46, kLeftPx = 64, kPaddingPx = 14;
+constexpr double kTitlePx = 30, kBelowPx = 64, kLeftPx = 70, kPaddingPx = 16;
 // The page's right part, page fraction, holds the colour bar and its labels.
 constexpr double kBarArea = 0.12;
 
@@ -64,7 +64,7 @@ void write_image_sheet(const std::filesystem::path& png, const std::vector<Image
     const PLFLT at[] = {0, 1}, grey[] = {0, 1};
     pls.scmap1n(256);
     pls.scmap1l(true, 2, at, grey, grey, grey, nullptr);
-    pls.schr(0, 0.8);
+    pls.schr(0, 0.7);
     const double step = nice_step(limit, 5);
     for (int k = 0; k < count; ++k) {
       const int r = k / cols, c = k % cols;

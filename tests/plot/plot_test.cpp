@@ -158,9 +158,11 @@ TEST(FieldPreview, WritesAPlotOfTheRequestedSizeWithItsColours) {
 TEST(FieldPreview, WithoutReplacedVectorsNoneIsDrawnInTheirColour) {
   const auto dir = testing_support::temp_dir("plot");
   const TestField t = vortex_field();
-  write_field_preview(dir / "plain.png", t.field, {}, {1200, 560});
+  write_field_preview(dir / "plain.png", t.field, {});
   const cv::Mat image = cv::imread((dir / "plain.png").string(), cv::IMREAD_COLOR);
   ASSERT_FALSE(image.empty());
+  EXPECT_EQ(image.cols, PreviewSize{}.width_px);
+  EXPECT_EQ(image.rows, PreviewSize{}.height_px);
   // The key's sample arrow only.
   EXPECT_LT(pixels_near(image, {0, 170, 0}, 40), 60);
 }
