@@ -48,6 +48,13 @@ message(STATUS "plenopiv: found HDF5 ${HDF5_VERSION}")
 # CRC-32 of the files a run folder copies (libhdf5-dev depends on zlib1g-dev)
 plenopiv_find_pkgconfig(ZLIB zlib zlib1g-dev)
 
+# Preview plots (PLplot's C++ API; PNGs through its cairo driver, plplot-driver-cairo at run time)
+plenopiv_find_pkgconfig(PLPLOT_CXX plplot-c++ libplplot-dev)
+plenopiv_find_pkgconfig(PLPLOT plplot libplplot-dev)
+# Exports: NetCDF-4 files and the zip archive of NumPy's .npz
+plenopiv_find_pkgconfig(NETCDF netcdf libnetcdf-dev)
+plenopiv_find_pkgconfig(LIBZIP libzip libzip-dev)
+
 # Messaging
 plenopiv_find_pkgconfig(LIBZMQ libzmq libzmq3-dev)
 plenopiv_find_config(cppzmq cppzmq-dev)

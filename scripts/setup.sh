@@ -17,8 +17,12 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev
   # numerics and files
   libfftw3-dev libhdf5-dev libyaml-cpp-dev libcli11-dev libsystemd-dev libtiff-dev zlib1g-dev
+  # preview plots (PLplot, PNG through its cairo driver); exports (NetCDF-4, the zip of NumPy's .npz)
+  libplplot-dev plplot-driver-cairo libnetcdf-dev libzip-dev
   # Python subscriber, plots and file checks (Debian's /usr/bin/python3)
   python3 python3-numpy python3-zmq python3-protobuf python3-h5py python3-matplotlib
+  # export tests read the files back: NetCDF-4
+  python3-netcdf4
   # systemd unit checks; man pages from --help, the bash completion's helpers and its test, the .deb
   # (dpkg-shlibdeps for its Depends, man-db to render the pages; scripts/test-package.sh)
   systemd help2man bash-completion dpkg-dev man-db

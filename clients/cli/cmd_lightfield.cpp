@@ -1,10 +1,6 @@
 // `plenopiv refocus` (focal stack TIFF + PNG contact sheet) and `plenopiv perspective` (views).
-#include <algorithm>
-#include <cmath>
 #include <iostream>
 #include <memory>
-#include <opencv2/imgcodecs.hpp>
-#include <opencv2/imgproc.hpp>
 #include <sstream>
 
 #include "clients/cli/commands.hpp"
@@ -13,12 +9,12 @@
 #include "clients/cli/progress.hpp"
 #include "core/base/errors.hpp"
 #include "core/calib/calibration_file.hpp"
-#include "core/io/atomic_file.hpp"
 #include "core/io/raw_frame.hpp"
 #include "core/io/tiff.hpp"
 #include "core/lightfield/light_field.hpp"
 #include "core/lightfield/refocus.hpp"
 #include "core/optics/camera_file.hpp"
+#include "core/plot/image_sheet.hpp"
 
 namespace plenopiv::client {
 namespace {
@@ -48,38 +44,6 @@ lightfield::LightField load_field(const LightFieldArgs& args, optics::CameraMode
   }
 }
 
-// One tile per image, a common grey scale (so relative sharpness shows), the label under each.
-void write_contact_sheet(const std::string& path, const std::vector<ImageF>& pages,
-                         const std::vector<std::string>& labels) {
-  float top = 0;
-  for (const auto& p : pages)
-    for (float v : p.pixels) top = std::max(top, v);
-  const int cols = int(std::ceil(std::sqrt(double(pages.size()))));
-  const int rows = int((pages.size() + cols - 1) / cols);
-  const int w = pages[0].width, h = pages[0].height;
-  const int scale = std::max(1, 200 / std::max(w, h));
-  const int tw = w * scale, th = h * scale + 18;
-  cv::Mat sheet(rows * th, cols * tw, CV_8U, cv::Scalar(0));
-  for (std::size_t k = 0; k < pages.size(); ++k) {
-    cv::Mat tile(h, w, CV_32F, const_cast<float*>(pages[k].pixels.data()));
-    cv::Mat tile8, big;
-    tile.convertTo(tile8, CV_8U, top > 0 ? 255.0 / top : 0.0);
-    cv::resize(tile8, big, cv::Size(tw, h * scale), 0, 0, cv::INTER_NEAREST);
-    const int x = int(k % cols) * tw, y = int(k / cols) * th;
-    big.copyTo(sheet(cv::Rect(x, y, tw, h * scale)));
-    cv::putText(sheet, labels[k], cv::Point(x + 2, y + h * scale + 14), cv::FONT_HERSHEY_SIMPLEX, 0.4, cv::Scalar(255),
-                1);
-  }
-  std::vector<unsigned char> png;
-  if (!cv::imencode(".png", sheet, png)) throw InputError(path + ": cannot encode PNG");
-  io::write_atomically(path, [&](const std::filesystem::path& tmp) {
-    std::FILE* f = std::fopen(tmp.c_str(), "wb");
-    if (!f) throw InputError(path + ": cannot write");
-    const bool ok = std::fwrite(png.data(), 1, png.size(), f) == png.size();
-    if (std::fclose(f) != 0 || !ok) throw InputError(path + ": cannot write");
-  });
-}
-
 void run_refocus(const LightFieldArgs& args) {
   const auto limit = thread_limit(args.threads);
   optics::CameraModel camera = optics::load_camera_file(args.camera);
@@ -90,14 +54,14 @@ void run_refocus(const LightFieldArgs& args) {
       if (!(a > 0)) throw InputError("--alpha: " + std::to_string(a) + " is not positive");
       alphas.push_back(a);
       std::ostringstream s;
-      s << "alpha " << a;
+      s << "alpha = " << a;
       labels.push_back(s.str());
     }
   } else {
     for (double z : parse_depths(args.depths.empty() ? "-10:10:1" : args.depths)) {
       alphas.push_back(lightfield::alpha_for_depth(camera, z));
       std::ostringstream s;
-      s << "z " << z << " mm";
+      s << "z = " << z << " mm";
       labels.push_back(s.str());
     }
   }
@@ -120,7 +84,7 @@ void run_refocus(const LightFieldArgs& args) {
   io::write_tiff_stack(args.output, stack, descriptions);
   const std::string sheet =
       args.sheet.empty() ? std::filesystem::path(args.output).replace_extension(".png").string() : args.sheet;
-  write_contact_sheet(sheet, stack, labels);
+  plot::write_image_sheet(sheet, stack, labels, "lens");
   std::cout << args.output << ": " << stack.size() << " refocused images of " << stack[0].width << " x "
             << stack[0].height << " (one pixel per microlens)\n"
             << sheet << ": contact sheet\n";
@@ -139,7 +103,7 @@ void run_perspective(const LightFieldArgs& args) {
   for (std::size_t k = 0; k < args.u.size(); ++k) {
     views.push_back(lightfield::perspective_view(field, args.u[k], args.v[k]));
     std::ostringstream s;
-    s << "u " << args.u[k] << " v " << args.v[k];
+    s << "u = " << args.u[k] << " mm, v = " << args.v[k] << " mm";
     labels.push_back(s.str());
   }
   std::vector<std::string> descriptions;
@@ -151,7 +115,7 @@ void run_perspective(const LightFieldArgs& args) {
     descriptions.push_back(d.str());
   }
   io::write_tiff_stack(args.output, views, descriptions);
-  if (!args.sheet.empty()) write_contact_sheet(args.sheet, views, labels);
+  if (!args.sheet.empty()) plot::write_image_sheet(args.sheet, views, labels, "lens");
   std::cout << args.output << ": " << views.size() << " perspective views of " << views[0].width << " x "
             << views[0].height << "\n";
 }

@@ -1,7 +1,8 @@
-// `plenopiv correlate`: two volume files -> a 3D/3C vector field (HDF5 and ParaView .vti).
+// `plenopiv correlate`: two volume files -> a 3D/3C vector field (HDF5, ParaView .vti, a PNG preview).
 #include <unistd.h>
 
 #include <cstdio>
+#include <filesystem>
 #include <iostream>
 #include <memory>
 #include <optional>
@@ -15,13 +16,14 @@
 #include "core/io/vtk_files.hpp"
 #include "core/piv/derived.hpp"
 #include "core/piv/multipass.hpp"
+#include "core/plot/field_preview.hpp"
 #include "core/process/field_file.hpp"
 
 namespace plenopiv::client {
 namespace {
 
 struct CorrelateOptions {
-  std::string first, second, output, vti, config, passes;
+  std::string first, second, output, vti, preview, config, passes;
   std::optional<double> dt_s;
   std::optional<float> signal_threshold;
   std::optional<double> intensity_threshold;
@@ -66,6 +68,11 @@ void run_correlate(const CorrelateOptions& o) {
   piv::check(settings, o.config.empty() ? "command line" : o.config);
   const auto limit = thread_limit(o.threads);
 
+  for (const std::string* file : {&o.output, &o.vti, &o.preview}) {
+    const auto folder = std::filesystem::path(*file).parent_path();
+    if (!file->empty() && !folder.empty() && !std::filesystem::is_directory(folder))
+      throw InputError(*file + ": folder " + folder.string() + " does not exist");
+  }
   const Volume a = io::read_volume_h5(o.first);
   const Volume b = io::read_volume_h5(o.second);
   if (!(a.grid == b.grid))
@@ -101,6 +108,10 @@ void run_correlate(const CorrelateOptions& o) {
   if (!o.vti.empty()) {
     std::cout << o.vti << ": written\n";
   }
+  if (!o.preview.empty()) {
+    plot::write_field_preview(o.preview, result.field, result.flags);
+    std::cout << o.preview << ": written\n";
+  }
 }
 
 }  // namespace
@@ -112,6 +123,8 @@ void add_piv_commands(CLI::App& app) {
   cmd->add_option("second", o->second, "volume of exposure B, same grid")->required();
   cmd->add_option("-o,--output", o->output, "vector field to write (HDF5 /vectors)")->required();
   cmd->add_option("--vti", o->vti, "also write VTK image data for ParaView");
+  cmd->add_option("--preview", o->preview,
+                  "also write a PNG preview: the middle x-y slice, vectors over vorticity and w");
   cmd->add_option("-c,--config", o->config,
                   "YAML with passes, median, signal_threshold, dt_s, predictor, ... (flags override it)");
   cmd->add_option("--passes", o->passes,

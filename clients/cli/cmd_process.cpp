@@ -1,11 +1,10 @@
 // `plenopiv process`: one frame pair from files (camera, calibration, frames A and B, run config)
-// to a vector field in HDF5 and .vti and a PNG preview (a slice with vectors over vorticity);
+// to a vector field in HDF5 and .vti and a PNG preview (core/plot: a slice, vectors over ω_z and w);
 // `plenopiv process --run <folder>`: every pair of a run recorded by plenopivd, from the folder alone.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
-#include <fstream>
 #include <iostream>
 #include <memory>
 #include <optional>
@@ -13,8 +12,6 @@
 #include <sstream>
 
 #include <google/protobuf/util/json_util.h>
-#include <opencv2/imgcodecs.hpp>
-#include <opencv2/imgproc.hpp>
 
 #include "clients/cli/calibration_frames.hpp"
 #include "clients/cli/commands.hpp"
@@ -32,7 +29,7 @@
 #include "core/io/raw_frame.hpp"
 #include "core/io/vtk_files.hpp"
 #include "core/optics/camera_file.hpp"
-#include "core/piv/derived.hpp"
+#include "core/plot/field_preview.hpp"
 #include "core/process/field_file.hpp"
 #include "core/process/frame_check.hpp"
 #include "core/process/pair_processor.hpp"
@@ -97,81 +94,6 @@ calib::LoadedCalibration calibration_for(const ProcessOptions& o, const optics::
   if (!o.calibration_image.empty()) files.calibration.push_back(o.calibration_image);
   const calib::Calibration cal = calibrate_from_files(camera, files);
   return calib::loaded_calibration(cal);
-}
-
-// The x-y slice through the middle of the vector grid: in-plane vectors over the out-of-plane
-// vorticity ω_z (colour, symmetric scale), with a colour bar and the scales written out.
-cv::Mat preview_image(const VectorField& f, const std::vector<float>& omega_z) {
-  const int nx = f.grid.shape[0], ny = f.grid.shape[1], k = f.grid.shape[2] / 2;
-  const int cell = std::max(8, 640 / std::max(nx, ny));
-  const int w = nx * cell, h = ny * cell, bar = 100, top = 30;
-  const auto idx = [&](int i, int j) { return (std::size_t(k) * ny + j) * nx + i; };
-  double omega_max = 0, disp_max = 0;
-  for (int j = 0; j < ny; ++j)
-    for (int i = 0; i < nx; ++i) {
-      const auto n = idx(i, j);
-      if (!f.valid[n]) continue;
-      if (std::isfinite(omega_z[n])) omega_max = std::max(omega_max, double(std::abs(omega_z[n])));
-      disp_max = std::max(disp_max, std::hypot(double(f.dx_mm[n]), double(f.dy_mm[n])));
-    }
-  if (!(omega_max > 0)) omega_max = 1;
-  cv::Mat level(ny, nx, CV_8U), invalid(ny, nx, CV_8U);
-  for (int j = 0; j < ny; ++j)
-    for (int i = 0; i < nx; ++i) {
-      const auto n = idx(i, j);
-      const bool ok = f.valid[n] && std::isfinite(omega_z[n]);
-      invalid.at<std::uint8_t>(j, i) = ok ? 0 : 255;
-      level.at<std::uint8_t>(j, i) = ok ? cv::saturate_cast<std::uint8_t>(127.5 + 127.5 * omega_z[n] / omega_max) : 0;
-    }
-  cv::Mat coloured, big_invalid;
-  cv::applyColorMap(level, coloured, cv::COLORMAP_JET);
-  cv::resize(coloured, coloured, {w, h}, 0, 0, cv::INTER_NEAREST);
-  cv::resize(invalid, big_invalid, {w, h}, 0, 0, cv::INTER_NEAREST);
-  coloured.setTo(cv::Scalar(128, 128, 128), big_invalid);
-
-  cv::Mat canvas(h + top, w + bar, CV_8UC3, cv::Scalar(255, 255, 255));
-  coloured.copyTo(canvas(cv::Rect(0, top, w, h)));
-  // Arrows centred on their node; the longest in-plane displacement spans 0.9 cell.
-  const double scale = disp_max > 0 ? 0.9 * cell / disp_max : 0;
-  for (int j = 0; j < ny; ++j)
-    for (int i = 0; i < nx; ++i) {
-      const auto n = idx(i, j);
-      if (!f.valid[n]) continue;
-      const cv::Point2d c((i + 0.5) * cell, top + (j + 0.5) * cell);
-      const cv::Point2d half(0.5 * f.dx_mm[n] * scale, 0.5 * f.dy_mm[n] * scale);
-      cv::arrowedLine(canvas, c - half, c + half, cv::Scalar(0, 0, 0), 1, cv::LINE_AA, 0, 0.25);
-    }
-  // Colour bar from -ω_max (bottom) to +ω_max (top).
-  for (int r = 0; r < h; ++r) {
-    cv::Mat one(1, 1, CV_8U, cv::Scalar(255 - 255 * r / std::max(h - 1, 1))), c;
-    cv::applyColorMap(one, c, cv::COLORMAP_JET);
-    cv::line(canvas, {w + 20, top + r}, {w + 40, top + r}, cv::Scalar(c.at<cv::Vec3b>(0, 0)));
-  }
-  char text[128];
-  const auto label = [&](const char* s, cv::Point at) {
-    cv::putText(canvas, s, at, cv::FONT_HERSHEY_SIMPLEX, 0.35, cv::Scalar(0, 0, 0), 1, cv::LINE_AA);
-  };
-  std::snprintf(text, sizeof text, "%+.3g", omega_max);
-  label(text, {w + 43, top + 10});
-  label("0", {w + 43, top + h / 2});
-  std::snprintf(text, sizeof text, "%+.3g", -omega_max);
-  label(text, {w + 43, top + h - 2});
-  label("wz 1/s", {w + 43, top + h / 2 + 14});
-  const double z_mm = f.grid.origin_mm[2] + k * f.grid.spacing_mm[2];
-  std::snprintf(text, sizeof text, "slice z = %.3f mm; longest arrow %.4g mm (%.4g m/s); grey: invalid", z_mm, disp_max,
-                f.dt_s > 0 ? disp_max * 1e-3 / f.dt_s : 0.0);
-  label(text, {4, 18});
-  return canvas;
-}
-
-void write_png(const std::filesystem::path& path, const cv::Mat& image) {
-  std::vector<std::uint8_t> bytes;
-  if (!cv::imencode(".png", image, bytes)) throw InputError(path.string() + ": PNG encoding failed");
-  io::write_atomically(path, [&](const std::filesystem::path& tmp) {
-    std::ofstream out(tmp, std::ios::binary);
-    out.write(reinterpret_cast<const char*>(bytes.data()), std::streamsize(bytes.size()));
-    if (!out) throw InputError(path.string() + ": cannot write");
-  });
 }
 
 // Frames given one by one that plenopivd recorded (frames/pair-<n>-A.tif in a run folder): the
@@ -244,7 +166,6 @@ void run_process(const ProcessOptions& o) {
   options.progress = [&](const std::string&, double f) { progress.update(f); };
   const auto r = processor.process(a, b, options);
 
-  const auto omega = piv::vorticity(r.correlation.field);
   std::vector<io::TextAttribute> provenance{process::input_file_entry("frame_a", o.frame_a),
                                             process::input_file_entry("frame_b", o.frame_b),
                                             process::input_file_entry("camera", o.camera),
@@ -265,7 +186,7 @@ void run_process(const ProcessOptions& o) {
       provenance.push_back(process::input_file_entry("calibration_image", o.calibration_image));
   }
   process::write_vector_field_files(out, vti, r.correlation.field, r.correlation.flags, provenance);
-  write_png(png, preview_image(r.correlation.field, omega[2]));
+  plot::write_field_preview(png, r.correlation.field, r.correlation.flags);
   warn_if_few_valid(r.correlation.field, out.string());
 
   std::size_t valid = 0;

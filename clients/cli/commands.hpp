@@ -27,5 +27,6 @@ void add_lightfield_commands(CLI::App& app);
 void add_run_commands(CLI::App& app, ControlOptions& options);
 void add_keys_commands(CLI::App& app);
 void add_slurm_commands(CLI::App& app);
+void add_export_commands(CLI::App& app);
 
 }  // namespace plenopiv::client

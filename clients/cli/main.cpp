@@ -69,6 +69,7 @@ int main(int argc, char** argv) {
   client::add_run_commands(app, control);
   client::add_keys_commands(app);
   client::add_slurm_commands(app);
+  client::add_export_commands(app);
 
   try {
     setup_logging("plenopiv", "info", LogTarget::console);

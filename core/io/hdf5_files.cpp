@@ -386,4 +386,120 @@ std::optional<std::string> read_provenance(const std::filesystem::path& path, co
                          [&](char* out) { return H5Dread(set.get(), type.get(), H5S_ALL, H5S_ALL, H5P_DEFAULT, out); });
 }
 
+namespace {
+
+// A text attribute of `object`, "" when it has none (or it is no fixed-length string).
+std::string text_attribute(hid_t object, const char* name) {
+  if (H5Aexists(object, name) <= 0) return "";
+  Handle attr(H5Aopen(object, name, H5P_DEFAULT), H5Aclose);
+  if (!attr.ok()) return "";
+  Handle type(H5Aget_type(attr.get()), H5Tclose);
+  return read_fixed_text(type.get(), 1u << 20, [&](char* out) { return H5Aread(attr.get(), type.get(), out); })
+      .value_or("");
+}
+
+// The names of a group's links, in name order.
+std::vector<std::string> link_names(hid_t group) {
+  std::vector<std::string> names;
+  H5Literate(
+      group, H5_INDEX_NAME, H5_ITER_INC, nullptr,
+      [](hid_t, const char* name, const H5L_info_t*, void* data) -> herr_t {
+        static_cast<std::vector<std::string>*>(data)->push_back(name);
+        return 0;
+      },
+      &names);
+  return names;
+}
+
+// The names of an object's attributes, in name order.
+std::vector<std::string> attribute_names(hid_t object) {
+  std::vector<std::string> names;
+  H5Aiterate2(
+      object, H5_INDEX_NAME, H5_ITER_INC, nullptr,
+      [](hid_t, const char* name, const H5A_info_t*, void* data) -> herr_t {
+        static_cast<std::vector<std::string>*>(data)->push_back(name);
+        return 0;
+      },
+      &names);
+  return names;
+}
+
+// The 3-D dataset `name` of `parent` if it lies on the grid `dims` and holds numbers; nullopt for
+// anything else (axes, strings, other shapes).
+std::optional<StoredArray> stored_array(hid_t parent, const std::filesystem::path& path, const std::string& name,
+                                        const std::vector<hsize_t>& dims) {
+  Handle set(H5Dopen2(parent, name.c_str(), H5P_DEFAULT), H5Dclose);
+  if (!set.ok()) return std::nullopt;
+  Handle space(H5Dget_space(set.get()), H5Sclose);
+  if (H5Sget_simple_extent_ndims(space.get()) != 3) return std::nullopt;
+  std::vector<hsize_t> shape(3);
+  H5Sget_simple_extent_dims(space.get(), shape.data(), nullptr);
+  if (shape != dims) return std::nullopt;
+  Handle type(H5Dget_type(set.get()), H5Tclose);
+  const H5T_class_t type_class = H5Tget_class(type.get());
+  if (type_class != H5T_INTEGER && type_class != H5T_FLOAT) return std::nullopt;
+  StoredArray a;
+  a.name = name;
+  a.is_uint8 = type_class == H5T_INTEGER && H5Tget_size(type.get()) == 1 && H5Tget_sign(type.get()) == H5T_SGN_NONE;
+  a.values.resize(std::size_t(dims[0] * dims[1] * dims[2]));
+  check(H5Dread(set.get(), H5T_NATIVE_FLOAT, H5S_ALL, H5S_ALL, H5P_DEFAULT, a.values.data()), path,
+        "read dataset " + name);
+  a.units = text_attribute(set.get(), "units");
+  a.long_name = text_attribute(set.get(), "long_name");
+  a.legend = text_attribute(set.get(), "legend");
+  return a;
+}
+
+}  // namespace
+
+StoredFields read_stored_fields_h5(const std::filesystem::path& path) {
+  Handle file = open_for_reading(path);
+  StoredFields out;
+  const bool vectors = H5Lexists(file.get(), "vectors", H5P_DEFAULT) > 0;
+  if (!vectors && H5Lexists(file.get(), "volume", H5P_DEFAULT) <= 0)
+    throw InputError(path.string() + ": neither /vectors nor /volume (not a plenopiv vector field or volume file)");
+  out.kind = vectors ? "vectors" : "volume";
+  Handle group(vectors ? H5Gopen2(file.get(), "vectors", H5P_DEFAULT) : H5Gopen2(file.get(), "/", H5P_DEFAULT),
+               H5Gclose);
+  if (!group.ok()) throw InputError(path.string() + ": cannot open /" + (vectors ? "vectors" : ""));
+  const std::string first = vectors ? "dx" : "volume";
+  std::vector<hsize_t> dims;
+  read_dataset<float>(group.get(), path, first, &dims, nullptr);
+  if (dims.size() != 3) throw InputError(path.string() + ": /" + (vectors ? "vectors/" : "") + first + " is not 3-D");
+  {
+    Handle owner(vectors ? H5Gopen2(file.get(), "vectors", H5P_DEFAULT) : H5Dopen2(file.get(), "volume", H5P_DEFAULT),
+                 vectors ? H5Gclose : H5Dclose);
+    const std::string owner_name = vectors ? "/vectors" : "/volume";
+    const auto origin = read_attribute(owner.get(), path, owner_name, "origin_mm", 3);
+    const auto spacing = read_attribute(owner.get(), path, owner_name, "spacing_mm", 3);
+    out.grid.shape = {int(dims[2]), int(dims[1]), int(dims[0])};
+    for (int a = 0; a < 3; ++a) {
+      out.grid.origin_mm[a] = origin[a];
+      out.grid.spacing_mm[a] = spacing[a];
+    }
+    if (vectors) out.dt_s = read_attribute(owner.get(), path, owner_name, "dt_s", 1)[0];
+  }
+  check_grid(out.grid, std::size_t(dims[0] * dims[1] * dims[2]), path.string() + ": /" + out.kind);
+  // The layout's arrays in their documented order, then whatever else lies on the grid.
+  const std::vector<std::string> layout =
+      vectors ? std::vector<std::string>{"dx", "dy", "dz", "u", "v", "w", "valid", "peak_ratio"}
+              : std::vector<std::string>{"volume"};
+  std::vector<std::string> names = layout;
+  for (const std::string& name : link_names(group.get()))
+    if (std::find(layout.begin(), layout.end(), name) == layout.end()) names.push_back(name);
+  for (const std::string& name : names) {
+    if (H5Lexists(group.get(), name.c_str(), H5P_DEFAULT) <= 0) continue;
+    if (auto a = stored_array(group.get(), path, name, dims)) out.arrays.push_back(std::move(*a));
+  }
+  if (H5Lexists(file.get(), "provenance", H5P_DEFAULT) > 0) {
+    Handle provenance(H5Gopen2(file.get(), "provenance", H5P_DEFAULT), H5Gclose);
+    std::vector<std::string> entries = attribute_names(provenance.get());
+    for (const std::string& name : link_names(provenance.get())) entries.push_back(name);
+    std::sort(entries.begin(), entries.end());
+    for (const std::string& name : entries)
+      if (auto value = read_provenance(path, name)) out.provenance.emplace_back(name, *value);
+  }
+  return out;
+}
+
 }  // namespace plenopiv::io

@@ -53,6 +53,29 @@ void write_vector_field_h5(const std::filesystem::path& path, const VectorField&
                            const std::vector<NamedField>& extra = {}, const std::vector<TextAttribute>& provenance = {},
                            const std::optional<FlagField>& flags = std::nullopt);
 VectorField read_vector_field_h5(const std::filesystem::path& path);
+// One 3-D array of a file as stored, with what the file says about it.
+struct StoredArray {
+  std::string name;
+  std::string units;          // the dataset's `units` ("" when it has none)
+  std::string long_name;      // its `long_name` ("" when none)
+  std::string legend;         // its `legend` (the meaning of flag bits; "" when none)
+  bool is_uint8 = false;      // stored as uint8 (valid, flags): `values` then holds whole numbers 0..255
+  std::vector<float> values;  // [nz][ny][nx]
+};
+
+// Everything on the grid of a vector field file (every 3-D dataset of /vectors, whatever its
+// name: the layout's own, vorticity, flags, and any a newer writer adds) or of a volume file
+// (/volume), for exporters that carry a file's arrays over whole.
+struct StoredFields {
+  std::string kind;                       // "vectors" or "volume"
+  Grid3 grid;                             // the axes x, y, z (mm)
+  std::optional<double> dt_s;             // a vector field's pulse separation
+  std::vector<StoredArray> arrays;        // the layout's arrays first, in DESIGN.md's order, then the rest by name
+  std::vector<TextAttribute> provenance;  // every entry of /provenance, by name
+};
+// InputError naming the file: missing, not HDF5, or with neither /vectors nor /volume.
+StoredFields read_stored_fields_h5(const std::filesystem::path& path);
+
 // An entry of a file's /provenance, or nullopt when it has none of that name (a file that cannot
 // be opened, or has no /provenance, reads as having none).
 std::optional<std::string> read_provenance(const std::filesystem::path& path, const std::string& name);
