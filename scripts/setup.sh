@@ -17,8 +17,10 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev
   # numerics and files
   libfftw3-dev libhdf5-dev libyaml-cpp-dev libcli11-dev libsystemd-dev libtiff-dev zlib1g-dev
-  # Python subscriber, plots and file checks (Debian's /usr/bin/python3)
-  python3 python3-numpy python3-zmq python3-protobuf python3-h5py python3-matplotlib
+  # the Python package (clients/python), plots and file checks (Debian's /usr/bin/python3); it is
+  # built with setuptools and wheel and installed with pip into a venv, with no index
+  python3 python3-numpy python3-zmq python3-protobuf python3-h5py python3-matplotlib python3-xarray
+  python3-venv python3-pip python3-setuptools python3-wheel
   # systemd unit checks
   systemd
   # a real one-node Slurm for `plenopiv slurm` and its tests (scripts/slurm-local.sh)
