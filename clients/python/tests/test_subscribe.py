@@ -37,14 +37,20 @@ def wait_until(condition, seconds, what):
     raise AssertionError("gave up waiting %g s for %s" % (seconds, what))
 
 
-def wait_for_line(process, text):
-    """Reads the process's output until a line holding `text` (its start-up: imports take seconds)."""
-    while True:
-        line = process.stdout.readline()
-        if not line:
-            raise AssertionError("the subscriber ended before printing %r (exit %s)" % (text, process.wait()))
-        if text in line:
-            return
+def start(argv, log, **kwargs):
+    """Starts a subscriber with its output (stdout and stderr) going to the file `log`."""
+    with open(log, "w") as f:
+        return subprocess.Popen(argv, stdout=f, stderr=subprocess.STDOUT, text=True, **kwargs)
+
+
+def wait_for_text(process, log, text):
+    """Waits until the process has written `text` to its log (its start-up: imports take seconds)."""
+    def written():
+        if process.poll() is not None:
+            raise AssertionError("the subscriber ended (exit %d) before printing %r: %s"
+                                 % (process.returncode, text, open(log).read()))
+        return text in open(log).read()
+    wait_until(written, 120, text)
 
 
 class Session:
@@ -82,27 +88,29 @@ class Session:
     def _run(self):
         wait_until(self._answers, 60, "plenopivd to answer")
         # The console entry point, saving and plotting; and `python -m` asked for a window with no display.
-        self.saver = subprocess.Popen(
+        saver_log, shower_log = os.path.join(WORK, "saver.log"), os.path.join(WORK, "shower.log")
+        self.saver = start(
             [os.path.join(PACKAGE_DIR, "bin", "plenopiv-subscribe"), "--publish", PUBLISH, "--wait", "300",
-             "--save", self.saved, "--plot", self.png],
-            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+             "--save", self.saved, "--plot", self.png], saver_log)
         env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
-        self.shower = subprocess.Popen(
+        self.shower = start(
             [sys.executable, "-m", "plenopiv.subscribe", "--publish", PUBLISH, "--count", "1", "--wait", "120",
-             "--show"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=self.headless, env=env)
-        for subscriber in (self.saver, self.shower):
-            wait_for_line(subscriber, "plenopiv.subscribe: subscribed to " + PUBLISH)
+             "--show"], shower_log, cwd=self.headless, env=env)
+        for subscriber, log in ((self.saver, saver_log), (self.shower, shower_log)):
+            wait_for_text(subscriber, log, "plenopiv.subscribe: subscribed to " + PUBLISH)
         time.sleep(0.5)  # the subscriptions reach the publisher (PUB/SUB joins late)
         config = os.path.join(WORK, "run.yaml")
         with open(config, "w") as f:
             f.write(RUN_YAML)
         self.started = client("run", "start", "--config", config, timeout=120)
-        self.shower_output, _ = self.shower.communicate(timeout=300)
+        self.shower.wait(300)
+        self.shower_output = open(shower_log).read()
         wait_until(lambda: "Idle" in client("status").splitlines()[0], 300, "the run to end")
         # Every field is published before the run ends; the saver runs until interrupted (Ctrl-C).
         time.sleep(2)
         self.saver.send_signal(signal.SIGINT)
-        self.saver_output, _ = self.saver.communicate(timeout=60)
+        self.saver.wait(60)
+        self.saver_output = open(saver_log).read()
         runs = [d for d in os.listdir(self.data) if d.startswith("run-")]
         assert len(runs) == 1, runs
         self.run_dir = os.path.join(self.data, runs[0])
