@@ -46,7 +46,8 @@ function(plenopiv_executable name)
 endfunction()
 
 # plenopiv_test(<name> LABEL unit|integration|slow SOURCES ... [LIBS ...] [TIMEOUT s]
-#               [RESOURCE_LOCK name])  -- tests sharing a lock never run at the same time (ctest -j)
+#               [RESOURCE_LOCK name] [FIXTURES name])  -- tests sharing a lock never run at the same time (ctest -j);
+#               FIXTURES: a ctest fixture set up before them
 function(plenopiv_test name)
   cmake_parse_arguments(ARG "" "LABEL;TIMEOUT;RESOURCE_LOCK;FIXTURES" "SOURCES;LIBS" ${ARGN})
   if(NOT ARG_LABEL)
