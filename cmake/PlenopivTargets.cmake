@@ -46,9 +46,10 @@ function(plenopiv_executable name)
 endfunction()
 
 # plenopiv_test(<name> LABEL unit|integration|slow SOURCES ... [LIBS ...] [TIMEOUT s]
-#               [RESOURCE_LOCK name])  -- tests sharing a lock never run at the same time (ctest -j)
+#               [RESOURCE_LOCK name] [FIXTURES name])  -- tests sharing a lock never run at the same time (ctest -j);
+#               FIXTURES: a ctest fixture set up before them
 function(plenopiv_test name)
-  cmake_parse_arguments(ARG "" "LABEL;TIMEOUT;RESOURCE_LOCK" "SOURCES;LIBS" ${ARGN})
+  cmake_parse_arguments(ARG "" "LABEL;TIMEOUT;RESOURCE_LOCK;FIXTURES" "SOURCES;LIBS" ${ARGN})
   if(NOT ARG_LABEL)
     message(FATAL_ERROR "plenopiv_test(${name}): LABEL unit|integration|slow is required")
   endif()
@@ -59,6 +60,11 @@ function(plenopiv_test name)
   if(ARG_RESOURCE_LOCK)
     set(lock RESOURCE_LOCK ${ARG_RESOURCE_LOCK})
   endif()
+  # FIXTURES: a ctest fixture the tests need set up first (python_package: the installed Python package).
+  set(fixtures)
+  if(ARG_FIXTURES)
+    set(fixtures FIXTURES_REQUIRED ${ARG_FIXTURES})
+  endif()
   add_executable(${name} ${ARG_SOURCES})
   target_link_libraries(${name} PRIVATE ${ARG_LIBS} GTest::gtest GTest::gtest_main)
   set_target_properties(${name} PROPERTIES RUNTIME_OUTPUT_DIRECTORY ${PROJECT_BINARY_DIR}/tests)
@@ -68,7 +74,7 @@ function(plenopiv_test name)
   # The CLIs' weight-table cache goes to the build folder, not the user's ~/.cache.
   gtest_discover_tests(${name}
     WORKING_DIRECTORY ${PROJECT_BINARY_DIR}
-    PROPERTIES LABELS ${ARG_LABEL} TIMEOUT ${ARG_TIMEOUT} ${lock}
+    PROPERTIES LABELS ${ARG_LABEL} TIMEOUT ${ARG_TIMEOUT} ${lock} ${fixtures}
                ENVIRONMENT PLENOPIV_CACHE_DIR=${PROJECT_BINARY_DIR}/test-cache
     DISCOVERY_TIMEOUT 60)
 endfunction()

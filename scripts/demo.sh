@@ -73,6 +73,8 @@ cat <<EOF
   flags, x/y/z in mm, provenance), statistics.h5 (mean and RMS fluctuation).
   Reprocessed offline into .h5 and .vti with a ParaView series:
     build/bin/plenopiv process --run $run_dir    # then open $run_dir/reprocessed/series.pvd in ParaView
+  In Python (xarray): plenopiv.open("$run_dir") from the package in clients/python;
+  README.md, "From a recorded run to a ParaView figure", walks through both.
 EOF
 
 kill -TERM $daemon

@@ -19,8 +19,10 @@ packages=(
   libfftw3-dev libhdf5-dev libyaml-cpp-dev libcli11-dev libsystemd-dev libtiff-dev zlib1g-dev
   # preview plots (PLplot, PNG through its cairo driver); exports (NetCDF-4, the zip of NumPy's .npz)
   libplplot-dev plplot-driver-cairo libnetcdf-dev libzip-dev
-  # Python subscriber, plots and file checks (Debian's /usr/bin/python3)
-  python3 python3-numpy python3-zmq python3-protobuf python3-h5py python3-matplotlib
+  # the Python package (clients/python), plots and file checks (Debian's /usr/bin/python3); it is
+  # built with setuptools and wheel and installed with pip into a venv, with no index
+  python3 python3-numpy python3-zmq python3-protobuf python3-h5py python3-matplotlib python3-xarray
+  python3-venv python3-pip python3-setuptools python3-wheel
   # export tests read the files back: NetCDF-4
   python3-netcdf4
   # systemd unit checks; man pages from --help, the bash completion's helpers and its test, the .deb

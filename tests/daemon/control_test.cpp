@@ -538,11 +538,11 @@ TEST(DaemonCurve, AdmitsOnlyAuthorizedKeysOverTcp) {
   EXPECT_FALSE(first_status((dir / "stranger.key_secret").string()));
   // The Python subscriber loads the same certificate files (zmq.auth) and connects with them: no run
   // is going, so it waits and says so (exit 3), with no traceback.
-  const int py = testing_support::run_command(
-      {"/usr/bin/python3", std::string(PLENOPIV_SOURCE_DIR) + "/clients/python/plenopiv_subscribe.py", "--publish",
-       publish, "--server-key", (dir / "plenopivd.key").string(), "--client-cert",
-       (dir / "clients" / "desk.key_secret").string(), "--count", "1", "--wait", "1"},
-      out);
+  const int py =
+      testing_support::run_command({PLENOPIV_PACKAGE_PYTHON, "-m", "plenopiv.subscribe", "--publish", publish,
+                                    "--server-key", (dir / "plenopivd.key").string(), "--client-cert",
+                                    (dir / "clients" / "desk.key_secret").string(), "--count", "1", "--wait", "1"},
+                                   out);
   EXPECT_EQ(py, 3) << out;
   EXPECT_EQ(out.find("Traceback"), std::string::npos) << out;
   daemon.signal(SIGTERM);
