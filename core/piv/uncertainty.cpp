@@ -96,7 +96,8 @@ std::array<float, 3> correlation_statistics_sigma(std::span<const float> a, std:
     const int vz = origin[2] - depth_margin + z;
     const bool in_a = z >= depth_margin && z < depth_margin + window[2], in_volume = vz >= 0 && vz < shape[2];
     for (int y = 0; y < n[1]; ++y) {
-      const std::size_t row = std::size_t(in_volume ? vz : 0) * plane + std::size_t(origin[1] + y) * shape[0] + origin[0];
+      const std::size_t row =
+          std::size_t(in_volume ? vz : 0) * plane + std::size_t(origin[1] + y) * shape[0] + origin[0];
       const std::size_t o = (std::size_t(z) * n[1] + y) * n[0];
       for (int x = 0; x < n[0]; ++x) {
         const float va = in_a ? a[row + std::size_t(x)] : 0.f, vb = in_volume ? b[row + std::size_t(x)] : 0.f;
@@ -108,7 +109,8 @@ std::array<float, 3> correlation_statistics_sigma(std::span<const float> a, std:
     }
   }
   // A's mean over its own voxels (zeros around it stay zero), B's over the whole domain.
-  const float mean_a = float(sum_a / (double(window[0]) * window[1] * window[2])), mean_b = float(sum_b / double(count));
+  const float mean_a = float(sum_a / (double(window[0]) * window[1] * window[2])),
+              mean_b = float(sum_b / double(count));
   for (int z = depth_margin; z < depth_margin + window[2]; ++z)
     for (std::size_t q = std::size_t(z) * n[0] * n[1]; q < std::size_t(z + 1) * n[0] * n[1]; ++q) s.a[q] -= mean_a;
   for (float& v : s.b) v -= mean_b;
@@ -125,7 +127,8 @@ std::array<float, 3> correlation_statistics_sigma(std::span<const float> a, std:
     std::size_t q = 0;
     for (int z = 0; z < n[2]; ++z)
       for (int y = 0; y < n[1]; ++y) {
-        const float* row = s.b.data() + (std::size_t(from[2][std::size_t(z)]) * n[1] + std::size_t(from[1][std::size_t(y)])) * n[0];
+        const float* row =
+            s.b.data() + (std::size_t(from[2][std::size_t(z)]) * n[1] + std::size_t(from[1][std::size_t(y)])) * n[0];
         for (int x = 0; x < n[0]; ++x, ++q) s.rolled[q] = row[from[0][std::size_t(x)]];
       }
   }
@@ -146,7 +149,8 @@ std::array<float, 3> correlation_statistics_sigma(std::span<const float> a, std:
           const std::size_t last = row_len - 1;
           c_plus[axis] += dot(pa + row, pb + row + 1, last) + double(pa[row + last]) * pb[row];
           c_minus[axis] += dot(pa + row + 1, pb + row, last) + double(pa[row]) * pb[row + last];
-          for (std::size_t x = 0; x < last; ++x) d[row + x] = pa[row + x] * pb[row + x + 1] - pa[row + x + 1] * pb[row + x];
+          for (std::size_t x = 0; x < last; ++x)
+            d[row + x] = pa[row + x] * pb[row + x + 1] - pa[row + x + 1] * pb[row + x];
           d[row + last] = pa[row + last] * pb[row] - pa[row] * pb[row + last];
         } else {
           // The row of +1 neighbours along y or z (cyclic).
@@ -154,7 +158,8 @@ std::array<float, 3> correlation_statistics_sigma(std::span<const float> a, std:
                                              : (std::size_t((z + 1) % n[2]) * n[1] + y) * row_len;
           c_plus[axis] += dot(pa + row, pb + next, row_len);
           c_minus[axis] += dot(pa + next, pb + row, row_len);
-          for (std::size_t x = 0; x < row_len; ++x) d[row + x] = pa[row + x] * pb[next + x] - pa[next + x] * pb[row + x];
+          for (std::size_t x = 0; x < row_len; ++x)
+            d[row + x] = pa[row + x] * pb[next + x] - pa[next + x] * pb[row + x];
         }
       }
     mean[axis] = c_plus[axis] - c_minus[axis];
@@ -178,15 +183,16 @@ std::array<float, 3> correlation_statistics_sigma(std::span<const float> a, std:
     std::copy(d.begin(), d.end(), s.box.begin());
     box_sum(s.box, n, radius, s.line);
     double spread_sq = 0;
-    for (std::size_t row = 0; row < rows; ++row) spread_sq += dot(d.data() + row * row_len, s.box.data() + row * row_len, row_len);
+    for (std::size_t row = 0; row < rows; ++row)
+      spread_sq += dot(d.data() + row * row_len, s.box.data() + row * row_len, row_len);
     const double spread = std::sqrt(std::max(0.0, spread_sq));
     sigma[axis] = fit_sigma(c0, 0.5 * (c_plus[axis] + c_minus[axis]), spread);
   }
   return sigma;
 }
 
-void smooth_sigma(std::vector<float>& sigma, std::span<const std::uint8_t> valid, std::array<int, 3> count,
-                  int passes, const std::array<int, 3>& step, const std::array<int, 3>& window) {
+void smooth_sigma(std::vector<float>& sigma, std::span<const std::uint8_t> valid, std::array<int, 3> count, int passes,
+                  const std::array<int, 3>& step, const std::array<int, 3>& window) {
   const std::array<std::size_t, 3> stride{1, std::size_t(count[0]), std::size_t(count[0]) * count[1]};
   static constexpr double w[3] = {0.25, 0.5, 0.25};
   std::vector<float> in;

@@ -49,7 +49,7 @@ std::array<float, 3> correlation_statistics_sigma(std::span<const float> a, std:
 // Sci. Technol. 27 (2016) 084006), so sigma'^2 = sum_ij w_i w_j rho(i - j) sigma_i sigma_j. Each
 // axis pass uses the windows' overlap along that axis, which is exact for one pass of smoothing
 // and slightly optimistic for more. A NaN neighbour makes the node NaN.
-void smooth_sigma(std::vector<float>& sigma, std::span<const std::uint8_t> valid, std::array<int, 3> count,
-                  int passes, const std::array<int, 3>& step, const std::array<int, 3>& window);
+void smooth_sigma(std::vector<float>& sigma, std::span<const std::uint8_t> valid, std::array<int, 3> count, int passes,
+                  const std::array<int, 3>& step, const std::array<int, 3>& window);
 
 }  // namespace plenopiv::piv
