@@ -85,14 +85,23 @@ void Publisher::publish_vectors(msg::VectorFieldHeader header, const VectorField
   header.set_max_speed_m_s(s.max_speed_m_s);
   header.set_valid_fraction(s.valid_fraction);
   const double to_m_s = field.dt_s > 0 ? 1e-3 / field.dt_s : 0.0;
-  std::vector<std::vector<float>> payloads(4, std::vector<float>(g.count()));
+  // With the uncertainty: sigma_u, sigma_v, sigma_w after the others.
+  const bool sigma = field.sigma_dx_mm.size() == g.count() && field.sigma_dy_mm.size() == g.count() &&
+                     field.sigma_dz_mm.size() == g.count();
+  std::vector<std::vector<float>> payloads(sigma ? 7 : 4, std::vector<float>(g.count()));
   for (std::size_t i = 0; i < g.count(); ++i) {
     payloads[0][i] = float(field.dx_mm[i] * to_m_s);
     payloads[1][i] = float(field.dy_mm[i] * to_m_s);
     payloads[2][i] = float(field.dz_mm[i] * to_m_s);
     payloads[3][i] = field.valid[i] ? 1.f : 0.f;
+    if (!sigma) continue;
+    payloads[4][i] = float(field.sigma_dx_mm[i] * to_m_s);
+    payloads[5][i] = float(field.sigma_dy_mm[i] * to_m_s);
+    payloads[6][i] = float(field.sigma_dz_mm[i] * to_m_s);
   }
   for (const char* name : {"u", "v", "w", "valid"}) header.add_payloads(name);
+  if (sigma)
+    for (const char* name : {"sigma_u", "sigma_v", "sigma_w"}) header.add_payloads(name);
   const auto now_ns = std::uint64_t(
       std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
           .count());

@@ -63,6 +63,7 @@ BENCHES = {
     "recon-fig22-accurate": ("quick", ["build/bin/bench_recon", "fig22", "0.9", "20", "1", "nesterov",
                                        "0.0052"], None),
     "piv": ("paper", ["build/bin/bench_piv"], None),
+    "uncertainty": ("paper", ["build/bin/bench_uncertainty", "--with-paper-ring"], None),
     "daemon": ("quick", ["build/bin/bench_daemon", "6", "1.0"], None),
     "sim": ("quick", ["build/bin/bench_sim"], None),
     "calib": ("quick", ["build/bin/bench_calib"], None),
@@ -521,6 +522,31 @@ def t_piv_ring(name):
     return make
 
 
+UNCERTAINTY_ROWS = [("exact", "uniform_noise", "exact, 96³: uniform shift, noise"),
+                    ("exact", "paper_ring_off_axis_band", "exact, paper's ring, off the band"),
+                    ("reconstructed", "uniform", "MART, small camera: uniform"),
+                    ("reconstructed", "ring_off_axis_band", "MART, small camera: ring, off the band")]
+
+
+def t_uncertainty(R):
+    r = R("uncertainty")
+    rows = []
+    for kind, case, label in UNCERTAINTY_ROWS:
+        per = {(d["band"], d["component"]): d for d in r.find(bench="uncertainty", kind=kind, case=case)
+               if "band" in d}
+        if not per:
+            continue
+        a = [per[("all", c)] for c in "uvw"]
+        worst = [max((float(per[(b, c)]["ratio"]) for b in ("near", "middle", "far")),
+                     key=lambda x: abs(x - 1)) for c in "uvw"]
+        rows.append([label, " / ".join(d["rms_error"] for d in a), " / ".join(d["rms_sigma"] for d in a),
+                     " / ".join(d["ratio"] for d in a), " / ".join(f"{x:.2f}" for x in worst),
+                     " / ".join(d["within_1sigma"] for d in a), " / ".join(d["within_2sigma"] for d in a)])
+    out = table(["volumes: case", "RMS error u / v / w", "RMS sigma", "sigma / error", "worst depth third",
+                 "within 1 sigma (68 %)", "within 2 sigma (95 %)"], rows)
+    return out + ["", r.provenance()]
+
+
 def t_daemon(R):
     r = R("daemon")
     rows = [[d["variant"], d["voxels"], d["setup_s"], d["sustained_pairs_per_s"], d["ratio"],
@@ -598,6 +624,7 @@ TABLES = {
     "recon-mid": t_recon_mid,
     "piv-uniform": t_piv_uniform("piv"),
     "piv-ring": t_piv_ring("piv"),
+    "uncertainty": t_uncertainty,
     "daemon": t_daemon,
     "sim": t_sim,
     "calib": t_calib,

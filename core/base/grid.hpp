@@ -48,6 +48,9 @@ struct VectorField {
   std::vector<float> dx_mm, dy_mm, dz_mm;
   std::vector<std::uint8_t> valid;
   std::vector<float> peak_ratio;
+  // Standard uncertainty of dx, dy, dz (mm) per node: empty when not estimated; NaN at a node
+  // without an estimate (invalid, or replaced by its neighbours' mean).
+  std::vector<float> sigma_dx_mm, sigma_dy_mm, sigma_dz_mm;
   double dt_s = 0.0;  // pulse separation; velocity = displacement / dt
 
   VectorField() = default;

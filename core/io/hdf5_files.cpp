@@ -267,6 +267,10 @@ void write_vector_field_h5(const std::filesystem::path& path, const VectorField&
   for (const auto* v : {&f.dy_mm, &f.dz_mm, &f.peak_ratio}) check_grid(f.grid, v->size(), what);
   check_grid(f.grid, f.valid.size(), what);
   for (const NamedField& e : extra) check_grid(f.grid, e.values.size(), what + " field " + e.name);
+  const bool sigma = !f.sigma_dx_mm.empty() || !f.sigma_dy_mm.empty() || !f.sigma_dz_mm.empty();
+  if (sigma)
+    for (const auto* v : {&f.sigma_dx_mm, &f.sigma_dy_mm, &f.sigma_dz_mm})
+      check_grid(f.grid, v->size(), what + " sigma");
   if (flags) check_grid(f.grid, flags->bits.size(), what + " field " + flags->name);
   if (!(f.dt_s > 0)) throw InputError(what + ": dt_s must be > 0 to give velocities");
 
@@ -295,6 +299,17 @@ void write_vector_field_h5(const std::filesystem::path& path, const VectorField&
     fields.push_back({"u", "m/s", "velocity along x"});
     fields.push_back({"v", "m/s", "velocity along y"});
     fields.push_back({"w", "m/s", "velocity along z"});
+    if (sigma) {
+      const std::pair<const char*, const std::vector<float>*> sigmas[3] = {
+          {"sigma_u", &f.sigma_dx_mm}, {"sigma_v", &f.sigma_dy_mm}, {"sigma_w", &f.sigma_dz_mm}};
+      for (const auto& [name, s] : sigmas) {
+        for (std::size_t i = 0; i < velocity.size(); ++i) velocity[i] = float((*s)[i] * scale);
+        write_dataset(group.get(), path, name, dims, velocity.data());
+        fields.push_back({name, "m/s",
+                          std::string("standard uncertainty of ") + (name + 6) +
+                              " (correlation statistics, Wieneke 2015); NaN: no estimate (invalid or interpolated)"});
+      }
+    }
     write_dataset(group.get(), path, "valid", dims, f.valid.data());
     fields.push_back({"valid", "1", "1: a vector (measured, or replaced by validation); 0: none"});
     write_dataset(group.get(), path, "peak_ratio", dims, f.peak_ratio.data());
@@ -343,6 +358,16 @@ VectorField read_vector_field_h5(const std::filesystem::path& path) {
   f.dz_mm = read_dataset<float>(group.get(), path, "dz", nullptr, &dims);
   f.valid = read_dataset<std::uint8_t>(group.get(), path, "valid", nullptr, &dims);
   f.peak_ratio = read_dataset<float>(group.get(), path, "peak_ratio", nullptr, &dims);
+  // The uncertainty, when the file has it (m/s -> mm).
+  if (H5Lexists(group.get(), "sigma_u", H5P_DEFAULT) > 0) {
+    const double to_mm = f.dt_s * 1e3;
+    const std::pair<const char*, std::vector<float>*> sigmas[3] = {
+        {"sigma_u", &f.sigma_dx_mm}, {"sigma_v", &f.sigma_dy_mm}, {"sigma_w", &f.sigma_dz_mm}};
+    for (const auto& [name, s] : sigmas) {
+      *s = read_dataset<float>(group.get(), path, name, nullptr, &dims);
+      for (float& v : *s) v = float(v * to_mm);
+    }
+  }
   check_grid(f.grid, f.dx_mm.size(), path.string() + ": /vectors");
   return f;
 }

@@ -98,6 +98,12 @@ void write_vector_field_vti(const std::filesystem::path& path, const VectorField
   arrays.push_back(make_array("velocity_m_s", "Float32", 3, interleave(f.dx_mm, f.dy_mm, f.dz_mm, 1e-3 / f.dt_s)));
   arrays.push_back(make_array("valid", "UInt8", 1, f.valid));
   arrays.push_back(make_array("peak_ratio", "Float32", 1, f.peak_ratio));
+  if (!f.sigma_dx_mm.empty() || !f.sigma_dy_mm.empty() || !f.sigma_dz_mm.empty()) {
+    if (f.sigma_dx_mm.size() != n || f.sigma_dy_mm.size() != n || f.sigma_dz_mm.size() != n)
+      throw InputError(path.string() + ": the vector field's sigma arrays do not match its grid");
+    arrays.push_back(make_array("sigma_velocity_m_s", "Float32", 3,
+                                interleave(f.sigma_dx_mm, f.sigma_dy_mm, f.sigma_dz_mm, 1e-3 / f.dt_s)));
+  }
   for (const NamedField& e : extra) {
     const bool vec = e.name.size() > 4 && e.name.substr(e.name.size() - 4) == "_vec";
     if (e.values.size() != (vec ? 3 : 1) * n) {

@@ -2,6 +2,7 @@
 #include "core/piv/multipass.hpp"
 
 #include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 #include <xmmintrin.h>
 
@@ -9,6 +10,7 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <span>
 #include <sstream>
 #include <stdexcept>
@@ -18,6 +20,7 @@
 #include "core/piv/deform.hpp"
 #include "core/piv/fft_correlator.hpp"
 #include "core/piv/peak_fit.hpp"
+#include "core/piv/uncertainty.hpp"
 
 namespace plenopiv::piv {
 namespace {
@@ -136,10 +139,10 @@ void normalise_by_depth_shift(std::span<float> corr, std::size_t slice, int dept
 
 // Correlates every window of `va` with the same window of `vb`; a window's candidates are the
 // predictor (at its centre, or its mean over the window: settings.hpp, PredictorBase) plus each
-// correlation peak.
+// correlation peak; `bases` gets that predictor per node (what each peak's shift was added to).
 Candidates correlate_windows(std::span<const float> va, std::span<const float> vb, const std::array<int, 3>& shape,
                              const Layout& l, const NodeField* predictor, float signal_threshold, FftPlanning planning,
-                             bool at_centre, std::vector<float>& ratio) {
+                             bool at_centre, std::vector<float>& ratio, std::vector<std::array<float, 3>>& bases) {
   const int margin = l.depth_margin;
   const std::array<int, 3> fft_shape{l.window[0], l.window[1], l.window[2] + 2 * margin};
   const FftCorrelator& correlator = FftCorrelator::shared(fft_shape, planning);
@@ -153,6 +156,7 @@ Candidates correlate_windows(std::span<const float> va, std::span<const float> v
       for (int i = 0; i < l.count[a]; ++i)
         mean_weights[a].push_back(predictor->mean_weights(a, l.start[a] + i * l.step[a], l.window[a]));
   ratio.assign(c.size(), 0.f);
+  bases.assign(c.size(), {0.f, 0.f, 0.f});
   const std::size_t plane = std::size_t(shape[0]) * shape[1];
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, c.size()), [&](const auto& r) {
     auto& ws = correlator.workspace();
@@ -229,6 +233,7 @@ Candidates correlate_windows(std::span<const float> va, std::span<const float> v
         }
         for (int a = 0; a < 3; ++a) base[a] = float(sum[a]);
       }
+      bases[node] = base;
       int found = 0;
       for (const Peak& p : peaks) {
         if (!(p.value > 0)) break;
@@ -245,6 +250,35 @@ Candidates correlate_windows(std::span<const float> va, std::span<const float> v
     }
   });
   return c;
+}
+
+// The standard uncertainty (voxels) of every vector the final pass measured (valid and not
+// replaced by its neighbours' mean; NaN elsewhere), from the windows it correlated, `va` and
+// `vb`: per axis x, y, z, one value per node. The peak behind a vector is at the integer shift
+// nearest its displacement less the predictor it was added to (`bases`).
+std::array<std::vector<float>, 3> vector_uncertainty(std::span<const float> va, std::span<const float> vb,
+                                                     const std::array<int, 3>& shape, const Layout& l,
+                                                     const ValidatedField& f, std::span<const std::uint8_t> flags,
+                                                     const std::vector<std::array<float, 3>>& bases) {
+  std::array<std::vector<float>, 3> sigma;
+  for (auto& s : sigma) s.assign(f.d.size(), std::numeric_limits<float>::quiet_NaN());
+  tbb::enumerable_thread_specific<UncertaintyScratch> scratch;
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, f.d.size()), [&](const auto& r) {
+    UncertaintyScratch& s = scratch.local();
+    for (std::size_t node = r.begin(); node < r.end(); ++node) {
+      if (!f.valid[node] || (flags[node] & flag_interpolated)) continue;
+      const int i = int(node % l.count[0]);
+      const int j = int((node / l.count[0]) % l.count[1]);
+      const int k = int(node / (std::size_t(l.count[0]) * l.count[1]));
+      std::array<int, 3> shift;
+      for (int a = 0; a < 3; ++a) shift[a] = int(std::lround(f.d[node][a] - bases[node][a]));
+      const auto v = correlation_statistics_sigma(
+          va, vb, shape, {l.start[0] + i * l.step[0], l.start[1] + j * l.step[1], l.start[2] + k * l.step[2]}, l.window,
+          l.depth_margin, shift, s);
+      for (int a = 0; a < 3; ++a) sigma[a][node] = v[a];
+    }
+  });
+  return sigma;
 }
 
 }  // namespace
@@ -316,6 +350,8 @@ CorrelationResult correlate_volumes(const Volume& a, const Volume& b, const Corr
   Candidates last;
   ValidatedField validated;
   std::vector<float> ratio;
+  std::vector<std::array<float, 3>> bases;
+  std::array<std::vector<float>, 3> sigma;  // voxels, x y z; empty unless settings.uncertainty
   Layout layout{};
   const int passes = int(settings.passes.size());
   for (int p = 0; p < passes; ++p) {
@@ -339,7 +375,7 @@ CorrelationResult correlate_volumes(const Volume& a, const Volume& b, const Corr
 
     t0 = Clock::now();
     last = correlate_windows(va, vb, shape, layout, have_predictor ? &predictor : nullptr, settings.signal_threshold,
-                             settings.fft_planning, settings.predictor == PredictorBase::centre, ratio);
+                             settings.fft_planning, settings.predictor == PredictorBase::centre, ratio, bases);
     report.correlate_s = seconds_since(t0);
     report.windows = last.size();
     for (std::size_t n = 0; n < last.size(); ++n) {
@@ -351,6 +387,11 @@ CorrelationResult correlate_volumes(const Volume& a, const Volume& b, const Corr
     t0 = Clock::now();
     validated = validate(last, settings.median);
     report.validation = validated.counts;
+    if (p + 1 == passes && settings.uncertainty) {
+      const auto t_sigma = Clock::now();
+      sigma = vector_uncertainty(va, vb, shape, layout, validated, last.flags, bases);
+      report.uncertainty_s = seconds_since(t_sigma);
+    }
     if (p + 1 < passes) {
       predictor = layout.nodes();
       const auto filled = fill_invalid(validated, layout.count);
@@ -370,7 +411,12 @@ CorrelationResult correlate_volumes(const Volume& a, const Volume& b, const Corr
     if (on_pass) on_pass(report);
   }
 
-  if (settings.final_smoothing > 0) smooth_valid(validated, layout.count, settings.final_smoothing);
+  if (settings.final_smoothing > 0) {
+    smooth_valid(validated, layout.count, settings.final_smoothing);
+    if (settings.uncertainty)
+      for (auto& s : sigma)
+        smooth_sigma(s, validated.valid, layout.count, settings.final_smoothing, layout.step, layout.window);
+  }
 
   Grid3 g;
   g.shape = layout.count;
@@ -382,6 +428,15 @@ CorrelationResult correlate_volumes(const Volume& a, const Volume& b, const Corr
   VectorField& f = result.field;
   f = VectorField(g);
   f.dt_s = settings.dt_s;
+  if (settings.uncertainty) {
+    const std::array<std::vector<float>*, 3> out{&f.sigma_dx_mm, &f.sigma_dy_mm, &f.sigma_dz_mm};
+    for (int axis = 0; axis < 3; ++axis) {
+      out[axis]->resize(g.count());
+      for (std::size_t n = 0; n < g.count(); ++n)
+        (*out[axis])[n] = validated.valid[n] ? float(sigma[axis][n] * a.grid.spacing_mm[axis])
+                                             : std::numeric_limits<float>::quiet_NaN();
+    }
+  }
   for (std::size_t n = 0; n < g.count(); ++n) {
     f.valid[n] = validated.valid[n];
     f.peak_ratio[n] = ratio[n];

@@ -25,10 +25,11 @@ struct PassReport {
   std::size_t flag_parabolic = 0;       // primary peaks fitted by the parabolic fallback
   std::size_t flag_centroid = 0;        // primary peaks on the window border (centroid)
   double deform_s = 0, correlate_s = 0, validate_s = 0;
+  double uncertainty_s = 0;  // the final pass's per-vector uncertainty (part of validate_s)
 };
 
 struct CorrelationResult {
-  VectorField field;                // displacement (mm), valid, peak ratio, dt_s, grid (mm)
+  VectorField field;                // displacement (mm) and its sigma, valid, peak ratio, dt_s, grid (mm)
   std::vector<std::uint8_t> flags;  // VectorFlag bits per node (peak_fit.hpp)
   std::vector<PassReport> passes;
 };

@@ -79,6 +79,11 @@ struct CorrelationSettings {
   // for random error, which dominates reconstructed volumes; 1 suits them (docs/benchmarks.md,
   // "Paper scale: correlation knobs on the same volumes").
   int final_smoothing = 0;
+  // Estimate each vector's standard uncertainty (VectorField::sigma_*: correlation statistics on
+  // the final pass's windows, uncertainty.hpp; carried through final_smoothing); default on. Off:
+  // no sigma arrays, and the final pass costs a little less (docs/benchmarks.md, "Per-vector
+  // uncertainty"). The vectors are the same bits either way.
+  bool uncertainty = true;
 };
 
 // Checks every value (windows >= 4 voxels, 0 <= overlap < 100, 0 <= depth_margin <= window z,
@@ -104,6 +109,7 @@ std::vector<PassSettings> parse_passes(const std::string& text);
 //   predictor: centre        # or window_mean (what a window's residual is added to)
 //   predictor_smoothing: 1   # binomial passes over the predictor between passes, 0..4
 //   final_smoothing: 0       # binomial passes over the final field's valid vectors, 0..4
+//   uncertainty: true        # each vector's standard uncertainty (sigma), or false
 // Every key is optional (defaults above); unknown keys are refused. Checked.
 CorrelationSettings load_correlation_settings(const std::filesystem::path& path);
 // The same from a mapping already parsed (a section of a larger file, e.g. process.yaml).

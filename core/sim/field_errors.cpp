@@ -4,6 +4,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "core/base/errors.hpp"
+
 namespace plenopiv::sim {
 
 FieldErrors field_errors(const VectorField& field, const Flow& flow, double voxel_mm, int midpoint_iterations,
@@ -61,6 +63,49 @@ FieldErrors field_errors(const VectorField& field, const Flow& flow, double voxe
   }
   e.rms_total = std::sqrt((sum_sq[0] + sum_sq[1] + sum_sq[2]) / n);
   return e;
+}
+
+UncertaintyCheck uncertainty_check(const VectorField& field, const Flow& flow, double voxel_mm, int midpoint_iterations,
+                                   int border, const std::function<bool(const Point3&)>& include) {
+  const Grid3& g = field.grid;
+  const std::array<const std::vector<float>*, 3> sigma{&field.sigma_dx_mm, &field.sigma_dy_mm, &field.sigma_dz_mm};
+  for (const auto* s : sigma)
+    if (s->size() != g.count()) throw InputError("uncertainty check: the vector field has no per-vector sigma");
+  UncertaintyCheck c;
+  std::array<double, 3> err_sum{0, 0, 0}, err_sq{0, 0, 0}, sigma_sq{0, 0, 0}, in1{0, 0, 0}, in2{0, 0, 0};
+  for (int k = border; k < g.shape[2] - border; ++k)
+    for (int j = border; j < g.shape[1] - border; ++j)
+      for (int i = border; i < g.shape[0] - border; ++i) {
+        const std::size_t m = g.index(i, j, k);
+        if (!field.valid[m]) continue;
+        if (!(std::isfinite((*sigma[0])[m]) && std::isfinite((*sigma[1])[m]) && std::isfinite((*sigma[2])[m])))
+          continue;
+        const Point3 x{g.coordinate_mm(0, i), g.coordinate_mm(1, j), g.coordinate_mm(2, k)};
+        if (include && !include(x)) continue;
+        Point3 d = flow.displacement_mm(x);
+        for (int it = 0; it < midpoint_iterations; ++it)
+          d = flow.displacement_mm({x[0] - d[0] / 2, x[1] - d[1] / 2, x[2] - d[2] / 2});
+        const std::array<double, 3> got{field.dx_mm[m], field.dy_mm[m], field.dz_mm[m]};
+        for (int a = 0; a < 3; ++a) {
+          const double signed_err = (got[a] - d[a]) / voxel_mm, err = std::abs(signed_err);
+          const double s = (*sigma[a])[m] / voxel_mm;
+          err_sum[a] += signed_err;
+          err_sq[a] += err * err;
+          sigma_sq[a] += s * s;
+          in1[a] += err <= s;
+          in2[a] += err <= 2 * s;
+        }
+        ++c.compared;
+      }
+  const double n = double(c.compared);
+  for (int a = 0; a < 3; ++a) {
+    c.rms_error[a] = c.compared ? std::sqrt(err_sq[a] / n) : NAN;
+    c.bias[a] = c.compared ? err_sum[a] / n : NAN;
+    c.rms_sigma[a] = c.compared ? std::sqrt(sigma_sq[a] / n) : NAN;
+    c.within_1[a] = c.compared ? in1[a] / n : NAN;
+    c.within_2[a] = c.compared ? in2[a] / n : NAN;
+  }
+  return c;
 }
 
 }  // namespace plenopiv::sim

@@ -33,6 +33,21 @@ FieldErrors field_errors(const VectorField& field, const Flow& flow, double voxe
 FieldErrors field_errors(const VectorField& field, const Flow& flow, double voxel_mm, int midpoint_iterations,
                          int border, const std::function<bool(const Point3&)>& include);
 
+// How well a field's per-vector uncertainty (VectorField::sigma_*) predicts its true errors, per
+// component, over the valid nodes with an estimate on all three axes (voxels; the truth as in
+// field_errors).
+struct UncertaintyCheck {
+  std::array<double, 3> rms_error{0, 0, 0};  // RMS of the true error (bias included)
+  std::array<double, 3> bias{0, 0, 0};       // mean error: what no per-vector sigma of random error sees
+  std::array<double, 3> rms_sigma{0, 0, 0};  // RMS of the predicted sigma: the RMS error it forecasts
+  std::array<double, 3> within_1{0, 0, 0};   // fraction of errors within +-1 sigma (68 % if Gaussian)
+  std::array<double, 3> within_2{0, 0, 0};   // ... within +-2 sigma (95 %)
+  std::size_t compared = 0;                  // nodes compared (the figures are NaN when none)
+};
+// `include`: as field_errors' (every node when empty). InputError when the field has no sigma.
+UncertaintyCheck uncertainty_check(const VectorField& field, const Flow& flow, double voxel_mm, int midpoint_iterations,
+                                   int border, const std::function<bool(const Point3&)>& include = {});
+
 // The ring vortex's axis band: nodes whose cubic window (half-width `half_window_mm`) reaches the
 // ring's axis, |x - x_c| <= h and |z - z_c| <= h. There, with DESIGN.md's reading, the exact radial
 // displacement (u, w) changes sign across the axis (every core point is equally near), so the

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <tbb/global_control.h>
+#include <cmath>
 #include <future>
 
 #include <fstream>
@@ -505,6 +506,62 @@ TEST_F(RunTest, ATooSlowOrNotANumberRateIsRefusedBeforeAnythingFires) {
   }
   state_.cancel_start();
   EXPECT_FALSE(fs::exists(data_ / "run-rate"));
+}
+
+// A field with its uncertainty goes out with sigma_u, sigma_v, sigma_w named after u, v, w, valid
+// and in m/s like them (NaN where a vector has none); one without it names only the four.
+TEST(Publisher, TheUncertaintyIsPublishedAsNamedPayloads) {
+  zmq::context_t context;
+  Publisher publisher(context, "tcp://127.0.0.1:*", 10);
+  zmq::socket_t sub(context, zmq::socket_type::sub);
+  sub.set(zmq::sockopt::subscribe, "vectors");
+  sub.set(zmq::sockopt::rcvtimeo, 5000);
+  sub.connect(publisher.endpoint());
+  Grid3 g;
+  g.shape = {3, 2, 2};
+  VectorField f(g);
+  f.dt_s = 1e-3;
+  f.dx_mm.assign(g.count(), 0.5f);
+  f.valid.assign(g.count(), 1);
+  for (auto* s : {&f.sigma_dx_mm, &f.sigma_dy_mm, &f.sigma_dz_mm}) s->assign(g.count(), 0.004f);
+  f.sigma_dz_mm[5] = NAN;
+  VectorField plain = f;
+  plain.sigma_dx_mm.clear();
+  plain.sigma_dy_mm.clear();
+  plain.sigma_dz_mm.clear();
+  // PUB drops what is sent before the subscription arrives: send until a message comes.
+  std::vector<zmq::message_t> parts;
+  for (int attempt = 0; attempt < 50 && parts.empty(); ++attempt) {
+    publisher.publish_vectors({}, f);
+    std::this_thread::sleep_for(50ms);
+    zmq::message_t m;
+    while (sub.recv(m, zmq::recv_flags::dontwait)) {
+      parts.push_back(std::move(m));
+      if (!parts.back().more()) break;
+    }
+  }
+  ASSERT_EQ(parts.size(), 9u);  // topic, header, 7 arrays
+  msg::VectorFieldHeader header;
+  ASSERT_TRUE(header.ParseFromArray(parts[1].data(), int(parts[1].size())));
+  std::vector<std::string> names(header.payloads().begin(), header.payloads().end());
+  EXPECT_EQ(names, (std::vector<std::string>{"u", "v", "w", "valid", "sigma_u", "sigma_v", "sigma_w"}));
+  const auto* sigma_u = parts[6].data<float>();
+  const auto* sigma_w = parts[8].data<float>();
+  EXPECT_FLOAT_EQ(sigma_u[0], 0.004f);  // 0.004 mm in 1 ms: 4 mm/s
+  EXPECT_TRUE(std::isnan(sigma_w[5]));
+  // Drain, then the field without an uncertainty.
+  zmq::message_t m;
+  while (sub.recv(m, zmq::recv_flags::dontwait)) {
+  }
+  publisher.publish_vectors({}, plain);
+  std::vector<zmq::message_t> plain_parts;
+  do {
+    ASSERT_TRUE(sub.recv(m));
+    plain_parts.push_back(std::move(m));
+  } while (plain_parts.back().more());
+  ASSERT_TRUE(header.ParseFromArray(plain_parts[1].data(), int(plain_parts[1].size())));
+  EXPECT_EQ(header.payloads_size(), 4);
+  EXPECT_EQ(plain_parts.size(), 6u);
 }
 
 TEST_F(RunTest, ASubscriberThatNeverReadsDoesNotSlowAcquisition) {

@@ -69,6 +69,12 @@ TEST(Processing, UniformDisplacementOfARayTracedPairComesBack) {
   EXPECT_EQ(valid, f.valid.size());
   EXPECT_NEAR(mean_dx, shift_mm, 0.02) << "measured 0.2505 mm";
   EXPECT_NEAR(mean_dy, 0.0, 0.01);
+  // Every measured vector has its uncertainty (the live path's correlation estimates it).
+  ASSERT_EQ(f.sigma_dz_mm.size(), f.valid.size());
+  std::size_t with_sigma = 0;
+  for (std::size_t i = 0; i < f.valid.size(); ++i)
+    with_sigma += f.valid[i] && f.sigma_dx_mm[i] > 0 && f.sigma_dy_mm[i] > 0 && f.sigma_dz_mm[i] > 0;
+  EXPECT_GT(with_sigma, valid / 2) << "of " << valid;
 
   // What MART skipped, for the status and the log: 3 iterations per frame, each updating the live
   // voxels of a box mostly dark at 30 particles, the shares consistent with those counts.

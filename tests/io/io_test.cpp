@@ -232,6 +232,39 @@ TEST(Hdf5, VectorFieldRoundTrip) {
   ASSERT_GT(long_settings.size(), 65536u);
   write_vector_field_h5(path, f, {}, {{"settings", long_settings}});
   EXPECT_EQ(read_provenance(path, "settings"), long_settings);
+  EXPECT_TRUE(back.sigma_dx_mm.empty());  // a field without an uncertainty has none in its file
+}
+
+// The per-vector uncertainty is written as sigma_u, sigma_v, sigma_w (m/s, with units and axes
+// like u, v, w), NaN where a vector has none, and read back in mm; the .vti carries it as one
+// 3-component array.
+TEST(Hdf5, VectorFieldUncertaintyRoundTrip) {
+  VectorField f = some_field();
+  for (auto* s : {&f.sigma_dx_mm, &f.sigma_dy_mm, &f.sigma_dz_mm}) s->assign(f.grid.count(), 0.002f);
+  f.sigma_dz_mm[3] = NAN;
+  const auto path = temp_dir() / "field_sigma.h5";
+  write_vector_field_h5(path, f);
+  const VectorField back = read_vector_field_h5(path);
+  ASSERT_EQ(back.sigma_dz_mm.size(), f.grid.count());
+  EXPECT_NEAR(back.sigma_dx_mm[0], 0.002, 1e-9);
+  EXPECT_TRUE(std::isnan(back.sigma_dz_mm[3]));
+  std::string out;
+  ASSERT_EQ(testing_support::run_command({"/usr/bin/python3", "-c",
+                                          "import h5py, sys; g = h5py.File(sys.argv[1])['vectors']; s = g['sigma_w']; "
+                                          "u = s.attrs['units']; print(u.decode() if isinstance(u, bytes) else u, "
+                                          "[d[0].name for d in s.dims], round(float(g['sigma_u'][0, 0, 0]), 6))",
+                                          path.string()},
+                                         out),
+            0)
+      << out;
+  EXPECT_NE(out.find("m/s ['/vectors/z', '/vectors/y', '/vectors/x'] 0.002"), std::string::npos) << out;
+  const auto vti = temp_dir() / "field_sigma.vti";
+  write_vector_field_vti(vti, f);
+  std::ifstream in(vti);
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_NE(text.find("Name=\"sigma_velocity_m_s\" NumberOfComponents=\"3\""), std::string::npos);
+  f.sigma_dy_mm.pop_back();
+  EXPECT_THROW(write_vector_field_h5(path, f), InputError);
 }
 
 TEST(Hdf5, PythonH5pyReadsTheLayoutOfTheDesign) {

@@ -18,6 +18,7 @@
 #include "core/piv/multipass.hpp"
 #include "core/piv/peak_fit.hpp"
 #include "core/piv/settings.hpp"
+#include "core/piv/uncertainty.hpp"
 #include "core/piv/validation.hpp"
 #include "core/sim/exact_volume.hpp"
 #include "core/sim/field_errors.hpp"
@@ -687,6 +688,116 @@ TEST(Multipass, DifferentGridsAndNonFiniteVoxelsAreRefused) {
   EXPECT_THROW(correlate_volumes(c, c, big), InputError);
 }
 
+// The per-vector uncertainty (correlation statistics, uncertainty.hpp) against the true errors of a
+// uniform shift among dim particles that differ between the exposures (random error, as a
+// reconstruction's noise gives): the RMS of the predicted sigma against the RMS error, per
+// component and per third of the depth, and the share of errors within +-1 and +-2 sigma. The
+// vectors are the same bits with the uncertainty off.
+TEST(Uncertainty, PredictsTheRandomErrorOfANoisyUniformShift) {
+  const Grid3 g = cube(64);
+  const auto pa = particles_around(g, 51);
+  const sim::UniformFlow flow({0.03, -0.06, 0.12});
+  Volume a = sim::render_exact_volume(g, pa), b = sim::render_exact_volume(g, sim::displace(pa, flow));
+  for (Volume* v : {&a, &b}) {
+    std::vector<sim::Point3> noise_points;
+    for (std::uint64_t k = 0; k < 4; ++k) {
+      const auto p = particles_around(g, (v == &a ? 60 : 70) + k);
+      noise_points.insert(noise_points.end(), p.begin(), p.end());
+    }
+    const Volume noise = sim::render_exact_volume(g, noise_points);
+    for (std::size_t i = 0; i < v->data.size(); ++i) v->data[i] += 0.25f * noise.data[i];
+  }
+  CorrelationSettings centre, window_mean, off;  // core/piv's default passes
+  window_mean.predictor = PredictorBase::window_mean;
+  off.uncertainty = false;
+  const CorrelationResult r = correlate_volumes(a, b, centre);
+  const CorrelationResult r_off = correlate_volumes(a, b, off);
+  EXPECT_EQ(r.field.dx_mm, r_off.field.dx_mm);
+  EXPECT_EQ(r.field.dy_mm, r_off.field.dy_mm);
+  EXPECT_EQ(r.field.dz_mm, r_off.field.dz_mm);
+  EXPECT_TRUE(r_off.field.sigma_dx_mm.empty());
+  ASSERT_EQ(r.field.sigma_dz_mm.size(), r.field.grid.count());
+  const double depth = (g.shape[2] - 1) * 0.1, z0 = g.origin_mm[2];
+  for (const bool at_centre : {true, false}) {
+    const CorrelationResult measured = at_centre ? r : correlate_volumes(a, b, window_mean);
+    const VectorField& f = measured.field;
+    const char* predictor = at_centre ? "centre" : "window_mean";
+    for (int band = 0; band < 4; ++band) {
+      const auto in_band = [&](const sim::Point3& x) {
+        return band == 3 || std::min(2, int(3 * (x[2] - z0) / depth)) == band;
+      };
+      const sim::UncertaintyCheck c = sim::uncertainty_check(f, flow, 0.1, 1, 1, in_band);
+      ASSERT_GT(c.compared, 300u) << band;
+      for (int k = 0; k < 3; ++k) {
+        const double ratio = c.rms_sigma[k] / c.rms_error[k];
+        std::printf(
+            "uncertainty, %s predictor, band %d, %c: RMS error %.4f, RMS sigma %.4f (%.3f), within 1 sigma "
+            "%.3f, 2 sigma %.3f\n",
+            predictor, band, "uvw"[k], c.rms_error[k], c.rms_sigma[k], ratio, c.within_1[k], c.within_2[k]);
+        // The issue asks for the predicted RMS within 30 % of the measured. The centre predictor
+        // (the default) adds its own interpolated error, which the final pass's correlation does
+        // not see: sigma falls 15-25 % short over the volume (docs/accuracy.md), less with the
+        // window-mean predictor. A third of the depth holds ~440 vectors: its figures scatter more.
+        const std::string what = std::string(predictor) + " band " + std::to_string(band) + " " + "uvw"[k];
+        EXPECT_GT(ratio, band == 3 ? (at_centre ? 0.7 : 0.78) : 0.6) << what << ": measured " << ratio;
+        EXPECT_LT(ratio, 1.2) << what << ": measured " << ratio;
+        EXPECT_GT(c.within_1[k], 0.38) << what << ": measured " << c.within_1[k];
+        EXPECT_GT(c.within_2[k], 0.72) << what << ": measured " << c.within_2[k];
+        EXPECT_LT(c.within_1[k], 0.8) << "measured " << c.within_1[k];
+      }
+    }
+  }
+}
+
+// Two windows that match voxel for voxel have no asymmetry to spread: sigma 0; noise in one of
+// them gives each axis a positive sigma, more for more noise.
+TEST(Uncertainty, MatchingWindowsHaveNoneAndNoiseGivesSome) {
+  const Grid3 g = cube(24);
+  const Volume a = blobs(g, random_points(g, 60, 3));
+  UncertaintyScratch scratch;
+  const auto none =
+      correlation_statistics_sigma(a.data, a.data, g.shape, {4, 4, 4}, {16, 16, 16}, 0, {0, 0, 0}, scratch);
+  for (int k = 0; k < 3; ++k) EXPECT_EQ(none[k], 0.f) << k;
+  std::array<float, 3> previous{0, 0, 0};
+  for (float level : {0.02f, 0.1f}) {
+    Volume b = a;
+    std::mt19937 rng(5);
+    std::normal_distribution<float> noise(0, level);
+    for (float& v : b.data) v += noise(rng);
+    const auto s =
+        correlation_statistics_sigma(a.data, b.data, g.shape, {4, 4, 4}, {16, 16, 16}, 0, {0, 0, 0}, scratch);
+    for (int k = 0; k < 3; ++k) {
+      EXPECT_GT(s[k], previous[k]) << "noise " << level << " axis " << k;
+      EXPECT_LT(s[k], 0.5f) << "noise " << level << " axis " << k;
+    }
+    previous = s;
+  }
+}
+
+// Smoothing carries sigma with the windows' overlap: uniform sigma 1 through one [1 2 1]/4 pass
+// per axis of windows 16 wide 4 apart (shares 3/4 and 1/2 at 1 and 2 nodes) leaves
+// sqrt(0.8125^3) inside; faces and invalid nodes keep theirs, and a neighbour without an
+// estimate gives none.
+TEST(Uncertainty, SmoothingCarriesSigmaWithTheWindowsOverlap) {
+  const std::array<int, 3> count{5, 5, 5};
+  std::vector<float> sigma(125, 1.f);
+  std::vector<std::uint8_t> valid(125, 1);
+  smooth_sigma(sigma, valid, count, 1, {4, 4, 4}, {16, 16, 16});
+  EXPECT_NEAR(sigma[62], std::sqrt(std::pow(0.8125, 3)), 1e-6);  // node (2, 2, 2)
+  EXPECT_NEAR(sigma[0], 1.f, 1e-6);                              // a corner: never smoothed
+  std::vector<float> with_none(125, 1.f);
+  with_none[61] = NAN;  // (1, 2, 2)
+  smooth_sigma(with_none, valid, count, 1, {4, 4, 4}, {16, 16, 16});
+  EXPECT_TRUE(std::isnan(with_none[62]));
+  std::vector<float> beside_invalid(125, 1.f);
+  valid[63] = 0;  // (3, 2, 2): (2, 2, 2) is not smoothed along x, only along y and z, so it keeps
+                  // more than a node smoothed on every axis
+  smooth_sigma(beside_invalid, valid, count, 1, {4, 4, 4}, {16, 16, 16});
+  EXPECT_GT(beside_invalid[62], std::sqrt(std::pow(0.8125, 3)) + 0.01);
+  EXPECT_LT(beside_invalid[62], 0.8125);
+  EXPECT_EQ(beside_invalid[63], 1.f);  // an invalid node keeps what it had
+}
+
 // A field of uniform displacement with small noise; planted outliers with good or bad
 // secondary peaks.
 TEST(Validation, PlantedOutliersAreCaughtAndReplaced) {
@@ -878,6 +989,9 @@ TEST(Settings, PredictorKeysFromYamlAndRefusals) {
   EXPECT_THROW(from("intensity_threshold_of_mean: many\n"), InputError);
   EXPECT_EQ(d.final_smoothing, 0);
   EXPECT_EQ(from("final_smoothing: 2\n").final_smoothing, 2);
+  EXPECT_TRUE(d.uncertainty);
+  EXPECT_FALSE(from("uncertainty: false\n").uncertainty);
+  EXPECT_THROW(from("uncertainty: sometimes\n"), InputError);
   EXPECT_THROW(from("final_smoothing: -1\n"), InputError);
   EXPECT_THROW(from("final_smoothing: 5\n"), InputError);
   EXPECT_THROW(from("final_smoothing: 1e10\n"), InputError);

@@ -1,0 +1,268 @@
+// Per-vector uncertainty benchmark: predicted sigma against the measured RMS error, per component
+// and depth band, and the coverage of +-1 and +-2 sigma, on exact-particle and reconstructed cases.
+//
+//   build/bin/bench_uncertainty [--quick] [--exact-only [--window-mean] | --reconstructed-only] [--with-paper-ring]
+//   build/bin/bench_uncertainty --cost N   (N^3 voxels: the correlation with and without the uncertainty)
+//
+// Exact particles: 96^3 voxels (--quick: 64^3) at 0.5 ppm, core/piv's default correlation: a
+// uniform shift among dim particles that differ between the exposures (noise), a shear in u and
+// w along y, and a ring vortex scored off its axis band; each with no final smoothing and one
+// pass (--window-mean: with the window-mean predictor instead of the centre one); with
+// --with-paper-ring also the paper's ring (300x200x200 voxels, sec 6.4). Reconstructed: the small camera (48^3 voxels
+// of 0.125 mm) through process::PairProcessor with the shipped systemd/config/process.yaml settings: a uniform shift, a
+// shear, the ring. One line per case, band and component (key=value); docs/benchmarks.md records them.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "bench/bench_support.hpp"
+#include "core/calib/nominal_calibration.hpp"
+#include "core/optics/camera_file.hpp"
+#include "core/piv/multipass.hpp"
+#include "core/process/pair_processor.hpp"
+#include "core/process/process.hpp"
+#include "core/sim/exact_volume.hpp"
+#include "core/sim/field_errors.hpp"
+#include "core/sim/flows.hpp"
+#include "core/sim/particles.hpp"
+#include "core/sim/render.hpp"
+
+using namespace plenopiv;
+
+namespace {
+
+double now_s() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
+
+Grid3 centred_grid(std::array<int, 3> n, double voxel_mm) {
+  Grid3 g;
+  g.shape = n;
+  g.spacing_mm = {voxel_mm, voxel_mm, voxel_mm};
+  for (int a = 0; a < 3; ++a) g.origin_mm[a] = -0.5 * (n[a] - 1) * voxel_mm;
+  return g;
+}
+
+std::vector<sim::Point3> particles_around(const Grid3& g, std::uint64_t seed) {
+  sim::Box box;
+  double voxels = 1;
+  for (int a = 0; a < 3; ++a) {
+    box.min_mm[a] = g.origin_mm[a] - 4 * g.spacing_mm[a];
+    box.max_mm[a] = g.origin_mm[a] + (g.shape[a] + 3) * g.spacing_mm[a];
+    voxels *= g.shape[a] + 7;
+  }
+  return sim::random_particles(box, std::size_t(0.0023 * voxels), seed);
+}
+
+// One row per depth band (thirds of the field's depth, and all) and component.
+void report(const std::string& kind, const std::string& name, const VectorField& f, const sim::Flow& flow,
+            double voxel_mm, const std::function<bool(const sim::Point3&)>& keep) {
+  const Grid3& g = f.grid;
+  const double z0 = g.origin_mm[2], depth = (g.shape[2] - 1) * g.spacing_mm[2];
+  const char* bands[] = {"near", "middle", "far", "all"};
+  for (int band = 0; band < 4; ++band) {
+    const auto include = [&](const sim::Point3& x) {
+      if (keep && !keep(x)) return false;
+      if (band == 3) return true;
+      const int b = std::min(2, int(3 * (x[2] - z0) / (depth + 1e-9)));
+      return b == band;
+    };
+    const sim::UncertaintyCheck c = sim::uncertainty_check(f, flow, voxel_mm, 1, 1, include);
+    for (int a = 0; a < 3; ++a)
+      std::printf(
+          "bench=uncertainty kind=%s case=%s band=%s component=%c vectors=%zu rms_error=%.4f bias=%.4f "
+          "rms_sigma=%.4f ratio=%.3f within_1sigma=%.3f within_2sigma=%.3f\n",
+          kind.c_str(), name.c_str(), bands[band], "uvw"[a], c.compared, c.rms_error[a], c.bias[a], c.rms_sigma[a],
+          c.rms_sigma[a] / c.rms_error[a], c.within_1[a], c.within_2[a]);
+  }
+  std::fflush(stdout);
+}
+
+void exact_cases(int n, bool window_mean) {
+  const double voxel = 0.1;
+  for (int smoothing : {0, 1}) {
+    piv::CorrelationSettings settings;
+    settings.dt_s = 1e-3;
+    settings.final_smoothing = smoothing;
+    if (window_mean) settings.predictor = piv::PredictorBase::window_mean;
+    const std::string suffix = std::string(smoothing ? "_smoothed" : "") + (window_mean ? "_window_mean" : "");
+    {
+      const Grid3 g = centred_grid({n, n, n}, voxel);
+      const auto pa = particles_around(g, 51);
+      const sim::UniformFlow flow({0.03, -0.06, 0.12});
+      Volume a = sim::render_exact_volume(g, pa), b = sim::render_exact_volume(g, sim::displace(pa, flow));
+      for (Volume* v : {&a, &b}) {
+        std::vector<sim::Point3> noise;
+        for (std::uint64_t k = 0; k < 4; ++k) {
+          const auto p = particles_around(g, (v == &a ? 60 : 70) + k);
+          noise.insert(noise.end(), p.begin(), p.end());
+        }
+        const Volume dim = sim::render_exact_volume(g, noise);
+        for (std::size_t i = 0; i < v->data.size(); ++i) v->data[i] += 0.25f * dim.data[i];
+      }
+      const double t = now_s();
+      const auto r = piv::correlate_volumes(a, b, settings);
+      std::printf("bench=uncertainty kind=exact case=uniform_noise%s correlate_s=%.2f uncertainty_s=%.2f\n",
+                  suffix.c_str(), now_s() - t, r.passes.back().uncertainty_s);
+      report("exact", "uniform_noise" + suffix, r.field, flow, voxel, {});
+    }
+    {
+      const Grid3 g = centred_grid({n, n, n}, voxel);
+      const auto pa = particles_around(g, 52);
+      const sim::LinearShear flow({0.05, 0, 0.05}, 1, 0.0);  // +-2.4 voxels across 96
+      const Volume a = sim::render_exact_volume(g, pa), b = sim::render_exact_volume(g, sim::displace(pa, flow));
+      const auto r = piv::correlate_volumes(a, b, settings);
+      report("exact", "shear" + suffix, r.field, flow, voxel, {});
+    }
+    {
+      const Grid3 g = centred_grid({n, n * 2 / 3, n * 2 / 3}, voxel);
+      sim::RingVortexFlow::Parameters rv;
+      rv.voxel_mm = voxel;
+      rv.ring_diameter_mm = 0.5 * n * voxel;
+      rv.core_radius_voxels = n / 6.0;
+      rv.core_displacement_voxels = 4;
+      const sim::RingVortexFlow flow(rv);
+      const auto pa = particles_around(g, 53);
+      const Volume a = sim::render_exact_volume(g, pa), b = sim::render_exact_volume(g, sim::displace(pa, flow));
+      const auto r = piv::correlate_volumes(a, b, settings);
+      const double half = 0.5 * settings.passes.back().window[0] * voxel;
+      report("exact", "ring_off_axis_band" + suffix, r.field, flow, voxel,
+             [&](const sim::Point3& x) { return !sim::in_ring_axis_band(flow, x, half); });
+    }
+  }
+}
+
+// The paper's ring (sec 6.4: 300x200x200 voxels of 0.1 mm, core radius 40 voxels, 8 voxels at
+// the core) on exact-particle volumes, off its axis band, with core/piv's default correlation and
+// with one final smoothing pass.
+void paper_ring() {
+  const Grid3 g = centred_grid({300, 200, 200}, 0.1);
+  const sim::RingVortexFlow flow(sim::RingVortexFlow::Parameters{});
+  const auto pa = particles_around(g, 2015);
+  const Volume a = sim::render_exact_volume(g, pa), b = sim::render_exact_volume(g, sim::displace(pa, flow));
+  for (int smoothing : {0, 1}) {
+    piv::CorrelationSettings settings;
+    settings.dt_s = 1e-3;
+    settings.final_smoothing = smoothing;
+    const double t = now_s();
+    const auto r = piv::correlate_volumes(a, b, settings);
+    const std::string name = std::string("paper_ring_off_axis_band") + (smoothing ? "_smoothed" : "");
+    std::printf("bench=uncertainty kind=exact case=%s correlate_s=%.2f uncertainty_s=%.2f\n", name.c_str(), now_s() - t,
+                r.passes.back().uncertainty_s);
+    const double half = 0.5 * settings.passes.back().window[0] * 0.1;
+    report("exact", name, r.field, flow, 0.1,
+           [&](const sim::Point3& x) { return !sim::in_ring_axis_band(flow, x, half); });
+  }
+}
+
+// The uncertainty's cost: the same correlation with and without it (CPU seconds of the whole
+// correlation, and the final pass's uncertainty step), and whether the vectors are the same bits.
+void cost(int n) {
+  const Grid3 g = centred_grid({n, n, n}, 0.1);
+  const auto pa = particles_around(g, 51);
+  const sim::UniformFlow flow({0.03, -0.06, 0.12});
+  const Volume a = sim::render_exact_volume(g, pa), b = sim::render_exact_volume(g, sim::displace(pa, flow));
+  piv::CorrelationSettings on, off;
+  off.uncertainty = false;
+  double cpu[2];
+  std::uint64_t hash[2];
+  double uncertainty_s = 0;
+  piv::correlate_volumes(a, b, off);  // FFT plans and thread buffers made before either is timed
+  for (int k = 0; k < 2; ++k) {
+    const double c = bench::cpu_seconds();
+    const auto r = piv::correlate_volumes(a, b, k ? off : on);
+    cpu[k] = bench::cpu_seconds() - c;
+    if (k == 0) uncertainty_s = r.passes.back().uncertainty_s;
+    hash[k] = bench::bits_hash(r.field.dz_mm, bench::bits_hash(r.field.dy_mm, bench::bits_hash(r.field.dx_mm)));
+  }
+  std::printf(
+      "bench=uncertainty kind=cost voxels=%d^3 cpu_with_s=%.3f cpu_without_s=%.3f extra=%.3f uncertainty_wall_s=%.3f "
+      "same_vectors=%d\n",
+      n, cpu[0], cpu[1], cpu[0] / cpu[1] - 1, uncertainty_s, int(hash[0] == hash[1]));
+}
+
+void reconstructed_cases() {
+  const std::string dir = std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/";
+  const auto camera = optics::load_camera_file(dir + "camera-small.yaml");
+  const double voxel = 0.125;
+  const int n = 48;
+  const double h = 0.5 * n * voxel;
+  process::ProcessSettings settings = process::load_process_settings(dir + "process.yaml");
+  settings.grid = process::grid_for_extent({-h, -h, -h}, {h, h, h}, {voxel, voxel, voxel}, "bench");
+  settings.correlation.dt_s = 1e-3;
+  const calib::LoadedCalibration nominal = calib::nominal_calibration(camera);
+  const process::PairProcessor processor(camera, nominal, settings);
+  const sim::Box box{{-h - 1, -h - 1, -h - 1}, {h + 1, h + 1, h + 1}};
+  const auto pa = sim::random_particles(box, sim::particle_count_from_ppm(camera, box, 0.5), 2015);
+  sim::RenderOptions ro;
+  ro.rays_per_particle = 5000;
+  const auto render = [&](const std::vector<sim::Point3>& p, std::uint64_t seed) {
+    const auto r = sim::render(camera, nominal.lenses, p, ro, seed);
+    ImageF f(r.image.width, r.image.height);
+    for (std::size_t i = 0; i < f.size(); ++i) f.pixels[i] = r.image.pixels[i];
+    return f;
+  };
+  const ImageF a = render(pa, 1);
+  sim::RingVortexFlow::Parameters rv;
+  rv.voxel_mm = voxel;
+  rv.ring_diameter_mm = 3.0;
+  rv.core_radius_voxels = 8;
+  rv.core_displacement_voxels = 3;
+  const sim::RingVortexFlow ring(rv);
+  const sim::UniformFlow uniform({0.25, 0.125, 0.25});  // 2, 1, 2 voxels
+  const sim::LinearShear shear({0.1, 0, 0.1}, 1, 0.0);  // u and w +-2.4 voxels across y
+  const std::pair<const char*, const sim::Flow*> flows[] = {
+      {"uniform", &uniform}, {"shear", &shear}, {"ring_off_axis_band", &ring}};
+  for (const auto& [name, flow] : flows) {
+    const ImageF b = render(sim::displace(pa, *flow), 2);
+    const double t = now_s();
+    const auto r = processor.process(a, b);
+    std::printf("bench=uncertainty kind=reconstructed case=%s process_s=%.2f correlate_s=%.2f uncertainty_s=%.3f\n",
+                name, now_s() - t, r.times.correlate_s, r.correlation.passes.back().uncertainty_s);
+    std::function<bool(const sim::Point3&)> keep;
+    if (flow == &ring) {
+      const double half = 0.5 * settings.correlation.passes.back().window[0] * voxel;
+      keep = [&, half](const sim::Point3& x) { return !sim::in_ring_axis_band(ring, x, half); };
+    }
+    report("reconstructed", name, r.correlation.field, *flow, voxel, keep);
+  }
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  bool quick = false, exact = true, reconstructed = true, window_mean = false;
+  int cost_voxels = 0;
+  bool paper = false;
+  for (int i = 1; i < argc; ++i) {
+    if (!std::strcmp(argv[i], "--quick")) {
+      quick = true;
+    } else if (!std::strcmp(argv[i], "--exact-only")) {
+      reconstructed = false;
+    } else if (!std::strcmp(argv[i], "--cost") && i + 1 < argc) {
+      cost_voxels = std::stoi(argv[++i]);
+    } else if (!std::strcmp(argv[i], "--with-paper-ring")) {
+      paper = true;
+    } else if (!std::strcmp(argv[i], "--window-mean")) {
+      window_mean = true;
+    } else if (!std::strcmp(argv[i], "--reconstructed-only")) {
+      exact = false;
+    } else {
+      std::fprintf(stderr,
+                   "usage: bench_uncertainty [--quick] [--exact-only [--window-mean] | --reconstructed-only]  "
+                   "[--with-paper-ring] | --cost N\n");
+      return 2;
+    }
+  }
+  if (cost_voxels) {
+    cost(cost_voxels);
+    return 0;
+  }
+  if (exact) exact_cases(quick ? 64 : 96, window_mean);
+  if (reconstructed) reconstructed_cases();
+  if (paper) paper_ring();
+  return 0;
+}

@@ -1,0 +1,219 @@
+// Per-vector standard uncertainty from correlation statistics (Wieneke 2015) in 3D, and its
+// propagation through the final field's smoothing (Sciacchitano & Wieneke 2016).
+#include "core/piv/uncertainty.hpp"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <xmmintrin.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace plenopiv::piv {
+namespace {
+
+constexpr float kNoEstimate = std::numeric_limits<float>::quiet_NaN();
+
+// sum_i x[i] y[i] over n floats: four lanes (SSE) in float, each row's lanes added in double.
+double dot(const float* x, const float* y, std::size_t n) {
+  __m128 lanes = _mm_setzero_ps();
+  std::size_t i = 0;
+  for (; i + 4 <= n; i += 4) lanes = _mm_add_ps(lanes, _mm_mul_ps(_mm_loadu_ps(x + i), _mm_loadu_ps(y + i)));
+  float part[4];
+  _mm_storeu_ps(part, lanes);
+  double sum = double(part[0]) + part[1] + part[2] + part[3];
+  for (; i < n; ++i) sum += double(x[i]) * y[i];
+  return sum;
+}
+
+// Replaces `out` (nx, ny, nz; zero outside) by its sums over boxes of (2 r + 1) voxels per axis.
+// `prefix` is scratch: running sums along one axis, whole rows at a time where the axis is y or z.
+void box_sum(std::span<float> out, const std::array<int, 3>& n, const std::array<int, 3>& r,
+             std::vector<float>& prefix) {
+  const std::size_t nx = std::size_t(n[0]), ny = std::size_t(n[1]), nz = std::size_t(n[2]);
+  // Along x: one row at a time.
+  prefix.assign(nx + 1, 0.f);
+  for (std::size_t row = 0; row < ny * nz; ++row) {
+    float* dst = out.data() + row * nx;
+    for (std::size_t x = 0; x < nx; ++x) prefix[x + 1] = prefix[x] + dst[x];
+    for (std::size_t x = 0; x < nx; ++x) {
+      const std::size_t lo = x > std::size_t(r[0]) ? x - r[0] : 0, hi = std::min(nx, x + r[0] + 1);
+      dst[x] = prefix[hi] - prefix[lo];
+    }
+  }
+  // Along y, then z: running sums of whole rows (planes), then differences of them.
+  for (int axis = 1; axis < 3; ++axis) {
+    const std::size_t len = axis == 1 ? ny : nz, width = axis == 1 ? nx : nx * ny;
+    const std::size_t outer = axis == 1 ? nz : 1, outer_stride = nx * ny;
+    prefix.assign((len + 1) * width, 0.f);
+    for (std::size_t o = 0; o < outer; ++o) {
+      float* base = out.data() + o * outer_stride;
+      for (std::size_t i = 0; i < len; ++i) {
+        const float* src = base + i * width;
+        const float* below = prefix.data() + i * width;
+        float* p = prefix.data() + (i + 1) * width;
+        for (std::size_t q = 0; q < width; ++q) p[q] = below[q] + src[q];
+      }
+      for (std::size_t i = 0; i < len; ++i) {
+        const std::size_t lo = i > std::size_t(r[axis]) ? i - r[axis] : 0, hi = std::min(len, i + r[axis] + 1);
+        const float* top = prefix.data() + hi * width;
+        const float* bottom = prefix.data() + lo * width;
+        float* dst = base + i * width;
+        for (std::size_t q = 0; q < width; ++q) dst[q] = top[q] - bottom[q];
+      }
+    }
+  }
+}
+
+// The 3-point Gaussian fit's offset error when C(+1) and C(-1) move apart by `spread` from their
+// mean `c_pm` about the peak value `c0` (parabolic where a value is not positive); NaN without
+// curvature.
+float fit_sigma(double c0, double c_pm, double spread) {
+  const double cp = c_pm + 0.5 * spread, cm = c_pm - 0.5 * spread;
+  if (c0 > 0 && cm > 0 && cp > 0) {
+    const double den = 4 * std::log(c0) - 2 * std::log(cp) - 2 * std::log(cm);
+    if (den > 0) return float((std::log(cp) - std::log(cm)) / den);
+  }
+  const double den = 2 * (2 * c0 - 2 * c_pm);
+  return den > 0 ? float(spread / den) : kNoEstimate;
+}
+
+}  // namespace
+
+std::array<float, 3> correlation_statistics_sigma(std::span<const float> a, std::span<const float> b,
+                                                  const std::array<int, 3>& shape, const std::array<int, 3>& origin,
+                                                  const std::array<int, 3>& window, int depth_margin,
+                                                  const std::array<int, 3>& shift, UncertaintyScratch& s) {
+  // The correlation's domain: the window, `depth_margin` slices more at each depth end.
+  const std::array<int, 3> n{window[0], window[1], window[2] + 2 * depth_margin};
+  const std::size_t count = std::size_t(n[0]) * n[1] * n[2];
+  s.a.resize(count);
+  s.b.resize(count);
+  const std::size_t plane = std::size_t(shape[0]) * shape[1];
+  double sum_a = 0, sum_b = 0;
+  for (int z = 0; z < n[2]; ++z) {
+    const int vz = origin[2] - depth_margin + z;
+    const bool in_a = z >= depth_margin && z < depth_margin + window[2], in_volume = vz >= 0 && vz < shape[2];
+    for (int y = 0; y < n[1]; ++y) {
+      const std::size_t row =
+          std::size_t(in_volume ? vz : 0) * plane + std::size_t(origin[1] + y) * shape[0] + origin[0];
+      const std::size_t o = (std::size_t(z) * n[1] + y) * n[0];
+      for (int x = 0; x < n[0]; ++x) {
+        const float va = in_a ? a[row + std::size_t(x)] : 0.f, vb = in_volume ? b[row + std::size_t(x)] : 0.f;
+        s.a[o + std::size_t(x)] = va;
+        s.b[o + std::size_t(x)] = vb;
+        sum_a += va;
+        sum_b += vb;
+      }
+    }
+  }
+  // A's mean over its own voxels (zeros around it stay zero), B's over the whole domain.
+  const float mean_a = float(sum_a / (double(window[0]) * window[1] * window[2])),
+              mean_b = float(sum_b / double(count));
+  for (int z = depth_margin; z < depth_margin + window[2]; ++z)
+    for (std::size_t q = std::size_t(z) * n[0] * n[1]; q < std::size_t(z + 1) * n[0] * n[1]; ++q) s.a[q] -= mean_a;
+  for (float& v : s.b) v -= mean_b;
+
+  // B rolled by the shift, cyclically: rolled(x) = b(x + shift), so that the peak's neighbours are
+  // x's neighbours. `b` then holds it (the window is no longer needed).
+  s.rolled.resize(count);
+  {
+    std::array<std::vector<int>, 3> from;
+    for (int k = 0; k < 3; ++k) {
+      from[k].resize(std::size_t(n[k]));
+      for (int i = 0; i < n[k]; ++i) from[k][std::size_t(i)] = (((i + shift[k]) % n[k]) + n[k]) % n[k];
+    }
+    std::size_t q = 0;
+    for (int z = 0; z < n[2]; ++z)
+      for (int y = 0; y < n[1]; ++y) {
+        const float* row =
+            s.b.data() + (std::size_t(from[2][std::size_t(z)]) * n[1] + std::size_t(from[1][std::size_t(y)])) * n[0];
+        for (int x = 0; x < n[0]; ++x, ++q) s.rolled[q] = row[from[0][std::size_t(x)]];
+      }
+  }
+  const float* pa = s.a.data();
+  const float* pb = s.rolled.data();
+  const std::size_t row_len = std::size_t(n[0]), rows = count / row_len;
+  double c0 = 0;
+  for (std::size_t row = 0; row < rows; ++row) c0 += dot(pa + row * row_len, pb + row * row_len, row_len);
+  std::array<double, 3> c_plus{0, 0, 0}, c_minus{0, 0, 0}, mean{0, 0, 0};
+  for (int axis = 0; axis < 3; ++axis) {
+    s.delta[axis].resize(count);
+    float* d = s.delta[axis].data();
+    for (int z = 0; z < n[2]; ++z)
+      for (int y = 0; y < n[1]; ++y) {
+        const std::size_t row = (std::size_t(z) * n[1] + y) * row_len;
+        if (axis == 0) {
+          // x's +1 neighbour is the next voxel of the row, the first one for the last.
+          const std::size_t last = row_len - 1;
+          c_plus[axis] += dot(pa + row, pb + row + 1, last) + double(pa[row + last]) * pb[row];
+          c_minus[axis] += dot(pa + row + 1, pb + row, last) + double(pa[row]) * pb[row + last];
+          for (std::size_t x = 0; x < last; ++x)
+            d[row + x] = pa[row + x] * pb[row + x + 1] - pa[row + x + 1] * pb[row + x];
+          d[row + last] = pa[row + last] * pb[row] - pa[row] * pb[row + last];
+        } else {
+          // The row of +1 neighbours along y or z (cyclic).
+          const std::size_t next = axis == 1 ? (std::size_t(z) * n[1] + (y + 1) % n[1]) * row_len
+                                             : (std::size_t((z + 1) % n[2]) * n[1] + y) * row_len;
+          c_plus[axis] += dot(pa + row, pb + next, row_len);
+          c_minus[axis] += dot(pa + next, pb + row, row_len);
+          for (std::size_t x = 0; x < row_len; ++x)
+            d[row + x] = pa[row + x] * pb[next + x] - pa[next + x] * pb[row + x];
+        }
+      }
+    mean[axis] = c_plus[axis] - c_minus[axis];
+  }
+  // The box: about two Gaussian widths of the correlation peak per axis, sigma_c^2 = -1 / (the
+  // curvature of ln C), at least 1 voxel and at most a quarter of the window.
+  std::array<int, 3> radius{1, 1, 1};
+  for (int axis = 0; axis < 3; ++axis) {
+    if (c0 > 0 && c_plus[axis] > 0 && c_minus[axis] > 0) {
+      const double curvature = std::log(c_plus[axis]) - 2 * std::log(c0) + std::log(c_minus[axis]);
+      if (curvature < 0) radius[axis] = int(std::lround(2 * std::sqrt(-1 / curvature)));
+    }
+    radius[axis] = std::clamp(radius[axis], 1, std::max(1, window[axis] / 4));
+  }
+  std::array<float, 3> sigma{};
+  s.box.resize(count);
+  for (int axis = 0; axis < 3; ++axis) {
+    std::vector<float>& d = s.delta[axis];
+    const float m = float(mean[axis] / double(count));
+    for (float& v : d) v -= m;
+    std::copy(d.begin(), d.end(), s.box.begin());
+    box_sum(s.box, n, radius, s.line);
+    double spread_sq = 0;
+    for (std::size_t row = 0; row < rows; ++row)
+      spread_sq += dot(d.data() + row * row_len, s.box.data() + row * row_len, row_len);
+    const double spread = std::sqrt(std::max(0.0, spread_sq));
+    sigma[axis] = fit_sigma(c0, 0.5 * (c_plus[axis] + c_minus[axis]), spread);
+  }
+  return sigma;
+}
+
+void smooth_sigma(std::vector<float>& sigma, std::span<const std::uint8_t> valid, std::array<int, 3> count, int passes,
+                  const std::array<int, 3>& step, const std::array<int, 3>& window) {
+  const std::array<std::size_t, 3> stride{1, std::size_t(count[0]), std::size_t(count[0]) * count[1]};
+  static constexpr double w[3] = {0.25, 0.5, 0.25};
+  std::vector<float> in;
+  for (int pass = 0; pass < passes; ++pass)
+    for (int axis = 0; axis < 3; ++axis) {
+      const double rho[3] = {1.0, std::max(0.0, 1.0 - double(step[axis]) / window[axis]),
+                             std::max(0.0, 1.0 - 2.0 * step[axis] / window[axis])};
+      in = sigma;
+      const std::size_t st = stride[axis];
+      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, in.size()), [&](const auto& r) {
+        for (std::size_t node = r.begin(); node < r.end(); ++node) {
+          const int c = int((node / st) % std::size_t(count[axis]));
+          if (!valid[node] || c == 0 || c == count[axis] - 1 || !valid[node - st] || !valid[node + st]) continue;
+          const double s[3] = {in[node - st], in[node], in[node + st]};
+          double var = 0;
+          for (int i = 0; i < 3; ++i)
+            for (int j = 0; j < 3; ++j) var += w[i] * w[j] * rho[std::abs(i - j)] * s[i] * s[j];
+          sigma[node] = float(std::sqrt(var));  // NaN in, NaN out
+        }
+      });
+    }
+}
+
+}  // namespace plenopiv::piv
