@@ -19,6 +19,7 @@
 #include "clients/cli/calibration_frames.hpp"
 #include "clients/cli/commands.hpp"
 #include "clients/cli/options.hpp"
+#include "clients/cli/png_file.hpp"
 #include "clients/cli/progress.hpp"
 #include "clients/cli/reprocess.hpp"
 #include "clients/cli/weights_cache.hpp"
@@ -162,16 +163,6 @@ cv::Mat preview_image(const VectorField& f, const std::vector<float>& omega_z) {
                 f.dt_s > 0 ? disp_max * 1e-3 / f.dt_s : 0.0);
   label(text, {4, 18});
   return canvas;
-}
-
-void write_png(const std::filesystem::path& path, const cv::Mat& image) {
-  std::vector<std::uint8_t> bytes;
-  if (!cv::imencode(".png", image, bytes)) throw InputError(path.string() + ": PNG encoding failed");
-  io::write_atomically(path, [&](const std::filesystem::path& tmp) {
-    std::ofstream out(tmp, std::ios::binary);
-    out.write(reinterpret_cast<const char*>(bytes.data()), std::streamsize(bytes.size()));
-    if (!out) throw InputError(path.string() + ": cannot write");
-  });
 }
 
 // Frames given one by one that plenopivd recorded (frames/pair-<n>-A.tif in a run folder): the

@@ -62,9 +62,9 @@ def decode_vectors(frames):
 
 def summary(f):
     h = f.header
-    return ("pair %6d  mean %.4f m/s  max %.4f m/s  valid %.1f %%  latency %.3f s  run %s"
+    return ("pair %6d  mean %.4f m/s  max %.4f m/s  valid %.1f %%  latency %.3f s  tier %s  run %s"
             % (h.pair_index, h.mean_speed_m_s, h.max_speed_m_s, 100.0 * h.valid_fraction,
-               h.latency_s, h.run_id))
+               h.latency_s, h.tier or "?", h.run_id))
 
 
 # Units of the published arrays, as plenopiv's HDF5 files give them (`units` attribute).
@@ -73,11 +73,12 @@ UNITS = {"u": "m/s", "v": "m/s", "w": "m/s", "dx": "mm", "dy": "mm", "dz": "mm",
 
 
 def save(h5, f):
-    """Appends one field as group /pair-<n> in the layout of plenopiv's vector files: the arrays
-    [nz][ny][nx] with `units`, the axes x, y, z (mm) attached as dimension scales, attribute dt_s,
-    and a provenance subgroup (run, pair, host timestamp, latency)."""
+    """Appends one field as group /pair-<n> (the full settings' field) or /pair-<n>-live (the live
+    tier's: a run with two lanes publishes both for a pair) in the layout of plenopiv's vector
+    files: the arrays [nz][ny][nx] with `units`, the axes x, y, z (mm) attached as dimension scales,
+    attribute dt_s, and a provenance subgroup (run, pair, tier, host timestamp, latency)."""
     h = f.header
-    g = h5.create_group("pair-%06d" % h.pair_index)
+    g = h5.create_group("pair-%06d%s" % (h.pair_index, "-live" if h.tier == "live" else ""))
     for axis, name in enumerate("xyz"):
         scale = g.create_dataset(name, data=f.axis_mm(axis))
         scale.make_scale(name)
@@ -93,6 +94,7 @@ def save(h5, f):
     p.attrs["software"] = "plenopiv_subscribe.py (live, from plenopivd)"
     p.attrs["run"] = h.run_id
     p.attrs["pair_index"] = str(h.pair_index)
+    p.attrs["tier"] = h.tier
     p.attrs["host_timestamp_ns"] = str(h.host_timestamp_ns)
     p.attrs["latency_s"] = str(h.latency_s)
     h5.flush()
