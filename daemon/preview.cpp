@@ -32,14 +32,16 @@ Preview PreviewMaker::make(const drivers::FramePair& pair) const {
     double sum = 0;
     for (const float v : frame.pixels) sum += v;
     const float full_scale = float((1u << std::clamp(pair.a.bit_depth, 1, 16)) - 1);
-    const auto saturated = std::count_if(frame.pixels.begin(), frame.pixels.end(), [&](float v) { return v >= full_scale; });
+    const auto saturated =
+        std::count_if(frame.pixels.begin(), frame.pixels.end(), [&](float v) { return v >= full_scale; });
     h.set_raw_min(*lo);
     h.set_raw_max(*hi);
     h.set_raw_mean(sum / double(frame.pixels.size()));
     h.set_saturated_fraction(double(saturated) / double(frame.pixels.size()));
   }
   // Block means (OpenCV's area interpolation), the last partial block dropped.
-  const int w = std::max(1, frame.width / settings_.downsample), h_px = std::max(1, frame.height / settings_.downsample);
+  const int w = std::max(1, frame.width / settings_.downsample),
+            h_px = std::max(1, frame.height / settings_.downsample);
   out.raw = ImageF(w, h_px);
   const cv::Mat source(frame.height, frame.width, CV_32F, const_cast<float*>(frame.pixels.data()));
   cv::Mat target(h_px, w, CV_32F, out.raw.pixels.data());

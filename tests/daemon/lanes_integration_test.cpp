@@ -61,20 +61,11 @@ class Lanes : public ::testing::Test {
     control_ = testing_support::ipc_endpoint("control");
     publish_ = "tcp://127.0.0.1:" + std::to_string(testing_support::free_tcp_port());
     daemon_ = std::make_unique<ChildProcess>(
-        std::vector<std::string>{"/usr/bin/env",
-                                 "PLENOPIV_TEST_FULL_TIER_MS=" + std::to_string(full_tier_ms),
-                                 binary("plenopivd-testcam"),
-                                 "--simulation",
-                                 "--camera-file",
-                                 std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml",
-                                 "--replay-dir",
-                                 (scratch_ / "recordings").string(),
-                                 "--control",
-                                 control_,
-                                 "--publish",
-                                 publish_,
-                                 "--data-dir",
-                                 (scratch_ / "data").string()},
+        std::vector<std::string>{"/usr/bin/env", "PLENOPIV_TEST_FULL_TIER_MS=" + std::to_string(full_tier_ms),
+                                 binary("plenopivd-testcam"), "--simulation", "--camera-file",
+                                 std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml", "--replay-dir",
+                                 (scratch_ / "recordings").string(), "--control", control_, "--publish", publish_,
+                                 "--data-dir", (scratch_ / "data").string()},
         scratch_ / "plenopivd.log");
     for (int i = 0; i < 100 && !testing_support::probe_status(control_); ++i)
       ASSERT_TRUE(daemon_->running()) << daemon_->output();

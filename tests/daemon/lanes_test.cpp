@@ -2,7 +2,6 @@
 // queue and counters, and the lanes a run config makes.
 #include <gtest/gtest.h>
 
-
 #include "daemon/lanes.hpp"
 
 namespace plenopiv::daemon {
@@ -34,7 +33,8 @@ TEST(Lane, EveryNthLaneIsOfferedTheMultiplesAndTakesThemOldestFirst) {
   lane.close(false);
   std::vector<std::uint64_t> seen;
   CancelFlag cancel{false};
-  lane.run(empty_field, [&](const drivers::FramePair& p, ProcessedPair&) { seen.push_back(p.pair_index); }, cancel);
+  lane.run(
+      empty_field, [&](const drivers::FramePair& p, ProcessedPair&) { seen.push_back(p.pair_index); }, cancel);
   EXPECT_EQ(seen, (std::vector<std::uint64_t>{0, 3, 6, 9}));
   const msg::LaneCounters c = lane.counters();
   EXPECT_EQ(c.offered(), 4u);
@@ -55,7 +55,8 @@ TEST(Lane, AFullQueueDropsItsOldestPairAndCountsIt) {
   lane.close(false);
   std::vector<std::uint64_t> seen;
   CancelFlag cancel{false};
-  lane.run(empty_field, [&](const drivers::FramePair& p, ProcessedPair&) { seen.push_back(p.pair_index); }, cancel);
+  lane.run(
+      empty_field, [&](const drivers::FramePair& p, ProcessedPair&) { seen.push_back(p.pair_index); }, cancel);
   EXPECT_EQ(seen, (std::vector<std::uint64_t>{7, 8, 9}));  // the newest three stayed, in order
   const msg::LaneCounters c = lane.counters();
   EXPECT_EQ(c.offered(), 10u);
@@ -83,9 +84,8 @@ TEST(Lane, ARunConfigMakesTheLiveLaneFirstAndTheQualityLaneWhenAsked) {
   EXPECT_EQ(one[0]->name(), "live");
   EXPECT_EQ(one[0]->tier(), process::Tier::full);
   EXPECT_EQ(one[0]->queue().capacity(), 3u);
-  const auto two = make_lanes(
-      parse_run_config(spec + "live: {reconstruction: {iterations: 1}}\nquality: {every: 2}\nquality_queue: 5\n",
-                       "run.yaml"));
+  const auto two = make_lanes(parse_run_config(
+      spec + "live: {reconstruction: {iterations: 1}}\nquality: {every: 2}\nquality_queue: 5\n", "run.yaml"));
   ASSERT_EQ(two.size(), 2u);
   EXPECT_EQ(two[0]->tier(), process::Tier::live);
   EXPECT_EQ(two[1]->name(), "quality");
