@@ -13,6 +13,7 @@ using Clock = std::chrono::steady_clock;
 void LiveMailbox::push(SharedPair pair) {
   {
     std::lock_guard lock(mutex_);
+    ++pushed_;
     pairs_.push_back(std::move(pair));
     while (pairs_.size() > capacity_) {
       pairs_.pop_front();
@@ -44,10 +45,25 @@ std::optional<SharedPair> LiveMailbox::take() {
   std::unique_lock lock(mutex_);
   ready_.wait(lock, [&] { return closed_ || !pairs_.empty(); });
   if (pairs_.empty()) return std::nullopt;
+  if (order_ == TakeOrder::oldest) {
+    SharedPair oldest = std::move(pairs_.front());
+    pairs_.pop_front();
+    return oldest;
+  }
   dropped_ += pairs_.size() - 1;
   SharedPair newest = std::move(pairs_.back());
   pairs_.clear();
   return newest;
+}
+
+bool LiveMailbox::wait_closed_for(std::chrono::steady_clock::duration timeout) {
+  std::unique_lock lock(mutex_);
+  return ready_.wait_for(lock, timeout, [&] { return closed_; });
+}
+
+std::uint64_t LiveMailbox::pushed() const {
+  std::lock_guard lock(mutex_);
+  return pushed_;
 }
 
 std::size_t LiveMailbox::depth() const {

@@ -46,20 +46,32 @@ using CancelFlag = std::atomic<bool>;
 // `cancel` as it goes and throws plenopiv::Cancelled once it is set.
 using ProcessFn = std::function<ProcessedPair(const drivers::FramePair&, const CancelFlag& cancel)>;
 
-// Pairs recorded and waiting for the live path: at most `capacity`, newest kept. The acquisition
-// side pushes every recorded pair; a push into a full mailbox drops the oldest waiting pair, and
-// take() hands out the newest and drops the older ones; either way the dropped pairs are counted
-// (they are on disk already). Memory stays bounded whatever the laser rate. Thread safe.
+// Which waiting pair a lane's queue hands out.
+enum class TakeOrder {
+  newest,  // the newest; the older ones are dropped (counted): the operator sees the latest pair
+  oldest,  // the oldest: pairs are processed in order while the lane keeps up
+};
+
+// Pairs recorded and waiting for a processing lane: at most `capacity`. The acquisition side pushes
+// the recorded pairs the lane takes; a push into a full queue drops the oldest waiting pair, and
+// take() hands out one pair in `order` (TakeOrder::newest drops the older ones); either way the
+// dropped pairs are counted (they are on disk already). Memory stays bounded whatever the laser
+// rate. Thread safe.
 class LiveMailbox {
  public:
-  explicit LiveMailbox(std::size_t capacity = 2) : capacity_(std::max<std::size_t>(capacity, 1)) {}
+  explicit LiveMailbox(std::size_t capacity = 2, TakeOrder order = TakeOrder::newest)
+      : capacity_(std::max<std::size_t>(capacity, 1)), order_(order) {}
   void push(SharedPair pair);
   void close();  // no more pairs: take() returns nullopt once empty
   // close() and forget what is waiting (a stop: the pairs are recorded, none is processed now).
   void close_and_clear();
-  // Blocks until a pair or close. Returns the newest pair.
+  // Blocks until a pair or close. Returns the newest or oldest pair, as the queue's order says.
   std::optional<SharedPair> take();
+  // Waits up to `timeout` for close(); true once closed.
+  bool wait_closed_for(std::chrono::steady_clock::duration timeout);
+  std::size_t capacity() const { return capacity_; }
   std::size_t depth() const;
+  std::uint64_t pushed() const;   // pairs ever pushed
   std::uint64_t dropped() const;  // pairs that left without being taken
 
  private:
@@ -67,6 +79,8 @@ class LiveMailbox {
   std::condition_variable ready_;
   std::deque<SharedPair> pairs_;
   std::size_t capacity_;
+  TakeOrder order_;
+  std::uint64_t pushed_ = 0;
   std::uint64_t dropped_ = 0;
   bool closed_ = false;
 };

@@ -33,45 +33,52 @@ ReconstructionWork reconstruction_work(const process::PairResult& r) {
 ProcessFactory plenoptic_processing(const optics::CameraModel& camera) {
   // Kept for the factory's life (the daemon's): runs with the same geometry share their operator.
   auto operators = std::make_shared<process::OperatorCache>();
-  return [camera, operators](const RunConfig& config, const RunCalibration& calibration) -> ProcessFn {
-    const process::ProcessSettings& settings = config.spec.full;
-    // A run's volume is refused before any table is built when the pairs it keeps in flight would not
-    // fit this machine.
-    const Grid3 g = settings.reconstruction_grid();
-    require_memory(settings.peak_bytes_per_pair() * config.max_pairs_in_flight,
-                   "processing " + std::to_string(config.max_pairs_in_flight) + " pair(s) at once on a " +
-                       std::to_string(g.shape[0]) + " x " + std::to_string(g.shape[1]) + " x " +
-                       std::to_string(g.shape[2]) + " voxel volume (volume, max_pairs_in_flight)");
-    auto processor = std::make_shared<const process::PairProcessor>(
-        camera, calibration.loaded ? *calibration.loaded : calib::nominal_calibration(camera), settings,
-        operators.get());
-    spdlog::info("run processing: calibration {}; {}; {}", calibration.summary(), processor->setup_note(),
-                 processor->note().empty() ? "frames reconstructed on raw pixels" : processor->note());
-    const bool keep_volumes = config.publish_volumes;
-    return [processor, keep_volumes](const drivers::FramePair& pair, const CancelFlag& cancel) {
-      process::PairOptions options;
-      if (pair.measured) options.measured_dt_s = pair.measured->dt_s();
-      // Called after every MART iteration and correlation pass: a stopping run gives up there.
-      options.progress = [&cancel](const std::string&, double) {
-        if (cancel) throw Cancelled("run stopping");
+  return
+      [camera, operators](const RunConfig& config, const RunCalibration& calibration, process::Tier tier) -> ProcessFn {
+        const process::ProcessSettings& settings = config.spec.settings(tier, "run config");
+        // A run's volumes are refused before any table is built when the pairs its lanes keep in flight
+        // would not fit this machine.
+        const process::ProcessSettings& live = config.spec.settings(config.live_lane_tier(), "run config");
+        const Grid3 g = live.reconstruction_grid();
+        const int quality = config.quality.on() ? QualityLane::kPairsInFlight : 0;
+        require_memory(
+            live.peak_bytes_per_pair() * config.max_pairs_in_flight + config.spec.full.peak_bytes_per_pair() * quality,
+            "processing " + std::to_string(config.max_pairs_in_flight) + " pair(s) at once on a " +
+                std::to_string(g.shape[0]) + " x " + std::to_string(g.shape[1]) + " x " + std::to_string(g.shape[2]) +
+                " voxel volume (volume, max_pairs_in_flight)" +
+                (quality ? " beside the quality lane's pair on the full settings' volume" : ""));
+        auto processor = std::make_shared<const process::PairProcessor>(
+            camera, calibration.loaded ? *calibration.loaded : calib::nominal_calibration(camera), settings,
+            operators.get());
+        spdlog::info("run processing, {} tier: calibration {}; {}; {}", process::tier_name(tier), calibration.summary(),
+                     processor->setup_note(),
+                     processor->note().empty() ? "frames reconstructed on raw pixels" : processor->note());
+        // Volumes are published from the live lane only (the quality lane's would double the traffic).
+        const bool keep_volumes = config.publish_volumes && tier == config.live_lane_tier();
+        return [processor, keep_volumes](const drivers::FramePair& pair, const CancelFlag& cancel) {
+          process::PairOptions options;
+          if (pair.measured) options.measured_dt_s = pair.measured->dt_s();
+          // Called after every MART iteration and correlation pass: a stopping run gives up there.
+          options.progress = [&cancel](const std::string&, double) {
+            if (cancel) throw Cancelled("run stopping");
+          };
+          process::PairResult r = processor->process(pair.a.image, pair.b.image, options);
+          ProcessedPair out;
+          out.vectors = std::move(r.correlation.field);
+          out.flags = std::move(r.correlation.flags);
+          out.work = reconstruction_work(r);
+          spdlog::debug(
+              "pair {}: MART skipped {:.1f} % of the voxel updates ({:.1f} % of the work pruned); live voxels "
+              "per iteration A {}, B {}",
+              pair.pair_index, 100 * out.work->updates_skipped, 100 * out.work->work_pruned,
+              fmt::join(out.work->live_a, " "), fmt::join(out.work->live_b, " "));
+          if (keep_volumes) {
+            out.volume_a = std::move(r.volume_a);
+            out.volume_b = std::move(r.volume_b);
+          }
+          return out;
+        };
       };
-      process::PairResult r = processor->process(pair.a.image, pair.b.image, options);
-      ProcessedPair out;
-      out.vectors = std::move(r.correlation.field);
-      out.flags = std::move(r.correlation.flags);
-      out.work = reconstruction_work(r);
-      spdlog::debug(
-          "pair {}: MART skipped {:.1f} % of the voxel updates ({:.1f} % of the work pruned); live voxels "
-          "per iteration A {}, B {}",
-          pair.pair_index, 100 * out.work->updates_skipped, 100 * out.work->work_pruned,
-          fmt::join(out.work->live_a, " "), fmt::join(out.work->live_b, " "));
-      if (keep_volumes) {
-        out.volume_a = std::move(r.volume_a);
-        out.volume_b = std::move(r.volume_b);
-      }
-      return out;
-    };
-  };
 }
 
 }  // namespace plenopiv::daemon

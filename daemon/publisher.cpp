@@ -124,4 +124,8 @@ void Publisher::publish_volume(msg::VolumeHeader header, const Volume& volume) {
   send("volume", header.SerializeAsString(), {volume.data});
 }
 
+void Publisher::publish_preview(const msg::PreviewHeader& header, const ImageF& raw, const ImageF& refocused) {
+  send("preview", header.SerializeAsString(), {raw.pixels, refocused.pixels});
+}
+
 }  // namespace plenopiv::daemon

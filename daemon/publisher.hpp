@@ -8,6 +8,7 @@
 #include <optional>
 
 #include "core/base/grid.hpp"
+#include "core/base/image.hpp"
 #include "plenopiv.pb.h"
 #include "proto/curve.hpp"
 
@@ -27,6 +28,8 @@ class Publisher {
   // filled in here.
   void publish_vectors(msg::VectorFieldHeader header, const VectorField& field);
   void publish_volume(msg::VolumeHeader header, const Volume& volume);
+  // Topic `preview`: the header, then the downsampled raw frame and the refocused slice.
+  void publish_preview(const msg::PreviewHeader& header, const ImageF& raw, const ImageF& refocused);
   const std::string& endpoint() const { return endpoint_; }
   std::uint64_t messages_sent() const;
 

@@ -2,13 +2,16 @@
 #include "daemon/run.hpp"
 
 #include <spdlog/spdlog.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <ctime>
+#include <exception>
 
 #include "core/base/errors.hpp"
+#include "core/calib/nominal_calibration.hpp"
 #include "core/io/atomic_file.hpp"
 #include "core/optics/camera_file.hpp"
 #include "core/process/frame_check.hpp"
@@ -54,7 +57,13 @@ Run::Run(RunConfig config, std::string run_id, RunEnvironment env)
   if (camera_uri.empty()) {
     throw InputError("camera_uri: the run names no camera and plenopivd.yaml has no camera_uri");
   }
-  mailbox_ = std::make_unique<LiveMailbox>(std::size_t(config_.live_queue));
+  lanes_ = make_lanes(config_);
+  if (config_.preview.on() && env_.publisher) {
+    if (env_.camera_file.empty()) {
+      throw InputError("preview: the alignment preview refocuses with the daemon's camera_file, and it has none");
+    }
+    preview_queue_ = std::make_unique<LiveMailbox>(1);
+  }
   camera_ = drivers::open_camera(camera_uri);
   camera_->configure(drivers::CameraSettings{});
   trigger_ = drivers::open_trigger(trigger_uri);
@@ -148,7 +157,9 @@ void Run::record(drivers::FramePair pair) {
   ++pairs_received_;
   check_frames(pair);
   if (env_.heartbeat) env_.heartbeat();
-  mailbox_->push(std::make_shared<const drivers::FramePair>(std::move(pair)));
+  const SharedPair shared = std::make_shared<const drivers::FramePair>(std::move(pair));
+  for (const auto& lane : lanes_) lane->offer(shared);
+  if (preview_queue_) preview_queue_->push(shared);
 }
 
 // A disk that is about to fill ends the run before a frame write fails half way.
@@ -302,12 +313,9 @@ void Run::acquire() {
     }
   }
   // A stop hands the waiting pairs to no one (they are on disk); a run that ended by itself lets the
-  // live path finish them.
-  if (stop_) {
-    mailbox_->close_and_clear();
-  } else {
-    mailbox_->close();
-  }
+  // lanes finish theirs. The preview is for acquiring only.
+  for (const auto& lane : lanes_) lane->close(stop_);
+  if (preview_queue_) preview_queue_->close_and_clear();
 }
 
 // The slow part of a start, on the run's thread while Armed: the processing (weight tables) and
@@ -316,11 +324,21 @@ void Run::acquire() {
 bool Run::prepare() {
   setup_started_ns_ = std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now().time_since_epoch()).count();
   try {
-    if (env_.processing) process_ = env_.processing(config_, calibration_);
+    if (env_.processing) {
+      for (const auto& lane : lanes_) {
+        processes_.push_back(env_.processing(config_, calibration_, lane->tier()));
+        if (stop_) break;
+      }
+    }
     if (stop_) {
       env_.state->cancel_start();  // Armed (or Draining after `run stop`) → Idle
       spdlog::info("run {} stopped while armed: nothing recorded, no folder made", run_id_);
       return false;
+    }
+    if (preview_queue_) {
+      const optics::CameraModel camera = optics::load_camera_file(env_.camera_file);
+      preview_ = std::make_unique<const PreviewMaker>(
+          camera, calibration_.loaded ? *calibration_.loaded : calib::nominal_calibration(camera), config_.preview);
     }
     recorder_ = std::make_unique<run_folder::Writer>(setup_);
     prepared_ = true;
@@ -347,69 +365,28 @@ void Run::run() {
     camera_->start();  // before the trigger: its first edge must find the camera running
     env_.state->acquiring();
     std::thread acquisition([this] { acquire(); });
-    if (process_) {
-      try {
-        run_live_pipeline(
-            *mailbox_, config_.max_pairs_in_flight, process_,
-            [this](const drivers::FramePair& pair, ProcessedPair& result) {
-              if (result.work) {
-                std::lock_guard lock(work_mutex_);
-                last_work_.emplace(pair.pair_index, std::move(*result.work));
-              }
-              result.vectors.dt_s = result.vectors.dt_s > 0 ? result.vectors.dt_s : config_.dt_s;
-              recorder_->record_vectors(pair.pair_index, result.vectors, result.flags);
-              if (env_.publisher) {
-                msg::VectorFieldHeader h;
-                h.set_run_id(run_id_);
-                h.set_pair_index(pair.pair_index);
-                h.set_trigger_index(pair.trigger_index);
-                h.set_device_timestamp_ns(pair.a.device_timestamp_ns);
-                h.set_host_timestamp_ns(pair.a.host_timestamp_ns);
-                h.set_pairs_skipped(mailbox_->dropped() + stats_.process.skipped + stats_.process.cancelled);
-                if (pair.measured) {
-                  // Laser pulse 1 to now, just before sending, on the trigger's clock
-                  // (CLOCK_MONOTONIC for gpiod and the real-time sim trigger). A value outside
-                  // [0, 60) s means another clock (a test trigger's virtual time): left at 0.
-                  timespec now{};
-                  clock_gettime(CLOCK_MONOTONIC, &now);
-                  const double now_ns = double(now.tv_sec) * 1e9 + double(now.tv_nsec);
-                  const double latency_s = (now_ns - double(pair.measured->pulse1_ns)) * 1e-9;
-                  if (latency_s >= 0 && latency_s < 60) h.set_trigger_latency_s(latency_s);
-                }
-                env_.publisher->publish_vectors(h, result.vectors);
-                if (config_.publish_volumes) {
-                  for (auto [volume, name] : {std::pair{&result.volume_a, "A"}, std::pair{&result.volume_b, "B"}}) {
-                    if (!*volume) continue;
-                    msg::VolumeHeader vh;
-                    vh.set_run_id(run_id_);
-                    vh.set_pair_index(pair.pair_index);
-                    vh.set_exposure(name);
-                    vh.set_host_timestamp_ns(pair.a.host_timestamp_ns);
-                    env_.publisher->publish_volume(vh, **volume);
-                  }
-                }
-              }
-              if (env_.heartbeat) env_.heartbeat();
-            },
-            stats_, stop_);
-      } catch (...) {
-        request_stop();
-        acquisition.join();
-        throw;
-      }
-    } else {
-      while (mailbox_->take()) {
-      }
+    std::thread preview;
+    if (preview_) preview = std::thread([this] { preview_loop(); });
+    const auto join_threads = [&] {
+      acquisition.join();
+      if (preview.joinable()) preview.join();
+    };
+    try {
+      process_lanes();
+    } catch (...) {
+      request_stop();
+      join_threads();
+      throw;
     }
-    acquisition.join();
+    join_threads();
     if (!acquisition_error_.empty()) failure = acquisition_error_;
   } catch (const std::exception& e) {
     failure = e.what();
   }
-  const std::uint64_t skipped = mailbox_->dropped() + stats_.process.skipped + stats_.process.cancelled;
+  const std::uint64_t skipped = lanes_.front()->skipped();
   try {
-    recorder_->close(failure.empty() ? (stop_ ? "stopped" : "complete") : "failed: " + failure, stats_.output.processed,
-                     skipped, losses(), frames_lost());
+    recorder_->close(failure.empty() ? (stop_ ? "stopped" : "complete") : "failed: " + failure, fields_made(), skipped,
+                     losses(), frames_lost(), lane_counters());
   } catch (const std::exception& e) {
     if (failure.empty()) failure = std::string("closing the run folder: ") + e.what();
   }
@@ -423,7 +400,7 @@ void Run::run() {
     spdlog::log(
         lost || tc.shots_abandoned ? spdlog::level::warn : spdlog::level::info,
         "run {} ended: {} pairs recorded, {} processed, {} skipped, {} frames lost{}{}", run_id_,
-        recorder_->pairs_recorded(), stats_.output.processed.load(), skipped, lost,
+        recorder_->pairs_recorded(), fields_made(), skipped, lost,
         tc.shots_delayed ? ", " + std::to_string(tc.shots_delayed) + " laser shots delayed (playback late)" : "",
         tc.shots_abandoned ? ", " + std::to_string(tc.shots_abandoned) + " laser shots abandoned" : "");
   } else {
@@ -432,6 +409,115 @@ void Run::run() {
                   lost, failure);
   }
   finished_ = true;
+}
+
+// The lanes process the recorded pairs until their queues close: the quality lane on a thread of
+// its own, the live lane on the run's. A daemon with no processing stage forgets them as they come.
+void Run::process_lanes() {
+  if (processes_.size() != lanes_.size()) {
+    for (const auto& lane : lanes_) lane->discard_all();
+    return;
+  }
+  std::vector<std::thread> others;
+  std::vector<std::exception_ptr> errors(lanes_.size());
+  const auto run_lane = [this, &errors](std::size_t i) {
+    try {
+      Lane& lane = *lanes_[i];
+      lane.run(
+          processes_[i],
+          [this, &lane](const drivers::FramePair& pair, ProcessedPair& result) { output(lane, pair, result); }, stop_);
+    } catch (...) {
+      errors[i] = std::current_exception();
+      request_stop();  // an output that failed (the disk) ends the run, whichever lane met it
+    }
+  };
+  for (std::size_t i = 1; i < lanes_.size(); ++i) others.emplace_back(run_lane, i);
+  run_lane(0);
+  for (std::thread& t : others) t.join();
+  for (const std::exception_ptr& e : errors) {
+    if (e) std::rethrow_exception(e);
+  }
+}
+
+// A lane's field: recorded under its tier (run_folder::Writer keeps the tiers apart), then
+// published with its tier, and the volumes when the run asks for them.
+void Run::output(const Lane& lane, const drivers::FramePair& pair, ProcessedPair& result) {
+  if (result.work) {
+    std::lock_guard lock(work_mutex_);
+    last_work_.emplace(pair.pair_index, std::move(*result.work));
+  }
+  result.vectors.dt_s = result.vectors.dt_s > 0 ? result.vectors.dt_s : config_.dt_s;
+  recorder_->record_vectors(pair.pair_index, result.vectors, result.flags, lane.tier());
+  if (env_.publisher) {
+    msg::VectorFieldHeader h;
+    h.set_run_id(run_id_);
+    h.set_pair_index(pair.pair_index);
+    h.set_trigger_index(pair.trigger_index);
+    h.set_device_timestamp_ns(pair.a.device_timestamp_ns);
+    h.set_host_timestamp_ns(pair.a.host_timestamp_ns);
+    h.set_pairs_skipped(lane.skipped());
+    h.set_tier(process::tier_name(lane.tier()));
+    if (pair.measured) {
+      // Laser pulse 1 to now, just before sending, on the trigger's clock
+      // (CLOCK_MONOTONIC for gpiod and the real-time sim trigger). A value outside
+      // [0, 60) s means another clock (a test trigger's virtual time): left at 0.
+      timespec now{};
+      clock_gettime(CLOCK_MONOTONIC, &now);
+      const double now_ns = double(now.tv_sec) * 1e9 + double(now.tv_nsec);
+      const double latency_s = (now_ns - double(pair.measured->pulse1_ns)) * 1e-9;
+      if (latency_s >= 0 && latency_s < 60) h.set_trigger_latency_s(latency_s);
+    }
+    env_.publisher->publish_vectors(h, result.vectors);
+    if (config_.publish_volumes) {
+      for (auto [volume, name] : {std::pair{&result.volume_a, "A"}, std::pair{&result.volume_b, "B"}}) {
+        if (!*volume) continue;
+        msg::VolumeHeader vh;
+        vh.set_run_id(run_id_);
+        vh.set_pair_index(pair.pair_index);
+        vh.set_exposure(name);
+        vh.set_host_timestamp_ns(pair.a.host_timestamp_ns);
+        env_.publisher->publish_volume(vh, **volume);
+      }
+    }
+  }
+  if (env_.heartbeat) env_.heartbeat();
+}
+
+// While the run acquires: a preview of the newest recorded pair, then a wait of interval_s, until the
+// acquisition closes the queue. Made in a low-priority arena: the lanes come first for the cores.
+void Run::preview_loop() {
+  tbb::task_arena arena(tbb::task_arena::automatic, 1, tbb::task_arena::priority::low);
+  const auto interval =
+      std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(config_.preview.interval_s));
+  bool warned = false;
+  while (const std::optional<SharedPair> pair = preview_queue_->take()) {
+    try {
+      Preview p;
+      arena.execute([&] { p = preview_->make(**pair); });
+      p.header.set_run_id(run_id_);
+      env_.publisher->publish_preview(p.header, p.raw, p.refocused);
+      ++previews_published_;
+    } catch (const std::exception& e) {
+      // Said once: the preview is the operator's aid, the run goes on without it.
+      if (!warned)
+        spdlog::warn("run {}: pair {}: alignment preview failed: {}", run_id_, (*pair)->pair_index, e.what());
+      warned = true;
+    }
+    if (preview_queue_->wait_closed_for(interval)) break;
+  }
+}
+
+// Vector fields made by every lane (a pair processed by both lanes counts twice).
+std::uint64_t Run::fields_made() const {
+  std::uint64_t n = 0;
+  for (const auto& lane : lanes_) n += lane->stats().output.processed;
+  return n;
+}
+
+std::vector<msg::LaneCounters> Run::lane_counters() const {
+  std::vector<msg::LaneCounters> out;
+  for (const auto& lane : lanes_) out.push_back(lane->counters());
+  return out;
 }
 
 msg::Losses Run::losses() const {
@@ -443,9 +529,10 @@ msg::Losses Run::losses() const {
   l.set_not_read_out(c.pairs_not_read_out);
   l.set_not_recorded_at_stop(not_recorded_at_stop_);
   l.set_shots_abandoned(trigger_->counters().shots_abandoned);
-  l.set_live_queue_dropped(mailbox_->dropped());
-  l.set_processing_failed(stats_.process.skipped);
-  l.set_processing_cancelled(stats_.process.cancelled);
+  const Lane& live = *lanes_.front();
+  l.set_live_queue_dropped(live.queue().dropped());
+  l.set_processing_failed(live.stats().process.skipped);
+  l.set_processing_cancelled(live.stats().process.cancelled);
   return l;
 }
 
@@ -473,8 +560,8 @@ void Run::fill_status(msg::Status& s) const {
   }
   s.set_pairs_acquired(pairs_received_);
   s.set_pairs_recorded(recorder_->pairs_recorded());
-  s.set_pairs_processed(stats_.output.processed);
-  s.set_pairs_skipped(mailbox_->dropped() + stats_.process.skipped + stats_.process.cancelled);
+  s.set_pairs_processed(fields_made());
+  s.set_pairs_skipped(lanes_.front()->skipped());
   s.set_frames_lost(frames_lost());
   *s.mutable_losses() = losses();
   {
@@ -498,9 +585,14 @@ void Run::fill_status(msg::Status& s) const {
   }
   if (const auto free = io::free_bytes(recorder_->dir())) s.set_bytes_free(*free);
   s.set_laser_shots_delayed(trigger_->counters().shots_delayed);
-  *s.add_stages() = stats_.input.to_message("input", std::uint32_t(mailbox_->depth()), mailbox_->dropped());
-  *s.add_stages() = stats_.process.to_message("process", stats_.process.in_flight);
-  *s.add_stages() = stats_.output.to_message("output", 0);
+  s.set_previews_published(previews_published_);
+  // The live lane's stages; every lane's counters beside them.
+  const Lane& live = *lanes_.front();
+  const PipelineStats& stats = live.stats();
+  *s.add_stages() = stats.input.to_message("input", std::uint32_t(live.queue().depth()), live.queue().dropped());
+  *s.add_stages() = stats.process.to_message("process", stats.process.in_flight);
+  *s.add_stages() = stats.output.to_message("output", 0);
+  for (const msg::LaneCounters& lane : lane_counters()) *s.add_lanes() = lane;
 }
 
 }  // namespace plenopiv::daemon

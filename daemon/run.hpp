@@ -1,4 +1,4 @@
-// One run: trigger → camera → recorder (every pair) → live pipeline → publisher, on its own threads.
+// One run: trigger → camera → recorder (every pair) → processing lanes → publisher, on its own threads.
 #pragma once
 
 #include <atomic>
@@ -12,7 +12,9 @@
 #include <thread>
 
 #include "daemon/daemon_config.hpp"
+#include "daemon/lanes.hpp"
 #include "daemon/pipeline.hpp"
+#include "daemon/preview.hpp"
 #include "daemon/publisher.hpp"
 #include "daemon/run_calibration.hpp"
 #include "daemon/run_config.hpp"
@@ -24,10 +26,10 @@
 
 namespace plenopiv::daemon {
 
-// Makes the processing function for a run (it may read the run's reconstruction and correlation
-// sections and set up per-run tables) with the run's calibration (the one the run folder keeps).
-// Empty: this daemon has no processing stage, and runs record raw frames only.
-using ProcessFactory = std::function<ProcessFn(const RunConfig&, const RunCalibration&)>;
+// Makes the processing function of one of a run's lanes: the settings of `tier` in the run's
+// processing spec (it may set up per-run tables), with the run's calibration (the one the run
+// folder keeps). Empty: this daemon has no processing stage, and runs record raw frames only.
+using ProcessFactory = std::function<ProcessFn(const RunConfig&, const RunCalibration&, process::Tier tier)>;
 
 // How long a stop may take, at most, for each of its steps: the camera delivering exposures already
 // triggered (drivers::Camera::stop), the recorder writing the pairs delivered before the stop, and
@@ -91,6 +93,11 @@ class Run {
   bool prepare();
   void acquire();
   void record(drivers::FramePair pair);
+  void process_lanes();
+  void preview_loop();
+  void output(const Lane& lane, const drivers::FramePair& pair, ProcessedPair& result);
+  std::uint64_t fields_made() const;
+  std::vector<msg::LaneCounters> lane_counters() const;
   void attach_shot(drivers::FramePair& pair);
   void check_frames(const drivers::FramePair& pair);
   void take_drops();
@@ -117,9 +124,15 @@ class Run {
   std::atomic<bool> prepared_{false};
   std::atomic<std::int64_t> setup_started_ns_{0};
   std::unique_ptr<run_folder::Writer> recorder_;
-  ProcessFn process_;
-  std::unique_ptr<LiveMailbox> mailbox_;
-  PipelineStats stats_;
+  // The live lane first, then the quality lane when the run has one (make_lanes), and the
+  // processing of each (empty when the daemon has none).
+  std::vector<std::unique_ptr<Lane>> lanes_;
+  std::vector<ProcessFn> processes_;
+  // The alignment preview (config_.preview on and a publisher): the newest recorded pair waits in
+  // a queue of one; the maker exists once the run is set up.
+  std::unique_ptr<LiveMailbox> preview_queue_;
+  std::unique_ptr<const PreviewMaker> preview_;
+  std::atomic<std::uint64_t> previews_published_{0};
   std::atomic<bool> stop_{false}, finished_{false};
   std::atomic<std::uint64_t> pairs_received_{0};
   std::atomic<std::uint64_t> not_recorded_at_stop_{0};

@@ -17,11 +17,67 @@ std::string RunConfig::process_yaml() const {
                             "`plenopiv process --config`, `plenopiv process --run`).");
 }
 
+std::string QualityLane::policy() const {
+  switch (take) {
+    case Take::off:
+      return "off";
+    case Take::newest:
+      return "newest";
+    case Take::every:
+      return "every " + std::to_string(every);
+  }
+  return "?";
+}
+
+namespace {
+
+// `quality: off | newest | {every: N}` and `quality_queue`, against the spec's tiers.
+QualityLane parse_quality_lane(const YamlMap& map, const process::ProcessSpec& spec) {
+  QualityLane q;
+  q.take = spec.live ? QualityLane::Take::newest : QualityLane::Take::off;
+  if (map.has("quality")) {
+    if (map.node()["quality"].IsMap()) {
+      const YamlMap every = map.map("quality");
+      every.reject_unknown({"every"});
+      const long long n = every.integer("every");
+      if (n < 1 || n > (1ll << 31))
+        every.fail("every", "must be in [1, 2^31] (1: every pair), got " + std::to_string(n));
+      q.take = QualityLane::Take::every;
+      q.every = std::uint64_t(n);
+    } else {
+      q.take = map.choice("quality", {"off", "newest"}) == "off" ? QualityLane::Take::off : QualityLane::Take::newest;
+    }
+    if (q.on() && !spec.live) {
+      map.fail("quality",
+               "a quality lane needs a live: tier in the processing settings (without one the live lane already "
+               "runs the full settings); add a live: section or leave quality out");
+    }
+  }
+  q.queue = map.integer_in("quality_queue", q.queue, 1, 64);
+  return q;
+}
+
+PreviewSettings parse_preview(const YamlMap& map) {
+  PreviewSettings p;
+  const auto preview = map.optional_map("preview");
+  if (!preview) return p;
+  preview->reject_unknown({"interval_s", "downsample", "z_mm"});
+  p.interval_s = preview->number_or("interval_s", 1.0);
+  if (!(p.interval_s >= 0.1 && p.interval_s <= 3600)) preview->fail("interval_s", "must be in [0.1, 3600] s");
+  p.downsample = preview->integer_in("downsample", p.downsample, 1, 64);
+  p.z_mm = preview->number_or("z_mm", p.z_mm);
+  if (!(std::abs(p.z_mm) <= 1000)) preview->fail("z_mm", "must be in [-1000, 1000] mm");
+  return p;
+}
+
+}  // namespace
+
 RunConfig parse_run_config(const std::string& text, const std::string& source) {
   const YAML::Node root = load_yaml_text(text, source);
   const YamlMap map(root, source);
-  std::vector<std::string_view> known{"camera_uri",      "trigger_uri",         "pairs",     "duration_s", "rate_hz",
-                                      "publish_volumes", "max_pairs_in_flight", "live_queue"};
+  std::vector<std::string_view> known{
+      "camera_uri",          "trigger_uri", "pairs",   "duration_s",    "rate_hz", "publish_volumes",
+      "max_pairs_in_flight", "live_queue",  "quality", "quality_queue", "preview"};
   known.insert(known.end(), std::begin(process::kProcessKeys), std::end(process::kProcessKeys));
   map.reject_unknown(std::span<const std::string_view>(known));
   RunConfig c;
@@ -49,6 +105,8 @@ RunConfig parse_run_config(const std::string& text, const std::string& source) {
   c.publish_volumes = map.boolean_or("publish_volumes", false);
   c.max_pairs_in_flight = map.integer_in("max_pairs_in_flight", c.max_pairs_in_flight, 1, 64);
   c.live_queue = map.integer_in("live_queue", c.live_queue, 1, 64);
+  c.quality = parse_quality_lane(map, c.spec);
+  c.preview = parse_preview(map);
   return c;
 }
 

@@ -247,8 +247,10 @@ void Writer::record_pair(const PairRecord& pair) {
   write_manifest_locked();
 }
 
-void Writer::record_vectors(std::uint64_t pair_index, const VectorField& field, std::span<const std::uint8_t> flags) {
-  const std::string file = "vectors/" + pair_name(pair_index) + ".h5";
+void Writer::record_vectors(std::uint64_t pair_index, const VectorField& field, std::span<const std::uint8_t> flags,
+                            process::Tier tier) {
+  const bool live = tier == process::Tier::live;
+  const std::string file = std::string(live ? "vectors/live/" : "vectors/") + pair_name(pair_index) + ".h5";
   std::string run_id, frame_a, frame_b;
   double measured_dt_s = 0;
   {
@@ -267,21 +269,34 @@ void Writer::record_vectors(std::uint64_t pair_index, const VectorField& field, 
       {"frame_a", frame_a},
       {"frame_b", frame_b},
       {"settings", process_yaml_},
+      {"tier", process::tier_name(tier)},
       {"dt_s", std::to_string(field.dt_s)},
       {"dt_source", measured_dt_s > 0 ? "measured (laser Q-switch sync)" : "nominal (the run's dt_s)"}};
+  if (live) fs::create_directories(dir_ / "vectors/live");
   process::write_vector_field_files(dir_ / file, {}, field, flags, provenance);
   std::lock_guard lock(mutex_);
-  statistics_.add(field);
+  (live ? live_statistics_ : statistics_).add(field);
   for (msg::ManifestPair& p : *manifest_.mutable_pairs()) {
-    if (p.pair_index() == pair_index) p.set_vectors(file);
+    if (p.pair_index() != pair_index) continue;
+    if (live) {
+      p.set_live_vectors(file);
+    } else {
+      p.set_vectors(file);
+    }
   }
   manifest_.set_pairs_processed(manifest_.pairs_processed() + 1);
   write_manifest_locked();
 }
 
 void Writer::write_statistics_locked() {
-  write_statistics(dir_ / "statistics.h5", statistics_, nominal_dt_s_, statistics_.fields());
-  manifest_.set_statistics_file("statistics.h5");
+  if (statistics_.fields() > 0) {
+    write_statistics(dir_ / "statistics.h5", statistics_, nominal_dt_s_, statistics_.fields());
+    manifest_.set_statistics_file("statistics.h5");
+  }
+  if (live_statistics_.fields() > 0) {
+    write_statistics(dir_ / "statistics-live.h5", live_statistics_, nominal_dt_s_, live_statistics_.fields());
+    manifest_.set_live_statistics_file("statistics-live.h5");
+  }
 }
 
 void Writer::record_drop(std::uint64_t trigger_index, const std::string& reason) {
@@ -301,7 +316,7 @@ void Writer::add_warning(const std::string& warning) {
 }
 
 void Writer::close(const std::string& state, std::uint64_t processed, std::uint64_t skipped, const msg::Losses& losses,
-                   std::uint64_t frames_lost) {
+                   std::uint64_t frames_lost, const std::vector<msg::LaneCounters>& lanes) {
   std::lock_guard lock(mutex_);
   if (closed_) return;
   closed_ = true;
@@ -311,10 +326,12 @@ void Writer::close(const std::string& state, std::uint64_t processed, std::uint6
   manifest_.set_pairs_skipped(skipped);
   *manifest_.mutable_losses() = losses;
   manifest_.set_frames_lost(frames_lost);
+  manifest_.clear_lanes();
+  for (const msg::LaneCounters& lane : lanes) *manifest_.add_lanes() = lane;
   // The final manifest goes first: statistics are a summary of files already listed, and a disk
   // that fills up writing them must not leave the folder "recording".
   write_manifest_locked();
-  if (statistics_.fields() > 0) {
+  if (statistics_.fields() > 0 || live_statistics_.fields() > 0) {
     write_statistics_locked();
     write_manifest_locked();
   }
@@ -374,6 +391,7 @@ Reader::Reader(const fs::path& dir) : dir_(dir) {
     }
     if (p.measured_dt_s() > 0) e.measured_dt_s = p.measured_dt_s();
     e.vectors = p.vectors();
+    e.live_vectors = p.live_vectors();
     pairs_.push_back(std::move(e));
   }
 }

@@ -13,6 +13,7 @@
 #include "core/base/grid.hpp"
 #include "core/base/image.hpp"
 #include "core/piv/statistics.hpp"
+#include "core/process/process.hpp"
 #include "plenopiv.pb.h"
 
 namespace plenopiv::run_folder {
@@ -24,8 +25,10 @@ namespace plenopiv::run_folder {
 //   calibration.h5           the calibration file the run processed with, byte for byte, if any
 //   frames/pair-<n>-A.tif    raw frames, 16-bit TIFF, every pair the camera delivered
 //   frames/pair-<n>-B.tif
-//   vectors/pair-<n>.h5      vector fields of the pairs the live path processed
-//   statistics.h5            mean velocity (u, v, w) and u_rms, v_rms, w_rms, count per node
+//   vectors/pair-<n>.h5      vector fields made with the full settings (either lane)
+//   vectors/live/pair-<n>.h5 vector fields made with the live tier (the live lane, when the run has one)
+//   statistics.h5            mean velocity (u, v, w) and u_rms, v_rms, w_rms, count per node (full settings)
+//   statistics-live.h5       the same over the live tier's fields
 //   manifest.json            msg::RunManifest as JSON (64-bit integers as JSON numbers)
 // Every file is written under a temporary name, fsynced and renamed; the manifest is rewritten the
 // same way after each pair and each field, so whatever stops the writer, the manifest lists exactly
@@ -79,19 +82,23 @@ class Writer {
   const std::filesystem::path& dir() const { return dir_; }
   // Writes both frames (together, each fsynced) and lists the pair. Throws if the disk refuses.
   void record_pair(const PairRecord& pair);
-  // Writes the pair's vector field (process::write_vector_field_files: vorticity, `flags` when
-  // given, provenance), lists it, and adds it to the running statistics.
-  void record_vectors(std::uint64_t pair_index, const VectorField& field, std::span<const std::uint8_t> flags = {});
+  // Writes the pair's vector field made with `tier`'s settings (process::write_vector_field_files:
+  // vorticity, `flags` when given, provenance with the tier), lists it (ManifestPair vectors or
+  // live_vectors), and adds it to that tier's running statistics. A pair may have one field of each
+  // tier; neither overwrites the other.
+  void record_vectors(std::uint64_t pair_index, const VectorField& field, std::span<const std::uint8_t> flags = {},
+                      process::Tier tier = process::Tier::full);
   // Lists pairs the camera dropped, with the reason, in the manifest (the first kMaxListedDrops;
   // the losses count them all). The manifest is rewritten with the next file or at close.
   void record_drop(std::uint64_t trigger_index, const std::string& reason);
   static constexpr int kMaxListedDrops = 10000;
   // Bad data met on the way (all-zero or saturated frames, ...): listed once each.
   void add_warning(const std::string& warning);
-  // Writes the final manifest with `state` ("complete", "stopped", "failed: ..."), the losses and
-  // the raw frames lost, then statistics (if any field was recorded). Later calls do nothing.
+  // Writes the final manifest with `state` ("complete", "stopped", "failed: ..."), the losses, the
+  // raw frames lost and the lanes' counters, then statistics (of each tier that recorded a field).
+  // Later calls do nothing.
   void close(const std::string& state, std::uint64_t processed, std::uint64_t skipped, const msg::Losses& losses = {},
-             std::uint64_t frames_lost = 0);
+             std::uint64_t frames_lost = 0, const std::vector<msg::LaneCounters>& lanes = {});
 
   std::uint64_t pairs_recorded() const;
   msg::RunManifest manifest() const;
@@ -103,8 +110,8 @@ class Writer {
   mutable std::mutex mutex_;
   std::filesystem::path dir_;
   msg::RunManifest manifest_;
-  std::string process_yaml_;  // the run's processing keys, each vector file's provenance
-  piv::RunningStatistics statistics_;
+  std::string process_yaml_;                             // the run's processing keys, each vector file's provenance
+  piv::RunningStatistics statistics_, live_statistics_;  // over the full and the live tier's fields
   double nominal_dt_s_ = 0;
   bool closed_ = false;
 };
@@ -114,7 +121,8 @@ struct PairEntry {
   std::uint64_t pair_index = 0, trigger_index = 0;
   std::filesystem::path frame_a, frame_b;  // absolute
   std::optional<double> measured_dt_s;     // the laser's pulse separation for this pair, if measured
-  std::string vectors;                     // the live path's field (relative), empty if none
+  std::string vectors;                     // the run's field with the full settings (relative), empty if none
+  std::string live_vectors;                // the run's field with the live tier (relative), empty if none
 };
 
 // Reads a run folder from the folder alone, checking everything before anything is processed: the

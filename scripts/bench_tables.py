@@ -65,6 +65,7 @@ BENCHES = {
     "piv": ("paper", ["build/bin/bench_piv"], None),
     "uncertainty": ("paper", ["build/bin/bench_uncertainty", "--with-paper-ring"], None),
     "daemon": ("quick", ["build/bin/bench_daemon", "6", "1.0"], None),
+    "lanes": ("quick", ["build/bin/bench_lanes", "200", "10"], None),
     "sim": ("quick", ["build/bin/bench_sim"], None),
     "calib": ("quick", ["build/bin/bench_calib"], None),
     "resampling": ("quick", ["build/bin/bench_resampling"], None),
@@ -558,6 +559,18 @@ def t_daemon(R):
     return out + ["", r.provenance()]
 
 
+def t_lanes(R):
+    r = R("lanes")
+    rows = [[d["variant"], f"{d['recorded']} of {d['pairs']}", d["frames_lost"],
+             f"{d['live_fields']} ({d['live_fields_per_s']}/s)", d["live_dropped"], d["live_mean_s"],
+             f"{d['quality_fields']} ({d['quality_fields_per_s']}/s)", d["quality_dropped"], d["quality_mean_s"],
+             f"{d['rss_min_gb']} / {d['rss_max_gb']}"]
+            for d in r.find(bench="lanes")]
+    out = table(["variant", "pairs recorded", "raw frames lost", "live fields", "live dropped", "live s/pair",
+                 "quality fields", "quality dropped", "quality s/pair", "RSS min / max GB"], rows)
+    return out + ["", r.provenance()]
+
+
 def t_sim(R):
     r = R("sim")
     rows = []
@@ -626,6 +639,7 @@ TABLES = {
     "piv-ring": t_piv_ring("piv"),
     "uncertainty": t_uncertainty,
     "daemon": t_daemon,
+    "lanes": t_lanes,
     "sim": t_sim,
     "calib": t_calib,
     "resampling": t_resampling,

@@ -56,6 +56,13 @@ void print_status(const msg::Status& s) {
                 << ", skipped " << c.skipped() << ", dropped " << c.dropped() << ", queue " << c.queue_depth()
                 << ", mean " << std::setprecision(3) << c.mean_time_s() << " s\n";
     }
+    for (const msg::LaneCounters& l : s.lanes()) {
+      std::cout << "lane " << std::left << std::setw(10) << l.name() << std::right << "tier " << l.tier() << ", "
+                << l.policy() << ", queue " << l.queue_depth() << "/" << l.queue_capacity() << ", offered "
+                << l.offered() << ", processed " << l.processed() << ", dropped " << l.dropped() << ", failed "
+                << l.failed() << ", cancelled " << l.cancelled() << ", in flight " << l.in_flight() << ", mean "
+                << std::setprecision(3) << l.mean_time_s() << " s\n";
+    }
     if (s.has_losses()) {
       const msg::Losses& l = s.losses();
       std::cout << "losses         frames never arrived " << l.frames_never_arrived() << ", discarded "

@@ -16,6 +16,7 @@
 #include "clients/cli/calibration_frames.hpp"
 #include "clients/cli/commands.hpp"
 #include "clients/cli/options.hpp"
+#include "clients/cli/png_file.hpp"
 #include "clients/cli/progress.hpp"
 #include "clients/cli/reprocess.hpp"
 #include "clients/cli/weights_cache.hpp"

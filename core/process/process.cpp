@@ -157,6 +157,14 @@ ProcessSpec process_spec_from(const YamlMap& root) {
   return spec;
 }
 
+const char* tier_name(Tier tier) { return tier == Tier::live ? "live" : "full"; }
+
+const ProcessSettings& ProcessSpec::settings(Tier tier, const std::string& source) const {
+  if (tier == Tier::full) return full;
+  if (!live) throw InputError(source + ": has no live: section (the live tier)");
+  return *live;
+}
+
 ProcessSpec load_process_spec(const std::filesystem::path& path) {
   return process_spec_from(YamlMap(load_yaml_file(path), path.string()));
 }

@@ -64,11 +64,19 @@ Grid3 grid_for_extent(const std::array<double, 3>& lo, const std::array<double, 
 //         each key overriding the one above it; everything else as above)
 inline constexpr std::string_view kProcessKeys[] = {"dt_s", "volume", "reconstruction", "correlation", "live"};
 
+// Which settings of a spec a vector field was made with: the full settings, or the `live:` fast tier.
+enum class Tier { full, live };
+// "full" or "live": the name files, messages and the command line use.
+const char* tier_name(Tier tier);
+
 // A processing spec, parsed and checked once: the full settings (the quality lane, offline
 // processing) and, when the config has a `live:` section, the live lane's fast tier.
 struct ProcessSpec {
   ProcessSettings full;
   std::optional<ProcessSettings> live;
+
+  // The settings of `tier`; InputError naming `source` when the tier is live and the spec has none.
+  const ProcessSettings& settings(Tier tier, const std::string& source) const;
 };
 
 // Reads a spec from a mapping holding only kProcessKeys. Unknown keys are refused; every value is

@@ -116,7 +116,9 @@ DecodedPair decode(const PairFiles& files) { return {io::read_tiff_u16(files.a),
 
 // Plays the recording on its own thread. Triggers (edges, software triggers, or the free-running
 // clock) queue up as pending exposures; the player delivers each from decoded frames: the
-// preloaded recording, or the read-ahead queue a second thread keeps filled.
+// preloaded recording (decoded at the first start(), on the caller's thread: plenopivd's run
+// thread, so that opening the camera, which answers `run start`, reads headers only), or the
+// read-ahead queue a second thread keeps filled.
 class ReplayCamera : public CameraBase, public TriggerInput {
  public:
   // An exposure to play: its trigger index (counted from start) and when it was triggered.
@@ -130,11 +132,9 @@ class ReplayCamera : public CameraBase, public TriggerInput {
         files_(std::move(files)),
         settings_(settings),
         bit_depth_(bit_depth),
-        epoch_(Clock::now()) {
-    if (files_.size() * pair_bytes <= settings_.buffer_bytes) {
-      preloaded_.reserve(files_.size());
-      for (const PairFiles& f : files_) preloaded_.push_back(decode(f));
-    } else {
+        epoch_(Clock::now()),
+        preload_(files_.size() * pair_bytes <= settings_.buffer_bytes) {
+    if (!preload_) {
       ahead_capacity_ = std::size_t(settings_.buffer_bytes / pair_bytes);
       reader_ = std::thread([this] { read_ahead_loop(); });
     }
@@ -165,6 +165,14 @@ class ReplayCamera : public CameraBase, public TriggerInput {
     external_ = settings.trigger == TriggerSource::External;
   }
   void do_start() override {
+    // The whole recording, decoded once (a failure to read a frame fails the start, naming it).
+    // Written before running_ is set under the mutex; the player reads it only after it saw that.
+    if (preload_ && preloaded_.empty()) {
+      std::vector<DecodedPair> decoded;
+      decoded.reserve(files_.size());
+      for (const PairFiles& f : files_) decoded.push_back(decode(f));
+      preloaded_ = std::move(decoded);
+    }
     {
       std::lock_guard lock(mutex_);
       running_ = true;
@@ -234,7 +242,7 @@ class ReplayCamera : public CameraBase, public TriggerInput {
 
   // The next recorded pair, or nullopt: not decoded yet (lost) or the end (ended_ set).
   std::optional<DecodedPair> next_recorded() {
-    if (!preloaded_.empty()) {
+    if (preload_) {
       if (cursor_ >= preloaded_.size()) {
         if (!settings_.loop) return std::nullopt;
         cursor_ = 0;
@@ -251,7 +259,7 @@ class ReplayCamera : public CameraBase, public TriggerInput {
 
   bool at_end() {
     if (settings_.loop) return false;
-    if (!preloaded_.empty()) return cursor_ >= preloaded_.size();
+    if (preload_) return cursor_ >= preloaded_.size();
     std::lock_guard lock(mutex_);
     return ahead_.empty() && read_all_;
   }
@@ -322,7 +330,8 @@ class ReplayCamera : public CameraBase, public TriggerInput {
   const ReplaySettings settings_;
   const int bit_depth_;
   const Clock::time_point epoch_;       // the replay's device clock starts at open
-  std::vector<DecodedPair> preloaded_;  // the whole recording, when it fits the budget
+  const bool preload_;                  // the whole recording fits the budget: decoded at the first start
+  std::vector<DecodedPair> preloaded_;  // the whole recording, once decoded
   std::size_t cursor_ = 0;              // next preloaded pair (player thread only)
   std::size_t ahead_capacity_ = 0;
 

@@ -44,7 +44,8 @@ inline constexpr std::uint64_t kReplayDefaultBufferMb = 1024;
 //                  a free-running camera stops delivering; a trigger after the last pair fails the
 //                  camera with "end of the recording", since the trigger cannot be honoured).
 //   buffer_mb=<MB> memory for decoded frames (default kReplayDefaultBufferMb, at least two pairs):
-//                  when the whole recording fits, it is decoded at open and played from memory;
+//                  when the whole recording fits, it is decoded at the first start() (the caller's
+//                  thread: plenopivd's run thread, never the request that opens it) and played from memory;
 //                  otherwise a read-ahead thread keeps up to buffer_mb of pairs decoded ahead of
 //                  the player. A trigger whose pair is not decoded yet delivers nothing: its two
 //                  frames are counted lost (CameraCounters::frames_lost, as any camera's missing

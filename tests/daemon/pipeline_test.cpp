@@ -224,7 +224,7 @@ class RunTest : public ::testing::Test {
     env_.default_camera_uri = "test://";
     env_.default_trigger_uri = "sim://";
     env_.state = &state_;
-    env_.processing = [](const RunConfig&, const RunCalibration&) {
+    env_.processing = [](const RunConfig&, const RunCalibration&, process::Tier) {
       return ProcessFn([](const drivers::FramePair& pair, const CancelFlag& c) { return tagged_field(pair, c); });
     };
     // Faster than a real laser, so runs stay short: frame B must end within the period.
@@ -333,7 +333,7 @@ TEST_F(RunTest, AStopWhileArmedEndsTheRunWithNoFolder) {
   std::promise<void> release;
   std::shared_future<void> released = release.get_future().share();
   std::atomic<bool> building{false};
-  env_.processing = [&, released](const RunConfig&, const RunCalibration&) {
+  env_.processing = [&, released](const RunConfig&, const RunCalibration&, process::Tier) {
     building = true;
     released.wait();  // the weight tables, as long as the test wants
     return ProcessFn([](const drivers::FramePair& pair, const CancelFlag& c) { return tagged_field(pair, c); });
@@ -363,7 +363,7 @@ TEST_F(RunTest, AStopWhileArmedEndsTheRunWithNoFolder) {
 // Settings the processing refuses while the run is set up (after the start was answered) put the
 // daemon into Error with the reason, and make no folder.
 TEST_F(RunTest, ASetupFailureIsTheRunsErrorWithNoFolder) {
-  env_.processing = [](const RunConfig&, const RunCalibration&) -> ProcessFn {
+  env_.processing = [](const RunConfig&, const RunCalibration&, process::Tier) -> ProcessFn {
     throw InputError("volume: z_mm: the box reaches behind the main lens");
   };
   state_.start("bad-setup");
@@ -463,7 +463,7 @@ TEST_F(RunTest, ACameraWithoutATriggerInputIsSoftwareTriggeredAndTheManifestSays
 // A stop is bounded however long the processing would take: pairs in flight give up at their next
 // check (they stay on disk), the folder is closed "stopped" and says what was cancelled.
 TEST_F(RunTest, AStopWithSlowProcessingInFlightIsBounded) {
-  env_.processing = [](const RunConfig&, const RunCalibration&) {
+  env_.processing = [](const RunConfig&, const RunCalibration&, process::Tier) {
     return ProcessFn([](const drivers::FramePair& pair, const CancelFlag& cancel) {
       for (int iteration = 0; iteration < 6000; ++iteration) {  // a minute of "MART iterations"
         if (cancel) throw Cancelled("run stopping");
@@ -569,7 +569,7 @@ TEST_F(RunTest, ASubscriberThatNeverReadsDoesNotSlowAcquisition) {
   auto publisher = std::make_optional<Publisher>(context, "tcp://127.0.0.1:*", 2);
   env_.publisher = &*publisher;
   // Big fields (32^3 nodes, 4 arrays: 512 KiB a message) fill the socket buffers quickly.
-  env_.processing = [](const RunConfig&, const RunCalibration&) {
+  env_.processing = [](const RunConfig&, const RunCalibration&, process::Tier) {
     return ProcessFn([](const drivers::FramePair& pair, const CancelFlag&) {
       Grid3 g;
       g.shape = {32, 32, 32};

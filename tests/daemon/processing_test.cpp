@@ -42,7 +42,7 @@ TEST(Processing, UniformDisplacementOfARayTracedPairComesBack) {
 
   const RunConfig config = parse_run_config(kConfig, "run.yaml");
   const auto t0 = std::chrono::steady_clock::now();
-  const ProcessFn process = plenoptic_processing(camera)(config, RunCalibration{});
+  const ProcessFn process = plenoptic_processing(camera)(config, RunCalibration{}, process::Tier::full);
   const CancelFlag go{false};
   const ProcessedPair out = process(pair, go);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -120,14 +120,14 @@ TEST(Processing, BadSettingsAndWrongImagesAreNamed) {
         parse_run_config("dt_s: 0.001\nvolume: {x_mm: [-100, 100], y_mm: [-100, 100], z_mm: [-5, 5], voxel_mm: 0.125}\n"
                          "max_pairs_in_flight: 4\n",
                          "run.yaml"),
-        RunCalibration{});
+        RunCalibration{}, process::Tier::full);
     FAIL() << "a 1600 x 1600 x 96 voxel volume with 4 pairs in flight was accepted";
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find("processing 4 pair(s) at once on a 1600 x 1600 x"), std::string::npos)
         << e.what();
     EXPECT_NE(std::string(e.what()).find("GB of memory"), std::string::npos) << e.what();
   }
-  const ProcessFn process = factory(parse_run_config(kConfig, "run.yaml"), RunCalibration{});
+  const ProcessFn process = factory(parse_run_config(kConfig, "run.yaml"), RunCalibration{}, process::Tier::full);
   drivers::FramePair small;
   small.a.image = ImageU16(64, 48);
   small.b.image = ImageU16(64, 48);
@@ -148,9 +148,9 @@ TEST(Processing, ARunOnAnEarlierRunsGeometryBuildsNoTables) {
   const RunConfig config = parse_run_config(kConfig, "run.yaml");
   std::string other = kConfig;
   other.replace(other.find("x_mm: [-1, 1]"), 13, "x_mm: [-1.25, 1.25]");
-  factory(config, RunCalibration{});
-  factory(config, RunCalibration{});
-  factory(parse_run_config(other, "run.yaml"), RunCalibration{});
+  factory(config, RunCalibration{}, process::Tier::full);
+  factory(config, RunCalibration{}, process::Tier::full);
+  factory(parse_run_config(other, "run.yaml"), RunCalibration{}, process::Tier::full);
   spdlog::set_default_logger(previous);
   const std::vector<std::string> lines = sink->last_formatted();
   ASSERT_EQ(lines.size(), 3u);

@@ -165,5 +165,53 @@ TEST(RunConfig, ProcessYamlGivesCoreProcessTheSameSpec) {
             std::string::npos);
 }
 
+// The quality lane: on (newest) by default when the spec has a live tier, off without one; `every: N`
+// and `off` as written; asking for one without a live tier, or a bad policy, names the key.
+TEST(RunConfig, TheQualityLaneFollowsTheLiveTierAndItsPolicyIsParsedOnce) {
+  const std::string live = "live: {reconstruction: {iterations: 1}}\n";
+  EXPECT_FALSE(parse_run_config(kVolume, "run.yaml").quality.on());
+  EXPECT_EQ(parse_run_config(kVolume, "run.yaml").live_lane_tier(), process::Tier::full);
+  const RunConfig two = parse_run_config(kVolume + live, "run.yaml");
+  EXPECT_EQ(two.quality.take, QualityLane::Take::newest);
+  EXPECT_EQ(two.quality.queue, 2);
+  EXPECT_EQ(two.live_lane_tier(), process::Tier::live);
+  const RunConfig every = parse_run_config(kVolume + live + "quality: {every: 5}\nquality_queue: 4\n", "run.yaml");
+  EXPECT_EQ(every.quality.take, QualityLane::Take::every);
+  EXPECT_EQ(every.quality.every, 5u);
+  EXPECT_EQ(every.quality.queue, 4);
+  EXPECT_EQ(every.quality.policy(), "every 5");
+  EXPECT_FALSE(parse_run_config(kVolume + live + "quality: off\n", "run.yaml").quality.on());
+
+  EXPECT_NE(error_of(kVolume + "quality: newest\n").find("quality: a quality lane needs a live: tier"),
+            std::string::npos)
+      << error_of(kVolume + "quality: newest\n");
+  EXPECT_NE(error_of(kVolume + live + "quality: oldest\n").find("quality"), std::string::npos);
+  EXPECT_NE(error_of(kVolume + live + "quality: {every: 0}\n").find("quality.every: must be in [1, 2^31]"),
+            std::string::npos)
+      << error_of(kVolume + live + "quality: {every: 0}\n");
+  EXPECT_NE(error_of(kVolume + live + "quality: {evry: 2}\n").find("quality.evry: unknown key"), std::string::npos)
+      << error_of(kVolume + live + "quality: {evry: 2}\n");
+  EXPECT_NE(error_of(kVolume + live + "quality_queue: 0\n").find("quality_queue"), std::string::npos);
+}
+
+// The alignment preview: none unless asked; its interval, downsampling and depth as written, each
+// checked by name.
+TEST(RunConfig, ThePreviewIsOffUnlessAskedAndItsSettingsAreChecked) {
+  EXPECT_FALSE(parse_run_config(kVolume, "run.yaml").preview.on());
+  const RunConfig on = parse_run_config(kVolume + "preview: {}\n", "run.yaml");
+  EXPECT_TRUE(on.preview.on());
+  EXPECT_DOUBLE_EQ(on.preview.interval_s, 1.0);
+  EXPECT_EQ(on.preview.downsample, 8);
+  const RunConfig set = parse_run_config(kVolume + "preview: {interval_s: 5, downsample: 4, z_mm: -1.5}\n", "run.yaml");
+  EXPECT_DOUBLE_EQ(set.preview.interval_s, 5.0);
+  EXPECT_EQ(set.preview.downsample, 4);
+  EXPECT_DOUBLE_EQ(set.preview.z_mm, -1.5);
+  EXPECT_NE(error_of(kVolume + "preview: {downsample: 0}\n").find("preview.downsample"), std::string::npos);
+  EXPECT_NE(error_of(kVolume + "preview: {z_mm: 2000}\n").find("preview.z_mm: must be in [-1000, 1000] mm"),
+            std::string::npos)
+      << error_of(kVolume + "preview: {z_mm: 2000}\n");
+  EXPECT_NE(error_of(kVolume + "preview: {rate: 1}\n").find("preview.rate: unknown key"), std::string::npos);
+}
+
 }  // namespace
 }  // namespace plenopiv::daemon

@@ -109,6 +109,21 @@ TEST(ReplayCamera, ATiffFolderIsReplayedBitForBitInNameOrder) {
   }
 }
 
+// Opening reads the TIFF headers only (plenopivd opens the camera while answering `run start`): a
+// recording that fits buffer_mb is decoded at start(), on the run's thread, so a frame replaced
+// between open and start is played as it is at start.
+TEST(ReplayCamera, ARecordingThatFitsIsDecodedAtStartNotAtOpen) {
+  const fs::path dir = tiff_folder("decoded-at-start", 2);
+  auto camera = open("replay://decoded-at-start");
+  io::write_tiff(dir / "pair-1-A.tif", frame_image(99), false);
+  start(*camera);
+  const std::vector<FramePair> pairs = take_pairs(*camera, 2);
+  ASSERT_EQ(pairs.size(), 2u) << testing_support::describe(camera->counters());
+  EXPECT_EQ(pairs[0].a.image.pixels, frame_image(0).pixels);
+  EXPECT_EQ(pairs[1].a.image.pixels, frame_image(99).pixels);
+  camera->stop();
+}
+
 TEST(ReplayCamera, ARunFolderIsReplayedBitForBitInTheManifestsOrder) {
   const fs::path data = replay_root() / "runs";
   fs::remove_all(data);

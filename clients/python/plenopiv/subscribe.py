@@ -17,15 +17,20 @@ DEFAULT_PNG = "plenopiv-live.png"
 
 
 def summary(ds):
-    return ("pair %6d  mean %.4f m/s  max %.4f m/s  valid %.1f %%  latency %.3f s  run %s"
+    return ("pair %6d  mean %.4f m/s  max %.4f m/s  valid %.1f %%  latency %.3f s  tier %s  run %s"
             % (ds.attrs["header_pair_index"], ds.attrs["header_mean_speed_m_s"], ds.attrs["header_max_speed_m_s"],
-               100.0 * ds.attrs["header_valid_fraction"], ds.attrs["header_latency_s"], ds.attrs["header_run_id"]))
+               100.0 * ds.attrs["header_valid_fraction"], ds.attrs["header_latency_s"],
+               ds.attrs.get("header_tier") or "?", ds.attrs["header_run_id"]))
 
 
 def save(directory, ds, endpoint):
-    """DIR/pair-<n>.h5 in the layout of the run folder's vector files (the published arrays), with the
-    header's fields as provenance. Returns the path."""
+    """DIR/pair-<n>.h5 (the full settings' field) or DIR/live/pair-<n>.h5 (the live tier's: a run with
+    two lanes publishes both for a pair), as the run folder keeps them, in the layout of its vector
+    files (the published arrays), with the header's fields as provenance. Returns the path."""
     pair = ds.attrs["header_pair_index"]
+    if ds.attrs.get("header_tier") == "live":
+        directory = os.path.join(directory, "live")
+        os.makedirs(directory, exist_ok=True)
     path = os.path.join(directory, "pair-%06d.h5" % pair)
     provenance = {"source": "live: published by plenopivd on %s, topic vectors" % endpoint,
                   "run": ds.attrs["header_run_id"], "pair_index": pair, "dt_s": repr(ds.attrs["dt_s"]),

@@ -1,0 +1,129 @@
+// The daemon's two lanes under a laser: ray-traced pairs (camera-small) replayed at rate_hz through
+// a whole in-process run (sim trigger, replay camera, recorder, real processing), the live lane
+// alone against the live lane with the full settings' quality lane behind it.
+#include <sys/resource.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <thread>
+
+#include "core/io/tiff.hpp"
+#include "core/optics/camera_file.hpp"
+#include "core/sim/particles.hpp"
+#include "core/sim/render.hpp"
+#include "daemon/processing.hpp"
+#include "daemon/run.hpp"
+#include "drivers/replay/replay_camera.hpp"
+
+using namespace plenopiv;
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+namespace {
+
+double rss_gb() {
+  std::ifstream in("/proc/self/status");
+  std::string line;
+  while (std::getline(in, line))
+    if (line.rfind("VmRSS:", 0) == 0) return std::stod(line.substr(6)) / (1024.0 * 1024.0);
+  return -1;
+}
+
+// `count` pairs in `dir` as frame-<k>.tif: 60 particles in a 4 x 4 x 2 mm box, displaced 0.25 mm
+// along x between exposures (as bench_daemon).
+void write_recording(const fs::path& dir, const optics::CameraModel& camera, int count) {
+  fs::create_directories(dir);
+  const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera));
+  sim::RenderOptions render;
+  render.rays_per_particle = 100000;
+  for (int i = 0; i < count; ++i) {
+    char a_name[32], b_name[32];
+    std::snprintf(a_name, sizeof a_name, "frame-%04d.tif", 2 * i);
+    std::snprintf(b_name, sizeof b_name, "frame-%04d.tif", 2 * i + 1);
+    if (fs::exists(dir / a_name) && fs::exists(dir / b_name)) continue;
+    const auto a = sim::random_particles({{-2, -2, -1}, {2, 2, 1}}, 60, 100 + std::uint64_t(i));
+    auto b = a;
+    for (auto& p : b) p[0] += 0.25;
+    io::write_tiff(dir / a_name, sim::render(camera, lenses, a, render, 2 * std::uint64_t(i)).image, false);
+    io::write_tiff(dir / b_name, sim::render(camera, lenses, b, render, 2 * std::uint64_t(i) + 1).image, false);
+  }
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const int pairs = argc > 1 ? std::atoi(argv[1]) : 200;
+  const double rate_hz = argc > 2 ? std::atof(argv[2]) : 10.0;
+  const fs::path camera_file = fs::path(PLENOPIV_SOURCE_DIR) / "systemd/config/camera-small.yaml";
+  const optics::CameraModel camera = optics::load_camera_file(camera_file);
+  const fs::path root = fs::temp_directory_path() / "plenopiv-bench-lanes";
+  write_recording(root / "replay" / "small", camera, 8);
+  drivers::register_replay_camera(drivers::CameraRegistry::instance(), {root / "replay", camera_file});
+
+  // Full settings: the shipped run.yaml's box at 0.0625 mm and 10 iterations; live tier: 0.25 mm,
+  // 3 iterations, one pass.
+  const std::string spec =
+      "dt_s: 0.001\nvolume: {x_mm: [-2, 2], y_mm: [-2, 2], z_mm: [-1, 1], voxel_mm: 0.0625}\n"
+      "reconstruction: {iterations: 10, mu: 1}\n"
+      "correlation: {passes: [{window: 32, overlap_percent: 50}, {window: 16, overlap_percent: 50}]}\n"
+      "live: {volume: {voxel_mm: 0.25}, reconstruction: {iterations: 3}, "
+      "correlation: {passes: [{window: 8, overlap_percent: 50}]}}\n";
+  const std::vector<std::pair<const char*, const char*>> variants{{"live_only", "quality: off\n"},
+                                                                  {"live_and_quality", "quality: newest\n"}};
+  const daemon::ProcessFactory processing = daemon::plenoptic_processing(camera);
+  for (const auto& [name, lanes] : variants) {
+    const fs::path data = root / "data";
+    fs::remove_all(data);
+    daemon::RunStateMachine state;
+    daemon::RunEnvironment env;
+    env.data_dir = data;
+    env.default_camera_uri = "replay://small?loop=1";
+    env.default_trigger_uri = "sim://";
+    env.camera_file = camera_file;
+    env.state = &state;
+    env.processing = processing;
+    const daemon::RunConfig config = daemon::parse_run_config(
+        "pairs: " + std::to_string(pairs) + "\nrate_hz: " + std::to_string(rate_hz) + "\n" + lanes + spec, name);
+    state.start(name);
+    const auto t0 = Clock::now();
+    double rss_min = 1e9, rss_max = 0;
+    double acquiring_at = 0;
+    std::uint64_t samples = 0;
+    {
+      daemon::Run run(config, name, env);
+      while (!run.finished()) {
+        std::this_thread::sleep_for(std::chrono::milliseconds(500));
+        const double r = rss_gb();
+        rss_min = std::min(rss_min, r);
+        rss_max = std::max(rss_max, r);
+        ++samples;
+        if (acquiring_at == 0 && state.state() == daemon::RunState::Acquiring)
+          acquiring_at = std::chrono::duration<double>(Clock::now() - t0).count();
+      }
+      msg::Status s;
+      run.fill_status(s);
+      const double wall = std::chrono::duration<double>(Clock::now() - t0).count() - acquiring_at;
+      const double acquire_s = double(pairs) / rate_hz;
+      msg::LaneCounters live, quality;
+      for (const msg::LaneCounters& l : s.lanes()) (l.name() == "live" ? live : quality) = l;
+      std::printf(
+          "bench=lanes variant=%s pairs=%d rate_hz=%.1f setup_s=%.1f run_s=%.1f recorded=%llu frames_lost=%llu "
+          "live_fields=%llu live_fields_per_s=%.2f live_dropped=%llu live_mean_s=%.3f quality_fields=%llu "
+          "quality_fields_per_s=%.3f quality_dropped=%llu quality_mean_s=%.2f rss_min_gb=%.2f rss_max_gb=%.2f "
+          "rss_samples=%llu state=%s\n",
+          name, pairs, rate_hz, acquiring_at, wall, static_cast<unsigned long long>(s.pairs_recorded()),
+          static_cast<unsigned long long>(s.frames_lost()), static_cast<unsigned long long>(live.processed()),
+          double(live.processed()) / acquire_s, static_cast<unsigned long long>(live.dropped()), live.mean_time_s(),
+          static_cast<unsigned long long>(quality.processed()), double(quality.processed()) / acquire_s,
+          static_cast<unsigned long long>(quality.dropped()), quality.mean_time_s(), rss_min, rss_max,
+          static_cast<unsigned long long>(samples), daemon::to_string(state.state()));
+      std::fflush(stdout);
+    }
+  }
+  fs::remove_all(root / "data");
+  return 0;
+}

@@ -1,0 +1,72 @@
+// A run's processing lanes: the live lane (every pair it can, fast tier, first call on the cores)
+// and the quality lane (the full settings behind it), each a bounded queue and a pipeline.
+#pragma once
+
+#include <tbb/task_arena.h>
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "core/process/process.hpp"
+#include "daemon/pipeline.hpp"
+#include "daemon/run_config.hpp"
+#include "plenopiv.pb.h"
+
+namespace plenopiv::daemon {
+
+// One lane: which recorded pairs it is offered (every pair, or every Nth), its bounded queue
+// (LiveMailbox: at most `capacity` waiting, the oldest dropped when full, every drop counted), its
+// pipeline (run_live_pipeline) and its counters. The pipeline runs in a tbb::task_arena of the
+// lane's priority: oneTBB gives its worker threads to the work of higher-priority arenas first, so
+// the quality lane's reconstruction runs on the cores the live lane leaves idle.
+class Lane {
+ public:
+  struct Options {
+    std::string name;  // "live" or "quality": status, logs
+    process::Tier tier = process::Tier::full;
+    std::string policy = "newest";  // "newest" or "every N", as status says it
+    TakeOrder order = TakeOrder::newest;
+    std::uint64_t every = 1;  // pairs whose index is a multiple of it are offered; 1: all
+    std::size_t capacity = 2;
+    int max_in_flight = 1;
+    tbb::task_arena::priority priority = tbb::task_arena::priority::normal;
+  };
+  explicit Lane(Options options);
+  Lane(const Lane&) = delete;
+  Lane& operator=(const Lane&) = delete;
+
+  // Queues a recorded pair if the lane's policy takes it (never blocks).
+  void offer(const SharedPair& pair);
+  // No more pairs; with `clear` (a stop) the waiting ones are dropped (they are on disk).
+  void close(bool clear);
+  // Runs the lane's pipeline in its arena until its queue is closed and empty (run_live_pipeline's
+  // contract: a pair whose processing throws is counted and skipped; once `cancel` is set the pairs
+  // in flight give up). An exception from `output` ends the lane and is thrown here.
+  void run(const ProcessFn& process, const OutputFn& output, const CancelFlag& cancel);
+  // Takes and forgets every pair until the queue is closed (a daemon with no processing stage).
+  void discard_all();
+
+  const std::string& name() const { return options_.name; }
+  process::Tier tier() const { return options_.tier; }
+  const LiveMailbox& queue() const { return queue_; }
+  const PipelineStats& stats() const { return stats_; }
+  // Pairs offered that the lane made no field of: dropped from its queue, failed or cancelled.
+  std::uint64_t skipped() const;
+  msg::LaneCounters counters() const;
+
+ private:
+  Options options_;
+  LiveMailbox queue_;
+  PipelineStats stats_;
+  tbb::task_arena arena_;
+};
+
+// The lanes of a run, the live lane first: it runs the live tier when the spec has one (else the
+// full settings) on the newest pair, max_pairs_in_flight at once, live_queue waiting, at high
+// priority; the quality lane (config.quality.on()) runs the full settings on the pairs its policy
+// takes, QualityLane::kPairsInFlight at once, quality.queue waiting, at low priority.
+std::vector<std::unique_ptr<Lane>> make_lanes(const RunConfig& config);
+
+}  // namespace plenopiv::daemon

@@ -1,0 +1,98 @@
+// A run's lanes in-process: which pairs a lane is offered, the order it takes them in, its bounded
+// queue and counters, and the lanes a run config makes.
+#include <gtest/gtest.h>
+
+#include "daemon/lanes.hpp"
+
+namespace plenopiv::daemon {
+namespace {
+
+SharedPair pair_of(std::uint64_t index) {
+  auto p = std::make_shared<drivers::FramePair>();
+  p->pair_index = index;
+  p->trigger_index = index;
+  return p;
+}
+
+ProcessedPair empty_field(const drivers::FramePair&, const CancelFlag&) {
+  ProcessedPair out;
+  Grid3 g;
+  g.shape = {1, 1, 1};
+  out.vectors = VectorField(g);
+  return out;
+}
+
+TEST(Lane, EveryNthLaneIsOfferedTheMultiplesAndTakesThemOldestFirst) {
+  Lane::Options o;
+  o.name = "quality";
+  o.order = TakeOrder::oldest;
+  o.every = 3;
+  o.capacity = 8;
+  Lane lane(o);
+  for (std::uint64_t i = 0; i < 10; ++i) lane.offer(pair_of(i));
+  lane.close(false);
+  std::vector<std::uint64_t> seen;
+  CancelFlag cancel{false};
+  lane.run(
+      empty_field, [&](const drivers::FramePair& p, ProcessedPair&) { seen.push_back(p.pair_index); }, cancel);
+  EXPECT_EQ(seen, (std::vector<std::uint64_t>{0, 3, 6, 9}));
+  const msg::LaneCounters c = lane.counters();
+  EXPECT_EQ(c.offered(), 4u);
+  EXPECT_EQ(c.processed(), 4u);
+  EXPECT_EQ(c.dropped(), 0u);
+}
+
+TEST(Lane, AFullQueueDropsItsOldestPairAndCountsIt) {
+  Lane::Options o;
+  o.name = "quality";
+  o.order = TakeOrder::oldest;
+  o.capacity = 3;
+  Lane lane(o);
+  for (std::uint64_t i = 0; i < 10; ++i) {
+    lane.offer(pair_of(i));
+    EXPECT_LE(lane.queue().depth(), 3u);
+  }
+  lane.close(false);
+  std::vector<std::uint64_t> seen;
+  CancelFlag cancel{false};
+  lane.run(
+      empty_field, [&](const drivers::FramePair& p, ProcessedPair&) { seen.push_back(p.pair_index); }, cancel);
+  EXPECT_EQ(seen, (std::vector<std::uint64_t>{7, 8, 9}));  // the newest three stayed, in order
+  const msg::LaneCounters c = lane.counters();
+  EXPECT_EQ(c.offered(), 10u);
+  EXPECT_EQ(c.dropped(), 7u);
+  EXPECT_EQ(c.queue_capacity(), 3u);
+  EXPECT_EQ(lane.skipped(), 7u);
+}
+
+TEST(Lane, AStopClearsTheQueueAndCountsWhatWasWaiting) {
+  Lane lane(Lane::Options{});
+  lane.offer(pair_of(0));
+  lane.offer(pair_of(1));
+  lane.close(true);
+  lane.discard_all();
+  EXPECT_EQ(lane.counters().dropped(), 2u);
+  EXPECT_EQ(lane.counters().processed(), 0u);
+}
+
+TEST(Lane, ARunConfigMakesTheLiveLaneFirstAndTheQualityLaneWhenAsked) {
+  const std::string spec =
+      "dt_s: 0.001\nvolume: {x_mm: [-1, 1], y_mm: [-1, 1], z_mm: [0, 2], voxel_mm: 0.5}\n"
+      "correlation: {passes: [{window: 4, overlap_percent: 50}]}\nlive_queue: 3\nmax_pairs_in_flight: 2\n";
+  const auto one = make_lanes(parse_run_config(spec, "run.yaml"));
+  ASSERT_EQ(one.size(), 1u);
+  EXPECT_EQ(one[0]->name(), "live");
+  EXPECT_EQ(one[0]->tier(), process::Tier::full);
+  EXPECT_EQ(one[0]->queue().capacity(), 3u);
+  const auto two = make_lanes(parse_run_config(
+      spec + "live: {reconstruction: {iterations: 1}}\nquality: {every: 2}\nquality_queue: 5\n", "run.yaml"));
+  ASSERT_EQ(two.size(), 2u);
+  EXPECT_EQ(two[0]->tier(), process::Tier::live);
+  EXPECT_EQ(two[1]->name(), "quality");
+  EXPECT_EQ(two[1]->tier(), process::Tier::full);
+  EXPECT_EQ(two[1]->queue().capacity(), 5u);
+  EXPECT_EQ(two[1]->counters().policy(), "every 2");
+}
+
+}  // namespace
+}  // namespace plenopiv::daemon
