@@ -13,7 +13,7 @@
 namespace plenopiv::daemon {
 
 PreviewMaker::PreviewMaker(optics::CameraModel camera, calib::LoadedCalibration calibration, PreviewSettings settings)
-    : camera_(std::move(camera)),
+    : camera_(calib::camera_in_frame(camera, calibration)),
       calibration_(std::move(calibration)),
       settings_(settings),
       alpha_(lightfield::alpha_for_depth(camera_, settings_.z_mm)) {}
