@@ -1,4 +1,5 @@
-// PNG pictures the CLI writes (process previews, watch --preview): encoded by OpenCV, written atomically.
+// Pictures (not plots: those are core/plot's) the CLI writes, i.e. `watch --preview`'s raw frame beside
+// the refocused slice: encoded by OpenCV, written atomically.
 #include "clients/cli/png_file.hpp"
 
 #include <opencv2/imgcodecs.hpp>
