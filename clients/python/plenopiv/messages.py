@@ -19,9 +19,12 @@ PAYLOAD_ATTRIBUTES = {
     "vorticity_x": ("1/s", ""),
     "vorticity_y": ("1/s", ""),
     "vorticity_z": ("1/s", ""),
-    "sigma_u": ("m/s", "uncertainty of u"),
-    "sigma_v": ("m/s", "uncertainty of v"),
-    "sigma_w": ("m/s", "uncertainty of w"),
+    "sigma_u": ("m/s", "standard uncertainty of u (correlation statistics, Wieneke 2015); NaN: no estimate "
+                          "(invalid or interpolated)"),
+    "sigma_v": ("m/s", "standard uncertainty of v (correlation statistics, Wieneke 2015); NaN: no estimate "
+                          "(invalid or interpolated)"),
+    "sigma_w": ("m/s", "standard uncertainty of w (correlation statistics, Wieneke 2015); NaN: no estimate "
+                          "(invalid or interpolated)"),
 }
 
 

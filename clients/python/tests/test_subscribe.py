@@ -171,8 +171,10 @@ class LiveSubscriber(unittest.TestCase):
         saved = plenopiv.open(self.s.saved)
         self.assertEqual(sorted(os.listdir(self.s.saved)), ["pair-%06d.h5" % i for i in self.s.processed])
         self.assertEqual(list(saved.pair.values), list(live.pair.values))
-        self.assertEqual(set(saved.data_vars) - {"dt_s"}, {"u", "v", "w", "valid"})
-        for name in ("u", "v", "w", "valid"):
+        # The published arrays: the velocity, its standard uncertainty (the correlation's default) and valid.
+        published = {"u", "v", "w", "sigma_u", "sigma_v", "sigma_w", "valid"}
+        self.assertEqual(set(saved.data_vars) - {"dt_s"}, published)
+        for name in sorted(published):
             self.assertEqual(saved[name].dtype, live[name].dtype, name)
             np.testing.assert_allclose(saved[name].values, live[name].values, rtol=1e-6, atol=0, err_msg=name)
             self.assertEqual(saved[name].attrs["units"], live[name].attrs["units"], name)
