@@ -11,6 +11,7 @@
 #include <string>
 #include <thread>
 
+#include "bench/bench_support.hpp"
 #include "core/io/tiff.hpp"
 #include "core/optics/camera_file.hpp"
 #include "core/sim/particles.hpp"
@@ -25,13 +26,7 @@ using Clock = std::chrono::steady_clock;
 
 namespace {
 
-double rss_gb() {
-  std::ifstream in("/proc/self/status");
-  std::string line;
-  while (std::getline(in, line))
-    if (line.rfind("VmRSS:", 0) == 0) return std::stod(line.substr(6)) / (1024.0 * 1024.0);
-  return -1;
-}
+using bench::rss_gb;
 
 // `count` pairs in `dir` as frame-<k>.tif: 60 particles in a 4 x 4 x 2 mm box, displaced 0.25 mm
 // along x between exposures (as bench_daemon).

@@ -25,14 +25,7 @@ using Clock = std::chrono::steady_clock;
 
 namespace {
 
-// Resident memory now (VmRSS), GB.
-double rss_gb() {
-  std::ifstream in("/proc/self/status");
-  std::string line;
-  while (std::getline(in, line))
-    if (line.rfind("VmRSS:", 0) == 0) return std::stod(line.substr(6)) / (1024.0 * 1024.0);
-  return -1;
-}
+using bench::rss_gb;
 
 // CPU time of this process so far (all threads: player, read-ahead, consumer), s.
 double cpu_s() {

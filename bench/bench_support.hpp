@@ -43,4 +43,13 @@ inline double peak_rss_gb() {
   return -1;
 }
 
+// Resident memory now (VmRSS), GB; -1 when /proc/self/status does not say.
+inline double rss_gb() {
+  std::ifstream in("/proc/self/status");
+  std::string line;
+  while (std::getline(in, line))
+    if (line.rfind("VmRSS:", 0) == 0) return std::stod(line.substr(6)) / (1024.0 * 1024.0);
+  return -1;
+}
+
 }  // namespace plenopiv::bench

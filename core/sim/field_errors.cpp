@@ -8,6 +8,19 @@
 
 namespace plenopiv::sim {
 
+namespace {
+
+// The exact displacement of the particle at `x` mid-way between the pulses (fixed-point iterations
+// of the midpoint rule; 0: the displacement at x).
+Point3 exact_displacement(const Flow& flow, const Point3& x, int midpoint_iterations) {
+  Point3 d = flow.displacement_mm(x);
+  for (int it = 0; it < midpoint_iterations; ++it)
+    d = flow.displacement_mm({x[0] - d[0] / 2, x[1] - d[1] / 2, x[2] - d[2] / 2});
+  return d;
+}
+
+}  // namespace
+
 FieldErrors field_errors(const VectorField& field, const Flow& flow, double voxel_mm, int midpoint_iterations,
                          int border) {
   return field_errors(field, flow, voxel_mm, midpoint_iterations, border, {});
@@ -30,9 +43,7 @@ FieldErrors field_errors(const VectorField& field, const Flow& flow, double voxe
         if (!field.valid[m]) continue;
         const Point3 x{g.coordinate_mm(0, i), g.coordinate_mm(1, j), g.coordinate_mm(2, k)};
         if (include && !include(x)) continue;
-        Point3 d = flow.displacement_mm(x);
-        for (int it = 0; it < midpoint_iterations; ++it)
-          d = flow.displacement_mm({x[0] - d[0] / 2, x[1] - d[1] / 2, x[2] - d[2] / 2});
+        const Point3 d = exact_displacement(flow, x, midpoint_iterations);
         const std::array<double, 3> got{field.dx_mm[m], field.dy_mm[m], field.dz_mm[m]};
         double truth_sq = 0;
         for (int a = 0; a < 3; ++a) {
@@ -82,9 +93,7 @@ UncertaintyCheck uncertainty_check(const VectorField& field, const Flow& flow, d
           continue;
         const Point3 x{g.coordinate_mm(0, i), g.coordinate_mm(1, j), g.coordinate_mm(2, k)};
         if (include && !include(x)) continue;
-        Point3 d = flow.displacement_mm(x);
-        for (int it = 0; it < midpoint_iterations; ++it)
-          d = flow.displacement_mm({x[0] - d[0] / 2, x[1] - d[1] / 2, x[2] - d[2] / 2});
+        const Point3 d = exact_displacement(flow, x, midpoint_iterations);
         const std::array<double, 3> got{field.dx_mm[m], field.dy_mm[m], field.dz_mm[m]};
         for (int a = 0; a < 3; ++a) {
           const double signed_err = (got[a] - d[a]) / voxel_mm, err = std::abs(signed_err);
