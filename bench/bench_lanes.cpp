@@ -1,6 +1,7 @@
 // The daemon's two lanes under a laser: ray-traced pairs (camera-small) replayed at rate_hz through
 // a whole in-process run (sim trigger, replay camera, recorder, real processing), the live lane
-// alone against the live lane with the full settings' quality lane behind it.
+// alone against the live lane with the full settings' quality lane behind it, with the processing
+// threads at plenopivd's default niceness and at the recording's own (processing_nice 0).
 #include <sys/resource.h>
 
 #include <algorithm>
@@ -16,6 +17,7 @@
 #include "core/optics/camera_file.hpp"
 #include "core/sim/particles.hpp"
 #include "core/sim/render.hpp"
+#include "daemon/daemon_config.hpp"
 #include "daemon/processing.hpp"
 #include "daemon/run.hpp"
 #include "drivers/replay/replay_camera.hpp"
@@ -67,10 +69,17 @@ int main(int argc, char** argv) {
       "correlation: {passes: [{window: 32, overlap_percent: 50}, {window: 16, overlap_percent: 50}]}\n"
       "live: {volume: {voxel_mm: 0.25}, reconstruction: {iterations: 3}, "
       "correlation: {passes: [{window: 8, overlap_percent: 50}]}}\n";
-  const std::vector<std::pair<const char*, const char*>> variants{{"live_only", "quality: off\n"},
-                                                                  {"live_and_quality", "quality: newest\n"}};
+  struct Variant {
+    const char* name;
+    const char* lanes;
+    int nice;
+  };
+  const int nice = daemon::DaemonConfig{}.processing_nice;
+  const std::vector<Variant> variants{{"live_only", "quality: off\n", nice},
+                                      {"live_and_quality", "quality: newest\n", nice},
+                                      {"live_and_quality_nice_0", "quality: newest\n", 0}};
   const daemon::ProcessFactory processing = daemon::plenoptic_processing(camera);
-  for (const auto& [name, lanes] : variants) {
+  for (const auto& [name, lanes, processing_nice] : variants) {
     const fs::path data = root / "data";
     fs::remove_all(data);
     daemon::RunStateMachine state;
@@ -81,6 +90,7 @@ int main(int argc, char** argv) {
     env.camera_file = camera_file;
     env.state = &state;
     env.processing = processing;
+    env.processing_nice = processing_nice;
     const daemon::RunConfig config = daemon::parse_run_config(
         "pairs: " + std::to_string(pairs) + "\nrate_hz: " + std::to_string(rate_hz) + "\n" + lanes + spec, name);
     state.start(name);
@@ -106,13 +116,15 @@ int main(int argc, char** argv) {
       msg::LaneCounters live, quality;
       for (const msg::LaneCounters& l : s.lanes()) (l.name() == "live" ? live : quality) = l;
       std::printf(
-          "bench=lanes variant=%s pairs=%d rate_hz=%.1f setup_s=%.1f run_s=%.1f recorded=%llu frames_lost=%llu "
+          "bench=lanes variant=%s processing_nice=%d pairs=%d rate_hz=%.1f setup_s=%.1f run_s=%.1f recorded=%llu "
+          "frames_lost=%llu "
           "live_fields=%llu live_fields_per_s=%.2f live_dropped=%llu live_mean_s=%.3f quality_fields=%llu "
           "quality_fields_per_s=%.3f quality_dropped=%llu quality_mean_s=%.2f rss_min_gb=%.2f rss_max_gb=%.2f "
           "rss_samples=%llu state=%s\n",
-          name, pairs, rate_hz, acquiring_at, wall, static_cast<unsigned long long>(s.pairs_recorded()),
-          static_cast<unsigned long long>(s.frames_lost()), static_cast<unsigned long long>(live.processed()),
-          double(live.processed()) / acquire_s, static_cast<unsigned long long>(live.dropped()), live.mean_time_s(),
+          name, processing_nice, pairs, rate_hz, acquiring_at, wall,
+          static_cast<unsigned long long>(s.pairs_recorded()), static_cast<unsigned long long>(s.frames_lost()),
+          static_cast<unsigned long long>(live.processed()), double(live.processed()) / acquire_s,
+          static_cast<unsigned long long>(live.dropped()), live.mean_time_s(),
           static_cast<unsigned long long>(quality.processed()), double(quality.processed()) / acquire_s,
           static_cast<unsigned long long>(quality.dropped()), quality.mean_time_s(), rss_min, rss_max,
           static_cast<unsigned long long>(samples), daemon::to_string(state.state()));

@@ -129,6 +129,7 @@ Daemon::Daemon(DaemonConfig config, const DaemonExtensions& extensions)
   environment_.camera_file = config_.camera_file;
   environment_.calibration_file = config_.calibration_file;
   environment_.timing = config_.timing;
+  environment_.processing_nice = config_.processing_nice;
   environment_.state = &state_;
   environment_.publisher = publisher_.get();
   environment_.processing = processing_factory_;

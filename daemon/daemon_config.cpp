@@ -71,7 +71,7 @@ DaemonConfig load_daemon_config(const std::filesystem::path& path) {
   const YamlMap map(load_yaml_file(path), path.string());
   map.reject_unknown({"control_endpoint", "control_socket_group", "curve", "publish_endpoint", "simulation",
                       "replay_dir", "data_dir", "camera_file", "calibration_file", "camera_uri", "trigger_uri",
-                      "log_level", "publish_high_water_mark", "timing"});
+                      "log_level", "publish_high_water_mark", "processing_nice", "timing"});
   DaemonConfig config;
   const std::filesystem::path base = path.parent_path();
   auto resolve = [&](const std::string& p) {
@@ -98,6 +98,7 @@ DaemonConfig load_daemon_config(const std::filesystem::path& path) {
   config.trigger_uri = map.string_or("trigger_uri", config.trigger_uri);
   config.log_level = map.choice_or("log_level", {"trace", "debug", "info", "warn", "error"}, config.log_level);
   config.publish_high_water_mark = map.integer_in("publish_high_water_mark", config.publish_high_water_mark, 1, 1000);
+  config.processing_nice = map.integer_in("processing_nice", config.processing_nice, 0, 19);
   if (auto timing = map.optional_map("timing")) config.timing = timing_from(*timing);
   validate(config, path.string());
   return config;

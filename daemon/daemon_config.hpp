@@ -52,6 +52,10 @@ struct DaemonConfig {
   std::string trigger_uri = "sim://";
   std::string log_level = "info";
   int publish_high_water_mark = 4;  // messages queued per subscriber before they are dropped
+  // The niceness (0-19) of the threads that process pairs (both lanes, the alignment preview):
+  // above the recording's, so that a busy pipeline takes the cores the recording leaves and never
+  // makes the camera's queue overflow. 0: processing competes with recording as an equal.
+  int processing_nice = 10;
   RigTiming timing;
 };
 

@@ -7,7 +7,8 @@ namespace plenopiv::daemon {
 Lane::Lane(Options options)
     : options_(std::move(options)),
       queue_(options_.capacity, options_.order),
-      arena_(tbb::task_arena::automatic, 1, options_.priority) {}
+      arena_(tbb::task_arena::automatic, 1, options_.priority),
+      niceness_(arena_, options_.nice) {}
 
 void Lane::offer(const SharedPair& pair) {
   if (options_.every > 1 && pair->pair_index % options_.every != 0) return;
@@ -52,7 +53,7 @@ msg::LaneCounters Lane::counters() const {
   return m;
 }
 
-std::vector<std::unique_ptr<Lane>> make_lanes(const RunConfig& config) {
+std::vector<std::unique_ptr<Lane>> make_lanes(const RunConfig& config, int nice) {
   std::vector<std::unique_ptr<Lane>> lanes;
   Lane::Options live;
   live.name = "live";
@@ -60,6 +61,7 @@ std::vector<std::unique_ptr<Lane>> make_lanes(const RunConfig& config) {
   live.capacity = std::size_t(config.live_queue);
   live.max_in_flight = config.max_pairs_in_flight;
   live.priority = tbb::task_arena::priority::high;
+  live.nice = nice;
   lanes.push_back(std::make_unique<Lane>(live));
   if (config.quality.on()) {
     Lane::Options quality;
@@ -72,6 +74,7 @@ std::vector<std::unique_ptr<Lane>> make_lanes(const RunConfig& config) {
     quality.capacity = std::size_t(config.quality.queue);
     quality.max_in_flight = QualityLane::kPairsInFlight;
     quality.priority = tbb::task_arena::priority::low;
+    quality.nice = nice;
     lanes.push_back(std::make_unique<Lane>(quality));
   }
   return lanes;

@@ -12,6 +12,7 @@
 #include "core/process/process.hpp"
 #include "daemon/pipeline.hpp"
 #include "daemon/run_config.hpp"
+#include "daemon/thread_priority.hpp"
 #include "plenopiv.pb.h"
 
 namespace plenopiv::daemon {
@@ -20,7 +21,8 @@ namespace plenopiv::daemon {
 // (LiveMailbox: at most `capacity` waiting, the oldest dropped when full, every drop counted), its
 // pipeline (run_live_pipeline) and its counters. The pipeline runs in a tbb::task_arena of the
 // lane's priority: oneTBB gives its worker threads to the work of higher-priority arenas first, so
-// the quality lane's reconstruction runs on the cores the live lane leaves idle.
+// the quality lane's reconstruction runs on the cores the live lane leaves idle. Every thread that
+// works in the arena runs at the lane's niceness, below the recording's (thread_priority.hpp).
 class Lane {
  public:
   struct Options {
@@ -32,6 +34,7 @@ class Lane {
     std::size_t capacity = 2;
     int max_in_flight = 1;
     tbb::task_arena::priority priority = tbb::task_arena::priority::normal;
+    int nice = 0;  // the niceness of the lane's threads, 0-19; 0: the caller's
   };
   explicit Lane(Options options);
   Lane(const Lane&) = delete;
@@ -61,12 +64,14 @@ class Lane {
   LiveMailbox queue_;
   PipelineStats stats_;
   tbb::task_arena arena_;
+  ArenaNiceness niceness_;
 };
 
 // The lanes of a run, the live lane first: it runs the live tier when the spec has one (else the
 // full settings) on the newest pair, max_pairs_in_flight at once, live_queue waiting, at high
 // priority; the quality lane (config.quality.on()) runs the full settings on the pairs its policy
-// takes, QualityLane::kPairsInFlight at once, quality.queue waiting, at low priority.
-std::vector<std::unique_ptr<Lane>> make_lanes(const RunConfig& config);
+// takes, QualityLane::kPairsInFlight at once, quality.queue waiting, at low priority. Both lanes'
+// threads run at `nice` (plenopivd.yaml `processing_nice`).
+std::vector<std::unique_ptr<Lane>> make_lanes(const RunConfig& config, int nice = 0);
 
 }  // namespace plenopiv::daemon

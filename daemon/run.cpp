@@ -15,6 +15,7 @@
 #include "core/io/atomic_file.hpp"
 #include "core/optics/camera_file.hpp"
 #include "core/process/frame_check.hpp"
+#include "daemon/thread_priority.hpp"
 #include "drivers/camera/camera_registry.hpp"
 #include "drivers/common/driver_errors.hpp"
 #include "drivers/trigger/camera_wiring.hpp"
@@ -57,7 +58,7 @@ Run::Run(RunConfig config, std::string run_id, RunEnvironment env)
   if (camera_uri.empty()) {
     throw InputError("camera_uri: the run names no camera and plenopivd.yaml has no camera_uri");
   }
-  lanes_ = make_lanes(config_);
+  lanes_ = make_lanes(config_, env_.processing_nice);
   if (config_.preview.on() && env_.publisher) {
     if (env_.camera_file.empty()) {
       throw InputError("preview: the alignment preview refocuses with the daemon's camera_file, and it has none");
@@ -487,6 +488,7 @@ void Run::output(const Lane& lane, const drivers::FramePair& pair, ProcessedPair
 // acquisition closes the queue. Made in a low-priority arena: the lanes come first for the cores.
 void Run::preview_loop() {
   tbb::task_arena arena(tbb::task_arena::automatic, 1, tbb::task_arena::priority::low);
+  const ArenaNiceness niceness(arena, env_.processing_nice);
   const auto interval =
       std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(config_.preview.interval_s));
   bool warned = false;

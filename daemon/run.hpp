@@ -47,6 +47,7 @@ struct RunEnvironment {
   std::filesystem::path calibration_file;
   // What the laser and camera need and allow; the run's rate_hz and dt_s must fit (run_schedule).
   RigTiming timing;
+  int processing_nice = 0;  // the lanes' and the preview's threads (DaemonConfig::processing_nice)
   RunStateMachine* state = nullptr;
   Publisher* publisher = nullptr;  // null: nothing published
   ProcessFactory processing;

@@ -561,12 +561,12 @@ def t_daemon(R):
 
 def t_lanes(R):
     r = R("lanes")
-    rows = [[d["variant"], f"{d['recorded']} of {d['pairs']}", d["frames_lost"],
+    rows = [[d["variant"], d.get("processing_nice", "0"), f"{d['recorded']} of {d['pairs']}", d["frames_lost"],
              f"{d['live_fields']} ({d['live_fields_per_s']}/s)", d["live_dropped"], d["live_mean_s"],
              f"{d['quality_fields']} ({d['quality_fields_per_s']}/s)", d["quality_dropped"], d["quality_mean_s"],
              f"{d['rss_min_gb']} / {d['rss_max_gb']}"]
             for d in r.find(bench="lanes")]
-    out = table(["variant", "pairs recorded", "raw frames lost", "live fields", "live dropped", "live s/pair",
+    out = table(["variant", "processing nice", "pairs recorded", "raw frames lost", "live fields", "live dropped", "live s/pair",
                  "quality fields", "quality dropped", "quality s/pair", "RSS min / max GB"], rows)
     return out + ["", r.provenance()]
 

@@ -33,6 +33,7 @@ TEST(DaemonConfig, ShippedDefaultLoads) {
   EXPECT_TRUE(c.simulation);
   EXPECT_TRUE(std::filesystem::exists(c.camera_file)) << c.camera_file;
   EXPECT_TRUE(c.calibration_file.empty());  // nominal until the rig is calibrated
+  EXPECT_EQ(c.processing_nice, 10);
 }
 
 TEST(DaemonConfig, RelativePathsAreTakenFromTheConfigFolder) {
@@ -98,6 +99,7 @@ TEST(DaemonConfig, BadKeysAreNamed) {
   EXPECT_NE(error_of("publish_endpoint: 5556\n").find("publish_endpoint"), std::string::npos);
   EXPECT_NE(error_of("log_level: loud\n").find("log_level"), std::string::npos);
   EXPECT_NE(error_of("publish_high_water_mark: 0\n").find("publish_high_water_mark"), std::string::npos);
+  EXPECT_NE(error_of("processing_nice: 20\n").find("processing_nice"), std::string::npos);
 }
 
 TEST(DaemonConfig, TimingSectionSetsTheRigAndBadKeysAreNamed) {

@@ -2,7 +2,14 @@
 // queue and counters, and the lanes a run config makes.
 #include <gtest/gtest.h>
 
+#include <tbb/parallel_for.h>
+
+#include <mutex>
+#include <set>
+#include <thread>
+
 #include "daemon/lanes.hpp"
+#include "daemon/thread_priority.hpp"
 
 namespace plenopiv::daemon {
 namespace {
@@ -73,6 +80,46 @@ TEST(Lane, AStopClearsTheQueueAndCountsWhatWasWaiting) {
   lane.discard_all();
   EXPECT_EQ(lane.counters().dropped(), 2u);
   EXPECT_EQ(lane.counters().processed(), 0u);
+}
+
+// The recording thread offers pairs at its own priority; every thread that processes them (the
+// lane's own, and oneTBB's workers in a parallel loop) runs at the lane's niceness.
+TEST(Lane, ItsProcessingThreadsRunNicerThanTheRecordingThread) {
+  const int recording = this_thread_niceness();
+  if (recording > 14) GTEST_SKIP() << "the test runs at niceness " << recording << ": no room to lower it by 5";
+  Lane::Options o;
+  o.nice = recording + 5;
+  o.order = TakeOrder::oldest;
+  o.capacity = 4;
+  Lane lane(o);
+  std::mutex m;
+  std::set<std::thread::id> threads;
+  std::set<int> niceness;
+  const auto process = [&](const drivers::FramePair& pair, const CancelFlag& cancel) {
+    tbb::parallel_for(0, 256, [&](int) {
+      volatile double x = 0;
+      for (int i = 0; i < 20000; ++i) x = x + 1.0;
+      std::lock_guard lock(m);
+      threads.insert(std::this_thread::get_id());
+      niceness.insert(this_thread_niceness());
+    });
+    return empty_field(pair, cancel);
+  };
+  for (std::uint64_t i = 0; i < 4; ++i) lane.offer(pair_of(i));
+  lane.close(false);
+  int lane_thread = -1;
+  CancelFlag cancel{false};
+  std::thread runner([&] {
+    lane.run(
+        process, [](const drivers::FramePair&, ProcessedPair&) {}, cancel);
+    lane_thread = this_thread_niceness();
+  });
+  runner.join();
+  EXPECT_EQ(lane.counters().processed(), 4u);
+  EXPECT_FALSE(threads.empty());
+  EXPECT_EQ(niceness, std::set<int>{recording + 5});
+  EXPECT_EQ(lane_thread, recording + 5) << "the thread that ran the lane";
+  EXPECT_EQ(this_thread_niceness(), recording) << "the recording thread keeps its priority";
 }
 
 TEST(Lane, ARunConfigMakesTheLiveLaneFirstAndTheQualityLaneWhenAsked) {
