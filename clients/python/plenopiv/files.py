@@ -186,10 +186,17 @@ def _stack(fields, pair_indices, run_dir):
     return stacked
 
 
-def open_run(run_dir):
-    """A run folder (its live vector files) or a reprocessed output folder (pair-<n>.h5 from
-    `plenopiv process --run`), stacked along `pair`, with the run manifest's entries as attributes
-    and each pair's frame A time (host clock) as coordinate `time` when a manifest is there."""
+# A run folder's tiers (daemon/lanes.hpp): the manifest entry naming each pair's vector file.
+TIERS = {"full": "vectors", "live": "live_vectors"}
+
+
+def open_run(run_dir, tier="full"):
+    """A run folder (its vector files of `tier`: "full", the run's full settings, or "live", the live
+    lane's fast tier) or a reprocessed output folder (pair-<n>.h5 from `plenopiv process --run`),
+    stacked along `pair`, with the run manifest's entries as attributes and each pair's frame A time
+    (host clock) as coordinate `time` when a manifest is there."""
+    if tier not in TIERS:
+        raise ValueError("tier: %r is not one of %s" % (tier, ", ".join(sorted(TIERS))))
     manifest_dir = None
     if os.path.exists(os.path.join(run_dir, MANIFEST)):
         manifest_dir = run_dir
@@ -201,9 +208,12 @@ def open_run(run_dir):
     files = {}
     if manifest_dir == run_dir:
         for index, pair in listed.items():
-            if pair.get("vectors"):
-                files[index] = os.path.join(run_dir, pair["vectors"])
-        what = "vector fields in its manifest (the live path processed none: reprocess with plenopiv process --run)"
+            if pair.get(TIERS[tier]):
+                files[index] = os.path.join(run_dir, pair[TIERS[tier]])
+        others = [t for t, key in sorted(TIERS.items()) if t != tier and any(p.get(key) for p in listed.values())]
+        what = "%s-tier vector fields in its manifest (%s)" % (
+            tier, "it has %s-tier ones: tier=%r" % (others[0], others[0]) if others
+            else "the daemon processed none: reprocess with plenopiv process --run")
     else:
         for name in os.listdir(run_dir):
             match = _PAIR_FILE.match(name)
@@ -223,11 +233,13 @@ def open_run(run_dir):
         ds["measured_dt_s"] = ("pair", np.array(measured),
                                {"units": "s", "long_name": "laser pulse separation measured for the pair; 0: not measured"})
     ds.attrs["kind"] = "run"
+    if manifest_dir == run_dir:
+        ds.attrs["tier"] = tier
     ds.attrs["source"] = os.path.abspath(run_dir)
     return ds
 
 
-def open(path):  # noqa: A001 (the package's entry point: plenopiv.open)
+def open(path, tier="full"):  # noqa: A001 (the package's entry point: plenopiv.open)
     """Opens what plenopiv writes as an xarray.Dataset:
     - a vector file (pair-<n>.h5, process -o, correlate, statistics.h5): every array of /vectors on
       coordinates z, y, x (mm) from the file's dimension scales, attributes units and long_name,
@@ -236,11 +248,12 @@ def open(path):  # noqa: A001 (the package's entry point: plenopiv.open)
     - a volume file (reconstruct): `volume` on z, y, x (mm) likewise;
     - a run folder (run-<id>/) or a reprocessed folder (<run>/reprocessed): its vector files stacked
       along `pair` (coordinate: pair index; dt_s and, with a manifest, time and measured_dt_s per
-      pair), the manifest's entries as attributes run_<name>.
+      pair), the manifest's entries as attributes run_<name>; of a run folder, the fields of `tier`
+      ("full": the run's settings, vectors/; "live": the live lane's fast tier, vectors/live/).
     FileError naming the file when it is none of these."""
     path = os.fspath(path)
     if os.path.isdir(path):
-        return open_run(path)
+        return open_run(path, tier)
     if not os.path.exists(path):
         raise FileError("%s: no such file or folder" % path)
     return open_file(path)

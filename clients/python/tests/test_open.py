@@ -1,6 +1,7 @@
 """plenopiv.open on real files written by the C++ tools (a simulated pair processed with `plenopiv process`, a
 volume from `plenopiv reconstruct`), checked against the files as h5py reads them; plenopiv-plot on the field;
 bad input named."""
+import json
 import os
 import re
 import unittest
@@ -166,6 +167,40 @@ class BadInput(unittest.TestCase):
             plenopiv.open(path)
         self.assertIn(path, str(caught.exception))
         self.assertIn(words, str(caught.exception))
+
+    def test_a_run_folder_opens_either_tier(self):
+        """A run folder whose manifest lists a full-tier file for pairs 0 and 2 and a live-tier one for
+        every pair (as the daemon's lanes write them): each tier opens on its own pairs."""
+        folder = os.path.join(WORK, "run-tiers")
+        os.makedirs(os.path.join(folder, "vectors", "live"), exist_ok=True)
+        with open(os.path.join(WORK, "v.h5"), "rb") as f:
+            field = f.read()
+        pairs = []
+        for i in range(3):
+            pair = {"pair_index": i, "live_vectors": "vectors/live/pair-%06d.h5" % i}
+            if i != 1:
+                pair["vectors"] = "vectors/pair-%06d.h5" % i
+            for key in ("vectors", "live_vectors"):
+                if key in pair:
+                    with open(os.path.join(folder, pair[key]), "wb") as f:
+                        f.write(field)
+            pairs.append(pair)
+        with open(os.path.join(folder, "manifest.json"), "w") as f:
+            json.dump({"run_id": "tiers", "pairs": pairs}, f)
+        full, live = plenopiv.open(folder), plenopiv.open(folder, tier="live")
+        self.assertEqual(list(full.pair.values), [0, 2])
+        self.assertEqual(list(live.pair.values), [0, 1, 2])
+        self.assertEqual((full.attrs["tier"], live.attrs["tier"]), ("full", "live"))
+        self.assertIn("vectors/live/pair-000001.h5", live.attrs["files"])
+        np.testing.assert_array_equal(live.u.sel(pair=2).values, full.u.sel(pair=2).values)
+        with self.assertRaisesRegex(ValueError, "tier: 'fast' is not one of full, live"):
+            plenopiv.open(folder, tier="fast")
+        only_live = os.path.join(WORK, "run-live-only")
+        os.makedirs(only_live, exist_ok=True)
+        with open(os.path.join(only_live, "manifest.json"), "w") as f:
+            json.dump({"run_id": "live-only", "pairs": [{"pair_index": 0, "live_vectors": os.path.join(
+                folder, "vectors/live/pair-000000.h5")}]}, f)
+        self.assert_refused(only_live, "no full-tier vector fields in its manifest (it has live-tier ones: tier='live')")
 
     def test_what_is_not_a_plenopiv_file_is_refused_by_name(self):
         self.assert_refused(os.path.join(WORK, "nothing-here.h5"), "no such file")
