@@ -13,10 +13,8 @@
 #include <thread>
 
 #include "bench/bench_support.hpp"
-#include "core/io/tiff.hpp"
+#include "bench/replay_recording.hpp"
 #include "core/optics/camera_file.hpp"
-#include "core/sim/particles.hpp"
-#include "core/sim/render.hpp"
 #include "daemon/daemon_config.hpp"
 #include "daemon/processing.hpp"
 #include "daemon/run.hpp"
@@ -26,31 +24,7 @@ using namespace plenopiv;
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
 
-namespace {
-
 using bench::rss_gb;
-
-// `count` pairs in `dir` as frame-<k>.tif: 60 particles in a 4 x 4 x 2 mm box, displaced 0.25 mm
-// along x between exposures (as bench_daemon).
-void write_recording(const fs::path& dir, const optics::CameraModel& camera, int count) {
-  fs::create_directories(dir);
-  const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera));
-  sim::RenderOptions render;
-  render.rays_per_particle = 100000;
-  for (int i = 0; i < count; ++i) {
-    char a_name[32], b_name[32];
-    std::snprintf(a_name, sizeof a_name, "frame-%04d.tif", 2 * i);
-    std::snprintf(b_name, sizeof b_name, "frame-%04d.tif", 2 * i + 1);
-    if (fs::exists(dir / a_name) && fs::exists(dir / b_name)) continue;
-    const auto a = sim::random_particles({{-2, -2, -1}, {2, 2, 1}}, 60, 100 + std::uint64_t(i));
-    auto b = a;
-    for (auto& p : b) p[0] += 0.25;
-    io::write_tiff(dir / a_name, sim::render(camera, lenses, a, render, 2 * std::uint64_t(i)).image, false);
-    io::write_tiff(dir / b_name, sim::render(camera, lenses, b, render, 2 * std::uint64_t(i) + 1).image, false);
-  }
-}
-
-}  // namespace
 
 int main(int argc, char** argv) {
   const int pairs = argc > 1 ? std::atoi(argv[1]) : 200;
@@ -58,7 +32,7 @@ int main(int argc, char** argv) {
   const fs::path camera_file = fs::path(PLENOPIV_SOURCE_DIR) / "systemd/config/camera-small.yaml";
   const optics::CameraModel camera = optics::load_camera_file(camera_file);
   const fs::path root = fs::temp_directory_path() / "plenopiv-bench-lanes";
-  write_recording(root / "replay" / "small", camera, 8);
+  bench::write_replay_recording(root / "replay" / "small", camera, 8);
   drivers::register_replay_camera(drivers::CameraRegistry::instance(), {root / "replay", camera_file});
 
   // Full settings: the shipped run.yaml's box at 0.0625 mm and 10 iterations; live tier: 0.25 mm,

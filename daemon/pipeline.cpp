@@ -3,6 +3,9 @@
 
 #include <spdlog/spdlog.h>
 #include <tbb/parallel_pipeline.h>
+#include <tbb/task.h>
+
+#include <utility>
 
 #include "core/base/errors.hpp"
 
@@ -10,7 +13,13 @@ namespace plenopiv::daemon {
 
 using Clock = std::chrono::steady_clock;
 
+std::function<void()> LiveMailbox::due_waiter_locked() {
+  if (!closed_ && pairs_.empty()) return {};
+  return std::exchange(waiter_, {});
+}
+
 void LiveMailbox::push(SharedPair pair) {
+  std::function<void()> wake;
   {
     std::lock_guard lock(mutex_);
     ++pushed_;
@@ -19,31 +28,60 @@ void LiveMailbox::push(SharedPair pair) {
       pairs_.pop_front();
       ++dropped_;
     }
+    wake = due_waiter_locked();
   }
   ready_.notify_one();
+  if (wake) wake();
 }
 
 void LiveMailbox::close() {
+  std::function<void()> wake;
   {
     std::lock_guard lock(mutex_);
     closed_ = true;
+    wake = due_waiter_locked();
   }
   ready_.notify_all();
+  if (wake) wake();
 }
 
 void LiveMailbox::close_and_clear() {
+  std::function<void()> wake;
   {
     std::lock_guard lock(mutex_);
     closed_ = true;
     dropped_ += pairs_.size();
     pairs_.clear();
+    wake = due_waiter_locked();
   }
   ready_.notify_all();
+  if (wake) wake();
+}
+
+void LiveMailbox::call_when_ready(std::function<void()> wake) {
+  {
+    std::lock_guard lock(mutex_);
+    if (!closed_ && pairs_.empty()) {
+      waiter_ = std::move(wake);
+      return;
+    }
+  }
+  wake();
 }
 
 std::optional<SharedPair> LiveMailbox::take() {
   std::unique_lock lock(mutex_);
   ready_.wait(lock, [&] { return closed_ || !pairs_.empty(); });
+  return take_locked();
+}
+
+std::optional<SharedPair> LiveMailbox::try_take(bool& closed) {
+  std::lock_guard lock(mutex_);
+  closed = closed_ && pairs_.empty();
+  return take_locked();
+}
+
+std::optional<SharedPair> LiveMailbox::take_locked() {
   if (pairs_.empty()) return std::nullopt;
   if (order_ == TakeOrder::oldest) {
     SharedPair oldest = std::move(pairs_.front());
@@ -93,6 +131,19 @@ struct Item {
   SharedPair pair;
   std::optional<ProcessedPair> result;  // empty when processing failed
 };
+
+// The mailbox's next pair, nullopt once it is closed and empty. While it is empty the calling task
+// is suspended, and its thread goes on with the arena's other work until a push or close resumes
+// the task (on a thread of the arena).
+std::optional<SharedPair> next_pair(LiveMailbox& mailbox) {
+  for (;;) {
+    bool closed = false;
+    if (std::optional<SharedPair> pair = mailbox.try_take(closed)) return pair;
+    if (closed) return std::nullopt;
+    tbb::task::suspend(
+        [&](tbb::task::suspend_point tag) { mailbox.call_when_ready([tag] { tbb::task::resume(tag); }); });
+  }
+}
 }  // namespace
 
 void run_live_pipeline(LiveMailbox& mailbox, int max_in_flight, const ProcessFn& process, const OutputFn& output,
@@ -101,7 +152,7 @@ void run_live_pipeline(LiveMailbox& mailbox, int max_in_flight, const ProcessFn&
       std::size_t(max_in_flight),
       tbb::make_filter<void, std::shared_ptr<Item>>(tbb::filter_mode::serial_in_order,
                                                     [&](tbb::flow_control& fc) -> std::shared_ptr<Item> {
-                                                      std::optional<SharedPair> pair = mailbox.take();
+                                                      std::optional<SharedPair> pair = next_pair(mailbox);
                                                       if (!pair) {
                                                         fc.stop();
                                                         return nullptr;

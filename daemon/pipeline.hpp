@@ -67,6 +67,13 @@ class LiveMailbox {
   void close_and_clear();
   // Blocks until a pair or close. Returns the newest or oldest pair, as the queue's order says.
   std::optional<SharedPair> take();
+  // take() without waiting: nullopt when no pair is waiting, and then `closed` says whether one
+  // ever will be.
+  std::optional<SharedPair> try_take(bool& closed);
+  // Calls `wake` once a pair can be taken or the queue is closed: at once on this thread if that
+  // is so already, else on the thread of the push or close that makes it so. One waiter at a time
+  // (a later call replaces a waiter not yet woken).
+  void call_when_ready(std::function<void()> wake);
   // Waits up to `timeout` for close(); true once closed.
   bool wait_closed_for(std::chrono::steady_clock::duration timeout);
   std::size_t capacity() const { return capacity_; }
@@ -75,8 +82,13 @@ class LiveMailbox {
   std::uint64_t dropped() const;  // pairs that left without being taken
 
  private:
+  std::optional<SharedPair> take_locked();
+  // The waiter to wake, taken under the lock when a pair or close makes it due.
+  std::function<void()> due_waiter_locked();
+
   mutable std::mutex mutex_;
   std::condition_variable ready_;
+  std::function<void()> waiter_;
   std::deque<SharedPair> pairs_;
   std::size_t capacity_;
   TakeOrder order_;
@@ -106,7 +118,9 @@ struct PipelineStats {
 using OutputFn = std::function<void(const drivers::FramePair&, ProcessedPair&)>;
 
 // Runs until the mailbox is closed and empty. At most `max_in_flight` pairs are between input
-// and output at once; output sees pairs in increasing pair order. A pair whose processing throws
+// and output at once; output sees pairs in increasing pair order. While the mailbox is empty the
+// stage waiting for it is suspended (oneTBB resumable tasks), so its thread works on the pairs in
+// flight instead of blocking: a lane that waits for the camera holds no core. A pair whose processing throws
 // is counted as skipped on the processing stage and not output; the run goes on. Once `cancel` is
 // set, pairs in flight give up (counted cancelled); those already done are still output.
 void run_live_pipeline(LiveMailbox& mailbox, int max_in_flight, const ProcessFn& process, const OutputFn& output,

@@ -2,7 +2,9 @@
 // cluster jobs; the one library that knows its layout and its manifest.
 #include "proto/run_folder.hpp"
 
+#include <fcntl.h>
 #include <google/protobuf/util/json_util.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <array>
@@ -14,6 +16,7 @@
 #include <regex>
 #include <set>
 #include <sstream>
+#include <system_error>
 
 #include "core/base/errors.hpp"
 #include "core/io/atomic_file.hpp"
@@ -61,6 +64,55 @@ std::set<std::string> integer64_fields() {
   return names;
 }
 
+constexpr const char* kJournal = "journal.jsonl";
+
+// A message as protobuf JSON with proto field names, 64-bit integers as numbers (protobuf's JSON
+// mapping quotes them; its parser takes either); `pretty`: indented, every field printed (the
+// manifest), else one line of the fields that are set (a journal entry).
+std::string message_json(const google::protobuf::Message& message, bool pretty) {
+  google::protobuf::util::JsonPrintOptions options;
+  options.add_whitespace = pretty;
+  options.always_print_primitive_fields = pretty;
+  options.preserve_proto_field_names = true;
+  std::string json;
+  const auto status = google::protobuf::util::MessageToJsonString(message, &json, options);
+  if (!status.ok()) throw std::runtime_error("manifest: " + status.ToString());
+  // "pair_index": "42" -> "pair_index": 42, for the 64-bit fields only (string fields keep their
+  // quotes whatever they hold).
+  static const std::set<std::string> fields = integer64_fields();
+  static const std::regex quoted(R"re("([a-z0-9_]+)":( ?)"(-?[0-9]+)")re");
+  std::string out;
+  out.reserve(json.size());
+  auto last = json.cbegin();
+  for (std::sregex_iterator it(json.begin(), json.end(), quoted), end; it != end; ++it) {
+    const std::smatch& m = *it;
+    if (!fields.count(m[1].str())) continue;
+    out.append(last, m[0].first);
+    out += "\"" + m[1].str() + "\":" + m[2].str() + m[3].str();
+    last = m[0].second;
+  }
+  out.append(last, json.cend());
+  return out;
+}
+
+// Adds a journal entry to a manifest; `positions` maps the manifest's pair indices to their place.
+void apply_entry(msg::RunManifest& manifest, std::unordered_map<std::uint64_t, int>& positions,
+                 const msg::ManifestJournalEntry& entry) {
+  if (entry.has_pair()) {
+    const auto [it, fresh] = positions.try_emplace(entry.pair().pair_index(), manifest.pairs_size());
+    if (fresh) {
+      *manifest.add_pairs() = entry.pair();
+    } else {
+      manifest.mutable_pairs(it->second)->MergeFrom(entry.pair());
+    }
+  } else if (entry.has_drop()) {
+    if (manifest.dropped_size() < Writer::kMaxListedDrops) *manifest.add_dropped() = entry.drop();
+  } else if (entry.has_warning()) {
+    if (std::find(manifest.warnings().begin(), manifest.warnings().end(), entry.warning()) == manifest.warnings().end())
+      manifest.add_warnings(entry.warning());
+  }
+}
+
 std::string read_text(const fs::path& path) {
   std::ifstream in(path, std::ios::binary);
   std::stringstream text;
@@ -71,31 +123,7 @@ std::string read_text(const fs::path& path) {
 
 }  // namespace
 
-std::string manifest_json(const msg::RunManifest& manifest) {
-  google::protobuf::util::JsonPrintOptions options;
-  options.add_whitespace = true;
-  options.always_print_primitive_fields = true;
-  options.preserve_proto_field_names = true;
-  std::string json;
-  const auto status = google::protobuf::util::MessageToJsonString(manifest, &json, options);
-  if (!status.ok()) throw std::runtime_error("manifest: " + status.ToString());
-  // "pair_index": "42" -> "pair_index": 42, for the 64-bit fields only (string fields keep their
-  // quotes whatever they hold).
-  static const std::set<std::string> fields = integer64_fields();
-  static const std::regex quoted(R"re("([a-z0-9_]+)": "(-?[0-9]+)")re");
-  std::string out;
-  out.reserve(json.size());
-  auto last = json.cbegin();
-  for (std::sregex_iterator it(json.begin(), json.end(), quoted), end; it != end; ++it) {
-    const std::smatch& m = *it;
-    if (!fields.count(m[1].str())) continue;
-    out.append(last, m[0].first);
-    out += "\"" + m[1].str() + "\": " + m[2].str();
-    last = m[0].second;
-  }
-  out.append(last, json.cend());
-  return out;
-}
+std::string manifest_json(const msg::RunManifest& manifest) { return message_json(manifest, true); }
 
 msg::RunManifest parse_manifest(const std::string& json, const std::string& source) {
   msg::RunManifest m;
@@ -105,6 +133,34 @@ msg::RunManifest parse_manifest(const std::string& json, const std::string& sour
     throw InputError(source + ": not a run manifest: " + std::string(status.message()));
   }
   return m;
+}
+
+msg::RunManifest read_manifest(const fs::path& run_dir) {
+  const fs::path manifest_path = run_dir / "manifest.json";
+  msg::RunManifest manifest = parse_manifest(read_text(manifest_path), manifest_path.string());
+  const fs::path journal_path = run_dir / kJournal;
+  // A closed run's manifest holds everything (its journal, left by a crash just before removal, too).
+  if (manifest.state() != "recording" || !fs::exists(journal_path)) return manifest;
+  const std::string journal = read_text(journal_path);
+  std::unordered_map<std::uint64_t, int> positions;
+  for (int i = 0; i < manifest.pairs_size(); ++i) positions.emplace(manifest.pairs(i).pair_index(), i);
+  google::protobuf::util::JsonParseOptions options;
+  options.ignore_unknown_fields = true;
+  std::size_t start = 0;
+  for (int line = 1;; ++line) {
+    const std::size_t end = journal.find('\n', start);
+    if (end == std::string::npos) break;  // the rest (if any) is a line a crash cut short
+    msg::ManifestJournalEntry entry;
+    const auto status =
+        google::protobuf::util::JsonStringToMessage(journal.substr(start, end - start), &entry, options);
+    if (!status.ok()) {
+      throw InputError(journal_path.string() + ": line " + std::to_string(line) +
+                       ": not a journal entry: " + std::string(status.message()));
+    }
+    apply_entry(manifest, positions, entry);
+    start = end + 1;
+  }
+  return manifest;
 }
 
 std::string new_run_id() { return utc_now("%Y%m%d-%H%M%S"); }
@@ -154,11 +210,17 @@ std::vector<fs::path> mark_interrupted_runs(const fs::path& data_dir, std::vecto
     const fs::path manifest_file = entry.path() / "manifest.json";
     if (entry.path().filename().string().rfind("run-", 0) != 0 || !fs::is_regular_file(manifest_file, ec)) continue;
     try {
-      msg::RunManifest manifest = parse_manifest(read_text(manifest_file), manifest_file.string());
-      if (manifest.state() != "recording") continue;
+      msg::RunManifest manifest = read_manifest(entry.path());
+      const fs::path journal = entry.path() / kJournal;
+      if (manifest.state() != "recording") {
+        if (fs::remove(journal)) io::sync_folder(entry.path());  // closed, but stopped before removing it
+        continue;
+      }
+      // The journal folded into the manifest, then removed: the folder stands on its manifest alone.
       manifest.set_state("interrupted");
       manifest.set_ended_utc(utc_now("%Y-%m-%dT%H:%M:%SZ"));
       write_text(manifest_file, manifest_json(manifest));
+      if (fs::remove(journal)) io::sync_folder(entry.path());
       marked.push_back(entry.path());
     } catch (const std::exception& e) {
       if (problems) problems->push_back(entry.path().string() + ": " + e.what());
@@ -207,6 +269,28 @@ Writer::Writer(const Setup& setup) : dir_(run_dir(setup.data_dir, setup.run_id))
   }
   std::lock_guard lock(mutex_);
   write_manifest_locked();
+  const fs::path journal = dir_ / kJournal;
+  journal_fd_ = ::open(journal.c_str(), O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC, 0644);
+  if (journal_fd_ < 0) throw std::system_error(errno, std::generic_category(), "cannot create " + journal.string());
+  io::sync_folder(dir_);
+}
+
+Writer::~Writer() {
+  if (journal_fd_ >= 0) ::close(journal_fd_);
+}
+
+void Writer::journal_locked(const msg::ManifestJournalEntry& entry, bool sync) {
+  if (journal_fd_ < 0) throw std::logic_error("run_folder::Writer: the run is closed");
+  const std::string line = message_json(entry, false) + "\n";
+  const fs::path journal = dir_ / kJournal;
+  for (std::size_t done = 0; done < line.size();) {
+    const ssize_t n = ::write(journal_fd_, line.data() + done, line.size() - done);
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0) throw std::system_error(errno, std::generic_category(), "cannot append to " + journal.string());
+    done += std::size_t(n);
+  }
+  if (sync && ::fdatasync(journal_fd_) != 0)
+    throw std::system_error(errno, std::generic_category(), "cannot sync " + journal.string());
 }
 
 void Writer::record_pair(const PairRecord& pair) {
@@ -225,7 +309,8 @@ void Writer::record_pair(const PairRecord& pair) {
   frame_b.get();
   io::sync_folder(dir_ / "frames");
   std::lock_guard lock(mutex_);
-  msg::ManifestPair* p = manifest_.add_pairs();
+  msg::ManifestJournalEntry entry;
+  msg::ManifestPair* p = entry.mutable_pair();
   p->set_pair_index(pair.pair_index);
   p->set_trigger_index(pair.trigger_index);
   p->set_frame_a(a);
@@ -244,7 +329,8 @@ void Writer::record_pair(const PairRecord& pair) {
     p->set_pulse1_ns(p1);
     p->set_pulse2_ns(p2);
   }
-  write_manifest_locked();
+  journal_locked(entry);
+  apply_entry(manifest_, pair_position_, entry);
 }
 
 void Writer::record_vectors(std::uint64_t pair_index, const VectorField& field, std::span<const std::uint8_t> flags,
@@ -256,8 +342,8 @@ void Writer::record_vectors(std::uint64_t pair_index, const VectorField& field, 
   {
     std::lock_guard lock(mutex_);
     run_id = manifest_.run_id();
-    for (const msg::ManifestPair& p : manifest_.pairs()) {
-      if (p.pair_index() != pair_index) continue;
+    if (const auto it = pair_position_.find(pair_index); it != pair_position_.end()) {
+      const msg::ManifestPair& p = manifest_.pairs(it->second);
       frame_a = p.frame_a();
       frame_b = p.frame_b();
       measured_dt_s = p.measured_dt_s();
@@ -276,16 +362,16 @@ void Writer::record_vectors(std::uint64_t pair_index, const VectorField& field, 
   process::write_vector_field_files(dir_ / file, {}, field, flags, provenance);
   std::lock_guard lock(mutex_);
   (live ? live_statistics_ : statistics_).add(field);
-  for (msg::ManifestPair& p : *manifest_.mutable_pairs()) {
-    if (p.pair_index() != pair_index) continue;
-    if (live) {
-      p.set_live_vectors(file);
-    } else {
-      p.set_vectors(file);
-    }
+  msg::ManifestJournalEntry entry;
+  entry.mutable_pair()->set_pair_index(pair_index);
+  if (live) {
+    entry.mutable_pair()->set_live_vectors(file);
+  } else {
+    entry.mutable_pair()->set_vectors(file);
   }
+  journal_locked(entry);
+  if (pair_position_.count(pair_index)) apply_entry(manifest_, pair_position_, entry);
   manifest_.set_pairs_processed(manifest_.pairs_processed() + 1);
-  write_manifest_locked();
 }
 
 void Writer::write_statistics_locked() {
@@ -299,12 +385,16 @@ void Writer::write_statistics_locked() {
   }
 }
 
+// Drops and warnings name no file: their journal lines reach the disk with the next pair's sync,
+// so that a flood of drops does not slow the recording of the pairs that do come.
 void Writer::record_drop(std::uint64_t trigger_index, const std::string& reason) {
   std::lock_guard lock(mutex_);
   if (manifest_.dropped_size() >= kMaxListedDrops) return;
-  msg::ManifestDrop* out = manifest_.add_dropped();
-  out->set_trigger_index(trigger_index);
-  out->set_reason(reason);
+  msg::ManifestJournalEntry entry;
+  entry.mutable_drop()->set_trigger_index(trigger_index);
+  entry.mutable_drop()->set_reason(reason);
+  journal_locked(entry, false);
+  apply_entry(manifest_, pair_position_, entry);
 }
 
 void Writer::add_warning(const std::string& warning) {
@@ -312,7 +402,10 @@ void Writer::add_warning(const std::string& warning) {
   for (const std::string& w : manifest_.warnings()) {
     if (w == warning) return;
   }
-  manifest_.add_warnings(warning);
+  msg::ManifestJournalEntry entry;
+  entry.set_warning(warning);
+  journal_locked(entry, false);
+  apply_entry(manifest_, pair_position_, entry);
 }
 
 void Writer::close(const std::string& state, std::uint64_t processed, std::uint64_t skipped, const msg::Losses& losses,
@@ -329,8 +422,12 @@ void Writer::close(const std::string& state, std::uint64_t processed, std::uint6
   manifest_.clear_lanes();
   for (const msg::LaneCounters& lane : lanes) *manifest_.add_lanes() = lane;
   // The final manifest goes first: statistics are a summary of files already listed, and a disk
-  // that fills up writing them must not leave the folder "recording".
+  // that fills up writing them must not leave the folder "recording". The journal goes once the
+  // manifest holds all it says (a crash in between leaves it beside a closed manifest: ignored).
   write_manifest_locked();
+  ::close(journal_fd_);
+  journal_fd_ = -1;
+  if (fs::remove(dir_ / kJournal)) io::sync_folder(dir_);
   if (statistics_.fields() > 0 || live_statistics_.fields() > 0) {
     write_statistics_locked();
     write_manifest_locked();
@@ -354,7 +451,7 @@ Reader::Reader(const fs::path& dir) : dir_(dir) {
   const fs::path manifest_path = dir_ / "manifest.json";
   if (!fs::is_regular_file(manifest_path))
     throw InputError(manifest_path.string() + ": missing (not a plenopivd run folder?)");
-  manifest_ = parse_manifest(read_text(manifest_path), manifest_path.string());
+  manifest_ = read_manifest(dir_);
   file("process_file", manifest_.process_file());
   file("camera_file", manifest_.camera_file());
   if (manifest_.calibration() == "file") {

@@ -8,6 +8,7 @@
 #include <optional>
 #include <span>
 #include <string>
+#include <unordered_map>
 #include <vector>
 
 #include "core/base/grid.hpp"
@@ -30,15 +31,23 @@ namespace plenopiv::run_folder {
 //   statistics.h5            mean velocity (u, v, w) and u_rms, v_rms, w_rms, count per node (full settings)
 //   statistics-live.h5       the same over the live tier's fields
 //   manifest.json            msg::RunManifest as JSON (64-bit integers as JSON numbers)
-// Every file is written under a temporary name, fsynced and renamed; the manifest is rewritten the
-// same way after each pair and each field, so whatever stops the writer, the manifest lists exactly
-// the complete files.
+//   journal.jsonl            while recording: one msg::ManifestJournalEntry per line, each pair,
+//                            field, drop and warning since manifest.json was written
+// Every file is written under a temporary name, fsynced and renamed. manifest.json is written at
+// the start and, with everything, at the end (then the journal is removed); in between each pair
+// and field is appended to the journal once its files are on disk (one line, fdatasync), so the
+// cost of recording a pair does not grow with the run, and whatever stops the writer, manifest
+// plus journal (read_manifest) list exactly the complete files.
 
 // The manifest as JSON: protobuf's JSON mapping, but with 64-bit integers as numbers (protobuf
 // writes them as strings; its parser takes either).
 std::string manifest_json(const msg::RunManifest& manifest);
 // Parses manifest.json text; InputError naming `source` when it is not a run manifest.
 msg::RunManifest parse_manifest(const std::string& json, const std::string& source);
+// A run folder's manifest as it stands: manifest.json with its journal (if any) applied. A journal
+// line cut short by a crash (the last, without its newline) lists nothing and is ignored; any other
+// line that does not parse is an InputError naming the file and line.
+msg::RunManifest read_manifest(const std::filesystem::path& run_dir);
 
 // One recorded pair as the writer stores it (what a camera delivered, and the laser pulses the
 // trigger measured for it).
@@ -78,6 +87,9 @@ class Writer {
   };
   // Creates the folder (InputError if it exists or cannot be made) and the first manifest.
   explicit Writer(const Setup& setup);
+  ~Writer();
+  Writer(const Writer&) = delete;
+  Writer& operator=(const Writer&) = delete;
 
   const std::filesystem::path& dir() const { return dir_; }
   // Writes both frames (together, each fsynced) and lists the pair. Throws if the disk refuses.
@@ -89,14 +101,14 @@ class Writer {
   void record_vectors(std::uint64_t pair_index, const VectorField& field, std::span<const std::uint8_t> flags = {},
                       process::Tier tier = process::Tier::full);
   // Lists pairs the camera dropped, with the reason, in the manifest (the first kMaxListedDrops;
-  // the losses count them all). The manifest is rewritten with the next file or at close.
+  // the losses count them all).
   void record_drop(std::uint64_t trigger_index, const std::string& reason);
   static constexpr int kMaxListedDrops = 10000;
   // Bad data met on the way (all-zero or saturated frames, ...): listed once each.
   void add_warning(const std::string& warning);
   // Writes the final manifest with `state` ("complete", "stopped", "failed: ..."), the losses, the
-  // raw frames lost and the lanes' counters, then statistics (of each tier that recorded a field).
-  // Later calls do nothing.
+  // raw frames lost and the lanes' counters, then statistics (of each tier that recorded a field),
+  // and removes the journal. Later calls do nothing.
   void close(const std::string& state, std::uint64_t processed, std::uint64_t skipped, const msg::Losses& losses = {},
              std::uint64_t frames_lost = 0, const std::vector<msg::LaneCounters>& lanes = {});
 
@@ -106,10 +118,15 @@ class Writer {
  private:
   void write_manifest_locked();
   void write_statistics_locked();
+  // Appends one entry to the journal; with `sync`, waits for the disk (fdatasync) to hold it and
+  // every line before it.
+  void journal_locked(const msg::ManifestJournalEntry& entry, bool sync = true);
 
   mutable std::mutex mutex_;
   std::filesystem::path dir_;
   msg::RunManifest manifest_;
+  std::unordered_map<std::uint64_t, int> pair_position_;  // pair_index -> its place in manifest_.pairs
+  int journal_fd_ = -1;
   std::string process_yaml_;                             // the run's processing keys, each vector file's provenance
   piv::RunningStatistics statistics_, live_statistics_;  // over the full and the live tier's fields
   double nominal_dt_s_ = 0;

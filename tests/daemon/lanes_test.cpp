@@ -4,6 +4,8 @@
 
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
+#include <chrono>
 #include <mutex>
 #include <set>
 #include <thread>
@@ -120,6 +122,51 @@ TEST(Lane, ItsProcessingThreadsRunNicerThanTheRecordingThread) {
   EXPECT_EQ(niceness, std::set<int>{recording + 5});
   EXPECT_EQ(lane_thread, recording + 5) << "the thread that ran the lane";
   EXPECT_EQ(this_thread_niceness(), recording) << "the recording thread keeps its priority";
+}
+
+// A lane waiting for its next pair holds no oneTBB worker: while the recording offers pairs slower
+// than they are processed (the queue empty between them), each pair's parallel loops still get
+// every core.
+TEST(Lane, AWaitingLaneLeavesEveryCoreToItsWork) {
+  const int cores = tbb::this_task_arena::max_concurrency();
+  if (cores < 2) GTEST_SKIP() << "one core: nothing to share";
+  Lane::Options o;
+  o.order = TakeOrder::oldest;
+  o.capacity = 8;
+  o.max_in_flight = 2;
+  Lane lane(o);
+  std::mutex m;
+  std::vector<std::size_t> threads_per_pair;
+  const auto process = [&](const drivers::FramePair& pair, const CancelFlag& cancel) {
+    std::mutex seen_mutex;
+    std::set<std::thread::id> seen;
+    tbb::parallel_for(0, 64, [&](int) {
+      const auto until = std::chrono::steady_clock::now() + std::chrono::milliseconds(2);
+      while (std::chrono::steady_clock::now() < until) {
+      }
+      std::lock_guard lock(seen_mutex);
+      seen.insert(std::this_thread::get_id());
+    });
+    std::lock_guard lock(m);
+    threads_per_pair.push_back(seen.size());
+    return empty_field(pair, cancel);
+  };
+  CancelFlag cancel{false};
+  std::thread runner([&] {
+    lane.run(
+        process, [](const drivers::FramePair&, ProcessedPair&) {}, cancel);
+  });
+  for (std::uint64_t i = 0; i < 6; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(250));  // each pair done before the next comes
+    lane.offer(pair_of(i));
+  }
+  lane.close(false);
+  runner.join();
+  ASSERT_EQ(threads_per_pair.size(), 6u);
+  // Every pair could use both cores; a loaded machine may be slow to wake a worker for some.
+  const auto shared =
+      std::count_if(threads_per_pair.begin(), threads_per_pair.end(), [](std::size_t n) { return n >= 2; });
+  EXPECT_GE(shared, 4) << "most pairs' loops ran on one thread: the lane's wait held the other cores";
 }
 
 TEST(Lane, ARunConfigMakesTheLiveLaneFirstAndTheQualityLaneWhenAsked) {

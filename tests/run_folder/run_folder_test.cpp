@@ -2,6 +2,7 @@
 // manifest's JSON, interrupted folders, and the running statistics it keeps.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <sstream>
@@ -65,6 +66,13 @@ Writer::Setup setup(const fs::path& data, const std::string& id) {
   s.camera_model = "plenopiv test camera";
   s.camera_triggering = "software: test";
   return s;
+}
+
+// manifest.json as it is on disk, without the journal.
+msg::RunManifest manifest_file_alone(const fs::path& run_dir) {
+  std::stringstream text;
+  text << std::ifstream(run_dir / "manifest.json").rdbuf();
+  return run_folder::parse_manifest(text.str(), "manifest.json");
 }
 
 TEST(RunFolder, TheWriterListsFramesVectorsStatisticsAndDropsAsTheyAreWritten) {
@@ -201,6 +209,53 @@ TEST(RunFolder, TheReaderChecksTheFolderBeforeAnythingIsProcessed) {
   EXPECT_THROW(Reader(data / "no-such-run"), InputError);
 }
 
+// While a run records, manifest.json stays as the start wrote it and each pair, field, drop and
+// warning goes to the journal, one line each: recording a pair costs the same at pair 10 000 as at
+// pair 1. read_manifest applies the journal; a last line cut short by a crash lists nothing; any
+// other bad line is named.
+TEST(RunFolder, PairsGoToTheJournalWhileRecordingAndIntoTheManifestAtTheEnd) {
+  const fs::path data = testing_support::temp_dir("run-folder") / "journal";
+  fs::remove_all(data);
+  Writer writer(setup(data, "j"));
+  for (std::uint64_t i = 0; i < 4; ++i) writer.record_pair(record_of(i, Frames(i)));
+  writer.record_vectors(1, field(1));
+  writer.record_vectors(1, field(2), {}, process::Tier::live);
+  writer.record_drop(5, "camera queue overflow");
+  const fs::path journal = writer.dir() / "journal.jsonl";
+  EXPECT_EQ(manifest_file_alone(writer.dir()).pairs_size(), 0);
+  std::stringstream lines;
+  lines << std::ifstream(journal).rdbuf();
+  const std::string kept = lines.str();
+  EXPECT_EQ(std::count(kept.begin(), kept.end(), '\n'), 7) << kept;
+  const msg::RunManifest m = run_folder::read_manifest(writer.dir());
+  ASSERT_EQ(m.pairs_size(), 4);
+  EXPECT_EQ(m.pairs(3).frame_b(), "frames/pair-000003-B.tif");
+  EXPECT_EQ(m.pairs(1).vectors(), "vectors/pair-000001.h5");
+  EXPECT_EQ(m.pairs(1).live_vectors(), "vectors/live/pair-000001.h5");
+  EXPECT_EQ(m.pairs(1).frame_a(), "frames/pair-000001-A.tif") << "a field's line keeps the pair's frames";
+  ASSERT_EQ(m.dropped_size(), 1);
+
+  // A crash while a line was being appended: the torn line lists nothing.
+  std::ofstream(journal, std::ios::app) << R"({"pair": {"pair_index": 9, "frame_a": "frames/pa)";
+  EXPECT_EQ(run_folder::read_manifest(writer.dir()).pairs_size(), 4);
+  // A damaged line inside the journal is named.
+  std::ofstream(journal, std::ios::trunc) << "{\"pair\": 3\n" << kept;
+  try {
+    run_folder::read_manifest(writer.dir());
+    ADD_FAILURE() << "a damaged journal line was accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("journal.jsonl: line 1"), std::string::npos) << e.what();
+  }
+  std::ofstream(journal, std::ios::trunc) << kept;
+
+  writer.close("complete", 2, 0);
+  EXPECT_FALSE(fs::exists(journal));
+  const msg::RunManifest closed = manifest_file_alone(writer.dir());
+  EXPECT_EQ(closed.pairs_size(), 4);
+  EXPECT_EQ(closed.pairs(1).live_vectors(), "vectors/live/pair-000001.h5");
+  EXPECT_EQ(closed.dropped_size(), 1);
+}
+
 TEST(RunFolder, FoldersLeftRecordingAreMarkedInterruptedAndKeepTheirPairs) {
   const fs::path data = testing_support::temp_dir("run-folder") / "interrupted";
   fs::remove_all(data);
@@ -222,6 +277,9 @@ TEST(RunFolder, FoldersLeftRecordingAreMarkedInterruptedAndKeepTheirPairs) {
   EXPECT_EQ(m.state(), "interrupted");
   EXPECT_FALSE(m.ended_utc().empty());
   EXPECT_EQ(m.pairs_size(), 2);
+  // The journal was folded into manifest.json and removed.
+  EXPECT_FALSE(fs::exists(data / "run-crashed" / "journal.jsonl"));
+  EXPECT_EQ(manifest_file_alone(data / "run-crashed").pairs_size(), 2);
   EXPECT_EQ(read_manifest(data / "run-closed").state(), "complete");
   ASSERT_EQ(problems.size(), 1u);
   EXPECT_NE(problems[0].find("run-damaged"), std::string::npos) << problems[0];

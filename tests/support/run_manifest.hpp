@@ -1,25 +1,23 @@
-// Tests: a run folder's manifest.json read back as the RunManifest message (a test failure, not an
-// exception, when it does not parse).
+// Tests: a run folder's manifest read back as the RunManifest message, with its journal applied
+// (run_folder::read_manifest), a test failure, not an exception, when it does not read.
 #pragma once
 
-#include <google/protobuf/util/json_util.h>
 #include <gtest/gtest.h>
 
 #include <filesystem>
-#include <fstream>
-#include <sstream>
 
 #include "plenopiv.pb.h"
+#include "proto/run_folder.hpp"
 
 namespace plenopiv::testing_support {
 
 inline msg::RunManifest read_manifest(const std::filesystem::path& run_dir) {
-  std::ifstream in(run_dir / "manifest.json");
-  std::stringstream text;
-  text << in.rdbuf();
-  msg::RunManifest m;
-  EXPECT_TRUE(google::protobuf::util::JsonStringToMessage(text.str(), &m).ok()) << text.str();
-  return m;
+  try {
+    return run_folder::read_manifest(run_dir);
+  } catch (const std::exception& e) {
+    ADD_FAILURE() << e.what();
+    return {};
+  }
 }
 
 }  // namespace plenopiv::testing_support

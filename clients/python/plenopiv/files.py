@@ -18,8 +18,10 @@ _HDF5_INTERNAL_ATTRIBUTES = {"CLASS", "NAME", "DIMENSION_LIST", "REFERENCE_LIST"
 AXIS_ORDER = "z, y, x: arrays are [nz][ny][nx] (C order, x fastest; MATLAB shows them x, y, z)"
 AXES = "x right, y down on the sensor, z away from the camera along the optical axis; mm; z = 0 the nominal focal plane"
 
-# The run folder's manifest (proto/run_folder.hpp) and a pair's file stem.
+# The run folder's manifest and, while it records, the journal of what was added since
+# (proto/run_folder.hpp), and a pair's file stem.
 MANIFEST = "manifest.json"
+JOURNAL = "journal.jsonl"
 _PAIR_FILE = re.compile(r"^pair-(\d+)\.h5$")
 
 
@@ -144,7 +146,40 @@ def read_manifest(run_dir):
         raise FileError("%s: cannot read the run manifest (%s)" % (path, e)) from None
     if not isinstance(manifest, dict) or "run_id" not in manifest:
         raise FileError("%s: not a run manifest (no run_id)" % path)
+    journal = os.path.join(run_dir, JOURNAL)
+    if manifest.get("state") == "recording" and os.path.exists(journal):
+        _apply_journal(manifest, journal)
     return manifest
+
+
+def _apply_journal(manifest, path):
+    """A recording run's journal (one msg::ManifestJournalEntry per line) applied to its manifest, as
+    run_folder::read_manifest does: a pair line adds a pair or its new fields to the listed one, a
+    drop or warning line is appended. A last line without its newline (cut short by a crash) lists
+    nothing."""
+    with builtins.open(path, encoding="utf-8") as f:
+        text = f.read()
+    pairs = manifest.setdefault("pairs", [])
+    listed = {int(p.get("pair_index", 0)): p for p in pairs}
+    for number, line in enumerate(text.split("\n")[:-1], start=1):
+        try:
+            entry = json.loads(line)
+            if not isinstance(entry, dict):
+                raise ValueError("not an object")
+        except ValueError as e:
+            raise FileError("%s: line %d: not a journal entry (%s)" % (path, number, e)) from None
+        if "pair" in entry:
+            pair = entry["pair"]
+            index = int(pair.get("pair_index", 0))
+            if index in listed:
+                listed[index].update({k: v for k, v in pair.items() if v not in ("", 0, None)})
+            else:
+                listed[index] = dict(pair)
+                pairs.append(listed[index])
+        elif "drop" in entry:
+            manifest.setdefault("dropped", []).append(entry["drop"])
+        elif "warning" in entry and entry["warning"] not in manifest.setdefault("warnings", []):
+            manifest["warnings"].append(entry["warning"])
 
 
 def _manifest_attributes(manifest):

@@ -202,6 +202,34 @@ class BadInput(unittest.TestCase):
                 folder, "vectors/live/pair-000000.h5")}]}, f)
         self.assert_refused(only_live, "no full-tier vector fields in its manifest (it has live-tier ones: tier='live')")
 
+    def test_a_run_still_recording_lists_what_its_journal_adds(self):
+        """A run folder being recorded: manifest.json as the run's start wrote it, the pairs and fields
+        since then in journal.jsonl (a last line cut short by a crash lists nothing)."""
+        folder = os.path.join(WORK, "run-recording")
+        os.makedirs(os.path.join(folder, "vectors"), exist_ok=True)
+        with open(os.path.join(WORK, "v.h5"), "rb") as f, \
+                open(os.path.join(folder, "vectors", "pair-000001.h5"), "wb") as out:
+            out.write(f.read())
+        with open(os.path.join(folder, "manifest.json"), "w") as f:
+            json.dump({"run_id": "recording", "state": "recording", "pairs": []}, f)
+        with open(os.path.join(folder, "journal.jsonl"), "w") as f:
+            f.write('{"pair":{"pair_index":0,"frame_a":"frames/pair-000000-A.tif"}}\n'
+                    '{"pair":{"pair_index":1,"frame_a":"frames/pair-000001-A.tif","host_timestamp_a_ns":7}}\n'
+                    '{"drop":{"trigger_index":2,"reason":"camera queue overflow"}}\n'
+                    '{"pair":{"pair_index":1,"vectors":"vectors/pair-000001.h5"}}\n'
+                    '{"pair":{"pair_index":3,"vec')
+        manifest = plenopiv.files.read_manifest(folder)
+        self.assertEqual([p["pair_index"] for p in manifest["pairs"]], [0, 1])
+        self.assertEqual(manifest["pairs"][1]["frame_a"], "frames/pair-000001-A.tif")
+        self.assertEqual(manifest["dropped"][0]["reason"], "camera queue overflow")
+        ds = plenopiv.open(folder)
+        self.assertEqual(list(ds.pair.values), [1])
+        with open(os.path.join(folder, "journal.jsonl"), "w") as f:
+            f.write('{"pair": \n')
+        with self.assertRaises(plenopiv.FileError) as caught:
+            plenopiv.files.read_manifest(folder)
+        self.assertIn("journal.jsonl: line 1: not a journal entry", str(caught.exception))
+
     def test_what_is_not_a_plenopiv_file_is_refused_by_name(self):
         self.assert_refused(os.path.join(WORK, "nothing-here.h5"), "no such file")
         text = os.path.join(WORK, "notes.txt")

@@ -1,0 +1,38 @@
+// A replay folder of ray-traced camera-small pairs, shared by the benchmarks that drive a whole
+// in-process run through `replay://` (bench_lanes, bench_soak).
+#pragma once
+
+#include <cstdint>
+#include <cstdio>
+#include <filesystem>
+
+#include "core/io/tiff.hpp"
+#include "core/optics/camera_model.hpp"
+#include "core/optics/microlens_array.hpp"
+#include "core/sim/particles.hpp"
+#include "core/sim/render.hpp"
+
+namespace plenopiv::bench {
+
+// `count` pairs in `dir` as frame-<k>.tif (kept when already there): 60 particles in a
+// 4 x 4 x 2 mm box, displaced 0.25 mm along x between exposures (as bench_daemon).
+inline void write_replay_recording(const std::filesystem::path& dir, const optics::CameraModel& camera, int count) {
+  namespace fs = std::filesystem;
+  fs::create_directories(dir);
+  const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera));
+  sim::RenderOptions render;
+  render.rays_per_particle = 100000;
+  for (int i = 0; i < count; ++i) {
+    char a_name[32], b_name[32];
+    std::snprintf(a_name, sizeof a_name, "frame-%04d.tif", 2 * i);
+    std::snprintf(b_name, sizeof b_name, "frame-%04d.tif", 2 * i + 1);
+    if (fs::exists(dir / a_name) && fs::exists(dir / b_name)) continue;
+    const auto a = sim::random_particles({{-2, -2, -1}, {2, 2, 1}}, 60, 100 + std::uint64_t(i));
+    auto b = a;
+    for (auto& p : b) p[0] += 0.25;
+    io::write_tiff(dir / a_name, sim::render(camera, lenses, a, render, 2 * std::uint64_t(i)).image, false);
+    io::write_tiff(dir / b_name, sim::render(camera, lenses, b, render, 2 * std::uint64_t(i) + 1).image, false);
+  }
+}
+
+}  // namespace plenopiv::bench
