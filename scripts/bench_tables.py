@@ -39,7 +39,8 @@ PROCESS = ["--mu", "1", "--accelerate", "--iterations", "20", "--intensity-thres
 RUN = ["--mu", "1", "--iterations", "3", "--intensity-threshold", "4", "--final-smoothing", "1",
        "--depth-prefilter", "4", "--passes", "16@50+4,8@50"]
 
-# name: (set, command from the repository root, plot drawn from its sweep rows or None)
+# name: (set, command from the repository root, plot or None); a plot is drawn by bench/plot_e2e.py from
+# sweep rows (pareto=), or by bench/plot_soak.py from soak samples (soak.png)
 BENCHES = {
     "e2e-reduced": ("quick", ["build/bin/bench_e2e", "reduced"], "e2e_pareto.png"),
     "e2e-full": ("paper", ["build/bin/bench_e2e", "full", "--no-sweep", "--steady"] + RUN_PAPER
@@ -66,6 +67,7 @@ BENCHES = {
     "uncertainty": ("paper", ["build/bin/bench_uncertainty", "--with-paper-ring"], None),
     "daemon": ("quick", ["build/bin/bench_daemon", "6", "1.0"], None),
     "lanes": ("quick", ["build/bin/bench_lanes", "200", "10"], None),
+    "soak": ("paper", ["build/bin/bench_soak", "10000", "15"], "soak.png"),
     "sim": ("quick", ["build/bin/bench_sim"], None),
     "calib": ("quick", ["build/bin/bench_calib"], None),
     "resampling": ("quick", ["build/bin/bench_resampling"], None),
@@ -571,6 +573,20 @@ def t_lanes(R):
     return out + ["", r.provenance()]
 
 
+def t_soak(R):
+    r = R("soak")
+    rows = [[f"{d['pairs']} at {d['rate_hz']} Hz", d["run_s"], d["recorded"], d["frames_lost"], d["live_fields"],
+             f"{d['pace_first_hz']} / {d['pace_last_hz']}",
+             f"{float(d['rss_first_gb']) * 1024:.0f} / {float(d['rss_last_gb']) * 1024:.0f} / "
+             f"{float(d['rss_max_gb']) * 1024:.0f}",
+             f"{d['fds_first']} / {d['fds_last']} / {d['fds_max']}",
+             f"{d['threads_first']} / {d['threads_last']} / {d['threads_max']}"]
+            for d in r.find(bench="soak")]
+    out = table(["pairs", "s", "recorded", "raw frames lost", "live fields", "recorded per s, early / late",
+                 "RSS MB, early / late / max", "open fds", "threads"], rows)
+    return out + ["", r.provenance()]
+
+
 def t_sim(R):
     r = R("sim")
     rows = []
@@ -640,6 +656,7 @@ TABLES = {
     "uncertainty": t_uncertainty,
     "daemon": t_daemon,
     "lanes": t_lanes,
+    "soak": t_soak,
     "sim": t_sim,
     "calib": t_calib,
     "resampling": t_resampling,
@@ -676,9 +693,10 @@ def regenerate():
     for name, (_, _, plot) in BENCHES.items():
         path = RESULTS / f"{name}.txt"
         text = path.read_text() if path.exists() else ""
-        if plot and "pareto=" in text and "# carried over:" not in text:
-            subprocess.run(["/usr/bin/python3", "bench/plot_e2e.py", f"docs/{plot}"], cwd=ROOT, check=True,
-                           input=text, text=True)
+        script = "bench/plot_soak.py" if plot == "soak.png" else "bench/plot_e2e.py"
+        marker = "bench=soak_sample" if plot == "soak.png" else "pareto="
+        if plot and marker in text and "# carried over:" not in text:
+            subprocess.run(["/usr/bin/python3", script, f"docs/{plot}"], cwd=ROOT, check=True, input=text, text=True)
 
 
 def main():
