@@ -141,7 +141,7 @@ TEST(Lane, AWaitingLaneLeavesEveryCoreToItsWork) {
     std::mutex seen_mutex;
     std::set<std::thread::id> seen;
     tbb::parallel_for(0, 64, [&](int) {
-      const auto until = std::chrono::steady_clock::now() + std::chrono::milliseconds(2);
+      const auto until = std::chrono::steady_clock::now() + std::chrono::milliseconds(4);
       while (std::chrono::steady_clock::now() < until) {
       }
       std::lock_guard lock(seen_mutex);
@@ -157,16 +157,24 @@ TEST(Lane, AWaitingLaneLeavesEveryCoreToItsWork) {
         process, [](const drivers::FramePair&, ProcessedPair&) {}, cancel);
   });
   for (std::uint64_t i = 0; i < 6; ++i) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(250));  // each pair done before the next comes
+    // Each pair comes once the one before is done (the lane waiting, its queue empty).
+    for (auto t0 = std::chrono::steady_clock::now();
+         std::chrono::steady_clock::now() - t0 < std::chrono::seconds(30);) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+      std::lock_guard lock(m);
+      if (threads_per_pair.size() == i) break;
+    }
     lane.offer(pair_of(i));
   }
   lane.close(false);
   runner.join();
   ASSERT_EQ(threads_per_pair.size(), 6u);
-  // Every pair could use both cores; a loaded machine may be slow to wake a worker for some.
+  // Every pair could use both cores, but a loaded machine (or workers left niced by another test)
+  // may not give a worker time during some pairs' 0.25 s loops. A lane whose wait holds the worker
+  // runs all but the last pair's loop on one thread.
   const auto shared =
-      std::count_if(threads_per_pair.begin(), threads_per_pair.end(), [](std::size_t n) { return n >= 2; });
-  EXPECT_GE(shared, 4) << "most pairs' loops ran on one thread: the lane's wait held the other cores";
+      std::count_if(threads_per_pair.begin(), threads_per_pair.end() - 1, [](std::size_t n) { return n >= 2; });
+  EXPECT_GE(shared, 2) << "the pairs' loops ran on one thread: the lane's wait held the other cores";
 }
 
 TEST(Lane, ARunConfigMakesTheLiveLaneFirstAndTheQualityLaneWhenAsked) {
