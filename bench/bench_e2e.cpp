@@ -13,6 +13,10 @@
 //     --time-sweep: MART iterations and the ghost floor against time per pair at this scale (with
 //              --no-sweep; ten pairs in a kept workspace; rows marked pareto= for plot_e2e.py).
 //     --steady: the headline pair once more in the kept MART workspace (time per pair in a run).
+//     --live B,N,P: a live tier beside the headline: voxels B times as large (the same box), N MART
+//              iterations, passes P (--passes syntax, windows in its voxels); its set-up, first and
+//              in-a-run time per pair and its errors in the headline's voxels (axis band: half its
+//              final window) (row variant=live).
 //     --prune-threshold: MART's prune threshold for the headline rows (default 0: exact zeros).
 //     --sparse-sweep: the headline settings with pruning off, on for exact zeros, and at thresholds
 //              1e-3 .. 3e-2, every pair in the kept workspaces (with --no-sweep; rows variant=sparse
@@ -78,10 +82,10 @@ struct Errors {
 // RMS error (voxels) over valid nodes against the midpoint displacement d = D(x - d/2) (three
 // fixed-point steps: the ring's displacements are several voxels), and the share of valid nodes;
 // beside it the RMS over the nodes whose final window does not reach the ring's axis
-// (sim::in_ring_axis_band; half-width: half the default final window, 1 mm at 0.125 mm voxels),
-// where the exact u and w jump.
-Errors errors_against(const VectorField& f, const sim::RingVortexFlow& flow, double voxel_mm) {
-  const double band_mm = 0.5 * piv::CorrelationSettings{}.passes.back().window[0] * voxel_mm;
+// (sim::in_ring_axis_band; half-width `band_mm`, default half the default final window, 1 mm at
+// 0.125 mm voxels), where the exact u and w jump.
+Errors errors_against(const VectorField& f, const sim::RingVortexFlow& flow, double voxel_mm, double band_mm = 0) {
+  if (band_mm <= 0) band_mm = 0.5 * piv::CorrelationSettings{}.passes.back().window[0] * voxel_mm;
   const sim::FieldErrors s = sim::field_errors(f, flow, voxel_mm, 3);
   const sim::FieldErrors off = sim::field_errors(
       f, flow, voxel_mm, 3, 0, [&](const sim::Point3& x) { return !sim::in_ring_axis_band(flow, x, band_mm); });
@@ -151,6 +155,7 @@ int main(int argc, char** argv) {
   double prune_threshold = recon::MartSettings{}.prune_threshold;
   std::string compare_passes;  // pass lists separated by ';'
   std::string passes;          // the headline's passes (--passes syntax); empty: core/piv's default
+  std::string live;            // --live B,N,P; empty: no live tier
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--no-sweep"))
       sweep = false;
@@ -190,6 +195,8 @@ int main(int argc, char** argv) {
       compare_passes = argv[++i];
     else if (!std::strcmp(argv[i], "--passes") && i + 1 < argc)
       passes = argv[++i];
+    else if (!std::strcmp(argv[i], "--live") && i + 1 < argc)
+      live = argv[++i];
     else
       scale = argv[i];
   }
@@ -340,6 +347,45 @@ int main(int argc, char** argv) {
         base.times.reconstruct_a_s + base.times.reconstruct_b_s + base.times.correlate_s,
         int(again.correlation.field.dz_mm == base.correlation.field.dz_mm &&
             again.correlation.field.dx_mm == base.correlation.field.dx_mm));
+    std::fflush(stdout);
+  }
+
+  if (!live.empty()) {
+    // A live tier: the same pair and box in coarser voxels, fewer iterations, its own passes.
+    const std::size_t c1 = live.find(','), c2 = live.find(',', c1 + 1);
+    if (c1 == std::string::npos || c2 == std::string::npos) {
+      std::fprintf(stderr, "bench_e2e: --live B,N,P (binning, iterations, passes), not '%s'\n", live.c_str());
+      return 2;
+    }
+    const int binning = std::stoi(live.substr(0, c1));
+    process::ProcessSettings s = settings;
+    const double lv = binning * voxel;
+    s.grid = process::grid_for_extent({-hx, -hy, z_centre - hz}, {hx, hy, z_centre + hz}, {lv, lv, lv}, "bench live");
+    s.mart.iterations = std::stoi(live.substr(c1 + 1, c2 - c1 - 1));
+    s.correlation.passes = piv::parse_passes(live.substr(c2 + 1));
+    t = now_s();
+    const process::PairProcessor live_processor(camera, nominal, s);
+    const double setup_s = now_s() - t;
+    t = now_s();
+    const auto first = live_processor.process(a, b);
+    const double first_wall_s = now_s() - t;
+    t = now_s();
+    const auto again = live_processor.process(a, b);
+    const double wall_s = now_s() - t;
+    const double band = 0.5 * s.correlation.passes.back().window[0] * lv;
+    const Errors el = errors_against(again.correlation.field, flow, voxel, band);
+    std::printf(
+        "bench=e2e case=%s variant=live binning=%d voxels=%zu iterations=%d passes=%s setup_s=%.2f first_wall_s=%.2f "
+        "wall_s=%.2f first_pair_s=%.2f pair_s=%.2f recon_a_s=%.2f recon_b_s=%.2f correlate_s=%.2f rms_u=%.3f "
+        "rms_v=%.3f rms_w=%.3f rms=%.3f "
+        "valid=%.3f off_axis_band_mm=%.2f off_axis_band_rms_u=%.3f off_axis_band_rms_v=%.3f off_axis_band_rms_w=%.3f "
+        "peak_rss_gb=%.2f\n",
+        scale.c_str(), binning, s.grid.count(), s.mart.iterations, live.substr(c2 + 1).c_str(), setup_s, first_wall_s,
+        wall_s, first.times.reconstruct_a_s + first.times.reconstruct_b_s + first.times.correlate_s,
+        again.times.reconstruct_a_s + again.times.reconstruct_b_s + again.times.correlate_s,
+        again.times.reconstruct_a_s, again.times.reconstruct_b_s, again.times.correlate_s, el.rms[0], el.rms[1],
+        el.rms[2], el.total, el.valid_fraction, band, el.off_band[0], el.off_band[1], el.off_band[2],
+        bench::peak_rss_gb());
     std::fflush(stdout);
   }
 

@@ -88,12 +88,13 @@ int main(int argc, char** argv) {
       if (acquiring_at < 0) acquiring_at = t;
       s.Clear();
       run.fill_status(s);
-      const Sample x{t - acquiring_at,     bench::rss_gb(),  bench::open_fd_count(), bench::thread_count(),
+      const Sample x{t - acquiring_at,   bench::rss_gb(), bench::open_fd_count(), bench::thread_count(),
                      s.pairs_recorded(), s.frames_lost(), s.pairs_processed()};
       samples.push_back(x);
-      std::printf("bench=soak_sample t_s=%.0f recorded=%llu frames_lost=%llu fields=%llu rss_gb=%.3f fds=%d threads=%d\n",
-                  x.t_s, static_cast<unsigned long long>(x.recorded), static_cast<unsigned long long>(x.lost),
-                  static_cast<unsigned long long>(x.fields), x.rss_gb, x.fds, x.threads);
+      std::printf(
+          "bench=soak_sample t_s=%.0f recorded=%llu frames_lost=%llu fields=%llu rss_gb=%.3f fds=%d threads=%d\n",
+          x.t_s, static_cast<unsigned long long>(x.recorded), static_cast<unsigned long long>(x.lost),
+          static_cast<unsigned long long>(x.fields), x.rss_gb, x.fds, x.threads);
       std::fflush(stdout);
     }
     s.Clear();
