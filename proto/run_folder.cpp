@@ -362,6 +362,10 @@ void Writer::record_vectors(std::uint64_t pair_index, const VectorField& field, 
   process::write_vector_field_files(dir_ / file, {}, field, flags, provenance);
   std::lock_guard lock(mutex_);
   (live ? live_statistics_ : statistics_).add(field);
+  manifest_.set_pairs_processed(manifest_.pairs_processed() + 1);
+  // Listed with its pair; a field of a pair this folder never recorded is kept but not listed (a
+  // journal line for it would add a pair without frames).
+  if (!pair_position_.count(pair_index)) return;
   msg::ManifestJournalEntry entry;
   entry.mutable_pair()->set_pair_index(pair_index);
   if (live) {
@@ -370,8 +374,7 @@ void Writer::record_vectors(std::uint64_t pair_index, const VectorField& field, 
     entry.mutable_pair()->set_vectors(file);
   }
   journal_locked(entry);
-  if (pair_position_.count(pair_index)) apply_entry(manifest_, pair_position_, entry);
-  manifest_.set_pairs_processed(manifest_.pairs_processed() + 1);
+  apply_entry(manifest_, pair_position_, entry);
 }
 
 void Writer::write_statistics_locked() {
