@@ -63,9 +63,10 @@ bool gvcp_bound(pid_t pid) {
 // A camera file of the fake camera's sensor (121 x 121 lenses) and a 4 x 4 x 8 voxel volume: the
 // daemon processes what it records, and the folder reprocesses, in moments.
 void write_fake_camera_file(const fs::path& path) {
-  std::ofstream(path) << "sensor:    {width_px: 2048, height_px: 2048, pixel_pitch_mm: 0.0074}\n"
-                         "microlens: {pitch_mm: 0.125, focal_length_mm: 0.5, count_x: 121, count_y: 121, layout: rect}\n"
-                         "main_lens: {focal_length_mm: 50, f_number: 2, magnification: -1}\n";
+  std::ofstream(path)
+      << "sensor:    {width_px: 2048, height_px: 2048, pixel_pitch_mm: 0.0074}\n"
+         "microlens: {pitch_mm: 0.125, focal_length_mm: 0.5, count_x: 121, count_y: 121, layout: rect}\n"
+         "main_lens: {focal_length_mm: 50, f_number: 2, magnification: -1}\n";
 }
 // `pairs` at 2 Hz (the fake camera takes a pair at most every 0.3 s: its profile), `extra` keys.
 std::string run_yaml(int pairs, const std::string& extra) {
@@ -168,8 +169,7 @@ TEST_F(FaultCamera, AKilledCameraIsCountedLostAndTheRunGoesOnAfterItComesBack) {
 
   // Aravis gives up on a camera that stopped answering after its GVCP retries (0.5 s each, five
   // per register): seconds.
-  s = daemon_->wait_for([](const msg::Status& s) { return s.message().find("camera lost") != std::string::npos; },
-                        25s);
+  s = daemon_->wait_for([](const msg::Status& s) { return s.message().find("camera lost") != std::string::npos; }, 25s);
   ASSERT_TRUE(s && s->message().find("camera lost") != std::string::npos)
       << "the loss was not seen: " << (s ? s->DebugString() : "no answer");
   const double seen_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - killed).count();
@@ -278,9 +278,7 @@ TEST_P(FaultCameraPacketLoss, EveryTriggerIsRecordedOrListedLostAndNoPairIsMisma
   EXPECT_TRUE(daemon_->process->wait(10s).has_value());
 }
 
-std::string rate_name(const ::testing::TestParamInfo<int>& info) {
-  return std::to_string(info.param) + "PerThousand";
-}
+std::string rate_name(const ::testing::TestParamInfo<int>& info) { return std::to_string(info.param) + "PerThousand"; }
 INSTANTIATE_TEST_SUITE_P(OneAndFivePercent, FaultCameraPacketLoss, ::testing::Values(10, 50), rate_name);
 
 }  // namespace
