@@ -1,7 +1,8 @@
 // Fault suite: plenopivd (simulated camera) as a real child process, hurt the ways a lab hurts it:
 // SIGKILL at random moments of a run, a subscriber that never reads. What must hold afterwards:
 // every run folder is consistent and `plenopiv process --run` reprocesses it; acquisition does not
-// notice the subscriber. (A disk that fills mid-run: DaemonDisk in tests/daemon/control_test.cpp.)
+// notice the subscriber. (A disk that fills mid-run: DaemonDisk in tests/daemon/control_test.cpp;
+// the camera killed or losing packets: fault_camera_test.cpp.)
 #include <gtest/gtest.h>
 
 #include <csignal>
