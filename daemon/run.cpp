@@ -49,6 +49,12 @@ std::string megabytes(std::uint64_t bytes) {
   return text;
 }
 
+std::string seconds(double s) {
+  char text[64];
+  std::snprintf(text, sizeof text, "%g s", s);
+  return text;
+}
+
 }  // namespace
 
 Run::Run(RunConfig config, std::string run_id, RunEnvironment env)
@@ -142,6 +148,8 @@ void Run::record(drivers::FramePair pair) {
   attach_shot(pair);
   check_space();
   run_folder::PairRecord record;
+  pair.trigger_index += trigger_offset_;
+  triggers_seen_ = std::max(triggers_seen_, pair.trigger_index + 1);
   record.pair_index = pair.pair_index;
   record.trigger_index = pair.trigger_index;
   record.frame_a = &pair.a.image;
@@ -197,9 +205,73 @@ void Run::take_drops() {
   const std::vector<drivers::PairDrop> drops = camera_->take_drops();
   if (drops.empty()) return;
   for (const drivers::PairDrop& d : drops) {
-    recorder_->record_drop(d.trigger_index, drivers::to_string(d.reason));
-    spdlog::warn("run {}: trigger {}: no pair recorded: {}", run_id_, d.trigger_index, drivers::to_string(d.reason));
+    const std::uint64_t index = d.trigger_index + trigger_offset_;
+    triggers_seen_ = std::max(triggers_seen_, index + 1);
+    recorder_->record_drop(index, drivers::to_string(d.reason));
+    spdlog::warn("run {}: trigger {}: no pair recorded: {}", run_id_, index, drivers::to_string(d.reason));
   }
+}
+
+// One software trigger, the run's `index`-th. While the camera is lost it is counted, not fired;
+// a trigger the camera does not take (its control timed out) begins an outage.
+void Run::fire_software_trigger(std::uint64_t index) {
+  triggers_made_ = index + 1;
+  if (outage_ && !camera_->status().connected) {
+    lose_trigger(index);
+    return;
+  }
+  try {
+    camera_->software_trigger();
+    if (outage_) end_outage(index);  // the camera took it: it is back
+  } catch (const drivers::DeviceError& e) {
+    if (outage_) {
+      lose_trigger(index);
+    } else {
+      begin_outage(e.what(), index + 1);
+    }
+  }
+}
+
+// Follows the camera's connection: an outage begins when the driver reports the camera lost and
+// ends when it has reconnected; one longer than the run's camera_outage_s fails the run.
+void Run::watch_camera(Clock::time_point now) {
+  const drivers::CameraStatus cs = camera_->status();
+  if (cs.failed) throw drivers::DeviceError("camera " + camera_->info().uri + " failed: " + cs.last_error);
+  if (camera_trigger_ != drivers::TriggerSource::Software) triggers_made_ = trigger_->counters().shots_fired;
+  if (!cs.connected && !outage_) begin_outage(cs.last_error, triggers_made_);
+  if (cs.connected && outage_ && camera_->counters().reconnects > outage_->reconnects) end_outage(triggers_made_);
+  if (outage_ && now - outage_->since > std::chrono::duration<double>(config_.camera_outage_s)) {
+    throw drivers::DeviceError("camera " + camera_->info().uri + " lost for more than " +
+                               seconds(config_.camera_outage_s) + ": " +
+                               (cs.last_error.empty() ? outage_->reason : cs.last_error));
+  }
+}
+
+// The pairs the camera delivered before it was lost are recorded; the triggers up to `made` that
+// it neither delivered nor dropped (their frames were still in the camera) are lost with it.
+void Run::begin_outage(const std::string& reason, std::uint64_t made) {
+  outage_ = Outage{Clock::now(), camera_->counters().reconnects, reason};
+  spdlog::error("run {}: camera {} lost, waiting up to {} for it: {}", run_id_, camera_->info().uri,
+                seconds(config_.camera_outage_s), reason);
+  while (auto pair = camera_->next_pair(0ms)) record(std::move(*pair));
+  take_drops();
+  for (std::uint64_t i = triggers_seen_; i < made; ++i) lose_trigger(i);
+}
+
+// The camera is back, from the run's trigger `made` on; a camera that reconnected counts its
+// triggers from 0 again there.
+void Run::end_outage(std::uint64_t made) {
+  for (std::uint64_t i = triggers_seen_; i < made; ++i) lose_trigger(i);
+  if (camera_->counters().reconnects > outage_->reconnects) trigger_offset_ = made;
+  spdlog::info("run {}: camera {} back after {:.1f} s; {} trigger(s) lost with it so far", run_id_, camera_->info().uri,
+               std::chrono::duration<double>(Clock::now() - outage_->since).count(), camera_lost_.load());
+  outage_.reset();
+}
+
+void Run::lose_trigger(std::uint64_t index) {
+  triggers_seen_ = std::max(triggers_seen_, index + 1);
+  ++camera_lost_;
+  recorder_->record_drop(index, "camera lost");
 }
 
 // The shot of a pair may still be on its way (a camera can deliver before the Q-switches fire):
@@ -261,9 +333,7 @@ void Run::acquire() {
     std::optional<Clock::time_point> last_shot;  // when the trigger had played all its shots
     while (!stop_) {
       take_drops();
-      if (const drivers::CameraStatus cs = camera_->status(); cs.failed) {
-        throw drivers::DeviceError("camera " + camera_->info().uri + " failed: " + cs.last_error);
-      }
+      watch_camera(Clock::now());
       const std::uint64_t received = pairs_received_;
       if (config_.pair_count && received >= config_.pair_count) break;
       const auto now = Clock::now();
@@ -284,7 +354,7 @@ void Run::acquire() {
       // manifest and log say it too).
       const bool more_to_fire = config_.pair_count == 0 || fired < config_.pair_count;
       if (software && more_to_fire && now >= next_trigger) {
-        camera_->software_trigger();
+        fire_software_trigger(fired);
         ++fired;
         next_trigger += period;
       }
@@ -535,13 +605,16 @@ msg::Losses Run::losses() const {
   l.set_live_queue_dropped(live.queue().dropped());
   l.set_processing_failed(live.stats().process.skipped);
   l.set_processing_cancelled(live.stats().process.cancelled);
+  l.set_camera_lost(camera_lost_);
+  l.set_camera_reconnects(c.reconnects);
   return l;
 }
 
 // Every raw frame the camera made that is in no recorded pair.
 std::uint64_t Run::frames_lost() const {
   const drivers::CameraCounters c = camera_->counters();
-  return c.frames_lost + c.frames_discarded + 2 * (c.pairs_overflowed + c.pairs_not_read_out + not_recorded_at_stop_);
+  return c.frames_lost + c.frames_discarded +
+         2 * (c.pairs_overflowed + c.pairs_not_read_out + not_recorded_at_stop_ + camera_lost_);
 }
 
 void Run::fill_status(msg::Status& s) const {
@@ -559,6 +632,10 @@ void Run::fill_status(msg::Status& s) const {
       s.set_message(setup_started_ns_ ? text : "setting up");
     }
     return;
+  }
+  if (const drivers::CameraStatus cs = camera_->status(); !cs.connected && !finished_) {
+    s.set_message("camera lost (" + cs.last_error + "); reconnecting, the run waits up to " +
+                  seconds(config_.camera_outage_s));
   }
   s.set_pairs_acquired(pairs_received_);
   s.set_pairs_recorded(recorder_->pairs_recorded());

@@ -102,6 +102,11 @@ class Run {
   void attach_shot(drivers::FramePair& pair);
   void check_frames(const drivers::FramePair& pair);
   void take_drops();
+  void fire_software_trigger(std::uint64_t index);
+  void watch_camera(std::chrono::steady_clock::time_point now);
+  void begin_outage(const std::string& reason, std::uint64_t fired);
+  void end_outage(std::uint64_t fired);
+  void lose_trigger(std::uint64_t index);
   void drain_after_stop();
   void check_space() const;
   void stop_devices() noexcept;
@@ -137,6 +142,20 @@ class Run {
   std::atomic<bool> stop_{false}, finished_{false};
   std::atomic<std::uint64_t> pairs_received_{0};
   std::atomic<std::uint64_t> not_recorded_at_stop_{0};
+  // A camera outage (acquisition thread): when it began, the camera's reconnects then, and why.
+  struct Outage {
+    std::chrono::steady_clock::time_point since;
+    std::uint64_t reconnects = 0;
+    std::string reason;
+  };
+  std::optional<Outage> outage_;
+  std::atomic<std::uint64_t> camera_lost_{0};  // triggers with no pair because the camera was lost
+  // Triggers the run made (software: fired; external: the trigger's shots) so far, for outages.
+  std::uint64_t triggers_made_ = 0;
+  // The camera counts triggers from 0 again after a reconnect: the run's index of its trigger 0.
+  std::uint64_t trigger_offset_ = 0;
+  // One past the highest trigger index (the run's) the camera delivered or dropped.
+  std::uint64_t triggers_seen_ = 0;
   std::uint64_t bytes_per_pair_ = 0;  // raw frames on disk
   // Bad data met (all-zero or saturated frames): kind -> (count, first pair), for status and manifest.
   mutable std::mutex warnings_mutex_;

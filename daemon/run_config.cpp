@@ -77,7 +77,7 @@ RunConfig parse_run_config(const std::string& text, const std::string& source) {
   const YamlMap map(root, source);
   std::vector<std::string_view> known{
       "camera_uri",          "trigger_uri", "pairs",   "duration_s",    "rate_hz", "publish_volumes",
-      "max_pairs_in_flight", "live_queue",  "quality", "quality_queue", "preview"};
+      "max_pairs_in_flight", "live_queue",  "quality", "quality_queue", "preview", "camera_outage_s"};
   known.insert(known.end(), std::begin(process::kProcessKeys), std::end(process::kProcessKeys));
   map.reject_unknown(std::span<const std::string_view>(known));
   RunConfig c;
@@ -91,6 +91,10 @@ RunConfig parse_run_config(const std::string& text, const std::string& source) {
   if (!(c.duration_s >= 0) || !std::isfinite(c.duration_s)) map.fail("duration_s", "must be >= 0 s (0: until stopped)");
   // The range the laser allows is the trigger sequencer's to check (with the rig's limits); this
   // only keeps the number sane.
+  c.camera_outage_s = map.number_or("camera_outage_s", c.camera_outage_s);
+  if (!(c.camera_outage_s >= 0) || c.camera_outage_s > 3600) {
+    map.fail("camera_outage_s", "must be in [0, 3600] s (0: a lost camera fails the run at once)");
+  }
   c.rate_hz = map.number_or("rate_hz", c.rate_hz);
   if (!(c.rate_hz > 0) || c.rate_hz > 1000) map.fail("rate_hz", "must be in (0, 1000] Hz");
 

@@ -54,7 +54,10 @@ struct RunConfig {
   std::uint64_t pair_count = 0;  // 0: until stopped or duration_s
   double duration_s = 0.0;       // 0: until stopped or pair_count
   double rate_hz = 1.0;          // laser repetition rate: pairs per second
-  double dt_s = 100e-6;          // pulse separation: the processing spec's dt_s
+  // How long a run waits for a lost camera (unplugged, power cycled, network down) to come back
+  // before it fails naming the camera; meanwhile its triggers are counted lost ("camera lost").
+  double camera_outage_s = 30.0;
+  double dt_s = 100e-6;  // pulse separation: the processing spec's dt_s
   bool publish_volumes = false;
   int max_pairs_in_flight = 2;  // bounded work in the processing stage
   // Recorded pairs waiting for the live lane, at most (the newest are kept, older ones dropped

@@ -69,6 +69,8 @@ void print_status(const msg::Status& s) {
                 << l.frames_discarded() << "; pairs: camera queue " << l.camera_queue_overflow() << ", not read out "
                 << l.not_read_out() << ", not recorded at stop " << l.not_recorded_at_stop()
                 << "; laser shots abandoned " << l.shots_abandoned() << "\n"
+                << "               camera lost: pairs " << l.camera_lost() << ", reconnects " << l.camera_reconnects()
+                << "\n"
                 << "               live path: queue dropped " << l.live_queue_dropped() << ", failed "
                 << l.processing_failed() << ", cancelled " << l.processing_cancelled() << " (on disk)\n";
     }

@@ -33,6 +33,7 @@ TEST(RunConfig, ShippedDefaultParses) {
   const RunConfig c = parse_run_config(text.str(), "run.yaml");
   EXPECT_EQ(c.pair_count, 20u);
   EXPECT_DOUBLE_EQ(c.rate_hz, 2.0);
+  EXPECT_DOUBLE_EQ(c.camera_outage_s, 30.0);
   EXPECT_DOUBLE_EQ(c.dt_s, 1e-4);
   EXPECT_TRUE(c.camera_uri.empty());  // the daemon's default camera
   EXPECT_EQ(c.spec.full.mart.iterations, 3);
@@ -120,6 +121,8 @@ TEST(RunConfig, UnknownVolumeKeyIsNamedWithItsPath) {
 TEST(RunConfig, BadValuesAreNamed) {
   EXPECT_NE(error_of(kVolume + "pairs: -1\n").find("pairs: must be >= 0"), std::string::npos);
   EXPECT_NE(error_of(kVolume + "rate_hz: 0\n").find("rate_hz"), std::string::npos);
+  EXPECT_NE(error_of(kVolume + "camera_outage_s: -1\n").find("camera_outage_s: must be in [0, 3600] s"),
+            std::string::npos);
   EXPECT_NE(error_of(kVolume + "reconstruction: 3\n").find("reconstruction: expected a mapping"), std::string::npos);
   EXPECT_NE(error_of(kVolume + "max_pairs_in_flight: 0\n").find("max_pairs_in_flight"), std::string::npos);
   EXPECT_NE(error_of("dt_s: 0.001\nvolume: {x_mm: [1, -1], y_mm: [-1, 1], z_mm: [0, 1], voxel_mm: 1}\n")

@@ -1,7 +1,8 @@
 // Fault suite: plenopivd (simulated camera) as a real child process, hurt the ways a lab hurts it:
 // SIGKILL at random moments of a run, a subscriber that never reads. What must hold afterwards:
 // every run folder is consistent and `plenopiv process --run` reprocesses it; acquisition does not
-// notice the subscriber. (A disk that fills mid-run: DaemonDisk in tests/daemon/control_test.cpp.)
+// notice the subscriber. (A disk that fills mid-run: DaemonDisk in tests/daemon/control_test.cpp;
+// the camera killed or losing packets: fault_camera_test.cpp.)
 #include <gtest/gtest.h>
 
 #include <csignal>
@@ -16,8 +17,10 @@
 #include "core/io/hdf5_files.hpp"
 #include "core/optics/camera_file.hpp"
 #include "proto/run_folder.hpp"
+#include "tests/fault/fault_daemon.hpp"
 #include "tests/support/child_process.hpp"
 #include "tests/support/daemon_status.hpp"
+#include "tests/support/run_folder_check.hpp"
 #include "tests/support/temp_dir.hpp"
 
 namespace plenopiv {
@@ -25,6 +28,8 @@ namespace {
 
 using namespace std::chrono_literals;
 namespace fs = std::filesystem;
+using fault::Daemon;
+using fault::run_folders;
 using testing_support::binary;
 using testing_support::ChildProcess;
 
@@ -49,39 +54,6 @@ std::string tiny_run_yaml(int pairs) {
   return "pairs: " + std::to_string(pairs) + "\nrate_hz: 15\ndt_s: 0.0001\n" +
          "volume: {x_mm: [-0.25, 0.25], y_mm: [-0.25, 0.25], z_mm: [-0.5, 0.5], voxel_mm: 0.125}\n" +
          "reconstruction: {iterations: 2}\ncorrelation: {passes: [{window: 4, overlap_percent: 50}]}\n";
-}
-
-// plenopivd on the simulated camera with a data folder, its control endpoint answering.
-struct Daemon {
-  std::string control = testing_support::ipc_endpoint("control");
-  std::string publish = "tcp://127.0.0.1:" + std::to_string(testing_support::free_tcp_port());
-  std::unique_ptr<ChildProcess> process;
-
-  Daemon(const fs::path& data_dir, const fs::path& log, const std::string& camera_file, const std::string& camera) {
-    process = std::make_unique<ChildProcess>(
-        std::vector<std::string>{binary("plenopivd"), "--simulation", "--camera-file", camera_file, "--camera", camera,
-                                 "--control", control, "--publish", publish, "--data-dir", data_dir.string()},
-        log);
-    for (int i = 0; i < 200 && !testing_support::probe_status(control); ++i) {
-      if (!process->running()) break;
-    }
-  }
-  bool answers() const { return testing_support::probe_status(control).has_value(); }
-
-  int client(const std::vector<std::string>& args, std::string& out) const {
-    std::vector<std::string> argv{binary("plenopiv"), "--endpoint", control};
-    argv.insert(argv.end(), args.begin(), args.end());
-    return testing_support::run_command(argv, out);
-  }
-};
-
-std::vector<fs::path> run_folders(const fs::path& data_dir) {
-  std::vector<fs::path> runs;
-  for (const auto& e : fs::directory_iterator(data_dir)) {
-    if (e.path().filename().string().rfind("run-", 0) == 0) runs.push_back(e.path());
-  }
-  std::sort(runs.begin(), runs.end());
-  return runs;
 }
 
 // The seed of the kill moments: PLENOPIV_FAULT_SEED to repeat a run of the suite, else random.
@@ -136,36 +108,12 @@ TEST(FaultSigkill, EveryRunFolderLeftByAKilledDaemonIsConsistentAndReprocessable
   ASSERT_EQ(runs.size(), std::size_t(kills));
   int with_pairs = 0, interrupted_with_pairs = 0;
   for (const fs::path& run : runs) {
-    SCOPED_TRACE(run.string());
-    msg::RunManifest manifest;
-    std::ifstream in(run / "manifest.json");
-    const std::string text{std::istreambuf_iterator<char>(in), {}};
-    ASSERT_NO_THROW(manifest = run_folder::parse_manifest(text, run.string())) << text;
+    const msg::RunManifest manifest =
+        testing_support::expect_consistent_and_reprocessable(run, model.sensor().width_px, model.sensor().height_px);
     EXPECT_TRUE(manifest.state() == "interrupted" || manifest.state() == "complete") << manifest.state();
-    std::string out;
-    const int status = testing_support::run_command({binary("plenopiv"), "process", "--run", run.string(), "-o",
-                                                     (run.parent_path() / ("re-" + run.filename().string())).string()},
-                                                    out, 300s);
-    if (manifest.pairs_size() == 0) {
-      EXPECT_EQ(status, 2) << out;
-      EXPECT_NE(out.find("the run recorded no pair"), std::string::npos) << out;
-      continue;
-    }
+    if (manifest.pairs_size() == 0) continue;
     ++with_pairs;
     if (manifest.state() == "interrupted") ++interrupted_with_pairs;
-    try {
-      const run_folder::Reader reader(run);
-      reader.check_frames(model.sensor().width_px, model.sensor().height_px);
-      for (const run_folder::PairEntry& p : reader.pairs()) {
-        if (!p.vectors.empty()) {
-          EXPECT_NO_THROW(io::read_vector_field_h5(run / p.vectors)) << p.vectors;
-        }
-      }
-    } catch (const InputError& e) {
-      ADD_FAILURE() << "inconsistent run folder: " << e.what();
-    }
-    EXPECT_EQ(status, 0) << out;
-    EXPECT_NE(out.find("process: 100%"), std::string::npos) << out;
   }
   std::printf("killed %d runs: %d before their first pair, %d interrupted with pairs, %d complete; all reprocessed\n",
               kills, kills - with_pairs, interrupted_with_pairs, with_pairs - interrupted_with_pairs);

@@ -408,8 +408,13 @@ class AravisCamera final : public CameraBase {
       GError* error = nullptr;
       arv_device_execute_command(device, profile_.software_trigger_command.c_str(), &error);
       if (error) {
-        throw DeviceError("camera " + uri_.text() + ": " + profile_.software_trigger_command + ": " +
-                          take_error(error));
+        // A command the camera does not answer: it is gone (power, cable), found now rather than
+        // by the heartbeat seconds later; the control loop reconnects.
+        const bool timeout = (error->domain == ARV_DEVICE_ERROR && error->code == ARV_DEVICE_ERROR_TIMEOUT) ||
+                             (error->message && std::strstr(error->message, "timeout"));
+        const std::string message = profile_.software_trigger_command + ": " + take_error(error);
+        if (timeout) handle_loss("control lost: " + message);
+        throw DeviceError("camera " + uri_.text() + ": " + message);
       }
     }
   }
