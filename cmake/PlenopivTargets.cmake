@@ -22,6 +22,16 @@ function(plenopiv_instrument target)
   endif()
 endfunction()
 
+# Sources with runtime ISA dispatch (target_clones / target: ifunc resolvers) are built without
+# ThreadSanitizer: the dynamic loader runs their resolvers before TSan's runtime starts, and an
+# instrumented resolver crashes the program at load. They are compute kernels on disjoint data.
+# Call in the folder that builds them (source properties are per folder).
+function(plenopiv_dispatched_sources)
+  if(PLENOPIV_SANITIZE MATCHES "thread")
+    set_property(SOURCE ${ARGN} APPEND PROPERTY COMPILE_OPTIONS -fno-sanitize=thread)
+  endif()
+endfunction()
+
 # plenopiv_library(<name> SOURCES ... [PUBLIC_LIBS ...] [PRIVATE_LIBS ...])
 # creates plenopiv_<name> with alias plenopiv::<name>; headers are included as
 # "<folder>/<header>" from the repository root.
