@@ -145,11 +145,12 @@ void Run::join() {
 
 // Raw frames first: never dropped once delivered (unless the disk has no room for them).
 void Run::record(drivers::FramePair pair) {
+  // The run's trigger numbering (a reconnected camera counts from 0 again), which the shots share.
+  pair.trigger_index += trigger_offset_;
+  triggers_seen_ = std::max(triggers_seen_, pair.trigger_index + 1);
   attach_shot(pair);
   check_space();
   run_folder::PairRecord record;
-  pair.trigger_index += trigger_offset_;
-  triggers_seen_ = std::max(triggers_seen_, pair.trigger_index + 1);
   record.pair_index = pair.pair_index;
   record.trigger_index = pair.trigger_index;
   record.frame_a = &pair.a.image;
