@@ -57,14 +57,8 @@ int main(int argc, char** argv) {
     const fs::path data = root / "data";
     fs::remove_all(data);
     daemon::RunStateMachine state;
-    daemon::RunEnvironment env;
-    env.data_dir = data;
-    env.default_camera_uri = "replay://small?loop=1";
-    env.default_trigger_uri = "sim://";
-    env.camera_file = camera_file;
-    env.state = &state;
-    env.processing = processing;
-    env.processing_nice = processing_nice;
+    const daemon::RunEnvironment env =
+        bench::replay_run_environment(data, camera_file, state, processing, processing_nice);
     const daemon::RunConfig config = daemon::parse_run_config(
         "pairs: " + std::to_string(pairs) + "\nrate_hz: " + std::to_string(rate_hz) + "\n" + lanes + spec, name);
     state.start(name);

@@ -65,14 +65,8 @@ int main(int argc, char** argv) {
                            "correlation: {passes: [{window: 8, overlap_percent: 50}]}\nquality: off\n";
   fs::remove_all(data);
   daemon::RunStateMachine state;
-  daemon::RunEnvironment env;
-  env.data_dir = data;
-  env.default_camera_uri = "replay://small?loop=1";
-  env.default_trigger_uri = "sim://";
-  env.camera_file = camera_file;
-  env.state = &state;
-  env.processing = daemon::plenoptic_processing(camera);
-  env.processing_nice = daemon::DaemonConfig{}.processing_nice;
+  const daemon::RunEnvironment env = bench::replay_run_environment(
+      data, camera_file, state, daemon::plenoptic_processing(camera), daemon::DaemonConfig{}.processing_nice);
   const daemon::RunConfig config = daemon::parse_run_config(spec, "soak");
   state.start("soak");
   std::vector<Sample> samples;

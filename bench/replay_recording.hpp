@@ -1,5 +1,5 @@
-// A replay folder of ray-traced camera-small pairs, shared by the benchmarks that drive a whole
-// in-process run through `replay://` (bench_lanes, bench_soak).
+// A replay folder of ray-traced camera-small pairs and the environment of a whole in-process run
+// that plays it through `replay://`, shared by bench_lanes and bench_soak.
 #pragma once
 
 #include <cstdint>
@@ -11,6 +11,7 @@
 #include "core/optics/microlens_array.hpp"
 #include "core/sim/particles.hpp"
 #include "core/sim/render.hpp"
+#include "daemon/run.hpp"
 
 namespace plenopiv::bench {
 
@@ -33,6 +34,23 @@ inline void write_replay_recording(const std::filesystem::path& dir, const optic
     io::write_tiff(dir / a_name, sim::render(camera, lenses, a, render, 2 * std::uint64_t(i)).image, false);
     io::write_tiff(dir / b_name, sim::render(camera, lenses, b, render, 2 * std::uint64_t(i) + 1).image, false);
   }
+}
+
+// A run's environment: data in `data`, the replay camera's folder `small` looped, the sim trigger,
+// `camera_file`, `processing` with its threads at `nice`.
+inline daemon::RunEnvironment replay_run_environment(const std::filesystem::path& data,
+                                                     const std::filesystem::path& camera_file,
+                                                     daemon::RunStateMachine& state,
+                                                     const daemon::ProcessFactory& processing, int nice) {
+  daemon::RunEnvironment env;
+  env.data_dir = data;
+  env.default_camera_uri = "replay://small?loop=1";
+  env.default_trigger_uri = "sim://";
+  env.camera_file = camera_file;
+  env.state = &state;
+  env.processing = processing;
+  env.processing_nice = nice;
+  return env;
 }
 
 }  // namespace plenopiv::bench
