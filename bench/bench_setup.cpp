@@ -41,10 +41,6 @@ struct Timing {
     wall.push_back(w);
     cpu.push_back(c);
   }
-  static double median(std::vector<double> v) {
-    std::sort(v.begin(), v.end());
-    return v.empty() ? 0 : v[v.size() / 2];
-  }
 };
 
 }  // namespace
@@ -114,7 +110,7 @@ int main(int argc, char** argv) {
     kept.get(camera, lenses, white, settings);
     memory.add(now_s() - t, cpu_s() - c);
   }
-  const double b = Timing::median(build.wall);
+  const double b = bench::median(build.wall);
   for (const auto& [name, timing] : {std::pair<const char*, const Timing*>{"build", &build},
                                      {"build_and_write_cache", &first_write},
                                      {"read_cache", &read},
@@ -122,8 +118,8 @@ int main(int argc, char** argv) {
     std::printf(
         "bench=setup case=%s rotation_rad=%g phase=%s seconds=%.3f cpu_s=%.3f "
         "ratio_to_build=%.3f\n",
-        scale.c_str(), rotation, name, Timing::median(timing->wall), Timing::median(timing->cpu),
-        Timing::median(timing->wall) / b);
+        scale.c_str(), rotation, name, bench::median(timing->wall), bench::median(timing->cpu),
+        bench::median(timing->wall) / b);
   }
   std::printf(
       "bench=setup case=%s rotation_rad=%g voxels=%zu table_mb=%.1f file_mb=%.1f same_tables=%d "

@@ -31,19 +31,13 @@ struct Sample {
   std::uint64_t recorded, lost, fields;
 };
 
-double median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::nth_element(v.begin(), v.begin() + std::ptrdiff_t(v.size() / 2), v.end());
-  return v[v.size() / 2];
-}
-
 // The median of `field` over the samples in [from, to) of the run (fractions of the samples).
 template <typename F>
 double median_over(const std::vector<Sample>& s, double from, double to, F field) {
   std::vector<double> v;
   const auto a = std::size_t(from * double(s.size())), b = std::size_t(to * double(s.size()));
   for (std::size_t i = a; i < b && i < s.size(); ++i) v.push_back(field(s[i]));
-  return median(v);
+  return bench::median(v);
 }
 
 }  // namespace

@@ -40,7 +40,7 @@ void ArenaNiceness::on_scheduler_entry(bool /*is_worker*/) {
     lower_this_thread_priority(nice_);
   } catch (const std::system_error& e) {
     if (!warned_.exchange(true)) {
-      spdlog::warn("processing threads keep the recording's priority: {} refused: {}", "processing_nice", e.what());
+      spdlog::warn("processing_nice: a processing thread keeps the recording's priority: {}", e.what());
     }
   }
 }
