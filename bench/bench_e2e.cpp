@@ -13,10 +13,11 @@
 //     --time-sweep: MART iterations and the ghost floor against time per pair at this scale (with
 //              --no-sweep; ten pairs in a kept workspace; rows marked pareto= for plot_e2e.py).
 //     --steady: the headline pair once more in the kept MART workspace (time per pair in a run).
-//     --live B,N,P: a live tier beside the headline: voxels B times as large (the same box), N MART
-//              iterations, passes P (--passes syntax, windows in its voxels); its set-up, first and
-//              in-a-run time per pair and its errors in the headline's voxels (axis band: half its
-//              final window) (row variant=live).
+//     --live B,K,N,P: a live tier beside the headline: voxels B times as large (the same box), pixels
+//              binned K x K (reconstruction.pixel_binning), N MART iterations, passes P (--passes
+//              syntax, windows in its voxels); its set-up, first and in-a-run time per pair and its
+//              errors in the headline's voxels (axis band: half its final window) (row
+//              variant=live). Repeat for several tiers.
 //     --prune-threshold: MART's prune threshold for the headline rows (default 0: exact zeros).
 //     --sparse-sweep: the headline settings with pruning off, on for exact zeros, and at thresholds
 //              1e-3 .. 3e-2, every pair in the kept workspaces (with --no-sweep; rows variant=sparse
@@ -153,9 +154,9 @@ int main(int argc, char** argv) {
   int sparse_repeats = 1;
   std::string sparse_variants;  // empty: all
   double prune_threshold = recon::MartSettings{}.prune_threshold;
-  std::string compare_passes;  // pass lists separated by ';'
-  std::string passes;          // the headline's passes (--passes syntax); empty: core/piv's default
-  std::string live;            // --live B,N,P; empty: no live tier
+  std::string compare_passes;     // pass lists separated by ';'
+  std::string passes;             // the headline's passes (--passes syntax); empty: core/piv's default
+  std::vector<std::string> live;  // --live B,K,N,P, one per live tier
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--no-sweep"))
       sweep = false;
@@ -196,7 +197,7 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--passes") && i + 1 < argc)
       passes = argv[++i];
     else if (!std::strcmp(argv[i], "--live") && i + 1 < argc)
-      live = argv[++i];
+      live.push_back(argv[++i]);
     else
       scale = argv[i];
   }
@@ -350,19 +351,22 @@ int main(int argc, char** argv) {
     std::fflush(stdout);
   }
 
-  if (!live.empty()) {
-    // A live tier: the same pair and box in coarser voxels, fewer iterations, its own passes.
-    const std::size_t c1 = live.find(','), c2 = live.find(',', c1 + 1);
-    if (c1 == std::string::npos || c2 == std::string::npos) {
-      std::fprintf(stderr, "bench_e2e: --live B,N,P (binning, iterations, passes), not '%s'\n", live.c_str());
+  for (const std::string& tier : live) {
+    // A live tier: the same pair and box in coarser voxels from binned pixels, fewer iterations,
+    // its own passes.
+    const std::size_t c1 = tier.find(','), c2 = tier.find(',', c1 + 1), c3 = tier.find(',', c2 + 1);
+    if (c1 == std::string::npos || c2 == std::string::npos || c3 == std::string::npos) {
+      std::fprintf(stderr, "bench_e2e: --live B,K,N,P (voxel factor, pixel binning, iterations, passes), not '%s'\n",
+                   tier.c_str());
       return 2;
     }
-    const int binning = std::stoi(live.substr(0, c1));
+    const int binning = std::stoi(tier.substr(0, c1));
     process::ProcessSettings s = settings;
     const double lv = binning * voxel;
     s.grid = process::grid_for_extent({-hx, -hy, z_centre - hz}, {hx, hy, z_centre + hz}, {lv, lv, lv}, "bench live");
-    s.mart.iterations = std::stoi(live.substr(c1 + 1, c2 - c1 - 1));
-    s.correlation.passes = piv::parse_passes(live.substr(c2 + 1));
+    s.pixel_binning = std::stoi(tier.substr(c1 + 1, c2 - c1 - 1));
+    s.mart.iterations = std::stoi(tier.substr(c2 + 1, c3 - c2 - 1));
+    s.correlation.passes = piv::parse_passes(tier.substr(c3 + 1));
     t = now_s();
     const process::PairProcessor live_processor(camera, nominal, s);
     const double setup_s = now_s() - t;
@@ -375,13 +379,15 @@ int main(int argc, char** argv) {
     const double band = 0.5 * s.correlation.passes.back().window[0] * lv;
     const Errors el = errors_against(again.correlation.field, flow, voxel, band);
     std::printf(
-        "bench=e2e case=%s variant=live binning=%d voxels=%zu iterations=%d passes=%s setup_s=%.2f first_wall_s=%.2f "
+        "bench=e2e case=%s variant=live binning=%d pixel_binning=%d voxels=%zu iterations=%d passes=%s setup_s=%.2f "
+        "first_wall_s=%.2f "
         "wall_s=%.2f first_pair_s=%.2f pair_s=%.2f recon_a_s=%.2f recon_b_s=%.2f correlate_s=%.2f rms_u=%.3f "
         "rms_v=%.3f rms_w=%.3f rms=%.3f "
         "valid=%.3f off_axis_band_mm=%.2f off_axis_band_rms_u=%.3f off_axis_band_rms_v=%.3f off_axis_band_rms_w=%.3f "
         "peak_rss_gb=%.2f\n",
-        scale.c_str(), binning, s.grid.count(), s.mart.iterations, live.substr(c2 + 1).c_str(), setup_s, first_wall_s,
-        wall_s, first.times.reconstruct_a_s + first.times.reconstruct_b_s + first.times.correlate_s,
+        scale.c_str(), binning, s.pixel_binning, s.grid.count(), s.mart.iterations, tier.substr(c3 + 1).c_str(),
+        setup_s, first_wall_s, wall_s,
+        first.times.reconstruct_a_s + first.times.reconstruct_b_s + first.times.correlate_s,
         again.times.reconstruct_a_s + again.times.reconstruct_b_s + again.times.correlate_s,
         again.times.reconstruct_a_s, again.times.reconstruct_b_s, again.times.correlate_s, el.rms[0], el.rms[1],
         el.rms[2], el.total, el.valid_fraction, band, el.off_band[0], el.off_band[1], el.off_band[2],

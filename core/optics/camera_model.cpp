@@ -142,6 +142,26 @@ CameraModel CameraModel::with_optical_axis(const std::array<double, 2>& axis_px)
   spec.sensor.optical_axis_px = axis_px;
   return CameraModel(spec, "the optical axis measured by calibration");
 }
+CameraModel CameraModel::binned(int factor) const {
+  const SensorSpec& s = spec_.sensor;
+  if (factor < 1 || s.width_px % factor != 0 || s.height_px % factor != 0) {
+    throw InputError("pixel binning " + std::to_string(factor) + " does not divide the sensor's " +
+                     std::to_string(s.width_px) + " x " + std::to_string(s.height_px) + " px");
+  }
+  if (factor == 1) return *this;
+  CameraSpec spec = spec_;
+  spec.sensor.width_px = s.width_px / factor;
+  spec.sensor.height_px = s.height_px / factor;
+  spec.sensor.pixel_pitch_mm = s.pixel_pitch_mm * factor;
+  // Binned pixel k covers raw pixels factor k .. factor k + factor - 1: its centre is raw
+  // factor k + (factor - 1) / 2 (integer coordinates are pixel centres).
+  if (s.optical_axis_px) {
+    const auto& a = *s.optical_axis_px;
+    spec.sensor.optical_axis_px =
+        std::array<double, 2>{(a[0] - 0.5 * (factor - 1)) / factor, (a[1] - 0.5 * (factor - 1)) / factor};
+  }
+  return CameraModel(spec, "the camera binned " + std::to_string(factor) + " x " + std::to_string(factor));
+}
 double CameraModel::sensor_width_mm() const { return spec_.sensor.width_px * spec_.sensor.pixel_pitch_mm; }
 double CameraModel::sensor_height_mm() const { return spec_.sensor.height_px * spec_.sensor.pixel_pitch_mm; }
 double CameraModel::row_pitch_mm() const {

@@ -94,6 +94,11 @@ class CameraModel {
   // This camera with its optical axis at `axis_px` (column, row), e.g. where calibration measured
   // it; InputError when it is not on the sensor.
   CameraModel with_optical_axis(const std::array<double, 2>& axis_px) const;
+  // This camera read out in blocks of `factor` x `factor` pixels (binned): pixels `factor` times
+  // as large, the sensor's pixel counts divided by `factor`, the optics, the sensor's extent in mm
+  // and the optical axis where they were (bin_pixels makes its frames). `factor` 1 is the camera
+  // itself; InputError when `factor` is below 1 or does not divide both pixel counts.
+  CameraModel binned(int factor) const;
 
   // Object-space field of view covered by the lens array at the nominal focal plane.
   double field_of_view_x_mm() const;

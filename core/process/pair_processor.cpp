@@ -2,12 +2,30 @@
 // operator, then any number of raw frame pairs through it, from any caller.
 #include "core/process/pair_processor.hpp"
 
+#include <opencv2/imgproc.hpp>
+
+#include "core/base/errors.hpp"
+
 namespace plenopiv::process {
 
 ImageF to_float(const ImageU16& raw) {
   ImageF image(raw.width, raw.height);
   for (std::size_t i = 0; i < raw.size(); ++i) image.pixels[i] = float(raw.pixels[i]);
   return image;
+}
+
+ImageF bin_pixels(const ImageF& image, int factor) {
+  if (factor < 1 || image.width % factor != 0 || image.height % factor != 0) {
+    throw InputError("pixel binning " + std::to_string(factor) + " does not divide the image's " +
+                     std::to_string(image.width) + " x " + std::to_string(image.height) + " px");
+  }
+  if (factor == 1 || image.pixels.empty()) return image;
+  ImageF out(image.width / factor, image.height / factor);
+  // INTER_AREA at an integer factor is the block mean.
+  const cv::Mat in(image.height, image.width, CV_32F, const_cast<float*>(image.pixels.data()));
+  cv::Mat binned(out.height, out.width, CV_32F, out.pixels.data());
+  cv::resize(in, binned, binned.size(), 0, 0, cv::INTER_AREA);
+  return out;
 }
 
 double pair_dt_s(const ProcessSettings& settings, std::optional<double> measured_dt_s) {
@@ -32,12 +50,24 @@ WorkspacePool::Lease WorkspacePool::take() {
 
 PairProcessor::PairProcessor(const optics::CameraModel& camera, const calib::LoadedCalibration& calibration,
                              ProcessSettings settings, OperatorCache* operators)
-    : settings_(std::move(settings)) {
-  const optics::CameraModel framed = calib::camera_in_frame(camera, calibration);
+    : settings_(std::move(settings)), raw_width_(camera.sensor().width_px), raw_height_(camera.sensor().height_px) {
+  const int binning = settings_.pixel_binning;
+  const auto in_binning = [&](auto&& make) {
+    try {
+      return make();
+    } catch (const InputError& e) {
+      throw InputError(std::string("reconstruction.pixel_binning: ") + e.what());
+    }
+  };
+  // The lenses stay as calibrated: their centres are in mm about the optical axis, which binning
+  // keeps where it is.
+  const optics::CameraModel framed =
+      in_binning([&] { return calib::camera_in_frame(camera, calibration).binned(binning); });
+  const ImageF white = in_binning([&] { return bin_pixels(calibration.white_correction, binning); });
   if (operators) {
-    op_ = operators->get(framed, calibration.lenses, calibration.white_correction, settings_, &setup_note_);
+    op_ = operators->get(framed, calibration.lenses, white, settings_, &setup_note_);
   } else {
-    op_ = std::make_shared<const PairOperator>(framed, calibration.lenses, calibration.white_correction, settings_);
+    op_ = std::make_shared<const PairOperator>(framed, calibration.lenses, white, settings_);
     setup_note_ = "operator built";
   }
 }
@@ -50,7 +80,12 @@ PairResult PairProcessor::process(const ImageF& frame_a, const ImageF& frame_b, 
   ProcessSettings s = settings_;
   s.correlation.dt_s = pair_dt_s(settings_, options.measured_dt_s);
   const WorkspacePool::Lease workspace = workspaces_.take();
-  return process_pair(*op_, frame_a, frame_b, s, options.progress, &(*workspace).mart, &(*workspace).correlation);
+  if (settings_.pixel_binning == 1)
+    return process_pair(*op_, frame_a, frame_b, s, options.progress, &(*workspace).mart, &(*workspace).correlation);
+  recon::validate_image(frame_a, raw_width_, raw_height_, "frame A");
+  recon::validate_image(frame_b, raw_width_, raw_height_, "frame B");
+  return process_pair(*op_, bin_pixels(frame_a, settings_.pixel_binning), bin_pixels(frame_b, settings_.pixel_binning),
+                      s, options.progress, &(*workspace).mart, &(*workspace).correlation);
 }
 
 }  // namespace plenopiv::process

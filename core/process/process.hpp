@@ -36,6 +36,12 @@ struct ProcessSettings {
   // (u, v) samples per aperture axis relative to sec 5.2's count (recon::WeightingOperator),
   // (0, 8]; default 1.
   double angular_sampling = 1.0;
+  // Raw pixels read as one for the reconstruction, per side, 1..8; default 1 (every pixel). At 2,
+  // a camera with ~17 px per microlens is reconstructed from ~8.5 px per lens: a quarter of the
+  // sensor-side work (ratios, projections, weight tables), for the lens's angular resolution. The
+  // live lane's fast tier on a large sensor. Must divide the sensor's pixel counts (PairProcessor
+  // checks; optics::CameraModel::binned, bin_pixels).
+  int pixel_binning = 1;
   recon::MartSettings mart;
   piv::CorrelationSettings correlation;  // dt_s lives here
 
@@ -57,7 +63,8 @@ Grid3 grid_for_extent(const std::array<double, 3>& lo, const std::array<double, 
 //   volume: {x_mm: [a, b], y_mm: [..], z_mm: [..], voxel_mm: 0.125, voxel_z_mm: 0.125, depth_guard_mm: 1}
 //           [a, b] are the faces of the box (the first voxel's lower face, the last one's upper face)
 //   reconstruction: {iterations, mu, acceleration, start: mlos|ones, noise_threshold, dark_weight_cutoff,
-//                    convergence, angular_sampling, sensor_blur_sigma_mm, prune, prune_threshold}
+//                    convergence, angular_sampling, pixel_binning, sensor_blur_sigma_mm, prune,
+//                    prune_threshold}
 //                                                  (ranges: recon::check)
 //   correlation: {passes, median, ...}             (piv::correlation_settings_from; ranges: piv::check)
 //   live: {volume: {..}, reconstruction: {..}, correlation: {..}}   (optional: the live lane's fast tier,

@@ -73,10 +73,14 @@ void apply_sensor_blur(const WeightingOperator& op, double sigma_mm, std::span<f
 }
 
 void validate_image(const ImageF& image, const WeightingOperator& op, const char* source) {
-  if (image.width != op.image_width() || image.height != op.image_height()) {
+  validate_image(image, op.image_width(), op.image_height(), source);
+}
+
+void validate_image(const ImageF& image, int width, int height, const char* source) {
+  if (image.width != width || image.height != height) {
     throw InputError(std::string(source) + ": image is " + std::to_string(image.width) + " x " +
-                     std::to_string(image.height) + " px, the camera's sensor is " + std::to_string(op.image_width()) +
-                     " x " + std::to_string(op.image_height()));
+                     std::to_string(image.height) + " px, the camera's sensor is " + std::to_string(width) + " x " +
+                     std::to_string(height));
   }
   // Checked in parallel; only an image that fails is scanned again in order to name its first
   // bad pixel.

@@ -161,6 +161,8 @@ struct MartResult {
 // Checks an image for the reconstruction: sensor-sized, finite, non-negative; InputError otherwise
 // naming `source`.
 void validate_image(const ImageF& image, const WeightingOperator& op, const char* source);
+// The same against a sensor of `width` x `height` pixels (a raw frame before binning).
+void validate_image(const ImageF& image, int width, int height, const char* source);
 
 namespace detail {
 struct MartBuffers;

@@ -232,7 +232,6 @@ TEST(CameraFile, UnreadableFileIsNamed) {
     EXPECT_NE(std::string(e.what()).find("/nonexistent/camera.yaml: cannot open"), std::string::npos);
   }
 }
-
 }  // namespace
 }  // namespace plenopiv::optics
 
@@ -286,6 +285,50 @@ TEST(SensorGeometry, PixelCentresAndTheApertureMapping) {
   EXPECT_NEAR(aperture_from_sensor_mm(spot, spot, 100.0, 0.5), 0.0, 1e-12);
   // Half a pitch right of the spot sees the left edge of a matched aperture: u = -p_m / 2.
   EXPECT_NEAR(aperture_from_sensor_mm(spot + 0.0625, spot, 100.0, 0.5), -12.5, 1e-9);
+}
+
+// Binning keeps the optics and the sensor's extent in mm; each binned pixel sits at the mean of
+// the raw pixels it reads, in sensor mm, with the optical axis at the centre or where a camera file
+// (or calibration) put it.
+TEST(CameraModel, ABinnedCameraKeepsItsGeometryInMillimetres) {
+  for (const std::string& axis : {std::string(), std::string(", optical_axis_px: [2440.3, 1651.8]")}) {
+    const CameraModel raw =
+        parse_camera_yaml(paper_with("pixel_pitch_mm: 0.0074", "pixel_pitch_mm: 0.0074" + axis), "paper");
+    for (int factor : {1, 2, 4}) {
+      const CameraModel b = raw.binned(factor);
+      EXPECT_EQ(b.sensor().width_px, 4904 / factor);
+      EXPECT_EQ(b.sensor().height_px, 3280 / factor);
+      EXPECT_DOUBLE_EQ(b.sensor().pixel_pitch_mm, 0.0074 * factor);
+      EXPECT_NEAR(b.sensor_width_mm(), raw.sensor_width_mm(), 1e-12);
+      EXPECT_NEAR(b.pixels_per_microlens(), raw.pixels_per_microlens() / factor, 1e-12);
+      EXPECT_NEAR(b.microlens_image_diameter_px(), raw.microlens_image_diameter_px() / factor, 1e-12);
+      EXPECT_EQ(b.nominal_count_x(), raw.nominal_count_x());
+      EXPECT_EQ(b.nominal_count_y(), raw.nominal_count_y());
+      EXPECT_DOUBLE_EQ(b.image_distance_mm(), raw.image_distance_mm());
+      for (int k : {0, 7, 1000, 4904 / factor - 1}) {
+        double mean_x = 0, mean_y = 0;
+        for (int r = 0; r < factor; ++r) {
+          mean_x += column_to_sensor_mm(raw.sensor(), factor * k + r) / factor;
+          mean_y += row_to_sensor_mm(raw.sensor(), factor * (k % 820) + r) / factor;
+        }
+        EXPECT_NEAR(column_to_sensor_mm(b.sensor(), k), mean_x, 1e-12) << factor << axis;
+        EXPECT_NEAR(row_to_sensor_mm(b.sensor(), k % 820), mean_y, 1e-12) << factor << axis;
+      }
+    }
+  }
+  const CameraModel raw = parse_camera_yaml(kPaper, "paper");
+  for (int bad : {0, -2, 3, 5}) {  // 4904 = 2^3 x 613 and 3280 = 2^4 x 5 x 41: 5 divides the height only
+    try {
+      raw.binned(bad);
+      ADD_FAILURE() << bad << " accepted";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("pixel binning " + std::to_string(bad) +
+                                           " does not divide the sensor's "
+                                           "4904 x 3280 px"),
+                std::string::npos)
+          << e.what();
+    }
+  }
 }
 
 }  // namespace
