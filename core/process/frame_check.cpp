@@ -4,6 +4,8 @@
 #include <algorithm>
 #include <cstdint>
 
+#include <opencv2/core.hpp>
+
 namespace plenopiv::process {
 namespace {
 
@@ -12,8 +14,19 @@ namespace {
 template <typename T>
 std::optional<std::string> problem_of(std::span<const T> pixels, int bit_depth) {
   if (pixels.empty()) return std::nullopt;
-  const auto [lo, hi] = std::minmax_element(pixels.begin(), pixels.end());
-  const T min = *lo, max = *hi;
+  // OpenCV's vectorised min/max (every raw frame of a run passes here on the recording thread), in
+  // spans an int counts.
+  double lo = 0, hi = 0;
+  constexpr std::size_t kChunk = std::size_t(1) << 30;
+  for (std::size_t at = 0; at < pixels.size(); at += kChunk) {
+    const std::size_t n = std::min(kChunk, pixels.size() - at);
+    const cv::Mat view(1, int(n), cv::DataType<T>::type, const_cast<T*>(pixels.data() + at));
+    double chunk_lo = 0, chunk_hi = 0;
+    cv::minMaxIdx(view, &chunk_lo, &chunk_hi);
+    lo = at ? std::min(lo, chunk_lo) : chunk_lo;
+    hi = at ? std::max(hi, chunk_hi) : chunk_hi;
+  }
+  const T min = T(lo), max = T(hi);
   if (max == T(0) && min == T(0)) {
     return std::string("all zero: no light reached the sensor (laser, lens cap, camera trigger?)");
   }

@@ -2,30 +2,59 @@
 // operator, then any number of raw frame pairs through it, from any caller.
 #include "core/process/pair_processor.hpp"
 
-#include <opencv2/imgproc.hpp>
+#include <algorithm>
+#include <vector>
 
 #include "core/base/errors.hpp"
 
 namespace plenopiv::process {
 
 ImageF to_float(const ImageU16& raw) {
-  ImageF image(raw.width, raw.height);
-  for (std::size_t i = 0; i < raw.size(); ++i) image.pixels[i] = float(raw.pixels[i]);
+  ImageF image;
+  image.width = raw.width;
+  image.height = raw.height;
+  image.pixels.assign(raw.pixels.begin(), raw.pixels.end());  // converted in one pass, not zeroed first
   return image;
 }
 
-ImageF bin_pixels(const ImageF& image, int factor) {
+namespace {
+
+// Block means, summed in float: exact for 16-bit counts up to 8 x 8 blocks (64 x 65535 < 2^24).
+template <typename T>
+ImageF block_means(const Image<T>& image, int factor) {
   if (factor < 1 || image.width % factor != 0 || image.height % factor != 0) {
     throw InputError("pixel binning " + std::to_string(factor) + " does not divide the image's " +
                      std::to_string(image.width) + " x " + std::to_string(image.height) + " px");
   }
-  if (factor == 1 || image.pixels.empty()) return image;
-  ImageF out(image.width / factor, image.height / factor);
-  // INTER_AREA at an integer factor is the block mean.
-  const cv::Mat in(image.height, image.width, CV_32F, const_cast<float*>(image.pixels.data()));
-  cv::Mat binned(out.height, out.width, CV_32F, out.pixels.data());
-  cv::resize(in, binned, binned.size(), 0, 0, cv::INTER_AREA);
+  ImageF out;
+  out.width = image.width / factor;
+  out.height = image.height / factor;
+  out.pixels.resize(std::size_t(out.width) * std::size_t(out.height));
+  const float scale = 1.0f / float(factor * factor);
+  std::vector<float> sums(std::size_t(out.width));
+  for (int y = 0; y < out.height; ++y) {
+    std::fill(sums.begin(), sums.end(), 0.f);
+    for (int r = 0; r < factor; ++r) {
+      const T* in = image.pixels.data() + std::size_t(y * factor + r) * std::size_t(image.width);
+      for (int x = 0; x < out.width; ++x)
+        for (int c = 0; c < factor; ++c) sums[std::size_t(x)] += float(in[x * factor + c]);
+    }
+    float* row = out.pixels.data() + std::size_t(y) * std::size_t(out.width);
+    for (int x = 0; x < out.width; ++x) row[x] = sums[std::size_t(x)] * scale;
+  }
   return out;
+}
+
+}  // namespace
+
+ImageF bin_pixels(const ImageF& image, int factor) {
+  if (factor == 1 || image.pixels.empty()) return image;
+  return block_means(image, factor);
+}
+
+ImageF bin_pixels(const ImageU16& image, int factor) {
+  if (factor == 1) return to_float(image);
+  return block_means(image, factor);
 }
 
 double pair_dt_s(const ProcessSettings& settings, std::optional<double> measured_dt_s) {
@@ -73,19 +102,26 @@ PairProcessor::PairProcessor(const optics::CameraModel& camera, const calib::Loa
 }
 
 PairResult PairProcessor::process(const ImageU16& frame_a, const ImageU16& frame_b, const PairOptions& options) const {
-  return process(to_float(frame_a), to_float(frame_b), options);
+  if (settings_.pixel_binning == 1) return process(to_float(frame_a), to_float(frame_b), options);
+  // Counts are finite and non-negative: only the size is checked raw, and the frames are binned
+  // straight from their counts (no sensor-sized float copy).
+  recon::validate_size(frame_a.width, frame_a.height, raw_width_, raw_height_, "frame A");
+  recon::validate_size(frame_b.width, frame_b.height, raw_width_, raw_height_, "frame B");
+  return run(bin_pixels(frame_a, settings_.pixel_binning), bin_pixels(frame_b, settings_.pixel_binning), options);
 }
 
 PairResult PairProcessor::process(const ImageF& frame_a, const ImageF& frame_b, const PairOptions& options) const {
+  if (settings_.pixel_binning == 1) return run(frame_a, frame_b, options);
+  recon::validate_image(frame_a, raw_width_, raw_height_, "frame A");
+  recon::validate_image(frame_b, raw_width_, raw_height_, "frame B");
+  return run(bin_pixels(frame_a, settings_.pixel_binning), bin_pixels(frame_b, settings_.pixel_binning), options);
+}
+
+PairResult PairProcessor::run(const ImageF& frame_a, const ImageF& frame_b, const PairOptions& options) const {
   ProcessSettings s = settings_;
   s.correlation.dt_s = pair_dt_s(settings_, options.measured_dt_s);
   const WorkspacePool::Lease workspace = workspaces_.take();
-  if (settings_.pixel_binning == 1)
-    return process_pair(*op_, frame_a, frame_b, s, options.progress, &(*workspace).mart, &(*workspace).correlation);
-  recon::validate_image(frame_a, raw_width_, raw_height_, "frame A");
-  recon::validate_image(frame_b, raw_width_, raw_height_, "frame B");
-  return process_pair(*op_, bin_pixels(frame_a, settings_.pixel_binning), bin_pixels(frame_b, settings_.pixel_binning),
-                      s, options.progress, &(*workspace).mart, &(*workspace).correlation);
+  return process_pair(*op_, frame_a, frame_b, s, options.progress, &(*workspace).mart, &(*workspace).correlation);
 }
 
 }  // namespace plenopiv::process

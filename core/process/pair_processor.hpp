@@ -21,10 +21,13 @@ namespace plenopiv::process {
 ImageF to_float(const ImageU16& raw);
 
 // `image` read out in blocks of `factor` x `factor` pixels, each the mean of its block (so that
-// counts, thresholds and the white correction keep their scale): the frames of
+// counts, thresholds and the white correction keep their scale; summed in float, exact for 16-bit
+// counts up to 8 x 8): the frames of
 // optics::CameraModel::binned(factor). InputError when `factor` is below 1 or does not divide the
 // image's size.
 ImageF bin_pixels(const ImageF& image, int factor);
+// The same straight from camera counts (no sensor-sized float copy); `factor` 1: to_float.
+ImageF bin_pixels(const ImageU16& image, int factor);
 
 // The pulse separation a pair's velocities use: the one the laser's Q-switch sync measured for the
 // pair when there is one (> 0), else the nominal dt_s of the settings.
@@ -99,6 +102,9 @@ class PairProcessor {
   const std::string& setup_note() const { return setup_note_; }
 
  private:
+  // process_pair on frames already in the operator's pixels, in a workspace from the pool.
+  PairResult run(const ImageF& frame_a, const ImageF& frame_b, const PairOptions& options) const;
+
   ProcessSettings settings_;
   int raw_width_ = 0, raw_height_ = 0;  // the camera's sensor, before pixel binning
   std::shared_ptr<const PairOperator> op_;

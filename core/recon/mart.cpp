@@ -76,12 +76,16 @@ void validate_image(const ImageF& image, const WeightingOperator& op, const char
   validate_image(image, op.image_width(), op.image_height(), source);
 }
 
-void validate_image(const ImageF& image, int width, int height, const char* source) {
-  if (image.width != width || image.height != height) {
-    throw InputError(std::string(source) + ": image is " + std::to_string(image.width) + " x " +
-                     std::to_string(image.height) + " px, the camera's sensor is " + std::to_string(width) + " x " +
+void validate_size(int image_width, int image_height, int width, int height, const char* source) {
+  if (image_width != width || image_height != height) {
+    throw InputError(std::string(source) + ": image is " + std::to_string(image_width) + " x " +
+                     std::to_string(image_height) + " px, the camera's sensor is " + std::to_string(width) + " x " +
                      std::to_string(height));
   }
+}
+
+void validate_image(const ImageF& image, int width, int height, const char* source) {
+  validate_size(image.width, image.height, width, height, source);
   // Checked in parallel; only an image that fails is scanned again in order to name its first
   // bad pixel.
   std::atomic<bool> bad{false};

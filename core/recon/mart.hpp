@@ -163,6 +163,8 @@ struct MartResult {
 void validate_image(const ImageF& image, const WeightingOperator& op, const char* source);
 // The same against a sensor of `width` x `height` pixels (a raw frame before binning).
 void validate_image(const ImageF& image, int width, int height, const char* source);
+// The size check alone: an image of `image_width` x `image_height` px on that sensor.
+void validate_size(int image_width, int image_height, int width, int height, const char* source);
 
 namespace detail {
 struct MartBuffers;

@@ -109,15 +109,17 @@ TEST(PixelBinning, APairOnTheBinnedCameraMeasuresTheShift) {
 
   // Frames are checked raw, before binning, and named.
   const PairProcessor binned(camera, calibration, parse(", pixel_binning: 2"));
-  EXPECT_NE(error_of([&] { binned.process(bin_pixels(frame_a, 2), frame_b); })
-                .find("frame A: image is 425 x 425 px, the camera's sensor is 850 x 850"),
+  EXPECT_NE(error_of([&] {
+              binned.process(bin_pixels(frame_a, 2), frame_b);
+            }).find("frame A: image is 425 x 425 px, the camera's sensor is 850 x 850"),
             std::string::npos);
   ImageF negative = frame_b;
   negative.pixels[10] = -1;
   EXPECT_NE(error_of([&] { binned.process(frame_a, negative); }).find("frame B: pixel (10, 0)"), std::string::npos);
   // A binning that does not divide the sensor names the setting.
-  EXPECT_NE(error_of([&] { PairProcessor(camera, calibration, parse(", pixel_binning: 3")); })
-                .find("reconstruction.pixel_binning: pixel binning 3 does not divide the sensor's 850 x 850 px"),
+  EXPECT_NE(error_of([&] {
+              PairProcessor(camera, calibration, parse(", pixel_binning: 3"));
+            }).find("reconstruction.pixel_binning: pixel binning 3 does not divide the sensor's 850 x 850 px"),
             std::string::npos);
 }
 
