@@ -2,13 +2,18 @@
 // and the quality lane (the full settings behind it), each a bounded queue and a pipeline.
 #include "daemon/lanes.hpp"
 
+#include <tbb/info.h>
+
+#include <algorithm>
+
 namespace plenopiv::daemon {
 
 Lane::Lane(Options options)
     : options_(std::move(options)),
       queue_(options_.capacity, options_.order),
-      arena_(tbb::task_arena::automatic, 1, options_.priority),
-      niceness_(arena_, options_.nice) {}
+      arena_(options_.max_concurrency > 0 ? options_.max_concurrency : int(tbb::task_arena::automatic), 1,
+             options_.priority),
+      niceness_(arena_, options_.nice, options_.caller_nice) {}
 
 void Lane::offer(const SharedPair& pair) {
   if (options_.every > 1 && pair->pair_index % options_.every != 0) return;
@@ -75,6 +80,8 @@ std::vector<std::unique_ptr<Lane>> make_lanes(const RunConfig& config, int nice)
     quality.max_in_flight = QualityLane::kPairsInFlight;
     quality.priority = tbb::task_arena::priority::low;
     quality.nice = nice;
+    quality.caller_nice = kQualityLaneNice;
+    quality.max_concurrency = std::max(1, tbb::info::default_concurrency() - 1);
     lanes.push_back(std::make_unique<Lane>(quality));
   }
   return lanes;

@@ -35,6 +35,10 @@ class Lane {
     int max_in_flight = 1;
     tbb::task_arena::priority priority = tbb::task_arena::priority::normal;
     int nice = 0;  // the niceness of the lane's threads, 0-19; 0: the caller's
+    // The niceness of the thread that runs the lane (its pipeline's own thread), 0-19; -1: `nice`.
+    int caller_nice = -1;
+    // Threads working in the arena at once, the lane's own thread included; 0: as many as cores.
+    int max_concurrency = 0;
   };
   explicit Lane(Options options);
   Lane(const Lane&) = delete;
@@ -66,6 +70,10 @@ class Lane {
   tbb::task_arena arena_;
   ArenaNiceness niceness_;
 };
+
+// The niceness of the quality lane's own thread: the lowest, so that the kernel, not only oneTBB's
+// task boundaries, gives the live lane (and the recording) the cores whenever they have work.
+inline constexpr int kQualityLaneNice = 19;
 
 // The lanes of a run, the live lane first: it runs the live tier when the spec has one (else the
 // full settings) on the newest pair, max_pairs_in_flight at once, live_queue waiting, at high

@@ -17,12 +17,13 @@ void lower_this_thread_priority(int nice);
 // The calling thread's niceness.
 int this_thread_niceness();
 
-// Every thread that enters `arena` (its workers, and the thread that calls execute) runs at
-// `nice` from then on (lower_this_thread_priority). oneTBB's workers move between arenas; once
-// niced they stay so, which suits a daemon whose only TBB work is processing.
+// Every thread that enters `arena` runs at `nice` from then on (lower_this_thread_priority); the
+// thread that calls execute at `caller_nice` (default: `nice`). oneTBB's workers move between
+// arenas; once niced they stay so (raising a priority needs CAP_SYS_NICE), which suits a daemon
+// whose only TBB work is processing: workers run at one niceness whichever arena they serve.
 class ArenaNiceness : public tbb::task_scheduler_observer {
  public:
-  ArenaNiceness(tbb::task_arena& arena, int nice);
+  ArenaNiceness(tbb::task_arena& arena, int nice, int caller_nice = -1);
   ~ArenaNiceness() override;
   ArenaNiceness(const ArenaNiceness&) = delete;
   ArenaNiceness& operator=(const ArenaNiceness&) = delete;
@@ -30,7 +31,7 @@ class ArenaNiceness : public tbb::task_scheduler_observer {
   void on_scheduler_entry(bool is_worker) override;
 
  private:
-  int nice_;
+  int nice_, caller_nice_;
   std::atomic<bool> warned_{false};
 };
 

@@ -1,6 +1,7 @@
 // A run's lanes in-process: which pairs a lane is offered, the order it takes them in, its bounded
 // queue and counters, and the lanes a run config makes.
 #include <gtest/gtest.h>
+#include <tbb/info.h>
 
 #include <tbb/parallel_for.h>
 
@@ -194,6 +195,53 @@ TEST(Lane, ARunConfigMakesTheLiveLaneFirstAndTheQualityLaneWhenAsked) {
   EXPECT_EQ(two[1]->tier(), process::Tier::full);
   EXPECT_EQ(two[1]->queue().capacity(), 5u);
   EXPECT_EQ(two[1]->counters().policy(), "every 2");
+}
+
+// The quality lane runs behind the live lane at the kernel's level too: its own thread at the
+// lowest priority, and its arena one thread short of the cores, so that a oneTBB worker stays free
+// for the live lane (a worker that served the quality lane would keep its niceness). Its workers,
+// where there are any (more than 2 cores), run at the processing niceness like the live lane's.
+TEST(Lane, TheQualityLaneRunsAtTheLowestPriorityAndLeavesTheLiveLaneAWorker) {
+  const int recording = this_thread_niceness();
+  if (recording > 14) GTEST_SKIP() << "the test runs at niceness " << recording << ": no room to lower it by 5";
+  const std::string spec =
+      "dt_s: 0.001\nvolume: {x_mm: [-1, 1], y_mm: [-1, 1], z_mm: [0, 2], voxel_mm: 0.5}\n"
+      "correlation: {passes: [{window: 4, overlap_percent: 50}]}\n"
+      "live: {reconstruction: {iterations: 1}}\nquality: {every: 1}\nquality_queue: 8\n";
+  const auto lanes = make_lanes(parse_run_config(spec, "run.yaml"), recording + 5);
+  ASSERT_EQ(lanes.size(), 2u);
+  Lane& quality = *lanes[1];
+  std::mutex m;
+  std::set<std::thread::id> threads;
+  std::set<int> worker_niceness;
+  std::thread::id caller;
+  const auto process = [&](const drivers::FramePair& pair, const CancelFlag& cancel) {
+    tbb::parallel_for(0, 256, [&](int) {
+      volatile double x = 0;
+      for (int i = 0; i < 20000; ++i) x = x + 1.0;
+      std::lock_guard lock(m);
+      threads.insert(std::this_thread::get_id());
+      if (std::this_thread::get_id() != caller) worker_niceness.insert(this_thread_niceness());
+    });
+    return empty_field(pair, cancel);
+  };
+  for (std::uint64_t i = 0; i < 4; ++i) quality.offer(pair_of(i));
+  quality.close(false);
+  int caller_niceness = -1;
+  CancelFlag cancel{false};
+  std::thread runner([&] {
+    caller = std::this_thread::get_id();
+    quality.run(
+        process, [](const drivers::FramePair&, ProcessedPair&) {}, cancel);
+    caller_niceness = this_thread_niceness();
+  });
+  runner.join();
+  EXPECT_EQ(quality.counters().processed(), 4u);
+  EXPECT_EQ(caller_niceness, kQualityLaneNice) << "the quality lane's own thread";
+  const int cores = tbb::info::default_concurrency();
+  EXPECT_LE(int(threads.size()), std::max(1, cores - 1)) << "threads in the quality lane's loops";
+  for (int n : worker_niceness) EXPECT_EQ(n, recording + 5) << "a worker in the quality lane";
+  EXPECT_EQ(this_thread_niceness(), recording) << "the recording thread keeps its priority";
 }
 
 }  // namespace
