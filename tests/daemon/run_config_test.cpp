@@ -50,7 +50,8 @@ TEST(RunConfig, ShippedDefaultParses) {
 }
 
 // The paper-scale live config gives core/process the paper's box and the setting measured to fit
-// 30 s per pair (docs/benchmarks.md, "Paper scale: time against error").
+// 30 s per pair (docs/benchmarks.md, "Paper scale: time against error") for the quality lane, and
+// the live tier measured under 1 s per pair ("Live tier") for the live lane.
 TEST(RunConfig, ShippedPaperScaleConfigParses) {
   std::ifstream in(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/run-paper.yaml");
   std::stringstream text;
@@ -71,6 +72,18 @@ TEST(RunConfig, ShippedPaperScaleConfigParses) {
   EXPECT_DOUBLE_EQ(s.correlation.intensity_threshold_of_mean, 3.0);
   EXPECT_EQ(s.correlation.depth_prefilter, 4);
   EXPECT_EQ(s.correlation.final_smoothing, 1);
+  EXPECT_EQ(s.pixel_binning, 1);
+
+  ASSERT_TRUE(c.spec.live);
+  const process::ProcessSettings& live = *c.spec.live;
+  EXPECT_EQ(live.grid.shape, (std::array<int, 3>{100, 67, 67}));  // the same box in 0.375 mm voxels
+  EXPECT_EQ(live.pixel_binning, 2);
+  EXPECT_EQ(live.mart.iterations, 3);
+  EXPECT_TRUE(live.mart.accelerate);
+  ASSERT_EQ(live.correlation.passes.size(), 2u);
+  EXPECT_EQ(live.correlation.passes[1].window, (std::array<int, 3>{8, 8, 8}));
+  EXPECT_EQ(live.correlation.depth_prefilter, 4);
+  EXPECT_EQ(c.quality.take, QualityLane::Take::newest);
 }
 
 // volume ranges are the box's faces, as in process.yaml: one meaning wherever the key is read.
