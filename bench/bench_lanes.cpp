@@ -1,20 +1,33 @@
-// The daemon's two lanes under a laser: ray-traced pairs (camera-small) replayed at rate_hz through
-// a whole in-process run (sim trigger, replay camera, recorder, real processing), the live lane
-// alone against the live lane with the full settings' quality lane behind it, with the processing
-// threads at plenopivd's default niceness and at the recording's own (processing_nice 0).
+// The daemon's two lanes under a laser: ray-traced pairs replayed at rate_hz through a whole
+// in-process run (sim trigger, replay camera, recorder, real processing).
+//   bench_lanes [PAIRS] [RATE_HZ]: camera-small; the live lane alone against the live lane with the
+//       full settings' quality lane behind it, with the processing threads at plenopivd's default
+//       niceness and at the recording's own (processing_nice 0).
+//   bench_lanes paper [PAIRS] [RATE_HZ] [DATA_DIR]: the shipped run-paper.yaml (its live tier, the
+//       quality lane behind it) on paper-scale frames (default 600 pairs at 10 Hz), sampled each
+//       second (bench=lanes_sample lines; bench/plot_lanes.py draws them). The replay camera
+//       preloads its frames (buffer_mb), as a camera delivers them decoded. 64 MB a pair at 10 Hz is
+//       640 MB/s, more than this machine's disk takes: the run folder is on DATA_DIR (default
+//       /dev/shm, a tmpfs), and its raw frames are deleted once recorded, standing in for a disk
+//       that takes the rate and holds the run.
 #include <sys/resource.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <string>
 #include <thread>
+#include <utility>
+
+#include <yaml-cpp/yaml.h>
 
 #include "bench/bench_support.hpp"
 #include "bench/replay_recording.hpp"
 #include "core/optics/camera_file.hpp"
+#include "core/sim/particles.hpp"
 #include "daemon/daemon_config.hpp"
 #include "daemon/processing.hpp"
 #include "daemon/run.hpp"
@@ -26,7 +39,108 @@ using Clock = std::chrono::steady_clock;
 
 using bench::rss_gb;
 
+namespace {
+
+// Deletes the raw frames of pairs recorded before `keep_from` (frames/pair-NNNNNN-A.tif, -B.tif)
+// in every run folder under `data`; the lanes hold their pairs in memory.
+void delete_recorded_frames(const fs::path& data, std::uint64_t keep_from) {
+  std::error_code ec;
+  for (const auto& run : fs::directory_iterator(data, ec)) {
+    for (const auto& f : fs::directory_iterator(run.path() / "frames", ec)) {
+      const std::string name = f.path().filename().string();
+      if (name.rfind("pair-", 0) == 0 && std::strtoull(name.c_str() + 5, nullptr, 10) < keep_from)
+        fs::remove(f.path(), ec);
+    }
+  }
+}
+
+int paper_lanes(int argc, char** argv) {
+  const int pairs = argc > 1 ? std::atoi(argv[1]) : 600;
+  const double rate_hz = argc > 2 ? std::atof(argv[2]) : 10.0;
+  const fs::path data = argc > 3 ? fs::path(argv[3]) : fs::path("/dev/shm/plenopiv-bench-lanes-paper");
+  const fs::path config_dir = fs::path(PLENOPIV_SOURCE_DIR) / "systemd/config";
+  const fs::path camera_file = config_dir / "camera-fahringer2015.yaml";
+  const optics::CameraModel camera = optics::load_camera_file(camera_file);
+  const fs::path root = fs::temp_directory_path() / "plenopiv-bench-lanes";
+  // run-paper.yaml's box at 0.5 particles per microlens, as bench_e2e's full case.
+  bench::ReplayScene scene;
+  scene.box = {{-18.75, -12.5, -12.5}, {18.75, 12.5, 12.5}};
+  scene.particles = sim::particle_count_from_ppm(camera, scene.box, 0.5);
+  scene.rays_per_particle = 5000;
+  bench::write_replay_recording(root / "replay" / "paper", camera, 4, scene);
+  drivers::register_replay_camera(drivers::CameraRegistry::instance(), {root / "replay", camera_file});
+
+  const daemon::ProcessFactory processing = daemon::plenoptic_processing(camera);
+  const int nice = daemon::DaemonConfig{}.processing_nice;
+  // The shipped config without its quality lane, then as shipped.
+  for (const auto& [name, quality] : {std::pair{"paper_live_only", "off"}, std::pair{"paper_run_paper_yaml", ""}}) {
+    YAML::Node run_yaml = YAML::LoadFile((config_dir / "run-paper.yaml").string());
+    // Until stopped, stopped here after `pairs`: a bounded run is refused where its raw frames would
+    // not fit DATA_DIR, and the deletion below is what makes them fit.
+    run_yaml["pairs"] = 0;
+    run_yaml["rate_hz"] = rate_hz;
+    if (*quality) run_yaml["quality"] = quality;
+    const daemon::RunConfig config = daemon::parse_run_config(YAML::Dump(run_yaml), "run-paper.yaml");
+    fs::remove_all(data);
+    daemon::RunStateMachine state;
+    const daemon::RunEnvironment env =
+        bench::replay_run_environment(data, camera_file, state, processing, nice, "paper?loop=1&buffer_mb=1024");
+    state.start(name);
+    const auto t0 = Clock::now();
+    double acquiring_at = 0, stopped_at = 0, rss_min = 1e9, rss_max = 0;
+    auto now = [&] { return std::chrono::duration<double>(Clock::now() - t0).count(); };
+    daemon::Run run(config, name, env);
+    msg::Status s;
+    while (!run.finished()) {
+      std::this_thread::sleep_for(std::chrono::seconds(1));
+      s.Clear();
+      run.fill_status(s);
+      if (acquiring_at == 0 && state.state() == daemon::RunState::Acquiring) acquiring_at = now();
+      if (acquiring_at == 0) continue;
+      if (s.pairs_recorded() > 2) delete_recorded_frames(data, s.pairs_recorded() - 2);
+      if (stopped_at == 0 && s.pairs_recorded() >= std::uint64_t(pairs)) {
+        run.request_stop();
+        stopped_at = now();
+      }
+      const double rss = rss_gb();
+      rss_min = std::min(rss_min, rss);
+      rss_max = std::max(rss_max, rss);
+      std::uint64_t fields[2] = {0, 0};
+      for (const msg::LaneCounters& l : s.lanes()) fields[l.name() == "live" ? 0 : 1] = l.processed();
+      std::printf(
+          "bench=lanes_sample variant=%s t_s=%.0f recorded=%llu frames_lost=%llu live_fields=%llu "
+          "quality_fields=%llu rss_gb=%.3f\n",
+          name, now() - acquiring_at, static_cast<unsigned long long>(s.pairs_recorded()),
+          static_cast<unsigned long long>(s.frames_lost()), static_cast<unsigned long long>(fields[0]),
+          static_cast<unsigned long long>(fields[1]), rss);
+      std::fflush(stdout);
+    }
+    s.Clear();
+    run.fill_status(s);
+    const double acquire_s = (stopped_at > 0 ? stopped_at : now()) - acquiring_at;
+    msg::LaneCounters live, quality_lane;
+    for (const msg::LaneCounters& l : s.lanes()) (l.name() == "live" ? live : quality_lane) = l;
+    std::printf(
+        "bench=lanes variant=%s processing_nice=%d pairs=%d rate_hz=%.1f setup_s=%.1f run_s=%.1f recorded=%llu "
+        "frames_lost=%llu live_fields=%llu live_fields_per_s=%.2f live_dropped=%llu live_mean_s=%.3f "
+        "quality_fields=%llu quality_fields_per_s=%.3f quality_dropped=%llu quality_mean_s=%.2f rss_min_gb=%.2f "
+        "rss_max_gb=%.2f state=%s\n",
+        name, nice, pairs, rate_hz, acquiring_at, acquire_s, static_cast<unsigned long long>(s.pairs_recorded()),
+        static_cast<unsigned long long>(s.frames_lost()), static_cast<unsigned long long>(live.processed()),
+        double(live.processed()) / acquire_s, static_cast<unsigned long long>(live.dropped()), live.mean_time_s(),
+        static_cast<unsigned long long>(quality_lane.processed()), double(quality_lane.processed()) / acquire_s,
+        static_cast<unsigned long long>(quality_lane.dropped()), quality_lane.mean_time_s(), rss_min, rss_max,
+        daemon::to_string(state.state()));
+    std::fflush(stdout);
+  }
+  fs::remove_all(data);
+  return 0;
+}
+
+}  // namespace
+
 int main(int argc, char** argv) {
+  if (argc > 1 && std::string(argv[1]) == "paper") return paper_lanes(argc - 1, argv + 1);
   const int pairs = argc > 1 ? std::atoi(argv[1]) : 200;
   const double rate_hz = argc > 2 ? std::atof(argv[2]) : 10.0;
   const fs::path camera_file = fs::path(PLENOPIV_SOURCE_DIR) / "systemd/config/camera-small.yaml";

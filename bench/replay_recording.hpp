@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <cstdio>
 #include <filesystem>
+#include <string>
 
 #include "core/io/tiff.hpp"
 #include "core/optics/camera_model.hpp"
@@ -15,20 +16,28 @@
 
 namespace plenopiv::bench {
 
-// `count` pairs in `dir` as frame-<k>.tif (kept when already there): 60 particles in a
-// 4 x 4 x 2 mm box, displaced 0.25 mm along x between exposures (as bench_daemon).
-inline void write_replay_recording(const std::filesystem::path& dir, const optics::CameraModel& camera, int count) {
+// The scene of a replay recording: `particles` in `box`, `rays_per_particle` each.
+struct ReplayScene {
+  sim::Box box{{-2, -2, -1}, {2, 2, 1}};
+  std::size_t particles = 60;
+  std::size_t rays_per_particle = 100000;
+};
+
+// `count` pairs in `dir` as frame-<k>.tif (kept when already there): by default 60 particles in a
+// 4 x 4 x 2 mm box (as bench_daemon); displaced 0.25 mm along x between exposures.
+inline void write_replay_recording(const std::filesystem::path& dir, const optics::CameraModel& camera, int count,
+                                   const ReplayScene& scene = {}) {
   namespace fs = std::filesystem;
   fs::create_directories(dir);
   const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera));
   sim::RenderOptions render;
-  render.rays_per_particle = 100000;
+  render.rays_per_particle = scene.rays_per_particle;
   for (int i = 0; i < count; ++i) {
     char a_name[32], b_name[32];
     std::snprintf(a_name, sizeof a_name, "frame-%04d.tif", 2 * i);
     std::snprintf(b_name, sizeof b_name, "frame-%04d.tif", 2 * i + 1);
     if (fs::exists(dir / a_name) && fs::exists(dir / b_name)) continue;
-    const auto a = sim::random_particles({{-2, -2, -1}, {2, 2, 1}}, 60, 100 + std::uint64_t(i));
+    const auto a = sim::random_particles(scene.box, scene.particles, 100 + std::uint64_t(i));
     auto b = a;
     for (auto& p : b) p[0] += 0.25;
     io::write_tiff(dir / a_name, sim::render(camera, lenses, a, render, 2 * std::uint64_t(i)).image, false);
@@ -36,15 +45,16 @@ inline void write_replay_recording(const std::filesystem::path& dir, const optic
   }
 }
 
-// A run's environment: data in `data`, the replay camera's folder `small` looped, the sim trigger,
-// `camera_file`, `processing` with its threads at `nice`.
+// A run's environment: data in `data`, the replay camera `replay://<source>` (default: the folder
+// `small`, looped), the sim trigger, `camera_file`, `processing` with its threads at `nice`.
 inline daemon::RunEnvironment replay_run_environment(const std::filesystem::path& data,
                                                      const std::filesystem::path& camera_file,
                                                      daemon::RunStateMachine& state,
-                                                     const daemon::ProcessFactory& processing, int nice) {
+                                                     const daemon::ProcessFactory& processing, int nice,
+                                                     const std::string& source = "small?loop=1") {
   daemon::RunEnvironment env;
   env.data_dir = data;
-  env.default_camera_uri = "replay://small?loop=1";
+  env.default_camera_uri = "replay://" + source;
   env.default_trigger_uri = "sim://";
   env.camera_file = camera_file;
   env.state = &state;
