@@ -69,13 +69,8 @@ if(PLENOPIV_WITH_ARAVIS)
   plenopiv_find_pkgconfig(ARAVIS aravis-0.8 libaravis-dev)
 endif()
 if(PLENOPIV_WITH_GPIOD)
+  # v1 (1.6) or v2 (2.x): drivers/trigger builds the GpioChip of the API found.
   plenopiv_find_pkgconfig(GPIOD "libgpiod>=1.6" libgpiod-dev)
-  if(GPIOD_VERSION VERSION_GREATER_EQUAL 2.0)
-    message(FATAL_ERROR "plenopiv: libgpiod ${GPIOD_VERSION} found; the gpiod:// trigger driver is written "
-                        "for the v1 API (libgpiod 1.6, Debian 12's libgpiod-dev) and has no v2 backend yet. "
-                        "Configure with -DPLENOPIV_WITH_GPIOD=OFF to build without it (gpiod:// then says "
-                        "how to build it), or build against libgpiod 1.6.")
-  endif()
 endif()
 if(PLENOPIV_WITH_USB)
   plenopiv_find_pkgconfig(LIBUSB libusb-1.0 libusb-1.0-0-dev)
