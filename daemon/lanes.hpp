@@ -22,7 +22,8 @@ namespace plenopiv::daemon {
 // pipeline (run_live_pipeline) and its counters. The pipeline runs in a tbb::task_arena of the
 // lane's priority: oneTBB gives its worker threads to the work of higher-priority arenas first, so
 // the quality lane's reconstruction runs on the cores the live lane leaves idle. Every thread that
-// works in the arena runs at the lane's niceness, below the recording's (thread_priority.hpp).
+// works in the arena runs at the lane's niceness, below the recording's (thread_priority.hpp), and
+// the lane's own thread at Options::caller_nice.
 class Lane {
  public:
   struct Options {
@@ -78,8 +79,10 @@ inline constexpr int kQualityLaneNice = 19;
 // The lanes of a run, the live lane first: it runs the live tier when the spec has one (else the
 // full settings) on the newest pair, max_pairs_in_flight at once, live_queue waiting, at high
 // priority; the quality lane (config.quality.on()) runs the full settings on the pairs its policy
-// takes, QualityLane::kPairsInFlight at once, quality.queue waiting, at low priority. Both lanes'
-// threads run at `nice` (plenopivd.yaml `processing_nice`).
+// takes, QualityLane::kPairsInFlight at once, quality.queue waiting, at low priority, its own
+// thread at kQualityLaneNice and its arena one thread short of the cores (a oneTBB worker always
+// free for the live lane). The other threads of both lanes run at `nice` (plenopivd.yaml
+// `processing_nice`).
 std::vector<std::unique_ptr<Lane>> make_lanes(const RunConfig& config, int nice = 0);
 
 }  // namespace plenopiv::daemon

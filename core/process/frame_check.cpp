@@ -15,7 +15,7 @@ template <typename T>
 std::optional<std::string> problem_of(std::span<const T> pixels, int bit_depth) {
   if (pixels.empty()) return std::nullopt;
   // OpenCV's vectorised min/max (every raw frame of a run passes here on the recording thread), in
-  // spans an int counts.
+  // chunks whose length fits cv::Mat's int sizes.
   double lo = 0, hi = 0;
   constexpr std::size_t kChunk = std::size_t(1) << 30;
   for (std::size_t at = 0; at < pixels.size(); at += kChunk) {

@@ -90,9 +90,11 @@ PairProcessor::PairProcessor(const optics::CameraModel& camera, const calib::Loa
   };
   // The lenses stay as calibrated: their centres are in mm about the optical axis, which binning
   // keeps where it is.
-  const optics::CameraModel framed =
-      in_binning([&] { return calib::camera_in_frame(camera, calibration).binned(binning); });
-  const ImageF white = in_binning([&] { return bin_pixels(calibration.white_correction, binning); });
+  const optics::CameraModel in_frame = calib::camera_in_frame(camera, calibration);
+  const optics::CameraModel framed = in_binning([&] { return in_frame.binned(binning); });
+  const ImageF binned_white =
+      binning == 1 ? ImageF{} : in_binning([&] { return bin_pixels(calibration.white_correction, binning); });
+  const ImageF& white = binning == 1 ? calibration.white_correction : binned_white;
   if (operators) {
     op_ = operators->get(framed, calibration.lenses, white, settings_, &setup_note_);
   } else {

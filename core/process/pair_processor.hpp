@@ -20,11 +20,10 @@ namespace plenopiv::process {
 // Raw camera counts as the float image the reconstruction reads.
 ImageF to_float(const ImageU16& raw);
 
-// `image` read out in blocks of `factor` x `factor` pixels, each the mean of its block (so that
-// counts, thresholds and the white correction keep their scale; summed in float, exact for 16-bit
-// counts up to 8 x 8): the frames of
-// optics::CameraModel::binned(factor). InputError when `factor` is below 1 or does not divide the
-// image's size.
+// `image` read out in blocks of `factor` x `factor` pixels: the frames of
+// optics::CameraModel::binned(factor). Each pixel is the mean of its block, so that counts,
+// thresholds and the white correction keep their scale (summed in float: exact for 16-bit counts
+// up to 8 x 8). InputError when `factor` is below 1 or does not divide the image's size.
 ImageF bin_pixels(const ImageF& image, int factor);
 // The same straight from camera counts (no sensor-sized float copy); `factor` 1: to_float.
 ImageF bin_pixels(const ImageU16& image, int factor);
@@ -78,18 +77,19 @@ struct PairOptions {
 class PairProcessor {
  public:
   // InputError when the settings and camera do not fit (the volume behind the main lens's focal
-  // length, windows larger than the volume, a pixel binning that does not divide the sensor, ...). `operators`
-  // (optional, outliving the call): where the operator comes from when it was built before from the same camera,
-  // calibration, volume and sampling (kept in memory, or its tables on disk), and where a new one is kept; without it
-  // the operator is built. The results are the same bits either way.
+  // length, windows larger than the volume, a pixel binning that does not divide the sensor, ...).
+  // `operators` (optional, outliving the call): where the operator comes from when it was built
+  // before from the same camera, calibration, volume and sampling (kept in memory, or its tables
+  // on disk), and where a new one is kept; without it the operator is built. The results are the
+  // same bits either way.
   PairProcessor(const optics::CameraModel& camera, const calib::LoadedCalibration& calibration,
                 ProcessSettings settings, OperatorCache* operators = nullptr);
 
   // Raw frames A and B (the camera's counts) to vectors: validated (sensor-sized; named "frame A"
   // and "frame B"), resampled when the operator says so, reconstructed and correlated
   // (process_pair), with the dt pair_dt_s gives. With settings.pixel_binning above 1 the operator
-  // is built on the binned camera and white image, and frames are validated raw, then binned. MART's and the
-  // correlation's buffers come from the processor's pool.
+  // is built on the binned camera and white image, and frames are validated raw, then binned.
+  // MART's and the correlation's buffers come from the processor's pool.
   PairResult process(const ImageU16& frame_a, const ImageU16& frame_b, const PairOptions& options = {}) const;
   PairResult process(const ImageF& frame_a, const ImageF& frame_b, const PairOptions& options = {}) const;
 
