@@ -54,6 +54,28 @@ void delete_recorded_frames(const fs::path& data, std::uint64_t keep_from) {
   }
 }
 
+// One variant's result line: the run's end status, per lane; rates over `acquire_s`.
+struct RunFigures {
+  double setup_s = 0, run_s = 0, acquire_s = 1, rss_min_gb = 0, rss_max_gb = 0;
+};
+void print_result(const char* variant, int nice, int pairs, double rate_hz, const RunFigures& f, const msg::Status& s,
+                  daemon::RunState state) {
+  msg::LaneCounters live, quality;
+  for (const msg::LaneCounters& l : s.lanes()) (l.name() == "live" ? live : quality) = l;
+  std::printf(
+      "bench=lanes variant=%s processing_nice=%d pairs=%d rate_hz=%.1f setup_s=%.1f run_s=%.1f recorded=%llu "
+      "frames_lost=%llu live_fields=%llu live_fields_per_s=%.2f live_dropped=%llu live_mean_s=%.3f "
+      "quality_fields=%llu quality_fields_per_s=%.3f quality_dropped=%llu quality_mean_s=%.2f rss_min_gb=%.2f "
+      "rss_max_gb=%.2f state=%s\n",
+      variant, nice, pairs, rate_hz, f.setup_s, f.run_s, static_cast<unsigned long long>(s.pairs_recorded()),
+      static_cast<unsigned long long>(s.frames_lost()), static_cast<unsigned long long>(live.processed()),
+      double(live.processed()) / f.acquire_s, static_cast<unsigned long long>(live.dropped()), live.mean_time_s(),
+      static_cast<unsigned long long>(quality.processed()), double(quality.processed()) / f.acquire_s,
+      static_cast<unsigned long long>(quality.dropped()), quality.mean_time_s(), f.rss_min_gb, f.rss_max_gb,
+      daemon::to_string(state));
+  std::fflush(stdout);
+}
+
 int paper_lanes(int argc, char** argv) {
   const int pairs = argc > 1 ? std::atoi(argv[1]) : 600;
   const double rate_hz = argc > 2 ? std::atof(argv[2]) : 10.0;
@@ -118,20 +140,7 @@ int paper_lanes(int argc, char** argv) {
     s.Clear();
     run.fill_status(s);
     const double acquire_s = (stopped_at > 0 ? stopped_at : now()) - acquiring_at;
-    msg::LaneCounters live, quality_lane;
-    for (const msg::LaneCounters& l : s.lanes()) (l.name() == "live" ? live : quality_lane) = l;
-    std::printf(
-        "bench=lanes variant=%s processing_nice=%d pairs=%d rate_hz=%.1f setup_s=%.1f run_s=%.1f recorded=%llu "
-        "frames_lost=%llu live_fields=%llu live_fields_per_s=%.2f live_dropped=%llu live_mean_s=%.3f "
-        "quality_fields=%llu quality_fields_per_s=%.3f quality_dropped=%llu quality_mean_s=%.2f rss_min_gb=%.2f "
-        "rss_max_gb=%.2f state=%s\n",
-        name, nice, pairs, rate_hz, acquiring_at, acquire_s, static_cast<unsigned long long>(s.pairs_recorded()),
-        static_cast<unsigned long long>(s.frames_lost()), static_cast<unsigned long long>(live.processed()),
-        double(live.processed()) / acquire_s, static_cast<unsigned long long>(live.dropped()), live.mean_time_s(),
-        static_cast<unsigned long long>(quality_lane.processed()), double(quality_lane.processed()) / acquire_s,
-        static_cast<unsigned long long>(quality_lane.dropped()), quality_lane.mean_time_s(), rss_min, rss_max,
-        daemon::to_string(state.state()));
-    std::fflush(stdout);
+    print_result(name, nice, pairs, rate_hz, {acquiring_at, acquire_s, acquire_s, rss_min, rss_max}, s, state.state());
   }
   fs::remove_all(data);
   return 0;
@@ -179,7 +188,6 @@ int main(int argc, char** argv) {
     const auto t0 = Clock::now();
     double rss_min = 1e9, rss_max = 0;
     double acquiring_at = 0;
-    std::uint64_t samples = 0;
     {
       daemon::Run run(config, name, env);
       while (!run.finished()) {
@@ -187,30 +195,14 @@ int main(int argc, char** argv) {
         const double r = rss_gb();
         rss_min = std::min(rss_min, r);
         rss_max = std::max(rss_max, r);
-        ++samples;
         if (acquiring_at == 0 && state.state() == daemon::RunState::Acquiring)
           acquiring_at = std::chrono::duration<double>(Clock::now() - t0).count();
       }
       msg::Status s;
       run.fill_status(s);
       const double wall = std::chrono::duration<double>(Clock::now() - t0).count() - acquiring_at;
-      const double acquire_s = double(pairs) / rate_hz;
-      msg::LaneCounters live, quality;
-      for (const msg::LaneCounters& l : s.lanes()) (l.name() == "live" ? live : quality) = l;
-      std::printf(
-          "bench=lanes variant=%s processing_nice=%d pairs=%d rate_hz=%.1f setup_s=%.1f run_s=%.1f recorded=%llu "
-          "frames_lost=%llu "
-          "live_fields=%llu live_fields_per_s=%.2f live_dropped=%llu live_mean_s=%.3f quality_fields=%llu "
-          "quality_fields_per_s=%.3f quality_dropped=%llu quality_mean_s=%.2f rss_min_gb=%.2f rss_max_gb=%.2f "
-          "rss_samples=%llu state=%s\n",
-          name, processing_nice, pairs, rate_hz, acquiring_at, wall,
-          static_cast<unsigned long long>(s.pairs_recorded()), static_cast<unsigned long long>(s.frames_lost()),
-          static_cast<unsigned long long>(live.processed()), double(live.processed()) / acquire_s,
-          static_cast<unsigned long long>(live.dropped()), live.mean_time_s(),
-          static_cast<unsigned long long>(quality.processed()), double(quality.processed()) / acquire_s,
-          static_cast<unsigned long long>(quality.dropped()), quality.mean_time_s(), rss_min, rss_max,
-          static_cast<unsigned long long>(samples), daemon::to_string(state.state()));
-      std::fflush(stdout);
+      print_result(name, processing_nice, pairs, rate_hz,
+                   {acquiring_at, wall, double(pairs) / rate_hz, rss_min, rss_max}, s, state.state());
     }
   }
   fs::remove_all(root / "data");

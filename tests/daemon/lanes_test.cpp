@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <functional>
 #include <mutex>
 #include <set>
 #include <thread>
@@ -30,6 +31,20 @@ ProcessedPair empty_field(const drivers::FramePair&, const CancelFlag&) {
   g.shape = {1, 1, 1};
   out.vectors = VectorField(g);
   return out;
+}
+
+// A ProcessFn whose pair is a parallel loop of busy work (256 iterations of 20 000 additions);
+// `seen` runs in every iteration, under one lock.
+ProcessFn busy_pairs(std::mutex& m, const std::function<void()>& seen) {
+  return [&m, seen](const drivers::FramePair& pair, const CancelFlag& cancel) {
+    tbb::parallel_for(0, 256, [&](int) {
+      volatile double x = 0;
+      for (int i = 0; i < 20000; ++i) x = x + 1.0;
+      std::lock_guard lock(m);
+      seen();
+    });
+    return empty_field(pair, cancel);
+  };
 }
 
 TEST(Lane, EveryNthLaneIsOfferedTheMultiplesAndTakesThemOldestFirst) {
@@ -98,16 +113,10 @@ TEST(Lane, ItsProcessingThreadsRunNicerThanTheRecordingThread) {
   std::mutex m;
   std::set<std::thread::id> threads;
   std::set<int> niceness;
-  const auto process = [&](const drivers::FramePair& pair, const CancelFlag& cancel) {
-    tbb::parallel_for(0, 256, [&](int) {
-      volatile double x = 0;
-      for (int i = 0; i < 20000; ++i) x = x + 1.0;
-      std::lock_guard lock(m);
-      threads.insert(std::this_thread::get_id());
-      niceness.insert(this_thread_niceness());
-    });
-    return empty_field(pair, cancel);
-  };
+  const ProcessFn process = busy_pairs(m, [&] {
+    threads.insert(std::this_thread::get_id());
+    niceness.insert(this_thread_niceness());
+  });
   for (std::uint64_t i = 0; i < 4; ++i) lane.offer(pair_of(i));
   lane.close(false);
   int lane_thread = -1;
@@ -215,16 +224,10 @@ TEST(Lane, TheQualityLaneRunsAtTheLowestPriorityAndLeavesTheLiveLaneAWorker) {
   std::set<std::thread::id> threads;
   std::set<int> worker_niceness;
   std::thread::id caller;
-  const auto process = [&](const drivers::FramePair& pair, const CancelFlag& cancel) {
-    tbb::parallel_for(0, 256, [&](int) {
-      volatile double x = 0;
-      for (int i = 0; i < 20000; ++i) x = x + 1.0;
-      std::lock_guard lock(m);
-      threads.insert(std::this_thread::get_id());
-      if (std::this_thread::get_id() != caller) worker_niceness.insert(this_thread_niceness());
-    });
-    return empty_field(pair, cancel);
-  };
+  const ProcessFn process = busy_pairs(m, [&] {
+    threads.insert(std::this_thread::get_id());
+    if (std::this_thread::get_id() != caller) worker_niceness.insert(this_thread_niceness());
+  });
   for (std::uint64_t i = 0; i < 4; ++i) quality.offer(pair_of(i));
   quality.close(false);
   int caller_niceness = -1;
