@@ -36,6 +36,14 @@ void FramePairer::record_drop(std::uint64_t trigger_index, PairDrop::Reason reas
   if (drops_.size() > kMaxDrops) drops_.pop_front();
 }
 
+void FramePairer::forget_unpaired_drop(std::uint64_t trigger_index) {
+  const auto before = drops_.size();
+  std::erase_if(drops_, [&](const PairDrop& d) {
+    return d.trigger_index == trigger_index && d.reason == PairDrop::Reason::Unpaired;
+  });
+  counts_.pairs_discarded -= before - drops_.size();
+}
+
 std::vector<PairDrop> FramePairer::take_drops() {
   std::vector<PairDrop> out(drops_.begin(), drops_.end());
   drops_.clear();
@@ -111,6 +119,7 @@ std::optional<FramePair> FramePairer::push(Frame frame, std::optional<std::uint6
       FramePair pair;
       pair.pair_index = counts_.pairs_delivered++;
       pair.trigger_index = a.trigger_index ? *a.trigger_index : a.sequence / 2;
+      forget_unpaired_drop(pair.trigger_index);
       pair.a = std::move(a.frame);
       pair.b = std::move(frame);
       return pair;

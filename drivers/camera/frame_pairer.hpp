@@ -71,6 +71,10 @@ class FramePairer {
   bool within_gap(const Frame& a, const Frame& b) const;
   void discard_pending();
   void record_drop(std::uint64_t trigger_index, PairDrop::Reason reason);
+  // A pair of trigger `trigger_index` was delivered: a frame discarded as unpaired under the same
+  // trigger (a stray frame before the pair, or a partner that came too late) lost no trigger, and
+  // its drop, not taken yet, is withdrawn, so that no trigger is both recorded and listed lost.
+  void forget_unpaired_drop(std::uint64_t trigger_index);
 
   PairerOptions options_;
   PairerCounts counts_;

@@ -101,6 +101,31 @@ TEST(FramePairer, FramesTooFarApartDoNotPair) {
   EXPECT_TRUE(p.push(std::move(d)));
 }
 
+// A stray frame just before a run's first pair (a camera's leftover, or a frame made before the
+// first trigger) is discarded, but its trigger is the pair's: it is not listed lost as well.
+TEST(FramePairer, AStrayFrameIsNotListedAsTheLossOfThePairAfterIt) {
+  FramePairer p(options());
+  Frame stray = frame(1, 0, 0);
+  stray.device_timestamp_ns -= 50 * kMs;
+  stray.host_timestamp_ns = stray.device_timestamp_ns;
+  EXPECT_FALSE(p.push(std::move(stray)));
+  EXPECT_FALSE(p.push(frame(2, 0, 0)));  // too late for the stray: it is discarded
+  const auto pair = p.push(frame(3, 0, 1));
+  ASSERT_TRUE(pair);
+  EXPECT_EQ(pair->trigger_index, 0u);
+  EXPECT_TRUE(p.take_drops().empty()) << "trigger 0 is recorded: not lost";
+  EXPECT_EQ(p.counts().frames_discarded, 1u);
+  EXPECT_EQ(p.counts().pairs_discarded, 0u);
+  expect_invariant(p);
+  // A lost B still lists its trigger: the next pair is another trigger's.
+  p.push(frame(4, 1, 0));
+  ASSERT_TRUE(p.push(frame(6, 2, 0)) == std::nullopt);  // frame 5 (B of trigger 1) lost
+  ASSERT_TRUE(p.push(frame(7, 2, 1)));
+  const auto drops = p.take_drops();
+  ASSERT_EQ(drops.size(), 1u);
+  EXPECT_EQ(drops[0].trigger_index, 1u);
+}
+
 TEST(FramePairer, KnownTriggerIndicesMustAgree) {
   FramePairer p(options());
   p.push(frame(1, 0, 0), 7);
