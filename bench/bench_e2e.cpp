@@ -70,7 +70,7 @@ using namespace plenopiv;
 
 namespace {
 
-double now_s() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
+using bench::now_s;
 
 struct Errors {
   double rms[3] = {0, 0, 0};
@@ -360,9 +360,9 @@ int main(int argc, char** argv) {
                    tier.c_str());
       return 2;
     }
-    const int binning = std::stoi(tier.substr(0, c1));
+    const int voxel_factor = std::stoi(tier.substr(0, c1));
     process::ProcessSettings s = settings;
-    const double lv = binning * voxel;
+    const double lv = voxel_factor * voxel;
     s.grid = process::grid_for_extent({-hx, -hy, z_centre - hz}, {hx, hy, z_centre + hz}, {lv, lv, lv}, "bench live");
     s.pixel_binning = std::stoi(tier.substr(c1 + 1, c2 - c1 - 1));
     s.mart.iterations = std::stoi(tier.substr(c2 + 1, c3 - c2 - 1));
@@ -385,7 +385,7 @@ int main(int argc, char** argv) {
         "rms_v=%.3f rms_w=%.3f rms=%.3f "
         "valid=%.3f off_axis_band_mm=%.2f off_axis_band_rms_u=%.3f off_axis_band_rms_v=%.3f off_axis_band_rms_w=%.3f "
         "peak_rss_gb=%.2f\n",
-        scale.c_str(), binning, s.pixel_binning, s.grid.count(), s.mart.iterations, tier.substr(c3 + 1).c_str(),
+        scale.c_str(), voxel_factor, s.pixel_binning, s.grid.count(), s.mart.iterations, tier.substr(c3 + 1).c_str(),
         setup_s, first_wall_s, wall_s,
         first.times.reconstruct_a_s + first.times.reconstruct_b_s + first.times.correlate_s,
         again.times.reconstruct_a_s + again.times.reconstruct_b_s + again.times.correlate_s,

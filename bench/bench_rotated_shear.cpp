@@ -28,7 +28,7 @@ namespace fs = std::filesystem;
 
 namespace {
 
-double now_s() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
+using bench::now_s;
 
 }  // namespace
 

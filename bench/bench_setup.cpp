@@ -28,7 +28,7 @@ using namespace plenopiv;
 
 namespace {
 
-double now_s() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
+using bench::now_s;
 double cpu_s() {
   rusage u{};
   getrusage(RUSAGE_SELF, &u);

@@ -1,10 +1,11 @@
 // What several benchmarks print alike: a hash of float bits (bit-identity across builds), medians,
-// CPU time, and the process's memory, threads and file descriptors.
+// wall and CPU time, and the process's memory, threads and file descriptors.
 #pragma once
 
 #include <sys/resource.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cstdint>
 #include <cstring>
 #include <filesystem>
@@ -33,6 +34,11 @@ inline std::uint64_t bits_hash(std::span<const float> values, std::uint64_t hash
 inline double median(std::vector<double> v) {
   std::sort(v.begin(), v.end());
   return v.empty() ? 0 : v[v.size() / 2];
+}
+
+// Seconds on the steady clock: the difference of two calls is the wall time between them.
+inline double now_s() {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 
 // Process CPU seconds so far (user + system, every thread): on a shared machine wall time

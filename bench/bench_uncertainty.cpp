@@ -36,7 +36,7 @@ using namespace plenopiv;
 
 namespace {
 
-double now_s() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
+using bench::now_s;
 
 Grid3 centred_grid(std::array<int, 3> n, double voxel_mm) {
   Grid3 g;

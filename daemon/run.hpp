@@ -104,8 +104,8 @@ class Run {
   void take_drops();
   void fire_software_trigger(std::uint64_t index);
   void watch_camera(std::chrono::steady_clock::time_point now);
-  void begin_outage(const std::string& reason, std::uint64_t fired);
-  void end_outage(std::uint64_t fired);
+  void begin_outage(const std::string& reason, std::uint64_t made);
+  void end_outage(std::uint64_t made);
   void lose_trigger(std::uint64_t index);
   void drain_after_stop();
   void check_space() const;
