@@ -215,11 +215,6 @@ HEADLINE_ROWS = [
 ]
 
 
-# The headline row whose settings the paper-scale time sweep also ran: its time there, when that
-# sweep ran on another day (another load), is shown beside the headline's.
-SWEEP_TWIN = {"e2e-full": "8_acc_floor_3"}
-
-
 def t_headline(R):
     rows = []
     for name, config, case, paper, target in HEADLINE_ROWS:
@@ -227,11 +222,6 @@ def t_headline(R):
         rec = r.one(variant="reconstructed") or {}
         steady = r.one(variant="steady_state") or {}
         time = f"{steady.get('pair_s', '?')} s" if r.exists else "—"
-        sweep = R("e2e-full-sweep")
-        twin = sweep.one(variant="mart_floor", value=SWEEP_TWIN.get(name, ""))
-        if twin and sweep.meta.get("date") != r.meta.get("date"):
-            time += (f" (load {r.meta.get('load', '?').split()[0]}); {twin['total_s']} s on "
-                     f"{sweep.meta.get('date', '?').split()[0]}, {sweep.meta.get('load', '?')}")
         rows.append([config, case, f"{uvw(rec)} ({uvw(rec, 'off_axis_band_rms_')})" if r.exists else "—",
                      time, paper, target, r.meta.get("date", "—").split(" (")[0],
                      r.meta.get("commit", "—")])

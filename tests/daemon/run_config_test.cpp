@@ -49,9 +49,9 @@ TEST(RunConfig, ShippedDefaultParses) {
   EXPECT_EQ(c.text, text.str());
 }
 
-// The paper-scale live config gives core/process the paper's box and the setting measured to fit
-// 30 s per pair (docs/benchmarks.md, "Paper scale: time against error") for the quality lane, and
-// the live tier measured under 1 s per pair ("Live tier") for the live lane.
+// The paper-scale live config gives core/process the paper's box and the full settings of
+// docs/benchmarks.md's "Paper scale: time against error" for the quality lane, and the live tier
+// measured under 1 s per pair ("Live tier") for the live lane.
 TEST(RunConfig, ShippedPaperScaleConfigParses) {
   std::ifstream in(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/run-paper.yaml");
   std::stringstream text;
