@@ -313,7 +313,7 @@ std::unique_ptr<Camera> open_sim_camera(const DeviceUri& uri, const std::filesys
   scene.ppm = uri.number_or("ppm", scene.ppm);
   if (!(scene.ppm > 0) || scene.ppm > 10) uri.fail("ppm: must be in (0, 10] particles per microlens");
   scene.depth_mm = uri.number_or("depth_mm", scene.depth_mm);
-  if (!(scene.depth_mm >= 0)) uri.fail("depth_mm: must be >= 0");
+  if (!(scene.depth_mm > 0) || scene.depth_mm > 1000) uri.fail("depth_mm: must be in (0, 1000] mm");
   scene.rays = count("rays", 2000);
   if (scene.rays == 0) uri.fail("rays: must be > 0");
   const std::uint64_t noise = count("noise", 0);

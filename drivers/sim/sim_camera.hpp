@@ -14,7 +14,7 @@ namespace plenopiv::drivers {
 // a URI, which may come from a request, never names a file). Parameters (all optional):
 //   seed=<n>            random seed; pair k uses (seed, k): a run is reproducible (default 1)
 //   ppm=<x>             particles per microlens over the field of view (default 0.05)
-//   depth_mm=<d>        particles fill z in [-d, d] (default 5)
+//   depth_mm=<d>        particles fill z in [-d, d], 0 < d <= 1000 (default 5)
 //   flow=uniform|ring|rotation|shear                      (default uniform)
 //   dx_mm, dy_mm, dz_mm displacement of the uniform flow (default 0.25, 0, 0)
 //   voxel_mm=<v>        voxel edge the ring vortex is defined in (default: the nominal voxel)

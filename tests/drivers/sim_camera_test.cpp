@@ -149,6 +149,10 @@ TEST(SimCamera, BadUrisAreNamed) {
   EXPECT_NE(message("sim://?ppm=-1").find("ppm"), std::string::npos);
   EXPECT_NE(message("sim://?rays=0").find("rays"), std::string::npos);
   EXPECT_NE(message("sim://?flow_dt_us=0").find("flow_dt_us"), std::string::npos);
+  // A box of no depth is the URI's error, named with its key, not a geometry failure later.
+  const std::string flat = message("sim://?depth_mm=0");
+  EXPECT_NE(flat.find("sim://?depth_mm=0"), std::string::npos) << flat;
+  EXPECT_NE(flat.find("depth_mm: must be in (0, 1000] mm"), std::string::npos) << flat;
   // A URI may come from a control request: it never names a file for the daemon to open.
   const std::string named_file = message("sim://?camera=/etc/passwd");
   EXPECT_NE(named_file.find("a URI cannot name a file"), std::string::npos) << named_file;
