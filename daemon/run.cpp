@@ -17,6 +17,7 @@
 #include "core/process/frame_check.hpp"
 #include "daemon/thread_priority.hpp"
 #include "drivers/camera/camera_registry.hpp"
+#include "drivers/camera/frame_pool.hpp"
 #include "drivers/common/driver_errors.hpp"
 #include "drivers/trigger/camera_wiring.hpp"
 #include "drivers/trigger/trigger_registry.hpp"
@@ -167,7 +168,8 @@ void Run::record(drivers::FramePair pair) {
   ++pairs_received_;
   check_frames(pair);
   if (env_.heartbeat) env_.heartbeat();
-  const SharedPair shared = std::make_shared<const drivers::FramePair>(std::move(pair));
+  // The frames go back to the camera's pool when the last consumer lets go of the pair.
+  const SharedPair shared = drivers::share_pair(std::move(pair), camera_->frame_pool());
   for (const auto& lane : lanes_) lane->offer(shared);
   if (preview_queue_) preview_queue_->push(shared);
 }

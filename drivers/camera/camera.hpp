@@ -3,6 +3,7 @@
 
 #include <chrono>
 #include <cstdint>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -135,6 +136,8 @@ class TriggerInput {
   virtual void laser_pulse(std::uint64_t /*time_ns*/) {}
 };
 
+class FramePool;
+
 // Thread safety: one thread controls a camera (configure/arm/start/stop/software_trigger);
 // next_pair() may be called from another thread; counters() and status() from any thread.
 class Camera {
@@ -165,6 +168,9 @@ class Camera {
   virtual std::vector<PairDrop> take_drops() { return {}; }
   // The simulated trigger input, or null for a camera triggered through a cable (or by software).
   virtual TriggerInput* trigger_input() { return nullptr; }
+  // Where this camera's frame buffers come from, or null: a consumer gives a delivered pair's
+  // buffers back there (share_pair in frame_pool.hpp) so that the next frames reuse them.
+  virtual std::shared_ptr<FramePool> frame_pool() { return nullptr; }
 };
 
 }  // namespace plenopiv::drivers

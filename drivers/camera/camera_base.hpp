@@ -3,12 +3,14 @@
 
 #include <condition_variable>
 #include <deque>
+#include <memory>
 #include <mutex>
 #include <optional>
 #include <string>
 
 #include "drivers/camera/camera.hpp"
 #include "drivers/camera/frame_pairer.hpp"
+#include "drivers/camera/frame_pool.hpp"
 
 namespace plenopiv::drivers {
 
@@ -26,6 +28,7 @@ class CameraBase : public Camera {
   CameraCounters counters() const override;
   CameraStatus status() const override;
   std::vector<PairDrop> take_drops() override;
+  std::shared_ptr<FramePool> frame_pool() override { return pool_; }
 
  protected:
   explicit CameraBase(CameraInfo info, PairerOptions pairing = {}, std::size_t queue_capacity = 16);
@@ -37,6 +40,8 @@ class CameraBase : public Camera {
   virtual void do_software_trigger() = 0;
   virtual std::uint64_t packets_resent() const { return 0; }
 
+  // The pixels of the next frame (FramePool::take): the backend overwrites every one.
+  ImageU16 take_image(int width, int height) { return pool_->take(width, height); }
   // Thread-safe; frames from one backend thread, in arrival order.
   void submit_frame(Frame frame, std::optional<std::uint64_t> trigger_index = {});
   // Triggers the backend dropped itself (e.g. not read out before stop), counted and listed.
@@ -70,6 +75,7 @@ class CameraBase : public Camera {
   std::uint64_t not_read_out_ = 0;
   std::deque<PairDrop> drops_;  // from the pairer, the queue and the backend, oldest first
   std::uint64_t reconnects_ = 0;
+  const std::shared_ptr<FramePool> pool_ = std::make_shared<FramePool>();
 };
 
 }  // namespace plenopiv::drivers

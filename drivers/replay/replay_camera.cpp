@@ -247,7 +247,10 @@ class ReplayCamera : public CameraBase, public TriggerInput {
         if (!settings_.loop) return std::nullopt;
         cursor_ = 0;
       }
-      return preloaded_[cursor_++];  // a copy: a loop plays the same frames again
+      // Copied into buffers from the frame pool, as a camera fills its buffers: a loop plays the
+      // same frames again, and at a steady rate the copies land in warm memory.
+      const DecodedPair& recorded = preloaded_[cursor_++];
+      return DecodedPair{pooled_copy(recorded.a), pooled_copy(recorded.b)};
     }
     std::lock_guard lock(mutex_);
     if (ahead_.empty()) return std::nullopt;
@@ -255,6 +258,12 @@ class ReplayCamera : public CameraBase, public TriggerInput {
     ahead_.pop_front();
     space_.notify_all();
     return p;
+  }
+
+  ImageU16 pooled_copy(const ImageU16& recorded) {
+    ImageU16 image = take_image(recorded.width, recorded.height);
+    std::copy(recorded.pixels.begin(), recorded.pixels.end(), image.pixels.begin());
+    return image;
   }
 
   bool at_end() {

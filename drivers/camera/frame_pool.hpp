@@ -1,0 +1,50 @@
+// Frame buffers reused from pair to pair (areaDetector's NDArrayPool), so that a camera at a steady
+// rate fills warm memory instead of a fresh allocation per frame (page faults, a zero fill).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <deque>
+#include <memory>
+#include <mutex>
+
+#include "core/base/image.hpp"
+#include "drivers/camera/camera.hpp"
+
+namespace plenopiv::drivers {
+
+// Thread-safe: a camera's thread takes, whichever consumer drops a frame last gives back.
+class FramePool {
+ public:
+  // Buffers not in use are kept up to `max_spare` of them; further ones given back are freed.
+  explicit FramePool(std::size_t max_spare = kDefaultMaxSpare);
+
+  // A width x height image for the next frame: a spare buffer of that size, its pixels whatever a
+  // previous frame left (the caller overwrites every one), or a fresh zeroed image when none fits.
+  ImageU16 take(int width, int height);
+  // Keeps the image's buffer for a later take(); beyond max_spare the oldest spare is freed.
+  void give(ImageU16 image);
+
+  struct Counts {
+    std::uint64_t taken = 0;   // images handed out
+    std::uint64_t reused = 0;  // of which came from a spare buffer
+    std::size_t spare = 0;     // buffers waiting now
+  };
+  Counts counts() const;
+
+  // Two pairs in flight beyond the consumers': enough for a camera that delivers at the rate a
+  // recorder writes, without holding much memory when none is needed (a spare is a whole frame).
+  static constexpr std::size_t kDefaultMaxSpare = 8;
+
+ private:
+  mutable std::mutex mutex_;
+  std::deque<ImageU16> spare_;  // oldest first
+  std::size_t max_spare_;
+  Counts counts_;
+};
+
+// A delivered pair shared among its consumers (recorder, lanes, preview); when the last one lets
+// go, its frames' buffers go back to `pool` (none: they are freed).
+std::shared_ptr<const FramePair> share_pair(FramePair pair, std::shared_ptr<FramePool> pool);
+
+}  // namespace plenopiv::drivers
