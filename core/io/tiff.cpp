@@ -3,6 +3,7 @@
 
 #include <tiffio.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdarg>
 #include <cstdio>
@@ -143,6 +144,25 @@ void write_row(TIFF* t, const std::filesystem::path& path, const void* row, int 
   }
 }
 
+// Uncompressed 16-bit pixels in the host's byte order, which is the file's (TIFFOpen "w"), are
+// their own encoding: each strip goes to the file straight from the image, without libtiff's copy
+// into its strip buffer (a recorder writes two camera frames per pair).
+void write_raw_strips(TIFF* t, const std::filesystem::path& path, const ImageU16& image) {
+  uint32_t rows_per_strip = 0;
+  TIFFGetFieldDefaulted(t, TIFFTAG_ROWSPERSTRIP, &rows_per_strip);
+  if (rows_per_strip == 0) rows_per_strip = 1;
+  const tstrip_t strips = TIFFNumberOfStrips(t);
+  for (tstrip_t strip = 0; strip < strips; ++strip) {
+    const int y0 = int(strip * rows_per_strip);
+    const int rows = std::min(int(rows_per_strip), image.height - y0);
+    const tmsize_t bytes = tmsize_t(rows) * image.width * tmsize_t(sizeof(std::uint16_t));
+    if (TIFFWriteRawStrip(t, strip, const_cast<std::uint16_t*>(image.row(y0).data()), bytes) != bytes) {
+      throw std::runtime_error(path.string() + ": cannot write TIFF rows " + std::to_string(y0) + " to " +
+                               std::to_string(y0 + rows - 1) + " (" + g_last_tiff_message + ")");
+    }
+  }
+}
+
 // Writes what libtiff still buffers; TIFFClose alone would lose a failure there.
 void flush(TIFF* t, const std::filesystem::path& path) {
   if (!TIFFFlush(t)) throw std::runtime_error(path.string() + ": cannot write TIFF (" + g_last_tiff_message + ")");
@@ -225,7 +245,7 @@ void write_tiff(const std::filesystem::path& path, const ImageU16& image, bool s
       [&](const std::filesystem::path& tmp) {
         TiffPtr t = open(tmp, "w");
         set_page_fields(t.get(), image.width, image.height, 16, SAMPLEFORMAT_UINT);
-        for (int y = 0; y < image.height; ++y) write_row(t.get(), path, image.row(y).data(), y);
+        write_raw_strips(t.get(), path, image);
         flush(t.get(), path);
       },
       sync_folder);

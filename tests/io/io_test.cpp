@@ -69,6 +69,22 @@ TEST(Tiff, SixteenBitRoundTrip) {
   EXPECT_EQ(back.pixels, img.pixels);
 }
 
+// A camera frame is written strip by strip straight from its pixels (the last strip shorter):
+// another reader (OpenCV's) sees the same counts.
+TEST(Tiff, AFrameOfManyStripsReadsBackBitForBitInAnotherReader) {
+  ImageU16 img(1000, 301);  // 2000-byte rows: 32 rows a strip, 10 strips, the last of 13 rows
+  for (std::size_t i = 0; i < img.size(); ++i) img.pixels[i] = std::uint16_t(i * 2654435761u >> 11);
+  const auto path = temp_dir() / "strips.tif";
+  write_tiff(path, img);
+  EXPECT_EQ(read_tiff_u16(path).pixels, img.pixels);
+  const cv::Mat other = cv::imread(path.string(), cv::IMREAD_UNCHANGED);
+  ASSERT_EQ(other.type(), CV_16U);
+  ASSERT_EQ(other.cols, 1000);
+  ASSERT_EQ(other.rows, 301);
+  for (int y = 0; y < img.height; ++y)
+    for (int x = 0; x < img.width; ++x) ASSERT_EQ(other.at<std::uint16_t>(y, x), img.at(x, y)) << x << ", " << y;
+}
+
 TEST(Tiff, FloatStackRoundTrip) {
   std::vector<ImageF> pages;
   for (int p = 0; p < 3; ++p) {
