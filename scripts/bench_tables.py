@@ -79,6 +79,7 @@ BENCHES = {
     "lanes": ("quick", ["build/bin/bench_lanes", "200", "10"], None),
     "lanes-paper": ("paper", ["build/bin/bench_lanes", "paper", "600", "10"], "lanes_paper.png"),
     "soak": ("paper", ["build/bin/bench_soak", "10000", "15"], "soak.png"),
+    "recording": ("quick", ["build/bin/bench_recording", "100", "3"], None),
     "sim": ("quick", ["build/bin/bench_sim"], None),
     "calib": ("quick", ["build/bin/bench_calib"], None),
     "resampling": ("quick", ["build/bin/bench_resampling"], None),
@@ -624,6 +625,18 @@ def t_rotated_shear(R):
     return out + ["", r.provenance()]
 
 
+def t_recording(R):
+    r = R("recording")
+    rows = [[d["variant"], d["mb_per_pair"], d["wall_s_per_pair"], d["cpu_s_per_pair"], d["cores_at_10hz"],
+             d["faults_per_pair"], d["buffers_reused"]] for d in r.find(bench="recording")]
+    out = table(["frames", "MB per pair", "wall s per pair", "CPU s per pair", "cores at 10 Hz",
+                 "page faults per pair", "buffers reused"], rows)
+    ratio = r.one(bench="recording_ratio")
+    if ratio:
+        out += ["", f"Pooled over fresh: CPU x{ratio['pooled_over_fresh_cpu']}."]
+    return out + ["", r.provenance()]
+
+
 def t_soak(R):
     r = R("soak")
     rows = [[f"{d['pairs']} at {d['rate_hz']} Hz", d["run_s"], d["recorded"], d["frames_lost"], d["live_fields"],
@@ -710,6 +723,7 @@ TABLES = {
     "live-tiers": t_live_tiers,
     "rotated-shear": t_rotated_shear,
     "soak": t_soak,
+    "recording": t_recording,
     "sim": t_sim,
     "calib": t_calib,
     "resampling": t_resampling,

@@ -1,0 +1,151 @@
+// What recording a paper-scale pair costs the daemon's machine, with the lanes left out: the replay
+// camera delivers decoded frames (as a camera's driver hands them over), the run folder writer
+// writes both as TIFF, the frame check scans them, and the pair is let go, its buffers freed
+// ("fresh") or given back to the camera's frame pool ("pooled", as plenopivd does). Triggers come as
+// fast as the pairs are recorded; the run folder is on DATA_DIR (default /dev/shm, a tmpfs: this
+// machine's disk takes less than 10 Hz of paper-scale pairs).
+//   bench_recording [PAIRS] [REPEATS] [DATA_DIR]   (default 100 pairs, 3 repeats per variant)
+// Per variant: medians over the repeats of wall and CPU seconds per pair and minor page faults per
+// pair, and the pool's reuse. The variants alternate, so drift in the machine's load hits both.
+#include <sys/resource.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "bench/bench_support.hpp"
+#include "bench/replay_recording.hpp"
+#include "core/optics/camera_file.hpp"
+#include "core/process/frame_check.hpp"
+#include "core/sim/particles.hpp"
+#include "drivers/camera/frame_pool.hpp"
+#include "drivers/replay/replay_camera.hpp"
+#include "proto/run_folder.hpp"
+
+using namespace plenopiv;
+namespace fs = std::filesystem;
+
+namespace {
+
+struct Figures {
+  double wall_s_per_pair = 0, cpu_s_per_pair = 0, faults_per_pair = 0, reused = 0;
+};
+
+long minor_faults() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return u.ru_minflt;
+}
+
+// `pairs` pairs from `camera` into a new run folder under `data`, each let go at once.
+Figures record(drivers::Camera& camera, const fs::path& data, const std::string& run_id, int pairs, bool pooled) {
+  run_folder::Writer::Setup setup;
+  setup.data_dir = data;
+  setup.run_id = run_id;
+  setup.camera_uri = camera.info().uri;
+  setup.trigger_uri = "software";
+  setup.camera_model = camera.info().model;
+  setup.nominal_dt_s = 100e-6;
+  run_folder::Writer writer(setup);
+  const drivers::FramePool::Counts before = camera.frame_pool()->counts();
+  const double wall0 = bench::now_s(), cpu0 = bench::cpu_seconds();
+  const long faults0 = minor_faults();
+  for (int i = 0; i < pairs; ++i) {
+    camera.software_trigger();
+    std::optional<drivers::FramePair> pair = camera.next_pair(std::chrono::seconds(5));
+    if (!pair) {
+      std::fprintf(stderr, "bench_recording: pair %d never came\n", i);
+      std::exit(1);
+    }
+    run_folder::PairRecord r;
+    r.pair_index = std::uint64_t(i);
+    r.trigger_index = pair->trigger_index;
+    r.frame_a = &pair->a.image;
+    r.frame_b = &pair->b.image;
+    r.frame_id_a = pair->a.frame_id;
+    r.frame_id_b = pair->b.frame_id;
+    writer.record_pair(r);
+    for (const drivers::Frame* f : {&pair->a, &pair->b}) (void)process::frame_problem(f->image.pixels, f->bit_depth);
+    (void)drivers::share_pair(std::move(*pair), pooled ? camera.frame_pool() : nullptr);
+    // The folder holds the last pair only: the tmpfs is memory.
+    if (i > 0) {
+      char name[64];
+      for (const char* k : {"A", "B"}) {
+        std::snprintf(name, sizeof name, "pair-%06d-%s.tif", i - 1, k);
+        fs::remove(writer.dir() / "frames" / name);
+      }
+    }
+  }
+  Figures f;
+  f.wall_s_per_pair = (bench::now_s() - wall0) / pairs;
+  f.cpu_s_per_pair = (bench::cpu_seconds() - cpu0) / pairs;
+  f.faults_per_pair = double(minor_faults() - faults0) / pairs;
+  const drivers::FramePool::Counts after = camera.frame_pool()->counts();
+  f.reused = double(after.reused - before.reused) / double(std::max<std::uint64_t>(1, after.taken - before.taken));
+  writer.close("complete", 0, 0);
+  fs::remove_all(writer.dir());
+  return f;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const int pairs = argc > 1 ? std::atoi(argv[1]) : 100;
+  const int repeats = argc > 2 ? std::atoi(argv[2]) : 3;
+  const fs::path data = argc > 3 ? fs::path(argv[3]) : fs::path("/dev/shm/plenopiv-bench-recording");
+  if (pairs < 2 || repeats < 1) {
+    std::fprintf(stderr, "usage: bench_recording [PAIRS >= 2] [REPEATS >= 1] [DATA_DIR]\n");
+    return 2;
+  }
+  const fs::path camera_file = fs::path(PLENOPIV_SOURCE_DIR) / "systemd/config/camera-fahringer2015.yaml";
+  const optics::CameraModel camera_model = optics::load_camera_file(camera_file);
+  // bench_lanes' paper recording (kept between the two benchmarks).
+  const fs::path root = fs::temp_directory_path() / "plenopiv-bench-lanes";
+  bench::ReplayScene scene;
+  scene.box = {{-18.75, -12.5, -12.5}, {18.75, 12.5, 12.5}};
+  scene.particles = sim::particle_count_from_ppm(camera_model, scene.box, 0.5);
+  scene.rays_per_particle = 5000;
+  bench::write_replay_recording(root / "replay" / "paper", camera_model, 4, scene);
+
+  auto camera = drivers::open_replay_camera(drivers::DeviceUri::parse("replay://paper?loop=1&buffer_mb=1024"),
+                                            {root / "replay", camera_file});
+  camera->configure(drivers::CameraSettings{});
+  camera->arm(drivers::DoubleExposureSettings{drivers::TriggerSource::Software, 0.0});
+  camera->start();
+  fs::remove_all(data);
+  fs::create_directories(data);
+  (void)record(*camera, data, "warm-up", 4, true);  // decoding the recording, the first frames' pages
+
+  std::vector<Figures> fresh, pooled;
+  for (int r = 0; r < repeats; ++r) {
+    fresh.push_back(record(*camera, data, "fresh-" + std::to_string(r), pairs, false));
+    pooled.push_back(record(*camera, data, "pooled-" + std::to_string(r), pairs, true));
+  }
+  camera->stop();
+  fs::remove_all(data);
+
+  auto med = [](const std::vector<Figures>& v, double Figures::*field) {
+    std::vector<double> x;
+    for (const Figures& f : v) x.push_back(f.*field);
+    return bench::median(x);
+  };
+  const char* names[] = {"fresh", "pooled"};
+  const std::vector<Figures>* runs[] = {&fresh, &pooled};
+  for (int k = 0; k < 2; ++k) {
+    const std::vector<Figures>& v = *runs[k];
+    std::printf(
+        "bench=recording variant=%s pairs=%d repeats=%d mb_per_pair=%.1f wall_s_per_pair=%.4f cpu_s_per_pair=%.4f "
+        "cores_at_10hz=%.2f faults_per_pair=%.0f buffers_reused=%.2f\n",
+        names[k], pairs, repeats,
+        2.0 * camera_model.sensor().width_px * camera_model.sensor().height_px * 2 / (1024.0 * 1024.0),
+        med(v, &Figures::wall_s_per_pair), med(v, &Figures::cpu_s_per_pair), 10 * med(v, &Figures::cpu_s_per_pair),
+        med(v, &Figures::faults_per_pair), med(v, &Figures::reused));
+  }
+  std::printf("bench=recording_ratio pooled_over_fresh_cpu=%.2f\n",
+              med(pooled, &Figures::cpu_s_per_pair) / med(fresh, &Figures::cpu_s_per_pair));
+  return 0;
+}
