@@ -95,18 +95,32 @@ std::string message_json(const google::protobuf::Message& message, bool pretty) 
   return out;
 }
 
-// Adds a journal entry to a manifest; `positions` maps the manifest's pair indices to their place.
-void apply_entry(msg::RunManifest& manifest, std::unordered_map<std::uint64_t, int>& positions,
-                 const msg::ManifestJournalEntry& entry) {
+// Adds a journal entry to a manifest. A trigger is a recorded pair or listed dropped, never both:
+// a camera lists a stray frame's loss against the trigger it infers from the frame's id, and a pair
+// recorded for that trigger (before or after) shows that the trigger itself was not lost (the
+// stray frame stays counted in the losses).
+void apply_entry(msg::RunManifest& manifest, ManifestIndex& index, const msg::ManifestJournalEntry& entry) {
   if (entry.has_pair()) {
-    const auto [it, fresh] = positions.try_emplace(entry.pair().pair_index(), manifest.pairs_size());
+    const auto [it, fresh] = index.pair_position.try_emplace(entry.pair().pair_index(), manifest.pairs_size());
     if (fresh) {
       *manifest.add_pairs() = entry.pair();
+      const std::uint64_t trigger = entry.pair().trigger_index();
+      index.recorded_triggers.insert(trigger);
+      if (index.dropped_triggers.erase(trigger)) {
+        auto* dropped = manifest.mutable_dropped();
+        dropped->erase(std::remove_if(dropped->begin(), dropped->end(),
+                                      [&](const msg::ManifestDrop& d) { return d.trigger_index() == trigger; }),
+                       dropped->end());
+      }
     } else {
       manifest.mutable_pairs(it->second)->MergeFrom(entry.pair());
     }
   } else if (entry.has_drop()) {
-    if (manifest.dropped_size() < Writer::kMaxListedDrops) *manifest.add_dropped() = entry.drop();
+    const std::uint64_t trigger = entry.drop().trigger_index();
+    if (manifest.dropped_size() < Writer::kMaxListedDrops && !index.recorded_triggers.count(trigger)) {
+      *manifest.add_dropped() = entry.drop();
+      index.dropped_triggers.insert(trigger);
+    }
   } else if (entry.has_warning()) {
     if (std::find(manifest.warnings().begin(), manifest.warnings().end(), entry.warning()) == manifest.warnings().end())
       manifest.add_warnings(entry.warning());
@@ -142,8 +156,12 @@ msg::RunManifest read_manifest(const fs::path& run_dir) {
   // A closed run's manifest holds everything (its journal, left by a crash just before removal, too).
   if (manifest.state() != "recording" || !fs::exists(journal_path)) return manifest;
   const std::string journal = read_text(journal_path);
-  std::unordered_map<std::uint64_t, int> positions;
-  for (int i = 0; i < manifest.pairs_size(); ++i) positions.emplace(manifest.pairs(i).pair_index(), i);
+  ManifestIndex index;
+  for (int i = 0; i < manifest.pairs_size(); ++i) {
+    index.pair_position.emplace(manifest.pairs(i).pair_index(), i);
+    index.recorded_triggers.insert(manifest.pairs(i).trigger_index());
+  }
+  for (const msg::ManifestDrop& d : manifest.dropped()) index.dropped_triggers.insert(d.trigger_index());
   google::protobuf::util::JsonParseOptions options;
   options.ignore_unknown_fields = true;
   std::size_t start = 0;
@@ -157,7 +175,7 @@ msg::RunManifest read_manifest(const fs::path& run_dir) {
       throw InputError(journal_path.string() + ": line " + std::to_string(line) +
                        ": not a journal entry: " + std::string(status.message()));
     }
-    apply_entry(manifest, positions, entry);
+    apply_entry(manifest, index, entry);
     start = end + 1;
   }
   return manifest;
@@ -330,7 +348,7 @@ void Writer::record_pair(const PairRecord& pair) {
     p->set_pulse2_ns(p2);
   }
   journal_locked(entry);
-  apply_entry(manifest_, pair_position_, entry);
+  apply_entry(manifest_, index_, entry);
 }
 
 void Writer::record_vectors(std::uint64_t pair_index, const VectorField& field, std::span<const std::uint8_t> flags,
@@ -342,7 +360,7 @@ void Writer::record_vectors(std::uint64_t pair_index, const VectorField& field, 
   {
     std::lock_guard lock(mutex_);
     run_id = manifest_.run_id();
-    if (const auto it = pair_position_.find(pair_index); it != pair_position_.end()) {
+    if (const auto it = index_.pair_position.find(pair_index); it != index_.pair_position.end()) {
       const msg::ManifestPair& p = manifest_.pairs(it->second);
       frame_a = p.frame_a();
       frame_b = p.frame_b();
@@ -365,7 +383,7 @@ void Writer::record_vectors(std::uint64_t pair_index, const VectorField& field, 
   manifest_.set_pairs_processed(manifest_.pairs_processed() + 1);
   // Listed with its pair; a field of a pair this folder never recorded is kept but not listed (a
   // journal line for it would add a pair without frames).
-  if (!pair_position_.count(pair_index)) return;
+  if (!index_.pair_position.count(pair_index)) return;
   msg::ManifestJournalEntry entry;
   entry.mutable_pair()->set_pair_index(pair_index);
   if (live) {
@@ -374,7 +392,7 @@ void Writer::record_vectors(std::uint64_t pair_index, const VectorField& field, 
     entry.mutable_pair()->set_vectors(file);
   }
   journal_locked(entry);
-  apply_entry(manifest_, pair_position_, entry);
+  apply_entry(manifest_, index_, entry);
 }
 
 void Writer::write_statistics_locked() {
@@ -397,7 +415,7 @@ void Writer::record_drop(std::uint64_t trigger_index, const std::string& reason)
   entry.mutable_drop()->set_trigger_index(trigger_index);
   entry.mutable_drop()->set_reason(reason);
   journal_locked(entry, false);
-  apply_entry(manifest_, pair_position_, entry);
+  apply_entry(manifest_, index_, entry);
 }
 
 void Writer::add_warning(const std::string& warning) {
@@ -408,7 +426,7 @@ void Writer::add_warning(const std::string& warning) {
   msg::ManifestJournalEntry entry;
   entry.set_warning(warning);
   journal_locked(entry, false);
-  apply_entry(manifest_, pair_position_, entry);
+  apply_entry(manifest_, index_, entry);
 }
 
 void Writer::close(const std::string& state, std::uint64_t processed, std::uint64_t skipped, const msg::Losses& losses,

@@ -9,6 +9,7 @@
 #include <span>
 #include <string>
 #include <unordered_map>
+#include <unordered_set>
 #include <vector>
 
 #include "core/base/grid.hpp"
@@ -69,6 +70,13 @@ struct CalibrationCopy {
   std::uint32_t crc32 = 0;
 };
 
+// What a manifest's journal is applied with: where each pair is, which triggers have a recorded
+// pair and which are listed dropped.
+struct ManifestIndex {
+  std::unordered_map<std::uint64_t, int> pair_position;  // pair_index -> its place in manifest.pairs
+  std::unordered_set<std::uint64_t> recorded_triggers, dropped_triggers;
+};
+
 // Writes a run folder as a run goes. Thread safe: frames, vectors and close may come from
 // different threads.
 class Writer {
@@ -125,7 +133,7 @@ class Writer {
   mutable std::mutex mutex_;
   std::filesystem::path dir_;
   msg::RunManifest manifest_;
-  std::unordered_map<std::uint64_t, int> pair_position_;  // pair_index -> its place in manifest_.pairs
+  ManifestIndex index_;
   int journal_fd_ = -1;
   std::string process_yaml_;                             // the run's processing keys, each vector file's provenance
   piv::RunningStatistics statistics_, live_statistics_;  // over the full and the live tier's fields

@@ -256,6 +256,31 @@ TEST(RunFolder, PairsGoToTheJournalWhileRecordingAndIntoTheManifestAtTheEnd) {
   EXPECT_EQ(closed.dropped_size(), 1);
 }
 
+// A camera lists a stray frame's loss against the trigger it infers; that trigger's pair recorded
+// before or after it shows the trigger was not lost: listed once, as recorded, in the journal
+// while recording and in the closed manifest.
+TEST(RunFolder, ATriggerWithARecordedPairIsNeverListedDropped) {
+  const fs::path data = testing_support::temp_dir("run-folder") / "reconciled";
+  fs::remove_all(data);
+  Writer writer(setup(data, "r"));
+  writer.record_pair(record_of(0, Frames(0)));
+  writer.record_drop(0, "unpaired frame");  // after its pair
+  writer.record_drop(1, "unpaired frame");  // before its pair
+  writer.record_drop(2, "incomplete frame");
+  writer.record_pair(record_of(1, Frames(1)));
+  auto dropped_triggers = [](const msg::RunManifest& m) {
+    std::vector<std::uint64_t> t;
+    for (const msg::ManifestDrop& d : m.dropped()) t.push_back(d.trigger_index());
+    return t;
+  };
+  const std::vector<std::uint64_t> only_2{2};
+  EXPECT_EQ(dropped_triggers(run_folder::read_manifest(writer.dir())), only_2) << "the journal, replayed";
+  writer.close("complete", 0, 0);
+  const msg::RunManifest closed = manifest_file_alone(writer.dir());
+  EXPECT_EQ(dropped_triggers(closed), only_2);
+  EXPECT_EQ(closed.pairs_size(), 2);
+}
+
 TEST(RunFolder, FoldersLeftRecordingAreMarkedInterruptedAndKeepTheirPairs) {
   const fs::path data = testing_support::temp_dir("run-folder") / "interrupted";
   fs::remove_all(data);
