@@ -17,6 +17,7 @@
 #include "bench/bench_support.hpp"
 #include "core/io/tiff.hpp"
 #include "core/optics/camera_file.hpp"
+#include "drivers/camera/frame_pool.hpp"
 #include "drivers/replay/replay_camera.hpp"
 
 using namespace plenopiv;
@@ -81,6 +82,8 @@ Figures run(const std::string& uri, const drivers::ReplaySource& source, double 
       if (f.delivered == 0) first_ns = pair->a.host_timestamp_ns;
       last_ns = pair->a.host_timestamp_ns;
       ++f.delivered;
+      // Let go as the daemon does: its buffers go back to the camera's frame pool.
+      (void)drivers::share_pair(std::move(*pair), camera->frame_pool());
     }
   }
   camera->stop();

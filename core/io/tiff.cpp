@@ -171,6 +171,12 @@ void flush(TIFF* t, const std::filesystem::path& path) {
 }  // namespace
 
 ImageU16 read_tiff_u16(const std::filesystem::path& path) {
+  ImageU16 image;
+  read_tiff_u16(path, image);
+  return image;
+}
+
+void read_tiff_u16(const std::filesystem::path& path, ImageU16& image) {
   TiffPtr t = open(path, "r");
   const std::uint64_t file_size = file_size_of(path);
   const PageInfo p = page_info(t.get());
@@ -180,7 +186,7 @@ ImageU16 read_tiff_u16(const std::filesystem::path& path) {
                      (p.format == SAMPLEFORMAT_IEEEFP ? "float" : "integer") + " samples");
   }
   check_pieces(t.get(), path, file_size, p);
-  ImageU16 image(int(p.width), int(p.height));
+  if (image.width != int(p.width) || image.height != int(p.height)) image = ImageU16(int(p.width), int(p.height));
   std::vector<unsigned char> row(TIFFScanlineSize(t.get()));
   read_rows(t.get(), path, p.height, row.data(), [&](uint32_t y) {
     auto out = image.row(int(y));
@@ -190,7 +196,6 @@ ImageU16 read_tiff_u16(const std::filesystem::path& path) {
       for (uint32_t x = 0; x < p.width; ++x) out[x] = row[x];
     }
   });
-  return image;
 }
 
 ImageF read_tiff_float(const std::filesystem::path& path) {

@@ -12,6 +12,9 @@ namespace plenopiv::io {
 // Reads the first page of an 8- or 16-bit single-channel TIFF (8-bit values are kept as they
 // are, 0-255). Anything else (colour, float, corrupt, missing) is an InputError naming the file.
 ImageU16 read_tiff_u16(const std::filesystem::path& path);
+// The same into `image`, whose buffer is reused when it already has the file's size (a camera's
+// frame buffers); on an error `image` is left as it was or holds part of the file.
+void read_tiff_u16(const std::filesystem::path& path, ImageU16& image);
 // Reads the first page of a single-channel TIFF as float: 8- or 16-bit unsigned (values as they
 // are), or 32/64-bit float whose every value is finite. Anything else is an InputError naming the
 // file (and, for a non-finite value, the pixel). Raw frames go through io::read_raw_frame.

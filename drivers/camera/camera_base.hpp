@@ -42,6 +42,11 @@ class CameraBase : public Camera {
 
   // The pixels of the next frame (FramePool::take): the backend overwrites every one.
   ImageU16 take_image(int width, int height) { return pool_->take(width, height); }
+  // A spare buffer for the next frame (FramePool::reuse), or nullopt.
+  std::optional<ImageU16> spare_image(int width, int height) { return pool_->reuse(width, height); }
+  // A copy of `source` for the next frame: into a spare buffer when the pool has one, else a plain
+  // copy (no zero fill first).
+  ImageU16 pooled_copy(const ImageU16& source);
   // Thread-safe; frames from one backend thread, in arrival order.
   void submit_frame(Frame frame, std::optional<std::uint64_t> trigger_index = {});
   // Triggers the backend dropped itself (e.g. not read out before stop), counted and listed.

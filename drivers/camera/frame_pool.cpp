@@ -9,22 +9,22 @@ namespace plenopiv::drivers {
 
 FramePool::FramePool(std::size_t max_spare) : max_spare_(max_spare) {}
 
+std::optional<ImageU16> FramePool::reuse(int width, int height) {
+  std::lock_guard lock(mutex_);
+  ++counts_.taken;
+  const auto fits = std::find_if(spare_.begin(), spare_.end(),
+                                 [&](const ImageU16& image) { return image.width == width && image.height == height; });
+  if (fits == spare_.end()) return std::nullopt;
+  ImageU16 image = std::move(*fits);
+  spare_.erase(fits);
+  ++counts_.reused;
+  counts_.spare = spare_.size();
+  return image;
+}
+
 ImageU16 FramePool::take(int width, int height) {
-  {
-    std::lock_guard lock(mutex_);
-    ++counts_.taken;
-    const auto fits = std::find_if(spare_.begin(), spare_.end(), [&](const ImageU16& image) {
-      return image.width == width && image.height == height;
-    });
-    if (fits != spare_.end()) {
-      ImageU16 image = std::move(*fits);
-      spare_.erase(fits);
-      ++counts_.reused;
-      counts_.spare = spare_.size();
-      return image;
-    }
-  }
-  return ImageU16(width, height);  // outside the lock: a first frame's allocation and zero fill
+  if (std::optional<ImageU16> spare = reuse(width, height)) return std::move(*spare);
+  return ImageU16(width, height);  // a first frame's allocation and zero fill
 }
 
 void FramePool::give(ImageU16 image) {

@@ -7,6 +7,7 @@
 #include <deque>
 #include <memory>
 #include <mutex>
+#include <optional>
 
 #include "core/base/image.hpp"
 #include "drivers/camera/camera.hpp"
@@ -19,15 +20,18 @@ class FramePool {
   // Buffers not in use are kept up to `max_spare` of them; further ones given back are freed.
   explicit FramePool(std::size_t max_spare = kDefaultMaxSpare);
 
-  // A width x height image for the next frame: a spare buffer of that size, its pixels whatever a
-  // previous frame left (the caller overwrites every one), or a fresh zeroed image when none fits.
+  // A spare width x height buffer for the next frame, its pixels whatever a previous frame left (the
+  // caller overwrites every one); nullopt when none fits (the caller allocates as it would without
+  // a pool, e.g. by copying its source).
+  std::optional<ImageU16> reuse(int width, int height);
+  // reuse(), or a fresh zeroed image when no spare fits.
   ImageU16 take(int width, int height);
   // Keeps the image's buffer for a later take(); beyond max_spare the oldest spare is freed.
   void give(ImageU16 image);
 
   struct Counts {
-    std::uint64_t taken = 0;   // images handed out
-    std::uint64_t reused = 0;  // of which came from a spare buffer
+    std::uint64_t taken = 0;   // frames asked for (reuse() or take())
+    std::uint64_t reused = 0;  // of which had a spare buffer
     std::size_t spare = 0;     // buffers waiting now
   };
   Counts counts() const;

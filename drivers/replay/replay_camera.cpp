@@ -260,12 +260,6 @@ class ReplayCamera : public CameraBase, public TriggerInput {
     return p;
   }
 
-  ImageU16 pooled_copy(const ImageU16& recorded) {
-    ImageU16 image = take_image(recorded.width, recorded.height);
-    std::copy(recorded.pixels.begin(), recorded.pixels.end(), image.pixels.begin());
-    return image;
-  }
-
   bool at_end() {
     if (settings_.loop) return false;
     if (preload_) return cursor_ >= preloaded_.size();
@@ -321,7 +315,14 @@ class ReplayCamera : public CameraBase, public TriggerInput {
         next = 0;
       }
       try {
-        DecodedPair p = decode(files_[next++]);
+        // Decoded into buffers the frame pool has spare, as a camera fills its buffers.
+        const CameraInfo camera = info();
+        DecodedPair p;
+        for (auto [image, file] : {std::pair{&p.a, &files_[next].a}, std::pair{&p.b, &files_[next].b}}) {
+          if (auto spare = spare_image(camera.sensor_width_px, camera.sensor_height_px)) *image = std::move(*spare);
+          io::read_tiff_u16(*file, *image);
+        }
+        ++next;
         std::lock_guard lock(mutex_);
         ahead_.push_back(std::move(p));
       } catch (const std::exception& e) {

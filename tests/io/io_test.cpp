@@ -85,6 +85,24 @@ TEST(Tiff, AFrameOfManyStripsReadsBackBitForBitInAnotherReader) {
     for (int x = 0; x < img.width; ++x) ASSERT_EQ(other.at<std::uint16_t>(y, x), img.at(x, y)) << x << ", " << y;
 }
 
+// Read into a frame buffer: reused when it has the file's size, replaced when not.
+TEST(Tiff, AFrameIsReadIntoABufferOfItsSize) {
+  ImageU16 img(9, 4);
+  for (std::size_t i = 0; i < img.size(); ++i) img.pixels[i] = std::uint16_t(3 * i + 1);
+  const auto path = temp_dir() / "into.tif";
+  write_tiff(path, img);
+  ImageU16 buffer(9, 4, 7);
+  const std::uint16_t* kept = buffer.pixels.data();
+  read_tiff_u16(path, buffer);
+  EXPECT_EQ(buffer.pixels, img.pixels);
+  EXPECT_EQ(buffer.pixels.data(), kept);
+  ImageU16 other(4, 9);
+  read_tiff_u16(path, other);
+  EXPECT_EQ(other.width, 9);
+  EXPECT_EQ(other.height, 4);
+  EXPECT_EQ(other.pixels, img.pixels);
+}
+
 TEST(Tiff, FloatStackRoundTrip) {
   std::vector<ImageF> pages;
   for (int p = 0; p < 3; ++p) {
