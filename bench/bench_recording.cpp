@@ -1,12 +1,13 @@
 // What recording a paper-scale pair costs the daemon's machine, with the lanes left out: the replay
 // camera delivers decoded frames (as a camera's driver hands them over), the run folder writer
 // writes both as TIFF, the frame check scans them, and the pair is let go, its buffers freed
-// ("fresh") or given back to the camera's frame pool ("pooled", as plenopivd does). Triggers come as
-// fast as the pairs are recorded; the run folder is on DATA_DIR (default /dev/shm, a tmpfs: this
+// ("fresh") or given back to the camera's frame pool ("pooled", as plenopivd does). The camera plays
+// at RATE_HZ, free-running; the run folder is on DATA_DIR (default /dev/shm, a tmpfs: this
 // machine's disk takes less than 10 Hz of paper-scale pairs).
-//   bench_recording [PAIRS] [REPEATS] [DATA_DIR]   (default 100 pairs, 3 repeats per variant)
-// Per variant: medians over the repeats of wall and CPU seconds per pair and minor page faults per
-// pair, and the pool's reuse. The variants alternate, so drift in the machine's load hits both.
+//   bench_recording [PAIRS] [REPEATS] [RATE_HZ] [DATA_DIR]   (default 100 pairs, 3 repeats, 10 Hz)
+// Per variant: medians over the repeats of wall and CPU seconds per pair (wall: 1 / RATE_HZ while
+// the recording keeps up) and minor page faults per pair, and the pool's reuse. The variants
+// alternate, so drift in the machine's load hits both.
 #include <sys/resource.h>
 
 #include <algorithm>
@@ -55,7 +56,6 @@ Figures record(drivers::Camera& camera, const fs::path& data, const std::string&
   const double wall0 = bench::now_s(), cpu0 = bench::cpu_seconds();
   const long faults0 = minor_faults();
   for (int i = 0; i < pairs; ++i) {
-    camera.software_trigger();
     std::optional<drivers::FramePair> pair = camera.next_pair(std::chrono::seconds(5));
     if (!pair) {
       std::fprintf(stderr, "bench_recording: pair %d never came\n", i);
@@ -96,9 +96,10 @@ Figures record(drivers::Camera& camera, const fs::path& data, const std::string&
 int main(int argc, char** argv) {
   const int pairs = argc > 1 ? std::atoi(argv[1]) : 100;
   const int repeats = argc > 2 ? std::atoi(argv[2]) : 3;
-  const fs::path data = argc > 3 ? fs::path(argv[3]) : fs::path("/dev/shm/plenopiv-bench-recording");
-  if (pairs < 2 || repeats < 1) {
-    std::fprintf(stderr, "usage: bench_recording [PAIRS >= 2] [REPEATS >= 1] [DATA_DIR]\n");
+  const double rate_hz = argc > 3 ? std::atof(argv[3]) : 10.0;
+  const fs::path data = argc > 4 ? fs::path(argv[4]) : fs::path("/dev/shm/plenopiv-bench-recording");
+  if (pairs < 2 || repeats < 1 || !(rate_hz > 0)) {
+    std::fprintf(stderr, "usage: bench_recording [PAIRS >= 2] [REPEATS >= 1] [RATE_HZ > 0] [DATA_DIR]\n");
     return 2;
   }
   const fs::path camera_file = fs::path(PLENOPIV_SOURCE_DIR) / "systemd/config/camera-fahringer2015.yaml";
@@ -111,10 +112,11 @@ int main(int argc, char** argv) {
   scene.rays_per_particle = 5000;
   bench::write_replay_recording(root / "replay" / "paper", camera_model, 4, scene);
 
-  auto camera = drivers::open_replay_camera(drivers::DeviceUri::parse("replay://paper?loop=1&buffer_mb=1024"),
-                                            {root / "replay", camera_file});
+  auto camera = drivers::open_replay_camera(
+      drivers::DeviceUri::parse("replay://paper?loop=1&buffer_mb=1024&rate_hz=" + std::to_string(rate_hz)),
+      {root / "replay", camera_file});
   camera->configure(drivers::CameraSettings{});
-  camera->arm(drivers::DoubleExposureSettings{drivers::TriggerSource::Software, 0.0});
+  camera->arm(drivers::DoubleExposureSettings{drivers::TriggerSource::Software, 0.0});  // free-running
   camera->start();
   fs::remove_all(data);
   fs::create_directories(data);
@@ -138,11 +140,11 @@ int main(int argc, char** argv) {
   for (int k = 0; k < 2; ++k) {
     const std::vector<Figures>& v = *runs[k];
     std::printf(
-        "bench=recording variant=%s pairs=%d repeats=%d mb_per_pair=%.1f wall_s_per_pair=%.4f cpu_s_per_pair=%.4f "
-        "cores_at_10hz=%.2f faults_per_pair=%.0f buffers_reused=%.2f\n",
-        names[k], pairs, repeats,
+        "bench=recording variant=%s pairs=%d repeats=%d rate_hz=%.1f mb_per_pair=%.1f wall_s_per_pair=%.4f "
+        "cpu_s_per_pair=%.4f cores=%.2f faults_per_pair=%.0f buffers_reused=%.2f\n",
+        names[k], pairs, repeats, rate_hz,
         2.0 * camera_model.sensor().width_px * camera_model.sensor().height_px * 2 / (1024.0 * 1024.0),
-        med(v, &Figures::wall_s_per_pair), med(v, &Figures::cpu_s_per_pair), 10 * med(v, &Figures::cpu_s_per_pair),
+        med(v, &Figures::wall_s_per_pair), med(v, &Figures::cpu_s_per_pair), rate_hz * med(v, &Figures::cpu_s_per_pair),
         med(v, &Figures::faults_per_pair), med(v, &Figures::reused));
   }
   std::printf("bench=recording_ratio pooled_over_fresh_cpu=%.2f\n",

@@ -79,7 +79,7 @@ BENCHES = {
     "lanes": ("quick", ["build/bin/bench_lanes", "200", "10"], None),
     "lanes-paper": ("paper", ["build/bin/bench_lanes", "paper", "600", "10"], "lanes_paper.png"),
     "soak": ("paper", ["build/bin/bench_soak", "10000", "15"], "soak.png"),
-    "recording": ("quick", ["build/bin/bench_recording", "100", "3"], None),
+    "recording": ("quick", ["build/bin/bench_recording", "100", "3", "10"], None),
     "sim": ("quick", ["build/bin/bench_sim"], None),
     "calib": ("quick", ["build/bin/bench_calib"], None),
     "resampling": ("quick", ["build/bin/bench_resampling"], None),
@@ -627,9 +627,9 @@ def t_rotated_shear(R):
 
 def t_recording(R):
     r = R("recording")
-    rows = [[d["variant"], d["mb_per_pair"], d["wall_s_per_pair"], d["cpu_s_per_pair"], d["cores_at_10hz"],
-             d["faults_per_pair"], d["buffers_reused"]] for d in r.find(bench="recording")]
-    out = table(["frames", "MB per pair", "wall s per pair", "CPU s per pair", "cores at 10 Hz",
+    rows = [[d["variant"], f"{d['rate_hz']} Hz", d["mb_per_pair"], d["wall_s_per_pair"], d["cpu_s_per_pair"],
+             d["cores"], d["faults_per_pair"], d["buffers_reused"]] for d in r.find(bench="recording")]
+    out = table(["frames", "rate", "MB per pair", "wall s per pair", "CPU s per pair", "cores",
                  "page faults per pair", "buffers reused"], rows)
     ratio = r.one(bench="recording_ratio")
     if ratio:
