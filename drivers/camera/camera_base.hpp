@@ -42,6 +42,8 @@ class CameraBase : public Camera {
 
   // The pixels of the next frame (FramePool::take): the backend overwrites every one.
   ImageU16 take_image(int width, int height) { return pool_->take(width, height); }
+  // Fills the frame pool with buffers of the frames to come (FramePool::prefill), at start.
+  void prefill_frames(int width, int height) { pool_->prefill(width, height); }
   // A spare buffer for the next frame (FramePool::reuse), or nullopt.
   std::optional<ImageU16> spare_image(int width, int height) { return pool_->reuse(width, height); }
   // A copy of `source` for the next frame: into a spare buffer when the pool has one, else a plain

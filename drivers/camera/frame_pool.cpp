@@ -27,6 +27,16 @@ ImageU16 FramePool::take(int width, int height) {
   return ImageU16(width, height);  // a first frame's allocation and zero fill
 }
 
+void FramePool::prefill(int width, int height) {
+  for (;;) {
+    {
+      std::lock_guard lock(mutex_);
+      if (spare_.size() >= max_spare_) return;
+    }
+    give(ImageU16(width, height));  // zero-filled: every page faulted in here
+  }
+}
+
 void FramePool::give(ImageU16 image) {
   if (image.empty()) return;
   std::lock_guard lock(mutex_);

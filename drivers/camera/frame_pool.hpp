@@ -26,6 +26,9 @@ class FramePool {
   std::optional<ImageU16> reuse(int width, int height);
   // reuse(), or a fresh zeroed image when no spare fits.
   ImageU16 take(int width, int height);
+  // Adds fresh width x height buffers (their memory touched now) until max_spare wait: a camera's
+  // start, so that its first frames do not fault memory in while the recording and the lanes start.
+  void prefill(int width, int height);
   // Keeps the image's buffer for a later take(); beyond max_spare the oldest spare is freed.
   void give(ImageU16 image);
 

@@ -173,6 +173,7 @@ class ReplayCamera : public CameraBase, public TriggerInput {
       for (const PairFiles& f : files_) decoded.push_back(decode(f));
       preloaded_ = std::move(decoded);
     }
+    prefill_frames(info().sensor_width_px, info().sensor_height_px);
     {
       std::lock_guard lock(mutex_);
       running_ = true;

@@ -44,6 +44,16 @@ TEST(FramePool, SparesAreBoundedAndTheOldestGoesFirst) {
   EXPECT_EQ(pool.counts().spare, 0u);
 }
 
+TEST(FramePool, APrefillLeavesItsBoundOfSpareBuffersOfTheFramesToCome) {
+  FramePool pool(3);
+  pool.give(ImageU16(4, 4));
+  pool.prefill(16, 8);
+  EXPECT_EQ(pool.counts().spare, 3u);
+  EXPECT_TRUE(pool.reuse(16, 8).has_value());
+  EXPECT_TRUE(pool.reuse(16, 8).has_value());
+  EXPECT_FALSE(pool.reuse(16, 8).has_value()) << "one spare was the 4 x 4 given before";
+}
+
 TEST(FramePool, ASharedPairGivesItsFramesBackWhenTheLastConsumerLetsGo) {
   auto pool = std::make_shared<FramePool>();
   FramePair pair;
