@@ -28,19 +28,8 @@ void Lane::close(bool clear) {
   }
 }
 
-void Lane::defer_to(Lane& ahead) {
-  queue_.hold_while([&ahead] { return ahead.queue_.depth() > 0 || ahead.stats_.process.in_flight > 0; });
-  ahead.behind_.push_back(this);
-}
-
 void Lane::run(const ProcessFn& process, const OutputFn& output, const CancelFlag& cancel) {
-  const auto wake_behind = [this] {
-    for (Lane* lane : behind_) lane->queue_.poke();
-  };
-  arena_.execute([&] {
-    run_live_pipeline(queue_, options_.max_in_flight, process, output, stats_, cancel,
-                      behind_.empty() ? std::function<void()>{} : std::function<void()>(wake_behind));
-  });
+  arena_.execute([&] { run_live_pipeline(queue_, options_.max_in_flight, process, output, stats_, cancel); });
 }
 
 void Lane::discard_all() {
@@ -94,7 +83,6 @@ std::vector<std::unique_ptr<Lane>> make_lanes(const RunConfig& config, int nice)
     quality.caller_nice = kQualityLaneNice;
     quality.max_concurrency = std::max(1, tbb::info::default_concurrency() - 1);
     lanes.push_back(std::make_unique<Lane>(quality));
-    lanes.back()->defer_to(*lanes.front());
   }
   return lanes;
 }

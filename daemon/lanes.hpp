@@ -53,13 +53,6 @@ class Lane {
   // contract: a pair whose processing throws is counted and skipped; once `cancel` is set the pairs
   // in flight give up). An exception from `output` ends the lane and is thrown here.
   void run(const ProcessFn& process, const OutputFn& output, const CancelFlag& cancel);
-  // This lane starts a pair only while `ahead` has none waiting or in flight: its pairs wait (and
-  // are dropped, counted, as usual) while `ahead` is busy, and `ahead` wakes it each time it
-  // finishes a pair. The quality lane defers to the live lane: at a rate the live lane cannot keep
-  // up with it starts nothing, rather than take cores for a pair it would not finish. A pair
-  // already started goes on (at its lower priority). Call before either lane runs; `ahead` must
-  // outlive this lane.
-  void defer_to(Lane& ahead);
   // Takes and forgets every pair until the queue is closed (a daemon with no processing stage).
   void discard_all();
 
@@ -75,7 +68,6 @@ class Lane {
   Options options_;
   LiveMailbox queue_;
   PipelineStats stats_;
-  std::vector<Lane*> behind_;  // lanes deferring to this one, woken after each of its pairs
   tbb::task_arena arena_;
   ArenaNiceness niceness_;
 };

@@ -14,17 +14,8 @@ namespace plenopiv::daemon {
 using Clock = std::chrono::steady_clock;
 
 std::function<void()> LiveMailbox::due_waiter_locked() {
-  if (!closed_ && (pairs_.empty() || held_locked())) return {};
+  if (!closed_ && pairs_.empty()) return {};
   return std::exchange(waiter_, {});
-}
-
-void LiveMailbox::poke() {
-  std::function<void()> wake;
-  {
-    std::lock_guard lock(mutex_);
-    wake = due_waiter_locked();
-  }
-  if (wake) wake();
 }
 
 void LiveMailbox::push(SharedPair pair) {
@@ -70,7 +61,7 @@ void LiveMailbox::close_and_clear() {
 void LiveMailbox::call_when_ready(std::function<void()> wake) {
   {
     std::lock_guard lock(mutex_);
-    if (!closed_ && (pairs_.empty() || held_locked())) {
+    if (!closed_ && pairs_.empty()) {
       waiter_ = std::move(wake);
       return;
     }
@@ -87,7 +78,6 @@ std::optional<SharedPair> LiveMailbox::take() {
 std::optional<SharedPair> LiveMailbox::try_take(bool& closed) {
   std::lock_guard lock(mutex_);
   closed = closed_ && pairs_.empty();
-  if (held_locked()) return std::nullopt;
   return take_locked();
 }
 
@@ -157,7 +147,7 @@ std::optional<SharedPair> next_pair(LiveMailbox& mailbox) {
 }  // namespace
 
 void run_live_pipeline(LiveMailbox& mailbox, int max_in_flight, const ProcessFn& process, const OutputFn& output,
-                       PipelineStats& stats, const CancelFlag& cancel, const std::function<void()>& after_each) {
+                       PipelineStats& stats, const CancelFlag& cancel) {
   tbb::parallel_pipeline(
       std::size_t(max_in_flight),
       tbb::make_filter<void, std::shared_ptr<Item>>(tbb::filter_mode::serial_in_order,
@@ -193,13 +183,11 @@ void run_live_pipeline(LiveMailbox& mailbox, int max_in_flight, const ProcessFn&
               }) &
           tbb::make_filter<std::shared_ptr<Item>, void>(tbb::filter_mode::serial_in_order,
                                                         [&](std::shared_ptr<Item> item) {
-                                                          if (item->result) {
-                                                            const auto start = Clock::now();
-                                                            output(*item->pair, *item->result);
-                                                            ++stats.output.processed;
-                                                            stats.output.add_time(Clock::now() - start);
-                                                          }
-                                                          if (after_each) after_each();
+                                                          if (!item->result) return;
+                                                          const auto start = Clock::now();
+                                                          output(*item->pair, *item->result);
+                                                          ++stats.output.processed;
+                                                          stats.output.add_time(Clock::now() - start);
                                                         }));
 }
 

@@ -74,13 +74,6 @@ class LiveMailbox {
   // is so already, else on the thread of the push or close that makes it so. One waiter at a time
   // (a later call replaces a waiter not yet woken).
   void call_when_ready(std::function<void()> wake);
-  // While `busy()` says so, try_take() and call_when_ready() treat the waiting pairs as not there
-  // yet (they still arrive and are dropped as usual; close() ends the hold): a lane behind another
-  // starts a pair only while that one is idle. The hold is looked at again on each push and poke().
-  // Set before the queue is used; take() (discarding) ignores it.
-  void hold_while(std::function<bool()> busy) { hold_ = std::move(busy); }
-  // Wakes a waiter when the hold has lifted and a pair is waiting.
-  void poke();
   // Waits up to `timeout` for close(); true once closed.
   bool wait_closed_for(std::chrono::steady_clock::duration timeout);
   std::size_t capacity() const { return capacity_; }
@@ -92,14 +85,10 @@ class LiveMailbox {
   std::optional<SharedPair> take_locked();
   // The waiter to wake, taken under the lock when a pair or close makes it due.
   std::function<void()> due_waiter_locked();
-  // A pair waits but the hold keeps it (the lane ahead is busy). Under the lock: `busy` takes only
-  // the other lane's own lock, never this one's.
-  bool held_locked() const { return !closed_ && hold_ && hold_(); }
 
   mutable std::mutex mutex_;
   std::condition_variable ready_;
   std::function<void()> waiter_;
-  std::function<bool()> hold_;
   std::deque<SharedPair> pairs_;
   std::size_t capacity_;
   TakeOrder order_;
@@ -134,8 +123,7 @@ using OutputFn = std::function<void(const drivers::FramePair&, ProcessedPair&)>;
 // flight instead of blocking: a lane that waits for the camera holds no core. A pair whose processing throws
 // is counted as skipped on the processing stage and not output; the run goes on. Once `cancel` is
 // set, pairs in flight give up (counted cancelled); those already done are still output.
-// `after_each` (optional) runs in the output stage after every pair, output or not.
 void run_live_pipeline(LiveMailbox& mailbox, int max_in_flight, const ProcessFn& process, const OutputFn& output,
-                       PipelineStats& stats, const CancelFlag& cancel, const std::function<void()>& after_each = {});
+                       PipelineStats& stats, const CancelFlag& cancel);
 
 }  // namespace plenopiv::daemon

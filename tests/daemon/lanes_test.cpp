@@ -7,7 +7,6 @@
 
 #include <algorithm>
 #include <chrono>
-#include <condition_variable>
 #include <functional>
 #include <mutex>
 #include <set>
@@ -205,67 +204,6 @@ TEST(Lane, ARunConfigMakesTheLiveLaneFirstAndTheQualityLaneWhenAsked) {
   EXPECT_EQ(two[1]->tier(), process::Tier::full);
   EXPECT_EQ(two[1]->queue().capacity(), 5u);
   EXPECT_EQ(two[1]->counters().policy(), "every 2");
-}
-
-// The quality lane defers to the live lane: while the live lane has a pair in flight or waiting,
-// the quality lane starts none (its pairs wait, the older dropped and counted); the live lane's
-// finishing its last pair wakes it, and it takes the newest.
-TEST(Lane, TheQualityLaneStartsNoPairWhileTheLiveLaneIsBusy) {
-  const std::string spec =
-      "dt_s: 0.001\nvolume: {x_mm: [-1, 1], y_mm: [-1, 1], z_mm: [0, 2], voxel_mm: 0.5}\n"
-      "correlation: {passes: [{window: 4, overlap_percent: 50}]}\n"
-      "live: {reconstruction: {iterations: 1}}\nquality: newest\nquality_queue: 8\nmax_pairs_in_flight: 1\n";
-  const auto lanes = make_lanes(parse_run_config(spec, "run.yaml"));
-  ASSERT_EQ(lanes.size(), 2u);
-  Lane& live = *lanes[0];
-  Lane& quality = *lanes[1];
-  std::mutex m;
-  std::condition_variable changed;
-  bool release_live = false;
-  std::vector<std::uint64_t> quality_pairs;
-  const ProcessFn live_process = [&](const drivers::FramePair& pair, const CancelFlag& cancel) {
-    std::unique_lock lock(m);
-    changed.wait(lock, [&] { return release_live; });
-    return empty_field(pair, cancel);
-  };
-  const ProcessFn quality_process = [&](const drivers::FramePair& pair, const CancelFlag& cancel) {
-    std::lock_guard lock(m);
-    quality_pairs.push_back(pair.pair_index);
-    changed.notify_all();
-    return empty_field(pair, cancel);
-  };
-  CancelFlag cancel{false};
-  const OutputFn no_output = [](const drivers::FramePair&, ProcessedPair&) {};
-  std::thread live_thread([&] { live.run(live_process, no_output, cancel); });
-  std::thread quality_thread([&] { quality.run(quality_process, no_output, cancel); });
-  // As a run records them: each pair offered to the live lane, then to the quality lane.
-  for (std::uint64_t i = 0; i < 4; ++i) {
-    live.offer(pair_of(i));
-    quality.offer(pair_of(i));
-    std::this_thread::sleep_for(std::chrono::milliseconds(50));
-  }
-  std::this_thread::sleep_for(std::chrono::milliseconds(300));
-  {
-    std::lock_guard lock(m);
-    EXPECT_TRUE(quality_pairs.empty()) << "the quality lane started pair " << quality_pairs.front()
-                                       << " while the live lane was busy";
-    release_live = true;
-  }
-  changed.notify_all();
-  {
-    std::unique_lock lock(m);
-    EXPECT_TRUE(changed.wait_for(lock, std::chrono::seconds(10), [&] { return !quality_pairs.empty(); }))
-        << "the live lane went idle and the quality lane was not woken";
-  }
-  live.close(false);
-  quality.close(false);
-  live_thread.join();
-  quality_thread.join();
-  ASSERT_EQ(quality_pairs.size(), 1u);
-  EXPECT_EQ(quality_pairs[0], 3u) << "the newest pair";
-  EXPECT_EQ(quality.counters().dropped(), 3u);
-  EXPECT_EQ(quality.counters().processed(), 1u);
-  EXPECT_EQ(live.counters().processed(), 2u) << "pair 0, then the newest";
 }
 
 // The quality lane runs behind the live lane at the kernel's level too: its own thread at the
