@@ -81,8 +81,8 @@ inline constexpr int kQualityLaneNice = 19;
 // priority; the quality lane (config.quality.on()) runs the full settings on the pairs its policy
 // takes, QualityLane::kPairsInFlight at once, quality.queue waiting, at low priority, its own
 // thread at kQualityLaneNice and its arena one thread short of the cores (a oneTBB worker always
-// free for the live lane), starting a pair only while the live lane is idle (defer_to). The other
-// threads of both lanes run at `nice` (plenopivd.yaml `processing_nice`).
+// free for the live lane). The other threads of both lanes run at `nice` (plenopivd.yaml
+// `processing_nice`).
 std::vector<std::unique_ptr<Lane>> make_lanes(const RunConfig& config, int nice = 0);
 
 }  // namespace plenopiv::daemon
