@@ -83,14 +83,8 @@ int paper_lanes(int argc, char** argv) {
   const fs::path config_dir = fs::path(PLENOPIV_SOURCE_DIR) / "systemd/config";
   const fs::path camera_file = config_dir / "camera-fahringer2015.yaml";
   const optics::CameraModel camera = optics::load_camera_file(camera_file);
-  const fs::path root = fs::temp_directory_path() / "plenopiv-bench-lanes";
-  // run-paper.yaml's box at 0.5 particles per microlens, as bench_e2e's full case.
-  bench::ReplayScene scene;
-  scene.box = {{-18.75, -12.5, -12.5}, {18.75, 12.5, 12.5}};
-  scene.particles = sim::particle_count_from_ppm(camera, scene.box, 0.5);
-  scene.rays_per_particle = 5000;
-  bench::write_replay_recording(root / "replay" / "paper", camera, 4, scene);
-  drivers::register_replay_camera(drivers::CameraRegistry::instance(), {root / "replay", camera_file});
+  drivers::register_replay_camera(drivers::CameraRegistry::instance(),
+                                  {bench::write_paper_replay_recording(camera), camera_file});
 
   const daemon::ProcessFactory processing = daemon::plenoptic_processing(camera);
   const int nice = daemon::DaemonConfig{}.processing_nice;

@@ -22,7 +22,6 @@
 #include "bench/replay_recording.hpp"
 #include "core/optics/camera_file.hpp"
 #include "core/process/frame_check.hpp"
-#include "core/sim/particles.hpp"
 #include "drivers/camera/frame_pool.hpp"
 #include "drivers/replay/replay_camera.hpp"
 #include "proto/run_folder.hpp"
@@ -104,17 +103,9 @@ int main(int argc, char** argv) {
   }
   const fs::path camera_file = fs::path(PLENOPIV_SOURCE_DIR) / "systemd/config/camera-fahringer2015.yaml";
   const optics::CameraModel camera_model = optics::load_camera_file(camera_file);
-  // bench_lanes' paper recording (kept between the two benchmarks).
-  const fs::path root = fs::temp_directory_path() / "plenopiv-bench-lanes";
-  bench::ReplayScene scene;
-  scene.box = {{-18.75, -12.5, -12.5}, {18.75, 12.5, 12.5}};
-  scene.particles = sim::particle_count_from_ppm(camera_model, scene.box, 0.5);
-  scene.rays_per_particle = 5000;
-  bench::write_replay_recording(root / "replay" / "paper", camera_model, 4, scene);
-
   auto camera = drivers::open_replay_camera(
       drivers::DeviceUri::parse("replay://paper?loop=1&buffer_mb=1024&rate_hz=" + std::to_string(rate_hz)),
-      {root / "replay", camera_file});
+      {bench::write_paper_replay_recording(camera_model), camera_file});
   camera->configure(drivers::CameraSettings{});
   camera->arm(drivers::DoubleExposureSettings{drivers::TriggerSource::Software, 0.0});  // free-running
   camera->start();

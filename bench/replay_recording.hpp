@@ -45,6 +45,19 @@ inline void write_replay_recording(const std::filesystem::path& dir, const optic
   }
 }
 
+// The paper-scale replay recording bench_lanes and bench_recording share: 4 pairs of run-paper.yaml's
+// box at 0.5 particles per microlens (as bench_e2e's full case), in <tmp>/plenopiv-bench-lanes/
+// replay/paper (kept between runs). Returns the replay folder (a ReplaySource's replay_dir).
+inline std::filesystem::path write_paper_replay_recording(const optics::CameraModel& camera) {
+  const std::filesystem::path replay = std::filesystem::temp_directory_path() / "plenopiv-bench-lanes" / "replay";
+  ReplayScene scene;
+  scene.box = {{-18.75, -12.5, -12.5}, {18.75, 12.5, 12.5}};
+  scene.particles = sim::particle_count_from_ppm(camera, scene.box, 0.5);
+  scene.rays_per_particle = 5000;
+  write_replay_recording(replay / "paper", camera, 4, scene);
+  return replay;
+}
+
 // A run's environment: data in `data`, the replay camera `replay://<source>` (default: the folder
 // `small`, looped), the sim trigger, `camera_file`, `processing` with its threads at `nice`.
 inline daemon::RunEnvironment replay_run_environment(const std::filesystem::path& data,
