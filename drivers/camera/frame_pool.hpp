@@ -26,8 +26,8 @@ class FramePool {
   std::optional<ImageU16> reuse(int width, int height);
   // reuse(), or a fresh zeroed image when no spare fits.
   ImageU16 take(int width, int height);
-  // Adds fresh width x height buffers (their memory touched now) until max_spare wait: a camera's
-  // start, so that its first frames do not fault memory in while the recording and the lanes start.
+  // Adds fresh width x height buffers (their memory touched now) until max_spare are waiting: for a
+  // camera's start, so that its first frames fault no memory in while the recording and lanes start.
   void prefill(int width, int height);
   // Keeps the image's buffer for a later take(); beyond max_spare the oldest spare is freed.
   void give(ImageU16 image);
@@ -39,8 +39,8 @@ class FramePool {
   };
   Counts counts() const;
 
-  // Two pairs in flight beyond the consumers': enough for a camera that delivers at the rate a
-  // recorder writes, without holding much memory when none is needed (a spare is a whole frame).
+  // Four pairs' frames: enough for a camera that delivers at the rate a recorder writes, without
+  // holding much memory when none is needed (a spare is a whole frame: 32 MB at the paper's scale).
   static constexpr std::size_t kDefaultMaxSpare = 8;
 
  private:
