@@ -157,13 +157,6 @@ void CameraBase::software_trigger() {
   do_software_trigger();
 }
 
-ImageU16 CameraBase::pooled_copy(const ImageU16& source) {
-  std::optional<ImageU16> image = pool_->reuse(source.width, source.height);
-  if (!image) return source;
-  std::copy(source.pixels.begin(), source.pixels.end(), image->pixels.begin());
-  return std::move(*image);
-}
-
 void CameraBase::submit_frame(Frame frame, std::optional<std::uint64_t> trigger_index) {
   std::lock_guard lock(mutex_);
   std::optional<FramePair> pair = pairer_.push(std::move(frame), trigger_index);

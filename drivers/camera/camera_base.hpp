@@ -40,15 +40,8 @@ class CameraBase : public Camera {
   virtual void do_software_trigger() = 0;
   virtual std::uint64_t packets_resent() const { return 0; }
 
-  // The pixels of the next frame (FramePool::take): the backend overwrites every one.
-  ImageU16 take_image(int width, int height) { return pool_->take(width, height); }
-  // Fills the frame pool with buffers of the frames to come (FramePool::prefill), at start.
-  void prefill_frames(int width, int height) { pool_->prefill(width, height); }
-  // A spare buffer for the next frame (FramePool::reuse), or nullopt.
-  std::optional<ImageU16> spare_image(int width, int height) { return pool_->reuse(width, height); }
-  // A copy of `source` for the next frame: into a spare buffer when the pool has one, else a plain
-  // copy (no zero fill first).
-  ImageU16 pooled_copy(const ImageU16& source);
+  // Where the backend takes its frames' pixels (frame_pool.hpp).
+  FramePool& frame_buffers() { return *pool_; }
   // Thread-safe; frames from one backend thread, in arrival order.
   void submit_frame(Frame frame, std::optional<std::uint64_t> trigger_index = {});
   // Triggers the backend dropped itself (e.g. not read out before stop), counted and listed.

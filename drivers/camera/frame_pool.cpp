@@ -27,6 +27,13 @@ ImageU16 FramePool::take(int width, int height) {
   return ImageU16(width, height);  // a first frame's allocation and zero fill
 }
 
+ImageU16 FramePool::copy(const ImageU16& source) {
+  std::optional<ImageU16> image = reuse(source.width, source.height);
+  if (!image) return source;
+  std::copy(source.pixels.begin(), source.pixels.end(), image->pixels.begin());
+  return std::move(*image);
+}
+
 void FramePool::prefill(int width, int height) {
   for (;;) {
     {

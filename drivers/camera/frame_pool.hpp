@@ -26,6 +26,9 @@ class FramePool {
   std::optional<ImageU16> reuse(int width, int height);
   // reuse(), or a fresh zeroed image when no spare fits.
   ImageU16 take(int width, int height);
+  // A copy of `source` for the next frame: into a spare buffer when one fits, else a plain copy (no
+  // zero fill first).
+  ImageU16 copy(const ImageU16& source);
   // Adds fresh width x height buffers (their memory touched now) until max_spare are waiting: for a
   // camera's start, so that its first frames fault no memory in while the recording and lanes start.
   void prefill(int width, int height);

@@ -173,7 +173,7 @@ class ReplayCamera : public CameraBase, public TriggerInput {
       for (const PairFiles& f : files_) decoded.push_back(decode(f));
       preloaded_ = std::move(decoded);
     }
-    prefill_frames(info().sensor_width_px, info().sensor_height_px);
+    frame_buffers().prefill(info().sensor_width_px, info().sensor_height_px);
     {
       std::lock_guard lock(mutex_);
       running_ = true;
@@ -251,7 +251,7 @@ class ReplayCamera : public CameraBase, public TriggerInput {
       // Copied into buffers from the frame pool, as a camera fills its buffers: a loop plays the
       // same frames again, and at a steady rate the copies land in warm memory.
       const DecodedPair& recorded = preloaded_[cursor_++];
-      return DecodedPair{pooled_copy(recorded.a), pooled_copy(recorded.b)};
+      return DecodedPair{frame_buffers().copy(recorded.a), frame_buffers().copy(recorded.b)};
     }
     std::lock_guard lock(mutex_);
     if (ahead_.empty()) return std::nullopt;
@@ -320,7 +320,9 @@ class ReplayCamera : public CameraBase, public TriggerInput {
         const CameraInfo camera = info();
         DecodedPair p;
         for (auto [image, file] : {std::pair{&p.a, &files_[next].a}, std::pair{&p.b, &files_[next].b}}) {
-          if (auto spare = spare_image(camera.sensor_width_px, camera.sensor_height_px)) *image = std::move(*spare);
+          if (auto spare = frame_buffers().reuse(camera.sensor_width_px, camera.sensor_height_px)) {
+            *image = std::move(*spare);
+          }
           io::read_tiff_u16(*file, *image);
         }
         ++next;

@@ -44,6 +44,22 @@ TEST(FramePool, SparesAreBoundedAndTheOldestGoesFirst) {
   EXPECT_EQ(pool.counts().spare, 0u);
 }
 
+TEST(FramePool, ACopyFillsASpareBufferOrIsAPlainCopy) {
+  FramePool pool;
+  ImageU16 source(5, 3);
+  for (std::size_t i = 0; i < source.size(); ++i) source.pixels[i] = std::uint16_t(7 * i + 1);
+  const ImageU16 plain = pool.copy(source);
+  EXPECT_EQ(plain.pixels, source.pixels);
+  ImageU16 spare(5, 3, 9);
+  const std::uint16_t* buffer = spare.pixels.data();
+  pool.give(std::move(spare));
+  const ImageU16 pooled = pool.copy(source);
+  EXPECT_EQ(pooled.pixels.data(), buffer);
+  EXPECT_EQ(pooled.pixels, source.pixels) << "nothing of the spare's old pixels";
+  EXPECT_EQ(pooled.width, 5);
+  EXPECT_EQ(pool.counts().reused, 1u);
+}
+
 TEST(FramePool, APrefillLeavesItsBoundOfSpareBuffersOfTheFramesToCome) {
   FramePool pool(3);
   pool.give(ImageU16(4, 4));

@@ -202,12 +202,12 @@ class AravisCamera final : public CameraBase {
       const void* data = arv_buffer_get_image_data(buffer, &size);
       const std::size_t n = std::size_t(w) * std::size_t(h);
       if (format == ARV_PIXEL_FORMAT_MONO_8 && data && size >= n) {
-        frame.image = take_image(w, h);
+        frame.image = frame_buffers().take(w, h);
         frame.bit_depth = 8;
         const auto* src = static_cast<const std::uint8_t*>(data);
         for (std::size_t i = 0; i < n; ++i) frame.image.pixels[i] = src[i];
       } else if ((format == ARV_PIXEL_FORMAT_MONO_16 || format == ARV_PIXEL_FORMAT_MONO_12) && data && size >= 2 * n) {
-        frame.image = take_image(w, h);
+        frame.image = frame_buffers().take(w, h);
         frame.bit_depth = format == ARV_PIXEL_FORMAT_MONO_12 ? 12 : 16;
         std::memcpy(frame.image.pixels.data(), data, 2 * n);
       } else {
