@@ -4,6 +4,7 @@
 #include <spdlog/fmt/ranges.h>
 #include <spdlog/spdlog.h>
 
+#include <chrono>
 #include <memory>
 
 #include "core/base/errors.hpp"
@@ -53,6 +54,14 @@ ProcessFactory plenoptic_processing(const optics::CameraModel& camera) {
         spdlog::info("run processing, {} tier: calibration {}; {}; {}", process::tier_name(tier), calibration.summary(),
                      processor->setup_note(),
                      processor->note().empty() ? "frames reconstructed on raw pixels" : processor->note());
+        // The lane's pairs in flight get their buffers now, while Armed, not beside the recording.
+        const bool live_lane = tier == config.live_lane_tier();
+        const int in_flight = live_lane ? config.max_pairs_in_flight : QualityLane::kPairsInFlight;
+        const auto t0 = std::chrono::steady_clock::now();
+        const std::size_t bytes = processor->reserve_workspaces(in_flight);
+        spdlog::info("run processing, {} tier: buffers for {} pair(s) in flight reserved, {:.2f} GB, in {:.1f} s",
+                     process::tier_name(tier), in_flight, double(bytes) / 1e9,
+                     std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
         // Volumes are published from the live lane only (the quality lane's would double the traffic).
         const bool keep_volumes = config.publish_volumes && tier == config.live_lane_tier();
         return [processor, keep_volumes](const drivers::FramePair& pair, const CancelFlag& cancel) {

@@ -8,12 +8,12 @@ namespace plenopiv::daemon {
 
 // For each lane of a run: a process::PairProcessor from the settings of the lane's tier in the
 // run's processing spec (RunConfig::spec, the keys core/process reads: docs/daemon.md) and the run's
-// calibration (or the nominal calibration), built once and shared by the lane's concurrent pairs;
-// each pair goes through it with its measured dt and the run's cancel flag. A run whose pairs in
-// flight (both lanes) would not fit this machine's memory, or whose settings do not fit the camera,
-// is refused (InputError) before the run folder exists.
-// The factory keeps the operators (weight tables) of its latest runs (process::OperatorCache, in
-// memory): a run on the camera, calibration and volume of an earlier one builds no tables.
+// calibration (or the nominal calibration), built once and shared by the lane's concurrent pairs,
+// whose buffers it reserves at once (PairProcessor::reserve_workspaces: the run is Armed); each pair goes through it
+// with its measured dt and the run's cancel flag. A run whose pairs in flight (both lanes) would not fit this machine's
+// memory, or whose settings do not fit the camera, is refused (InputError) before the run folder exists. The factory
+// keeps the operators (weight tables) of its latest runs (process::OperatorCache, in memory): a run on the camera,
+// calibration and volume of an earlier one builds no tables.
 ProcessFactory plenoptic_processing(const optics::CameraModel& camera);
 
 }  // namespace plenopiv::daemon

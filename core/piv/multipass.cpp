@@ -300,6 +300,17 @@ std::size_t CorrelationWorkspace::bytes() const {
          sizeof(float);
 }
 
+void CorrelationWorkspace::reserve(std::size_t voxels) {
+  if (!buffers_) throw std::logic_error("correlation: the workspace was moved from");
+  Buffers& b = *buffers_;
+  if (b.busy.exchange(true)) throw std::logic_error("correlation: the workspace is in use by a correlation");
+  struct Release {
+    std::atomic<bool>& busy;
+    ~Release() { busy.store(false); }
+  } release{b.busy};
+  for (BigBuffer<float>* v : {&b.smoothed_a, &b.smoothed_b, &b.deformed_a, &b.deformed_b}) v->assign(voxels, 0.f);
+}
+
 CorrelationResult correlate_volumes(const Volume& a, const Volume& b, const CorrelationSettings& settings,
                                     const std::function<void(const PassReport&)>& on_pass, int depth_context,
                                     CorrelationWorkspace* workspace) {

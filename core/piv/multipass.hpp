@@ -47,6 +47,10 @@ class CorrelationWorkspace {
   CorrelationWorkspace(CorrelationWorkspace&&) noexcept;
   CorrelationWorkspace& operator=(CorrelationWorkspace&&) noexcept;
   std::size_t bytes() const;  // held (the buffers' capacities)
+  // Sizes and writes the buffers for volumes of `voxels` voxels (the reconstruction grid's count),
+  // so that correlations of such volumes afterwards neither allocate nor page-fault them (as
+  // recon::MartWorkspace::reserve). std::logic_error while a correlation uses the workspace.
+  void reserve(std::size_t voxels);
 
   struct Buffers;
 

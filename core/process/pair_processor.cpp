@@ -77,6 +77,20 @@ WorkspacePool::Lease WorkspacePool::take() {
   return Lease(*this, std::move(workspace));
 }
 
+void WorkspacePool::reserve(int count, const std::function<void(PairWorkspace&)>& prepare) {
+  std::lock_guard lock(mutex_);
+  while (int(free_.size()) < count) free_.push_back(std::make_unique<PairWorkspace>());
+  for (const std::unique_ptr<PairWorkspace>& workspace : free_) prepare(*workspace);
+}
+
+std::size_t WorkspacePool::bytes() {
+  std::lock_guard lock(mutex_);
+  std::size_t total = 0;
+  for (const std::unique_ptr<PairWorkspace>& workspace : free_)
+    total += workspace->mart.bytes() + workspace->correlation.bytes();
+  return total;
+}
+
 PairProcessor::PairProcessor(const optics::CameraModel& camera, const calib::LoadedCalibration& calibration,
                              ProcessSettings settings, OperatorCache* operators)
     : settings_(std::move(settings)), raw_width_(camera.sensor().width_px), raw_height_(camera.sensor().height_px) {
@@ -117,6 +131,15 @@ PairResult PairProcessor::process(const ImageF& frame_a, const ImageF& frame_b, 
   recon::validate_image(frame_a, raw_width_, raw_height_, "frame A");
   recon::validate_image(frame_b, raw_width_, raw_height_, "frame B");
   return run(bin_pixels(frame_a, settings_.pixel_binning), bin_pixels(frame_b, settings_.pixel_binning), options);
+}
+
+std::size_t PairProcessor::reserve_workspaces(int pairs) const {
+  const recon::WeightingOperator& weights = op_->weights();
+  workspaces_.reserve(pairs, [&](PairWorkspace& workspace) {
+    workspace.mart.reserve(weights);
+    workspace.correlation.reserve(weights.grid().count());
+  });
+  return workspaces_.bytes();
 }
 
 PairResult PairProcessor::run(const ImageF& frame_a, const ImageF& frame_b, const PairOptions& options) const {

@@ -2,6 +2,7 @@
 // operator, then any number of raw frame pairs through it, from any caller.
 #pragma once
 
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -58,6 +59,10 @@ class WorkspacePool {
     std::unique_ptr<PairWorkspace> workspace_;
   };
   Lease take();
+  // Makes at least `count` workspaces free and passes each free one to `prepare` (the daemon sizes
+  // them before a run's first pair). Holds the pool meanwhile: take() waits.
+  void reserve(int count, const std::function<void(PairWorkspace&)>& prepare);
+  std::size_t bytes();  // held by the free workspaces (their buffers' capacities)
 
  private:
   std::mutex mutex_;
@@ -100,6 +105,13 @@ class PairProcessor {
   // Where the weight tables came from, for the user: "operator built", "operator kept in memory",
   // or the disk cache's line (WeightsDiskCache::last_note).
   const std::string& setup_note() const { return setup_note_; }
+  // Makes the pool hold `pairs` workspaces sized for this operator's largest reconstruction and
+  // correlation (recon::MartWorkspace::reserve, piv::CorrelationWorkspace::reserve), so that up to
+  // `pairs` pairs in flight at once allocate and page-fault none of them. plenopivd calls it while
+  // a run is Armed: a lane's first pair then takes no gigabytes of fresh memory beside the
+  // recording. Seconds at the paper's scale; changes no result. Returns the bytes the pool's
+  // workspaces hold.
+  std::size_t reserve_workspaces(int pairs) const;
 
  private:
   // process_pair on frames already in the operator's pixels, in a workspace from the pool.

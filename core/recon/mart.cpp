@@ -133,6 +133,35 @@ std::size_t MartWorkspace::bytes() const {
   return total;
 }
 
+void MartWorkspace::reserve(const WeightingOperator& op) {
+  if (!buffers_) throw std::logic_error("MART: the workspace was moved from; use the one it was moved to");
+  detail::MartBuffers& b = *buffers_;
+  if (b.busy.exchange(true)) throw std::logic_error("MART: the workspace is in use by a reconstruction");
+  struct Release {
+    std::atomic<bool>& busy;
+    ~Release() { busy.store(false); }
+  } release{b.busy};
+  // Every buffer at the largest size a reconstruction with `op` gives it, written once so that its
+  // pages are in (assign fills; the kernels write their own scratch).
+  const Grid3& g = op.grid();
+  const std::size_t voxels = g.count(), pixels = op.pixel_count();
+  std::vector<std::uint32_t> all(voxels);
+  for (std::size_t i = 0; i < voxels; ++i) all[i] = std::uint32_t(i);
+  b.active.assign(op, std::move(all));
+  for (BigBuffer<float>* v : {&b.e, &b.update, &b.weight, &b.last, &b.log_last, &b.momentum}) v->assign(voxels, 0.f);
+  b.origin.assign(voxels, 0);
+  for (BigBuffer<float>* v : {&b.data, &b.log_data, &b.projection, &b.ratio}) v->assign(pixels, 0.f);
+  b.active.project(op, b.e, b.projection, &b.kernels);
+  b.active.back_project_whitened(op, b.projection, b.update, b.ratio, b.weight, &b.kernels);
+  const std::size_t words = std::size_t(op.image_height() + 63) / 64;
+  b.select.dark.assign(std::size_t(op.image_width()) * words, 0);
+  b.select.per_slice.resize(std::size_t(g.shape[2]));
+  for (auto& slice : b.select.per_slice) {
+    slice.assign(std::size_t(g.shape[0]) * std::size_t(g.shape[1]), 0);
+    slice.clear();
+  }
+}
+
 MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const MartSettings& settings,
                        const IterationCallback& progress) {
   MartWorkspace workspace;

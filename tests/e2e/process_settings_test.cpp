@@ -2,12 +2,15 @@
 // process_pair hands back the box the user asked for (guard slices reconstructed, then dropped).
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cstdint>
 #include <vector>
 
 #include "core/base/errors.hpp"
 #include "core/base/yaml_access.hpp"
 #include "core/calib/nominal_calibration.hpp"
 #include "core/optics/camera_file.hpp"
+#include "core/process/pair_processor.hpp"
 #include "core/process/process.hpp"
 #include "core/recon/mart.hpp"
 #include "core/recon/weights.hpp"
@@ -171,6 +174,55 @@ TEST(ProcessSettings, AKeptWorkspaceGivesTheSameVolumesAndVectors) {
   EXPECT_NE(alone.volume_a.data, alone.volume_b.data);  // two different frames
   EXPECT_GT(workspace.bytes(), 0u);                     // the pairs ran in it
   EXPECT_GT(correlation.bytes(), 0u);
+}
+
+// Workspaces reserved for the operator's largest reconstruction (every voxel of the box active) and
+// its correlation (plenopivd reserves its lanes' buffers while a run is Armed) change no bit, and
+// no pair grows them: neither a particle pair nor frames lit on every pixel (the most voxels MART
+// can keep). (The list of active voxels is the selection's own, made per frame: it may shrink.)
+// PairProcessor's pool reserved twice, with a pair between, holds the same bytes.
+TEST(ProcessSettings, AReservedWorkspaceChangesNoBitAndNoPairGrowsIt) {
+  const auto camera = optics::load_camera_file(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml");
+  const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera));
+  const ProcessSettings s = parse(kVolume + ", depth_guard_mm: 0.25}\n" + kPasses);
+  const ImageF a = two_particle_frame(camera, lenses, 3.0), b = two_particle_frame(camera, lenses, 3.1);
+  const PairOperator op(camera, lenses, calib::geometric_white_image(camera, lenses), s);
+  const PairResult alone = process_pair(op, a, b, s);
+
+  recon::MartWorkspace workspace;
+  piv::CorrelationWorkspace correlation;
+  workspace.reserve(op.weights());
+  correlation.reserve(op.weights().grid().count());
+  const std::size_t mart_bytes = workspace.bytes(), correlation_bytes = correlation.bytes();
+  EXPECT_GE(mart_bytes, 6 * op.weights().grid().count() * sizeof(float));  // the per-voxel arrays
+  EXPECT_EQ(correlation_bytes, 4 * op.weights().grid().count() * sizeof(float));
+  const PairResult kept = process_pair(op, a, b, s, {}, &workspace, &correlation);
+  EXPECT_EQ(kept.volume_a.data, alone.volume_a.data);
+  EXPECT_EQ(kept.volume_b.data, alone.volume_b.data);
+  EXPECT_EQ(kept.correlation.field.dx_mm, alone.correlation.field.dx_mm);
+  EXPECT_EQ(kept.correlation.field.dz_mm, alone.correlation.field.dz_mm);
+  EXPECT_EQ(kept.correlation.flags, alone.correlation.flags);
+  EXPECT_LE(workspace.bytes(), mart_bytes);
+  EXPECT_EQ(correlation.bytes(), correlation_bytes);
+
+  ImageF lit(a.width, a.height);
+  for (float& v : lit.pixels) v = 1000.f;
+  const recon::MartResult all = recon::reconstruct(op.weights(), lit, s.mart, workspace);
+  EXPECT_EQ(all.skipped.voxels_dark, 0u);  // every voxel a pixel sees is active
+  EXPECT_GT(all.skipped.voxels_active, all.skipped.voxels / 2);
+  EXPECT_LE(workspace.bytes(), mart_bytes);
+
+  const calib::LoadedCalibration calibration = calib::nominal_calibration(camera);
+  const PairProcessor processor(camera, calibration, s);
+  const std::size_t pool_bytes = processor.reserve_workspaces(2);
+  EXPECT_GE(pool_bytes, 2 * (mart_bytes + correlation_bytes) * 9 / 10);
+  ImageU16 raw_a(camera.sensor().width_px, camera.sensor().height_px), raw_b = raw_a;
+  for (std::size_t i = 0; i < raw_a.pixels.size(); ++i) {
+    raw_a.pixels[i] = std::uint16_t(std::min(a.pixels[i], 65535.f));
+    raw_b.pixels[i] = std::uint16_t(std::min(b.pixels[i], 65535.f));
+  }
+  processor.process(raw_a, raw_b);
+  EXPECT_EQ(processor.reserve_workspaces(2), pool_bytes);
 }
 
 // Cancelling from the progress callback (plenopiv::Cancelled, as the daemon's stop does) abandons
