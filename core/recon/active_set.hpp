@@ -62,6 +62,9 @@ class ActiveSet {
   // has finished them, on the thread that computed them: per-pixel work on the projection while
   // the band is in cache. Bands are numbered 0..band_count() - 1 and cover the image in order.
   using BandDone = std::function<void(int band, std::size_t first_pixel, std::size_t end_pixel)>;
+  // Sizes and writes `workspace` for this set's passes (a projection on as many threads as the
+  // calling arena has, a two-image back-projection), so that they neither grow nor page-fault it.
+  void reserve(const WeightingOperator& op, Workspace& workspace) const;
   int band_count() const { return bands_; }
 
   // image = W·values (values per active voxel, image of the sensor's size, overwritten).

@@ -151,8 +151,7 @@ void MartWorkspace::reserve(const WeightingOperator& op) {
   for (BigBuffer<float>* v : {&b.e, &b.update, &b.weight, &b.last, &b.log_last, &b.momentum}) v->assign(voxels, 0.f);
   b.origin.assign(voxels, 0);
   for (BigBuffer<float>* v : {&b.data, &b.log_data, &b.projection, &b.ratio}) v->assign(pixels, 0.f);
-  b.active.project(op, b.e, b.projection, &b.kernels);
-  b.active.back_project_whitened(op, b.projection, b.update, b.ratio, b.weight, &b.kernels);
+  b.active.reserve(op, b.kernels);
   const std::size_t words = std::size_t(op.image_height() + 63) / 64;
   b.select.dark.assign(std::size_t(op.image_width()) * words, 0);
   b.select.per_slice.resize(std::size_t(g.shape[2]));

@@ -42,6 +42,15 @@ void run_costliest_first(const std::vector<int>& items, F&& f) {
 
 }  // namespace
 
+void ActiveSet::reserve(const WeightingOperator& op, Workspace& workspace) const {
+  // The sizes project and back_project_images give these buffers (N = 2 images).
+  const std::size_t band_size = std::size_t(kBandRows) * std::size_t(op.image_width());
+  workspace.scaled.assign(order_.size(), 0.f);
+  workspace.sums.assign(2 * order_.size(), 0.0);
+  workspace.band_lanes.assign(std::size_t(tbb::this_task_arena::max_concurrency()) * band_size, 0.f);
+  workspace.image_lanes.assign(2 * std::size_t(bands_) * band_size, 0.f);
+}
+
 void ActiveSet::project(const WeightingOperator& op, std::span<const float> values, std::span<float> image,
                         Workspace* workspace, const BandDone& band_done) const {
   const std::size_t width = std::size_t(op.image_width());
