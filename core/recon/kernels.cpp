@@ -144,14 +144,46 @@ __attribute__((target_clones("avx512f", "avx2", "default"))) void add_columns_is
   }
 }
 
-// Back-projection stage 1 (dot_columns in kernels.hpp), in every build: each row's sum in
-// dot_quads_base's order, lane j of the even quads and of the odd ones in eight accumulators,
-// then even + odd and the lanes pairwise.
-__attribute__((target_clones("avx512f", "avx2", "default"))) void dot_columns_isa(const float* const* band, int images,
-                                                                                  std::size_t width, int words,
-                                                                                  const ColumnJob* jobs, int count) {
-  RowBits lane_bit;
-  for (int l = 0; l < kSubRows; ++l) lane_bit[l] = 1 << l;
+// Back-projection stage 1 (dot_columns in kernels.hpp) on R of a block's kSubRows rows at a time,
+// R floats being one vector register of the build: its eight accumulators (lane j of the even
+// quads and of the odd ones) then stay in registers (16 rows at once would need all sixteen of
+// AVX2's and spill). Each row's sum in dot_quads_base's order, then even + odd and the lanes
+// pairwise: the same operations per row whatever R.
+template <int R>
+struct RowPart;  // R rows of a block: their floats and a mask
+template <>
+struct RowPart<4> {
+  using F = float __attribute__((vector_size(16)));
+  using I = std::int32_t __attribute__((vector_size(16)));
+};
+template <>
+struct RowPart<8> {
+  using F = float __attribute__((vector_size(32)));
+  using I = std::int32_t __attribute__((vector_size(32)));
+};
+template <>
+struct RowPart<16> {
+  using F = float __attribute__((vector_size(64)));
+  using I = std::int32_t __attribute__((vector_size(64)));
+};
+
+template <int R>
+__attribute__((always_inline)) inline void dot_columns_rows(const float* const* band, int images, std::size_t width,
+                                                            int words, const ColumnJob* jobs, int count) {
+  static_assert(kSubRows % R == 0);
+  using Part = typename RowPart<R>::F;
+  using PartBits = typename RowPart<R>::I;
+  const auto dot_part = [](Part* acc, const float* at, const float* w) {
+#pragma GCC unroll 4
+    for (int l = 0; l < kQuad; ++l) {
+      if (w[l] == 0.f) continue;
+      Part p;
+      __builtin_memcpy(&p, at + l * kSubRows, sizeof p);
+      acc[l] += p * w[l];
+    }
+  };
+  PartBits lane_bit;
+  for (int l = 0; l < R; ++l) lane_bit[l] = 1 << l;
   for (int word = 0; word < words; ++word) {
     for (int sub = 0; sub < 64; sub += kSubRows) {
       const std::size_t block = std::size_t(64 * word + sub) * width;
@@ -159,25 +191,40 @@ __attribute__((target_clones("avx512f", "avx2", "default"))) void dot_columns_is
         const ColumnJob& j = jobs[v];
         const std::int32_t bits = std::int32_t((j.rows[word] >> sub) & kSubMask);
         if (bits == 0) continue;
-        const RowBits reached = (RowBits{} + bits) & lane_bit;
         for (int i = 0; i < images; ++i) {
           const float* lanes = band[i] + block;
-          Rows even[kQuad] = {}, odd[kQuad] = {};
-          std::size_t k = 0;
-          for (; k + 2 <= j.n; k += 2) {
-            dot_quad(even, lanes + std::size_t(j.first[k]) * kSubRows, j.w + kQuad * k);
-            dot_quad(odd, lanes + std::size_t(j.first[k + 1]) * kSubRows, j.w + kQuad * (k + 1));
+          for (int h = 0; h < kSubRows; h += R) {
+            const PartBits reached = (PartBits{} + (bits >> h)) & lane_bit;
+            Part even[kQuad] = {}, odd[kQuad] = {};
+            std::size_t k = 0;
+            for (; k + 2 <= j.n; k += 2) {
+              dot_part(even, lanes + std::size_t(j.first[k]) * kSubRows + h, j.w + kQuad * k);
+              dot_part(odd, lanes + std::size_t(j.first[k + 1]) * kSubRows + h, j.w + kQuad * (k + 1));
+            }
+            if (k < j.n) dot_part(even, lanes + std::size_t(j.first[k]) * kSubRows + h, j.w + kQuad * k);
+            const Part lane0 = even[0] + odd[0], lane1 = even[1] + odd[1];
+            const Part lane2 = even[2] + odd[2], lane3 = even[3] + odd[3];
+            const Part sum = (lane0 + lane1) + (lane2 + lane3);
+            const Part kept = reached != 0 ? sum : Part{};
+            __builtin_memcpy(j.sums[std::size_t(i)] + 64 * word + sub + h, &kept, sizeof kept);
           }
-          if (k < j.n) dot_quad(even, lanes + std::size_t(j.first[k]) * kSubRows, j.w + kQuad * k);
-          const Rows lane0 = even[0] + odd[0], lane1 = even[1] + odd[1];
-          const Rows lane2 = even[2] + odd[2], lane3 = even[3] + odd[3];
-          const Rows sum = (lane0 + lane1) + (lane2 + lane3);
-          const Rows kept = reached != 0 ? sum : Rows{};
-          __builtin_memcpy(j.sums[std::size_t(i)] + 64 * word + sub, &kept, sizeof kept);
         }
       }
     }
   }
+}
+
+__attribute__((target("default"))) void dot_columns_isa(const float* const* band, int images, std::size_t width,
+                                                        int words, const ColumnJob* jobs, int count) {
+  dot_columns_rows<4>(band, images, width, words, jobs, count);
+}
+__attribute__((target("avx2"))) void dot_columns_isa(const float* const* band, int images, std::size_t width, int words,
+                                                     const ColumnJob* jobs, int count) {
+  dot_columns_rows<8>(band, images, width, words, jobs, count);
+}
+__attribute__((target("avx512f"))) void dot_columns_isa(const float* const* band, int images, std::size_t width,
+                                                        int words, const ColumnJob* jobs, int count) {
+  dot_columns_rows<16>(band, images, width, words, jobs, count);
 }
 
 // The eq 13 normalisers' first stage (dot_slice_rows in kernels.hpp) in two hand-written builds.
