@@ -97,14 +97,19 @@ PLOTTERS = {"soak.png": ("bench/plot_soak.py", "bench=soak_sample"),
 
 
 def machine():
-    model = "unknown CPU"
+    """Cores, CPU model and its widest vector instructions (the kernels' build: AVX-512, AVX2 or
+    baseline SSE), Debian release."""
+    model, flags = "unknown CPU", set()
     for line in open("/proc/cpuinfo"):
-        if line.startswith("model name"):
+        if line.startswith("model name") and model == "unknown CPU":
             model = line.split(":", 1)[1].strip()
+        if line.startswith("flags"):
+            flags = set(line.split(":", 1)[1].split())
             break
+    isa = "AVX-512" if "avx512f" in flags else "AVX2" if "avx2" in flags else "SSE"
     debian = Path("/etc/debian_version")
     system = f"Debian {debian.read_text().strip()}" if debian.exists() else "Linux"
-    return f"{os.cpu_count()} cores ({model}), {system}"
+    return f"{os.cpu_count()} cores ({model}, {isa}), {system}"
 
 
 def run(name):
