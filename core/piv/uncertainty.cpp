@@ -27,43 +27,60 @@ double dot(const float* x, const float* y, std::size_t n) {
   return sum;
 }
 
-// Replaces `out` (nx, ny, nz; zero outside) by its sums over boxes of (2 r + 1) voxels per axis.
-// `prefix` is scratch: running sums along one axis, whole rows at a time where the axis is y or z.
-void box_sum(std::span<float> out, const std::array<int, 3>& n, const std::array<int, 3>& r,
-             std::vector<float>& prefix) {
-  const std::size_t nx = std::size_t(n[0]), ny = std::size_t(n[1]), nz = std::size_t(n[2]);
-  // Along x: one row at a time.
-  prefix.assign(nx + 1, 0.f);
-  for (std::size_t row = 0; row < ny * nz; ++row) {
-    float* dst = out.data() + row * nx;
-    for (std::size_t x = 0; x < nx; ++x) prefix[x + 1] = prefix[x] + dst[x];
-    for (std::size_t x = 0; x < nx; ++x) {
-      const std::size_t lo = x > std::size_t(r[0]) ? x - r[0] : 0, hi = std::min(nx, x + r[0] + 1);
-      dst[x] = prefix[hi] - prefix[lo];
-    }
-  }
-  // Along y, then z: running sums of whole rows (planes), then differences of them.
+// Sums `in` over boxes of (2 r + 1) voxels per axis into `out`, both laid out as the window's rows
+// (nx voxels, then r[0] zeros: a row's box never reaches the next row) from element r[0] on, with
+// r[0] zeros before the first row and after the last: row (z ny + y) starts at
+// r[0] + (z ny + y) (nx + r[0]). Along x the sum of shifted copies of the whole array; along y and
+// z running sums of whole rows (planes) in `prefix` (scratch), then their differences. Each loop
+// runs over whole rows or planes, so that it vectorises.
+void box_sum(const float* __restrict in, float* __restrict out, const std::array<int, 3>& n,
+             const std::array<int, 3>& r) {
+  const std::size_t ny = std::size_t(n[1]), nz = std::size_t(n[2]), rx = std::size_t(r[0]);
+  const std::size_t stride = std::size_t(n[0]) + rx, begin = rx, end = rx + ny * nz * stride;
+  for (std::size_t i = begin; i < end; ++i) out[i] = in[i];
+  for (std::size_t o = 1; o <= rx; ++o)
+    for (std::size_t i = begin; i < end; ++i) out[i] += in[i + o] + in[i - o];
+}
+
+void box_sum_rows(float* out, const std::array<int, 3>& n, const std::array<int, 3>& r, std::vector<float>& prefix) {
+  const std::size_t ny = std::size_t(n[1]), nz = std::size_t(n[2]), stride = std::size_t(n[0]) + std::size_t(r[0]);
   for (int axis = 1; axis < 3; ++axis) {
-    const std::size_t len = axis == 1 ? ny : nz, width = axis == 1 ? nx : nx * ny;
-    const std::size_t outer = axis == 1 ? nz : 1, outer_stride = nx * ny;
-    prefix.assign((len + 1) * width, 0.f);
+    const std::size_t len = axis == 1 ? ny : nz, width = axis == 1 ? stride : stride * ny;
+    const std::size_t outer = axis == 1 ? nz : 1, outer_stride = stride * ny;
+    prefix.resize((len + 1) * width);
+    std::fill(prefix.begin(), prefix.begin() + std::ptrdiff_t(width), 0.f);
     for (std::size_t o = 0; o < outer; ++o) {
-      float* base = out.data() + o * outer_stride;
+      float* base = out + std::size_t(r[0]) + o * outer_stride;
       for (std::size_t i = 0; i < len; ++i) {
-        const float* src = base + i * width;
-        const float* below = prefix.data() + i * width;
-        float* p = prefix.data() + (i + 1) * width;
+        const float* __restrict src = base + i * width;
+        const float* __restrict below = prefix.data() + i * width;
+        float* __restrict p = prefix.data() + (i + 1) * width;
         for (std::size_t q = 0; q < width; ++q) p[q] = below[q] + src[q];
       }
       for (std::size_t i = 0; i < len; ++i) {
         const std::size_t lo = i > std::size_t(r[axis]) ? i - r[axis] : 0, hi = std::min(len, i + r[axis] + 1);
-        const float* top = prefix.data() + hi * width;
-        const float* bottom = prefix.data() + lo * width;
-        float* dst = base + i * width;
+        const float* __restrict top = prefix.data() + hi * width;
+        const float* __restrict bottom = prefix.data() + lo * width;
+        float* __restrict dst = base + i * width;
         for (std::size_t q = 0; q < width; ++q) dst[q] = top[q] - bottom[q];
       }
     }
   }
+}
+
+// Copies `len` floats of `src` (zeros when null) to `dst` and returns their sum (float lanes, in
+// double at the end).
+double copy_row(const float* __restrict src, std::size_t len, float* __restrict dst) {
+  if (!src) {
+    std::fill(dst, dst + len, 0.f);
+    return 0;
+  }
+  float sum = 0;
+  for (std::size_t x = 0; x < len; ++x) {
+    dst[x] = src[x];
+    sum += src[x];
+  }
+  return sum;
 }
 
 // The 3-point Gaussian fit's offset error when C(+1) and C(-1) move apart by `spread` from their
@@ -88,6 +105,7 @@ std::array<float, 3> correlation_statistics_sigma(std::span<const float> a, std:
   // The correlation's domain: the window, `depth_margin` slices more at each depth end.
   const std::array<int, 3> n{window[0], window[1], window[2] + 2 * depth_margin};
   const std::size_t count = std::size_t(n[0]) * n[1] * n[2];
+  const std::size_t row_len = std::size_t(n[0]), rows = count / row_len;
   s.a.resize(count);
   s.b.resize(count);
   const std::size_t plane = std::size_t(shape[0]) * shape[1];
@@ -98,71 +116,55 @@ std::array<float, 3> correlation_statistics_sigma(std::span<const float> a, std:
     for (int y = 0; y < n[1]; ++y) {
       const std::size_t row =
           std::size_t(in_volume ? vz : 0) * plane + std::size_t(origin[1] + y) * shape[0] + origin[0];
-      const std::size_t o = (std::size_t(z) * n[1] + y) * n[0];
-      for (int x = 0; x < n[0]; ++x) {
-        const float va = in_a ? a[row + std::size_t(x)] : 0.f, vb = in_volume ? b[row + std::size_t(x)] : 0.f;
-        s.a[o + std::size_t(x)] = va;
-        s.b[o + std::size_t(x)] = vb;
-        sum_a += va;
-        sum_b += vb;
-      }
+      const std::size_t o = (std::size_t(z) * n[1] + y) * row_len;
+      sum_a += copy_row(in_a ? a.data() + row : nullptr, row_len, s.a.data() + o);
+      sum_b += copy_row(in_volume ? b.data() + row : nullptr, row_len, s.b.data() + o);
     }
   }
   // A's mean over its own voxels (zeros around it stay zero), B's over the whole domain.
   const float mean_a = float(sum_a / (double(window[0]) * window[1] * window[2])),
               mean_b = float(sum_b / double(count));
-  for (int z = depth_margin; z < depth_margin + window[2]; ++z)
-    for (std::size_t q = std::size_t(z) * n[0] * n[1]; q < std::size_t(z + 1) * n[0] * n[1]; ++q) s.a[q] -= mean_a;
+  for (std::size_t q = std::size_t(depth_margin) * n[0] * n[1]; q < std::size_t(depth_margin + window[2]) * n[0] * n[1];
+       ++q)
+    s.a[q] -= mean_a;
   for (float& v : s.b) v -= mean_b;
 
   // B rolled by the shift, cyclically: rolled(x) = b(x + shift), so that the peak's neighbours are
-  // x's neighbours. `b` then holds it (the window is no longer needed).
+  // x's neighbours; along x a row's two parts swap places.
   s.rolled.resize(count);
   {
-    std::array<std::vector<int>, 3> from;
-    for (int k = 0; k < 3; ++k) {
-      from[k].resize(std::size_t(n[k]));
-      for (int i = 0; i < n[k]; ++i) from[k][std::size_t(i)] = (((i + shift[k]) % n[k]) + n[k]) % n[k];
-    }
+    const auto wrap = [](int i, int len) { return ((i % len) + len) % len; };
+    const std::size_t sx = std::size_t(wrap(shift[0], n[0]));
     std::size_t q = 0;
     for (int z = 0; z < n[2]; ++z)
-      for (int y = 0; y < n[1]; ++y) {
+      for (int y = 0; y < n[1]; ++y, q += row_len) {
         const float* row =
-            s.b.data() + (std::size_t(from[2][std::size_t(z)]) * n[1] + std::size_t(from[1][std::size_t(y)])) * n[0];
-        for (int x = 0; x < n[0]; ++x, ++q) s.rolled[q] = row[from[0][std::size_t(x)]];
+            s.b.data() + (std::size_t(wrap(z + shift[2], n[2])) * n[1] + wrap(y + shift[1], n[1])) * row_len;
+        std::copy(row + sx, row + row_len, s.rolled.data() + q);
+        std::copy(row, row + sx, s.rolled.data() + q + (row_len - sx));
       }
   }
   const float* pa = s.a.data();
   const float* pb = s.rolled.data();
-  const std::size_t row_len = std::size_t(n[0]), rows = count / row_len;
+  // The row of x's +1 neighbours along y or z (cyclic), from the row index (z ny + y).
+  const auto next_row = [&](int axis, std::size_t r) {
+    const std::size_t y = r % std::size_t(n[1]), z = r / std::size_t(n[1]);
+    return (axis == 1 ? z * n[1] + (y + 1) % std::size_t(n[1]) : ((z + 1) % std::size_t(n[2])) * n[1] + y) * row_len;
+  };
   double c0 = 0;
   for (std::size_t row = 0; row < rows; ++row) c0 += dot(pa + row * row_len, pb + row * row_len, row_len);
-  std::array<double, 3> c_plus{0, 0, 0}, c_minus{0, 0, 0}, mean{0, 0, 0};
-  for (int axis = 0; axis < 3; ++axis) {
-    s.delta[axis].resize(count);
-    float* d = s.delta[axis].data();
-    for (int z = 0; z < n[2]; ++z)
-      for (int y = 0; y < n[1]; ++y) {
-        const std::size_t row = (std::size_t(z) * n[1] + y) * row_len;
-        if (axis == 0) {
-          // x's +1 neighbour is the next voxel of the row, the first one for the last.
-          const std::size_t last = row_len - 1;
-          c_plus[axis] += dot(pa + row, pb + row + 1, last) + double(pa[row + last]) * pb[row];
-          c_minus[axis] += dot(pa + row + 1, pb + row, last) + double(pa[row]) * pb[row + last];
-          for (std::size_t x = 0; x < last; ++x)
-            d[row + x] = pa[row + x] * pb[row + x + 1] - pa[row + x + 1] * pb[row + x];
-          d[row + last] = pa[row + last] * pb[row] - pa[row] * pb[row + last];
-        } else {
-          // The row of +1 neighbours along y or z (cyclic).
-          const std::size_t next = axis == 1 ? (std::size_t(z) * n[1] + (y + 1) % n[1]) * row_len
-                                             : (std::size_t((z + 1) % n[2]) * n[1] + y) * row_len;
-          c_plus[axis] += dot(pa + row, pb + next, row_len);
-          c_minus[axis] += dot(pa + next, pb + row, row_len);
-          for (std::size_t x = 0; x < row_len; ++x)
-            d[row + x] = pa[row + x] * pb[next + x] - pa[next + x] * pb[row + x];
-        }
-      }
-    mean[axis] = c_plus[axis] - c_minus[axis];
+  std::array<double, 3> c_plus{0, 0, 0}, c_minus{0, 0, 0};
+  const std::size_t last = row_len - 1;
+  for (std::size_t r = 0; r < rows; ++r) {
+    const std::size_t row = r * row_len;
+    // x's +1 neighbour is the next voxel of the row, the first one for the last.
+    c_plus[0] += dot(pa + row, pb + row + 1, last) + double(pa[row + last]) * pb[row];
+    c_minus[0] += dot(pa + row + 1, pb + row, last) + double(pa[row]) * pb[row + last];
+    for (int axis = 1; axis < 3; ++axis) {
+      const std::size_t next = next_row(axis, r);
+      c_plus[axis] += dot(pa + row, pb + next, row_len);
+      c_minus[axis] += dot(pa + next, pb + row, row_len);
+    }
   }
   // The box: about two Gaussian widths of the correlation peak per axis, sigma_c^2 = -1 / (the
   // curvature of ln C), at least 1 voxel and at most a quarter of the window.
@@ -174,17 +176,32 @@ std::array<float, 3> correlation_statistics_sigma(std::span<const float> a, std:
     }
     radius[axis] = std::clamp(radius[axis], 1, std::max(1, window[axis] / 4));
   }
+  // dC' in rows padded with radius[0] zeros (box_sum's layout); the pads stay zero, so the box sums'
+  // values there are multiplied by zeros.
+  const std::size_t rx = std::size_t(radius[0]), stride = row_len + rx;
+  s.delta.assign(rows * stride + 2 * rx, 0.f);
+  s.box.resize(s.delta.size());
   std::array<float, 3> sigma{};
-  s.box.resize(count);
   for (int axis = 0; axis < 3; ++axis) {
-    std::vector<float>& d = s.delta[axis];
-    const float m = float(mean[axis] / double(count));
-    for (float& v : d) v -= m;
-    std::copy(d.begin(), d.end(), s.box.begin());
-    box_sum(s.box, n, radius, s.line);
+    // dC'(x) = a(x) b(x + e) - a(x + e) b(x) less its mean, (C(+1) - C(-1)) / count.
+    const float m = float((c_plus[axis] - c_minus[axis]) / double(count));
+    for (std::size_t r = 0; r < rows; ++r) {
+      const std::size_t row = r * row_len;
+      float* __restrict d = s.delta.data() + rx + r * stride;
+      if (axis == 0) {
+        for (std::size_t x = 0; x < last; ++x)
+          d[x] = (pa[row + x] * pb[row + x + 1] - pa[row + x + 1] * pb[row + x]) - m;
+        d[last] = (pa[row + last] * pb[row] - pa[row] * pb[row + last]) - m;
+      } else {
+        const std::size_t next = next_row(axis, r);
+        for (std::size_t x = 0; x < row_len; ++x) d[x] = (pa[row + x] * pb[next + x] - pa[next + x] * pb[row + x]) - m;
+      }
+    }
+    box_sum(s.delta.data(), s.box.data(), n, radius);
+    box_sum_rows(s.box.data(), n, radius, s.line);
     double spread_sq = 0;
-    for (std::size_t row = 0; row < rows; ++row)
-      spread_sq += dot(d.data() + row * row_len, s.box.data() + row * row_len, row_len);
+    for (std::size_t r = 0; r < rows; ++r)
+      spread_sq += dot(s.delta.data() + rx + r * stride, s.box.data() + rx + r * stride, row_len);
     const double spread = std::sqrt(std::max(0.0, spread_sq));
     sigma[axis] = fit_sigma(c0, 0.5 * (c_plus[axis] + c_minus[axis]), spread);
   }
