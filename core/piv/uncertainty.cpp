@@ -4,10 +4,10 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
-#include <xmmintrin.h>
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
 
 namespace plenopiv::piv {
@@ -15,14 +15,22 @@ namespace {
 
 constexpr float kNoEstimate = std::numeric_limits<float>::quiet_NaN();
 
-// sum_i x[i] y[i] over n floats: four lanes (SSE) in float, each row's lanes added in double.
-double dot(const float* x, const float* y, std::size_t n) {
-  __m128 lanes = _mm_setzero_ps();
+// Eight floats: GCC's vector extension, so each target clone of correlation_statistics_sigma gets
+// its own instructions (two SSE or one AVX operation) for the same operations in the same order.
+typedef float Lanes8 __attribute__((vector_size(32)));
+
+// sum_i x[i] y[i] over n floats: eight lanes in float, added in double with the remainder.
+[[gnu::always_inline]] inline double dot(const float* x, const float* y, std::size_t n) {
+  Lanes8 lanes = {0, 0, 0, 0, 0, 0, 0, 0};
   std::size_t i = 0;
-  for (; i + 4 <= n; i += 4) lanes = _mm_add_ps(lanes, _mm_mul_ps(_mm_loadu_ps(x + i), _mm_loadu_ps(y + i)));
-  float part[4];
-  _mm_storeu_ps(part, lanes);
-  double sum = double(part[0]) + part[1] + part[2] + part[3];
+  for (; i + 8 <= n; i += 8) {
+    Lanes8 u, v;
+    std::memcpy(&u, x + i, sizeof u);
+    std::memcpy(&v, y + i, sizeof v);
+    lanes += u * v;
+  }
+  double sum = 0;
+  for (int k = 0; k < 8; ++k) sum += lanes[k];
   for (; i < n; ++i) sum += double(x[i]) * y[i];
   return sum;
 }
@@ -33,8 +41,8 @@ double dot(const float* x, const float* y, std::size_t n) {
 // r[0] + (z ny + y) (nx + r[0]). Along x the sum of shifted copies of the whole array; along y and
 // z running sums of whole rows (planes) in `prefix` (scratch), then their differences. Each loop
 // runs over whole rows or planes, so that it vectorises.
-void box_sum(const float* __restrict in, float* __restrict out, const std::array<int, 3>& n,
-             const std::array<int, 3>& r) {
+[[gnu::always_inline]] inline void box_sum(const float* __restrict in, float* __restrict out,
+                                           const std::array<int, 3>& n, const std::array<int, 3>& r) {
   const std::size_t ny = std::size_t(n[1]), nz = std::size_t(n[2]), rx = std::size_t(r[0]);
   const std::size_t stride = std::size_t(n[0]) + rx, begin = rx, end = rx + ny * nz * stride;
   for (std::size_t i = begin; i < end; ++i) out[i] = in[i];
@@ -42,7 +50,8 @@ void box_sum(const float* __restrict in, float* __restrict out, const std::array
     for (std::size_t i = begin; i < end; ++i) out[i] += in[i + o] + in[i - o];
 }
 
-void box_sum_rows(float* out, const std::array<int, 3>& n, const std::array<int, 3>& r, std::vector<float>& prefix) {
+[[gnu::always_inline]] inline void box_sum_rows(float* out, const std::array<int, 3>& n, const std::array<int, 3>& r,
+                                                std::vector<float>& prefix) {
   const std::size_t ny = std::size_t(n[1]), nz = std::size_t(n[2]), stride = std::size_t(n[0]) + std::size_t(r[0]);
   for (int axis = 1; axis < 3; ++axis) {
     const std::size_t len = axis == 1 ? ny : nz, width = axis == 1 ? stride : stride * ny;
@@ -70,7 +79,7 @@ void box_sum_rows(float* out, const std::array<int, 3>& n, const std::array<int,
 
 // Copies `len` floats of `src` (zeros when null) to `dst` and returns their sum (float lanes, in
 // double at the end).
-double copy_row(const float* __restrict src, std::size_t len, float* __restrict dst) {
+[[gnu::always_inline]] inline double copy_row(const float* __restrict src, std::size_t len, float* __restrict dst) {
   if (!src) {
     std::fill(dst, dst + len, 0.f);
     return 0;
@@ -98,10 +107,10 @@ float fit_sigma(double c0, double c_pm, double spread) {
 
 }  // namespace
 
-std::array<float, 3> correlation_statistics_sigma(std::span<const float> a, std::span<const float> b,
-                                                  const std::array<int, 3>& shape, const std::array<int, 3>& origin,
-                                                  const std::array<int, 3>& window, int depth_margin,
-                                                  const std::array<int, 3>& shift, UncertaintyScratch& s) {
+__attribute__((target_clones("avx512f", "avx2", "default"))) std::array<float, 3> correlation_statistics_sigma(
+    std::span<const float> a, std::span<const float> b, const std::array<int, 3>& shape,
+    const std::array<int, 3>& origin, const std::array<int, 3>& window, int depth_margin,
+    const std::array<int, 3>& shift, UncertaintyScratch& s) {
   // The correlation's domain: the window, `depth_margin` slices more at each depth end.
   const std::array<int, 3> n{window[0], window[1], window[2] + 2 * depth_margin};
   const std::size_t count = std::size_t(n[0]) * n[1] * n[2];
