@@ -15,65 +15,81 @@ namespace {
 
 constexpr float kNoEstimate = std::numeric_limits<float>::quiet_NaN();
 
-// Eight floats: GCC's vector extension, so each target clone of correlation_statistics_sigma gets
-// its own instructions (two SSE or one AVX operation) for the same operations in the same order.
+// Eight floats (four doubles): GCC's vector extension, so each target clone of
+// correlation_statistics_sigma gets its own instructions (SSE, AVX or AVX-512) for the same
+// operations in the same order.
 typedef float Lanes8 __attribute__((vector_size(32)));
+typedef float Floats4 __attribute__((vector_size(16)));
+typedef double Doubles4 __attribute__((vector_size(32)));
 
-// sum_i x[i] y[i] over n floats: eight lanes in float, added in double with the remainder.
+// sum_i x[i] y[i] over n floats: products summed in eight float lanes over blocks of 64, each
+// block's lanes added into eight double lanes, the remainder in double.
 [[gnu::always_inline]] inline double dot(const float* x, const float* y, std::size_t n) {
-  Lanes8 lanes = {0, 0, 0, 0, 0, 0, 0, 0};
+  constexpr std::size_t block = 64;
+  Doubles4 low = {0, 0, 0, 0}, high = low;
+  const std::size_t whole = n - n % 8;
   std::size_t i = 0;
-  for (; i + 8 <= n; i += 8) {
-    Lanes8 u, v;
-    std::memcpy(&u, x + i, sizeof u);
-    std::memcpy(&v, y + i, sizeof v);
-    lanes += u * v;
+  while (i < whole) {
+    const std::size_t end = std::min(whole, i + block);
+    Lanes8 lanes = {0, 0, 0, 0, 0, 0, 0, 0};
+    for (; i < end; i += 8) {
+      Lanes8 u, v;
+      std::memcpy(&u, x + i, sizeof u);
+      std::memcpy(&v, y + i, sizeof v);
+      lanes += u * v;
+    }
+    Floats4 l, h;
+    std::memcpy(&l, &lanes, sizeof l);
+    std::memcpy(&h, reinterpret_cast<const char*>(&lanes) + sizeof l, sizeof h);
+    low += __builtin_convertvector(l, Doubles4);
+    high += __builtin_convertvector(h, Doubles4);
   }
-  double sum = 0;
-  for (int k = 0; k < 8; ++k) sum += lanes[k];
+  const Doubles4 both = low + high;
+  double sum = (both[0] + both[1]) + (both[2] + both[3]);
   for (; i < n; ++i) sum += double(x[i]) * y[i];
   return sum;
 }
 
-// Sums `in` over boxes of (2 r + 1) voxels per axis into `out`, both laid out as the window's rows
-// (nx voxels, then r[0] zeros: a row's box never reaches the next row) from element r[0] on, with
-// r[0] zeros before the first row and after the last: row (z ny + y) starts at
-// r[0] + (z ny + y) (nx + r[0]). Along x the sum of shifted copies of the whole array; along y and
-// z running sums of whole rows (planes) in `prefix` (scratch), then their differences. Each loop
-// runs over whole rows or planes, so that it vectorises.
-[[gnu::always_inline]] inline void box_sum(const float* __restrict in, float* __restrict out,
-                                           const std::array<int, 3>& n, const std::array<int, 3>& r) {
-  const std::size_t ny = std::size_t(n[1]), nz = std::size_t(n[2]), rx = std::size_t(r[0]);
-  const std::size_t stride = std::size_t(n[0]) + rx, begin = rx, end = rx + ny * nz * stride;
-  for (std::size_t i = begin; i < end; ++i) out[i] = in[i];
-  for (std::size_t o = 1; o <= rx; ++o)
-    for (std::size_t i = begin; i < end; ++i) out[i] += in[i + o] + in[i - o];
+// Adds in[j + shift] to out[j] for j in [0, len): one step of a box sum along an axis whose
+// neighbours lie `shift` elements apart.
+[[gnu::always_inline]] inline void add_shifted(const float* in, float* __restrict out, std::size_t len,
+                                               std::ptrdiff_t shift) {
+  for (std::size_t j = 0; j < len; ++j) out[j] += in[std::ptrdiff_t(j) + shift];
 }
 
-[[gnu::always_inline]] inline void box_sum_rows(float* out, const std::array<int, 3>& n, const std::array<int, 3>& r,
-                                                std::vector<float>& prefix) {
-  const std::size_t ny = std::size_t(n[1]), nz = std::size_t(n[2]), stride = std::size_t(n[0]) + std::size_t(r[0]);
-  for (int axis = 1; axis < 3; ++axis) {
-    const std::size_t len = axis == 1 ? ny : nz, width = axis == 1 ? stride : stride * ny;
-    const std::size_t outer = axis == 1 ? nz : 1, outer_stride = stride * ny;
-    prefix.resize((len + 1) * width);
-    std::fill(prefix.begin(), prefix.begin() + std::ptrdiff_t(width), 0.f);
-    for (std::size_t o = 0; o < outer; ++o) {
-      float* base = out + std::size_t(r[0]) + o * outer_stride;
-      for (std::size_t i = 0; i < len; ++i) {
-        const float* __restrict src = base + i * width;
-        const float* __restrict below = prefix.data() + i * width;
-        float* __restrict p = prefix.data() + (i + 1) * width;
-        for (std::size_t q = 0; q < width; ++q) p[q] = below[q] + src[q];
-      }
-      for (std::size_t i = 0; i < len; ++i) {
-        const std::size_t lo = i > std::size_t(r[axis]) ? i - r[axis] : 0, hi = std::min(len, i + r[axis] + 1);
-        const float* __restrict top = prefix.data() + hi * width;
-        const float* __restrict bottom = prefix.data() + lo * width;
-        float* __restrict dst = base + i * width;
-        for (std::size_t q = 0; q < width; ++q) dst[q] = top[q] - bottom[q];
-      }
+// Sums `in` over boxes of (2 r + 1) voxels per axis, clipped at the window's faces, into `out`;
+// `tmp` is scratch of the same size. All three are laid out as the window's rows (nx voxels, then
+// r[0] zeros: a row's box never reaches the next row) from element r[0] on, with r[0] zeros before
+// the first row and after the last: row (z ny + y) starts at r[0] + (z ny + y) (nx + r[0]). Each
+// axis adds shifted copies of whole slabs, so that every loop is long and vectorises.
+[[gnu::always_inline]] inline void box_sum(const float* __restrict in, float* __restrict tmp, float* __restrict out,
+                                           const std::array<int, 3>& n, const std::array<int, 3>& r) {
+  const std::size_t ny = std::size_t(n[1]), nz = std::size_t(n[2]), rx = std::size_t(r[0]);
+  const std::size_t stride = std::size_t(n[0]) + rx, plane = ny * stride, total = nz * plane;
+  // Along x (into out): the pads keep rows apart.
+  for (std::size_t i = rx; i < rx + total; ++i) out[i] = in[i];
+  for (std::size_t o = 1; o <= rx; ++o)
+    for (std::size_t i = rx; i < rx + total; ++i) out[i] += in[i + o] + in[i - o];
+  // Along y (into tmp), slab by slab: row y takes the rows y +- o of its slab.
+  const std::size_t ry = std::min(std::size_t(r[1]), ny - 1), rz = std::min(std::size_t(r[2]), nz - 1);
+  for (std::size_t z = 0; z < nz; ++z) {
+    const float* src = out + rx + z * plane;
+    float* dst = tmp + rx + z * plane;
+    std::copy(src, src + plane, dst);
+    for (std::size_t o = 1; o <= ry; ++o) {
+      const std::ptrdiff_t d = std::ptrdiff_t(o * stride);
+      add_shifted(src, dst, plane - o * stride, d);
+      add_shifted(src + o * stride, dst + o * stride, plane - o * stride, -d);
     }
+  }
+  // Along z (into out): slab z takes the slabs z +- o of the window.
+  const float* src = tmp + rx;
+  float* dst = out + rx;
+  std::copy(src, src + total, dst);
+  for (std::size_t o = 1; o <= rz; ++o) {
+    const std::ptrdiff_t d = std::ptrdiff_t(o * plane);
+    add_shifted(src, dst, total - o * plane, d);
+    add_shifted(src + o * plane, dst + o * plane, total - o * plane, -d);
   }
 }
 
@@ -160,20 +176,29 @@ __attribute__((target_clones("avx512f", "avx2", "default"))) std::array<float, 3
     const std::size_t y = r % std::size_t(n[1]), z = r / std::size_t(n[1]);
     return (axis == 1 ? z * n[1] + (y + 1) % std::size_t(n[1]) : ((z + 1) % std::size_t(n[2])) * n[1] + y) * row_len;
   };
-  double c0 = 0;
-  for (std::size_t row = 0; row < rows; ++row) c0 += dot(pa + row * row_len, pb + row * row_len, row_len);
-  std::array<double, 3> c_plus{0, 0, 0}, c_minus{0, 0, 0};
-  const std::size_t last = row_len - 1;
-  for (std::size_t r = 0; r < rows; ++r) {
-    const std::size_t row = r * row_len;
-    // x's +1 neighbour is the next voxel of the row, the first one for the last.
-    c_plus[0] += dot(pa + row, pb + row + 1, last) + double(pa[row + last]) * pb[row];
-    c_minus[0] += dot(pa + row + 1, pb + row, last) + double(pa[row]) * pb[row + last];
-    for (int axis = 1; axis < 3; ++axis) {
-      const std::size_t next = next_row(axis, r);
-      c_plus[axis] += dot(pa + row, pb + next, row_len);
-      c_minus[axis] += dot(pa + next, pb + row, row_len);
+  // C at the peak and at its cyclic +-1 neighbours, as long dots over the flattened windows: along
+  // x the neighbour of a row's last voxel is its first, not the next row's; along y a slab's last
+  // row wraps to its first; along z the last slab to the first.
+  const std::size_t last = row_len - 1, slab_size = row_len * std::size_t(n[1]);
+  const double c0 = dot(pa, pb, count);
+  std::array<double, 3> c_plus{dot(pa, pb + 1, count - 1), 0, 0}, c_minus{dot(pa + 1, pb, count - 1), 0, 0};
+  for (std::size_t row = 0; row < count; row += row_len) {
+    if (row + row_len < count) {
+      c_plus[0] -= double(pa[row + last]) * pb[row + row_len];
+      c_minus[0] -= double(pa[row + row_len]) * pb[row + last];
     }
+    c_plus[0] += double(pa[row + last]) * pb[row];
+    c_minus[0] += double(pa[row]) * pb[row + last];
+  }
+  for (std::size_t slab = 0; slab < count; slab += slab_size) {
+    const std::size_t inner = slab_size - row_len;
+    c_plus[1] += dot(pa + slab, pb + slab + row_len, inner) + dot(pa + slab + inner, pb + slab, row_len);
+    c_minus[1] += dot(pa + slab + row_len, pb + slab, inner) + dot(pa + slab, pb + slab + inner, row_len);
+  }
+  {
+    const std::size_t inner = count - slab_size;
+    c_plus[2] = dot(pa, pb + slab_size, inner) + dot(pa + inner, pb, slab_size);
+    c_minus[2] = dot(pa + slab_size, pb, inner) + dot(pa, pb + inner, slab_size);
   }
   // The box: about two Gaussian widths of the correlation peak per axis, sigma_c^2 = -1 / (the
   // curvature of ln C), at least 1 voxel and at most a quarter of the window.
@@ -190,6 +215,7 @@ __attribute__((target_clones("avx512f", "avx2", "default"))) std::array<float, 3
   const std::size_t rx = std::size_t(radius[0]), stride = row_len + rx;
   s.delta.assign(rows * stride + 2 * rx, 0.f);
   s.box.resize(s.delta.size());
+  s.line.resize(s.delta.size());
   std::array<float, 3> sigma{};
   for (int axis = 0; axis < 3; ++axis) {
     // dC'(x) = a(x) b(x + e) - a(x + e) b(x) less its mean, (C(+1) - C(-1)) / count.
@@ -206,11 +232,9 @@ __attribute__((target_clones("avx512f", "avx2", "default"))) std::array<float, 3
         for (std::size_t x = 0; x < row_len; ++x) d[x] = (pa[row + x] * pb[next + x] - pa[next + x] * pb[row + x]) - m;
       }
     }
-    box_sum(s.delta.data(), s.box.data(), n, radius);
-    box_sum_rows(s.box.data(), n, radius, s.line);
-    double spread_sq = 0;
-    for (std::size_t r = 0; r < rows; ++r)
-      spread_sq += dot(s.delta.data() + rx + r * stride, s.box.data() + rx + r * stride, row_len);
+    box_sum(s.delta.data(), s.line.data(), s.box.data(), n, radius);
+    // The pads of dC' are zero: one dot over the padded rows.
+    const double spread_sq = dot(s.delta.data() + rx, s.box.data() + rx, rows * stride);
     const double spread = std::sqrt(std::max(0.0, spread_sq));
     sigma[axis] = fit_sigma(c0, 0.5 * (c_plus[axis] + c_minus[axis]), spread);
   }

@@ -14,7 +14,7 @@ namespace plenopiv::piv {
 struct UncertaintyScratch {
   std::vector<float> a, b, rolled;  // the two windows, mean-subtracted; b rolled by the shift
   std::vector<float> delta;         // per-voxel asymmetry of the +-1 neighbours along one axis
-  std::vector<float> box, line;     // box sums of delta, and their running sums
+  std::vector<float> box, line;     // box sums of delta, and its sums along x and y
 };
 
 // The standard uncertainty (voxels, x y z) of the sub-voxel peak position of one window's
