@@ -121,9 +121,9 @@ float fit_sigma(double c0, double c_pm, double spread) {
   return den > 0 ? float(spread / den) : kNoEstimate;
 }
 
-}  // namespace
-
-__attribute__((target_clones("avx512f", "avx2", "default"))) std::array<float, 3> correlation_statistics_sigma(
+// correlation_statistics_sigma's work, in one clone per instruction set (internal: clang gives a
+// function with external linkage no dispatch, only its first clone).
+__attribute__((target_clones("avx512f", "avx2", "default"))) std::array<float, 3> sigma_of_window(
     std::span<const float> a, std::span<const float> b, const std::array<int, 3>& shape,
     const std::array<int, 3>& origin, const std::array<int, 3>& window, int depth_margin,
     const std::array<int, 3>& shift, UncertaintyScratch& s) {
@@ -239,6 +239,15 @@ __attribute__((target_clones("avx512f", "avx2", "default"))) std::array<float, 3
     sigma[axis] = fit_sigma(c0, 0.5 * (c_plus[axis] + c_minus[axis]), spread);
   }
   return sigma;
+}
+
+}  // namespace
+
+std::array<float, 3> correlation_statistics_sigma(std::span<const float> a, std::span<const float> b,
+                                                  const std::array<int, 3>& shape, const std::array<int, 3>& origin,
+                                                  const std::array<int, 3>& window, int depth_margin,
+                                                  const std::array<int, 3>& shift, UncertaintyScratch& scratch) {
+  return sigma_of_window(a, b, shape, origin, window, depth_margin, shift, scratch);
 }
 
 void smooth_sigma(std::vector<float>& sigma, std::span<const std::uint8_t> valid, std::array<int, 3> count, int passes,
