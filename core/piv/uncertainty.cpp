@@ -93,8 +93,8 @@ typedef double Doubles4 __attribute__((vector_size(32)));
   }
 }
 
-// Copies `len` floats of `src` (zeros when null) to `dst` and returns their sum (float lanes, in
-// double at the end).
+// Copies `len` floats of `src` (zeros when null) to `dst` and returns their sum (in float, in
+// order; the caller adds the rows' sums in double).
 [[gnu::always_inline]] inline double copy_row(const float* __restrict src, std::size_t len, float* __restrict dst) {
   if (!src) {
     std::fill(dst, dst + len, 0.f);
