@@ -15,9 +15,8 @@ namespace {
 
 constexpr float kNoEstimate = std::numeric_limits<float>::quiet_NaN();
 
-// Eight floats (four doubles): GCC's vector extension, so each target clone of
-// correlation_statistics_sigma gets its own instructions (SSE, AVX or AVX-512) for the same
-// operations in the same order.
+// Eight floats (four doubles): GCC's vector extension, so each target clone of sigma_of_window
+// gets its own instructions (SSE, AVX or AVX-512) for the same operations in the same order.
 typedef float Lanes8 __attribute__((vector_size(32)));
 typedef float Floats4 __attribute__((vector_size(16)));
 typedef double Doubles4 __attribute__((vector_size(32)));
