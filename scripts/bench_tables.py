@@ -177,8 +177,9 @@ class Result:
         carried = self.meta.get("carried over")
         if carried:
             m = self.meta
-            return (f"*Carried over, not rerun: measured {m.get('date', '?')} on the code of commit "
-                    f"{m.get('commit', '?')}, {m.get('machine', '?')}, {m.get('load', '?')}; {carried}. "
+            # Why it was carried over stays in the results file; the page says when and where.
+            return (f"*Not rerun since {m.get('date', '?')} (commit {m.get('commit', '?')}, "
+                    f"{m.get('machine', '?')}; why: docs/bench-results/{self.name}.txt). "
                     f"Rerun: `/usr/bin/python3 scripts/bench_tables.py --run {self.name}`.*")
         if not self.exists:
             command = " ".join(BENCHES[self.name][1])
