@@ -9,16 +9,14 @@ function(plenopiv_defaults target)
   plenopiv_instrument(${target})
 endfunction()
 
-# PLENOPIV_SANITIZE and PLENOPIV_FUZZ on one target: its code is instrumented, and an executable
-# links the sanitizer runtimes. UBSan reports stay recoverable so that UBSAN_OPTIONS decides
-# (halt_on_error=1 and a suppression file in .ci/run).
+# PLENOPIV_SANITIZE on one target: its code is instrumented, and an executable links the sanitizer
+# runtimes. UBSan reports stay recoverable so that UBSAN_OPTIONS decides (halt_on_error=1 and a
+# suppression file in .ci/run). libFuzzer's coverage goes only to the code the fuzz targets feed
+# (tests/fuzz/CMakeLists.txt).
 function(plenopiv_instrument target)
   if(PLENOPIV_SANITIZE)
     target_compile_options(${target} PRIVATE -fsanitize=${PLENOPIV_SANITIZE} -fno-omit-frame-pointer)
     target_link_options(${target} PRIVATE -fsanitize=${PLENOPIV_SANITIZE})
-  endif()
-  if(PLENOPIV_FUZZ)
-    target_compile_options(${target} PRIVATE -fsanitize=fuzzer-no-link)
   endif()
 endfunction()
 
