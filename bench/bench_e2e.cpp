@@ -20,10 +20,12 @@
 //              variant=live). Repeat for several tiers.
 //     --prune-threshold: MART's prune threshold for the headline rows (default 0: exact zeros).
 //     --sparse-sweep: the headline settings with pruning off, on for exact zeros, and at thresholds
-//              1e-3 .. 3e-2, every pair in the kept workspaces (with --no-sweep; rows variant=sparse
+//              1e-3 .. 3e-2 of the volume's peak and 1e-2 .. 1e-1 of each depth slice's peak
+//              (slice-*), every pair in the kept workspaces (with --no-sweep; rows variant=sparse
 //              for docs/benchmarks.md, "Sparse reconstruction"); --sparse-repeats N:
 //              the variants interleaved N times, times the medians (default 1); --sparse-variants:
-//              a subset of off,zeros,1e-3,3e-3,1e-2,3e-2 starting with off (default all).
+//              a subset of off,zeros,1e-3,3e-3,1e-2,3e-2,slice-1e-2,slice-3e-2,slice-1e-1 starting
+//              with off (default all).
 //     --intensity-threshold: the correlation's ghost floor for the headline rows, times each
 //              volume's mean (default 0, the paper's correlation); they then also print the
 //              correlation without it on the same volumes.
@@ -491,10 +493,14 @@ int main(int argc, char** argv) {
       const char* name;
       bool on;
       double threshold;
+      recon::PruneScope scope = recon::PruneScope::volume;
     };
     std::vector<Prune> variants;
-    for (const Prune& pr : {Prune{"off", false, 0.0}, Prune{"zeros", true, 0.0}, Prune{"1e-3", true, 1e-3},
-                            Prune{"3e-3", true, 3e-3}, Prune{"1e-2", true, 1e-2}, Prune{"3e-2", true, 3e-2}})
+    constexpr auto slice = recon::PruneScope::slice;
+    for (const Prune& pr :
+         {Prune{"off", false, 0.0}, Prune{"zeros", true, 0.0}, Prune{"1e-3", true, 1e-3}, Prune{"3e-3", true, 3e-3},
+          Prune{"1e-2", true, 1e-2}, Prune{"3e-2", true, 3e-2}, Prune{"slice-1e-2", true, 1e-2, slice},
+          Prune{"slice-3e-2", true, 3e-2, slice}, Prune{"slice-1e-1", true, 1e-1, slice}})
       if (sparse_variants.empty() ||
           ("," + sparse_variants + ",").find("," + std::string(pr.name) + ",") != std::string::npos)
         variants.push_back(pr);
@@ -510,6 +516,7 @@ int main(int argc, char** argv) {
         process::ProcessSettings s = settings;
         s.mart.prune = variants[v].on;
         s.mart.prune_threshold = variants[v].threshold;
+        s.mart.prune_scope = variants[v].scope;
         const double cpu0 = bench::cpu_seconds();
         process::PairResult r = process::process_pair(op, a, b, s, {}, &workspace, &correlation_workspace);
         cpu[v].push_back(bench::cpu_seconds() - cpu0);

@@ -58,7 +58,7 @@ BENCHES = {
     "e2e-full-sweep": ("paper", ["build/bin/bench_e2e", "full", "--no-sweep", "--time-sweep"] + RUN_PAPER,
                        "e2e_pareto_full.png"),
     "e2e-full-sparse": ("paper", ["build/bin/bench_e2e", "full", "--no-sweep", "--sparse-sweep", "--sparse-repeats",
-                                  "1", "--sparse-variants", "off,zeros,1e-2"] + RUN_PAPER, None),
+                                  "1", "--sparse-variants", "off,zeros,1e-2,slice-3e-2,slice-1e-1"] + RUN_PAPER, None),
     "e2e-reduced-sparse": ("quick", ["build/bin/bench_e2e", "reduced", "--no-sweep", "--sparse-sweep",
                                      "--sparse-repeats", "5"] + RUN_PAPER[:-2], None),
     "e2e-full-process": ("paper", ["build/bin/bench_e2e", "full", "--no-sweep", "--steady"] + PROCESS,
@@ -332,7 +332,9 @@ def t_sparse(R):
     for name, case in (("e2e-full-sparse", "paper"), ("e2e-reduced-sparse", "reduced")):
         r = R(name)
         for d in r.find(variant="sparse"):
-            label = SPARSE_LABELS.get(d["prune"], "threshold " + d["prune"] + " of the peak")
+            prune = d["prune"]
+            label = SPARSE_LABELS.get(prune, f"threshold {prune[6:]} of its depth slice's peak"
+                                      if prune.startswith("slice-") else f"threshold {prune} of the peak")
             cpu = f"; CPU {d['pair_cpu_s']} ({float(d['cpu_over_off']):.2f})" if "pair_cpu_s" in d else ""
             rows.append([case, label, f"{d['pair_s']} ({float(d['pair_over_off']):.2f}){cpu}",
                          f"{d['recon_a_s']} + {d['recon_b_s']} + {d['correlate_s']}",

@@ -64,7 +64,7 @@ Grid3 grid_for_extent(const std::array<double, 3>& lo, const std::array<double, 
 //           [a, b] are the faces of the box (the first voxel's lower face, the last one's upper face)
 //   reconstruction: {iterations, mu, acceleration, start: mlos|ones, noise_threshold, dark_weight_cutoff,
 //                    convergence, angular_sampling, pixel_binning, sensor_blur_sigma_mm, prune,
-//                    prune_threshold}
+//                    prune_threshold, prune_scope: volume|slice}
 //                                                  (ranges: recon::check)
 //   correlation: {passes, median, ...}             (piv::correlation_settings_from; ranges: piv::check)
 //   live: {volume: {..}, reconstruction: {..}, correlation: {..}}   (optional: the live lane's fast tier,

@@ -38,6 +38,12 @@ struct RegionMm {
   std::array<double, 3> max_mm{0, 0, 0};
 };
 
+// MartSettings::prune_scope.
+enum class PruneScope {
+  volume,  // the volume's peak
+  slice,   // the peak of the voxel's depth slice
+};
+
 struct MartSettings {
   MartMethod method = MartMethod::smart;
   MartStart start = MartStart::mlos;
@@ -75,6 +81,11 @@ struct MartSettings {
   // 0 a faint voxel that might still have grown is dropped: faster, an approximation whose cost
   // docs/benchmarks.md measures ("Sparse reconstruction"). Range [0, 1); default 0.
   double prune_threshold = 0.0;
+  // What `prune_threshold` is a fraction of: the whole volume's peak, or the peak of the voxel's
+  // own depth slice (z = const). A particle's reconstructed peak falls with its distance from the
+  // focal plane, where each lens sees it through more pixels at lower weight; against the volume's
+  // peak the faint far particles are pruned first. Default: volume.
+  PruneScope prune_scope = PruneScope::volume;
   // Off: every active voxel is updated on every iteration (the reference). Default on.
   bool prune = true;
 };

@@ -313,7 +313,22 @@ void SmartSolver::prune() {
   } timer{t0, result_.prune_seconds};
   BigBuffer<float>& e = b_.e;
   if (n_ == 0) return;
-  if (settings_.prune_threshold > 0) {
+  if (settings_.prune_threshold > 0 && settings_.prune_scope == PruneScope::slice) {
+    // Each depth slice against its own peak. The set is in index order, so slice z's live voxels
+    // are one run of it; a maximum is the same in any order.
+    const std::vector<std::uint32_t>& voxels = active_.voxels();
+    const std::size_t slice = std::size_t(op_.grid().shape[0]) * op_.grid().shape[1];
+    tbb::parallel_for(0, op_.grid().shape[2], [&](int z) {
+      const auto first = std::lower_bound(voxels.begin(), voxels.end(), std::uint32_t(z * slice));
+      const auto end = std::lower_bound(first, voxels.end(), std::uint32_t((z + 1) * slice));
+      const std::size_t m0 = std::size_t(first - voxels.begin()), m1 = std::size_t(end - voxels.begin());
+      float peak = 0.f;
+      for (std::size_t m = m0; m < m1; ++m) peak = std::max(peak, e[m]);
+      const float cut = float(settings_.prune_threshold * double(peak));
+      for (std::size_t m = m0; m < m1; ++m)
+        if (e[m] <= cut) e[m] = 0.f;
+    });
+  } else if (settings_.prune_threshold > 0) {
     // The peak: a maximum, the same in any order.
     const float peak = tbb::parallel_reduce(
         tbb::blocked_range<std::size_t>(0, n_, 1 << 14), 0.f,

@@ -105,9 +105,13 @@ TEST(ProcessSettings, PruningReachesMart) {
   const ProcessSettings defaults = parse(kVolume + "}\n" + kPasses);
   EXPECT_TRUE(defaults.mart.prune);  // exact zeros only: the volume of no pruning
   EXPECT_EQ(defaults.mart.prune_threshold, 0.0);
+  EXPECT_EQ(defaults.mart.prune_scope, recon::PruneScope::volume);
   const ProcessSettings s = parse(kVolume + "}\nreconstruction: {prune: false, prune_threshold: 0.01}\n" + kPasses);
   EXPECT_FALSE(s.mart.prune);
   EXPECT_DOUBLE_EQ(s.mart.prune_threshold, 0.01);
+  EXPECT_EQ(parse(kVolume + "}\nreconstruction: {prune_scope: slice}\n" + kPasses).mart.prune_scope,
+            recon::PruneScope::slice);
+  expect_refused_naming(kVolume + "}\nreconstruction: {prune_scope: lens}\n" + kPasses, "prune_scope");
   for (const std::string bad : {"-0.001", "1", "faint"}) {
     expect_refused_naming(kVolume + "}\nreconstruction: {prune_threshold: " + bad + "}\n" + kPasses, "prune_threshold");
   }

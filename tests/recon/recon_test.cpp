@@ -576,6 +576,7 @@ TEST_F(Mart, IdenticalVolumesAtOneAndTwoThreads) {
       s.accelerate = accelerate;
       s.sensor_blur_sigma_mm = blur;
       s.prune_threshold = accelerate ? 1e-2 : 0.0;  // the pruned active sets, laid out again
+      s.prune_scope = blur > 0 ? PruneScope::slice : PruneScope::volume;
       auto run = [&](int threads) {
         tbb::global_control c(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
         const WeightingOperator op = make_operator(*camera_, op_->grid());
@@ -684,6 +685,47 @@ TEST_F(Mart, PruningAtASmallThresholdStaysCloseToNoPruning) {
     EXPECT_GT(pruned.skipped.fraction_updates_skipped(), off.skipped.fraction_updates_skipped());
     EXPECT_TRUE(all_finite_bounded(pruned.volume, 1e30f));
   }
+}
+
+// MartSettings::prune_scope: the threshold is a fraction of the volume's peak, or of each depth
+// slice's. A bright particle at z = -2 mm and one 30 times fainter at z = +3 mm, apart in x, and a
+// threshold of 0.1: against the volume's peak the faint particle is pruned at the start, against
+// its own slice's it is reconstructed. Either way every voxel left is above the threshold times its
+// reference peak (the last prune follows the last update).
+TEST_F(Mart, PruningAgainstEachDepthSlicesPeakKeepsAFaintParticleAwayFromABrightOne) {
+  const WeightingOperator op = make_operator(*camera_, centred_grid(40, 9, 1.0, -4.0));
+  const Grid3& g = op.grid();
+  ImageF image = project_image(op, blob_volume(g, {{10, 20, 2}}, 0.7, 0.7), 1000.f);
+  const ImageF faint = project_image(op, blob_volume(g, {{30, 20, 7}}, 0.7, 0.7), 1000.f / 30.f);
+  for (std::size_t i = 0; i < image.pixels.size(); ++i) image.pixels[i] += faint.pixels[i];
+  MartSettings s;
+  s.iterations = 10;
+  s.mu = 1;
+  s.accelerate = true;
+  s.prune_threshold = 0.1;
+  const std::size_t slice = std::size_t(g.shape[0]) * g.shape[1];
+  std::array<double, 2> near_faint{};  // intensity within 2 voxels of the faint particle
+  for (const PruneScope scope : {PruneScope::volume, PruneScope::slice}) {
+    s.prune_scope = scope;
+    const MartResult r = reconstruct(op, image, s);
+    const std::vector<float>& e = r.volume.data;
+    const float volume_peak = *std::max_element(e.begin(), e.end());
+    for (int z = 0; z < g.shape[2]; ++z) {
+      const auto first = e.begin() + std::ptrdiff_t(z * slice), end = first + std::ptrdiff_t(slice);
+      const float reference = scope == PruneScope::slice ? *std::max_element(first, end) : volume_peak;
+      const float cut = float(s.prune_threshold * double(reference));
+      EXPECT_EQ(0, std::count_if(first, end, [&](float v) { return v != 0.f && v <= cut; }))
+          << "slice " << z << ", scope " << int(scope) << ": live voxels at or below the threshold";
+    }
+    for (int z = 5; z <= 8; ++z)
+      for (int y = 18; y <= 22; ++y)
+        for (int x = 28; x <= 32; ++x) near_faint[int(scope)] += r.volume.at(x, y, z);
+    std::cout << "measured: scope " << int(scope) << ": intensity near the faint particle " << near_faint[int(scope)]
+              << ", voxel updates skipped " << r.skipped.fraction_updates_skipped() << "\n";
+    EXPECT_GT(r.skipped.voxels_pruned, 0u);
+  }
+  EXPECT_EQ(near_faint[0], 0.0) << "the volume's peak: the faint particle is below 0.1 of it";
+  EXPECT_GT(near_faint[1], 0.0) << "its slice's peak: the faint particle is kept";
 }
 
 // A caller cancels by throwing plenopiv::Cancelled from the progress callback (what the daemon
