@@ -82,9 +82,9 @@ struct MartSettings {
   // docs/benchmarks.md measures ("Sparse reconstruction"). Range [0, 1); default 0.
   double prune_threshold = 0.0;
   // What `prune_threshold` is a fraction of: the whole volume's peak, or the peak of the voxel's
-  // own depth slice (z = const). A particle's reconstructed peak falls with its distance from the
-  // focal plane, where each lens sees it through more pixels at lower weight; against the volume's
-  // peak the faint far particles are pruned first. Default: volume.
+  // own depth slice (z = const). A reconstructed particle's peak varies several-fold with its depth
+  // (lowest far from the focal plane, where its light is spread over the most voxels); against the
+  // volume's peak the particles of the faint slices are pruned first. Default: volume.
   PruneScope prune_scope = PruneScope::volume;
   // Off: every active voxel is updated on every iteration (the reference). Default on.
   bool prune = true;
