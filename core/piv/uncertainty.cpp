@@ -49,6 +49,11 @@ typedef double Doubles4 __attribute__((vector_size(32)));
   return sum;
 }
 
+// sum_i x[i] y[(i + k) mod len] over len floats: x's +k neighbours in y, cyclic over the block.
+[[gnu::always_inline]] inline double cyclic_dot(const float* x, const float* y, std::size_t len, std::size_t k) {
+  return dot(x, y + k, len - k) + dot(x + (len - k), y, k);
+}
+
 // Adds in[j + shift] to out[j] for j in [0, len): one step of a box sum along an axis whose
 // neighbours lie `shift` elements apart.
 [[gnu::always_inline]] inline void add_shifted(const float* in, float* __restrict out, std::size_t len,
@@ -190,15 +195,11 @@ __attribute__((target_clones("avx512f", "avx2", "default"))) std::array<float, 3
     c_minus[0] += double(pa[row]) * pb[row + last];
   }
   for (std::size_t slab = 0; slab < count; slab += slab_size) {
-    const std::size_t inner = slab_size - row_len;
-    c_plus[1] += dot(pa + slab, pb + slab + row_len, inner) + dot(pa + slab + inner, pb + slab, row_len);
-    c_minus[1] += dot(pa + slab + row_len, pb + slab, inner) + dot(pa + slab, pb + slab + inner, row_len);
+    c_plus[1] += cyclic_dot(pa + slab, pb + slab, slab_size, row_len);
+    c_minus[1] += cyclic_dot(pb + slab, pa + slab, slab_size, row_len);
   }
-  {
-    const std::size_t inner = count - slab_size;
-    c_plus[2] = dot(pa, pb + slab_size, inner) + dot(pa + inner, pb, slab_size);
-    c_minus[2] = dot(pa + slab_size, pb, inner) + dot(pa, pb + inner, slab_size);
-  }
+  c_plus[2] = cyclic_dot(pa, pb, count, slab_size);
+  c_minus[2] = cyclic_dot(pb, pa, count, slab_size);
   // The box: about two Gaussian widths of the correlation peak per axis, sigma_c^2 = -1 / (the
   // curvature of ln C), at least 1 voxel and at most a quarter of the window.
   std::array<int, 3> radius{1, 1, 1};
