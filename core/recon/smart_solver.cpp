@@ -318,9 +318,10 @@ void SmartSolver::prune() {
     // are one run of it; a maximum is the same in any order.
     const std::vector<std::uint32_t>& voxels = active_.voxels();
     const std::size_t slice = std::size_t(op_.grid().shape[0]) * op_.grid().shape[1];
+    const auto before = [](std::uint32_t voxel, std::size_t index) { return voxel < index; };
     tbb::parallel_for(0, op_.grid().shape[2], [&](int z) {
-      const auto first = std::lower_bound(voxels.begin(), voxels.end(), std::uint32_t(z * slice));
-      const auto end = std::lower_bound(first, voxels.end(), std::uint32_t((z + 1) * slice));
+      const auto first = std::lower_bound(voxels.begin(), voxels.end(), std::size_t(z) * slice, before);
+      const auto end = std::lower_bound(first, voxels.end(), std::size_t(z + 1) * slice, before);
       const std::size_t m0 = std::size_t(first - voxels.begin()), m1 = std::size_t(end - voxels.begin());
       float peak = 0.f;
       for (std::size_t m = m0; m < m1; ++m) peak = std::max(peak, e[m]);
