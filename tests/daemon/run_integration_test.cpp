@@ -7,12 +7,16 @@
 #include <sys/un.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <csignal>
 #include <fstream>
 #include <iomanip>
+#include <mutex>
 #include <set>
 #include <sstream>
 #include <thread>
+#include <utility>
+#include <vector>
 
 #include "clients/cli/control_client.hpp"
 #include "tests/support/child_process.hpp"
@@ -324,33 +328,53 @@ TEST_F(DaemonRuns, SigtermMidRunDrainsAndLeavesTheFolderConsistent) {
 namespace plenopiv {
 namespace {
 
-// A stand-in for systemd's notify socket: collects what plenopivd sends (READY, STATUS, WATCHDOG).
+// A stand-in for systemd's notify socket: collects what plenopivd sends (READY, STATUS, WATCHDOG)
+// as it arrives, as systemd does. A datagram socket queues only net.unix.max_dgram_qlen (often 10)
+// unread messages before the sender blocks, so a reader that waited for the test would stall the
+// daemon's control loop on a slow machine.
 class NotifySocket {
  public:
+  using Message = std::pair<std::chrono::steady_clock::time_point, std::string>;
+
   explicit NotifySocket(const fs::path& path) : path_(path) {
     fs::remove(path);
-    fd_ = ::socket(AF_UNIX, SOCK_DGRAM | SOCK_NONBLOCK, 0);
+    fd_ = ::socket(AF_UNIX, SOCK_DGRAM, 0);
     sockaddr_un addr{};
     addr.sun_family = AF_UNIX;
     std::snprintf(addr.sun_path, sizeof addr.sun_path, "%s", path.c_str());
     if (::bind(fd_, reinterpret_cast<sockaddr*>(&addr), sizeof addr) != 0) {
       throw std::runtime_error("cannot bind " + path.string());
     }
+    const timeval poll{0, 20000};  // the reader looks at stop_ every 20 ms
+    ::setsockopt(fd_, SOL_SOCKET, SO_RCVTIMEO, &poll, sizeof poll);
+    reader_ = std::thread([this] {
+      char buffer[4096];
+      while (!stop_) {
+        const ssize_t n = ::recv(fd_, buffer, sizeof buffer, 0);
+        if (n <= 0) continue;
+        std::lock_guard lock(mutex_);
+        received_.emplace_back(std::chrono::steady_clock::now(), std::string(buffer, std::size_t(n)));
+      }
+    });
   }
-  ~NotifySocket() { ::close(fd_); }
-  // Every datagram received so far, with the time it was read.
-  std::vector<std::pair<std::chrono::steady_clock::time_point, std::string>> drain() {
-    std::vector<std::pair<std::chrono::steady_clock::time_point, std::string>> out;
-    char buffer[4096];
-    for (ssize_t n; (n = ::recv(fd_, buffer, sizeof buffer, 0)) > 0;) {
-      out.emplace_back(std::chrono::steady_clock::now(), std::string(buffer, std::size_t(n)));
-    }
-    return out;
+  ~NotifySocket() {
+    stop_ = true;
+    reader_.join();
+    ::close(fd_);
+  }
+  // Every datagram received since the last drain, with the time it arrived.
+  std::vector<Message> drain() {
+    std::lock_guard lock(mutex_);
+    return std::exchange(received_, {});
   }
 
  private:
   fs::path path_;
   int fd_ = -1;
+  std::atomic<bool> stop_{false};
+  std::mutex mutex_;
+  std::vector<Message> received_;
+  std::thread reader_;
 };
 
 TEST(DaemonNotify, ReadyStatusAndAWatchdogThatStopsWhenTheRunStalls) {
@@ -389,11 +413,8 @@ TEST(DaemonNotify, ReadyStatusAndAWatchdogThatStopsWhenTheRunStalls) {
             0)
       << out;
   const auto started = std::chrono::steady_clock::now();
-  std::vector<std::pair<std::chrono::steady_clock::time_point, std::string>> received;
-  while (std::chrono::steady_clock::now() - started < 1500ms) {  // read as they come: timed
-    for (auto& r : notify.drain()) received.push_back(r);
-    std::this_thread::sleep_for(20ms);
-  }
+  std::this_thread::sleep_for(1500ms);
+  const std::vector<NotifySocket::Message> received = notify.drain();
   bool saw_acquiring = false;
   int late_pings = 0;
   for (auto& [t, m] : received) {
