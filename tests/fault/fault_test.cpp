@@ -62,7 +62,7 @@ unsigned fault_seed() {
   return std::random_device{}();
 }
 
-// How many runs to kill: PLENOPIV_FAULT_KILLS (.ci/run gives fewer to its sanitizer build), else 20.
+// How many runs to kill: PLENOPIV_FAULT_KILLS (fewer for a quick run by hand), else 20.
 int fault_kills() {
   if (const char* s = std::getenv("PLENOPIV_FAULT_KILLS")) return std::max(1, std::atoi(s));
   return 20;
