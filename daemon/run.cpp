@@ -73,7 +73,9 @@ Run::Run(RunConfig config, std::string run_id, RunEnvironment env)
     preview_queue_ = std::make_unique<LiveMailbox>(1);
   }
   camera_ = drivers::open_camera(camera_uri);
-  camera_->configure(drivers::CameraSettings{});
+  drivers::CameraSettings camera_settings;
+  camera_settings.roi = config_.camera_roi;
+  camera_->configure(camera_settings);
   trigger_ = drivers::open_trigger(trigger_uri);
   const drivers::TriggerInfo trigger_info = trigger_->info();
   trigger_->load(run_schedule(env_.timing, trigger_info, config_.rate_hz, config_.dt_s));
@@ -92,8 +94,11 @@ Run::Run(RunConfig config, std::string run_id, RunEnvironment env)
     calibration = load_run_calibration(env_.calibration_file, optics::load_camera_file(env_.camera_file));
   }
   // The raw frames of the pairs this run plans must fit on the disk before it starts.
-  bytes_per_pair_ = 2 * std::uint64_t(std::max(info.sensor_width_px, 0)) *
-                    std::uint64_t(std::max(info.sensor_height_px, 0)) * sizeof(std::uint16_t);
+  const drivers::Roi& roi = config_.camera_roi;
+  const int frame_width = roi.width > 0 ? roi.width : info.sensor_width_px;
+  const int frame_height = roi.height > 0 ? roi.height : info.sensor_height_px;
+  bytes_per_pair_ =
+      2 * std::uint64_t(std::max(frame_width, 0)) * std::uint64_t(std::max(frame_height, 0)) * sizeof(std::uint16_t);
   std::uint64_t planned = config_.pair_count;
   if (planned == 0 && config_.duration_s > 0) planned = std::uint64_t(std::ceil(config_.duration_s * config_.rate_hz));
   if (planned == 0) planned = kMinPairsUnbounded;

@@ -57,6 +57,22 @@ QualityLane parse_quality_lane(const YamlMap& map, const process::ProcessSpec& s
   return q;
 }
 
+drivers::Roi parse_camera_roi(const YamlMap& map) {
+  drivers::Roi r;
+  const auto roi = map.optional_map("camera_roi");
+  if (!roi) return r;
+  roi->reject_unknown({"x", "y", "width", "height"});
+  for (const char* size : {"width", "height"}) {
+    if (!roi->has(size)) roi->fail(size, "is required: the region's size in pixels");
+  }
+  constexpr int kMaxPx = 1 << 16;
+  r.x = roi->integer_in("x", 0, 0, kMaxPx);
+  r.y = roi->integer_in("y", 0, 0, kMaxPx);
+  r.width = roi->integer_in("width", 0, 1, kMaxPx);
+  r.height = roi->integer_in("height", 0, 1, kMaxPx);
+  return r;
+}
+
 PreviewSettings parse_preview(const YamlMap& map) {
   PreviewSettings p;
   const auto preview = map.optional_map("preview");
@@ -76,14 +92,16 @@ RunConfig parse_run_config(const std::string& text, const std::string& source) {
   const YAML::Node root = load_yaml_text(text, source);
   const YamlMap map(root, source);
   std::vector<std::string_view> known{
-      "camera_uri",          "trigger_uri", "pairs",   "duration_s",    "rate_hz", "publish_volumes",
-      "max_pairs_in_flight", "live_queue",  "quality", "quality_queue", "preview", "camera_outage_s"};
+      "camera_uri",      "trigger_uri",         "pairs",      "duration_s", "rate_hz",
+      "publish_volumes", "max_pairs_in_flight", "live_queue", "quality",    "quality_queue",
+      "preview",         "camera_outage_s",     "camera_roi"};
   known.insert(known.end(), std::begin(process::kProcessKeys), std::end(process::kProcessKeys));
   map.reject_unknown(std::span<const std::string_view>(known));
   RunConfig c;
   c.text = text;
   c.camera_uri = map.string_or("camera_uri", "");
   c.trigger_uri = map.string_or("trigger_uri", "");
+  c.camera_roi = parse_camera_roi(map);
   const long long pairs = map.integer_or("pairs", 0);
   if (pairs < 0) map.fail("pairs", "must be >= 0 (0: until stopped), got " + std::to_string(pairs));
   c.pair_count = std::uint64_t(pairs);

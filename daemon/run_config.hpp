@@ -9,6 +9,7 @@
 
 #include "core/base/grid.hpp"
 #include "core/process/process.hpp"
+#include "drivers/camera/camera.hpp"
 
 namespace plenopiv::daemon {
 
@@ -48,9 +49,13 @@ struct PreviewSettings {
 };
 
 struct RunConfig {
-  std::string text;              // the YAML as the operator wrote it (saved in the run folder)
-  std::string camera_uri;        // empty: the daemon's default
-  std::string trigger_uri;       // empty: the daemon's default
+  std::string text;         // the YAML as the operator wrote it (saved in the run folder)
+  std::string camera_uri;   // empty: the daemon's default
+  std::string trigger_uri;  // empty: the daemon's default
+  // run.yaml `camera_roi: {x, y, width, height}`: the sensor region the camera reads out, in pixels
+  // from the sensor's top-left corner; absent (all 0): the whole sensor. The camera refuses a region
+  // off its sensor, or one it cannot read out (the simulated and replay cameras: any but the whole).
+  drivers::Roi camera_roi;
   std::uint64_t pair_count = 0;  // 0: until stopped or duration_s
   double duration_s = 0.0;       // 0: until stopped or pair_count
   double rate_hz = 1.0;          // laser repetition rate: pairs per second

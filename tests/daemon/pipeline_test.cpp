@@ -403,6 +403,22 @@ TEST_F(RunTest, UnknownCameraIsAnInputErrorNamingTheUri) {
   }
 }
 
+// run.yaml's camera_roi reaches the camera, which refuses a region it cannot read out by name,
+// before any folder is made (the simulated camera renders its whole sensor only).
+TEST_F(RunTest, ACameraRegionTheCameraCannotReadIsRefusedByName) {
+  drivers::register_sim_camera(drivers::CameraRegistry::instance(),
+                               std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml");
+  RunConfig c = config("camera_uri: sim://?rays=100&ppm=0.02\ncamera_roi: {width: 64, height: 64}\n");
+  try {
+    daemon::Run run(c, "roi", env_);
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("roi: the simulated camera renders the full sensor only"), std::string::npos)
+        << e.what();
+  }
+  EXPECT_FALSE(fs::exists(data_ / "run-roi"));
+}
+
 TEST_F(RunTest, UnknownTriggerIsAnInputErrorNamingTheUri) {
   RunConfig c = config("trigger_uri: nosuch://x\n");
   try {

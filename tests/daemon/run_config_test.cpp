@@ -229,5 +229,27 @@ TEST(RunConfig, ThePreviewIsOffUnlessAskedAndItsSettingsAreChecked) {
   EXPECT_NE(error_of(kVolume + "preview: {rate: 1}\n").find("preview.rate: unknown key"), std::string::npos);
 }
 
+TEST(RunConfig, TheCameraRegionIsTheWholeSensorUnlessGivenAndItsSizeIsRequired) {
+  const drivers::Roi whole = parse_run_config(kVolume, "run.yaml").camera_roi;
+  EXPECT_EQ(whole.x + whole.y + whole.width + whole.height, 0);
+  const drivers::Roi roi =
+      parse_run_config(kVolume + "camera_roi: {x: 16, y: 8, width: 256, height: 128}\n", "run.yaml").camera_roi;
+  EXPECT_EQ(roi.x, 16);
+  EXPECT_EQ(roi.y, 8);
+  EXPECT_EQ(roi.width, 256);
+  EXPECT_EQ(roi.height, 128);
+  const drivers::Roi corner =
+      parse_run_config(kVolume + "camera_roi: {width: 64, height: 32}\n", "run.yaml").camera_roi;
+  EXPECT_EQ(corner.x + corner.y, 0);
+  EXPECT_NE(error_of(kVolume + "camera_roi: {width: 64}\n").find("camera_roi.height: is required"), std::string::npos);
+  EXPECT_NE(error_of(kVolume + "camera_roi: {x: -1, width: 64, height: 64}\n").find("camera_roi.x: must be 0 to"),
+            std::string::npos);
+  EXPECT_NE(error_of(kVolume + "camera_roi: {width: 0, height: 64}\n").find("camera_roi.width: must be 1 to"),
+            std::string::npos);
+  EXPECT_NE(error_of(kVolume + "camera_roi: {w: 64, width: 64, height: 64}\n").find("camera_roi.w: unknown key"),
+            std::string::npos);
+  EXPECT_NE(error_of(kVolume + "camera_roi: [0, 0, 64, 64]\n").find("camera_roi"), std::string::npos);
+}
+
 }  // namespace
 }  // namespace plenopiv::daemon
