@@ -26,8 +26,9 @@ packages=(
   # export tests read the files back: NetCDF-4
   python3-netcdf4
   # systemd unit checks; man pages from --help, the bash completion's helpers and its test, the .deb
-  # (dpkg-shlibdeps for its Depends, man-db to render the pages; scripts/test-package.sh)
-  systemd help2man bash-completion dpkg-dev man-db
+  # (dpkg-shlibdeps for its Depends, man-db to render the pages; scripts/test-package.sh, which boots
+  # systemd as PID 1 in a systemd-nspawn container to start the installed unit)
+  systemd systemd-container help2man bash-completion dpkg-dev man-db
   # a real one-node Slurm for `plenopiv slurm` and its tests (scripts/slurm-local.sh)
   slurm-wlm munge
 )

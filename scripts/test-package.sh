@@ -2,8 +2,9 @@
 # The .deb end to end on this machine (as root): builds it from a Release build in build-package/,
 # installs it with apt, checks what it put where, verifies the installed unit with systemd-analyze,
 # starts the installed plenopivd as the plenopiv user on the simulated camera with the installed
-# config, asks it with the installed `plenopiv status` and `devices`, stops it, and purges the
-# package. Leaves the machine as it found it: the plenopiv user and group and plenopivd's folders
+# config, asks it with the installed `plenopiv status` and `devices`, stops it, starts the installed
+# unit under systemd as PID 1 in a container (systemd-nspawn) and runs one pair there, and purges
+# the package. Leaves the machine as it found it: the plenopiv user and group and plenopivd's folders
 # are removed again when this script made them. Every step prints its wall time.
 # PLENOPIV_PACKAGE_BUILD_TYPE: the CMake build type of the package (default Release; RelWithDebInfo
 # shares scripts/build.sh's flags, so right after it ccache has every object).
@@ -36,8 +37,11 @@ state_existed=$(existed test -e /var/lib/plenopiv)
 runtime_existed=$(existed test -e /run/plenopiv)
 
 daemon_pid=""
+container_pid=""
 cleanup() {
   if [ -n "$daemon_pid" ] && kill "$daemon_pid" 2> /dev/null; then wait "$daemon_pid" || true; fi
+  # nspawn answers SIGTERM by powering the container off.
+  if [ -n "$container_pid" ] && kill "$container_pid" 2> /dev/null; then wait "$container_pid" || true; fi
   if dpkg-query -W plenopiv > /dev/null 2>&1; then
     DEBIAN_FRONTEND=noninteractive apt-get purge -y -qq plenopiv > /dev/null
   fi
@@ -125,7 +129,74 @@ daemon_pid=""
 rm -f "$log"
 step "plenopivd stopped"
 
-# 6. Purge: nothing of the package is left.
+# 6. The installed unit under systemd as PID 1, with all its hardening: a container (systemd-nspawn)
+# that boots this machine's own /usr and /etc read-only, an empty /var and no network but its own
+# loopback, to basic.target. There systemd starts plenopivd.service (Type=notify: READY=1 once the
+# sockets are bound), the installed client asks it, a one-pair run on the simulated camera is
+# recorded and processed under the unit's sandbox, and systemd stops it cleanly.
+root=$PWD/$build/nspawn-root
+rm -rf "$root"
+mkdir -p "$root/usr/lib" "$root/etc" "$root/var"
+cp /usr/lib/os-release "$root/usr/lib/"  # what nspawn looks for before it binds /usr over it
+for link in bin lib lib64 sbin; do [ -L /$link ] && ln -s "$(readlink /$link)" "$root/$link"; done
+container_log=$PWD/$build/nspawn.log
+systemd-nspawn --quiet --directory="$root" --bind-ro=/usr --bind-ro=/etc --tmpfs=/var --private-network \
+  --register=no --keep-unit --boot -- --unit=basic.target > "$container_log" 2>&1 &
+container_pid=$!
+leader=""
+inside() { nsenter --target "$leader" --mount --uts --ipc --net --pid -- "$@"; }
+container_fail() {
+  [ -z "$leader" ] || inside journalctl -u plenopivd --no-pager -n 50 >&2 || true
+  fail "$* (container log: $container_log)"
+}
+for _ in $(seq 100); do
+  leader=$(pgrep -P $container_pid -x systemd || true)
+  [ -n "$leader" ] && inside systemctl is-system-running --wait > /dev/null 2>&1 && break
+  kill -0 $container_pid 2> /dev/null || fail "the container exited: $(cat "$container_log")"
+  sleep 0.3
+done
+[ "$(inside systemctl is-system-running)" = running ] || container_fail "systemd in the container is not running"
+step "systemd is PID 1 in a container"
+inside systemctl start plenopivd || container_fail "systemctl start plenopivd failed"
+[ "$(inside systemctl is-active plenopivd)" = active ] || container_fail "plenopivd.service is not active"
+main_pid=$(inside systemctl show -p MainPID --value plenopivd)
+[ "$(inside ps -o user= -p "$main_pid")" = plenopiv ] || container_fail "plenopivd does not run as plenopiv"
+# The sandbox is in force: the system call filter (seccomp), no new privileges, no capabilities.
+sandbox=$(inside grep -E '^(Seccomp|NoNewPrivs|CapEff):' /proc/"$main_pid"/status | tr -s '\t ' ' ')
+for expected in "Seccomp: 2" "NoNewPrivs: 1" "CapEff: 0000000000000000"; do
+  grep -qx "$expected" <<< "$sandbox" || container_fail "plenopivd's sandbox lacks '$expected': $sandbox"
+done
+status=$(inside /usr/bin/plenopiv status --json) || container_fail "plenopiv status had no answer"
+grep -q '"state": *"Idle"' <<< "$status" || container_fail "plenopivd is not idle: $status"
+step "systemd started plenopivd.service"
+inside sh -c 'cat > /var/tmp/one-pair.yaml' << 'YAML'
+camera_uri: "sim://?rays=200&ppm=0.05"
+pairs: 1
+rate_hz: 1
+dt_s: 0.001
+volume: {x_mm: [-1, 1], y_mm: [-1, 1], z_mm: [-1, 1], voxel_mm: 0.25}
+reconstruction: {iterations: 2}
+correlation: {passes: [{window: 4, overlap_percent: 50}]}
+YAML
+inside /usr/bin/plenopiv run start --config /var/tmp/one-pair.yaml > /dev/null || container_fail "the run did not start"
+manifest=""
+for _ in $(seq 300); do
+  manifest=$(inside sh -c 'cat /var/lib/plenopiv/run-*/manifest.json' 2> /dev/null || true)
+  grep -q '"state": *"complete"' <<< "$manifest" && break
+  sleep 0.5
+done
+grep -q '"state": *"complete"' <<< "$manifest" || container_fail "the run did not complete in 150 s: $manifest"
+inside sh -c 'ls /var/lib/plenopiv/run-*/vectors/*.h5' > /dev/null 2>&1 || container_fail "the run wrote no vectors"
+step "a one-pair run recorded and processed under the unit's sandbox"
+inside systemctl stop plenopivd
+[ "$(inside systemctl show -p Result --value plenopivd)" = success ] || container_fail "plenopivd did not stop cleanly"
+[ "$(inside systemctl show -p ExecMainStatus --value plenopivd)" = 0 ] || container_fail "plenopivd exited non-zero"
+inside systemctl poweroff
+wait $container_pid || fail "the container did not shut down cleanly: $(cat "$container_log")"
+container_pid=""
+step "systemd stopped plenopivd.service; container shut down"
+
+# 7. Purge: nothing of the package is left.
 DEBIAN_FRONTEND=noninteractive apt-get purge -y -qq plenopiv > /dev/null
 for path in /usr/bin/plenopivd /etc/plenopiv $unit; do
   [ ! -e $path ] || fail "$path is left after purge"
