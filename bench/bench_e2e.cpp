@@ -6,7 +6,8 @@
 //   bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate]
 //             [--dark-cutoff F] [--intensity-threshold K] [--final-smoothing K] [--depth-prefilter K]
 //             [--passes P] [--steady] [--time-sweep] [--z-centre MM] [--compare-passes 'P1;P2;...']
-//             [--prune-threshold F] [--sparse-sweep [--sparse-repeats N] [--sparse-variants V,..]]
+//             [--prune-threshold F [--prune-scope volume|slice]]
+//             [--sparse-sweep [--sparse-repeats N] [--sparse-variants V,..]]
 //     --iterations/--mu/--accelerate/--dark-cutoff: MART for the headline rows (default the
 //              paper's 5 at mu 0.5, not accelerated, MartSettings' dark-pixel cutoff; the sweep's
 //              rows still start from the paper's settings).
@@ -18,7 +19,8 @@
 //              syntax, windows in its voxels); its set-up, first and in-a-run time per pair and its
 //              errors in the headline's voxels (axis band: half its final window) (row
 //              variant=live). Repeat for several tiers.
-//     --prune-threshold: MART's prune threshold for the headline rows (default 0: exact zeros).
+//     --prune-threshold: MART's prune threshold for the headline rows (default 0: exact zeros);
+//              --prune-scope: of the volume's peak (default) or of each depth slice's.
 //     --sparse-sweep: the headline settings with pruning off, on for exact zeros, and at thresholds
 //              1e-3 .. 3e-2 of the volume's peak and 1e-2 .. 1e-1 of each depth slice's peak
 //              (slice-*), every pair in the kept workspaces (with --no-sweep; rows variant=sparse
@@ -156,6 +158,7 @@ int main(int argc, char** argv) {
   int sparse_repeats = 1;
   std::string sparse_variants;  // empty: all
   double prune_threshold = recon::MartSettings{}.prune_threshold;
+  std::string prune_scope = "volume";
   std::string compare_passes;     // pass lists separated by ';'
   std::string passes;             // the headline's passes (--passes syntax); empty: core/piv's default
   std::vector<std::string> live;  // --live B,K,N,P, one per live tier
@@ -194,6 +197,8 @@ int main(int argc, char** argv) {
       sparse_variants = argv[++i];
     else if (!std::strcmp(argv[i], "--prune-threshold") && i + 1 < argc)
       prune_threshold = std::stod(argv[++i]);
+    else if (!std::strcmp(argv[i], "--prune-scope") && i + 1 < argc)
+      prune_scope = argv[++i];
     else if (!std::strcmp(argv[i], "--compare-passes") && i + 1 < argc)
       compare_passes = argv[++i];
     else if (!std::strcmp(argv[i], "--passes") && i + 1 < argc)
@@ -209,7 +214,7 @@ int main(int argc, char** argv) {
                 intensity_threshold != piv::CorrelationSettings{}.intensity_threshold_of_mean ||
                 final_smoothing != piv::CorrelationSettings{}.final_smoothing ||
                 depth_prefilter != piv::CorrelationSettings{}.depth_prefilter ||
-                prune_threshold != recon::MartSettings{}.prune_threshold)) {
+                prune_threshold != recon::MartSettings{}.prune_threshold || prune_scope != "volume")) {
     std::fprintf(stderr,
                  "bench_e2e: "
                  "--iterations/--mu/--accelerate/--dark-cutoff/--sensor-blur-mm/--intensity-threshold/"
@@ -226,7 +231,12 @@ int main(int argc, char** argv) {
                  "usage: bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate] "
                  "[--dark-cutoff F] [--sensor-blur-mm S] [--intensity-threshold K] [--final-smoothing K] "
                  "[--depth-prefilter K] [--passes P] [--steady] [--time-sweep] [--z-centre MM] [--compare-passes "
-                 "'P1;P2'] [--prune-threshold F] [--sparse-sweep [--sparse-repeats N] [--sparse-variants V,..]]\n");
+                 "'P1;P2'] [--prune-threshold F [--prune-scope volume|slice]] [--sparse-sweep [--sparse-repeats N] "
+                 "[--sparse-variants V,..]]\n");
+    return 2;
+  }
+  if (prune_scope != "volume" && prune_scope != "slice") {
+    std::fprintf(stderr, "bench_e2e: --prune-scope must be volume or slice, got %s\n", prune_scope.c_str());
     return 2;
   }
   const std::string dir = std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/";
@@ -245,6 +255,7 @@ int main(int argc, char** argv) {
   settings.mart.dark_weight_cutoff = dark_cutoff;
   settings.mart.sensor_blur_sigma_mm = sensor_blur_mm;
   settings.mart.prune_threshold = prune_threshold;
+  settings.mart.prune_scope = prune_scope == "slice" ? recon::PruneScope::slice : recon::PruneScope::volume;
   settings.correlation.intensity_threshold_of_mean = intensity_threshold;
   settings.correlation.final_smoothing = final_smoothing;
   settings.correlation.depth_prefilter = depth_prefilter;
@@ -294,16 +305,16 @@ int main(int argc, char** argv) {
   const Errors e = errors_against(base.correlation.field, flow, voxel);
   std::printf(
       "bench=e2e case=%s variant=reconstructed iterations=%d mu=%.2f accelerate=%d dark_cutoff=%.3g "
-      "sensor_blur_mm=%.4g "
+      "sensor_blur_mm=%.4g prune_threshold=%.3g prune_scope=%s "
       "intensity_threshold=%.3g final_smoothing=%d depth_prefilter=%d recon_a_s=%.2f recon_b_s=%.2f "
       "correlate_s=%.2f skipped_a=%.3f skipped_b=%.3f rms_u=%.3f rms_v=%.3f rms_w=%.3f rms=%.3f valid=%.3f "
       "off_axis_band_rms_u=%.3f off_axis_band_rms_v=%.3f off_axis_band_rms_w=%.3f off_axis_band_gain_u=%.3f "
       "off_axis_band_gain_v=%.3f off_axis_band_gain_w=%.3f peak_rss_gb=%.2f\n",
-      scale.c_str(), iterations, mu, int(accelerate), dark_cutoff, sensor_blur_mm, intensity_threshold, final_smoothing,
-      depth_prefilter, base.times.reconstruct_a_s, base.times.reconstruct_b_s, base.times.correlate_s,
-      base.skipped_a.fraction_skipped(), base.skipped_b.fraction_skipped(), e.rms[0], e.rms[1], e.rms[2], e.total,
-      e.valid_fraction, e.off_band[0], e.off_band[1], e.off_band[2], e.off_band_gain[0], e.off_band_gain[1],
-      e.off_band_gain[2], bench::peak_rss_gb());
+      scale.c_str(), iterations, mu, int(accelerate), dark_cutoff, sensor_blur_mm, prune_threshold, prune_scope.c_str(),
+      intensity_threshold, final_smoothing, depth_prefilter, base.times.reconstruct_a_s, base.times.reconstruct_b_s,
+      base.times.correlate_s, base.skipped_a.fraction_skipped(), base.skipped_b.fraction_skipped(), e.rms[0], e.rms[1],
+      e.rms[2], e.total, e.valid_fraction, e.off_band[0], e.off_band[1], e.off_band[2], e.off_band_gain[0],
+      e.off_band_gain[1], e.off_band_gain[2], bench::peak_rss_gb());
 
   // Where depth is lost: RMS of w (voxels) per band of the vectors' depth (mm from the focal plane),
   // with the band's gain (slope of measured against true w: below 1 where w falls short in

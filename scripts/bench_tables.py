@@ -30,8 +30,8 @@ DOC = ROOT / "docs" / "benchmarks.md"
 DOCS = [DOC, ROOT / "docs" / "paper-figures.md", ROOT / "docs" / "accuracy.md", ROOT / "docs" / "recon.md"]
 
 # run-paper.yaml's reconstruction and correlation settings, as bench_e2e's flags.
-RUN_PAPER = ["--mu", "1", "--accelerate", "--iterations", "8", "--intensity-threshold", "3",
-             "--final-smoothing", "1", "--depth-prefilter", "4",
+RUN_PAPER = ["--mu", "1", "--accelerate", "--iterations", "8", "--prune-threshold", "0.03", "--prune-scope",
+             "slice", "--intensity-threshold", "3", "--final-smoothing", "1", "--depth-prefilter", "4",
              "--passes", "32@50,16@50+4,16@50,16@50,16@75"]
 # process.yaml's (its passes are core/piv's default).
 PROCESS = ["--mu", "1", "--accelerate", "--iterations", "20", "--intensity-threshold", "4",
@@ -261,6 +261,8 @@ def e2e_row(r, label):
     if steady:
         times += f"; in a run {steady['pair_s']} (first {steady['first_pair_s']})"
     mart = f"{rec['iterations']} it, mu {float(rec['mu']):g}" + (", accelerated" if rec["accelerate"] == "1" else "")
+    if float(rec.get("prune_threshold", "0")) > 0:
+        mart += f", pruned below {float(rec['prune_threshold']):g} of each {rec.get('prune_scope', 'volume')}'s peak"
     skipped = pct(rec["skipped_a"]) if "skipped_a" in rec else "?"
     return [label, mart, times, f"**{uvw(rec)}** ({rec['rms']})", uvw(rec, "off_axis_band_rms_"),
             f"{uvw(ex)}" if ex else "—", f"{skipped}, {rec.get('peak_rss_gb', '?')} GB"]

@@ -65,6 +65,8 @@ TEST(RunConfig, ShippedPaperScaleConfigParses) {
   EXPECT_EQ(s.mart.iterations, 8);
   EXPECT_DOUBLE_EQ(s.mart.mu, 1.0);
   EXPECT_TRUE(s.mart.accelerate);
+  EXPECT_DOUBLE_EQ(s.mart.prune_threshold, 0.03);  // of each depth slice's peak ("Sparse reconstruction")
+  EXPECT_EQ(s.mart.prune_scope, recon::PruneScope::slice);
   ASSERT_EQ(s.correlation.passes.size(), 5u);  // core/piv's default with a third 16^3, 50 % pass
   EXPECT_EQ(s.correlation.passes[1].depth_margin, 4);
   EXPECT_EQ(s.correlation.passes[4].window, (std::array<int, 3>{16, 16, 16}));
@@ -80,6 +82,7 @@ TEST(RunConfig, ShippedPaperScaleConfigParses) {
   EXPECT_EQ(live.pixel_binning, 2);
   EXPECT_EQ(live.mart.iterations, 3);
   EXPECT_TRUE(live.mart.accelerate);
+  EXPECT_EQ(live.mart.prune_scope, recon::PruneScope::slice);  // the live tier keeps the full settings'
   ASSERT_EQ(live.correlation.passes.size(), 2u);
   EXPECT_EQ(live.correlation.passes[1].window, (std::array<int, 3>{8, 8, 8}));
   EXPECT_EQ(live.correlation.depth_prefilter, 4);
