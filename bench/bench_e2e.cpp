@@ -307,12 +307,14 @@ int main(int argc, char** argv) {
       "bench=e2e case=%s variant=reconstructed iterations=%d mu=%.2f accelerate=%d dark_cutoff=%.3g "
       "sensor_blur_mm=%.4g prune_threshold=%.3g prune_scope=%s "
       "intensity_threshold=%.3g final_smoothing=%d depth_prefilter=%d recon_a_s=%.2f recon_b_s=%.2f "
-      "correlate_s=%.2f skipped_a=%.3f skipped_b=%.3f rms_u=%.3f rms_v=%.3f rms_w=%.3f rms=%.3f valid=%.3f "
+      "correlate_s=%.2f skipped_a=%.3f skipped_b=%.3f updates_skipped_a=%.3f updates_skipped_b=%.3f rms_u=%.3f "
+      "rms_v=%.3f rms_w=%.3f rms=%.3f valid=%.3f "
       "off_axis_band_rms_u=%.3f off_axis_band_rms_v=%.3f off_axis_band_rms_w=%.3f off_axis_band_gain_u=%.3f "
       "off_axis_band_gain_v=%.3f off_axis_band_gain_w=%.3f peak_rss_gb=%.2f\n",
       scale.c_str(), iterations, mu, int(accelerate), dark_cutoff, sensor_blur_mm, prune_threshold, prune_scope.c_str(),
       intensity_threshold, final_smoothing, depth_prefilter, base.times.reconstruct_a_s, base.times.reconstruct_b_s,
-      base.times.correlate_s, base.skipped_a.fraction_skipped(), base.skipped_b.fraction_skipped(), e.rms[0], e.rms[1],
+      base.times.correlate_s, base.skipped_a.fraction_skipped(), base.skipped_b.fraction_skipped(),
+      base.skipped_a.fraction_updates_skipped(), base.skipped_b.fraction_updates_skipped(), e.rms[0], e.rms[1],
       e.rms[2], e.total, e.valid_fraction, e.off_band[0], e.off_band[1], e.off_band[2], e.off_band_gain[0],
       e.off_band_gain[1], e.off_band_gain[2], bench::peak_rss_gb());
 

@@ -264,6 +264,8 @@ def e2e_row(r, label):
     if float(rec.get("prune_threshold", "0")) > 0:
         mart += f", pruned below {float(rec['prune_threshold']):g} of each {rec.get('prune_scope', 'volume')}'s peak"
     skipped = pct(rec["skipped_a"]) if "skipped_a" in rec else "?"
+    if "updates_skipped_a" in rec:
+        skipped += f" of the box, {pct(rec['updates_skipped_a'])} of the updates"
     return [label, mart, times, f"**{uvw(rec)}** ({rec['rms']})", uvw(rec, "off_axis_band_rms_"),
             f"{uvw(ex)}" if ex else "—", f"{skipped}, {rec.get('peak_rss_gb', '?')} GB"]
 
