@@ -134,6 +134,7 @@ step "plenopivd stopped"
 # loopback, to basic.target. There systemd starts plenopivd.service (Type=notify: READY=1 once the
 # sockets are bound), the installed client asks it, a one-pair run on the simulated camera is
 # recorded and processed under the unit's sandbox, and systemd stops it cleanly.
+command -v systemd-nspawn > /dev/null || fail "systemd-nspawn is missing: Debian package systemd-container (scripts/setup.sh)"
 root=$PWD/$build/nspawn-root
 rm -rf "$root"
 mkdir -p "$root/usr/lib" "$root/etc" "$root/var"
