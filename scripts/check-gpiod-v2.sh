@@ -10,12 +10,9 @@ cd "$(dirname "$0")/.."
 dir=$PWD/build-gpiod2
 deps=$dir/libgpiod2
 rm -rf "$dir"
-mkdir -p "$deps/apt/lists/partial" "$deps/apt/cache/archives/partial" "$deps/root"
-echo "deb [signed-by=/usr/share/keyrings/debian-archive-keyring.gpg] http://deb.debian.org/debian trixie main" \
-  > "$deps/apt/sources.list"
-apt_options=(-o Dir::Etc::SourceList="$deps/apt/sources.list" -o Dir::Etc::SourceParts=/dev/null
-  -o Dir::State::Lists="$deps/apt/lists" -o Dir::Cache="$deps/apt/cache" -o APT::Sandbox::User=root)
-apt-get "${apt_options[@]}" update -qq
+mkdir -p "$deps/root"
+source scripts/private-apt.sh
+private_apt "$deps/apt" deb trixie
 (cd "$deps" && apt-get "${apt_options[@]}" download -qq libgpiod-dev libgpiod3)
 for deb in "$deps"/*.deb; do dpkg-deb -x "$deb" "$deps/root"; done
 libdir=$deps/root/usr/lib/x86_64-linux-gnu

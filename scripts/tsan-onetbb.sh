@@ -14,13 +14,10 @@ if [[ -f $install/version && $(cat "$install/version") == "$version" ]]; then
   exit 0
 fi
 rm -rf "$dir"
-mkdir -p "$dir/apt/lists/partial" "$dir/apt/cache/archives/partial" "$dir/src"
-echo "deb-src [signed-by=/usr/share/keyrings/debian-archive-keyring.gpg] http://deb.debian.org/debian bookworm main" \
-  > "$dir/apt/sources.list"
-apt_options=(-o Dir::Etc::SourceList="$dir/apt/sources.list" -o Dir::Etc::SourceParts=/dev/null
-  -o Dir::State::Lists="$dir/apt/lists" -o Dir::Cache="$dir/apt/cache" -o APT::Sandbox::User=root)
+mkdir -p "$dir/src"
+source scripts/private-apt.sh
 {
-  apt-get "${apt_options[@]}" update -qq
+  private_apt "$dir/apt" deb-src bookworm
   (cd "$dir/src" && apt-get "${apt_options[@]}" source -qq "onetbb=$version")
   source_dir=$(find "$dir/src" -mindepth 1 -maxdepth 1 -type d -name 'onetbb-*')
   launcher=()
