@@ -133,6 +133,7 @@ Daemon::Daemon(DaemonConfig config, const DaemonExtensions& extensions)
   environment_.state = &state_;
   environment_.publisher = publisher_.get();
   environment_.processing = processing_factory_;
+  environment_.processing_reads_camera_file = !extensions.processing && !config_.camera_file.empty();
   environment_.heartbeat = [this] { last_progress_ns_ = now_ns(); };
   last_progress_ns_ = now_ns();
 }

@@ -93,10 +93,25 @@ Run::Run(RunConfig config, std::string run_id, RunEnvironment env)
     }
     calibration = load_run_calibration(env_.calibration_file, optics::load_camera_file(env_.camera_file));
   }
-  // The raw frames of the pairs this run plans must fit on the disk before it starts.
+  // The frames the camera delivers: its region, else its whole sensor.
   const drivers::Roi& roi = config_.camera_roi;
   const int frame_width = roi.width > 0 ? roi.width : info.sensor_width_px;
   const int frame_height = roi.height > 0 ? roi.height : info.sensor_height_px;
+  // Frames of another size than the camera file's sensor would fail every pair of the plenoptic
+  // processing, so such a run does not start.
+  if (env_.processing && env_.processing_reads_camera_file && !env_.camera_file.empty()) {
+    const optics::SensorSpec sensor = optics::load_camera_file(env_.camera_file).sensor();
+    if (frame_width != sensor.width_px || frame_height != sensor.height_px) {
+      const std::string frames = std::to_string(frame_width) + " x " + std::to_string(frame_height) + " px";
+      throw InputError((roi.width > 0 ? "camera_roi: a region of " + frames
+                                      : "camera_uri " + camera_uri + ": a sensor of " + frames) +
+                       " does not match camera_file " + env_.camera_file.string() + ", whose sensor is " +
+                       std::to_string(sensor.width_px) + " x " + std::to_string(sensor.height_px) +
+                       " px: the processing could reconstruct no pair; give plenopivd the camera file of these "
+                       "frames, or set camera_roi to the camera file's size");
+    }
+  }
+  // The raw frames of the pairs this run plans must fit on the disk before it starts.
   bytes_per_pair_ =
       2 * std::uint64_t(std::max(frame_width, 0)) * std::uint64_t(std::max(frame_height, 0)) * sizeof(std::uint16_t);
   std::uint64_t planned = config_.pair_count;

@@ -51,6 +51,9 @@ struct RunEnvironment {
   RunStateMachine* state = nullptr;
   Publisher* publisher = nullptr;  // null: nothing published
   ProcessFactory processing;
+  // The processing reconstructs frames of camera_file's sensor size (plenoptic_processing): a run
+  // whose frames (the camera's sensor, or camera_roi) differ is refused at start.
+  bool processing_reads_camera_file = false;
   // Called whenever the run makes progress (a pair recorded, a field published): the heartbeat
   // that the systemd watchdog pings follow.
   std::function<void()> heartbeat;

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstring>
 #include <future>
+#include <iterator>
 
 #include <fstream>
 #include <latch>
@@ -417,6 +418,42 @@ TEST_F(RunTest, ACameraRegionTheCameraCannotReadIsRefusedByName) {
         << e.what();
   }
   EXPECT_FALSE(fs::exists(data_ / "run-roi"));
+}
+
+// Frames whose size differs from the camera file the processing reconstructs with (the camera's
+// whole sensor, or its camera_roi) could be recorded but never processed: the run is refused at
+// start, naming both sizes, before any folder is made. A region of the camera file's size starts.
+TEST_F(RunTest, FramesOfAnotherSizeThanTheCameraFileAreRefusedAtStart) {
+  const fs::path camera_file = data_.parent_path() / "camera-64x48.yaml";
+  {
+    std::ifstream small(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml");
+    std::string text((std::istreambuf_iterator<char>(small)), std::istreambuf_iterator<char>());
+    const std::string size = "width_px: 850, height_px: 850";
+    ASSERT_NE(text.find(size), std::string::npos);
+    text.replace(text.find(size), size.size(), "width_px: 48, height_px: 32");
+    std::ofstream(camera_file) << text;
+  }
+  env_.camera_file = camera_file;
+  env_.processing_reads_camera_file = true;
+  for (const auto& [extra, culprit] :
+       {std::pair<std::string, std::string>{"", "camera_uri test://: a sensor of 64 x 48 px"},
+        {"camera_roi: {width: 40, height: 32}\n", "camera_roi: a region of 40 x 32 px"}}) {
+    try {
+      daemon::Run run(config(extra), "size", env_);
+      ADD_FAILURE() << "started with " << extra;
+    } catch (const InputError& e) {
+      const std::string what = e.what();
+      EXPECT_NE(
+          what.find(culprit + " does not match camera_file " + camera_file.string() + ", whose sensor is 48 x 32 px"),
+          std::string::npos)
+          << what;
+    }
+    EXPECT_FALSE(fs::exists(data_ / "run-size"));
+  }
+  state_.start("fits");
+  daemon::Run run(config("pairs: 2\nrate_hz: 20\ncamera_roi: {width: 48, height: 32}\n"), "fits", env_);
+  wait_finished(run);
+  EXPECT_EQ(recorded(run), 2u);
 }
 
 TEST_F(RunTest, UnknownTriggerIsAnInputErrorNamingTheUri) {

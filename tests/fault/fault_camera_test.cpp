@@ -154,6 +154,28 @@ class FaultCamera : public ::testing::Test {
   std::unique_ptr<Daemon> daemon_;
 };
 
+// plenopivd reconstructs with its camera file: a run whose frames would be of another size, the
+// fake camera's whole 2048² sensor or a region of another size, is refused at start naming both
+// sizes, and no run folder is made.
+TEST_F(FaultCamera, FramesOfAnotherSizeThanTheCameraFileAreRefusedAtStart) {
+  ASSERT_NO_FATAL_FAILURE(start_fake());
+  ASSERT_NO_FATAL_FAILURE(start_daemon());
+  const std::string file = (dir_ / "camera.yaml").string();
+  for (const auto& [roi, culprit] :
+       {std::pair<std::string, std::string>{"", "camera_uri " + kCameraUri + ": a sensor of 2048 x 2048 px"},
+        {"camera_roi: {width: 128, height: 256}\n", "camera_roi: a region of 128 x 256 px"}}) {
+    std::ofstream(dir_ / "run.yaml") << "pairs: 2\nrate_hz: 2\ndt_s: 0.001\n" + roi +
+                                            "volume: {x_mm: [-0.25, 0.25], y_mm: [-0.25, 0.25], z_mm: [-0.5, 0.5], "
+                                            "voxel_mm: 0.125}\ncorrelation: {passes: [{window: 4}]}\n";
+    std::string out;
+    EXPECT_EQ(daemon_->client({"run", "start", "--config", (dir_ / "run.yaml").string()}, out), 4) << out;
+    EXPECT_NE(out.find(culprit + " does not match camera_file " + file + ", whose sensor is 256 x 256 px"),
+              std::string::npos)
+        << out;
+  }
+  EXPECT_TRUE(!fs::exists(dir_ / "data") || fs::is_empty(dir_ / "data"));
+}
+
 // The camera killed (SIGKILL) a few pairs into a run (until stopped) and started again once the
 // daemon has seen it gone: status says the camera is lost while it is, the run goes on when it is
 // back, counts the reconnect and the triggers lost meanwhile, and records pairs after it; stopped,
