@@ -2,8 +2,8 @@
 // camera delivers decoded frames (as a camera's driver hands them over), the run folder writer
 // writes both as TIFF, the frame check scans them, and the pair is let go, its buffers freed
 // ("fresh") or given back to the camera's frame pool ("pooled", as plenopivd does). The camera plays
-// at RATE_HZ, free-running; the run folder is on DATA_DIR (default /dev/shm, a tmpfs: this
-// machine's disk takes less than 10 Hz of paper-scale pairs).
+// at RATE_HZ, free-running; the run folder is on DATA_DIR (default: the temporary folder's disk),
+// which the writer reaches past the page cache where its file system allows (write=direct).
 //   bench_recording [PAIRS] [REPEATS] [RATE_HZ] [DATA_DIR]   (default 100 pairs, 3 repeats, 10 Hz)
 // Per variant: medians over the repeats of wall and CPU seconds per pair (wall: 1 / RATE_HZ while
 // the recording keeps up) and minor page faults per pair, and the pool's reuse. The variants
@@ -20,6 +20,7 @@
 
 #include "bench/bench_support.hpp"
 #include "bench/replay_recording.hpp"
+#include "core/io/direct_writer.hpp"
 #include "core/optics/camera_file.hpp"
 #include "core/process/frame_check.hpp"
 #include "drivers/camera/frame_pool.hpp"
@@ -70,7 +71,7 @@ Figures record(drivers::Camera& camera, const fs::path& data, const std::string&
     writer.record_pair(r);
     for (const drivers::Frame* f : {&pair->a, &pair->b}) (void)process::frame_problem(f->image.pixels, f->bit_depth);
     (void)drivers::share_pair(std::move(*pair), pooled ? camera.frame_pool() : nullptr);
-    // The folder holds the last pair only: the tmpfs is memory.
+    // The folder holds the last pair only: 100 paper-scale pairs are 6 GB.
     if (i > 0) {
       char name[64];
       for (const char* k : {"A", "B"}) {
@@ -96,7 +97,7 @@ int main(int argc, char** argv) {
   const int pairs = argc > 1 ? std::atoi(argv[1]) : 100;
   const int repeats = argc > 2 ? std::atoi(argv[2]) : 3;
   const double rate_hz = argc > 3 ? std::atof(argv[3]) : 10.0;
-  const fs::path data = argc > 4 ? fs::path(argv[4]) : fs::path("/dev/shm/plenopiv-bench-recording");
+  const fs::path data = argc > 4 ? fs::path(argv[4]) : fs::temp_directory_path() / "plenopiv-bench-recording";
   if (pairs < 2 || repeats < 1 || !(rate_hz > 0)) {
     std::fprintf(stderr, "usage: bench_recording [PAIRS >= 2] [REPEATS >= 1] [RATE_HZ > 0] [DATA_DIR]\n");
     return 2;
@@ -111,6 +112,7 @@ int main(int argc, char** argv) {
   camera->start();
   fs::remove_all(data);
   fs::create_directories(data);
+  const char* write_mode = io::direct_write_mode(data) == io::WriteMode::direct ? "direct" : "buffered";
   (void)record(*camera, data, "warm-up", 4, true);  // decoding the recording, the first frames' pages
 
   std::vector<Figures> fresh, pooled;
@@ -131,9 +133,9 @@ int main(int argc, char** argv) {
   for (int k = 0; k < 2; ++k) {
     const std::vector<Figures>& v = *runs[k];
     std::printf(
-        "bench=recording variant=%s pairs=%d repeats=%d rate_hz=%.1f mb_per_pair=%.1f wall_s_per_pair=%.4f "
-        "cpu_s_per_pair=%.4f cores=%.2f faults_per_pair=%.0f buffers_reused=%.2f\n",
-        names[k], pairs, repeats, rate_hz,
+        "bench=recording variant=%s pairs=%d repeats=%d rate_hz=%.1f data_dir=%s write=%s mb_per_pair=%.1f "
+        "wall_s_per_pair=%.4f cpu_s_per_pair=%.4f cores=%.2f faults_per_pair=%.0f buffers_reused=%.2f\n",
+        names[k], pairs, repeats, rate_hz, data.c_str(), write_mode,
         2.0 * camera_model.sensor().width_px * camera_model.sensor().height_px * 2 / (1024.0 * 1024.0),
         med(v, &Figures::wall_s_per_pair), med(v, &Figures::cpu_s_per_pair), rate_hz * med(v, &Figures::cpu_s_per_pair),
         med(v, &Figures::faults_per_pair), med(v, &Figures::reused));

@@ -13,6 +13,7 @@
 #include "core/base/errors.hpp"
 #include "core/calib/nominal_calibration.hpp"
 #include "core/io/atomic_file.hpp"
+#include "core/io/direct_writer.hpp"
 #include "core/optics/camera_file.hpp"
 #include "core/process/frame_check.hpp"
 #include "daemon/thread_priority.hpp"
@@ -147,6 +148,10 @@ Run::Run(RunConfig config, std::string run_id, RunEnvironment env)
   spdlog::info("run {}: {} pairs at {} Hz, dt {} s, from {}, trigger {}, folder {}", run_id_,
                config_.pair_count ? std::to_string(config_.pair_count) : "unlimited", config_.rate_hz, config_.dt_s,
                camera_uri, trigger_uri, dir_.string());
+  spdlog::info("run {}: raw frames written {}", run_id_,
+               io::direct_write_mode(env_.data_dir) == io::WriteMode::direct
+                   ? "past the page cache (O_DIRECT)"
+                   : "through the page cache: the data directory's file system does not take O_DIRECT");
   if (wiring.source == drivers::TriggerSource::Software) {
     spdlog::warn("run {}: camera triggering {}", run_id_, wiring.description);
   } else {

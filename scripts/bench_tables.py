@@ -639,9 +639,10 @@ def t_rotated_shear(R):
 
 def t_recording(R):
     r = R("recording")
-    rows = [[d["variant"], f"{d['rate_hz']} Hz", d["mb_per_pair"], d["wall_s_per_pair"], d["cpu_s_per_pair"],
+    rows = [[d["variant"], f"{d['rate_hz']} Hz", f"{d.get('data_dir', '/dev/shm')} ({d.get('write', 'buffered')})",
+             d["mb_per_pair"], d["wall_s_per_pair"], d["cpu_s_per_pair"],
              d["cores"], d["faults_per_pair"], d["buffers_reused"]] for d in r.find(bench="recording")]
-    out = table(["frames", "rate", "MB per pair", "wall s per pair", "CPU s per pair", "cores",
+    out = table(["frames", "rate", "folder (writes)", "MB per pair", "wall s per pair", "CPU s per pair", "cores",
                  "page faults per pair", "buffers reused"], rows)
     ratio = r.one(bench="recording_ratio")
     if ratio:

@@ -15,6 +15,7 @@
 
 #include "core/base/errors.hpp"
 #include "core/io/atomic_file.hpp"
+#include "core/io/direct_writer.hpp"
 
 namespace plenopiv::io {
 namespace {
@@ -49,6 +50,39 @@ TiffPtr open(const std::filesystem::path& path, const char* mode) {
   }
   return TiffPtr(t);
 }
+
+// libtiff's client I/O onto a DirectWriter (a new file, written only). Its procedures turn the
+// writer's exceptions into libtiff's failures and keep the reason for our error text.
+namespace direct_tiff {
+DirectWriter& writer(thandle_t h) { return *static_cast<DirectWriter*>(h); }
+template <typename T, typename F>
+T guarded(F&& f) {
+  try {
+    return f();
+  } catch (const std::exception& e) {
+    g_last_tiff_message = e.what();
+    return T(-1);
+  }
+}
+tmsize_t read(thandle_t, void*, tmsize_t) { return -1; }
+tmsize_t write(thandle_t h, void* data, tmsize_t n) {
+  return guarded<tmsize_t>([&] { return writer(h).write(data, std::size_t(n)), n; });
+}
+toff_t seek(thandle_t h, toff_t offset, int whence) {
+  return guarded<toff_t>([&] { return toff_t(writer(h).seek(std::int64_t(offset), whence)); });
+}
+int close(thandle_t) { return 0; }  // the writer's owner finishes the file
+toff_t size(thandle_t h) { return writer(h).size(); }
+int map(thandle_t, void**, toff_t*) { return 0; }
+void unmap(thandle_t, void*, toff_t) {}
+
+TiffPtr open(DirectWriter& w, const std::filesystem::path& path) {
+  g_last_tiff_message.clear();
+  TIFF* t = TIFFClientOpen(path.c_str(), "w", &w, read, write, seek, close, size, map, unmap);
+  if (!t) throw std::runtime_error(path.string() + ": cannot start a TIFF (" + g_last_tiff_message + ")");
+  return TiffPtr(t);
+}
+}  // namespace direct_tiff
 
 struct PageInfo {
   uint32_t width = 0, height = 0;
@@ -144,9 +178,9 @@ void write_row(TIFF* t, const std::filesystem::path& path, const void* row, int 
   }
 }
 
-// Uncompressed 16-bit pixels in the host's byte order, which is the file's (TIFFOpen "w"), are
-// their own encoding: each strip goes to the file straight from the image, without libtiff's copy
-// into its strip buffer (a recorder writes two camera frames per pair).
+// Uncompressed 16-bit pixels in the host's byte order, which is the file's, are their own
+// encoding: each strip goes to the writer straight from the image, without libtiff's copy into its
+// strip buffer (a recorder writes two camera frames per pair).
 void write_raw_strips(TIFF* t, const std::filesystem::path& path, const ImageU16& image) {
   uint32_t rows_per_strip = 0;
   TIFFGetFieldDefaulted(t, TIFFTAG_ROWSPERSTRIP, &rows_per_strip);
@@ -248,10 +282,13 @@ void write_tiff(const std::filesystem::path& path, const ImageU16& image, bool s
   write_atomically(
       path,
       [&](const std::filesystem::path& tmp) {
-        TiffPtr t = open(tmp, "w");
+        DirectWriter file(tmp);
+        TiffPtr t = direct_tiff::open(file, tmp);
         set_page_fields(t.get(), image.width, image.height, 16, SAMPLEFORMAT_UINT);
         write_raw_strips(t.get(), path, image);
         flush(t.get(), path);
+        t.reset();
+        file.finish();
       },
       sync_folder);
 }

@@ -28,7 +28,8 @@ struct TiffInfo {
 // a truncated or damaged frame is found without reading its pixels. InputError naming the file.
 TiffInfo check_tiff(const std::filesystem::path& path);
 
-// Writes a 16-bit single-channel TIFF, atomically.
+// Writes a 16-bit single-channel TIFF, atomically, past the page cache where the file system takes
+// O_DIRECT (io::DirectWriter): a recorder's frames cost a copy, not page-cache churn.
 // `sync_folder`: as io::write_atomically (false: the caller flushes the folder once for several files).
 void write_tiff(const std::filesystem::path& path, const ImageU16& image, bool sync_folder = true);
 // Writes float32 pages (a focal stack, say) as one multi-page TIFF, atomically. `descriptions`

@@ -4,11 +4,13 @@
 #include <cmath>
 #include <cstring>
 #include <fstream>
+#include <iterator>
 #include <opencv2/imgcodecs.hpp>
 #include <sstream>
 
 #include "core/base/errors.hpp"
 #include "core/io/atomic_file.hpp"
+#include "core/io/direct_writer.hpp"
 #include "core/io/hdf5_files.hpp"
 #include "core/io/raw_frame.hpp"
 #include "core/io/tiff.hpp"
@@ -83,6 +85,78 @@ TEST(Tiff, AFrameOfManyStripsReadsBackBitForBitInAnotherReader) {
   ASSERT_EQ(other.rows, 301);
   for (int y = 0; y < img.height; ++y)
     for (int x = 0; x < img.width; ++x) ASSERT_EQ(other.at<std::uint16_t>(y, x), img.at(x, y)) << x << ", " << y;
+}
+
+// A frame larger than the direct writer's staging buffer (several of them, the last part short)
+// reads back bit for bit in both readers.
+TEST(Tiff, AFrameLargerThanTheStagingBufferReadsBackBitForBit) {
+  ImageU16 img(3001, 1601);  // 9.6 MB
+  for (std::size_t i = 0; i < img.size(); ++i) img.pixels[i] = std::uint16_t(i * 40503u >> 3);
+  const auto path = temp_dir() / "large.tif";
+  write_tiff(path, img);
+  EXPECT_EQ(read_tiff_u16(path).pixels, img.pixels);
+  const cv::Mat other = cv::imread(path.string(), cv::IMREAD_UNCHANGED);
+  ASSERT_EQ(other.type(), CV_16U);
+  ASSERT_EQ(other.cols, img.width);
+  ASSERT_EQ(other.rows, img.height);
+  EXPECT_EQ(std::memcmp(other.ptr<std::uint16_t>(0), img.pixels.data(), img.size() * 2), 0);
+}
+
+// The direct writer behaves as a file handle: sequential writes across staging buffers, a seek back
+// into the first block and into blocks already written, a gap past the end (zeros); the file holds
+// exactly what a buffered file would. Tried where /tmp is (O_DIRECT on most file systems).
+TEST(DirectWriter, AnyPatternOfWritesLeavesWhatAFileHandleWould) {
+  const auto path = temp_dir() / "direct.bin";
+  std::vector<unsigned char> expected;
+  const auto put = [&](std::size_t at, std::size_t n, unsigned seed) {
+    if (expected.size() < at + n) expected.resize(at + n, 0);
+    for (std::size_t i = 0; i < n; ++i) expected[at + i] = static_cast<unsigned char>((seed + i) * 2654435761u >> 24);
+  };
+  {
+    DirectWriter w(path);
+    EXPECT_EQ(w.mode(), direct_write_mode(path.parent_path()));
+    std::vector<unsigned char> chunk;
+    const auto write_at = [&](std::size_t at, std::size_t n, unsigned seed) {
+      put(at, n, seed);
+      chunk.assign(expected.begin() + std::ptrdiff_t(at), expected.begin() + std::ptrdiff_t(at + n));
+      EXPECT_EQ(w.seek(std::int64_t(at), SEEK_SET), at);
+      w.write(chunk.data(), n);
+    };
+    write_at(0, 8, 1);  // a header
+    std::size_t at = 8;
+    for (unsigned k = 0; at < 9'500'000; ++k) {  // strips of odd sizes, across 4 MiB buffers
+      const std::size_t n = 1 + (k * 7919u) % 70'000;
+      write_at(at, n, k + 2);
+      at += n;
+    }
+    write_at(4, 4, 99);              // the header again
+    write_at(5000, 3000, 100);       // inside a block already on the disk
+    write_at(4'194'000, 9000, 101);  // across the first buffer's end, on the disk
+    EXPECT_EQ(w.seek(0, SEEK_END), at);
+    write_at(at + 12'345, 10, 102);  // past the end: a gap of zeros
+    EXPECT_EQ(w.size(), expected.size());
+    w.finish();
+  }
+  std::ifstream in(path, std::ios::binary);
+  const std::vector<unsigned char> back((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  ASSERT_EQ(back.size(), expected.size());
+  EXPECT_TRUE(back == expected);
+}
+
+// A full disk surfaces from the write that meets it or from finish(), naming the file and the
+// reason; write_tiff then leaves nothing under the name.
+TEST(DirectWriter, AFullDiskIsNamedAndLeavesNoFile) {
+  testing_support::SmallTmpfs disk(temp_dir() / "full-direct", 2);
+  if (!disk.mounted()) GTEST_SKIP() << disk.why_not();
+  ImageU16 img(1500, 1000);  // 3 MB on a 2 MB disk
+  const auto path = disk.dir() / "frame.tif";
+  try {
+    write_tiff(path, img);
+    ADD_FAILURE() << "wrote 3 MB on a 2 MB disk";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("no space left on device"), std::string::npos) << e.what();
+  }
+  EXPECT_TRUE(std::filesystem::is_empty(disk.dir()));
 }
 
 // Read into a frame buffer: reused when it has the file's size, replaced when not.
