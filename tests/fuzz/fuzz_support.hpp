@@ -21,16 +21,23 @@ inline std::string as_text(const std::uint8_t* data, std::size_t size) {
 }
 
 // A folder of this process's own for files a harness writes: on /dev/shm when there is one (a
-// file per input must not cost a disk write), else the temporary folder.
+// file per input must not cost a disk write), else the temporary folder. Removed when the process
+// exits (a crash leaves it; libFuzzer keeps the crashing input elsewhere).
 inline const std::filesystem::path& scratch_dir() {
-  static const std::filesystem::path dir = [] {
+  // Never destroyed: the exit handler reads it after static destructors have run.
+  static const std::filesystem::path* dir = [] {
     const std::filesystem::path base =
         std::filesystem::is_directory("/dev/shm") ? "/dev/shm" : std::filesystem::temp_directory_path();
-    const auto d = base / ("plenopiv-fuzz-" + std::to_string(::getpid()));
-    std::filesystem::create_directories(d);
+    auto* d = new std::filesystem::path(base / ("plenopiv-fuzz-" + std::to_string(::getpid())));
+    std::filesystem::remove_all(*d);  // left by an earlier process with the same pid
+    std::filesystem::create_directories(*d);
+    std::atexit([] {
+      std::error_code ignored;
+      std::filesystem::remove_all(scratch_dir(), ignored);
+    });
     return d;
   }();
-  return dir;
+  return *dir;
 }
 
 // Writes the input to `name` in the scratch folder and returns its path.

@@ -3,6 +3,9 @@
 
 #include <unistd.h>
 
+#include <gtest/gtest.h>
+
+#include <cstdlib>
 #include <filesystem>
 #include <mutex>
 #include <set>
@@ -10,14 +13,46 @@
 
 namespace plenopiv::testing_support {
 
+namespace detail {
+// The scratch folders this process made, removed when it exits with every test passed: a suite
+// that CI runs again and again must not leave gigabytes behind. After a failure they stay for a
+// look (their paths are in the failing test's output).
+struct ScratchFolders {
+  std::mutex mutex;
+  std::set<std::string> areas;
+  std::set<std::filesystem::path> made;
+  pid_t owner = ::getpid();
+
+  static ScratchFolders& instance() {
+    // Never destroyed: the exit handler below runs after static destructors may have.
+    static ScratchFolders* folders = [] {
+      auto* f = new ScratchFolders;
+      // gtest's UnitTest made before the handler is registered is destroyed after it runs.
+      (void)::testing::UnitTest::GetInstance();
+      std::atexit([] {
+        ScratchFolders& f = instance();
+        if (::getpid() != f.owner || ::testing::UnitTest::GetInstance()->Failed()) return;
+        std::error_code ignored;
+        for (const auto& dir : f.made) std::filesystem::remove_all(dir, ignored);
+      });
+      return f;
+    }();
+    return *folders;
+  }
+};
+}  // namespace detail
+
 // <tmp>/plenopiv-<area>-<pid>, emptied on this process's first use: a folder of that name left by an
-// earlier process with the same (recycled) pid must not hand this one its files.
+// earlier process with the same (recycled) pid must not hand this one its files. Removed at exit
+// unless a test failed.
 inline std::filesystem::path temp_dir(const std::string& area) {
   const auto dir = std::filesystem::temp_directory_path() / ("plenopiv-" + area + "-" + std::to_string(::getpid()));
-  static std::mutex mutex;
-  static std::set<std::string> emptied;
-  std::lock_guard lock(mutex);
-  if (emptied.insert(area).second) std::filesystem::remove_all(dir);
+  detail::ScratchFolders& folders = detail::ScratchFolders::instance();
+  std::lock_guard lock(folders.mutex);
+  if (folders.areas.insert(area).second) {
+    std::filesystem::remove_all(dir);
+    folders.made.insert(dir);
+  }
   std::filesystem::create_directories(dir);
   return dir;
 }
