@@ -126,6 +126,7 @@ void DirectWriter::patch_flushed(const unsigned char* data, std::size_t n, std::
       got = ::pread(fd_, block->data, kBlock, off_t(start));
     } while (got < 0 && errno == EINTR);
     if (got < 0) fail("cannot read back a written block");
+    std::memset(block->data + got, 0, kBlock - std::size_t(got));  // past the end: zeros
     std::memcpy(block->data + within, data, take);
     write_blocks(block->data, kBlock, start);
     data += take;
@@ -187,11 +188,11 @@ void DirectWriter::finish() {
 
 WriteMode direct_write_mode(const std::filesystem::path& folder) {
   const std::filesystem::path probe = folder / (".direct-write-probe-" + std::to_string(::getpid()));
-  const int fd = ::open(probe.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_DIRECT | O_CLOEXEC, 0600);
+  const int fd = ::open(probe.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_DIRECT | O_CLOEXEC, 0600);
   const int error = errno;
+  ::unlink(probe.c_str());
   if (fd >= 0) {
     ::close(fd);
-    ::unlink(probe.c_str());
     return WriteMode::direct;
   }
   if (error == EINVAL) return WriteMode::buffered;
