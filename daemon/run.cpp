@@ -349,6 +349,20 @@ void Run::drain_after_stop() {
   take_drops();
 }
 
+// The frames of the run's last triggers that never arrived leave no gap in the frame ids behind
+// them for the camera's pairer to see: what the triggers made and no count holds is counted never
+// arrived, and a trigger neither recorded nor listed yet is listed.
+void Run::account_for_the_last_triggers() {
+  if (camera_trigger_ != drivers::TriggerSource::Software) triggers_made_ = trigger_->counters().shots_fired;
+  for (std::uint64_t i = triggers_seen_; i < triggers_made_; ++i) {
+    recorder_->record_drop(i, "never arrived");
+    spdlog::warn("run {}: trigger {}: no pair recorded: never arrived", run_id_, i);
+  }
+  triggers_seen_ = std::max(triggers_seen_, triggers_made_);
+  const std::uint64_t accounted = 2 * recorder_->pairs_recorded() + frames_lost();
+  if (2 * triggers_made_ > accounted) never_arrived_at_end_ = 2 * triggers_made_ - accounted;
+}
+
 void Run::acquire() {
   try {
     const auto period =
@@ -403,6 +417,7 @@ void Run::acquire() {
     env_.state->finishing();
     stop_devices();
     drain_after_stop();
+    account_for_the_last_triggers();
   } catch (const std::exception& e) {
     acquisition_error_ = e.what();
     stop_devices();
@@ -623,7 +638,7 @@ std::vector<msg::LaneCounters> Run::lane_counters() const {
 msg::Losses Run::losses() const {
   const drivers::CameraCounters c = camera_->counters();
   msg::Losses l;
-  l.set_frames_never_arrived(c.frames_lost);
+  l.set_frames_never_arrived(c.frames_lost + never_arrived_at_end_);
   l.set_frames_discarded(c.frames_discarded);
   l.set_camera_queue_overflow(c.pairs_overflowed);
   l.set_not_read_out(c.pairs_not_read_out);
@@ -641,7 +656,7 @@ msg::Losses Run::losses() const {
 // Every raw frame the camera made that is in no recorded pair.
 std::uint64_t Run::frames_lost() const {
   const drivers::CameraCounters c = camera_->counters();
-  return c.frames_lost + c.frames_discarded +
+  return c.frames_lost + never_arrived_at_end_ + c.frames_discarded +
          2 * (c.pairs_overflowed + c.pairs_not_read_out + not_recorded_at_stop_ + camera_lost_);
 }
 

@@ -111,6 +111,7 @@ class Run {
   void end_outage(std::uint64_t made);
   void lose_trigger(std::uint64_t index);
   void drain_after_stop();
+  void account_for_the_last_triggers();
   void check_space() const;
   void stop_devices() noexcept;
   msg::Losses losses() const;
@@ -145,6 +146,8 @@ class Run {
   std::atomic<bool> stop_{false}, finished_{false};
   std::atomic<std::uint64_t> pairs_received_{0};
   std::atomic<std::uint64_t> not_recorded_at_stop_{0};
+  // Frames of the run's last triggers that never arrived (account_for_the_last_triggers).
+  std::atomic<std::uint64_t> never_arrived_at_end_{0};
   // A camera outage (acquisition thread): when it began, the camera's reconnects then, and why.
   struct Outage {
     std::chrono::steady_clock::time_point since;

@@ -277,11 +277,12 @@ TEST_F(DaemonRuns, UnpairedFramesCountAsLost) {
   const auto s = status_or_null();
   ASSERT_TRUE(s);
   // Triggers 1 and 3 lose frame B: B1 is a gap in the ids (lost), A1 and A3 wait for partners that
-  // never come (discarded); pairs 0 and 2 are recorded.
+  // never come (discarded), and B3, the run's last frame, never arrives (counted at the run's end
+  // against the triggers made); pairs 0 and 2 are recorded.
   EXPECT_EQ(s->pairs_recorded(), 2u);
-  EXPECT_EQ(s->frames_lost(), 3u);
+  EXPECT_EQ(s->frames_lost(), 4u);
   // ... and the log says so at the run's end.
-  EXPECT_NE(daemon_->output().find("2 pairs recorded, 2 processed, 0 skipped, 3 frames lost"), std::string::npos)
+  EXPECT_NE(daemon_->output().find("2 pairs recorded, 2 processed, 0 skipped, 4 frames lost"), std::string::npos)
       << daemon_->output();
   // The manifest names the triggers with no pair and why, and counts every loss.
   const msg::RunManifest m = manifest(only_run_dir());
@@ -289,8 +290,9 @@ TEST_F(DaemonRuns, UnpairedFramesCountAsLost) {
   EXPECT_EQ(m.dropped(0).trigger_index(), 1u);
   EXPECT_EQ(m.dropped(1).trigger_index(), 3u);
   for (const msg::ManifestDrop& d : m.dropped()) EXPECT_EQ(d.reason(), "unpaired frame");
-  EXPECT_EQ(m.frames_lost(), 3u);
-  EXPECT_EQ(m.losses().frames_never_arrived() + m.losses().frames_discarded(), 3u);
+  EXPECT_EQ(m.frames_lost(), 4u);
+  EXPECT_EQ(m.losses().frames_never_arrived(), 2u);
+  EXPECT_EQ(m.losses().frames_discarded(), 2u);
 }
 
 TEST_F(DaemonRuns, SigtermMidRunDrainsAndLeavesTheFolderConsistent) {
