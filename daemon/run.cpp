@@ -174,6 +174,7 @@ void Run::record(drivers::FramePair pair) {
   // The run's trigger numbering (a reconnected camera counts from 0 again), which the shots share.
   pair.trigger_index += trigger_offset_;
   triggers_seen_ = std::max(triggers_seen_, pair.trigger_index + 1);
+  mark_accounted(pair.trigger_index);
   attach_shot(pair);
   check_space();
   run_folder::PairRecord record;
@@ -235,6 +236,7 @@ void Run::take_drops() {
   for (const drivers::PairDrop& d : drops) {
     const std::uint64_t index = d.trigger_index + trigger_offset_;
     triggers_seen_ = std::max(triggers_seen_, index + 1);
+    mark_accounted(index);
     recorder_->record_drop(index, drivers::to_string(d.reason));
     spdlog::warn("run {}: trigger {}: no pair recorded: {}", run_id_, index, drivers::to_string(d.reason));
   }
@@ -298,6 +300,7 @@ void Run::end_outage(std::uint64_t made) {
 
 void Run::lose_trigger(std::uint64_t index) {
   triggers_seen_ = std::max(triggers_seen_, index + 1);
+  mark_accounted(index);
   ++camera_lost_;
   recorder_->record_drop(index, "camera lost");
 }
@@ -343,18 +346,28 @@ void Run::drain_after_stop() {
       continue;
     }
     ++not_recorded_at_stop_;
-    spdlog::warn("run {}: trigger {}: not recorded: the stop's {} s bound was reached", run_id_, pair->trigger_index,
+    const std::uint64_t index = pair->trigger_index + trigger_offset_;
+    mark_accounted(index);
+    recorder_->record_drop(index, "not recorded at the stop");
+    spdlog::warn("run {}: trigger {}: not recorded: the stop's {} s bound was reached", run_id_, index,
                  kStopRecordBound.count() / 1000.0);
   }
   take_drops();
 }
 
+void Run::mark_accounted(std::uint64_t trigger_index) {
+  if (trigger_index >= triggers_accounted_.size()) triggers_accounted_.resize(trigger_index + 1, false);
+  triggers_accounted_[trigger_index] = true;
+}
+
 // The frames of the run's last triggers that never arrived leave no gap in the frame ids behind
 // them for the camera's pairer to see: what the triggers made and no count holds is counted never
-// arrived, and a trigger neither recorded nor listed yet is listed.
+// arrived. A trigger whose frames all went missing (the pairer counts the frames, not the trigger)
+// is neither recorded nor listed: it is listed now.
 void Run::account_for_the_last_triggers() {
   if (camera_trigger_ != drivers::TriggerSource::Software) triggers_made_ = trigger_->counters().shots_fired;
-  for (std::uint64_t i = triggers_seen_; i < triggers_made_; ++i) {
+  for (std::uint64_t i = 0; i < triggers_made_; ++i) {
+    if (i < triggers_accounted_.size() && triggers_accounted_[i]) continue;
     recorder_->record_drop(i, "never arrived");
     spdlog::warn("run {}: trigger {}: no pair recorded: never arrived", run_id_, i);
   }

@@ -10,6 +10,7 @@
 #include <optional>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include "daemon/daemon_config.hpp"
 #include "daemon/lanes.hpp"
@@ -162,6 +163,9 @@ class Run {
   std::uint64_t trigger_offset_ = 0;
   // One past the highest trigger index (the run's) the camera delivered or dropped.
   std::uint64_t triggers_seen_ = 0;
+  // The run's triggers recorded or listed with no pair, by index (acquisition thread).
+  std::vector<bool> triggers_accounted_;
+  void mark_accounted(std::uint64_t trigger_index);
   std::uint64_t bytes_per_pair_ = 0;  // raw frames on disk
   // Bad data met (all-zero or saturated frames): kind -> (count, first pair), for status and manifest.
   mutable std::mutex warnings_mutex_;
