@@ -1,5 +1,4 @@
-// A new file written past the page cache (O_DIRECT) through aligned staging buffers: the raw
-// frames a recorder writes at hundreds of MB/s cost a copy, not page-cache churn.
+// A new file written past the page cache (O_DIRECT) through aligned staging buffers.
 #pragma once
 
 #include <cstddef>
@@ -15,6 +14,7 @@ enum class WriteMode {
   buffered,  // the file system refuses O_DIRECT (EINVAL): ordinary writes of the same blocks
 };
 
+// Written this way, a recorder's raw frames at hundreds of MB/s cost a copy, not page-cache churn.
 // Writes one new file (created or truncated, mode 0644) at any offsets, as a file handle does:
 // libtiff's client I/O (header, strips, directory, then the header again) fits it. Bytes go into a
 // staging buffer aligned to kBlock and reach the file in whole blocks; the file's first block stays
