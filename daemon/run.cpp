@@ -173,7 +173,6 @@ void Run::join() {
 void Run::record(drivers::FramePair pair) {
   // The run's trigger numbering (a reconnected camera counts from 0 again), which the shots share.
   pair.trigger_index += trigger_offset_;
-  triggers_seen_ = std::max(triggers_seen_, pair.trigger_index + 1);
   mark_accounted(pair.trigger_index);
   attach_shot(pair);
   check_space();
@@ -235,7 +234,6 @@ void Run::take_drops() {
   if (drops.empty()) return;
   for (const drivers::PairDrop& d : drops) {
     const std::uint64_t index = d.trigger_index + trigger_offset_;
-    triggers_seen_ = std::max(triggers_seen_, index + 1);
     mark_accounted(index);
     recorder_->record_drop(index, drivers::to_string(d.reason));
     spdlog::warn("run {}: trigger {}: no pair recorded: {}", run_id_, index, drivers::to_string(d.reason));
@@ -285,13 +283,13 @@ void Run::begin_outage(const std::string& reason, std::uint64_t made) {
                 seconds(config_.camera_outage_s), reason);
   while (auto pair = camera_->next_pair(0ms)) record(std::move(*pair));
   take_drops();
-  for (std::uint64_t i = triggers_seen_; i < made; ++i) lose_trigger(i);
+  for (std::uint64_t i = triggers_seen(); i < made; ++i) lose_trigger(i);
 }
 
 // The camera is back, from the run's trigger `made` on; a camera that reconnected counts its
 // triggers from 0 again there.
 void Run::end_outage(std::uint64_t made) {
-  for (std::uint64_t i = triggers_seen_; i < made; ++i) lose_trigger(i);
+  for (std::uint64_t i = triggers_seen(); i < made; ++i) lose_trigger(i);
   if (camera_->counters().reconnects > outage_->reconnects) trigger_offset_ = made;
   spdlog::info("run {}: camera {} back after {:.1f} s; {} trigger(s) lost with it so far", run_id_, camera_->info().uri,
                std::chrono::duration<double>(Clock::now() - outage_->since).count(), camera_lost_.load());
@@ -299,7 +297,6 @@ void Run::end_outage(std::uint64_t made) {
 }
 
 void Run::lose_trigger(std::uint64_t index) {
-  triggers_seen_ = std::max(triggers_seen_, index + 1);
   mark_accounted(index);
   ++camera_lost_;
   recorder_->record_drop(index, "camera lost");
@@ -371,7 +368,6 @@ void Run::account_for_the_last_triggers() {
     recorder_->record_drop(i, "never arrived");
     spdlog::warn("run {}: trigger {}: no pair recorded: never arrived", run_id_, i);
   }
-  triggers_seen_ = std::max(triggers_seen_, triggers_made_);
   const std::uint64_t accounted = 2 * recorder_->pairs_recorded() + frames_lost();
   if (2 * triggers_made_ > accounted) never_arrived_at_end_ = 2 * triggers_made_ - accounted;
 }

@@ -161,11 +161,11 @@ class Run {
   std::uint64_t triggers_made_ = 0;
   // The camera counts triggers from 0 again after a reconnect: the run's index of its trigger 0.
   std::uint64_t trigger_offset_ = 0;
-  // One past the highest trigger index (the run's) the camera delivered or dropped.
-  std::uint64_t triggers_seen_ = 0;
   // The run's triggers recorded or listed with no pair, by index (acquisition thread).
   std::vector<bool> triggers_accounted_;
   void mark_accounted(std::uint64_t trigger_index);
+  // One past the highest trigger index (the run's) recorded or listed.
+  std::uint64_t triggers_seen() const { return triggers_accounted_.size(); }
   std::uint64_t bytes_per_pair_ = 0;  // raw frames on disk
   // Bad data met (all-zero or saturated frames): kind -> (count, first pair), for status and manifest.
   mutable std::mutex warnings_mutex_;

@@ -19,7 +19,6 @@ namespace detail {
 // look (their paths are in the failing test's output).
 struct ScratchFolders {
   std::mutex mutex;
-  std::set<std::string> areas;
   std::set<std::filesystem::path> made;
   pid_t owner = ::getpid();
 
@@ -49,10 +48,7 @@ inline std::filesystem::path temp_dir(const std::string& area) {
   const auto dir = std::filesystem::temp_directory_path() / ("plenopiv-" + area + "-" + std::to_string(::getpid()));
   detail::ScratchFolders& folders = detail::ScratchFolders::instance();
   std::lock_guard lock(folders.mutex);
-  if (folders.areas.insert(area).second) {
-    std::filesystem::remove_all(dir);
-    folders.made.insert(dir);
-  }
+  if (folders.made.insert(dir).second) std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
   return dir;
 }
