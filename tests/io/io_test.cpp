@@ -71,6 +71,17 @@ TEST(Tiff, SixteenBitRoundTrip) {
   EXPECT_EQ(back.pixels, img.pixels);
 }
 
+// Our reader and another (OpenCV's) read `path` back as `img`, pixel for pixel.
+void expect_read_back_by_both_readers(const std::filesystem::path& path, const ImageU16& img) {
+  EXPECT_EQ(read_tiff_u16(path).pixels, img.pixels);
+  const cv::Mat other = cv::imread(path.string(), cv::IMREAD_UNCHANGED);
+  ASSERT_EQ(other.type(), CV_16U);
+  ASSERT_EQ(other.cols, img.width);
+  ASSERT_EQ(other.rows, img.height);
+  for (int y = 0; y < img.height; ++y)
+    for (int x = 0; x < img.width; ++x) ASSERT_EQ(other.at<std::uint16_t>(y, x), img.at(x, y)) << x << ", " << y;
+}
+
 // A camera frame is written strip by strip straight from its pixels (the last strip shorter):
 // another reader (OpenCV's) sees the same counts.
 TEST(Tiff, AFrameOfManyStripsReadsBackBitForBitInAnotherReader) {
@@ -78,13 +89,7 @@ TEST(Tiff, AFrameOfManyStripsReadsBackBitForBitInAnotherReader) {
   for (std::size_t i = 0; i < img.size(); ++i) img.pixels[i] = std::uint16_t(i * 2654435761u >> 11);
   const auto path = temp_dir() / "strips.tif";
   write_tiff(path, img);
-  EXPECT_EQ(read_tiff_u16(path).pixels, img.pixels);
-  const cv::Mat other = cv::imread(path.string(), cv::IMREAD_UNCHANGED);
-  ASSERT_EQ(other.type(), CV_16U);
-  ASSERT_EQ(other.cols, 1000);
-  ASSERT_EQ(other.rows, 301);
-  for (int y = 0; y < img.height; ++y)
-    for (int x = 0; x < img.width; ++x) ASSERT_EQ(other.at<std::uint16_t>(y, x), img.at(x, y)) << x << ", " << y;
+  expect_read_back_by_both_readers(path, img);
 }
 
 // A frame larger than the direct writer's staging buffer (several of them, the last part short)
@@ -94,12 +99,7 @@ TEST(Tiff, AFrameLargerThanTheStagingBufferReadsBackBitForBit) {
   for (std::size_t i = 0; i < img.size(); ++i) img.pixels[i] = std::uint16_t(i * 40503u >> 3);
   const auto path = temp_dir() / "large.tif";
   write_tiff(path, img);
-  EXPECT_EQ(read_tiff_u16(path).pixels, img.pixels);
-  const cv::Mat other = cv::imread(path.string(), cv::IMREAD_UNCHANGED);
-  ASSERT_EQ(other.type(), CV_16U);
-  ASSERT_EQ(other.cols, img.width);
-  ASSERT_EQ(other.rows, img.height);
-  EXPECT_EQ(std::memcmp(other.ptr<std::uint16_t>(0), img.pixels.data(), img.size() * 2), 0);
+  expect_read_back_by_both_readers(path, img);
 }
 
 // The direct writer behaves as a file handle: sequential writes across staging buffers, a seek back
