@@ -14,6 +14,7 @@
 
 #include "core/base/errors.hpp"
 #include "daemon/run_state.hpp"
+#include "proto/valid_text.hpp"
 
 namespace plenopiv::daemon {
 
@@ -27,8 +28,8 @@ msg::Reply error_reply(std::uint64_t id, msg::Error::Code code, const std::strin
 
 namespace {
 
-// Runs `write` (the reply) and maps the exceptions a handler may throw to error replies.
-msg::Reply answer(std::uint64_t id, const std::function<msg::Reply()>& make) {
+// Runs `make` (the reply) and maps the exceptions a handler may throw to error replies.
+msg::Reply answer_or_error(std::uint64_t id, const std::function<msg::Reply()>& make) {
   try {
     msg::Reply reply = make();
     reply.set_id(id);
@@ -41,6 +42,15 @@ msg::Reply answer(std::uint64_t id, const std::function<msg::Reply()>& make) {
     spdlog::error("control request {} failed: {}", id, e.what());
     return error_reply(id, msg::Error::INTERNAL, e.what());
   }
+}
+
+// The reply of `make`, its text fields made valid UTF-8: an error may quote the request's bytes
+// (a config key as the YAML parser read it) or a path, and a client refuses a reply whose string
+// fields are not UTF-8.
+msg::Reply answer(std::uint64_t id, const std::function<msg::Reply()>& make) {
+  msg::Reply reply = answer_or_error(id, make);
+  msg::make_text_valid_utf8(reply);
+  return reply;
 }
 
 // Binds an ipc:// socket so that only its owner and group can connect: the folder is made, the

@@ -6,6 +6,7 @@
 #include <cmath>
 
 #include "core/base/errors.hpp"
+#include "proto/valid_text.hpp"
 
 namespace plenopiv::daemon {
 
@@ -47,7 +48,11 @@ std::uint64_t Publisher::messages_sent() const {
   return sent_;
 }
 
-void Publisher::publish_status(const msg::Status& status) { send("status", status.SerializeAsString(), {}); }
+void Publisher::publish_status(const msg::Status& status) {
+  msg::Status valid = status;
+  msg::make_text_valid_utf8(valid);
+  send("status", valid.SerializeAsString(), {});
+}
 
 FieldSummary summarize(const VectorField& field) {
   FieldSummary s;

@@ -13,6 +13,7 @@
 #include <ctime>
 #include <fstream>
 #include <future>
+#include <memory>
 #include <regex>
 #include <set>
 #include <sstream>
@@ -24,6 +25,7 @@
 #include "core/io/hdf5_files.hpp"
 #include "core/io/tiff.hpp"
 #include "core/process/field_file.hpp"
+#include "proto/valid_text.hpp"
 
 namespace plenopiv::run_folder {
 namespace fs = std::filesystem;
@@ -74,8 +76,13 @@ std::string message_json(const google::protobuf::Message& message, bool pretty) 
   options.add_whitespace = pretty;
   options.always_print_primitive_fields = pretty;
   options.preserve_proto_field_names = true;
+  // A camera's model string or a warning quoting a path may hold bytes that are not UTF-8, which
+  // protobuf's JSON printer refuses.
+  std::unique_ptr<google::protobuf::Message> valid(message.New());
+  valid->CopyFrom(message);
+  msg::make_text_valid_utf8(*valid);
   std::string json;
-  const auto status = google::protobuf::util::MessageToJsonString(message, &json, options);
+  const auto status = google::protobuf::util::MessageToJsonString(*valid, &json, options);
   if (!status.ok()) throw std::runtime_error("manifest: " + status.ToString());
   // "pair_index": "42" -> "pair_index": 42, for the 64-bit fields only (string fields keep their
   // quotes whatever they hold).

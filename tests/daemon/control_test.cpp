@@ -95,6 +95,22 @@ TEST_F(Daemon, MalformedAndEmptyRequestsGetErrorRepliesAndTheDaemonGoesOn) {
   EXPECT_TRUE(daemon_->running());
 }
 
+// A run config whose key holds a NUL: the YAML parser reads it as bytes that are not UTF-8, and the
+// error that quotes the key still makes a reply a client can read (the fuzzer's find).
+TEST_F(Daemon, AnErrorQuotingBytesThatAreNotUtf8IsAReadableReply) {
+  msg::Request r;
+  r.set_id(6);
+  r.mutable_start_run()->set_config_yaml(std::string(
+      "rate_hz: 10\nvolume: {x_mm: [-0.25, 0.25], y_mm: [-0.25, 0.25], z_mm: [-0.5, 0.5], v\x08\x02\"\0_mm: "
+      "0.125}\n",
+      99));
+  const msg::Reply reply = raw_call(r.SerializeAsString());
+  ASSERT_TRUE(reply.has_error()) << reply.ShortDebugString();
+  EXPECT_EQ(reply.id(), 6u);
+  EXPECT_EQ(reply.error().code(), msg::Error::INVALID);
+  EXPECT_NE(reply.error().message().find("unknown key"), std::string::npos) << reply.error().message();
+}
+
 TEST_F(Daemon, ListsDevices) {
   client::ControlClient client(control_);
   msg::Request r;

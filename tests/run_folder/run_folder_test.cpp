@@ -1,5 +1,6 @@
 // The run folder library: what the writer puts on disk, what the reader accepts and refuses, the
 // manifest's JSON, interrupted folders, and the running statistics it keeps.
+#include <google/protobuf/util/json_util.h>
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -11,6 +12,7 @@
 #include "core/io/hdf5_files.hpp"
 #include "core/io/tiff.hpp"
 #include "proto/run_folder.hpp"
+#include "proto/valid_text.hpp"
 #include "tests/support/child_process.hpp"
 #include "tests/support/run_manifest.hpp"
 #include "tests/support/temp_dir.hpp"
@@ -168,6 +170,48 @@ TEST(RunFolder, TheManifestsIntegersAreJsonIntegers) {
       << out;
   EXPECT_EQ(out, "int 1764080000123456789\n");
   EXPECT_THROW(parse_manifest("{\"pairs\": 3", "broken.json"), InputError);
+}
+
+// Text that is not UTF-8 (a camera's model string, a warning quoting a path or a user's bytes) is
+// mended, byte by byte, to U+FFFD; well-formed text, including multi-byte characters, is kept.
+TEST(ValidText, EveryMalformedByteBecomesAReplacementCharacterAndWellFormedTextIsKept) {
+  const std::string replacement = "\xEF\xBF\xBD";
+  for (const std::string& good :
+       {std::string("plain ASCII, tab\tand newline\n"), std::string("2 \xC2\xB5m"), std::string("\xE2\x82\xAC 3"),
+        std::string("\xF0\x9F\x94\xAC"), std::string("nul \0 inside", 12)}) {
+    EXPECT_EQ(msg::valid_utf8(good), good);
+  }
+  EXPECT_EQ(msg::valid_utf8("v\"\xA0mm"), "v\"" + replacement + "mm") << "a lone continuation byte";
+  EXPECT_EQ(msg::valid_utf8("\xC0\x80"), replacement + replacement) << "an overlong NUL";
+  EXPECT_EQ(msg::valid_utf8("\xE0\x80\xAF"), replacement + replacement + replacement) << "an overlong slash";
+  EXPECT_EQ(msg::valid_utf8("\xED\xA0\x80"), replacement + replacement + replacement) << "a surrogate";
+  EXPECT_EQ(msg::valid_utf8("\xF4\x90\x80\x80"), replacement + replacement + replacement + replacement)
+      << "above U+10FFFF";
+  EXPECT_EQ(msg::valid_utf8("\xF5!"), replacement + "!");
+  EXPECT_EQ(msg::valid_utf8("cut \xE2\x82"), "cut " + replacement + replacement) << "a sequence cut short";
+  EXPECT_EQ(msg::valid_utf8("\xFF\xFE"), replacement + replacement);
+}
+
+// A manifest whose strings are not UTF-8 (nested and repeated fields too) is still written, and
+// reads back with the bad bytes replaced; protobuf's JSON printer would refuse it unmended.
+TEST(ValidText, AManifestWithTextThatIsNotUtf8IsWrittenAndReadsBack) {
+  msg::RunManifest m;
+  m.set_camera_model("Acme \xA0\xFF cam");
+  m.add_warnings("frame all zero in /data/\xE9t\xE9");
+  msg::ManifestDrop* drop = m.add_dropped();
+  drop->set_reason("never \xC0\xAF arrived");
+  std::string unmended;
+  ASSERT_TRUE(google::protobuf::util::MessageToJsonString(m, &unmended, {}).ok());
+  msg::RunManifest unreadable;
+  EXPECT_FALSE(google::protobuf::util::JsonStringToMessage(unmended, &unreadable, {}).ok())
+      << "protobuf's JSON reader took text that is not UTF-8; the mending is not needed";
+  const msg::RunManifest back = parse_manifest(manifest_json(m), "test");
+  EXPECT_EQ(back.camera_model(), "Acme \xEF\xBF\xBD\xEF\xBF\xBD cam");
+  EXPECT_EQ(back.warnings(0), "frame all zero in /data/\xEF\xBF\xBDt\xEF\xBF\xBD");
+  EXPECT_EQ(back.dropped(0).reason(), "never \xEF\xBF\xBD\xEF\xBF\xBD arrived");
+  msg::RunManifest copy = m;
+  EXPECT_EQ(msg::make_text_valid_utf8(copy), 3);
+  EXPECT_EQ(msg::make_text_valid_utf8(copy), 0) << "mended text is left alone";
 }
 
 TEST(RunFolder, TheReaderChecksTheFolderBeforeAnythingIsProcessed) {
