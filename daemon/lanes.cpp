@@ -29,7 +29,16 @@ void Lane::close(bool clear) {
 }
 
 void Lane::run(const ProcessFn& process, const OutputFn& output, const CancelFlag& cancel) {
-  arena_.execute([&] { run_live_pipeline(queue_, options_.max_in_flight, process, output, stats_, cancel); });
+  ProcessFn holding = process;
+  if (options_.holds) {
+    holding = [&process, gate = options_.holds](const drivers::FramePair& pair, const PairSteps& steps) {
+      const PriorityGate::Hold hold(*gate);
+      return process(pair, steps);
+    };
+  }
+  arena_.execute([&] {
+    run_live_pipeline(queue_, options_.max_in_flight, holding, output, stats_, cancel, options_.yields_to.get());
+  });
 }
 
 void Lane::discard_all() {
@@ -67,6 +76,9 @@ std::vector<std::unique_ptr<Lane>> make_lanes(const RunConfig& config, int nice)
   live.max_in_flight = config.max_pairs_in_flight;
   live.priority = tbb::task_arena::priority::high;
   live.nice = nice;
+  // The live lane's pairs in flight, which the quality lane's wait for.
+  const auto gate = config.quality.on() ? std::make_shared<PriorityGate>() : nullptr;
+  live.holds = gate;
   lanes.push_back(std::make_unique<Lane>(live));
   if (config.quality.on()) {
     Lane::Options quality;
@@ -82,6 +94,7 @@ std::vector<std::unique_ptr<Lane>> make_lanes(const RunConfig& config, int nice)
     quality.nice = nice;
     quality.caller_nice = kQualityLaneNice;
     quality.max_concurrency = std::max(1, tbb::info::default_concurrency() - 1);
+    quality.yields_to = gate;
     lanes.push_back(std::make_unique<Lane>(quality));
   }
   return lanes;

@@ -40,6 +40,10 @@ class Lane {
     int caller_nice = -1;
     // Threads working in the arena at once, the lane's own thread included; 0: as many as cores.
     int max_concurrency = 0;
+    // The gate this lane's pairs hold while in flight (the live lane's), and the gate its pairs
+    // wait at between their steps (the quality lane's: the live lane's gate); either may be none.
+    std::shared_ptr<PriorityGate> holds;
+    std::shared_ptr<const PriorityGate> yields_to;
   };
   explicit Lane(Options options);
   Lane(const Lane&) = delete;
@@ -81,8 +85,9 @@ inline constexpr int kQualityLaneNice = 19;
 // priority; the quality lane (config.quality.on()) runs the full settings on the pairs its policy
 // takes, QualityLane::kPairsInFlight at once, quality.queue waiting, at low priority, its own
 // thread at kQualityLaneNice and its arena one thread short of the cores (a oneTBB worker always
-// free for the live lane). The other threads of both lanes run at `nice` (plenopivd.yaml
-// `processing_nice`).
+// free for the live lane), and its pairs wait between their steps while the live lane has a pair
+// in flight (PriorityGate): it works on the time the live lane leaves. The other threads of both
+// lanes run at `nice` (plenopivd.yaml `processing_nice`).
 std::vector<std::unique_ptr<Lane>> make_lanes(const RunConfig& config, int nice = 0);
 
 }  // namespace plenopiv::daemon

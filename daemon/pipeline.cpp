@@ -13,6 +13,37 @@ namespace plenopiv::daemon {
 
 using Clock = std::chrono::steady_clock;
 
+PriorityGate::Hold::Hold(PriorityGate& gate) : gate_(gate) {
+  std::lock_guard lock(gate_.mutex_);
+  ++gate_.held_;
+}
+
+PriorityGate::Hold::~Hold() {
+  {
+    std::lock_guard lock(gate_.mutex_);
+    --gate_.held_;
+  }
+  gate_.free_.notify_all();
+}
+
+Clock::duration PriorityGate::wait_turn(const CancelFlag& cancel) const {
+  const auto start = Clock::now();
+  std::unique_lock lock(mutex_);
+  // `cancel` is set without this lock: looked at every 50 ms, so that a stop is not held up.
+  while (held_ > 0 && !cancel) free_.wait_for(lock, std::chrono::milliseconds(50));
+  return Clock::now() - start;
+}
+
+int PriorityGate::pairs_held() const {
+  std::lock_guard lock(mutex_);
+  return held_;
+}
+
+void PairSteps::step() const {
+  if (yield_to_) waited_ += yield_to_->wait_turn(cancel_);
+  if (cancel_) throw Cancelled("run stopping");
+}
+
 std::function<void()> LiveMailbox::due_waiter_locked() {
   if (!closed_ && pairs_.empty()) return {};
   return std::exchange(waiter_, {});
@@ -147,7 +178,7 @@ std::optional<SharedPair> next_pair(LiveMailbox& mailbox) {
 }  // namespace
 
 void run_live_pipeline(LiveMailbox& mailbox, int max_in_flight, const ProcessFn& process, const OutputFn& output,
-                       PipelineStats& stats, const CancelFlag& cancel) {
+                       PipelineStats& stats, const CancelFlag& cancel, const PriorityGate* yield_to) {
   tbb::parallel_pipeline(
       std::size_t(max_in_flight),
       tbb::make_filter<void, std::shared_ptr<Item>>(tbb::filter_mode::serial_in_order,
@@ -167,9 +198,10 @@ void run_live_pipeline(LiveMailbox& mailbox, int max_in_flight, const ProcessFn&
               tbb::filter_mode::parallel,
               [&](std::shared_ptr<Item> item) {
                 const auto start = Clock::now();
+                const PairSteps steps(cancel, yield_to);
                 try {
-                  if (cancel) throw Cancelled("run stopping");
-                  item->result = process(*item->pair, cancel);
+                  steps.step();
+                  item->result = process(*item->pair, steps);
                   ++stats.process.processed;
                 } catch (const Cancelled&) {
                   ++stats.process.cancelled;
@@ -177,7 +209,7 @@ void run_live_pipeline(LiveMailbox& mailbox, int max_in_flight, const ProcessFn&
                   ++stats.process.skipped;
                   spdlog::warn("pair {}: processing failed: {}", item->pair->pair_index, e.what());
                 }
-                stats.process.add_time(Clock::now() - start);
+                stats.process.add_time(Clock::now() - start - steps.waited());
                 --stats.process.in_flight;
                 return item;
               }) &

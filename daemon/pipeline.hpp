@@ -41,10 +41,56 @@ struct ProcessedPair {
 // iteration or correlation pass.
 using CancelFlag = std::atomic<bool>;
 
+// Where a lane of lower priority waits, between the steps of its pairs, while a lane of higher
+// priority has a pair in flight. The kernel's niceness alone does not do it: with three busy
+// threads on two cores, the quality lane's one thread kept a core to itself while the live lane's
+// two shared the other (docs/lab/2026-11-27.md). Thread safe.
+class PriorityGate {
+ public:
+  // A pair of the higher-priority lane is in flight while a Hold lives.
+  class Hold {
+   public:
+    explicit Hold(PriorityGate& gate);
+    ~Hold();
+    Hold(const Hold&) = delete;
+    Hold& operator=(const Hold&) = delete;
+
+   private:
+    PriorityGate& gate_;
+  };
+  // Returns once no pair of the higher-priority lane is in flight or `cancel` is set; the time it
+  // waited.
+  std::chrono::steady_clock::duration wait_turn(const CancelFlag& cancel) const;
+  int pairs_held() const;
+
+ private:
+  mutable std::mutex mutex_;
+  mutable std::condition_variable free_;
+  int held_ = 0;
+};
+
+// What processing does at each step of a pair (as it starts, and after every MART iteration and
+// correlation pass): first wait while the lane above it (`yield_to`, none for the live lane) has a
+// pair in flight, then give up (plenopiv::Cancelled) once the run stops.
+class PairSteps {
+ public:
+  explicit PairSteps(const CancelFlag& cancel, const PriorityGate* yield_to = nullptr)
+      : cancel_(cancel), yield_to_(yield_to) {}
+  void step() const;
+  bool cancelled() const { return cancel_; }
+  // The time spent waiting at the gate, not processing.
+  std::chrono::steady_clock::duration waited() const { return waited_; }
+
+ private:
+  const CancelFlag& cancel_;
+  const PriorityGate* yield_to_;
+  mutable std::chrono::steady_clock::duration waited_{};
+};
+
 // The processing stage: preprocess, reconstruct A and B, correlate. Called concurrently for
-// different pairs; it must not keep state between calls except read-only setup. It checks
-// `cancel` as it goes and throws plenopiv::Cancelled once it is set.
-using ProcessFn = std::function<ProcessedPair(const drivers::FramePair&, const CancelFlag& cancel)>;
+// different pairs; it must not keep state between calls except read-only setup. It calls
+// `steps.step()` as it goes, which throws plenopiv::Cancelled once the run stops.
+using ProcessFn = std::function<ProcessedPair(const drivers::FramePair&, const PairSteps& steps)>;
 
 // Which waiting pair a lane's queue hands out.
 enum class TakeOrder {
@@ -122,8 +168,10 @@ using OutputFn = std::function<void(const drivers::FramePair&, ProcessedPair&)>;
 // stage waiting for it is suspended (oneTBB resumable tasks), so its thread works on the pairs in
 // flight instead of blocking: a lane that waits for the camera holds no core. A pair whose processing throws
 // is counted as skipped on the processing stage and not output; the run goes on. Once `cancel` is
-// set, pairs in flight give up (counted cancelled); those already done are still output.
+// set, pairs in flight give up (counted cancelled); those already done are still output. With
+// `yield_to`, each pair waits at it as it starts and between its steps (PairSteps); the time
+// waited is not counted as processing time.
 void run_live_pipeline(LiveMailbox& mailbox, int max_in_flight, const ProcessFn& process, const OutputFn& output,
-                       PipelineStats& stats, const CancelFlag& cancel);
+                       PipelineStats& stats, const CancelFlag& cancel, const PriorityGate* yield_to = nullptr);
 
 }  // namespace plenopiv::daemon

@@ -7,7 +7,6 @@
 #include <chrono>
 #include <memory>
 
-#include "core/base/errors.hpp"
 #include "core/base/memory.hpp"
 #include "core/calib/nominal_calibration.hpp"
 #include "core/process/pair_processor.hpp"
@@ -64,13 +63,12 @@ ProcessFactory plenoptic_processing(const optics::CameraModel& camera) {
                      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
         // Volumes are published from the live lane only (the quality lane's would double the traffic).
         const bool keep_volumes = config.publish_volumes && tier == config.live_lane_tier();
-        return [processor, keep_volumes](const drivers::FramePair& pair, const CancelFlag& cancel) {
+        return [processor, keep_volumes](const drivers::FramePair& pair, const PairSteps& steps) {
           process::PairOptions options;
           if (pair.measured) options.measured_dt_s = pair.measured->dt_s();
-          // Called after every MART iteration and correlation pass: a stopping run gives up there.
-          options.progress = [&cancel](const std::string&, double) {
-            if (cancel) throw Cancelled("run stopping");
-          };
+          // Called after every MART iteration and correlation pass: the quality lane waits there while
+          // the live lane has a pair, and a stopping run gives up there.
+          options.progress = [&steps](const std::string&, double) { steps.step(); };
           process::PairResult r = processor->process(pair.a.image, pair.b.image, options);
           ProcessedPair out;
           out.vectors = std::move(r.correlation.field);

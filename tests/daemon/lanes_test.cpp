@@ -6,6 +6,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <functional>
 #include <mutex>
@@ -25,7 +26,7 @@ SharedPair pair_of(std::uint64_t index) {
   return p;
 }
 
-ProcessedPair empty_field(const drivers::FramePair&, const CancelFlag&) {
+ProcessedPair empty_field(const drivers::FramePair&, const PairSteps&) {
   ProcessedPair out;
   Grid3 g;
   g.shape = {1, 1, 1};
@@ -36,14 +37,14 @@ ProcessedPair empty_field(const drivers::FramePair&, const CancelFlag&) {
 // A ProcessFn whose pair is a parallel loop of busy work (256 iterations of 20 000 additions);
 // `seen` runs in every iteration, under one lock.
 ProcessFn busy_pairs(std::mutex& m, const std::function<void()>& seen) {
-  return [&m, seen](const drivers::FramePair& pair, const CancelFlag& cancel) {
+  return [&m, seen](const drivers::FramePair& pair, const PairSteps& steps) {
     tbb::parallel_for(0, 256, [&](int) {
       volatile double x = 0;
       for (int i = 0; i < 20000; ++i) x = x + 1.0;
       std::lock_guard lock(m);
       seen();
     });
-    return empty_field(pair, cancel);
+    return empty_field(pair, steps);
   };
 }
 
@@ -147,7 +148,7 @@ TEST(Lane, AWaitingLaneLeavesEveryCoreToItsWork) {
   Lane lane(o);
   std::mutex m;
   std::vector<std::size_t> threads_per_pair;
-  const auto process = [&](const drivers::FramePair& pair, const CancelFlag& cancel) {
+  const auto process = [&](const drivers::FramePair& pair, const PairSteps& steps) {
     std::mutex seen_mutex;
     std::set<std::thread::id> seen;
     tbb::parallel_for(0, 64, [&](int) {
@@ -159,7 +160,7 @@ TEST(Lane, AWaitingLaneLeavesEveryCoreToItsWork) {
     });
     std::lock_guard lock(m);
     threads_per_pair.push_back(seen.size());
-    return empty_field(pair, cancel);
+    return empty_field(pair, steps);
   };
   CancelFlag cancel{false};
   std::thread runner([&] {
@@ -204,6 +205,93 @@ TEST(Lane, ARunConfigMakesTheLiveLaneFirstAndTheQualityLaneWhenAsked) {
   EXPECT_EQ(two[1]->tier(), process::Tier::full);
   EXPECT_EQ(two[1]->queue().capacity(), 5u);
   EXPECT_EQ(two[1]->counters().policy(), "every 2");
+}
+
+// Polls `done` every 5 ms for up to 30 s; true once it holds.
+bool eventually(const std::function<bool()>& done) {
+  for (auto t0 = std::chrono::steady_clock::now(); std::chrono::steady_clock::now() - t0 < std::chrono::seconds(30);) {
+    if (done()) return true;
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  return done();
+}
+
+// The quality lane's pairs wait while the live lane has a pair in flight: one about to start does
+// not start, one in progress stops at its next step, and both go on once the live pair is done.
+// The time waited is not counted as processing time, and a stop ends a wait.
+TEST(Lane, TheQualityLaneWaitsBetweenItsStepsWhileTheLiveLaneHasAPair) {
+  const std::string spec =
+      "dt_s: 0.001\nvolume: {x_mm: [-1, 1], y_mm: [-1, 1], z_mm: [0, 2], voxel_mm: 0.5}\n"
+      "correlation: {passes: [{window: 4, overlap_percent: 50}]}\n"
+      "live: {reconstruction: {iterations: 1}}\nquality: {every: 1}\nquality_queue: 8\n";
+  const auto lanes = make_lanes(parse_run_config(spec, "run.yaml"));
+  ASSERT_EQ(lanes.size(), 2u);
+  Lane& live = *lanes[0];
+  Lane& quality = *lanes[1];
+  std::atomic<int> live_started{0}, live_released{0}, quality_steps{0};
+  std::atomic<bool> quality_may_go_on{true};
+  const ProcessFn live_process = [&](const drivers::FramePair& pair, const PairSteps& steps) {
+    const int n = ++live_started;
+    while (live_released < n) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    return empty_field(pair, steps);
+  };
+  // Ten steps; after the first of pair 1 it waits until the test lets it go on.
+  const ProcessFn quality_process = [&](const drivers::FramePair& pair, const PairSteps& steps) {
+    for (int step = 0; step < 10; ++step) {
+      steps.step();
+      ++quality_steps;
+      while (!quality_may_go_on) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+    return empty_field(pair, steps);
+  };
+  CancelFlag cancel{false};
+  std::thread live_runner([&] {
+    live.run(
+        live_process, [](const drivers::FramePair&, ProcessedPair&) {}, cancel);
+  });
+  std::thread quality_runner([&] {
+    quality.run(
+        quality_process, [](const drivers::FramePair&, ProcessedPair&) {}, cancel);
+  });
+
+  // A live pair in flight: the quality pair offered now does not start.
+  live.offer(pair_of(0));
+  ASSERT_TRUE(eventually([&] { return live_started == 1; }));
+  quality.offer(pair_of(0));
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  EXPECT_EQ(quality_steps, 0) << "the quality pair started beside a live pair";
+  ++live_released;
+  ASSERT_TRUE(eventually([&] { return quality.counters().processed() == 1; }));
+  EXPECT_EQ(quality_steps, 10);
+  EXPECT_LT(quality.counters().mean_time_s(), 0.2) << "the 0.3 s waited counted as processing";
+
+  // A quality pair in progress stops at its next step while a live pair is in flight.
+  quality_may_go_on = false;
+  quality.offer(pair_of(1));
+  ASSERT_TRUE(eventually([&] { return quality_steps == 11; }));
+  live.offer(pair_of(1));
+  ASSERT_TRUE(eventually([&] { return live_started == 2; }));
+  quality_may_go_on = true;
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  EXPECT_EQ(quality_steps, 11) << "the quality pair went on beside a live pair";
+  ++live_released;
+  ASSERT_TRUE(eventually([&] { return quality.counters().processed() == 2; }));
+  EXPECT_EQ(quality_steps, 20);
+
+  // A stop ends a wait: the waiting quality pair is cancelled, not held until the live pair ends.
+  live.offer(pair_of(2));
+  ASSERT_TRUE(eventually([&] { return live_started == 3; }));
+  quality.offer(pair_of(2));
+  std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  cancel = true;
+  EXPECT_TRUE(eventually([&] { return quality.counters().cancelled() == 1; }));
+  EXPECT_EQ(quality_steps, 20);
+  ++live_released;
+  live.close(true);
+  quality.close(true);
+  live_runner.join();
+  quality_runner.join();
+  EXPECT_EQ(live.counters().processed(), 3u) << "the live lane's own pairs never wait";
 }
 
 // The quality lane runs behind the live lane at the kernel's level too: its own thread at the

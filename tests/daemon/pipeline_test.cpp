@@ -48,7 +48,7 @@ drivers::FramePair make_pair(std::uint64_t index) {
 }
 
 // A field whose x displacement is the pair index (mm): tells which pair a result came from.
-ProcessedPair tagged_field(const drivers::FramePair& pair, const CancelFlag& = CancelFlag{false}) {
+ProcessedPair tagged_field(const drivers::FramePair& pair) {
   Grid3 g;
   g.shape = {3, 2, 2};
   ProcessedPair out;
@@ -79,7 +79,7 @@ TEST_P(Concurrency, OutputSeesEveryTakenPairInOrderWithItsOwnResult) {
   });
   CancelFlag cancel{false};
   run_live_pipeline(
-      mailbox, 3, [](const drivers::FramePair& pair, const CancelFlag& c) { return tagged_field(pair, c); },
+      mailbox, 3, [](const drivers::FramePair& pair, const PairSteps&) { return tagged_field(pair); },
       [&](const drivers::FramePair& pair, ProcessedPair& result) {
         EXPECT_EQ(result.vectors.dx_mm[0], float(pair.pair_index));
         seen.push_back(pair.pair_index);
@@ -112,7 +112,7 @@ TEST_P(Concurrency, SlowProcessingSkipsToTheNewestPairAndCountsTheRest) {
   CancelFlag cancel{false};
   run_live_pipeline(
       mailbox, 1,
-      [&](const drivers::FramePair& pair, const CancelFlag&) {
+      [&](const drivers::FramePair& pair, const PairSteps&) {
         release.wait();
         return tagged_field(pair);
       },
@@ -139,7 +139,7 @@ TEST_P(Concurrency, TheLiveQueueStaysBoundedAtAnyRateAndCountsWhatItDrops) {
   CancelFlag cancel{false};
   run_live_pipeline(
       mailbox, 2,
-      [](const drivers::FramePair& pair, const CancelFlag&) {
+      [](const drivers::FramePair& pair, const PairSteps&) {
         std::this_thread::sleep_for(2ms);
         return tagged_field(pair);
       },
@@ -166,12 +166,12 @@ TEST_P(Concurrency, ACancelGivesUpThePairsInFlightAtTheirNextCheck) {
   std::vector<std::uint64_t> seen;
   run_live_pipeline(
       mailbox, 2,
-      [&](const drivers::FramePair& pair, const CancelFlag& c) {
+      [&](const drivers::FramePair& pair, const PairSteps& c) {
         ++started;
-        // Work in "iterations" that check the flag, as MART and the correlation do through
+        // Work in "iterations" that take a step, as MART and the correlation do through
         // process_pair's progress callback; without a cancel this would take 60 s.
         for (int iteration = 0; iteration < 6000; ++iteration) {
-          if (c) throw Cancelled("run stopping");
+          c.step();
           std::this_thread::sleep_for(10ms);
         }
         return tagged_field(pair);
@@ -202,7 +202,7 @@ TEST_P(Concurrency, AProcessingFailureSkipsThatPairOnly) {
   CancelFlag cancel{false};
   run_live_pipeline(
       one_by_one, 2,
-      [&](const drivers::FramePair& pair, const CancelFlag&) {
+      [&](const drivers::FramePair& pair, const PairSteps&) {
         if (pair.pair_index == 1) throw std::runtime_error("no particles");
         return tagged_field(pair);
       },
@@ -227,7 +227,7 @@ class RunTest : public ::testing::Test {
     env_.default_trigger_uri = "sim://";
     env_.state = &state_;
     env_.processing = [](const RunConfig&, const RunCalibration&, process::Tier) {
-      return ProcessFn([](const drivers::FramePair& pair, const CancelFlag& c) { return tagged_field(pair, c); });
+      return ProcessFn([](const drivers::FramePair& pair, const PairSteps&) { return tagged_field(pair); });
     };
     // Faster than a real laser, so runs stay short: frame B must end within the period.
     env_.timing.limits.laser_max_rate_hz = 200;
@@ -338,7 +338,7 @@ TEST_F(RunTest, AStopWhileArmedEndsTheRunWithNoFolder) {
   env_.processing = [&, released](const RunConfig&, const RunCalibration&, process::Tier) {
     building = true;
     released.wait();  // the weight tables, as long as the test wants
-    return ProcessFn([](const drivers::FramePair& pair, const CancelFlag& c) { return tagged_field(pair, c); });
+    return ProcessFn([](const drivers::FramePair& pair, const PairSteps&) { return tagged_field(pair); });
   };
   state_.start("armed");
   daemon::Run run(config("pairs: 3\nrate_hz: 50\n"), "armed", env_);
@@ -546,9 +546,9 @@ TEST_F(RunTest, ACameraWithoutATriggerInputIsSoftwareTriggeredAndTheManifestSays
 // check (they stay on disk), the folder is closed "stopped" and says what was cancelled.
 TEST_F(RunTest, AStopWithSlowProcessingInFlightIsBounded) {
   env_.processing = [](const RunConfig&, const RunCalibration&, process::Tier) {
-    return ProcessFn([](const drivers::FramePair& pair, const CancelFlag& cancel) {
+    return ProcessFn([](const drivers::FramePair& pair, const PairSteps& steps) {
       for (int iteration = 0; iteration < 6000; ++iteration) {  // a minute of "MART iterations"
-        if (cancel) throw Cancelled("run stopping");
+        steps.step();
         std::this_thread::sleep_for(10ms);
       }
       return tagged_field(pair);
@@ -659,7 +659,7 @@ TEST_F(RunTest, ASubscriberThatNeverReadsDoesNotSlowAcquisition) {
   env_.publisher = &*publisher;
   // Big fields (32^3 nodes, 4 arrays: 512 KiB a message) fill the socket buffers quickly.
   env_.processing = [](const RunConfig&, const RunCalibration&, process::Tier) {
-    return ProcessFn([](const drivers::FramePair& pair, const CancelFlag&) {
+    return ProcessFn([](const drivers::FramePair& pair, const PairSteps&) {
       Grid3 g;
       g.shape = {32, 32, 32};
       ProcessedPair out;

@@ -26,12 +26,12 @@ plenopiv::daemon::ProcessedPair tagged_field(const plenopiv::drivers::FramePair&
   return out;
 }
 
-// The full tier's time per pair, checking the run's cancel flag every 10 ms as real processing does.
-void full_tier_delay(const plenopiv::daemon::CancelFlag& cancel) {
+// The full tier's time per pair, taking a step every 10 ms as real processing does.
+void full_tier_delay(const plenopiv::daemon::PairSteps& steps) {
   const char* text = std::getenv("PLENOPIV_TEST_FULL_TIER_MS");
   const int ms = text ? std::atoi(text) : 0;
   for (int waited = 0; waited < ms; waited += 10) {
-    if (cancel) throw plenopiv::Cancelled("run stopping");
+    steps.step();
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
 }
@@ -44,8 +44,8 @@ int main(int argc, char** argv) {
   extensions.processing = [](const plenopiv::daemon::RunConfig&, const plenopiv::daemon::RunCalibration&,
                              plenopiv::process::Tier tier) {
     return plenopiv::daemon::ProcessFn(
-        [tier](const plenopiv::drivers::FramePair& pair, const plenopiv::daemon::CancelFlag& cancel) {
-          if (tier == plenopiv::process::Tier::full) full_tier_delay(cancel);
+        [tier](const plenopiv::drivers::FramePair& pair, const plenopiv::daemon::PairSteps& steps) {
+          if (tier == plenopiv::process::Tier::full) full_tier_delay(steps);
           return tagged_field(pair, tier);
         });
   };

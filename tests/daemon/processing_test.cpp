@@ -44,7 +44,7 @@ TEST(Processing, UniformDisplacementOfARayTracedPairComesBack) {
   const auto t0 = std::chrono::steady_clock::now();
   const ProcessFn process = plenoptic_processing(camera)(config, RunCalibration{}, process::Tier::full);
   const CancelFlag go{false};
-  const ProcessedPair out = process(pair, go);
+  const ProcessedPair out = process(pair, PairSteps(go));
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 
   const VectorField& f = out.vectors;
@@ -97,7 +97,7 @@ TEST(Processing, UniformDisplacementOfARayTracedPairComesBack) {
 
   // A stopping run: the same pair gives up at the first MART iteration's check.
   const CancelFlag stop{true};
-  EXPECT_THROW(process(pair, stop), Cancelled);
+  EXPECT_THROW(process(pair, PairSteps(stop)), Cancelled);
 }
 
 TEST(Processing, BadSettingsAndWrongImagesAreNamed) {
@@ -132,7 +132,7 @@ TEST(Processing, BadSettingsAndWrongImagesAreNamed) {
   small.a.image = ImageU16(64, 48);
   small.b.image = ImageU16(64, 48);
   const CancelFlag go{false};
-  EXPECT_THROW(process(small, go), InputError);  // not the camera's sensor size
+  EXPECT_THROW(process(small, PairSteps(go)), InputError);  // not the camera's sensor size
 }
 
 // The factory keeps the operators it built (process::OperatorCache): a second run on the same
