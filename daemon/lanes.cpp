@@ -18,6 +18,11 @@ Lane::Lane(Options options)
 void Lane::offer(const SharedPair& pair) {
   if (options_.every > 1 && pair->pair_index % options_.every != 0) return;
   queue_.push(pair);
+  reassess_gate();
+}
+
+void Lane::reassess_gate() {
+  if (options_.holds) options_.holds->reassess([this] { return pairs_in_process_ > 0 || queue_.depth() > 0; });
 }
 
 void Lane::close(bool clear) {
@@ -26,13 +31,22 @@ void Lane::close(bool clear) {
   } else {
     queue_.close();
   }
+  reassess_gate();
 }
 
 void Lane::run(const ProcessFn& process, const OutputFn& output, const CancelFlag& cancel) {
   ProcessFn holding = process;
   if (options_.holds) {
-    holding = [&process, gate = options_.holds](const drivers::FramePair& pair, const PairSteps& steps) {
-      const PriorityGate::Hold hold(*gate);
+    holding = [this, &process](const drivers::FramePair& pair, const PairSteps& steps) {
+      ++pairs_in_process_;
+      reassess_gate();
+      struct Done {
+        Lane& lane;
+        ~Done() {
+          --lane.pairs_in_process_;
+          lane.reassess_gate();
+        }
+      } done{*this};
       return process(pair, steps);
     };
   }

@@ -40,8 +40,9 @@ class Lane {
     int caller_nice = -1;
     // Threads working in the arena at once, the lane's own thread included; 0: as many as cores.
     int max_concurrency = 0;
-    // The gate this lane's pairs hold while in flight (the live lane's), and the gate its pairs
-    // wait at between their steps (the quality lane's: the live lane's gate); either may be none.
+    // The gate this lane keeps closed while it has a pair in flight or waiting (the live lane's),
+    // and the gate its pairs wait at between their steps (the quality lane's: the live lane's
+    // gate); either may be none.
     std::shared_ptr<PriorityGate> holds;
     std::shared_ptr<const PriorityGate> yields_to;
   };
@@ -69,8 +70,12 @@ class Lane {
   msg::LaneCounters counters() const;
 
  private:
+  // Tells options_.holds whether this lane has a pair in flight or waiting.
+  void reassess_gate();
+
   Options options_;
   LiveMailbox queue_;
+  std::atomic<int> pairs_in_process_{0};
   PipelineStats stats_;
   tbb::task_arena arena_;
   ArenaNiceness niceness_;

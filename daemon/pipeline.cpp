@@ -13,30 +13,28 @@ namespace plenopiv::daemon {
 
 using Clock = std::chrono::steady_clock;
 
-PriorityGate::Hold::Hold(PriorityGate& gate) : gate_(gate) {
-  std::lock_guard lock(gate_.mutex_);
-  ++gate_.held_;
-}
-
-PriorityGate::Hold::~Hold() {
+void PriorityGate::reassess(const std::function<bool()>& busy_now) {
+  bool freed = false;
   {
-    std::lock_guard lock(gate_.mutex_);
-    --gate_.held_;
+    std::lock_guard lock(mutex_);
+    const bool busy = busy_now();
+    freed = busy_ && !busy;
+    busy_ = busy;
   }
-  gate_.free_.notify_all();
+  if (freed) free_.notify_all();
 }
 
 Clock::duration PriorityGate::wait_turn(const CancelFlag& cancel) const {
   const auto start = Clock::now();
   std::unique_lock lock(mutex_);
   // `cancel` is set without this lock: looked at every 50 ms, so that a stop is not held up.
-  while (held_ > 0 && !cancel) free_.wait_for(lock, std::chrono::milliseconds(50));
+  while (busy_ && !cancel) free_.wait_for(lock, std::chrono::milliseconds(50));
   return Clock::now() - start;
 }
 
-int PriorityGate::pairs_held() const {
+bool PriorityGate::busy() const {
   std::lock_guard lock(mutex_);
-  return held_;
+  return busy_;
 }
 
 void PairSteps::step() const {

@@ -42,31 +42,23 @@ struct ProcessedPair {
 using CancelFlag = std::atomic<bool>;
 
 // Where a lane of lower priority waits, between the steps of its pairs, while a lane of higher
-// priority has a pair in flight. The kernel's niceness alone does not do it: with three busy
-// threads on two cores, the quality lane's one thread kept a core to itself while the live lane's
-// two shared the other (docs/lab/2026-11-27.md). Thread safe.
+// priority is busy (a pair in flight or waiting in its queue). The kernel's niceness alone does not
+// do it: with three busy threads on two cores, the quality lane's one thread kept a core to itself
+// while the live lane's two shared the other (docs/lab/2026-11-27.md). Thread safe.
 class PriorityGate {
  public:
-  // A pair of the higher-priority lane is in flight while a Hold lives.
-  class Hold {
-   public:
-    explicit Hold(PriorityGate& gate);
-    ~Hold();
-    Hold(const Hold&) = delete;
-    Hold& operator=(const Hold&) = delete;
-
-   private:
-    PriorityGate& gate_;
-  };
-  // Returns once no pair of the higher-priority lane is in flight or `cancel` is set; the time it
-  // waited.
+  // Sets whether the higher-priority lane is busy to what `busy_now` says, called under the gate's
+  // lock, so that of concurrent callers the last leaves the latest state. The lane calls it
+  // whenever what it depends on changes.
+  void reassess(const std::function<bool()>& busy_now);
+  // Returns once the higher-priority lane is not busy or `cancel` is set; the time it waited.
   std::chrono::steady_clock::duration wait_turn(const CancelFlag& cancel) const;
-  int pairs_held() const;
+  bool busy() const;
 
  private:
   mutable std::mutex mutex_;
   mutable std::condition_variable free_;
-  int held_ = 0;
+  bool busy_ = false;
 };
 
 // What processing does at each step of a pair (as it starts, and after every MART iteration and

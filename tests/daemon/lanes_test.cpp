@@ -216,9 +216,9 @@ bool eventually(const std::function<bool()>& done) {
   return done();
 }
 
-// The quality lane's pairs wait while the live lane has a pair in flight: one about to start does
-// not start, one in progress stops at its next step, and both go on once the live pair is done.
-// The time waited is not counted as processing time, and a stop ends a wait.
+// The quality lane's pairs wait while the live lane has a pair in flight or waiting: one about to
+// start does not start, one in progress stops at its next step, and both go on once the live lane
+// has nothing to do. The time waited is not counted as processing time, and a stop ends a wait.
 TEST(Lane, TheQualityLaneWaitsBetweenItsStepsWhileTheLiveLaneHasAPair) {
   const std::string spec =
       "dt_s: 0.001\nvolume: {x_mm: [-1, 1], y_mm: [-1, 1], z_mm: [0, 2], voxel_mm: 0.5}\n"
@@ -254,12 +254,18 @@ TEST(Lane, TheQualityLaneWaitsBetweenItsStepsWhileTheLiveLaneHasAPair) {
         quality_process, [](const drivers::FramePair&, ProcessedPair&) {}, cancel);
   });
 
-  // A live pair in flight: the quality pair offered now does not start.
+  // A live pair in flight and one waiting: the quality pair offered now does not start, nor
+  // between the two live pairs.
   live.offer(pair_of(0));
   ASSERT_TRUE(eventually([&] { return live_started == 1; }));
+  live.offer(pair_of(1));
   quality.offer(pair_of(0));
   std::this_thread::sleep_for(std::chrono::milliseconds(300));
   EXPECT_EQ(quality_steps, 0) << "the quality pair started beside a live pair";
+  ++live_released;
+  ASSERT_TRUE(eventually([&] { return live_started == 2; }));
+  std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  EXPECT_EQ(quality_steps, 0) << "the quality pair started with a live pair waiting";
   ++live_released;
   ASSERT_TRUE(eventually([&] { return quality.counters().processed() == 1; }));
   EXPECT_EQ(quality_steps, 10);
@@ -269,8 +275,8 @@ TEST(Lane, TheQualityLaneWaitsBetweenItsStepsWhileTheLiveLaneHasAPair) {
   quality_may_go_on = false;
   quality.offer(pair_of(1));
   ASSERT_TRUE(eventually([&] { return quality_steps == 11; }));
-  live.offer(pair_of(1));
-  ASSERT_TRUE(eventually([&] { return live_started == 2; }));
+  live.offer(pair_of(2));
+  ASSERT_TRUE(eventually([&] { return live_started == 3; }));
   quality_may_go_on = true;
   std::this_thread::sleep_for(std::chrono::milliseconds(300));
   EXPECT_EQ(quality_steps, 11) << "the quality pair went on beside a live pair";
@@ -279,8 +285,8 @@ TEST(Lane, TheQualityLaneWaitsBetweenItsStepsWhileTheLiveLaneHasAPair) {
   EXPECT_EQ(quality_steps, 20);
 
   // A stop ends a wait: the waiting quality pair is cancelled, not held until the live pair ends.
-  live.offer(pair_of(2));
-  ASSERT_TRUE(eventually([&] { return live_started == 3; }));
+  live.offer(pair_of(3));
+  ASSERT_TRUE(eventually([&] { return live_started == 4; }));
   quality.offer(pair_of(2));
   std::this_thread::sleep_for(std::chrono::milliseconds(100));
   cancel = true;
@@ -291,7 +297,7 @@ TEST(Lane, TheQualityLaneWaitsBetweenItsStepsWhileTheLiveLaneHasAPair) {
   quality.close(true);
   live_runner.join();
   quality_runner.join();
-  EXPECT_EQ(live.counters().processed(), 3u) << "the live lane's own pairs never wait";
+  EXPECT_EQ(live.counters().processed(), 4u) << "the live lane's own pairs never wait";
 }
 
 // The quality lane runs behind the live lane at the kernel's level too: its own thread at the
