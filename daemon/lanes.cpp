@@ -78,6 +78,7 @@ msg::LaneCounters Lane::counters() const {
   m.set_in_flight(stats_.process.in_flight);
   const std::uint64_t n = stats_.process.processed;
   m.set_mean_time_s(n ? double(stats_.process.busy_ns) * 1e-9 / double(n) : 0.0);
+  m.set_waited_s(double(stats_.process.waited_ns) * 1e-9);
   return m;
 }
 

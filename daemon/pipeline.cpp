@@ -208,6 +208,7 @@ void run_live_pipeline(LiveMailbox& mailbox, int max_in_flight, const ProcessFn&
                   spdlog::warn("pair {}: processing failed: {}", item->pair->pair_index, e.what());
                 }
                 stats.process.add_time(Clock::now() - start - steps.waited());
+                stats.process.add_wait(steps.waited());
                 --stats.process.in_flight;
                 return item;
               }) &

@@ -141,9 +141,13 @@ struct StageStats {
   std::atomic<std::uint64_t> skipped{0};    // processing threw: the pair stays on disk
   std::atomic<std::uint64_t> cancelled{0};  // in flight when the run stopped
   std::atomic<std::uint64_t> busy_ns{0};
+  std::atomic<std::uint64_t> waited_ns{0};  // at a PriorityGate, not counted in busy_ns
   std::atomic<std::uint32_t> in_flight{0};
   void add_time(std::chrono::steady_clock::duration d) {
     busy_ns += std::uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(d).count());
+  }
+  void add_wait(std::chrono::steady_clock::duration d) {
+    waited_ns += std::uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(d).count());
   }
   msg::StageCounters to_message(const char* name, std::uint32_t queue_depth, std::uint64_t dropped = 0) const;
 };

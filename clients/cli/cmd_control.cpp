@@ -61,7 +61,9 @@ void print_status(const msg::Status& s) {
                 << l.policy() << ", queue " << l.queue_depth() << "/" << l.queue_capacity() << ", offered "
                 << l.offered() << ", processed " << l.processed() << ", dropped " << l.dropped() << ", failed "
                 << l.failed() << ", cancelled " << l.cancelled() << ", in flight " << l.in_flight() << ", mean "
-                << std::setprecision(3) << l.mean_time_s() << " s\n";
+                << std::setprecision(3) << l.mean_time_s() << " s";
+      if (l.waited_s() > 0) std::cout << ", waited " << std::setprecision(1) << l.waited_s() << " s for the live lane";
+      std::cout << "\n";
     }
     if (s.has_losses()) {
       const msg::Losses& l = s.losses();
