@@ -14,6 +14,7 @@
 
 #include "core/base/build_info.hpp"
 #include "core/base/errors.hpp"
+#include "core/base/memory.hpp"
 #include "core/io/atomic_file.hpp"
 #include "core/io/hdf5_handle.hpp"
 
@@ -191,9 +192,12 @@ std::vector<T> read_dataset(hid_t parent, const std::filesystem::path& path, con
   if (expected && dims != *expected) {
     throw InputError(path.string() + ": dataset " + name + " has the wrong shape");
   }
-  std::size_t count = 1;
-  for (hsize_t d : dims) count *= d;
-  std::vector<T> data(count);
+  // A damaged file can declare any shape (its chunks unwritten, read as the fill value): the count
+  // is formed in floating point, so that it cannot wrap, and checked against this machine's memory.
+  double count = 1;
+  for (hsize_t d : dims) count *= double(d);
+  require_memory(count * sizeof(T), path.string() + ": dataset " + name);
+  std::vector<T> data(static_cast<std::size_t>(count));
   check(H5Dread(set.get(), mem_type<T>(), H5S_ALL, H5S_ALL, H5P_DEFAULT, data.data()), path, "read dataset " + name);
   if (dims_out) *dims_out = dims;
   return data;

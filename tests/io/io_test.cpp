@@ -441,6 +441,24 @@ TEST(Hdf5, WrongFilesAreNamed) {
   VectorField no_dt = some_field();
   no_dt.dt_s = 0;
   EXPECT_NE(message_of([&] { write_vector_field_h5(temp_dir() / "nodt.h5", no_dt); }).find("dt_s"), std::string::npos);
+  // A file of a few KB that declares a 4 PB volume (chunks never written read as the fill value):
+  // refused with what it would need, before anything is allocated.
+  const auto huge = temp_dir() / "huge.h5";
+  std::string out;
+  ASSERT_EQ(testing_support::run_command({"/usr/bin/python3", "-c",
+                                          "import h5py, sys\n"
+                                          "with h5py.File(sys.argv[1], 'w') as f:\n"
+                                          "    v = f.create_dataset('volume', shape=(100000,) * 3, dtype='f4', "
+                                          "chunks=(1, 64, 64))\n"
+                                          "    v.attrs['origin_mm'] = [0.0, 0.0, 0.0]\n"
+                                          "    v.attrs['spacing_mm'] = [1.0, 1.0, 1.0]\n",
+                                          huge.string()},
+                                         out),
+            0)
+      << out;
+  const std::string refused = message_of([&] { read_volume_h5(huge); });
+  EXPECT_NE(refused.find("dataset volume needs"), std::string::npos) << refused;
+  EXPECT_NE(refused.find("more than this machine's"), std::string::npos) << refused;
 }
 
 TEST(Vti, HeaderAndAppendedSizesDescribeTheArrays) {
