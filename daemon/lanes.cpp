@@ -91,7 +91,7 @@ std::vector<std::unique_ptr<Lane>> make_lanes(const RunConfig& config, int nice)
   live.max_in_flight = config.max_pairs_in_flight;
   live.priority = tbb::task_arena::priority::high;
   live.nice = nice;
-  // The live lane's pairs in flight, which the quality lane's wait for.
+  // Closed while the live lane has a pair in flight or waiting; the quality lane's pairs wait at it.
   const auto gate = config.quality.on() ? std::make_shared<PriorityGate>() : nullptr;
   live.holds = gate;
   lanes.push_back(std::make_unique<Lane>(live));

@@ -91,7 +91,7 @@ inline constexpr int kQualityLaneNice = 19;
 // takes, QualityLane::kPairsInFlight at once, quality.queue waiting, at low priority, its own
 // thread at kQualityLaneNice and its arena one thread short of the cores (a oneTBB worker always
 // free for the live lane), and its pairs wait between their steps while the live lane has a pair
-// in flight (PriorityGate): it works on the time the live lane leaves. The other threads of both
+// in flight or waiting (PriorityGate): it works on the time the live lane leaves. The other threads of both
 // lanes run at `nice` (plenopivd.yaml `processing_nice`).
 std::vector<std::unique_ptr<Lane>> make_lanes(const RunConfig& config, int nice = 0);
 

@@ -32,11 +32,6 @@ Clock::duration PriorityGate::wait_turn(const CancelFlag& cancel) const {
   return Clock::now() - start;
 }
 
-bool PriorityGate::busy() const {
-  std::lock_guard lock(mutex_);
-  return busy_;
-}
-
 void PairSteps::step() const {
   if (yield_to_) waited_ += yield_to_->wait_turn(cancel_);
   if (cancel_) throw Cancelled("run stopping");

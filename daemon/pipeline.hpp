@@ -53,7 +53,6 @@ class PriorityGate {
   void reassess(const std::function<bool()>& busy_now);
   // Returns once the higher-priority lane is not busy or `cancel` is set; the time it waited.
   std::chrono::steady_clock::duration wait_turn(const CancelFlag& cancel) const;
-  bool busy() const;
 
  private:
   mutable std::mutex mutex_;
@@ -62,8 +61,8 @@ class PriorityGate {
 };
 
 // What processing does at each step of a pair (as it starts, and after every MART iteration and
-// correlation pass): first wait while the lane above it (`yield_to`, none for the live lane) has a
-// pair in flight, then give up (plenopiv::Cancelled) once the run stops.
+// correlation pass): first wait while the lane above it (`yield_to`, none for the live lane) is
+// busy, then give up (plenopiv::Cancelled) once the run stops.
 class PairSteps {
  public:
   explicit PairSteps(const CancelFlag& cancel, const PriorityGate* yield_to = nullptr)
