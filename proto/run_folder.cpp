@@ -76,8 +76,8 @@ std::string message_json(const google::protobuf::Message& message, bool pretty) 
   options.add_whitespace = pretty;
   options.always_print_primitive_fields = pretty;
   options.preserve_proto_field_names = true;
-  // A camera's model string or a warning quoting a path may hold bytes that are not UTF-8, which
-  // protobuf's JSON printer refuses.
+  // A camera's model string or a warning quoting a path may hold bytes that are not UTF-8: printed
+  // as they are, they make JSON that protobuf's reader refuses when the folder is read back.
   std::unique_ptr<google::protobuf::Message> valid(message.New());
   valid->CopyFrom(message);
   msg::make_text_valid_utf8(*valid);
