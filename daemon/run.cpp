@@ -151,7 +151,8 @@ Run::Run(RunConfig config, std::string run_id, RunEnvironment env)
   spdlog::info("run {}: raw frames written {}", run_id_,
                io::direct_write_mode(env_.data_dir) == io::WriteMode::direct
                    ? "past the page cache (O_DIRECT)"
-                   : "through the page cache: the data directory's file system does not take O_DIRECT");
+                   : "through the page cache: the data directory's file system does not take O_DIRECT in 4 KiB "
+                     "blocks");
   if (wiring.source == drivers::TriggerSource::Software) {
     spdlog::warn("run {}: camera triggering {}", run_id_, wiring.description);
   } else {

@@ -2,6 +2,7 @@
 #include "core/io/direct_writer.hpp"
 
 #include <fcntl.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -63,9 +64,30 @@ struct DirectWriter::Buffer {
   }
 };
 
+bool DirectWriter::alignment_fits(std::uint32_t memory_align, std::uint32_t offset_align) {
+  return memory_align > 0 && offset_align > 0 && kBlock % memory_align == 0 && kBlock % offset_align == 0;
+}
+
+namespace {
+
+// Whether `fd`, opened with O_DIRECT, takes kBlock-aligned direct I/O: what the file system reports
+// (Linux 6.1 and later); one that reports nothing is taken at its word that the open succeeded.
+bool direct_io_fits(int fd) {
+  struct statx s {};
+  if (::statx(fd, "", AT_EMPTY_PATH, STATX_DIOALIGN, &s) != 0 || !(s.stx_mask & STATX_DIOALIGN)) return true;
+  return DirectWriter::alignment_fits(s.stx_dio_mem_align, s.stx_dio_offset_align);
+}
+
+}  // namespace
+
 DirectWriter::DirectWriter(const std::filesystem::path& path) : path_(path) {
   constexpr int kFlags = O_RDWR | O_CREAT | O_TRUNC | O_CLOEXEC;
   fd_ = ::open(path.c_str(), kFlags | O_DIRECT, 0644);
+  if (fd_ >= 0 && !direct_io_fits(fd_)) {
+    ::close(fd_);
+    fd_ = -1;
+    errno = EINVAL;
+  }
   if (fd_ < 0 && errno == EINVAL) {
     mode_ = WriteMode::buffered;
     fd_ = ::open(path.c_str(), kFlags, 0644);
@@ -192,8 +214,9 @@ WriteMode direct_write_mode(const std::filesystem::path& folder) {
   const int error = errno;
   ::unlink(probe.c_str());
   if (fd >= 0) {
+    const bool fits = direct_io_fits(fd);
     ::close(fd);
-    return WriteMode::direct;
+    return fits ? WriteMode::direct : WriteMode::buffered;
   }
   if (error == EINVAL) return WriteMode::buffered;
   throw std::runtime_error(folder.string() + ": cannot make a file: " + std::strerror(error));

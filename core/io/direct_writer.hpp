@@ -11,7 +11,8 @@ namespace plenopiv::io {
 // How a DirectWriter reaches the disk.
 enum class WriteMode {
   direct,    // O_DIRECT: from the staging buffer to the device, no page cache
-  buffered,  // the file system refuses O_DIRECT (EINVAL): ordinary writes of the same blocks
+  buffered,  // the file system refuses O_DIRECT (EINVAL), or asks for an alignment that kBlock is
+             // not a multiple of: ordinary writes of the same blocks
 };
 
 // Written this way, a recorder's raw frames at hundreds of MB/s cost a copy, not page-cache churn.
@@ -27,6 +28,9 @@ class DirectWriter {
   // O_DIRECT alignment of offsets, lengths and memory: a 4 KiB logical block covers 512-byte
   // and 4K-sector devices alike.
   static constexpr std::size_t kBlock = 4096;
+  // Whether kBlock-aligned memory, offsets and lengths meet the direct-I/O alignments a file system
+  // reports for a file (statx STATX_DIOALIGN: memory and offset, bytes; 0: no direct I/O there).
+  static bool alignment_fits(std::uint32_t memory_align, std::uint32_t offset_align);
 
   explicit DirectWriter(const std::filesystem::path& path);
   ~DirectWriter();

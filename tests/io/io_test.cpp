@@ -102,6 +102,17 @@ TEST(Tiff, AFrameLargerThanTheStagingBufferReadsBackBitForBit) {
   expect_read_back_by_both_readers(path, img);
 }
 
+// A file system's direct-I/O alignments (statx) that 4 KiB blocks meet, and those they do not: then
+// the writer writes through the page cache instead of failing its first write.
+TEST(DirectWriter, TakesO_DIRECTOnlyWhereFourKiBBlocksMeetTheReportedAlignment) {
+  EXPECT_TRUE(DirectWriter::alignment_fits(512, 512));    // ext4 on this machine's disk
+  EXPECT_TRUE(DirectWriter::alignment_fits(4, 512));      // memory aligned more loosely than offsets
+  EXPECT_TRUE(DirectWriter::alignment_fits(4096, 4096));  // a 4K-sector device
+  EXPECT_FALSE(DirectWriter::alignment_fits(8192, 8192)) << "a device with 8 KiB logical blocks";
+  EXPECT_FALSE(DirectWriter::alignment_fits(512, 16384));
+  EXPECT_FALSE(DirectWriter::alignment_fits(0, 0)) << "no direct I/O for this file";
+}
+
 // The direct writer behaves as a file handle: sequential writes across staging buffers, a seek back
 // into the first block and into blocks already written, a gap past the end (zeros); the file holds
 // exactly what a buffered file would. Tried where /tmp is (O_DIRECT on most file systems).
