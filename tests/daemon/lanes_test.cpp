@@ -235,7 +235,7 @@ TEST(Lane, TheQualityLaneWaitsBetweenItsStepsWhileTheLiveLaneHasAPair) {
     while (live_released < n) std::this_thread::sleep_for(std::chrono::milliseconds(1));
     return empty_field(pair, steps);
   };
-  // Ten steps; after the first of pair 1 it waits until the test lets it go on.
+  // Ten steps, each followed by a hold while the test says so (quality_may_go_on false).
   const ProcessFn quality_process = [&](const drivers::FramePair& pair, const PairSteps& steps) {
     for (int step = 0; step < 10; ++step) {
       steps.step();
@@ -253,6 +253,20 @@ TEST(Lane, TheQualityLaneWaitsBetweenItsStepsWhileTheLiveLaneHasAPair) {
     quality.run(
         quality_process, [](const drivers::FramePair&, ProcessedPair&) {}, cancel);
   });
+  // Ends both lanes, also when an assertion below returns early.
+  const std::function<void()> finish = [&] {
+    cancel = true;
+    live_released = 1000;
+    quality_may_go_on = true;
+    live.close(true);
+    quality.close(true);
+    if (live_runner.joinable()) live_runner.join();
+    if (quality_runner.joinable()) quality_runner.join();
+  };
+  struct Finally {
+    const std::function<void()>& f;
+    ~Finally() { f(); }
+  } finally{finish};
 
   // A live pair in flight and one waiting: the quality pair offered now does not start, nor
   // between the two live pairs.
@@ -295,11 +309,7 @@ TEST(Lane, TheQualityLaneWaitsBetweenItsStepsWhileTheLiveLaneHasAPair) {
   EXPECT_TRUE(eventually([&] { return quality.counters().cancelled() == 1; }));
   EXPECT_EQ(quality_steps, 20);
   ++live_released;
-  live.close(true);
-  quality.close(true);
-  live_runner.join();
-  quality_runner.join();
-  EXPECT_EQ(live.counters().processed(), 4u) << "the live lane's own pairs never wait";
+  ASSERT_TRUE(eventually([&] { return live.counters().processed() == 4; })) << "the live lane's own pairs never wait";
 }
 
 // The quality lane runs behind the live lane at the kernel's level too: its own thread at the
