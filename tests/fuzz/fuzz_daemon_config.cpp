@@ -12,8 +12,14 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     daemon::validate(config, path.string());
     fuzzing::require(!config.control_endpoint.empty() && !config.publish_endpoint.empty(),
                      "an accepted daemon config has no endpoint");
-    fuzzing::require(config.control_endpoint.rfind("ipc://", 0) == 0 || config.curve.has_value(),
+    // ipc:// (a socket file) and inproc:// (this process only) are not reachable over a network.
+    fuzzing::require(config.control_endpoint.rfind("ipc://", 0) == 0 ||
+                         config.control_endpoint.rfind("inproc://", 0) == 0 || config.curve.has_value(),
                      "an accepted daemon config has a tcp:// control endpoint without CURVE");
+    fuzzing::require(config.control_endpoint.rfind("tcp://", 0) == 0 ||
+                         config.control_endpoint.rfind("ipc://", 0) == 0 ||
+                         config.control_endpoint.rfind("inproc://", 0) == 0,
+                     "an accepted daemon config has a control endpoint of another transport");
   } catch (const InputError& e) {
     fuzzing::require_names(e, path.string());
   }
