@@ -42,9 +42,9 @@ struct ProcessedPair {
 using CancelFlag = std::atomic<bool>;
 
 // Where a lane of lower priority waits, between the steps of its pairs, while a lane of higher
-// priority is busy (a pair in flight or waiting in its queue). The kernel's niceness alone does not
-// do it: with three busy threads on two cores, the quality lane's one thread kept a core to itself
-// while the live lane's two shared the other (docs/lab/2026-11-27.md). Thread safe.
+// priority is busy (a pair in flight or waiting in its queue), so that the higher one gets every
+// core: niceness weighs threads only on one CPU's run queue and cannot keep a busy low-priority
+// thread off a core of its own (bench_lanes paper, docs/benchmarks.md). Thread safe.
 class PriorityGate {
  public:
   // Sets whether the higher-priority lane is busy to what `busy_now` says, called under the gate's

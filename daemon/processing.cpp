@@ -67,7 +67,7 @@ ProcessFactory plenoptic_processing(const optics::CameraModel& camera) {
           process::PairOptions options;
           if (pair.measured) options.measured_dt_s = pair.measured->dt_s();
           // Called after every MART iteration and correlation pass: the quality lane waits there while
-          // the live lane has a pair, and a stopping run gives up there.
+          // the live lane is busy, and a stopping run gives up there.
           options.progress = [&steps](const std::string&, double) { steps.step(); };
           process::PairResult r = processor->process(pair.a.image, pair.b.image, options);
           ProcessedPair out;

@@ -193,7 +193,7 @@ TEST(ValidText, EveryMalformedByteBecomesAReplacementCharacterAndWellFormedTextI
 }
 
 // A manifest whose strings are not UTF-8 (nested and repeated fields too) is still written, and
-// reads back with the bad bytes replaced; protobuf's JSON printer would refuse it unmended.
+// reads back with the bad bytes replaced; unmended, protobuf's JSON reader refuses it.
 TEST(ValidText, AManifestWithTextThatIsNotUtf8IsWrittenAndReadsBack) {
   msg::RunManifest m;
   m.set_camera_model("Acme \xA0\xFF cam");
