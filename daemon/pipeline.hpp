@@ -68,7 +68,6 @@ class PairSteps {
   explicit PairSteps(const CancelFlag& cancel, const PriorityGate* yield_to = nullptr)
       : cancel_(cancel), yield_to_(yield_to) {}
   void step() const;
-  bool cancelled() const { return cancel_; }
   // The time spent waiting at the gate, not processing.
   std::chrono::steady_clock::duration waited() const { return waited_; }
 
