@@ -5,6 +5,9 @@
 #include <algorithm>
 #include <vector>
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include "core/base/errors.hpp"
 
 namespace plenopiv::process {
@@ -31,17 +34,21 @@ ImageF block_means(const Image<T>& image, int factor) {
   out.height = image.height / factor;
   out.pixels.resize(std::size_t(out.width) * std::size_t(out.height));
   const float scale = 1.0f / float(factor * factor);
-  std::vector<float> sums(std::size_t(out.width));
-  for (int y = 0; y < out.height; ++y) {
-    std::fill(sums.begin(), sums.end(), 0.f);
-    for (int r = 0; r < factor; ++r) {
-      const T* in = image.pixels.data() + std::size_t(y * factor + r) * std::size_t(image.width);
-      for (int x = 0; x < out.width; ++x)
-        for (int c = 0; c < factor; ++c) sums[std::size_t(x)] += float(in[x * factor + c]);
+  // Output rows are independent (each sums its own block of input rows in a fixed order), so the
+  // threads change no bit.
+  tbb::parallel_for(tbb::blocked_range<int>(0, out.height, 16), [&](const tbb::blocked_range<int>& rows) {
+    std::vector<float> sums(std::size_t(out.width));
+    for (int y = rows.begin(); y != rows.end(); ++y) {
+      std::fill(sums.begin(), sums.end(), 0.f);
+      for (int r = 0; r < factor; ++r) {
+        const T* in = image.pixels.data() + std::size_t(y * factor + r) * std::size_t(image.width);
+        for (int x = 0; x < out.width; ++x)
+          for (int c = 0; c < factor; ++c) sums[std::size_t(x)] += float(in[x * factor + c]);
+      }
+      float* row = out.pixels.data() + std::size_t(y) * std::size_t(out.width);
+      for (int x = 0; x < out.width; ++x) row[x] = sums[std::size_t(x)] * scale;
     }
-    float* row = out.pixels.data() + std::size_t(y) * std::size_t(out.width);
-    for (int x = 0; x < out.width; ++x) row[x] = sums[std::size_t(x)] * scale;
-  }
+  });
   return out;
 }
 
