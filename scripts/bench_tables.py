@@ -42,9 +42,9 @@ RUN = ["--mu", "1", "--iterations", "3", "--intensity-threshold", "4", "--final-
 
 # Live tiers at the paper's scale, bench_e2e --live B,K,N,P: voxels B times as large, pixels binned
 # K x K, N MART iterations, passes P. RUN_PAPER_LIVE is run-paper.yaml's `live:` tier.
-RUN_PAPER_LIVE = "3,2,3,16@50+4,8@50"
-LIVE_TIERS = ["4,2,3,8@50", "3,2,2,16@50+4,8@50", RUN_PAPER_LIVE, "3,1,3,16@50+4,8@50", "2,2,3,16@50+4,8@50",
-              "2,1,3,16@50+4,8@50"]
+RUN_PAPER_LIVE = "3,4,4,16@50+4,8@50"
+LIVE_TIERS = ["4,4,5,16@50+4,8@50", "4,4,8,16@50+4,8@50", "3,4,3,16@50+4,8@50", RUN_PAPER_LIVE,
+              "3,4,5,16@50+4,8@50", "3,2,3,16@50+4,8@50", "3,1,3,16@50+4,8@50", "2,2,3,16@50+4,8@50"]
 
 # name: (set, command from the repository root, plot or None); a plot is drawn by bench/plot_e2e.py from
 # sweep rows (pareto=), or by the script PLOTTERS names from the samples it names
