@@ -8,9 +8,13 @@
 //       second (bench=lanes_sample lines; bench/plot_lanes.py draws them). The replay camera
 //       preloads its frames (buffer_mb), as a camera delivers them decoded. 64 MB a pair at 10 Hz is
 //       640 MB/s onto DATA_DIR (default: the temporary folder's disk, written past the page cache
-//       where it allows); its raw frames are deleted once recorded, standing in for a disk that
-//       holds the run's 38 GB.
+//       where it allows). Where DATA_DIR has room for the run's raw frames (38 GB), they stay until
+//       the run ends, as a recording keeps them; where it has not, they are deleted once recorded
+//       (frames_deleted=during), a stand-in that costs the file system what a recording never does:
+//       on a disk mounted with online discard each deletion trims its blocks at the journal's commit,
+//       which stalls the recorder's own writes.
 #include <sys/resource.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
@@ -58,21 +62,22 @@ void delete_recorded_frames(const fs::path& data, std::uint64_t keep_from) {
 struct RunFigures {
   double setup_s = 0, run_s = 0, acquire_s = 1, rss_min_gb = 0, rss_max_gb = 0;
 };
+// frames_deleted: "after" the run, or "during" it once recorded (a data folder without room for them).
 void print_result(const char* variant, int nice, int pairs, double rate_hz, const RunFigures& f, const msg::Status& s,
-                  daemon::RunState state) {
+                  daemon::RunState state, const char* frames_deleted) {
   msg::LaneCounters live, quality;
   for (const msg::LaneCounters& l : s.lanes()) (l.name() == "live" ? live : quality) = l;
   std::printf(
       "bench=lanes variant=%s processing_nice=%d pairs=%d rate_hz=%.1f setup_s=%.1f run_s=%.1f recorded=%llu "
       "frames_lost=%llu live_fields=%llu live_fields_per_s=%.2f live_dropped=%llu live_mean_s=%.3f "
       "quality_fields=%llu quality_fields_per_s=%.3f quality_dropped=%llu quality_mean_s=%.2f rss_min_gb=%.2f "
-      "rss_max_gb=%.2f state=%s\n",
+      "rss_max_gb=%.2f state=%s frames_deleted=%s\n",
       variant, nice, pairs, rate_hz, f.setup_s, f.run_s, static_cast<unsigned long long>(s.pairs_recorded()),
       static_cast<unsigned long long>(s.frames_lost()), static_cast<unsigned long long>(live.processed()),
       double(live.processed()) / f.acquire_s, static_cast<unsigned long long>(live.dropped()), live.mean_time_s(),
       static_cast<unsigned long long>(quality.processed()), double(quality.processed()) / f.acquire_s,
       static_cast<unsigned long long>(quality.dropped()), quality.mean_time_s(), f.rss_min_gb, f.rss_max_gb,
-      daemon::to_string(state));
+      daemon::to_string(state), frames_deleted);
   std::fflush(stdout);
 }
 
@@ -98,6 +103,11 @@ int paper_lanes(int argc, char** argv) {
     if (*quality) run_yaml["quality"] = quality;
     const daemon::RunConfig config = daemon::parse_run_config(YAML::Dump(run_yaml), "run-paper.yaml");
     fs::remove_all(data);
+    ::sync();  // the last variant's trims done before this one records
+    fs::create_directories(data);
+    // The run's raw frames with a tenth to spare; a pair's TIFFs hold a little more than its pixels.
+    const double frame_bytes = 2.0 * double(camera.sensor().width_px) * double(camera.sensor().height_px) * 2.0;
+    const bool delete_during = double(fs::space(data).available) < 1.1 * frame_bytes * (pairs + 10 * rate_hz);
     daemon::RunStateMachine state;
     const daemon::RunEnvironment env =
         bench::replay_run_environment(data, camera_file, state, processing, nice, "paper?loop=1&buffer_mb=1024");
@@ -113,7 +123,7 @@ int paper_lanes(int argc, char** argv) {
       run.fill_status(s);
       if (acquiring_at == 0 && state.state() == daemon::RunState::Acquiring) acquiring_at = now();
       if (acquiring_at == 0) continue;
-      if (s.pairs_recorded() > 2) delete_recorded_frames(data, s.pairs_recorded() - 2);
+      if (delete_during && s.pairs_recorded() > 2) delete_recorded_frames(data, s.pairs_recorded() - 2);
       if (stopped_at == 0 && s.pairs_recorded() >= std::uint64_t(pairs)) {
         run.request_stop();
         stopped_at = now();
@@ -134,7 +144,8 @@ int paper_lanes(int argc, char** argv) {
     s.Clear();
     run.fill_status(s);
     const double acquire_s = (stopped_at > 0 ? stopped_at : now()) - acquiring_at;
-    print_result(name, nice, pairs, rate_hz, {acquiring_at, acquire_s, acquire_s, rss_min, rss_max}, s, state.state());
+    print_result(name, nice, pairs, rate_hz, {acquiring_at, acquire_s, acquire_s, rss_min, rss_max}, s, state.state(),
+                 delete_during ? "during" : "after");
   }
   fs::remove_all(data);
   return 0;
@@ -173,6 +184,11 @@ int main(int argc, char** argv) {
   for (const auto& [name, lanes, processing_nice] : variants) {
     const fs::path data = root / "data";
     fs::remove_all(data);
+    ::sync();  // the last variant's trims done before this one records
+    fs::create_directories(data);
+    // The run's raw frames with a tenth to spare; a pair's TIFFs hold a little more than its pixels.
+    const double frame_bytes = 2.0 * double(camera.sensor().width_px) * double(camera.sensor().height_px) * 2.0;
+    const bool delete_during = double(fs::space(data).available) < 1.1 * frame_bytes * (pairs + 10 * rate_hz);
     daemon::RunStateMachine state;
     const daemon::RunEnvironment env =
         bench::replay_run_environment(data, camera_file, state, processing, processing_nice);
@@ -196,7 +212,7 @@ int main(int argc, char** argv) {
       run.fill_status(s);
       const double wall = std::chrono::duration<double>(Clock::now() - t0).count() - acquiring_at;
       print_result(name, processing_nice, pairs, rate_hz,
-                   {acquiring_at, wall, double(pairs) / rate_hz, rss_min, rss_max}, s, state.state());
+                   {acquiring_at, wall, double(pairs) / rate_hz, rss_min, rss_max}, s, state.state(), "after");
     }
   }
   fs::remove_all(root / "data");

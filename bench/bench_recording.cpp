@@ -5,10 +5,12 @@
 // at RATE_HZ, free-running; the run folder is on DATA_DIR (default: the temporary folder's disk),
 // which the writer reaches past the page cache where its file system allows (write=direct).
 //   bench_recording [PAIRS] [REPEATS] [RATE_HZ] [DATA_DIR]   (default 100 pairs, 3 repeats, 10 Hz)
-// Per variant: medians over the repeats of wall and CPU seconds per pair (wall: 1 / RATE_HZ while
-// the recording keeps up) and minor page faults per pair, and the pool's reuse. The variants
-// alternate, so drift in the machine's load hits both.
+// Where DATA_DIR has no room for a variant's frames, each pair's are deleted once the next is
+// recorded (frames_deleted=during). Per variant: medians over the repeats of wall and CPU seconds
+// per pair (wall: 1 / RATE_HZ while the recording keeps up) and minor page faults per pair, and the pool's reuse. The
+// variants alternate, so drift in the machine's load hits both.
 #include <sys/resource.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
@@ -42,8 +44,10 @@ long minor_faults() {
   return u.ru_minflt;
 }
 
-// `pairs` pairs from `camera` into a new run folder under `data`, each let go at once.
-Figures record(drivers::Camera& camera, const fs::path& data, const std::string& run_id, int pairs, bool pooled) {
+// `pairs` pairs from `camera` into a new run folder under `data`, each let go at once; each pair's
+// frames deleted once the next is recorded if `delete_during` (a data folder without room for them).
+Figures record(drivers::Camera& camera, const fs::path& data, const std::string& run_id, int pairs, bool pooled,
+               bool delete_during) {
   run_folder::Writer::Setup setup;
   setup.data_dir = data;
   setup.run_id = run_id;
@@ -71,8 +75,10 @@ Figures record(drivers::Camera& camera, const fs::path& data, const std::string&
     writer.record_pair(r);
     for (const drivers::Frame* f : {&pair->a, &pair->b}) (void)process::frame_problem(f->image.pixels, f->bit_depth);
     (void)drivers::share_pair(std::move(*pair), pooled ? camera.frame_pool() : nullptr);
-    // The folder holds the last pair only: 100 paper-scale pairs are 6 GB.
-    if (i > 0) {
+    // The folder holds the last pair only: 100 paper-scale pairs are 6 GB. A deletion is timed with
+    // the recording and, on a disk mounted with online discard, trims its blocks at the journal's
+    // commit, which stalls the writes: where there is room the frames stay until the run's end.
+    if (delete_during && i > 0) {
       char name[64];
       for (const char* k : {"A", "B"}) {
         std::snprintf(name, sizeof name, "pair-%06d-%s.tif", i - 1, k);
@@ -88,6 +94,7 @@ Figures record(drivers::Camera& camera, const fs::path& data, const std::string&
   f.reused = double(after.reused - before.reused) / double(std::max<std::uint64_t>(1, after.taken - before.taken));
   writer.close("complete", 0, 0);
   fs::remove_all(writer.dir());
+  ::sync();  // the deletion's trims done before the next variant records
   return f;
 }
 
@@ -113,12 +120,16 @@ int main(int argc, char** argv) {
   fs::remove_all(data);
   fs::create_directories(data);
   const char* write_mode = io::direct_write_mode(data) == io::WriteMode::direct ? "direct" : "buffered";
-  (void)record(*camera, data, "warm-up", 4, true);  // decoding the recording, the first frames' pages
+  // One variant's frames (a pair's TIFFs hold a little more than its pixels), with a tenth to spare.
+  const double frame_bytes =
+      2.0 * double(camera_model.sensor().width_px) * double(camera_model.sensor().height_px) * 2.0;
+  const bool delete_during = double(fs::space(data).available) < 1.1 * frame_bytes * pairs;
+  (void)record(*camera, data, "warm-up", 4, true, false);  // decoding the recording, the first frames' pages
 
   std::vector<Figures> fresh, pooled;
   for (int r = 0; r < repeats; ++r) {
-    fresh.push_back(record(*camera, data, "fresh-" + std::to_string(r), pairs, false));
-    pooled.push_back(record(*camera, data, "pooled-" + std::to_string(r), pairs, true));
+    fresh.push_back(record(*camera, data, "fresh-" + std::to_string(r), pairs, false, delete_during));
+    pooled.push_back(record(*camera, data, "pooled-" + std::to_string(r), pairs, true, delete_during));
   }
   camera->stop();
   fs::remove_all(data);
@@ -134,11 +145,12 @@ int main(int argc, char** argv) {
     const std::vector<Figures>& v = *runs[k];
     std::printf(
         "bench=recording variant=%s pairs=%d repeats=%d rate_hz=%.1f data_dir=%s write=%s mb_per_pair=%.1f "
-        "wall_s_per_pair=%.4f cpu_s_per_pair=%.4f cores=%.2f faults_per_pair=%.0f buffers_reused=%.2f\n",
+        "wall_s_per_pair=%.4f cpu_s_per_pair=%.4f cores=%.2f faults_per_pair=%.0f buffers_reused=%.2f "
+        "frames_deleted=%s\n",
         names[k], pairs, repeats, rate_hz, data.c_str(), write_mode,
         2.0 * camera_model.sensor().width_px * camera_model.sensor().height_px * 2 / (1024.0 * 1024.0),
         med(v, &Figures::wall_s_per_pair), med(v, &Figures::cpu_s_per_pair), rate_hz * med(v, &Figures::cpu_s_per_pair),
-        med(v, &Figures::faults_per_pair), med(v, &Figures::reused));
+        med(v, &Figures::faults_per_pair), med(v, &Figures::reused), delete_during ? "during" : "after");
   }
   std::printf("bench=recording_ratio pooled_over_fresh_cpu=%.2f\n",
               med(pooled, &Figures::cpu_s_per_pair) / med(fresh, &Figures::cpu_s_per_pair));
