@@ -105,7 +105,8 @@ int paper_lanes(int argc, char** argv) {
     fs::remove_all(data);
     ::sync();  // the last variant's trims done before this one records
     fs::create_directories(data);
-    // The run's raw frames with a tenth to spare; a pair's TIFFs hold a little more than its pixels.
+    // The run's raw frames, and 10 s of pairs past the count (the stop comes at the next sample), with
+    // a tenth to spare; a pair's TIFFs hold a little more than its pixels.
     const double frame_bytes = 2.0 * double(camera.sensor().width_px) * double(camera.sensor().height_px) * 2.0;
     const bool delete_during = double(fs::space(data).available) < 1.1 * frame_bytes * (pairs + 10 * rate_hz);
     daemon::RunStateMachine state;

@@ -7,8 +7,8 @@
 //   bench_recording [PAIRS] [REPEATS] [RATE_HZ] [DATA_DIR]   (default 100 pairs, 3 repeats, 10 Hz)
 // Where DATA_DIR has no room for a variant's frames, each pair's are deleted once the next is
 // recorded (frames_deleted=during). Per variant: medians over the repeats of wall and CPU seconds
-// per pair (wall: 1 / RATE_HZ while the recording keeps up) and minor page faults per pair, and the pool's reuse. The
-// variants alternate, so drift in the machine's load hits both.
+// per pair (wall: 1 / RATE_HZ while the recording keeps up) and minor page faults per pair, and the
+// pool's reuse. The variants alternate, so drift in the machine's load hits both.
 #include <sys/resource.h>
 #include <unistd.h>
 
