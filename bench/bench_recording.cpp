@@ -72,8 +72,13 @@ Figures record(drivers::Camera& camera, const fs::path& data, const std::string&
     r.frame_b = &pair->b.image;
     r.frame_id_a = pair->a.frame_id;
     r.frame_id_b = pair->b.frame_id;
+    // The frame check as plenopivd makes it: its statistics gathered while the frames are written.
+    process::FrameRange range_a, range_b;
+    r.visit_rows_a = [&range_a](std::span<const std::uint16_t> rows) { range_a.add(rows); };
+    r.visit_rows_b = [&range_b](std::span<const std::uint16_t> rows) { range_b.add(rows); };
     writer.record_pair(r);
-    for (const drivers::Frame* f : {&pair->a, &pair->b}) (void)process::frame_problem(f->image.pixels, f->bit_depth);
+    (void)process::frame_problem(pair->a.image.pixels, pair->a.bit_depth, range_a);
+    (void)process::frame_problem(pair->b.image.pixels, pair->b.bit_depth, range_b);
     (void)drivers::share_pair(std::move(*pair), pooled ? camera.frame_pool() : nullptr);
     // The folder holds the last pair only: 100 paper-scale pairs are 6 GB. A deletion is timed with
     // the recording and, on a disk mounted with online discard, trims its blocks at the journal's

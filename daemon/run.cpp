@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <ctime>
 #include <exception>
+#include <tuple>
 
 #include "core/base/errors.hpp"
 #include "core/calib/nominal_calibration.hpp"
@@ -190,9 +191,13 @@ void Run::record(drivers::FramePair pair) {
   record.host_timestamp_b_ns = pair.b.host_timestamp_ns;
   record.frame_gap_s = frame_gap_s(pair);
   if (pair.measured) record.laser_pulses_ns = std::pair{pair.measured->pulse1_ns, pair.measured->pulse2_ns};
+  // The frame check's statistics gathered as the frames are written, not by reading them again.
+  process::FrameRange range_a, range_b;
+  record.visit_rows_a = [&range_a](std::span<const std::uint16_t> rows) { range_a.add(rows); };
+  record.visit_rows_b = [&range_b](std::span<const std::uint16_t> rows) { range_b.add(rows); };
   recorder_->record_pair(record);
   ++pairs_received_;
-  check_frames(pair);
+  check_frames(pair, range_a, range_b);
   if (env_.heartbeat) env_.heartbeat();
   // The frames go back to the camera's pool when the last consumer lets go of the pair.
   const SharedPair shared = drivers::share_pair(std::move(pair), camera_->frame_pool());
@@ -211,9 +216,10 @@ void Run::check_space() const {
 
 // Frames that hold no information are recorded as they are, and flagged (process::frame_problem:
 // all zero, or saturated), once per kind of problem in the log and manifest, counted in status.
-void Run::check_frames(const drivers::FramePair& pair) {
-  for (const auto& [frame, name] : {std::pair{&pair.a, "A"}, std::pair{&pair.b, "B"}}) {
-    const auto problem = process::frame_problem(frame->image.pixels, frame->bit_depth);
+void Run::check_frames(const drivers::FramePair& pair, const process::FrameRange& range_a,
+                       const process::FrameRange& range_b) {
+  for (const auto& [frame, range, name] : {std::tuple{&pair.a, &range_a, "A"}, std::tuple{&pair.b, &range_b, "B"}}) {
+    const auto problem = process::frame_problem(frame->image.pixels, frame->bit_depth, *range);
     if (!problem) continue;
     const std::string kind = std::string("frame ") + name + " " + *problem;
     bool first = false;

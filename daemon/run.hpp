@@ -12,6 +12,7 @@
 #include <thread>
 #include <vector>
 
+#include "core/process/frame_check.hpp"
 #include "daemon/daemon_config.hpp"
 #include "daemon/lanes.hpp"
 #include "daemon/pipeline.hpp"
@@ -104,7 +105,8 @@ class Run {
   std::uint64_t fields_made() const;
   std::vector<msg::LaneCounters> lane_counters() const;
   void attach_shot(drivers::FramePair& pair);
-  void check_frames(const drivers::FramePair& pair);
+  void check_frames(const drivers::FramePair& pair, const process::FrameRange& range_a,
+                    const process::FrameRange& range_b);
   void take_drops();
   void fire_software_trigger(std::uint64_t index);
   void watch_camera(std::chrono::steady_clock::time_point now);

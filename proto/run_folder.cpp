@@ -324,9 +324,10 @@ void Writer::record_pair(const PairRecord& pair) {
   const std::string a = "frames/" + name + "-A.tif", b = "frames/" + name + "-B.tif";
   // Frames are written outside the lock (the output stage may be listing vectors meanwhile), both at
   // once: each waits for the disk to confirm its data (fsync), and the folder is flushed once for both.
-  auto frame_b = std::async(std::launch::async, [&] { io::write_tiff(dir_ / b, *pair.frame_b, false); });
+  auto frame_b =
+      std::async(std::launch::async, [&] { io::write_tiff(dir_ / b, *pair.frame_b, false, pair.visit_rows_b); });
   try {
-    io::write_tiff(dir_ / a, *pair.frame_a, false);
+    io::write_tiff(dir_ / a, *pair.frame_a, false, pair.visit_rows_a);
   } catch (...) {
     frame_b.wait();
     throw;

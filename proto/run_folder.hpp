@@ -4,6 +4,7 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <mutex>
 #include <optional>
 #include <span>
@@ -61,6 +62,9 @@ struct PairRecord {
   std::uint64_t host_timestamp_a_ns = 0, host_timestamp_b_ns = 0;
   double frame_gap_s = 0;  // B - A, device clock when both frames carry it, else host
   std::optional<std::pair<std::uint64_t, std::uint64_t>> laser_pulses_ns;  // measured pulse 1 and 2
+  // If set, see each frame's rows as they are written (io::write_tiff's visitor); A's and B's are
+  // called from different threads at once.
+  std::function<void(std::span<const std::uint16_t>)> visit_rows_a, visit_rows_b;
 };
 
 // A calibration file copied into the folder.

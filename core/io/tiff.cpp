@@ -181,7 +181,8 @@ void write_row(TIFF* t, const std::filesystem::path& path, const void* row, int 
 // Uncompressed 16-bit pixels in the host's byte order, which is the file's, are their own
 // encoding: each strip goes to the writer straight from the image, without libtiff's copy into its
 // strip buffer (a recorder writes two camera frames per pair).
-void write_raw_strips(TIFF* t, const std::filesystem::path& path, const ImageU16& image) {
+void write_raw_strips(TIFF* t, const std::filesystem::path& path, const ImageU16& image,
+                      const RowsVisitor& visit_rows) {
   uint32_t rows_per_strip = 0;
   TIFFGetFieldDefaulted(t, TIFFTAG_ROWSPERSTRIP, &rows_per_strip);
   if (rows_per_strip == 0) rows_per_strip = 1;
@@ -190,6 +191,7 @@ void write_raw_strips(TIFF* t, const std::filesystem::path& path, const ImageU16
     const int y0 = int(strip * rows_per_strip);
     const int rows = std::min(int(rows_per_strip), image.height - y0);
     const tmsize_t bytes = tmsize_t(rows) * image.width * tmsize_t(sizeof(std::uint16_t));
+    if (visit_rows) visit_rows(std::span<const std::uint16_t>(image.row(y0).data(), std::size_t(rows) * image.width));
     if (TIFFWriteRawStrip(t, strip, const_cast<std::uint16_t*>(image.row(y0).data()), bytes) != bytes) {
       throw std::runtime_error(path.string() + ": cannot write TIFF rows " + std::to_string(y0) + " to " +
                                std::to_string(y0 + rows - 1) + " (" + g_last_tiff_message + ")");
@@ -278,14 +280,15 @@ ImageF read_tiff_float(const std::filesystem::path& path) {
   return image;
 }
 
-void write_tiff(const std::filesystem::path& path, const ImageU16& image, bool sync_folder) {
+void write_tiff(const std::filesystem::path& path, const ImageU16& image, bool sync_folder,
+                const RowsVisitor& visit_rows) {
   write_atomically(
       path,
       [&](const std::filesystem::path& tmp) {
         DirectWriter file(tmp);
         TiffPtr t = direct_tiff::open(file, tmp);
         set_page_fields(t.get(), image.width, image.height, 16, SAMPLEFORMAT_UINT);
-        write_raw_strips(t.get(), path, image);
+        write_raw_strips(t.get(), path, image, visit_rows);
         flush(t.get(), path);
         t.reset();
         file.finish();

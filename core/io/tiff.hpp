@@ -2,6 +2,8 @@
 #pragma once
 
 #include <filesystem>
+#include <functional>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -31,7 +33,11 @@ TiffInfo check_tiff(const std::filesystem::path& path);
 // Writes a 16-bit single-channel TIFF, atomically, past the page cache where the file system takes
 // O_DIRECT (io::DirectWriter): a recorder's frames cost a copy, not page-cache churn.
 // `sync_folder`: as io::write_atomically (false: the caller flushes the folder once for several files).
-void write_tiff(const std::filesystem::path& path, const ImageU16& image, bool sync_folder = true);
+// `visit_rows`, if set, sees each strip's pixels (whole rows, in order, each once) just before they
+// are copied out, while they are in cache: a frame's statistics for the price of no extra read.
+using RowsVisitor = std::function<void(std::span<const std::uint16_t>)>;
+void write_tiff(const std::filesystem::path& path, const ImageU16& image, bool sync_folder = true,
+                const RowsVisitor& visit_rows = {});
 // Writes float32 pages (a focal stack, say) as one multi-page TIFF, atomically. `descriptions`
 // (empty, or one per page): each page's ImageDescription, what the page is (e.g. its depth).
 void write_tiff_stack(const std::filesystem::path& path, const std::vector<ImageF>& pages,

@@ -279,6 +279,32 @@ TEST_F(Lanes, WithTheQualityLaneOffTheLiveLaneAloneRunsTheLiveTier) {
   EXPECT_FALSE(fs::exists(run / "statistics.h5"));
 }
 
+// Frames without light and clipped frames are recorded, and named in the status and the manifest
+// once per kind, from the statistics gathered while the recorder writes them.
+TEST_F(Lanes, FramesWithoutLightOrClippedAreRecordedAndNamed) {
+  // Frame A of every pair dark; frame B with a tenth of its pixels at the 16-bit full scale.
+  ImageU16 clipped(850, 850, 100);
+  for (std::size_t i = 0; i < clipped.pixels.size(); i += 10) clipped.pixels[i] = 65535;
+  for (int k = 0; k < 8; k += 2) {
+    io::write_tiff(scratch_ / "recordings/rec" / ("frame-" + std::to_string(k) + ".tif"), ImageU16(850, 850, 0), false);
+    io::write_tiff(scratch_ / "recordings/rec" / ("frame-" + std::to_string(k + 1) + ".tif"), clipped, false);
+  }
+  start_daemon(0);
+  std::string out;
+  ASSERT_EQ(start_run("pairs: 4\nrate_hz: 10\nquality: off\n" + kProcessing + kLiveTier, out), 0) << out;
+  const msg::Status s = wait_idle();
+  EXPECT_EQ(s.pairs_recorded(), 4u);
+  std::string warnings;
+  for (const std::string& w : s.warnings()) warnings += w + "\n";
+  EXPECT_NE(warnings.find("frame A all zero: no light reached the sensor"), std::string::npos) << warnings;
+  EXPECT_NE(warnings.find("frame B saturated: 10.0 % of the pixels at full scale 65535"), std::string::npos)
+      << warnings;
+  EXPECT_NE(warnings.find(": 4 pair(s), first pair 0"), std::string::npos) << warnings;
+  const msg::RunManifest m = testing_support::read_manifest(only_run_dir());
+  ASSERT_EQ(m.warnings_size(), 2) << warnings;
+  EXPECT_EQ(m.pairs_size(), 4);
+}
+
 // The alignment preview over real sockets: while the run acquires, frame A of the newest pair
 // downsampled and refocused, on topic `preview`; `plenopiv watch --preview` prints it and writes the
 // PNG (raw | refocused).

@@ -2,7 +2,9 @@
 // ordinary frames pass, for camera counts and float frames.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstdint>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -42,6 +44,26 @@ TEST(FrameCheck, NoLightAndClippingAreNamedAndOrdinaryFramesPass) {
   const std::vector<float> dark_float(850 * 850, 0.f);
   EXPECT_EQ(frame_problem(std::span<const float>(dark_float))->rfind("all zero", 0), 0u);
   EXPECT_FALSE(frame_problem(std::span<const float>()));
+}
+
+// The range a recorder gathers row by row as it writes a frame gives the whole-frame check's answers.
+TEST(FrameCheck, ARangeGatheredRowByRowGivesTheSameAnswers) {
+  const std::size_t one_percent = 850 * 850 / 100;
+  const std::vector<std::vector<std::uint16_t>> frames{
+      frame<std::uint16_t>(0, 0), frame<std::uint16_t>(2 * one_percent, 65535),
+      frame<std::uint16_t>(3 * one_percent, 4095), std::vector<std::uint16_t>(850 * 850, 0)};
+  for (const auto& pixels : frames) {
+    FrameRange range;
+    for (std::size_t row = 0; row < 850; ++row) range.add(std::span(pixels).subspan(row * 850, 850));
+    EXPECT_EQ(range.min, *std::min_element(pixels.begin(), pixels.end()));
+    EXPECT_EQ(range.max, *std::max_element(pixels.begin(), pixels.end()));
+    for (const int bit_depth : {0, 12, 16}) {
+      EXPECT_EQ(frame_problem(std::span<const std::uint16_t>(pixels), bit_depth, range),
+                frame_problem(std::span<const std::uint16_t>(pixels), bit_depth));
+    }
+  }
+  // A range that saw none of the frame's pixels is a caller's mistake, not a frame without light.
+  EXPECT_THROW(frame_problem(std::span<const std::uint16_t>(frames[0]), 0, FrameRange{}), std::logic_error);
 }
 
 }  // namespace

@@ -139,6 +139,30 @@ TEST(RunFolder, TheWriterListsFramesVectorsStatisticsAndDropsAsTheyAreWritten) {
 
 // Integers are JSON integers (protobuf's mapping quotes 64-bit ones); strings of digits stay
 // strings; and the manifest still parses with protobuf's own reader.
+// A recorder's row visitors see each frame's pixels once, in order, and the frames on disk are the
+// frames.
+TEST(RunFolder, TheRowVisitorsSeeEveryRowOfTheirFrameOnceInOrder) {
+  const fs::path data = testing_support::temp_dir("run-folder") / "visitors";
+  fs::remove_all(data);
+  Writer writer(setup(data, "r1"));
+  Frames frames(7);
+  for (int y = 0; y < frames.a.height; ++y)
+    for (int x = 0; x < frames.a.width; ++x) {
+      frames.a.row(y)[std::size_t(x)] = std::uint16_t(100 * y + x);
+      frames.b.row(y)[std::size_t(x)] = std::uint16_t(5000 + 100 * y + x);
+    }
+  PairRecord r = record_of(7, frames);
+  std::vector<std::uint16_t> seen_a, seen_b;
+  r.visit_rows_a = [&](std::span<const std::uint16_t> rows) { seen_a.insert(seen_a.end(), rows.begin(), rows.end()); };
+  r.visit_rows_b = [&](std::span<const std::uint16_t> rows) { seen_b.insert(seen_b.end(), rows.begin(), rows.end()); };
+  writer.record_pair(r);
+  EXPECT_EQ(seen_a, frames.a.pixels);
+  EXPECT_EQ(seen_b, frames.b.pixels);
+  const ImageF on_disk = io::read_tiff_float(writer.dir() / "frames/pair-000007-B.tif");
+  ASSERT_EQ(on_disk.pixels.size(), frames.b.pixels.size());
+  for (std::size_t i = 0; i < on_disk.pixels.size(); ++i) EXPECT_EQ(on_disk.pixels[i], float(frames.b.pixels[i]));
+}
+
 TEST(RunFolder, TheManifestsIntegersAreJsonIntegers) {
   msg::RunManifest m;
   m.set_run_id("20261125");  // a string of digits: stays a string
