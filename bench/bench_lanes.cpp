@@ -106,9 +106,9 @@ int paper_lanes(int argc, char** argv) {
     ::sync();  // the last variant's trims done before this one records
     fs::create_directories(data);
     // The run's raw frames, and 10 s of pairs past the count (the stop comes at the next sample), with
-    // a tenth to spare; a pair's TIFFs hold a little more than its pixels.
-    const double frame_bytes = 2.0 * double(camera.sensor().width_px) * double(camera.sensor().height_px) * 2.0;
-    const bool delete_during = double(fs::space(data).available) < 1.1 * frame_bytes * (pairs + 10 * rate_hz);
+    // a tenth to spare.
+    const bool delete_during =
+        double(fs::space(data).available) < 1.1 * bench::pair_bytes(camera) * (pairs + 10 * rate_hz);
     daemon::RunStateMachine state;
     const daemon::RunEnvironment env =
         bench::replay_run_environment(data, camera_file, state, processing, nice, "paper?loop=1&buffer_mb=1024");

@@ -125,10 +125,8 @@ int main(int argc, char** argv) {
   fs::remove_all(data);
   fs::create_directories(data);
   const char* write_mode = io::direct_write_mode(data) == io::WriteMode::direct ? "direct" : "buffered";
-  // One variant's frames (a pair's TIFFs hold a little more than its pixels), with a tenth to spare.
-  const double frame_bytes =
-      2.0 * double(camera_model.sensor().width_px) * double(camera_model.sensor().height_px) * 2.0;
-  const bool delete_during = double(fs::space(data).available) < 1.1 * frame_bytes * pairs;
+  // One variant's frames, with a tenth to spare.
+  const bool delete_during = double(fs::space(data).available) < 1.1 * bench::pair_bytes(camera_model) * pairs;
   (void)record(*camera, data, "warm-up", 4, true, false);  // decoding the recording, the first frames' pages
 
   std::vector<Figures> fresh, pooled;
@@ -153,9 +151,9 @@ int main(int argc, char** argv) {
         "wall_s_per_pair=%.4f cpu_s_per_pair=%.4f cores=%.2f faults_per_pair=%.0f buffers_reused=%.2f "
         "frames_deleted=%s\n",
         names[k], pairs, repeats, rate_hz, data.c_str(), write_mode,
-        2.0 * camera_model.sensor().width_px * camera_model.sensor().height_px * 2 / (1024.0 * 1024.0),
-        med(v, &Figures::wall_s_per_pair), med(v, &Figures::cpu_s_per_pair), rate_hz * med(v, &Figures::cpu_s_per_pair),
-        med(v, &Figures::faults_per_pair), med(v, &Figures::reused), delete_during ? "during" : "after");
+        bench::pair_bytes(camera_model) / (1024.0 * 1024.0), med(v, &Figures::wall_s_per_pair),
+        med(v, &Figures::cpu_s_per_pair), rate_hz * med(v, &Figures::cpu_s_per_pair), med(v, &Figures::faults_per_pair),
+        med(v, &Figures::reused), delete_during ? "during" : "after");
   }
   std::printf("bench=recording_ratio pooled_over_fresh_cpu=%.2f\n",
               med(pooled, &Figures::cpu_s_per_pair) / med(fresh, &Figures::cpu_s_per_pair));

@@ -58,6 +58,11 @@ inline std::filesystem::path write_paper_replay_recording(const optics::CameraMo
   return replay;
 }
 
+// The bytes of one pair's 16-bit frames on `camera`'s sensor (its TIFFs hold a little more).
+inline double pair_bytes(const optics::CameraModel& camera) {
+  return 2.0 * double(camera.sensor().width_px) * double(camera.sensor().height_px) * 2.0;
+}
+
 // A run's environment: data in `data`, the replay camera `replay://<source>` (default: the folder
 // `small`, looped), the sim trigger, `camera_file`, `processing` with its threads at `nice`.
 inline daemon::RunEnvironment replay_run_environment(const std::filesystem::path& data,
