@@ -137,8 +137,6 @@ TEST(RunFolder, TheWriterListsFramesVectorsStatisticsAndDropsAsTheyAreWritten) {
   }
 }
 
-// Integers are JSON integers (protobuf's mapping quotes 64-bit ones); strings of digits stay
-// strings; and the manifest still parses with protobuf's own reader.
 // A recorder's row visitors see each frame's pixels once, in order, and the frames on disk are the
 // frames.
 TEST(RunFolder, TheRowVisitorsSeeEveryRowOfTheirFrameOnceInOrder) {
@@ -163,6 +161,8 @@ TEST(RunFolder, TheRowVisitorsSeeEveryRowOfTheirFrameOnceInOrder) {
   for (std::size_t i = 0; i < on_disk.pixels.size(); ++i) EXPECT_EQ(on_disk.pixels[i], float(frames.b.pixels[i]));
 }
 
+// Integers are JSON integers (protobuf's mapping quotes 64-bit ones); strings of digits stay
+// strings; and the manifest still parses with protobuf's own reader.
 TEST(RunFolder, TheManifestsIntegersAreJsonIntegers) {
   msg::RunManifest m;
   m.set_run_id("20261125");  // a string of digits: stays a string
