@@ -284,7 +284,9 @@ TEST(Lane, TheQualityLaneWaitsBetweenItsStepsWhileTheLiveLaneHasAPair) {
   ASSERT_TRUE(eventually([&] { return quality.counters().processed() == 1; }));
   EXPECT_EQ(quality_steps, 10);
   EXPECT_LT(quality.counters().mean_time_s(), 0.2) << "the 0.4 s waited counted as processing";
-  EXPECT_GE(quality.counters().waited_s(), 0.4);
+  // The hold lasts at least 0.4 s from the offer; the lane's clock starts when its thread
+  // wakes, which on a loaded machine can be tens of milliseconds later.
+  EXPECT_GE(quality.counters().waited_s(), 0.3);
   EXPECT_EQ(live.counters().waited_s(), 0.0);
 
   // A quality pair in progress stops at its next step while a live pair is in flight.
