@@ -168,13 +168,13 @@ void ring_vortex(const std::array<int, 3>& shape, bool all_variants, bool defaul
     });
     std::printf(
         "bench=piv_ring volume=%dx%dx%d variant=%s threads=%d seconds=%.2f cpu_s=%.2f cpu_ratio=%.2f "
-        "deform_s=%.2f correlate_s=%.2f final_windows=%zu final_us_per_window=%.1f "
+        "deform_s=%.2f correlate_s=%.2f uncertainty_s=%.2f final_windows=%zu final_us_per_window=%.1f "
         "outliers=%zu rms_x=%.5f rms_y=%.5f rms_z=%.5f rms=%.5f max_displacement=%.2f "
         "rms_over_max=%.4f off_axis_band_n=%zu off_axis_band_rms_u=%.3f off_axis_band_rms_v=%.3f "
         "off_axis_band_rms_w=%.3f field_hash=%016llx\n",
         shape[0], shape[1], shape[2], v.name.c_str(), v.threads, s, cpu, cpu / reference_s, deform, correlate,
-        last.windows, 1e6 * last.correlate_s / double(last.windows), outliers, e.rms[0], e.rms[1], e.rms[2],
-        std::sqrt(e.rms[0] * e.rms[0] + e.rms[1] * e.rms[1] + e.rms[2] * e.rms[2]), e.max_truth_voxels,
+        last.uncertainty_s, last.windows, 1e6 * last.correlate_s / double(last.windows), outliers, e.rms[0], e.rms[1],
+        e.rms[2], std::sqrt(e.rms[0] * e.rms[0] + e.rms[1] * e.rms[1] + e.rms[2] * e.rms[2]), e.max_truth_voxels,
         std::sqrt(e.rms[0] * e.rms[0] + e.rms[1] * e.rms[1] + e.rms[2] * e.rms[2]) / e.max_truth_voxels, off.compared,
         off.rms[0], off.rms[1], off.rms[2], (unsigned long long)hash);
     std::fflush(stdout);

@@ -54,18 +54,37 @@ typedef double Doubles4 __attribute__((vector_size(32)));
   return dot(x, y + k, len - k) + dot(x + (len - k), y, k);
 }
 
-// Adds in[j + shift] to out[j] for j in [0, len): one step of a box sum along an axis whose
-// neighbours lie `shift` elements apart.
-[[gnu::always_inline]] inline void add_shifted(const float* in, float* __restrict out, std::size_t len,
-                                               std::ptrdiff_t shift) {
-  for (std::size_t j = 0; j < len; ++j) out[j] += in[std::ptrdiff_t(j) + shift];
+// Box sums along one axis of `count` lines of `width` contiguous floats each (rows of a slab, or
+// slabs of the window): dst line k = the sum of src lines k - r .. k + r that exist (r < count). A
+// running sum, one addition and one subtraction per element whatever r, over whole lines, so that
+// every loop is long and vectorises.
+[[gnu::always_inline]] inline void slide_lines(const float* __restrict src, float* __restrict dst, std::size_t count,
+                                               std::size_t width, std::size_t r) {
+  std::copy(src, src + width, dst);
+  for (std::size_t o = 1; o <= r; ++o)
+    for (std::size_t j = 0; j < width; ++j) dst[j] += src[o * width + j];
+  for (std::size_t k = 1; k < count; ++k) {
+    const float* previous = dst + (k - 1) * width;
+    float* out = dst + k * width;
+    const float* enters = k + r < count ? src + (k + r) * width : nullptr;
+    const float* leaves = k > r ? src + (k - r - 1) * width : nullptr;
+    if (enters && leaves)
+      for (std::size_t j = 0; j < width; ++j) out[j] = (previous[j] + enters[j]) - leaves[j];
+    else if (enters)
+      for (std::size_t j = 0; j < width; ++j) out[j] = previous[j] + enters[j];
+    else if (leaves)
+      for (std::size_t j = 0; j < width; ++j) out[j] = previous[j] - leaves[j];
+    else
+      std::copy(previous, previous + width, out);
+  }
 }
 
 // Sums `in` over boxes of (2 r + 1) voxels per axis, clipped at the window's faces, into `out`;
 // `tmp` is scratch of the same size. All three are laid out as the window's rows (nx voxels, then
 // r[0] zeros: a row's box never reaches the next row) from element r[0] on, with r[0] zeros before
-// the first row and after the last: row (z ny + y) starts at r[0] + (z ny + y) (nx + r[0]). Each
-// axis adds shifted copies of whole slabs, so that every loop is long and vectorises.
+// the first row and after the last: row (z ny + y) starts at r[0] + (z ny + y) (nx + r[0]). Along x
+// shifted copies of the whole window are added; along y and z the sums run over whole rows and
+// slabs.
 [[gnu::always_inline]] inline void box_sum(const float* __restrict in, float* __restrict tmp, float* __restrict out,
                                            const std::array<int, 3>& n, const std::array<int, 3>& r) {
   const std::size_t ny = std::size_t(n[1]), nz = std::size_t(n[2]), rx = std::size_t(r[0]);
@@ -74,27 +93,10 @@ typedef double Doubles4 __attribute__((vector_size(32)));
   for (std::size_t i = rx; i < rx + total; ++i) out[i] = in[i];
   for (std::size_t o = 1; o <= rx; ++o)
     for (std::size_t i = rx; i < rx + total; ++i) out[i] += in[i + o] + in[i - o];
-  // Along y (into tmp), slab by slab: row y takes the rows y +- o of its slab.
+  // Along y (into tmp), slab by slab; along z (into out).
   const std::size_t ry = std::min(std::size_t(r[1]), ny - 1), rz = std::min(std::size_t(r[2]), nz - 1);
-  for (std::size_t z = 0; z < nz; ++z) {
-    const float* src = out + rx + z * plane;
-    float* dst = tmp + rx + z * plane;
-    std::copy(src, src + plane, dst);
-    for (std::size_t o = 1; o <= ry; ++o) {
-      const std::ptrdiff_t d = std::ptrdiff_t(o * stride);
-      add_shifted(src, dst, plane - o * stride, d);
-      add_shifted(src + o * stride, dst + o * stride, plane - o * stride, -d);
-    }
-  }
-  // Along z (into out): slab z takes the slabs z +- o of the window.
-  const float* src = tmp + rx;
-  float* dst = out + rx;
-  std::copy(src, src + total, dst);
-  for (std::size_t o = 1; o <= rz; ++o) {
-    const std::ptrdiff_t d = std::ptrdiff_t(o * plane);
-    add_shifted(src, dst, total - o * plane, d);
-    add_shifted(src + o * plane, dst + o * plane, total - o * plane, -d);
-  }
+  for (std::size_t z = 0; z < nz; ++z) slide_lines(out + rx + z * plane, tmp + rx + z * plane, ny, stride, ry);
+  slide_lines(tmp + rx, out + rx, nz, plane, rz);
 }
 
 // Copies `len` floats of `src` (zeros when null) to `dst` and returns their sum (in float, in
@@ -162,24 +164,19 @@ __attribute__((target_clones("avx512f", "avx2", "default"))) std::array<float, 3
   // x's neighbours; along x a row's two parts swap places.
   s.rolled.resize(count);
   {
+    // Wrapped once per axis, then stepped: no division per row.
     const auto wrap = [](int i, int len) { return ((i % len) + len) % len; };
     const std::size_t sx = std::size_t(wrap(shift[0], n[0]));
     std::size_t q = 0;
-    for (int z = 0; z < n[2]; ++z)
-      for (int y = 0; y < n[1]; ++y, q += row_len) {
-        const float* row =
-            s.b.data() + (std::size_t(wrap(z + shift[2], n[2])) * n[1] + wrap(y + shift[1], n[1])) * row_len;
+    for (int z = 0, bz = wrap(shift[2], n[2]); z < n[2]; ++z, bz = bz + 1 == n[2] ? 0 : bz + 1)
+      for (int y = 0, by = wrap(shift[1], n[1]); y < n[1]; ++y, q += row_len, by = by + 1 == n[1] ? 0 : by + 1) {
+        const float* row = s.b.data() + (std::size_t(bz) * n[1] + std::size_t(by)) * row_len;
         std::copy(row + sx, row + row_len, s.rolled.data() + q);
         std::copy(row, row + sx, s.rolled.data() + q + (row_len - sx));
       }
   }
   const float* pa = s.a.data();
   const float* pb = s.rolled.data();
-  // The row of x's +1 neighbours along y or z (cyclic), from the row index (z ny + y).
-  const auto next_row = [&](int axis, std::size_t r) {
-    const std::size_t y = r % std::size_t(n[1]), z = r / std::size_t(n[1]);
-    return (axis == 1 ? z * n[1] + (y + 1) % std::size_t(n[1]) : ((z + 1) % std::size_t(n[2])) * n[1] + y) * row_len;
-  };
   // C at the peak and at its cyclic +-1 neighbours, as long dots over the flattened windows: along
   // x the neighbour of a row's last voxel is its first, not the next row's; along y a slab's last
   // row wraps to its first; along z the last slab to the first.
@@ -220,18 +217,23 @@ __attribute__((target_clones("avx512f", "avx2", "default"))) std::array<float, 3
   for (int axis = 0; axis < 3; ++axis) {
     // dC'(x) = a(x) b(x + e) - a(x + e) b(x) less its mean, (C(+1) - C(-1)) / count.
     const float m = float((c_plus[axis] - c_minus[axis]) / double(count));
-    for (std::size_t r = 0; r < rows; ++r) {
-      const std::size_t row = r * row_len;
-      float* __restrict d = s.delta.data() + rx + r * stride;
-      if (axis == 0) {
-        for (std::size_t x = 0; x < last; ++x)
-          d[x] = (pa[row + x] * pb[row + x + 1] - pa[row + x + 1] * pb[row + x]) - m;
-        d[last] = (pa[row + last] * pb[row] - pa[row] * pb[row + last]) - m;
-      } else {
-        const std::size_t next = next_row(axis, r);
-        for (std::size_t x = 0; x < row_len; ++x) d[x] = (pa[row + x] * pb[next + x] - pa[next + x] * pb[row + x]) - m;
+    const std::size_t ny = std::size_t(n[1]), nz = std::size_t(n[2]);
+    for (std::size_t z = 0, r = 0; z < nz; ++z)
+      for (std::size_t y = 0; y < ny; ++y, ++r) {
+        const std::size_t row = r * row_len;
+        float* __restrict d = s.delta.data() + rx + r * stride;
+        if (axis == 0) {
+          for (std::size_t x = 0; x < last; ++x)
+            d[x] = (pa[row + x] * pb[row + x + 1] - pa[row + x + 1] * pb[row + x]) - m;
+          d[last] = (pa[row + last] * pb[row] - pa[row] * pb[row + last]) - m;
+        } else {
+          // The row of x's +1 neighbours along y or z, cyclic.
+          const std::size_t next =
+              (axis == 1 ? z * ny + (y + 1 == ny ? 0 : y + 1) : (z + 1 == nz ? 0 : z + 1) * ny + y) * row_len;
+          for (std::size_t x = 0; x < row_len; ++x)
+            d[x] = (pa[row + x] * pb[next + x] - pa[next + x] * pb[row + x]) - m;
+        }
       }
-    }
     box_sum(s.delta.data(), s.line.data(), s.box.data(), n, radius);
     // The pads of dC' are zero: one dot over the padded rows.
     const double spread_sq = dot(s.delta.data() + rx, s.box.data() + rx, rows * stride);
