@@ -258,5 +258,30 @@ TEST(ProcessSettings, CancellingFromProgressAbandonsThePairAndFreesTheWorkspace)
   EXPECT_EQ(done.volume_a.data, process_pair(op, a, b, s).volume_a.data);
 }
 
+// The progress fraction rises to 1 and gives each correlation pass its share of the time: a
+// 8³@75 % pass has 8x the windows of an 8³@50 % pass, so the first of the two ends well before
+// the correlation's halfway point.
+TEST(ProcessSettings, ProgressGivesADenserPassItsShare) {
+  const auto camera = optics::load_camera_file(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml");
+  const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera));
+  ProcessSettings s =
+      parse(kVolume + ", depth_guard_mm: 0.25}\n" +
+            "correlation: {passes: [{window: 8, overlap_percent: 50}, {window: 8, overlap_percent: 75}]}\n");
+  const ImageF a = two_particle_frame(camera, lenses, 3.0), b = two_particle_frame(camera, lenses, 3.1);
+  const PairOperator op(camera, lenses, calib::geometric_white_image(camera, lenses), s);
+  std::vector<std::pair<std::string, double>> seen;
+  process_pair(op, a, b, s, [&](const std::string& stage, double f) { seen.emplace_back(stage, f); });
+  ASSERT_FALSE(seen.empty());
+  for (std::size_t i = 1; i < seen.size(); ++i) EXPECT_GE(seen[i].second, seen[i - 1].second) << seen[i].first;
+  EXPECT_EQ(seen.back(), std::make_pair(std::string("done"), 1.0));
+  std::vector<double> correlate;
+  for (const auto& [stage, f] : seen)
+    if (stage == "correlate") correlate.push_back(f);
+  ASSERT_EQ(correlate.size(), 2u);
+  // 2 units against 9 (process.cpp's correlation_progress): 0.8 + 0.2 * 2 / 11.
+  EXPECT_NEAR(correlate[0], 0.8 + 0.2 * 2 / 11, 1e-9);
+  EXPECT_DOUBLE_EQ(correlate[1], 1.0);
+}
+
 }  // namespace
 }  // namespace plenopiv::process
