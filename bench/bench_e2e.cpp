@@ -493,6 +493,12 @@ int main(int argc, char** argv) {
     depth_toggled.depth_prefilter = depth_prefilter > 0 ? 0 : 4;
     correlate_both("correlation", "depth_prefilter_" + std::to_string(depth_toggled.depth_prefilter), depth_toggled,
                    true);
+    // The deformation before the last pass with the other interpolator (cubic when the headline's
+    // is the sinc).
+    piv::CorrelationSettings early = settings.correlation;
+    const bool cubic = early.early_interpolation == piv::Interpolation::sinc;
+    early.early_interpolation = cubic ? piv::Interpolation::cubic : piv::Interpolation::sinc;
+    correlate_both("correlation", cubic ? "early_interpolation_cubic" : "early_interpolation_sinc", early, true);
     correlate_both("correlation", "previous_default_3pass_window_mean", previous, false);
     correlate_both("correlation", "centre_3pass", centre3, false);
   }

@@ -287,6 +287,8 @@ VARIANT_LABELS = {
     "depth_prefilter_0": "no depth prefilter", "depth_prefilter_4": "depth prefilter 4",
     "previous_default_3pass_window_mean": "32/50, 16/50, 16/75, window-mean predictor, unsmoothed",
     "centre_3pass": "32/50, 16/50, 16/75, centre predictor",
+    "early_interpolation_cubic": "passes before the last deformed with Keys' cubic",
+    "early_interpolation_sinc": "passes before the last deformed with the sinc",
 }
 
 

@@ -378,7 +378,8 @@ CorrelationResult correlate_volumes(const Volume& a, const Volume& b, const Corr
     if (have_predictor) {
       deformed_a.resize(a.data.size());
       deformed_b.resize(b.data.size());
-      deform_pair(input_a, input_b, shape, predictor, deformed_a, deformed_b);
+      deform_pair(input_a, input_b, shape, predictor, deformed_a, deformed_b,
+                  p + 1 == passes ? Interpolation::sinc : settings.early_interpolation);
       va = deformed_a;
       vb = deformed_b;
     }

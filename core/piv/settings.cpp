@@ -92,7 +92,7 @@ std::vector<PassSettings> parse_passes(const std::string& text) {
 CorrelationSettings correlation_settings_from(const YamlMap& root) {
   root.reject_unknown({"passes", "median", "signal_threshold", "dt_s", "fft_planning", "prefilter", "depth_prefilter",
                        "predictor", "predictor_smoothing", "intensity_threshold_of_mean", "final_smoothing",
-                       "uncertainty"});
+                       "uncertainty", "early_interpolation"});
   CorrelationSettings s;
   if (root.has("passes")) {
     const YAML::Node list = root.node()["passes"];
@@ -144,6 +144,9 @@ CorrelationSettings correlation_settings_from(const YamlMap& root) {
   s.predictor_smoothing = root.integer_in("predictor_smoothing", s.predictor_smoothing, 0, 4);
   s.final_smoothing = root.integer_in("final_smoothing", s.final_smoothing, 0, 4);
   s.uncertainty = root.boolean_or("uncertainty", s.uncertainty);
+  s.early_interpolation = root.choice_or("early_interpolation", {"sinc", "cubic"}, "sinc") == "cubic"
+                              ? Interpolation::cubic
+                              : Interpolation::sinc;
   check(s, root.source());
   return s;
 }

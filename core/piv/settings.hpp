@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "core/base/yaml_access.hpp"
+#include "core/piv/deform.hpp"
 #include "core/piv/fft_correlator.hpp"
 #include "core/piv/validation.hpp"
 
@@ -84,6 +85,11 @@ struct CorrelationSettings {
   // no sigma arrays, and the final pass costs a little less (docs/benchmarks.md, "Per-vector
   // uncertainty"). The vectors are the same bits either way.
   bool uncertainty = true;
+  // The deformation's interpolator in every pass but the last (deform.hpp: Interpolation), whose
+  // vectors only become the next pass's predictor; the last pass always deforms with the sinc.
+  // Default sinc; cubic costs those passes' deformation about a fifth (docs/benchmarks.md,
+  // "Paper scale: correlation knobs on the same volumes").
+  Interpolation early_interpolation = Interpolation::sinc;
 };
 
 // Checks every value (windows >= 4 voxels, 0 <= overlap < 100, 0 <= depth_margin <= window z,
@@ -110,6 +116,7 @@ std::vector<PassSettings> parse_passes(const std::string& text);
 //   predictor_smoothing: 1   # binomial passes over the predictor between passes, 0..4
 //   final_smoothing: 0       # binomial passes over the final field's valid vectors, 0..4
 //   uncertainty: true        # each vector's standard uncertainty (sigma), or false
+//   early_interpolation: sinc  # or cubic: the deformation's interpolator before the last pass
 // Every key is optional (defaults above); unknown keys are refused. Checked.
 CorrelationSettings load_correlation_settings(const std::filesystem::path& path);
 // The same from a mapping already parsed (a section of a larger file, e.g. process.yaml).
