@@ -83,34 +83,67 @@ using Stencil = std::array<Taps, 3>;
          t[2].base >= 0 && t[2].base + sinc_taps <= s[2];
 }
 
-// N samples inside their volumes (v[n] with stencil t[n]), summed over the 7x7x7 stencil: each
-// of the 49 rows is read as 8 contiguous voxels (the 8th with weight 0) and added, times its z
-// and y weights, into the sample's 8-lane accumulator; the x weights are applied once at the
-// end. Every lane sees the same multiplies and adds in the same order as a scalar loop would (no
-// fused multiply-add: deform.cpp is built with -ffp-contract=off), so all target clones and
-// every N give the same bits. Why N samples at once: each sample's 49 additions form one
-// dependent chain; N independent chains side by side keep the adders busy.
-template <int N>
-[[gnu::always_inline]] inline void sample_inside(const float* const* v, const std::array<int, 3>& s, const Stencil* t,
-                                                 float* out) {
+// N samples inside their volumes (v[n] with stencil t[n]: per axis a first voxel `base` and
+// `Taps` weights `w`), summed over the Taps^3 stencil: each of its Taps^2 rows is read as one `Row`
+// of contiguous voxels (the sinc's 7 taps as 8, the 8th with weight 0) and added, times its z and
+// y weights, into the sample's accumulator; the x weights are applied once at the end. Every lane
+// sees the same multiplies and adds in the same order as a scalar loop would (no fused
+// multiply-add: deform.cpp is built with -ffp-contract=off), so all target clones and every N give
+// the same bits. Why N samples at once: each sample's additions form one dependent chain; N
+// independent chains side by side keep the adders busy.
+template <int N, int Taps, class Row, class Stencil>
+[[gnu::always_inline]] inline void sum_rows(const float* const* v, const std::array<int, 3>& s, const Stencil* t,
+                                            float* out) {
   const std::size_t plane = std::size_t(s[0]) * s[1];
   const float* slab[N];
   for (int n = 0; n < N; ++n) slab[n] = v[n] + t[n][2].base * plane + std::size_t(t[n][1].base) * s[0] + t[n][0].base;
-  Lanes8 acc[N];
-  for (int n = 0; n < N; ++n) acc[n] = Lanes8{0, 0, 0, 0, 0, 0, 0, 0};
-  for (int kz = 0; kz < sinc_taps; ++kz)
-    for (int ky = 0; ky < sinc_taps; ++ky)
+  Row acc[N];
+  for (int n = 0; n < N; ++n) acc[n] = Row{};
+  for (int kz = 0; kz < Taps; ++kz)
+    for (int ky = 0; ky < Taps; ++ky)
       for (int n = 0; n < N; ++n) {
         const float w = t[n][2].w[kz] * t[n][1].w[ky];
-        Lanes8 row;
+        Row row;
         std::memcpy(&row, slab[n] + kz * plane + std::size_t(ky) * s[0], sizeof row);
         acc[n] += w * row;
       }
   for (int n = 0; n < N; ++n) {
     float total = 0;
-    for (int k = 0; k < sinc_taps; ++k) total += t[n][0].w[k] * acc[n][k];
+    for (int k = 0; k < Taps; ++k) total += t[n][0].w[k] * acc[n][k];
     out[n] = total;
   }
+}
+
+// One sample whose stencil may reach past the volume's faces; voxels outside count as 0.
+template <int Taps, class Stencil>
+[[gnu::always_inline]] inline float sum_clipped(const float* v, const std::array<int, 3>& s, const Stencil& t) {
+  const std::size_t plane = std::size_t(s[0]) * s[1];
+  const auto &tx = t[0], &ty = t[1], &tz = t[2];
+  float total = 0;
+  for (int kz = 0; kz < Taps; ++kz) {
+    const int z = tz.base + kz;
+    if (z < 0 || z >= s[2]) continue;
+    float zsum = 0;
+    for (int ky = 0; ky < Taps; ++ky) {
+      const int y = ty.base + ky;
+      if (y < 0 || y >= s[1]) continue;
+      const float* row = v + z * plane + std::size_t(y) * s[0];
+      float ysum = 0;
+      for (int kx = 0; kx < Taps; ++kx) {
+        const int x = tx.base + kx;
+        if (x >= 0 && x < s[0]) ysum += tx.w[kx] * row[x];
+      }
+      zsum += ty.w[ky] * ysum;
+    }
+    total += tz.w[kz] * zsum;
+  }
+  return total;
+}
+
+template <int N>
+[[gnu::always_inline]] inline void sample_inside(const float* const* v, const std::array<int, 3>& s, const Stencil* t,
+                                                 float* out) {
+  sum_rows<N, sinc_taps, Lanes8>(v, s, t, out);
 }
 
 // One sample anywhere; voxels outside the volume count as 0.
@@ -120,27 +153,7 @@ template <int N>
     sample_inside<1>(&v, s, &t, &out);
     return out;
   }
-  const std::size_t plane = std::size_t(s[0]) * s[1];
-  const Taps &tx = t[0], &ty = t[1], &tz = t[2];
-  float total = 0;
-  for (int kz = 0; kz < sinc_taps; ++kz) {
-    const int z = tz.base + kz;
-    if (z < 0 || z >= s[2]) continue;
-    float zsum = 0;
-    for (int ky = 0; ky < sinc_taps; ++ky) {
-      const int y = ty.base + ky;
-      if (y < 0 || y >= s[1]) continue;
-      const float* row = v + z * plane + std::size_t(y) * s[0];
-      float ysum = 0;
-      for (int kx = 0; kx < sinc_taps; ++kx) {
-        const int x = tx.base + kx;
-        if (x >= 0 && x < s[0]) ysum += tx.w[kx] * row[x];
-      }
-      zsum += ty.w[ky] * ysum;
-    }
-    total += tz.w[kz] * zsum;
-  }
-  return total;
+  return sum_clipped<sinc_taps>(v, s, t);
 }
 
 using Located = std::pair<int, double>;
@@ -228,51 +241,13 @@ struct Cubic4 {
       if (t[k].base < 0 || t[k].base + taps > s[k]) return false;
     return true;
   }
-  // As sample_inside above, on rows of 4 voxels.
   template <int N>
   [[gnu::always_inline]] static void sample_inside(const float* const* v, const std::array<int, 3>& s, const Stencil* t,
                                                    float* out) {
-    const std::size_t plane = std::size_t(s[0]) * s[1];
-    const float* slab[N];
-    for (int n = 0; n < N; ++n) slab[n] = v[n] + t[n][2].base * plane + std::size_t(t[n][1].base) * s[0] + t[n][0].base;
-    Floats4 acc[N];
-    for (int n = 0; n < N; ++n) acc[n] = Floats4{0, 0, 0, 0};
-    for (int kz = 0; kz < taps; ++kz)
-      for (int ky = 0; ky < taps; ++ky)
-        for (int n = 0; n < N; ++n) {
-          const float w = t[n][2].w[kz] * t[n][1].w[ky];
-          Floats4 row;
-          std::memcpy(&row, slab[n] + kz * plane + std::size_t(ky) * s[0], sizeof row);
-          acc[n] += w * row;
-        }
-    for (int n = 0; n < N; ++n) {
-      float total = 0;
-      for (int k = 0; k < taps; ++k) total += t[n][0].w[k] * acc[n][k];
-      out[n] = total;
-    }
+    sum_rows<N, taps, Floats4>(v, s, t, out);
   }
-  // One sample anywhere; voxels outside the volume count as 0.
   [[gnu::always_inline]] static float sample(const float* v, const std::array<int, 3>& s, const Stencil& t) {
-    const std::size_t plane = std::size_t(s[0]) * s[1];
-    float total = 0;
-    for (int kz = 0; kz < taps; ++kz) {
-      const int z = t[2].base + kz;
-      if (z < 0 || z >= s[2]) continue;
-      float zsum = 0;
-      for (int ky = 0; ky < taps; ++ky) {
-        const int y = t[1].base + ky;
-        if (y < 0 || y >= s[1]) continue;
-        const float* row = v + z * plane + std::size_t(y) * s[0];
-        float ysum = 0;
-        for (int kx = 0; kx < taps; ++kx) {
-          const int x = t[0].base + kx;
-          if (x >= 0 && x < s[0]) ysum += t[0].w[kx] * row[x];
-        }
-        zsum += t[1].w[ky] * ysum;
-      }
-      total += t[2].w[kz] * zsum;
-    }
-    return total;
+    return sum_clipped<taps>(v, s, t);
   }
 };
 
