@@ -69,7 +69,7 @@ float subtract_mean_floor(std::span<const float> in, const std::array<int, 3>& s
                           std::span<float> out);
 
 // The deformation's interpolator. sinc: the 7x7x7 cardinal interpolator above. cubic: Keys'
-// cubic convolution (Catmull-Rom) on a 4x4x4 stencil, about a fifth of the work; it reproduces
+// cubic convolution (Catmull-Rom) on a 4x4x4 stencil (64 voxels per sample, not 343); it reproduces
 // quadratics but damps and shifts detail near the Nyquist frequency more, so it is for passes
 // whose result only feeds the next pass's predictor (CorrelationSettings::early_interpolation).
 enum class Interpolation { sinc, cubic };

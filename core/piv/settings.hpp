@@ -87,7 +87,7 @@ struct CorrelationSettings {
   bool uncertainty = true;
   // The deformation's interpolator in every pass but the last (deform.hpp: Interpolation), whose
   // vectors only become the next pass's predictor; the last pass always deforms with the sinc.
-  // Default sinc; cubic costs those passes' deformation about a fifth (docs/benchmarks.md,
+  // Default sinc; cubic makes those passes' deformation cheaper (docs/benchmarks.md,
   // "Paper scale: correlation knobs on the same volumes").
   Interpolation early_interpolation = Interpolation::sinc;
 };
