@@ -539,7 +539,8 @@ PIV_LABELS = {"default_4pass_2threads": "default, 2 threads", "default_4pass_1th
               "centre_3pass": "32/50, 16/50, 16/75", "centre_4pass_16_75": "32/50, 16/50, 16/75, 16/75",
               "centre_5pass": "32/50, 16/50, 16/75 x 3", "default_no_prefilter": "default without the prefilter",
               "default_fftw_measure": "default, FFTW_MEASURE plans", "single_pass_16": "one 16³@75 % pass",
-              "window_mean_4pass": "default passes, window-mean predictor"}
+              "window_mean_4pass": "default passes, window-mean predictor",
+              "default_4pass_early_cubic": "default, passes before the last deformed with Keys' cubic"}
 
 
 def t_piv_ring(name):
