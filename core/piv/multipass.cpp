@@ -82,7 +82,7 @@ Layout layout_of(const PassSettings& p, const std::array<int, 3>& shape, int dep
   l.depth_margin = p.depth_margin;
   for (int a = 0; a < 3; ++a) {
     const int context = a == 2 ? depth_context : 0, length = shape[a] - 2 * context;
-    l.step[a] = std::max(1, int(std::lround(p.window[a] * (1 - p.overlap_percent / 100))));
+    l.step[a] = p.step(a);
     l.count[a] = (length - p.window[a]) / l.step[a] + 1;
     // Centre the set of windows in the volume.
     l.start[a] = context + (length - p.window[a] - (l.count[a] - 1) * l.step[a]) / 2;

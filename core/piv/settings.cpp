@@ -1,6 +1,8 @@
 // Settings of the multi-pass correlation: passes (window, overlap), validation, dt; from YAML.
 #include "core/piv/settings.hpp"
 
+#include <algorithm>
+#include <cmath>
 #include <sstream>
 
 #include "core/base/errors.hpp"
@@ -40,6 +42,10 @@ void check(const CorrelationSettings& s, const std::string& source) {
     fail("intensity_threshold_of_mean: must be in [0, 100] (times the volume's mean), got " +
          std::to_string(s.intensity_threshold_of_mean));
   if (!(s.dt_s > 0)) fail("dt_s: must be > 0, got " + std::to_string(s.dt_s));
+}
+
+int PassSettings::step(int axis) const {
+  return std::max(1, int(std::lround(window[std::size_t(axis)] * (1 - overlap_percent / 100))));
 }
 
 std::vector<PassSettings> parse_passes(const std::string& text) {

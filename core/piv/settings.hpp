@@ -27,6 +27,8 @@ struct PassSettings {
   // belongs in passes after the first, whose predictor is already close. FFT size: times
   // (window z + 2 margin) / window z.
   int depth_margin = 0;
+  // Voxels between neighbouring windows along `axis`: the window less its overlap, at least 1.
+  int step(int axis) const;
 };
 
 // What a deformed window's residual is added to. window_mean: the predictor's mean over the

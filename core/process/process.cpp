@@ -87,7 +87,7 @@ std::vector<double> correlation_progress(const std::vector<piv::PassSettings>& p
   double total = 0;
   for (const piv::PassSettings& p : passes) {
     double density = 1;
-    for (int w : p.window) density *= double(w) / std::max(1.0, std::round(w * (1 - p.overlap_percent / 100)));
+    for (int a = 0; a < 3; ++a) density *= double(p.window[std::size_t(a)]) / p.step(a);
     total += 1 + density / 8;
     done.push_back(total);
   }
