@@ -140,17 +140,11 @@ template <int Taps, class Stencil>
   return total;
 }
 
-template <int N>
-[[gnu::always_inline]] inline void sample_inside(const float* const* v, const std::array<int, 3>& s, const Stencil* t,
-                                                 float* out) {
-  sum_rows<N, sinc_taps, Lanes8>(v, s, t, out);
-}
-
-// One sample anywhere; voxels outside the volume count as 0.
+// One sample of the sinc anywhere; voxels outside the volume count as 0.
 [[gnu::always_inline]] inline float sample(const float* v, const std::array<int, 3>& s, const Stencil& t) {
   if (inside(s, t)) {
     float out;
-    sample_inside<1>(&v, s, &t, &out);
+    sum_rows<1, sinc_taps, Lanes8>(&v, s, &t, &out);
     return out;
   }
   return sum_clipped<sinc_taps>(v, s, t);
@@ -210,7 +204,7 @@ struct Sinc7 {
   template <int N>
   [[gnu::always_inline]] static void sample_inside(const float* const* v, const std::array<int, 3>& s, const Stencil* t,
                                                    float* out) {
-    piv::sample_inside<N>(v, s, t, out);
+    sum_rows<N, sinc_taps, Lanes8>(v, s, t, out);
   }
   [[gnu::always_inline]] static float sample(const float* v, const std::array<int, 3>& s, const Stencil& t) {
     return piv::sample(v, s, t);
@@ -251,7 +245,7 @@ struct Cubic4 {
   }
 };
 
-// Voxels per block of deform_row: 2 x 4 samples side by side (sample_inside says why).
+// Voxels per block of deform_row: 2 x 4 samples side by side (sum_rows says why).
 constexpr int block_voxels = 4;
 
 // One row (y, z) of both deformed volumes with `kernel`. `lx`: the predictor's node location of
