@@ -22,12 +22,13 @@
 //     --prune-threshold: MART's prune threshold for the headline rows (default 0: exact zeros);
 //              --prune-scope: of the volume's peak (default) or of each depth slice's.
 //     --sparse-sweep: the headline settings with pruning off, on for exact zeros, and at thresholds
-//              1e-3 .. 3e-2 of the volume's peak and 1e-2 .. 1e-1 of each depth slice's peak
-//              (slice-*), every pair in the kept workspaces (with --no-sweep; rows variant=sparse
-//              for docs/benchmarks.md, "Sparse reconstruction"); --sparse-repeats N:
-//              the variants interleaved N times, times the medians (default 1); --sparse-variants:
-//              a subset of off,zeros,1e-3,3e-3,1e-2,3e-2,slice-1e-2,slice-3e-2,slice-1e-1 starting
-//              with off (default all).
+//              1e-3 .. 3e-2 of the volume's peak and 1e-2 .. 2e-1 of each depth slice's peak
+//              (slice-*; -reachN: MART's prune_depth_reach N), every pair in the kept workspaces
+//              (with --no-sweep; rows variant=sparse for docs/benchmarks.md, "Sparse
+//              reconstruction"); --sparse-repeats N: the variants interleaved N times, times the
+//              medians (default 1); --sparse-variants: a subset of off,zeros,1e-3,3e-3,1e-2,3e-2,
+//              slice-1e-2,slice-3e-2,slice-1e-1,slice-2e-1,slice-1e-1-reach2,slice-2e-1-reach2,
+//              slice-1e-1-reach4,slice-2e-1-reach4 starting with off (default all).
 //     --intensity-threshold: the correlation's ghost floor for the headline rows, times each
 //              volume's mean (default 0, the paper's correlation); they then also print the
 //              correlation without it on the same volumes.
@@ -513,13 +514,17 @@ int main(int argc, char** argv) {
       bool on;
       double threshold;
       recon::PruneScope scope = recon::PruneScope::volume;
+      int depth_reach = 0;
     };
     std::vector<Prune> variants;
     constexpr auto slice = recon::PruneScope::slice;
     for (const Prune& pr :
          {Prune{"off", false, 0.0}, Prune{"zeros", true, 0.0}, Prune{"1e-3", true, 1e-3}, Prune{"3e-3", true, 3e-3},
           Prune{"1e-2", true, 1e-2}, Prune{"3e-2", true, 3e-2}, Prune{"slice-1e-2", true, 1e-2, slice},
-          Prune{"slice-3e-2", true, 3e-2, slice}, Prune{"slice-1e-1", true, 1e-1, slice}})
+          Prune{"slice-3e-2", true, 3e-2, slice}, Prune{"slice-1e-1", true, 1e-1, slice},
+          Prune{"slice-2e-1", true, 2e-1, slice}, Prune{"slice-1e-1-reach2", true, 1e-1, slice, 2},
+          Prune{"slice-2e-1-reach2", true, 2e-1, slice, 2}, Prune{"slice-1e-1-reach4", true, 1e-1, slice, 4},
+          Prune{"slice-2e-1-reach4", true, 2e-1, slice, 4}})
       if (sparse_variants.empty() ||
           ("," + sparse_variants + ",").find("," + std::string(pr.name) + ",") != std::string::npos)
         variants.push_back(pr);
@@ -536,6 +541,7 @@ int main(int argc, char** argv) {
         s.mart.prune = variants[v].on;
         s.mart.prune_threshold = variants[v].threshold;
         s.mart.prune_scope = variants[v].scope;
+        s.mart.prune_depth_reach = variants[v].depth_reach;
         const double cpu0 = bench::cpu_seconds();
         process::PairResult r = process::process_pair(op, a, b, s, {}, &workspace, &correlation_workspace);
         cpu[v].push_back(bench::cpu_seconds() - cpu0);

@@ -339,8 +339,11 @@ def t_sparse(R):
         r = R(name)
         for d in r.find(variant="sparse"):
             prune = d["prune"]
-            label = SPARSE_LABELS.get(prune, f"threshold {prune[6:]} of its depth slice's peak"
+            threshold, _, reach = prune.partition("-reach")
+            label = SPARSE_LABELS.get(prune, f"threshold {threshold[6:]} of its depth slice's peak"
                                       if prune.startswith("slice-") else f"threshold {prune} of the peak")
+            if reach:
+                label += f", kept within {reach} slices of one above it"
             cpu = f"; CPU {d['pair_cpu_s']} ({float(d['cpu_over_off']):.2f})" if "pair_cpu_s" in d else ""
             rows.append([case, label, f"{d['pair_s']} ({float(d['pair_over_off']):.2f}){cpu}",
                          f"{d['recon_a_s']} + {d['recon_b_s']} + {d['correlate_s']}",

@@ -115,7 +115,7 @@ ProcessSettings parse_settings(const YamlMap& root) {
   if (auto r = root.optional_map("reconstruction")) {
     r->reject_unknown({"iterations", "mu", "acceleration", "start", "noise_threshold", "dark_weight_cutoff",
                        "convergence", "angular_sampling", "pixel_binning", "sensor_blur_sigma_mm", "prune",
-                       "prune_threshold", "prune_scope"});
+                       "prune_threshold", "prune_scope", "prune_depth_reach"});
     // Read here, checked by recon::check (the one owner of MART's ranges); the integer is only kept
     // from wrapping as it narrows.
     s.mart.iterations = r->integer_in("iterations", s.mart.iterations, std::numeric_limits<int>::min(),
@@ -133,6 +133,8 @@ ProcessSettings parse_settings(const YamlMap& root) {
     s.mart.prune_scope = r->choice_or("prune_scope", {"volume", "slice"}, "volume") == "slice"
                              ? recon::PruneScope::slice
                              : recon::PruneScope::volume;
+    s.mart.prune_depth_reach = r->integer_in("prune_depth_reach", s.mart.prune_depth_reach,
+                                             std::numeric_limits<int>::min(), std::numeric_limits<int>::max());
     if (const auto problem = recon::check(s.mart)) r->fail(problem->key, problem->reason);
     s.angular_sampling = r->number_or("angular_sampling", s.angular_sampling);
     if (!(s.angular_sampling > 0 && s.angular_sampling <= 8)) r->fail("angular_sampling", "must be in (0, 8]");

@@ -62,6 +62,10 @@ std::optional<SettingProblem> check(const MartSettings& s) {
     return SettingProblem{"prune_threshold",
                           "must be in [0, 1) (a fraction of the volume's peak), got " + number(s.prune_threshold)};
   }
+  if (!(s.prune_depth_reach >= 0 && s.prune_depth_reach <= kMaxPruneDepthReach)) {
+    return SettingProblem{"prune_depth_reach", "must be in [0, " + std::to_string(kMaxPruneDepthReach) +
+                                                   "] depth slices, got " + std::to_string(s.prune_depth_reach)};
+  }
   return std::nullopt;
 }
 

@@ -86,9 +86,17 @@ struct MartSettings {
   // (lowest far from the focal plane, where its light is spread over the most voxels); against the
   // volume's peak the particles of the faint slices are pruned first. Default: volume.
   PruneScope prune_scope = PruneScope::volume;
+  // A voxel at or below the prune threshold stays in the active set while a voxel at most this
+  // many depth slices away, at the same x and y, is above it. MART's particles are several times
+  // longer in depth than wide and the centroid of their faint depth ends carries w; a threshold
+  // alone cuts those ends first. Range [0, kMaxPruneDepthReach] slices; default 0 (the value alone).
+  int prune_depth_reach = 0;
   // Off: every active voxel is updated on every iteration (the reference). Default on.
   bool prune = true;
 };
+// MartSettings::prune_depth_reach's upper end: a particle's depth extent, in slices, at the
+// paper's magnification and aperture is well inside it.
+inline constexpr int kMaxPruneDepthReach = 32;
 // A Gaussian wider than this is no sensor blur (the paper's lens images are 0.125 mm across).
 inline constexpr double kMaxSensorBlurSigmaMm = 0.05;
 

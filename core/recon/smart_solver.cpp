@@ -313,36 +313,7 @@ void SmartSolver::prune() {
   } timer{t0, result_.prune_seconds};
   BigBuffer<float>& e = b_.e;
   if (n_ == 0) return;
-  if (settings_.prune_threshold > 0 && settings_.prune_scope == PruneScope::slice) {
-    // Each depth slice against its own peak. The set is in index order, so slice z's live voxels
-    // are one run of it; a maximum is the same in any order.
-    const std::vector<std::uint32_t>& voxels = active_.voxels();
-    const std::size_t slice = std::size_t(op_.grid().shape[0]) * op_.grid().shape[1];
-    const auto before = [](std::uint32_t voxel, std::size_t index) { return voxel < index; };
-    tbb::parallel_for(0, op_.grid().shape[2], [&](int z) {
-      const auto first = std::lower_bound(voxels.begin(), voxels.end(), std::size_t(z) * slice, before);
-      const auto end = std::lower_bound(first, voxels.end(), std::size_t(z + 1) * slice, before);
-      const std::size_t m0 = std::size_t(first - voxels.begin()), m1 = std::size_t(end - voxels.begin());
-      float peak = 0.f;
-      for (std::size_t m = m0; m < m1; ++m) peak = std::max(peak, e[m]);
-      const float cut = float(settings_.prune_threshold * double(peak));
-      for (std::size_t m = m0; m < m1; ++m)
-        if (e[m] <= cut) e[m] = 0.f;
-    });
-  } else if (settings_.prune_threshold > 0) {
-    // The peak: a maximum, the same in any order.
-    const float peak = tbb::parallel_reduce(
-        tbb::blocked_range<std::size_t>(0, n_, 1 << 14), 0.f,
-        [&](const tbb::blocked_range<std::size_t>& r, float top) {
-          for (std::size_t m = r.begin(); m != r.end(); ++m) top = std::max(top, e[m]);
-          return top;
-        },
-        [](float a, float b) { return std::max(a, b); });
-    const float cut = float(settings_.prune_threshold * double(peak));
-    for_voxels([&](std::size_t m) {
-      if (e[m] <= cut) e[m] = 0.f;
-    });
-  }
+  if (settings_.prune_threshold > 0) zero_below_cut();
   const std::size_t dead = tbb::parallel_reduce(
       tbb::blocked_range<std::size_t>(0, n_, 1 << 14), std::size_t(0),
       [&](const tbb::blocked_range<std::size_t>& r, std::size_t count) {
@@ -378,6 +349,57 @@ void SmartSolver::prune() {
     for (BigBuffer<float>* b : {&b_.last, &b_.log_last, &b_.momentum}) b->resize(n_);
   }
   active_.assign(op_, std::move(voxels));
+}
+
+void SmartSolver::zero_below_cut() {
+  BigBuffer<float>& e = b_.e;
+  // The set is in index order, so each depth slice's live voxels are one run of it, [run[z], run[z + 1]).
+  const std::vector<std::uint32_t>& voxels = active_.voxels();
+  const int depth = op_.grid().shape[2];
+  const std::size_t slice = std::size_t(op_.grid().shape[0]) * op_.grid().shape[1];
+  std::vector<std::size_t> run(std::size_t(depth) + 1);
+  for (int z = 0; z <= depth; ++z)
+    run[z] = std::size_t(std::lower_bound(voxels.begin(), voxels.end(), std::size_t(z) * slice,
+                                          [](std::uint32_t voxel, std::size_t index) { return voxel < index; }) -
+                         voxels.begin());
+  // The cut per slice: the threshold times the slice's peak, or the volume's (the peak of the
+  // slices' peaks; a maximum is the same in any order).
+  std::vector<float> cut(std::size_t(depth), 0.f);
+  tbb::parallel_for(0, depth, [&](int z) {
+    for (std::size_t m = run[z]; m < run[z + 1]; ++m) cut[z] = std::max(cut[z], e[m]);
+  });
+  if (settings_.prune_scope == PruneScope::volume)
+    std::fill(cut.begin(), cut.end(), *std::max_element(cut.begin(), cut.end()));
+  for (float& c : cut) c = float(settings_.prune_threshold * double(c));
+
+  const int reach = settings_.prune_depth_reach;
+  if (reach == 0) {
+    tbb::parallel_for(0, depth, [&](int z) {
+      for (std::size_t m = run[z]; m < run[z + 1]; ++m)
+        if (e[m] <= cut[z]) e[m] = 0.f;
+    });
+    return;
+  }
+  // A voxel at or below its cut stays while one of the `reach` voxels before or after it along
+  // depth is above theirs.
+  BigBuffer<std::uint8_t>& above = b_.above_cut;
+  above.resize(slice * std::size_t(depth));
+  tbb::parallel_for(0, depth, [&](int z) {
+    std::fill(above.begin() + std::ptrdiff_t(std::size_t(z) * slice),
+              above.begin() + std::ptrdiff_t(std::size_t(z + 1) * slice), std::uint8_t(0));
+    for (std::size_t m = run[z]; m < run[z + 1]; ++m)
+      if (e[m] > cut[z]) above[voxels[m]] = 1;
+  });
+  tbb::parallel_for(0, depth, [&](int z) {
+    const int z0 = std::max(0, z - reach), z1 = std::min(depth - 1, z + reach);
+    for (std::size_t m = run[z]; m < run[z + 1]; ++m) {
+      if (e[m] > cut[z]) continue;
+      const std::size_t column = voxels[m] - std::size_t(z) * slice;  // x + y * nx
+      bool near = false;
+      for (int zz = z0; zz <= z1 && !near; ++zz) near = above[column + std::size_t(zz) * slice] != 0;
+      if (!near) e[m] = 0.f;
+    }
+  });
 }
 
 void SmartSolver::write_volume() {

@@ -28,6 +28,8 @@ struct MartBuffers {
   BigBuffer<float> e, update, weight, last, log_last, momentum;
   // Per live voxel: its position in the active set the start had (pruning keeps the order).
   BigBuffer<std::uint32_t> origin;
+  // Per voxel of the box: 1 where a live voxel is above the prune cut (MartSettings::prune_depth_reach).
+  BigBuffer<std::uint8_t> above_cut;
   ActiveSet active;              // the live voxels, laid out again in place when pruned
   ActiveSet::Workspace kernels;  // reused by every pass
   SelectScratch select;
@@ -64,6 +66,9 @@ class SmartSolver {
   // MartSettings::prune: voxels at or below the threshold set to 0, and the active set rebuilt
   // without the zeros once enough of them have gathered.
   void prune();
+  // prune()'s first half: live voxels at or below their slice's cut set to 0 (those the depth
+  // reach keeps aside).
+  void zero_below_cut();
   // The active voxels' values into the result's volume.
   void write_volume();
 

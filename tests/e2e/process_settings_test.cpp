@@ -116,6 +116,12 @@ TEST(ProcessSettings, PruningReachesMart) {
     expect_refused_naming(kVolume + "}\nreconstruction: {prune_threshold: " + bad + "}\n" + kPasses, "prune_threshold");
   }
   expect_refused_naming(kVolume + "}\nreconstruction: {prune: sometimes}\n" + kPasses, "prune");
+  EXPECT_EQ(defaults.mart.prune_depth_reach, 0);
+  EXPECT_EQ(parse(kVolume + "}\nreconstruction: {prune_depth_reach: 2}\n" + kPasses).mart.prune_depth_reach, 2);
+  for (const std::string bad : {"-1", "33", "near"}) {
+    expect_refused_naming(kVolume + "}\nreconstruction: {prune_depth_reach: " + bad + "}\n" + kPasses,
+                          "prune_depth_reach");
+  }
 }
 
 // Two particles at depths z and z + 0.5 mm through the small camera, as the camera records them.

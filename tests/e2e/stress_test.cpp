@@ -128,17 +128,19 @@ Case make_case(std::uint64_t index) {
   const double prune_thresholds[] = {0, 0, 1e-2, 0.5};  // exact zeros (the default), a small and a large cut
   c.settings.mart.prune_threshold = prune_thresholds[pick(4)];
   c.settings.mart.prune_scope = pick(2) ? recon::PruneScope::slice : recon::PruneScope::volume;
-  c.description = "case " + std::to_string(index) + ": mode " + std::to_string(mode) + ", " + std::to_string(count) +
-                  " particles, mu " + std::to_string(c.settings.mart.mu) + ", " +
-                  std::to_string(c.settings.mart.iterations) + " iterations" +
-                  (c.settings.mart.accelerate ? " accelerated" : "") + ", intensity floor " +
-                  std::to_string(c.settings.correlation.intensity_threshold_of_mean) + "x the mean, depth margin " +
-                  std::to_string(c.settings.correlation.passes[1].depth_margin) + ", final smoothing " +
-                  std::to_string(c.settings.correlation.final_smoothing) + ", depth prefilter " +
-                  std::to_string(c.settings.correlation.depth_prefilter) + ", prune threshold " +
-                  std::to_string(c.settings.mart.prune_threshold) + " of the " +
-                  (c.settings.mart.prune_scope == recon::PruneScope::slice ? "slice's" : "volume's") + " peak, depth " +
-                  std::to_string(c.depth);
+  const int reaches[] = {0, 0, 2, recon::kMaxPruneDepthReach};  // the threshold alone, a particle's ends, the most
+  c.settings.mart.prune_depth_reach = reaches[pick(4)];
+  c.description =
+      "case " + std::to_string(index) + ": mode " + std::to_string(mode) + ", " + std::to_string(count) +
+      " particles, mu " + std::to_string(c.settings.mart.mu) + ", " + std::to_string(c.settings.mart.iterations) +
+      " iterations" + (c.settings.mart.accelerate ? " accelerated" : "") + ", intensity floor " +
+      std::to_string(c.settings.correlation.intensity_threshold_of_mean) + "x the mean, depth margin " +
+      std::to_string(c.settings.correlation.passes[1].depth_margin) + ", final smoothing " +
+      std::to_string(c.settings.correlation.final_smoothing) + ", depth prefilter " +
+      std::to_string(c.settings.correlation.depth_prefilter) + ", prune threshold " +
+      std::to_string(c.settings.mart.prune_threshold) + " of the " +
+      (c.settings.mart.prune_scope == recon::PruneScope::slice ? "slice's" : "volume's") + " peak, depth reach " +
+      std::to_string(c.settings.mart.prune_depth_reach) + ", depth " + std::to_string(c.depth);
   return c;
 }
 

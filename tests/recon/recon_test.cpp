@@ -565,6 +565,16 @@ TEST_F(Mart, RejectsNaNAndNegativePixelsAndBadSettings) {
       EXPECT_NE(std::string(e.what()).find("prune_threshold"), std::string::npos) << e.what();
     }
   }
+  for (const int reach : {-1, kMaxPruneDepthReach + 1}) {
+    MartSettings pruned;
+    pruned.prune_depth_reach = reach;
+    try {
+      reconstruct(*op_, ImageF(850, 850, 1.f), pruned);
+      ADD_FAILURE() << "prune depth reach " << reach << " accepted";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("prune_depth_reach"), std::string::npos) << e.what();
+    }
+  }
 }
 
 TEST_F(Mart, IdenticalVolumesAtOneAndTwoThreads) {
@@ -726,6 +736,48 @@ TEST_F(Mart, PruningAgainstEachDepthSlicesPeakKeepsAFaintParticleAwayFromABright
   }
   EXPECT_EQ(near_faint[0], 0.0) << "the volume's peak: the faint particle is below 0.1 of it";
   EXPECT_GT(near_faint[1], 0.0) << "its slice's peak: the faint particle is kept";
+}
+
+// MartSettings::prune_depth_reach: a voxel at or below its slice's cut stays while a voxel within
+// `reach` slices of it along depth (same x, y) is above theirs. On one particle with a high
+// threshold of the volume's peak (its faint depth ends are below it): every live voxel of the
+// result is above the cut or that near one, some are kept only by the reach, and the particle
+// keeps more of its depth extent than with the threshold alone.
+TEST_F(Mart, ADepthReachKeepsTheFaintDepthEndsOfAParticle) {
+  const WeightingOperator op = make_operator(*camera_, centred_grid(40, 9, 1.0, -4.0));
+  const Grid3& g = op.grid();
+  const ImageF image = project_image(op, blob_volume(g, {{20, 20, 4}}, 0.7, 0.7), 1000.f);
+  MartSettings s;
+  s.iterations = 6;
+  s.mu = 1;
+  s.prune_threshold = 0.3;
+  const std::size_t slice = std::size_t(g.shape[0]) * g.shape[1];
+  std::array<std::size_t, 2> live{};
+  for (const int reach : {0, 2}) {
+    s.prune_depth_reach = reach;
+    const MartResult r = reconstruct(op, image, s);
+    const std::vector<float>& e = r.volume.data;
+    const float cut = float(s.prune_threshold * double(*std::max_element(e.begin(), e.end())));
+    std::size_t kept_by_reach = 0;
+    for (int z = 0; z < g.shape[2]; ++z)
+      for (std::size_t column = 0; column < slice; ++column) {
+        const float v = e[z * slice + column];
+        if (v == 0.f) continue;
+        ++live[reach > 0];
+        if (v > cut) continue;
+        bool near = false;
+        for (int zz = std::max(0, z - reach); zz <= std::min(g.shape[2] - 1, z + reach); ++zz)
+          near = near || e[zz * slice + column] > cut;
+        EXPECT_TRUE(near) << "reach " << reach << ": voxel " << column << " of slice " << z
+                          << " is at or below the cut with no voxel above within reach";
+        kept_by_reach += near;
+      }
+    if (reach > 0) {
+      EXPECT_GT(kept_by_reach, 0u) << "the reach kept no voxel below the cut";
+    }
+    EXPECT_GT(r.skipped.voxels_pruned, 0u) << "reach " << reach;
+  }
+  EXPECT_GT(live[1], live[0]) << "the reach keeps more of the particle";
 }
 
 // A caller cancels by throwing plenopiv::Cancelled from the progress callback (what the daemon
