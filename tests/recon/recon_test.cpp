@@ -545,35 +545,29 @@ TEST_F(Mart, RejectsNaNAndNegativePixelsAndBadSettings) {
   MartSettings bad;
   bad.mu = 1.5;
   EXPECT_THROW(reconstruct(*op_, ImageF(850, 850, 1.f), bad), InputError);
+  // A setting out of its range is refused naming its key.
+  const auto expect_refused = [&](const MartSettings& s, const std::string& key) {
+    try {
+      reconstruct(*op_, ImageF(850, 850, 1.f), s);
+      ADD_FAILURE() << key << " accepted";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(key), std::string::npos) << e.what();
+    }
+  };
   for (const double blur : {-0.001, std::nan(""), 0.06}) {
     MartSettings blurred;
     blurred.sensor_blur_sigma_mm = blur;
-    try {
-      reconstruct(*op_, ImageF(850, 850, 1.f), blurred);
-      ADD_FAILURE() << "sensor blur " << blur << " accepted";
-    } catch (const InputError& e) {
-      EXPECT_NE(std::string(e.what()).find("sensor_blur_sigma_mm"), std::string::npos) << e.what();
-    }
+    expect_refused(blurred, "sensor_blur_sigma_mm");
   }
   for (const double threshold : {-0.001, std::nan(""), 1.0}) {
     MartSettings pruned;
     pruned.prune_threshold = threshold;
-    try {
-      reconstruct(*op_, ImageF(850, 850, 1.f), pruned);
-      ADD_FAILURE() << "prune threshold " << threshold << " accepted";
-    } catch (const InputError& e) {
-      EXPECT_NE(std::string(e.what()).find("prune_threshold"), std::string::npos) << e.what();
-    }
+    expect_refused(pruned, "prune_threshold");
   }
   for (const int reach : {-1, kMaxPruneDepthReach + 1}) {
     MartSettings pruned;
     pruned.prune_depth_reach = reach;
-    try {
-      reconstruct(*op_, ImageF(850, 850, 1.f), pruned);
-      ADD_FAILURE() << "prune depth reach " << reach << " accepted";
-    } catch (const InputError& e) {
-      EXPECT_NE(std::string(e.what()).find("prune_depth_reach"), std::string::npos) << e.what();
-    }
+    expect_refused(pruned, "prune_depth_reach");
   }
 }
 
