@@ -132,6 +132,7 @@ std::size_t MartWorkspace::bytes() const {
   total += b.kernels.scaled.capacity() * sizeof(float) + b.kernels.sums.capacity() * sizeof(double);
   total += (b.kernels.band_lanes.capacity() + b.kernels.image_lanes.capacity()) * sizeof(float);
   total += b.select.dark.capacity() * sizeof(std::uint64_t) + b.origin.capacity() * sizeof(std::uint32_t);
+  total += b.above_cut.capacity();
   total += b.active.bytes();
   for (const auto& slice : b.select.per_slice) total += slice.capacity() * sizeof(std::uint32_t);
   return total;
@@ -154,6 +155,7 @@ void MartWorkspace::reserve(const WeightingOperator& op) {
   b.active.assign(op, std::move(all));
   for (BigBuffer<float>* v : {&b.e, &b.update, &b.weight, &b.last, &b.log_last, &b.momentum}) v->assign(voxels, 0.f);
   b.origin.assign(voxels, 0);
+  b.above_cut.assign(voxels, 0);  // read only with MartSettings::prune_depth_reach, which reserve() does not know
   for (BigBuffer<float>* v : {&b.data, &b.log_data, &b.projection, &b.ratio}) v->assign(pixels, 0.f);
   b.active.reserve(op, b.kernels);
   const std::size_t words = std::size_t(op.image_height() + 63) / 64;

@@ -190,11 +190,14 @@ TEST(ProcessSettings, AKeptWorkspaceGivesTheSameVolumesAndVectors) {
 // its correlation (plenopivd reserves its lanes' buffers while a run is Armed) change no bit, and
 // no pair grows them: neither a particle pair nor frames lit on every pixel (the most voxels MART
 // can keep). (The list of active voxels is the selection's own, made per frame: it may shrink.)
-// PairProcessor's pool reserved twice, with a pair between, holds the same bytes.
+// PairProcessor's pool reserved twice, with a pair between, holds the same bytes. MART prunes
+// with a depth reach, so its per-box buffer is reserved too.
 TEST(ProcessSettings, AReservedWorkspaceChangesNoBitAndNoPairGrowsIt) {
   const auto camera = optics::load_camera_file(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml");
   const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera));
-  const ProcessSettings s = parse(kVolume + ", depth_guard_mm: 0.25}\n" + kPasses);
+  const ProcessSettings s =
+      parse(kVolume + ", depth_guard_mm: 0.25}\n" +
+            "reconstruction: {prune_threshold: 0.05, prune_scope: slice, prune_depth_reach: 2}\n" + kPasses);
   const ImageF a = two_particle_frame(camera, lenses, 3.0), b = two_particle_frame(camera, lenses, 3.1);
   const PairOperator op(camera, lenses, calib::geometric_white_image(camera, lenses), s);
   const PairResult alone = process_pair(op, a, b, s);
