@@ -77,10 +77,16 @@ typedef float Lanes8 __attribute__((vector_size(32)));
 // The taps of one sample along x, y and z.
 using Stencil = std::array<Taps, 3>;
 
-// Whether the stencil, read as 8 voxels per row (below), lies inside the volume.
+// Whether a stencil of `Taps` voxels per axis, its rows read as `RowVoxels` contiguous voxels
+// along x (sum_rows), lies inside the volume.
+template <int Taps, int RowVoxels, class AnyStencil>
+[[gnu::always_inline]] inline bool inside(const std::array<int, 3>& s, const AnyStencil& t) {
+  return t[0].base >= 0 && t[0].base + RowVoxels <= s[0] && t[1].base >= 0 && t[1].base + Taps <= s[1] &&
+         t[2].base >= 0 && t[2].base + Taps <= s[2];
+}
+// The sinc's stencil, read as 8 voxels per row (Lanes8).
 [[gnu::always_inline]] inline bool inside(const std::array<int, 3>& s, const Stencil& t) {
-  return t[0].base >= 0 && t[0].base + sinc_taps + 1 <= s[0] && t[1].base >= 0 && t[1].base + sinc_taps <= s[1] &&
-         t[2].base >= 0 && t[2].base + sinc_taps <= s[2];
+  return inside<sinc_taps, sinc_taps + 1>(s, t);
 }
 
 // N samples inside their volumes (v[n] with stencil t[n]: per axis a first voxel `base` and
@@ -231,9 +237,7 @@ struct Cubic4 {
   }
   [[gnu::always_inline]] Stencil stencil(double x, double y, double z) const { return {axis(x), axis(y), axis(z)}; }
   [[gnu::always_inline]] static bool inside(const std::array<int, 3>& s, const Stencil& t) {
-    for (int k = 0; k < 3; ++k)
-      if (t[k].base < 0 || t[k].base + taps > s[k]) return false;
-    return true;
+    return piv::inside<taps, taps>(s, t);
   }
   template <int N>
   [[gnu::always_inline]] static void sample_inside(const float* const* v, const std::array<int, 3>& s, const Stencil* t,
