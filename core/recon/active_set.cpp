@@ -8,7 +8,6 @@
 #include <xmmintrin.h>
 
 #include <algorithm>
-#include <bit>
 #include <functional>
 #include <limits>
 #include <numeric>
@@ -279,8 +278,7 @@ void ActiveSet::fill_entries(const WeightingOperator& op, const BigBuffer<int>& 
 }
 
 void ActiveSet::order_by_cost(const WeightingOperator& op) {
-  // The work of each band and strip, estimated as the kernels' quad operations (rows reached
-  // times x quads) plus a share per entry.
+  // The work of each band and strip, estimated as the kernels' vector operations (pass_work()).
   std::vector<double> band_cost(std::size_t(bands_), 0.0), strip_cost(std::size_t(strips_), 0.0);
   for (int b = 0; b < bands_; ++b) {
     for (int s = 0; s < strips_; ++s) {
@@ -289,10 +287,15 @@ void ActiveSet::order_by_cost(const WeightingOperator& op) {
         const Visit& v = visits_[i];
         const Column& col = columns_[v.column];
         const SliceTables& t = op.slice(col.z);
-        int rows = 0;
-        for (std::uint64_t word : v.rows) rows += std::popcount(word);
+        // The x stages take a block of kSubRows rows whole if the visit reaches any of its rows.
+        int blocks = 0;
+        for (std::uint64_t word : v.rows) {
+          for (int sub = 0; sub < 64; sub += kernels::kSubRows) blocks += ((word >> sub) & kernels::kSubMask) != 0;
+        }
         const std::size_t x_quads = t.x_quad_start[std::size_t(col.x) + 1] - t.x_quad_start[std::size_t(col.x)];
-        const double cost = double(rows) * double(x_quads + 2) + 8.0 * double(v.entry_end - v.entry_begin);
+        std::size_t y_quads = 0;
+        for (std::size_t k = v.entry_begin; k < v.entry_end; ++k) y_quads += entries_[k].quad_count;
+        const double cost = double(kQuad) * double(blocks) * double(x_quads) + 2.0 * double(y_quads);
         band_cost[std::size_t(b)] += cost;
         strip_cost[std::size_t(s)] += cost;
       }

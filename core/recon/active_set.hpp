@@ -43,8 +43,10 @@ class ActiveSet {
 
   const std::vector<std::uint32_t>& voxels() const { return voxels_; }
   std::size_t size() const { return voxels_.size(); }
-  // The work of one pass, estimated as the kernels' vector operations: per visit, the rows it
-  // reaches times its column's x quads (the x stage) plus its voxels' y quads (the y stage).
+  // The work of one pass, estimated as the kernels' vector operations: per visit, the x stage's
+  // kQuad operations per x quad of its column on each block of kSubRows rows it reaches (a block
+  // costs the same however few of its rows are reached), plus two per y quad of its voxels (the
+  // y stage; the back-projection's runs in double).
   double pass_work() const { return pass_work_; }
   // Bytes held (the arrays' capacities).
   std::size_t bytes() const;

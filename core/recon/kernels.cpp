@@ -100,7 +100,6 @@ __attribute__((target("avx2"), always_inline)) inline void dot_quads2_avx2(const
 
 using Rows = float __attribute__((vector_size(kSubRows * sizeof(float))));
 using RowBits = std::int32_t __attribute__((vector_size(kSubRows * sizeof(std::int32_t))));
-constexpr std::uint64_t kSubMask = ~std::uint64_t(0) >> (64 - kSubRows);
 
 // acc[l] += w[l] · (column l of a quad, kSubRows rows), skipping zero weights.
 __attribute__((always_inline)) inline void dot_quad(Rows* acc, const float* at, const float* w) {

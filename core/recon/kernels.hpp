@@ -21,6 +21,8 @@ inline constexpr int kQuad = 4;
 inline constexpr int kChunk = 32;
 inline constexpr int kSubRows = 16;
 static_assert(64 % kSubRows == 0 && kSubRows <= 64);
+// One block of kSubRows rows out of a 64-row word of reached rows (a visit's rows >> sub).
+inline constexpr std::uint64_t kSubMask = ~std::uint64_t(0) >> (64 - kSubRows);
 
 using Lanes4 = float __attribute__((vector_size(16)));
 using Doubles4 = double __attribute__((vector_size(32)));

@@ -49,7 +49,7 @@ MartResult SmartSolver::run(const ImageF& image, const IterationCallback& progre
   result_.start_seconds = seconds_since(t_start);
   result_.setup_seconds = seconds_since(t_setup);
   prepare_iterations();
-  if (settings_.prune) prune();
+  if (settings_.prune) prune(false);
 
   int momentum_step = 1;  // k of FISTA's beta_k
   double previous = -1;   // the last iteration's residual
@@ -72,7 +72,7 @@ MartResult SmartSolver::run(const ImageF& image, const IterationCallback& progre
     result_.skipped.work_unpruned += start_work_;
     const std::size_t updated = n_;
     const double work = start_work_ > 0 ? active_.pass_work() / start_work_ : 1.0;
-    if (settings_.prune) prune();
+    if (settings_.prune) prune(it == settings_.iterations);
     IterationReport rep{it, r, seconds_since(t_it), updated, op_.grid().count(), work};
     result_.iterations.push_back(rep);
     if (progress) progress(rep);
@@ -304,7 +304,7 @@ bool SmartSolver::step_along_momentum() const {
   return !(combine(combine, 0, n_start_) < 0);
 }
 
-void SmartSolver::prune() {
+void SmartSolver::prune(bool last) {
   const auto t0 = std::chrono::steady_clock::now();
   struct Timer {
     std::chrono::steady_clock::time_point t0;
@@ -324,6 +324,12 @@ void SmartSolver::prune() {
   // A zero costs a pass a little work; a new layout costs about what the passes save on
   // kRebuildShare of the live voxels over one iteration. Rebuild once that many are zero.
   if (dead == 0 || dead * kRebuildShare < n_) return;
+  // After the last iteration no pass follows but the final residual's projection, which skips
+  // zeros: the zeros are written to the volume as they are, and counted as the rebuild would.
+  if (last) {
+    result_.skipped.voxels_pruned += dead;
+    return;
+  }
   const std::vector<std::uint32_t>& old_voxels = active_.voxels();  // read before assign()
   std::vector<std::uint32_t> voxels;
   voxels.reserve(n_ - dead);

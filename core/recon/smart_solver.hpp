@@ -64,8 +64,8 @@ class SmartSolver {
   // Whether the step just taken goes along the momentum (else the momentum restarts).
   bool step_along_momentum() const;
   // MartSettings::prune: voxels at or below the threshold set to 0, and the active set rebuilt
-  // without the zeros once enough of them have gathered.
-  void prune();
+  // without the zeros once enough of them have gathered, unless `last` (after the last iteration).
+  void prune(bool last);
   // prune()'s first half: live voxels at or below their slice's cut set to 0 (those the depth
   // reach keeps aside).
   void zero_below_cut();
