@@ -89,6 +89,16 @@ std::size_t ActiveSet::bytes() const {
          visit_start_.capacity() * sizeof(std::size_t);
 }
 
+std::vector<std::size_t> ActiveSet::slice_runs(const WeightingOperator& op) const {
+  const Grid3& g = op.grid();
+  const std::uint64_t slice = std::uint64_t(g.shape[0]) * std::uint64_t(g.shape[1]);
+  std::vector<std::size_t> runs(std::size_t(g.shape[2]) + 1);
+  for (std::size_t z = 0; z < runs.size(); ++z) {
+    runs[z] = std::size_t(std::lower_bound(voxels_.begin(), voxels_.end(), z * slice) - voxels_.begin());
+  }
+  return runs;
+}
+
 void ActiveSet::check_voxels(const WeightingOperator& op) const {
   if (std::adjacent_find(voxels_.begin(), voxels_.end(), std::greater_equal<>()) != voxels_.end() ||
       (!voxels_.empty() && voxels_.back() >= op.grid().count())) {
@@ -110,11 +120,7 @@ BigBuffer<int> ActiveSet::group_by_column(const WeightingOperator& op) {
   // Group by voxel column in that order with a counting sort, slice by slice in parallel (the
   // voxels are sorted, so each slice is one stretch of them): y stays increasing within a
   // column. A voxel that sees no pixel (n = 0) takes no part; its value is 0.
-  std::vector<std::size_t> slice_begin(std::size_t(nz) + 1);
-  for (std::uint32_t z = 0; z <= nz; ++z) {
-    slice_begin[z] =
-        std::size_t(std::lower_bound(voxels_.begin(), voxels_.end(), std::uint64_t(z) * nxy) - voxels_.begin());
-  }
+  const std::vector<std::size_t> slice_begin = slice_runs(op);
   std::vector<std::uint32_t> column_count(std::size_t(nz) * nx, 0);  // [z][x]
   tbb::parallel_for(std::uint32_t(0), nz, [&](std::uint32_t z) {
     for (std::size_t m = slice_begin[z]; m < slice_begin[z + 1]; ++m) {

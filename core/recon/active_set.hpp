@@ -43,6 +43,9 @@ class ActiveSet {
 
   const std::vector<std::uint32_t>& voxels() const { return voxels_; }
   std::size_t size() const { return voxels_.size(); }
+  // Where each depth slice's voxels lie in voxels() (the set is in index order, so each slice's
+  // are one run): slice z's are [runs[z], runs[z + 1]), z = 0 .. the grid's depth.
+  std::vector<std::size_t> slice_runs(const WeightingOperator& op) const;
   // The work of one pass, estimated as the kernels' vector operations: per visit, the x stage's
   // kQuad operations per x quad of its column on each block of kSubRows rows it reaches (a block
   // costs the same however few of its rows are reached), plus two per y quad of its voxels (the

@@ -359,15 +359,11 @@ void SmartSolver::prune(bool last) {
 
 void SmartSolver::zero_below_cut() {
   BigBuffer<float>& e = b_.e;
-  // The set is in index order, so each depth slice's live voxels are one run of it, [run[z], run[z + 1]).
+  // Each depth slice's live voxels: [run[z], run[z + 1]).
   const std::vector<std::uint32_t>& voxels = active_.voxels();
   const int depth = op_.grid().shape[2];
   const std::size_t slice = std::size_t(op_.grid().shape[0]) * op_.grid().shape[1];
-  std::vector<std::size_t> run(std::size_t(depth) + 1);
-  for (int z = 0; z <= depth; ++z)
-    run[z] = std::size_t(std::lower_bound(voxels.begin(), voxels.end(), std::size_t(z) * slice,
-                                          [](std::uint32_t voxel, std::size_t index) { return voxel < index; }) -
-                         voxels.begin());
+  const std::vector<std::size_t> run = active_.slice_runs(op_);
   // The cut per slice: the threshold times the slice's peak, or the volume's (the peak of the
   // slices' peaks; a maximum is the same in any order).
   std::vector<float> cut(std::size_t(depth), 0.f);
