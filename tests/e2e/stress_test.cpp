@@ -130,17 +130,20 @@ Case make_case(std::uint64_t index) {
   c.settings.mart.prune_scope = pick(2) ? recon::PruneScope::slice : recon::PruneScope::volume;
   const int reaches[] = {0, 0, 2, recon::kMaxPruneDepthReach};  // the threshold alone, a particle's ends, the most
   c.settings.mart.prune_depth_reach = reaches[pick(4)];
-  c.description =
-      "case " + std::to_string(index) + ": mode " + std::to_string(mode) + ", " + std::to_string(count) +
-      " particles, mu " + std::to_string(c.settings.mart.mu) + ", " + std::to_string(c.settings.mart.iterations) +
-      " iterations" + (c.settings.mart.accelerate ? " accelerated" : "") + ", intensity floor " +
-      std::to_string(c.settings.correlation.intensity_threshold_of_mean) + "x the mean, depth margin " +
-      std::to_string(c.settings.correlation.passes[1].depth_margin) + ", final smoothing " +
-      std::to_string(c.settings.correlation.final_smoothing) + ", depth prefilter " +
-      std::to_string(c.settings.correlation.depth_prefilter) + ", prune threshold " +
-      std::to_string(c.settings.mart.prune_threshold) + " of the " +
-      (c.settings.mart.prune_scope == recon::PruneScope::slice ? "slice's" : "volume's") + " peak, depth reach " +
-      std::to_string(c.settings.mart.prune_depth_reach) + ", depth " + std::to_string(c.depth);
+  c.settings.correlation.early_interpolation = pick(2) ? piv::Interpolation::cubic : piv::Interpolation::sinc;
+  c.description = "case " + std::to_string(index) + ": mode " + std::to_string(mode) + ", " + std::to_string(count) +
+                  " particles, mu " + std::to_string(c.settings.mart.mu) + ", " +
+                  std::to_string(c.settings.mart.iterations) + " iterations" +
+                  (c.settings.mart.accelerate ? " accelerated" : "") + ", intensity floor " +
+                  std::to_string(c.settings.correlation.intensity_threshold_of_mean) + "x the mean, depth margin " +
+                  std::to_string(c.settings.correlation.passes[1].depth_margin) + ", final smoothing " +
+                  std::to_string(c.settings.correlation.final_smoothing) + ", depth prefilter " +
+                  std::to_string(c.settings.correlation.depth_prefilter) + ", prune threshold " +
+                  std::to_string(c.settings.mart.prune_threshold) + " of the " +
+                  (c.settings.mart.prune_scope == recon::PruneScope::slice ? "slice's" : "volume's") +
+                  " peak, depth reach " + std::to_string(c.settings.mart.prune_depth_reach) + ", early interpolation " +
+                  (c.settings.correlation.early_interpolation == piv::Interpolation::cubic ? "cubic" : "sinc") +
+                  ", depth " + std::to_string(c.depth);
   return c;
 }
 
@@ -183,6 +186,17 @@ TEST(PLENOPIV_STRESS_SUITE, RandomisedPairsAreFiniteAndThreadIndependent) {
     const VectorField& g = two.correlation.field;
     ASSERT_TRUE(same_bits(f.dx_mm, g.dx_mm) && same_bits(f.dy_mm, g.dy_mm) && same_bits(f.dz_mm, g.dz_mm));
     ASSERT_TRUE(same_bits(f.valid, g.valid));
+    ASSERT_TRUE(same_bits(f.sigma_dx_mm, g.sigma_dx_mm) && same_bits(f.sigma_dy_mm, g.sigma_dy_mm) &&
+                same_bits(f.sigma_dz_mm, g.sigma_dz_mm));
+    // A valid vector's sigma: non-negative and finite, or NaN on an axis where its peak has no
+    // curvature (uncertainty.hpp).
+    for (std::size_t n = 0; n < f.valid.size(); ++n) {
+      if (!f.valid[n]) continue;
+      for (const std::vector<float>* sigma : {&f.sigma_dx_mm, &f.sigma_dy_mm, &f.sigma_dz_mm}) {
+        const float s = (*sigma)[n];
+        ASSERT_TRUE(std::isnan(s) || (std::isfinite(s) && s >= 0.f)) << "vector " << n << ": sigma " << s;
+      }
+    }
     ASSERT_TRUE(same_bits(one.correlation.flags, two.correlation.flags));
     for (auto v : f.valid)
       if (v) {
