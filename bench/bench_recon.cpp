@@ -252,10 +252,12 @@ void prune_sweep(const std::string& source_dir, bool small, double ppm, int iter
     const char* name;
     bool prune;
     double threshold;
+    recon::PruneScope scope = recon::PruneScope::volume;
   };
   std::uint64_t reference = 0;
   for (const Variant& v : {Variant{"off", false, 0.0}, Variant{"zeros", true, 0.0}, Variant{"1e-4", true, 1e-4},
-                           Variant{"1e-3", true, 1e-3}, Variant{"3e-3", true, 3e-3}, Variant{"1e-2", true, 1e-2}}) {
+                           Variant{"1e-3", true, 1e-3}, Variant{"3e-3", true, 3e-3}, Variant{"1e-2", true, 1e-2},
+                           Variant{"slice-3e-2", true, 3e-2, recon::PruneScope::slice}}) {
     if (!only.empty() && ("," + only + ",").find("," + std::string(v.name) + ",") == std::string::npos) continue;
     recon::MartSettings s;
     s.iterations = iterations;
@@ -264,6 +266,7 @@ void prune_sweep(const std::string& source_dir, bool small, double ppm, int iter
     s.final_residual = false;
     s.prune = v.prune;
     s.prune_threshold = v.threshold;
+    s.prune_scope = v.scope;
     std::string live, seconds, work;
     const auto t = Clock::now();
     const double c = cpu_seconds();
