@@ -61,7 +61,9 @@ BENCHES = {
                                   "1", "--sparse-variants",
                                   "off,zeros,1e-2,slice-3e-2,slice-1e-1,slice-1e-1-reach2,slice-2e-1,slice-2e-1-reach2"] + RUN_PAPER, None),
     "e2e-reduced-sparse": ("quick", ["build/bin/bench_e2e", "reduced", "--no-sweep", "--sparse-sweep",
-                                     "--sparse-repeats", "5"] + RUN_PAPER[:-2], None),
+                                     "--sparse-repeats", "5", "--sparse-variants",
+                                     "off,zeros,1e-3,3e-3,1e-2,3e-2,slice-1e-2,slice-3e-2,slice-1e-1,slice-2e-1,"
+                                     "slice-1e-1-reach2,slice-2e-1-reach2"] + RUN_PAPER[:-2], None),
     "e2e-full-process": ("paper", ["build/bin/bench_e2e", "full", "--no-sweep", "--steady"] + PROCESS,
                          None),
     "e2e-reduced-process": ("quick", ["build/bin/bench_e2e", "reduced", "--no-sweep", "--steady"] + PROCESS,
