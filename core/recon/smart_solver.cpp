@@ -321,8 +321,9 @@ void SmartSolver::prune(bool last) {
         return count;
       },
       std::plus<std::size_t>());
-  // A zero costs a pass a little work; a new layout costs about what the passes save on
-  // kRebuildShare of the live voxels over one iteration. Rebuild once that many are zero.
+  // A zero costs a pass a little work (its column's blocks stay while any voxel there lives); a
+  // new layout costs about what the smaller set saves over the iterations left, whether sooner
+  // or later (docs/lab/2026-11-28.md). Rebuild once 1 / kRebuildShare of the set is zero.
   if (dead == 0 || dead * kRebuildShare < n_) return;
   // After the last iteration no pass follows but the final residual's projection, which skips
   // zeros: the zeros are written to the volume as they are, and counted as the rebuild would.
