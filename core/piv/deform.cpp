@@ -23,9 +23,14 @@ double sinc(double t) {
   return std::sin(a) / a;
 }
 
-// Rows for f = -0.5 + r / table_steps, r = 0 .. table_steps.
+// Eight floats: one stencil row and its (zero-weighted) eighth voxel, or one table row and its
+// zero. GCC's vector extension, so each target clone gets its own instructions (two SSE or one AVX
+// operation per row).
+typedef float Lanes8 __attribute__((vector_size(32)));
+
+// Rows for f = -0.5 + r / table_steps, r = 0 .. table_steps: the 7 taps and a zero (one Lanes8).
 struct SincTable {
-  std::array<std::array<float, sinc_taps>, table_steps + 1> rows;
+  alignas(32) std::array<std::array<float, sinc_taps + 1>, table_steps + 1> rows{};
   SincTable() {
     for (int r = 0; r <= table_steps; ++r) {
       const double f = -0.5 + double(r) / table_steps;
@@ -47,19 +52,24 @@ const SincTable& sinc_table() {
   return table;
 }
 
-// Weights for the fractional offset f in [-0.5, 0.5] from the table, linearly interpolated.
-[[gnu::always_inline]] inline void weights_from(const SincTable& table, double f, std::array<float, sinc_taps>& w) {
+// Weights for the fractional offset f in [-0.5, 0.5] from the table, linearly interpolated, and a
+// zero eighth: each lane rows[r][k] + t (rows[r + 1][k] - rows[r][k]), as a scalar loop would.
+[[gnu::always_inline]] inline void weights_from(const SincTable& table, double f, std::array<float, sinc_taps + 1>& w) {
   const auto& rows = table.rows;
   const double u = std::clamp((f + 0.5) * table_steps, 0.0, double(table_steps));
   const int r = std::min(int(u), table_steps - 1);
   const float t = float(u - r);
-  for (int k = 0; k < sinc_taps; ++k) w[k] = rows[r][k] + t * (rows[r + 1][k] - rows[r][k]);
+  Lanes8 low, high;
+  std::memcpy(&low, rows[r].data(), sizeof low);
+  std::memcpy(&high, rows[r + 1].data(), sizeof high);
+  const Lanes8 out = low + t * (high - low);
+  std::memcpy(w.data(), &out, sizeof out);
 }
 
 // Nearest voxel and weights of a coordinate.
 struct Taps {
-  int base;  // first tap: round(p) - 3
-  std::array<float, sinc_taps> w;
+  int base;                            // first tap: round(p) - 3
+  std::array<float, sinc_taps + 1> w;  // the 7 weights and a zero (sum_rows reads rows of 8)
 };
 
 [[gnu::always_inline]] inline Taps taps_for(const SincTable& table, double p) {
@@ -69,10 +79,6 @@ struct Taps {
   weights_from(table, p - n0, t.w);
   return t;
 }
-
-// Eight floats: one stencil row and its (zero-weighted) eighth voxel. GCC's vector extension,
-// so each target clone gets its own instructions (two SSE or one AVX operation per row).
-typedef float Lanes8 __attribute__((vector_size(32)));
 
 // The taps of one sample along x, y and z.
 using Stencil = std::array<Taps, 3>;
@@ -103,12 +109,25 @@ template <int N, int Taps, class Row, class Stencil>
   const std::size_t plane = std::size_t(s[0]) * s[1];
   const float* slab[N];
   for (int n = 0; n < N; ++n) slab[n] = v[n] + t[n][2].base * plane + std::size_t(t[n][1].base) * s[0] + t[n][0].base;
+  // Each row's weight w_z w_y, computed a Row of y weights at a time (the weight arrays hold a
+  // whole Row): in the loop below a weight is one load, not a multiply and a broadcast.
+  constexpr int lanes = sizeof(Row) / sizeof(float);
+  static_assert(lanes >= Taps && sizeof(t[0][1].w) == sizeof(Row));
+  alignas(sizeof(Row)) float wzy[N][Taps][lanes];
+  for (int n = 0; n < N; ++n) {
+    Row wy;
+    std::memcpy(&wy, t[n][1].w.data(), sizeof wy);
+    for (int kz = 0; kz < Taps; ++kz) {
+      const Row w = t[n][2].w[kz] * wy;
+      std::memcpy(wzy[n][kz], &w, sizeof w);
+    }
+  }
   Row acc[N];
   for (int n = 0; n < N; ++n) acc[n] = Row{};
   for (int kz = 0; kz < Taps; ++kz)
     for (int ky = 0; ky < Taps; ++ky)
       for (int n = 0; n < N; ++n) {
-        const float w = t[n][2].w[kz] * t[n][1].w[ky];
+        const float w = wzy[n][kz][ky];
         Row row;
         std::memcpy(&row, slab[n] + kz * plane + std::size_t(ky) * s[0], sizeof row);
         acc[n] += w * row;
@@ -343,7 +362,11 @@ std::vector<double> NodeField::mean_weights(int axis, int first_voxel, int n) co
   return w;
 }
 
-void sinc7_weights(double f, std::array<float, sinc_taps>& w) { weights_from(sinc_table(), f, w); }
+void sinc7_weights(double f, std::array<float, sinc_taps>& w) {
+  std::array<float, sinc_taps + 1> padded;
+  weights_from(sinc_table(), f, padded);
+  std::copy_n(padded.begin(), sinc_taps, w.begin());
+}
 
 float sample_sinc7(std::span<const float> volume, const std::array<int, 3>& shape, double x, double y, double z) {
   const SincTable& table = sinc_table();
