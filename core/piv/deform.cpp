@@ -139,40 +139,51 @@ template <int N, int Taps, class Row, class Stencil>
   }
 }
 
-// One sample whose stencil may reach past the volume's faces; voxels outside count as 0.
-template <int Taps, class Stencil>
-[[gnu::always_inline]] inline float sum_clipped(const float* v, const std::array<int, 3>& s, const Stencil& t) {
+// N samples whose stencils may reach past the volume's faces; voxels outside count as 0. Each
+// stencil's rows are copied, zeros in place of the voxels outside, into a block of its own and
+// summed there by sum_rows: the arithmetic of a stencil inside, as if the volume were padded with
+// zeros (a zero adds +-0, which leaves a sum that started at +0 unchanged), so that a sample's
+// value does not depend on the path that computed it.
+template <int N, int Taps, class Row, class Stencil>
+[[gnu::always_inline]] inline void sum_rows_clipped(const float* const* v, const std::array<int, 3>& s,
+                                                    const Stencil* t, float* out) {
+  constexpr int lanes = sizeof(Row) / sizeof(float);
   const std::size_t plane = std::size_t(s[0]) * s[1];
-  const auto &tx = t[0], &ty = t[1], &tz = t[2];
-  float total = 0;
-  for (int kz = 0; kz < Taps; ++kz) {
-    const int z = tz.base + kz;
-    if (z < 0 || z >= s[2]) continue;
-    float zsum = 0;
-    for (int ky = 0; ky < Taps; ++ky) {
-      const int y = ty.base + ky;
-      if (y < 0 || y >= s[1]) continue;
-      const float* row = v + z * plane + std::size_t(y) * s[0];
-      float ysum = 0;
-      for (int kx = 0; kx < Taps; ++kx) {
-        const int x = tx.base + kx;
-        if (x >= 0 && x < s[0]) ysum += tx.w[kx] * row[x];
+  alignas(sizeof(Row)) float local[N][Taps][Taps][lanes];
+  const float* blocks[N];
+  Stencil at_origin[N];
+  for (int n = 0; n < N; ++n) {
+    const int x0 = t[n][0].base;
+    const bool row_inside = x0 >= 0 && x0 + lanes <= s[0];
+    for (int kz = 0; kz < Taps; ++kz)
+      for (int ky = 0; ky < Taps; ++ky) {
+        const int z = t[n][2].base + kz, y = t[n][1].base + ky;
+        float* dst = local[n][kz][ky];
+        if (z < 0 || z >= s[2] || y < 0 || y >= s[1]) {
+          std::fill(dst, dst + lanes, 0.f);
+        } else {
+          const float* row = v[n] + z * plane + std::size_t(y) * s[0];
+          if (row_inside)
+            std::memcpy(dst, row + x0, sizeof(Row));
+          else
+            for (int k = 0; k < lanes; ++k) dst[k] = x0 + k >= 0 && x0 + k < s[0] ? row[x0 + k] : 0.f;
+        }
       }
-      zsum += ty.w[ky] * ysum;
-    }
-    total += tz.w[kz] * zsum;
+    blocks[n] = &local[n][0][0][0];
+    at_origin[n] = t[n];
+    for (auto& axis : at_origin[n]) axis.base = 0;
   }
-  return total;
+  sum_rows<N, Taps, Row>(blocks, {lanes, Taps, Taps}, at_origin, out);
 }
 
 // One sample of the sinc anywhere; voxels outside the volume count as 0.
 [[gnu::always_inline]] inline float sample(const float* v, const std::array<int, 3>& s, const Stencil& t) {
-  if (inside(s, t)) {
-    float out;
+  float out;
+  if (inside(s, t))
     sum_rows<1, sinc_taps, Lanes8>(&v, s, &t, &out);
-    return out;
-  }
-  return sum_clipped<sinc_taps>(v, s, t);
+  else
+    sum_rows_clipped<1, sinc_taps, Lanes8>(&v, s, &t, &out);
+  return out;
 }
 
 using Located = std::pair<int, double>;
@@ -231,8 +242,10 @@ struct Sinc7 {
                                                    float* out) {
     sum_rows<N, sinc_taps, Lanes8>(v, s, t, out);
   }
-  [[gnu::always_inline]] static float sample(const float* v, const std::array<int, 3>& s, const Stencil& t) {
-    return piv::sample(v, s, t);
+  template <int N>
+  [[gnu::always_inline]] static void sample_clipped(const float* const* v, const std::array<int, 3>& s,
+                                                    const Stencil* t, float* out) {
+    sum_rows_clipped<N, sinc_taps, Lanes8>(v, s, t, out);
   }
 };
 
@@ -263,8 +276,10 @@ struct Cubic4 {
                                                    float* out) {
     sum_rows<N, taps, Floats4>(v, s, t, out);
   }
-  [[gnu::always_inline]] static float sample(const float* v, const std::array<int, 3>& s, const Stencil& t) {
-    return sum_clipped<taps>(v, s, t);
+  template <int N>
+  [[gnu::always_inline]] static void sample_clipped(const float* const* v, const std::array<int, 3>& s,
+                                                    const Stencil* t, float* out) {
+    sum_rows_clipped<N, taps, Floats4>(v, s, t, out);
   }
 };
 
@@ -294,18 +309,19 @@ template <class Kernel>
       t[2 * i + 1] = kernel.stencil(x + hx, y + hy, z + hz);
       all_inside = all_inside && Kernel::inside(shape, t[2 * i]) && Kernel::inside(shape, t[2 * i + 1]);
     }
+    // A stencil past a face is summed from a zero-padded copy (sum_rows_clipped), with the same
+    // arithmetic, so either path gives a sample the same bits.
+    float out[samples];
     if (all_inside) {
-      float out[samples];
       Kernel::template sample_inside<samples>(src, shape, t, out);
-      for (int i = 0; i < n; ++i) {
-        a_out[x0 + i] = out[2 * i];
-        b_out[x0 + i] = out[2 * i + 1];
-      }
+    } else if (n == block_voxels) {
+      Kernel::template sample_clipped<samples>(src, shape, t, out);
     } else {
-      for (int i = 0; i < n; ++i) {
-        a_out[x0 + i] = Kernel::sample(a, shape, t[2 * i]);
-        b_out[x0 + i] = Kernel::sample(b, shape, t[2 * i + 1]);
-      }
+      for (int k = 0; k < 2 * n; ++k) Kernel::template sample_clipped<1>(src + k, shape, t + k, out + k);
+    }
+    for (int i = 0; i < n; ++i) {
+      a_out[x0 + i] = out[2 * i];
+      b_out[x0 + i] = out[2 * i + 1];
     }
   }
 }

@@ -242,6 +242,55 @@ TEST(Deform, CubicReproducesAQuadraticAndAZeroShift) {
   EXPECT_EQ(db, v);
 }
 
+// Voxels beyond the faces count as zero, with the arithmetic of a stencil inside: the volume
+// deformed as it is and a copy padded with zeros (the predictor moved with it) give the same bits
+// over the original voxels, though there every stencil near a face lies inside. With either
+// interpolator, and a predictor varying enough to mix both kinds of stencil in one block.
+TEST(Deform, AStencilPastAFaceGivesTheBitsOfAZeroPaddedVolume) {
+  const std::array<int, 3> shape{23, 14, 12};
+  constexpr int pad = 8;
+  const std::array<int, 3> padded{shape[0] + 2 * pad, shape[1] + 2 * pad, shape[2] + 2 * pad};
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> value(0.f, 1.f), shift(-3.f, 3.f);
+  std::vector<float> a(std::size_t(shape[0]) * shape[1] * shape[2]), b(a.size());
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    a[i] = value(rng);
+    b[i] = value(rng);
+  }
+  const auto index = [](const std::array<int, 3>& s, int x, int y, int z) {
+    return (std::size_t(z) * s[1] + y) * s[0] + x;
+  };
+  std::vector<float> pa(std::size_t(padded[0]) * padded[1] * padded[2], 0.f), pb(pa.size(), 0.f);
+  for (int z = 0; z < shape[2]; ++z)
+    for (int y = 0; y < shape[1]; ++y)
+      for (int x = 0; x < shape[0]; ++x) {
+        pa[index(padded, x + pad, y + pad, z + pad)] = a[index(shape, x, y, z)];
+        pb[index(padded, x + pad, y + pad, z + pad)] = b[index(shape, x, y, z)];
+      }
+  NodeField pred({4, 3, 3}, {0, 0, 0}, {7, 6.5, 5.5});
+  for (int c = 0; c < 3; ++c)
+    for (float& d : pred.d[c]) d = shift(rng);
+  NodeField pred_padded = pred;
+  pred_padded.first = {pad, pad, pad};
+  for (const Interpolation how : {Interpolation::sinc, Interpolation::cubic}) {
+    const char* name = how == Interpolation::sinc ? "sinc" : "cubic";
+    std::vector<float> da(a.size()), db(a.size()), pda(pa.size()), pdb(pa.size());
+    deform_pair(a, b, shape, pred, da, db, how);
+    deform_pair(pa, pb, padded, pred_padded, pda, pdb, how);
+    std::size_t differ = 0, nonzero = 0;
+    for (int z = 0; z < shape[2]; ++z)
+      for (int y = 0; y < shape[1]; ++y)
+        for (int x = 0; x < shape[0]; ++x) {
+          const std::size_t i = index(shape, x, y, z), j = index(padded, x + pad, y + pad, z + pad);
+          differ +=
+              std::memcmp(&da[i], &pda[j], sizeof(float)) != 0 || std::memcmp(&db[i], &pdb[j], sizeof(float)) != 0;
+          nonzero += da[i] != 0.f;
+        }
+    EXPECT_EQ(differ, 0u) << name;
+    EXPECT_GT(nonzero, a.size() / 2) << name << ": the deformed volume holds the signal";
+  }
+}
+
 TEST(Deform, MeanFloorSubtractsAMultipleOfTheMeanAndClipsAtZero) {
   const std::array<int, 3> shape{4, 3, 2};
   std::vector<float> in(24);
