@@ -46,25 +46,39 @@ ImageF geometric_white_image(const optics::CameraModel& camera, const optics::Mi
   for (std::size_t lens = 0; lens < spots.size(); ++lens) {
     for (int y = rows[lens][0]; y <= rows[lens][1]; ++y) row_lenses[fill[std::size_t(y)]++] = std::uint32_t(lens);
   }
+  // A pixel wholly inside (its centre within radius - 0.75) or outside (beyond radius + 0.75) is
+  // told apart by its squared distance, with a margin that leaves hypot's answer to the pixels
+  // near either bound; only the pixels between are sub-sampled.
+  const double radius_sq = radius_px * radius_px;
+  const double inner = radius_px - 0.75, outer = radius_px + 0.75, margin = 1e-9 * outer * outer;
+  const double inner_sq = inner > 0 ? inner * inner : -1.0, outer_sq = outer * outer;
   tbb::parallel_for(0, s.height_px, [&](int y) {
     for (std::uint32_t k = row_start[std::size_t(y)]; k < row_start[std::size_t(y) + 1]; ++k) {
       const Spot& p = spots[row_lenses[k]];
+      const double dy = y - p.cy;
       for (int x = p.x0; x <= p.x1; ++x) {
-        const double d = std::hypot(x - p.cx, y - p.cy);
+        const double dx = x - p.cx, d_sq = dx * dx + dy * dy;
         double fraction;
-        if (d <= radius_px - 0.75) {
+        if (d_sq < inner_sq - margin) {
           fraction = 1.0;
-        } else if (d >= radius_px + 0.75) {
+        } else if (d_sq > outer_sq + margin) {
+          continue;
+        } else if (const double d = std::hypot(dx, dy); d <= inner) {
+          fraction = 1.0;
+        } else if (d >= outer) {
           continue;
         } else {
-          int inside = 0;
-          for (int j = 0; j < kSub; ++j) {
-            for (int i = 0; i < kSub; ++i) {
-              const double px = x - 0.5 + (i + 0.5) / kSub - p.cx;
-              const double py = y - 0.5 + (j + 0.5) / kSub - p.cy;
-              inside += px * px + py * py <= radius_px * radius_px;
-            }
+          // The squared offsets of the sub-samples' columns and rows from the lens's centre, each
+          // computed once: the sum of two of them is the sub-sample's squared distance.
+          std::array<double, kSub> px_sq, py_sq;
+          for (int i = 0; i < kSub; ++i) {
+            const double px = x - 0.5 + (i + 0.5) / kSub - p.cx, py = y - 0.5 + (i + 0.5) / kSub - p.cy;
+            px_sq[std::size_t(i)] = px * px;
+            py_sq[std::size_t(i)] = py * py;
           }
+          int inside = 0;
+          for (int j = 0; j < kSub; ++j)
+            for (int i = 0; i < kSub; ++i) inside += px_sq[std::size_t(i)] + py_sq[std::size_t(j)] <= radius_sq;
           fraction = double(inside) / (kSub * kSub);
         }
         float& w = white.at(x, y);
