@@ -161,10 +161,12 @@ template <int N, int Taps, class Row, class Stencil>
         float* dst = local[n][kz][ky];
         if (z < 0 || z >= s[2] || y < 0 || y >= s[1]) {
           std::fill(dst, dst + lanes, 0.f);
-        } else if (k0 == 0 && k1 == lanes) {
-          std::memcpy(dst, v[n] + z * plane + std::size_t(y) * s[0] + x0, sizeof(Row));
+          continue;
+        }
+        const float* row = v[n] + z * plane + std::size_t(y) * s[0];
+        if (k0 == 0 && k1 == lanes) {
+          std::memcpy(dst, row + x0, sizeof(Row));
         } else {
-          const float* row = v[n] + z * plane + std::size_t(y) * s[0];
           // Either way zeros beside the voxels inside; per width the form the compiler makes faster.
           if constexpr (lanes > 4) {
             std::fill(dst, dst + lanes, 0.f);
