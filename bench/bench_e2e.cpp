@@ -8,6 +8,7 @@
 //             [--passes P] [--steady] [--time-sweep] [--z-centre MM] [--compare-passes 'P1;P2;...']
 //             [--prune-threshold F [--prune-scope volume|slice]]
 //             [--sparse-sweep [--sparse-repeats N] [--sparse-variants V,..]]
+//             [--live B,K,N,P ... [--live-only]]
 //     --iterations/--mu/--accelerate/--dark-cutoff: MART for the headline rows (default the
 //              paper's 5 at mu 0.5, not accelerated, MartSettings' dark-pixel cutoff; the sweep's
 //              rows still start from the paper's settings).
@@ -18,7 +19,9 @@
 //              binned K x K (reconstruction.pixel_binning), N MART iterations, passes P (--passes
 //              syntax, windows in its voxels); its set-up, first and in-a-run time per pair and its
 //              errors in the headline's voxels (axis band: half its final window) (row
-//              variant=live). Repeat for several tiers.
+//              variant=live), beside the same passes on exact-particle volumes of its grid
+//              (exact_*). Repeat for several tiers.
+//     --live-only: the --live tiers alone (with --no-sweep), without the headline rows.
 //     --prune-threshold: MART's prune threshold for the headline rows (default 0: exact zeros);
 //              --prune-scope: of the volume's peak (default) or of each depth slice's.
 //     --sparse-sweep: the headline settings with pruning off, on for exact zeros, and at thresholds
@@ -155,7 +158,7 @@ int main(int argc, char** argv) {
   double intensity_threshold = piv::CorrelationSettings{}.intensity_threshold_of_mean;
   int final_smoothing = piv::CorrelationSettings{}.final_smoothing;
   int depth_prefilter = piv::CorrelationSettings{}.depth_prefilter;
-  bool steady = false, time_sweep = false, sparse_sweep = false;
+  bool steady = false, time_sweep = false, sparse_sweep = false, live_only = false;
   int sparse_repeats = 1;
   std::string sparse_variants;  // empty: all
   double prune_threshold = recon::MartSettings{}.prune_threshold;
@@ -206,6 +209,8 @@ int main(int argc, char** argv) {
       passes = argv[++i];
     else if (!std::strcmp(argv[i], "--live") && i + 1 < argc)
       live.push_back(argv[++i]);
+    else if (!std::strcmp(argv[i], "--live-only"))
+      live_only = true;
     else
       scale = argv[i];
   }
@@ -233,11 +238,15 @@ int main(int argc, char** argv) {
                  "[--dark-cutoff F] [--sensor-blur-mm S] [--intensity-threshold K] [--final-smoothing K] "
                  "[--depth-prefilter K] [--passes P] [--steady] [--time-sweep] [--z-centre MM] [--compare-passes "
                  "'P1;P2'] [--prune-threshold F [--prune-scope volume|slice]] [--sparse-sweep [--sparse-repeats N] "
-                 "[--sparse-variants V,..]]\n");
+                 "[--sparse-variants V,..]] [--live B,K,N,P [--live-only]]\n");
     return 2;
   }
   if (prune_scope != "volume" && prune_scope != "slice") {
     std::fprintf(stderr, "bench_e2e: --prune-scope must be volume or slice, got %s\n", prune_scope.c_str());
+    return 2;
+  }
+  if (live_only && (sweep || live.empty())) {
+    std::fprintf(stderr, "bench_e2e: --live-only needs --no-sweep and at least one --live tier\n");
     return 2;
   }
   const std::string dir = std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/";
@@ -290,6 +299,63 @@ int main(int argc, char** argv) {
   };
   const ImageF a = render(pa, 1), b = render(pb, 2);
   const double render_s = now_s() - t;
+
+  // The --live tiers, each with its own processor; false on a malformed tier.
+  const auto run_live_tiers = [&]() -> bool {
+    for (const std::string& tier : live) {
+      // A live tier: the same pair and box in coarser voxels from binned pixels, fewer iterations,
+      // its own passes.
+      const std::size_t c1 = tier.find(','), c2 = tier.find(',', c1 + 1), c3 = tier.find(',', c2 + 1);
+      if (c1 == std::string::npos || c2 == std::string::npos || c3 == std::string::npos) {
+        std::fprintf(stderr, "bench_e2e: --live B,K,N,P (voxel factor, pixel binning, iterations, passes), not '%s'\n",
+                     tier.c_str());
+        return false;
+      }
+      const int voxel_factor = std::stoi(tier.substr(0, c1));
+      process::ProcessSettings s = settings;
+      const double lv = voxel_factor * voxel;
+      s.grid = process::grid_for_extent({-hx, -hy, z_centre - hz}, {hx, hy, z_centre + hz}, {lv, lv, lv}, "bench live");
+      s.pixel_binning = std::stoi(tier.substr(c1 + 1, c2 - c1 - 1));
+      s.mart.iterations = std::stoi(tier.substr(c2 + 1, c3 - c2 - 1));
+      s.correlation.passes = piv::parse_passes(tier.substr(c3 + 1));
+      t = now_s();
+      const process::PairProcessor live_processor(camera, nominal, s);
+      const double setup_s = now_s() - t;
+      t = now_s();
+      const auto first = live_processor.process(a, b);
+      const double first_wall_s = now_s() - t;
+      t = now_s();
+      const auto again = live_processor.process(a, b);
+      const double wall_s = now_s() - t;
+      const double band = 0.5 * s.correlation.passes.back().window[0] * lv;
+      const Errors el = errors_against(again.correlation.field, flow, voxel, band);
+      // The same correlation on exact-particle volumes of this grid: what the tier's voxels and
+      // passes allow before any reconstruction error.
+      const auto exact = piv::correlate_volumes(sim::render_exact_volume(s.grid, pa),
+                                                sim::render_exact_volume(s.grid, pb), s.correlation);
+      const Errors ex = errors_against(exact.field, flow, voxel, band);
+      std::printf(
+          "bench=e2e case=%s variant=live binning=%d pixel_binning=%d voxels=%zu iterations=%d passes=%s setup_s=%.2f "
+          "first_wall_s=%.2f "
+          "wall_s=%.2f first_pair_s=%.2f pair_s=%.2f recon_a_s=%.2f recon_b_s=%.2f correlate_s=%.2f rms_u=%.3f "
+          "rms_v=%.3f rms_w=%.3f rms=%.3f "
+          "valid=%.3f off_axis_band_mm=%.2f off_axis_band_rms_u=%.3f off_axis_band_rms_v=%.3f off_axis_band_rms_w=%.3f "
+          "off_axis_band_gain_u=%.3f off_axis_band_gain_v=%.3f off_axis_band_gain_w=%.3f "
+          "exact_off_axis_band_rms_u=%.3f exact_off_axis_band_rms_v=%.3f exact_off_axis_band_rms_w=%.3f "
+          "peak_rss_gb=%.2f\n",
+          scale.c_str(), voxel_factor, s.pixel_binning, s.grid.count(), s.mart.iterations, tier.substr(c3 + 1).c_str(),
+          setup_s, first_wall_s, wall_s,
+          first.times.reconstruct_a_s + first.times.reconstruct_b_s + first.times.correlate_s,
+          again.times.reconstruct_a_s + again.times.reconstruct_b_s + again.times.correlate_s,
+          again.times.reconstruct_a_s, again.times.reconstruct_b_s, again.times.correlate_s, el.rms[0], el.rms[1],
+          el.rms[2], el.total, el.valid_fraction, band, el.off_band[0], el.off_band[1], el.off_band[2],
+          el.off_band_gain[0], el.off_band_gain[1], el.off_band_gain[2], ex.off_band[0], ex.off_band[1], ex.off_band[2],
+          bench::peak_rss_gb());
+      std::fflush(stdout);
+    }
+    return true;
+  };
+  if (live_only) return run_live_tiers() ? 0 : 2;
 
   t = now_s();
   // The headline goes through the owner every caller uses (process::PairProcessor); the variants
@@ -367,49 +433,7 @@ int main(int argc, char** argv) {
     std::fflush(stdout);
   }
 
-  for (const std::string& tier : live) {
-    // A live tier: the same pair and box in coarser voxels from binned pixels, fewer iterations,
-    // its own passes.
-    const std::size_t c1 = tier.find(','), c2 = tier.find(',', c1 + 1), c3 = tier.find(',', c2 + 1);
-    if (c1 == std::string::npos || c2 == std::string::npos || c3 == std::string::npos) {
-      std::fprintf(stderr, "bench_e2e: --live B,K,N,P (voxel factor, pixel binning, iterations, passes), not '%s'\n",
-                   tier.c_str());
-      return 2;
-    }
-    const int voxel_factor = std::stoi(tier.substr(0, c1));
-    process::ProcessSettings s = settings;
-    const double lv = voxel_factor * voxel;
-    s.grid = process::grid_for_extent({-hx, -hy, z_centre - hz}, {hx, hy, z_centre + hz}, {lv, lv, lv}, "bench live");
-    s.pixel_binning = std::stoi(tier.substr(c1 + 1, c2 - c1 - 1));
-    s.mart.iterations = std::stoi(tier.substr(c2 + 1, c3 - c2 - 1));
-    s.correlation.passes = piv::parse_passes(tier.substr(c3 + 1));
-    t = now_s();
-    const process::PairProcessor live_processor(camera, nominal, s);
-    const double setup_s = now_s() - t;
-    t = now_s();
-    const auto first = live_processor.process(a, b);
-    const double first_wall_s = now_s() - t;
-    t = now_s();
-    const auto again = live_processor.process(a, b);
-    const double wall_s = now_s() - t;
-    const double band = 0.5 * s.correlation.passes.back().window[0] * lv;
-    const Errors el = errors_against(again.correlation.field, flow, voxel, band);
-    std::printf(
-        "bench=e2e case=%s variant=live binning=%d pixel_binning=%d voxels=%zu iterations=%d passes=%s setup_s=%.2f "
-        "first_wall_s=%.2f "
-        "wall_s=%.2f first_pair_s=%.2f pair_s=%.2f recon_a_s=%.2f recon_b_s=%.2f correlate_s=%.2f rms_u=%.3f "
-        "rms_v=%.3f rms_w=%.3f rms=%.3f "
-        "valid=%.3f off_axis_band_mm=%.2f off_axis_band_rms_u=%.3f off_axis_band_rms_v=%.3f off_axis_band_rms_w=%.3f "
-        "peak_rss_gb=%.2f\n",
-        scale.c_str(), voxel_factor, s.pixel_binning, s.grid.count(), s.mart.iterations, tier.substr(c3 + 1).c_str(),
-        setup_s, first_wall_s, wall_s,
-        first.times.reconstruct_a_s + first.times.reconstruct_b_s + first.times.correlate_s,
-        again.times.reconstruct_a_s + again.times.reconstruct_b_s + again.times.correlate_s,
-        again.times.reconstruct_a_s, again.times.reconstruct_b_s, again.times.correlate_s, el.rms[0], el.rms[1],
-        el.rms[2], el.total, el.valid_fraction, band, el.off_band[0], el.off_band[1], el.off_band[2],
-        bench::peak_rss_gb());
-    std::fflush(stdout);
-  }
+  if (!run_live_tiers()) return 2;
 
   // Baseline: exact-particle volumes through the same correlation (as the paper did).
   t = now_s();

@@ -620,19 +620,22 @@ def lane_rows(r):
 def t_live_tiers(R):
     r = R("e2e-full-live")
     full = r.one(variant="reconstructed")
+    exact = r.one(variant="exact_volumes") or {}
+    gains = lambda d: " / ".join(d.get(f"off_axis_band_gain_{c}", "?") for c in "uvw")
     rows = []
     if full:
         one_shot = sum(float(full[k]) for k in ("recon_a_s", "recon_b_s", "correlate_s"))
         rows.append(["the full settings (run-paper.yaml)", "0.125 mm, 1 x 1", full["iterations"],
                      "32@50,16@50+4,16@50,16@50,16@75", f"{one_shot:.2f} (one-shot)", uvw(full),
-                     uvw(full, "off_axis_band_rms_")])
+                     uvw(full, "off_axis_band_rms_"), gains(full), uvw(exact, "off_axis_band_rms_") if exact else "—"])
     for d in r.find(variant="live"):
         b, k, n, p = d["binning"], d["pixel_binning"], d["iterations"], d["passes"]
         label = "**live (run-paper.yaml)**" if f"{b},{k},{n},{p}" == RUN_PAPER_LIVE else "live"
         rows.append([label, f"{0.125 * int(b):g} mm, {k} x {k}", n, p, f"{d['pair_s']} (first {d['first_pair_s']})",
-                     uvw(d), uvw(d, "off_axis_band_rms_")])
+                     uvw(d), uvw(d, "off_axis_band_rms_"), gains(d), uvw(d, "exact_off_axis_band_rms_")])
     out = table(["tier", "voxel, pixel binning", "MART it", "passes", "s per pair in a run",
-                 "RMS u / v / w, 0.125 mm voxels", "off the axis band"], rows)
+                 "RMS u / v / w, 0.125 mm voxels", "off the axis band", "gain u / v / w (off the band)",
+                 "exact particles on its grid (off the band)"], rows)
     return out + ["", r.provenance()]
 
 
