@@ -99,18 +99,10 @@ __attribute__((target("avx2"), always_inline)) inline void dot_quads2_avx2(const
 }
 
 using Rows = float __attribute__((vector_size(kSubRows * sizeof(float))));
-using RowBits = std::int32_t __attribute__((vector_size(kSubRows * sizeof(std::int32_t))));
 
-// acc[l] += w[l] · (column l of a quad, kSubRows rows), skipping zero weights.
-__attribute__((always_inline)) inline void dot_quad(Rows* acc, const float* at, const float* w) {
-#pragma GCC unroll 4
-  for (int l = 0; l < kQuad; ++l) {
-    if (w[l] == 0.f) continue;
-    Rows p;
-    __builtin_memcpy(&p, at + l * kSubRows, sizeof p);
-    acc[l] += p * w[l];
-  }
-}
+// The x stages multiply a quad's zero lanes (its padding, inside the row) like the others: each
+// adds ±0 (its pixel or row sum being finite) to a sum that started at +0 and so is never -0,
+// which leaves the sum's bits as skipping the lane would, without a compare and a branch per weight.
 
 // Projection stage 2 (add_columns in kernels.hpp), in every build.
 __attribute__((target_clones("avx512f", "avx2", "default"))) void add_columns_isa(float* band, std::size_t width,
@@ -131,7 +123,6 @@ __attribute__((target_clones("avx512f", "avx2", "default"))) void add_columns_is
           const float* w = j.w + kQuad * k;
 #pragma GCC unroll 4
           for (int l = 0; l < kQuad; ++l) {
-            if (w[l] == 0.f) continue;
             Rows p;
             __builtin_memcpy(&p, at + l * kSubRows, sizeof p);
             p += gv * w[l];
@@ -175,7 +166,6 @@ __attribute__((always_inline)) inline void dot_columns_rows(const float* const* 
   const auto dot_part = [](Part* acc, const float* at, const float* w) {
 #pragma GCC unroll 4
     for (int l = 0; l < kQuad; ++l) {
-      if (w[l] == 0.f) continue;
       Part p;
       __builtin_memcpy(&p, at + l * kSubRows, sizeof p);
       acc[l] += p * w[l];
