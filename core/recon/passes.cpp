@@ -214,23 +214,42 @@ void ActiveSet::back_project_images(const WeightingOperator& op, const std::arra
           const SliceTables& t = op.slice(columns_[visit.column].z);
           std::array<const float*, N> row_sum;
           for (std::size_t i = 0; i < N; ++i) row_sum[i] = padded_sums[i][v - v0].data() + kQuad;
-          for (std::size_t k = visit.entry_begin; k < visit.entry_end; ++k) {
-            const BandEntry& entry = entries_[k];
-            const int* first = t.y_quad_first.data() + entry.quad_begin;
-            const float* w = t.y_quad_weights.data() + kQuad * std::size_t(entry.quad_begin);
-            std::array<double, N> s{};
-            for (std::uint32_t q = 0; q < entry.quad_count; ++q) {
-              Lanes4 wq;
-              __builtin_memcpy(&wq, w + kQuad * q, sizeof wq);
-              const Doubles4 wd = __builtin_convertvector(wq, Doubles4);
-              for (std::size_t i = 0; i < N; ++i) {
-                Lanes4 bq;
-                __builtin_memcpy(&bq, row_sum[i] + (first[q] - r0), sizeof bq);
-                // Products of floats are exact in double: only the order of the adds matters.
-                const Doubles4 p = wd * __builtin_convertvector(bq, Doubles4);
-                s[i] = (((s[i] + p[0]) + p[1]) + p[2]) + p[3];
-              }
+          // Quad q of `entry` added to its sums s, lane after lane.
+          const auto add_quad = [&](const BandEntry& entry, std::uint32_t q, std::array<double, N>& s) {
+            const std::uint32_t at = entry.quad_begin + q;
+            Lanes4 wq;
+            __builtin_memcpy(&wq, t.y_quad_weights.data() + kQuad * std::size_t(at), sizeof wq);
+            const Doubles4 wd = __builtin_convertvector(wq, Doubles4);
+            for (std::size_t i = 0; i < N; ++i) {
+              Lanes4 bq;
+              __builtin_memcpy(&bq, row_sum[i] + (t.y_quad_first[at] - r0), sizeof bq);
+              // Products of floats are exact in double: only the order of the adds matters.
+              const Doubles4 p = wd * __builtin_convertvector(bq, Doubles4);
+              s[i] = (((s[i] + p[0]) + p[1]) + p[2]) + p[3];
             }
+          };
+          // Two voxels at a time, their quads side by side: each sum is one chain of dependent
+          // adds in a fixed order, and two independent chains keep the adder busy.
+          std::size_t k = visit.entry_begin;
+          for (; k + 2 <= visit.entry_end; k += 2) {
+            const BandEntry &a = entries_[k], &b = entries_[k + 1];
+            std::array<double, N> sa{}, sb{};
+            const std::uint32_t both = std::min(a.quad_count, b.quad_count);
+            for (std::uint32_t q = 0; q < both; ++q) {
+              add_quad(a, q, sa);
+              add_quad(b, q, sb);
+            }
+            for (std::uint32_t q = both; q < a.quad_count; ++q) add_quad(a, q, sa);
+            for (std::uint32_t q = both; q < b.quad_count; ++q) add_quad(b, q, sb);
+            for (std::size_t i = 0; i < N; ++i) {
+              sums[i * order_.size() + a.position] += sa[i];
+              sums[i * order_.size() + b.position] += sb[i];
+            }
+          }
+          if (k < visit.entry_end) {
+            const BandEntry& entry = entries_[k];
+            std::array<double, N> s{};
+            for (std::uint32_t q = 0; q < entry.quad_count; ++q) add_quad(entry, q, s);
             for (std::size_t i = 0; i < N; ++i) sums[i * order_.size() + entry.position] += s[i];
           }
         }
