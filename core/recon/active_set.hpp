@@ -68,7 +68,7 @@ class ActiveSet {
   // the band is in cache. Bands are numbered 0..band_count() - 1 and cover the image in order.
   using BandDone = std::function<void(int band, std::size_t first_pixel, std::size_t end_pixel)>;
   // Sizes and writes `workspace` for this set's passes (a projection on as many threads as the
-  // calling arena has, a two-image back-projection), so that they neither grow nor page-fault it.
+  // calling arena has, a back-projection), so that they neither grow nor page-fault it.
   void reserve(const WeightingOperator& op, Workspace& workspace) const;
   int band_count() const { return bands_; }
 
@@ -82,11 +82,6 @@ class ActiveSet {
   // pass and a buffer inside MART's loop).
   void back_project_whitened(const WeightingOperator& op, std::span<const float> whitened_image,
                              std::span<float> values, Workspace* workspace = nullptr) const;
-  // Two whitened images in one walk (MLOS needs the lit mask's and ln I's): each result has the
-  // same bits as its own back_project_whitened; the bookkeeping is paid once.
-  void back_project_whitened(const WeightingOperator& op, std::span<const float> whitened_a, std::span<float> values_a,
-                             std::span<const float> whitened_b, std::span<float> values_b,
-                             Workspace* workspace = nullptr) const;
 
  private:
   // One voxel column (z, x) of the set: its voxels are order_[begin, end), y increasing.
@@ -152,7 +147,7 @@ class ActiveSet {
   BigBuffer<Visit> visits_;
   BigBuffer<BandEntry> entries_;
 
-  // Back-projection of N whitened images at once (N = 1 or 2).
+  // Back-projection of N whitened images in one walk (the kernels take one or two; MART uses one).
   template <std::size_t N>
   void back_project_images(const WeightingOperator& op, const std::array<const float*, N>& images,
                            const std::array<float*, N>& values, Workspace& workspace) const;

@@ -126,7 +126,7 @@ std::size_t MartWorkspace::bytes() const {
   const detail::MartBuffers& b = *buffers_;
   std::size_t total = 0;
   for (const auto* v :
-       {&b.data, &b.log_data, &b.projection, &b.ratio, &b.e, &b.update, &b.weight, &b.last, &b.log_last, &b.momentum}) {
+       {&b.data, &b.log_data, &b.projection, &b.ratio, &b.e, &b.update, &b.last, &b.log_last, &b.momentum}) {
     total += v->capacity() * sizeof(float);
   }
   total += b.kernels.scaled.capacity() * sizeof(float) + b.kernels.sums.capacity() * sizeof(double);
@@ -153,7 +153,7 @@ void MartWorkspace::reserve(const WeightingOperator& op) {
   std::vector<std::uint32_t> all(voxels);
   for (std::size_t i = 0; i < voxels; ++i) all[i] = std::uint32_t(i);
   b.active.assign(op, std::move(all));
-  for (BigBuffer<float>* v : {&b.e, &b.update, &b.weight, &b.last, &b.log_last, &b.momentum}) v->assign(voxels, 0.f);
+  for (BigBuffer<float>* v : {&b.e, &b.update, &b.last, &b.log_last, &b.momentum}) v->assign(voxels, 0.f);
   b.origin.assign(voxels, 0);
   b.above_cut.assign(voxels, 0);  // read only with MartSettings::prune_depth_reach, which reserve() does not know
   for (BigBuffer<float>* v : {&b.data, &b.log_data, &b.projection, &b.ratio}) v->assign(pixels, 0.f);

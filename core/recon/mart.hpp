@@ -170,7 +170,7 @@ struct MartResult {
   bool converged = false;
   double setup_seconds = 0;  // active set and start
   // The setup's parts (wall seconds): choosing the active voxels, grouping them for the kernels
-  // (ActiveSet), and the MLOS start (one two-image back-projection, one projection).
+  // (ActiveSet), and the MLOS start (one back-projection).
   double select_seconds = 0, active_set_seconds = 0, start_seconds = 0;
   // Wall seconds spent pruning (MartSettings::prune), most of it laying out the smaller active
   // sets; inside the iterations' seconds, apart from the prune after the start.

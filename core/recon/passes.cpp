@@ -43,12 +43,12 @@ void run_costliest_first(const std::vector<int>& items, F&& f) {
 }  // namespace
 
 void ActiveSet::reserve(const WeightingOperator& op, Workspace& workspace) const {
-  // The sizes project and back_project_images give these buffers (N = 2 images).
+  // The sizes project and back_project_images give these buffers (N = 1 image).
   const std::size_t band_size = std::size_t(kBandRows) * std::size_t(op.image_width());
   workspace.scaled.assign(order_.size(), 0.f);
-  workspace.sums.assign(2 * order_.size(), 0.0);
+  workspace.sums.assign(order_.size(), 0.0);
   workspace.band_lanes.assign(std::size_t(tbb::this_task_arena::max_concurrency()) * band_size, 0.f);
-  workspace.image_lanes.assign(2 * std::size_t(bands_) * band_size, 0.f);
+  workspace.image_lanes.assign(std::size_t(bands_) * band_size, 0.f);
 }
 
 void ActiveSet::project(const WeightingOperator& op, std::span<const float> values, std::span<float> image,
@@ -143,14 +143,6 @@ void ActiveSet::back_project_whitened(const WeightingOperator& op, std::span<con
                                       std::span<float> values, Workspace* workspace) const {
   Workspace local;
   back_project_images<1>(op, {image.data()}, {values.data()}, workspace ? *workspace : local);
-}
-
-void ActiveSet::back_project_whitened(const WeightingOperator& op, std::span<const float> whitened_a,
-                                      std::span<float> values_a, std::span<const float> whitened_b,
-                                      std::span<float> values_b, Workspace* workspace) const {
-  Workspace local;
-  back_project_images<2>(op, {whitened_a.data(), whitened_b.data()}, {values_a.data(), values_b.data()},
-                         workspace ? *workspace : local);
 }
 
 template <std::size_t N>

@@ -135,19 +135,20 @@ void SmartSolver::start() {
 void SmartSolver::start_mlos() {
   const BigBuffer<float>& data = b_.data;
   BigBuffer<float>& e = b_.e;
-  // The weighted geometric mean of the lit pixels a voxel sees (dark ones below the cutoff
-  // carry no ln I), renormalised over those pixels. The lit mask and ln I, each times the white
-  // image, in the ratio and projection buffers (not yet in use), back-projected in one walk.
-  BigBuffer<float>& weight = b_.weight;  // written in full by the back-projection
-  fit(weight, n_);
+  // The weighted geometric mean of the pixels a voxel sees (multiplicative line of sight), each
+  // dark pixel at the floor it recorded at most, as the iterations take it (ratio_band): ln E_j =
+  // Σ_i W_ij white_i ln max(I_i, floor) / n_j, one back-projection of ln I times the white image
+  // (in the projection buffer, not yet in use). n_j = Σ_i W_ij white_i, so an image scaled by c
+  // scales every voxel by c, which the scale to the image's light below undoes.
+  const float log_floor = std::log(dark_floor_);
   for_pixels(data.size(), [&](std::size_t i0, std::size_t i1) {
-    for (std::size_t i = i0; i < i1; ++i) {
-      b_.ratio[i] = (data[i] > 0.f ? 1.f : 0.f) * white_[i];
-      b_.projection[i] = log_pixel(data[i]) * white_[i];
-    }
+    for (std::size_t i = i0; i < i1; ++i)
+      b_.projection[i] = (data[i] > 0.f ? log_pixel(data[i]) : log_floor) * white_[i];
   });
-  active_.back_project_whitened(op_, b_.ratio, weight, b_.projection, b_.update, &b_.kernels);
-  for_voxels([&](std::size_t m) { e[m] = weight[m] > 0.f ? clean(bounded_exp(b_.update[m] / weight[m])) : 0.f; });
+  active_.back_project_whitened(op_, b_.projection, b_.update, &b_.kernels);
+  // A voxel that sees no pixel (n_j = 0) is left out of the passes and stays 0.
+  const std::vector<std::uint32_t>& voxels = active_.voxels();
+  for_voxels([&](std::size_t m) { e[m] = op_.normaliser(voxels[m]) > 0.f ? clean(bounded_exp(b_.update[m])) : 0.f; });
   // Scale to the image's total light so the first ratios are near 1. The projection's total is
   // Σ_j E_j (eq 13 makes each voxel's weights sum to 1 over the sensor), so no projection is
   // needed; the two totals differ by the projection's float rounding only (docs/recon.md,

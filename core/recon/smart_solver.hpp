@@ -24,8 +24,8 @@ struct MartBuffers {
   std::atomic<bool> busy{false};
   // Per sensor pixel: the thresholded image, ln I, W E and white · ln(I / W E).
   BigBuffer<float> data, log_data, projection, ratio;
-  // Per active voxel: E, the back-projected update, MLOS's weight, and the momentum's three.
-  BigBuffer<float> e, update, weight, last, log_last, momentum;
+  // Per active voxel: E, the back-projected update, and the momentum's three.
+  BigBuffer<float> e, update, last, log_last, momentum;
   // Per live voxel: its position in the active set the start had (pruning keeps the order).
   BigBuffer<std::uint32_t> origin;
   // Per voxel of the box: 1 where a live voxel is above the prune cut (MartSettings::prune_depth_reach).

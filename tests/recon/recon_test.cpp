@@ -227,15 +227,6 @@ TEST(WeightsActiveSet, SubsetOnAWideGridEqualsExplicitColumns) {
   std::cout << "measured: subset back-projection relative difference "
             << max_abs_diff(back, expected) / max_abs(expected) << "\n";
   EXPECT_LE(max_abs_diff(back, expected) / max_abs(expected), 1e-4);
-  // Two images in one walk (MLOS) give each the bits of its own back-projection.
-  std::vector<float> y2(op.pixel_count()), one_a(subset.size()), one_b(subset.size()), two_a(subset.size()),
-      two_b(subset.size());
-  for (float& v : y2) v = u(rng);
-  set.back_project_whitened(op, y, one_a);
-  set.back_project_whitened(op, y2, one_b);
-  set.back_project_whitened(op, y, two_a, y2, two_b);
-  EXPECT_EQ(0, std::memcmp(one_a.data(), two_a.data(), one_a.size() * sizeof(float)));
-  EXPECT_EQ(0, std::memcmp(one_b.data(), two_b.data(), one_b.size() * sizeof(float)));
 }
 
 TEST_F(Weights, RaySamplingFollowsSection52) {
