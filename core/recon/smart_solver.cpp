@@ -139,8 +139,10 @@ void SmartSolver::start_mlos() {
   // dark pixel at the floor it recorded at most, as the iterations take it (ratio_band): ln E_j =
   // Σ_i W_ij white_i ln max(I_i, floor) / n_j, one back-projection of ln I times the white image
   // (in the projection buffer, not yet in use). n_j = Σ_i W_ij white_i, so an image scaled by c
-  // scales every voxel by c, which the scale to the image's light below undoes.
-  const float log_floor = std::log(dark_floor_);
+  // scales every voxel by c, which the scale to the image's light below undoes. The floor's log is
+  // bounded as a lit pixel's is (log_pixel): half the faintest pixel of an image near the float
+  // limit can round to 0.
+  const float log_floor = std::log(std::max(dark_floor_, kTiny));
   for_pixels(data.size(), [&](std::size_t i0, std::size_t i1) {
     for (std::size_t i = i0; i < i1; ++i)
       b_.projection[i] = (data[i] > 0.f ? log_pixel(data[i]) : log_floor) * white_[i];

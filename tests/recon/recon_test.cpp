@@ -562,6 +562,34 @@ TEST_F(Mart, RejectsNaNAndNegativePixelsAndBadSettings) {
   }
 }
 
+// The MLOS start takes a dark pixel at the floor (half the faintest lit pixel here), which scales
+// with the image, and n_j = Σ W white, so the start, and with it every iteration, scales with the
+// image: a camera's units (12-bit counts, 16-bit, a float image in 0..1) change no particle.
+TEST_F(Mart, TheVolumeScalesWithTheImage) {
+  // The particles' faint fringes dark (below 5 % of the peak), so that active voxels see dark
+  // pixels beside lit ones.
+  ImageF image = project_image(*op_, truth(), 1000.f);
+  const float image_peak = *std::max_element(image.pixels.begin(), image.pixels.end());
+  for (float& v : image.pixels) v = v < 0.05f * image_peak ? 0.f : v;
+  MartSettings s;
+  s.iterations = 3;
+  const Volume reference = reconstruct(*op_, image, s).volume;
+  double peak = 0;
+  for (float v : reference.data) peak = std::max(peak, double(v));
+  ASSERT_GT(peak, 0);
+  for (const float c : {1e-3f, 16.f}) {
+    ImageF scaled = image;
+    for (float& v : scaled.pixels) v *= c;
+    const Volume volume = reconstruct(*op_, scaled, s).volume;
+    double worst = 0;
+    for (std::size_t j = 0; j < volume.data.size(); ++j)
+      worst = std::max(worst, std::abs(double(volume.data[j]) / c - double(reference.data[j])) / peak);
+    std::cout << "measured: image x " << c << ", largest difference of volume / " << c << " " << worst
+              << " of the peak\n";
+    EXPECT_LT(worst, 1e-5) << "image x " << c;
+  }
+}
+
 TEST_F(Mart, IdenticalVolumesAtOneAndTwoThreads) {
   const ImageF image = project_image(*op_, truth(), 1000.f);
   for (const bool accelerate : {false, true}) {
