@@ -5,7 +5,8 @@
 //
 //   bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate]
 //             [--dark-cutoff F] [--intensity-threshold K] [--final-smoothing K] [--depth-prefilter K]
-//             [--passes P] [--steady] [--time-sweep] [--z-centre MM] [--compare-passes 'P1;P2;...']
+//             [--passes P] [--early-interpolation sinc|cubic] [--steady] [--time-sweep] [--z-centre MM]
+//             [--compare-passes 'P1;P2;...']
 //             [--prune-threshold F [--prune-scope volume|slice]]
 //             [--sparse-sweep [--sparse-repeats N] [--sparse-variants V,..]]
 //             [--live B,K,N,P ... [--live-only]]
@@ -14,6 +15,8 @@
 //              rows still start from the paper's settings).
 //     --time-sweep: MART iterations and the ghost floor against time per pair at this scale (with
 //              --no-sweep; ten pairs in a kept workspace; rows marked pareto= for plot_e2e.py).
+//     --early-interpolation: the deformation of the passes before the last (correlation's
+//              early_interpolation; default the sinc); the variants correlate with the other one.
 //     --steady: the headline pair once more in the kept MART workspace (time per pair in a run).
 //     --live B,K,N,P: a live tier beside the headline: voxels B times as large (the same box), pixels
 //              binned K x K (reconstruction.pixel_binning), N MART iterations, passes P (--passes
@@ -163,8 +166,9 @@ int main(int argc, char** argv) {
   std::string sparse_variants;  // empty: all
   double prune_threshold = recon::MartSettings{}.prune_threshold;
   std::string prune_scope = "volume";
-  std::string compare_passes;     // pass lists separated by ';'
-  std::string passes;             // the headline's passes (--passes syntax); empty: core/piv's default
+  std::string compare_passes;  // pass lists separated by ';'
+  std::string passes;          // the headline's passes (--passes syntax); empty: core/piv's default
+  piv::Interpolation early_interpolation = piv::CorrelationSettings{}.early_interpolation;
   std::vector<std::string> live;  // --live B,K,N,P, one per live tier
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--no-sweep"))
@@ -207,7 +211,14 @@ int main(int argc, char** argv) {
       compare_passes = argv[++i];
     else if (!std::strcmp(argv[i], "--passes") && i + 1 < argc)
       passes = argv[++i];
-    else if (!std::strcmp(argv[i], "--live") && i + 1 < argc)
+    else if (!std::strcmp(argv[i], "--early-interpolation") && i + 1 < argc) {
+      const std::string name = argv[++i];
+      if (name != "sinc" && name != "cubic") {
+        std::fprintf(stderr, "bench_e2e: --early-interpolation takes sinc or cubic, not '%s'\n", name.c_str());
+        return 2;
+      }
+      early_interpolation = name == "cubic" ? piv::Interpolation::cubic : piv::Interpolation::sinc;
+    } else if (!std::strcmp(argv[i], "--live") && i + 1 < argc)
       live.push_back(argv[++i]);
     else if (!std::strcmp(argv[i], "--live-only"))
       live_only = true;
@@ -215,6 +226,7 @@ int main(int argc, char** argv) {
       scale = argv[i];
   }
   if (sweep && (iterations != 5 || mu != 0.5 || accelerate || z_centre != 0.0 || !passes.empty() ||
+                early_interpolation != piv::CorrelationSettings{}.early_interpolation ||
                 dark_cutoff != recon::MartSettings{}.dark_weight_cutoff ||
                 sensor_blur_mm != recon::MartSettings{}.sensor_blur_sigma_mm ||
                 intensity_threshold != piv::CorrelationSettings{}.intensity_threshold_of_mean ||
@@ -224,7 +236,7 @@ int main(int argc, char** argv) {
     std::fprintf(stderr,
                  "bench_e2e: "
                  "--iterations/--mu/--accelerate/--dark-cutoff/--sensor-blur-mm/--intensity-threshold/"
-                 "--final-smoothing/--depth-prefilter/--passes/--z-centre change the "
+                 "--final-smoothing/--depth-prefilter/--passes/--early-interpolation/--z-centre change the "
                  "headline rows only; use them with --no-sweep\n");
     return 2;
   }
@@ -236,7 +248,8 @@ int main(int argc, char** argv) {
     std::fprintf(stderr,
                  "usage: bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate] "
                  "[--dark-cutoff F] [--sensor-blur-mm S] [--intensity-threshold K] [--final-smoothing K] "
-                 "[--depth-prefilter K] [--passes P] [--steady] [--time-sweep] [--z-centre MM] [--compare-passes "
+                 "[--depth-prefilter K] [--passes P] [--early-interpolation sinc|cubic] [--steady] [--time-sweep] "
+                 "[--z-centre MM] [--compare-passes "
                  "'P1;P2'] [--prune-threshold F [--prune-scope volume|slice]] [--sparse-sweep [--sparse-repeats N] "
                  "[--sparse-variants V,..]] [--live B,K,N,P [--live-only]]\n");
     return 2;
@@ -269,6 +282,7 @@ int main(int argc, char** argv) {
   settings.correlation.intensity_threshold_of_mean = intensity_threshold;
   settings.correlation.final_smoothing = final_smoothing;
   settings.correlation.depth_prefilter = depth_prefilter;
+  settings.correlation.early_interpolation = early_interpolation;
   if (!passes.empty()) settings.correlation.passes = piv::parse_passes(passes);
 
   sim::RingVortexFlow::Parameters rv;

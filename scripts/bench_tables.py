@@ -32,12 +32,12 @@ DOCS = [DOC, ROOT / "docs" / "paper-figures.md", ROOT / "docs" / "accuracy.md", 
 # run-paper.yaml's reconstruction and correlation settings, as bench_e2e's flags.
 RUN_PAPER = ["--mu", "1", "--accelerate", "--iterations", "8", "--prune-threshold", "0.03", "--prune-scope",
              "slice", "--intensity-threshold", "3", "--final-smoothing", "1", "--depth-prefilter", "4",
-             "--passes", "32@50,16@50+4,16@50,16@50,16@75"]
+             "--passes", "32@50,16@50+4,16@50,16@50,16@75", "--early-interpolation", "cubic"]
 # process.yaml's (its passes are core/piv's default).
 PROCESS = ["--mu", "1", "--accelerate", "--iterations", "20", "--intensity-threshold", "4",
            "--final-smoothing", "1", "--depth-prefilter", "4"]
 # run.yaml's (the live preview on the small camera).
-RUN = ["--mu", "1", "--iterations", "3", "--intensity-threshold", "4", "--final-smoothing", "1",
+RUN = ["--mu", "1", "--iterations", "4", "--intensity-threshold", "4", "--final-smoothing", "1",
        "--depth-prefilter", "4", "--passes", "16@50+4,8@50"]
 
 # Live tiers at the paper's scale, bench_e2e --live B,K,N,P: voxels B times as large, pixels binned

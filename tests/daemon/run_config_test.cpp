@@ -36,7 +36,7 @@ TEST(RunConfig, ShippedDefaultParses) {
   EXPECT_DOUBLE_EQ(c.camera_outage_s, 30.0);
   EXPECT_DOUBLE_EQ(c.dt_s, 1e-4);
   EXPECT_TRUE(c.camera_uri.empty());  // the daemon's default camera
-  EXPECT_EQ(c.spec.full.mart.iterations, 3);
+  EXPECT_EQ(c.spec.full.mart.iterations, 4);
   const process::ProcessSettings s =
       process::process_settings_from(YamlMap(load_yaml_text(c.process_yaml(), "process.yaml"), "process.yaml"));
   EXPECT_EQ(s.grid.shape, (std::array<int, 3>{32, 32, 32}));  // [-2, 2] mm at 0.125 mm: the box's faces
@@ -74,6 +74,7 @@ TEST(RunConfig, ShippedPaperScaleConfigParses) {
   EXPECT_DOUBLE_EQ(s.correlation.intensity_threshold_of_mean, 3.0);
   EXPECT_EQ(s.correlation.depth_prefilter, 4);
   EXPECT_EQ(s.correlation.final_smoothing, 1);
+  EXPECT_EQ(s.correlation.early_interpolation, piv::Interpolation::cubic);  // the last pass keeps the sinc
   EXPECT_EQ(s.pixel_binning, 1);
 
   ASSERT_TRUE(c.spec.live);
