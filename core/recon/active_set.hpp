@@ -146,11 +146,6 @@ class ActiveSet {
   std::vector<std::size_t> visit_start_;
   BigBuffer<Visit> visits_;
   BigBuffer<BandEntry> entries_;
-
-  // Back-projection of N whitened images in one walk (the kernels take one or two; MART uses one).
-  template <std::size_t N>
-  void back_project_images(const WeightingOperator& op, const std::array<const float*, N>& images,
-                           const std::array<float*, N>& values, Workspace& workspace) const;
 };
 
 }  // namespace plenopiv::recon

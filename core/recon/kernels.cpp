@@ -114,7 +114,7 @@ __attribute__((target_clones("avx512f", "avx2", "default"))) void add_columns_is
       for (int v = 0; v < count; ++v) {
         const ColumnJob& j = jobs[v];
         if (((j.rows[word] >> sub) & kSubMask) == 0) continue;
-        float* g = j.sums[0] + 64 * word + sub;
+        float* g = j.sums + 64 * word + sub;
         Rows gv;
         __builtin_memcpy(&gv, g, sizeof gv);
         std::fill_n(g, kSubRows, 0.f);
@@ -158,8 +158,8 @@ struct RowPart<16> {
 };
 
 template <int R>
-__attribute__((always_inline)) inline void dot_columns_rows(const float* const* band, int images, std::size_t width,
-                                                            int words, const ColumnJob* jobs, int count) {
+__attribute__((always_inline)) inline void dot_columns_rows(const float* band, std::size_t width, int words,
+                                                            const ColumnJob* jobs, int count) {
   static_assert(kSubRows % R == 0);
   using Part = typename RowPart<R>::F;
   using PartBits = typename RowPart<R>::I;
@@ -175,45 +175,42 @@ __attribute__((always_inline)) inline void dot_columns_rows(const float* const* 
   for (int l = 0; l < R; ++l) lane_bit[l] = 1 << l;
   for (int word = 0; word < words; ++word) {
     for (int sub = 0; sub < 64; sub += kSubRows) {
-      const std::size_t block = std::size_t(64 * word + sub) * width;
+      const float* lanes = band + std::size_t(64 * word + sub) * width;
       for (int v = 0; v < count; ++v) {
         const ColumnJob& j = jobs[v];
         const std::int32_t bits = std::int32_t((j.rows[word] >> sub) & kSubMask);
         if (bits == 0) continue;
-        for (int i = 0; i < images; ++i) {
-          const float* lanes = band[i] + block;
-          for (int h = 0; h < kSubRows; h += R) {
-            const PartBits reached = (PartBits{} + (bits >> h)) & lane_bit;
-            Part even[kQuad] = {}, odd[kQuad] = {};
-            std::size_t k = 0;
-            for (; k + 2 <= j.n; k += 2) {
-              dot_part(even, lanes + std::size_t(j.first[k]) * kSubRows + h, j.w + kQuad * k);
-              dot_part(odd, lanes + std::size_t(j.first[k + 1]) * kSubRows + h, j.w + kQuad * (k + 1));
-            }
-            if (k < j.n) dot_part(even, lanes + std::size_t(j.first[k]) * kSubRows + h, j.w + kQuad * k);
-            const Part lane0 = even[0] + odd[0], lane1 = even[1] + odd[1];
-            const Part lane2 = even[2] + odd[2], lane3 = even[3] + odd[3];
-            const Part sum = (lane0 + lane1) + (lane2 + lane3);
-            const Part kept = reached != 0 ? sum : Part{};
-            __builtin_memcpy(j.sums[std::size_t(i)] + 64 * word + sub + h, &kept, sizeof kept);
+        for (int h = 0; h < kSubRows; h += R) {
+          const PartBits reached = (PartBits{} + (bits >> h)) & lane_bit;
+          Part even[kQuad] = {}, odd[kQuad] = {};
+          std::size_t k = 0;
+          for (; k + 2 <= j.n; k += 2) {
+            dot_part(even, lanes + std::size_t(j.first[k]) * kSubRows + h, j.w + kQuad * k);
+            dot_part(odd, lanes + std::size_t(j.first[k + 1]) * kSubRows + h, j.w + kQuad * (k + 1));
           }
+          if (k < j.n) dot_part(even, lanes + std::size_t(j.first[k]) * kSubRows + h, j.w + kQuad * k);
+          const Part lane0 = even[0] + odd[0], lane1 = even[1] + odd[1];
+          const Part lane2 = even[2] + odd[2], lane3 = even[3] + odd[3];
+          const Part sum = (lane0 + lane1) + (lane2 + lane3);
+          const Part kept = reached != 0 ? sum : Part{};
+          __builtin_memcpy(j.sums + 64 * word + sub + h, &kept, sizeof kept);
         }
       }
     }
   }
 }
 
-__attribute__((target("default"))) void dot_columns_isa(const float* const* band, int images, std::size_t width,
-                                                        int words, const ColumnJob* jobs, int count) {
-  dot_columns_rows<4>(band, images, width, words, jobs, count);
+__attribute__((target("default"))) void dot_columns_isa(const float* band, std::size_t width, int words,
+                                                        const ColumnJob* jobs, int count) {
+  dot_columns_rows<4>(band, width, words, jobs, count);
 }
-__attribute__((target("avx2"))) void dot_columns_isa(const float* const* band, int images, std::size_t width, int words,
+__attribute__((target("avx2"))) void dot_columns_isa(const float* band, std::size_t width, int words,
                                                      const ColumnJob* jobs, int count) {
-  dot_columns_rows<8>(band, images, width, words, jobs, count);
+  dot_columns_rows<8>(band, width, words, jobs, count);
 }
-__attribute__((target("avx512f"))) void dot_columns_isa(const float* const* band, int images, std::size_t width,
-                                                        int words, const ColumnJob* jobs, int count) {
-  dot_columns_rows<16>(band, images, width, words, jobs, count);
+__attribute__((target("avx512f"))) void dot_columns_isa(const float* band, std::size_t width, int words,
+                                                        const ColumnJob* jobs, int count) {
+  dot_columns_rows<16>(band, width, words, jobs, count);
 }
 
 // The eq 13 normalisers' first stage (dot_slice_rows in kernels.hpp) in two hand-written builds.
@@ -280,8 +277,8 @@ void add_columns(float* band, std::size_t width, int words, const ColumnJob* job
   add_columns_isa(band, width, words, jobs, count);
 }
 
-void dot_columns(const float* const* band, int images, std::size_t width, int words, const ColumnJob* jobs, int count) {
-  dot_columns_isa(band, images, width, words, jobs, count);
+void dot_columns(const float* band, std::size_t width, int words, const ColumnJob* jobs, int count) {
+  dot_columns_isa(band, width, words, jobs, count);
 }
 
 void dot_slice_rows(const float* row_a, const float* row_b, const std::size_t* start, const int* first, const float* w,

@@ -28,10 +28,10 @@ using Lanes4 = float __attribute__((vector_size(16)));
 using Doubles4 = double __attribute__((vector_size(32)));
 
 // One visit of a chunk as the x stages see it: its row sums over the band (G for the
-// projection; B, per image, for the back-projection; pointing at the band's first row), the
+// projection, B for the back-projection; pointing at the band's first row), the
 // band's rows it reaches (one bit per row, `words` 64-bit words), and its column's x quads.
 struct ColumnJob {
-  std::array<float*, 2> sums;
+  float* sums;
   const std::uint64_t* rows;
   const int* first;
   const float* w;
@@ -41,7 +41,7 @@ struct ColumnJob {
 inline ColumnJob x_job(const SliceTables& t, int x, const std::uint64_t* rows) {
   const std::size_t q0 = t.x_quad_start[std::size_t(x)];
   const std::size_t q1 = t.x_quad_start[std::size_t(x) + 1];
-  return ColumnJob{{nullptr, nullptr}, rows, t.x_quad_first.data() + q0, t.x_quad_weights.data() + kQuad * q0, q1 - q0};
+  return ColumnJob{nullptr, rows, t.x_quad_first.data() + q0, t.x_quad_weights.data() + kQuad * q0, q1 - q0};
 }
 
 // The x stages work on images in "row lanes": each block of kSubRows sensor rows stored column
@@ -65,10 +65,10 @@ void lanes_to_rows(const float* lanes, std::size_t width, int count, float* rows
 // visit reaches, resetting G there. `band` points at the band's first block; every pixel gets
 // its visits' additions in visiting order, its quads' in quad order.
 void add_columns(float* band, std::size_t width, int words, const ColumnJob* jobs, int count);
-// Back-projection stage 1: B_i[r] = Σ_col Ax r_i(r, col) over the blocks a visit reaches, for
-// `images` (1 or 2) lanes images whose bands start at band[i]; rows the visit does not reach
-// are set to 0. Each row's sum in dot_quads order (below).
-void dot_columns(const float* const* band, int images, std::size_t width, int words, const ColumnJob* jobs, int count);
+// Back-projection stage 1: B[r] = Σ_col Ax r(r, col) over the blocks a visit reaches, from the
+// lanes image whose band starts at `band`; rows the visit does not reach are set to 0. Each
+// row's sum in dot_quads order (below).
+void dot_columns(const float* band, std::size_t width, int words, const ColumnJob* jobs, int count);
 
 // The eq 13 normalisers' first stage: out[x] = Σ_col Ax_x(col) row(col) for every voxel x of a
 // slice (its quads [start[x], start[x + 1])), for two rows at once (row_b null: one row). Each

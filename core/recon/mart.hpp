@@ -212,11 +212,11 @@ class MartWorkspace {
   std::size_t bytes() const;
 
   // Sizes and writes every buffer for the largest reconstruction `op` can run (every voxel of its
-  // grid active, both back-projection images), so that reconstructions with `op` afterwards
-  // neither allocate these buffers nor page-fault them. A daemon reserves its lanes' workspaces
-  // while a run is Armed, so that a lane's first pair does not fault in gigabytes beside the
-  // recording. Costs the memory of that reconstruction and one projection and back-projection of
-  // the whole box; changes no result. std::logic_error while a reconstruction uses the workspace.
+  // grid active), so that reconstructions with `op` afterwards neither allocate these buffers nor
+  // page-fault them. A daemon reserves its lanes' workspaces while a run is Armed, so that a lane's
+  // first pair does not fault in gigabytes beside the recording. Costs the memory of that
+  // reconstruction and one projection and back-projection of the whole box; changes no result.
+  // std::logic_error while a reconstruction uses the workspace.
   void reserve(const WeightingOperator& op);
 
  private:

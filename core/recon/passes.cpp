@@ -43,7 +43,7 @@ void run_costliest_first(const std::vector<int>& items, F&& f) {
 }  // namespace
 
 void ActiveSet::reserve(const WeightingOperator& op, Workspace& workspace) const {
-  // The sizes project and back_project_images give these buffers (N = 1 image).
+  // The sizes project and back_project_whitened give these buffers.
   const std::size_t band_size = std::size_t(kBandRows) * std::size_t(op.image_width());
   workspace.scaled.assign(order_.size(), 0.f);
   workspace.sums.assign(order_.size(), 0.0);
@@ -113,7 +113,7 @@ void ActiveSet::project(const WeightingOperator& op, std::span<const float> valu
       for (std::size_t v = c0; v < c1; ++v) {
         const Column& col = columns_[visits_[v].column];
         jobs[v - c0] = x_job(op.slice(col.z), col.x, visits_[v].rows.data());
-        jobs[v - c0].sums[0] = padded_sums[v - c0].data() + kQuad;
+        jobs[v - c0].sums = padded_sums[v - c0].data() + kQuad;
       }
       kernels::add_columns(lanes, width, kRowWords, jobs.data(), int(c1 - c0));
       for (std::size_t v = c0; v < c1; ++v) {
@@ -140,30 +140,22 @@ void ActiveSet::back_project(const WeightingOperator& op, std::span<const float>
 }
 
 void ActiveSet::back_project_whitened(const WeightingOperator& op, std::span<const float> image,
-                                      std::span<float> values, Workspace* workspace) const {
+                                      std::span<float> values, Workspace* workspace_or_null) const {
   Workspace local;
-  back_project_images<1>(op, {image.data()}, {values.data()}, workspace ? *workspace : local);
-}
-
-template <std::size_t N>
-void ActiveSet::back_project_images(const WeightingOperator& op, const std::array<const float*, N>& images,
-                                    const std::array<float*, N>& values, Workspace& workspace) const {
-  static_assert(N == 1 || N == 2, "ColumnJob holds the sums of at most two images");
+  Workspace& workspace = workspace_or_null ? *workspace_or_null : local;
   const std::size_t width = std::size_t(op.image_width());
-  for (float* v : values) std::fill(v, v + voxels_.size(), 0.f);  // voxels that see no pixel
-  // Per image and voxel in visiting order; each strip zeroes and sums its own range.
+  std::fill_n(values.begin(), voxels_.size(), 0.f);  // voxels that see no pixel
+  // Per voxel in visiting order; each strip zeroes and sums its own range.
   auto& sums = workspace.sums;
-  sums.resize(N * order_.size());
-  // The images in row lanes, band by band in parallel: the last block's rows past the sensor are
+  sums.resize(order_.size());
+  // The image in row lanes, band by band in parallel: the last block's rows past the sensor are
   // 0; blocks wholly past it are left unwritten (no visit reaches them, so none is read).
   const int height = op.image_height();
-  const std::size_t image_size = std::size_t(bands_) * std::size_t(kBandRows) * width;
-  workspace.image_lanes.resize(N * image_size);
-  tbb::parallel_for(0, int(N) * bands_, [&](int item) {
-    const std::size_t i = std::size_t(item / bands_);
-    const int r0 = (item % bands_) * kBandRows;
-    kernels::rows_to_lanes(images[i] + std::size_t(r0) * width, width, std::min(height, r0 + kBandRows) - r0,
-                           workspace.image_lanes.data() + i * image_size + std::size_t(r0) * width);
+  workspace.image_lanes.resize(std::size_t(bands_) * std::size_t(kBandRows) * width);
+  tbb::parallel_for(0, bands_, [&](int band) {
+    const int r0 = band * kBandRows;
+    kernels::rows_to_lanes(image.data() + std::size_t(r0) * width, width, std::min(height, r0 + kBandRows) - r0,
+                           workspace.image_lanes.data() + std::size_t(r0) * width);
   });
   // Each strip owns its voxels (a contiguous range of order_), so their sums need no atomics,
   // and every voxel adds its bands in order whatever the thread count.
@@ -171,21 +163,18 @@ void ActiveSet::back_project_images(const WeightingOperator& op, const std::arra
     const std::uint32_t c0 = strip_columns_[std::size_t(strip)], c1 = strip_columns_[std::size_t(strip) + 1];
     if (c0 == c1) return;
     const std::uint32_t p0 = columns_[c0].begin, p1 = columns_[c1 - 1].end;
-    for (std::size_t i = 0; i < N; ++i)
-      std::fill_n(sums.begin() + std::ptrdiff_t(i * order_.size() + p0), p1 - p0, 0.0);
+    std::fill_n(sums.begin() + std::ptrdiff_t(p0), p1 - p0, 0.0);
     // B(row) of kChunk consecutive visits over the band's rows, with kQuad rows of margin on
     // either side, all 0 except the rows the column reaches: the lanes of y quads outside the
     // band, and their zero lanes on rows the column does not reach, then add 0 · 0 (a stale
     // value from another column would give 0 too if finite, but not if a row sum overflowed).
-    std::array<std::array<std::array<float, kQuad + kBandRows + kQuad>, kChunk>, N> padded_sums;
+    std::array<std::array<float, kQuad + kBandRows + kQuad>, kChunk> padded_sums;
     for (int b = 0; b < bands_; ++b) {
       const int r0 = b * kBandRows;
       const std::size_t slot = std::size_t(b) * std::size_t(strips_) + std::size_t(strip);
       for (std::size_t v0 = visit_start_[slot]; v0 < visit_start_[slot + 1]; v0 += kChunk) {
         const std::size_t v1 = std::min(visit_start_[slot + 1], v0 + kChunk);
-        for (std::size_t i = 0; i < N; ++i) {
-          for (std::size_t v = v0; v < v1; ++v) padded_sums[i][v - v0].fill(0.f);
-        }
+        for (std::size_t v = v0; v < v1; ++v) padded_sums[v - v0].fill(0.f);
         // Stage 1: B(row) = Σ_col Ax(col) r(row, col) over each 16-row block the column reaches
         // (its unreached rows kept 0), one block at a time for all the chunk's visits, so the
         // pixels they share stay in L1.
@@ -193,39 +182,32 @@ void ActiveSet::back_project_images(const WeightingOperator& op, const std::arra
         for (std::size_t v = v0; v < v1; ++v) {
           const Column& col = columns_[visits_[v].column];
           jobs[v - v0] = x_job(op.slice(col.z), col.x, visits_[v].rows.data());
-          for (std::size_t i = 0; i < N; ++i) jobs[v - v0].sums[i] = padded_sums[i][v - v0].data() + kQuad;
+          jobs[v - v0].sums = padded_sums[v - v0].data() + kQuad;
         }
-        std::array<const float*, N> bands;
-        for (std::size_t i = 0; i < N; ++i)
-          bands[i] = workspace.image_lanes.data() + i * image_size + std::size_t(r0) * width;
-        kernels::dot_columns(bands.data(), int(N), width, kRowWords, jobs.data(), int(v1 - v0));
+        kernels::dot_columns(workspace.image_lanes.data() + std::size_t(r0) * width, width, kRowWords, jobs.data(),
+                             int(v1 - v0));
         // Stage 2: per voxel Σ_row Ay(row) B(row) over the band's rows, one quad of rows at a
         // time, lane after lane: the zero lanes add +0, so the sums are those row by row.
         for (std::size_t v = v0; v < v1; ++v) {
           const Visit& visit = visits_[v];
           const SliceTables& t = op.slice(columns_[visit.column].z);
-          std::array<const float*, N> row_sum;
-          for (std::size_t i = 0; i < N; ++i) row_sum[i] = padded_sums[i][v - v0].data() + kQuad;
-          // Quad q of `entry` added to its sums s, lane after lane.
-          const auto add_quad = [&](const BandEntry& entry, std::uint32_t q, std::array<double, N>& s) {
+          const float* row_sum = padded_sums[v - v0].data() + kQuad;
+          // Quad q of `entry` added to its sum s, lane after lane.
+          const auto add_quad = [&](const BandEntry& entry, std::uint32_t q, double& s) {
             const std::uint32_t at = entry.quad_begin + q;
-            Lanes4 wq;
+            Lanes4 wq, bq;
             __builtin_memcpy(&wq, t.y_quad_weights.data() + kQuad * std::size_t(at), sizeof wq);
-            const Doubles4 wd = __builtin_convertvector(wq, Doubles4);
-            for (std::size_t i = 0; i < N; ++i) {
-              Lanes4 bq;
-              __builtin_memcpy(&bq, row_sum[i] + (t.y_quad_first[at] - r0), sizeof bq);
-              // Products of floats are exact in double: only the order of the adds matters.
-              const Doubles4 p = wd * __builtin_convertvector(bq, Doubles4);
-              s[i] = (((s[i] + p[0]) + p[1]) + p[2]) + p[3];
-            }
+            __builtin_memcpy(&bq, row_sum + (t.y_quad_first[at] - r0), sizeof bq);
+            // Products of floats are exact in double: only the order of the adds matters.
+            const Doubles4 p = __builtin_convertvector(wq, Doubles4) * __builtin_convertvector(bq, Doubles4);
+            s = (((s + p[0]) + p[1]) + p[2]) + p[3];
           };
           // Two voxels at a time, their quads side by side: each sum is one chain of dependent
           // adds in a fixed order, and two independent chains keep the adder busy.
           std::size_t k = visit.entry_begin;
           for (; k + 2 <= visit.entry_end; k += 2) {
             const BandEntry &a = entries_[k], &b = entries_[k + 1];
-            std::array<double, N> sa{}, sb{};
+            double sa = 0, sb = 0;
             const std::uint32_t both = std::min(a.quad_count, b.quad_count);
             for (std::uint32_t q = 0; q < both; ++q) {
               add_quad(a, q, sa);
@@ -233,25 +215,19 @@ void ActiveSet::back_project_images(const WeightingOperator& op, const std::arra
             }
             for (std::uint32_t q = both; q < a.quad_count; ++q) add_quad(a, q, sa);
             for (std::uint32_t q = both; q < b.quad_count; ++q) add_quad(b, q, sb);
-            for (std::size_t i = 0; i < N; ++i) {
-              sums[i * order_.size() + a.position] += sa[i];
-              sums[i * order_.size() + b.position] += sb[i];
-            }
+            sums[a.position] += sa;
+            sums[b.position] += sb;
           }
           if (k < visit.entry_end) {
             const BandEntry& entry = entries_[k];
-            std::array<double, N> s{};
+            double s = 0;
             for (std::uint32_t q = 0; q < entry.quad_count; ++q) add_quad(entry, q, s);
-            for (std::size_t i = 0; i < N; ++i) sums[i * order_.size() + entry.position] += s[i];
+            sums[entry.position] += s;
           }
         }
       }
     }
-    for (std::size_t i = 0; i < N; ++i) {
-      for (std::uint32_t p = p0; p < p1; ++p) {
-        values[i][order_[p]] = float(sums[i * order_.size() + p] / order_normaliser_[p]);  // eq 13
-      }
-    }
+    for (std::uint32_t p = p0; p < p1; ++p) values[order_[p]] = float(sums[p] / order_normaliser_[p]);  // eq 13
   });
 }
 
