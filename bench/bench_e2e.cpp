@@ -5,7 +5,8 @@
 //
 //   bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate]
 //             [--dark-cutoff F] [--intensity-threshold K] [--final-smoothing K] [--depth-prefilter K]
-//             [--passes P] [--early-interpolation sinc|cubic] [--steady] [--time-sweep] [--z-centre MM]
+//             [--passes P] [--early-interpolation sinc|cubic] [--voxel-z-factor D] [--steady] [--time-sweep]
+//             [--z-centre MM]
 //             [--compare-passes 'P1;P2;...']
 //             [--prune-threshold F [--prune-scope volume|slice]]
 //             [--sparse-sweep [--sparse-repeats N] [--sparse-variants V,..]]
@@ -15,15 +16,19 @@
 //              rows still start from the paper's settings).
 //     --time-sweep: MART iterations and the ghost floor against time per pair at this scale (with
 //              --no-sweep; ten pairs in a kept workspace; rows marked pareto= for plot_e2e.py).
+//     --voxel-z-factor D: the headline's voxels D times as deep as wide (volume.voxel_z_mm; errors
+//              still in the 0.125 mm voxels; window depths and margins in --passes are its voxels).
 //     --early-interpolation: the deformation of the passes before the last (correlation's
 //              early_interpolation; default the sinc); the variants correlate with the other one.
 //     --steady: the headline pair once more in the kept MART workspace (time per pair in a run).
-//     --live B,K,N,P: a live tier beside the headline: voxels B times as large (the same box), pixels
+//     --live B,K,N,P: a live tier beside the headline: voxels B times as large (the same box; BzD:
+//              B times as large across and D times as deep), pixels
 //              binned K x K (reconstruction.pixel_binning), N MART iterations, passes P (--passes
 //              syntax, windows in its voxels); its set-up, first and in-a-run time per pair and its
 //              errors in the headline's voxels (axis band: half its final window) (row
 //              variant=live), beside the same passes on exact-particle volumes of its grid
 //              (exact_*). Repeat for several tiers.
+//     --live-depth-prefilter K: the --live tiers' depth prefilter (default the headline's).
 //     --live-only: the --live tiers alone (with --no-sweep), without the headline rows.
 //     --prune-threshold: MART's prune threshold for the headline rows (default 0: exact zeros);
 //              --prune-scope: of the volume's peak (default) or of each depth slice's.
@@ -169,6 +174,8 @@ int main(int argc, char** argv) {
   std::string compare_passes;  // pass lists separated by ';'
   std::string passes;          // the headline's passes (--passes syntax); empty: core/piv's default
   piv::Interpolation early_interpolation = piv::CorrelationSettings{}.early_interpolation;
+  int depth_voxel_factor = 1;     // the headline's voxels this many times as deep as wide
+  int live_depth_prefilter = -1;  // the --live tiers' depth prefilter; < 0: the headline's
   std::vector<std::string> live;  // --live B,K,N,P, one per live tier
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--no-sweep"))
@@ -211,6 +218,10 @@ int main(int argc, char** argv) {
       compare_passes = argv[++i];
     else if (!std::strcmp(argv[i], "--passes") && i + 1 < argc)
       passes = argv[++i];
+    else if (!std::strcmp(argv[i], "--live-depth-prefilter") && i + 1 < argc)
+      live_depth_prefilter = std::stoi(argv[++i]);
+    else if (!std::strcmp(argv[i], "--voxel-z-factor") && i + 1 < argc)
+      depth_voxel_factor = std::max(1, std::stoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--early-interpolation") && i + 1 < argc) {
       const std::string name = argv[++i];
       if (name != "sinc" && name != "cubic") {
@@ -226,18 +237,19 @@ int main(int argc, char** argv) {
       scale = argv[i];
   }
   if (sweep && (iterations != 5 || mu != 0.5 || accelerate || z_centre != 0.0 || !passes.empty() ||
-                early_interpolation != piv::CorrelationSettings{}.early_interpolation ||
+                early_interpolation != piv::CorrelationSettings{}.early_interpolation || depth_voxel_factor != 1 ||
                 dark_cutoff != recon::MartSettings{}.dark_weight_cutoff ||
                 sensor_blur_mm != recon::MartSettings{}.sensor_blur_sigma_mm ||
                 intensity_threshold != piv::CorrelationSettings{}.intensity_threshold_of_mean ||
                 final_smoothing != piv::CorrelationSettings{}.final_smoothing ||
                 depth_prefilter != piv::CorrelationSettings{}.depth_prefilter ||
                 prune_threshold != recon::MartSettings{}.prune_threshold || prune_scope != "volume")) {
-    std::fprintf(stderr,
-                 "bench_e2e: "
-                 "--iterations/--mu/--accelerate/--dark-cutoff/--sensor-blur-mm/--intensity-threshold/"
-                 "--final-smoothing/--depth-prefilter/--passes/--early-interpolation/--z-centre change the "
-                 "headline rows only; use them with --no-sweep\n");
+    std::fprintf(
+        stderr,
+        "bench_e2e: "
+        "--iterations/--mu/--accelerate/--dark-cutoff/--sensor-blur-mm/--intensity-threshold/"
+        "--final-smoothing/--depth-prefilter/--passes/--early-interpolation/--voxel-z-factor/--z-centre change the "
+        "headline rows only; use them with --no-sweep\n");
     return 2;
   }
   // mid: the paper's camera and depth with the box cut laterally to the ring (120 x 80 voxels):
@@ -248,10 +260,11 @@ int main(int argc, char** argv) {
     std::fprintf(stderr,
                  "usage: bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate] "
                  "[--dark-cutoff F] [--sensor-blur-mm S] [--intensity-threshold K] [--final-smoothing K] "
-                 "[--depth-prefilter K] [--passes P] [--early-interpolation sinc|cubic] [--steady] [--time-sweep] "
+                 "[--depth-prefilter K] [--passes P] [--early-interpolation sinc|cubic] [--voxel-z-factor D] "
+                 "[--steady] [--time-sweep] "
                  "[--z-centre MM] [--compare-passes "
                  "'P1;P2'] [--prune-threshold F [--prune-scope volume|slice]] [--sparse-sweep [--sparse-repeats N] "
-                 "[--sparse-variants V,..]] [--live B,K,N,P [--live-only]]\n");
+                 "[--sparse-variants V,..]] [--live B,K,N,P [--live-depth-prefilter K] [--live-only]]\n");
     return 2;
   }
   if (prune_scope != "volume" && prune_scope != "slice") {
@@ -269,8 +282,8 @@ int main(int argc, char** argv) {
   const double hx = 0.5 * nx * voxel, hy = 0.5 * ny * voxel, hz = 0.5 * nz * voxel;
 
   process::ProcessSettings settings;
-  settings.grid =
-      process::grid_for_extent({-hx, -hy, z_centre - hz}, {hx, hy, z_centre + hz}, {voxel, voxel, voxel}, "bench");
+  settings.grid = process::grid_for_extent({-hx, -hy, z_centre - hz}, {hx, hy, z_centre + hz},
+                                           {voxel, voxel, depth_voxel_factor * voxel}, "bench");
   settings.correlation.dt_s = 1.0;
   settings.mart.iterations = iterations;
   settings.mart.mu = mu;
@@ -325,13 +338,18 @@ int main(int argc, char** argv) {
                      tier.c_str());
         return false;
       }
-      const int voxel_factor = std::stoi(tier.substr(0, c1));
+      // B, or BzD: voxels B times as large across and D times as deep.
+      const std::string factors = tier.substr(0, c1);
+      const std::size_t zd = factors.find('z');
+      const int voxel_factor = std::stoi(factors.substr(0, zd));
+      const int depth_factor = zd == std::string::npos ? voxel_factor : std::stoi(factors.substr(zd + 1));
       process::ProcessSettings s = settings;
-      const double lv = voxel_factor * voxel;
-      s.grid = process::grid_for_extent({-hx, -hy, z_centre - hz}, {hx, hy, z_centre + hz}, {lv, lv, lv}, "bench live");
+      const double lv = voxel_factor * voxel, lz = depth_factor * voxel;
+      s.grid = process::grid_for_extent({-hx, -hy, z_centre - hz}, {hx, hy, z_centre + hz}, {lv, lv, lz}, "bench live");
       s.pixel_binning = std::stoi(tier.substr(c1 + 1, c2 - c1 - 1));
       s.mart.iterations = std::stoi(tier.substr(c2 + 1, c3 - c2 - 1));
       s.correlation.passes = piv::parse_passes(tier.substr(c3 + 1));
+      if (live_depth_prefilter >= 0) s.correlation.depth_prefilter = live_depth_prefilter;
       t = now_s();
       const process::PairProcessor live_processor(camera, nominal, s);
       const double setup_s = now_s() - t;
@@ -349,7 +367,8 @@ int main(int argc, char** argv) {
                                                 sim::render_exact_volume(s.grid, pb), s.correlation);
       const Errors ex = errors_against(exact.field, flow, voxel, band);
       std::printf(
-          "bench=e2e case=%s variant=live binning=%d pixel_binning=%d voxels=%zu iterations=%d passes=%s setup_s=%.2f "
+          "bench=e2e case=%s variant=live binning=%d depth_binning=%d pixel_binning=%d voxels=%zu iterations=%d "
+          "passes=%s setup_s=%.2f "
           "first_wall_s=%.2f "
           "wall_s=%.2f first_pair_s=%.2f pair_s=%.2f recon_a_s=%.2f recon_b_s=%.2f correlate_s=%.2f rms_u=%.3f "
           "rms_v=%.3f rms_w=%.3f rms=%.3f "
@@ -357,8 +376,8 @@ int main(int argc, char** argv) {
           "off_axis_band_gain_u=%.3f off_axis_band_gain_v=%.3f off_axis_band_gain_w=%.3f "
           "exact_off_axis_band_rms_u=%.3f exact_off_axis_band_rms_v=%.3f exact_off_axis_band_rms_w=%.3f "
           "peak_rss_gb=%.2f\n",
-          scale.c_str(), voxel_factor, s.pixel_binning, s.grid.count(), s.mart.iterations, tier.substr(c3 + 1).c_str(),
-          setup_s, first_wall_s, wall_s,
+          scale.c_str(), voxel_factor, depth_factor, s.pixel_binning, s.grid.count(), s.mart.iterations,
+          tier.substr(c3 + 1).c_str(), setup_s, first_wall_s, wall_s,
           first.times.reconstruct_a_s + first.times.reconstruct_b_s + first.times.correlate_s,
           again.times.reconstruct_a_s + again.times.reconstruct_b_s + again.times.correlate_s,
           again.times.reconstruct_a_s, again.times.reconstruct_b_s, again.times.correlate_s, el.rms[0], el.rms[1],

@@ -60,26 +60,27 @@ TEST(RunConfig, ShippedPaperScaleConfigParses) {
   EXPECT_EQ(c.max_pairs_in_flight, 1);
   const process::ProcessSettings s =
       process::process_settings_from(YamlMap(load_yaml_text(c.process_yaml(), "process.yaml"), "process.yaml"));
-  EXPECT_EQ(s.grid.shape, (std::array<int, 3>{300, 200, 200}));
-  EXPECT_EQ(s.grid.spacing_mm, (std::array<double, 3>{0.125, 0.125, 0.125}));
+  EXPECT_EQ(s.grid.shape, (std::array<int, 3>{300, 200, 100}));  // the paper's box, voxels twice as deep
+  EXPECT_EQ(s.grid.spacing_mm, (std::array<double, 3>{0.125, 0.125, 0.25}));
   EXPECT_EQ(s.mart.iterations, 8);
   EXPECT_DOUBLE_EQ(s.mart.mu, 1.0);
   EXPECT_TRUE(s.mart.accelerate);
   EXPECT_DOUBLE_EQ(s.mart.prune_threshold, 0.03);  // of each depth slice's peak ("Sparse reconstruction")
   EXPECT_EQ(s.mart.prune_scope, recon::PruneScope::slice);
-  ASSERT_EQ(s.correlation.passes.size(), 5u);  // core/piv's default with a third 16^3, 50 % pass
-  EXPECT_EQ(s.correlation.passes[1].depth_margin, 4);
-  EXPECT_EQ(s.correlation.passes[4].window, (std::array<int, 3>{16, 16, 16}));
+  ASSERT_EQ(s.correlation.passes.size(), 5u);  // core/piv's default with a third 2 mm, 50 % pass
+  EXPECT_EQ(s.correlation.passes[0].window, (std::array<int, 3>{32, 32, 16}));  // 4 mm cubes
+  EXPECT_EQ(s.correlation.passes[1].depth_margin, 2);                           // 0.5 mm
+  EXPECT_EQ(s.correlation.passes[4].window, (std::array<int, 3>{16, 16, 8}));   // 2 mm cubes
   EXPECT_DOUBLE_EQ(s.correlation.passes[4].overlap_percent, 75.0);
   EXPECT_DOUBLE_EQ(s.correlation.intensity_threshold_of_mean, 3.0);
-  EXPECT_EQ(s.correlation.depth_prefilter, 4);
+  EXPECT_EQ(s.correlation.depth_prefilter, 1);  // four passes' smoothing at 0.125 mm
   EXPECT_EQ(s.correlation.final_smoothing, 1);
   EXPECT_EQ(s.correlation.early_interpolation, piv::Interpolation::cubic);  // the last pass keeps the sinc
   EXPECT_EQ(s.pixel_binning, 1);
 
   ASSERT_TRUE(c.spec.live);
   const process::ProcessSettings& live = *c.spec.live;
-  EXPECT_EQ(live.grid.shape, (std::array<int, 3>{100, 67, 67}));  // the same box in 0.375 mm voxels
+  EXPECT_EQ(live.grid.shape, (std::array<int, 3>{100, 67, 67}));  // the same box in 0.375 mm cubes
   EXPECT_EQ(live.pixel_binning, 4);
   EXPECT_EQ(live.mart.iterations, 4);
   EXPECT_TRUE(live.mart.accelerate);
