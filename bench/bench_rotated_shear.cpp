@@ -55,9 +55,10 @@ int main(int argc, char** argv) {
   const double half_y = 0.5 * g.shape[1] * voxel;
   const double rate = 2 * voxel / half_y;  // u and w: +-2 voxels at the box's y faces
   const sim::LinearShear flow({rate, 0, rate}, 1, 0.0);
+  const double voxel_z = g.spacing_mm[2];  // run-paper.yaml's voxels are deeper than wide
   const sim::Box box{
-      {g.origin_mm[0] - 0.5 * voxel - 1, -half_y - 1, g.origin_mm[2] - 0.5 * voxel - 1},
-      {g.origin_mm[0] + (g.shape[0] - 0.5) * voxel + 1, half_y + 1, g.origin_mm[2] + (g.shape[2] - 0.5) * voxel + 1}};
+      {g.origin_mm[0] - 0.5 * voxel - 1, -half_y - 1, g.origin_mm[2] - 0.5 * voxel_z - 1},
+      {g.origin_mm[0] + (g.shape[0] - 0.5) * voxel + 1, half_y + 1, g.origin_mm[2] + (g.shape[2] - 0.5) * voxel_z + 1}};
   const std::size_t count = sim::particle_count_from_ppm(camera, box, 0.5);
   const auto pa = sim::random_particles(box, count, 2026);
   const auto pb = sim::displace(pa, flow);

@@ -167,6 +167,15 @@ ProcessSpec process_spec_from(const YamlMap& root) {
   spec.full = parse_settings(YamlMap(full, root.source()));
   if (const auto live = root.optional_map("live")) {
     live->reject_unknown({"volume", "reconstruction", "correlation"});
+    // Deep voxels set for the full tier would stay under a live tier's coarser voxel_mm, finer than
+    // it across: a tier that changes voxel_mm says its depth too.
+    const YAML::Node& full_settings = full;  // read only: no key is added
+    if (const auto volume = live->optional_map("volume"); volume && volume->has("voxel_mm") &&
+                                                          !volume->has("voxel_z_mm") && full_settings["volume"] &&
+                                                          full_settings["volume"]["voxel_z_mm"])
+      volume->fail("voxel_z_mm",
+                   "missing: the full settings set volume.voxel_z_mm, so a live tier that sets voxel_mm sets "
+                   "voxel_z_mm too");
     // Each key of a live section overrides the same key of the full settings' section.
     YAML::Node merged = YAML::Clone(full);
     for (const char* section : {"volume", "reconstruction", "correlation"}) {

@@ -124,6 +124,16 @@ TEST(RunConfig, ALiveSectionIsTheFastTierOverridingTheFullSettings) {
   EXPECT_NE(e.find("run.yaml (live tier): reconstruction.iterations: must be 1 to 10000"), std::string::npos) << e;
   EXPECT_NE(error_of(kVolume + "live: {dt_s: 0.1}\n").find("live.dt_s: unknown key"), std::string::npos)
       << error_of(kVolume + "live: {dt_s: 0.1}\n");
+  // Deep voxels in the full settings and a live tier that sets voxel_mm alone: its depth is asked for.
+  const std::string deep =
+      "pairs: 1\nrate_hz: 1\ndt_s: 1e-4\nvolume: {x_mm: [-2, 2], y_mm: [-2, 2], z_mm: [-2, 2], "
+      "voxel_mm: 0.25, voxel_z_mm: 0.5}\ncorrelation: {passes: [{window: 4, overlap_percent: 50}]}\n";
+  const std::string e_deep = error_of(deep + "live: {volume: {voxel_mm: 0.5}}\n");
+  EXPECT_NE(e_deep.find("live.volume.voxel_z_mm: missing"), std::string::npos) << e_deep;
+  const RunConfig both = parse_run_config(deep + "live: {volume: {voxel_mm: 0.5, voxel_z_mm: 1}}\n", "run.yaml");
+  ASSERT_TRUE(both.spec.live);
+  EXPECT_EQ(both.spec.live->grid.shape, (std::array<int, 3>{8, 8, 4}));
+  EXPECT_EQ(parse_run_config(deep, "run.yaml").spec.full.grid.shape, (std::array<int, 3>{16, 16, 8}));
 }
 
 TEST(RunConfig, UnknownKeyIsNamed) {
