@@ -647,7 +647,9 @@ def t_live_tiers(R):
 
 def t_rotated_shear(R):
     r = R("rotated-shear")
-    rows = [[f"run-paper.yaml's {d['tier']}", f"{float(d['voxel_mm']):g} mm, {d['pixel_binning']} x {d['pixel_binning']}, "
+    voxel = lambda d: (f"{float(d['voxel_mm']):g}" + (f" x {float(d['voxel_z_mm']):g}" if d.get("voxel_z_mm", d["voxel_mm"])
+                                                        != d["voxel_mm"] else "") + " mm")
+    rows = [[f"run-paper.yaml's {d['tier']}", f"{voxel(d)}, {d['pixel_binning']} x {d['pixel_binning']}, "
              f"{d['iterations']} it", f"{d['pair_s']} (first {d['first_s']})", uvw(d), uvw(d, "bias_"),
              f"{d['gain_u']} / {d['gain_w']}"] for d in r.find(bench="rotated_shear") if "tier" in d]
     out = table(["tier", "voxel, pixel binning, MART", "s per pair in a run", "RMS u / v / w, 0.125 mm voxels",
