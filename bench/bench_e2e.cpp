@@ -5,12 +5,11 @@
 //
 //   bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate]
 //             [--dark-cutoff F] [--intensity-threshold K] [--final-smoothing K] [--depth-prefilter K]
-//             [--passes P] [--early-interpolation sinc|cubic] [--voxel-z-factor D] [--steady] [--time-sweep]
-//             [--z-centre MM]
-//             [--compare-passes 'P1;P2;...']
+//             [--passes P] [--early-interpolation sinc|cubic] [--voxel-z-factor D] [--steady]
+//             [--time-sweep] [--z-centre MM] [--compare-passes 'P1;P2;...']
 //             [--prune-threshold F [--prune-scope volume|slice]]
 //             [--sparse-sweep [--sparse-repeats N] [--sparse-variants V,..]]
-//             [--live B,K,N,P ... [--live-only]]
+//             [--live B,K,N,P ... [--live-depth-prefilter K] [--live-only]]
 //     --iterations/--mu/--accelerate/--dark-cutoff: MART for the headline rows (default the
 //              paper's 5 at mu 0.5, not accelerated, MartSettings' dark-pixel cutoff; the sweep's
 //              rows still start from the paper's settings).
@@ -22,8 +21,8 @@
 //              early_interpolation; default the sinc); the variants correlate with the other one.
 //     --steady: the headline pair once more in the kept MART workspace (time per pair in a run).
 //     --live B,K,N,P: a live tier beside the headline: voxels B times as large (the same box; BzD:
-//              B times as large across and D times as deep), pixels
-//              binned K x K (reconstruction.pixel_binning), N MART iterations, passes P (--passes
+//              B times as large across and D times as deep), pixels binned K x K
+//              (reconstruction.pixel_binning), N MART iterations, passes P (--passes
 //              syntax, windows in its voxels); its set-up, first and in-a-run time per pair and its
 //              errors in the headline's voxels (axis band: half its final window) (row
 //              variant=live), beside the same passes on exact-particle volumes of its grid
@@ -261,9 +260,8 @@ int main(int argc, char** argv) {
                  "usage: bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate] "
                  "[--dark-cutoff F] [--sensor-blur-mm S] [--intensity-threshold K] [--final-smoothing K] "
                  "[--depth-prefilter K] [--passes P] [--early-interpolation sinc|cubic] [--voxel-z-factor D] "
-                 "[--steady] [--time-sweep] "
-                 "[--z-centre MM] [--compare-passes "
-                 "'P1;P2'] [--prune-threshold F [--prune-scope volume|slice]] [--sparse-sweep [--sparse-repeats N] "
+                 "[--steady] [--time-sweep] [--z-centre MM] [--compare-passes 'P1;P2'] [--prune-threshold F "
+                 "[--prune-scope volume|slice]] [--sparse-sweep [--sparse-repeats N] "
                  "[--sparse-variants V,..]] [--live B,K,N,P [--live-depth-prefilter K] [--live-only]]\n");
     return 2;
   }

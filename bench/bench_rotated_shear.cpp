@@ -85,8 +85,8 @@ int main(int argc, char** argv) {
     const sim::FieldErrors e = sim::field_errors(r.correlation.field, flow, voxel, 3);
     std::printf(
         "bench=rotated_shear tier=%s degrees=%.2f voxel_mm=%.3f voxel_z_mm=%.3f pixel_binning=%d iterations=%d "
-        "setup_s=%.2f "
-        "first_s=%.2f pair_s=%.2f rms_u=%.3f rms_v=%.3f rms_w=%.3f bias_u=%.3f bias_v=%.3f bias_w=%.3f gain_u=%.3f "
+        "setup_s=%.2f first_s=%.2f pair_s=%.2f rms_u=%.3f rms_v=%.3f rms_w=%.3f bias_u=%.3f bias_v=%.3f bias_w=%.3f "
+        "gain_u=%.3f "
         "gain_w=%.3f valid=%.3f resampled=%d peak_rss_gb=%.2f\n",
         process::tier_name(tier), degrees, s.grid.spacing_mm[0], s.grid.spacing_mm[2], s.pixel_binning,
         s.mart.iterations, setup_s, first_s, pair_s, e.rms[0], e.rms[1], e.rms[2], e.bias[0], e.bias[1], e.bias[2],
