@@ -21,7 +21,7 @@
 //              early_interpolation; default the sinc); the variants correlate with the other one.
 //     --steady: the headline pair once more in the kept MART workspace (time per pair in a run).
 //     --live B,K,N,P: a live tier beside the headline: voxels B times as large (the same box; BzD:
-//              B times as large across and D times as deep), pixels binned K x K
+//              B times as large across and D times as deep; BzDpF: F depth prefilter passes), pixels binned K x K
 //              (reconstruction.pixel_binning), N MART iterations, passes P (--passes
 //              syntax, windows in its voxels); its set-up, first and in-a-run time per pair and its
 //              errors in the headline's voxels (axis band: half its final window) (row
@@ -336,8 +336,14 @@ int main(int argc, char** argv) {
                      tier.c_str());
         return false;
       }
-      // B, or BzD: voxels B times as large across and D times as deep.
-      const std::string factors = tier.substr(0, c1);
+      // B, or BzD: voxels B times as large across and D times as deep; a suffix pK: K depth
+      // prefilter passes for this tier.
+      std::string factors = tier.substr(0, c1);
+      int tier_prefilter = live_depth_prefilter;
+      if (const std::size_t pk = factors.find('p'); pk != std::string::npos) {
+        tier_prefilter = std::stoi(factors.substr(pk + 1));
+        factors = factors.substr(0, pk);
+      }
       const std::size_t zd = factors.find('z');
       const int voxel_factor = std::stoi(factors.substr(0, zd));
       const int depth_factor = zd == std::string::npos ? voxel_factor : std::stoi(factors.substr(zd + 1));
@@ -347,7 +353,7 @@ int main(int argc, char** argv) {
       s.pixel_binning = std::stoi(tier.substr(c1 + 1, c2 - c1 - 1));
       s.mart.iterations = std::stoi(tier.substr(c2 + 1, c3 - c2 - 1));
       s.correlation.passes = piv::parse_passes(tier.substr(c3 + 1));
-      if (live_depth_prefilter >= 0) s.correlation.depth_prefilter = live_depth_prefilter;
+      if (tier_prefilter >= 0) s.correlation.depth_prefilter = tier_prefilter;
       t = now_s();
       const process::PairProcessor live_processor(camera, nominal, s);
       const double setup_s = now_s() - t;
@@ -365,8 +371,8 @@ int main(int argc, char** argv) {
                                                 sim::render_exact_volume(s.grid, pb), s.correlation);
       const Errors ex = errors_against(exact.field, flow, voxel, band);
       std::printf(
-          "bench=e2e case=%s variant=live binning=%d depth_binning=%d pixel_binning=%d voxels=%zu iterations=%d "
-          "passes=%s setup_s=%.2f "
+          "bench=e2e case=%s variant=live tier=%s binning=%d depth_binning=%d depth_prefilter=%d pixel_binning=%d "
+          "voxels=%zu iterations=%d passes=%s setup_s=%.2f "
           "first_wall_s=%.2f "
           "wall_s=%.2f first_pair_s=%.2f pair_s=%.2f recon_a_s=%.2f recon_b_s=%.2f correlate_s=%.2f rms_u=%.3f "
           "rms_v=%.3f rms_w=%.3f rms=%.3f "
@@ -374,8 +380,8 @@ int main(int argc, char** argv) {
           "off_axis_band_gain_u=%.3f off_axis_band_gain_v=%.3f off_axis_band_gain_w=%.3f "
           "exact_off_axis_band_rms_u=%.3f exact_off_axis_band_rms_v=%.3f exact_off_axis_band_rms_w=%.3f "
           "peak_rss_gb=%.2f\n",
-          scale.c_str(), voxel_factor, depth_factor, s.pixel_binning, s.grid.count(), s.mart.iterations,
-          tier.substr(c3 + 1).c_str(), setup_s, first_wall_s, wall_s,
+          scale.c_str(), tier.c_str(), voxel_factor, depth_factor, s.correlation.depth_prefilter, s.pixel_binning,
+          s.grid.count(), s.mart.iterations, tier.substr(c3 + 1).c_str(), setup_s, first_wall_s, wall_s,
           first.times.reconstruct_a_s + first.times.reconstruct_b_s + first.times.correlate_s,
           again.times.reconstruct_a_s + again.times.reconstruct_b_s + again.times.correlate_s,
           again.times.reconstruct_a_s, again.times.reconstruct_b_s, again.times.correlate_s, el.rms[0], el.rms[1],

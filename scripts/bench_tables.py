@@ -46,9 +46,11 @@ RUN = ["--mu", "1", "--iterations", "4", "--intensity-threshold", "4", "--final-
        "--depth-prefilter", "4", "--passes", "16@50+4,8@50"]
 
 # Live tiers at the paper's scale, bench_e2e --live B,K,N,P: voxels B times as large, pixels binned
-# K x K, N MART iterations, passes P. RUN_PAPER_LIVE is run-paper.yaml's `live:` tier.
-RUN_PAPER_LIVE = "3,4,4,16@50+4,8@50"
-LIVE_TIERS = ["4,4,5,16@50+4,8@50", "4,4,8,16@50+4,8@50", "3,4,3,16@50+4,8@50", RUN_PAPER_LIVE,
+# K x K, N MART iterations, passes P (BzDpF: D times as deep, F depth prefilter passes; the cubes'
+# tiers take 4). RUN_PAPER_LIVE is run-paper.yaml's `live:` tier.
+RUN_PAPER_LIVE = "3z6p1,4,4,16x16x8@50+2,8x8x4@50"
+LIVE_TIERS = ["4,4,5,16@50+4,8@50", "4,4,8,16@50+4,8@50", "3,4,3,16@50+4,8@50", "3,4,4,16@50+4,8@50", RUN_PAPER_LIVE,
+              "2z4p2,4,4,24x24x12@50+3,12x12x6@50",
               "3,4,5,16@50+4,8@50", "3,2,3,16@50+4,8@50", "3,1,3,16@50+4,8@50", "2,2,3,16@50+4,8@50"]
 
 # name: (set, command from the repository root, plot or None); a plot is drawn by bench/plot_e2e.py from
@@ -242,11 +244,11 @@ def t_headline(R):
                      time, paper, target, r.meta.get("date", "—").split(" (")[0],
                      r.meta.get("commit", "—")])
     r = R("e2e-full-live")
-    b, k, n, p = RUN_PAPER_LIVE.split(",", 3)
-    live = r.one(variant="live", binning=b, pixel_binning=k, iterations=n, passes=p)
+    live = r.one(variant="live", tier=RUN_PAPER_LIVE)
     if live:
-        rows.insert(1, ["run-paper.yaml's `live:` tier", f"the same pair: {0.125 * int(b):g} mm voxels, pixels "
-                        f"binned {k} x {k}, {n} it", f"{uvw(live)} ({uvw(live, 'off_axis_band_rms_')})",
+        b, db, k, n = live["binning"], live["depth_binning"], live["pixel_binning"], live["iterations"]
+        rows.insert(1, ["run-paper.yaml's `live:` tier", f"the same pair: {0.125 * int(b):g} x {0.125 * int(db):g} mm "
+                        f"voxels, pixels binned {k} x {k}, {n} it", f"{uvw(live)} ({uvw(live, 'off_axis_band_rms_')})",
                         f"{live['pair_s']} s", "—", "<= 1 s per pair (#22)", r.meta.get("date", "—").split(" (")[0],
                         r.meta.get("commit", "—")])
     out = table(["config", "case", "RMS u / v / w, voxels (off the axis band)", "time per pair in a run",
@@ -636,8 +638,11 @@ def t_live_tiers(R):
                      uvw(full, "off_axis_band_rms_"), gains(full), uvw(exact, "off_axis_band_rms_") if exact else "—"])
     for d in r.find(variant="live"):
         b, k, n, p = d["binning"], d["pixel_binning"], d["iterations"], d["passes"]
-        label = "**live (run-paper.yaml)**" if f"{b},{k},{n},{p}" == RUN_PAPER_LIVE else "live"
-        rows.append([label, f"{0.125 * int(b):g} mm, {k} x {k}", n, p, f"{d['pair_s']} (first {d['first_pair_s']})",
+        db = d.get("depth_binning", b)
+        label = "**live (run-paper.yaml)**" if d.get("tier", f"{b},{k},{n},{p}") == RUN_PAPER_LIVE else "live"
+        voxel = f"{0.125 * int(b):g}" + (f" x {0.125 * int(db):g}" if db != b else "") + " mm"
+        prefilter = f", prefilter {d['depth_prefilter']}" if "depth_prefilter" in d else ""
+        rows.append([label, f"{voxel}, {k} x {k}{prefilter}", n, p, f"{d['pair_s']} (first {d['first_pair_s']})",
                      uvw(d), uvw(d, "off_axis_band_rms_"), gains(d), uvw(d, "exact_off_axis_band_rms_")])
     out = table(["tier", "voxel, pixel binning", "MART it", "passes", "s per pair in a run",
                  "RMS u / v / w, 0.125 mm voxels", "off the axis band", "gain u / v / w (off the band)",

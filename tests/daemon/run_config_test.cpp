@@ -80,14 +80,14 @@ TEST(RunConfig, ShippedPaperScaleConfigParses) {
 
   ASSERT_TRUE(c.spec.live);
   const process::ProcessSettings& live = *c.spec.live;
-  EXPECT_EQ(live.grid.shape, (std::array<int, 3>{100, 67, 67}));  // the same box in 0.375 mm cubes
+  EXPECT_EQ(live.grid.shape, (std::array<int, 3>{100, 67, 33}));  // the same box in 0.375 x 0.75 mm voxels
   EXPECT_EQ(live.pixel_binning, 4);
   EXPECT_EQ(live.mart.iterations, 4);
   EXPECT_TRUE(live.mart.accelerate);
   EXPECT_EQ(live.mart.prune_scope, recon::PruneScope::slice);  // the live tier keeps the full settings'
   ASSERT_EQ(live.correlation.passes.size(), 2u);
-  EXPECT_EQ(live.correlation.passes[1].window, (std::array<int, 3>{8, 8, 8}));
-  EXPECT_EQ(live.correlation.depth_prefilter, 4);
+  EXPECT_EQ(live.correlation.passes[1].window, (std::array<int, 3>{8, 8, 4}));  // 3 mm cubes
+  EXPECT_EQ(live.correlation.depth_prefilter, 1);
   EXPECT_EQ(c.quality.take, QualityLane::Take::newest);
 }
 
