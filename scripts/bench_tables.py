@@ -29,15 +29,16 @@ DOC = ROOT / "docs" / "benchmarks.md"
 # accuracy and reconstruction pages' measured tables.
 DOCS = [DOC, ROOT / "docs" / "paper-figures.md", ROOT / "docs" / "accuracy.md", ROOT / "docs" / "recon.md"]
 
-# run-paper.yaml's reconstruction and correlation settings, as bench_e2e's flags.
+# run-paper.yaml's MART, ghost floor and final smoothing, as bench_e2e's flags.
+RUN_PAPER_MART = ["--mu", "1", "--accelerate", "--iterations", "8", "--prune-threshold", "0.03", "--prune-scope",
+                  "slice", "--intensity-threshold", "3", "--final-smoothing", "1"]
+# run-paper.yaml's reconstruction and correlation settings.
 RUN_PAPER_PASSES = "32x32x16@50,16x16x8@50+2,16x16x8@50,16x16x8@50,16x16x8@75"
-RUN_PAPER = ["--voxel-z-factor", "2", "--mu", "1", "--accelerate", "--iterations", "8", "--prune-threshold", "0.03",
-             "--prune-scope", "slice", "--intensity-threshold", "3", "--final-smoothing", "1", "--depth-prefilter", "1",
-             "--passes", RUN_PAPER_PASSES, "--early-interpolation", "cubic"]
-# run-paper.yaml's MART and filters on cubic 0.125 mm voxels (the depth prefilter's four passes
-# there), with core/piv's default passes: the small camera's sparse sweep.
-RUN_PAPER_CUBES = ["--mu", "1", "--accelerate", "--iterations", "8", "--prune-threshold", "0.03", "--prune-scope",
-                   "slice", "--intensity-threshold", "3", "--final-smoothing", "1", "--depth-prefilter", "4"]
+RUN_PAPER = (["--voxel-z-factor", "2"] + RUN_PAPER_MART
+             + ["--depth-prefilter", "1", "--passes", RUN_PAPER_PASSES, "--early-interpolation", "cubic"])
+# The same on cubic 0.125 mm voxels (the depth prefilter's four passes there) with core/piv's
+# default passes: the small camera's sparse sweep.
+RUN_PAPER_CUBES = RUN_PAPER_MART + ["--depth-prefilter", "4"]
 # process.yaml's (its passes are core/piv's default).
 PROCESS = ["--mu", "1", "--accelerate", "--iterations", "20", "--intensity-threshold", "4",
            "--final-smoothing", "1", "--depth-prefilter", "4"]
