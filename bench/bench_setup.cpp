@@ -3,7 +3,7 @@
 //
 //   bench_setup [paper|small] [--rotation RAD] [--repeat N]
 //     paper: camera-fahringer2015.yaml, 300 x 200 x 200 voxels of 0.125 mm plus 1 mm depth guard
-//            (run-paper.yaml's box); small: camera-small.yaml, 32 x 32 x 32 (process.yaml's).
+//            (run-paper.yaml's box, on cubes); small: camera-small.yaml, 32 x 32 x 32 (process.yaml's box, on cubes).
 //     --rotation: the lens array rotated by RAD (0.001745 = 0.1 deg), so the frames are resampled
 //            onto an axis-aligned lattice first (default 0: the nominal lattice, raw pixels).
 //     --repeat: medians over N builds and N reads (default 3).

@@ -39,12 +39,13 @@ RUN_PAPER = (["--voxel-z-factor", "2"] + RUN_PAPER_MART
 # The same on cubic 0.125 mm voxels (the depth prefilter's four passes there) with core/piv's
 # default passes: the small camera's sparse sweep.
 RUN_PAPER_CUBES = RUN_PAPER_MART + ["--depth-prefilter", "4"]
-# process.yaml's (its passes are core/piv's default).
-PROCESS = ["--mu", "1", "--accelerate", "--iterations", "20", "--intensity-threshold", "4",
-           "--final-smoothing", "1", "--depth-prefilter", "4"]
+# process.yaml's (core/piv's default passes in voxels twice as deep as wide).
+PROCESS = ["--voxel-z-factor", "2", "--mu", "1", "--accelerate", "--iterations", "20", "--intensity-threshold", "4",
+           "--final-smoothing", "1", "--depth-prefilter", "1", "--passes",
+           "32x32x16@50,16x16x8@50+2,16x16x8@50,16x16x8@75"]
 # run.yaml's (the live preview on the small camera).
-RUN = ["--mu", "1", "--iterations", "4", "--intensity-threshold", "4", "--final-smoothing", "1",
-       "--depth-prefilter", "4", "--passes", "16@50+4,8@50"]
+RUN = ["--voxel-z-factor", "2", "--mu", "1", "--iterations", "4", "--intensity-threshold", "4", "--final-smoothing",
+       "1", "--depth-prefilter", "1", "--passes", "16x16x8@50+2,8x8x4@50"]
 
 # Live tiers at the paper's scale, bench_e2e --live B,K,N,P: voxels B times as large, pixels binned
 # K x K, N MART iterations, passes P (BzDpF: D times as deep, F depth prefilter passes; the cubes'
@@ -226,9 +227,10 @@ HEADLINE_ROWS = [
      "0.165 / 0.23 / 0.98; 30 min per image on 12 cores",
      "<= 0.10 / 0.10 / 0.50 and <= 30 s per pair (#7); <= 10 s per pair in a run (#21)"),
     ("e2e-full-process", "process.yaml's MART and correlation",
-     "the same pair in 300x200x200 voxels of 0.125 mm", "as above", "as above"),
+     "the same pair and voxels", "as above", "as above"),
     ("e2e-reduced-process", "process.yaml's MART and correlation",
-     "the ring scaled to camera-small: 48³ voxels, across the focal plane", "—", "—"),
+     "the ring scaled to camera-small: a 6 mm cube across the focal plane in 48 x 48 x 24 voxels (0.125 mm across, "
+     "0.25 mm deep)", "—", "—"),
     ("e2e-reduced-live", "run.yaml's MART and correlation",
      "the same small pair", "—", "keep up with the laser (#22: every pair at 1 Hz)"),
 ]

@@ -19,7 +19,7 @@ namespace {
 const std::string kConfig =
     "dt_s: 0.001\n"
     "volume: {x_mm: [-1, 1], y_mm: [-1, 1], z_mm: [-1, 1], voxel_mm: 0.125}\n"
-    // The live settings of systemd/config/run.yaml (MLOS start, dark cutoff 0.9: MART's defaults).
+    // Live settings on cubes (MLOS start, dark cutoff 0.9: MART's defaults).
     "reconstruction: {iterations: 3, mu: 1}\n"
     // Two passes: the predictor of the first removes the loss-of-pairs bias of a single pass.
     "correlation: {passes: [{window: 16, overlap_percent: 50}, {window: 8, overlap_percent: 50}],\n"

@@ -39,11 +39,12 @@ TEST(RunConfig, ShippedDefaultParses) {
   EXPECT_EQ(c.spec.full.mart.iterations, 4);
   const process::ProcessSettings s =
       process::process_settings_from(YamlMap(load_yaml_text(c.process_yaml(), "process.yaml"), "process.yaml"));
-  EXPECT_EQ(s.grid.shape, (std::array<int, 3>{32, 32, 32}));  // [-2, 2] mm at 0.125 mm: the box's faces
+  // [-2, 2] mm at 0.125 mm across and 0.25 mm deep: the box's faces
+  EXPECT_EQ(s.grid.shape, (std::array<int, 3>{32, 32, 16}));
   ASSERT_EQ(s.correlation.passes.size(), 2u);
-  EXPECT_EQ(s.correlation.passes[0].depth_margin, 4);  // depth motion recovered twice over (benchmarks.md)
-  EXPECT_EQ(s.correlation.passes[1].window, (std::array<int, 3>{8, 8, 8}));
-  EXPECT_EQ(s.correlation.depth_prefilter, 4);
+  EXPECT_EQ(s.correlation.passes[0].depth_margin, 2);  // depth motion recovered twice over (benchmarks.md)
+  EXPECT_EQ(s.correlation.passes[1].window, (std::array<int, 3>{8, 8, 4}));
+  EXPECT_EQ(s.correlation.depth_prefilter, 1);
   EXPECT_EQ(s.correlation.final_smoothing, 1);
   EXPECT_FALSE(c.publish_volumes);
   EXPECT_EQ(c.text, text.str());
