@@ -522,8 +522,10 @@ int main(int argc, char** argv) {
   {
     // Three passes with the residual added to the predictor's window mean, unsmoothed: what the
     // centre predictor, its smoothing and the fourth pass are compared against.
+    // Windows of 4 and 2 mm, in the headline's voxels (depth_voxel_factor times as deep as wide).
     piv::CorrelationSettings previous = settings.correlation;
-    previous.passes = {{{32, 32, 32}, 50}, {{16, 16, 16}, 50}, {{16, 16, 16}, 75}};
+    const int f = depth_voxel_factor;
+    previous.passes = {{{32, 32, 32 / f}, 50}, {{16, 16, 16 / f}, 50}, {{16, 16, 16 / f}, 75}};
     previous.predictor = piv::PredictorBase::window_mean;
     previous.predictor_smoothing = 0;
     piv::CorrelationSettings centre3 = previous;
