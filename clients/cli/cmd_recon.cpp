@@ -41,6 +41,8 @@ struct ReconOptions {
   double convergence = 0;
   double sensor_blur_mm = 0;
   double prune_threshold = 0;
+  std::string prune_scope = "volume";
+  int prune_depth_reach = 0;
   bool no_prune = false;
   std::string cache_dir;
   bool no_cache = false;
@@ -79,6 +81,8 @@ void run(const ReconOptions& o) {
   s.sensor_blur_sigma_mm = o.sensor_blur_mm;
   s.prune = !o.no_prune;
   s.prune_threshold = o.prune_threshold;
+  s.prune_scope = o.prune_scope == "slice" ? recon::PruneScope::slice : recon::PruneScope::volume;
+  s.prune_depth_reach = o.prune_depth_reach;
   if (o.start == "mlos") {
     s.start = recon::MartStart::mlos;
   } else if (o.start == "ones") {
@@ -185,8 +189,18 @@ void add_recon_commands(CLI::App& app) {
                   "core/sim's is 0.0052; 0: sec 5.2's weights alone)")
       ->capture_default_str();
   cmd->add_option("--prune-threshold", o->prune_threshold,
-                  "voxels at or below this fraction of the volume's peak leave the active set after the "
-                  "start and each iteration (0: only exact zeros, the same volume as without pruning)")
+                  "voxels at or below this fraction of the volume's peak (or their slice's: --prune-scope) leave "
+                  "the active set after the start and each iteration (0: only exact zeros, the same volume as "
+                  "without pruning)")
+      ->capture_default_str();
+  cmd->add_option("--prune-scope", o->prune_scope,
+                  "what --prune-threshold is a fraction of: the volume's peak, or each depth slice's own "
+                  "(run-paper.yaml's and process.yaml's: a faint slice's particles are kept)")
+      ->check(CLI::IsMember({"volume", "slice"}))
+      ->capture_default_str();
+  cmd->add_option("--prune-depth-reach", o->prune_depth_reach,
+                  "a voxel at or below the cut stays while one within this many slices of it along depth is "
+                  "above (keeps a particle's faint depth ends; 0: off)")
       ->capture_default_str();
   cmd->add_flag("--no-prune", o->no_prune, "update every active voxel on every iteration (the reference)");
   cmd->add_option("--cache-dir", o->cache_dir,

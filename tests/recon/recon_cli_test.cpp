@@ -110,6 +110,49 @@ TEST(ReconstructCli, WritesVolumesWhoseBrightestVoxelIsTheParticle) {
   EXPECT_NEAR(fit_accelerated->position_mm[0], -0.1875, 0.0625);
   EXPECT_NEAR(fit_accelerated->position_mm[1], 0.1875, 0.0625);
   EXPECT_NEAR(fit_accelerated->position_mm[2], -0.75, 0.5);
+
+  // --prune-scope reaches MART: the same threshold against each slice's peak prunes another count of
+  // voxels than against the volume's (here none: each slice's live voxels are the particle's own),
+  // and the particle stays. --prune-depth-reach: RefusesBadArgumentsClearly.
+  const auto pruned_with = [&](const std::vector<std::string>& extra, const std::string& name) {
+    std::vector<std::string> args = {binary("plenopiv"),
+                                     "reconstruct",
+                                     "--camera",
+                                     kCamera,
+                                     (dir / "particle.tif").string(),
+                                     "--extent",
+                                     "-0.625",
+                                     "0.625",
+                                     "-0.625",
+                                     "0.625",
+                                     "-2",
+                                     "2",
+                                     "--voxel",
+                                     "0.125",
+                                     "--voxel-z",
+                                     "0.5",
+                                     "--iterations",
+                                     "3",
+                                     "--prune-threshold",
+                                     "0.3",
+                                     "-o",
+                                     (dir / (name + ".h5")).string()};
+    args.insert(args.end(), extra.begin(), extra.end());
+    EXPECT_EQ(run_command(args, out), 0) << out;
+    const auto at = out.find(" voxels pruned)");
+    EXPECT_NE(at, std::string::npos) << out;
+    const auto from = out.rfind('(', at);
+    return out.substr(from + 1, at - from - 1);
+  };
+  const std::string by_volume = pruned_with({}, "pruned-volume");
+  const std::string by_slice = pruned_with({"--prune-scope", "slice"}, "pruned-slice");
+  EXPECT_NE(by_volume, by_slice) << "voxels pruned: " << by_volume << " against the volume's peak, " << by_slice
+                                 << " against each slice's";
+  const auto fit_slice = fit_particle(io::read_volume_h5(dir / "pruned-slice.h5"), {-0.1875, 0.1875, -0.75}, {3, 3, 3});
+  ASSERT_TRUE(fit_slice);
+  EXPECT_NEAR(fit_slice->position_mm[2], -0.75, 0.5);
+  std::printf("voxels pruned below 0.3 of the peak: %s (the volume's), %s (each slice's)\n", by_volume.c_str(),
+              by_slice.c_str());
 }
 
 TEST(ReconstructCli, RefusesBadArgumentsClearly) {
@@ -130,6 +173,16 @@ TEST(ReconstructCli, RefusesBadArgumentsClearly) {
                       "-1", "1", "-1", "1", "-1", "1", "--sensor-blur-mm", "-0.001", "-o", (dir / "x.h5").string()},
                      out));
   EXPECT_NE(out.find("sensor_blur_sigma_mm"), std::string::npos) << out;
+  EXPECT_EQ(105, run_command(
+                     {binary("plenopiv"), "reconstruct", "--camera", kCamera, (dir / "right.tif").string(), "--extent",
+                      "-1", "1", "-1", "1", "-1", "1", "--prune-scope", "brick", "-o", (dir / "x.h5").string()},
+                     out));
+  EXPECT_NE(out.find("--prune-scope"), std::string::npos) << out;
+  EXPECT_EQ(
+      2, run_command({binary("plenopiv"), "reconstruct", "--camera", kCamera, (dir / "right.tif").string(), "--extent",
+                      "-1", "1", "-1", "1", "-1", "1", "--prune-depth-reach", "99", "-o", (dir / "x.h5").string()},
+                     out));
+  EXPECT_NE(out.find("prune_depth_reach"), std::string::npos) << out;
   EXPECT_FALSE(std::filesystem::exists(dir / "x.h5"));
 }
 
