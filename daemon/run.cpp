@@ -45,6 +45,11 @@ double frame_gap_s(const drivers::FramePair& pair) {
 constexpr std::uint64_t kReserveBytes = 64ull * 1024 * 1024;
 // A run without a pair count or duration needs room for at least this many pairs to start.
 constexpr std::uint64_t kMinPairsUnbounded = 10;
+// Runs that record at least this many bytes per second have the data directory's write rate
+// measured before they start (the paper's camera from about 1.6 Hz; the small camera never), with a
+// write of this size (a fraction of a second on a disk fast enough for them).
+constexpr double kProbeWriteRateAbove = 100e6;
+constexpr std::uint64_t kWriteProbeBytes = std::uint64_t(256) << 20;
 
 std::string megabytes(std::uint64_t bytes) {
   char text[64];
@@ -154,6 +159,7 @@ Run::Run(RunConfig config, std::string run_id, RunEnvironment env)
                    ? "past the page cache (O_DIRECT)"
                    : "through the page cache: the data directory's file system does not take O_DIRECT in 4 KiB "
                      "blocks");
+  check_write_rate();
   if (wiring.source == drivers::TriggerSource::Software) {
     spdlog::warn("run {}: camera triggering {}", run_id_, wiring.description);
   } else {
@@ -206,6 +212,28 @@ void Run::record(drivers::FramePair pair) {
 }
 
 // A disk that is about to fill ends the run before a frame write fails half way.
+// A recorder slower than the camera falls behind and, its queue bounded, loses frames: where a run
+// records fast enough for the disk to matter, the data directory's write rate is measured before
+// the first pair (a burst: a disk that takes it may still slow down over minutes) and a rate below
+// the run's is said at once, not after the run as frames lost.
+void Run::check_write_rate() const {
+  const double needed = double(bytes_per_pair_) * config_.rate_hz;  // bytes per second
+  if (needed < kProbeWriteRateAbove) return;
+  const double taken = io::measure_write_rate(env_.data_dir, kWriteProbeBytes);
+  char rates[256];
+  std::snprintf(rates, sizeof rates, "%.0f MB/s in a %llu MiB write; this run records %.0f MB/s (%s per pair at %g Hz)",
+                taken / 1e6, static_cast<unsigned long long>(kWriteProbeBytes >> 20), needed / 1e6,
+                megabytes(bytes_per_pair_).c_str(), config_.rate_hz);
+  if (taken < needed) {
+    spdlog::warn(
+        "run {}: data_dir {} took {}: the recorder will fall behind and lose frames; lower rate_hz or "
+        "record to a faster disk",
+        run_id_, env_.data_dir.string(), rates);
+  } else {
+    spdlog::info("run {}: data_dir {} took {}", run_id_, env_.data_dir.string(), rates);
+  }
+}
+
 void Run::check_space() const {
   const auto free = io::free_bytes(recorder_->dir());
   if (free && *free < bytes_per_pair_ + kReserveBytes / 4) {

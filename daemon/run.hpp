@@ -115,6 +115,7 @@ class Run {
   void lose_trigger(std::uint64_t index);
   void drain_after_stop();
   void account_for_the_last_triggers();
+  void check_write_rate() const;
   void check_space() const;
   void stop_devices() noexcept;
   msg::Losses losses() const;

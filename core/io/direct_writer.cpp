@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -220,6 +221,61 @@ WriteMode direct_write_mode(const std::filesystem::path& folder) {
   }
   if (error == EINVAL) return WriteMode::buffered;
   throw std::runtime_error(folder.string() + ": cannot make a file: " + std::strerror(error));
+}
+
+double measure_write_rate(const std::filesystem::path& folder, std::uint64_t bytes) {
+  const std::filesystem::path path = folder / kWriteProbeName;
+  const auto fail = [&](const char* what, int error) {
+    throw std::runtime_error(path.string() + ": " + what + ": " + std::strerror(error));
+  };
+  constexpr int kFlags = O_WRONLY | O_CREAT | O_CLOEXEC;  // no O_TRUNC: the blocks stay allocated
+  int fd = ::open(path.c_str(), kFlags | O_DIRECT, 0600);
+  if (fd >= 0 && !direct_io_fits(fd)) {
+    ::close(fd);
+    fd = -1;
+    errno = EINVAL;
+  }
+  if (fd < 0 && errno == EINVAL) fd = ::open(path.c_str(), kFlags, 0600);
+  if (fd < 0) fail("cannot open the write probe", errno);
+  constexpr std::size_t kChunk = std::size_t(8) << 20;
+  const std::uint64_t chunks = std::max<std::uint64_t>(1, (bytes + kChunk - 1) / kChunk);
+  const std::unique_ptr<std::uint64_t, decltype(&std::free)> buffer(
+      static_cast<std::uint64_t*>(std::aligned_alloc(DirectWriter::kBlock, kChunk)), &std::free);
+  if (!buffer) {
+    ::close(fd);
+    throw std::bad_alloc();
+  }
+  // Bytes like a frame's, not zeros a file system or device might compress or skip (xorshift64).
+  std::uint64_t state = 0x9e3779b97f4a7c15ull;
+  for (std::size_t i = 0; i < kChunk / sizeof(std::uint64_t); ++i) {
+    state ^= state << 13;
+    state ^= state >> 7;
+    state ^= state << 17;
+    buffer.get()[i] = state;
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  for (std::uint64_t c = 0; c < chunks; ++c) {
+    buffer.get()[0] = c;  // every chunk different
+    const auto* data = reinterpret_cast<const unsigned char*>(buffer.get());
+    for (std::size_t done = 0; done < kChunk;) {
+      const ssize_t n = ::pwrite(fd, data + done, kChunk - done, off_t(c * kChunk + done));
+      if (n < 0 && errno == EINTR) continue;
+      if (n <= 0) {
+        const int error = n < 0 ? errno : EIO;
+        ::close(fd);
+        fail("cannot write the write probe", error);
+      }
+      done += std::size_t(n);
+    }
+  }
+  if (::fdatasync(fd) != 0) {
+    const int error = errno;
+    ::close(fd);
+    fail("cannot sync the write probe", error);
+  }
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  ::close(fd);
+  return double(chunks * kChunk) / std::max(seconds, 1e-9);
 }
 
 }  // namespace plenopiv::io

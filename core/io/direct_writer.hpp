@@ -69,4 +69,15 @@ class DirectWriter {
 // Whether files in `folder` can be written with O_DIRECT (a probe file is made and removed).
 WriteMode direct_write_mode(const std::filesystem::path& folder);
 
+// The file measure_write_rate writes in its folder, kept between calls.
+inline constexpr const char* kWriteProbeName = ".plenopiv-write-probe";
+// The rate at which `folder` takes a recorder's writes, bytes per second: `bytes` (rounded up to
+// whole 8 MiB chunks of bytes that differ from chunk to chunk) written as a DirectWriter writes,
+// past the page cache where the file system takes O_DIRECT (else through it, then fdatasync),
+// timed until the data is on the device. Into `folder`/kWriteProbeName, which is kept and
+// overwritten in place next time: removing or truncating it would make a file system mounted
+// with `discard` trim its blocks just as a run starts, stalling the recorder (docs/reliability.md).
+// std::runtime_error naming the file and the system's reason otherwise.
+double measure_write_rate(const std::filesystem::path& folder, std::uint64_t bytes);
+
 }  // namespace plenopiv::io

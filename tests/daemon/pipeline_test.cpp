@@ -3,6 +3,8 @@
 #include <google/protobuf/util/json_util.h>
 #include <gtest/gtest.h>
 
+#include <spdlog/sinks/ringbuffer_sink.h>
+#include <spdlog/spdlog.h>
 #include <tbb/global_control.h>
 #include <cmath>
 #include <cstring>
@@ -17,6 +19,7 @@
 #include <thread>
 
 #include "core/base/errors.hpp"
+#include "core/io/direct_writer.hpp"
 #include "core/io/hdf5_files.hpp"
 #include "core/io/tiff.hpp"
 #include "daemon/pipeline.hpp"
@@ -326,6 +329,39 @@ TEST_F(RunTest, RunOfNPairsRecordsAllAndEndsIdle) {
   run.fill_status(s);
   EXPECT_EQ(s.pairs_recorded(), 6u);
   EXPECT_EQ(s.stages_size(), 3);
+}
+
+// A run that records faster than a disk takes is told so before its first pair: the data
+// directory's write rate is measured (only for runs that record at least 100 MB/s) and a warning
+// names data_dir, both rates and the frames to be lost. The probe file stays for the next run.
+TEST_F(RunTest, ARunFasterThanTheDiskIsToldBeforeItStarts) {
+  auto sink = std::make_shared<spdlog::sinks::ringbuffer_sink_mt>(64);
+  const auto previous = spdlog::default_logger();
+  spdlog::set_default_logger(std::make_shared<spdlog::logger>("write-rate", sink));
+  const fs::path probe = data_ / io::kWriteProbeName;
+  state_.start("slow");
+  {
+    daemon::Run run(config("pairs: 2\nrate_hz: 50\n"), "slow", env_);  // 64 x 48 px: 0.6 MB/s
+    wait_finished(run);
+  }
+  EXPECT_FALSE(fs::exists(probe)) << "a run that records little is not probed";
+  state_.start("fast");
+  {
+    // 4096 x 4096 px, two 16-bit frames per pair at 200 Hz: 13.4 GB/s.
+    daemon::Run run(config("pairs: 1\nrate_hz: 200\ncamera_uri: test://?sensor=4096x4096\n"), "fast", env_);
+    wait_finished(run);
+  }
+  spdlog::set_default_logger(previous);
+  std::vector<std::string> lines;
+  for (const std::string& l : sink->last_formatted())
+    if (l.find("data_dir") != std::string::npos && l.find("MB/s") != std::string::npos) lines.push_back(l);
+  ASSERT_EQ(lines.size(), 1u) << "one probe, for the fast run";
+  std::printf("%s\n", lines[0].c_str());
+  EXPECT_NE(lines[0].find("run fast: data_dir " + data_.string() + " took "), std::string::npos) << lines[0];
+  EXPECT_NE(lines[0].find("this run records 13422 MB/s (67.1 MB per pair at 200 Hz)"), std::string::npos) << lines[0];
+  EXPECT_NE(lines[0].find("[warning]"), std::string::npos) << lines[0];
+  EXPECT_NE(lines[0].find("the recorder will fall behind and lose frames"), std::string::npos) << lines[0];
+  EXPECT_EQ(fs::file_size(probe), std::uintmax_t(256) << 20) << "kept for the next run";
 }
 
 // A run is set up on its own thread while Armed (the processing's tables): status says so, and

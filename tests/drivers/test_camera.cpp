@@ -2,17 +2,19 @@
 #include "tests/drivers/test_camera.hpp"
 
 #include <chrono>
+#include <cstdio>
 #include <sstream>
 
 namespace plenopiv::testing_support {
 
 using namespace plenopiv::drivers;
 
-TestCamera::TestCamera(std::string uri, TestCameraFaults faults, bool with_input)
-    : CameraBase(CameraInfo{uri, "plenopiv", "test camera", "T0", 64, 48, "burst (test)"},
+TestCamera::TestCamera(std::string uri, TestCameraFaults faults, bool with_input, TestCameraSensor sensor)
+    : CameraBase(CameraInfo{uri, "plenopiv", "test camera", "T0", sensor.width, sensor.height, "burst (test)"},
                  PairerOptions{2'000'000, 0, 1'000'000'000}),
       faults_(std::move(faults)),
-      with_input_(with_input) {}
+      with_input_(with_input),
+      sensor_(sensor) {}
 
 std::uint16_t TestCamera::test_pixel(std::uint64_t frame_id, int x, int y) {
   return std::uint16_t((frame_id * 131 + std::uint64_t(x) * 7 + std::uint64_t(y) * 3) & 0x0fff);
@@ -24,8 +26,8 @@ void TestCamera::fire() {
   const auto host = std::uint64_t(
       std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
           .count());
-  const int w = settings_.roi.width > 0 ? settings_.roi.width : 64;
-  const int h = settings_.roi.height > 0 ? settings_.roi.height : 48;
+  const int w = settings_.roi.width > 0 ? settings_.roi.width : sensor_.width;
+  const int h = settings_.roi.height > 0 ? settings_.roi.height : sensor_.height;
   for (int k = 0; k < 2; ++k) {
     Frame f;
     f.frame_id = next_id_++;
@@ -56,11 +58,15 @@ std::set<std::uint64_t> numbers(const std::string& list) {
 
 void register_test_camera(CameraRegistry& registry) {
   registry.add("test", [](const DeviceUri& uri) -> std::unique_ptr<Camera> {
-    uri.reject_unknown({"lose", "incomplete", "input"});
+    uri.reject_unknown({"lose", "incomplete", "input", "sensor"});
     const std::string input = uri.string_or("input", "line");
     if (input != "line" && input != "none") uri.fail("input: line or none, got '" + input + "'");
     TestCameraFaults faults{numbers(uri.string_or("lose", "")), numbers(uri.string_or("incomplete", ""))};
-    return std::make_unique<TestCamera>(uri.text(), faults, input == "line");
+    TestCameraSensor sensor;
+    const std::string size = uri.string_or("sensor", "64x48");
+    if (std::sscanf(size.c_str(), "%dx%d", &sensor.width, &sensor.height) != 2 || sensor.width < 1 || sensor.height < 1)
+      uri.fail("sensor: WxH in px, got '" + size + "'");
+    return std::make_unique<TestCamera>(uri.text(), faults, input == "line", sensor);
   });
 }
 

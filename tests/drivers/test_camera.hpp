@@ -16,6 +16,11 @@ struct TestCameraFaults {
   std::set<std::uint64_t> incomplete;  // frame numbers delivered with complete = false
 };
 
+// The sensor's size, px; `test://?sensor=WxH` (default 64x48).
+struct TestCameraSensor {
+  int width = 64, height = 48;
+};
+
 // Each software_trigger() (or fire()) delivers frames A and B at once, ids counting up from 1,
 // device timestamps 1 ms apart within a pair and 100 ms between pairs. Pixel (x, y) of frame id f
 // holds test_pixel(f, x, y), so a test can tell which frame it got.
@@ -23,7 +28,8 @@ struct TestCameraFaults {
 // line); `with_input = false` makes a camera without one (like a real camera on a cable).
 class TestCamera : public drivers::CameraBase, public drivers::TriggerInput {
  public:
-  explicit TestCamera(std::string uri = "test://", TestCameraFaults faults = {}, bool with_input = true);
+  explicit TestCamera(std::string uri = "test://", TestCameraFaults faults = {}, bool with_input = true,
+                      TestCameraSensor sensor = {});
   static std::uint16_t test_pixel(std::uint64_t frame_id, int x, int y);
   // Fires one trigger, whatever the trigger source (stands in for the trigger line).
   void fire();
@@ -47,6 +53,7 @@ class TestCamera : public drivers::CameraBase, public drivers::TriggerInput {
   bool with_input_;
   std::atomic<bool> external_{false};
   drivers::CameraSettings settings_;
+  TestCameraSensor sensor_;
   std::uint64_t frame_number_ = 0;
   std::uint64_t next_id_ = 1;
   std::uint64_t trigger_ = 0;

@@ -1,5 +1,6 @@
 // File formats: TIFF, HDF5 and VTI round trips, h5py reading our files, refused corrupt inputs.
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 
 #include <cmath>
 #include <cstring>
@@ -168,6 +169,49 @@ TEST(DirectWriter, AFullDiskIsNamedAndLeavesNoFile) {
     EXPECT_NE(std::string(e.what()).find("no space left on device"), std::string::npos) << e.what();
   }
   EXPECT_TRUE(std::filesystem::is_empty(disk.dir()));
+}
+
+// The write-rate probe: a rate, its file kept and overwritten in place (never truncated, which
+// would trim its blocks on a `discard` mount), chunks that differ, and a full disk or a missing
+// folder named.
+TEST(WriteRate, TheProbeIsMeasuredKeptAndOverwrittenInPlace) {
+  const auto dir = temp_dir() / "write-rate";
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const auto probe = dir / kWriteProbeName;
+  const double first = measure_write_rate(dir, 20u << 20);  // three 8 MiB chunks
+  EXPECT_GT(first, 1e6) << "bytes per second";
+  ASSERT_EQ(std::filesystem::file_size(probe), std::uintmax_t(24) << 20);
+  struct stat before {};
+  ASSERT_EQ(::stat(probe.c_str(), &before), 0);
+  std::ifstream in(probe, std::ios::binary);
+  std::vector<char> start(64), next(64);
+  in.read(start.data(), 64);
+  in.seekg(8 << 20);
+  in.read(next.data(), 64);
+  EXPECT_NE(start, next) << "every chunk's bytes differ";
+  in.close();
+  const double second = measure_write_rate(dir, 1);  // one chunk, over the first
+  EXPECT_GT(second, 1e6);
+  struct stat after {};
+  ASSERT_EQ(::stat(probe.c_str(), &after), 0);
+  EXPECT_EQ(after.st_ino, before.st_ino) << "the same file, not a new one";
+  EXPECT_EQ(std::filesystem::file_size(probe), std::uintmax_t(24) << 20) << "not truncated";
+  try {
+    measure_write_rate(dir / "missing", 1);
+    ADD_FAILURE() << "a missing folder";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find((dir / "missing" / kWriteProbeName).string()), std::string::npos) << e.what();
+  }
+  testing_support::SmallTmpfs disk(temp_dir() / "full-rate", 4);
+  if (!disk.mounted()) GTEST_SKIP() << disk.why_not();
+  try {
+    measure_write_rate(disk.dir(), 16u << 20);
+    ADD_FAILURE() << "wrote 16 MiB on a 4 MB disk";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("space left on device"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find(kWriteProbeName), std::string::npos) << e.what();
+  }
 }
 
 // Read into a frame buffer: reused when it has the file's size, replaced when not.
