@@ -159,7 +159,6 @@ Run::Run(RunConfig config, std::string run_id, RunEnvironment env)
                    ? "past the page cache (O_DIRECT)"
                    : "through the page cache: the data directory's file system does not take O_DIRECT in 4 KiB "
                      "blocks");
-  check_write_rate();
   if (wiring.source == drivers::TriggerSource::Software) {
     spdlog::warn("run {}: camera triggering {}", run_id_, wiring.description);
   } else {
@@ -213,13 +212,20 @@ void Run::record(drivers::FramePair pair) {
 
 // A disk that is about to fill ends the run before a frame write fails half way.
 // A recorder slower than the camera falls behind and, its queue bounded, loses frames: where a run
-// records fast enough for the disk to matter, the data directory's write rate is measured before
-// the first pair (a burst: a disk that takes it may still slow down over minutes) and a rate below
-// the run's is said at once, not after the run as frames lost.
+// records fast enough for the disk to matter, the data directory's write rate is measured while
+// Armed, on the run's thread (a burst: a disk that takes it may still slow down over minutes), and
+// a rate below the run's is said before the first pair, not after the run as frames lost. A probe
+// that fails is said too; the run goes on (its own checks of space stand).
 void Run::check_write_rate() const {
   const double needed = double(bytes_per_pair_) * config_.rate_hz;  // bytes per second
   if (needed < kProbeWriteRateAbove) return;
-  const double taken = io::measure_write_rate(env_.data_dir, kWriteProbeBytes);
+  double taken = 0;
+  try {
+    taken = io::measure_write_rate(env_.data_dir, kWriteProbeBytes);
+  } catch (const std::exception& e) {
+    spdlog::warn("run {}: could not time a write into data_dir {}: {}", run_id_, env_.data_dir.string(), e.what());
+    return;
+  }
   char rates[256];
   std::snprintf(rates, sizeof rates, "%.0f MB/s in a %llu MiB write; this run records %.0f MB/s (%s per pair at %g Hz)",
                 taken / 1e6, static_cast<unsigned long long>(kWriteProbeBytes >> 20), needed / 1e6,
@@ -481,6 +487,7 @@ void Run::acquire() {
 // Idle, nothing made) or failed (Error, with the reason; no folder).
 bool Run::prepare() {
   setup_started_ns_ = std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now().time_since_epoch()).count();
+  check_write_rate();
   try {
     if (env_.processing) {
       for (const auto& lane : lanes_) {

@@ -228,6 +228,12 @@ double measure_write_rate(const std::filesystem::path& folder, std::uint64_t byt
   const auto fail = [&](const char* what, int error) {
     throw std::runtime_error(path.string() + ": " + what + ": " + std::strerror(error));
   };
+  // A probe that could not be written whole is removed: left, it could fill the disk a run needs.
+  const auto fail_and_remove = [&](int fd, const char* what, int error) {
+    ::close(fd);
+    ::unlink(path.c_str());
+    fail(what, error);
+  };
   constexpr int kFlags = O_WRONLY | O_CREAT | O_CLOEXEC;  // no O_TRUNC: the blocks stay allocated
   int fd = ::open(path.c_str(), kFlags | O_DIRECT, 0600);
   if (fd >= 0 && !direct_io_fits(fd)) {
@@ -260,19 +266,11 @@ double measure_write_rate(const std::filesystem::path& folder, std::uint64_t byt
     for (std::size_t done = 0; done < kChunk;) {
       const ssize_t n = ::pwrite(fd, data + done, kChunk - done, off_t(c * kChunk + done));
       if (n < 0 && errno == EINTR) continue;
-      if (n <= 0) {
-        const int error = n < 0 ? errno : EIO;
-        ::close(fd);
-        fail("cannot write the write probe", error);
-      }
+      if (n <= 0) fail_and_remove(fd, "cannot write the write probe", n < 0 ? errno : EIO);
       done += std::size_t(n);
     }
   }
-  if (::fdatasync(fd) != 0) {
-    const int error = errno;
-    ::close(fd);
-    fail("cannot sync the write probe", error);
-  }
+  if (::fdatasync(fd) != 0) fail_and_remove(fd, "cannot sync the write probe", errno);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   ::close(fd);
   return double(chunks * kChunk) / std::max(seconds, 1e-9);

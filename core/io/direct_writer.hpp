@@ -77,7 +77,8 @@ inline constexpr const char* kWriteProbeName = ".plenopiv-write-probe";
 // timed until the data is on the device. Into `folder`/kWriteProbeName, which is kept and
 // overwritten in place next time: removing or truncating it would make a file system mounted
 // with `discard` trim its blocks just as a run starts, stalling the recorder (docs/reliability.md).
-// std::runtime_error naming the file and the system's reason otherwise.
+// std::runtime_error naming the file and the system's reason otherwise; a probe not written whole
+// (a full disk) is removed, so that it does not take the room a run needs.
 double measure_write_rate(const std::filesystem::path& folder, std::uint64_t bytes);
 
 }  // namespace plenopiv::io

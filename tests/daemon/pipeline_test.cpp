@@ -30,6 +30,7 @@
 #include "tests/drivers/test_camera.hpp"
 #include "tests/support/run_manifest.hpp"
 #include "tests/support/temp_dir.hpp"
+#include "tests/support/tmpfs.hpp"
 
 namespace plenopiv::daemon {
 namespace {
@@ -362,6 +363,33 @@ TEST_F(RunTest, ARunFasterThanTheDiskIsToldBeforeItStarts) {
   EXPECT_NE(lines[0].find("[warning]"), std::string::npos) << lines[0];
   EXPECT_NE(lines[0].find("the recorder will fall behind and lose frames"), std::string::npos) << lines[0];
   EXPECT_EQ(fs::file_size(probe), std::uintmax_t(256) << 20) << "kept for the next run";
+}
+
+// A disk with room for the run but not for the probe: the probe fails, is said and removed, and the
+// run records its pair.
+TEST_F(RunTest, AWriteProbeThatDoesNotFitIsSaidAndLeavesTheRoomToTheRun) {
+  testing_support::SmallTmpfs disk(data_ / "small-disk", 200);
+  if (!disk.mounted()) GTEST_SKIP() << disk.why_not();
+  env_.data_dir = disk.dir();
+  auto sink = std::make_shared<spdlog::sinks::ringbuffer_sink_mt>(64);
+  const auto previous = spdlog::default_logger();
+  spdlog::set_default_logger(std::make_shared<spdlog::logger>("write-rate", sink));
+  state_.start("tight");
+  std::uint64_t recorded = 0;
+  {
+    daemon::Run run(config("pairs: 1\nrate_hz: 200\ncamera_uri: test://?sensor=4096x4096\n"), "tight", env_);
+    wait_finished(run);
+    msg::Status s;
+    run.fill_status(s);
+    recorded = s.pairs_recorded();
+  }
+  spdlog::set_default_logger(previous);
+  std::string said;
+  for (const std::string& l : sink->last_formatted())
+    if (l.find("could not time a write into data_dir") != std::string::npos) said = l;
+  EXPECT_NE(said.find("space left on device"), std::string::npos) << said;
+  EXPECT_FALSE(fs::exists(disk.dir() / io::kWriteProbeName));
+  EXPECT_EQ(recorded, 1u) << state_.error();
 }
 
 // A run is set up on its own thread while Armed (the processing's tables): status says so, and

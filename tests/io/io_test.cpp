@@ -212,6 +212,7 @@ TEST(WriteRate, TheProbeIsMeasuredKeptAndOverwrittenInPlace) {
     EXPECT_NE(std::string(e.what()).find("space left on device"), std::string::npos) << e.what();
     EXPECT_NE(std::string(e.what()).find(kWriteProbeName), std::string::npos) << e.what();
   }
+  EXPECT_TRUE(std::filesystem::is_empty(disk.dir())) << "a probe not written whole does not fill the disk";
 }
 
 // Read into a frame buffer: reused when it has the file's size, replaced when not.
