@@ -125,6 +125,7 @@ Run::Run(RunConfig config, std::string run_id, RunEnvironment env)
   if (planned == 0 && config_.duration_s > 0) planned = std::uint64_t(std::ceil(config_.duration_s * config_.rate_hz));
   if (planned == 0) planned = kMinPairsUnbounded;
   std::filesystem::create_directories(env_.data_dir);
+  bytes_planned_ = planned * bytes_per_pair_ + kReserveBytes;
   if (const auto free = io::free_bytes(env_.data_dir)) {
     const double needed = double(planned) * double(bytes_per_pair_) + double(kReserveBytes);
     if (double(*free) < needed) {
@@ -219,6 +220,16 @@ void Run::record(drivers::FramePair pair) {
 void Run::check_write_rate() const {
   const double needed = double(bytes_per_pair_) * config_.rate_hz;  // bytes per second
   if (needed < kProbeWriteRateAbove) return;
+  // A new probe file must leave the run its room (one kept from an earlier run is overwritten).
+  const auto free = io::free_bytes(env_.data_dir);
+  if (free && *free < bytes_planned_ + kWriteProbeBytes &&
+      !std::filesystem::exists(env_.data_dir / io::kWriteProbeName)) {
+    spdlog::warn(
+        "run {}: data_dir {}: no room for a {} MiB write probe beside this run's frames; whether the disk "
+        "takes {:.0f} MB/s is not checked",
+        run_id_, env_.data_dir.string(), kWriteProbeBytes >> 20, needed / 1e6);
+    return;
+  }
   double taken = 0;
   try {
     taken = io::measure_write_rate(env_.data_dir, kWriteProbeBytes);

@@ -170,6 +170,7 @@ class Run {
   // One past the highest trigger index (the run's) recorded or listed.
   std::uint64_t triggers_seen() const { return triggers_accounted_.size(); }
   std::uint64_t bytes_per_pair_ = 0;  // raw frames on disk
+  std::uint64_t bytes_planned_ = 0;   // the planned pairs' frames and the reserve kept free
   // Bad data met (all-zero or saturated frames): kind -> (count, first pair), for status and manifest.
   mutable std::mutex warnings_mutex_;
   std::map<std::string, std::pair<std::uint64_t, std::uint64_t>> warnings_;
