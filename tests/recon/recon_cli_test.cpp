@@ -22,6 +22,33 @@ using testing_support::run_command;
 
 const std::string kCamera = std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml";
 
+// `plenopiv reconstruct` of dir/particle.tif on the grid below, 3 iterations, into dir/output.
+std::vector<std::string> reconstruct_args(const std::filesystem::path& dir, const std::string& output,
+                                          const std::vector<std::string>& extra) {
+  std::vector<std::string> args = {binary("plenopiv"),
+                                   "reconstruct",
+                                   "--camera",
+                                   kCamera,
+                                   (dir / "particle.tif").string(),
+                                   "--extent",
+                                   "-0.625",
+                                   "0.625",
+                                   "-0.625",
+                                   "0.625",
+                                   "-2",
+                                   "2",
+                                   "--voxel",
+                                   "0.125",
+                                   "--voxel-z",
+                                   "0.5",
+                                   "--iterations",
+                                   "3",
+                                   "-o",
+                                   (dir / output).string()};
+  args.insert(args.end(), extra.begin(), extra.end());
+  return args;
+}
+
 TEST(ReconstructCli, WritesVolumesWhoseBrightestVoxelIsTheParticle) {
   const auto dir = testing_support::temp_dir("recon-cli");
   // The CLI's grid for --extent -0.625 0.625 -0.625 0.625 -2 2 --voxel 0.125 --voxel-z 0.5.
@@ -44,27 +71,7 @@ TEST(ReconstructCli, WritesVolumesWhoseBrightestVoxelIsTheParticle) {
   io::write_tiff(dir / "particle.tif", image);
 
   std::string out;
-  const int status = run_command({binary("plenopiv"),
-                                  "reconstruct",
-                                  "--camera",
-                                  kCamera,
-                                  (dir / "particle.tif").string(),
-                                  "--extent",
-                                  "-0.625",
-                                  "0.625",
-                                  "-0.625",
-                                  "0.625",
-                                  "-2",
-                                  "2",
-                                  "--voxel",
-                                  "0.125",
-                                  "--voxel-z",
-                                  "0.5",
-                                  "--iterations",
-                                  "3",
-                                  "-o",
-                                  (dir / "v.h5").string()},
-                                 out);
+  const int status = run_command(reconstruct_args(dir, "v.h5", {}), out);
   ASSERT_EQ(status, 0) << out;
   EXPECT_NE(out.find("iteration 3/3 residual"), std::string::npos) << out;
   EXPECT_NE(out.find("skipped"), std::string::npos) << out;
@@ -79,30 +86,7 @@ TEST(ReconstructCli, WritesVolumesWhoseBrightestVoxelIsTheParticle) {
   EXPECT_NEAR(fit->position_mm[2], -0.75, 0.5);
 
   // --accelerate reaches MART: another volume, the particle still where it is.
-  ASSERT_EQ(run_command({binary("plenopiv"),
-                         "reconstruct",
-                         "--camera",
-                         kCamera,
-                         (dir / "particle.tif").string(),
-                         "--extent",
-                         "-0.625",
-                         "0.625",
-                         "-0.625",
-                         "0.625",
-                         "-2",
-                         "2",
-                         "--voxel",
-                         "0.125",
-                         "--voxel-z",
-                         "0.5",
-                         "--iterations",
-                         "3",
-                         "--accelerate",
-                         "-o",
-                         (dir / "accelerated.h5").string()},
-                        out),
-            0)
-      << out;
+  ASSERT_EQ(run_command(reconstruct_args(dir, "accelerated.h5", {"--accelerate"}), out), 0) << out;
   const Volume accelerated = io::read_volume_h5(dir / "accelerated.h5");
   EXPECT_NE(accelerated.data, v.data);
   const auto fit_accelerated = fit_particle(accelerated, {-0.1875, 0.1875, -0.75}, {3, 3, 3});
@@ -114,30 +98,9 @@ TEST(ReconstructCli, WritesVolumesWhoseBrightestVoxelIsTheParticle) {
   // --prune-scope reaches MART: the same threshold against each slice's peak prunes another count of
   // voxels than against the volume's (here none: each slice's live voxels are the particle's own),
   // and the particle stays. --prune-depth-reach: RefusesBadArgumentsClearly.
-  const auto pruned_with = [&](const std::vector<std::string>& extra, const std::string& name) {
-    std::vector<std::string> args = {binary("plenopiv"),
-                                     "reconstruct",
-                                     "--camera",
-                                     kCamera,
-                                     (dir / "particle.tif").string(),
-                                     "--extent",
-                                     "-0.625",
-                                     "0.625",
-                                     "-0.625",
-                                     "0.625",
-                                     "-2",
-                                     "2",
-                                     "--voxel",
-                                     "0.125",
-                                     "--voxel-z",
-                                     "0.5",
-                                     "--iterations",
-                                     "3",
-                                     "--prune-threshold",
-                                     "0.3",
-                                     "-o",
-                                     (dir / (name + ".h5")).string()};
-    args.insert(args.end(), extra.begin(), extra.end());
+  const auto pruned_with = [&](std::vector<std::string> extra, const std::string& name) {
+    extra.insert(extra.begin(), {"--prune-threshold", "0.3"});
+    const std::vector<std::string> args = reconstruct_args(dir, name + ".h5", extra);
     EXPECT_EQ(run_command(args, out), 0) << out;
     const auto at = out.find(" voxels pruned)");
     EXPECT_NE(at, std::string::npos) << out;
