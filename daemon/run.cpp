@@ -217,7 +217,7 @@ void Run::record(drivers::FramePair pair) {
 // Armed, on the run's thread (a burst: a disk that takes it may still slow down over minutes), and
 // a rate below the run's is said before the first pair, not after the run as frames lost. A probe
 // that fails is said too; the run goes on (its own checks of space stand).
-void Run::check_write_rate() const {
+void Run::check_write_rate() {
   const double needed = double(bytes_per_pair_) * config_.rate_hz;  // bytes per second
   if (needed < kProbeWriteRateAbove) return;
   // A new probe file must leave the run its room (one kept from an earlier run is overwritten).
@@ -242,10 +242,12 @@ void Run::check_write_rate() const {
                 taken / 1e6, static_cast<unsigned long long>(kWriteProbeBytes >> 20), needed / 1e6,
                 megabytes(bytes_per_pair_).c_str(), config_.rate_hz);
   if (taken < needed) {
-    spdlog::warn(
-        "run {}: data_dir {} took {}: the recorder will fall behind and lose frames; lower rate_hz or "
-        "record to a faster disk",
-        run_id_, env_.data_dir.string(), rates);
+    const std::string warning = "data_dir " + env_.data_dir.string() + " took " + rates +
+                                ": the recorder will fall behind and lose frames; lower rate_hz or record to a "
+                                "faster disk";
+    spdlog::warn("run {}: {}", run_id_, warning);
+    std::lock_guard lock(warnings_mutex_);
+    setup_warning_ = warning;
   } else {
     spdlog::info("run {}: data_dir {} took {}", run_id_, env_.data_dir.string(), rates);
   }
@@ -517,6 +519,7 @@ bool Run::prepare() {
           camera, calibration_.loaded ? *calibration_.loaded : calib::nominal_calibration(camera), config_.preview);
     }
     recorder_ = std::make_unique<run_folder::Writer>(setup_);
+    if (!setup_warning_.empty()) recorder_->add_warning(setup_warning_);
     prepared_ = true;
     if (env_.heartbeat) env_.heartbeat();  // the setup's time is not a stalled pipeline
     return true;
@@ -750,6 +753,7 @@ void Run::fill_status(msg::Status& s) const {
   *s.mutable_losses() = losses();
   {
     std::lock_guard lock(warnings_mutex_);
+    if (!setup_warning_.empty()) s.add_warnings(setup_warning_);
     for (const auto& [kind, seen] : warnings_) {
       s.add_warnings(kind + ": " + std::to_string(seen.first) + " pair(s), first pair " + std::to_string(seen.second));
     }

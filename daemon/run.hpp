@@ -115,7 +115,7 @@ class Run {
   void lose_trigger(std::uint64_t index);
   void drain_after_stop();
   void account_for_the_last_triggers();
-  void check_write_rate() const;
+  void check_write_rate();
   void check_space() const;
   void stop_devices() noexcept;
   msg::Losses losses() const;
@@ -173,6 +173,7 @@ class Run {
   std::uint64_t bytes_planned_ = 0;   // the planned pairs' frames and the reserve kept free
   // Bad data met (all-zero or saturated frames): kind -> (count, first pair), for status and manifest.
   mutable std::mutex warnings_mutex_;
+  std::string setup_warning_;  // said while Armed (the disk's write rate); in status and the manifest
   std::map<std::string, std::pair<std::uint64_t, std::uint64_t>> warnings_;
   // MART's skipped work on the latest processed pair (its index), for status.
   mutable std::mutex work_mutex_;

@@ -351,6 +351,14 @@ TEST_F(RunTest, ARunFasterThanTheDiskIsToldBeforeItStarts) {
     // 4096 x 4096 px, two 16-bit frames per pair at 200 Hz: 13.4 GB/s.
     daemon::Run run(config("pairs: 1\nrate_hz: 200\ncamera_uri: test://?sensor=4096x4096\n"), "fast", env_);
     wait_finished(run);
+    // The operator's client sees it in status, and the run folder keeps it.
+    msg::Status s;
+    run.fill_status(s);
+    ASSERT_EQ(s.warnings_size(), 1);
+    EXPECT_NE(s.warnings(0).find("the recorder will fall behind and lose frames"), std::string::npos) << s.warnings(0);
+    const msg::RunManifest m = read_manifest(run.dir());
+    ASSERT_EQ(m.warnings_size(), 1);
+    EXPECT_EQ(m.warnings(0), s.warnings(0));
   }
   spdlog::set_default_logger(previous);
   std::vector<std::string> lines;
