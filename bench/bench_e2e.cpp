@@ -525,7 +525,8 @@ int main(int argc, char** argv) {
     // Windows of 4 and 2 mm, in the headline's voxels (depth_voxel_factor times as deep as wide).
     piv::CorrelationSettings previous = settings.correlation;
     const int f = depth_voxel_factor;
-    previous.passes = {{{32, 32, 32 / f}, 50}, {{16, 16, 16 / f}, 50}, {{16, 16, 16 / f}, 75}};
+    previous.passes = {
+        {{32, 32, std::max(4, 32 / f)}, 50}, {{16, 16, std::max(4, 16 / f)}, 50}, {{16, 16, std::max(4, 16 / f)}, 75}};
     previous.predictor = piv::PredictorBase::window_mean;
     previous.predictor_smoothing = 0;
     piv::CorrelationSettings centre3 = previous;

@@ -211,7 +211,6 @@ void Run::record(drivers::FramePair pair) {
   if (preview_queue_) preview_queue_->push(shared);
 }
 
-// A disk that is about to fill ends the run before a frame write fails half way.
 // A recorder slower than the camera falls behind and, its queue bounded, loses frames: where a run
 // records fast enough for the disk to matter, the data directory's write rate is measured while
 // Armed, on the run's thread (a burst: a disk that takes it may still slow down over minutes), and
@@ -253,6 +252,7 @@ void Run::check_write_rate() {
   }
 }
 
+// A disk that is about to fill ends the run before a frame write fails half way.
 void Run::check_space() const {
   const auto free = io::free_bytes(recorder_->dir());
   if (free && *free < bytes_per_pair_ + kReserveBytes / 4) {
@@ -500,8 +500,8 @@ void Run::acquire() {
 // Idle, nothing made) or failed (Error, with the reason; no folder).
 bool Run::prepare() {
   setup_started_ns_ = std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now().time_since_epoch()).count();
-  check_write_rate();
   try {
+    check_write_rate();
     if (env_.processing) {
       for (const auto& lane : lanes_) {
         processes_.push_back(env_.processing(config_, calibration_, lane->tier()));
