@@ -347,18 +347,14 @@ TEST_F(RunTest, ARunFasterThanTheDiskIsToldBeforeItStarts) {
   }
   EXPECT_FALSE(fs::exists(probe)) << "a run that records little is not probed";
   state_.start("fast");
+  msg::Status status;
+  msg::RunManifest manifest;
   {
-    // 4096 x 4096 px, two 16-bit frames per pair at 200 Hz: 13.4 GB/s.
+    // 4096 x 4096 px, two 16-bit frames per pair at 200 Hz: 13.4 GB/s, beyond any disk's burst here.
     daemon::Run run(config("pairs: 1\nrate_hz: 200\ncamera_uri: test://?sensor=4096x4096\n"), "fast", env_);
     wait_finished(run);
-    // The operator's client sees it in status, and the run folder keeps it.
-    msg::Status s;
-    run.fill_status(s);
-    ASSERT_EQ(s.warnings_size(), 1);
-    EXPECT_NE(s.warnings(0).find("the recorder will fall behind and lose frames"), std::string::npos) << s.warnings(0);
-    const msg::RunManifest m = read_manifest(run.dir());
-    ASSERT_EQ(m.warnings_size(), 1);
-    EXPECT_EQ(m.warnings(0), s.warnings(0));
+    run.fill_status(status);
+    manifest = read_manifest(run.dir());
   }
   spdlog::set_default_logger(previous);
   std::vector<std::string> lines;
@@ -366,10 +362,24 @@ TEST_F(RunTest, ARunFasterThanTheDiskIsToldBeforeItStarts) {
     if (l.find("data_dir") != std::string::npos && l.find("MB/s") != std::string::npos) lines.push_back(l);
   ASSERT_EQ(lines.size(), 1u) << "one probe, for the fast run";
   std::printf("%s\n", lines[0].c_str());
-  EXPECT_NE(lines[0].find("run fast: data_dir " + data_.string() + " took "), std::string::npos) << lines[0];
+  const std::string said = "run fast: data_dir " + data_.string() + " took ";
+  const auto at = lines[0].find(said);
+  ASSERT_NE(at, std::string::npos) << lines[0];
+  const double taken_mb_s = std::stod(lines[0].substr(at + said.size()));
   EXPECT_NE(lines[0].find("this run records 13422 MB/s (67.1 MB per pair at 200 Hz)"), std::string::npos) << lines[0];
-  EXPECT_NE(lines[0].find("[warning]"), std::string::npos) << lines[0];
-  EXPECT_NE(lines[0].find("the recorder will fall behind and lose frames"), std::string::npos) << lines[0];
+  if (taken_mb_s < 13422) {
+    // The operator's client sees it in status, and the run folder keeps it.
+    EXPECT_NE(lines[0].find("[warning]"), std::string::npos) << lines[0];
+    EXPECT_NE(lines[0].find("the recorder will fall behind and lose frames"), std::string::npos) << lines[0];
+    ASSERT_EQ(status.warnings_size(), 1);
+    EXPECT_NE(status.warnings(0).find("the recorder will fall behind and lose frames"), std::string::npos)
+        << status.warnings(0);
+    ASSERT_EQ(manifest.warnings_size(), 1);
+    EXPECT_EQ(manifest.warnings(0), status.warnings(0));
+  } else {  // a data directory in memory faster than the run: said, not warned
+    EXPECT_NE(lines[0].find("[info]"), std::string::npos) << lines[0];
+    EXPECT_EQ(status.warnings_size(), 0);
+  }
   EXPECT_EQ(fs::file_size(probe), std::uintmax_t(256) << 20) << "kept for the next run";
 }
 
