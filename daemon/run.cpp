@@ -127,10 +127,9 @@ Run::Run(RunConfig config, std::string run_id, RunEnvironment env)
   std::filesystem::create_directories(env_.data_dir);
   bytes_planned_ = planned * bytes_per_pair_ + kReserveBytes;
   if (const auto free = io::free_bytes(env_.data_dir)) {
-    const double needed = double(planned) * double(bytes_per_pair_) + double(kReserveBytes);
-    if (double(*free) < needed) {
+    if (*free < bytes_planned_) {
       throw InputError("data_dir: " + env_.data_dir.string() + " has " + megabytes(*free) + " free; " +
-                       std::to_string(planned) + " pairs of raw frames need " + megabytes(std::uint64_t(needed)) +
+                       std::to_string(planned) + " pairs of raw frames need " + megabytes(bytes_planned_) +
                        (config_.pair_count || config_.duration_s > 0 ? "" : " to start an unbounded run") +
                        ": free some space or record fewer pairs");
     }

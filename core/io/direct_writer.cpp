@@ -79,20 +79,27 @@ bool direct_io_fits(int fd) {
   return DirectWriter::alignment_fits(s.stx_dio_mem_align, s.stx_dio_offset_align);
 }
 
+// Opens `path` with `flags` and O_DIRECT where the file system takes kBlock-aligned direct I/O,
+// else without it (`mode` says which); -1 with errno set otherwise.
+int open_direct_or_buffered(const std::filesystem::path& path, int flags, mode_t permissions, WriteMode& mode) {
+  mode = WriteMode::direct;
+  int fd = ::open(path.c_str(), flags | O_DIRECT, permissions);
+  if (fd >= 0 && !direct_io_fits(fd)) {
+    ::close(fd);
+    fd = -1;
+    errno = EINVAL;
+  }
+  if (fd < 0 && errno == EINVAL) {
+    mode = WriteMode::buffered;
+    fd = ::open(path.c_str(), flags, permissions);
+  }
+  return fd;
+}
+
 }  // namespace
 
 DirectWriter::DirectWriter(const std::filesystem::path& path) : path_(path) {
-  constexpr int kFlags = O_RDWR | O_CREAT | O_TRUNC | O_CLOEXEC;
-  fd_ = ::open(path.c_str(), kFlags | O_DIRECT, 0644);
-  if (fd_ >= 0 && !direct_io_fits(fd_)) {
-    ::close(fd_);
-    fd_ = -1;
-    errno = EINVAL;
-  }
-  if (fd_ < 0 && errno == EINVAL) {
-    mode_ = WriteMode::buffered;
-    fd_ = ::open(path.c_str(), kFlags, 0644);
-  }
+  fd_ = open_direct_or_buffered(path, O_RDWR | O_CREAT | O_TRUNC | O_CLOEXEC, 0644, mode_);
   if (fd_ < 0) fail("cannot create");
   head_ = Buffer::make(kBlock);
   staged_ = Buffer::make(kStagedBlocks * kBlock);
@@ -234,14 +241,9 @@ double measure_write_rate(const std::filesystem::path& folder, std::uint64_t byt
     ::unlink(path.c_str());
     fail(what, error);
   };
-  constexpr int kFlags = O_WRONLY | O_CREAT | O_CLOEXEC;  // no O_TRUNC: the blocks stay allocated
-  int fd = ::open(path.c_str(), kFlags | O_DIRECT, 0600);
-  if (fd >= 0 && !direct_io_fits(fd)) {
-    ::close(fd);
-    fd = -1;
-    errno = EINVAL;
-  }
-  if (fd < 0 && errno == EINVAL) fd = ::open(path.c_str(), kFlags, 0600);
+  WriteMode mode;  // buffered: the fdatasync below still times the data to the device
+  // No O_TRUNC: the blocks stay allocated.
+  const int fd = open_direct_or_buffered(path, O_WRONLY | O_CREAT | O_CLOEXEC, 0600, mode);
   if (fd < 0) fail("cannot open the write probe", errno);
   constexpr std::size_t kChunk = std::size_t(8) << 20;
   const std::uint64_t chunks = std::max<std::uint64_t>(1, (bytes + kChunk - 1) / kChunk);
