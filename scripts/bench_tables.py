@@ -29,20 +29,31 @@ DOC = ROOT / "docs" / "benchmarks.md"
 # accuracy and reconstruction pages' measured tables.
 DOCS = [DOC, ROOT / "docs" / "paper-figures.md", ROOT / "docs" / "accuracy.md", ROOT / "docs" / "recon.md"]
 
-# run-paper.yaml's MART, ghost floor and final smoothing, as bench_e2e's flags.
-RUN_PAPER_MART = ["--mu", "1", "--accelerate", "--iterations", "8", "--prune-threshold", "0.03", "--prune-scope",
-                  "slice", "--intensity-threshold", "3", "--final-smoothing", "1"]
+# The shipped full settings' MART, ghost floor and final smoothing as bench_e2e's flags, with
+# `iterations` (run-paper.yaml's 8, process.yaml's 20).
+def shipped_mart(iterations):
+    return ["--mu", "1", "--accelerate", "--iterations", str(iterations), "--prune-threshold", "0.03", "--prune-scope",
+            "slice", "--intensity-threshold", "3", "--final-smoothing", "1"]
+
+
+# run-paper.yaml's MART.
+RUN_PAPER_MART = shipped_mart(8)
 # run-paper.yaml's reconstruction and correlation settings.
 RUN_PAPER_PASSES = "32x32x16@50,16x16x8@50+2,16x16x8@50,16x16x8@50,16x16x8@75"
-RUN_PAPER = (["--voxel-z-factor", "2"] + RUN_PAPER_MART
-             + ["--depth-prefilter", "1", "--passes", RUN_PAPER_PASSES, "--early-interpolation", "cubic"])
+
+
+# `mart` on the shipped voxels (0.25 mm deep) with the shipped correlation.
+def shipped(mart):
+    return (["--voxel-z-factor", "2"] + mart
+            + ["--depth-prefilter", "1", "--passes", RUN_PAPER_PASSES, "--early-interpolation", "cubic"])
+
+
+RUN_PAPER = shipped(RUN_PAPER_MART)
 # The same on cubic 0.125 mm voxels (the depth prefilter's four passes there) with core/piv's
 # default passes: the small camera's sparse sweep.
 RUN_PAPER_CUBES = RUN_PAPER_MART + ["--depth-prefilter", "4"]
 # process.yaml's: run-paper.yaml's settings with 20 iterations.
-PROCESS = (["--voxel-z-factor", "2", "--mu", "1", "--accelerate", "--iterations", "20", "--prune-threshold", "0.03",
-            "--prune-scope", "slice", "--intensity-threshold", "3", "--final-smoothing", "1"]
-           + ["--depth-prefilter", "1", "--passes", RUN_PAPER_PASSES, "--early-interpolation", "cubic"])
+PROCESS = shipped(shipped_mart(20))
 # run.yaml's (the live preview on the small camera).
 RUN = ["--voxel-z-factor", "2", "--mu", "1", "--iterations", "4", "--intensity-threshold", "4", "--final-smoothing",
        "1", "--depth-prefilter", "1", "--passes", "16x16x8@50+2,8x8x4@50"]
