@@ -183,9 +183,9 @@ TEST(ProcessCli, RecoversTheDepthDisplacementAwayFromFocus) {
   // The guard alone, with the floor off (the floor takes part of the end slices' stationary light
   // away too, and the depth context and margin part of the guard's work, so this compares the
   // guard with everything else equal): without it the depth displacement falls by more than
-  // 0.04 mm.
+  // 0.05 mm.
   const double guarded = process("1", false)[2], unguarded = process("0", false)[2];
-  EXPECT_LT(unguarded, guarded - 0.04)
+  EXPECT_LT(unguarded, guarded - 0.05)
       << "the guard no longer matters: update docs and defaults (measured 0.2449 mm with the "
          "guard, 0.1879 without)";
 }
