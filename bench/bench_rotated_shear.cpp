@@ -4,8 +4,11 @@
 // tiers', not the calibration's. u and w grow along y (-2 to +2 voxels over the box, both across
 // the focal plane's depth). Per tier: set-up, first and in-a-run time per pair, and RMS error,
 // bias and gain per component against the truth.
-//   build/bin/bench_rotated_shear [DEGREES]   (default 0.1)
+// w's gain per depth band follows (near the focal plane the mirror ambiguity limits it).
+//   build/bin/bench_rotated_shear [DEGREES] [PPM] [full]   (defaults 0.1 deg, 0.5 ppm, both tiers)
+#include <array>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -34,6 +37,13 @@ using bench::now_s;
 
 int main(int argc, char** argv) {
   const double degrees = argc > 1 ? std::atof(argv[1]) : 0.1;
+  const double ppm = argc > 2 ? std::atof(argv[2]) : 0.5;
+  const bool full_only = argc > 3 && std::string(argv[3]) == "full";
+  if (!(degrees >= 0 && degrees < 5) || !(ppm > 0 && ppm <= 5)) {
+    std::fprintf(stderr, "bench_rotated_shear: degrees in [0, 5) and ppm in (0, 5], got %s\n",
+                 argc > 2 ? argv[2] : argv[1]);
+    return 2;
+  }
   const fs::path config_dir = fs::path(PLENOPIV_SOURCE_DIR) / "systemd/config";
   const optics::CameraModel camera = optics::load_camera_file(config_dir / "camera-fahringer2015.yaml");
   const YAML::Node run_yaml = YAML::LoadFile((config_dir / "run-paper.yaml").string());
@@ -59,7 +69,7 @@ int main(int argc, char** argv) {
   const sim::Box box{
       {g.origin_mm[0] - 0.5 * voxel - 1, -half_y - 1, g.origin_mm[2] - 0.5 * voxel_z - 1},
       {g.origin_mm[0] + (g.shape[0] - 0.5) * voxel + 1, half_y + 1, g.origin_mm[2] + (g.shape[2] - 0.5) * voxel_z + 1}};
-  const std::size_t count = sim::particle_count_from_ppm(camera, box, 0.5);
+  const std::size_t count = sim::particle_count_from_ppm(camera, box, ppm);
   const auto pa = sim::random_particles(box, count, 2026);
   const auto pb = sim::displace(pa, flow);
   sim::RenderOptions ro;
@@ -67,10 +77,12 @@ int main(int argc, char** argv) {
   double t = now_s();
   const ImageU16 a = sim::render(camera, truth.lenses, pa, ro, 1).image;
   const ImageU16 b = sim::render(camera, truth.lenses, pb, ro, 2).image;
-  std::printf("bench=rotated_shear degrees=%.2f particles=%zu render_s=%.1f\n", degrees, count, now_s() - t);
+  std::printf("bench=rotated_shear degrees=%.2f ppm=%.3f particles=%zu render_s=%.1f\n", degrees, ppm, count,
+              now_s() - t);
   std::fflush(stdout);
 
   for (const process::Tier tier : {process::Tier::live, process::Tier::full}) {
+    if (full_only && tier != process::Tier::full) continue;
     const process::ProcessSettings& s = spec.settings(tier, "run-paper.yaml");
     t = now_s();
     const process::PairProcessor processor(camera, truth, s);
@@ -93,6 +105,17 @@ int main(int argc, char** argv) {
         e.gain[0], e.gain[2],
         r.correlation.field.grid.count() ? double(e.compared) / double(r.correlation.field.grid.count()) : 0.0,
         int(processor.op().resampler() != nullptr), bench::peak_rss_gb());
+    // w's gain by distance from the focal plane (z = 0), mm.
+    std::printf("bench=rotated_shear_depth tier=%s ppm=%.3f", process::tier_name(tier), ppm);
+    const std::array<double, 5> edges{0, 2, 4, 8, 1e9};
+    for (std::size_t band = 0; band + 1 < edges.size(); ++band) {
+      const sim::FieldErrors eb = sim::field_errors(r.correlation.field, flow, voxel, 3, 0, [&](const sim::Point3& p) {
+        return std::abs(p[2]) >= edges[band] && std::abs(p[2]) < edges[band + 1];
+      });
+      std::printf(" gain_w_%g_%g=%.3f bias_w_%g_%g=%.3f", edges[band], std::min(edges[band + 1], 99.0), eb.gain[2],
+                  edges[band], std::min(edges[band + 1], 99.0), eb.bias[2]);
+    }
+    std::printf("\n");
     std::fflush(stdout);
   }
   return 0;
