@@ -188,6 +188,18 @@ void paper_scale(const std::string& source_dir, bool small, double ppm, int iter
         "abs_x_err_vox_sd=%.3f abs_z_err_vox_mean=%.3f abs_z_err_vox_sd=%.3f "
         "depth_error_slope_percent=%.2f\n",
         estimator, ex.size(), positions.size(), mx[0], mx[1], mz[0], mz[1], 100 * slope);
+    // The signed depth error by depth, 2 mm bins: where its change across bins is not zero, two
+    // particles a bin apart come out nearer or farther apart in depth than they are, and a depth
+    // displacement there is measured short or long by that much.
+    std::printf("bench=recon_paper_depth fit=%s", estimator);
+    for (int bin = -7; bin < 7; ++bin) {
+      double sum = 0;
+      int n = 0;
+      for (std::size_t i = 0; i < dz.size(); ++i)
+        if (z_true[i] >= 2.0 * bin && z_true[i] < 2.0 * (bin + 1)) sum += dz[i], ++n;
+      std::printf(" dz_mm_at_%+d=%.3f n_at_%+d=%d", 2 * bin + 1, n ? sum / n : 0.0, 2 * bin + 1, n);
+    }
+    std::printf("\n");
   };
   report("peak_rows", [&](const sim::Point3& p) { return recon::fit_particle(r.volume, p, {3, 3, 15}); });
   report("moments", [&](const sim::Point3& p) { return recon::fit_particle_moments(r.volume, p, {3, 3, 15}); });

@@ -5,7 +5,9 @@
 // the focal plane's depth). Per tier: set-up, first and in-a-run time per pair, and RMS error,
 // bias and gain per component against the truth.
 // w's gain per depth band follows (near the focal plane the mirror ambiguity limits it).
-//   build/bin/bench_rotated_shear [DEGREES] [PPM] [full]   (defaults 0.1 deg, 0.5 ppm, both tiers)
+//   build/bin/bench_rotated_shear [DEGREES] [PPM] [full] [CONFIG]
+// (defaults 0.1 deg, 0.5 ppm, both tiers, systemd/config/run-paper.yaml; CONFIG: any run.yaml or
+// process.yaml whose volume is the paper's box)
 #include <array>
 #include <chrono>
 #include <cmath>
@@ -46,9 +48,11 @@ int main(int argc, char** argv) {
   }
   const fs::path config_dir = fs::path(PLENOPIV_SOURCE_DIR) / "systemd/config";
   const optics::CameraModel camera = optics::load_camera_file(config_dir / "camera-fahringer2015.yaml");
-  const YAML::Node run_yaml = YAML::LoadFile((config_dir / "run-paper.yaml").string());
+  const fs::path config = argc > 4 ? fs::path(argv[4]) : config_dir / "run-paper.yaml";
+  const YAML::Node run_yaml = YAML::LoadFile(config.string());
+  const std::string config_name = config.filename().string();
   const process::ProcessSpec spec =
-      process::process_spec_from(YamlMap(process::processing_part(run_yaml), "run-paper.yaml"));
+      process::process_spec_from(YamlMap(process::processing_part(run_yaml), config_name));
 
   // The true array: the nominal lattice rotated, offset by a fraction of a lens, each lens jittered
   // by 1 um (0.14 px).
@@ -83,7 +87,7 @@ int main(int argc, char** argv) {
 
   for (const process::Tier tier : {process::Tier::live, process::Tier::full}) {
     if (full_only && tier != process::Tier::full) continue;
-    const process::ProcessSettings& s = spec.settings(tier, "run-paper.yaml");
+    const process::ProcessSettings& s = spec.settings(tier, config_name);
     t = now_s();
     const process::PairProcessor processor(camera, truth, s);
     const double setup_s = now_s() - t;
@@ -106,8 +110,9 @@ int main(int argc, char** argv) {
         r.correlation.field.grid.count() ? double(e.compared) / double(r.correlation.field.grid.count()) : 0.0,
         int(processor.op().resampler() != nullptr), bench::peak_rss_gb());
     // w's gain by distance from the focal plane (z = 0), mm.
-    std::printf("bench=rotated_shear_depth tier=%s ppm=%.3f", process::tier_name(tier), ppm);
-    const std::array<double, 5> edges{0, 2, 4, 8, 1e9};
+    std::printf("bench=rotated_shear_depth tier=%s ppm=%.3f config=%s", process::tier_name(tier), ppm,
+                config_name.c_str());
+    const std::array<double, 6> edges{0, 2, 4, 8, 10, 1e9};
     for (std::size_t band = 0; band + 1 < edges.size(); ++band) {
       const sim::FieldErrors eb = sim::field_errors(r.correlation.field, flow, voxel, 3, 0, [&](const sim::Point3& p) {
         return std::abs(p[2]) >= edges[band] && std::abs(p[2]) < edges[band + 1];
