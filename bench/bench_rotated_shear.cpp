@@ -5,9 +5,10 @@
 // the focal plane's depth). Per tier: set-up, first and in-a-run time per pair, and RMS error,
 // bias and gain per component against the truth.
 // w's gain per depth band follows (near the focal plane the mirror ambiguity limits it).
-//   build/bin/bench_rotated_shear [DEGREES] [PPM] [full] [CONFIG]
+//   build/bin/bench_rotated_shear [DEGREES] [PPM] [full|both] [CONFIG]
 // (defaults 0.1 deg, 0.5 ppm, both tiers, systemd/config/run-paper.yaml; CONFIG: any run.yaml or
 // process.yaml whose volume is the paper's box)
+#include <algorithm>
 #include <array>
 #include <chrono>
 #include <cmath>
@@ -40,12 +41,15 @@ using bench::now_s;
 int main(int argc, char** argv) {
   const double degrees = argc > 1 ? std::atof(argv[1]) : 0.1;
   const double ppm = argc > 2 ? std::atof(argv[2]) : 0.5;
-  const bool full_only = argc > 3 && std::string(argv[3]) == "full";
-  if (!(degrees >= 0 && degrees < 5) || !(ppm > 0 && ppm <= 5)) {
-    std::fprintf(stderr, "bench_rotated_shear: degrees in [0, 5) and ppm in (0, 5], got %s\n",
-                 argc > 2 ? argv[2] : argv[1]);
+  const std::string tiers = argc > 3 ? argv[3] : "both";
+  if (!(degrees >= 0 && degrees < 5) || !(ppm > 0 && ppm <= 5) || (tiers != "both" && tiers != "full")) {
+    std::fprintf(stderr,
+                 "usage: bench_rotated_shear [DEGREES in [0, 5)] [PPM in (0, 5]] [full|both] [CONFIG]; got %g deg, "
+                 "%g ppm, %s\n",
+                 degrees, ppm, tiers.c_str());
     return 2;
   }
+  const bool full_only = tiers == "full";
   const fs::path config_dir = fs::path(PLENOPIV_SOURCE_DIR) / "systemd/config";
   const optics::CameraModel camera = optics::load_camera_file(config_dir / "camera-fahringer2015.yaml");
   const fs::path config = argc > 4 ? fs::path(argv[4]) : config_dir / "run-paper.yaml";
