@@ -3,8 +3,6 @@
 #include <google/protobuf/util/json_util.h>
 #include <gtest/gtest.h>
 
-#include <spdlog/sinks/ringbuffer_sink.h>
-#include <spdlog/spdlog.h>
 #include <tbb/global_control.h>
 #include <cmath>
 #include <cstring>
@@ -28,6 +26,7 @@
 #include "drivers/sim/sim_camera.hpp"
 #include "drivers/trigger/sim_trigger.hpp"
 #include "tests/drivers/test_camera.hpp"
+#include "tests/support/captured_log.hpp"
 #include "tests/support/run_manifest.hpp"
 #include "tests/support/temp_dir.hpp"
 #include "tests/support/tmpfs.hpp"
@@ -336,9 +335,7 @@ TEST_F(RunTest, RunOfNPairsRecordsAllAndEndsIdle) {
 // directory's write rate is measured (only for runs that record at least 100 MB/s) and a warning
 // names data_dir, both rates and the frames to be lost. The probe file stays for the next run.
 TEST_F(RunTest, ARunFasterThanTheDiskIsToldBeforeItStarts) {
-  auto sink = std::make_shared<spdlog::sinks::ringbuffer_sink_mt>(64);
-  const auto previous = spdlog::default_logger();
-  spdlog::set_default_logger(std::make_shared<spdlog::logger>("write-rate", sink));
+  const testing_support::CapturedLog log;
   const fs::path probe = data_ / io::kWriteProbeName;
   state_.start("slow");
   {
@@ -356,9 +353,8 @@ TEST_F(RunTest, ARunFasterThanTheDiskIsToldBeforeItStarts) {
     run.fill_status(status);
     manifest = read_manifest(run.dir());
   }
-  spdlog::set_default_logger(previous);
   std::vector<std::string> lines;
-  for (const std::string& l : sink->last_formatted())
+  for (const std::string& l : log.lines())
     if (l.find("data_dir") != std::string::npos && l.find("MB/s") != std::string::npos) lines.push_back(l);
   ASSERT_EQ(lines.size(), 1u) << "one probe, for the fast run";
   std::printf("%s\n", lines[0].c_str());
@@ -389,9 +385,7 @@ TEST_F(RunTest, AWriteProbeThatDoesNotFitIsSaidAndLeavesTheRoomToTheRun) {
   testing_support::SmallTmpfs disk(data_ / "small-disk", 200);
   if (!disk.mounted()) GTEST_SKIP() << disk.why_not();
   env_.data_dir = disk.dir();
-  auto sink = std::make_shared<spdlog::sinks::ringbuffer_sink_mt>(64);
-  const auto previous = spdlog::default_logger();
-  spdlog::set_default_logger(std::make_shared<spdlog::logger>("write-rate", sink));
+  const testing_support::CapturedLog log;
   state_.start("tight");
   std::uint64_t recorded = 0;
   {
@@ -401,9 +395,8 @@ TEST_F(RunTest, AWriteProbeThatDoesNotFitIsSaidAndLeavesTheRoomToTheRun) {
     run.fill_status(s);
     recorded = s.pairs_recorded();
   }
-  spdlog::set_default_logger(previous);
   std::string said;
-  for (const std::string& l : sink->last_formatted())
+  for (const std::string& l : log.lines())
     if (l.find("no room for a 256 MiB write probe beside this run's frames") != std::string::npos) said = l;
   EXPECT_NE(said.find("whether the disk takes 13422 MB/s is not checked"), std::string::npos) << said;
   EXPECT_FALSE(fs::exists(disk.dir() / io::kWriteProbeName));

@@ -1,9 +1,6 @@
 // The live processing stage on ray-traced pairs (core/sim): a known uniform displacement comes back.
 #include <gtest/gtest.h>
 
-#include <spdlog/sinks/ringbuffer_sink.h>
-#include <spdlog/spdlog.h>
-
 #include <chrono>
 #include <memory>
 
@@ -12,6 +9,7 @@
 #include "core/sim/particles.hpp"
 #include "core/sim/render.hpp"
 #include "daemon/processing.hpp"
+#include "tests/support/captured_log.hpp"
 
 namespace plenopiv::daemon {
 namespace {
@@ -141,9 +139,7 @@ TEST(Processing, BadSettingsAndWrongImagesAreNamed) {
 TEST(Processing, ARunOnAnEarlierRunsGeometryBuildsNoTables) {
   const optics::CameraModel camera =
       optics::load_camera_file(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml");
-  auto sink = std::make_shared<spdlog::sinks::ringbuffer_sink_mt>(8);
-  const auto previous = spdlog::default_logger();
-  spdlog::set_default_logger(std::make_shared<spdlog::logger>("processing-test", sink));
+  const testing_support::CapturedLog log(8);
   const ProcessFactory factory = plenoptic_processing(camera);
   const RunConfig config = parse_run_config(kConfig, "run.yaml");
   std::string other = kConfig;
@@ -151,10 +147,9 @@ TEST(Processing, ARunOnAnEarlierRunsGeometryBuildsNoTables) {
   factory(config, RunCalibration{}, process::Tier::full);
   factory(config, RunCalibration{}, process::Tier::full);
   factory(parse_run_config(other, "run.yaml"), RunCalibration{}, process::Tier::full);
-  spdlog::set_default_logger(previous);
   // Each run logs its operator line, then the line of the buffers it reserved.
   std::vector<std::string> lines, reserved;
-  for (const std::string& line : sink->last_formatted())
+  for (const std::string& line : log.lines())
     (line.find("reserved") == std::string::npos ? lines : reserved).push_back(line);
   EXPECT_EQ(reserved.size(), 3u);
   ASSERT_EQ(lines.size(), 3u);
