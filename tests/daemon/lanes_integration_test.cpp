@@ -217,7 +217,10 @@ TEST_F(Lanes, BothTiersArePublishedAndRecordedApartTheQueuesStayBoundedAndEveryR
 TEST_F(Lanes, EveryNthPairGoesToTheQualityLaneInOrder) {
   start_daemon(0);
   std::string out;
-  ASSERT_EQ(start_run("pairs: 12\nrate_hz: 10\nquality: {every: 3}\n" + kProcessing + kLiveTier, out), 0) << out;
+  // The quality queue holds all four pairs offered, so that a slow (sanitizer) build drops none.
+  ASSERT_EQ(start_run("pairs: 12\nrate_hz: 10\nquality: {every: 3}\nquality_queue: 4\n" + kProcessing + kLiveTier, out),
+            0)
+      << out;
   wait_idle();
   const msg::RunManifest m = testing_support::read_manifest(only_run_dir());
   ASSERT_EQ(m.pairs_size(), 12);
@@ -316,9 +319,12 @@ TEST_F(Lanes, TheAlignmentPreviewIsPublishedWhileAcquiring) {
                        scratch_ / "watch.log");
   std::this_thread::sleep_for(1500ms);  // the subscription reaches the publisher
   std::string out;
-  ASSERT_EQ(start_run("pairs: 30\nrate_hz: 10\npreview: {interval_s: 0.2, downsample: 5}\n" + kProcessing, out), 0)
+  // The run lasts until the watcher has its three previews (a sanitizer build under load makes
+  // them more slowly than a fixed number of pairs would last).
+  ASSERT_EQ(start_run("pairs: 0\nrate_hz: 10\npreview: {interval_s: 0.2, downsample: 5}\n" + kProcessing, out), 0)
       << out;
-  const auto watched = watcher.wait(30s);
+  const auto watched = watcher.wait(60s);
+  EXPECT_EQ(client({"run", "stop"}, out), 0) << out;
   ASSERT_TRUE(watched.has_value()) << watcher.output();
   EXPECT_EQ(*watched, 0) << watcher.output();
   const std::string lines = watcher.output();
@@ -332,7 +338,8 @@ TEST_F(Lanes, TheAlignmentPreviewIsPublishedWhileAcquiring) {
   EXPECT_GT(picture.cols, 256 + 8);
   const msg::Status s = wait_idle();
   EXPECT_GE(s.previews_published(), 3u);
-  EXPECT_LE(s.previews_published(), 30u);  // at most one per interval, never one per pair at 10 Hz and 0.2 s
+  // One preview, then a wait of the interval: at 10 Hz and 0.2 s about one per two pairs, never one per pair.
+  EXPECT_LT(s.previews_published(), s.pairs_recorded());
 }
 
 // A preview setting out of range is refused naming the key.
