@@ -471,10 +471,7 @@ TEST(DaemonDisk, AFullDiskFailsTheRunCleanlyAndRefusesTheNext) {
   ASSERT_TRUE(s);
   ASSERT_EQ(s->state(), "Error") << daemon.output();
   EXPECT_NE(s->message().find("no space left on device"), std::string::npos) << s->message();
-  fs::path run;
-  for (const auto& e : fs::directory_iterator(disk.dir())) {
-    if (e.path().filename().string().rfind("run-", 0) == 0) run = e.path();
-  }
+  const fs::path run = testing_support::only_run_folder(disk.dir());
   const msg::RunManifest m = testing_support::read_manifest(run);
   EXPECT_EQ(m.state().rfind("failed: no space left on device", 0), 0u) << m.state();
   EXPECT_GT(m.pairs_size(), 10);

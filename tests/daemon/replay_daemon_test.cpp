@@ -72,10 +72,7 @@ TEST(DaemonReplay, ARunOnTheReplayCameraRecordsTheReplayedFramesBitForBit) {
   }
   ASSERT_TRUE(s);
   ASSERT_EQ(s->state(), "Idle") << daemon.output();
-  fs::path folder;
-  for (const auto& e : fs::directory_iterator(dir / "data")) {
-    if (e.path().filename().string().rfind("run-", 0) == 0) folder = e.path();
-  }
+  const fs::path folder = testing_support::only_run_folder(dir / "data");
   const msg::RunManifest m = testing_support::read_manifest(folder);
   EXPECT_EQ(m.state(), "complete");
   EXPECT_EQ(m.frames_lost(), 0u);

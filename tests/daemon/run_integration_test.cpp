@@ -103,14 +103,7 @@ class DaemonRuns : public ::testing::Test {
 
   msg::RunManifest manifest(const fs::path& run_dir) { return testing_support::read_manifest(run_dir); }
 
-  fs::path only_run_dir() {
-    std::vector<fs::path> runs;
-    for (const auto& e : fs::directory_iterator(scratch_ / "data")) {
-      if (e.path().filename().string().rfind("run-", 0) == 0) runs.push_back(e.path());
-    }
-    EXPECT_EQ(runs.size(), 1u);
-    return runs.empty() ? fs::path() : runs[0];
-  }
+  fs::path only_run_dir() { return testing_support::only_run_folder(scratch_ / "data"); }
 
   fs::path scratch_;
   std::string control_, publish_;

@@ -217,7 +217,7 @@ TEST_F(FaultCamera, AKilledCameraIsCountedLostAndTheRunGoesOnAfterItComesBack) {
   EXPECT_EQ(end.losses().camera_reconnects(), 1u);
   EXPECT_GE(end.losses().camera_lost(), 1u);
 
-  const std::vector<fs::path> runs = fault::run_folders(dir_ / "data");
+  const std::vector<fs::path> runs = testing_support::run_folders(dir_ / "data");
   ASSERT_EQ(runs.size(), 1u);
   const msg::RunManifest m = testing_support::expect_consistent_and_reprocessable(runs[0], kFramePx, kFramePx);
   EXPECT_EQ(m.state(), "stopped");
@@ -236,7 +236,7 @@ TEST_F(FaultCamera, AKilledCameraIsCountedLostAndTheRunGoesOnAfterItComesBack) {
   // fake camera, paired by host arrival time, loses a pair now and then on a loaded machine).
   start_run(4);
   EXPECT_GE(wait_for_run_end(15s).pairs_recorded(), 1u);
-  const std::vector<fs::path> both = fault::run_folders(dir_ / "data");
+  const std::vector<fs::path> both = testing_support::run_folders(dir_ / "data");
   ASSERT_EQ(both.size(), 2u);
   const msg::RunManifest next = testing_support::read_manifest(both[1]);
   EXPECT_EQ(next.state(), "complete");
@@ -264,7 +264,7 @@ TEST_F(FaultCamera, ACameraThatDoesNotComeBackFailsTheRunNamingIt) {
   EXPECT_NE(s->message().find("camera " + kCameraUri + " lost for more than 1 s"), std::string::npos) << s->message();
   EXPECT_NE(s->message().find("control lost"), std::string::npos) << s->message();
 
-  const std::vector<fs::path> runs = fault::run_folders(dir_ / "data");
+  const std::vector<fs::path> runs = testing_support::run_folders(dir_ / "data");
   ASSERT_EQ(runs.size(), 1u);
   const msg::RunManifest m = testing_support::expect_consistent_and_reprocessable(runs[0], kFramePx, kFramePx);
   EXPECT_EQ(m.state().rfind("failed: ", 0), 0u) << m.state();
@@ -291,7 +291,7 @@ TEST_P(FaultCameraPacketLoss, EveryTriggerIsRecordedOrListedLostAndNoPairIsMisma
   start_daemon();
   start_run(pairs);
   const msg::Status end = wait_for_run_end(pairs * 1s + 15s);
-  const std::vector<fs::path> runs = fault::run_folders(dir_ / "data");
+  const std::vector<fs::path> runs = testing_support::run_folders(dir_ / "data");
   ASSERT_EQ(runs.size(), 1u);
   const msg::RunManifest m = testing_support::expect_consistent_and_reprocessable(runs[0], kFramePx, kFramePx);
   std::printf("%d per thousand packets lost: %d pairs recorded, %d triggers listed lost; losses %s\n", GetParam(),

@@ -1,7 +1,6 @@
-// The fault suite's plenopivd: a real daemon child process on a data folder, and its run folders.
+// The fault suite's plenopivd: a real daemon child process on a data folder.
 #pragma once
 
-#include <algorithm>
 #include <chrono>
 #include <filesystem>
 #include <memory>
@@ -57,14 +56,5 @@ struct Daemon {
     return testing_support::run_command(argv, out);
   }
 };
-
-inline std::vector<fs::path> run_folders(const fs::path& data_dir) {
-  std::vector<fs::path> runs;
-  for (const auto& e : fs::directory_iterator(data_dir)) {
-    if (e.path().filename().string().rfind("run-", 0) == 0) runs.push_back(e.path());
-  }
-  std::sort(runs.begin(), runs.end());
-  return runs;
-}
 
 }  // namespace plenopiv::fault

@@ -21,6 +21,7 @@
 #include "tests/support/child_process.hpp"
 #include "tests/support/daemon_status.hpp"
 #include "tests/support/run_folder_check.hpp"
+#include "tests/support/run_manifest.hpp"
 #include "tests/support/temp_dir.hpp"
 
 namespace plenopiv {
@@ -29,9 +30,9 @@ namespace {
 using namespace std::chrono_literals;
 namespace fs = std::filesystem;
 using fault::Daemon;
-using fault::run_folders;
 using testing_support::binary;
 using testing_support::ChildProcess;
+using testing_support::run_folders;
 
 const std::string kSmallCamera = std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml";
 
