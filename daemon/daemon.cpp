@@ -176,7 +176,7 @@ HandlerResult Daemon::handle(const msg::Request& request) {
 msg::Reply Daemon::start_run(const msg::StartRun& request) {
   RunConfig run_config = parse_run_config(request.config_yaml(), "run config");
   if (request.pair_count() > 0) run_config.pair_count = request.pair_count();
-  const std::string id = unused_run_id(config_.data_dir, "run-");
+  const std::string id = unused_run_id(config_.data_dir, std::string(run_folder::kRunFolderPrefix));
   state_.start(id);
   if (run_) run_->join();  // the previous run's thread is past its last state change
   run_.reset();

@@ -190,7 +190,9 @@ msg::RunManifest read_manifest(const fs::path& run_dir) {
 
 std::string new_run_id() { return utc_now("%Y%m%d-%H%M%S"); }
 
-fs::path run_dir(const fs::path& data_dir, const std::string& run_id) { return data_dir / ("run-" + run_id); }
+fs::path run_dir(const fs::path& data_dir, const std::string& run_id) {
+  return data_dir / (std::string(kRunFolderPrefix) + run_id);
+}
 
 void write_statistics(const fs::path& path, const piv::RunningStatistics& statistics, double nominal_dt_s,
                       std::uint64_t fields) {
@@ -233,7 +235,8 @@ std::vector<fs::path> mark_interrupted_runs(const fs::path& data_dir, std::vecto
   if (ec) return marked;  // no data directory yet: nothing was interrupted
   for (const auto& entry : it) {
     const fs::path manifest_file = entry.path() / "manifest.json";
-    if (entry.path().filename().string().rfind("run-", 0) != 0 || !fs::is_regular_file(manifest_file, ec)) continue;
+    if (!entry.path().filename().string().starts_with(kRunFolderPrefix) || !fs::is_regular_file(manifest_file, ec))
+      continue;
     try {
       msg::RunManifest manifest = read_manifest(entry.path());
       const fs::path journal = entry.path() / kJournal;

@@ -9,6 +9,7 @@
 #include <optional>
 #include <span>
 #include <string>
+#include <string_view>
 #include <unordered_map>
 #include <unordered_set>
 #include <vector>
@@ -199,6 +200,8 @@ void write_statistics(const std::filesystem::path& path, const piv::RunningStati
 
 // A file name-safe run id from the current UTC time: 20261123-035512.
 std::string new_run_id();
+// What a run folder's name starts with, before its run id.
+inline constexpr std::string_view kRunFolderPrefix = "run-";
 // The folder a run of this id has under `data_dir`: <data_dir>/run-<id>.
 std::filesystem::path run_dir(const std::filesystem::path& data_dir, const std::string& run_id);
 // "pair-000042": the stem of a pair's files.

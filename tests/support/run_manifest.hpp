@@ -18,7 +18,7 @@ namespace plenopiv::testing_support {
 inline std::vector<std::filesystem::path> run_folders(const std::filesystem::path& data_dir) {
   std::vector<std::filesystem::path> runs;
   for (const auto& e : std::filesystem::directory_iterator(data_dir)) {
-    if (e.path().filename().string().rfind("run-", 0) == 0) runs.push_back(e.path());
+    if (e.path().filename().string().starts_with(run_folder::kRunFolderPrefix)) runs.push_back(e.path());
   }
   std::sort(runs.begin(), runs.end());
   return runs;
