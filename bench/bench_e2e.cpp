@@ -71,6 +71,7 @@
 #include <vector>
 
 #include "bench/bench_support.hpp"
+#include "core/base/errors.hpp"
 #include "core/calib/nominal_calibration.hpp"
 #include "core/optics/camera_file.hpp"
 #include "core/process/pair_processor.hpp"
@@ -265,8 +266,11 @@ int main(int argc, char** argv) {
                  "[--sparse-variants V,..]] [--live B,K,N,P [--live-depth-prefilter K] [--live-only]]\n");
     return 2;
   }
-  if (prune_scope != "volume" && prune_scope != "slice") {
-    std::fprintf(stderr, "bench_e2e: --prune-scope must be volume or slice, got %s\n", prune_scope.c_str());
+  recon::PruneScope scope = recon::PruneScope::volume;
+  try {
+    scope = recon::prune_scope_named(prune_scope, "--prune-scope");
+  } catch (const InputError& e) {
+    std::fprintf(stderr, "bench_e2e: %s\n", e.what());
     return 2;
   }
   if (live_only && (sweep || live.empty())) {
@@ -289,7 +293,7 @@ int main(int argc, char** argv) {
   settings.mart.dark_weight_cutoff = dark_cutoff;
   settings.mart.sensor_blur_sigma_mm = sensor_blur_mm;
   settings.mart.prune_threshold = prune_threshold;
-  settings.mart.prune_scope = prune_scope == "slice" ? recon::PruneScope::slice : recon::PruneScope::volume;
+  settings.mart.prune_scope = scope;
   settings.correlation.intensity_threshold_of_mean = intensity_threshold;
   settings.correlation.final_smoothing = final_smoothing;
   settings.correlation.depth_prefilter = depth_prefilter;

@@ -115,7 +115,7 @@ void paper_scale(const std::string& source_dir, bool small, double ppm, int iter
       "bench=recon_paper particles=%zu ppm=%.2f lit_pixel_fraction=%.4f threshold_counts=%.1f dark_cutoff=%.2f "
       "iterations=%d mu=%.2f accelerate=%d sensor_blur_mm=%.4f start=%s\n",
       count, ppm, double(lit) / double(image.size()), double(s.noise_threshold), dark_cutoff, iterations, mu,
-      int(accelerate), sensor_blur_mm, start == recon::MartStart::ones ? "ones" : "mlos");
+      int(accelerate), sensor_blur_mm, std::string(recon::name_of(start)).c_str());
   std::printf("bench=recon_paper phase=active_set_and_mlos seconds=%.3f select=%.3f active_set=%.3f start=%.3f\n",
               r.setup_seconds, r.select_seconds, r.active_set_seconds, r.start_seconds);
   std::printf("bench=recon_paper phase=iterations seconds=%.3f per_iteration=%.3f\n", iter_total,
@@ -414,8 +414,9 @@ int main(int argc, char** argv) {
   // `paper [ppm] [threshold] [cutoff] [iterations] [sensor blur sigma, mm] [mlos|ones]`, and the
   // first frame against a kept workspace (bench=recon_reuse).
   if (which == "paper" || which == "all")
-    paper_scale(
-        source_dir, false, ppm, iterations, threshold, cutoff, 0, 0.5, false, argc > 6 ? std::stod(argv[6]) : 0.0,
-        argc > 7 && std::string(argv[7]) == "ones" ? recon::MartStart::ones : recon::MartStart::mlos, which == "paper");
+    paper_scale(source_dir, false, ppm, iterations, threshold, cutoff, 0, 0.5, false,
+                argc > 6 ? std::stod(argv[6]) : 0.0,
+                argc > 7 ? recon::mart_start_named(argv[7], "bench_recon paper: start") : recon::MartStart::mlos,
+                which == "paper");
   return 0;
 }

@@ -81,15 +81,9 @@ void run(const ReconOptions& o) {
   s.sensor_blur_sigma_mm = o.sensor_blur_mm;
   s.prune = !o.no_prune;
   s.prune_threshold = o.prune_threshold;
-  s.prune_scope = o.prune_scope == "slice" ? recon::PruneScope::slice : recon::PruneScope::volume;
+  s.prune_scope = recon::prune_scope_named(o.prune_scope, "--prune-scope");
   s.prune_depth_reach = o.prune_depth_reach;
-  if (o.start == "mlos") {
-    s.start = recon::MartStart::mlos;
-  } else if (o.start == "ones") {
-    s.start = recon::MartStart::ones;
-  } else {
-    throw InputError("--start: mlos or ones, got '" + o.start + "'");
-  }
+  s.start = recon::mart_start_named(o.start, "--start");
   const ImageF image = io::read_raw_frame(o.image);
 
   const bool tty = ::isatty(STDERR_FILENO);
@@ -174,6 +168,7 @@ void add_recon_commands(CLI::App& app) {
                 "Nesterov momentum on the iterations (about half the iterations for the same depth "
                 "recovery; off: the paper's iteration)");
   cmd->add_option("--start", o->start, "initial volume: mlos (multiplicative line of sight) or ones (eq 9)")
+      ->check(CLI::IsMember(std::vector<std::string>(recon::kMartStartNames.begin(), recon::kMartStartNames.end())))
       ->capture_default_str();
   cmd->add_option("--threshold", o->threshold, "noise floor in counts: pixels at or below are dark")
       ->capture_default_str();
@@ -196,7 +191,7 @@ void add_recon_commands(CLI::App& app) {
   cmd->add_option("--prune-scope", o->prune_scope,
                   "what --prune-threshold is a fraction of: the volume's peak, or each depth slice's own "
                   "(run-paper.yaml's and process.yaml's: a faint slice's particles are kept)")
-      ->check(CLI::IsMember({"volume", "slice"}))
+      ->check(CLI::IsMember(std::vector<std::string>(recon::kPruneScopeNames.begin(), recon::kPruneScopeNames.end())))
       ->capture_default_str();
   cmd->add_option("--prune-depth-reach", o->prune_depth_reach,
                   "a voxel at or below the cut stays while one within this many slices of it along depth is "

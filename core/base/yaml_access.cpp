@@ -176,7 +176,7 @@ std::string YamlMap::string_or(std::string_view key, std::string fallback) const
   return has(key) ? string(key) : fallback;
 }
 
-std::string YamlMap::choice(std::string_view key, std::initializer_list<std::string_view> allowed) const {
+std::string YamlMap::choice(std::string_view key, std::span<const std::string_view> allowed) const {
   const std::string value = string(key);
   std::string list;
   for (std::string_view a : allowed) {
@@ -186,7 +186,7 @@ std::string YamlMap::choice(std::string_view key, std::initializer_list<std::str
   fail(key, "expected one of " + list + ", got '" + value + "'");
 }
 
-std::string YamlMap::choice_or(std::string_view key, std::initializer_list<std::string_view> allowed,
+std::string YamlMap::choice_or(std::string_view key, std::span<const std::string_view> allowed,
                                std::string fallback) const {
   return has(key) ? choice(key, allowed) : fallback;
 }

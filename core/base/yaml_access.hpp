@@ -10,6 +10,7 @@
 #include <span>
 #include <string>
 #include <string_view>
+#include <utility>
 
 namespace plenopiv {
 
@@ -49,9 +50,15 @@ class YamlMap {
   std::string string(std::string_view key) const;
   std::string string_or(std::string_view key, std::string fallback) const;
   // A string that must be one of `allowed`.
-  std::string choice(std::string_view key, std::initializer_list<std::string_view> allowed) const;
+  std::string choice(std::string_view key, std::span<const std::string_view> allowed) const;
+  std::string choice(std::string_view key, std::initializer_list<std::string_view> allowed) const {
+    return choice(key, std::span<const std::string_view>(allowed.begin(), allowed.size()));
+  }
+  std::string choice_or(std::string_view key, std::span<const std::string_view> allowed, std::string fallback) const;
   std::string choice_or(std::string_view key, std::initializer_list<std::string_view> allowed,
-                        std::string fallback) const;
+                        std::string fallback) const {
+    return choice_or(key, std::span<const std::string_view>(allowed.begin(), allowed.size()), std::move(fallback));
+  }
 
   // Refuses keys not in `known` (a typo must not become a silent default).
   void reject_unknown(std::span<const std::string_view> known) const;

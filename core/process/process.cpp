@@ -122,17 +122,17 @@ ProcessSettings parse_settings(const YamlMap& root) {
                                       std::numeric_limits<int>::max());
     s.mart.mu = r->number_or("mu", s.mart.mu);
     s.mart.accelerate = r->choice_or("acceleration", {"none", "nesterov"}, "none") == "nesterov";
-    s.mart.start =
-        r->choice_or("start", {"mlos", "ones"}, "mlos") == "ones" ? recon::MartStart::ones : recon::MartStart::mlos;
+    s.mart.start = recon::mart_start_named(
+        r->choice_or("start", recon::kMartStartNames, std::string(recon::name_of(s.mart.start))), "start");
     s.mart.noise_threshold = float(r->number_or("noise_threshold", s.mart.noise_threshold));
     s.mart.dark_weight_cutoff = r->number_or("dark_weight_cutoff", s.mart.dark_weight_cutoff);
     s.mart.convergence = r->number_or("convergence", s.mart.convergence);
     s.mart.sensor_blur_sigma_mm = r->number_or("sensor_blur_sigma_mm", s.mart.sensor_blur_sigma_mm);
     s.mart.prune = r->boolean_or("prune", s.mart.prune);
     s.mart.prune_threshold = r->number_or("prune_threshold", s.mart.prune_threshold);
-    s.mart.prune_scope = r->choice_or("prune_scope", {"volume", "slice"}, "volume") == "slice"
-                             ? recon::PruneScope::slice
-                             : recon::PruneScope::volume;
+    s.mart.prune_scope = recon::prune_scope_named(
+        r->choice_or("prune_scope", recon::kPruneScopeNames, std::string(recon::name_of(s.mart.prune_scope))),
+        "prune_scope");
     s.mart.prune_depth_reach = r->integer_in("prune_depth_reach", s.mart.prune_depth_reach,
                                              std::numeric_limits<int>::min(), std::numeric_limits<int>::max());
     if (const auto problem = recon::check(s.mart)) r->fail(problem->key, problem->reason);

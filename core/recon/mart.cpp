@@ -37,7 +37,28 @@ void validate_settings(const MartSettings& s) {
   if (const auto problem = check(s)) throw InputError("MART: " + problem->key + ": " + problem->reason);
 }
 
+template <typename E, std::size_t N>
+E named(const std::array<std::string_view, N>& names, std::string_view name, std::string_view what) {
+  std::string list;
+  for (std::size_t i = 0; i < N; ++i) {
+    if (names[i] == name) return E(i);
+    list += (list.empty() ? "" : ", ") + std::string(names[i]);
+  }
+  throw InputError(std::string(what) + ": expected one of " + list + ", got '" + std::string(name) + "'");
+}
+
 }  // namespace
+
+std::string_view name_of(MartStart start) { return kMartStartNames.at(std::size_t(start)); }
+std::string_view name_of(PruneScope scope) { return kPruneScopeNames.at(std::size_t(scope)); }
+
+MartStart mart_start_named(std::string_view name, std::string_view what) {
+  return named<MartStart>(kMartStartNames, name, what);
+}
+
+PruneScope prune_scope_named(std::string_view name, std::string_view what) {
+  return named<PruneScope>(kPruneScopeNames, name, what);
+}
 
 std::optional<SettingProblem> check(const MartSettings& s) {
   const auto number = [](double v) { return std::to_string(v); };

@@ -9,6 +9,7 @@
 #include <optional>
 #include <span>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "core/base/grid.hpp"
@@ -43,6 +44,16 @@ enum class PruneScope {
   volume,  // the volume's peak
   slice,   // the peak of the voxel's depth slice
 };
+
+// The names run configs (core/process) and the CLI (`plenopiv recon`, the benchmarks) give MartStart
+// and PruneScope, in the enums' order: the one table they all read.
+inline constexpr std::array<std::string_view, 2> kMartStartNames{"ones", "mlos"};
+inline constexpr std::array<std::string_view, 2> kPruneScopeNames{"volume", "slice"};
+std::string_view name_of(MartStart start);
+std::string_view name_of(PruneScope scope);
+// The value with that name; InputError naming `what` (the key or option) and the names otherwise.
+MartStart mart_start_named(std::string_view name, std::string_view what);
+PruneScope prune_scope_named(std::string_view name, std::string_view what);
 
 struct MartSettings {
   MartMethod method = MartMethod::smart;

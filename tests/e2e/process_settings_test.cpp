@@ -112,6 +112,9 @@ TEST(ProcessSettings, PruningReachesMart) {
   EXPECT_EQ(parse(kVolume + "}\nreconstruction: {prune_scope: slice}\n" + kPasses).mart.prune_scope,
             recon::PruneScope::slice);
   expect_refused_naming(kVolume + "}\nreconstruction: {prune_scope: lens}\n" + kPasses, "prune_scope");
+  EXPECT_EQ(defaults.mart.start, recon::MartStart::mlos);
+  EXPECT_EQ(parse(kVolume + "}\nreconstruction: {start: ones}\n" + kPasses).mart.start, recon::MartStart::ones);
+  expect_refused_naming(kVolume + "}\nreconstruction: {start: zeros}\n" + kPasses, "start");
   for (const std::string bad : {"-0.001", "1", "faint"}) {
     expect_refused_naming(kVolume + "}\nreconstruction: {prune_threshold: " + bad + "}\n" + kPasses, "prune_threshold");
   }

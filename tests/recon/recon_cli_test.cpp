@@ -142,6 +142,11 @@ TEST(ReconstructCli, RefusesBadArgumentsClearly) {
                      out));
   EXPECT_NE(out.find("--prune-scope"), std::string::npos) << out;
   EXPECT_EQ(
+      105, run_command({binary("plenopiv"), "reconstruct", "--camera", kCamera, (dir / "right.tif").string(),
+                        "--extent", "-1", "1", "-1", "1", "-1", "1", "--start", "zeros", "-o", (dir / "x.h5").string()},
+                       out));
+  EXPECT_NE(out.find("--start"), std::string::npos) << out;
+  EXPECT_EQ(
       2, run_command({binary("plenopiv"), "reconstruct", "--camera", kCamera, (dir / "right.tif").string(), "--extent",
                       "-1", "1", "-1", "1", "-1", "1", "--prune-depth-reach", "99", "-o", (dir / "x.h5").string()},
                      out));

@@ -107,6 +107,22 @@ double max_abs_diff(std::span<const float> a, std::span<const float> b) {
   return m;
 }
 
+TEST(MartNames, EveryValueHasOneNameAndAnUnknownNameIsRefusedByName) {
+  for (const MartStart start : {MartStart::ones, MartStart::mlos})
+    EXPECT_EQ(mart_start_named(name_of(start), "start"), start);
+  for (const PruneScope scope : {PruneScope::volume, PruneScope::slice})
+    EXPECT_EQ(prune_scope_named(name_of(scope), "prune_scope"), scope);
+  EXPECT_EQ(name_of(MartStart::mlos), "mlos");
+  EXPECT_EQ(name_of(PruneScope::slice), "slice");
+  try {
+    (void)prune_scope_named("lens", "--prune-scope");
+    FAIL() << "an unknown scope was taken";
+  } catch (const InputError& e) {
+    EXPECT_STREQ(e.what(), "--prune-scope: expected one of volume, slice, got 'lens'");
+  }
+  EXPECT_THROW((void)mart_start_named("MLOS", "start"), InputError);  // names are exact
+}
+
 TEST_F(Weights, GeometricWhiteImageIsOneInsideMicrolensImagesAndZeroBetween) {
   const ImageF& w = op_->white();
   // camera-small: 50 x 50 lenses of 16.89 px on 850 px, f-number matched, centred.
