@@ -33,7 +33,6 @@ using namespace plenopiv;
 namespace {
 
 constexpr double voxel_mm = 0.1;
-constexpr double particles_per_voxel = 0.0023;  // 0.5 ppm: ~28 000 particles in 300x200x200
 
 Grid3 centred_grid(int nx, int ny, int nz) {
   Grid3 g;
@@ -41,18 +40,6 @@ Grid3 centred_grid(int nx, int ny, int nz) {
   g.spacing_mm = {voxel_mm, voxel_mm, voxel_mm};
   for (int a = 0; a < 3; ++a) g.origin_mm[a] = -0.5 * (g.shape[a] - 1) * voxel_mm;
   return g;
-}
-
-// Particles in a box 4 voxels larger than the volume on every side (they enter and leave).
-std::vector<sim::Point3> particles_for(const Grid3& g, std::uint64_t seed) {
-  sim::Box box;
-  double voxels = 1;
-  for (int a = 0; a < 3; ++a) {
-    box.min_mm[a] = g.origin_mm[a] - 4 * voxel_mm;
-    box.max_mm[a] = g.origin_mm[a] + (g.shape[a] + 3) * voxel_mm;
-    voxels *= g.shape[a] + 7;
-  }
-  return sim::random_particles(box, std::size_t(particles_per_voxel * voxels), seed);
 }
 
 double cpu_seconds() {
@@ -71,7 +58,7 @@ std::pair<double, double> seconds_of(const std::function<void()>& f) {
 
 void uniform_shifts(int n) {
   const Grid3 g = centred_grid(n, n, n);
-  const auto pa = particles_for(g, 1);
+  const auto pa = sim::particles_around(g, 1);
   const Volume a = sim::render_exact_volume(g, pa);
   for (bool prefilter : {true, false})
     for (int step = 0; step <= 10; ++step) {
@@ -98,7 +85,7 @@ void uniform_shifts(int n) {
 void ring_vortex(const std::array<int, 3>& shape, bool all_variants, bool default_only = false) {
   const Grid3 g = centred_grid(shape[0], shape[1], shape[2]);
   const sim::RingVortexFlow flow(sim::RingVortexFlow::Parameters{});  // the paper's ring
-  const auto pa = particles_for(g, 2);
+  const auto pa = sim::particles_around(g, 2);
   const Volume a = sim::render_exact_volume(g, pa);
   const Volume b = sim::render_exact_volume(g, sim::displace(pa, flow));
   struct Variant {
@@ -328,7 +315,7 @@ class Decomposition {
 void decompose(const std::array<int, 3>& shape, const std::vector<std::string>& variants) {
   const Grid3 g = centred_grid(shape[0], shape[1], shape[2]);
   const sim::RingVortexFlow flow(sim::RingVortexFlow::Parameters{});
-  const auto pa = particles_for(g, 2);
+  const auto pa = sim::particles_around(g, 2);
   const Volume a = sim::render_exact_volume(g, pa);
   const Volume b = sim::render_exact_volume(g, sim::displace(pa, flow));
   const Decomposition d(g, flow);

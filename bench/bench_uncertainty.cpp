@@ -47,17 +47,6 @@ Grid3 centred_grid(std::array<int, 3> n, double voxel_mm) {
   return g;
 }
 
-std::vector<sim::Point3> particles_around(const Grid3& g, std::uint64_t seed) {
-  sim::Box box;
-  double voxels = 1;
-  for (int a = 0; a < 3; ++a) {
-    box.min_mm[a] = g.origin_mm[a] - 4 * g.spacing_mm[a];
-    box.max_mm[a] = g.origin_mm[a] + (g.shape[a] + 3) * g.spacing_mm[a];
-    voxels *= g.shape[a] + 7;
-  }
-  return sim::random_particles(box, std::size_t(0.0023 * voxels), seed);
-}
-
 // One row per depth band (thirds of the field's depth, and all) and component.
 void report(const std::string& kind, const std::string& name, const VectorField& f, const sim::Flow& flow,
             double voxel_mm, const std::function<bool(const sim::Point3&)>& keep) {
@@ -92,13 +81,13 @@ void exact_cases(int n, bool window_mean) {
     const std::string suffix = std::string(smoothing ? "_smoothed" : "") + (window_mean ? "_window_mean" : "");
     {
       const Grid3 g = centred_grid({n, n, n}, voxel);
-      const auto pa = particles_around(g, 51);
+      const auto pa = sim::particles_around(g, 51);
       const sim::UniformFlow flow({0.03, -0.06, 0.12});
       Volume a = sim::render_exact_volume(g, pa), b = sim::render_exact_volume(g, sim::displace(pa, flow));
       for (Volume* v : {&a, &b}) {
         std::vector<sim::Point3> noise;
         for (std::uint64_t k = 0; k < 4; ++k) {
-          const auto p = particles_around(g, (v == &a ? 60 : 70) + k);
+          const auto p = sim::particles_around(g, (v == &a ? 60 : 70) + k);
           noise.insert(noise.end(), p.begin(), p.end());
         }
         const Volume dim = sim::render_exact_volume(g, noise);
@@ -112,7 +101,7 @@ void exact_cases(int n, bool window_mean) {
     }
     {
       const Grid3 g = centred_grid({n, n, n}, voxel);
-      const auto pa = particles_around(g, 52);
+      const auto pa = sim::particles_around(g, 52);
       const sim::LinearShear flow({0.05, 0, 0.05}, 1, 0.0);  // +-2.4 voxels across 96
       const Volume a = sim::render_exact_volume(g, pa), b = sim::render_exact_volume(g, sim::displace(pa, flow));
       const auto r = piv::correlate_volumes(a, b, settings);
@@ -126,7 +115,7 @@ void exact_cases(int n, bool window_mean) {
       rv.core_radius_voxels = n / 6.0;
       rv.core_displacement_voxels = 4;
       const sim::RingVortexFlow flow(rv);
-      const auto pa = particles_around(g, 53);
+      const auto pa = sim::particles_around(g, 53);
       const Volume a = sim::render_exact_volume(g, pa), b = sim::render_exact_volume(g, sim::displace(pa, flow));
       const auto r = piv::correlate_volumes(a, b, settings);
       const double half = 0.5 * settings.passes.back().window[0] * voxel;
@@ -149,7 +138,7 @@ void paper_ring(bool deep) {
     g.origin_mm[2] = -0.5 * (g.shape[2] - 1) * g.spacing_mm[2];
   }
   const sim::RingVortexFlow flow(sim::RingVortexFlow::Parameters{});
-  const auto pa = particles_around(cubes, 2015);  // the same particles on either grid
+  const auto pa = sim::particles_around(cubes, 2015);  // the same particles on either grid
   const Volume a = sim::render_exact_volume(g, pa), b = sim::render_exact_volume(g, sim::displace(pa, flow));
   for (int smoothing : {0, 1}) {
     piv::CorrelationSettings settings;
@@ -176,7 +165,7 @@ void paper_ring(bool deep) {
 // correlation, and the final pass's uncertainty step), and whether the vectors are the same bits.
 void cost(int n) {
   const Grid3 g = centred_grid({n, n, n}, 0.1);
-  const auto pa = particles_around(g, 51);
+  const auto pa = sim::particles_around(g, 51);
   const sim::UniformFlow flow({0.03, -0.06, 0.12});
   const Volume a = sim::render_exact_volume(g, pa), b = sim::render_exact_volume(g, sim::displace(pa, flow));
   piv::CorrelationSettings on, off;

@@ -44,6 +44,18 @@ std::vector<Point3> random_particles(const Box& box, std::size_t count, std::uin
   return points;
 }
 
+std::vector<Point3> particles_around(const Grid3& grid, std::uint64_t seed, double per_voxel, int margin_voxels) {
+  Box box;
+  double voxels = 1;
+  for (int a = 0; a < 3; ++a) {
+    const int across = grid.shape[a] - 1 + margin_voxels;  // voxels from the first centre to the far face
+    box.min_mm[a] = grid.origin_mm[a] - margin_voxels * grid.spacing_mm[a];
+    box.max_mm[a] = grid.origin_mm[a] + across * grid.spacing_mm[a];
+    voxels *= across + margin_voxels;
+  }
+  return random_particles(box, std::size_t(per_voxel * voxels), seed);
+}
+
 double field_of_view_area_ratio(const optics::CameraModel& camera, const Box& box) {
   check_box(box);
   const double box_area = (box.max_mm[0] - box.min_mm[0]) * (box.max_mm[1] - box.min_mm[1]);

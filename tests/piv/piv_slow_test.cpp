@@ -18,12 +18,7 @@ TEST(PaperScale, RingVortexOnExactParticleVolumes) {
   g.shape = {300, 200, 200};
   g.spacing_mm = {0.1, 0.1, 0.1};
   for (int a = 0; a < 3; ++a) g.origin_mm[a] = -0.5 * (g.shape[a] - 1) * 0.1;
-  sim::Box box;
-  for (int a = 0; a < 3; ++a) {
-    box.min_mm[a] = g.origin_mm[a] - 0.4;
-    box.max_mm[a] = g.origin_mm[a] + (g.shape[a] + 3) * 0.1;
-  }
-  const auto pa = sim::random_particles(box, std::size_t(0.0023 * 307 * 207 * 207), 2);
+  const auto pa = sim::particles_around(g, 2);
   const sim::RingVortexFlow flow(sim::RingVortexFlow::Parameters{});
   const auto r = correlate_volumes(sim::render_exact_volume(g, pa),
                                    sim::render_exact_volume(g, sim::displace(pa, flow)), CorrelationSettings{});

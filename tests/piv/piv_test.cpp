@@ -397,22 +397,9 @@ CorrelationSettings small_settings() {
   return s;
 }
 
-// Particles (mm) at the paper's density (0.5 ppm ~ 0.0023 per voxel) in a box reaching 4 voxels
-// beyond the volume, so that particles enter and leave its faces as in a real flow.
-std::vector<sim::Point3> particles_around(const Grid3& g, std::uint64_t seed) {
-  sim::Box box;
-  double voxels = 1;
-  for (int a = 0; a < 3; ++a) {
-    box.min_mm[a] = g.origin_mm[a] - 4 * g.spacing_mm[a];
-    box.max_mm[a] = g.origin_mm[a] + (g.shape[a] + 3) * g.spacing_mm[a];
-    voxels *= g.shape[a] + 7;
-  }
-  return sim::random_particles(box, std::size_t(0.0023 * voxels), seed);
-}
-
 TEST(Multipass, UniformSubvoxelShiftsAreRecovered) {
   const Grid3 g = cube(64);
-  const auto pa = particles_around(g, 11);
+  const auto pa = sim::particles_around(g, 11);
   const Volume a = sim::render_exact_volume(g, pa);
   // The same passes, and with a depth margin of 4 on the middle one, as the default has one
   // before its final passes (compact particles: nothing to correct there, and nothing may get
@@ -451,7 +438,7 @@ TEST(Multipass, UniformSubvoxelShiftsAreRecovered) {
 // intensity floor (CorrelationSettings::intensity_threshold_of_mean) takes most of that pull away.
 TEST(Multipass, TheIntensityFloorRemovesAStationaryHazesPull) {
   const Grid3 g = cube(48);
-  const auto pa = particles_around(g, 21);
+  const auto pa = sim::particles_around(g, 21);
   const P3 d{0, 0, 1.5};  // voxels, along depth as the ghosts' pull is largest there
   const sim::UniformFlow flow({0, 0, d[2] * 0.1});
   Volume a = sim::render_exact_volume(g, pa);
@@ -459,7 +446,7 @@ TEST(Multipass, TheIntensityFloorRemovesAStationaryHazesPull) {
   // Five times the particles' count at 0.15 of their intensity: as much light as the particles.
   std::vector<sim::Point3> haze_points;
   for (std::uint64_t seed : {31, 32, 33, 34, 35}) {
-    const auto p = particles_around(g, seed);
+    const auto p = sim::particles_around(g, seed);
     haze_points.insert(haze_points.end(), p.begin(), p.end());
   }
   const Volume haze = sim::render_exact_volume(g, haze_points);
@@ -516,7 +503,7 @@ TEST(Multipass, ADepthMarginRemovesThePullOfStreaksCutByTheWindow) {
 // (CorrelationSettings::final_smoothing) lowers it and leaves the mean where it was.
 TEST(Multipass, FinalSmoothingLowersTheRandomErrorOfAUniformShift) {
   const Grid3 g = cube(64);
-  const auto pa = particles_around(g, 51);
+  const auto pa = sim::particles_around(g, 51);
   const P3 d{0.3, -0.6, 1.2};  // voxels
   const sim::UniformFlow flow({d[0] * 0.1, d[1] * 0.1, d[2] * 0.1});
   Volume a = sim::render_exact_volume(g, pa);
@@ -524,7 +511,7 @@ TEST(Multipass, FinalSmoothingLowersTheRandomErrorOfAUniformShift) {
   for (Volume* v : {&a, &b}) {
     std::vector<sim::Point3> noise_points;
     for (std::uint64_t k = 0; k < 4; ++k) {
-      const auto p = particles_around(g, (v == &a ? 60 : 70) + k);
+      const auto p = sim::particles_around(g, (v == &a ? 60 : 70) + k);
       noise_points.insert(noise_points.end(), p.begin(), p.end());
     }
     const Volume noise = sim::render_exact_volume(g, noise_points);
@@ -636,7 +623,7 @@ TEST(Multipass, DepthContextLetsTheFaceWindowsSeeTheCutStreaks) {
 
 TEST(Multipass, SameBitsAtOneAndTwoThreads) {
   const Grid3 g = cube(48);
-  const auto pa = particles_around(g, 5);
+  const auto pa = sim::particles_around(g, 5);
   const sim::LinearShear shear({0.02, 0, 0}, 1, 0.0);
   const Volume a = sim::render_exact_volume(g, pa);
   const Volume b = sim::render_exact_volume(g, sim::displace(pa, shear));
@@ -675,7 +662,7 @@ TEST(Multipass, AKeptWorkspaceGivesTheBitsOfNone) {
   const sim::LinearShear shear({0.02, 0, 0}, 1, 0.0);
   const auto pair = [&](int n, unsigned seed) {
     const Grid3 g = cube(n);
-    const auto p = particles_around(g, seed);
+    const auto p = sim::particles_around(g, seed);
     return std::pair{sim::render_exact_volume(g, p), sim::render_exact_volume(g, sim::displace(p, shear))};
   };
   const auto large = pair(48, 5), small = pair(32, 9);
@@ -710,7 +697,7 @@ TEST(Multipass, WindowDeformationReducesTheRingVortexError) {
   for (int a = 0; a < 3; ++a) g.origin_mm[a] = -0.5 * (g.shape[a] - 1) * g.spacing_mm[a];
   const sim::RingVortexFlow::Parameters p;  // the paper's
   const sim::RingVortexFlow flow(p);
-  const auto pa = particles_around(g, 7);
+  const auto pa = sim::particles_around(g, 7);
   const Volume a = sim::render_exact_volume(g, pa);
   const Volume b = sim::render_exact_volume(g, sim::displace(pa, flow));
   CorrelationSettings single;
@@ -780,13 +767,13 @@ TEST(Multipass, DifferentGridsAndNonFiniteVoxelsAreRefused) {
 // vectors are the same bits with the uncertainty off.
 TEST(Uncertainty, PredictsTheRandomErrorOfANoisyUniformShift) {
   const Grid3 g = cube(64);
-  const auto pa = particles_around(g, 51);
+  const auto pa = sim::particles_around(g, 51);
   const sim::UniformFlow flow({0.03, -0.06, 0.12});
   Volume a = sim::render_exact_volume(g, pa), b = sim::render_exact_volume(g, sim::displace(pa, flow));
   for (Volume* v : {&a, &b}) {
     std::vector<sim::Point3> noise_points;
     for (std::uint64_t k = 0; k < 4; ++k) {
-      const auto p = particles_around(g, (v == &a ? 60 : 70) + k);
+      const auto p = sim::particles_around(g, (v == &a ? 60 : 70) + k);
       noise_points.insert(noise_points.end(), p.begin(), p.end());
     }
     const Volume noise = sim::render_exact_volume(g, noise_points);

@@ -46,6 +46,34 @@ TEST(Particles, UniformInBoxAndSeeded) {
   EXPECT_THROW(random_particles(Box{{0, 0, 0}, {1, 0, 1}}, 10, 1), InputError);
 }
 
+TEST(Particles, AroundAGridReachTheMarginAtThePapersDensity) {
+  Grid3 g;
+  g.shape = {20, 10, 30};
+  g.spacing_mm = {0.1, 0.1, 0.2};
+  g.origin_mm = {-1.0, 0.5, 2.0};
+  const auto a = particles_around(g, 5);
+  EXPECT_EQ(a, particles_around(g, 5));
+  EXPECT_EQ(a.size(), std::size_t(kPaperParticlesPerVoxel * 27 * 17 * 37));  // 4 voxels each side
+  // Denser, to see the box's faces: hundreds of particles come within 0.8 voxel of each.
+  const auto dense = particles_around(g, 6, 0.5);
+  Point3 lo{1e9, 1e9, 1e9}, hi{-1e9, -1e9, -1e9};
+  for (const Point3& p : dense) {
+    for (int k = 0; k < 3; ++k) {
+      lo[k] = std::min(lo[k], p[k]);
+      hi[k] = std::max(hi[k], p[k]);
+    }
+  }
+  for (int k = 0; k < 3; ++k) {
+    const double first = g.origin_mm[k], last = g.origin_mm[k] + (g.shape[k] - 1) * g.spacing_mm[k];
+    // The box reaches 4 voxels beyond the outer centres.
+    EXPECT_GE(lo[k], first - 4 * g.spacing_mm[k]);
+    EXPECT_LT(lo[k], first - 3.2 * g.spacing_mm[k]);
+    EXPECT_LT(hi[k], last + 4 * g.spacing_mm[k]);
+    EXPECT_GT(hi[k], last + 3.2 * g.spacing_mm[k]);
+  }
+  EXPECT_EQ(particles_around(g, 5, 0.01, 2).size(), std::size_t(0.01 * 23 * 13 * 33));
+}
+
 TEST(Particles, DensityToCountAsThePaper) {
   const auto camera = paper_camera();
   const Box fov = field_of_view_box(camera, -10, 10);
