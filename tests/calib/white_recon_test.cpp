@@ -16,6 +16,7 @@
 #include "core/sim/render.hpp"
 #include "tests/support/cameras.hpp"
 #include "tests/support/mean_displacement.hpp"
+#include "tests/support/small_shift_pair.hpp"
 
 namespace plenopiv {
 namespace {
@@ -35,14 +36,7 @@ struct Shift {
 // white correction from a calibration of `truth` made from its images.
 Shift processed_shift(const optics::MicrolensArray& truth, bool white_only) {
   const optics::CameraModel camera = testing_support::small_camera();
-  const process::ProcessSettings s = process::process_settings_from(YamlMap(load_yaml_text(R"(
-dt_s: 0.0001
-volume: {x_mm: [-2, 2], y_mm: [-2, 2], z_mm: [0, 4], voxel_mm: 0.125, voxel_z_mm: 0.125, depth_guard_mm: 1}
-reconstruction: {iterations: 20, mu: 1, start: mlos, noise_threshold: 0, dark_weight_cutoff: 0.9}
-correlation: {median: {threshold: 2, epsilon_voxel: 0.1, radius: 2}, signal_threshold: 0}
-)",
-                                                                                           "white_recon.yaml"),
-                                                                            "white_recon.yaml"));
+  const process::ProcessSettings s = testing_support::small_shift_settings("white_recon.yaml");
   sim::SensorModel sensor;
   sensor.electrons_per_ray = 20;
   sensor.shot_noise = true;
@@ -62,15 +56,9 @@ correlation: {median: {threshold: 2, epsilon_voxel: 0.1, radius: 2}, signal_thre
   const calib::Calibration cal = calib::calibrate_camera(camera, frames);
   EXPECT_EQ(cal.source, white_only ? calib::CentreSource::white : calib::CentreSource::spots);
 
-  const std::vector<sim::Point3> a = sim::random_particles({{-2.5, -2.5, -0.5}, {2.5, 2.5, 4.5}}, 400, 7);
-  std::vector<sim::Point3> b = a;
-  for (auto& p : b) p = {p[0] + 0.1, p[1] - 0.05, p[2] + 0.25};
-  sim::RenderOptions ro;
-  ro.rays_per_particle = 10000;
-  const ImageF frame_a = sim::render(camera, truth, a, ro, 3).rays;
-  const ImageF frame_b = sim::render(camera, truth, b, ro, 4).rays;
+  const testing_support::FramePair frames_ab = testing_support::small_shift_pair(camera, truth, {0.1, -0.05, 0.25});
   const process::PairOperator op(camera, cal.microlens_array(), cal.white_correction, s);
-  const auto r = process::process_pair(op, frame_a, frame_b, s);
+  const auto r = process::process_pair(op, frames_ab.a, frames_ab.b, s);
   const testing_support::MeanDisplacement m = testing_support::mean_displacement(r.correlation.field);
   EXPECT_GT(m.valid, r.correlation.field.grid.count() / 2);
   return {m.mm, r.lattice_note};

@@ -17,6 +17,7 @@
 #include "core/sim/render.hpp"
 #include "tests/support/cameras.hpp"
 #include "tests/support/mean_displacement.hpp"
+#include "tests/support/small_shift_pair.hpp"
 
 namespace plenopiv {
 namespace {
@@ -39,14 +40,7 @@ std::array<double, 3> mean_displacement(const VectorField& f) {
 TEST(ProcessMeasuredWhite, DepthShiftMatchesTheGeometricWhite) {
   const auto t0 = std::chrono::steady_clock::now();
   const optics::CameraModel camera = testing_support::small_camera();
-  const process::ProcessSettings s = process::process_settings_from(YamlMap(load_yaml_text(R"(
-dt_s: 0.0001
-volume: {x_mm: [-2, 2], y_mm: [-2, 2], z_mm: [0, 4], voxel_mm: 0.125, voxel_z_mm: 0.125, depth_guard_mm: 1}
-reconstruction: {iterations: 20, mu: 1, start: mlos, noise_threshold: 0, dark_weight_cutoff: 0.9}
-correlation: {median: {threshold: 2, epsilon_voxel: 0.1, radius: 2}, signal_threshold: 0}
-)",
-                                                                                           "measured_white.yaml"),
-                                                                            "measured_white.yaml"));
+  const process::ProcessSettings s = testing_support::small_shift_settings("measured_white.yaml");
   const auto truth = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera));
 
   const calib::Calibration cal =
@@ -61,17 +55,11 @@ correlation: {median: {threshold: 2, epsilon_voxel: 0.1, radius: 2}, signal_thre
   EXPECT_LT(outside, 0.015) << "measured 0.0093";
   const optics::MicrolensArray lenses = cal.microlens_array();
 
-  const std::vector<sim::Point3> a = sim::random_particles({{-2.5, -2.5, -0.5}, {2.5, 2.5, 4.5}}, 400, 7);
-  std::vector<sim::Point3> b = a;
-  for (auto& p : b) p[2] += 0.25;
-  sim::RenderOptions ro;
-  ro.rays_per_particle = 10000;
-  const ImageF frame_a = sim::render(camera, truth, a, ro, 3).rays;
-  const ImageF frame_b = sim::render(camera, truth, b, ro, 4).rays;
+  const testing_support::FramePair frames = testing_support::small_shift_pair(camera, truth, {0, 0, 0.25});
 
   auto run = [&](const ImageF& white) {
     const process::PairOperator op(camera, lenses, white, s);
-    return mean_displacement(process::process_pair(op, frame_a, frame_b, s).correlation.field);
+    return mean_displacement(process::process_pair(op, frames.a, frames.b, s).correlation.field);
   };
   const auto geometric = run(calib::geometric_white_image(camera, lenses));
   const auto with_measured = run(measured);
