@@ -5,6 +5,7 @@
 //
 //   bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate]
 //             [--dark-cutoff F] [--intensity-threshold K] [--final-smoothing K] [--depth-prefilter K]
+//             [--spectral-whitening P [--whitened-peak-sigma X,Y,Z]]
 //             [--passes P] [--early-interpolation sinc|cubic] [--voxel-z-factor D] [--steady]
 //             [--time-sweep] [--z-centre MM] [--compare-passes 'P1;P2;...']
 //             [--prune-threshold F [--prune-scope volume|slice]]
@@ -47,6 +48,10 @@
 //              4) and, when it is set, without it.
 //     --depth-prefilter: more binomial passes along z after the prefilter for the headline rows,
 //              0 to 8 (default 0); they then also print the field with it toggled (0, or 4).
+//     --spectral-whitening P, --whitened-peak-sigma X,Y,Z: the correlation's robust phase
+//              weighting of the passes before the last for the headline rows (default 0: off; the
+//              peak widths in voxels, default core/piv's); the rows then also print it off (or,
+//              when off, at 1/2 and 1).
 //     --z-centre: depth of the volume's (and the ring's) centre, mm (default 0: the focal plane).
 //     --passes: the headline rows' pass list in --passes syntax (default core/piv's).
 //     --compare-passes: correlate the headline volumes (and the exact ones) with each pass list
@@ -164,6 +169,8 @@ int main(int argc, char** argv) {
   double mu = 0.5, z_centre = 0.0, dark_cutoff = recon::MartSettings{}.dark_weight_cutoff;
   double sensor_blur_mm = recon::MartSettings{}.sensor_blur_sigma_mm;
   double intensity_threshold = piv::CorrelationSettings{}.intensity_threshold_of_mean;
+  double spectral_whitening = piv::CorrelationSettings{}.spectral_whitening;
+  std::array<double, 3> whitened_sigma = piv::CorrelationSettings{}.whitened_peak_sigma_voxel;
   int final_smoothing = piv::CorrelationSettings{}.final_smoothing;
   int depth_prefilter = piv::CorrelationSettings{}.depth_prefilter;
   bool steady = false, time_sweep = false, sparse_sweep = false, live_only = false;
@@ -194,6 +201,11 @@ int main(int argc, char** argv) {
       dark_cutoff = std::stod(argv[++i]);
     else if (!std::strcmp(argv[i], "--sensor-blur-mm") && i + 1 < argc)
       sensor_blur_mm = std::stod(argv[++i]);
+    else if (!std::strcmp(argv[i], "--spectral-whitening") && i + 1 < argc)
+      spectral_whitening = std::stod(argv[++i]);
+    else if (!std::strcmp(argv[i], "--whitened-peak-sigma") && i + 1 < argc &&
+             std::sscanf(argv[i + 1], "%lf,%lf,%lf", &whitened_sigma[0], &whitened_sigma[1], &whitened_sigma[2]) == 3)
+      ++i;
     else if (!std::strcmp(argv[i], "--intensity-threshold") && i + 1 < argc)
       intensity_threshold = std::stod(argv[++i]);
     else if (!std::strcmp(argv[i], "--final-smoothing") && i + 1 < argc)
@@ -241,6 +253,7 @@ int main(int argc, char** argv) {
                 dark_cutoff != recon::MartSettings{}.dark_weight_cutoff ||
                 sensor_blur_mm != recon::MartSettings{}.sensor_blur_sigma_mm ||
                 intensity_threshold != piv::CorrelationSettings{}.intensity_threshold_of_mean ||
+                spectral_whitening != piv::CorrelationSettings{}.spectral_whitening ||
                 final_smoothing != piv::CorrelationSettings{}.final_smoothing ||
                 depth_prefilter != piv::CorrelationSettings{}.depth_prefilter ||
                 prune_threshold != recon::MartSettings{}.prune_threshold || prune_scope != "volume")) {
@@ -248,7 +261,8 @@ int main(int argc, char** argv) {
         stderr,
         "bench_e2e: "
         "--iterations/--mu/--accelerate/--dark-cutoff/--sensor-blur-mm/--intensity-threshold/"
-        "--final-smoothing/--depth-prefilter/--passes/--early-interpolation/--voxel-z-factor/--z-centre change the "
+        "--final-smoothing/--depth-prefilter/--spectral-whitening/--passes/--early-interpolation/--voxel-z-factor/"
+        "--z-centre change the "
         "headline rows only; use them with --no-sweep\n");
     return 2;
   }
@@ -260,7 +274,8 @@ int main(int argc, char** argv) {
     std::fprintf(stderr,
                  "usage: bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate] "
                  "[--dark-cutoff F] [--sensor-blur-mm S] [--intensity-threshold K] [--final-smoothing K] "
-                 "[--depth-prefilter K] [--passes P] [--early-interpolation sinc|cubic] [--voxel-z-factor D] "
+                 "[--depth-prefilter K] [--spectral-whitening P [--whitened-peak-sigma X,Y,Z]] [--passes P] "
+                 "[--early-interpolation sinc|cubic] [--voxel-z-factor D] "
                  "[--steady] [--time-sweep] [--z-centre MM] [--compare-passes 'P1;P2'] [--prune-threshold F "
                  "[--prune-scope volume|slice]] [--sparse-sweep [--sparse-repeats N] "
                  "[--sparse-variants V,..]] [--live B,K,N,P [--live-depth-prefilter K] [--live-only]]\n");
@@ -295,6 +310,8 @@ int main(int argc, char** argv) {
   settings.mart.prune_threshold = prune_threshold;
   settings.mart.prune_scope = scope;
   settings.correlation.intensity_threshold_of_mean = intensity_threshold;
+  settings.correlation.spectral_whitening = spectral_whitening;
+  settings.correlation.whitened_peak_sigma_voxel = whitened_sigma;
   settings.correlation.final_smoothing = final_smoothing;
   settings.correlation.depth_prefilter = depth_prefilter;
   settings.correlation.early_interpolation = early_interpolation;
@@ -568,6 +585,19 @@ int main(int argc, char** argv) {
     const bool cubic = early.early_interpolation == piv::Interpolation::sinc;
     early.early_interpolation = cubic ? piv::Interpolation::cubic : piv::Interpolation::sinc;
     correlate_both("correlation", cubic ? "early_interpolation_cubic" : "early_interpolation_sinc", early, true);
+    // Robust phase correlation: off when the headline has it; at 1/2 and 1 (the headline's peak
+    // widths) when not.
+    if (spectral_whitening > 0) {
+      piv::CorrelationSettings plain = settings.correlation;
+      plain.spectral_whitening = 0;
+      correlate_both("correlation", "spectral_whitening_0", plain, true);
+    } else {
+      for (const double p : {0.5, 1.0}) {
+        piv::CorrelationSettings whitened = settings.correlation;
+        whitened.spectral_whitening = p;
+        correlate_both("correlation", p == 1.0 ? "spectral_whitening_1" : "spectral_whitening_0.5", whitened, true);
+      }
+    }
     correlate_both("correlation", "previous_default_3pass_window_mean", previous, false);
     correlate_both("correlation", "centre_3pass", centre3, false);
   }

@@ -318,6 +318,9 @@ VARIANT_LABELS = {
     "centre_3pass": "32/50, 16/50, 16/75, centre predictor",
     "early_interpolation_cubic": "passes before the last deformed with Keys' cubic",
     "early_interpolation_sinc": "passes before the last deformed with the sinc",
+    "spectral_whitening_0": "no spectral whitening (plain cross-correlation in every pass)",
+    "spectral_whitening_0.5": "passes before the last whitened 1/2 (robust phase correlation)",
+    "spectral_whitening_1": "passes before the last phase-only (whitening 1)",
 }
 
 

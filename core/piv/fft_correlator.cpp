@@ -4,9 +4,13 @@
 #include <fftw3.h>
 #include <tbb/enumerable_thread_specific.h>
 
+#include <algorithm>
+#include <cmath>
+#include <limits>
 #include <map>
 #include <mutex>
 #include <new>
+#include <numbers>
 #include <utility>
 
 namespace plenopiv::piv {
@@ -72,7 +76,26 @@ FftCorrelator::Workspace::Workspace(const FftCorrelator& owner, std::unique_ptr<
 std::span<float> FftCorrelator::Workspace::window_a() { return {buffers_->a, buffers_->real_count}; }
 std::span<float> FftCorrelator::Workspace::window_b() { return {buffers_->b, buffers_->real_count}; }
 
-std::span<float> FftCorrelator::Workspace::correlate() {
+SpectralWeights::SpectralWeights(std::array<int, 3> shape, double whitening,
+                                 const std::array<double, 3>& peak_sigma_voxel)
+    : whitening_(float(whitening)) {
+  const int half_x = shape[0] / 2 + 1;
+  gauss_.resize(std::size_t(shape[2]) * shape[1] * half_x);
+  // Frequencies in cycles per voxel, negative ones wrapped as FFTW lays them out.
+  const auto frequency = [](int k, int n) { return double(k <= n / 2 ? k : k - n) / n; };
+  const double c = 2 * std::numbers::pi * std::numbers::pi;
+  std::size_t i = 0;
+  for (int kz = 0; kz < shape[2]; ++kz)
+    for (int ky = 0; ky < shape[1]; ++ky)
+      for (int kx = 0; kx < half_x; ++kx, ++i) {
+        const double f[3] = {frequency(kx, shape[0]), frequency(ky, shape[1]), frequency(kz, shape[2])};
+        double e = 0;
+        for (int a = 0; a < 3; ++a) e += peak_sigma_voxel[a] * peak_sigma_voxel[a] * f[a] * f[a];
+        gauss_[i] = float(std::exp(-c * e));
+      }
+}
+
+std::span<float> FftCorrelator::Workspace::correlate(const SpectralWeights* weights) {
   Buffers& w = *buffers_;
   const std::size_t n = w.real_count;
   const std::array<int, 3>& s = owner_->shape_;
@@ -108,6 +131,29 @@ std::span<float> FftCorrelator::Workspace::correlate() {
   // changes only the k = 0 term of A and B: their product there is zero.
   w.cross[0][0] = 0.f;
   w.cross[0][1] = 0.f;
+  if (weights) {
+    // C G / |C|^p, |C|^p from |C|^2: square roots (exact) for the usual 1/2 and 1. Without a
+    // branch: |C|^2 below the smallest normal float is taken as that float, and C (0 there, or
+    // nearly) times the finite scale stays 0.
+    const float* gauss = weights->gauss().data();
+    const std::size_t count = weights->gauss().size();
+    float* c = &w.cross[0][0];
+    const float p = weights->whitening();
+    const auto weigh = [&](auto root) {
+      for (std::size_t k = 1; k < count; ++k) {
+        const float re = c[2 * k], im = c[2 * k + 1];
+        const float scale = gauss[k] / root(std::max(re * re + im * im, std::numeric_limits<float>::min()));
+        c[2 * k] = re * scale;
+        c[2 * k + 1] = im * scale;
+      }
+    };
+    if (p == 0.5f)
+      weigh([](float m) { return std::sqrt(std::sqrt(m)); });
+    else if (p == 1.f)
+      weigh([](float m) { return std::sqrt(m); });
+    else
+      weigh([p](float m) { return std::pow(m, 0.5f * p); });
+  }
   fftwf_execute_dft_c2r(owner_->plans_->inverse, w.cross, w.corr);
   return {w.corr, n};
 }

@@ -5,6 +5,7 @@
 #include <cstddef>
 #include <memory>
 #include <span>
+#include <vector>
 
 namespace plenopiv::piv {
 
@@ -13,6 +14,25 @@ namespace plenopiv::piv {
 // is made (once per window shape and process); faster transforms, but the chosen plan, and so
 // the last bits of the results, may differ between processes (never between thread counts).
 enum class FftPlanning { estimate, measure };
+
+// Robust phase correlation's spectral weighting (Eckstein & Vlachos, Meas. Sci. Technol. 20 (2009)
+// 055401) for one window shape: the cross-spectrum C(k) becomes C(k) G(k) / |C(k)|^whitening, G a
+// Gaussian low-pass whose inverse transform is a Gaussian of standard deviation peak_sigma_voxel
+// per axis. Phases carry the displacement; whitening evens out the weight the spectrum's bands get,
+// so broad intensity (MART's haze along lines of sight) no longer outweighs the particles' finer
+// detail, and G gives the peak a width the three-point fits can resolve.
+class SpectralWeights {
+ public:
+  // whitening in (0, 1]; peak_sigma_voxel > 0 per axis.
+  SpectralWeights(std::array<int, 3> shape, double whitening, const std::array<double, 3>& peak_sigma_voxel);
+  float whitening() const { return whitening_; }
+  // G over the half spectrum kx = 0 .. nx / 2, [kz][ky][kx].
+  std::span<const float> gauss() const { return gauss_; }
+
+ private:
+  float whitening_;
+  std::vector<float> gauss_;
+};
 
 // Correlates windows of one shape (nx, ny, nz; any size per axis). The FFTW plans are made once,
 // in the constructor, under a process-wide mutex (FFTW's planner is not thread-safe). Each thread
@@ -27,8 +47,9 @@ class FftCorrelator {
     std::span<float> window_b();
     // R(s) = sum_x a'(x) b'(x + s) of the mean-subtracted windows a', b'; [z][y][x] with shift 0
     // at index 0 and negative shifts wrapped (cyclic). Valid until the next call, and the caller's
-    // to rescale; the windows' contents are consumed.
-    std::span<float> correlate();
+    // to rescale; the windows' contents are consumed. With `weights` (made for this shape) the
+    // cross-spectrum is weighted first (SpectralWeights).
+    std::span<float> correlate(const SpectralWeights* weights = nullptr);
 
    private:
     friend class FftCorrelator;

@@ -11,6 +11,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <optional>
 #include <span>
 #include <sstream>
 #include <stdexcept>
@@ -142,10 +143,16 @@ void normalise_by_depth_shift(std::span<float> corr, std::size_t slice, int dept
 // correlation peak; `bases` gets that predictor per node (what each peak's shift was added to).
 Candidates correlate_windows(std::span<const float> va, std::span<const float> vb, const std::array<int, 3>& shape,
                              const Layout& l, const NodeField* predictor, float signal_threshold, FftPlanning planning,
-                             bool at_centre, std::vector<float>& ratio, std::vector<std::array<float, 3>>& bases) {
+                             bool at_centre, const CorrelationSettings& settings, bool last_pass,
+                             std::vector<float>& ratio, std::vector<std::array<float, 3>>& bases) {
   const int margin = l.depth_margin;
   const std::array<int, 3> fft_shape{l.window[0], l.window[1], l.window[2] + 2 * margin};
   const FftCorrelator& correlator = FftCorrelator::shared(fft_shape, planning);
+  std::optional<SpectralWeights> weights;
+  // CorrelationSettings::spectral_whitening: every pass but the last.
+  if (settings.spectral_whitening > 0 && !last_pass)
+    weights.emplace(fft_shape, settings.spectral_whitening, settings.whitened_peak_sigma_voxel);
+  const SpectralWeights* spectral = weights ? &*weights : nullptr;
   const std::size_t slice = std::size_t(l.window[0]) * l.window[1];
   Candidates c(l.count);
   // window_mean: the predictor's mean over each window, as per-axis node weights (the residual
@@ -188,7 +195,7 @@ Candidates correlate_windows(std::span<const float> va, std::span<const float> v
       }
       std::span<float> corr;
       if (margin == 0) {
-        corr = ws.correlate();  // the transform takes out both windows' means
+        corr = ws.correlate(spectral);  // the transform takes out both windows' means
       } else {
         // A's mean over its own voxels, not the padded buffer's; B's sums per slice for the
         // normalisation, taken before correlate() consumes the window.
@@ -206,7 +213,7 @@ Candidates correlate_windows(std::span<const float> va, std::span<const float> v
             slice_sums[z] += v;
             slice_sums[slices + z] += v * v;
           }
-        corr = ws.correlate();
+        corr = ws.correlate(spectral);
         const std::span<const double> sums(slice_sums);
         normalise_by_depth_shift(corr, slice, l.window[2], margin, sums.first(slices), sums.subspan(slices));
       }
@@ -387,7 +394,8 @@ CorrelationResult correlate_volumes(const Volume& a, const Volume& b, const Corr
 
     t0 = Clock::now();
     last = correlate_windows(va, vb, shape, layout, have_predictor ? &predictor : nullptr, settings.signal_threshold,
-                             settings.fft_planning, settings.predictor == PredictorBase::centre, ratio, bases);
+                             settings.fft_planning, settings.predictor == PredictorBase::centre, settings,
+                             p + 1 == passes, ratio, bases);
     report.correlate_s = seconds_since(t0);
     report.windows = last.size();
     for (std::size_t n = 0; n < last.size(); ++n) {

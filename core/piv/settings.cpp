@@ -41,6 +41,12 @@ void check(const CorrelationSettings& s, const std::string& source) {
   if (!(s.intensity_threshold_of_mean >= 0 && s.intensity_threshold_of_mean <= 100))
     fail("intensity_threshold_of_mean: must be in [0, 100] (times the volume's mean), got " +
          std::to_string(s.intensity_threshold_of_mean));
+  if (!(s.spectral_whitening >= 0 && s.spectral_whitening <= 1))
+    fail("spectral_whitening: must be in [0, 1], got " + std::to_string(s.spectral_whitening));
+  for (int a = 0; a < 3; ++a)
+    if (!(s.whitened_peak_sigma_voxel[std::size_t(a)] >= 0.5 && s.whitened_peak_sigma_voxel[std::size_t(a)] <= 8))
+      fail("whitened_peak_sigma_voxel: each must be in [0.5, 8] voxels, got " +
+           std::to_string(s.whitened_peak_sigma_voxel[std::size_t(a)]));
   if (!(s.dt_s > 0)) fail("dt_s: must be > 0, got " + std::to_string(s.dt_s));
 }
 
@@ -98,7 +104,7 @@ std::vector<PassSettings> parse_passes(const std::string& text) {
 CorrelationSettings correlation_settings_from(const YamlMap& root) {
   root.reject_unknown({"passes", "median", "signal_threshold", "dt_s", "fft_planning", "prefilter", "depth_prefilter",
                        "predictor", "predictor_smoothing", "intensity_threshold_of_mean", "final_smoothing",
-                       "uncertainty", "early_interpolation"});
+                       "uncertainty", "early_interpolation", "spectral_whitening", "whitened_peak_sigma_voxel"});
   CorrelationSettings s;
   if (root.has("passes")) {
     const YAML::Node list = root.node()["passes"];
@@ -153,6 +159,21 @@ CorrelationSettings correlation_settings_from(const YamlMap& root) {
   s.early_interpolation = root.choice_or("early_interpolation", {"sinc", "cubic"}, "sinc") == "cubic"
                               ? Interpolation::cubic
                               : Interpolation::sinc;
+  s.spectral_whitening = root.number_or("spectral_whitening", s.spectral_whitening);
+  if (root.has("whitened_peak_sigma_voxel")) {
+    const YAML::Node w = root.node()["whitened_peak_sigma_voxel"];
+    try {
+      if (w.IsScalar()) {
+        s.whitened_peak_sigma_voxel.fill(w.as<double>());
+      } else if (w.IsSequence() && w.size() == 3) {
+        for (std::size_t a = 0; a < 3; ++a) s.whitened_peak_sigma_voxel[a] = w[a].as<double>();
+      } else {
+        root.fail("whitened_peak_sigma_voxel", "must be a width or [x, y, z], voxels");
+      }
+    } catch (const YAML::Exception&) {
+      root.fail("whitened_peak_sigma_voxel", "widths must be numbers, voxels");
+    }
+  }
   check(s, root.source());
   return s;
 }

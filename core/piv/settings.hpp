@@ -92,11 +92,26 @@ struct CorrelationSettings {
   // Default sinc; cubic makes those passes' deformation cheaper (docs/benchmarks.md,
   // "Paper scale: correlation knobs on the same volumes").
   Interpolation early_interpolation = Interpolation::sinc;
+  // Robust phase correlation in every pass but the last (fft_correlator.hpp: SpectralWeights):
+  // each window pair's cross-spectrum divided by its magnitude to this power, 0..1; default 0
+  // (off: the plain cross-correlation, the paper's), 1: phase correlation. In a MART volume the
+  // light left where particles' lines of sight cross moves less than the particles, most in depth,
+  // and is broad; evening out the spectrum lets the particles' finer detail set the peak, so the
+  // predictor follows w more closely. The last pass, which only measures what the predictor left,
+  // stays plain: whitened it adds random error. 1/2 suits MART's volumes (docs/benchmarks.md,
+  // "Paper scale: correlation knobs on the same volumes").
+  double spectral_whitening = 0.0;
+  // The whitened peak's standard deviation per axis (voxels, x y z), 0.5..8: the low-pass that
+  // keeps the three-point fits resolvable and the noisy high frequencies out. About a particle's
+  // size in each direction: MART's particles at 0.125 x 0.125 x 0.25 mm voxels are ~1 voxel across
+  // and ~2 deep. Used only with spectral_whitening > 0.
+  std::array<double, 3> whitened_peak_sigma_voxel{1, 1, 2};
 };
 
 // Checks every value (windows >= 4 voxels, 0 <= overlap < 100, 0 <= depth_margin <= window z,
 // threshold and epsilon > 0, radius 1..3, predictor_smoothing and final_smoothing 0..4,
-// depth_prefilter 0..8 and only with the prefilter,
+// depth_prefilter 0..8 and only with the prefilter, spectral_whitening 0..1, whitened_peak_sigma_voxel
+// 0.5..8 per axis,
 // intensity_threshold_of_mean 0..100, dt > 0); InputError naming `source` and the setting otherwise.
 void check(const CorrelationSettings& s, const std::string& source);
 
@@ -119,6 +134,8 @@ std::vector<PassSettings> parse_passes(const std::string& text);
 //   final_smoothing: 0       # binomial passes over the final field's valid vectors, 0..4
 //   uncertainty: true        # each vector's standard uncertainty (sigma), or false
 //   early_interpolation: sinc  # or cubic: the deformation's interpolator before the last pass
+//   spectral_whitening: 0    # 0..1: robust phase correlation's whitening before the last pass (0: off)
+//   whitened_peak_sigma_voxel: [1, 1, 2]  # its peak's width per axis, voxels
 // Every key is optional (defaults above); unknown keys are refused. Checked.
 CorrelationSettings load_correlation_settings(const std::filesystem::path& path);
 // The same from a mapping already parsed (a section of a larger file, e.g. process.yaml).

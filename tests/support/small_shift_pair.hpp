@@ -23,7 +23,7 @@ volume: {x_mm: [-2, 2], y_mm: [-2, 2], z_mm: [0, 4], voxel_mm: 0.125, voxel_z_mm
 reconstruction: {iterations: 20, mu: 1, start: mlos, noise_threshold: 0, dark_weight_cutoff: 0.9}
 correlation: {median: {threshold: 2, epsilon_voxel: 0.1, radius: 2}, signal_threshold: 0}
 )",
-                                                              source),
+                                                               source),
                                                 source));
 }
 
