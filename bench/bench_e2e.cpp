@@ -26,8 +26,9 @@
 //              (reconstruction.pixel_binning), N MART iterations, passes P (--passes
 //              syntax, windows in its voxels); its set-up, first and in-a-run time per pair and its
 //              errors in the headline's voxels (axis band: half its final window) (row
-//              variant=live), beside the same passes on exact-particle volumes of its grid
-//              (exact_*). Repeat for several tiers.
+//              variant=live; correlated without spectral whitening, as run-paper.yaml's live
+//              tier), beside the same passes on exact-particle volumes of its grid (exact_*).
+//              Repeat for several tiers.
 //     --live-depth-prefilter K: the --live tiers' depth prefilter (default the headline's).
 //     --live-only: the --live tiers alone (with --no-sweep), without the headline rows.
 //     --prune-threshold: MART's prune threshold for the headline rows (default 0: exact zeros);
@@ -375,6 +376,7 @@ int main(int argc, char** argv) {
       s.mart.iterations = std::stoi(tier.substr(c2 + 1, c3 - c2 - 1));
       s.correlation.passes = piv::parse_passes(tier.substr(c3 + 1));
       if (tier_prefilter >= 0) s.correlation.depth_prefilter = tier_prefilter;
+      s.correlation.spectral_whitening = 0;  // plain, as run-paper.yaml's live tier
       t = now_s();
       const process::PairProcessor live_processor(camera, nominal, s);
       const double setup_s = now_s() - t;

@@ -46,10 +46,12 @@ RUN_PAPER_PASSES = "32x32x16@50,16x16x8@50+2,16x16x8@50,16x16x8@50,16x16x8@75"
 PROCESS_PASSES = "32x32x16@50,16x16x8@50+2,16x16x8@50,16x16x8@50,16x16x8@50,16x16x8@50,16x16x8@75"
 
 
-# `mart` on the shipped voxels (0.25 mm deep) with the shipped correlation (`passes`).
+# `mart` on the shipped voxels (0.25 mm deep) with the shipped correlation (`passes`; the passes
+# before the last whitened).
 def shipped(mart, passes=RUN_PAPER_PASSES):
     return (["--voxel-z-factor", "2"] + mart
-            + ["--depth-prefilter", "1", "--passes", passes, "--early-interpolation", "cubic"])
+            + ["--depth-prefilter", "1", "--passes", passes, "--early-interpolation", "cubic",
+               "--spectral-whitening", "0.5", "--whitened-peak-sigma", "1,1,2"])
 
 
 RUN_PAPER = shipped(RUN_PAPER_MART)
