@@ -45,7 +45,7 @@ enum class PruneScope {
   slice,   // the peak of the voxel's depth slice
 };
 
-// The names run configs (core/process) and the CLI (`plenopiv recon`, the benchmarks) give MartStart
+// The names run configs (core/process) and the CLI (`plenopiv reconstruct`, the benchmarks) give MartStart
 // and PruneScope, in the enums' order: the one table they all read.
 inline constexpr std::array<std::string_view, 2> kMartStartNames{"ones", "mlos"};
 inline constexpr std::array<std::string_view, 2> kPruneScopeNames{"volume", "slice"};
