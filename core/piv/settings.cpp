@@ -2,13 +2,35 @@
 #include "core/piv/settings.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <sstream>
+#include <string_view>
 
 #include "core/base/errors.hpp"
 #include "core/base/yaml_access.hpp"
 
 namespace plenopiv::piv {
+namespace {
+
+// `key` of `map` given once for all three axes or as [x, y, z]; the map's error naming the key
+// otherwise (`shape`: what to give, `type`: a value that is not a T).
+template <typename T>
+std::array<T, 3> per_axis(const YamlMap& map, std::string_view key, const std::string& shape, const std::string& type) {
+  const YAML::Node v = map.node()[std::string(key)];
+  try {
+    if (v.IsScalar()) {
+      const T x = v.as<T>();
+      return {x, x, x};
+    }
+    if (v.IsSequence() && v.size() == 3) return {v[0].as<T>(), v[1].as<T>(), v[2].as<T>()};
+  } catch (const YAML::Exception&) {
+    map.fail(key, type);
+  }
+  map.fail(key, shape);
+}
+
+}  // namespace
 
 void check(const CorrelationSettings& s, const std::string& source) {
   auto fail = [&](const std::string& what) { throw InputError(source + ": " + what); };
@@ -115,19 +137,7 @@ CorrelationSettings correlation_settings_from(const YamlMap& root) {
       const YamlMap pass(list[p], root.source(), root.path().empty() ? key : root.path() + "." + key);
       pass.reject_unknown({"window", "overlap_percent", "depth_margin"});
       PassSettings ps;
-      const YAML::Node w = pass.node()["window"];
-      try {
-        if (w.IsScalar()) {
-          const int n = w.as<int>();
-          ps.window = {n, n, n};
-        } else if (w.IsSequence() && w.size() == 3) {
-          ps.window = {w[0].as<int>(), w[1].as<int>(), w[2].as<int>()};
-        } else {
-          pass.fail("window", "must be a size or [x, y, z]");
-        }
-      } catch (const YAML::Exception&) {
-        pass.fail("window", "sizes must be whole numbers");
-      }
+      ps.window = per_axis<int>(pass, "window", "must be a size or [x, y, z]", "sizes must be whole numbers");
       ps.overlap_percent = pass.number_or("overlap_percent", 0);
       const long long margin = pass.integer_or("depth_margin", 0);
       if (margin < 0 || margin > ps.window[2])
@@ -160,20 +170,9 @@ CorrelationSettings correlation_settings_from(const YamlMap& root) {
                               ? Interpolation::cubic
                               : Interpolation::sinc;
   s.spectral_whitening = root.number_or("spectral_whitening", s.spectral_whitening);
-  if (root.has("whitened_peak_sigma_voxel")) {
-    const YAML::Node w = root.node()["whitened_peak_sigma_voxel"];
-    try {
-      if (w.IsScalar()) {
-        s.whitened_peak_sigma_voxel.fill(w.as<double>());
-      } else if (w.IsSequence() && w.size() == 3) {
-        for (std::size_t a = 0; a < 3; ++a) s.whitened_peak_sigma_voxel[a] = w[a].as<double>();
-      } else {
-        root.fail("whitened_peak_sigma_voxel", "must be a width or [x, y, z], voxels");
-      }
-    } catch (const YAML::Exception&) {
-      root.fail("whitened_peak_sigma_voxel", "widths must be numbers, voxels");
-    }
-  }
+  if (root.has("whitened_peak_sigma_voxel"))
+    s.whitened_peak_sigma_voxel = per_axis<double>(
+        root, "whitened_peak_sigma_voxel", "must be a width or [x, y, z], voxels", "widths must be numbers, voxels");
   check(s, root.source());
   return s;
 }
