@@ -141,13 +141,15 @@ void normalise_by_depth_shift(std::span<float> corr, std::size_t slice, int dept
 // Correlates every window of `va` with the same window of `vb`; a window's candidates are the
 // predictor (at its centre, or its mean over the window: settings.hpp, PredictorBase) plus each
 // correlation peak; `bases` gets that predictor per node (what each peak's shift was added to).
+// The settings' spectral whitening applies unless this is the `last_pass`.
 Candidates correlate_windows(std::span<const float> va, std::span<const float> vb, const std::array<int, 3>& shape,
-                             const Layout& l, const NodeField* predictor, float signal_threshold, FftPlanning planning,
-                             bool at_centre, const CorrelationSettings& settings, bool last_pass,
-                             std::vector<float>& ratio, std::vector<std::array<float, 3>>& bases) {
+                             const Layout& l, const NodeField* predictor, const CorrelationSettings& settings,
+                             bool last_pass, std::vector<float>& ratio, std::vector<std::array<float, 3>>& bases) {
+  const float signal_threshold = settings.signal_threshold;
+  const bool at_centre = settings.predictor == PredictorBase::centre;
   const int margin = l.depth_margin;
   const std::array<int, 3> fft_shape{l.window[0], l.window[1], l.window[2] + 2 * margin};
-  const FftCorrelator& correlator = FftCorrelator::shared(fft_shape, planning);
+  const FftCorrelator& correlator = FftCorrelator::shared(fft_shape, settings.fft_planning);
   std::optional<SpectralWeights> weights;
   // CorrelationSettings::spectral_whitening: every pass but the last.
   if (settings.spectral_whitening > 0 && !last_pass)
@@ -393,9 +395,8 @@ CorrelationResult correlate_volumes(const Volume& a, const Volume& b, const Corr
     report.deform_s = seconds_since(t0);
 
     t0 = Clock::now();
-    last = correlate_windows(va, vb, shape, layout, have_predictor ? &predictor : nullptr, settings.signal_threshold,
-                             settings.fft_planning, settings.predictor == PredictorBase::centre, settings,
-                             p + 1 == passes, ratio, bases);
+    last = correlate_windows(va, vb, shape, layout, have_predictor ? &predictor : nullptr, settings, p + 1 == passes,
+                             ratio, bases);
     report.correlate_s = seconds_since(t0);
     report.windows = last.size();
     for (std::size_t n = 0; n < last.size(); ++n) {
