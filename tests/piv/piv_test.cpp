@@ -505,6 +505,27 @@ TEST(Multipass, SpectralWhiteningTakesAwayTheStreaksPullOnTheDepthShift) {
   EXPECT_LT(std::max(e_half.rms[0], e_half.rms[1]), 0.05) << "measured 0.024, 0.023";
 }
 
+// The whitening weighs only the passes before the last: a single pass is the plain correlation, bit
+// for bit, and a second pass after it moves the vectors.
+TEST(Multipass, SpectralWhiteningLeavesTheLastPassPlain) {
+  const Grid3 g = cube(48);
+  const auto pa = sim::particles_around(g, 25);
+  const sim::UniformFlow flow({0.03, -0.02, 0.05});
+  const Volume a = sim::render_exact_volume(g, pa), b = sim::render_exact_volume(g, sim::displace(pa, flow));
+  CorrelationSettings plain = small_settings();
+  plain.passes = {{{16, 16, 16}, 50}};
+  CorrelationSettings whitened = plain;
+  whitened.spectral_whitening = 1;
+  const VectorField one_plain = correlate_volumes(a, b, plain).field;
+  const VectorField one_whitened = correlate_volumes(a, b, whitened).field;
+  EXPECT_EQ(one_plain.dx_mm, one_whitened.dx_mm);
+  EXPECT_EQ(one_plain.dy_mm, one_whitened.dy_mm);
+  EXPECT_EQ(one_plain.dz_mm, one_whitened.dz_mm);
+  plain.passes.insert(plain.passes.begin(), PassSettings{{24, 24, 24}, 50});
+  whitened.passes = plain.passes;
+  EXPECT_NE(correlate_volumes(a, b, plain).field.dz_mm, correlate_volumes(a, b, whitened).field.dz_mm);
+}
+
 // Reconstructed particles are streaks along depth (paper sec 6.2: about 4 times as long as wide).
 // A window's depth faces cut them at the same place in both volumes, and the cut ends pull the
 // depth shift toward zero; the second window reaching further in depth (PassSettings::
