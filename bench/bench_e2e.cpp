@@ -204,10 +204,12 @@ int main(int argc, char** argv) {
       sensor_blur_mm = std::stod(argv[++i]);
     else if (!std::strcmp(argv[i], "--spectral-whitening") && i + 1 < argc)
       spectral_whitening = std::stod(argv[++i]);
-    else if (!std::strcmp(argv[i], "--whitened-peak-sigma") && i + 1 < argc &&
-             std::sscanf(argv[i + 1], "%lf,%lf,%lf", &whitened_sigma[0], &whitened_sigma[1], &whitened_sigma[2]) == 3)
-      ++i;
-    else if (!std::strcmp(argv[i], "--intensity-threshold") && i + 1 < argc)
+    else if (!std::strcmp(argv[i], "--whitened-peak-sigma") && i + 1 < argc) {
+      if (std::sscanf(argv[++i], "%lf,%lf,%lf", &whitened_sigma[0], &whitened_sigma[1], &whitened_sigma[2]) != 3) {
+        std::fprintf(stderr, "bench_e2e: --whitened-peak-sigma takes X,Y,Z voxels, not '%s'\n", argv[i]);
+        return 2;
+      }
+    } else if (!std::strcmp(argv[i], "--intensity-threshold") && i + 1 < argc)
       intensity_threshold = std::stod(argv[++i]);
     else if (!std::strcmp(argv[i], "--final-smoothing") && i + 1 < argc)
       final_smoothing = std::stoi(argv[++i]);
