@@ -95,6 +95,33 @@ SpectralWeights::SpectralWeights(std::array<int, 3> shape, double whitening,
       }
 }
 
+namespace {
+
+// C G / |C|^p over `count` interleaved complex values but the first (k = 0, zero after the mean
+// subtraction), in one clone per instruction set. |C|^p from |C|^2: square roots (exact, so every
+// clone gives the same bits) for the usual p = 1/2 and 1. Without a branch: |C|^2 below the smallest
+// normal float is taken as that float, and C (0 there, or nearly) times the finite scale stays 0.
+__attribute__((target_clones("avx512f", "avx2", "default"))) void weigh_cross_spectrum(float* __restrict c,
+                                                                                       const float* __restrict gauss,
+                                                                                       std::size_t count, float p) {
+  const auto weigh = [&](auto root) {
+    for (std::size_t k = 1; k < count; ++k) {
+      const float re = c[2 * k], im = c[2 * k + 1];
+      const float scale = gauss[k] / root(std::max(re * re + im * im, std::numeric_limits<float>::min()));
+      c[2 * k] = re * scale;
+      c[2 * k + 1] = im * scale;
+    }
+  };
+  if (p == 0.5f)
+    weigh([](float m) { return std::sqrt(std::sqrt(m)); });
+  else if (p == 1.f)
+    weigh([](float m) { return std::sqrt(m); });
+  else
+    weigh([p](float m) { return std::pow(m, 0.5f * p); });
+}
+
+}  // namespace
+
 std::span<float> FftCorrelator::Workspace::correlate(const SpectralWeights* weights) {
   Buffers& w = *buffers_;
   const std::size_t n = w.real_count;
@@ -131,29 +158,8 @@ std::span<float> FftCorrelator::Workspace::correlate(const SpectralWeights* weig
   // changes only the k = 0 term of A and B: their product there is zero.
   w.cross[0][0] = 0.f;
   w.cross[0][1] = 0.f;
-  if (weights) {
-    // C G / |C|^p, |C|^p from |C|^2: square roots (exact) for the usual 1/2 and 1. Without a
-    // branch: |C|^2 below the smallest normal float is taken as that float, and C (0 there, or
-    // nearly) times the finite scale stays 0.
-    const float* gauss = weights->gauss().data();
-    const std::size_t count = weights->gauss().size();
-    float* c = &w.cross[0][0];
-    const float p = weights->whitening();
-    const auto weigh = [&](auto root) {
-      for (std::size_t k = 1; k < count; ++k) {
-        const float re = c[2 * k], im = c[2 * k + 1];
-        const float scale = gauss[k] / root(std::max(re * re + im * im, std::numeric_limits<float>::min()));
-        c[2 * k] = re * scale;
-        c[2 * k + 1] = im * scale;
-      }
-    };
-    if (p == 0.5f)
-      weigh([](float m) { return std::sqrt(std::sqrt(m)); });
-    else if (p == 1.f)
-      weigh([](float m) { return std::sqrt(m); });
-    else
-      weigh([p](float m) { return std::pow(m, 0.5f * p); });
-  }
+  if (weights)
+    weigh_cross_spectrum(&w.cross[0][0], weights->gauss().data(), weights->gauss().size(), weights->whitening());
   fftwf_execute_dft_c2r(owner_->plans_->inverse, w.cross, w.corr);
   return {w.corr, n};
 }
