@@ -62,7 +62,8 @@ RUN_PAPER_CUBES = RUN_PAPER_MART + ["--depth-prefilter", "4"]
 PROCESS = shipped(shipped_mart(20), PROCESS_PASSES)
 # run.yaml's (the live preview on the small camera).
 RUN = ["--voxel-z-factor", "2", "--mu", "1", "--iterations", "4", "--intensity-threshold", "4", "--final-smoothing",
-       "1", "--depth-prefilter", "1", "--passes", "16x16x8@50+2,8x8x4@50"]
+       "1", "--depth-prefilter", "1", "--passes", "16x16x8@50+2,8x8x4@50", "--spectral-whitening", "0.5",
+       "--whitened-peak-sigma", "1,1,2"]
 
 # Live tiers at the paper's scale, bench_e2e --live B,K,N,P: voxels B times as large, pixels binned
 # K x K, N MART iterations, passes P (BzDpF: D times as deep, F depth prefilter passes; the cubes'

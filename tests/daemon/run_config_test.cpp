@@ -46,6 +46,7 @@ TEST(RunConfig, ShippedDefaultParses) {
   EXPECT_EQ(s.correlation.passes[1].window, (std::array<int, 3>{8, 8, 4}));
   EXPECT_EQ(s.correlation.depth_prefilter, 1);
   EXPECT_EQ(s.correlation.final_smoothing, 1);
+  EXPECT_DOUBLE_EQ(s.correlation.spectral_whitening, 0.5);  // w truer on the demo's seeding (docs/lab/)
   EXPECT_FALSE(c.publish_volumes);
   EXPECT_EQ(c.text, text.str());
 }
