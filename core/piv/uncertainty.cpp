@@ -114,6 +114,26 @@ typedef double Doubles4 __attribute__((vector_size(32)));
   return sum;
 }
 
+// Copies `len` floats of `src` (zeros when null) to `dst` turned left by `turn` (dst[x] =
+// src[(x + turn) mod len]) and returns their sum, added in src's order as copy_row adds.
+[[gnu::always_inline]] inline double copy_row_turned(const float* __restrict src, std::size_t len, std::size_t turn,
+                                                     float* __restrict dst) {
+  if (!src) {
+    std::fill(dst, dst + len, 0.f);
+    return 0;
+  }
+  float sum = 0;
+  for (std::size_t x = 0; x < turn; ++x) {
+    dst[len - turn + x] = src[x];
+    sum += src[x];
+  }
+  for (std::size_t x = turn; x < len; ++x) {
+    dst[x - turn] = src[x];
+    sum += src[x];
+  }
+  return sum;
+}
+
 // The 3-point Gaussian fit's offset error when C(+1) and C(-1) move apart by `spread` from their
 // mean `c_pm` about the peak value `c0` (parabolic where a value is not positive); NaN without
 // curvature.
@@ -138,18 +158,27 @@ __attribute__((target_clones("avx512f", "avx2", "default"))) std::array<float, 3
   const std::size_t count = std::size_t(n[0]) * n[1] * n[2];
   const std::size_t row_len = std::size_t(n[0]), rows = count / row_len;
   s.a.resize(count);
-  s.b.resize(count);
+  s.rolled.resize(count);
+  // B goes straight to its place rolled by the shift, cyclically: rolled(x) = b(x + shift), so that
+  // the peak's neighbours are x's neighbours. Source rows are read in order and each row's sum is
+  // added in the source's order: the means are those of the windows unrolled.
+  const auto wrap = [](int i, int len) { return std::size_t(((i % len) + len) % len); };
+  const std::size_t turn = wrap(shift[0], n[0]), sy = wrap(shift[1], n[1]), sz = wrap(shift[2], n[2]);
   const std::size_t plane = std::size_t(shape[0]) * shape[1];
   double sum_a = 0, sum_b = 0;
   for (int z = 0; z < n[2]; ++z) {
     const int vz = origin[2] - depth_margin + z;
     const bool in_a = z >= depth_margin && z < depth_margin + window[2], in_volume = vz >= 0 && vz < shape[2];
+    // The rolled row that source row (z, y) fills: ((z - sz) mod nz, (y - sy) mod ny).
+    const std::size_t rz = (std::size_t(z) + n[2] - sz) % std::size_t(n[2]);
     for (int y = 0; y < n[1]; ++y) {
       const std::size_t row =
           std::size_t(in_volume ? vz : 0) * plane + std::size_t(origin[1] + y) * shape[0] + origin[0];
       const std::size_t o = (std::size_t(z) * n[1] + y) * row_len;
+      const std::size_t ry = (std::size_t(y) + n[1] - sy) % std::size_t(n[1]);
       sum_a += copy_row(in_a ? a.data() + row : nullptr, row_len, s.a.data() + o);
-      sum_b += copy_row(in_volume ? b.data() + row : nullptr, row_len, s.b.data() + o);
+      sum_b += copy_row_turned(in_volume ? b.data() + row : nullptr, row_len, turn,
+                               s.rolled.data() + (rz * n[1] + ry) * row_len);
     }
   }
   // A's mean over its own voxels (zeros around it stay zero), B's over the whole domain.
@@ -158,23 +187,7 @@ __attribute__((target_clones("avx512f", "avx2", "default"))) std::array<float, 3
   for (std::size_t q = std::size_t(depth_margin) * n[0] * n[1]; q < std::size_t(depth_margin + window[2]) * n[0] * n[1];
        ++q)
     s.a[q] -= mean_a;
-  for (float& v : s.b) v -= mean_b;
-
-  // B rolled by the shift, cyclically: rolled(x) = b(x + shift), so that the peak's neighbours are
-  // x's neighbours; along x a row's two parts swap places.
-  s.rolled.resize(count);
-  {
-    // Wrapped once per axis, then stepped: no division per row.
-    const auto wrap = [](int i, int len) { return ((i % len) + len) % len; };
-    const std::size_t sx = std::size_t(wrap(shift[0], n[0]));
-    std::size_t q = 0;
-    for (int z = 0, bz = wrap(shift[2], n[2]); z < n[2]; ++z, bz = bz + 1 == n[2] ? 0 : bz + 1)
-      for (int y = 0, by = wrap(shift[1], n[1]); y < n[1]; ++y, q += row_len, by = by + 1 == n[1] ? 0 : by + 1) {
-        const float* row = s.b.data() + (std::size_t(bz) * n[1] + std::size_t(by)) * row_len;
-        std::copy(row + sx, row + row_len, s.rolled.data() + q);
-        std::copy(row, row + sx, s.rolled.data() + q + (row_len - sx));
-      }
-  }
+  for (float& v : s.rolled) v -= mean_b;
   const float* pa = s.a.data();
   const float* pb = s.rolled.data();
   // C at the peak and at its cyclic +-1 neighbours, as long dots over the flattened windows: along

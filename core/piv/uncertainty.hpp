@@ -12,9 +12,9 @@ namespace plenopiv::piv {
 
 // Buffers of one thread's uncertainty windows (grown on first use, reused after).
 struct UncertaintyScratch {
-  std::vector<float> a, b, rolled;  // the two windows, mean-subtracted; b rolled by the shift
-  std::vector<float> delta;         // per-voxel asymmetry of the +-1 neighbours along one axis
-  std::vector<float> box, line;     // box sums of delta, and its sums along x and y
+  std::vector<float> a, rolled;  // the two windows, mean-subtracted; b rolled by the shift
+  std::vector<float> delta;      // per-voxel asymmetry of the +-1 neighbours along one axis
+  std::vector<float> box, line;  // box sums of delta, and its sums along x and y
 };
 
 // The standard uncertainty (voxels, x y z) of the sub-voxel peak position of one window's
