@@ -131,6 +131,13 @@ Case make_case(std::uint64_t index) {
   const int reaches[] = {0, 0, 2, recon::kMaxPruneDepthReach};  // the threshold alone, a particle's ends, the most
   c.settings.mart.prune_depth_reach = reaches[pick(4)];
   c.settings.correlation.early_interpolation = pick(2) ? piv::Interpolation::cubic : piv::Interpolation::sinc;
+  // Off (the default), the shipped configs', phase only, and a power off the exact square roots' paths.
+  const double whitening[] = {0, 0.5, 1, 0.3};
+  c.settings.correlation.spectral_whitening = whitening[pick(4)];
+  // The shipped peak, and the narrowest and widest allowed.
+  const std::array<double, 3> peak_sigmas[] = {{1, 1, 2}, {0.5, 0.5, 0.5}, {8, 8, 8}};
+  c.settings.correlation.whitened_peak_sigma_voxel = peak_sigmas[pick(3)];
+  const auto& sigma = c.settings.correlation.whitened_peak_sigma_voxel;
   c.description = "case " + std::to_string(index) + ": mode " + std::to_string(mode) + ", " + std::to_string(count) +
                   " particles, mu " + std::to_string(c.settings.mart.mu) + ", " +
                   std::to_string(c.settings.mart.iterations) + " iterations" +
@@ -143,7 +150,9 @@ Case make_case(std::uint64_t index) {
                   (c.settings.mart.prune_scope == recon::PruneScope::slice ? "slice's" : "volume's") +
                   " peak, depth reach " + std::to_string(c.settings.mart.prune_depth_reach) + ", early interpolation " +
                   (c.settings.correlation.early_interpolation == piv::Interpolation::cubic ? "cubic" : "sinc") +
-                  ", depth " + std::to_string(c.depth);
+                  ", spectral whitening " + std::to_string(c.settings.correlation.spectral_whitening) +
+                  " with a peak of " + std::to_string(sigma[0]) + " x " + std::to_string(sigma[1]) + " x " +
+                  std::to_string(sigma[2]) + " voxels, depth " + std::to_string(c.depth);
   return c;
 }
 
