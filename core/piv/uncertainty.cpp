@@ -99,25 +99,11 @@ typedef double Doubles4 __attribute__((vector_size(32)));
   slide_lines(tmp + rx, out + rx, nz, plane, rz);
 }
 
-// Copies `len` floats of `src` (zeros when null) to `dst` and returns their sum (in float, in
-// order; the caller adds the rows' sums in double).
-[[gnu::always_inline]] inline double copy_row(const float* __restrict src, std::size_t len, float* __restrict dst) {
-  if (!src) {
-    std::fill(dst, dst + len, 0.f);
-    return 0;
-  }
-  float sum = 0;
-  for (std::size_t x = 0; x < len; ++x) {
-    dst[x] = src[x];
-    sum += src[x];
-  }
-  return sum;
-}
-
 // Copies `len` floats of `src` (zeros when null) to `dst` turned left by `turn` (dst[x] =
-// src[(x + turn) mod len]) and returns their sum, added in src's order as copy_row adds.
-[[gnu::always_inline]] inline double copy_row_turned(const float* __restrict src, std::size_t len, std::size_t turn,
-                                                     float* __restrict dst) {
+// src[(x + turn) mod len]; 0: a plain copy) and returns their sum (in float, in src's order; the
+// caller adds the rows' sums in double).
+[[gnu::always_inline]] inline double copy_row(const float* __restrict src, std::size_t len, float* __restrict dst,
+                                              std::size_t turn = 0) {
   if (!src) {
     std::fill(dst, dst + len, 0.f);
     return 0;
@@ -177,8 +163,8 @@ __attribute__((target_clones("avx512f", "avx2", "default"))) std::array<float, 3
       const std::size_t o = (std::size_t(z) * n[1] + y) * row_len;
       const std::size_t ry = (std::size_t(y) + n[1] - sy) % std::size_t(n[1]);
       sum_a += copy_row(in_a ? a.data() + row : nullptr, row_len, s.a.data() + o);
-      sum_b += copy_row_turned(in_volume ? b.data() + row : nullptr, row_len, turn,
-                               s.rolled.data() + (rz * n[1] + ry) * row_len);
+      sum_b +=
+          copy_row(in_volume ? b.data() + row : nullptr, row_len, s.rolled.data() + (rz * n[1] + ry) * row_len, turn);
     }
   }
   // A's mean over its own voxels (zeros around it stay zero), B's over the whole domain.
