@@ -8,7 +8,7 @@
 //             [--spectral-whitening P [--whitened-peak-sigma X,Y,Z]]
 //             [--passes P] [--early-interpolation sinc|cubic] [--voxel-z-factor D] [--steady]
 //             [--time-sweep] [--z-centre MM] [--compare-passes 'P1;P2;...']
-//             [--prune-threshold F [--prune-scope volume|slice]]
+//             [--prune-threshold F [--prune-scope volume|slice]] [--depth-response-ppm F]
 //             [--sparse-sweep [--sparse-repeats N] [--sparse-variants V,..]]
 //             [--live B,K,N,P ... [--live-depth-prefilter K] [--live-only]]
 //     --iterations/--mu/--accelerate/--dark-cutoff: MART for the headline rows (default the
@@ -33,6 +33,9 @@
 //     --live-only: the --live tiers alone (with --no-sweep), without the headline rows.
 //     --prune-threshold: MART's prune threshold for the headline rows (default 0: exact zeros);
 //              --prune-scope: of the volume's peak (default) or of each depth slice's.
+//     --depth-response-ppm F: the headline's w corrected for MART's depth response measured at F
+//              particles per microlens (reconstruction.depth_response_ppm; default 0: off); its
+//              set-up time is in weights_s.
 //     --sparse-sweep: the headline settings with pruning off, on for exact zeros, and at thresholds
 //              1e-3 .. 3e-2 of the volume's peak and 1e-2 .. 2e-1 of each depth slice's peak
 //              (slice-*; -reachN: MART's prune_depth_reach N), every pair in the kept workspaces
@@ -179,6 +182,7 @@ int main(int argc, char** argv) {
   std::string sparse_variants;  // empty: all
   double prune_threshold = recon::MartSettings{}.prune_threshold;
   std::string prune_scope = "volume";
+  double depth_response_ppm = 0.0;
   std::string compare_passes;  // pass lists separated by ';'
   std::string passes;          // the headline's passes (--passes syntax); empty: core/piv's default
   piv::Interpolation early_interpolation = piv::CorrelationSettings{}.early_interpolation;
@@ -229,6 +233,8 @@ int main(int argc, char** argv) {
       prune_threshold = std::stod(argv[++i]);
     else if (!std::strcmp(argv[i], "--prune-scope") && i + 1 < argc)
       prune_scope = argv[++i];
+    else if (!std::strcmp(argv[i], "--depth-response-ppm") && i + 1 < argc)
+      depth_response_ppm = std::stod(argv[++i]);
     else if (!std::strcmp(argv[i], "--compare-passes") && i + 1 < argc)
       compare_passes = argv[++i];
     else if (!std::strcmp(argv[i], "--passes") && i + 1 < argc)
@@ -259,13 +265,14 @@ int main(int argc, char** argv) {
                 spectral_whitening != piv::CorrelationSettings{}.spectral_whitening ||
                 final_smoothing != piv::CorrelationSettings{}.final_smoothing ||
                 depth_prefilter != piv::CorrelationSettings{}.depth_prefilter ||
-                prune_threshold != recon::MartSettings{}.prune_threshold || prune_scope != "volume")) {
+                prune_threshold != recon::MartSettings{}.prune_threshold || prune_scope != "volume" ||
+                depth_response_ppm != 0.0)) {
     std::fprintf(
         stderr,
         "bench_e2e: "
         "--iterations/--mu/--accelerate/--dark-cutoff/--sensor-blur-mm/--intensity-threshold/"
         "--final-smoothing/--depth-prefilter/--spectral-whitening/--passes/--early-interpolation/--voxel-z-factor/"
-        "--z-centre change the "
+        "--z-centre/--depth-response-ppm change the "
         "headline rows only; use them with --no-sweep\n");
     return 2;
   }
@@ -280,7 +287,7 @@ int main(int argc, char** argv) {
                  "[--depth-prefilter K] [--spectral-whitening P [--whitened-peak-sigma X,Y,Z]] [--passes P] "
                  "[--early-interpolation sinc|cubic] [--voxel-z-factor D] "
                  "[--steady] [--time-sweep] [--z-centre MM] [--compare-passes 'P1;P2'] [--prune-threshold F "
-                 "[--prune-scope volume|slice]] [--sparse-sweep [--sparse-repeats N] "
+                 "[--prune-scope volume|slice]] [--depth-response-ppm F] [--sparse-sweep [--sparse-repeats N] "
                  "[--sparse-variants V,..]] [--live B,K,N,P [--live-depth-prefilter K] [--live-only]]\n");
     return 2;
   }
@@ -312,6 +319,7 @@ int main(int argc, char** argv) {
   settings.mart.sensor_blur_sigma_mm = sensor_blur_mm;
   settings.mart.prune_threshold = prune_threshold;
   settings.mart.prune_scope = scope;
+  settings.depth_response_ppm = depth_response_ppm;
   settings.correlation.intensity_threshold_of_mean = intensity_threshold;
   settings.correlation.spectral_whitening = spectral_whitening;
   settings.correlation.whitened_peak_sigma_voxel = whitened_sigma;

@@ -3,7 +3,8 @@
 // calibration (the resampling path every calibrated camera takes), so that the figure is the
 // tiers', not the calibration's. u and w grow along y (-2 to +2 voxels over the box, both across
 // the focal plane's depth). Per tier: set-up, first and in-a-run time per pair, and RMS error,
-// bias and gain per component against the truth.
+// bias and gain per component against the truth; the full tier once more with w through MART's
+// depth response (reconstruction.depth_response_ppm at the pair's seeding).
 // w's gain per depth band follows (near the focal plane the mirror ambiguity limits it).
 //   build/bin/bench_rotated_shear [DEGREES] [PPM] [full|both] [CONFIG]
 // (defaults 0.1 deg, 0.5 ppm, both tiers, systemd/config/run-paper.yaml; CONFIG: any run.yaml or
@@ -89,9 +90,20 @@ int main(int argc, char** argv) {
               now_s() - t);
   std::fflush(stdout);
 
-  for (const process::Tier tier : {process::Tier::live, process::Tier::full}) {
+  // The live tier, the full tier, and the full tier with w through MART's depth response measured
+  // at this seeding (reconstruction.depth_response_ppm; its set-up time includes the response's
+  // four simulated pairs).
+  struct Row {
+    process::Tier tier;
+    bool depth_response;
+  };
+  for (const Row row :
+       {Row{process::Tier::live, false}, Row{process::Tier::full, false}, Row{process::Tier::full, true}}) {
+    const process::Tier tier = row.tier;
     if (full_only && tier != process::Tier::full) continue;
-    const process::ProcessSettings& s = spec.settings(tier, config_name);
+    process::ProcessSettings s = spec.settings(tier, config_name);
+    if (row.depth_response) s.depth_response_ppm = ppm;
+    const char* variant = s.depth_response_ppm > 0 ? "depth_response" : "plain";
     t = now_s();
     const process::PairProcessor processor(camera, truth, s);
     const double setup_s = now_s() - t;
@@ -104,18 +116,19 @@ int main(int argc, char** argv) {
     // Errors in the full settings' voxels, whatever the tier's.
     const sim::FieldErrors e = sim::field_errors(r.correlation.field, flow, voxel, 3);
     std::printf(
-        "bench=rotated_shear tier=%s degrees=%.2f voxel_mm=%.3f voxel_z_mm=%.3f pixel_binning=%d iterations=%d "
+        "bench=rotated_shear tier=%s variant=%s degrees=%.2f voxel_mm=%.3f voxel_z_mm=%.3f pixel_binning=%d "
+        "iterations=%d "
         "setup_s=%.2f first_s=%.2f pair_s=%.2f rms_u=%.3f rms_v=%.3f rms_w=%.3f bias_u=%.3f bias_v=%.3f bias_w=%.3f "
         "gain_u=%.3f "
         "gain_w=%.3f valid=%.3f resampled=%d peak_rss_gb=%.2f\n",
-        process::tier_name(tier), degrees, s.grid.spacing_mm[0], s.grid.spacing_mm[2], s.pixel_binning,
+        process::tier_name(tier), variant, degrees, s.grid.spacing_mm[0], s.grid.spacing_mm[2], s.pixel_binning,
         s.mart.iterations, setup_s, first_s, pair_s, e.rms[0], e.rms[1], e.rms[2], e.bias[0], e.bias[1], e.bias[2],
         e.gain[0], e.gain[2],
         r.correlation.field.grid.count() ? double(e.compared) / double(r.correlation.field.grid.count()) : 0.0,
         int(processor.op().resampler() != nullptr), bench::peak_rss_gb());
     // w's gain by distance from the focal plane (z = 0), mm.
-    std::printf("bench=rotated_shear_depth tier=%s ppm=%.3f config=%s", process::tier_name(tier), ppm,
-                config_name.c_str());
+    std::printf("bench=rotated_shear_depth tier=%s variant=%s ppm=%.3f config=%s", process::tier_name(tier), variant,
+                ppm, config_name.c_str());
     const std::array<double, 6> edges{0, 2, 4, 8, 10, 1e9};
     for (std::size_t band = 0; band + 1 < edges.size(); ++band) {
       const sim::FieldErrors eb = sim::field_errors(r.correlation.field, flow, voxel, 3, 0, [&](const sim::Point3& p) {

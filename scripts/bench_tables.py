@@ -58,8 +58,8 @@ RUN_PAPER = shipped(RUN_PAPER_MART)
 # The same on cubic 0.125 mm voxels (the depth prefilter's four passes there) with core/piv's
 # default passes: the small camera's sparse sweep.
 RUN_PAPER_CUBES = RUN_PAPER_MART + ["--depth-prefilter", "4"]
-# process.yaml's: run-paper.yaml's settings with 20 iterations and seven passes.
-PROCESS = shipped(shipped_mart(20), PROCESS_PASSES)
+# process.yaml's: run-paper.yaml's settings with 20 iterations, seven passes and w through the depth response.
+PROCESS = shipped(shipped_mart(20), PROCESS_PASSES) + ["--depth-response-ppm", "0.5"]
 # run.yaml's (the live preview on the small camera).
 RUN = ["--voxel-z-factor", "2", "--mu", "1", "--iterations", "4", "--intensity-threshold", "4", "--final-smoothing",
        "1", "--depth-prefilter", "1", "--passes", "16x16x8@50+2,8x8x4@50", "--spectral-whitening", "0.5",
@@ -678,7 +678,8 @@ def t_rotated_shear(R):
     r = R("rotated-shear")
     voxel = lambda d: (f"{float(d['voxel_mm']):g}" + (f" x {float(d['voxel_z_mm']):g}" if d.get("voxel_z_mm", d["voxel_mm"])
                                                         != d["voxel_mm"] else "") + " mm")
-    rows = [[f"run-paper.yaml's {d['tier']}", f"{voxel(d)}, {d['pixel_binning']} x {d['pixel_binning']}, "
+    rows = [[f"run-paper.yaml's {d['tier']}" + (", w through the depth response" if d.get("variant") == "depth_response"
+                                                  else ""), f"{voxel(d)}, {d['pixel_binning']} x {d['pixel_binning']}, "
              f"{d['iterations']} it", f"{d['pair_s']} (first {d['first_s']})", uvw(d), uvw(d, "bias_"),
              f"{d['gain_u']} / {d['gain_w']}"] for d in r.find(bench="rotated_shear") if "tier" in d]
     out = table(["tier", "voxel, pixel binning, MART", "s per pair in a run", "RMS u / v / w, 0.125 mm voxels",

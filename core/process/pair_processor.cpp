@@ -122,10 +122,29 @@ PairProcessor::PairProcessor(const optics::CameraModel& camera, const calib::Loa
     op_ = std::make_shared<const PairOperator>(framed, calibration.lenses, white, settings_);
     setup_note_ = "operator built";
   }
+  if (settings_.depth_response_ppm > 0) {
+    depth_response_ = std::make_unique<const DepthResponse>(
+        measure_depth_response(*this, camera, calibration.lenses, settings_.depth_response_ppm));
+    setup_note_ += "; " + depth_response_->summary();
+  }
+}
+
+PairResult PairProcessor::corrected(PairResult result) const {
+  if (depth_response_) depth_response_->apply(result.correlation.field);
+  return result;
 }
 
 PairResult PairProcessor::process(const ImageU16& frame_a, const ImageU16& frame_b, const PairOptions& options) const {
-  if (settings_.pixel_binning == 1) return process(to_float(frame_a), to_float(frame_b), options);
+  return corrected(process_uncorrected(frame_a, frame_b, options));
+}
+
+PairResult PairProcessor::process(const ImageF& frame_a, const ImageF& frame_b, const PairOptions& options) const {
+  return corrected(process_uncorrected(frame_a, frame_b, options));
+}
+
+PairResult PairProcessor::process_uncorrected(const ImageU16& frame_a, const ImageU16& frame_b,
+                                              const PairOptions& options) const {
+  if (settings_.pixel_binning == 1) return process_uncorrected(to_float(frame_a), to_float(frame_b), options);
   // Counts are finite and non-negative: only the size is checked raw, and the frames are binned
   // straight from their counts (no sensor-sized float copy).
   recon::validate_size(frame_a.width, frame_a.height, raw_width_, raw_height_, "frame A");
@@ -133,7 +152,8 @@ PairResult PairProcessor::process(const ImageU16& frame_a, const ImageU16& frame
   return run(bin_pixels(frame_a, settings_.pixel_binning), bin_pixels(frame_b, settings_.pixel_binning), options);
 }
 
-PairResult PairProcessor::process(const ImageF& frame_a, const ImageF& frame_b, const PairOptions& options) const {
+PairResult PairProcessor::process_uncorrected(const ImageF& frame_a, const ImageF& frame_b,
+                                              const PairOptions& options) const {
   if (settings_.pixel_binning == 1) return run(frame_a, frame_b, options);
   recon::validate_image(frame_a, raw_width_, raw_height_, "frame A");
   recon::validate_image(frame_b, raw_width_, raw_height_, "frame B");

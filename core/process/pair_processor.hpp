@@ -12,6 +12,7 @@
 #include "core/base/image.hpp"
 #include "core/calib/calibration_file.hpp"
 #include "core/optics/camera_model.hpp"
+#include "core/process/depth_response.hpp"
 #include "core/process/operator_cache.hpp"
 #include "core/process/process.hpp"
 #include "core/recon/mart.hpp"
@@ -95,8 +96,13 @@ class PairProcessor {
   // (process_pair), with the dt pair_dt_s gives. With settings.pixel_binning above 1 the operator
   // is built on the binned camera and white image, and frames are validated raw, then binned.
   // MART's and the correlation's buffers come from the processor's pool.
+  // With settings.depth_response_ppm above 0, w (and its uncertainty) is then taken through the
+  // depth response measured when the processor was built (depth_response.hpp).
   PairResult process(const ImageU16& frame_a, const ImageU16& frame_b, const PairOptions& options = {}) const;
   PairResult process(const ImageF& frame_a, const ImageF& frame_b, const PairOptions& options = {}) const;
+  // process() without the depth response's correction: what the response is measured with.
+  PairResult process_uncorrected(const ImageU16& frame_a, const ImageU16& frame_b,
+                                 const PairOptions& options = {}) const;
 
   const ProcessSettings& settings() const { return settings_; }
   const PairOperator& op() const { return *op_; }
@@ -105,6 +111,8 @@ class PairProcessor {
   // Where the weight tables came from, for the user: "operator built", "operator kept in memory",
   // or the disk cache's line (WeightsDiskCache::last_note).
   const std::string& setup_note() const { return setup_note_; }
+  // The depth response process() corrects w with; null when settings.depth_response_ppm is 0.
+  const DepthResponse* depth_response() const { return depth_response_.get(); }
   // Makes the pool hold `pairs` workspaces sized for this operator's largest reconstruction and
   // correlation (recon::MartWorkspace::reserve, piv::CorrelationWorkspace::reserve), so that up to
   // `pairs` pairs in flight at once allocate and page-fault none of them. plenopivd calls it while
@@ -116,11 +124,14 @@ class PairProcessor {
  private:
   // process_pair on frames already in the operator's pixels, in a workspace from the pool.
   PairResult run(const ImageF& frame_a, const ImageF& frame_b, const PairOptions& options) const;
+  PairResult process_uncorrected(const ImageF& frame_a, const ImageF& frame_b, const PairOptions& options) const;
+  PairResult corrected(PairResult result) const;  // w through depth_response_, when there is one
 
   ProcessSettings settings_;
   int raw_width_ = 0, raw_height_ = 0;  // the camera's sensor, before pixel binning
   std::shared_ptr<const PairOperator> op_;
   std::string setup_note_;
+  std::unique_ptr<const DepthResponse> depth_response_;
   mutable WorkspacePool workspaces_;
 };
 

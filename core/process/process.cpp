@@ -115,7 +115,7 @@ ProcessSettings parse_settings(const YamlMap& root) {
   if (auto r = root.optional_map("reconstruction")) {
     r->reject_unknown({"iterations", "mu", "acceleration", "start", "noise_threshold", "dark_weight_cutoff",
                        "convergence", "angular_sampling", "pixel_binning", "sensor_blur_sigma_mm", "prune",
-                       "prune_threshold", "prune_scope", "prune_depth_reach"});
+                       "prune_threshold", "prune_scope", "prune_depth_reach", "depth_response_ppm"});
     // Read here, checked by recon::check (the one owner of MART's ranges); the integer is only kept
     // from wrapping as it narrows.
     s.mart.iterations = r->integer_in("iterations", s.mart.iterations, std::numeric_limits<int>::min(),
@@ -139,6 +139,9 @@ ProcessSettings parse_settings(const YamlMap& root) {
     s.angular_sampling = r->number_or("angular_sampling", s.angular_sampling);
     if (!(s.angular_sampling > 0 && s.angular_sampling <= 8)) r->fail("angular_sampling", "must be in (0, 8]");
     s.pixel_binning = r->integer_in("pixel_binning", s.pixel_binning, 1, 8);
+    s.depth_response_ppm = r->number_or("depth_response_ppm", s.depth_response_ppm);
+    if (!(s.depth_response_ppm >= 0 && s.depth_response_ppm <= 5))
+      r->fail("depth_response_ppm", "must be in [0, 5] particles per microlens (0: off)");
   }
 
   if (auto c = root.optional_map("correlation")) {

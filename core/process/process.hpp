@@ -42,6 +42,11 @@ struct ProcessSettings {
   // live lane's fast tier on a large sensor. Must divide the sensor's pixel counts (PairProcessor
   // checks; optics::CameraModel::binned, bin_pixels).
   int pixel_binning = 1;
+  // w corrected for MART's depth response (depth_response.hpp): the seeding, particles per
+  // microlens, of the simulated pairs the response is measured on when the settings are first used
+  // (PairProcessor), [0, 5]; default 0: no correction. About the flow's own seeding: the response
+  // changes a few per cent between half and the full seeding.
+  double depth_response_ppm = 0.0;
   recon::MartSettings mart;
   piv::CorrelationSettings correlation;  // dt_s lives here
 
@@ -64,7 +69,7 @@ Grid3 grid_for_extent(const std::array<double, 3>& lo, const std::array<double, 
 //           [a, b] are the faces of the box (the first voxel's lower face, the last one's upper face)
 //   reconstruction: {iterations, mu, acceleration, start: mlos|ones, noise_threshold, dark_weight_cutoff,
 //                    convergence, angular_sampling, pixel_binning, sensor_blur_sigma_mm, prune,
-//                    prune_threshold, prune_scope: volume|slice}
+//                    prune_threshold, prune_scope: volume|slice, depth_response_ppm}
 //                                                  (ranges: recon::check)
 //   correlation: {passes, median, ...}             (piv::correlation_settings_from; ranges: piv::check)
 //   live: {volume: {..}, reconstruction: {..}, correlation: {..}}   (optional: the live lane's fast tier,

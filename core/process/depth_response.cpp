@@ -1,0 +1,155 @@
+// MART's depth response: what a pair's own processing measures in depth for known uniform depth
+// shifts of simulated particles, per depth layer of the vector grid, and its inverse applied to w.
+#include "core/process/depth_response.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <stdexcept>
+
+#include "core/base/errors.hpp"
+#include "core/process/pair_processor.hpp"
+#include "core/sim/flows.hpp"
+#include "core/sim/particles.hpp"
+#include "core/sim/render.hpp"
+
+namespace plenopiv::process {
+
+namespace {
+
+std::string mm(double v) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.3g", v);
+  return text;
+}
+
+}  // namespace
+
+DepthResponse::DepthResponse(Grid3 field_grid, std::vector<double> true_mm, std::vector<std::vector<double>> measured_mm)
+    : field_grid_(field_grid), true_mm_(std::move(true_mm)), measured_mm_(std::move(measured_mm)) {
+  if (true_mm_.size() < 2 || !std::is_sorted(true_mm_.begin(), true_mm_.end()) ||
+      std::adjacent_find(true_mm_.begin(), true_mm_.end()) != true_mm_.end())
+    throw std::logic_error("DepthResponse: the true shifts must be at least two, ascending and distinct");
+  if (measured_mm_.size() != std::size_t(field_grid_.shape[2]))
+    throw std::logic_error("DepthResponse: one row of measured shifts per depth layer of the vector grid");
+  for (std::size_t layer = 0; layer < measured_mm_.size(); ++layer) {
+    const std::vector<double>& m = measured_mm_[layer];
+    if (m.size() != true_mm_.size()) throw std::logic_error("DepthResponse: one measured shift per true shift");
+    for (std::size_t k = 0; k < m.size(); ++k) {
+      const bool rises = k + 1 == m.size() || m[k + 1] > m[k];
+      const bool follows = true_mm_[k] == 0 ? m[k] == 0 : m[k] / true_mm_[k] >= kDepthResponseLeast;
+      if (std::isfinite(m[k]) && rises && follows) continue;
+      std::string seen;
+      for (std::size_t j = 0; j < m.size(); ++j)
+        seen += (j ? ", " : "") + mm(true_mm_[j]) + " -> " + mm(m[j]);
+      throw InputError("depth response: the vectors at z = " + mm(field_grid_.coordinate_mm(2, int(layer))) +
+                       " mm follow a depth shift by less than half of it, or not at all (true -> measured mm: " + seen +
+                       "), so correcting their w would more than double its noise; turn "
+                       "reconstruction.depth_response_ppm off, or give the volume a depth guard or move it");
+    }
+  }
+}
+
+int DepthResponse::segment(int layer, double measured_mm) const {
+  const std::vector<double>& m = measured_mm_[std::size_t(layer)];
+  // The first segment whose upper end lies above the value, the last one for values beyond it.
+  int k = 0;
+  while (k + 2 < int(m.size()) && measured_mm > m[std::size_t(k) + 1]) ++k;
+  return k;
+}
+
+double DepthResponse::true_mm(int layer, double measured_mm) const {
+  const int k = segment(layer, measured_mm);
+  const std::vector<double>& m = measured_mm_[std::size_t(layer)];
+  return true_mm_[std::size_t(k)] + (measured_mm - m[std::size_t(k)]) * slope(layer, measured_mm);
+}
+
+double DepthResponse::slope(int layer, double measured_mm) const {
+  const std::size_t k = std::size_t(segment(layer, measured_mm));
+  const std::vector<double>& m = measured_mm_[std::size_t(layer)];
+  return (true_mm_[k + 1] - true_mm_[k]) / (m[k + 1] - m[k]);
+}
+
+void DepthResponse::apply(VectorField& field) const {
+  const Grid3& g = field.grid;
+  if (g.shape[2] != field_grid_.shape[2] || g.origin_mm[2] != field_grid_.origin_mm[2] ||
+      g.spacing_mm[2] != field_grid_.spacing_mm[2])
+    throw std::logic_error("DepthResponse::apply: the field's depth layers are not those the response was measured on");
+  const bool with_sigma = field.sigma_dz_mm.size() == field.dz_mm.size();
+  const std::size_t per_layer = std::size_t(g.shape[0]) * std::size_t(g.shape[1]);
+  for (int layer = 0; layer < g.shape[2]; ++layer)
+    for (std::size_t i = std::size_t(layer) * per_layer; i < std::size_t(layer + 1) * per_layer; ++i) {
+      const double w = field.dz_mm[i];
+      if (!std::isfinite(w)) continue;
+      if (with_sigma) field.sigma_dz_mm[i] = float(field.sigma_dz_mm[i] * slope(layer, w));
+      field.dz_mm[i] = float(true_mm(layer, w));
+    }
+}
+
+std::string DepthResponse::summary() const {
+  std::string text = "depth response over z " + mm(field_grid_.coordinate_mm(2, 0)) + ".." +
+                     mm(field_grid_.coordinate_mm(2, field_grid_.shape[2] - 1)) + " mm:";
+  for (const std::size_t k : {true_mm_.size() - 1, std::size_t(0)}) {
+    double lo = 1e9, hi = -1e9;
+    for (const std::vector<double>& m : measured_mm_) {
+      lo = std::min(lo, m[k] / true_mm_[k]);
+      hi = std::max(hi, m[k] / true_mm_[k]);
+    }
+    text += (k ? " " : ", ") + mm(lo) + ".." + mm(hi) + " of " + (true_mm_[k] > 0 ? "+" : "") + mm(true_mm_[k]) +
+            " mm";
+  }
+  return text;
+}
+
+DepthResponse measure_depth_response(const PairProcessor& processor, const optics::CameraModel& camera,
+                                     const optics::MicrolensArray& lenses, double seeding_ppm,
+                                     const std::function<void(double)>& progress) {
+  const ProcessSettings& s = processor.settings();
+  const Grid3 g = s.reconstruction_grid();
+  // The reconstructed box (guard slices included) and 1 mm beyond each face: particles just outside
+  // it light its edges, as in any real flow.
+  sim::Box box;
+  for (std::size_t a = 0; a < 3; ++a) {
+    box.min_mm[a] = g.origin_mm[a] - 0.5 * g.spacing_mm[a] - 1.0;
+    box.max_mm[a] = g.origin_mm[a] + (g.shape[a] - 0.5) * g.spacing_mm[a] + 1.0;
+  }
+  const std::size_t count = sim::particle_count_from_ppm(camera, box, seeding_ppm);
+  sim::RenderOptions render;
+  render.rays_per_particle = 5000;  // the frames' ray noise well below the sensor's
+
+  std::vector<double> shifts_mm{0.0};
+  for (const double v : kDepthResponseShiftsVoxel) shifts_mm.push_back(v * s.grid.spacing_mm[2]);
+  std::sort(shifts_mm.begin(), shifts_mm.end());
+  std::vector<std::vector<double>> measured;
+  Grid3 field_grid;
+  int pair = 0;
+  for (std::size_t k = 0; k < shifts_mm.size(); ++k) {
+    if (shifts_mm[k] == 0.0) continue;
+    const std::uint64_t seed = 7001 + 2 * std::uint64_t(pair);
+    const std::vector<sim::Point3> a = sim::random_particles(box, count, seed);
+    const std::vector<sim::Point3> b = sim::displace(a, sim::UniformFlow({0.0, 0.0, shifts_mm[k]}));
+    const PairResult r = processor.process_uncorrected(sim::render(camera, lenses, a, render, seed).image,
+                                                       sim::render(camera, lenses, b, render, seed + 1).image);
+    const VectorField& f = r.correlation.field;
+    if (measured.empty()) {
+      field_grid = f.grid;
+      measured.assign(std::size_t(f.grid.shape[2]), std::vector<double>(shifts_mm.size(), 0.0));
+    }
+    const std::size_t per_layer = std::size_t(f.grid.shape[0]) * std::size_t(f.grid.shape[1]);
+    for (int layer = 0; layer < f.grid.shape[2]; ++layer) {
+      double sum = 0;
+      std::size_t n = 0;
+      for (std::size_t i = std::size_t(layer) * per_layer; i < std::size_t(layer + 1) * per_layer; ++i)
+        if (f.valid[i] && std::isfinite(f.dz_mm[i])) {
+          sum += f.dz_mm[i];
+          ++n;
+        }
+      measured[std::size_t(layer)][k] = n ? sum / double(n) : std::nan("");
+    }
+    ++pair;
+    if (progress) progress(double(pair) / double(shifts_mm.size() - 1));
+  }
+  return DepthResponse(field_grid, shifts_mm, std::move(measured));
+}
+
+}  // namespace plenopiv::process

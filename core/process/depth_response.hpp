@@ -1,0 +1,71 @@
+// MART's depth response: what a pair's own processing measures in depth for known uniform depth
+// shifts of simulated particles, per depth layer of the vector grid, and its inverse applied to w.
+#pragma once
+
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "core/base/grid.hpp"
+#include "core/optics/camera_model.hpp"
+#include "core/optics/microlens_array.hpp"
+
+namespace plenopiv::process {
+
+class PairProcessor;
+
+// The true shifts the response is measured at, in depth voxels of the grid (voxel_z): two each
+// way, because the response is neither proportional (the light MART leaves where lines of sight
+// cross follows a shift less than the particles do) nor odd (a shift towards the focal plane comes
+// out shorter than one away from it).
+inline constexpr double kDepthResponseShiftsVoxel[] = {-1.0, -0.5, 0.5, 1.0};
+
+// The least fraction of each true shift a layer must measure: below it the inverse would multiply
+// w's random error by about 1 / kDepthResponseLeast or more, and a depth that barely follows motion
+// (the end slices of a volume without a depth guard, say) is better reported than amplified.
+inline constexpr double kDepthResponseLeast = 0.5;
+
+// Per depth layer (node z index) of the vector grid, the mean w measured over the layer's valid
+// vectors for each true shift, through (0, 0): a monotone piecewise-linear curve, inverted to take
+// MART's depth response out of a measured w. Beyond the outermost shifts the end segments go on.
+class DepthResponse {
+ public:
+  // `true_mm`: the shifts, ascending, 0 among them; `measured_mm[layer][k]`: what the processing
+  // measured for true_mm[k] (0 at the 0 shift). InputError, naming the layer's depth, when a
+  // layer's measured values do not rise with the true ones, or one is less than
+  // kDepthResponseLeast of its true shift.
+  DepthResponse(Grid3 field_grid, std::vector<double> true_mm, std::vector<std::vector<double>> measured_mm);
+
+  // The true shift that layer `layer` measures as `measured_mm`, and the inverse's slope there
+  // (d true / d measured: what carries w's standard uncertainty).
+  double true_mm(int layer, double measured_mm) const;
+  double slope(int layer, double measured_mm) const;
+  // w (and its uncertainty, where estimated) of every node of `field` taken through its layer's
+  // inverse. std::logic_error when `field` is not on the grid the response was measured on.
+  void apply(VectorField& field) const;
+
+  const Grid3& field_grid() const { return field_grid_; }
+  const std::vector<double>& shifts_mm() const { return true_mm_; }
+  const std::vector<std::vector<double>>& measured_mm() const { return measured_mm_; }
+  // Measured over true shift at the outermost shifts, the smallest and largest over the layers,
+  // e.g. "depth response over z -11.5..11.5 mm: 0.80..0.98 of +0.25 mm, 0.83..0.99 of -0.25 mm".
+  std::string summary() const;
+
+ private:
+  int segment(int layer, double measured_mm) const;  // k: measured_mm lies in [m(k), m(k + 1)]
+  Grid3 field_grid_;
+  std::vector<double> true_mm_;
+  std::vector<std::vector<double>> measured_mm_;
+};
+
+// The response of `processor`'s settings on its camera and lenses: for each of
+// kDepthResponseShiftsVoxel, particles seeded uniformly at `seeding_ppm` particles per microlens
+// through the reconstructed box and 1 mm beyond each face, rendered (core/sim) before and after a
+// uniform depth shift, and processed as any pair. Deterministic (fixed seeds). Costs four pairs'
+// processing and rendering: seconds on a small camera, minutes at the paper's scale. `progress`
+// (optional) gets the fraction done after each pair.
+DepthResponse measure_depth_response(const PairProcessor& processor, const optics::CameraModel& camera,
+                                     const optics::MicrolensArray& lenses, double seeding_ppm,
+                                     const std::function<void(double)>& progress = {});
+
+}  // namespace plenopiv::process
