@@ -58,8 +58,8 @@ RUN_PAPER = shipped(RUN_PAPER_MART)
 # The same on cubic 0.125 mm voxels (the depth prefilter's four passes there) with core/piv's
 # default passes: the small camera's sparse sweep.
 RUN_PAPER_CUBES = RUN_PAPER_MART + ["--depth-prefilter", "4"]
-# process.yaml's: run-paper.yaml's settings with 20 iterations, seven passes and w through the depth response.
-PROCESS = shipped(shipped_mart(20), PROCESS_PASSES) + ["--depth-response-ppm", "0.5"]
+# process.yaml's: run-paper.yaml's settings with 20 iterations and seven passes.
+PROCESS = shipped(shipped_mart(20), PROCESS_PASSES)
 # run.yaml's (the live preview on the small camera).
 RUN = ["--voxel-z-factor", "2", "--mu", "1", "--iterations", "4", "--intensity-threshold", "4", "--final-smoothing",
        "1", "--depth-prefilter", "1", "--passes", "16x16x8@50+2,8x8x4@50", "--spectral-whitening", "0.5",

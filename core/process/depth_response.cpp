@@ -25,7 +25,8 @@ std::string mm(double v) {
 
 }  // namespace
 
-DepthResponse::DepthResponse(Grid3 field_grid, std::vector<double> true_mm, std::vector<std::vector<double>> measured_mm)
+DepthResponse::DepthResponse(Grid3 field_grid, std::vector<double> true_mm,
+                             std::vector<std::vector<double>> measured_mm)
     : field_grid_(field_grid), true_mm_(std::move(true_mm)), measured_mm_(std::move(measured_mm)) {
   if (true_mm_.size() < 2 || !std::is_sorted(true_mm_.begin(), true_mm_.end()) ||
       std::adjacent_find(true_mm_.begin(), true_mm_.end()) != true_mm_.end())
@@ -40,8 +41,7 @@ DepthResponse::DepthResponse(Grid3 field_grid, std::vector<double> true_mm, std:
       const bool follows = true_mm_[k] == 0 ? m[k] == 0 : m[k] / true_mm_[k] >= kDepthResponseLeast;
       if (std::isfinite(m[k]) && rises && follows) continue;
       std::string seen;
-      for (std::size_t j = 0; j < m.size(); ++j)
-        seen += (j ? ", " : "") + mm(true_mm_[j]) + " -> " + mm(m[j]);
+      for (std::size_t j = 0; j < m.size(); ++j) seen += (j ? ", " : "") + mm(true_mm_[j]) + " -> " + mm(m[j]);
       throw InputError("depth response: the vectors at z = " + mm(field_grid_.coordinate_mm(2, int(layer))) +
                        " mm follow a depth shift by less than half of it, or not at all (true -> measured mm: " + seen +
                        "), so correcting their w would more than double its noise; turn "
@@ -95,8 +95,7 @@ std::string DepthResponse::summary() const {
       lo = std::min(lo, m[k] / true_mm_[k]);
       hi = std::max(hi, m[k] / true_mm_[k]);
     }
-    text += (k ? " " : ", ") + mm(lo) + ".." + mm(hi) + " of " + (true_mm_[k] > 0 ? "+" : "") + mm(true_mm_[k]) +
-            " mm";
+    text += (k ? " " : ", ") + mm(lo) + ".." + mm(hi) + " of " + (true_mm_[k] > 0 ? "+" : "") + mm(true_mm_[k]) + " mm";
   }
   return text;
 }

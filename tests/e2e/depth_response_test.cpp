@@ -52,8 +52,8 @@ TEST(DepthResponse, InvertsEachLayersCurvePiecewiseAndGoesOnAlongItsEndSegments)
     EXPECT_NEAR(r.true_mm(1, r.measured_mm()[1][k]), kShifts[k], 1e-12) << k;
   }
   EXPECT_NEAR(r.slope(0, 0.05), 1.25, 1e-12);
-  EXPECT_NEAR(r.true_mm(1, 0.05), 0.0625, 1e-12);      // half way up the first segment above 0
-  EXPECT_NEAR(r.true_mm(1, 0.14), 0.1875, 1e-12);      // half way up the last
+  EXPECT_NEAR(r.true_mm(1, 0.05), 0.0625, 1e-12);        // half way up the first segment above 0
+  EXPECT_NEAR(r.true_mm(1, 0.14), 0.1875, 1e-12);        // half way up the last
   EXPECT_NEAR(r.true_mm(1, 0.26), 0.25 + 0.125, 1e-12);  // beyond it, along it
   EXPECT_NEAR(r.slope(1, 0.26), 0.125 / 0.08, 1e-12);
   EXPECT_NEAR(r.true_mm(1, -0.36), -0.25 - 0.125, 1e-12);  // below the first, along it
@@ -137,8 +137,7 @@ TEST(DepthResponse, TakesMartsShortfallOutOfAShearsDepthComponent) {
   const double rate = 2 * voxel / 2.0;  // +-2 voxels at the box's y faces
   const sim::LinearShear flow({rate, 0, rate}, 1, 0.0);
   const sim::Box box{{-3, -3, -2}, {3, 3, 6}};
-  const std::vector<sim::Point3> a =
-      sim::random_particles(box, sim::particle_count_from_ppm(camera, box, ppm), 4242);
+  const std::vector<sim::Point3> a = sim::random_particles(box, sim::particle_count_from_ppm(camera, box, ppm), 4242);
   const std::vector<sim::Point3> b = sim::displace(a, flow);
   sim::RenderOptions ro;
   ro.rays_per_particle = 5000;
