@@ -119,35 +119,46 @@ DepthResponse measure_depth_response(const PairProcessor& processor, const optic
   std::vector<double> shifts_mm{0.0};
   for (const double v : kDepthResponseShiftsVoxel) shifts_mm.push_back(v * s.grid.spacing_mm[2]);
   std::sort(shifts_mm.begin(), shifts_mm.end());
-  std::vector<std::vector<double>> measured;
+  const std::size_t shifts = shifts_mm.size() - 1;  // the 0 shift needs no pair
+
+  // Per depth layer and shift: the sum of the valid vectors' w and their count, over the shift's
+  // particle sets (each set its own particles and sensor noise).
   Grid3 field_grid;
-  int pair = 0;
+  std::vector<std::vector<double>> sum, count_valid;
+  int sets = 1;  // per shift, known after the first pair (it depends on the vectors per layer)
+  std::size_t pairs_done = 0;
   for (std::size_t k = 0; k < shifts_mm.size(); ++k) {
     if (shifts_mm[k] == 0.0) continue;
-    const std::uint64_t seed = 7001 + 2 * std::uint64_t(pair);
-    const std::vector<sim::Point3> a = sim::random_particles(box, count, seed);
-    const std::vector<sim::Point3> b = sim::displace(a, sim::UniformFlow({0.0, 0.0, shifts_mm[k]}));
-    const PairResult r = processor.process_uncorrected(sim::render(camera, lenses, a, render, seed).image,
-                                                       sim::render(camera, lenses, b, render, seed + 1).image);
-    const VectorField& f = r.correlation.field;
-    if (measured.empty()) {
-      field_grid = f.grid;
-      measured.assign(std::size_t(f.grid.shape[2]), std::vector<double>(shifts_mm.size(), 0.0));
+    for (int set = 0; set < sets; ++set) {
+      const std::uint64_t seed = 7001 + 2 * std::uint64_t(pairs_done);
+      const std::vector<sim::Point3> a = sim::random_particles(box, count, seed);
+      const std::vector<sim::Point3> b = sim::displace(a, sim::UniformFlow({0.0, 0.0, shifts_mm[k]}));
+      const PairResult r = processor.process_uncorrected(sim::render(camera, lenses, a, render, seed).image,
+                                                         sim::render(camera, lenses, b, render, seed + 1).image);
+      const VectorField& f = r.correlation.field;
+      const std::size_t per_layer = std::size_t(f.grid.shape[0]) * std::size_t(f.grid.shape[1]);
+      if (sum.empty()) {
+        field_grid = f.grid;
+        sum.assign(std::size_t(f.grid.shape[2]), std::vector<double>(shifts_mm.size(), 0.0));
+        count_valid = sum;
+        sets = int(std::clamp<std::size_t>((kDepthResponseVectorsPerLayer + per_layer - 1) / per_layer, 1,
+                                           kDepthResponseMostSets));
+      }
+      for (int layer = 0; layer < f.grid.shape[2]; ++layer)
+        for (std::size_t i = std::size_t(layer) * per_layer; i < std::size_t(layer + 1) * per_layer; ++i)
+          if (f.valid[i] && std::isfinite(f.dz_mm[i])) {
+            sum[std::size_t(layer)][k] += f.dz_mm[i];
+            count_valid[std::size_t(layer)][k] += 1;
+          }
+      ++pairs_done;
+      if (progress) progress(double(pairs_done) / double(shifts * std::size_t(sets)));
     }
-    const std::size_t per_layer = std::size_t(f.grid.shape[0]) * std::size_t(f.grid.shape[1]);
-    for (int layer = 0; layer < f.grid.shape[2]; ++layer) {
-      double sum = 0;
-      std::size_t n = 0;
-      for (std::size_t i = std::size_t(layer) * per_layer; i < std::size_t(layer + 1) * per_layer; ++i)
-        if (f.valid[i] && std::isfinite(f.dz_mm[i])) {
-          sum += f.dz_mm[i];
-          ++n;
-        }
-      measured[std::size_t(layer)][k] = n ? sum / double(n) : std::nan("");
-    }
-    ++pair;
-    if (progress) progress(double(pair) / double(shifts_mm.size() - 1));
   }
+  std::vector<std::vector<double>> measured(sum.size(), std::vector<double>(shifts_mm.size(), 0.0));
+  for (std::size_t layer = 0; layer < sum.size(); ++layer)
+    for (std::size_t k = 0; k < shifts_mm.size(); ++k)
+      if (shifts_mm[k] != 0.0)
+        measured[layer][k] = count_valid[layer][k] > 0 ? sum[layer][k] / count_valid[layer][k] : std::nan("");
   return DepthResponse(field_grid, shifts_mm, std::move(measured));
 }
 

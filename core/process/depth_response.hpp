@@ -2,6 +2,7 @@
 // shifts of simulated particles, per depth layer of the vector grid, and its inverse applied to w.
 #pragma once
 
+#include <cstddef>
 #include <functional>
 #include <string>
 #include <vector>
@@ -19,6 +20,12 @@ class PairProcessor;
 // cross follows a shift less than the particles do) nor odd (a shift towards the focal plane comes
 // out shorter than one away from it).
 inline constexpr double kDepthResponseShiftsVoxel[] = {-1.0, -0.5, 0.5, 1.0};
+
+// Each layer's mean is taken over at least this many vectors per shift where a particle set gives
+// fewer (a small box: its vectors' w scatters from set to set by more than the shortfall's change
+// across the layers), over at most kDepthResponseMostSets sets of particles per shift.
+inline constexpr std::size_t kDepthResponseVectorsPerLayer = 400;
+inline constexpr std::size_t kDepthResponseMostSets = 4;
 
 // The least fraction of each true shift a layer must measure: below it the inverse would multiply
 // w's random error by about 1 / kDepthResponseLeast or more, and a depth that barely follows motion
@@ -61,9 +68,10 @@ class DepthResponse {
 // The response of `processor`'s settings on its camera and lenses: for each of
 // kDepthResponseShiftsVoxel, particles seeded uniformly at `seeding_ppm` particles per microlens
 // through the reconstructed box and 1 mm beyond each face, rendered (core/sim) before and after a
-// uniform depth shift, and processed as any pair. Deterministic (fixed seeds). Costs four pairs'
-// processing and rendering: seconds on a small camera, minutes at the paper's scale. `progress`
-// (optional) gets the fraction done after each pair.
+// uniform depth shift, and processed as any pair; one set of particles per shift, or as many as
+// kDepthResponseVectorsPerLayer asks (at most kDepthResponseMostSets). Deterministic (fixed seeds).
+// Costs four pairs' processing and rendering at the paper's scale (minutes), up to sixteen on a
+// small box (seconds). `progress` (optional) gets the fraction done after each pair.
 DepthResponse measure_depth_response(const PairProcessor& processor, const optics::CameraModel& camera,
                                      const optics::MicrolensArray& lenses, double seeding_ppm,
                                      const std::function<void(double)>& progress = {});
