@@ -159,8 +159,13 @@ void run_process(const ProcessOptions& o) {
   std::fprintf(stderr, "volume %d x %d x %d voxels (+%d guard slices at each depth end); weights ...\n", g.shape[0],
                g.shape[1], g.shape[2], settings.guard_slices());
   const auto operators = weights_cache(o.cache_dir, o.no_cache);
-  const process::PairProcessor processor(camera, cal, settings, operators.get());
-  if (operators) std::fprintf(stderr, "%s\n", processor.setup_note().c_str());
+  // The depth response (reconstruction.depth_response_ppm) simulates and processes pairs first.
+  std::optional<Progress> response_progress;
+  if (settings.depth_response_ppm > 0) response_progress.emplace("depth response", "%", 100.0);
+  const process::PairProcessor processor(camera, cal, settings, operators.get(), [&](double f) {
+    if (response_progress) response_progress->update(f);
+  });
+  if (operators || processor.depth_response()) std::fprintf(stderr, "%s\n", processor.setup_note().c_str());
   if (!processor.note().empty()) std::fprintf(stderr, "%s\n", processor.note().c_str());
   Progress progress("process", "pairs", 1.0);
   process::PairOptions options;

@@ -200,8 +200,13 @@ ReprocessReport reprocess_run(const ReprocessOptions& o) {
       per_pair / 1e9, o.jobs);
   std::optional<process::OperatorCache> operators;
   if (!o.weights_cache.empty()) operators.emplace(1, o.weights_cache);
-  const process::PairProcessor processor(in.camera, calibration, in.settings, operators ? &*operators : nullptr);
-  if (operators) std::fprintf(stderr, "%s\n", processor.setup_note().c_str());
+  std::optional<Progress> response_progress;  // reconstruction.depth_response_ppm: pairs simulated first
+  if (in.settings.depth_response_ppm > 0) response_progress.emplace("depth response", "%", 100.0);
+  const process::PairProcessor processor(in.camera, calibration, in.settings, operators ? &*operators : nullptr,
+                                         [&](double f) {
+                                           if (response_progress) response_progress->update(f);
+                                         });
+  if (operators || processor.depth_response()) std::fprintf(stderr, "%s\n", processor.setup_note().c_str());
   if (!processor.note().empty()) std::fprintf(stderr, "%s\n", processor.note().c_str());
   // The settings the outputs were made with, beside them.
   io::write_text_atomically(in.output / "process.yaml", in.settings_text);

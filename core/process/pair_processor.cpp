@@ -99,7 +99,8 @@ std::size_t WorkspacePool::bytes() {
 }
 
 PairProcessor::PairProcessor(const optics::CameraModel& camera, const calib::LoadedCalibration& calibration,
-                             ProcessSettings settings, OperatorCache* operators)
+                             ProcessSettings settings, OperatorCache* operators,
+                             const std::function<void(double)>& setup_progress)
     : settings_(std::move(settings)), raw_width_(camera.sensor().width_px), raw_height_(camera.sensor().height_px) {
   const int binning = settings_.pixel_binning;
   const auto in_binning = [&](auto&& make) {
@@ -124,7 +125,7 @@ PairProcessor::PairProcessor(const optics::CameraModel& camera, const calib::Loa
   }
   if (settings_.depth_response_ppm > 0) {
     depth_response_ = std::make_unique<const DepthResponse>(
-        measure_depth_response(*this, camera, calibration.lenses, settings_.depth_response_ppm));
+        measure_depth_response(*this, camera, calibration.lenses, settings_.depth_response_ppm, setup_progress));
     setup_note_ += "; " + depth_response_->summary();
   }
 }

@@ -88,8 +88,11 @@ class PairProcessor {
   // before from the same camera, calibration, volume and sampling (kept in memory, or its tables
   // on disk), and where a new one is kept; without it the operator is built. The results are the
   // same bits either way.
+  // `setup_progress` (optional): the fraction of the depth response's measurement done, after each
+  // of its simulated pairs (settings.depth_response_ppm above 0: minutes at the paper's scale).
   PairProcessor(const optics::CameraModel& camera, const calib::LoadedCalibration& calibration,
-                ProcessSettings settings, OperatorCache* operators = nullptr);
+                ProcessSettings settings, OperatorCache* operators = nullptr,
+                const std::function<void(double)>& setup_progress = {});
 
   // Raw frames A and B (the camera's counts) to vectors: validated (sensor-sized; named "frame A"
   // and "frame B"), resampled when the operator says so, reconstructed and correlated

@@ -2,6 +2,7 @@
 // setting, and a shear pair on the small camera whose w it brings to the truth.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <iostream>
 #include <stdexcept>
@@ -128,8 +129,14 @@ TEST(DepthResponse, TakesMartsShortfallOutOfAShearsDepthComponent) {
   const optics::CameraModel camera = testing_support::small_camera();
   const calib::LoadedCalibration calibration = calib::nominal_calibration(camera);
   const double ppm = 0.5;
-  const PairProcessor processor(camera, calibration, parse(", depth_response_ppm: " + std::to_string(ppm)));
+  std::vector<double> fractions;  // the set-up's progress, one call per simulated pair
+  const PairProcessor processor(camera, calibration, parse(", depth_response_ppm: " + std::to_string(ppm)), nullptr,
+                                [&](double f) { fractions.push_back(f); });
   ASSERT_NE(processor.depth_response(), nullptr);
+  // 25 vectors per layer here: four particle sets for each of the four shifts.
+  ASSERT_EQ(fractions.size(), 16u);
+  EXPECT_TRUE(std::is_sorted(fractions.begin(), fractions.end()));
+  EXPECT_DOUBLE_EQ(fractions.back(), 1.0);
   std::cout << "measured: " << processor.depth_response()->summary() << "\n";
   EXPECT_NE(processor.setup_note().find("depth response over z"), std::string::npos);
 
