@@ -14,21 +14,13 @@
 #include "core/sim/particles.hpp"
 #include "core/sim/render.hpp"
 #include "tests/support/cameras.hpp"
+#include "tests/support/input_error.hpp"
 #include "tests/support/mean_displacement.hpp"
 
 namespace plenopiv::process {
 namespace {
 
-// The message of the InputError `f` throws ("" if none).
-template <class F>
-std::string error_of(F&& f) {
-  try {
-    f();
-  } catch (const InputError& e) {
-    return e.what();
-  }
-  return "";
-}
+using testing_support::error_of;
 
 TEST(BinPixels, EachPixelIsTheMeanOfItsBlock) {
   ImageF image(6, 4);
