@@ -169,6 +169,23 @@ TEST(RunConfig, BadValuesAreNamed) {
   EXPECT_NE(error_of("pairs: [3\n").find("run.yaml"), std::string::npos);  // YAML syntax
 }
 
+// The depth response takes minutes while Armed and no `run stop` could end it: offline only, in
+// either tier; process.yaml (offline) takes it.
+TEST(RunConfig, TheDepthResponseIsRefusedForALiveRun) {
+  const std::string full = error_of(kVolume + "reconstruction: {depth_response_ppm: 0.5}\n");
+  EXPECT_NE(full.find("run.yaml: reconstruction.depth_response_ppm: is for offline processing only"), std::string::npos)
+      << full;
+  const std::string live = error_of(kVolume + "live: {reconstruction: {depth_response_ppm: 0.5}}\n");
+  EXPECT_NE(live.find("live.reconstruction.depth_response_ppm: is for offline processing only"), std::string::npos)
+      << live;
+  EXPECT_EQ(error_of(kVolume + "reconstruction: {depth_response_ppm: 0}\n"), "(no error)");
+  EXPECT_EQ(process::process_spec_from(
+                YamlMap(load_yaml_text(kVolume + "reconstruction: {depth_response_ppm: 0.5}\n", "process.yaml"),
+                        "process.yaml"))
+                .full.depth_response_ppm,
+            0.5);
+}
+
 // process.yaml, as the run folder keeps it and `plenopiv process --run` reads it: the same spec the
 // live stage used, key for key.
 TEST(RunConfig, ProcessYamlGivesCoreProcessTheSameSpec) {

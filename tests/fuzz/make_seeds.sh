@@ -77,8 +77,7 @@ duration_s: 2
 rate_hz: 5
 dt_s: 0.0002
 volume: {x_mm: [-1, 1], y_mm: [-1, 1], z_mm: [-2, 2], voxel_mm: 0.25, depth_guard_mm: 0.5}
-reconstruction: {iterations: 3, mu: 0.5, start: mlos, noise_threshold: 2, angular_sampling: 1, pixel_binning: 1,
-                 depth_response_ppm: 0.5}
+reconstruction: {iterations: 3, mu: 0.5, start: mlos, noise_threshold: 2, angular_sampling: 1, pixel_binning: 1}
 correlation:
   passes: [{window: [16, 16, 32], overlap_percent: 50}, {window: 8, overlap_percent: 75, depth_margin: 2}]
   median: {threshold: 2, epsilon_voxel: 0.1, radius: 2}
