@@ -1,5 +1,5 @@
 // MART's depth response (process::DepthResponse): the per-layer inverse, its refusals, the
-// setting, and a shear pair on the small camera whose w it brings to the truth.
+// setting, and a shear pair on the small camera whose w it brings nearer the truth.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -116,7 +116,7 @@ TEST(DepthResponse, TheSettingIsOffByDefaultAndRefusedOutsideZeroToFive) {
 }
 
 // A shear the response was not measured on (u and w grow along y, -2 to +2 voxels over the box)
-// through a processor that measured it: w's shortfall goes, u and v stay the same bits.
+// through a processor that measured it: most of w's shortfall goes, u and v stay the same bits.
 TEST(DepthResponse, TakesMartsShortfallOutOfAShearsDepthComponent) {
   const optics::CameraModel camera = testing_support::small_camera();
   const calib::LoadedCalibration calibration = calib::nominal_calibration(camera);
