@@ -58,16 +58,22 @@ int DepthResponse::segment(int layer, double measured_mm) const {
   return k;
 }
 
-double DepthResponse::true_mm(int layer, double measured_mm) const {
-  const int k = segment(layer, measured_mm);
+double DepthResponse::segment_slope(int layer, int k) const {
   const std::vector<double>& m = measured_mm_[std::size_t(layer)];
-  return true_mm_[std::size_t(k)] + (measured_mm - m[std::size_t(k)]) * slope(layer, measured_mm);
+  return (true_mm_[std::size_t(k) + 1] - true_mm_[std::size_t(k)]) / (m[std::size_t(k) + 1] - m[std::size_t(k)]);
+}
+
+double DepthResponse::along_segment(int layer, int k, double measured_mm) const {
+  return true_mm_[std::size_t(k)] +
+         (measured_mm - measured_mm_[std::size_t(layer)][std::size_t(k)]) * segment_slope(layer, k);
+}
+
+double DepthResponse::true_mm(int layer, double measured_mm) const {
+  return along_segment(layer, segment(layer, measured_mm), measured_mm);
 }
 
 double DepthResponse::slope(int layer, double measured_mm) const {
-  const std::size_t k = std::size_t(segment(layer, measured_mm));
-  const std::vector<double>& m = measured_mm_[std::size_t(layer)];
-  return (true_mm_[k + 1] - true_mm_[k]) / (m[k + 1] - m[k]);
+  return segment_slope(layer, segment(layer, measured_mm));
 }
 
 void DepthResponse::apply(VectorField& field) const {
@@ -81,8 +87,9 @@ void DepthResponse::apply(VectorField& field) const {
     for (std::size_t i = std::size_t(layer) * per_layer; i < std::size_t(layer + 1) * per_layer; ++i) {
       const double w = field.dz_mm[i];
       if (!std::isfinite(w)) continue;
-      if (with_sigma) field.sigma_dz_mm[i] = float(field.sigma_dz_mm[i] * slope(layer, w));
-      field.dz_mm[i] = float(true_mm(layer, w));
+      const int k = segment(layer, w);  // once per vector: value and slope come from the same segment
+      if (with_sigma) field.sigma_dz_mm[i] = float(field.sigma_dz_mm[i] * segment_slope(layer, k));
+      field.dz_mm[i] = float(along_segment(layer, k, w));
     }
 }
 

@@ -55,11 +55,13 @@ class DepthResponse {
   const std::vector<double>& shifts_mm() const { return true_mm_; }
   const std::vector<std::vector<double>>& measured_mm() const { return measured_mm_; }
   // Measured over true shift at the outermost shifts, the smallest and largest over the layers,
-  // e.g. "depth response over z -11.5..11.5 mm: 0.80..0.98 of +0.25 mm, 0.83..0.99 of -0.25 mm".
+  // as "depth response over z <first>..<last layer> mm: <least>..<most> of +<shift> mm, ... of -<shift> mm".
   std::string summary() const;
 
  private:
-  int segment(int layer, double measured_mm) const;  // k: measured_mm lies in [m(k), m(k + 1)]
+  int segment(int layer, double measured_mm) const;                  // k: measured_mm lies in [m(k), m(k + 1)]
+  double segment_slope(int layer, int k) const;                      // d true / d measured on segment k
+  double along_segment(int layer, int k, double measured_mm) const;  // the true shift, on segment k
   Grid3 field_grid_;
   std::vector<double> true_mm_;
   std::vector<std::vector<double>> measured_mm_;

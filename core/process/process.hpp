@@ -45,8 +45,8 @@ struct ProcessSettings {
   // w corrected for MART's depth response (depth_response.hpp): the seeding, particles per
   // microlens, of the simulated pairs the response is measured on when the settings are first used
   // (PairProcessor), [0, 5]; default 0: no correction. About the flow's own seeding: the response
-  // changes a few per cent between half and the full seeding. Offline only: plenopivd's run configs
-  // refuse it (minutes of measuring while a run is Armed).
+  // depends on it only weakly (docs/accuracy.md, "Depth response"). Offline only: plenopivd's run
+  // configs refuse it (minutes of measuring while a run is Armed).
   double depth_response_ppm = 0.0;
   recon::MartSettings mart;
   piv::CorrelationSettings correlation;  // dt_s lives here
