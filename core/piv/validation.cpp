@@ -22,11 +22,14 @@ float median(float* v, int n) {
   return 0.5f * (upper + *std::max_element(v, v + n / 2));
 }
 
-// Median and median absolute residual per component of the neighbours' primary vectors.
+// The neighbours' primary vectors per component, their median and, once a test needs it, the
+// median absolute residual about it (the spread).
 struct Reference {
   int n = 0;
+  std::array<std::array<float, max_neighbours>, 3> values;  // reordered by the medians
   std::array<float, 3> median{0, 0, 0};
   std::array<float, 3> spread{0, 0, 0};
+  bool has_spread = false;
 };
 
 template <typename Visit>
@@ -42,24 +45,38 @@ void for_neighbours(const std::array<int, 3>& count, std::size_t node, int radiu
       }
 }
 
-Reference reference_of(const Candidates& c, std::size_t node, int radius) {
-  std::array<std::array<float, max_neighbours>, 3> values;
-  Reference ref;
+void reference_of(const Candidates& c, std::size_t node, int radius, Reference& ref) {
+  ref.n = 0;
+  ref.has_spread = false;
   for_neighbours(c.count, node, radius, [&](std::size_t m) {
     if (!c.peaks[m]) return;
-    for (int a = 0; a < 3; ++a) values[a][ref.n] = c.peak[0][m][a];
+    for (int a = 0; a < 3; ++a) ref.values[a][ref.n] = c.peak[0][m][a];
     ++ref.n;
   });
-  if (ref.n == 0) return ref;
-  for (int a = 0; a < 3; ++a) {
-    ref.median[a] = median(values[a].data(), ref.n);
-    for (int m = 0; m < ref.n; ++m) values[a][m] = std::abs(values[a][m] - ref.median[a]);
-    ref.spread[a] = median(values[a].data(), ref.n);
-  }
-  return ref;
+  if (ref.n == 0) return;
+  for (int a = 0; a < 3; ++a) ref.median[a] = median(ref.values[a].data(), ref.n);
 }
 
-bool passes(const std::array<float, 3>& u, const Reference& ref, const MedianTest& test) {
+// The spread from the values in whatever order the medians left them: a median is the same
+// value in any order.
+void find_spread(Reference& ref) {
+  for (int a = 0; a < 3; ++a) {
+    float* v = ref.values[a].data();
+    for (int m = 0; m < ref.n; ++m) v[m] = std::abs(v[m] - ref.median[a]);
+    ref.spread[a] = median(v, ref.n);
+  }
+  ref.has_spread = true;
+}
+
+bool passes(const std::array<float, 3>& u, Reference& ref, const MedianTest& test) {
+  // Within threshold x epsilon of the median on every axis a vector passes whatever the spread
+  // (>= 0, and a larger divisor gives no larger quotient): the spread's three selections are
+  // needed only beyond, and the outcome is the full test's.
+  bool near = true;
+  for (int a = 0; a < 3; ++a)
+    if (!(std::abs(u[a] - ref.median[a]) / test.epsilon <= test.threshold)) near = false;
+  if (near) return true;
+  if (!ref.has_spread) find_spread(ref);
   for (int a = 0; a < 3; ++a) {
     const double r = std::abs(u[a] - ref.median[a]) / (ref.spread[a] + test.epsilon);
     if (!(r <= test.threshold)) return false;
@@ -98,9 +115,10 @@ ValidatedField validate(Candidates& c, const MedianTest& test) {
   // 0: passed, 1: outlier replaced by a peak, 2: outlier waiting for interpolation.
   std::vector<std::uint8_t> state(n, 0);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n), [&](const auto& r) {
+    Reference ref;
     for (std::size_t node = r.begin(); node < r.end(); ++node) {
       if (!c.peaks[node]) continue;
-      const Reference ref = reference_of(c, node, radius);
+      reference_of(c, node, radius, ref);
       if (ref.n == 0 || passes(c.peak[0][node], ref, test)) {
         f.d[node] = c.peak[0][node];
         f.valid[node] = 1;
