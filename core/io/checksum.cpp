@@ -15,9 +15,17 @@ namespace plenopiv::io {
 std::string read_file_bytes(const std::filesystem::path& path) {
   std::error_code ec;
   if (!std::filesystem::is_regular_file(path, ec)) throw InputError(path.string() + ": no such file");
-  std::ifstream in(path, std::ios::binary);
-  std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  if (in.bad() || !in.is_open()) throw InputError(path.string() + ": cannot read");
+  // One read of the size the file has when opened (not a character at a time), then whatever
+  // it grew by since.
+  std::ifstream in(path, std::ios::binary | std::ios::ate);
+  const std::streamoff size = in ? std::streamoff(in.tellg()) : -1;
+  if (size < 0) throw InputError(path.string() + ": cannot read");
+  std::string bytes(std::size_t(size), '\0');
+  in.seekg(0);
+  in.read(bytes.data(), size);
+  if (in.gcount() != size) throw InputError(path.string() + ": cannot read (it shrank while being read)");
+  bytes.append(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  if (in.bad()) throw InputError(path.string() + ": cannot read");
   return bytes;
 }
 

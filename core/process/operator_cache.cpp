@@ -96,19 +96,6 @@ Parsed parse(std::string_view file, const std::string& key) {
   return Parsed{payload, Outcome::hit, {}};
 }
 
-// The whole file, read in one piece (a cache file holds hundreds of MB).
-std::string read_whole(const std::filesystem::path& path) {
-  std::ifstream in(path, std::ios::binary | std::ios::ate);
-  if (!in) throw InputError(path.string() + ": cannot open");
-  const std::streamoff size = in.tellg();
-  if (size < 0) throw InputError(path.string() + ": cannot read");
-  std::string bytes(std::size_t(size), '\0');
-  in.seekg(0);
-  in.read(bytes.data(), size);
-  if (!in) throw InputError(path.string() + ": cannot read");
-  return bytes;
-}
-
 // Keeps the `keep` most recently used weights-*.bin files of `folder`.
 void trim(const std::filesystem::path& folder, std::size_t keep) {
   std::error_code ec;
@@ -184,8 +171,9 @@ std::filesystem::path WeightsDiskCache::file_for(const std::string& key) const {
 std::unique_ptr<const recon::WeightingOperator> WeightsDiskCache::weights(const optics::CameraModel& camera,
                                                                           const optics::MicrolensArray& lenses,
                                                                           const ImageF& white, const Grid3& grid,
-                                                                          double angular_sampling) {
-  const std::string key = operator_key(camera, lenses, white, grid, angular_sampling);
+                                                                          double angular_sampling,
+                                                                          const std::string* known_key) {
+  const std::string key = known_key ? *known_key : operator_key(camera, lenses, white, grid, angular_sampling);
   const std::filesystem::path file = file_for(key);
   std::error_code ec;
   outcome_ = Outcome::missing;
@@ -193,7 +181,7 @@ std::unique_ptr<const recon::WeightingOperator> WeightsDiskCache::weights(const 
   if (std::filesystem::exists(file, ec)) {
     std::string bytes;
     try {
-      bytes = read_whole(file);
+      bytes = io::read_file_bytes(file);
     } catch (const InputError& e) {
       outcome_ = Outcome::corrupt;
       why = e.what();
@@ -276,8 +264,15 @@ std::shared_ptr<const PairOperator> OperatorCache::get(const optics::CameraModel
     if (note) *note = note_;
     return kept_.front().second;
   }
-  auto op = std::make_shared<const PairOperator>(camera, lenses, white, grid, angular_sampling,
-                                                 disk_ ? disk_->source() : PairOperator::WeightsSource{});
+  // The disk cache is asked for the inputs keyed above, as they are, or for a resampled lattice's.
+  PairOperator::WeightsSource source;
+  if (disk_)
+    source = [&](const optics::CameraModel& c, const optics::MicrolensArray& l, const ImageF& w, const Grid3& g,
+                 double a) {
+      const bool keyed = &c == &camera && &l == &lenses && &w == &white && g == grid && a == angular_sampling;
+      return disk_->weights(c, l, w, g, a, keyed ? &key : nullptr);
+    };
+  auto op = std::make_shared<const PairOperator>(camera, lenses, white, grid, angular_sampling, source);
   ++counts_.builds;
   note_ = disk_ ? disk_->last_note() : "operator built";
   if (note) *note = note_;

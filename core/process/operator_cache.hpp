@@ -40,10 +40,13 @@ class WeightsDiskCache {
 
   explicit WeightsDiskCache(std::filesystem::path folder, std::size_t keep = 4);
 
-  // The operator for these inputs: read from its file, or built and written there.
+  // The operator for these inputs: read from its file, or built and written there. `key`
+  // (optional): operator_key of these very inputs, when the caller has it (hashing a large white
+  // image is not free).
   std::unique_ptr<const recon::WeightingOperator> weights(const optics::CameraModel& camera,
                                                           const optics::MicrolensArray& lenses, const ImageF& white,
-                                                          const Grid3& grid, double angular_sampling);
+                                                          const Grid3& grid, double angular_sampling,
+                                                          const std::string* key = nullptr);
   // weights() as a PairOperator's source of weights (this cache must outlive the call).
   PairOperator::WeightsSource source();
   Outcome last_outcome() const { return outcome_; }

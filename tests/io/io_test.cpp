@@ -11,6 +11,7 @@
 
 #include "core/base/errors.hpp"
 #include "core/io/atomic_file.hpp"
+#include "core/io/checksum.hpp"
 #include "core/io/direct_writer.hpp"
 #include "core/io/hdf5_files.hpp"
 #include "core/io/raw_frame.hpp"
@@ -364,6 +365,25 @@ TEST(AtomicFile, AFailedWriteLeavesNothingBehind) {
   EXPECT_TRUE(std::filesystem::is_empty(dir));
   const std::string err = message_of([&] { write_volume_h5(dir / "missing/v.h5", ramp_volume()); });
   EXPECT_NE(err.find("does not exist"), std::string::npos) << err;
+}
+
+TEST(FileBytes, EveryByteOfEmptySmallAndLargeFilesAndTheirCrc) {
+  const auto dir = temp_dir() / "file_bytes";
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  std::string large(3u << 20, '\0');
+  for (std::size_t i = 0; i < large.size(); ++i) large[i] = char((i * 2654435761u) >> 24);
+  for (const std::string& bytes : {std::string(), std::string("a\0b\n", 4), large}) {
+    const auto file = dir / ("f" + std::to_string(bytes.size()));
+    std::ofstream(file, std::ios::binary).write(bytes.data(), std::streamsize(bytes.size()));
+    EXPECT_EQ(read_file_bytes(file), bytes) << bytes.size() << " bytes";
+  }
+  // zlib's CRC-32 of "123456789", the check value of the CRC-32/ISO-HDLC catalogue entry.
+  EXPECT_EQ(crc32_hex(crc32_of("123456789")), "cbf43926");
+  for (const auto& bad : {dir / "missing", dir}) {
+    const std::string err = message_of([&] { read_file_bytes(bad); });
+    EXPECT_NE(err.find(bad.string()), std::string::npos) << err;
+  }
 }
 
 TEST(Hdf5, VolumeRoundTrip) {
