@@ -80,4 +80,22 @@ void dot_slice_rows(const float* row_a, const float* row_b, const std::size_t* s
 // image[i] *= white[i] over n pixels.
 void white_band(float* image, const float* white, std::size_t n);
 
+// What MART's log-ratio of a pixel is made of (all arrays over the sensor's pixels).
+struct LogRatioInputs {
+  const float* projection;  // P: the volume's projection
+  const float* data;        // I: the recorded image
+  const float* log_data;    // ln I where I > 0
+  const float* white;       // the white image: 0 between microlens images
+  const float* scale;       // a factor per pixel, or null: 1
+  float max_log;            // bound on |log-ratio|
+  float log_floor;          // ln of the floor a dark pixel (I = 0) recorded at most
+  float dark_floor;         // that floor
+  float tiny;               // P below it is taken as it inside the logarithm
+};
+// ratio[i] for pixels [i0, i1): 0 where the white image is 0 (no voxel sees the pixel); for a lit
+// pixel k ln(I/P) clamped to ±max_log (0 where P = 0); for a dark one k max(ln(floor/P), -max_log)
+// where P > floor, else 0 (it pulls the voxels that claim more light there down, never up). The
+// logarithm is glibc's vector one: within a few ulp of its scalar logf, and the same in every run.
+void log_ratios(const LogRatioInputs& in, std::size_t i0, std::size_t i1, float* ratio);
+
 }  // namespace plenopiv::recon::kernels

@@ -12,6 +12,7 @@
 #include <string>
 #include <utility>
 
+#include "core/recon/kernels.hpp"
 #include "core/recon/mart_numerics.hpp"
 
 namespace plenopiv::recon::detail {
@@ -221,18 +222,9 @@ double SmartSolver::residual() const {
 // The log-ratio of each pixel MART uses, times `scale` (the white image, or 1 where the sensor
 // blur is applied before whitening).
 void SmartSolver::ratio_band(std::size_t i0, std::size_t i1, const float* scale) {
-  for (std::size_t i = i0; i < i1; ++i) {
-    const float p = b_.projection[i], d = b_.data[i], k = scale ? scale[i] : 1.f;
-    if (white_[i] == 0.f) {
-      b_.ratio[i] = 0.f;  // between microlens images: no voxel sees the pixel
-    } else if (d > 0.f) {
-      b_.ratio[i] = p > 0.f ? k * std::clamp(b_.log_data[i] - std::log(p), -kMaxLog, kMaxLog) : 0.f;
-    } else {
-      // A dark pixel the voxel sees only faintly: it recorded at most the floor, so it pulls the
-      // voxels that claim more light there down (never up).
-      b_.ratio[i] = p > dark_floor_ ? k * std::max(log_floor_ - std::log(p), -kMaxLog) : 0.f;
-    }
-  }
+  const kernels::LogRatioInputs in{
+      b_.projection.data(), b_.data.data(), b_.log_data.data(), white_, scale, kMaxLog, log_floor_, dark_floor_, kTiny};
+  kernels::log_ratios(in, i0, i1, b_.ratio.data());
 }
 
 void SmartSolver::project_and_compare(bool with_ratio) {
