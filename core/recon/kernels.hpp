@@ -95,7 +95,26 @@ struct LogRatioInputs {
 // ratio[i] for pixels [i0, i1): 0 where the white image is 0 (no voxel sees the pixel); for a lit
 // pixel k ln(I/P) clamped to ±max_log (0 where P = 0); for a dark one k max(ln(floor/P), -max_log)
 // where P > floor, else 0 (it pulls the voxels that claim more light there down, never up). The
-// logarithm is glibc's vector one: within a few ulp of its scalar logf, and the same in every run.
+// logarithm is SLEEF's deterministic SSE2 one (3.5 ulp): the same bits on every x86-64 CPU.
 void log_ratios(const LogRatioInputs& in, std::size_t i0, std::size_t i1, float* ratio);
+
+// out[i] = ln values[i] where values[i] > 0, else 0, for [i0, i1), with the logarithm log_ratios and
+// extrapolate take: a pixel its projection matches gets a log-ratio of exactly 0, a voxel unchanged
+// since then a momentum of exactly 0.
+void log_or_zero(const float* values, std::size_t i0, std::size_t i1, float* out);
+
+// Nesterov's step of accelerated MART on voxels [i0, i1), arrays over the active voxels: y = x_k
+// (x_k / x_(k-1))^beta, taken on ln E. `e` holds x_k and gets y; `last` and `log_last` hold x_(k-1)
+// and its ln and get x_k and its ln; `momentum` gets ln x_k - ln x_(k-1) (0 where either is 0).
+// The exponent is bounded by ±max_log and y flushed to 0 below `tiny`, capped at `huge`. SLEEF's
+// log and exp, as log_ratios.
+struct Extrapolation {
+  float* e;
+  float* last;
+  float* log_last;
+  float* momentum;
+  float beta, max_log, tiny, huge;
+};
+void extrapolate(const Extrapolation& x, std::size_t i0, std::size_t i1);
 
 }  // namespace plenopiv::recon::kernels

@@ -168,9 +168,10 @@ void SmartSolver::prepare_iterations() {
   const BigBuffer<float>& data = b_.data;
   BigBuffer<float>& log_data = b_.log_data;
   fit(log_data, data.size());
-  for_pixels(data.size(), [&](std::size_t i0, std::size_t i1) {
-    for (std::size_t i = i0; i < i1; ++i) log_data[i] = data[i] > 0.f ? std::log(data[i]) : 0.f;
-  });
+  // The log-ratios' logarithm (kernels::log_ratios), so that a pixel its projection matches
+  // exactly has a log-ratio of exactly 0.
+  for_pixels(data.size(),
+             [&](std::size_t i0, std::size_t i1) { kernels::log_or_zero(data.data(), i0, i1, log_data.data()); });
   log_floor_ = std::log(dark_floor_);
   // The residual's two sums per band of the projection, added in band order: the same at any
   // thread count.
@@ -181,7 +182,9 @@ void SmartSolver::prepare_iterations() {
   if (settings_.accelerate) {
     b_.last.assign(b_.e.begin(), b_.e.end());
     b_.log_last.resize(n_);  // written in full here
-    for_voxels([&](std::size_t m) { b_.log_last[m] = b_.last[m] > 0.f ? std::log(b_.last[m]) : 0.f; });
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n_, 1 << 12), [&](const tbb::blocked_range<std::size_t>& r) {
+      kernels::log_or_zero(b_.last.data(), r.begin(), r.end(), b_.log_last.data());
+    });
     b_.momentum.assign(n_, 0.f);
   }
 }
@@ -189,14 +192,10 @@ void SmartSolver::prepare_iterations() {
 void SmartSolver::extrapolate(float beta) {
   // Each iteration starts from y = x_k (x_k / x_(k-1))^beta_k with FISTA's
   // beta_k = (k - 1) / (k + 2).
-  BigBuffer<float>& e = b_.e;
-  for_voxels([&](std::size_t m) {
-    const float log_e = e[m] > 0.f ? std::log(e[m]) : 0.f;
-    b_.momentum[m] = e[m] > 0.f && b_.last[m] > 0.f ? log_e - b_.log_last[m] : 0.f;
-    b_.last[m] = e[m];
-    b_.log_last[m] = log_e;
-    e[m] = clean(e[m] * bounded_exp(beta * b_.momentum[m]));
-  });
+  const kernels::Extrapolation x{b_.e.data(), b_.last.data(), b_.log_last.data(), b_.momentum.data(), beta, kMaxLog,
+                                 kTiny,       kHuge};
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n_, 1 << 12),
+                    [&](const tbb::blocked_range<std::size_t>& r) { kernels::extrapolate(x, r.begin(), r.end()); });
 }
 
 void SmartSolver::residual_band(int band, std::size_t i0, std::size_t i1) {
