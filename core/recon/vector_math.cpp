@@ -46,7 +46,7 @@ void log_ratios_of(const LogRatioInputs& in, std::size_t i0, std::size_t i1, flo
     const float* __restrict data = in.data + c;
     const float* __restrict log_data = in.log_data + c;
     const float* __restrict white = in.white + c;
-    const float* __restrict scale = in.scale + (Scaled ? c : 0);
+    const float* __restrict scale = Scaled ? in.scale + c : nullptr;
     float* __restrict out = ratio + c;
     for (std::size_t j = 0; j < n; ++j) {
       float lit = log_data[j] - log_p[j], dark = log_floor - log_p[j];
