@@ -1,0 +1,132 @@
+// MART's elementwise logarithms and exponentials (kernels::log_ratios, log_or_zero, extrapolate):
+// each pixel's case, the bounds, and the same bits wherever a range is split.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <random>
+#include <vector>
+
+#include "core/recon/kernels.hpp"
+
+namespace plenopiv::recon::kernels {
+namespace {
+
+constexpr float kMaxLog = 40.f, kTiny = 1e-30f, kHuge = 1e30f;
+
+// Pixels of every case: between lens images (white 0), lit with P > 0 and P = 0, dark with P above
+// and below the floor, log-ratios beyond ±kMaxLog; n not a multiple of four.
+struct Pixels {
+  std::vector<float> projection, data, log_data, white, scale;
+  float dark_floor = 0.5f, log_floor = std::log(0.5f);
+  explicit Pixels(std::size_t n) : projection(n), data(n), log_data(n), white(n), scale(n) {
+    std::mt19937 random(7);
+    std::uniform_real_distribution<float> unit(0.f, 1.f), exponent(-40.f, 40.f);
+    for (std::size_t i = 0; i < n; ++i) {
+      const int kind = int(i % 7);
+      projection[i] = kind == 1 ? 0.f : (kind == 2 ? 1e-35f : std::exp(exponent(random)));
+      data[i] = kind == 3 || kind == 4 ? 0.f : std::exp(exponent(random));
+      if (kind == 4) projection[i] = 0.25f * unit(random);  // dark, below the floor
+      white[i] = kind == 5 ? 0.f : unit(random);
+      scale[i] = unit(random);
+    }
+    log_or_zero(data.data(), 0, n, log_data.data());
+  }
+  LogRatioInputs inputs(bool scaled) const {
+    return {projection.data(), data.data(), log_data.data(), white.data(), scaled ? scale.data() : nullptr,
+            kMaxLog,           log_floor,   dark_floor,      kTiny};
+  }
+};
+
+std::vector<std::size_t> random_cuts(std::mt19937& random, std::size_t n) {
+  std::uniform_int_distribution<std::size_t> at(0, n);
+  std::vector<std::size_t> cuts{0, n, at(random), at(random), at(random)};
+  std::sort(cuts.begin(), cuts.end());
+  return cuts;
+}
+
+TEST(VectorMath, EachPixelsCaseAndTheBoundsOfTheLogRatio) {
+  const Pixels px(1003);
+  for (const bool scaled : {false, true}) {
+    std::vector<float> ratio(px.data.size());
+    log_ratios(px.inputs(scaled), 0, ratio.size(), ratio.data());
+    for (std::size_t i = 0; i < ratio.size(); ++i) {
+      const float p = px.projection[i], k = scaled ? px.scale[i] : 1.f;
+      double expected = 0;
+      if (px.white[i] == 0.f) {
+        expected = 0;
+      } else if (px.data[i] > 0.f) {
+        expected = p > 0.f ? k * std::clamp(std::log(double(px.data[i])) - std::log(std::max(double(p), 1e-30)), -40.0,
+                                            40.0)
+                           : 0.0;
+      } else {
+        expected = p > px.dark_floor ? k * std::max(double(px.log_floor) - std::log(double(p)), -40.0) : 0.0;
+      }
+      if (expected == 0) {
+        EXPECT_EQ(ratio[i], 0.f) << "pixel " << i;
+      } else {
+        // ln within a few ulp of values up to 69: 2e-5 absolute.
+        EXPECT_NEAR(ratio[i], expected, 2e-5 + 1e-6 * std::abs(expected)) << "pixel " << i;
+        EXPECT_LE(std::abs(ratio[i]), k * kMaxLog) << "pixel " << i;
+      }
+    }
+  }
+}
+
+TEST(VectorMath, AProjectionThatMatchesItsPixelGivesALogRatioOfExactlyZero) {
+  Pixels px(101);
+  px.projection = px.data;  // every lit pixel matched
+  std::vector<float> ratio(px.data.size(), 1.f);
+  log_ratios(px.inputs(false), 0, ratio.size(), ratio.data());
+  for (std::size_t i = 0; i < ratio.size(); ++i) {
+    if (px.data[i] > kTiny) {
+      EXPECT_EQ(ratio[i], 0.f) << "pixel " << i;
+    }
+  }
+}
+
+TEST(VectorMath, TheSameBitsWhereverARangeIsSplit) {
+  const Pixels px(1003);
+  const std::size_t n = px.data.size();
+  std::vector<float> whole(n), logs(n);
+  log_ratios(px.inputs(true), 0, n, whole.data());
+  log_or_zero(px.data.data(), 0, n, logs.data());
+  // The accelerated step's state: voxels at 0 and at least kTiny, some unchanged since the last.
+  std::mt19937 random(3);
+  std::uniform_real_distribution<float> exponent(-60.f, 60.f);
+  std::vector<float> e(n), last(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    e[i] = i % 5 == 0 ? 0.f : std::exp(exponent(random));
+    last[i] = i % 3 == 0 ? e[i] : (i % 11 == 0 ? 0.f : std::exp(exponent(random)));
+  }
+  std::vector<float> log_last(n), momentum(n);
+  log_or_zero(last.data(), 0, n, log_last.data());
+  std::vector<float> step_e = e, step_last = last, step_log_last = log_last, step_momentum(n);
+  extrapolate({step_e.data(), step_last.data(), step_log_last.data(), step_momentum.data(), 0.6f, kMaxLog, kTiny, kHuge},
+              0, n);
+  for (std::size_t i = 0; i < n; ++i) {
+    if (i % 3 == 0 && e[i] > 0.f) {
+      EXPECT_EQ(step_momentum[i], 0.f) << "an unchanged voxel " << i << " has no momentum";
+      EXPECT_EQ(step_e[i], e[i]) << "voxel " << i;
+    }
+    EXPECT_TRUE(step_e[i] == 0.f || (step_e[i] >= kTiny && step_e[i] <= kHuge)) << "voxel " << i << ": " << step_e[i];
+  }
+  for (int trial = 0; trial < 20; ++trial) {
+    const std::vector<std::size_t> cuts = random_cuts(random, n);
+    std::vector<float> split(n), split_logs(n);
+    std::vector<float> se = e, sl = last, sll = log_last, sm(n);
+    for (std::size_t c = 0; c + 1 < cuts.size(); ++c) {
+      log_ratios(px.inputs(true), cuts[c], cuts[c + 1], split.data());
+      log_or_zero(px.data.data(), cuts[c], cuts[c + 1], split_logs.data());
+      extrapolate({se.data(), sl.data(), sll.data(), sm.data(), 0.6f, kMaxLog, kTiny, kHuge}, cuts[c], cuts[c + 1]);
+    }
+    EXPECT_EQ(0, std::memcmp(split.data(), whole.data(), n * sizeof(float))) << "trial " << trial;
+    EXPECT_EQ(0, std::memcmp(split_logs.data(), logs.data(), n * sizeof(float))) << "trial " << trial;
+    EXPECT_EQ(0, std::memcmp(se.data(), step_e.data(), n * sizeof(float))) << "trial " << trial;
+    EXPECT_EQ(0, std::memcmp(sm.data(), step_momentum.data(), n * sizeof(float))) << "trial " << trial;
+  }
+}
+
+}  // namespace
+}  // namespace plenopiv::recon::kernels
