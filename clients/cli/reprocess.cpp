@@ -71,7 +71,7 @@ RunInputs read_inputs(const ReprocessOptions& o) {
   in.settings_text = io::read_file_bytes(spec_file);
   in.tier = o.tier;
   in.settings = tier_of(process::load_process_spec(spec_file), o.tier, spec_file.string());
-  in.camera_crc = io::crc32_hex(io::crc32_of(io::read_file_bytes(in.reader.camera_file())));
+  in.camera_crc = io::crc32_hex(io::checksum_of_file(in.reader.camera_file()).crc32);
   in.calibration_crc = in.reader.calibration_file() ? in.reader.manifest().calibration_crc32() : "nominal";
   in.reader.check_frames(in.camera.sensor().width_px, in.camera.sensor().height_px);
 
@@ -95,8 +95,8 @@ std::string input_description(const RunInputs& in, const run_folder::PairEntry& 
   const std::string description = std::string("plenopiv ") + PLENOPIV_VERSION + "\nsettings " +
                                   io::crc32_hex(io::crc32_of(in.settings_text)) + " tier " + in.tier + "\ncamera " +
                                   in.camera_crc + "\ncalibration " + in.calibration_crc + "\nframe A " +
-                                  io::crc32_hex(io::crc32_of(io::read_file_bytes(p.frame_a))) + "\nframe B " +
-                                  io::crc32_hex(io::crc32_of(io::read_file_bytes(p.frame_b))) + "\ndt_s " + dt + "\n";
+                                  io::crc32_hex(io::checksum_of_file(p.frame_a).crc32) + "\nframe B " +
+                                  io::crc32_hex(io::checksum_of_file(p.frame_b).crc32) + "\ndt_s " + dt + "\n";
   return description;
 }
 

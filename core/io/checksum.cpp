@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <fstream>
 #include <iterator>
+#include <vector>
 
 #include "core/base/errors.hpp"
 
@@ -38,6 +39,24 @@ std::uint32_t crc32_of(std::string_view bytes) {
     at += n;
   }
   return std::uint32_t(crc);
+}
+
+FileChecksum checksum_of_file(const std::filesystem::path& path) {
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec)) throw InputError(path.string() + ": no such file");
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw InputError(path.string() + ": cannot read");
+  FileChecksum sum;
+  uLong crc = crc32(0L, Z_NULL, 0);
+  std::vector<char> piece(1 << 20);
+  while (in.read(piece.data(), std::streamsize(piece.size())) || in.gcount() > 0) {
+    const auto n = std::size_t(in.gcount());
+    crc = crc32(crc, reinterpret_cast<const Bytef*>(piece.data()), uInt(n));
+    sum.bytes += n;
+  }
+  if (in.bad()) throw InputError(path.string() + ": cannot read");
+  sum.crc32 = std::uint32_t(crc);
+  return sum;
 }
 
 std::string crc32_hex(std::uint32_t crc) {

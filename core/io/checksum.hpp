@@ -12,6 +12,13 @@ namespace plenopiv::io {
 std::string read_file_bytes(const std::filesystem::path& path);
 // CRC-32 (zlib's, as `crc32` in Python's zlib and binascii) of `bytes`.
 std::uint32_t crc32_of(std::string_view bytes);
+// CRC-32 of a file's bytes and their count, read in pieces (the file is never whole in memory);
+// InputError naming the file when it is missing or cannot be read.
+struct FileChecksum {
+  std::uint32_t crc32 = 0;
+  std::uint64_t bytes = 0;
+};
+FileChecksum checksum_of_file(const std::filesystem::path& path);
 // "%08x" of a CRC-32, as manifests write it.
 std::string crc32_hex(std::uint32_t crc);
 

@@ -34,9 +34,8 @@ void write_vector_field_files(const std::filesystem::path& h5, const std::filesy
 }
 
 io::TextAttribute input_file_entry(const std::string& name, const std::filesystem::path& file) {
-  const std::string bytes = io::read_file_bytes(file);
-  return {name, file.string() + " (CRC-32 " + io::crc32_hex(io::crc32_of(bytes)) + ", " + std::to_string(bytes.size()) +
-                    " bytes)"};
+  const io::FileChecksum sum = io::checksum_of_file(file);
+  return {name, file.string() + " (CRC-32 " + io::crc32_hex(sum.crc32) + ", " + std::to_string(sum.bytes) + " bytes)"};
 }
 
 }  // namespace plenopiv::process

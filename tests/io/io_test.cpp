@@ -367,22 +367,26 @@ TEST(AtomicFile, AFailedWriteLeavesNothingBehind) {
   EXPECT_NE(err.find("does not exist"), std::string::npos) << err;
 }
 
-TEST(FileBytes, EveryByteOfEmptySmallAndLargeFilesAndTheirCrc) {
+TEST(FileBytes, EveryByteOfEmptySmallAndLargeFilesAndTheirCrcWholeOrInPieces) {
   const auto dir = temp_dir() / "file_bytes";
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
-  std::string large(3u << 20, '\0');
+  std::string large((3u << 20) + 12345, '\0');  // pieces of 1 MiB and a rest
   for (std::size_t i = 0; i < large.size(); ++i) large[i] = char((i * 2654435761u) >> 24);
   for (const std::string& bytes : {std::string(), std::string("a\0b\n", 4), large}) {
     const auto file = dir / ("f" + std::to_string(bytes.size()));
     std::ofstream(file, std::ios::binary).write(bytes.data(), std::streamsize(bytes.size()));
     EXPECT_EQ(read_file_bytes(file), bytes) << bytes.size() << " bytes";
+    const FileChecksum sum = checksum_of_file(file);
+    EXPECT_EQ(sum.crc32, crc32_of(bytes)) << bytes.size() << " bytes";
+    EXPECT_EQ(sum.bytes, bytes.size());
   }
   // zlib's CRC-32 of "123456789", the check value of the CRC-32/ISO-HDLC catalogue entry.
   EXPECT_EQ(crc32_hex(crc32_of("123456789")), "cbf43926");
   for (const auto& bad : {dir / "missing", dir}) {
-    const std::string err = message_of([&] { read_file_bytes(bad); });
-    EXPECT_NE(err.find(bad.string()), std::string::npos) << err;
+    for (const std::string& err :
+         {message_of([&] { read_file_bytes(bad); }), message_of([&] { checksum_of_file(bad); })})
+      EXPECT_NE(err.find(bad.string()), std::string::npos) << err;
   }
 }
 

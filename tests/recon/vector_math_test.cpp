@@ -57,9 +57,9 @@ TEST(VectorMath, EachPixelsCaseAndTheBoundsOfTheLogRatio) {
       if (px.white[i] == 0.f) {
         expected = 0;
       } else if (px.data[i] > 0.f) {
-        expected = p > 0.f ? k * std::clamp(std::log(double(px.data[i])) - std::log(std::max(double(p), 1e-30)), -40.0,
-                                            40.0)
-                           : 0.0;
+        expected =
+            p > 0.f ? k * std::clamp(std::log(double(px.data[i])) - std::log(std::max(double(p), 1e-30)), -40.0, 40.0)
+                    : 0.0;
       } else {
         expected = p > px.dark_floor ? k * std::max(double(px.log_floor) - std::log(double(p)), -40.0) : 0.0;
       }
@@ -103,8 +103,8 @@ TEST(VectorMath, TheSameBitsWhereverARangeIsSplit) {
   std::vector<float> log_last(n), momentum(n);
   log_or_zero(last.data(), 0, n, log_last.data());
   std::vector<float> step_e = e, step_last = last, step_log_last = log_last, step_momentum(n);
-  extrapolate({step_e.data(), step_last.data(), step_log_last.data(), step_momentum.data(), 0.6f, kMaxLog, kTiny, kHuge},
-              0, n);
+  extrapolate(
+      {step_e.data(), step_last.data(), step_log_last.data(), step_momentum.data(), 0.6f, kMaxLog, kTiny, kHuge}, 0, n);
   for (std::size_t i = 0; i < n; ++i) {
     if (i % 3 == 0 && e[i] > 0.f) {
       EXPECT_EQ(step_momentum[i], 0.f) << "an unchanged voxel " << i << " has no momentum";
