@@ -172,7 +172,11 @@ void SmartSolver::prepare_iterations() {
   // exactly has a log-ratio of exactly 0.
   for_pixels(data.size(),
              [&](std::size_t i0, std::size_t i1) { kernels::log_or_zero(data.data(), i0, i1, log_data.data()); });
-  log_floor_ = std::log(dark_floor_);
+  // ln floor with the same logarithm: the dark pixels' log-ratios subtract ln P from it. A floor
+  // below kTiny (an image whose faintest pixel is a denormal) as kTiny: its log-ratios are at their
+  // bound either way.
+  const float floor_or_tiny = std::max(dark_floor_, kTiny);
+  kernels::log_or_zero(&floor_or_tiny, 0, 1, &log_floor_);
   // The residual's two sums per band of the projection, added in band order: the same at any
   // thread count.
   band_sums_.assign(std::size_t(active_.band_count()), {0.0, 0.0});
