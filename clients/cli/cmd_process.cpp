@@ -159,18 +159,11 @@ void run_process(const ProcessOptions& o) {
   std::fprintf(stderr, "volume %d x %d x %d voxels (+%d guard slices at each depth end); weights ...\n", g.shape[0],
                g.shape[1], g.shape[2], settings.guard_slices());
   const auto operators = weights_cache(o.cache_dir, o.no_cache);
-  // The depth response (reconstruction.depth_response_ppm) simulates and processes pairs first.
-  std::optional<Progress> response_progress;
-  if (settings.depth_response_ppm > 0) response_progress.emplace("depth response", "%", 100.0);
-  const process::PairProcessor processor(camera, cal, settings, operators.get(), [&](double f) {
-    if (response_progress) response_progress->update(f);
-  });
-  if (operators || processor.depth_response()) std::fprintf(stderr, "%s\n", processor.setup_note().c_str());
-  if (!processor.note().empty()) std::fprintf(stderr, "%s\n", processor.note().c_str());
+  const auto processor = make_pair_processor(camera, cal, settings, operators.get());
   Progress progress("process", "pairs", 1.0);
   process::PairOptions options;
   options.progress = [&](const std::string&, double f) { progress.update(f); };
-  const auto r = processor.process(a, b, options);
+  const auto r = processor->process(a, b, options);
 
   std::vector<io::TextAttribute> provenance{process::input_file_entry("frame_a", o.frame_a),
                                             process::input_file_entry("frame_b", o.frame_b),

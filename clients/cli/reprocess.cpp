@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "clients/cli/progress.hpp"
+#include "clients/cli/weights_cache.hpp"
 #include "core/base/errors.hpp"
 #include "core/base/memory.hpp"
 #include "core/calib/calibration_file.hpp"
@@ -200,14 +201,7 @@ ReprocessReport reprocess_run(const ReprocessOptions& o) {
       per_pair / 1e9, o.jobs);
   std::optional<process::OperatorCache> operators;
   if (!o.weights_cache.empty()) operators.emplace(1, o.weights_cache);
-  std::optional<Progress> response_progress;  // reconstruction.depth_response_ppm: pairs simulated first
-  if (in.settings.depth_response_ppm > 0) response_progress.emplace("depth response", "%", 100.0);
-  const process::PairProcessor processor(in.camera, calibration, in.settings, operators ? &*operators : nullptr,
-                                         [&](double f) {
-                                           if (response_progress) response_progress->update(f);
-                                         });
-  if (operators || processor.depth_response()) std::fprintf(stderr, "%s\n", processor.setup_note().c_str());
-  if (!processor.note().empty()) std::fprintf(stderr, "%s\n", processor.note().c_str());
+  const auto processor = make_pair_processor(in.camera, calibration, in.settings, operators ? &*operators : nullptr);
   // The settings the outputs were made with, beside them.
   io::write_text_atomically(in.output / "process.yaml", in.settings_text);
 
@@ -247,7 +241,7 @@ ReprocessReport reprocess_run(const ReprocessOptions& o) {
         process::PairOptions options;
         options.measured_dt_s = p.measured_dt_s;
         options.progress = [&](const std::string&, double f) { progress.pair_progress(slot, f); };
-        const process::PairResult r = processor.process(a, b, options);
+        const process::PairResult r = processor->process(a, b, options);
         process::write_vector_field_files(
             output_of(in, p, ".h5"), output_of(in, p, ".vti"), r.correlation.field, r.correlation.flags,
             {{"input_hash", hash},

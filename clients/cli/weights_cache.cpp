@@ -1,7 +1,11 @@
-// Where `plenopiv process` and `plenopiv reconstruct` keep weight tables between calls.
+// Where `plenopiv process` and `plenopiv reconstruct` keep weight tables between calls, and the
+// pair processor `plenopiv process` builds through them.
 #include "clients/cli/weights_cache.hpp"
 
 #include <cstdio>
+#include <optional>
+
+#include "clients/cli/progress.hpp"
 
 namespace plenopiv::client {
 
@@ -17,6 +21,21 @@ std::unique_ptr<process::OperatorCache> weights_cache(const std::string& dir, bo
   const std::filesystem::path folder = weights_cache_folder(dir, off);
   if (folder.empty()) return nullptr;
   return std::make_unique<process::OperatorCache>(1, folder);
+}
+
+std::unique_ptr<const process::PairProcessor> make_pair_processor(const optics::CameraModel& camera,
+                                                                  const calib::LoadedCalibration& calibration,
+                                                                  const process::ProcessSettings& settings,
+                                                                  process::OperatorCache* operators) {
+  std::optional<Progress> response_progress;  // the depth response simulates and processes pairs first
+  if (settings.depth_response_ppm > 0) response_progress.emplace("depth response", "%", 100.0);
+  auto processor =
+      std::make_unique<const process::PairProcessor>(camera, calibration, settings, operators, [&](double f) {
+        if (response_progress) response_progress->update(f);
+      });
+  if (operators || processor->depth_response()) std::fprintf(stderr, "%s\n", processor->setup_note().c_str());
+  if (!processor->note().empty()) std::fprintf(stderr, "%s\n", processor->note().c_str());
+  return processor;
 }
 
 }  // namespace plenopiv::client
