@@ -18,6 +18,7 @@
 #include "core/io/tiff.hpp"
 #include "core/io/vtk_files.hpp"
 #include "tests/support/child_process.hpp"
+#include "tests/support/input_error.hpp"
 #include "tests/support/temp_dir.hpp"
 #include "tests/support/tmpfs.hpp"
 
@@ -26,14 +27,7 @@ namespace {
 
 std::filesystem::path temp_dir() { return testing_support::temp_dir("io-test"); }
 
-std::string message_of(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const InputError& e) {
-    return e.what();
-  }
-  return "";
-}
+using testing_support::error_of;
 
 Volume ramp_volume() {
   Grid3 g;
@@ -251,16 +245,16 @@ TEST(Tiff, FloatStackRoundTrip) {
 TEST(Tiff, CorruptAndMissingFilesAreNamed) {
   const auto path = temp_dir() / "corrupt.tif";
   std::ofstream(path) << "II*\0 this is not a tiff";
-  const std::string corrupt = message_of([&] { read_tiff_u16(path); });
+  const std::string corrupt = error_of([&] { read_tiff_u16(path); });
   EXPECT_NE(corrupt.find(path.string()), std::string::npos) << corrupt;
-  const std::string missing = message_of([&] { read_tiff_u16(temp_dir() / "nope.tif"); });
+  const std::string missing = error_of([&] { read_tiff_u16(temp_dir() / "nope.tif"); });
   EXPECT_NE(missing.find("nope.tif: cannot open as TIFF"), std::string::npos) << missing;
 }
 
 TEST(Tiff, FloatImageIsNotARawFrame) {
   const auto path = temp_dir() / "float.tif";
   write_tiff_stack(path, {ImageF(3, 3, 1.f)});
-  const std::string err = message_of([&] { read_tiff_u16(path); });
+  const std::string err = error_of([&] { read_tiff_u16(path); });
   EXPECT_NE(err.find("expected a single-channel 8- or 16-bit unsigned TIFF"), std::string::npos) << err;
 }
 
@@ -308,7 +302,7 @@ TEST(RawFrame, PngAndTiffOfEveryDepthReadAsCounts) {
       read_mean_frame({(dir / "a.png").string(), (dir / "c.tif").string(), (dir / "b.png").string()}, "white");
   EXPECT_FLOAT_EQ(mean.at(3, 2), (23.0f + 23.0f + 2003.0f) / 3);
   ASSERT_TRUE(cv::imwrite((dir / "small.png").string(), cv::Mat(2, 2, CV_8U, cv::Scalar(1))));
-  const std::string err = message_of([&] {
+  const std::string err = error_of([&] {
     read_mean_frame({(dir / "a.png").string(), (dir / "small.png").string()}, "dark");
   });
   EXPECT_NE(err.find("small.png: dark frame is 2 x 2 pixels, "), std::string::npos) << err;
@@ -322,33 +316,33 @@ TEST(RawFrame, ColourNonFiniteCorruptAndForeignFilesAreRefusedByName) {
   ASSERT_TRUE(cv::imwrite((dir / "grey_rgb.png").string(), cv::Mat(2, 3, CV_8UC3, cv::Scalar(7, 7, 7))));
   EXPECT_EQ(read_raw_frame(dir / "grey_rgb.png").pixels, std::vector<float>(6, 7.0f));
   ASSERT_TRUE(cv::imwrite((dir / "colour.png").string(), cv::Mat(2, 3, CV_8UC3, cv::Scalar(7, 8, 9))));
-  std::string err = message_of([&] { read_raw_frame(dir / "colour.png"); });
+  std::string err = error_of([&] { read_raw_frame(dir / "colour.png"); });
   EXPECT_NE(err.find("colour.png: a colour PNG"), std::string::npos) << err;
 
   ImageF nan(3, 2, 1.0f);
   nan.at(2, 1) = std::nanf("");
   write_tiff_stack(dir / "nan.tif", {nan});
-  err = message_of([&] { read_raw_frame(dir / "nan.tif"); });
+  err = error_of([&] { read_raw_frame(dir / "nan.tif"); });
   EXPECT_NE(err.find("nan.tif: pixel (2, 1) is nan; a raw frame's values must be finite"), std::string::npos) << err;
 
   std::ofstream(dir / "text.png") << "just some text, not an image";
-  err = message_of([&] { read_raw_frame(dir / "text.png"); });
+  err = error_of([&] { read_raw_frame(dir / "text.png"); });
   EXPECT_NE(err.find("text.png: not a PNG or TIFF file"), std::string::npos) << err;
   {
     std::ofstream bad(dir / "cut.png", std::ios::binary);
     bad << "\x89PNG\r\n\x1a\n" << std::string(40, 'x');
   }
-  err = message_of([&] { read_raw_frame(dir / "cut.png"); });
+  err = error_of([&] { read_raw_frame(dir / "cut.png"); });
   EXPECT_NE(err.find("cut.png: corrupt or unreadable PNG"), std::string::npos) << err;
-  err = message_of([&] { read_raw_frame(dir / "missing.png"); });
+  err = error_of([&] { read_raw_frame(dir / "missing.png"); });
   EXPECT_NE(err.find("missing.png: no such file"), std::string::npos) << err;
-  err = message_of([&] { read_raw_frame(dir / "cut.tif"); });
+  err = error_of([&] { read_raw_frame(dir / "cut.tif"); });
   EXPECT_NE(err.find("cut.tif: no such file"), std::string::npos) << err;
   {
     const std::string head("II*\0 and then nothing useful", 29);
     std::ofstream(dir / "cut.tif", std::ios::binary).write(head.data(), std::streamsize(head.size()));
   }
-  err = message_of([&] { read_raw_frame(dir / "cut.tif"); });
+  err = error_of([&] { read_raw_frame(dir / "cut.tif"); });
   EXPECT_NE(err.find("cut.tif: cannot open as TIFF"), std::string::npos) << err;
 }
 
@@ -363,7 +357,7 @@ TEST(AtomicFile, AFailedWriteLeavesNothingBehind) {
                                 }),
                std::runtime_error);
   EXPECT_TRUE(std::filesystem::is_empty(dir));
-  const std::string err = message_of([&] { write_volume_h5(dir / "missing/v.h5", ramp_volume()); });
+  const std::string err = error_of([&] { write_volume_h5(dir / "missing/v.h5", ramp_volume()); });
   EXPECT_NE(err.find("does not exist"), std::string::npos) << err;
 }
 
@@ -384,8 +378,7 @@ TEST(FileBytes, EveryByteOfEmptySmallAndLargeFilesAndTheirCrcWholeOrInPieces) {
   // zlib's CRC-32 of "123456789", the check value of the CRC-32/ISO-HDLC catalogue entry.
   EXPECT_EQ(crc32_hex(crc32_of("123456789")), "cbf43926");
   for (const auto& bad : {dir / "missing", dir}) {
-    for (const std::string& err :
-         {message_of([&] { read_file_bytes(bad); }), message_of([&] { checksum_of_file(bad); })})
+    for (const std::string& err : {error_of([&] { read_file_bytes(bad); }), error_of([&] { checksum_of_file(bad); })})
       EXPECT_NE(err.find(bad.string()), std::string::npos) << err;
   }
 }
@@ -511,16 +504,16 @@ TEST(Hdf5, PythonH5pyReadsTheLayoutOfTheDesign) {
 TEST(Hdf5, WrongFilesAreNamed) {
   const auto text = temp_dir() / "text.h5";
   std::ofstream(text) << "not hdf5";
-  EXPECT_NE(message_of([&] { read_volume_h5(text); }).find("not an HDF5 file"), std::string::npos);
+  EXPECT_NE(error_of([&] { read_volume_h5(text); }).find("not an HDF5 file"), std::string::npos);
   const auto field = temp_dir() / "field_only.h5";
   write_vector_field_h5(field, some_field());
-  EXPECT_NE(message_of([&] { read_volume_h5(field); }).find("no dataset volume"), std::string::npos);
+  EXPECT_NE(error_of([&] { read_volume_h5(field); }).find("no dataset volume"), std::string::npos);
   const auto vol = temp_dir() / "volume_only.h5";
   write_volume_h5(vol, ramp_volume());
-  EXPECT_NE(message_of([&] { read_vector_field_h5(vol); }).find("no group /vectors"), std::string::npos);
+  EXPECT_NE(error_of([&] { read_vector_field_h5(vol); }).find("no group /vectors"), std::string::npos);
   VectorField no_dt = some_field();
   no_dt.dt_s = 0;
-  EXPECT_NE(message_of([&] { write_vector_field_h5(temp_dir() / "nodt.h5", no_dt); }).find("dt_s"), std::string::npos);
+  EXPECT_NE(error_of([&] { write_vector_field_h5(temp_dir() / "nodt.h5", no_dt); }).find("dt_s"), std::string::npos);
   // A file of a few KB that declares a 4 PB volume (chunks never written read as the fill value):
   // refused with what it would need, before anything is allocated.
   const auto huge = temp_dir() / "huge.h5";
@@ -536,7 +529,7 @@ TEST(Hdf5, WrongFilesAreNamed) {
                                          out),
             0)
       << out;
-  const std::string refused = message_of([&] { read_volume_h5(huge); });
+  const std::string refused = error_of([&] { read_volume_h5(huge); });
   EXPECT_NE(refused.find("dataset volume needs"), std::string::npos) << refused;
   EXPECT_NE(refused.find("more than this machine's"), std::string::npos) << refused;
 }
