@@ -455,7 +455,9 @@ TEST_F(RunTest, ASetupFailureIsTheRunsErrorWithNoFolder) {
 TEST_F(RunTest, StopMidRunLeavesAConsistentFolder) {
   state_.start("s");
   daemon::Run run(config("pairs: 0\nrate_hz: 40\n"), "s", env_);
-  std::this_thread::sleep_for(300ms);
+  // Stopped once a few pairs are in, however long a loaded machine takes to set the run up.
+  for (int i = 0; i < 1000 && recorded(run) < 3; ++i) std::this_thread::sleep_for(10ms);
+  ASSERT_GE(recorded(run), 3u);
   state_.stop();
   run.request_stop();
   wait_finished(run);
