@@ -1,6 +1,10 @@
 // File contents and their CRC-32 (zlib): how a run folder says which bytes of a file it copied.
 #include "core/io/checksum.hpp"
 
+#include <fcntl.h>
+#include <sys/mman.h>
+#include <sys/stat.h>
+#include <unistd.h>
 #include <zlib.h>
 
 #include <algorithm>
@@ -28,6 +32,33 @@ std::string read_file_bytes(const std::filesystem::path& path) {
   bytes.append(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
   if (in.bad()) throw InputError(path.string() + ": cannot read");
   return bytes;
+}
+
+MappedFile::MappedFile(const std::filesystem::path& path) {
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec)) throw InputError(path.string() + ": no such file");
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) throw InputError(path.string() + ": cannot read");
+  struct stat st {};
+  if (::fstat(fd, &st) != 0) {
+    ::close(fd);
+    throw InputError(path.string() + ": cannot read");
+  }
+  size_ = std::size_t(st.st_size);
+  if (size_ > 0) {
+    // Mapped in whole at once (MAP_POPULATE): the reader walks all of it.
+    data_ = ::mmap(nullptr, size_, PROT_READ, MAP_PRIVATE | MAP_POPULATE, fd, 0);
+    if (data_ == MAP_FAILED) {
+      data_ = nullptr;
+      ::close(fd);
+      throw InputError(path.string() + ": cannot map into memory");
+    }
+  }
+  ::close(fd);  // the mapping stays
+}
+
+MappedFile::~MappedFile() {
+  if (data_) ::munmap(data_, size_);
 }
 
 std::uint32_t crc32_of(std::string_view bytes) {

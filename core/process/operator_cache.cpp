@@ -6,6 +6,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
+#include <optional>
 #include <system_error>
 #include <vector>
 
@@ -179,15 +180,18 @@ std::unique_ptr<const recon::WeightingOperator> WeightsDiskCache::weights(const 
   outcome_ = Outcome::missing;
   std::string why = "no file yet";
   if (std::filesystem::exists(file, ec)) {
-    std::string bytes;
+    // Mapped, not read: the tables are copied once, from the page cache into the operator. Cache
+    // files are replaced by rename and trimmed by removal, never truncated, so the mapping stays
+    // whole while another process writes the same key.
+    std::optional<io::MappedFile> bytes;
     try {
-      bytes = io::read_file_bytes(file);
+      bytes.emplace(file);
     } catch (const InputError& e) {
       outcome_ = Outcome::corrupt;
       why = e.what();
     }
     if (outcome_ != Outcome::corrupt) {
-      const Parsed p = parse(bytes, key);
+      const Parsed p = parse(bytes->bytes(), key);
       outcome_ = p.problem;
       why = p.why;
       if (outcome_ == Outcome::hit) {

@@ -361,7 +361,7 @@ TEST(AtomicFile, AFailedWriteLeavesNothingBehind) {
   EXPECT_NE(err.find("does not exist"), std::string::npos) << err;
 }
 
-TEST(FileBytes, EveryByteOfEmptySmallAndLargeFilesAndTheirCrcWholeOrInPieces) {
+TEST(FileBytes, EveryByteOfEmptySmallAndLargeFilesReadMappedAndTheirCrcWholeOrInPieces) {
   const auto dir = temp_dir() / "file_bytes";
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
@@ -371,6 +371,7 @@ TEST(FileBytes, EveryByteOfEmptySmallAndLargeFilesAndTheirCrcWholeOrInPieces) {
     const auto file = dir / ("f" + std::to_string(bytes.size()));
     std::ofstream(file, std::ios::binary).write(bytes.data(), std::streamsize(bytes.size()));
     EXPECT_EQ(read_file_bytes(file), bytes) << bytes.size() << " bytes";
+    EXPECT_EQ(MappedFile(file).bytes(), bytes) << bytes.size() << " bytes";
     const FileChecksum sum = checksum_of_file(file);
     EXPECT_EQ(sum.crc32, crc32_of(bytes)) << bytes.size() << " bytes";
     EXPECT_EQ(sum.bytes, bytes.size());
@@ -378,9 +379,20 @@ TEST(FileBytes, EveryByteOfEmptySmallAndLargeFilesAndTheirCrcWholeOrInPieces) {
   // zlib's CRC-32 of "123456789", the check value of the CRC-32/ISO-HDLC catalogue entry.
   EXPECT_EQ(crc32_hex(crc32_of("123456789")), "cbf43926");
   for (const auto& bad : {dir / "missing", dir}) {
-    for (const std::string& err : {error_of([&] { read_file_bytes(bad); }), error_of([&] { checksum_of_file(bad); })})
+    for (const std::string& err : {error_of([&] { read_file_bytes(bad); }), error_of([&] { checksum_of_file(bad); }),
+                                   error_of([&] { MappedFile m(bad); })})
       EXPECT_NE(err.find(bad.string()), std::string::npos) << err;
   }
+  // A mapped file replaced by a rename (as io::write_atomically replaces one) or removed keeps the
+  // bytes it had when mapped.
+  const auto file = dir / "replaced";
+  std::ofstream(file, std::ios::binary) << "old bytes";
+  const MappedFile mapped(file);
+  std::ofstream(dir / "new", std::ios::binary) << "new and longer bytes";
+  std::filesystem::rename(dir / "new", file);
+  EXPECT_EQ(mapped.bytes(), "old bytes");
+  std::filesystem::remove(file);
+  EXPECT_EQ(mapped.bytes(), "old bytes");
 }
 
 TEST(Hdf5, VolumeRoundTrip) {
