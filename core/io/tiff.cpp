@@ -12,6 +12,7 @@
 #include <memory>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
 
 #include "core/base/errors.hpp"
 #include "core/io/atomic_file.hpp"
@@ -253,28 +254,33 @@ ImageF read_tiff_float(const std::filesystem::path& path) {
   ImageF image(int(p.width), int(p.height));
   std::vector<unsigned char> row(TIFFScanlineSize(t.get()));
   if (row.size() < std::size_t(p.width) * (p.bits / 8)) throw InputError(path.string() + ": corrupt TIFF (short rows)");
-  read_rows(t.get(), path, p.height, row.data(), [&](uint32_t y) {
-    auto out = image.row(int(y));
+  // One loop per sample type (the compiler vectorises the integer ones); counts are finite by
+  // their type, so only float samples are checked.
+  const auto convert = [&](uint32_t y, auto sample) {
+    using T = decltype(sample);
+    float* out = image.row(int(y)).data();
     for (uint32_t x = 0; x < p.width; ++x) {
-      double v = 0;
-      if (p.bits == 8) {
-        v = row[x];
-      } else if (p.bits == 16) {
-        uint16_t u;
-        std::memcpy(&u, row.data() + 2 * x, 2);
-        v = u;
-      } else if (p.bits == 32) {
-        float f;
-        std::memcpy(&f, row.data() + 4 * x, 4);
-        v = f;
-      } else {
-        std::memcpy(&v, row.data() + 8 * x, 8);
-      }
-      if (!std::isfinite(v) || std::abs(v) > 3.0e38) {
-        throw InputError(path.string() + ": pixel (" + std::to_string(x) + ", " + std::to_string(y) + ") is " +
-                         std::to_string(v) + "; a raw frame's values must be finite");
+      T v;
+      std::memcpy(&v, row.data() + sizeof(T) * x, sizeof(T));
+      if constexpr (std::is_floating_point_v<T>) {
+        if (!std::isfinite(v) || std::abs(double(v)) > 3.0e38) {
+          throw InputError(path.string() + ": pixel (" + std::to_string(x) + ", " + std::to_string(y) + ") is " +
+                           std::to_string(v) + "; a raw frame's values must be finite");
+        }
       }
       out[x] = float(v);
+    }
+  };
+  read_rows(t.get(), path, p.height, row.data(), [&](uint32_t y) {
+    switch (p.bits) {
+      case 8:
+        return convert(y, std::uint8_t{});
+      case 16:
+        return convert(y, std::uint16_t{});
+      case 32:
+        return convert(y, float{});
+      default:
+        return convert(y, double{});
     }
   });
   return image;
