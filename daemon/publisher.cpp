@@ -28,7 +28,7 @@ Publisher::Publisher(zmq::context_t& context, const std::string& endpoint, int h
 }
 
 void Publisher::send(const std::string& topic, const std::string& header,
-                     const std::vector<std::vector<float>>& payloads) {
+                     const std::vector<std::span<const float>>& payloads) {
   std::lock_guard lock(mutex_);
   // A PUB socket never blocks: at the high-water mark it drops the whole message for that
   // subscriber (multipart messages are delivered whole or not at all).
@@ -37,7 +37,7 @@ void Publisher::send(const std::string& topic, const std::string& header,
                (payloads.empty() ? zmq::send_flags::none : zmq::send_flags::sndmore) | zmq::send_flags::dontwait);
   for (std::size_t i = 0; i < payloads.size(); ++i) {
     socket_.send(
-        zmq::buffer(payloads[i]),
+        zmq::buffer(payloads[i].data(), payloads[i].size_bytes()),
         (i + 1 < payloads.size() ? zmq::send_flags::sndmore : zmq::send_flags::none) | zmq::send_flags::dontwait);
   }
   ++sent_;
@@ -114,7 +114,7 @@ void Publisher::publish_vectors(msg::VectorFieldHeader header, const VectorField
   if (header.host_timestamp_ns() != 0) {
     header.set_latency_s((double(now_ns) - double(header.host_timestamp_ns())) * 1e-9);
   }
-  send("vectors", header.SerializeAsString(), payloads);
+  send("vectors", header.SerializeAsString(), {payloads.begin(), payloads.end()});
 }
 
 void Publisher::publish_volume(msg::VolumeHeader header, const Volume& volume) {

@@ -2,6 +2,7 @@
 #pragma once
 
 #include <mutex>
+#include <span>
 #include <string>
 #include <zmq.hpp>
 
@@ -34,7 +35,7 @@ class Publisher {
   std::uint64_t messages_sent() const;
 
  private:
-  void send(const std::string& topic, const std::string& header, const std::vector<std::vector<float>>& payloads);
+  void send(const std::string& topic, const std::string& header, const std::vector<std::span<const float>>& payloads);
   mutable std::mutex mutex_;
   zmq::socket_t socket_;
   std::string endpoint_;

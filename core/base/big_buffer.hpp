@@ -1,5 +1,5 @@
-// Large scratch arrays (the reconstruction's images and per-voxel sums, the correlation's volume
-// copies): not zeroed when allocated, and on transparent huge pages where the kernel offers them.
+// Large arrays on transparent huge pages where the kernel offers them: images and volumes
+// (HugePageVector, zeroed as std::vector is) and scratch arrays (BigBuffer, not zeroed).
 #pragma once
 
 #include <sys/mman.h>
@@ -12,19 +12,19 @@
 
 namespace plenopiv {
 
-// An allocator for std::vector whose elements are default-initialised (a float is left as it is:
-// every user writes these arrays before reading them, so zeroing 64 MB first is wasted work done
-// on one thread) and whose large blocks are 2 MB aligned and marked MADV_HUGEPAGE: a 64 MB image
-// then takes 32 page faults instead of 16 384, and the kernels' scattered row accesses miss the
-// TLB less. Where huge pages are off, the advice is ignored and nothing else changes.
+// Blocks of 2 MB or more are 2 MB aligned and marked MADV_HUGEPAGE: a 64 MB image then takes 32
+// page faults instead of 16 384 (a page fault is the dearer part of a fresh buffer on a virtual
+// machine), and the kernels' scattered row accesses miss the TLB less. Where huge pages are off,
+// the advice is ignored and nothing else changes. Elements are value-initialised, as by
+// std::allocator.
 template <typename T>
-struct BigBufferAllocator {
+struct HugePageAllocator {
   using value_type = T;
   static constexpr std::size_t kHugePage = std::size_t(2) << 20;
 
-  BigBufferAllocator() = default;
+  HugePageAllocator() = default;
   template <typename U>
-  BigBufferAllocator(const BigBufferAllocator<U>&) noexcept {}
+  HugePageAllocator(const HugePageAllocator<U>&) noexcept {}
 
   static bool huge(std::size_t n) { return n * sizeof(T) >= kHugePage; }
   T* allocate(std::size_t n) {
@@ -42,6 +42,27 @@ struct BigBufferAllocator {
       ::operator delete(p);
     }
   }
+  template <typename U>
+  bool operator==(const HugePageAllocator<U>&) const noexcept {
+    return true;
+  }
+};
+
+template <typename T>
+using HugePageVector = std::vector<T, HugePageAllocator<T>>;
+
+// As HugePageAllocator, but elements are default-initialised (a float is left as it is: every
+// user writes these arrays before reading them, so zeroing 64 MB first is wasted work done on one
+// thread).
+template <typename T>
+struct BigBufferAllocator : HugePageAllocator<T> {
+  BigBufferAllocator() = default;
+  template <typename U>
+  BigBufferAllocator(const BigBufferAllocator<U>&) noexcept {}
+  template <typename U>
+  struct rebind {
+    using other = BigBufferAllocator<U>;
+  };
   // v(n) and resize(n) default-initialise; v(n, x) still fills with x.
   template <typename U>
   void construct(U* p) noexcept {
@@ -50,10 +71,6 @@ struct BigBufferAllocator {
   template <typename U, typename... Args>
   void construct(U* p, Args&&... args) {
     ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
-  }
-  template <typename U>
-  bool operator==(const BigBufferAllocator<U>&) const noexcept {
-    return true;
   }
 };
 

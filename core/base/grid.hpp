@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "core/base/big_buffer.hpp"
 #include "core/base/memory.hpp"
 
 namespace plenopiv {
@@ -34,7 +35,7 @@ struct Grid3 {
 // Reconstructed (or exact) particle intensity, float32.
 struct Volume {
   Grid3 grid;
-  std::vector<float> data;  // [z][y][x]
+  HugePageVector<float> data;  // [z][y][x]
 
   Volume() = default;
   explicit Volume(const Grid3& g, float fill = 0.f) : grid(g), data(g.checked_count(sizeof(float)), fill) {}

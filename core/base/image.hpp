@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "core/base/big_buffer.hpp"
 #include "core/base/memory.hpp"
 
 namespace plenopiv {
@@ -15,7 +16,7 @@ template <typename T>
 struct Image {
   int width = 0;
   int height = 0;
-  std::vector<T> pixels;  // row-major, row 0 = first stored row, x fastest
+  HugePageVector<T> pixels;  // row-major, row 0 = first stored row, x fastest
 
   Image() = default;
   // Sizes are checked against this machine's memory first (InputError naming them).

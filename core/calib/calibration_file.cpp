@@ -56,9 +56,9 @@ double read_attr_or(const File& f, hid_t parent, const std::string& group, const
   return read_attr(f, parent, group, name);
 }
 
-template <typename T>
-std::vector<T> read_set(const File& f, hid_t parent, const std::string& name, const std::vector<hsize_t>& expected,
-                        hid_t mem_type) {
+template <typename T, typename Array = std::vector<T>>
+Array read_set(const File& f, hid_t parent, const std::string& name, const std::vector<hsize_t>& expected,
+               hid_t mem_type) {
   if (H5Lexists(parent, name.c_str(), H5P_DEFAULT) <= 0) throw InputError(f.where("no dataset /" + name));
   Handle set(H5Dopen2(parent, name.c_str(), H5P_DEFAULT), H5Dclose);
   Handle space(H5Dget_space(set.get()), H5Sclose);
@@ -71,7 +71,7 @@ std::vector<T> read_set(const File& f, hid_t parent, const std::string& name, co
   }
   std::size_t n = 1;
   for (hsize_t d : dims) n *= d;
-  std::vector<T> data(n);
+  Array data(n);
   if (H5Dread(set.get(), mem_type, H5S_ALL, H5S_ALL, H5P_DEFAULT, data.data()) < 0) {
     throw InputError(f.where("cannot read dataset /" + name));
   }
@@ -299,7 +299,7 @@ Calibration read_calibration_h5(const std::filesystem::path& path) {
                            : std::vector<double>(cal.spots_px.size(), nan);
   cal.white_correction.width = cal.sensor.width_px;
   cal.white_correction.height = cal.sensor.height_px;
-  cal.white_correction.pixels = read_set<float>(
+  cal.white_correction.pixels = read_set<float, HugePageVector<float>>(
       f, root, "white_correction", {hsize_t(cal.sensor.height_px), hsize_t(cal.sensor.width_px)}, H5T_NATIVE_FLOAT);
   // A NaN, infinite or negative gain would spread through every reconstruction as NaN (no valid
   // vector, no error): refused here, where the file is named.

@@ -177,9 +177,9 @@ std::vector<double> read_attribute(hid_t parent, const std::filesystem::path& pa
 }
 
 // Reads a dataset whose shape must be `dims`; wrong shape or a missing dataset names the file.
-template <typename T>
-std::vector<T> read_dataset(hid_t parent, const std::filesystem::path& path, const std::string& name,
-                            std::vector<hsize_t>* dims_out, const std::vector<hsize_t>* expected) {
+template <typename T, typename Array = std::vector<T>>
+Array read_dataset(hid_t parent, const std::filesystem::path& path, const std::string& name,
+                   std::vector<hsize_t>* dims_out, const std::vector<hsize_t>* expected) {
   if (H5Lexists(parent, name.c_str(), H5P_DEFAULT) <= 0) {
     throw InputError(path.string() + ": no dataset " + name);
   }
@@ -197,7 +197,7 @@ std::vector<T> read_dataset(hid_t parent, const std::filesystem::path& path, con
   double count = 1;
   for (hsize_t d : dims) count *= double(d);
   require_memory(count * sizeof(T), path.string() + ": dataset " + name);
-  std::vector<T> data(static_cast<std::size_t>(count));
+  Array data(static_cast<std::size_t>(count));
   check(H5Dread(set.get(), mem_type<T>(), H5S_ALL, H5S_ALL, H5P_DEFAULT, data.data()), path, "read dataset " + name);
   if (dims_out) *dims_out = dims;
   return data;
@@ -247,7 +247,7 @@ void write_volume_h5(const std::filesystem::path& path, const Volume& volume,
 Volume read_volume_h5(const std::filesystem::path& path) {
   Handle file = open_for_reading(path);
   std::vector<hsize_t> dims;
-  std::vector<float> data = read_dataset<float>(file.get(), path, "volume", &dims, nullptr);
+  HugePageVector<float> data = read_dataset<float, HugePageVector<float>>(file.get(), path, "volume", &dims, nullptr);
   if (dims.size() != 3) throw InputError(path.string() + ": /volume is not 3-D [nz][ny][nx]");
   Handle set(H5Dopen2(file.get(), "volume", H5P_DEFAULT), H5Dclose);
   const auto origin = read_attribute(set.get(), path, "/volume", "origin_mm", 3);

@@ -21,10 +21,10 @@ struct Array {
   std::vector<char> bytes;
 };
 
-template <typename T>
-Array make_array(const std::string& name, const std::string& type, int components, const std::vector<T>& values) {
+template <typename Values>
+Array make_array(const std::string& name, const std::string& type, int components, const Values& values) {
   Array a{name, type, components, {}};
-  a.bytes.resize(values.size() * sizeof(T));
+  a.bytes.resize(values.size() * sizeof(values[0]));
   std::memcpy(a.bytes.data(), values.data(), a.bytes.size());
   return a;
 }

@@ -273,8 +273,8 @@ Volume reconstruct_row_action(const WeightingOperator& op, const SparseMatrix& w
       }
     }
   }
-  Volume out(g, 0.f);
-  out.data = std::move(e);
+  Volume out(g);
+  out.data.assign(e.begin(), e.end());
   return out;
 }
 

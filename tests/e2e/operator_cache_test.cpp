@@ -8,6 +8,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <span>
 #include <string>
 
 #include "core/calib/nominal_calibration.hpp"
@@ -39,7 +40,7 @@ class OperatorCacheTest : public ::testing::Test {
   static Grid3 grid(double z0) { return grid_for_extent({-1, -1, z0}, {1, 1, z0 + 2}, {0.125, 0.125, 0.125}, "test"); }
 
   // A frame of a few ray-traced particles in the grid, reconstructed with `op`: the volume's bits.
-  static std::vector<float> volume_through(const recon::WeightingOperator& op) {
+  static HugePageVector<float> volume_through(const recon::WeightingOperator& op) {
     const optics::CameraModel cam = camera();
     const calib::LoadedCalibration nominal = calib::nominal_calibration(cam);
     const auto particles = sim::random_particles(sim::Box{{-0.8, -0.8, 0.2}, {0.8, 0.8, 1.8}}, 20, 3);
@@ -58,7 +59,7 @@ class OperatorCacheTest : public ::testing::Test {
   std::filesystem::path folder_;
 };
 
-bool same_bits(const std::vector<float>& a, const std::vector<float>& b) {
+bool same_bits(std::span<const float> a, std::span<const float> b) {
   return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(float)) == 0;
 }
 

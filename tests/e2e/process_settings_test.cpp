@@ -154,7 +154,7 @@ TEST(ProcessSettings, ProcessPairReturnsTheRequestedBoxAndRefusesAnUnguardedOper
   // Exactly the inner slices of the guarded reconstruction (deterministic kernels: bit for bit).
   const Volume full = recon::reconstruct(guarded, a, s.mart).volume;
   const std::size_t slice = std::size_t(s.grid.shape[0]) * std::size_t(s.grid.shape[1]);
-  const std::vector<float> inner(
+  const HugePageVector<float> inner(
       full.data.begin() + std::ptrdiff_t(std::size_t(s.guard_slices()) * slice),
       full.data.begin() + std::ptrdiff_t(std::size_t(s.guard_slices()) * slice + s.grid.count()));
   EXPECT_EQ(r.volume_a.data, inner);

@@ -10,6 +10,7 @@
 #include <map>
 #include <memory>
 #include <random>
+#include <span>
 
 #include "core/base/errors.hpp"
 #include "core/calib/nominal_calibration.hpp"
@@ -156,12 +157,12 @@ Case make_case(std::uint64_t index) {
   return c;
 }
 
-template <class T>
-bool same_bits(const std::vector<T>& x, const std::vector<T>& y) {
-  return x.size() == y.size() && std::memcmp(x.data(), y.data(), x.size() * sizeof(T)) == 0;
+template <class Array>
+bool same_bits(const Array& x, const Array& y) {
+  return x.size() == y.size() && std::memcmp(x.data(), y.data(), x.size() * sizeof(x[0])) == 0;
 }
 
-bool all_finite(const std::vector<float>& v) {
+bool all_finite(std::span<const float> v) {
   for (float x : v)
     if (!std::isfinite(x)) return false;
   return true;

@@ -314,7 +314,7 @@ TEST(RawFrame, ColourNonFiniteCorruptAndForeignFilesAreRefusedByName) {
   std::filesystem::create_directories(dir);
   // Grey stored as colour (equal channels) is grey; real colour is not a raw frame.
   ASSERT_TRUE(cv::imwrite((dir / "grey_rgb.png").string(), cv::Mat(2, 3, CV_8UC3, cv::Scalar(7, 7, 7))));
-  EXPECT_EQ(read_raw_frame(dir / "grey_rgb.png").pixels, std::vector<float>(6, 7.0f));
+  EXPECT_EQ(read_raw_frame(dir / "grey_rgb.png").pixels, HugePageVector<float>(6, 7.0f));
   ASSERT_TRUE(cv::imwrite((dir / "colour.png").string(), cv::Mat(2, 3, CV_8UC3, cv::Scalar(7, 8, 9))));
   std::string err = error_of([&] { read_raw_frame(dir / "colour.png"); });
   EXPECT_NE(err.find("colour.png: a colour PNG"), std::string::npos) << err;

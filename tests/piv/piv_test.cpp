@@ -439,7 +439,7 @@ TEST(Deform, MeanFloorSubtractsAMultipleOfTheMeanAndClipsAtZero) {
   // In place, and the same bits at 1 and 2 threads on a volume that is split between them.
   const Grid3 g = cube(40);
   const Volume v = blobs(g, random_points(g, 300, 3));
-  std::vector<float> one = v.data, two = v.data;
+  HugePageVector<float> one = v.data, two = v.data;
   {
     tbb::global_control c(tbb::global_control::max_allowed_parallelism, 1);
     subtract_mean_floor(one, g.shape, 4.0, one);

@@ -747,7 +747,7 @@ TEST_F(Mart, PruningAgainstEachDepthSlicesPeakKeepsAFaintParticleAwayFromABright
   for (const PruneScope scope : {PruneScope::volume, PruneScope::slice}) {
     s.prune_scope = scope;
     const MartResult r = reconstruct(op, image, s);
-    const std::vector<float>& e = r.volume.data;
+    const HugePageVector<float>& e = r.volume.data;
     const float volume_peak = *std::max_element(e.begin(), e.end());
     for (int z = 0; z < g.shape[2]; ++z) {
       const auto first = e.begin() + std::ptrdiff_t(z * slice), end = first + std::ptrdiff_t(slice);
@@ -785,7 +785,7 @@ TEST_F(Mart, ADepthReachKeepsTheFaintDepthEndsOfAParticle) {
   for (const int reach : {0, 2}) {
     s.prune_depth_reach = reach;
     const MartResult r = reconstruct(op, image, s);
-    const std::vector<float>& e = r.volume.data;
+    const HugePageVector<float>& e = r.volume.data;
     const float cut = float(s.prune_threshold * double(*std::max_element(e.begin(), e.end())));
     std::size_t kept_by_reach = 0;
     for (int z = 0; z < g.shape[2]; ++z)

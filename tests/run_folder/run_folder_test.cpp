@@ -150,7 +150,7 @@ TEST(RunFolder, TheRowVisitorsSeeEveryRowOfTheirFrameOnceInOrder) {
       frames.b.row(y)[std::size_t(x)] = std::uint16_t(5000 + 100 * y + x);
     }
   PairRecord r = record_of(7, frames);
-  std::vector<std::uint16_t> seen_a, seen_b;
+  HugePageVector<std::uint16_t> seen_a, seen_b;
   r.visit_rows_a = [&](std::span<const std::uint16_t> rows) { seen_a.insert(seen_a.end(), rows.begin(), rows.end()); };
   r.visit_rows_b = [&](std::span<const std::uint16_t> rows) { seen_b.insert(seen_b.end(), rows.begin(), rows.end()); };
   writer.record_pair(r);
