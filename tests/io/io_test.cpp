@@ -2,7 +2,9 @@
 #include <gtest/gtest.h>
 #include <sys/stat.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <fstream>
 #include <iterator>
@@ -393,6 +395,27 @@ TEST(FileBytes, EveryByteOfEmptySmallAndLargeFilesReadMappedAndTheirCrcWholeOrIn
   EXPECT_EQ(mapped.bytes(), "old bytes");
   std::filesystem::remove(file);
   EXPECT_EQ(mapped.bytes(), "old bytes");
+}
+
+// Frames and volumes of 2 MB or more start on a 2 MB boundary (where a huge page can back them)
+// and are zeroed as a std::vector is; smaller ones are plain allocations, zeroed too.
+TEST(HugePages, LargeImagesAndVolumesStartOnA2MbBoundaryAndAreZeroed) {
+  const auto on_boundary = [](const void* p) {
+    return reinterpret_cast<std::uintptr_t>(p) % (std::size_t(2) << 20) == 0;
+  };
+  const ImageF frame(2048, 1025);  // just over 8 MB
+  EXPECT_TRUE(on_boundary(frame.pixels.data()));
+  EXPECT_EQ(std::count(frame.pixels.begin(), frame.pixels.end(), 0.f), std::ptrdiff_t(frame.size()));
+  Grid3 g;
+  g.shape = {128, 128, 40};  // 2.5 MB
+  const Volume volume(g);
+  EXPECT_TRUE(on_boundary(volume.data.data()));
+  EXPECT_EQ(std::count(volume.data.begin(), volume.data.end(), 0.f), std::ptrdiff_t(volume.data.size()));
+  const ImageU16 small(16, 16, 7);
+  EXPECT_EQ(std::count(small.pixels.begin(), small.pixels.end(), std::uint16_t(7)), 256);
+  ImageF copy = frame;  // a copy takes its own block
+  EXPECT_TRUE(on_boundary(copy.pixels.data()));
+  EXPECT_NE(copy.pixels.data(), frame.pixels.data());
 }
 
 TEST(Hdf5, VolumeRoundTrip) {
