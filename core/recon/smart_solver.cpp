@@ -36,9 +36,15 @@ SmartSolver::SmartSolver(const WeightingOperator& op, const MartSettings& settin
       blur_(op, settings.sensor_blur_sigma_mm) {}
 
 template <typename F>
+void SmartSolver::for_voxel_ranges(F&& f) const {
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n_, 1 << 12),
+                    [&](const tbb::blocked_range<std::size_t>& r) { f(r.begin(), r.end()); });
+}
+
+template <typename F>
 void SmartSolver::for_voxels(F&& f) const {
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n_, 1 << 12), [&](const tbb::blocked_range<std::size_t>& r) {
-    for (std::size_t m = r.begin(); m != r.end(); ++m) f(m);
+  for_voxel_ranges([&](std::size_t m0, std::size_t m1) {
+    for (std::size_t m = m0; m != m1; ++m) f(m);
   });
 }
 
@@ -186,9 +192,8 @@ void SmartSolver::prepare_iterations() {
   if (settings_.accelerate) {
     b_.last.assign(b_.e.begin(), b_.e.end());
     b_.log_last.resize(n_);  // written in full here
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n_, 1 << 12), [&](const tbb::blocked_range<std::size_t>& r) {
-      kernels::log_or_zero(b_.last.data(), r.begin(), r.end(), b_.log_last.data());
-    });
+    for_voxel_ranges(
+        [&](std::size_t m0, std::size_t m1) { kernels::log_or_zero(b_.last.data(), m0, m1, b_.log_last.data()); });
     b_.momentum.assign(n_, 0.f);
   }
 }
@@ -198,8 +203,7 @@ void SmartSolver::extrapolate(float beta) {
   // beta_k = (k - 1) / (k + 2).
   const kernels::Extrapolation x{b_.e.data(), b_.last.data(), b_.log_last.data(), b_.momentum.data(), beta, kMaxLog,
                                  kTiny,       kHuge};
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n_, 1 << 12),
-                    [&](const tbb::blocked_range<std::size_t>& r) { kernels::extrapolate(x, r.begin(), r.end()); });
+  for_voxel_ranges([&](std::size_t m0, std::size_t m1) { kernels::extrapolate(x, m0, m1); });
 }
 
 void SmartSolver::residual_band(int band, std::size_t i0, std::size_t i1) {

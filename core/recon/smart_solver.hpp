@@ -75,8 +75,11 @@ class SmartSolver {
   // The residual's sums and the log-ratios of pixels [i0, i1) of the projection (band `band`).
   void residual_band(int band, std::size_t i0, std::size_t i1);
   void ratio_band(std::size_t i0, std::size_t i1, const float* scale);
+  // f(m) for every active voxel m, or f(m0, m1) over its ranges, in parallel.
   template <typename F>
   void for_voxels(F&& f) const;
+  template <typename F>
+  void for_voxel_ranges(F&& f) const;
 
   const WeightingOperator& op_;
   const MartSettings& settings_;
