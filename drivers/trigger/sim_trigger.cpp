@@ -37,6 +37,9 @@ void SimTrigger::all_low() noexcept {
 
 void SimTrigger::on_edge_written(const Edge& edge, std::uint64_t shot, double planned_s, double lateness_s) {
   RecordedEdge r{edge.line, edge.rising, shot, planned_s, planned_s + lateness_s};
+  // The laser's Q-switch sync output fires with each Q-switch: measure it like gpiod would.
+  const bool laser_fired = edge.rising && (edge.line == TriggerLine::QSwitch1 || edge.line == TriggerLine::QSwitch2);
+  if (laser_fired) r.sync_ns = virtual_clock_ ? base_ns_ + std::uint64_t(r.actual_s * 1e9) : now_ns();
   EdgeListener listener;
   TriggerInput* camera_input = nullptr;
   {
@@ -47,12 +50,10 @@ void SimTrigger::on_edge_written(const Edge& edge, std::uint64_t shot, double pl
   }
   // The camera line, wired to a simulated camera's trigger input.
   if (camera_input && edge.line == TriggerLine::Camera && edge.rising) camera_input->rising_edge();
-  // The laser's Q-switch sync output fires with each Q-switch: measure it like gpiod would.
-  if (edge.rising && (edge.line == TriggerLine::QSwitch1 || edge.line == TriggerLine::QSwitch2)) {
-    const std::uint64_t fired_ns = virtual_clock_ ? base_ns_ + std::uint64_t(r.actual_s * 1e9) : now_ns();
-    report_sync_edge(fired_ns);
+  if (laser_fired) {
+    report_sync_edge(r.sync_ns);
     // The simulated scene moves between the pulses that really fired (a late Q-switch 1 shortens dt).
-    if (camera_input) camera_input->laser_pulse(fired_ns);
+    if (camera_input) camera_input->laser_pulse(r.sync_ns);
   }
   if (listener) listener(r);
 }

@@ -18,6 +18,9 @@ struct RecordedEdge {
   std::uint64_t shot = 0;
   double planned_s = 0;  // from the start of playback
   double actual_s = 0;   // planned + how late it was written (equal in virtual time)
+  // A rising Q-switch edge: the time (ns, the trigger's sync clock) its laser's sync output was
+  // stamped with, as report_sync_edge got it; 0 for every other edge.
+  std::uint64_t sync_ns = 0;
 };
 
 // URI parameters: clock=real|virtual (default real: edges are written at their times on the
