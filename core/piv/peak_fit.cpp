@@ -67,12 +67,10 @@ std::array<Peak, 3> find_peaks(std::span<const float> corr, const std::array<int
   std::array<Candidate, 3> best{};
   int found = 0;
   const int nx = shape[0], ny = shape[1], nz = shape[2];
-  // Neighbour offsets; away from the borders no index needs wrapping, and an offset < 0 is a
-  // neighbour the scan has already passed.
-  std::array<std::ptrdiff_t, 26> offset;
+  // Neighbour steps (dx, dy, dz), the 6 faces first: most voxels are rejected by one of them. A
+  // step is "earlier" when its offset in the array, unwrapped, is negative.
   std::array<std::array<int, 3>, 26> step;
-  // The 6 face neighbours come first: most voxels are rejected by one of them, and x +- 1 is
-  // in the same cache line.
+  std::array<bool, 26> earlier;
   int o = 0;
   for (int pass = 0; pass < 2; ++pass)
     for (int dz = -1; dz <= 1; ++dz)
@@ -80,29 +78,25 @@ std::array<Peak, 3> find_peaks(std::span<const float> corr, const std::array<int
         for (int dx = -1; dx <= 1; ++dx) {
           const int nonzero = (dx != 0) + (dy != 0) + (dz != 0);
           if (nonzero == 0 || (nonzero == 1) != (pass == 0)) continue;
-          offset[o] = (std::ptrdiff_t(dz) * ny + dy) * nx + dx;
+          earlier[o] = (std::ptrdiff_t(dz) * ny + dy) * nx + dx < 0;
           step[o++] = {dx, dy, dz};
         }
   // Strict against earlier neighbours, non-strict against later ones: a plateau yields exactly
-  // one maximum, its first voxel.
+  // one maximum, its first voxel. A NaN neighbour beats nothing.
   auto beaten = [](float w, float v, bool earlier) { return earlier ? w >= v : w > v; };
   float threshold = 0;
-  // One voxel: is it a local maximum above the threshold, and among the three highest so far?
-  auto visit = [&](const float* row, int x, int y, int z, bool yz_inside) {
-    const float v = row[x];
+  // The rows of the current voxel's cyclic neighbourhood: rows[dz + 1][dy + 1].
+  const float* rows[3][3];
+  // One voxel of the current row: is it a local maximum above the threshold, and among the three
+  // highest so far?
+  auto visit = [&](int x, int y, int z) {
+    const float v = rows[1][1][x];
     // Only values above the third peak so far (or above 0 while fewer than three were found;
     // peaks <= 0 are of no use) need a test.
     if (!(v > threshold)) return;
-    if (yz_inside && x > 0 && x < nx - 1) {
-      for (int k = 0; k < 26; ++k)
-        if (beaten(row[x + offset[k]], v, offset[k] < 0)) return;
-    } else {
-      for (int k = 0; k < 26; ++k) {
-        const float w =
-            corr[index_of(shape, wrap(x + step[k][0], nx), wrap(y + step[k][1], ny), wrap(z + step[k][2], nz))];
-        if (beaten(w, v, offset[k] < 0)) return;
-      }
-    }
+    const int xs[3] = {wrap(x - 1, nx), x, wrap(x + 1, nx)};
+    for (int k = 0; k < 26; ++k)
+      if (beaten(rows[step[k][2] + 1][step[k][1] + 1][xs[step[k][0] + 1]], v, earlier[k])) return;
     int pos = std::min(found, 2);
     while (pos > 0 && best[pos - 1].value < v) {
       best[pos] = best[pos - 1];
@@ -113,23 +107,36 @@ std::array<Peak, 3> find_peaks(std::span<const float> corr, const std::array<int
     if (found == 3) threshold = best[2].value;
   };
   for (int z = 0; z < nz; ++z) {
-    const bool z_inside = z > 0 && z < nz - 1;
+    const int zs[3] = {wrap(z - 1, nz), z, wrap(z + 1, nz)};
     for (int y = 0; y < ny; ++y) {
-      const bool yz_inside = z_inside && y > 0 && y < ny - 1;
-      const float* row = corr.data() + index_of(shape, 0, y, z);
-      // Four voxels per SSE comparison against the threshold: most groups hold none above it
-      // and are passed over with one well-predicted branch. The voxels above it are visited in
-      // scan order, each tested again (the threshold may have risen), so the result is that of
-      // a voxel-by-voxel scan.
-      int x = 0;
-      for (; x + 4 <= nx; x += 4) {
-        int above = _mm_movemask_ps(_mm_cmpgt_ps(_mm_loadu_ps(row + x), _mm_set1_ps(threshold)));
-        while (above) {
-          visit(row, x + __builtin_ctz(above), y, z, yz_inside);
-          above &= above - 1;
+      const int ys[3] = {wrap(y - 1, ny), y, wrap(y + 1, ny)};
+      for (int a = 0; a < 3; ++a)
+        for (int b = 0; b < 3; ++b) rows[a][b] = corr.data() + index_of(shape, 0, ys[b], zs[a]);
+      const float* row = rows[1][1];
+      // The row's ends wrap along x; between them, four voxels per SSE comparison: above the
+      // threshold and beaten by none of the 6 face neighbours (visit's first tests; most groups
+      // hold no such voxel and are passed over with one well-predicted branch). The voxels left
+      // are visited in scan order, each tested again (the threshold may have risen), so the
+      // result is that of a voxel-by-voxel scan.
+      visit(0, y, z);
+      int x = 1;
+      for (; x + 4 <= nx - 1; x += 4) {
+        const __m128 v = _mm_loadu_ps(row + x);
+        __m128 keep = _mm_cmpgt_ps(v, _mm_set1_ps(threshold));
+        keep = _mm_and_ps(keep, _mm_cmpnge_ps(_mm_loadu_ps(row + x - 1), v));
+        keep = _mm_and_ps(keep, _mm_cmpngt_ps(_mm_loadu_ps(row + x + 1), v));
+        keep = _mm_and_ps(keep, _mm_cmpnge_ps(_mm_loadu_ps(rows[1][0] + x), v));
+        keep = _mm_and_ps(keep, _mm_cmpngt_ps(_mm_loadu_ps(rows[1][2] + x), v));
+        keep = _mm_and_ps(keep, _mm_cmpnge_ps(_mm_loadu_ps(rows[0][1] + x), v));
+        keep = _mm_and_ps(keep, _mm_cmpngt_ps(_mm_loadu_ps(rows[2][1] + x), v));
+        int left = _mm_movemask_ps(keep);
+        while (left) {
+          visit(x + __builtin_ctz(left), y, z);
+          left &= left - 1;
         }
       }
-      for (; x < nx; ++x) visit(row, x, y, z, yz_inside);
+      for (; x < nx - 1; ++x) visit(x, y, z);
+      if (nx > 1) visit(nx - 1, y, z);
     }
   }
   std::array<Peak, 3> peaks{};
