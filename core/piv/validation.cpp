@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "core/piv/peak_fit.hpp"
 
@@ -45,7 +46,8 @@ void for_neighbours(const std::array<int, 3>& count, std::size_t node, int radiu
       }
 }
 
-void reference_of(const Candidates& c, std::size_t node, int radius, Reference& ref) {
+// The neighbours' primary vectors into `ref`, without their medians yet.
+void gather_reference(const Candidates& c, std::size_t node, int radius, Reference& ref) {
   ref.n = 0;
   ref.has_spread = false;
   for_neighbours(c.count, node, radius, [&](std::size_t m) {
@@ -53,8 +55,42 @@ void reference_of(const Candidates& c, std::size_t node, int radius, Reference& 
     for (int a = 0; a < 3; ++a) ref.values[a][ref.n] = c.peak[0][m][a];
     ++ref.n;
   });
-  if (ref.n == 0) return;
+}
+
+void find_medians(Reference& ref) {
   for (int a = 0; a < 3; ++a) ref.median[a] = median(ref.values[a].data(), ref.n);
+}
+
+// The float nearest `x` on the side of `toward`'s sign: at or above it (+1), at or below (-1).
+float float_at_or(double x, int toward) {
+  const float f = float(x);
+  if (toward > 0 && double(f) < x) return std::nextafter(f, std::numeric_limits<float>::infinity());
+  if (toward < 0 && double(f) > x) return std::nextafter(f, -std::numeric_limits<float>::infinity());
+  return f;
+}
+
+// Whether `u` passes the test's first step (within threshold x epsilon of the median on every
+// axis) whatever the medians' exact values, from counts alone: an axis's median lies in [lo, hi]
+// when at most (n - 1) / 2 of the n values are below lo and at most as many above hi (for even n
+// both middle values do, and so does their mean). [lo, hi] is u +- a hair less than threshold x
+// epsilon, so passes()'s float arithmetic agrees. Counting is one vectorised pass over each axis's
+// values where a median is a selection; a vector not surely near goes through the full test, so
+// the outcome is that of passes() alone.
+bool surely_near(const std::array<float, 3>& u, const Reference& ref, const MedianTest& test) {
+  const double reach = test.threshold * test.epsilon * (1 - 1e-5);
+  const int limit = (ref.n - 1) / 2;
+  for (int a = 0; a < 3; ++a) {
+    const float lo = float_at_or(double(u[a]) - reach, +1), hi = float_at_or(double(u[a]) + reach, -1);
+    if (!(lo <= hi)) return false;  // u not finite, or no reach
+    const float* v = ref.values[a].data();
+    int below = 0, above = 0;
+    for (int m = 0; m < ref.n; ++m) {
+      below += v[m] < lo;
+      above += v[m] > hi;
+    }
+    if (!(below <= limit && above <= limit)) return false;
+  }
+  return true;
 }
 
 // The spread from the values in whatever order the medians left them: a median is the same
@@ -118,8 +154,10 @@ ValidatedField validate(Candidates& c, const MedianTest& test) {
     Reference ref;
     for (std::size_t node = r.begin(); node < r.end(); ++node) {
       if (!c.peaks[node]) continue;
-      reference_of(c, node, radius, ref);
-      if (ref.n == 0 || passes(c.peak[0][node], ref, test)) {
+      gather_reference(c, node, radius, ref);
+      const bool near = ref.n == 0 || surely_near(c.peak[0][node], ref, test);
+      if (!near) find_medians(ref);
+      if (near || passes(c.peak[0][node], ref, test)) {
         f.d[node] = c.peak[0][node];
         f.valid[node] = 1;
         continue;

@@ -1206,6 +1206,88 @@ TEST(Validation, PlantedOutliersAreCaughtAndReplaced) {
   }
 }
 
+// validate() against the normalised median test written out for every node: the neighbours'
+// primaries within the radius (clipped at the faces, so odd and even counts), each axis's median
+// (the mean of the two middle values for an even count) and median absolute residual, a vector
+// passing when |u - median| / (spread + epsilon) <= threshold on every axis; an outlier takes the
+// first secondary peak that passes, else waits for interpolation. Values on a coarse grid put
+// many residuals exactly at, and one float step about, threshold x epsilon.
+TEST(Validation, EveryNodeGetsTheNormalisedMedianTestsOutcome) {
+  std::mt19937 rng(9);
+  int boundary = 0, outliers = 0, nodes = 0;
+  for (int trial = 0; trial < 24; ++trial) {
+    Candidates c({6, 5, 7});
+    const float step = trial % 2 ? 0.05f : 0.1f;
+    // Most primaries within a step of 0 (a spread of at most a step: the first step of the test,
+    // |u - median| <= threshold x epsilon, decides most of them), a fifth of them far out.
+    std::uniform_int_distribution<int> narrow(-1, 1), wide(-8, 8), pick(0, 4);
+    for (std::size_t n = 0; n < c.size(); ++n) {
+      c.peaks[n] = std::uint8_t(trial % 4 == 3 && n % 5 == 0 ? 0 : 1 + n % 3);
+      for (auto& rank : c.peak)
+        for (float& v : rank[n]) v = float(pick(rng) ? narrow(rng) : wide(rng)) * step;
+    }
+    MedianTest test;
+    test.radius = 1 + trial % 2;
+    const auto median_of = [](std::vector<float> v) {
+      std::sort(v.begin(), v.end());
+      const std::size_t h = v.size() / 2;
+      return v.size() % 2 ? v[h] : 0.5f * (v[h - 1] + v[h]);
+    };
+    Candidates copy = c;
+    const ValidatedField f = validate(copy, test);
+    for (int k = 0; k < c.count[2]; ++k)
+      for (int j = 0; j < c.count[1]; ++j)
+        for (int i = 0; i < c.count[0]; ++i) {
+          const std::size_t node = (std::size_t(k) * c.count[1] + j) * c.count[0] + i;
+          if (!c.peaks[node]) continue;
+          ++nodes;
+          std::array<std::vector<float>, 3> values;
+          for (int z = std::max(k - test.radius, 0); z <= std::min(k + test.radius, c.count[2] - 1); ++z)
+            for (int y = std::max(j - test.radius, 0); y <= std::min(j + test.radius, c.count[1] - 1); ++y)
+              for (int x = std::max(i - test.radius, 0); x <= std::min(i + test.radius, c.count[0] - 1); ++x) {
+                const std::size_t m = (std::size_t(z) * c.count[1] + y) * c.count[0] + x;
+                if (m == node || !c.peaks[m]) continue;
+                for (int a = 0; a < 3; ++a) values[a].push_back(c.peak[0][m][a]);
+              }
+          std::array<float, 3> med{}, spread{};
+          for (int a = 0; a < 3 && !values[0].empty(); ++a) {
+            med[a] = median_of(values[a]);
+            std::vector<float> residual;
+            for (float v : values[a]) residual.push_back(std::abs(v - med[a]));
+            spread[a] = median_of(residual);
+          }
+          const auto passes = [&](const std::array<float, 3>& u) {
+            if (values[0].empty()) return true;
+            for (int a = 0; a < 3; ++a) {
+              const float r = std::abs(u[a] - med[a]);
+              boundary += std::abs(r / test.epsilon - test.threshold) < 1e-5;
+              if (!(r / (spread[a] + test.epsilon) <= test.threshold)) return false;
+            }
+            return true;
+          };
+          SCOPED_TRACE("trial " + std::to_string(trial) + ", node " + std::to_string(node));
+          if (passes(c.peak[0][node])) {
+            EXPECT_TRUE(f.valid[node]);
+            EXPECT_EQ(copy.flags[node], 0);
+            EXPECT_EQ(f.d[node], c.peak[0][node]);
+            continue;
+          }
+          ++outliers;
+          int rank = 1;
+          while (rank < c.peaks[node] && !passes(c.peak[rank][node])) ++rank;
+          if (rank < c.peaks[node]) {
+            EXPECT_TRUE(copy.flags[node] & (rank == 1 ? flag_second_peak : flag_third_peak));
+            EXPECT_EQ(f.d[node], c.peak[rank][node]);
+          } else {
+            EXPECT_TRUE(copy.flags[node] & (flag_interpolated | flag_unresolved));
+          }
+        }
+  }
+  EXPECT_GT(outliers, nodes / 20);  // both outcomes are compared
+  EXPECT_LT(outliers, nodes * 9 / 10);
+  EXPECT_GT(boundary, 100);  // residuals at threshold x epsilon
+}
+
 TEST(Validation, ASpoiledWindowIsCaughtAndReplaced) {
   const Grid3 g = cube(48);
   const auto pa = random_points(g, 300, 21);
