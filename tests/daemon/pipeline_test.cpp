@@ -101,14 +101,15 @@ TEST_P(Concurrency, SlowProcessingSkipsToTheNewestPairAndCountsTheRest) {
   LiveMailbox mailbox;
   PipelineStats stats;
   std::latch release(1);
+  std::atomic<bool> first_taken{false};
   std::vector<std::uint64_t> seen;
   std::thread feeder([&] {
     mailbox.push(std::make_shared<const drivers::FramePair>(make_pair(0)));
-    std::this_thread::sleep_for(50ms);  // pair 0 is taken and blocks in processing
+    // Pair 0 is taken and blocks in processing (bounded: a pipeline that never takes it fails below).
+    for (int i = 0; i < 30000 && !first_taken; ++i) std::this_thread::sleep_for(1ms);
     for (std::uint64_t i = 1; i <= 10; ++i) {
       mailbox.push(std::make_shared<const drivers::FramePair>(make_pair(i)));
     }
-    std::this_thread::sleep_for(50ms);
     release.count_down();
     mailbox.close();
   });
@@ -116,6 +117,7 @@ TEST_P(Concurrency, SlowProcessingSkipsToTheNewestPairAndCountsTheRest) {
   run_live_pipeline(
       mailbox, 1,
       [&](const drivers::FramePair& pair, const PairSteps&) {
+        if (pair.pair_index == 0) first_taken = true;
         release.wait();
         return tagged_field(pair);
       },
