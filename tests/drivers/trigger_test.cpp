@@ -91,16 +91,18 @@ TEST(SimTrigger, RealTimePlaybackStopsWithAllLinesLow) {
   // 0.5 s rather than a fixed sleep of 60 ms: under load the playback thread may be late).
   for (int i = 0; i < 500 && t->counters().shots_fired < 2; ++i) std::this_thread::sleep_for(1ms);
   t->stop();
-  // The measured dt is what really happened (a late Q-switch 1 shortens it), and agrees with the
-  // times the edges were actually written.
-  double q1 = -1, q2 = -1;
+  // The measured dt is what really happened (a late Q-switch 1 shortens it): the sync stamps of
+  // shot 0's own Q-switch edges, exactly.
+  std::uint64_t q1 = 0, q2 = 0;
   for (const RecordedEdge& e : sim->edges()) {
     if (e.shot != 0 || !e.level) continue;
-    if (e.line == TriggerLine::QSwitch1) q1 = e.actual_s;
-    if (e.line == TriggerLine::QSwitch2) q2 = e.actual_s;
+    if (e.line == TriggerLine::QSwitch1) q1 = e.sync_ns;
+    if (e.line == TriggerLine::QSwitch2) q2 = e.sync_ns;
   }
+  EXPECT_EQ(shot->shot_index, 0u);
   EXPECT_GT(shot->dt_s(), 0);
-  EXPECT_NEAR(shot->dt_s(), q2 - q1, 1e-3);
+  EXPECT_EQ(shot->pulse1_ns, q1);
+  EXPECT_EQ(shot->pulse2_ns, q2);
   EXPECT_FALSE(t->running());
   for (TriggerLine l : kTriggerLines) EXPECT_FALSE(sim->level(l)) << to_string(l);
   const TriggerCounters c = t->counters();
