@@ -29,6 +29,33 @@ struct ActiveSet::BandPlan {
   std::vector<std::uint32_t> block_entries;
 };
 
+struct ActiveSet::RowBands {
+  // One voxel row's share of one band: its y quads that overlap the band (quad_count 0: none)
+  // and, as a visit holds them, the band's rows they reach with a weight (bit j: row r0 + j).
+  struct Share {
+    std::uint32_t quad_begin, quad_count;
+    std::array<std::uint64_t, kRowWords> rows;
+  };
+  // Voxel row (z, y) is zy = z ny + y: the first band its quads reach, and its shares of that band
+  // and the next ones, shares[start[zy] .. start[zy + 1]).
+  std::size_t ny = 0;
+  std::vector<int> first_band;
+  std::vector<std::size_t> start;
+  BigBuffer<Share> shares;
+
+  // Calls entry(b, share) for each band b in [first, last] in which voxel row zy has quads, in
+  // band order: what walking the row's quads band by band gives, looked up.
+  template <typename Entry>
+  void walk(std::size_t zy, int first, int last, Entry&& entry) const {
+    const int b0 = std::max(first, first_band[zy]);
+    const int b1 = std::min(last, first_band[zy] + int(start[zy + 1] - start[zy]) - 1);
+    for (int b = b0; b <= b1; ++b) {
+      const Share& s = shares[start[zy] + std::size_t(b - first_band[zy])];
+      if (s.quad_count) entry(b, s);
+    }
+  }
+};
+
 namespace {
 
 // Calls entry(b, p, first quad, count) for each voxel p in [begin, end) of a column of slice `t`
@@ -70,9 +97,10 @@ void ActiveSet::assign(const WeightingOperator& op, std::vector<std::uint32_t> v
   check_voxels(op);
   const BigBuffer<int> order_y = group_by_column(op);
   bands_ = (op.image_height() + kBandRows - 1) / kBandRows;
-  BandPlan plan = plan_bands(op, order_y);
+  const RowBands rows = row_bands(op);
+  BandPlan plan = plan_bands(op, order_y, rows);
   const std::vector<std::size_t> block_visit = lay_out_visits(plan);
-  fill_entries(op, order_y, plan, block_visit);
+  fill_entries(op, order_y, rows, plan, block_visit);
   order_by_cost(op);
 }
 
@@ -164,7 +192,8 @@ BigBuffer<int> ActiveSet::group_by_column(const WeightingOperator& op) {
   return order_y;
 }
 
-ActiveSet::BandPlan ActiveSet::plan_bands(const WeightingOperator& op, const BigBuffer<int>& order_y) const {
+ActiveSet::BandPlan ActiveSet::plan_bands(const WeightingOperator& op, const BigBuffer<int>& order_y,
+                                          const RowBands& rows) const {
   const int height = op.image_height();
   BandPlan plan;
   plan.first_band.resize(columns_.size());
@@ -188,18 +217,18 @@ ActiveSet::BandPlan ActiveSet::plan_bands(const WeightingOperator& op, const Big
                     });
   for (std::size_t c = 0; c < columns_.size(); ++c) plan.block_offset[c + 1] += plan.block_offset[c];
   plan.block_entries.assign(plan.block_offset.back(), 0);
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, columns_.size(), 64),
-                    [&](const tbb::blocked_range<std::size_t>& range) {
-                      for (std::size_t c = range.begin(); c != range.end(); ++c) {
-                        const Column& col = columns_[c];
-                        const std::size_t offset = plan.block_offset[c];
-                        const int first = plan.first_band[c];
-                        walk_column(op.slice(col.z), col.begin, col.end, order_y.data(), first, plan.last_band[c],
-                                    kBandRows, height, [&](int b, std::uint32_t, std::size_t, std::size_t) {
-                                      ++plan.block_entries[offset + std::size_t(b - first)];
-                                    });
-                      }
-                    });
+  tbb::parallel_for(
+      tbb::blocked_range<std::size_t>(0, columns_.size(), 64), [&](const tbb::blocked_range<std::size_t>& range) {
+        for (std::size_t c = range.begin(); c != range.end(); ++c) {
+          const Column& col = columns_[c];
+          const std::size_t offset = plan.block_offset[c];
+          const int first = plan.first_band[c];
+          const std::size_t slice_rows = std::size_t(col.z) * rows.ny;
+          for (std::uint32_t p = col.begin; p < col.end; ++p)
+            rows.walk(slice_rows + std::size_t(order_y[p]), first, plan.last_band[c],
+                      [&](int b, const RowBands::Share&) { ++plan.block_entries[offset + std::size_t(b - first)]; });
+        }
+      });
   return plan;
 }
 
@@ -241,46 +270,86 @@ std::vector<std::size_t> ActiveSet::lay_out_visits(const BandPlan& plan) {
   return block_visit;
 }
 
-void ActiveSet::fill_entries(const WeightingOperator& op, const BigBuffer<int>& order_y, BandPlan& plan,
-                             const std::vector<std::size_t>& block_visit) {
+ActiveSet::RowBands ActiveSet::row_bands(const WeightingOperator& op) {
   const int height = op.image_height();
-  tbb::parallel_for(
-      tbb::blocked_range<std::size_t>(0, columns_.size(), 64), [&](const tbb::blocked_range<std::size_t>& range) {
-        for (std::size_t c = range.begin(); c != range.end(); ++c) {
-          const Column& col = columns_[c];
-          const SliceTables& t = op.slice(col.z);
-          const std::size_t offset = plan.block_offset[c];
-          const int first_band = plan.first_band[c];
-          walk_column(
-              t, col.begin, col.end, order_y.data(), first_band, plan.last_band[c], kBandRows, height,
-              [&](int b, std::uint32_t p, std::size_t k, std::size_t n) {
-                const std::size_t block = offset + std::size_t(b - first_band);
-                Visit& v = visits_[block_visit[block]];
-                // In y order.
-                entries_[v.entry_end - plan.block_entries[block]--] = BandEntry{p, std::uint32_t(k), std::uint32_t(n)};
-                const int r0 = b * kBandRows, r1 = std::min(height, r0 + kBandRows);
-                // The rows with weight, a quad's lanes at a time: bit j for row first + j,
-                // without the lanes in the neighbouring bands.
-                for (std::size_t q = k; q < k + n; ++q) {
-                  const float* w = t.y_quad_weights.data() + kQuad * q;
-                  // Bit j: lane j's weight is not 0 (one SSE compare, not four scalar
-                  // ones).
-                  std::uint64_t lanes =
-                      std::uint64_t(_mm_movemask_ps(_mm_cmpneq_ps(_mm_loadu_ps(w), _mm_setzero_ps())));
-                  int at = t.y_quad_first[q] - r0;
-                  if (at < 0) {
-                    lanes >>= -at;
-                    at = 0;
-                  }
-                  if (r1 - r0 - at < kQuad) lanes &= (std::uint64_t(1) << (r1 - r0 - at)) - 1;
-                  v.rows[std::size_t(at >> 6)] |= lanes << (at & 63);
-                  if ((at & 63) > 64 - kQuad && (at >> 6) + 1 < kRowWords) {
-                    v.rows[std::size_t(at >> 6) + 1] |= lanes >> (64 - (at & 63));
-                  }
-                }
-              });
-        }
-      });
+  const std::size_t ny = std::size_t(op.grid().shape[1]), nz = std::size_t(op.grid().shape[2]);
+  RowBands rows;
+  rows.ny = ny;
+  rows.first_band.assign(nz * ny, 0);
+  rows.start.assign(nz * ny + 1, 0);
+  for (std::size_t z = 0; z < nz; ++z) {
+    const SliceTables& t = op.slice(int(z));
+    for (std::size_t y = 0; y < ny; ++y) {
+      const std::size_t q0 = t.y_quad_start[y], q1 = t.y_quad_start[y + 1], zy = z * ny + y;
+      std::size_t bands = 0;
+      if (q0 < q1) {
+        rows.first_band[zy] = t.y_quad_first[q0] / kBandRows;
+        bands = std::size_t((t.y_quad_first[q1 - 1] + kQuad - 1) / kBandRows - rows.first_band[zy] + 1);
+      }
+      rows.start[zy + 1] = rows.start[zy] + bands;
+    }
+  }
+  // Each share written in full (BigBuffer does not zero): the bands a row's quads skip keep
+  // quad_count 0.
+  rows.shares.resize(rows.start.back());
+  tbb::parallel_for(std::size_t(0), nz, [&](std::size_t z) {
+    const SliceTables& t = op.slice(int(z));
+    for (std::size_t y = 0; y < ny; ++y) {
+      const std::size_t zy = z * ny + y;
+      for (std::size_t i = rows.start[zy]; i < rows.start[zy + 1]; ++i) rows.shares[i] = RowBands::Share{0, 0, {}};
+      const int order_of_y = int(y);
+      walk_column(t, 0, 1, &order_of_y, rows.first_band[zy], std::numeric_limits<int>::max(), kBandRows, height,
+                  [&](int b, std::uint32_t, std::size_t k, std::size_t n) {
+                    RowBands::Share& share = rows.shares[rows.start[zy] + std::size_t(b - rows.first_band[zy])];
+                    share.quad_begin = std::uint32_t(k);
+                    share.quad_count = std::uint32_t(n);
+                    const int r0 = b * kBandRows, r1 = std::min(height, r0 + kBandRows);
+                    // The rows with weight, a quad's lanes at a time: bit j for row first + j,
+                    // without the lanes in the neighbouring bands.
+                    for (std::size_t q = k; q < k + n; ++q) {
+                      const float* w = t.y_quad_weights.data() + kQuad * q;
+                      // Bit j: lane j's weight is not 0 (one SSE compare, not four scalar ones).
+                      std::uint64_t lanes =
+                          std::uint64_t(_mm_movemask_ps(_mm_cmpneq_ps(_mm_loadu_ps(w), _mm_setzero_ps())));
+                      int at = t.y_quad_first[q] - r0;
+                      if (at < 0) {
+                        lanes >>= -at;
+                        at = 0;
+                      }
+                      if (r1 - r0 - at < kQuad) lanes &= (std::uint64_t(1) << (r1 - r0 - at)) - 1;
+                      share.rows[std::size_t(at >> 6)] |= lanes << (at & 63);
+                      if ((at & 63) > 64 - kQuad && (at >> 6) + 1 < kRowWords) {
+                        share.rows[std::size_t(at >> 6) + 1] |= lanes >> (64 - (at & 63));
+                      }
+                    }
+                  });
+    }
+  });
+  return rows;
+}
+
+void ActiveSet::fill_entries(const WeightingOperator&, const BigBuffer<int>& order_y, const RowBands& rows,
+                             BandPlan& plan, const std::vector<std::size_t>& block_visit) {
+  // Each voxel's shares of its column's bands come from its row's (the same for every voxel column
+  // x); a visit's rows are the OR of its entries' (in any order: the same bits).
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, columns_.size(), 64), [&](const tbb::blocked_range<std::size_t>&
+                                                                                     range) {
+    for (std::size_t c = range.begin(); c != range.end(); ++c) {
+      const Column& col = columns_[c];
+      const std::size_t offset = plan.block_offset[c];
+      const int first = plan.first_band[c];
+      const std::size_t slice_rows = std::size_t(col.z) * rows.ny;
+      for (std::uint32_t p = col.begin; p < col.end; ++p)
+        rows.walk(
+            slice_rows + std::size_t(order_y[p]), first, plan.last_band[c], [&](int b, const RowBands::Share& share) {
+              const std::size_t block = offset + std::size_t(b - first);
+              Visit& v = visits_[block_visit[block]];
+              // In y order.
+              entries_[v.entry_end - plan.block_entries[block]--] = BandEntry{p, share.quad_begin, share.quad_count};
+              for (int word = 0; word < kRowWords; ++word) v.rows[std::size_t(word)] |= share.rows[std::size_t(word)];
+            });
+    }
+  });
 }
 
 void ActiveSet::order_by_cost(const WeightingOperator& op) {

@@ -107,19 +107,23 @@ class ActiveSet {
     std::uint32_t entry_begin, entry_end;       // into entries_
     std::array<std::uint64_t, kRowWords> rows;  // bit r: row r0 + r of the band
   };
-  // The construction's bookkeeping per column and band (active_set.cpp).
+  // The construction's bookkeeping per column and band, and each voxel row's share of each band
+  // (active_set.cpp).
   struct BandPlan;
+  struct RowBands;
 
   // The construction, step by step (active_set.cpp).
   void check_voxels(const WeightingOperator& op) const;
   // order_, order_normaliser_, columns_ and the strips; returns each ordered voxel's y.
   BigBuffer<int> group_by_column(const WeightingOperator& op);
+  // Per voxel row (z, y) of the grid: its y quads in each band and the band's rows they reach.
+  static RowBands row_bands(const WeightingOperator& op);
   // Which bands each column's voxels reach, and how many entries each (column, band) holds.
-  BandPlan plan_bands(const WeightingOperator& op, const BigBuffer<int>& order_y) const;
+  BandPlan plan_bands(const WeightingOperator& op, const BigBuffer<int>& order_y, const RowBands& rows) const;
   // visit_start_ and visits_ (without their rows) in the kernels' reading order.
   std::vector<std::size_t> lay_out_visits(const BandPlan& plan);
   // entries_ and each visit's reached rows.
-  void fill_entries(const WeightingOperator& op, const BigBuffer<int>& order_y, BandPlan& plan,
+  void fill_entries(const WeightingOperator& op, const BigBuffer<int>& order_y, const RowBands& rows, BandPlan& plan,
                     const std::vector<std::size_t>& block_visit);
   // band_order_ and strip_order_: costliest first.
   void order_by_cost(const WeightingOperator& op);
