@@ -82,6 +82,23 @@ void walk_column(const SliceTables& t, std::uint32_t begin, std::uint32_t end, c
   }
 }
 
+// Calls visit(c, b, p, share) for each voxel p of each column c and each band b of the column's
+// range [plan.first_band[c], plan.last_band[c]] in which the voxel's row has quads: in parallel
+// over columns, a column's calls in y order and each voxel's in band order.
+template <typename Columns, typename Rows, typename Plan, typename Visit>
+void for_each_share(const Columns& columns, const int* order_y, const Rows& rows, const Plan& plan, Visit&& visit) {
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, columns.size(), 64),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+                      for (std::size_t c = range.begin(); c != range.end(); ++c) {
+                        const auto& col = columns[c];
+                        const std::size_t slice_rows = std::size_t(col.z) * rows.ny;
+                        for (std::uint32_t p = col.begin; p < col.end; ++p)
+                          rows.walk(slice_rows + std::size_t(order_y[p]), plan.first_band[c], plan.last_band[c],
+                                    [&](int b, const auto& share) { visit(c, b, p, share); });
+                      }
+                    });
+}
+
 }  // namespace
 
 ActiveSet::ActiveSet(const WeightingOperator& op, std::vector<std::uint32_t> voxels) { assign(op, std::move(voxels)); }
@@ -217,18 +234,10 @@ ActiveSet::BandPlan ActiveSet::plan_bands(const WeightingOperator& op, const Big
                     });
   for (std::size_t c = 0; c < columns_.size(); ++c) plan.block_offset[c + 1] += plan.block_offset[c];
   plan.block_entries.assign(plan.block_offset.back(), 0);
-  tbb::parallel_for(
-      tbb::blocked_range<std::size_t>(0, columns_.size(), 64), [&](const tbb::blocked_range<std::size_t>& range) {
-        for (std::size_t c = range.begin(); c != range.end(); ++c) {
-          const Column& col = columns_[c];
-          const std::size_t offset = plan.block_offset[c];
-          const int first = plan.first_band[c];
-          const std::size_t slice_rows = std::size_t(col.z) * rows.ny;
-          for (std::uint32_t p = col.begin; p < col.end; ++p)
-            rows.walk(slice_rows + std::size_t(order_y[p]), first, plan.last_band[c],
-                      [&](int b, const RowBands::Share&) { ++plan.block_entries[offset + std::size_t(b - first)]; });
-        }
-      });
+  for_each_share(columns_, order_y.data(), rows, plan,
+                 [&](std::size_t c, int b, std::uint32_t, const RowBands::Share&) {
+                   ++plan.block_entries[plan.block_offset[c] + std::size_t(b - plan.first_band[c])];
+                 });
   return plan;
 }
 
@@ -332,24 +341,14 @@ void ActiveSet::fill_entries(const WeightingOperator&, const BigBuffer<int>& ord
                              BandPlan& plan, const std::vector<std::size_t>& block_visit) {
   // Each voxel's shares of its column's bands come from its row's (the same for every voxel column
   // x); a visit's rows are the OR of its entries' (in any order: the same bits).
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, columns_.size(), 64), [&](const tbb::blocked_range<std::size_t>&
-                                                                                     range) {
-    for (std::size_t c = range.begin(); c != range.end(); ++c) {
-      const Column& col = columns_[c];
-      const std::size_t offset = plan.block_offset[c];
-      const int first = plan.first_band[c];
-      const std::size_t slice_rows = std::size_t(col.z) * rows.ny;
-      for (std::uint32_t p = col.begin; p < col.end; ++p)
-        rows.walk(
-            slice_rows + std::size_t(order_y[p]), first, plan.last_band[c], [&](int b, const RowBands::Share& share) {
-              const std::size_t block = offset + std::size_t(b - first);
-              Visit& v = visits_[block_visit[block]];
-              // In y order.
-              entries_[v.entry_end - plan.block_entries[block]--] = BandEntry{p, share.quad_begin, share.quad_count};
-              for (int word = 0; word < kRowWords; ++word) v.rows[std::size_t(word)] |= share.rows[std::size_t(word)];
-            });
-    }
-  });
+  for_each_share(
+      columns_, order_y.data(), rows, plan, [&](std::size_t c, int b, std::uint32_t p, const RowBands::Share& share) {
+        const std::size_t block = plan.block_offset[c] + std::size_t(b - plan.first_band[c]);
+        Visit& v = visits_[block_visit[block]];
+        // In y order.
+        entries_[v.entry_end - plan.block_entries[block]--] = BandEntry{p, share.quad_begin, share.quad_count};
+        for (int word = 0; word < kRowWords; ++word) v.rows[std::size_t(word)] |= share.rows[std::size_t(word)];
+      });
 }
 
 void ActiveSet::order_by_cost(const WeightingOperator& op) {
