@@ -117,7 +117,7 @@ void ActiveSet::assign(const WeightingOperator& op, std::vector<std::uint32_t> v
   const RowBands rows = row_bands(op);
   BandPlan plan = plan_bands(op, order_y, rows);
   const std::vector<std::size_t> block_visit = lay_out_visits(plan);
-  fill_entries(op, order_y, rows, plan, block_visit);
+  fill_entries(order_y, rows, plan, block_visit);
   order_by_cost(op);
 }
 
@@ -337,8 +337,8 @@ ActiveSet::RowBands ActiveSet::row_bands(const WeightingOperator& op) {
   return rows;
 }
 
-void ActiveSet::fill_entries(const WeightingOperator&, const BigBuffer<int>& order_y, const RowBands& rows,
-                             BandPlan& plan, const std::vector<std::size_t>& block_visit) {
+void ActiveSet::fill_entries(const BigBuffer<int>& order_y, const RowBands& rows, BandPlan& plan,
+                             const std::vector<std::size_t>& block_visit) {
   // Each voxel's shares of its column's bands come from its row's (the same for every voxel column
   // x); a visit's rows are the OR of its entries' (in any order: the same bits).
   for_each_share(

@@ -123,7 +123,7 @@ class ActiveSet {
   // visit_start_ and visits_ (without their rows) in the kernels' reading order.
   std::vector<std::size_t> lay_out_visits(const BandPlan& plan);
   // entries_ and each visit's reached rows.
-  void fill_entries(const WeightingOperator& op, const BigBuffer<int>& order_y, const RowBands& rows, BandPlan& plan,
+  void fill_entries(const BigBuffer<int>& order_y, const RowBands& rows, BandPlan& plan,
                     const std::vector<std::size_t>& block_visit);
   // band_order_ and strip_order_: costliest first.
   void order_by_cost(const WeightingOperator& op);
