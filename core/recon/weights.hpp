@@ -174,7 +174,7 @@ class WeightingOperator {
   ImageF white_;
   Geometry geo_;
   std::vector<SliceTables> slices_;
-  std::vector<float> normaliser_;
+  HugePageVector<float> normaliser_;  // one per voxel of the grid: on huge pages
 };
 
 }  // namespace plenopiv::recon

@@ -1,4 +1,6 @@
 // The weighting operator as bytes and back, for a cache of operators kept between runs.
+#include <tbb/parallel_for.h>
+
 #include <array>
 #include <cstring>
 #include <string>
@@ -37,7 +39,7 @@ class Writer {
 
 class Reader {
  public:
-  explicit Reader(std::string_view in) : in_(in) {}
+  explicit Reader(std::string_view in, std::size_t at = 0) : in_(in), at_(at) {}
   template <typename T>
   T pod() {
     static_assert(std::is_trivially_copyable_v<T>);
@@ -52,6 +54,15 @@ class Reader {
     v.resize(std::size_t(n));
     take(v.data(), std::size_t(n) * sizeof(T));
   }
+  // Passes over an array of v's element type without reading it into v.
+  template <typename T, typename A>
+  void skip(const std::vector<T, A>&) {
+    const auto n = pod<std::uint64_t>();
+    if (n > (in_.size() - at_) / sizeof(T)) fail("an array runs past the end");
+    at_ += std::size_t(n) * sizeof(T);
+  }
+  std::size_t at() const { return at_; }
+  void move_to(std::size_t at) { at_ = at; }
   bool done() const { return at_ == in_.size(); }
   [[noreturn]] static void fail(const std::string& why) { throw InputError("weighting operator bytes: " + why); }
 
@@ -64,6 +75,25 @@ class Reader {
   std::string_view in_;
   std::size_t at_ = 0;
 };
+
+// A slice's scalars and then its arrays, in the order they are stored: f(scalar) for each scalar
+// and g(array) for each array (`Tables`: SliceTables, const or not).
+template <typename Tables, typename F, typename G>
+void for_each_member(Tables& t, F&& f, G&& g) {
+  f(t.z_mm);
+  f(t.alpha);
+  f(t.magnification);
+  f(t.samples);
+  for (auto* v : {&t.x_runs, &t.y_runs}) g(*v);
+  for (auto* v : {&t.x_segments, &t.y_segments}) g(*v);
+  for (auto* v : {&t.x_table, &t.y_table}) g(*v);
+  g(t.x_quad_start);
+  g(t.x_quad_first);
+  g(t.x_quad_weights);
+  g(t.y_quad_start);
+  g(t.y_quad_first);
+  g(t.y_quad_weights);
+}
 
 }  // namespace
 
@@ -93,24 +123,9 @@ void WeightingOperator::serialize(std::string& out) const {
   w.vec(geo_.lens_y);
   w.pod(geo_.max_centre_deviation_mm);
   w.pod(std::uint64_t(slices_.size()));
-  for (const SliceTables& t : slices_) {
-    w.pod(t.z_mm);
-    w.pod(t.alpha);
-    w.pod(t.magnification);
-    w.pod(t.samples);
-    w.vec(t.x_runs);
-    w.vec(t.y_runs);
-    w.vec(t.x_segments);
-    w.vec(t.y_segments);
-    w.vec(t.x_table);
-    w.vec(t.y_table);
-    w.vec(t.x_quad_start);
-    w.vec(t.x_quad_first);
-    w.vec(t.x_quad_weights);
-    w.vec(t.y_quad_start);
-    w.vec(t.y_quad_first);
-    w.vec(t.y_quad_weights);
-  }
+  for (const SliceTables& t : slices_)
+    for_each_member(
+        t, [&](const auto& v) { w.pod(v); }, [&](const auto& v) { w.vec(v); });
   w.vec(normaliser_);
 }
 
@@ -144,25 +159,24 @@ WeightingOperator WeightingOperator::deserialize(std::string_view bytes) {
   op.geo_.max_centre_deviation_mm = r.pod<double>();
   const auto slices = r.pod<std::uint64_t>();
   if (slices != std::uint64_t(op.grid_.shape[2])) Reader::fail("slice count does not match the grid");
+  // Where each slice starts, found by passing over the arrays; then the slices are copied in
+  // parallel: most of the copy's time is the first touch of the tables' fresh pages.
   op.slices_.resize(std::size_t(slices));
-  for (SliceTables& t : op.slices_) {
-    t.z_mm = r.pod<double>();
-    t.alpha = r.pod<double>();
-    t.magnification = r.pod<double>();
-    t.samples = r.pod<int>();
-    r.vec(t.x_runs);
-    r.vec(t.y_runs);
-    r.vec(t.x_segments);
-    r.vec(t.y_segments);
-    r.vec(t.x_table);
-    r.vec(t.y_table);
-    r.vec(t.x_quad_start);
-    r.vec(t.x_quad_first);
-    r.vec(t.x_quad_weights);
-    r.vec(t.y_quad_start);
-    r.vec(t.y_quad_first);
-    r.vec(t.y_quad_weights);
+  std::vector<std::size_t> start(std::size_t(slices) + 1);
+  for (std::size_t z = 0; z < op.slices_.size(); ++z) {
+    start[z] = r.at();
+    for_each_member(
+        op.slices_[z], [&](auto& v) { v = r.pod<std::remove_reference_t<decltype(v)>>(); },
+        [&](const auto& v) { r.skip(v); });
   }
+  start.back() = r.at();
+  tbb::parallel_for(std::size_t(0), op.slices_.size(), [&](std::size_t z) {
+    Reader slice(bytes.substr(sizeof kMagic), start[z]);
+    for_each_member(
+        op.slices_[z], [&](auto& v) { v = slice.pod<std::remove_reference_t<decltype(v)>>(); },
+        [&](auto& v) { slice.vec(v); });
+  });
+  r.move_to(start.back());
   r.vec(op.normaliser_);
   if (!r.done()) Reader::fail("bytes left after the operator");
   // Sizes the kernels rely on; the caller's checksum vouches for the values.
@@ -181,13 +195,10 @@ WeightingOperator WeightingOperator::deserialize(std::string_view bytes) {
 
 std::size_t WeightingOperator::bytes() const {
   std::size_t total = white_.pixels.size() * sizeof(float) + normaliser_.size() * sizeof(float);
-  for (const SliceTables& t : slices_) {
-    total += (t.x_runs.size() + t.y_runs.size()) * sizeof(WeightRun) +
-             (t.x_segments.size() + t.y_segments.size()) * sizeof(Segment) +
-             (t.x_table.size() + t.y_table.size() + t.x_quad_weights.size() + t.y_quad_weights.size()) * sizeof(float) +
-             (t.x_quad_start.size() + t.y_quad_start.size()) * sizeof(std::size_t) +
-             (t.x_quad_first.size() + t.y_quad_first.size()) * sizeof(int);
-  }
+  for (const SliceTables& t : slices_)
+    for_each_member(
+        t, [](const auto&) {},
+        [&](const auto& v) { total += v.size() * sizeof(typename std::decay_t<decltype(v)>::value_type); });
   return total;
 }
 
