@@ -42,6 +42,8 @@ plenopiv_find_pkgconfig(FFTW3F fftw3f libfftw3-dev)
 # Vector logarithms and exponentials with the same bits on every CPU (MART's per-pixel log-ratios)
 plenopiv_find_pkgconfig(SLEEF sleef libsleef-dev)
 plenopiv_find_pkgconfig(LIBTIFF libtiff-4 libtiff-dev)
+# Fast hashes (XXH3) of the weights cache: its key's white image and its tables' checksum
+plenopiv_find_pkgconfig(XXHASH libxxhash libxxhash-dev)
 find_package(HDF5 QUIET COMPONENTS C HL)
 if(NOT HDF5_FOUND)
   plenopiv_missing(HDF5 libhdf5-dev)

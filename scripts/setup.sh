@@ -16,7 +16,7 @@ packages=(
   libzmq3-dev cppzmq-dev libprotobuf-dev protobuf-compiler libspdlog-dev libtbb-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   # numerics and files
-  libfftw3-dev libsleef-dev libhdf5-dev libyaml-cpp-dev libcli11-dev libsystemd-dev libtiff-dev zlib1g-dev
+  libfftw3-dev libsleef-dev libxxhash-dev libhdf5-dev libyaml-cpp-dev libcli11-dev libsystemd-dev libtiff-dev zlib1g-dev
   # preview plots (PLplot, PNG through its cairo driver); exports (NetCDF-4, the zip of NumPy's .npz)
   libplplot-dev plplot-driver-cairo libnetcdf-dev libzip-dev
   # the Python package (clients/python), plots and file checks (Debian's /usr/bin/python3); it is

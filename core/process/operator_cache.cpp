@@ -10,6 +10,8 @@
 #include <system_error>
 #include <vector>
 
+#include <xxhash.h>
+
 #include "core/base/errors.hpp"
 #include "core/io/atomic_file.hpp"
 #include "core/io/checksum.hpp"
@@ -18,18 +20,16 @@ namespace plenopiv::process {
 namespace {
 
 constexpr char kMagic[8] = {'P', 'L', 'W', 'C', 'A', 'C', 'H', 'E'};
-constexpr std::uint32_t kFileFormat = 1;
+// 2: the tables' checksum is XXH3's 64 bits (1: CRC-32); a file of another format is stale.
+constexpr std::uint32_t kFileFormat = 2;
 
 template <typename T>
 void put(std::string& out, const T& v) {
   out.append(reinterpret_cast<const char*>(&v), sizeof v);
 }
 
-std::uint64_t fnv1a(std::string_view bytes) {
-  std::uint64_t h = 14695981039346656037ull;
-  for (unsigned char c : bytes) h = (h ^ c) * 1099511628211ull;
-  return h;
-}
+// XXH3 (xxHash's 64-bit hash) of `bytes`: the cache's file names and its tables' checksum.
+std::uint64_t xxh3_of(std::string_view bytes) { return XXH3_64bits(bytes.data(), bytes.size()); }
 
 std::string hex64(std::uint64_t v) {
   char text[17];
@@ -37,14 +37,14 @@ std::string hex64(std::uint64_t v) {
   return text;
 }
 
-// The file's header: magic, format, key, payload length and CRC-32; then the payload.
+// The file's header: magic, format, key, payload length and checksum; then the payload.
 std::string header(const std::string& key, std::string_view payload) {
   std::string out(kMagic, sizeof kMagic);
   put(out, kFileFormat);
   put(out, std::uint64_t(key.size()));
   out += key;
   put(out, std::uint64_t(payload.size()));
-  put(out, io::crc32_of(payload));
+  put(out, xxh3_of(payload));
   return out;
 }
 
@@ -84,16 +84,13 @@ Parsed parse(std::string_view file, const std::string& key) {
   const std::string_view stored_key = take(std::size_t(key_size));
   if (stored_key.size() != key_size) return bad(Outcome::corrupt, "truncated");
   if (stored_key != key) return bad(Outcome::stale, "made for another camera, calibration, volume or settings");
-  std::uint32_t crc = 0;
-  if (!take_u64(payload_size)) return bad(Outcome::corrupt, "truncated");
-  const std::string_view c = take(sizeof crc);
-  if (c.size() != sizeof crc) return bad(Outcome::corrupt, "truncated");
-  std::memcpy(&crc, c.data(), sizeof crc);
+  std::uint64_t checksum = 0;
+  if (!take_u64(payload_size) || !take_u64(checksum)) return bad(Outcome::corrupt, "truncated");
   const std::string_view payload = file.substr(at);
   if (payload.size() != payload_size)
     return bad(Outcome::corrupt, "holds " + std::to_string(payload.size()) + " bytes of tables, its header says " +
                                      std::to_string(payload_size));
-  if (io::crc32_of(payload) != crc) return bad(Outcome::corrupt, "checksum does not match its tables");
+  if (xxh3_of(payload) != checksum) return bad(Outcome::corrupt, "checksum does not match its tables");
   return Parsed{payload, Outcome::hit, {}};
 }
 
@@ -137,8 +134,9 @@ std::string operator_key(const optics::CameraModel& camera, const optics::Microl
                                      white.pixels.size() * sizeof(float));
   put(key, white.width);
   put(key, white.height);
-  put(key, fnv1a(white_bytes));
-  put(key, io::crc32_of(white_bytes));
+  const XXH128_hash_t white_hash = XXH3_128bits(white_bytes.data(), white_bytes.size());
+  put(key, white_hash.low64);
+  put(key, white_hash.high64);
   put(key, grid.shape);
   put(key, grid.origin_mm);
   put(key, grid.spacing_mm);
@@ -166,7 +164,7 @@ WeightsDiskCache::WeightsDiskCache(std::filesystem::path folder, std::size_t kee
     : folder_(std::move(folder)), keep_(std::max<std::size_t>(keep, 1)) {}
 
 std::filesystem::path WeightsDiskCache::file_for(const std::string& key) const {
-  return folder_ / ("weights-" + hex64(fnv1a(key)) + ".bin");
+  return folder_ / ("weights-" + hex64(xxh3_of(key)) + ".bin");
 }
 
 std::unique_ptr<const recon::WeightingOperator> WeightsDiskCache::weights(const optics::CameraModel& camera,

@@ -27,7 +27,7 @@ std::string operator_key(const optics::CameraModel& camera, const optics::Microl
                          const Grid3& grid, double angular_sampling);
 
 // Weight tables in files of a folder, one per key (weights-<hash of the key>.bin: a header with
-// the full key, the payload's length and CRC-32, then recon::WeightingOperator::serialize's
+// the full key, the payload's length and XXH3 checksum, then recon::WeightingOperator::serialize's
 // bytes). A file is used only when its key, length and checksum all match and its bytes read
 // back; a stale (other key or format) or damaged file is rebuilt and replaced, never trusted.
 // Files are written atomically (io::write_atomically); the folder keeps the `keep` most recently

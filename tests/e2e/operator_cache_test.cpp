@@ -113,6 +113,27 @@ TEST_F(OperatorCacheTest, AnotherGeometryIsAnotherKeyAndAStaleFileIsRebuilt) {
   EXPECT_EQ(cache.last_outcome(), Outcome::hit) << cache.last_note();
 }
 
+// A file of another format (its header's format field, after the 8-byte magic, set to the previous
+// one's 1, whose checksum was a CRC-32) is stale: rebuilt, then hit.
+TEST_F(OperatorCacheTest, AFileOfAnotherFormatIsStaleAndRebuilt) {
+  const optics::CameraModel cam = camera();
+  const calib::LoadedCalibration nominal = calib::nominal_calibration(cam);
+  WeightsDiskCache cache(folder_);
+  cache.weights(cam, nominal.lenses, nominal.white_correction, grid(0), 1.0);
+  const std::filesystem::path file = the_file();
+  {
+    std::fstream f(file, std::ios::in | std::ios::out | std::ios::binary);
+    const std::uint32_t previous = 1;
+    f.seekp(8);
+    f.write(reinterpret_cast<const char*>(&previous), sizeof previous);
+  }
+  cache.weights(cam, nominal.lenses, nominal.white_correction, grid(0), 1.0);
+  EXPECT_EQ(cache.last_outcome(), Outcome::stale) << cache.last_note();
+  EXPECT_NE(cache.last_note().find("written by another version"), std::string::npos) << cache.last_note();
+  cache.weights(cam, nominal.lenses, nominal.white_correction, grid(0), 1.0);
+  EXPECT_EQ(cache.last_outcome(), Outcome::hit) << cache.last_note();
+}
+
 TEST_F(OperatorCacheTest, ADamagedFileIsRebuiltNeverTrusted) {
   const optics::CameraModel cam = camera();
   const calib::LoadedCalibration nominal = calib::nominal_calibration(cam);
