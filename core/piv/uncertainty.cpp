@@ -21,9 +21,11 @@ typedef float Lanes8 __attribute__((vector_size(32)));
 typedef float Floats4 __attribute__((vector_size(16)));
 typedef double Doubles4 __attribute__((vector_size(32)));
 
-// sum_i x[i] y[i] over n floats: products summed in eight float lanes over blocks of 64, each
-// block's lanes added into eight double lanes, the remainder in double.
-[[gnu::always_inline]] inline double dot(const float* x, const float* y, std::size_t n) {
+// The sum over i < n of what add(i, lanes) adds to eight float lanes (elements i .. i + 7) and,
+// past the last whole eight, of tail(i) (a double): the lanes summed in float over blocks of 64
+// elements, each block's lanes added into eight double lanes, the tail in double.
+template <class Add, class Tail>
+[[gnu::always_inline]] inline double blocked_sum(std::size_t n, Add add, Tail tail) {
   constexpr std::size_t block = 64;
   Doubles4 low = {0, 0, 0, 0}, high = low;
   const std::size_t whole = n - n % 8;
@@ -31,12 +33,7 @@ typedef double Doubles4 __attribute__((vector_size(32)));
   while (i < whole) {
     const std::size_t end = std::min(whole, i + block);
     Lanes8 lanes = {0, 0, 0, 0, 0, 0, 0, 0};
-    for (; i < end; i += 8) {
-      Lanes8 u, v;
-      std::memcpy(&u, x + i, sizeof u);
-      std::memcpy(&v, y + i, sizeof v);
-      lanes += u * v;
-    }
+    for (; i < end; i += 8) add(i, lanes);
     Floats4 l, h;
     std::memcpy(&l, &lanes, sizeof l);
     std::memcpy(&h, reinterpret_cast<const char*>(&lanes) + sizeof l, sizeof h);
@@ -45,8 +42,33 @@ typedef double Doubles4 __attribute__((vector_size(32)));
   }
   const Doubles4 both = low + high;
   double sum = (both[0] + both[1]) + (both[2] + both[3]);
-  for (; i < n; ++i) sum += double(x[i]) * y[i];
+  for (; i < n; ++i) sum += tail(i);
   return sum;
+}
+
+// sum_i x[i] y[i] over n floats.
+[[gnu::always_inline]] inline double dot(const float* x, const float* y, std::size_t n) {
+  return blocked_sum(
+      n,
+      [&](std::size_t i, Lanes8& lanes) {
+        Lanes8 u, v;
+        std::memcpy(&u, x + i, sizeof u);
+        std::memcpy(&v, y + i, sizeof v);
+        lanes += u * v;
+      },
+      [&](std::size_t i) { return double(x[i]) * y[i]; });
+}
+
+// sum_i x[i] over n floats.
+[[gnu::always_inline]] inline double sum_of(const float* x, std::size_t n) {
+  return blocked_sum(
+      n,
+      [&](std::size_t i, Lanes8& lanes) {
+        Lanes8 u;
+        std::memcpy(&u, x + i, sizeof u);
+        lanes += u;
+      },
+      [&](std::size_t i) { return double(x[i]); });
 }
 
 // sum_i x[i] y[(i + k) mod len] over len floats: x's +k neighbours in y, cyclic over the block.
@@ -100,24 +122,15 @@ typedef double Doubles4 __attribute__((vector_size(32)));
 }
 
 // Copies `len` floats of `src` (zeros when null) to `dst` turned left by `turn` (dst[x] =
-// src[(x + turn) mod len]; 0: a plain copy) and returns their sum (in float, in src's order; the
-// caller adds the rows' sums in double).
-[[gnu::always_inline]] inline double copy_row(const float* __restrict src, std::size_t len, float* __restrict dst,
-                                              std::size_t turn = 0) {
+// src[(x + turn) mod len]; 0: a plain copy).
+[[gnu::always_inline]] inline void copy_row(const float* __restrict src, std::size_t len, float* __restrict dst,
+                                            std::size_t turn = 0) {
   if (!src) {
     std::fill(dst, dst + len, 0.f);
-    return 0;
+    return;
   }
-  float sum = 0;
-  for (std::size_t x = 0; x < turn; ++x) {
-    dst[len - turn + x] = src[x];
-    sum += src[x];
-  }
-  for (std::size_t x = turn; x < len; ++x) {
-    dst[x - turn] = src[x];
-    sum += src[x];
-  }
-  return sum;
+  std::copy(src, src + turn, dst + (len - turn));
+  std::copy(src + turn, src + len, dst);
 }
 
 // The 3-point Gaussian fit's offset error when C(+1) and C(-1) move apart by `spread` from their
@@ -146,12 +159,10 @@ __attribute__((target_clones("avx512f", "avx2", "default"))) std::array<float, 3
   s.a.resize(count);
   s.rolled.resize(count);
   // B goes straight to its place rolled by the shift, cyclically: rolled(x) = b(x + shift), so that
-  // the peak's neighbours are x's neighbours. Source rows are read in order and each row's sum is
-  // added in the source's order: the means are those of the windows unrolled.
+  // the peak's neighbours are x's neighbours.
   const auto wrap = [](int i, int len) { return std::size_t(((i % len) + len) % len); };
   const std::size_t turn = wrap(shift[0], n[0]), sy = wrap(shift[1], n[1]), sz = wrap(shift[2], n[2]);
   const std::size_t plane = std::size_t(shape[0]) * shape[1];
-  double sum_a = 0, sum_b = 0;
   for (int z = 0; z < n[2]; ++z) {
     const int vz = origin[2] - depth_margin + z;
     const bool in_a = z >= depth_margin && z < depth_margin + window[2], in_volume = vz >= 0 && vz < shape[2];
@@ -162,12 +173,13 @@ __attribute__((target_clones("avx512f", "avx2", "default"))) std::array<float, 3
           std::size_t(in_volume ? vz : 0) * plane + std::size_t(origin[1] + y) * shape[0] + origin[0];
       const std::size_t o = (std::size_t(z) * n[1] + y) * row_len;
       const std::size_t ry = (std::size_t(y) + n[1] - sy) % std::size_t(n[1]);
-      sum_a += copy_row(in_a ? a.data() + row : nullptr, row_len, s.a.data() + o);
-      sum_b +=
-          copy_row(in_volume ? b.data() + row : nullptr, row_len, s.rolled.data() + (rz * n[1] + ry) * row_len, turn);
+      copy_row(in_a ? a.data() + row : nullptr, row_len, s.a.data() + o);
+      copy_row(in_volume ? b.data() + row : nullptr, row_len, s.rolled.data() + (rz * n[1] + ry) * row_len, turn);
     }
   }
-  // A's mean over its own voxels (zeros around it stay zero), B's over the whole domain.
+  // A's mean over its own voxels (zeros around it stay zero), B's over the whole domain (its sum
+  // taken over the rolled copy: the same values).
+  const double sum_a = sum_of(s.a.data(), count), sum_b = sum_of(s.rolled.data(), count);
   const float mean_a = float(sum_a / (double(window[0]) * window[1] * window[2])),
               mean_b = float(sum_b / double(count));
   for (std::size_t q = std::size_t(depth_margin) * n[0] * n[1]; q < std::size_t(depth_margin + window[2]) * n[0] * n[1];
