@@ -103,6 +103,21 @@ void log_ratios(const LogRatioInputs& in, std::size_t i0, std::size_t i1, float*
 // since then a momentum of exactly 0.
 void log_or_zero(const float* values, std::size_t i0, std::size_t i1, float* out);
 
+// MART's multiplicative update (eq 9) on voxels [i0, i1), arrays over the active voxels: e[i] =
+// e[i] exp(mu update[i]), the exponent bounded by ±max_log, the result flushed to 0 below `tiny` and
+// capped at `huge`. SLEEF's exp, as extrapolate's.
+struct MultiplicativeUpdate {
+  float* e;
+  const float* update;
+  float mu, max_log, tiny, huge;
+};
+void multiply_by_exp(const MultiplicativeUpdate& u, std::size_t i0, std::size_t i1);
+
+// The multiplicative line of sight's pixel logarithms for [i0, i1): out[i] = ln max(data[i], tiny)
+// white[i] for a lit pixel, log_floor white[i] for a dark one (data 0). SLEEF's ln, as log_ratios.
+void log_pixels(const float* data, const float* white, float log_floor, float tiny, std::size_t i0, std::size_t i1,
+                float* out);
+
 // Nesterov's step of accelerated MART on voxels [i0, i1), arrays over the active voxels: y = x_k
 // (x_k / x_(k-1))^beta, taken on ln E. `e` holds x_k and gets y; `last` and `log_last` hold x_(k-1)
 // and its ln and get x_k and its ln; `momentum` gets ln x_k - ln x_(k-1) (0 where either is 0).

@@ -147,17 +147,21 @@ void SmartSolver::start_mlos() {
   // Σ_i W_ij white_i ln max(I_i, floor) / n_j, one back-projection of ln I times the white image
   // (in the projection buffer, not yet in use). n_j = Σ_i W_ij white_i, so an image scaled by c
   // scales every voxel by c, which the scale to the image's light below undoes. The floor's log is
-  // bounded as a lit pixel's is (log_pixel): half the faintest pixel of an image near the float
-  // limit can round to 0.
-  const float log_floor = std::log(std::max(dark_floor_, kTiny));
+  // bounded as a lit pixel's is (ln max(I, kTiny)): half the faintest pixel of an image near the
+  // float limit can round to 0. The logarithms and exponentials are SLEEF's, as the iterations'
+  // (kernels::log_pixels, multiply_by_exp): the same start on every x86-64 CPU.
+  const float floor_or_tiny = std::max(dark_floor_, kTiny);
+  float log_floor = 0;
+  kernels::log_or_zero(&floor_or_tiny, 0, 1, &log_floor);
   for_pixels(data.size(), [&](std::size_t i0, std::size_t i1) {
-    for (std::size_t i = i0; i < i1; ++i)
-      b_.projection[i] = (data[i] > 0.f ? log_pixel(data[i]) : log_floor) * white_[i];
+    kernels::log_pixels(data.data(), white_, log_floor, kTiny, i0, i1, b_.projection.data());
   });
   active_.back_project_whitened(op_, b_.projection, b_.update, &b_.kernels);
-  // A voxel that sees no pixel (n_j = 0) is left out of the passes and stays 0.
+  // E = exp(ln E); a voxel that sees no pixel (n_j = 0) is left out of the passes and stays 0.
   const std::vector<std::uint32_t>& voxels = active_.voxels();
-  for_voxels([&](std::size_t m) { e[m] = op_.normaliser(voxels[m]) > 0.f ? clean(bounded_exp(b_.update[m])) : 0.f; });
+  for_voxels([&](std::size_t m) { e[m] = op_.normaliser(voxels[m]) > 0.f ? 1.f : 0.f; });
+  const kernels::MultiplicativeUpdate start{e.data(), b_.update.data(), 1.f, kMaxLog, kTiny, kHuge};
+  for_voxel_ranges([&](std::size_t m0, std::size_t m1) { kernels::multiply_by_exp(start, m0, m1); });
   // Scale to the image's total light so the first ratios are near 1. The projection's total is
   // Σ_j E_j (eq 13 makes each voxel's weights sum to 1 over the sensor), so no projection is
   // needed; the two totals differ by the projection's float rounding only (docs/recon.md,
@@ -262,9 +266,8 @@ void SmartSolver::project_and_compare(bool with_ratio) {
 
 void SmartSolver::update() {
   active_.back_project_whitened(op_, b_.ratio, b_.update, &b_.kernels);
-  const float mu = float(settings_.mu);
-  BigBuffer<float>& e = b_.e;
-  for_voxels([&](std::size_t m) { e[m] = clean(e[m] * bounded_exp(mu * b_.update[m])); });
+  const kernels::MultiplicativeUpdate u{b_.e.data(), b_.update.data(), float(settings_.mu), kMaxLog, kTiny, kHuge};
+  for_voxel_ranges([&](std::size_t m0, std::size_t m1) { kernels::multiply_by_exp(u, m0, m1); });
 }
 
 bool SmartSolver::step_along_momentum() const {

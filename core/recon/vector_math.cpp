@@ -1,6 +1,6 @@
 // MART's loops over every pixel or voxel that take a logarithm or an exponential
-// (kernels::log_ratios, log_or_zero, extrapolate): the functions through SLEEF, four values at a
-// time, the rest in loops the vectoriser takes (-O3, CMakeLists.txt).
+// (kernels::log_ratios, log_or_zero, log_pixels, multiply_by_exp, extrapolate): the functions through SLEEF, four
+// values at a time, the rest in loops the vectoriser takes (-O3, CMakeLists.txt).
 #include <sleef.h>
 
 #include <algorithm>
@@ -80,6 +80,36 @@ void log_or_zero(const float* values, std::size_t i0, std::size_t i1, float* out
     for (std::size_t j = 0; j < n; ++j) ln[j] = v[j] > 0.f ? v[j] : 1.f;
     log_n(ln, n);
     for (std::size_t j = 0; j < n; ++j) out[c + j] = v[j] > 0.f ? ln[j] : 0.f;
+  });
+}
+
+void log_pixels(const float* data, const float* white, float log_floor, float tiny, std::size_t i0, std::size_t i1,
+                float* out) {
+  in_chunks(i0, i1, [&](std::size_t c, std::size_t n) {
+    alignas(16) float ln[kChunkValues];
+    const float* __restrict d = data + c;
+    for (std::size_t j = 0; j < n; ++j) ln[j] = std::max(d[j], tiny);
+    log_n(ln, n);
+    const float* __restrict w = white + c;
+    for (std::size_t j = 0; j < n; ++j) out[c + j] = (d[j] > 0.f ? ln[j] : log_floor) * w[j];
+  });
+}
+
+void multiply_by_exp(const MultiplicativeUpdate& u, std::size_t i0, std::size_t i1) {
+  const float mu = u.mu, max_log = u.max_log, tiny = u.tiny, huge = u.huge;
+  in_chunks(i0, i1, [&](std::size_t c, std::size_t n) {
+    alignas(16) float grow[kChunkValues];
+    const float* __restrict update = u.update + c;
+    for (std::size_t j = 0; j < n; ++j) {
+      const float x = mu * update[j];
+      grow[j] = x < -max_log ? -max_log : (x > max_log ? max_log : x);
+    }
+    exp_n(grow, n);
+    float* __restrict e = u.e + c;
+    for (std::size_t j = 0; j < n; ++j) {
+      const float y = e[j] * grow[j];
+      e[j] = y < tiny ? 0.f : (y > huge ? huge : y);
+    }
   });
 }
 

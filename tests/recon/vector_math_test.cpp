@@ -1,5 +1,6 @@
-// MART's elementwise logarithms and exponentials (kernels::log_ratios, log_or_zero, extrapolate):
-// each pixel's case, the bounds, and the same bits wherever a range is split.
+// MART's elementwise logarithms and exponentials (kernels::log_ratios, log_or_zero, log_pixels,
+// multiply_by_exp, extrapolate): each pixel's case, the bounds, and the same bits wherever a range
+// is split.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -74,6 +75,54 @@ TEST(VectorMath, EachPixelsCaseAndTheBoundsOfTheLogRatio) {
   }
 }
 
+// Voxels at 0 and across the float range, updates past both bounds of the exponent: e exp(mu u)
+// within the exp's 1 ulp and the product's rounding, 0 below kTiny, kHuge above it.
+std::vector<float> voxels(std::mt19937& random, std::size_t n) {
+  std::uniform_real_distribution<float> exponent(-60.f, 60.f);
+  std::vector<float> e(n);
+  for (std::size_t i = 0; i < n; ++i) e[i] = i % 5 == 0 ? 0.f : std::exp(exponent(random));
+  return e;
+}
+
+TEST(VectorMath, EachVoxelsMultiplicativeUpdateAndItsBounds) {
+  std::mt19937 random(5);
+  const std::size_t n = 1003;
+  const std::vector<float> e = voxels(random, n);
+  std::uniform_real_distribution<float> change(-120.f, 120.f);
+  std::vector<float> update(n);
+  for (float& u : update) u = change(random);
+  const float mu = 0.5f;
+  std::vector<float> out = e;
+  multiply_by_exp({out.data(), update.data(), mu, kMaxLog, kTiny, kHuge}, 0, n);
+  int checked = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const double expected = double(e[i]) * std::exp(std::clamp(double(mu) * update[i], -40.0, 40.0));
+    if (expected < kTiny * (1 - 1e-5)) {
+      EXPECT_EQ(out[i], 0.f) << "voxel " << i;
+    } else if (expected > kHuge * (1 + 1e-5)) {
+      EXPECT_EQ(out[i], kHuge) << "voxel " << i;
+    } else if (expected > kTiny * (1 + 1e-5) && expected < kHuge * (1 - 1e-5)) {
+      EXPECT_NEAR(out[i], expected, 3e-7 * expected) << "voxel " << i;
+      ++checked;
+    }
+  }
+  EXPECT_GT(checked, int(n / 2));
+}
+
+TEST(VectorMath, EachPixelsLogarithmForTheLineOfSightStart) {
+  const Pixels px(1003);
+  const float log_floor = -3.5f;
+  std::vector<float> data = px.data;
+  data[6] = 1e-40f;  // a denormal pixel: taken at kTiny
+  std::vector<float> out(data.size());
+  log_pixels(data.data(), px.white.data(), log_floor, kTiny, 0, out.size(), out.data());
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    const double expected =
+        (data[i] > 0.f ? std::log(std::max(double(data[i]), double(kTiny))) : double(log_floor)) * px.white[i];
+    EXPECT_NEAR(out[i], expected, 2e-5 + 1e-6 * std::abs(expected)) << "pixel " << i;
+  }
+}
+
 TEST(VectorMath, AProjectionThatMatchesItsPixelGivesALogRatioOfExactlyZero) {
   Pixels px(101);
   px.projection = px.data;  // every lit pixel matched
@@ -112,19 +161,27 @@ TEST(VectorMath, TheSameBitsWhereverARangeIsSplit) {
     }
     EXPECT_TRUE(step_e[i] == 0.f || (step_e[i] >= kTiny && step_e[i] <= kHuge)) << "voxel " << i << ": " << step_e[i];
   }
+  // The update and the start's pixel logarithms, whole.
+  std::vector<float> updated = e, pixel_logs(n);
+  multiply_by_exp({updated.data(), logs.data(), 0.7f, kMaxLog, kTiny, kHuge}, 0, n);
+  log_pixels(px.data.data(), px.white.data(), -3.5f, kTiny, 0, n, pixel_logs.data());
   for (int trial = 0; trial < 20; ++trial) {
     const std::vector<std::size_t> cuts = random_cuts(random, n);
-    std::vector<float> split(n), split_logs(n);
-    std::vector<float> se = e, sl = last, sll = log_last, sm(n);
+    std::vector<float> split(n), split_logs(n), split_pixel_logs(n);
+    std::vector<float> se = e, sl = last, sll = log_last, sm(n), su = e;
     for (std::size_t c = 0; c + 1 < cuts.size(); ++c) {
       log_ratios(px.inputs(true), cuts[c], cuts[c + 1], split.data());
       log_or_zero(px.data.data(), cuts[c], cuts[c + 1], split_logs.data());
       extrapolate({se.data(), sl.data(), sll.data(), sm.data(), 0.6f, kMaxLog, kTiny, kHuge}, cuts[c], cuts[c + 1]);
+      multiply_by_exp({su.data(), logs.data(), 0.7f, kMaxLog, kTiny, kHuge}, cuts[c], cuts[c + 1]);
+      log_pixels(px.data.data(), px.white.data(), -3.5f, kTiny, cuts[c], cuts[c + 1], split_pixel_logs.data());
     }
     EXPECT_EQ(0, std::memcmp(split.data(), whole.data(), n * sizeof(float))) << "trial " << trial;
     EXPECT_EQ(0, std::memcmp(split_logs.data(), logs.data(), n * sizeof(float))) << "trial " << trial;
     EXPECT_EQ(0, std::memcmp(se.data(), step_e.data(), n * sizeof(float))) << "trial " << trial;
     EXPECT_EQ(0, std::memcmp(sm.data(), step_momentum.data(), n * sizeof(float))) << "trial " << trial;
+    EXPECT_EQ(0, std::memcmp(su.data(), updated.data(), n * sizeof(float))) << "trial " << trial;
+    EXPECT_EQ(0, std::memcmp(split_pixel_logs.data(), pixel_logs.data(), n * sizeof(float))) << "trial " << trial;
   }
 }
 
