@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <exception>
 #include <filesystem>
 #include <iostream>
 #include <memory>
@@ -12,6 +13,7 @@
 #include <sstream>
 
 #include <google/protobuf/util/json_util.h>
+#include <tbb/parallel_invoke.h>
 
 #include "clients/cli/calibration_frames.hpp"
 #include "clients/cli/commands.hpp"
@@ -165,27 +167,49 @@ void run_process(const ProcessOptions& o) {
   options.progress = [&](const std::string&, double f) { progress.update(f); };
   const auto r = processor->process(a, b, options);
 
-  std::vector<io::TextAttribute> provenance{process::input_file_entry("frame_a", o.frame_a),
-                                            process::input_file_entry("frame_b", o.frame_b),
-                                            process::input_file_entry("camera", o.camera),
-                                            {"settings", io::read_file_bytes(o.config)},
-                                            {"settings_file", o.config},
-                                            {"dt_s", std::to_string(r.correlation.field.dt_s)},
-                                            {"dt_source", o.dt_s ? "--dt" : "nominal (dt_s of " + o.config + ")"}};
-  if (!o.calibration.empty()) {
-    provenance.push_back(process::input_file_entry("calibration", o.calibration));
-  } else if (o.nominal) {
-    provenance.push_back({"calibration", "nominal (the camera file's lens array and a geometric white image)"});
-  } else {
-    for (std::size_t i = 0; i < o.white_images.size(); ++i)
-      provenance.push_back(process::input_file_entry("white_image_" + std::to_string(i + 1), o.white_images[i]));
-    for (std::size_t i = 0; i < o.dark_images.size(); ++i)
-      provenance.push_back(process::input_file_entry("dark_image_" + std::to_string(i + 1), o.dark_images[i]));
-    if (!o.calibration_image.empty())
-      provenance.push_back(process::input_file_entry("calibration_image", o.calibration_image));
-  }
-  process::write_vector_field_files(out, vti, r.correlation.field, r.correlation.flags, provenance);
-  plot::write_field_preview(png, r.correlation.field, r.correlation.flags);
+  // What the field came from, with the input files' checksums (input_file_entry).
+  const auto provenance = [&] {
+    std::vector<io::TextAttribute> p{process::input_file_entry("frame_a", o.frame_a),
+                                     process::input_file_entry("frame_b", o.frame_b),
+                                     process::input_file_entry("camera", o.camera),
+                                     {"settings", io::read_file_bytes(o.config)},
+                                     {"settings_file", o.config},
+                                     {"dt_s", std::to_string(r.correlation.field.dt_s)},
+                                     {"dt_source", o.dt_s ? "--dt" : "nominal (dt_s of " + o.config + ")"}};
+    if (!o.calibration.empty()) {
+      p.push_back(process::input_file_entry("calibration", o.calibration));
+    } else if (o.nominal) {
+      p.push_back({"calibration", "nominal (the camera file's lens array and a geometric white image)"});
+    } else {
+      for (std::size_t i = 0; i < o.white_images.size(); ++i)
+        p.push_back(process::input_file_entry("white_image_" + std::to_string(i + 1), o.white_images[i]));
+      for (std::size_t i = 0; i < o.dark_images.size(); ++i)
+        p.push_back(process::input_file_entry("dark_image_" + std::to_string(i + 1), o.dark_images[i]));
+      if (!o.calibration_image.empty())
+        p.push_back(process::input_file_entry("calibration_image", o.calibration_image));
+    }
+    return p;
+  };
+  // The preview is drawn while the inputs' checksums are taken and the field files written; a
+  // failure of the files is reported before one of the preview, whichever thread ends first.
+  std::exception_ptr files_failed, preview_failed;
+  tbb::parallel_invoke(
+      [&] {
+        try {
+          process::write_vector_field_files(out, vti, r.correlation.field, r.correlation.flags, provenance());
+        } catch (...) {
+          files_failed = std::current_exception();
+        }
+      },
+      [&] {
+        try {
+          plot::write_field_preview(png, r.correlation.field, r.correlation.flags);
+        } catch (...) {
+          preview_failed = std::current_exception();
+        }
+      });
+  for (const std::exception_ptr& e : {files_failed, preview_failed})
+    if (e) std::rethrow_exception(e);
   warn_if_few_valid(r.correlation.field, out.string());
 
   std::size_t valid = 0;
