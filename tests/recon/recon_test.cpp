@@ -198,6 +198,46 @@ TEST_F(Weights, ProjectionAndBackProjectionAreAdjoint) {
 // last pixel columns, where the 4-pixel quads shift inwards) and with several voxel x per strip,
 // against the explicit matrix's columns for those voxels (the same 1e-4 relative bound as the
 // dense operators).
+// The weights cache's bytes (WeightingOperator::serialize / deserialize): read back to the same
+// bytes, and cut short anywhere, with a byte too many, or with a slice's array claiming more
+// elements than there are bytes, refused with InputError instead of read past their end (the
+// slices are found by a pass over their sizes, then copied in parallel).
+TEST(WeightsBytes, ReadBackTheSameAndRefuseDamagedBytes) {
+  const auto cam = small_camera();
+  const WeightingOperator op = make_operator(cam, centred_grid(8, 6, 1.0, -4.0));
+  std::string bytes;
+  op.serialize(bytes);
+  const WeightingOperator back = WeightingOperator::deserialize(bytes);
+  std::string again;
+  back.serialize(again);
+  EXPECT_TRUE(again == bytes);
+  EXPECT_EQ(back.bytes(), op.bytes());
+  for (int k = 0; k < 64; ++k) {
+    const std::size_t cut = bytes.size() * std::size_t(k) / 64;
+    EXPECT_THROW((void)WeightingOperator::deserialize(std::string_view(bytes).substr(0, cut)), InputError)
+        << "cut at " << cut << " of " << bytes.size();
+  }
+  try {
+    (void)WeightingOperator::deserialize(bytes + "x");
+    ADD_FAILURE() << "a byte too many was read";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("bytes left after the operator"), std::string::npos) << e.what();
+  }
+  // The last slice's last array (its y quad weights) says it holds far more floats than follow:
+  // its count sits right before its floats and the normalisers' count and floats.
+  const std::size_t tail = sizeof(std::uint64_t) + op.normalisers().size() * sizeof(float);
+  const std::size_t last_weights = op.slice(op.grid().shape[2] - 1).y_quad_weights.size() * sizeof(float);
+  std::string damaged = bytes;
+  const std::uint64_t huge = std::uint64_t(1) << 40;
+  std::memcpy(damaged.data() + bytes.size() - tail - last_weights - sizeof huge, &huge, sizeof huge);
+  try {
+    (void)WeightingOperator::deserialize(damaged);
+    ADD_FAILURE() << "an array longer than the bytes was read";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("an array runs past the end"), std::string::npos) << e.what();
+  }
+}
+
 TEST(WeightsActiveSet, SubsetOnAWideGridEqualsExplicitColumns) {
   const auto cam = small_camera();
   Grid3 g;
