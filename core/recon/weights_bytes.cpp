@@ -49,17 +49,14 @@ class Reader {
   }
   template <typename T, typename A>
   void vec(std::vector<T, A>& v) {
-    const auto n = pod<std::uint64_t>();
-    if (n > (in_.size() - at_) / sizeof(T)) fail("an array runs past the end");
-    v.resize(std::size_t(n));
-    take(v.data(), std::size_t(n) * sizeof(T));
+    const std::size_t n = count<T>();
+    v.resize(n);
+    take(v.data(), n * sizeof(T));
   }
   // Passes over an array of v's element type without reading it into v.
   template <typename T, typename A>
   void skip(const std::vector<T, A>&) {
-    const auto n = pod<std::uint64_t>();
-    if (n > (in_.size() - at_) / sizeof(T)) fail("an array runs past the end");
-    at_ += std::size_t(n) * sizeof(T);
+    at_ += count<T>() * sizeof(T);
   }
   std::size_t at() const { return at_; }
   void move_to(std::size_t at) { at_ = at; }
@@ -67,6 +64,13 @@ class Reader {
   [[noreturn]] static void fail(const std::string& why) { throw InputError("weighting operator bytes: " + why); }
 
  private:
+  // An array's element count, checked against the bytes left.
+  template <typename T>
+  std::size_t count() {
+    const auto n = pod<std::uint64_t>();
+    if (n > (in_.size() - at_) / sizeof(T)) fail("an array runs past the end");
+    return std::size_t(n);
+  }
   void take(void* dst, std::size_t n) {
     if (n > in_.size() - at_) fail("truncated");
     std::memcpy(dst, in_.data() + at_, n);
