@@ -273,7 +273,7 @@ TEST(DaemonSocket, TheControlSocketAdmitsItsOwnerAndGroupOnly) {
                                    out);
   EXPECT_EQ(rc, 3) << out;
   EXPECT_NE(out.find("no reply from plenopivd"), std::string::npos) << out;
-  EXPECT_TRUE(testing_support::probe_status(control)) << "the owner still controls it";
+  EXPECT_TRUE(testing_support::probe_status(control, 5s)) << "the owner still controls it";
 }
 
 // Oversized control messages are dropped by ZeroMQ before the daemon reads them; configs beyond the
@@ -483,7 +483,7 @@ TEST(DaemonDisk, AFullDiskFailsTheRunCleanlyAndRefusesTheNext) {
   EXPECT_EQ(start(out), 4) << out;
   EXPECT_NE(out.find("data_dir: " + disk.dir().string() + " has"), std::string::npos) << out;
   EXPECT_NE(out.find("free some space or record fewer pairs"), std::string::npos) << out;
-  EXPECT_TRUE(testing_support::probe_status(control));
+  EXPECT_TRUE(testing_support::probe_status(control, 5s));
   daemon.signal(SIGTERM);
   EXPECT_TRUE(daemon.wait(10s).has_value());
 }

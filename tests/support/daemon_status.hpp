@@ -10,9 +10,12 @@
 
 namespace plenopiv::testing_support {
 
-inline std::optional<msg::Status> probe_status(const std::string& control) {
+// `timeout` is short (300 ms) for polling a daemon that is starting up; a test asserting that a
+// running daemon answers gives it seconds, as a sanitizer's slowdown can need.
+inline std::optional<msg::Status> probe_status(const std::string& control,
+                                               std::chrono::milliseconds timeout = std::chrono::milliseconds(300)) {
   try {
-    client::ControlClient probe(control, std::chrono::milliseconds(300));
+    client::ControlClient probe(control, timeout);
     msg::Request r;
     r.mutable_status();
     const msg::Reply reply = probe.call(r);
