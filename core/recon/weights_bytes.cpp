@@ -1,12 +1,15 @@
 // The weighting operator as bytes and back, for a cache of operators kept between runs.
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
 #include <array>
 #include <cstring>
 #include <string>
+#include <string_view>
 #include <type_traits>
 #include <vector>
 
+#include "core/base/byte_stream.hpp"
 #include "core/base/errors.hpp"
 #include "core/recon/weights.hpp"
 
@@ -18,67 +21,7 @@ namespace {
 constexpr char kMagic[8] = {'P', 'L', 'W', 'E', 'I', 'G', 'H', 'T'};
 constexpr std::uint32_t kFormat = WeightingOperator::kBytesFormat;
 
-class Writer {
- public:
-  explicit Writer(std::string& out) : out_(out) {}
-  template <typename T>
-  void pod(const T& v) {
-    static_assert(std::is_trivially_copyable_v<T>);
-    out_.append(reinterpret_cast<const char*>(&v), sizeof v);
-  }
-  template <typename T, typename A>
-  void vec(const std::vector<T, A>& v) {
-    static_assert(std::is_trivially_copyable_v<T>);
-    pod(std::uint64_t(v.size()));
-    out_.append(reinterpret_cast<const char*>(v.data()), v.size() * sizeof(T));
-  }
-
- private:
-  std::string& out_;
-};
-
-class Reader {
- public:
-  explicit Reader(std::string_view in, std::size_t at = 0) : in_(in), at_(at) {}
-  template <typename T>
-  T pod() {
-    static_assert(std::is_trivially_copyable_v<T>);
-    T v;
-    take(&v, sizeof v);
-    return v;
-  }
-  template <typename T, typename A>
-  void vec(std::vector<T, A>& v) {
-    const std::size_t n = count<T>();
-    v.resize(n);
-    take(v.data(), n * sizeof(T));
-  }
-  // Passes over an array of v's element type without reading it into v.
-  template <typename T, typename A>
-  void skip(const std::vector<T, A>&) {
-    at_ += count<T>() * sizeof(T);
-  }
-  std::size_t at() const { return at_; }
-  void move_to(std::size_t at) { at_ = at; }
-  bool done() const { return at_ == in_.size(); }
-  [[noreturn]] static void fail(const std::string& why) { throw InputError("weighting operator bytes: " + why); }
-
- private:
-  // An array's element count, checked against the bytes left.
-  template <typename T>
-  std::size_t count() {
-    const auto n = pod<std::uint64_t>();
-    if (n > (in_.size() - at_) / sizeof(T)) fail("an array runs past the end");
-    return std::size_t(n);
-  }
-  void take(void* dst, std::size_t n) {
-    if (n > in_.size() - at_) fail("truncated");
-    std::memcpy(dst, in_.data() + at_, n);
-    at_ += n;
-  }
-  std::string_view in_;
-  std::size_t at_ = 0;
-};
+constexpr std::string_view kWhat = "weighting operator bytes";
 
 // A slice's scalars and then its arrays, in the order they are stored: f(scalar) for each scalar
 // and g(array) for each array (`Tables`: SliceTables, const or not).
@@ -102,7 +45,7 @@ void for_each_member(Tables& t, F&& f, G&& g) {
 }  // namespace
 
 void WeightingOperator::serialize(std::string& out) const {
-  Writer w(out);
+  ByteWriter w(out);
   out.append(kMagic, sizeof kMagic);
   w.pod(kFormat);
   w.pod(grid_.shape);
@@ -134,11 +77,10 @@ void WeightingOperator::serialize(std::string& out) const {
 }
 
 WeightingOperator WeightingOperator::deserialize(std::string_view bytes) {
-  if (bytes.size() < sizeof kMagic || std::memcmp(bytes.data(), kMagic, sizeof kMagic) != 0) {
-    Reader::fail("not a weighting operator");
-  }
-  Reader r(bytes.substr(sizeof kMagic));
-  if (r.pod<std::uint32_t>() != kFormat) Reader::fail("written in another format");
+  ByteReader r(kWhat, bytes.substr(std::min(bytes.size(), sizeof kMagic)));
+  if (bytes.size() < sizeof kMagic || std::memcmp(bytes.data(), kMagic, sizeof kMagic) != 0)
+    r.fail("not a weighting operator");
+  if (r.pod<std::uint32_t>() != kFormat) r.fail("written in another format");
   WeightingOperator op;
   op.grid_.shape = r.pod<std::array<int, 3>>();
   op.grid_.origin_mm = r.pod<std::array<double, 3>>();
@@ -162,7 +104,7 @@ WeightingOperator WeightingOperator::deserialize(std::string_view bytes) {
   r.vec(op.geo_.lens_y);
   op.geo_.max_centre_deviation_mm = r.pod<double>();
   const auto slices = r.pod<std::uint64_t>();
-  if (slices != std::uint64_t(op.grid_.shape[2])) Reader::fail("slice count does not match the grid");
+  if (slices != std::uint64_t(op.grid_.shape[2])) r.fail("slice count does not match the grid");
   // Where each slice starts, found by passing over the arrays; then the slices are copied in
   // parallel: most of the copy's time is the first touch of the tables' fresh pages.
   op.slices_.resize(std::size_t(slices));
@@ -175,14 +117,14 @@ WeightingOperator WeightingOperator::deserialize(std::string_view bytes) {
   }
   start.back() = r.at();
   tbb::parallel_for(std::size_t(0), op.slices_.size(), [&](std::size_t z) {
-    Reader slice(bytes.substr(sizeof kMagic), start[z]);
+    ByteReader slice(kWhat, bytes.substr(sizeof kMagic), start[z]);
     for_each_member(
         op.slices_[z], [&](auto& v) { v = slice.pod<std::remove_reference_t<decltype(v)>>(); },
         [&](auto& v) { slice.vec(v); });
   });
   r.move_to(start.back());
   r.vec(op.normaliser_);
-  if (!r.done()) Reader::fail("bytes left after the operator");
+  if (!r.done()) r.fail("bytes left after the operator");
   // Sizes the kernels rely on; the caller's checksum vouches for the values.
   const std::size_t nx = std::size_t(op.grid_.shape[0]), ny = std::size_t(op.grid_.shape[1]);
   bool sound = op.normaliser_.size() == op.grid_.count() && op.white_.width == op.width_ &&
@@ -193,7 +135,7 @@ WeightingOperator WeightingOperator::deserialize(std::string_view bytes) {
             t.y_quad_weights.size() == 4 * t.y_quad_first.size() && t.x_quad_start.back() == t.x_quad_first.size() &&
             t.y_quad_start.back() == t.y_quad_first.size();
   }
-  if (!sound) Reader::fail("inconsistent table sizes");
+  if (!sound) r.fail("inconsistent table sizes");
   return op;
 }
 
