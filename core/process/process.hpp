@@ -44,7 +44,7 @@ struct ProcessSettings {
   int pixel_binning = 1;
   // w corrected for MART's depth response (depth_response.hpp): the seeding, particles per
   // microlens, of the simulated pairs the response is measured on when the settings are first used
-  // (PairProcessor), [0, 5]; default 0: no correction. About the flow's own seeding: the response
+  // (PairProcessor; kept in the weights' disk cache after), [0, 5]; default 0: no correction. About the flow's own seeding: the response
   // depends on it only weakly (docs/accuracy.md, "Depth response"). Offline only: plenopivd's run
   // configs refuse it (minutes of measuring while a run is Armed).
   double depth_response_ppm = 0.0;
@@ -58,6 +58,13 @@ struct ProcessSettings {
   // memory") times the voxels. What a caller checks before it keeps several pairs in flight.
   double peak_bytes_per_pair() const;
 };
+
+// Every setting of `s` as bytes in a fixed order (this build's layout): equal bytes, equal
+// processing. What a cache of results computed with the settings keys them on. Leaves out the
+// correlation's dt_s (velocities only: displacements, which such results hold, do not depend on
+// it). A member added to ProcessSettings, MartSettings, CorrelationSettings or the structs they
+// hold does not compile until it is written here too.
+std::string settings_key(const ProcessSettings& s);
 
 // The box of voxels centred on [lo, hi] per axis with `voxel_mm` spacing (x, y, z); InputError
 // naming `where` when a size is not positive, an axis has min >= max, or the count is absurd.
