@@ -3,10 +3,12 @@
 #include "core/process/depth_response.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <stdexcept>
 
+#include "core/base/byte_stream.hpp"
 #include "core/base/errors.hpp"
 #include "core/process/pair_processor.hpp"
 #include "core/sim/flows.hpp"
@@ -105,6 +107,36 @@ std::string DepthResponse::summary() const {
     text += (k ? " " : ", ") + mm(lo) + ".." + mm(hi) + " of " + (true_mm_[k] > 0 ? "+" : "") + mm(true_mm_[k]) + " mm";
   }
   return text;
+}
+
+void DepthResponse::serialize(std::string& out) const {
+  ByteWriter w(out);
+  w.pod(field_grid_.shape);
+  w.pod(field_grid_.origin_mm);
+  w.pod(field_grid_.spacing_mm);
+  w.vec(true_mm_);
+  for (const std::vector<double>& m : measured_mm_) w.vec(m);
+}
+
+DepthResponse DepthResponse::deserialize(std::string_view bytes) {
+  ByteReader r("depth response bytes", bytes);
+  Grid3 grid;
+  grid.shape = r.pod<std::array<int, 3>>();
+  grid.origin_mm = r.pod<std::array<double, 3>>();
+  grid.spacing_mm = r.pod<std::array<double, 3>>();
+  std::vector<double> true_mm;
+  r.vec(true_mm);
+  // Each layer's row takes at least its count's 8 bytes.
+  if (grid.shape[2] < 1 || std::size_t(grid.shape[2]) > (bytes.size() - r.at()) / sizeof(std::uint64_t))
+    r.fail(std::to_string(grid.shape[2]) + " depth layers do not fit the bytes");
+  std::vector<std::vector<double>> measured(std::size_t(grid.shape[2]));
+  for (std::vector<double>& m : measured) r.vec(m);
+  if (!r.done()) r.fail("bytes left after the response");
+  try {
+    return DepthResponse(grid, std::move(true_mm), std::move(measured));
+  } catch (const std::exception& e) {  // the constructor's checks: InputError or std::logic_error
+    r.fail(e.what());
+  }
 }
 
 DepthResponse measure_depth_response(const PairProcessor& processor, const optics::CameraModel& camera,

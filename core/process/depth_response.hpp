@@ -5,6 +5,7 @@
 #include <cstddef>
 #include <functional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "core/base/grid.hpp"
@@ -57,6 +58,11 @@ class DepthResponse {
   // Measured over true shift at the outermost shifts, the smallest and largest over the layers,
   // as "depth response over z <first>..<last layer> mm: <least>..<most> of +<shift> mm, ... of -<shift> mm".
   std::string summary() const;
+
+  // The response as bytes (this build's layout) and back; deserialize throws InputError naming
+  // the problem for bytes that are cut, too many, or not a response its constructor accepts.
+  void serialize(std::string& out) const;
+  static DepthResponse deserialize(std::string_view bytes);
 
  private:
   int segment(int layer, double measured_mm) const;                  // k: measured_mm lies in [m(k), m(k + 1)]

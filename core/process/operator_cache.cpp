@@ -12,9 +12,11 @@
 
 #include <xxhash.h>
 
+#include "core/base/build_info.hpp"
 #include "core/base/errors.hpp"
 #include "core/io/atomic_file.hpp"
 #include "core/io/checksum.hpp"
+#include "core/optics/camera_file.hpp"
 
 namespace plenopiv::process {
 namespace {
@@ -52,11 +54,11 @@ std::string header(const std::string& key, std::string_view payload) {
 // or format; corrupt: truncated, wrong length or checksum).
 struct Parsed {
   std::string_view payload;
-  WeightsDiskCache::Outcome problem = WeightsDiskCache::Outcome::hit;
+  CacheOutcome problem = CacheOutcome::hit;
   std::string why;
 };
 Parsed parse(std::string_view file, const std::string& key) {
-  using Outcome = WeightsDiskCache::Outcome;
+  using Outcome = CacheOutcome;
   auto bad = [](Outcome o, std::string why) { return Parsed{{}, o, std::move(why)}; };
   std::size_t at = 0;
   auto take = [&](std::size_t n) -> std::string_view {
@@ -73,7 +75,7 @@ Parsed parse(std::string_view file, const std::string& key) {
   };
   const std::string_view magic = take(sizeof kMagic);
   if (magic.size() != sizeof kMagic || std::memcmp(magic.data(), kMagic, sizeof kMagic) != 0)
-    return bad(Outcome::corrupt, "not a plenopiv weights cache file");
+    return bad(Outcome::corrupt, "not a plenopiv cache file");
   std::uint32_t format = 0;
   const std::string_view f = take(sizeof format);
   if (f.size() != sizeof format) return bad(Outcome::corrupt, "truncated");
@@ -88,25 +90,80 @@ Parsed parse(std::string_view file, const std::string& key) {
   if (!take_u64(payload_size) || !take_u64(checksum)) return bad(Outcome::corrupt, "truncated");
   const std::string_view payload = file.substr(at);
   if (payload.size() != payload_size)
-    return bad(Outcome::corrupt, "holds " + std::to_string(payload.size()) + " bytes of tables, its header says " +
+    return bad(Outcome::corrupt, "holds " + std::to_string(payload.size()) + " bytes of contents, its header says " +
                                      std::to_string(payload_size));
-  if (xxh3_of(payload) != checksum) return bad(Outcome::corrupt, "checksum does not match its tables");
+  if (xxh3_of(payload) != checksum) return bad(Outcome::corrupt, "checksum does not match its contents");
   return Parsed{payload, Outcome::hit, {}};
 }
 
-// Keeps the `keep` most recently used weights-*.bin files of `folder`.
-void trim(const std::filesystem::path& folder, std::size_t keep) {
+// Keeps the `keep` most recently used <prefix>*.bin files of `folder`.
+void trim(const std::filesystem::path& folder, const std::string& prefix, std::size_t keep) {
   std::error_code ec;
   std::vector<std::pair<std::filesystem::file_time_type, std::filesystem::path>> files;
   for (const auto& entry : std::filesystem::directory_iterator(folder, ec)) {
     const std::string name = entry.path().filename().string();
-    if (name.rfind("weights-", 0) != 0 || entry.path().extension() != ".bin") continue;
+    if (name.rfind(prefix, 0) != 0 || entry.path().extension() != ".bin") continue;
     files.emplace_back(std::filesystem::last_write_time(entry.path(), ec), entry.path());
   }
   if (files.size() <= keep) return;
   std::sort(files.begin(), files.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
   for (std::size_t i = keep; i < files.size(); ++i) std::filesystem::remove(files[i].second, ec);
 }
+
+// A cache file mapped and checked against `key`: its payload when `outcome` is hit, else why not.
+// Mapped, not read: a payload is copied once, from the page cache into its object. Cache files
+// are replaced by rename and trimmed by removal, never truncated, so the mapping stays whole while
+// another process writes the same key.
+struct Loaded {
+  std::optional<io::MappedFile> bytes;
+  std::string_view payload;
+  CacheOutcome outcome = CacheOutcome::missing;
+  std::string why = "no file yet";
+};
+void load(const std::filesystem::path& file, const std::string& key, Loaded& l) {
+  std::error_code ec;
+  if (!std::filesystem::exists(file, ec)) return;
+  try {
+    l.bytes.emplace(file);
+  } catch (const InputError& e) {
+    l.outcome = CacheOutcome::corrupt;
+    l.why = e.what();
+    return;
+  }
+  const Parsed p = parse(l.bytes->bytes(), key);
+  l.outcome = p.problem;
+  l.why = p.why;
+  l.payload = p.payload;
+}
+
+// Marks `file` as just used (trim() keeps the most recently used).
+void touch(const std::filesystem::path& file) {
+  std::error_code ec;
+  std::filesystem::last_write_time(file, std::filesystem::file_time_type::clock::now(), ec);
+}
+
+// Writes `payload` under `key` to `file` atomically and trims the folder's <prefix> files to
+// `keep`; throws what the file system does.
+void store(const std::filesystem::path& file, const std::string& key, std::string_view payload,
+           const std::string& prefix, std::size_t keep) {
+  std::filesystem::create_directories(file.parent_path());
+  const std::string head = header(key, payload);
+  io::write_atomically(file, [&](const std::filesystem::path& tmp) {
+    std::ofstream out(tmp, std::ios::binary);
+    out.write(head.data(), std::streamsize(head.size()));
+    out.write(payload.data(), std::streamsize(payload.size()));
+    out.close();
+    if (!out) throw InputError(tmp.string() + ": cannot write");
+  });
+  trim(file.parent_path(), prefix, keep);
+}
+
+std::string file_name(const std::string& prefix, const std::string& key) {
+  return prefix + hex64(xxh3_of(key)) + ".bin";
+}
+
+constexpr const char* kWeightsPrefix = "weights-";
+constexpr const char* kDepthResponsePrefix = "depth-response-";
 
 }  // namespace
 
@@ -144,17 +201,17 @@ std::string operator_key(const optics::CameraModel& camera, const optics::Microl
   return key;
 }
 
-const char* WeightsDiskCache::name(Outcome o) {
+const char* cache_outcome_name(CacheOutcome o) {
   switch (o) {
-    case Outcome::hit:
+    case CacheOutcome::hit:
       return "hit";
-    case Outcome::missing:
+    case CacheOutcome::missing:
       return "missing";
-    case Outcome::stale:
+    case CacheOutcome::stale:
       return "stale";
-    case Outcome::corrupt:
+    case CacheOutcome::corrupt:
       return "corrupt";
-    case Outcome::unwritable:
+    case CacheOutcome::unwritable:
       return "unwritable";
   }
   return "?";
@@ -164,7 +221,7 @@ WeightsDiskCache::WeightsDiskCache(std::filesystem::path folder, std::size_t kee
     : folder_(std::move(folder)), keep_(std::max<std::size_t>(keep, 1)) {}
 
 std::filesystem::path WeightsDiskCache::file_for(const std::string& key) const {
-  return folder_ / ("weights-" + hex64(xxh3_of(key)) + ".bin");
+  return folder_ / file_name(kWeightsPrefix, key);
 }
 
 std::unique_ptr<const recon::WeightingOperator> WeightsDiskCache::weights(const optics::CameraModel& camera,
@@ -174,60 +231,89 @@ std::unique_ptr<const recon::WeightingOperator> WeightsDiskCache::weights(const 
                                                                           const std::string* known_key) {
   const std::string key = known_key ? *known_key : operator_key(camera, lenses, white, grid, angular_sampling);
   const std::filesystem::path file = file_for(key);
-  std::error_code ec;
-  outcome_ = Outcome::missing;
-  std::string why = "no file yet";
-  if (std::filesystem::exists(file, ec)) {
-    // Mapped, not read: the tables are copied once, from the page cache into the operator. Cache
-    // files are replaced by rename and trimmed by removal, never truncated, so the mapping stays
-    // whole while another process writes the same key.
-    std::optional<io::MappedFile> bytes;
+  Loaded loaded;
+  load(file, key, loaded);
+  if (loaded.outcome == Outcome::hit) {
     try {
-      bytes.emplace(file);
+      auto op = std::make_unique<const recon::WeightingOperator>(recon::WeightingOperator::deserialize(loaded.payload));
+      touch(file);
+      outcome_ = Outcome::hit;
+      note_ = "weight tables from the cache: " + file.string();
+      return op;
     } catch (const InputError& e) {
-      outcome_ = Outcome::corrupt;
-      why = e.what();
-    }
-    if (outcome_ != Outcome::corrupt) {
-      const Parsed p = parse(bytes->bytes(), key);
-      outcome_ = p.problem;
-      why = p.why;
-      if (outcome_ == Outcome::hit) {
-        try {
-          auto op = std::make_unique<const recon::WeightingOperator>(recon::WeightingOperator::deserialize(p.payload));
-          std::filesystem::last_write_time(file, std::filesystem::file_time_type::clock::now(),
-                                           ec);  // used
-          note_ = "weight tables from the cache: " + file.string();
-          return op;
-        } catch (const InputError& e) {
-          outcome_ = Outcome::corrupt;
-          why = e.what();
-        }
-      }
+      loaded.outcome = Outcome::corrupt;
+      loaded.why = e.what();
     }
   }
+  loaded.bytes.reset();
+  outcome_ = loaded.outcome;
   auto op = std::make_unique<const recon::WeightingOperator>(camera, lenses, grid, white, angular_sampling);
-  const Outcome found = outcome_;
   try {
-    std::filesystem::create_directories(folder_);
     std::string payload;
     op->serialize(payload);
-    const std::string head = header(key, payload);
-    io::write_atomically(file, [&](const std::filesystem::path& tmp) {
-      std::ofstream out(tmp, std::ios::binary);
-      out.write(head.data(), std::streamsize(head.size()));
-      out.write(payload.data(), std::streamsize(payload.size()));
-      out.close();
-      if (!out) throw InputError(tmp.string() + ": cannot write");
-    });
-    trim(folder_, keep_);
+    store(file, key, payload, kWeightsPrefix, keep_);
     note_ = std::string("weight tables built and kept in the cache: ") + file.string() +
-            (found == Outcome::missing ? "" : std::string(" (replaced: ") + name(found) + ", " + why + ")");
+            (loaded.outcome == Outcome::missing
+                 ? ""
+                 : std::string(" (replaced: ") + name(loaded.outcome) + ", " + loaded.why + ")");
   } catch (const std::exception& e) {
     outcome_ = Outcome::unwritable;
     note_ = std::string("weight tables built; the cache could not keep them (") + e.what() + ")";
   }
   return op;
+}
+
+std::string depth_response_key(const std::string& operator_key, const optics::CameraModel& render_camera,
+                               const ProcessSettings& settings) {
+  const std::string& build = executable_build_id();
+  if (build.empty()) return {};
+  std::string key =
+      "plenopiv depth response\nbuild " + build + "\nrendered on\n" + optics::to_yaml(render_camera.spec()) + "\n";
+  put(key, std::uint64_t(operator_key.size()));
+  key += operator_key;
+  key += settings_key(settings);
+  return key;
+}
+
+DepthResponseDiskCache::DepthResponseDiskCache(std::filesystem::path folder, std::size_t keep)
+    : folder_(std::move(folder)), keep_(std::max<std::size_t>(keep, 1)) {}
+
+std::filesystem::path DepthResponseDiskCache::file_for(const std::string& key) const {
+  return folder_ / file_name(kDepthResponsePrefix, key);
+}
+
+DepthResponse DepthResponseDiskCache::response(const std::string& key, const std::function<DepthResponse()>& measure) {
+  const std::filesystem::path file = file_for(key);
+  Loaded loaded;
+  load(file, key, loaded);
+  if (loaded.outcome == CacheOutcome::hit) {
+    try {
+      DepthResponse r = DepthResponse::deserialize(loaded.payload);
+      touch(file);
+      outcome_ = CacheOutcome::hit;
+      note_ = "depth response from the cache: " + file.string();
+      return r;
+    } catch (const InputError& e) {
+      loaded.outcome = CacheOutcome::corrupt;
+      loaded.why = e.what();
+    }
+  }
+  loaded.bytes.reset();
+  outcome_ = loaded.outcome;
+  DepthResponse r = measure();
+  try {
+    std::string payload;
+    r.serialize(payload);
+    store(file, key, payload, kDepthResponsePrefix, keep_);
+    note_ = "depth response measured and kept in the cache: " + file.string() +
+            (loaded.outcome == CacheOutcome::missing
+                 ? ""
+                 : std::string(" (replaced: ") + cache_outcome_name(loaded.outcome) + ", " + loaded.why + ")");
+  } catch (const std::exception& e) {
+    outcome_ = CacheOutcome::unwritable;
+    note_ = std::string("depth response measured; the cache could not keep it (") + e.what() + ")";
+  }
+  return r;
 }
 
 PairOperator::WeightsSource WeightsDiskCache::source() {
@@ -282,6 +368,8 @@ std::shared_ptr<const PairOperator> OperatorCache::get(const optics::CameraModel
   if (kept_.size() > capacity_) kept_.pop_back();
   return op;
 }
+
+std::filesystem::path OperatorCache::disk_folder() const { return disk_ ? disk_->folder() : std::filesystem::path(); }
 
 OperatorCache::Counts OperatorCache::counts() const {
   std::lock_guard lock(mutex_);

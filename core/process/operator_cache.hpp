@@ -1,10 +1,12 @@
-// Setup once per geometry: pair operators kept in the process (the daemon, run after run) and
-// their weight tables kept on disk (the CLI, call after call), keyed by what they are built from.
+// Setup once per geometry: pair operators kept in the process (the daemon, run after run), their
+// weight tables and depth responses kept on disk (the CLI, call after call), keyed by what they
+// are built from.
 #pragma once
 
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <list>
 #include <memory>
 #include <mutex>
@@ -15,6 +17,7 @@
 #include "core/base/image.hpp"
 #include "core/optics/camera_model.hpp"
 #include "core/optics/microlens_array.hpp"
+#include "core/process/depth_response.hpp"
 #include "core/process/process.hpp"
 #include "core/recon/weights.hpp"
 
@@ -26,6 +29,11 @@ namespace plenopiv::process {
 std::string operator_key(const optics::CameraModel& camera, const optics::MicrolensArray& lenses, const ImageF& white,
                          const Grid3& grid, double angular_sampling);
 
+// What a cache's last lookup did: used its file (hit), or found none, one for another key or
+// format (stale), a damaged one (corrupt), or could not write the one it made (unwritable).
+enum class CacheOutcome { hit, missing, stale, corrupt, unwritable };
+const char* cache_outcome_name(CacheOutcome o);
+
 // Weight tables in files of a folder, one per key (weights-<hash of the key>.bin: a header with
 // the full key, the payload's length and XXH3 checksum, then recon::WeightingOperator::serialize's
 // bytes). A file is used only when its key, length and checksum all match and its bytes read
@@ -35,8 +43,8 @@ std::string operator_key(const optics::CameraModel& camera, const optics::Microl
 class WeightsDiskCache {
  public:
   // What the last weights() call did.
-  enum class Outcome { hit, missing, stale, corrupt, unwritable };
-  static const char* name(Outcome o);
+  using Outcome = CacheOutcome;
+  static const char* name(Outcome o) { return cache_outcome_name(o); }
 
   explicit WeightsDiskCache(std::filesystem::path folder, std::size_t keep = 4);
 
@@ -59,6 +67,36 @@ class WeightsDiskCache {
   std::filesystem::path folder_;
   std::size_t keep_;
   Outcome outcome_ = Outcome::missing;
+  std::string note_;
+};
+
+// What a depth response (depth_response.hpp) is measured from, as bytes: the operator's inputs
+// (`operator_key` of the camera in the frames' pixels, the lenses, the white image, the
+// reconstruction grid and sampling), the camera the simulated pairs are rendered on, every
+// processing setting (settings_key), and the running executable's build ID (any change of code
+// measures anew). Empty when the executable has no build ID: such a response cannot be told from
+// another build's and is not kept.
+std::string depth_response_key(const std::string& operator_key, const optics::CameraModel& render_camera,
+                               const ProcessSettings& settings);
+
+// Depth responses in files of a folder (the weight tables' folder), one per key
+// (depth-response-<hash of the key>.bin, with the weight files' header and checks): measuring one
+// costs minutes at the paper's scale, reading it back a millisecond. A stale or damaged file is
+// measured anew and replaced; the folder keeps the `keep` most recently used ones.
+class DepthResponseDiskCache {
+ public:
+  explicit DepthResponseDiskCache(std::filesystem::path folder, std::size_t keep = 16);
+  // The response kept for `key` (depth_response_key), else measure()'s, then kept for it.
+  DepthResponse response(const std::string& key, const std::function<DepthResponse()>& measure);
+  CacheOutcome last_outcome() const { return outcome_; }
+  // One line for the user: which file, and why it was (not) used.
+  const std::string& last_note() const { return note_; }
+  std::filesystem::path file_for(const std::string& key) const;
+
+ private:
+  std::filesystem::path folder_;
+  std::size_t keep_;
+  CacheOutcome outcome_ = CacheOutcome::missing;
   std::string note_;
 };
 
@@ -90,6 +128,8 @@ class OperatorCache {
   // Where the last get() took its operator from: "kept in memory", or the disk cache's note, or
   // "built".
   std::string last_note() const;
+  // The folder of the disk cache; empty without one.
+  std::filesystem::path disk_folder() const;
 
  private:
   std::size_t capacity_;

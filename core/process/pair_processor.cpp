@@ -124,8 +124,23 @@ PairProcessor::PairProcessor(const optics::CameraModel& camera, const calib::Loa
     setup_note_ = "operator built";
   }
   if (settings_.depth_response_ppm > 0) {
-    depth_response_ = std::make_unique<const DepthResponse>(
-        measure_depth_response(*this, camera, calibration.lenses, settings_.depth_response_ppm, setup_progress));
+    const auto measure = [&] {
+      return measure_depth_response(*this, camera, calibration.lenses, settings_.depth_response_ppm, setup_progress);
+    };
+    const std::filesystem::path folder = operators ? operators->disk_folder() : std::filesystem::path();
+    const std::string key =
+        folder.empty() ? std::string()
+                       : depth_response_key(operator_key(framed, calibration.lenses, white,
+                                                         settings_.reconstruction_grid(), settings_.angular_sampling),
+                                            camera, settings_);
+    if (!key.empty()) {
+      DepthResponseDiskCache cache(folder);
+      depth_response_ = std::make_unique<const DepthResponse>(cache.response(key, measure));
+      setup_note_ += "; " + cache.last_note();
+    } else {
+      depth_response_ = std::make_unique<const DepthResponse>(measure());
+      if (!folder.empty()) setup_note_ += "; depth response measured, not kept: this executable has no build ID";
+    }
     setup_note_ += "; " + depth_response_->summary();
   }
 }

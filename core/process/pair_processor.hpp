@@ -88,8 +88,10 @@ class PairProcessor {
   // before from the same camera, calibration, volume and sampling (kept in memory, or its tables
   // on disk), and where a new one is kept; without it the operator is built. The results are the
   // same bits either way.
-  // `setup_progress` (optional): the fraction of the depth response's measurement done, after each
-  // of its simulated pairs (settings.depth_response_ppm above 0: minutes at the paper's scale).
+  // With settings.depth_response_ppm above 0 the depth response is measured (minutes at the
+  // paper's scale), or read from the disk folder of `operators` where it was measured before with
+  // the same inputs, settings and executable (DepthResponseDiskCache), and kept there when measured.
+  // `setup_progress` (optional): the fraction of the measurement done, after each of its pairs.
   PairProcessor(const optics::CameraModel& camera, const calib::LoadedCalibration& calibration,
                 ProcessSettings settings, OperatorCache* operators = nullptr,
                 const std::function<void(double)>& setup_progress = {});
@@ -112,7 +114,8 @@ class PairProcessor {
   // Why and how frames are resampled (PairOperator::note), empty when they are not.
   const std::string& note() const { return op_->note(); }
   // Where the weight tables came from, for the user: "operator built", "operator kept in memory",
-  // or the disk cache's line (WeightsDiskCache::last_note).
+  // or the disk cache's line (WeightsDiskCache::last_note); then, with a depth response, where it
+  // came from and its summary.
   const std::string& setup_note() const { return setup_note_; }
   // The depth response process() corrects w with; null when settings.depth_response_ppm is 0.
   const DepthResponse* depth_response() const { return depth_response_.get(); }

@@ -1,18 +1,24 @@
 // MART's depth response (process::DepthResponse): the per-layer inverse, its refusals, the
-// setting, and a shear pair on the small camera whose w it brings nearer the truth.
+// setting, its bytes and disk cache, and a shear pair on the small camera whose w it brings nearer
+// the truth.
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
 #include <iostream>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
+#include "core/base/build_info.hpp"
 #include "core/base/errors.hpp"
 #include "core/base/yaml_access.hpp"
 #include "core/calib/nominal_calibration.hpp"
 #include "core/process/depth_response.hpp"
+#include "core/process/operator_cache.hpp"
 #include "core/process/pair_processor.hpp"
 #include "core/process/process.hpp"
 #include "core/sim/field_errors.hpp"
@@ -21,6 +27,7 @@
 #include "core/sim/render.hpp"
 #include "tests/support/cameras.hpp"
 #include "tests/support/input_error.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace plenopiv::process {
 namespace {
@@ -90,6 +97,111 @@ TEST(DepthResponse, RefusesALayerWhoseVectorsBarelyFollowTheShift) {
   EXPECT_NE(refused({-0.124, -0.1, 0, 0.1, 0.2}).find("z = 3 mm"), std::string::npos);
 }
 
+TEST(DepthResponse, ItsBytesReadBackTheSameAndDamagedOnesAreRefused) {
+  const DepthResponse r(two_layers(), kShifts, {{-0.2, -0.1, 0, 0.1, 0.2}, {-0.24, -0.12, 0, 0.1, 0.18}});
+  std::string bytes;
+  r.serialize(bytes);
+  const DepthResponse back = DepthResponse::deserialize(bytes);
+  EXPECT_EQ(back.field_grid(), r.field_grid());
+  EXPECT_EQ(back.shifts_mm(), r.shifts_mm());
+  EXPECT_EQ(back.measured_mm(), r.measured_mm());
+  for (std::size_t cut = 0; cut < bytes.size(); cut += 7) {
+    const std::string e = error_of([&] { DepthResponse::deserialize(std::string_view(bytes).substr(0, cut)); });
+    EXPECT_NE(e.find("depth response bytes: "), std::string::npos) << cut << ": " << e;
+  }
+  EXPECT_NE(error_of([&] { DepthResponse::deserialize(bytes + "x"); }).find("bytes left"), std::string::npos);
+  // A measured value that no longer rises: what the constructor refuses, named.
+  std::string flat = bytes;
+  const double same = 0.1;
+  std::memcpy(flat.data() + flat.size() - sizeof(double), &same, sizeof same);
+  EXPECT_NE(error_of([&] { DepthResponse::deserialize(flat); }).find("the vectors at z = 3 mm"), std::string::npos);
+  // A layer count the bytes cannot hold is refused before anything is allocated for it.
+  std::string many = bytes;
+  const int layers = 1 << 30;
+  std::memcpy(many.data() + 2 * sizeof(int), &layers, sizeof layers);
+  EXPECT_NE(error_of([&] { DepthResponse::deserialize(many); }).find("depth layers do not fit"), std::string::npos);
+}
+
+class DepthResponseCacheTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    folder_ = testing_support::temp_dir("depth-response-cache") /
+              ::testing::UnitTest::GetInstance()->current_test_info()->name();
+    std::filesystem::remove_all(folder_);
+  }
+  void TearDown() override { std::filesystem::remove_all(folder_); }
+  // A response standing in for a measurement (its cost is the processing's, tested below), and
+  // how often it was asked for.
+  DepthResponse measure() {
+    ++measured_;
+    return DepthResponse(two_layers(), kShifts, {{-0.2, -0.1, 0, 0.1, 0.2}, {-0.24, -0.12, 0, 0.1, 0.18}});
+  }
+  std::filesystem::path folder_;
+  int measured_ = 0;
+};
+
+TEST_F(DepthResponseCacheTest, AMissMeasuresAndKeepsItAHitReadsItBack) {
+  DepthResponseDiskCache cache(folder_);
+  const auto measure = [&] { return this->measure(); };
+  const DepthResponse first = cache.response("key one", measure);
+  EXPECT_EQ(cache.last_outcome(), CacheOutcome::missing) << cache.last_note();
+  EXPECT_NE(
+      cache.last_note().find("depth response measured and kept in the cache: " + cache.file_for("key one").string()),
+      std::string::npos)
+      << cache.last_note();
+  const DepthResponse again = DepthResponseDiskCache(folder_).response("key one", measure);
+  EXPECT_EQ(measured_, 1);
+  EXPECT_EQ(again.measured_mm(), first.measured_mm());
+  EXPECT_EQ(again.shifts_mm(), first.shifts_mm());
+  EXPECT_EQ(again.field_grid(), first.field_grid());
+  cache.response("key two", measure);  // another key, another file
+  EXPECT_EQ(cache.last_outcome(), CacheOutcome::missing);
+  EXPECT_EQ(measured_, 2);
+  EXPECT_NE(cache.file_for("key one"), cache.file_for("key two"));
+}
+
+TEST_F(DepthResponseCacheTest, AStaleOrDamagedFileIsMeasuredAnewAndReplaced) {
+  DepthResponseDiskCache cache(folder_);
+  const auto measure = [&] { return this->measure(); };
+  cache.response("key one", measure);
+  // key one's file where key two's should be: the stored key tells them apart.
+  std::filesystem::copy_file(cache.file_for("key one"), cache.file_for("key two"));
+  cache.response("key two", measure);
+  EXPECT_EQ(cache.last_outcome(), CacheOutcome::stale) << cache.last_note();
+  EXPECT_NE(cache.last_note().find("replaced: stale"), std::string::npos) << cache.last_note();
+  EXPECT_EQ(measured_, 2);
+  cache.response("key two", measure);
+  EXPECT_EQ(cache.last_outcome(), CacheOutcome::hit) << cache.last_note();
+  // One byte of the response changed: the checksum refuses it.
+  const std::filesystem::path file = cache.file_for("key one");
+  std::string bytes;
+  {
+    std::ifstream in(file, std::ios::binary);
+    bytes.assign(std::istreambuf_iterator<char>(in), {});
+  }
+  bytes[bytes.size() - 3] ^= 0x10;
+  std::ofstream(file, std::ios::binary | std::ios::trunc) << bytes;
+  cache.response("key one", measure);
+  EXPECT_EQ(cache.last_outcome(), CacheOutcome::corrupt) << cache.last_note();
+  EXPECT_NE(cache.last_note().find("checksum"), std::string::npos) << cache.last_note();
+  EXPECT_EQ(measured_, 3);
+  cache.response("key one", measure);
+  EXPECT_EQ(cache.last_outcome(), CacheOutcome::hit) << cache.last_note();
+  EXPECT_EQ(measured_, 3);
+}
+
+TEST_F(DepthResponseCacheTest, AFolderItCannotWriteIsSaidAndTheResponseStillMeasured) {
+  std::filesystem::create_directories(folder_.parent_path());
+  std::ofstream(folder_) << "a file where the folder should be";
+  DepthResponseDiskCache cache(folder_);
+  const DepthResponse r = cache.response("key", [&] { return this->measure(); });
+  EXPECT_EQ(cache.last_outcome(), CacheOutcome::unwritable);
+  EXPECT_NE(cache.last_note().find("depth response measured; the cache could not keep it"), std::string::npos)
+      << cache.last_note();
+  EXPECT_EQ(r.shifts_mm(), kShifts);
+  std::filesystem::remove(folder_);
+}
+
 // process.yaml's settings on the small camera with fewer passes and iterations (a unit test's
 // time); the box on one side of the focal plane, as process.yaml's.
 const std::string kSpec = R"(
@@ -115,15 +227,50 @@ TEST(DepthResponse, TheSettingIsOffByDefaultAndRefusedOutsideZeroToFive) {
         << bad;
 }
 
+// Every setting goes into the key but dt (displacements do not depend on it), and so does the
+// executable's build ID.
+TEST(DepthResponse, ItsKeyTakesEveryProcessingSettingButDt) {
+  const ProcessSettings base = parse("");
+  const std::string key = settings_key(base);
+  const auto changed = [&](auto&& change) {
+    ProcessSettings s = base;
+    change(s);
+    return settings_key(s) != key;
+  };
+  EXPECT_EQ(settings_key(parse("")), key);
+  EXPECT_FALSE(changed([](ProcessSettings& s) { s.correlation.dt_s *= 2; }));
+  EXPECT_TRUE(changed([](ProcessSettings& s) { s.grid.origin_mm[2] += 0.125; }));
+  EXPECT_TRUE(changed([](ProcessSettings& s) { s.depth_guard_mm = 2; }));
+  EXPECT_TRUE(changed([](ProcessSettings& s) { s.depth_response_ppm = 0.25; }));
+  EXPECT_TRUE(changed([](ProcessSettings& s) { s.mart.iterations += 1; }));
+  EXPECT_TRUE(changed([](ProcessSettings& s) { s.mart.region = recon::RegionMm{}; }));
+  EXPECT_TRUE(changed([](ProcessSettings& s) { s.mart.prune_depth_reach += 1; }));
+  EXPECT_TRUE(changed([](ProcessSettings& s) { s.correlation.passes.back().depth_margin += 1; }));
+  EXPECT_TRUE(changed([](ProcessSettings& s) { s.correlation.passes.pop_back(); }));
+  EXPECT_TRUE(changed([](ProcessSettings& s) { s.correlation.median.radius += 1; }));
+  EXPECT_TRUE(changed([](ProcessSettings& s) { s.correlation.whitened_peak_sigma_voxel[2] += 1; }));
+  const optics::CameraModel camera = testing_support::small_camera();
+  const std::string response_key = depth_response_key("operator", camera, base);
+  ASSERT_FALSE(executable_build_id().empty()) << "the tests are linked with a build ID (the toolchain's default)";
+  EXPECT_NE(response_key.find(executable_build_id()), std::string::npos);
+  EXPECT_NE(response_key.find(key), std::string::npos);
+  EXPECT_NE(depth_response_key("another operator", camera, base), response_key);
+}
+
 // A shear the response was not measured on (u and w grow along y, -2 to +2 voxels over the box)
-// through a processor that measured it: most of w's shortfall goes, u and v stay the same bits.
+// through a processor that measured it: most of w's shortfall goes, u and v stay the same bits. The
+// processor keeps the response in its disk cache, and one built later reads it back from there.
 TEST(DepthResponse, TakesMartsShortfallOutOfAShearsDepthComponent) {
   const optics::CameraModel camera = testing_support::small_camera();
   const calib::LoadedCalibration calibration = calib::nominal_calibration(camera);
   const double ppm = 0.5;
+  const std::filesystem::path folder = testing_support::temp_dir("depth-response-shear");
+  std::filesystem::remove_all(folder);
   std::vector<double> fractions;  // the set-up's progress, one call per simulated pair
-  const PairProcessor processor(camera, calibration, parse(", depth_response_ppm: " + std::to_string(ppm)), nullptr,
-                                [&](double f) { fractions.push_back(f); });
+  const auto progress = [&](double f) { fractions.push_back(f); };
+  const ProcessSettings settings = parse(", depth_response_ppm: " + std::to_string(ppm));
+  OperatorCache operators(1, folder);
+  const PairProcessor processor(camera, calibration, settings, &operators, progress);
   ASSERT_NE(processor.depth_response(), nullptr);
   // 25 vectors per layer here: four particle sets for each of the four shifts.
   ASSERT_EQ(fractions.size(), 16u);
@@ -131,6 +278,8 @@ TEST(DepthResponse, TakesMartsShortfallOutOfAShearsDepthComponent) {
   EXPECT_DOUBLE_EQ(fractions.back(), 1.0);
   std::cout << "measured: " << processor.depth_response()->summary() << "\n";
   EXPECT_NE(processor.setup_note().find("depth response over z"), std::string::npos);
+  EXPECT_NE(processor.setup_note().find("depth response measured and kept in the cache"), std::string::npos)
+      << processor.setup_note();
 
   const double voxel = 0.125;
   const double rate = 2 * voxel / 2.0;  // +-2 voxels at the box's y faces
@@ -159,6 +308,13 @@ TEST(DepthResponse, TakesMartsShortfallOutOfAShearsDepthComponent) {
   EXPECT_GT(after.gain[2], 0.88);
   EXPECT_LT(after.gain[2], 1.05);
   EXPECT_LT(after.rms[2], 0.9 * before.rms[2]);
+
+  OperatorCache later_operators(1, folder);
+  const PairProcessor later(camera, calibration, settings, &later_operators, progress);
+  EXPECT_EQ(fractions.size(), 16u) << "measured again";
+  EXPECT_NE(later.setup_note().find("depth response from the cache"), std::string::npos) << later.setup_note();
+  EXPECT_EQ(later.process(frame_a, frame_b).correlation.field.dz_mm, corrected.correlation.field.dz_mm);
+  std::filesystem::remove_all(folder);
 }
 
 }  // namespace
