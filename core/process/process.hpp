@@ -44,9 +44,10 @@ struct ProcessSettings {
   int pixel_binning = 1;
   // w corrected for MART's depth response (depth_response.hpp): the seeding, particles per
   // microlens, of the simulated pairs the response is measured on when the settings are first used
-  // (PairProcessor; kept in the weights' disk cache after), [0, 5]; default 0: no correction. About the flow's own seeding: the response
-  // depends on it only weakly (docs/accuracy.md, "Depth response"). Offline only: plenopivd's run
-  // configs refuse it (minutes of measuring while a run is Armed).
+  // (PairProcessor; kept in the weights' disk cache after), [0, 5]; default 0: no correction.
+  // About the flow's own seeding: the response depends on it only weakly (docs/accuracy.md, "Depth
+  // response"). Offline only: plenopivd's run configs refuse it (minutes of measuring while a run
+  // is Armed).
   double depth_response_ppm = 0.0;
   recon::MartSettings mart;
   piv::CorrelationSettings correlation;  // dt_s lives here
