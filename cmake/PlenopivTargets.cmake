@@ -6,6 +6,9 @@ function(plenopiv_defaults target)
   if(PLENOPIV_WERROR)
     target_compile_options(${target} PRIVATE -Werror)
   endif()
+  # A GNU build ID in every executable (the toolchains' default, asked for explicitly): results
+  # cached on disk are keyed by it (executable_build_id in core/base/build_info.hpp).
+  target_link_options(${target} PRIVATE LINKER:--build-id)
   plenopiv_instrument(${target})
 endfunction()
 
