@@ -162,6 +162,52 @@ std::string file_name(const std::string& prefix, const std::string& key) {
   return prefix + hex64(xxh3_of(key)) + ".bin";
 }
 
+// What a cache keeps in one file: its name in notes ("weight tables"), how it is made when not
+// kept ("built", "measured"), and the folder's file prefix and count to keep.
+struct Kind {
+  const char* what;
+  const char* made;
+  const char* prefix;
+  std::size_t keep;
+};
+
+// The object kept in `file` for `key` (read(payload), which throws InputError on bad bytes), else
+// make()'s, then written there (write(object, payload)). `outcome` and `note` say which and why.
+template <typename Read, typename Make, typename Write>
+auto read_or_make(const Kind& kind, const std::filesystem::path& file, const std::string& key, Read&& read, Make&& make,
+                  Write&& write, CacheOutcome& outcome, std::string& note) {
+  Loaded loaded;
+  load(file, key, loaded);
+  if (loaded.outcome == CacheOutcome::hit) {
+    try {
+      auto kept = read(loaded.payload);
+      touch(file);
+      outcome = CacheOutcome::hit;
+      note = std::string(kind.what) + " from the cache: " + file.string();
+      return kept;
+    } catch (const InputError& e) {
+      loaded.outcome = CacheOutcome::corrupt;
+      loaded.why = e.what();
+    }
+  }
+  loaded.bytes.reset();
+  outcome = loaded.outcome;
+  auto made = make();
+  try {
+    std::string payload;
+    write(made, payload);
+    store(file, key, payload, kind.prefix, kind.keep);
+    note = std::string(kind.what) + " " + kind.made + " and kept in the cache: " + file.string() +
+           (loaded.outcome == CacheOutcome::missing
+                ? ""
+                : std::string(" (replaced: ") + cache_outcome_name(loaded.outcome) + ", " + loaded.why + ")");
+  } catch (const std::exception& e) {
+    outcome = CacheOutcome::unwritable;
+    note = std::string(kind.what) + " " + kind.made + ", not kept in the cache (" + e.what() + ")";
+  }
+  return made;
+}
+
 constexpr const char* kWeightsPrefix = "weights-";
 constexpr const char* kDepthResponsePrefix = "depth-response-";
 
@@ -230,37 +276,13 @@ std::unique_ptr<const recon::WeightingOperator> WeightsDiskCache::weights(const 
                                                                           double angular_sampling,
                                                                           const std::string* known_key) {
   const std::string key = known_key ? *known_key : operator_key(camera, lenses, white, grid, angular_sampling);
-  const std::filesystem::path file = file_for(key);
-  Loaded loaded;
-  load(file, key, loaded);
-  if (loaded.outcome == Outcome::hit) {
-    try {
-      auto op = std::make_unique<const recon::WeightingOperator>(recon::WeightingOperator::deserialize(loaded.payload));
-      touch(file);
-      outcome_ = Outcome::hit;
-      note_ = "weight tables from the cache: " + file.string();
-      return op;
-    } catch (const InputError& e) {
-      loaded.outcome = Outcome::corrupt;
-      loaded.why = e.what();
-    }
-  }
-  loaded.bytes.reset();
-  outcome_ = loaded.outcome;
-  auto op = std::make_unique<const recon::WeightingOperator>(camera, lenses, grid, white, angular_sampling);
-  try {
-    std::string payload;
-    op->serialize(payload);
-    store(file, key, payload, kWeightsPrefix, keep_);
-    note_ = std::string("weight tables built and kept in the cache: ") + file.string() +
-            (loaded.outcome == Outcome::missing
-                 ? ""
-                 : std::string(" (replaced: ") + name(loaded.outcome) + ", " + loaded.why + ")");
-  } catch (const std::exception& e) {
-    outcome_ = Outcome::unwritable;
-    note_ = std::string("weight tables built; the cache could not keep them (") + e.what() + ")";
-  }
-  return op;
+  return read_or_make(
+      Kind{"weight tables", "built", kWeightsPrefix, keep_}, file_for(key), key,
+      [](std::string_view payload) {
+        return std::make_unique<const recon::WeightingOperator>(recon::WeightingOperator::deserialize(payload));
+      },
+      [&] { return std::make_unique<const recon::WeightingOperator>(camera, lenses, grid, white, angular_sampling); },
+      [](const auto& op, std::string& payload) { op->serialize(payload); }, outcome_, note_);
 }
 
 std::string depth_response_key(const std::string& operator_key, const optics::CameraModel& render_camera,
@@ -283,37 +305,10 @@ std::filesystem::path DepthResponseDiskCache::file_for(const std::string& key) c
 }
 
 DepthResponse DepthResponseDiskCache::response(const std::string& key, const std::function<DepthResponse()>& measure) {
-  const std::filesystem::path file = file_for(key);
-  Loaded loaded;
-  load(file, key, loaded);
-  if (loaded.outcome == CacheOutcome::hit) {
-    try {
-      DepthResponse r = DepthResponse::deserialize(loaded.payload);
-      touch(file);
-      outcome_ = CacheOutcome::hit;
-      note_ = "depth response from the cache: " + file.string();
-      return r;
-    } catch (const InputError& e) {
-      loaded.outcome = CacheOutcome::corrupt;
-      loaded.why = e.what();
-    }
-  }
-  loaded.bytes.reset();
-  outcome_ = loaded.outcome;
-  DepthResponse r = measure();
-  try {
-    std::string payload;
-    r.serialize(payload);
-    store(file, key, payload, kDepthResponsePrefix, keep_);
-    note_ = "depth response measured and kept in the cache: " + file.string() +
-            (loaded.outcome == CacheOutcome::missing
-                 ? ""
-                 : std::string(" (replaced: ") + cache_outcome_name(loaded.outcome) + ", " + loaded.why + ")");
-  } catch (const std::exception& e) {
-    outcome_ = CacheOutcome::unwritable;
-    note_ = std::string("depth response measured; the cache could not keep it (") + e.what() + ")";
-  }
-  return r;
+  return read_or_make(
+      Kind{"depth response", "measured", kDepthResponsePrefix, keep_}, file_for(key), key,
+      [](std::string_view payload) { return DepthResponse::deserialize(payload); }, measure,
+      [](const DepthResponse& r, std::string& payload) { r.serialize(payload); }, outcome_, note_);
 }
 
 PairOperator::WeightsSource WeightsDiskCache::source() {

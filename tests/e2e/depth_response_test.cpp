@@ -196,7 +196,7 @@ TEST_F(DepthResponseCacheTest, AFolderItCannotWriteIsSaidAndTheResponseStillMeas
   DepthResponseDiskCache cache(folder_);
   const DepthResponse r = cache.response("key", [&] { return this->measure(); });
   EXPECT_EQ(cache.last_outcome(), CacheOutcome::unwritable);
-  EXPECT_NE(cache.last_note().find("depth response measured; the cache could not keep it"), std::string::npos)
+  EXPECT_NE(cache.last_note().find("depth response measured, not kept in the cache ("), std::string::npos)
       << cache.last_note();
   EXPECT_EQ(r.shifts_mm(), kShifts);
   std::filesystem::remove(folder_);
