@@ -1,11 +1,12 @@
 // MART's loops over every pixel or voxel that take a logarithm or an exponential
-// (kernels::log_ratios, log_or_zero, log_pixels, multiply_by_exp, extrapolate): the functions through SLEEF, four
-// values at a time, the rest in loops the vectoriser takes (-O3, CMakeLists.txt).
+// (kernels::log_ratios, log_or_zero, log_pixels, multiply_by_exp, extrapolate): the functions through SLEEF, as
+// wide as the CPU's vectors, the rest in loops the vectoriser takes (-O3, CMakeLists.txt).
 #include <sleef.h>
 
 #include <algorithm>
 
 #include "core/recon/kernels.hpp"
+#include "core/recon/sleef_wide.hpp"
 
 namespace plenopiv::recon::kernels {
 namespace {
@@ -13,16 +14,37 @@ namespace {
 // Values per chunk: a chunk's arguments and results stay in L1.
 constexpr std::size_t kChunkValues = 256;
 
-// ln and exp of n values (n <= kChunkValues), four at a time: SLEEF's deterministic SSE2 functions
-// ("cinz": no fused multiply-add; ln within 3.5 ulp, exp within 1 ulp), so every x86-64 CPU gives
-// the same bits. A chunk's last few values are padded to four (with 1), so that every value goes
-// through the same function wherever a range starts or ends.
+// The widest vectors of SLEEF's functions this CPU runs, chosen once.
+enum class Width { sse2 = 4, avx = 8, avx512 = 16 };
+Width widest() {
+  static const Width w = __builtin_cpu_supports("avx512f") ? Width::avx512
+                         : __builtin_cpu_supports("avx")   ? Width::avx
+                                                           : Width::sse2;
+  return w;
+}
+
+// ln and exp of n values (n <= kChunkValues), as many at a time as the CPU's widest vectors hold:
+// SLEEF's deterministic functions ("cinz": no fused multiply-add; ln within 3.5 ulp, exp within 1
+// ulp), which give the same bits in every width (tests/recon/vector_math_test.cpp), so every
+// x86-64 CPU gives the same bits. A chunk's last few values are padded (with 1) to a whole vector,
+// so that every value goes through the same function wherever a range starts or ends.
+std::size_t padded(float* v, std::size_t n, Width w) {
+  const std::size_t lanes = std::size_t(w);
+  for (std::size_t i = n; i % lanes; ++i) v[i] = 1.f;
+  return (n + lanes - 1) / lanes * lanes;
+}
 void log_n(float* v, std::size_t n) {
-  for (std::size_t i = n; i % 4; ++i) v[i] = 1.f;
+  const Width w = widest();
+  n = padded(v, n, w);
+  if (w == Width::avx512) return log_avx512(v, n);
+  if (w == Width::avx) return log_avx(v, n);
   for (std::size_t i = 0; i < n; i += 4) _mm_storeu_ps(v + i, Sleef_cinz_logf4_u35sse2(_mm_loadu_ps(v + i)));
 }
 void exp_n(float* v, std::size_t n) {
-  for (std::size_t i = n; i % 4; ++i) v[i] = 1.f;
+  const Width w = widest();
+  n = padded(v, n, w);
+  if (w == Width::avx512) return exp_avx512(v, n);
+  if (w == Width::avx) return exp_avx(v, n);
   for (std::size_t i = 0; i < n; i += 4) _mm_storeu_ps(v + i, Sleef_cinz_expf4_u10sse2(_mm_loadu_ps(v + i)));
 }
 

@@ -1,15 +1,18 @@
 // MART's elementwise logarithms and exponentials (kernels::log_ratios, log_or_zero, log_pixels,
-// multiply_by_exp, extrapolate): each pixel's case, the bounds, and the same bits wherever a range
-// is split.
+// multiply_by_exp, extrapolate): each pixel's case, the bounds, the same bits wherever a range is
+// split, and SLEEF's functions the same bits in every vector width the kernels dispatch to.
 #include <gtest/gtest.h>
+#include <sleef.h>
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <random>
 #include <vector>
 
 #include "core/recon/kernels.hpp"
+#include "core/recon/sleef_wide.hpp"
 
 namespace plenopiv::recon::kernels {
 namespace {
@@ -45,6 +48,43 @@ std::vector<std::size_t> random_cuts(std::mt19937& random, std::size_t n) {
   std::vector<std::size_t> cuts{0, n, at(random), at(random), at(random)};
   std::sort(cuts.begin(), cuts.end());
   return cuts;
+}
+
+// The same bits, or both NaN: a NaN's payload may differ between widths (the kernels never take
+// ln or exp of a NaN: their arguments are clamped, and images and volumes are checked finite).
+bool same(float a, float b) { return std::memcmp(&a, &b, sizeof a) == 0 || (std::isnan(a) && std::isnan(b)); }
+
+// The kernels take ln and exp in the widest vectors the CPU has (vector_math.cpp, sleef_wide.hpp):
+// the same bits as the SSE2 functions every x86-64 CPU has, so results do not depend on the CPU.
+// Over every 257th float bit pattern of either sign (zeros, denormals, infinities, NaNs among them).
+TEST(VectorMath, SleefsFunctionsGiveTheSameBitsInEveryVectorWidth) {
+  const bool has_avx = __builtin_cpu_supports("avx"), has_avx512 = __builtin_cpu_supports("avx512f");
+  if (!has_avx && !has_avx512) GTEST_SKIP() << "this CPU has neither AVX nor AVX-512: only the SSE2 path runs here";
+  std::size_t compared = 0;
+  float in[16], ln[16], ex[16], ln_wide[16], ex_wide[16];
+  for (std::uint64_t bits = 0; bits <= 0xffffffffu; bits += 16 * 257) {
+    for (int i = 0; i < 16; ++i) {
+      const std::uint32_t b = std::uint32_t(bits + std::uint64_t(i) * 257);
+      std::memcpy(&in[i], &b, sizeof b);
+    }
+    for (int i = 0; i < 16; i += 4) {
+      _mm_storeu_ps(ln + i, Sleef_cinz_logf4_u35sse2(_mm_loadu_ps(in + i)));
+      _mm_storeu_ps(ex + i, Sleef_cinz_expf4_u10sse2(_mm_loadu_ps(in + i)));
+    }
+    for (const bool avx512 : {false, true}) {
+      if (avx512 ? !has_avx512 : !has_avx) continue;
+      std::memcpy(ln_wide, in, sizeof in);
+      std::memcpy(ex_wide, in, sizeof in);
+      (avx512 ? log_avx512 : log_avx)(ln_wide, 16);
+      (avx512 ? exp_avx512 : exp_avx)(ex_wide, 16);
+      for (int i = 0; i < 16; ++i) {
+        ASSERT_TRUE(same(ln[i], ln_wide[i])) << "ln of " << in[i] << (avx512 ? ", AVX-512" : ", AVX");
+        ASSERT_TRUE(same(ex[i], ex_wide[i])) << "exp of " << in[i] << (avx512 ? ", AVX-512" : ", AVX");
+      }
+      compared += 16;
+    }
+  }
+  EXPECT_GT(compared, 1000000u);
 }
 
 TEST(VectorMath, EachPixelsCaseAndTheBoundsOfTheLogRatio) {
