@@ -19,11 +19,14 @@ int read_build_id(struct dl_phdr_info* info, std::size_t, void* out) {
     if (ph.p_type != PT_NOTE) continue;
     const char* at = reinterpret_cast<const char*>(info->dlpi_addr + ph.p_vaddr);
     const char* end = at + ph.p_memsz;
+    // A note's name and descriptor are padded to the segment's alignment (4, or 8 for some).
+    const std::size_t align = ph.p_align == 8 ? 8 : 4;
+    const auto padded = [align](std::size_t n) { return (n + align - 1) & ~(align - 1); };
     while (at + sizeof(ElfW(Nhdr)) <= end) {
       ElfW(Nhdr) note;
       std::memcpy(&note, at, sizeof note);
       const char* name = at + sizeof note;
-      const char* desc = name + ((note.n_namesz + 3) & ~3u);
+      const char* desc = name + padded(note.n_namesz);
       if (note.n_type == NT_GNU_BUILD_ID && note.n_namesz == 4 && std::memcmp(name, "GNU", 4) == 0 &&
           desc + note.n_descsz <= end) {
         for (std::size_t b = 0; b < note.n_descsz; ++b) {
@@ -33,7 +36,7 @@ int read_build_id(struct dl_phdr_info* info, std::size_t, void* out) {
         }
         return 1;
       }
-      at = desc + ((note.n_descsz + 3) & ~3u);
+      at = desc + padded(note.n_descsz);
     }
   }
   return 1;  // the executable comes first; the libraries' IDs are not its own
