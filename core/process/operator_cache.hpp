@@ -81,7 +81,7 @@ std::string depth_response_key(const std::string& operator_key, const optics::Ca
 
 // Depth responses in files of a folder (the weight tables' folder), one per key
 // (depth-response-<hash of the key>.bin, with the weight files' header and checks): measuring one
-// costs minutes at the paper's scale, reading it back a millisecond. A stale or damaged file is
+// costs minutes at the paper's scale, reading it back next to nothing. A stale or damaged file is
 // measured anew and replaced; the folder keeps the `keep` most recently used ones.
 class DepthResponseDiskCache {
  public:
