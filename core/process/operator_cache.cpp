@@ -13,6 +13,7 @@
 #include <xxhash.h>
 
 #include "core/base/build_info.hpp"
+#include "core/base/byte_stream.hpp"
 #include "core/base/errors.hpp"
 #include "core/io/atomic_file.hpp"
 #include "core/io/checksum.hpp"
@@ -24,11 +25,6 @@ namespace {
 constexpr char kMagic[8] = {'P', 'L', 'W', 'C', 'A', 'C', 'H', 'E'};
 // 2: the tables' checksum is XXH3's 64 bits (1: CRC-32); a file of another format is stale.
 constexpr std::uint32_t kFileFormat = 2;
-
-template <typename T>
-void put(std::string& out, const T& v) {
-  out.append(reinterpret_cast<const char*>(&v), sizeof v);
-}
 
 // XXH3 (xxHash's 64-bit hash) of `bytes`: the cache's file names and its tables' checksum.
 std::uint64_t xxh3_of(std::string_view bytes) { return XXH3_64bits(bytes.data(), bytes.size()); }
@@ -42,11 +38,12 @@ std::string hex64(std::uint64_t v) {
 // The file's header: magic, format, key, payload length and checksum; then the payload.
 std::string header(const std::string& key, std::string_view payload) {
   std::string out(kMagic, sizeof kMagic);
-  put(out, kFileFormat);
-  put(out, std::uint64_t(key.size()));
+  ByteWriter w(out);
+  w.pod(kFileFormat);
+  w.pod(std::uint64_t(key.size()));
   out += key;
-  put(out, std::uint64_t(payload.size()));
-  put(out, xxh3_of(payload));
+  w.pod(std::uint64_t(payload.size()));
+  w.pod(xxh3_of(payload));
   return out;
 }
 
@@ -216,34 +213,33 @@ constexpr const char* kDepthResponsePrefix = "depth-response-";
 std::string operator_key(const optics::CameraModel& camera, const optics::MicrolensArray& lenses, const ImageF& white,
                          const Grid3& grid, double angular_sampling) {
   std::string key = "plenopiv weighting operator\n";
-  put(key, recon::WeightingOperator::kBytesFormat);
+  ByteWriter w(key);
+  w.pod(recon::WeightingOperator::kBytesFormat);
   const optics::CameraSpec& c = camera.spec();
   for (const int v :
        {c.sensor.width_px, c.sensor.height_px, c.microlens.count_x, c.microlens.count_y, int(c.microlens.layout)})
-    put(key, v);
+    w.pod(v);
   for (const double v :
        {c.sensor.pixel_pitch_mm, c.microlens.pitch_mm, c.microlens.focal_length_mm, c.main_lens.focal_length_mm,
         c.main_lens.f_number, c.main_lens.magnification, camera.image_distance_mm(), camera.object_distance_mm(),
         camera.aperture_diameter_mm(), camera.microlens_image_diameter_px(), camera.optical_axis_px()[0],
         camera.optical_axis_px()[1]})
-    put(key, v);
+    w.pod(v);
   const optics::Lattice& l = lenses.lattice;
-  for (const int v : {int(l.layout), l.count_x, l.count_y}) put(key, v);
-  for (const double v : {l.pitch_x_mm, l.pitch_y_mm, l.rotation_rad, l.offset_x_mm, l.offset_y_mm}) put(key, v);
-  put(key, std::uint64_t(lenses.centres_mm.size()));
-  key.append(reinterpret_cast<const char*>(lenses.centres_mm.data()),
-             lenses.centres_mm.size() * sizeof(lenses.centres_mm[0]));
+  for (const int v : {int(l.layout), l.count_x, l.count_y}) w.pod(v);
+  for (const double v : {l.pitch_x_mm, l.pitch_y_mm, l.rotation_rad, l.offset_x_mm, l.offset_y_mm}) w.pod(v);
+  w.vec(lenses.centres_mm);
   const std::string_view white_bytes(reinterpret_cast<const char*>(white.pixels.data()),
                                      white.pixels.size() * sizeof(float));
-  put(key, white.width);
-  put(key, white.height);
+  w.pod(white.width);
+  w.pod(white.height);
   const XXH128_hash_t white_hash = XXH3_128bits(white_bytes.data(), white_bytes.size());
-  put(key, white_hash.low64);
-  put(key, white_hash.high64);
-  put(key, grid.shape);
-  put(key, grid.origin_mm);
-  put(key, grid.spacing_mm);
-  put(key, angular_sampling);
+  w.pod(white_hash.low64);
+  w.pod(white_hash.high64);
+  w.pod(grid.shape);
+  w.pod(grid.origin_mm);
+  w.pod(grid.spacing_mm);
+  w.pod(angular_sampling);
   return key;
 }
 
@@ -291,7 +287,7 @@ std::string depth_response_key(const std::string& operator_key, const optics::Ca
   if (build.empty()) return {};
   std::string key =
       "plenopiv depth response\nbuild " + build + "\nrendered on\n" + optics::to_yaml(render_camera.spec()) + "\n";
-  put(key, std::uint64_t(operator_key.size()));
+  ByteWriter(key).pod(std::uint64_t(operator_key.size()));
   key += operator_key;
   key += settings_key(settings);
   return key;

@@ -10,9 +10,9 @@
 #include <span>
 #include <sstream>
 #include <string>
-#include <type_traits>
 #include <utility>
 
+#include "core/base/byte_stream.hpp"
 #include "core/base/errors.hpp"
 
 namespace plenopiv::process {
@@ -63,73 +63,67 @@ double ProcessSettings::peak_bytes_per_pair() const {
 
 namespace {
 
-template <typename T>
-void put(std::string& out, const T& v) {
-  static_assert(std::is_trivially_copyable_v<T>);
-  out.append(reinterpret_cast<const char*>(&v), sizeof v);
-}
-
-void put_grid(std::string& out, const Grid3& g) {
+void put_grid(ByteWriter& w, const Grid3& g) {
   const auto& [shape, origin_mm, spacing_mm] = g;
-  put(out, shape);
-  put(out, origin_mm);
-  put(out, spacing_mm);
+  w.pod(shape);
+  w.pod(origin_mm);
+  w.pod(spacing_mm);
 }
 
 // Structured bindings name every member: a struct with another member count does not compile.
-void put_mart(std::string& out, const recon::MartSettings& m) {
+void put_mart(ByteWriter& w, const recon::MartSettings& m) {
   const auto& [method, start, iterations, mu, accelerate, noise_threshold, dark_weight_cutoff, convergence, region,
                sensor_blur_sigma_mm, final_residual, prune_threshold, prune_scope, prune_depth_reach, prune] = m;
-  put(out, method);
-  put(out, start);
-  put(out, iterations);
-  put(out, mu);
-  put(out, accelerate);
-  put(out, noise_threshold);
-  put(out, dark_weight_cutoff);
-  put(out, convergence);
-  put(out, region.has_value());
+  w.pod(method);
+  w.pod(start);
+  w.pod(iterations);
+  w.pod(mu);
+  w.pod(accelerate);
+  w.pod(noise_threshold);
+  w.pod(dark_weight_cutoff);
+  w.pod(convergence);
+  w.pod(region.has_value());
   if (region) {
     const auto& [min_mm, max_mm] = *region;
-    put(out, min_mm);
-    put(out, max_mm);
+    w.pod(min_mm);
+    w.pod(max_mm);
   }
-  put(out, sensor_blur_sigma_mm);
-  put(out, final_residual);
-  put(out, prune_threshold);
-  put(out, prune_scope);
-  put(out, prune_depth_reach);
-  put(out, prune);
+  w.pod(sensor_blur_sigma_mm);
+  w.pod(final_residual);
+  w.pod(prune_threshold);
+  w.pod(prune_scope);
+  w.pod(prune_depth_reach);
+  w.pod(prune);
 }
 
-void put_correlation(std::string& out, const piv::CorrelationSettings& c) {
+void put_correlation(ByteWriter& w, const piv::CorrelationSettings& c) {
   const auto& [passes, median, signal_threshold, dt_s, fft_planning, intensity_threshold_of_mean, prefilter,
                depth_prefilter, predictor, predictor_smoothing, final_smoothing, uncertainty, early_interpolation,
                spectral_whitening, whitened_peak_sigma_voxel] = c;
-  put(out, std::uint64_t(passes.size()));
+  w.pod(std::uint64_t(passes.size()));
   for (const piv::PassSettings& p : passes) {
     const auto& [window, overlap_percent, depth_margin] = p;
-    put(out, window);
-    put(out, overlap_percent);
-    put(out, depth_margin);
+    w.pod(window);
+    w.pod(overlap_percent);
+    w.pod(depth_margin);
   }
   const auto& [threshold, epsilon, radius] = median;
-  put(out, threshold);
-  put(out, epsilon);
-  put(out, radius);
-  put(out, signal_threshold);
+  w.pod(threshold);
+  w.pod(epsilon);
+  w.pod(radius);
+  w.pod(signal_threshold);
   (void)dt_s;  // velocities only
-  put(out, fft_planning);
-  put(out, intensity_threshold_of_mean);
-  put(out, prefilter);
-  put(out, depth_prefilter);
-  put(out, predictor);
-  put(out, predictor_smoothing);
-  put(out, final_smoothing);
-  put(out, uncertainty);
-  put(out, early_interpolation);
-  put(out, spectral_whitening);
-  put(out, whitened_peak_sigma_voxel);
+  w.pod(fft_planning);
+  w.pod(intensity_threshold_of_mean);
+  w.pod(prefilter);
+  w.pod(depth_prefilter);
+  w.pod(predictor);
+  w.pod(predictor_smoothing);
+  w.pod(final_smoothing);
+  w.pod(uncertainty);
+  w.pod(early_interpolation);
+  w.pod(spectral_whitening);
+  w.pod(whitened_peak_sigma_voxel);
 }
 
 }  // namespace
@@ -137,13 +131,14 @@ void put_correlation(std::string& out, const piv::CorrelationSettings& c) {
 std::string settings_key(const ProcessSettings& s) {
   const auto& [grid, depth_guard_mm, angular_sampling, pixel_binning, depth_response_ppm, mart, correlation] = s;
   std::string out = "plenopiv processing settings\n";
-  put_grid(out, grid);
-  put(out, depth_guard_mm);
-  put(out, angular_sampling);
-  put(out, pixel_binning);
-  put(out, depth_response_ppm);
-  put_mart(out, mart);
-  put_correlation(out, correlation);
+  ByteWriter w(out);
+  put_grid(w, grid);
+  w.pod(depth_guard_mm);
+  w.pod(angular_sampling);
+  w.pod(pixel_binning);
+  w.pod(depth_response_ppm);
+  put_mart(w, mart);
+  put_correlation(w, correlation);
   return out;
 }
 
