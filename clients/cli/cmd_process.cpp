@@ -47,7 +47,7 @@ namespace {
 struct ProcessOptions {
   std::string run, tier = "full", pairs, shard;
   int jobs = 1;
-  bool resume = false, merge = false;
+  bool resume = false, merge = false, prepare = false;
   std::optional<double> dt_s;
   std::string camera, frame_a, frame_b, config, calibration, calibration_image, output, vti, preview;
   std::vector<std::string> white_images, dark_images;
@@ -127,6 +127,10 @@ void run_process(const ProcessOptions& o) {
        {std::pair{&o.camera, "--camera"}, std::pair{&o.frame_a, "frame_a"}, std::pair{&o.frame_b, "frame_b"},
         std::pair{&o.config, "--config"}, std::pair{&o.output, "--output"}})
     if (value->empty()) throw InputError(std::string(name) + " is required (or --run <run folder>)");
+  for (const auto& [given, name] :
+       {std::pair{o.resume, "--resume"}, std::pair{o.merge, "--merge"}, std::pair{o.prepare, "--prepare"},
+        std::pair{!o.shard.empty(), "--shard"}, std::pair{!o.pairs.empty(), "--pairs"}})
+    if (given) throw InputError(std::string(name) + " works on a recorded run: give it with --run <run folder>");
   const auto limit = thread_limit(o.threads);
   // Every input is read and checked before any long work starts.
   process::ProcessSettings settings = process::load_process_settings(o.config);
@@ -231,7 +235,8 @@ void run_reprocess(const ProcessOptions& o) {
     if (!other->empty())
       throw InputError(
           "--run takes the camera, frames and calibration from the run folder; give --run with -o, "
-          "--config, --tier, --pairs, --jobs, --resume, --shard, --merge, --threads and the cache options only");
+          "--config, --tier, --pairs, --jobs, --resume, --shard, --merge, --prepare, --threads and the cache options "
+          "only");
   if (!o.white_images.empty() || !o.dark_images.empty() || o.nominal)
     throw InputError("--run takes the calibration from the run folder (manifest.json: calibration)");
   if (o.dt_s) throw InputError("--dt: --run uses each pair's measured dt (the run's dt_s where none was measured)");
@@ -246,9 +251,19 @@ void run_reprocess(const ProcessOptions& o) {
   r.jobs = o.jobs;
   r.resume = o.resume;
   r.merge_only = o.merge;
+  r.prepare_only = o.prepare;
   r.weights_cache = weights_cache_folder(o.cache_dir, o.no_cache);
   if (r.merge_only && r.shard) throw InputError("--merge covers every pair: give it without --shard");
+  if (r.prepare_only && (r.merge_only || r.shard || r.resume))
+    throw InputError("--prepare processes no pair: give it without --merge, --shard and --resume");
   const ReprocessReport report = reprocess_run(r);
+  if (r.prepare_only) {
+    std::fprintf(stderr, "%s: prepared for %zu pair(s): the weight tables%s in %s\n", report.output.string().c_str(),
+                 report.selected, report.depth_response ? " and the depth response" : "",
+                 r.weights_cache.string().c_str());
+    std::cout << r.weights_cache.string() << "\n";
+    return;
+  }
   std::fprintf(stderr, "%s: %zu pair(s) selected, %zu processed, %zu up to date%s\n", report.output.string().c_str(),
                report.selected, report.processed, report.skipped,
                report.merged ? "; statistics.h5 and series.pvd written" : "");
@@ -299,6 +314,9 @@ void add_process_commands(CLI::App& app) {
   cmd->add_option("--shard", o->shard, "with --run: process shard i/n of the pairs only (a cluster task); merge later");
   cmd->add_flag("--merge", o->merge,
                 "with --run: only check every pair's output and write statistics.h5 and series.pvd");
+  cmd->add_flag("--prepare", o->prepare,
+                "with --run: only make the weight tables and the depth response (if the settings ask for one) in "
+                "the cache folder, for the calls after it (a cluster submission's first job)");
   cmd->callback([o] { o->run.empty() ? run_process(*o) : run_reprocess(*o); });
 }
 

@@ -1,5 +1,6 @@
 // `plenopiv slurm submit|status`: a recorded run reprocessed on a Slurm cluster, one array task per
-// shard (`plenopiv process --run ... --shard i/n --resume`) and a merge job after them.
+// shard (`plenopiv process --run ... --shard i/n --resume`) and a merge job after them; where the
+// settings measure a depth response, a setup job before them (`--prepare`) that keeps it for all.
 #include <unistd.h>
 #include <yaml-cpp/yaml.h>
 
@@ -41,11 +42,14 @@ struct SlurmOptions {
   bool resume = false;
   bool dry_run = false;
   fs::path program;  // the plenopiv the tasks run; default: this one
+  // The jobs' weights cache (`process --cache-dir`); empty: each node's default. The setup job's
+  // depth response reaches the tasks only through a folder the nodes share.
+  fs::path cache_dir;
 };
 
 // The submissions made for an output folder, newest last: <output>/slurm/jobs.yaml.
 struct Submission {
-  std::string array_job, merge_job, time;
+  std::string setup_job, array_job, merge_job, time;  // setup_job: empty when there was none
   int shards = 0;
   std::vector<int> tasks;
 };
@@ -60,6 +64,7 @@ std::vector<Submission> read_submissions(const fs::path& output) {
   for (const YAML::Node& n : root.node()["submissions"]) {
     const YamlMap m(n, file.string(), "submissions");
     Submission s;
+    s.setup_job = m.string_or("setup_job", "");
     s.array_job = m.string_or("array_job", "");
     s.merge_job = m.string("merge_job");
     s.time = m.string("time");
@@ -74,9 +79,10 @@ void write_submissions(const fs::path& output, const std::vector<Submission>& su
   YAML::Emitter e;
   e << YAML::BeginMap << YAML::Key << "submissions" << YAML::Value << YAML::BeginSeq;
   for (const Submission& s : submissions) {
-    e << YAML::BeginMap << YAML::Key << "array_job" << YAML::Value << s.array_job << YAML::Key << "merge_job"
-      << YAML::Value << s.merge_job << YAML::Key << "time" << YAML::Value << s.time << YAML::Key << "shards"
-      << YAML::Value << s.shards << YAML::Key << "tasks" << YAML::Value << YAML::Flow << s.tasks << YAML::EndMap;
+    e << YAML::BeginMap << YAML::Key << "setup_job" << YAML::Value << s.setup_job << YAML::Key << "array_job"
+      << YAML::Value << s.array_job << YAML::Key << "merge_job" << YAML::Value << s.merge_job << YAML::Key << "time"
+      << YAML::Value << s.time << YAML::Key << "shards" << YAML::Value << s.shards << YAML::Key << "tasks"
+      << YAML::Value << YAML::Flow << s.tasks << YAML::EndMap;
   }
   e << YAML::EndSeq << YAML::EndMap;
   io::write_text_atomically(slurm_dir(output) / "jobs.yaml", std::string(e.c_str()) + "\n");
@@ -119,6 +125,7 @@ std::vector<std::string> process_arguments(const SlurmOptions& o, const fs::path
   std::vector<std::string> args{"process",  "--run", run.string(), "-o",  output.string(),
                                 "--config", config,  "--tier",     o.tier};
   if (!o.pairs.empty()) args.insert(args.end(), {"--pairs", o.pairs});
+  if (!o.cache_dir.empty()) args.insert(args.end(), {"--cache-dir", fs::absolute(o.cache_dir).string()});
   return args;
 }
 
@@ -221,8 +228,8 @@ void run_submit(const SlurmOptions& o) {
   if (o.resume && !o.dry_run) {
     // A resubmission must not race tasks of an earlier one still queued or running.
     for (const Submission& s : before) {
-      for (const std::string& line : queued({s.array_job})) {
-        throw InputError("job " + s.array_job + " (an earlier submission for " + r.output.string() +
+      for (const std::string& line : queued({s.setup_job, s.array_job})) {
+        throw InputError("job " + line.substr(0, line.find(' ')) + " (an earlier submission for " + r.output.string() +
                          ") is still in the queue: '" + line + "'; wait for it or scancel it, then --resume");
       }
       if (!queued({s.merge_job}).empty()) {
@@ -267,15 +274,29 @@ void run_submit(const SlurmOptions& o) {
       sbatch_script("plenopiv: merge of " + r.run.string(), merge_directives, program, merge_args, "");
   io::write_text_atomically(dir / "shards.sbatch", shard_script);
   io::write_text_atomically(dir / "merge.sbatch", merge_script);
+  // The depth response is measured once, by a job the shards wait for, not by every shard at once.
+  const bool setup = plan.depth_response && !tasks.empty();
+  if (setup) {
+    std::vector<std::string> setup_directives = common;
+    setup_directives.push_back("--cpus-per-task=" + std::to_string(o.cpus));
+    setup_directives.push_back("--output=" + (dir / "setup.out").string());
+    std::vector<std::string> setup_args = args;
+    setup_args.insert(setup_args.end(), {"--prepare", "--threads", std::to_string(o.cpus)});
+    io::write_text_atomically(dir / "setup.sbatch",
+                              sbatch_script("plenopiv: weight tables and depth response for " + r.run.string(),
+                                            setup_directives, program, setup_args, ""));
+  }
 
   std::fprintf(stderr, "%zu pairs in %d shards; %zu shard(s) to run: %s; %.2f GB per pair in flight, --mem=%s\n", pairs,
                o.shards, tasks.size(), tasks.empty() ? "none" : task_list(tasks).c_str(), plan.bytes_per_pair / 1e9,
                mem.c_str());
+  std::vector<std::string> setup_command{"sbatch", "--parsable", (dir / "setup.sbatch").string()};
   std::vector<std::string> array_command{"sbatch", "--parsable", "--array=" + task_list(tasks),
                                          (dir / "shards.sbatch").string()};
   std::vector<std::string> merge_command{"sbatch", "--parsable", "--kill-on-invalid-dep=yes",
                                          (dir / "merge.sbatch").string()};
   if (o.dry_run) {
+    if (setup) std::cout << (dir / "setup.sbatch").string() << "\n";
     std::cout << (dir / "shards.sbatch").string() << "\n" << (dir / "merge.sbatch").string() << "\n";
     return;
   }
@@ -283,6 +304,11 @@ void run_submit(const SlurmOptions& o) {
   s.shards = o.shards;
   s.tasks = tasks;
   s.time = now_utc();
+  if (setup) {
+    s.setup_job = submit(setup_command);
+    array_command.insert(array_command.begin() + 2,
+                         {"--dependency=afterok:" + s.setup_job, "--kill-on-invalid-dep=yes"});
+  }
   if (!tasks.empty()) {
     s.array_job = submit(array_command);
     merge_command.insert(merge_command.begin() + 2, "--dependency=afterok:" + s.array_job);
@@ -292,7 +318,8 @@ void run_submit(const SlurmOptions& o) {
   all.push_back(s);
   write_submissions(r.output, all);
   std::fprintf(
-      stderr, "submitted: array job %s (tasks %s), merge job %s after it; `plenopiv slurm status --run %s%s`\n",
+      stderr, "submitted: %sarray job %s (tasks %s), merge job %s after it; `plenopiv slurm status --run %s%s`\n",
+      s.setup_job.empty() ? "" : ("setup job " + s.setup_job + " (depth response), ").c_str(),
       s.array_job.empty() ? "none" : s.array_job.c_str(), tasks.empty() ? "none" : task_list(tasks).c_str(),
       s.merge_job.c_str(), r.run.string().c_str(), o.output.empty() ? "" : (" -o " + r.output.string()).c_str());
   std::cout << s.array_job << " " << s.merge_job << "\n";
@@ -306,7 +333,7 @@ void run_status(const SlurmOptions& o) {
                      ": no Slurm submission recorded (slurm/jobs.yaml); `plenopiv slurm submit` first");
   const Submission& last = submissions.back();
   const ShardPlan plan = plan_shards(r, last.shards, false);
-  const std::vector<std::string> lines = queued({last.array_job, last.merge_job});
+  const std::vector<std::string> lines = queued({last.setup_job, last.array_job, last.merge_job});
   std::size_t pairs = 0, done = 0;
   for (const ShardState& s : plan.shards) {
     pairs += s.pairs;
@@ -316,6 +343,14 @@ void run_status(const SlurmOptions& o) {
               r.run.string().c_str(), r.output.string().c_str(), last.time.c_str(),
               last.array_job.empty() ? "none" : last.array_job.c_str(), task_list(last.tasks).c_str(),
               last.merge_job.c_str());
+  if (!last.setup_job.empty()) {
+    // Out of the queue it has finished: its log says how (a failed one takes its tasks with it).
+    std::string state = "finished (slurm/setup.out)";
+    for (const std::string& line : lines) {
+      if (line.rfind(last.setup_job + " ", 0) == 0) state = line.substr(line.find(' ') + 1);
+    }
+    std::printf("setup      job %s: %s\n", last.setup_job.c_str(), state.c_str());
+  }
   std::printf("pairs      %zu of %zu have outputs (%.0f %%)\n", done, pairs,
               pairs ? 100.0 * double(done) / double(pairs) : 0.0);
   std::size_t incomplete = 0;
@@ -371,6 +406,9 @@ void add_slurm_commands(CLI::App& app) {
                        "submit only the shards with pairs not done (after failed tasks), and the merge");
   submit_cmd->add_flag("--dry-run", o->dry_run, "write the sbatch scripts and print their paths; submit nothing");
   submit_cmd->add_option("--plenopiv", o->program, "the plenopiv the jobs run (default: this one)");
+  submit_cmd->add_option("--cache-dir", o->cache_dir,
+                         "the jobs' weights cache folder (process --cache-dir), on a file system the nodes share "
+                         "(default: each node's $PLENOPIV_CACHE_DIR, $XDG_CACHE_HOME/plenopiv or ~/.cache/plenopiv)");
   submit_cmd->callback([o] { run_submit(*o); });
   status_cmd->callback([o] { run_status(*o); });
 }

@@ -178,6 +178,10 @@ std::pair<int, int> parse_shard(const std::string& text) {
 ReprocessReport reprocess_run(const ReprocessOptions& o) {
   if (o.jobs < 1 || o.jobs > 64) throw InputError("--jobs: 1 to 64 pairs at once, got " + std::to_string(o.jobs));
   if (o.merge_only) return merge_outputs(o);
+  if (o.prepare_only && o.weights_cache.empty())
+    throw InputError(
+        "--prepare makes the weight tables and depth response for later calls: it needs the cache "
+        "(not --no-cache)");
   // Every input is read and checked before any long work starts or any file is written.
   const RunInputs in = read_inputs(o);
   const Grid3 g = in.settings.reconstruction_grid();
@@ -202,12 +206,14 @@ ReprocessReport reprocess_run(const ReprocessOptions& o) {
   std::optional<process::OperatorCache> operators;
   if (!o.weights_cache.empty()) operators.emplace(1, o.weights_cache);
   const auto processor = make_pair_processor(in.camera, calibration, in.settings, operators ? &*operators : nullptr);
-  // The settings the outputs were made with, beside them.
-  io::write_text_atomically(in.output / "process.yaml", in.settings_text);
-
   ReprocessReport report;
   report.selected = in.selected.size();
   report.output = in.output;
+  report.depth_response = processor->depth_response() != nullptr;
+  if (o.prepare_only) return report;
+  // The settings the outputs were made with, beside them.
+  io::write_text_atomically(in.output / "process.yaml", in.settings_text);
+
   SharedProgress progress(in.selected.size());
   std::atomic<std::size_t> next{0}, processed{0}, skipped{0};
   std::mutex errors_mutex;
@@ -319,6 +325,7 @@ ShardPlan plan_shards(const ReprocessOptions& o, int shards, bool verify) {
   ShardPlan plan;
   plan.output = in.output;
   plan.bytes_per_pair = in.settings.peak_bytes_per_pair();
+  plan.depth_response = in.settings.depth_response_ppm > 0;
   fs::file_time_type newest_pair = fs::file_time_type::min();
   bool all_there = true;
   for (int i = 0; i < shards; ++i) {

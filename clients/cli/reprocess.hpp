@@ -26,6 +26,10 @@ struct ReprocessOptions {
   int jobs = 1;             // pairs processed at once (they share the operator; each needs its buffers)
   bool resume = false;      // skip pairs whose output exists with the same input hash
   bool merge_only = false;  // only check the outputs and write statistics.h5 and series.pvd
+  // Only check the inputs and make what the pairs share (the weight tables and, where the settings
+  // ask for one, the depth response) in `weights_cache`, then stop: a cluster submission's first
+  // job, so that its tasks read them instead of each making its own.
+  bool prepare_only = false;
   // The folder that keeps weight tables between calls (process::OperatorCache over its files);
   // empty: the tables are built and kept nowhere.
   std::filesystem::path weights_cache;
@@ -33,15 +37,16 @@ struct ReprocessOptions {
 
 // What happened, for the caller's summary line and for tests.
 struct ReprocessReport {
-  std::size_t selected = 0;   // pairs in range (and in the shard)
-  std::size_t processed = 0;  // computed now
-  std::size_t skipped = 0;    // up to date already (resume)
-  bool merged = false;        // statistics.h5 and series.pvd written
+  std::size_t selected = 0;     // pairs in range (and in the shard)
+  std::size_t processed = 0;    // computed now
+  std::size_t skipped = 0;      // up to date already (resume)
+  bool merged = false;          // statistics.h5 and series.pvd written
+  bool depth_response = false;  // the settings measure one (made or read from the cache)
   std::filesystem::path output;
 };
 
 // Checks everything first (the folder, its frames, the settings against the camera, memory for
-// `jobs` pairs), then processes the selected pairs with each pair's measured dt (the run's dt_s
+// `jobs` pairs), then (unless `prepare_only`) processes the selected pairs with each pair's measured dt (the run's dt_s
 // where none was measured) through one process::PairProcessor, writing <output>/pair-<n>.h5
 // (with the inputs' hash) and .vti, with a progress bar over pairs. Without a shard it then merges
 // (merge_outputs). InputError naming the culprit on bad input; nothing is written before the
@@ -65,6 +70,9 @@ struct ShardState {
 struct ShardPlan {
   std::vector<ShardState> shards;
   double bytes_per_pair = 0;  // the estimated peak memory of one pair in flight
+  // The settings measure MART's depth response before the first pair (process::PairProcessor):
+  // minutes at paper scale, worth one job that keeps it for the others.
+  bool depth_response = false;
   std::filesystem::path output;
   bool merged = false;  // statistics.h5 and series.pvd are there, newer than every pair's output
 };

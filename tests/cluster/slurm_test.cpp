@@ -1,7 +1,8 @@
 // `plenopiv slurm` on a real one-node Slurm (scripts/slurm-local.sh: munged, slurmctld and slurmd
 // on this machine, started for the test and stopped after it): a 4-shard array over a small
 // recorded run and its merge job give the bits of a local reprocess; a failed task is resubmitted
-// alone and the merge follows it. Where the cluster cannot start, the test fails with the reason.
+// alone and the merge follows it; a depth response is measured once, by a setup job before the shards. Where the
+// cluster cannot start, the test fails with the reason.
 #include <gtest/gtest.h>
 
 #include <chrono>
@@ -173,6 +174,57 @@ TEST_F(Slurm, AFailedTaskIsResubmittedAloneAndTheMergeFollows) {
   status = plenopiv_ok({"slurm", "status", "--run", run.string(), "-o", out.string()});
   EXPECT_NE(status.find("merge      done"), std::string::npos) << status << file_text(out / "slurm" / "merge.out");
   expect_same_outputs(run.parent_path() / "local", out, 8);
+}
+
+// Settings that measure MART's depth response: a setup job measures it once into the shared cache
+// folder before the shards, which read it back instead of each measuring its own; the outputs are a
+// local reprocess's with the same settings.
+TEST_F(Slurm, ADepthResponseIsMeasuredOnceBySetupJobBeforeTheShards) {
+  const fs::path& run = recorded_run();
+  // process.yaml's settings with fewer iterations and passes, the box on one side of the focal plane
+  // (where depth shifts can be measured).
+  const fs::path spec = run.parent_path() / "with-depth-response.yaml";
+  std::ofstream(spec) << R"(dt_s: 0.001
+volume: {x_mm: [-2, 2], y_mm: [-2, 2], z_mm: [0, 4], voxel_mm: 0.125, voxel_z_mm: 0.25, depth_guard_mm: 1}
+reconstruction: {iterations: 8, mu: 1, acceleration: nesterov, depth_response_ppm: 0.5}
+correlation:
+  passes: [{window: [32, 32, 16], overlap_percent: 50}, {window: [16, 16, 8], overlap_percent: 50, depth_margin: 2},
+           {window: [16, 16, 8], overlap_percent: 75}]
+  intensity_threshold_of_mean: 3
+  depth_prefilter: 1
+  final_smoothing: 1
+)";
+  const fs::path local = run.parent_path() / "local-depth-response";
+  const std::string measured_locally =
+      plenopiv_ok({"process", "--run", run.string(), "-c", spec.string(), "-o", local.string(), "--pairs", "0:4",
+                   "--cache-dir", (run.parent_path() / "local-cache").string()});
+  ASSERT_NE(measured_locally.find("depth response measured and kept in the cache"), std::string::npos)
+      << measured_locally;
+
+  const fs::path out = run.parent_path() / "depth-response";
+  const fs::path cache = run.parent_path() / "shared-cache";
+  const std::string submitted =
+      plenopiv_ok({"slurm", "submit", "--run", run.string(), "-o", out.string(), "-c", spec.string(), "--pairs", "0:4",
+                   "--shards", "2", "--cpus", "1", "--cache-dir", cache.string()});
+  EXPECT_NE(submitted.find("setup job "), std::string::npos) << submitted;
+  EXPECT_TRUE(fs::exists(out / "slurm" / "setup.sbatch"));
+  wait_for_jobs(job_list(submitted));
+  const std::string setup = file_text(out / "slurm" / "setup.out");
+  EXPECT_NE(setup.find("depth response measured and kept in the cache: " + cache.string()), std::string::npos) << setup;
+  EXPECT_NE(setup.find("prepared for 4 pair(s): the weight tables and the depth response"), std::string::npos) << setup;
+  for (int shard = 0; shard < 2; ++shard) {
+    const std::string log = file_text(out / "slurm" / ("shard-" + std::to_string(shard) + ".out"));
+    EXPECT_NE(log.find("depth response from the cache: " + cache.string()), std::string::npos)
+        << "shard " << shard << ":\n"
+        << log;
+    EXPECT_EQ(log.find("depth response measured"), std::string::npos) << "shard " << shard << ":\n" << log;
+    EXPECT_NE(log.find("2 pair(s) selected, 2 processed"), std::string::npos) << "shard " << shard << ":\n" << log;
+  }
+  const std::string status =
+      plenopiv_ok({"slurm", "status", "--run", run.string(), "-o", out.string(), "--pairs", "0:4"});
+  EXPECT_NE(status.find("setup      job "), std::string::npos) << status;
+  EXPECT_NE(status.find("merge      done"), std::string::npos) << status << file_text(out / "slurm" / "merge.out");
+  expect_same_outputs(local, out, 4);
 }
 
 // Refusals before anything is queued: more shards than pairs, a folder that is not a run.

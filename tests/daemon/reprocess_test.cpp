@@ -327,13 +327,47 @@ TEST(Reprocess, RangesAndOfflineSettingsAreTheUsersChoice) {
         std::pair{std::vector<std::string>{"--shard", "2/2"}, "--shard: '2/2': needs 0 <= i < n"},
         std::pair{std::vector<std::string>{"--tier", "live"}, "has no live: section"},
         std::pair{std::vector<std::string>{"--jobs", "0"}, "--jobs: 1 to 64"},
-        std::pair{std::vector<std::string>{"--dt", "0.001"}, "--dt: --run uses each pair's measured dt"}}) {
+        std::pair{std::vector<std::string>{"--dt", "0.001"}, "--dt: --run uses each pair's measured dt"},
+        std::pair{std::vector<std::string>{"--prepare", "--no-cache"}, "--prepare makes the weight tables"},
+        std::pair{std::vector<std::string>{"--prepare", "--shard", "0/2"}, "--prepare processes no pair"}}) {
     std::vector<std::string> argv{testing_support::binary("plenopiv"), "process", "--run", run.string(), "-o",
                                   (dir / "refused").string()};
     argv.insert(argv.end(), args.begin(), args.end());
     EXPECT_EQ(testing_support::run_command(argv, out), 2) << out;
     EXPECT_NE(out.find(culprit), std::string::npos) << culprit << ": " << out;
     EXPECT_FALSE(fs::exists(dir / "refused")) << culprit;
+  }
+}
+
+// `--prepare` makes the weight tables in the cache folder and processes nothing; the call after it
+// reads them. The options of a recorded run are refused without --run.
+TEST(Reprocess, PrepareKeepsTheWeightTablesForTheCallsAfterIt) {
+  const fs::path& run = recorded_run();
+  const fs::path dir = testing_support::temp_dir("reprocess") / "prepare";
+  fs::remove_all(dir);
+  const std::string prepared = plenopiv_ok({"process", "--run", run.string(), "-o", (dir / "out").string(), "--prepare",
+                                            "--cache-dir", (dir / "cache").string()});
+  EXPECT_NE(prepared.find("weight tables built and kept in the cache: " + (dir / "cache").string()), std::string::npos)
+      << prepared;
+  EXPECT_NE(prepared.find("prepared for 3 pair(s): the weight tables in " + (dir / "cache").string()),
+            std::string::npos)
+      << prepared;
+  EXPECT_TRUE(pair_outputs(dir / "out").empty());
+  EXPECT_FALSE(fs::exists(dir / "out" / "process.yaml"));
+  const std::string after = plenopiv_ok(
+      {"process", "--run", run.string(), "-o", (dir / "out").string(), "--cache-dir", (dir / "cache").string()});
+  EXPECT_NE(after.find("weight tables from the cache: " + (dir / "cache").string()), std::string::npos) << after;
+  EXPECT_EQ(pair_outputs(dir / "out").size(), 3u);
+
+  std::string out;
+  for (const char* option : {"--prepare", "--merge", "--resume"}) {
+    EXPECT_EQ(
+        testing_support::run_command({testing_support::binary("plenopiv"), "process", "--camera", "camera.yaml",
+                                      "a.tif", "b.tif", "-c", "process.yaml", "-o", (dir / "one.h5").string(), option},
+                                     out),
+        2)
+        << out;
+    EXPECT_NE(out.find(std::string(option) + " works on a recorded run: give it with --run"), std::string::npos) << out;
   }
 }
 
