@@ -18,6 +18,7 @@
 #include "core/io/hdf5_files.hpp"
 #include "tests/support/child_process.hpp"
 #include "tests/support/recorded_run.hpp"
+#include "tests/support/shallow_spec.hpp"
 #include "tests/support/temp_dir.hpp"
 
 namespace plenopiv {
@@ -181,19 +182,9 @@ TEST_F(Slurm, AFailedTaskIsResubmittedAloneAndTheMergeFollows) {
 // local reprocess's with the same settings.
 TEST_F(Slurm, ADepthResponseIsMeasuredOnceBySetupJobBeforeTheShards) {
   const fs::path& run = recorded_run();
-  // process.yaml's settings with fewer iterations and passes, the box on one side of the focal plane
-  // (where depth shifts can be measured).
   const fs::path spec = run.parent_path() / "with-depth-response.yaml";
-  std::ofstream(spec) << R"(dt_s: 0.001
-volume: {x_mm: [-2, 2], y_mm: [-2, 2], z_mm: [0, 4], voxel_mm: 0.125, voxel_z_mm: 0.25, depth_guard_mm: 1}
-reconstruction: {iterations: 8, mu: 1, acceleration: nesterov, depth_response_ppm: 0.5}
-correlation:
-  passes: [{window: [32, 32, 16], overlap_percent: 50}, {window: [16, 16, 8], overlap_percent: 50, depth_margin: 2},
-           {window: [16, 16, 8], overlap_percent: 75}]
-  intensity_threshold_of_mean: 3
-  depth_prefilter: 1
-  final_smoothing: 1
-)";
+  std::ofstream(spec) << "dt_s: 0.001" << testing_support::kShallowSmallBox
+                      << "reconstruction: {iterations: 8, mu: 1, acceleration: nesterov, depth_response_ppm: 0.5}\n";
   const fs::path local = run.parent_path() / "local-depth-response";
   const std::string measured_locally =
       plenopiv_ok({"process", "--run", run.string(), "-c", spec.string(), "-o", local.string(), "--pairs", "0:4",

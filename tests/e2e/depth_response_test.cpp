@@ -27,6 +27,7 @@
 #include "core/sim/render.hpp"
 #include "tests/support/cameras.hpp"
 #include "tests/support/input_error.hpp"
+#include "tests/support/shallow_spec.hpp"
 #include "tests/support/temp_dir.hpp"
 
 namespace plenopiv::process {
@@ -204,16 +205,8 @@ TEST_F(DepthResponseCacheTest, AFolderItCannotWriteIsSaidAndTheResponseStillMeas
 
 // process.yaml's settings on the small camera with fewer passes and iterations (a unit test's
 // time); the box on one side of the focal plane, as process.yaml's.
-const std::string kSpec = R"(
-dt_s: 0.0001
-volume: {x_mm: [-2, 2], y_mm: [-2, 2], z_mm: [0, 4], voxel_mm: 0.125, voxel_z_mm: 0.25, depth_guard_mm: 1}
-correlation:
-  passes: [{window: [32, 32, 16], overlap_percent: 50}, {window: [16, 16, 8], overlap_percent: 50, depth_margin: 2},
-           {window: [16, 16, 8], overlap_percent: 75}]
-  intensity_threshold_of_mean: 3
-  depth_prefilter: 1
-  final_smoothing: 1
-reconstruction: {iterations: 8, mu: 1, acceleration: nesterov)";
+const std::string kSpec = std::string("dt_s: 0.0001") + testing_support::kShallowSmallBox +
+                          "reconstruction: {iterations: 8, mu: 1, acceleration: nesterov";
 
 ProcessSettings parse(const std::string& reconstruction_keys) {
   return process_settings_from(YamlMap(load_yaml_text(kSpec + reconstruction_keys + "}\n", "run.yaml"), "run.yaml"));
