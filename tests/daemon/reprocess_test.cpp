@@ -359,7 +359,18 @@ TEST(Reprocess, PrepareKeepsTheWeightTablesForTheCallsAfterIt) {
   EXPECT_NE(after.find("weight tables from the cache: " + (dir / "cache").string()), std::string::npos) << after;
   EXPECT_EQ(pair_outputs(dir / "out").size(), 3u);
 
+  // A cache "folder" that is a file: the tables are built but not kept, and --prepare says so.
+  std::ofstream(dir / "a-file") << "not a folder";
   std::string out;
+  EXPECT_EQ(
+      testing_support::run_command({testing_support::binary("plenopiv"), "process", "--run", run.string(), "-o",
+                                    (dir / "out").string(), "--prepare", "--cache-dir", (dir / "a-file").string()},
+                                   out),
+      2)
+      << out;
+  EXPECT_NE(out.find("--prepare: the cache folder " + (dir / "a-file").string() + " did not keep what was made"),
+            std::string::npos)
+      << out;
   for (const char* option : {"--prepare", "--merge", "--resume"}) {
     EXPECT_EQ(
         testing_support::run_command({testing_support::binary("plenopiv"), "process", "--camera", "camera.yaml",
