@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstddef>
 
+#include <immintrin.h>
 #include <xmmintrin.h>
 
 namespace plenopiv::piv {
@@ -15,6 +16,31 @@ int signed_shift(int i, int n) { return i < (n + 1) / 2 ? i : i - n; }
 
 std::size_t index_of(const std::array<int, 3>& s, int x, int y, int z) {
   return (std::size_t(z) * s[1] + y) * s[0] + x;
+}
+
+// A 16-voxel row's pre-test in one AVX-512 vector (the windows' common width along x): each voxel
+// above `threshold` and beaten by none of its 6 face neighbours (the row's cyclic x neighbours by a
+// lane rotation; `earlier_y`, `later_y`, `earlier_z`, `later_z` the neighbouring rows), with the
+// comparisons of find_peaks' 4-voxel groups. Bit x set: voxel x goes on to the full test.
+__attribute__((target("avx512f"))) unsigned row16_candidates(const float* row, const float* earlier_y,
+                                                             const float* later_y, const float* earlier_z,
+                                                             const float* later_z, float threshold) {
+  const __m512 v = _mm512_loadu_ps(row);
+  // Lane x takes lane x - 1 (lane 0 lane 15), and lane x + 1 (lane 15 lane 0); the masked form, all
+  // lanes set, because GCC 12 warns of the plain one's undefined pass-through.
+  const __m512 left =
+      _mm512_mask_permutexvar_ps(v, 0xFFFF, _mm512_set_epi32(14, 13, 12, 11, 10, 9, 8, 7, 6, 5, 4, 3, 2, 1, 0, 15), v);
+  const __m512 right =
+      _mm512_mask_permutexvar_ps(v, 0xFFFF, _mm512_set_epi32(0, 15, 14, 13, 12, 11, 10, 9, 8, 7, 6, 5, 4, 3, 2, 1), v);
+  __mmask16 keep = _mm512_cmp_ps_mask(v, _mm512_set1_ps(threshold), _CMP_GT_OQ);
+  // Earlier neighbours beat at >=, later ones at > (a NaN neighbour beats nothing).
+  keep &= _mm512_cmp_ps_mask(left, v, _CMP_NGE_UQ);
+  keep &= _mm512_cmp_ps_mask(right, v, _CMP_NGT_UQ);
+  keep &= _mm512_cmp_ps_mask(_mm512_loadu_ps(earlier_y), v, _CMP_NGE_UQ);
+  keep &= _mm512_cmp_ps_mask(_mm512_loadu_ps(later_y), v, _CMP_NGT_UQ);
+  keep &= _mm512_cmp_ps_mask(_mm512_loadu_ps(earlier_z), v, _CMP_NGE_UQ);
+  keep &= _mm512_cmp_ps_mask(_mm512_loadu_ps(later_z), v, _CMP_NGT_UQ);
+  return keep;
 }
 
 }  // namespace
@@ -85,6 +111,7 @@ std::array<Peak, 3> find_peaks(std::span<const float> corr, const std::array<int
   // one maximum, its first voxel. A NaN neighbour beats nothing.
   auto beaten = [](float w, float v, bool earlier) { return earlier ? w >= v : w > v; };
   float threshold = 0;
+  static const bool with_avx512 = __builtin_cpu_supports("avx512f");
   // The rows of the current voxel's cyclic neighbourhood: rows[dz + 1][dy + 1].
   const float* rows[3][3];
   // One voxel of the current row: is it a local maximum above the threshold, and among the three
@@ -113,6 +140,13 @@ std::array<Peak, 3> find_peaks(std::span<const float> corr, const std::array<int
       for (int a = 0; a < 3; ++a)
         for (int b = 0; b < 3; ++b) rows[a][b] = corr.data() + index_of(shape, 0, ys[b], zs[a]);
       const float* row = rows[1][1];
+      if (nx == 16 && with_avx512) {
+        // The whole row in one vector; its candidates visited in scan order, as below.
+        for (unsigned left = row16_candidates(row, rows[1][0], rows[1][2], rows[0][1], rows[2][1], threshold); left;
+             left &= left - 1)
+          visit(__builtin_ctz(left), y, z);
+        continue;
+      }
       // The row's ends wrap along x; between them, four voxels per SSE comparison: above the
       // threshold and beaten by none of the 6 face neighbours (visit's first tests; most groups
       // hold no such voxel and are passed over with one well-predicted branch). The voxels left
