@@ -756,11 +756,7 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "bench_e2e: %s done (%.1f s)\n", st.name, seconds[k].back());
       }
     }
-    for (std::size_t k = 0; k < rows.size(); ++k) {
-      std::vector<double>& t = seconds[k];
-      std::sort(t.begin(), t.end());
-      rows[k].seconds = t.size() % 2 ? t[t.size() / 2] : 0.5 * (t[t.size() / 2 - 1] + t[t.size() / 2]);
-    }
+    for (std::size_t k = 0; k < rows.size(); ++k) rows[k].seconds = bench::median(seconds[k]);
     print_pareto(scale.c_str(), rows);
   }
   if (!sweep) return 0;

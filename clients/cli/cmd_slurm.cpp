@@ -255,36 +255,35 @@ void run_submit(const SlurmOptions& o) {
   std::vector<std::string> common{"--job-name=" + name, "--mem=" + mem};
   if (!o.partition.empty()) common.push_back("--partition=" + o.partition);
   if (!o.time.empty()) common.push_back("--time=" + o.time);
-  std::vector<std::string> directives = common;
-  directives.push_back("--cpus-per-task=" + std::to_string(o.cpus));
-  directives.push_back("--output=" + (dir / "shard-%a.out").string());
+  // A job's directives: the common ones, its CPUs and its log in slurm/.
+  const auto directives = [&](int cpus, const std::string& log) {
+    std::vector<std::string> d = common;
+    d.push_back("--cpus-per-task=" + std::to_string(cpus));
+    d.push_back("--output=" + (dir / log).string());
+    return d;
+  };
 
   const std::vector<std::string> args = process_arguments(o, r.run, r.output, config);
   std::vector<std::string> shard_args = args;
   shard_args.insert(shard_args.end(), {"--resume", "--threads", std::to_string(o.cpus), "--shard"});
   const std::string shard_script =
       sbatch_script("plenopiv: shard ${SLURM_ARRAY_TASK_ID} of " + std::to_string(o.shards) + " of " + r.run.string(),
-                    directives, program, shard_args, " \"${SLURM_ARRAY_TASK_ID}/" + std::to_string(o.shards) + "\"");
-  std::vector<std::string> merge_directives = common;
-  merge_directives.push_back("--cpus-per-task=1");
-  merge_directives.push_back("--output=" + (dir / "merge.out").string());
+                    directives(o.cpus, "shard-%a.out"), program, shard_args,
+                    " \"${SLURM_ARRAY_TASK_ID}/" + std::to_string(o.shards) + "\"");
   std::vector<std::string> merge_args = args;
   merge_args.push_back("--merge");
   const std::string merge_script =
-      sbatch_script("plenopiv: merge of " + r.run.string(), merge_directives, program, merge_args, "");
+      sbatch_script("plenopiv: merge of " + r.run.string(), directives(1, "merge.out"), program, merge_args, "");
   io::write_text_atomically(dir / "shards.sbatch", shard_script);
   io::write_text_atomically(dir / "merge.sbatch", merge_script);
   // The depth response is measured once, by a job the shards wait for, not by every shard at once.
   const bool setup = plan.depth_response && !tasks.empty();
   if (setup) {
-    std::vector<std::string> setup_directives = common;
-    setup_directives.push_back("--cpus-per-task=" + std::to_string(o.cpus));
-    setup_directives.push_back("--output=" + (dir / "setup.out").string());
     std::vector<std::string> setup_args = args;
     setup_args.insert(setup_args.end(), {"--prepare", "--threads", std::to_string(o.cpus)});
     io::write_text_atomically(dir / "setup.sbatch",
                               sbatch_script("plenopiv: weight tables and depth response for " + r.run.string(),
-                                            setup_directives, program, setup_args, ""));
+                                            directives(o.cpus, "setup.out"), program, setup_args, ""));
   }
 
   std::fprintf(stderr, "%zu pairs in %d shards; %zu shard(s) to run: %s; %.2f GB per pair in flight, --mem=%s\n", pairs,
