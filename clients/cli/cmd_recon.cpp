@@ -96,11 +96,11 @@ void run(const ReconOptions& o) {
       c.white_correction.empty() ? calib::geometric_white_image(camera, lenses) : std::move(c.white_correction);
   // Raw pixels, or the image resampled onto an axis-aligned lattice for a rotated/warped/hex array.
   const auto operators = weights_cache(o.cache_dir, o.no_cache);
-  std::string setup_note;
+  process::OperatorCache::Provenance provenance;
   const std::shared_ptr<const process::PairOperator> kept =
-      operators ? operators->get(camera, lenses, white, grid, 1.0, &setup_note)
+      operators ? operators->get(camera, lenses, white, grid, 1.0, &provenance)
                 : std::make_shared<const process::PairOperator>(camera, lenses, white, grid, 1.0);
-  if (operators) std::fprintf(stderr, "%s\n", setup_note.c_str());
+  if (operators) std::fprintf(stderr, "%s\n", provenance.note.c_str());
   const process::PairOperator& pair_op = *kept;
   const recon::WeightingOperator& op = pair_op.weights();
   recon::validate_image(image, op, o.image.c_str());

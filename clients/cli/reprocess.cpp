@@ -212,8 +212,8 @@ ReprocessReport reprocess_run(const ReprocessOptions& o) {
   report.depth_response = processor->depth_response() != nullptr;
   if (o.prepare_only) {
     // What --prepare made is for the calls after it: a folder that could not keep it fails the call
-    // (the cache's note, "... not kept ...", says why) rather than leave each later call to make its own.
-    if (processor->setup_note().find("not kept") != std::string::npos)
+    // (the setup note says why) rather than leave each later call to make its own.
+    if (!processor->setup_on_disk())
       throw InputError("--prepare: the cache folder " + o.weights_cache.string() +
                        " did not keep what was made: " + processor->setup_note());
     return report;

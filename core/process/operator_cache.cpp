@@ -326,22 +326,26 @@ OperatorCache::OperatorCache(std::size_t capacity, std::filesystem::path disk_fo
 
 std::shared_ptr<const PairOperator> OperatorCache::get(const optics::CameraModel& camera,
                                                        const optics::MicrolensArray& lenses, const ImageF& white,
-                                                       const ProcessSettings& settings, std::string* note) {
-  return get(camera, lenses, white, settings.reconstruction_grid(), settings.angular_sampling, note);
+                                                       const ProcessSettings& settings, Provenance* provenance) {
+  return get(camera, lenses, white, settings.reconstruction_grid(), settings.angular_sampling, provenance);
 }
 
 std::shared_ptr<const PairOperator> OperatorCache::get(const optics::CameraModel& camera,
                                                        const optics::MicrolensArray& lenses, const ImageF& white,
-                                                       const Grid3& grid, double angular_sampling, std::string* note) {
-  const std::string key = operator_key(camera, lenses, white, grid, angular_sampling);
+                                                       const Grid3& grid, double angular_sampling,
+                                                       Provenance* provenance) {
+  std::string key = operator_key(camera, lenses, white, grid, angular_sampling);
   std::lock_guard lock(mutex_);
+  const auto tell = [&](const Kept& kept) {
+    if (provenance) *provenance = Provenance{kept.key, note_, kept.on_disk};
+    return kept.op;
+  };
   for (auto it = kept_.begin(); it != kept_.end(); ++it) {
-    if (it->first != key) continue;
+    if (it->key != key) continue;
     kept_.splice(kept_.begin(), kept_, it);
     ++counts_.hits;
     note_ = "operator kept in memory";
-    if (note) *note = note_;
-    return kept_.front().second;
+    return tell(kept_.front());
   }
   // The disk cache is asked for the inputs keyed above, as they are, or for a resampled lattice's.
   PairOperator::WeightsSource source;
@@ -354,10 +358,10 @@ std::shared_ptr<const PairOperator> OperatorCache::get(const optics::CameraModel
   auto op = std::make_shared<const PairOperator>(camera, lenses, white, grid, angular_sampling, source);
   ++counts_.builds;
   note_ = disk_ ? disk_->last_note() : "operator built";
-  if (note) *note = note_;
-  kept_.emplace_front(key, op);
+  const bool on_disk = disk_ && disk_->last_outcome() != CacheOutcome::unwritable;
+  kept_.push_front(Kept{std::move(key), std::move(op), on_disk});
   if (kept_.size() > capacity_) kept_.pop_back();
-  return op;
+  return tell(kept_.front());
 }
 
 std::filesystem::path OperatorCache::disk_folder() const { return disk_ ? disk_->folder() : std::filesystem::path(); }

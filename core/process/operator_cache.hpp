@@ -112,14 +112,20 @@ class OperatorCache {
  public:
   explicit OperatorCache(std::size_t capacity = 2, std::filesystem::path disk_folder = {});
 
-  // The operator for these inputs. `note` (optional): where it came from, as last_note() says
-  // (for this call, whatever other threads do meanwhile).
+  // Where one get() took its operator from (for that call, whatever other threads do meanwhile).
+  struct Provenance {
+    std::string key;       // operator_key of the inputs
+    std::string note;      // for the user, as last_note() says
+    bool on_disk = false;  // its weight tables are in the disk folder (read from it, or written there)
+  };
+
+  // The operator for these inputs. `provenance` (optional): where it came from.
   std::shared_ptr<const PairOperator> get(const optics::CameraModel& camera, const optics::MicrolensArray& lenses,
                                           const ImageF& white, const ProcessSettings& settings,
-                                          std::string* note = nullptr);
+                                          Provenance* provenance = nullptr);
   std::shared_ptr<const PairOperator> get(const optics::CameraModel& camera, const optics::MicrolensArray& lenses,
                                           const ImageF& white, const Grid3& grid, double angular_sampling,
-                                          std::string* note = nullptr);
+                                          Provenance* provenance = nullptr);
 
   struct Counts {
     std::size_t hits = 0, builds = 0;
@@ -135,7 +141,12 @@ class OperatorCache {
   std::size_t capacity_;
   std::unique_ptr<WeightsDiskCache> disk_;
   mutable std::mutex mutex_;
-  std::list<std::pair<std::string, std::shared_ptr<const PairOperator>>> kept_;  // most recent first
+  struct Kept {
+    std::string key;
+    std::shared_ptr<const PairOperator> op;
+    bool on_disk = false;
+  };
+  std::list<Kept> kept_;  // most recent first
   Counts counts_;
   std::string note_;
 };

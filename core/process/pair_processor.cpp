@@ -117,8 +117,11 @@ PairProcessor::PairProcessor(const optics::CameraModel& camera, const calib::Loa
   const ImageF binned_white =
       binning == 1 ? ImageF{} : in_binning([&] { return bin_pixels(calibration.white_correction, binning); });
   const ImageF& white = binning == 1 ? calibration.white_correction : binned_white;
+  OperatorCache::Provenance provenance;
   if (operators) {
-    op_ = operators->get(framed, calibration.lenses, white, settings_, &setup_note_);
+    op_ = operators->get(framed, calibration.lenses, white, settings_, &provenance);
+    setup_note_ = provenance.note;
+    setup_on_disk_ = provenance.on_disk;
   } else {
     op_ = std::make_shared<const PairOperator>(framed, calibration.lenses, white, settings_);
     setup_note_ = "operator built";
@@ -128,17 +131,15 @@ PairProcessor::PairProcessor(const optics::CameraModel& camera, const calib::Loa
       return measure_depth_response(*this, camera, calibration.lenses, settings_.depth_response_ppm, setup_progress);
     };
     const std::filesystem::path folder = operators ? operators->disk_folder() : std::filesystem::path();
-    const std::string key =
-        folder.empty() ? std::string()
-                       : depth_response_key(operator_key(framed, calibration.lenses, white,
-                                                         settings_.reconstruction_grid(), settings_.angular_sampling),
-                                            camera, settings_);
+    const std::string key = folder.empty() ? std::string() : depth_response_key(provenance.key, camera, settings_);
     if (!key.empty()) {
       DepthResponseDiskCache cache(folder);
       depth_response_ = std::make_unique<const DepthResponse>(cache.response(key, measure));
       setup_note_ += "; " + cache.last_note();
+      setup_on_disk_ = setup_on_disk_ && cache.last_outcome() != CacheOutcome::unwritable;
     } else {
       depth_response_ = std::make_unique<const DepthResponse>(measure());
+      setup_on_disk_ = false;
       if (!folder.empty()) setup_note_ += "; depth response measured, not kept: this executable has no build ID";
     }
     setup_note_ += "; " + depth_response_->summary();

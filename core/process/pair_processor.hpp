@@ -117,6 +117,10 @@ class PairProcessor {
   // or the disk cache's line (WeightsDiskCache::last_note); then, with a depth response, where it
   // came from and its summary.
   const std::string& setup_note() const { return setup_note_; }
+  // Whether what the setup made or read (the weight tables; the depth response, where the settings
+  // ask for one) is in the disk folder of `operators`, for a later processor with the same inputs
+  // to read: false without such a folder, or where it could not keep something.
+  bool setup_on_disk() const { return setup_on_disk_; }
   // The depth response process() corrects w with; null when settings.depth_response_ppm is 0.
   const DepthResponse* depth_response() const { return depth_response_.get(); }
   // Makes the pool hold `pairs` workspaces sized for this operator's largest reconstruction and
@@ -137,6 +141,7 @@ class PairProcessor {
   int raw_width_ = 0, raw_height_ = 0;  // the camera's sensor, before pixel binning
   std::shared_ptr<const PairOperator> op_;
   std::string setup_note_;
+  bool setup_on_disk_ = false;
   std::unique_ptr<const DepthResponse> depth_response_;
   mutable WorkspacePool workspaces_;
 };

@@ -273,6 +273,7 @@ TEST(DepthResponse, TakesMartsShortfallOutOfAShearsDepthComponent) {
   EXPECT_NE(processor.setup_note().find("depth response over z"), std::string::npos);
   EXPECT_NE(processor.setup_note().find("depth response measured and kept in the cache"), std::string::npos)
       << processor.setup_note();
+  EXPECT_TRUE(processor.setup_on_disk());
 
   const double voxel = 0.125;
   const double rate = 2 * voxel / 2.0;  // +-2 voxels at the box's y faces
@@ -306,6 +307,7 @@ TEST(DepthResponse, TakesMartsShortfallOutOfAShearsDepthComponent) {
   const PairProcessor later(camera, calibration, settings, &later_operators, progress);
   EXPECT_EQ(fractions.size(), 16u) << "measured again";
   EXPECT_NE(later.setup_note().find("depth response from the cache"), std::string::npos) << later.setup_note();
+  EXPECT_TRUE(later.setup_on_disk());
   EXPECT_EQ(later.process(frame_a, frame_b).correlation.field.dz_mm, corrected.correlation.field.dz_mm);
   std::filesystem::remove_all(folder);
 }

@@ -190,6 +190,41 @@ TEST_F(OperatorCacheTest, AnUnwritableFolderIsSaidAndTheTablesAreBuilt) {
       << cache.last_note();
 }
 
+// What a get() says of its operator: the key of its inputs, and whether its tables are on disk (a
+// build written there, a file read, or a kept operator that was either), whatever the note's words.
+TEST_F(OperatorCacheTest, AGetSaysWhetherTheTablesAreOnDisk) {
+  const optics::CameraModel cam = camera();
+  const calib::LoadedCalibration nominal = calib::nominal_calibration(cam);
+  const std::string key = operator_key(cam, nominal.lenses, nominal.white_correction, grid(0), 1.0);
+  OperatorCache::Provenance p;
+  OperatorCache written(1, folder_);
+  written.get(cam, nominal.lenses, nominal.white_correction, grid(0), 1.0, &p);
+  EXPECT_EQ(p.key, key);
+  EXPECT_TRUE(p.on_disk) << p.note;
+  written.get(cam, nominal.lenses, nominal.white_correction, grid(0), 1.0, &p);
+  EXPECT_EQ(p.note, "operator kept in memory");
+  EXPECT_TRUE(p.on_disk);
+  OperatorCache read(1, folder_);
+  read.get(cam, nominal.lenses, nominal.white_correction, grid(0), 1.0, &p);
+  EXPECT_NE(p.note.find("from the cache"), std::string::npos) << p.note;
+  EXPECT_TRUE(p.on_disk);
+
+  std::filesystem::create_directories(folder_);
+  const std::filesystem::path blocked = folder_ / "a file, not a folder";
+  std::ofstream(blocked) << "x";
+  OperatorCache unwritable(1, blocked);
+  unwritable.get(cam, nominal.lenses, nominal.white_correction, grid(0), 1.0, &p);
+  EXPECT_FALSE(p.on_disk) << p.note;
+  unwritable.get(cam, nominal.lenses, nominal.white_correction, grid(0), 1.0, &p);
+  EXPECT_EQ(p.note, "operator kept in memory");
+  EXPECT_FALSE(p.on_disk);
+  OperatorCache memory_only(1);
+  memory_only.get(cam, nominal.lenses, nominal.white_correction, grid(0), 1.0, &p);
+  EXPECT_EQ(p.note, "operator built");
+  EXPECT_EQ(p.key, key);
+  EXPECT_FALSE(p.on_disk);
+}
+
 TEST_F(OperatorCacheTest, TheFolderKeepsTheMostRecentlyUsedFiles) {
   const optics::CameraModel cam = camera();
   const calib::LoadedCalibration nominal = calib::nominal_calibration(cam);
