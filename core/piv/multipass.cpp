@@ -4,12 +4,12 @@
 #include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
-#include <xmmintrin.h>
 
 #include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <optional>
 #include <span>
@@ -91,28 +91,60 @@ Layout layout_of(const PassSettings& p, const std::array<int, 3>& shape, int dep
   return l;
 }
 
-// Copies `n` floats (or zeros, where `src` is null) and keeps their running maximum in `max4`
-// (four lanes, SSE) and `max1` (the tail). The voxels are finite (checked), so the maximum does
-// not depend on the order it is taken in.
-void copy_row(const float* src, int n, float* dst, __m128& max4, float& max1) {
+typedef float Floats16 __attribute__((vector_size(64)));
+typedef float Floats4 __attribute__((vector_size(16)));
+
+// Copies `n` floats (or zeros, where `src` is null) and keeps their running maximum in `max16`,
+// `max4` (lanes) and `max1` (the tail). The voxels are finite (checked), so the maximum does not
+// depend on the order it is taken in.
+[[gnu::always_inline]] inline void copy_row(const float* __restrict src, int n, float* __restrict dst,
+                                            Floats16& max16, Floats4& max4, float& max1) {
   if (!src) {
     std::fill(dst, dst + n, 0.f);
     return;
   }
   int x = 0;
+  for (; x + 16 <= n; x += 16) {
+    Floats16 v;
+    std::memcpy(&v, src + x, sizeof v);
+    std::memcpy(dst + x, &v, sizeof v);
+    max16 = max16 > v ? max16 : v;
+  }
   for (; x + 4 <= n; x += 4) {
-    const __m128 q = _mm_loadu_ps(src + x);
-    _mm_storeu_ps(dst + x, q);
-    max4 = _mm_max_ps(max4, q);
+    Floats4 v;
+    std::memcpy(&v, src + x, sizeof v);
+    std::memcpy(dst + x, &v, sizeof v);
+    max4 = max4 > v ? max4 : v;
   }
   for (; x < n; ++x) max1 = std::max(max1, dst[x] = src[x]);
 }
 
-float max_of(__m128 max4, float max1) {
-  float lanes[4];
-  _mm_storeu_ps(lanes, max4);
-  for (float v : lanes) max1 = std::max(max1, v);
-  return max1;
+// The window at `origin` of A (its slices in the middle, zeros in the `margin` slices at each depth
+// end) and of B (all window[2] + 2 margin slices; zeros outside the volume) into `wa` and `wb`, row
+// by row; returns their brightest voxels. One clone per instruction set: a 16-voxel row is one
+// AVX-512 vector.
+__attribute__((target_clones("avx512f", "avx2", "default"))) std::array<float, 2> copy_windows(
+    const float* va, const float* vb, const std::array<int, 3>& shape, const std::array<int, 3>& origin,
+    const std::array<int, 3>& window, int margin, float* wa, float* wb) {
+  const Floats16 low16 = Floats16{} - INFINITY;
+  const Floats4 low4 = Floats4{} - INFINITY;
+  Floats16 max16_a = low16, max16_b = low16;
+  Floats4 max4_a = low4, max4_b = low4;
+  float max_a = -INFINITY, max_b = -INFINITY;
+  const std::size_t plane = std::size_t(shape[0]) * shape[1];
+  for (int z = -margin; z < window[2] + margin; ++z) {
+    const int vz = origin[2] + z;
+    const bool in_a = z >= 0 && z < window[2], in_volume = vz >= 0 && vz < shape[2];
+    for (int y = 0; y < window[1]; ++y) {
+      const std::size_t row = std::size_t(in_volume ? vz : 0) * plane + std::size_t(origin[1] + y) * shape[0] + origin[0];
+      const std::size_t o = (std::size_t(z + margin) * window[1] + y) * window[0];
+      copy_row(in_a ? va + row : nullptr, window[0], wa + o, max16_a, max4_a, max_a);
+      copy_row(in_volume ? vb + row : nullptr, window[0], wb + o, max16_b, max4_b, max_b);
+    }
+  }
+  for (int l = 0; l < 16; ++l) max_a = std::max(max_a, max16_a[l]), max_b = std::max(max_b, max16_b[l]);
+  for (int l = 0; l < 4; ++l) max_a = std::max(max_a, max4_a[l]), max_b = std::max(max_b, max4_b[l]);
+  return {max_a, max_b};
 }
 
 // With a depth margin (PassSettings::depth_margin): the cyclic correlation `corr` of window A (its
@@ -166,7 +198,6 @@ Candidates correlate_windows(std::span<const float> va, std::span<const float> v
         mean_weights[a].push_back(predictor->mean_weights(a, l.start[a] + i * l.step[a], l.window[a]));
   ratio.assign(c.size(), 0.f);
   bases.assign(c.size(), {0.f, 0.f, 0.f});
-  const std::size_t plane = std::size_t(shape[0]) * shape[1];
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, c.size()), [&](const auto& r) {
     auto& ws = correlator.workspace();
     std::vector<double> slice_sums(margin ? 2 * std::size_t(fft_shape[2]) : 0);  // b, then b^2
@@ -178,19 +209,8 @@ Candidates correlate_windows(std::span<const float> va, std::span<const float> v
       auto wa = ws.window_a();
       auto wb = ws.window_b();
       // Slices -margin .. window + margin of B; A's are its window's, zeros in the margins.
-      __m128 max4_a = _mm_set1_ps(-INFINITY), max4_b = max4_a;
-      float max_a = -INFINITY, max_b = -INFINITY;
-      for (int z = -margin; z < l.window[2] + margin; ++z) {
-        const bool in_a = z >= 0 && z < l.window[2], in_volume = z0 + z >= 0 && z0 + z < shape[2];
-        for (int y = 0; y < l.window[1]; ++y) {
-          const std::size_t row = std::size_t(in_volume ? z0 + z : 0) * plane + std::size_t(y0 + y) * shape[0] + x0;
-          const std::size_t o = (std::size_t(z + margin) * l.window[1] + y) * l.window[0];
-          copy_row(in_a ? &va[row] : nullptr, l.window[0], &wa[o], max4_a, max_a);
-          copy_row(in_volume ? &vb[row] : nullptr, l.window[0], &wb[o], max4_b, max_b);
-        }
-      }
-      max_a = max_of(max4_a, max_a);
-      max_b = max_of(max4_b, max_b);
+      const auto [max_a, max_b] = copy_windows(va.data(), vb.data(), shape, {x0, y0, z0}, l.window, margin,
+                                               wa.data(), wb.data());
       if (!(max_a > signal_threshold && max_b > signal_threshold)) {
         c.flags[node] = flag_no_signal;
         continue;
