@@ -97,8 +97,8 @@ typedef float Floats4 __attribute__((vector_size(16)));
 // Copies `n` floats (or zeros, where `src` is null) and keeps their running maximum in `max16`,
 // `max4` (lanes) and `max1` (the tail). The voxels are finite (checked), so the maximum does not
 // depend on the order it is taken in.
-[[gnu::always_inline]] inline void copy_row(const float* __restrict src, int n, float* __restrict dst,
-                                            Floats16& max16, Floats4& max4, float& max1) {
+[[gnu::always_inline]] inline void copy_row(const float* __restrict src, int n, float* __restrict dst, Floats16& max16,
+                                            Floats4& max4, float& max1) {
   if (!src) {
     std::fill(dst, dst + n, 0.f);
     return;
@@ -136,7 +136,8 @@ __attribute__((target_clones("avx512f", "avx2", "default"))) std::array<float, 2
     const int vz = origin[2] + z;
     const bool in_a = z >= 0 && z < window[2], in_volume = vz >= 0 && vz < shape[2];
     for (int y = 0; y < window[1]; ++y) {
-      const std::size_t row = std::size_t(in_volume ? vz : 0) * plane + std::size_t(origin[1] + y) * shape[0] + origin[0];
+      const std::size_t row =
+          std::size_t(in_volume ? vz : 0) * plane + std::size_t(origin[1] + y) * shape[0] + origin[0];
       const std::size_t o = (std::size_t(z + margin) * window[1] + y) * window[0];
       copy_row(in_a ? va + row : nullptr, window[0], wa + o, max16_a, max4_a, max_a);
       copy_row(in_volume ? vb + row : nullptr, window[0], wb + o, max16_b, max4_b, max_b);
@@ -209,8 +210,8 @@ Candidates correlate_windows(std::span<const float> va, std::span<const float> v
       auto wa = ws.window_a();
       auto wb = ws.window_b();
       // Slices -margin .. window + margin of B; A's are its window's, zeros in the margins.
-      const auto [max_a, max_b] = copy_windows(va.data(), vb.data(), shape, {x0, y0, z0}, l.window, margin,
-                                               wa.data(), wb.data());
+      const auto [max_a, max_b] =
+          copy_windows(va.data(), vb.data(), shape, {x0, y0, z0}, l.window, margin, wa.data(), wb.data());
       if (!(max_a > signal_threshold && max_b > signal_threshold)) {
         c.flags[node] = flag_no_signal;
         continue;
