@@ -23,10 +23,10 @@ function(plenopiv_instrument target)
   endif()
 endfunction()
 
-# Sources with runtime ISA dispatch (target_clones / target: ifunc resolvers) are built without
-# ThreadSanitizer: the dynamic loader runs their resolvers before TSan's runtime starts, and an
-# instrumented resolver crashes the program at load. They are compute kernels on disjoint data.
-# Call in the folder that builds them (source properties are per folder).
+# The compute kernels built per instruction set (core/base/isa.hpp) are built without
+# ThreadSanitizer: their loops work on disjoint data their callers give out (the callers' TBB loops
+# stay instrumented), and instrumenting every load and store of them would multiply a TSan run's
+# time. Call in the folder that builds them (source properties are per folder).
 function(plenopiv_dispatched_sources)
   if(PLENOPIV_SANITIZE MATCHES "thread")
     set_property(SOURCE ${ARGN} APPEND PROPERTY COMPILE_OPTIONS -fno-sanitize=thread)

@@ -11,6 +11,7 @@
 #include <iostream>
 
 #include "core/base/errors.hpp"
+#include "core/base/isa.hpp"
 #include "daemon/daemon_config.hpp"
 #include "daemon/logging/logging.hpp"
 
@@ -61,6 +62,8 @@ int daemon_main(int argc, char** argv, const DaemonExtensions& extensions) {
     if (!log_level.empty()) config.log_level = log_level;
     validate(config, config_path.empty() ? "command line" : config_path.string());
     setup_logging("plenopivd", config.log_level);
+    spdlog::info("kernels: the {} build (this CPU's best: {}; PLENOPIV_ISA picks a lower one)", isa_name(isa()),
+                 isa_name(best_isa()));
 
     std::signal(SIGTERM, on_signal);
     std::signal(SIGINT, on_signal);

@@ -6,6 +6,7 @@
 #include "clients/cli/commands.hpp"
 #include "clients/cli/control_client.hpp"
 #include "core/base/errors.hpp"
+#include "core/base/isa.hpp"
 #include "daemon/logging/logging.hpp"
 
 namespace {
@@ -73,6 +74,7 @@ int main(int argc, char** argv) {
 
   try {
     setup_logging("plenopiv", "info", LogTarget::console);
+    isa();  // a bad PLENOPIV_ISA fails here, before any work
     app.parse(argc, argv);
     return 0;
   } catch (const CLI::ParseError& e) {

@@ -9,6 +9,8 @@
 #include <cstring>
 #include <numbers>
 
+#include "core/base/isa.hpp"
+
 namespace plenopiv::piv {
 namespace {
 
@@ -333,17 +335,42 @@ template <class Kernel>
   }
 }
 
-// deform_row_with for each kernel; the AVX-512 or AVX2 clone is chosen at run time where the CPU
-// has it.
-__attribute__((target_clones("avx512f", "avx2", "default"))) void deform_row(
-    const float* a, const float* b, const std::array<int, 3>& shape, const NodeField& predictor, const SincTable& table,
-    const Located* lx, const Located& ly, const Located& lz, int y, int z, float* a_out, float* b_out) {
-  deform_row_with(Sinc7{table}, a, b, shape, predictor, lx, ly, lz, y, z, a_out, b_out);
+// deform_row_with for each kernel, built once per instruction set; deform_row picks the build
+// isa() names (core/base/isa.hpp).
+struct RowJob {
+  const float *a, *b;
+  const std::array<int, 3>& shape;
+  const NodeField& predictor;
+  const Located *lx, &ly, &lz;
+  int y, z;
+  float *a_out, *b_out;
+};
+template <class Kernel>
+[[gnu::always_inline]] inline void deform_row_job(const Kernel& kernel, const RowJob& j) {
+  deform_row_with(kernel, j.a, j.b, j.shape, j.predictor, j.lx, j.ly, j.lz, j.y, j.z, j.a_out, j.b_out);
 }
-__attribute__((target_clones("avx512f", "avx2", "default"))) void deform_row_cubic(
-    const float* a, const float* b, const std::array<int, 3>& shape, const NodeField& predictor, const Located* lx,
-    const Located& ly, const Located& lz, int y, int z, float* a_out, float* b_out) {
-  deform_row_with(Cubic4{}, a, b, shape, predictor, lx, ly, lz, y, z, a_out, b_out);
+__attribute__((target("avx512f"))) void sinc_row_avx512(const SincTable& table, const RowJob& j) {
+  deform_row_job(Sinc7{table}, j);
+}
+__attribute__((target("avx2"))) void sinc_row_avx2(const SincTable& table, const RowJob& j) {
+  deform_row_job(Sinc7{table}, j);
+}
+void sinc_row_baseline(const SincTable& table, const RowJob& j) { deform_row_job(Sinc7{table}, j); }
+__attribute__((target("avx512f"))) void cubic_row_avx512(const RowJob& j) { deform_row_job(Cubic4{}, j); }
+__attribute__((target("avx2"))) void cubic_row_avx2(const RowJob& j) { deform_row_job(Cubic4{}, j); }
+void cubic_row_baseline(const RowJob& j) { deform_row_job(Cubic4{}, j); }
+
+// One row of both deformed volumes: the 7x7x7 sinc with `table`, or without it Keys' cubic.
+void deform_row(const SincTable* table, const RowJob& j) {
+  const Isa build = isa();
+  if (table) {
+    if (build == Isa::avx512) return sinc_row_avx512(*table, j);
+    if (build == Isa::avx2) return sinc_row_avx2(*table, j);
+    return sinc_row_baseline(*table, j);
+  }
+  if (build == Isa::avx512) return cubic_row_avx512(j);
+  if (build == Isa::avx2) return cubic_row_avx2(j);
+  cubic_row_baseline(j);
 }
 
 }  // namespace
@@ -469,12 +496,9 @@ void deform_pair(std::span<const float> a, std::span<const float> b, const std::
     for (int z = r.begin(); z < r.end(); ++z)
       for (int y = 0; y < shape[1]; ++y) {
         const std::size_t row = z * plane + std::size_t(y) * shape[0];
-        if (interpolation == Interpolation::cubic)
-          deform_row_cubic(a.data(), b.data(), shape, predictor, where[0].data(), where[1][y], where[2][z], y, z,
-                           a_out.data() + row, b_out.data() + row);
-        else
-          deform_row(a.data(), b.data(), shape, predictor, table, where[0].data(), where[1][y], where[2][z], y, z,
-                     a_out.data() + row, b_out.data() + row);
+        deform_row(interpolation == Interpolation::cubic ? nullptr : &table,
+                   {a.data(), b.data(), shape, predictor, where[0].data(), where[1][y], where[2][z], y, z,
+                    a_out.data() + row, b_out.data() + row});
       }
   });
 }

@@ -13,6 +13,8 @@
 #include <numbers>
 #include <utility>
 
+#include "core/base/isa.hpp"
+
 namespace plenopiv::piv {
 namespace {
 
@@ -98,12 +100,11 @@ SpectralWeights::SpectralWeights(std::array<int, 3> shape, double whitening,
 namespace {
 
 // C G / |C|^p over `count` interleaved complex values but the first (k = 0, zero after the mean
-// subtraction), in one clone per instruction set. |C|^p from |C|^2: square roots (exact, so every
-// clone gives the same bits) for the usual p = 1/2 and 1. Without a branch: |C|^2 below the smallest
+// subtraction), built once per instruction set below. |C|^p from |C|^2: square roots (exact, so every
+// build gives the same bits) for the usual p = 1/2 and 1. Without a branch: |C|^2 below the smallest
 // normal float is taken as that float, and C (0 there, or nearly) times the finite scale stays 0.
-__attribute__((target_clones("avx512f", "avx2", "default"))) void weigh_cross_spectrum(float* __restrict c,
-                                                                                       const float* __restrict gauss,
-                                                                                       std::size_t count, float p) {
+[[gnu::always_inline]] inline void weigh_cross_spectrum_body(float* __restrict c, const float* __restrict gauss,
+                                                             std::size_t count, float p) {
   const auto weigh = [&](auto root) {
     for (std::size_t k = 1; k < count; ++k) {
       const float re = c[2 * k], im = c[2 * k + 1];
@@ -118,6 +119,28 @@ __attribute__((target_clones("avx512f", "avx2", "default"))) void weigh_cross_sp
     weigh([](float m) { return std::sqrt(m); });
   else
     weigh([p](float m) { return std::pow(m, 0.5f * p); });
+}
+
+__attribute__((target("avx512f"))) void weigh_cross_spectrum_avx512(float* c, const float* gauss, std::size_t count,
+                                                                    float p) {
+  weigh_cross_spectrum_body(c, gauss, count, p);
+}
+__attribute__((target("avx2"))) void weigh_cross_spectrum_avx2(float* c, const float* gauss, std::size_t count,
+                                                               float p) {
+  weigh_cross_spectrum_body(c, gauss, count, p);
+}
+void weigh_cross_spectrum_baseline(float* c, const float* gauss, std::size_t count, float p) {
+  weigh_cross_spectrum_body(c, gauss, count, p);
+}
+void weigh_cross_spectrum(float* c, const float* gauss, std::size_t count, float p) {
+  switch (isa()) {
+    case Isa::avx512:
+      return weigh_cross_spectrum_avx512(c, gauss, count, p);
+    case Isa::avx2:
+      return weigh_cross_spectrum_avx2(c, gauss, count, p);
+    case Isa::baseline:
+      return weigh_cross_spectrum_baseline(c, gauss, count, p);
+  }
 }
 
 }  // namespace

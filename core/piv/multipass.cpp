@@ -18,6 +18,7 @@
 
 #include "core/base/big_buffer.hpp"
 #include "core/base/errors.hpp"
+#include "core/base/isa.hpp"
 #include "core/piv/deform.hpp"
 #include "core/piv/fft_correlator.hpp"
 #include "core/piv/peak_fit.hpp"
@@ -121,11 +122,13 @@ typedef float Floats4 __attribute__((vector_size(16)));
 
 // The window at `origin` of A (its slices in the middle, zeros in the `margin` slices at each depth
 // end) and of B (all window[2] + 2 margin slices; zeros outside the volume) into `wa` and `wb`, row
-// by row; returns their brightest voxels. One clone per instruction set: a 16-voxel row is one
-// AVX-512 vector.
-__attribute__((target_clones("avx512f", "avx2", "default"))) std::array<float, 2> copy_windows(
-    const float* va, const float* vb, const std::array<int, 3>& shape, const std::array<int, 3>& origin,
-    const std::array<int, 3>& window, int margin, float* wa, float* wb) {
+// by row; returns their brightest voxels. Built once per instruction set below: a 16-voxel row is
+// one AVX-512 vector.
+[[gnu::always_inline]] inline std::array<float, 2> copy_windows_body(const float* va, const float* vb,
+                                                                     const std::array<int, 3>& shape,
+                                                                     const std::array<int, 3>& origin,
+                                                                     const std::array<int, 3>& window, int margin,
+                                                                     float* wa, float* wb) {
   const Floats16 low16 = Floats16{} - INFINITY;
   const Floats4 low4 = Floats4{} - INFINITY;
   Floats16 max16_a = low16, max16_b = low16;
@@ -146,6 +149,39 @@ __attribute__((target_clones("avx512f", "avx2", "default"))) std::array<float, 2
   for (int l = 0; l < 16; ++l) max_a = std::max(max_a, max16_a[l]), max_b = std::max(max_b, max16_b[l]);
   for (int l = 0; l < 4; ++l) max_a = std::max(max_a, max4_a[l]), max_b = std::max(max_b, max4_b[l]);
   return {max_a, max_b};
+}
+
+__attribute__((target("avx512f"))) std::array<float, 2> copy_windows_avx512(const float* va, const float* vb,
+                                                                            const std::array<int, 3>& shape,
+                                                                            const std::array<int, 3>& origin,
+                                                                            const std::array<int, 3>& window,
+                                                                            int margin, float* wa, float* wb) {
+  return copy_windows_body(va, vb, shape, origin, window, margin, wa, wb);
+}
+__attribute__((target("avx2"))) std::array<float, 2> copy_windows_avx2(const float* va, const float* vb,
+                                                                       const std::array<int, 3>& shape,
+                                                                       const std::array<int, 3>& origin,
+                                                                       const std::array<int, 3>& window, int margin,
+                                                                       float* wa, float* wb) {
+  return copy_windows_body(va, vb, shape, origin, window, margin, wa, wb);
+}
+std::array<float, 2> copy_windows_baseline(const float* va, const float* vb, const std::array<int, 3>& shape,
+                                           const std::array<int, 3>& origin, const std::array<int, 3>& window,
+                                           int margin, float* wa, float* wb) {
+  return copy_windows_body(va, vb, shape, origin, window, margin, wa, wb);
+}
+std::array<float, 2> copy_windows(const float* va, const float* vb, const std::array<int, 3>& shape,
+                                  const std::array<int, 3>& origin, const std::array<int, 3>& window, int margin,
+                                  float* wa, float* wb) {
+  switch (isa()) {
+    case Isa::avx512:
+      return copy_windows_avx512(va, vb, shape, origin, window, margin, wa, wb);
+    case Isa::avx2:
+      return copy_windows_avx2(va, vb, shape, origin, window, margin, wa, wb);
+    case Isa::baseline:
+      break;
+  }
+  return copy_windows_baseline(va, vb, shape, origin, window, margin, wa, wb);
 }
 
 // With a depth margin (PassSettings::depth_margin): the cyclic correlation `corr` of window A (its

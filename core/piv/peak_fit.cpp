@@ -8,6 +8,8 @@
 #include <immintrin.h>
 #include <xmmintrin.h>
 
+#include "core/base/isa.hpp"
+
 namespace plenopiv::piv {
 namespace {
 
@@ -111,7 +113,7 @@ std::array<Peak, 3> find_peaks(std::span<const float> corr, const std::array<int
   // one maximum, its first voxel. A NaN neighbour beats nothing.
   auto beaten = [](float w, float v, bool earlier) { return earlier ? w >= v : w > v; };
   float threshold = 0;
-  static const bool with_avx512 = __builtin_cpu_supports("avx512f");
+  const bool with_avx512 = isa() == Isa::avx512;
   // The rows of the current voxel's cyclic neighbourhood: rows[dz + 1][dy + 1].
   const float* rows[3][3];
   // One voxel of the current row: is it a local maximum above the threshold, and among the three

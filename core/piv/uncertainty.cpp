@@ -2,6 +2,8 @@
 // propagation through the final field's smoothing (Sciacchitano & Wieneke 2016).
 #include "core/piv/uncertainty.hpp"
 
+#include "core/base/isa.hpp"
+
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
@@ -154,12 +156,13 @@ float fit_sigma(double c0, double c_pm, double spread) {
   return den > 0 ? float(spread / den) : kNoEstimate;
 }
 
-// correlation_statistics_sigma's work, in one clone per instruction set (internal: clang gives a
-// function with external linkage no dispatch, only its first clone).
-__attribute__((target_clones("avx512f", "avx2", "default"))) std::array<float, 3> sigma_of_window(
-    std::span<const float> a, std::span<const float> b, const std::array<int, 3>& shape,
-    const std::array<int, 3>& origin, const std::array<int, 3>& window, int depth_margin,
-    const std::array<int, 3>& shift, UncertaintyScratch& s) {
+// correlation_statistics_sigma's work, built once per instruction set below.
+[[gnu::always_inline]] inline std::array<float, 3> sigma_of_window(std::span<const float> a, std::span<const float> b,
+                                                                   const std::array<int, 3>& shape,
+                                                                   const std::array<int, 3>& origin,
+                                                                   const std::array<int, 3>& window, int depth_margin,
+                                                                   const std::array<int, 3>& shift,
+                                                                   UncertaintyScratch& s) {
   // The correlation's domain: the window, `depth_margin` slices more at each depth end.
   const std::array<int, 3> n{window[0], window[1], window[2] + 2 * depth_margin};
   const std::size_t count = std::size_t(n[0]) * n[1] * n[2];
@@ -262,13 +265,43 @@ __attribute__((target_clones("avx512f", "avx2", "default"))) std::array<float, 3
   return sigma;
 }
 
+__attribute__((target("avx512f"))) std::array<float, 3> sigma_avx512(std::span<const float> a, std::span<const float> b,
+                                                                     const std::array<int, 3>& shape,
+                                                                     const std::array<int, 3>& origin,
+                                                                     const std::array<int, 3>& window, int depth_margin,
+                                                                     const std::array<int, 3>& shift,
+                                                                     UncertaintyScratch& s) {
+  return sigma_of_window(a, b, shape, origin, window, depth_margin, shift, s);
+}
+__attribute__((target("avx2"))) std::array<float, 3> sigma_avx2(std::span<const float> a, std::span<const float> b,
+                                                                const std::array<int, 3>& shape,
+                                                                const std::array<int, 3>& origin,
+                                                                const std::array<int, 3>& window, int depth_margin,
+                                                                const std::array<int, 3>& shift,
+                                                                UncertaintyScratch& s) {
+  return sigma_of_window(a, b, shape, origin, window, depth_margin, shift, s);
+}
+std::array<float, 3> sigma_baseline(std::span<const float> a, std::span<const float> b, const std::array<int, 3>& shape,
+                                    const std::array<int, 3>& origin, const std::array<int, 3>& window,
+                                    int depth_margin, const std::array<int, 3>& shift, UncertaintyScratch& s) {
+  return sigma_of_window(a, b, shape, origin, window, depth_margin, shift, s);
+}
+
 }  // namespace
 
 std::array<float, 3> correlation_statistics_sigma(std::span<const float> a, std::span<const float> b,
                                                   const std::array<int, 3>& shape, const std::array<int, 3>& origin,
                                                   const std::array<int, 3>& window, int depth_margin,
                                                   const std::array<int, 3>& shift, UncertaintyScratch& scratch) {
-  return sigma_of_window(a, b, shape, origin, window, depth_margin, shift, scratch);
+  switch (isa()) {
+    case Isa::avx512:
+      return sigma_avx512(a, b, shape, origin, window, depth_margin, shift, scratch);
+    case Isa::avx2:
+      return sigma_avx2(a, b, shape, origin, window, depth_margin, shift, scratch);
+    case Isa::baseline:
+      break;
+  }
+  return sigma_baseline(a, b, shape, origin, window, depth_margin, shift, scratch);
 }
 
 void smooth_sigma(std::vector<float>& sigma, std::span<const std::uint8_t> valid, std::array<int, 3> count, int passes,

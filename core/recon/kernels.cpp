@@ -1,9 +1,11 @@
 // The reconstruction's vector micro-kernels: the x stages of the passes over row lanes and the
 // row-major quad dot products of the eq 13 normalisers, each built for several instruction sets
-// by GCC's function multiversioning (an ifunc resolved once at load time).
+// (GCC's target attribute), the build chosen per call by isa() (core/base/isa.hpp).
 #include "core/recon/kernels.hpp"
 
 #include <algorithm>
+
+#include "core/base/isa.hpp"
 
 namespace plenopiv::recon::kernels {
 namespace {
@@ -105,9 +107,8 @@ using Rows = float __attribute__((vector_size(kSubRows * sizeof(float))));
 // which leaves the sum's bits as skipping the lane would, without a compare and a branch per weight.
 
 // Projection stage 2 (add_columns in kernels.hpp), in every build.
-__attribute__((target_clones("avx512f", "avx2", "default"))) void add_columns_isa(float* band, std::size_t width,
-                                                                                  int words, const ColumnJob* jobs,
-                                                                                  int count) {
+[[gnu::always_inline]] inline void add_columns_body(float* band, std::size_t width, int words, const ColumnJob* jobs,
+                                                    int count) {
   for (int word = 0; word < words; ++word) {
     for (int sub = 0; sub < 64; sub += kSubRows) {
       float* block = band + std::size_t(64 * word + sub) * width;
@@ -200,32 +201,42 @@ __attribute__((always_inline)) inline void dot_columns_rows(const float* band, s
   }
 }
 
-__attribute__((target("default"))) void dot_columns_isa(const float* band, std::size_t width, int words,
-                                                        const ColumnJob* jobs, int count) {
+__attribute__((target("avx512f"))) void add_columns_avx512(float* band, std::size_t width, int words,
+                                                           const ColumnJob* jobs, int count) {
+  add_columns_body(band, width, words, jobs, count);
+}
+__attribute__((target("avx2"))) void add_columns_avx2(float* band, std::size_t width, int words, const ColumnJob* jobs,
+                                                      int count) {
+  add_columns_body(band, width, words, jobs, count);
+}
+void add_columns_baseline(float* band, std::size_t width, int words, const ColumnJob* jobs, int count) {
+  add_columns_body(band, width, words, jobs, count);
+}
+
+void dot_columns_baseline(const float* band, std::size_t width, int words, const ColumnJob* jobs, int count) {
   dot_columns_rows<4>(band, width, words, jobs, count);
 }
-__attribute__((target("avx2"))) void dot_columns_isa(const float* band, std::size_t width, int words,
-                                                     const ColumnJob* jobs, int count) {
+__attribute__((target("avx2"))) void dot_columns_avx2(const float* band, std::size_t width, int words,
+                                                      const ColumnJob* jobs, int count) {
   dot_columns_rows<8>(band, width, words, jobs, count);
 }
-__attribute__((target("avx512f"))) void dot_columns_isa(const float* band, std::size_t width, int words,
-                                                        const ColumnJob* jobs, int count) {
+__attribute__((target("avx512f"))) void dot_columns_avx512(const float* band, std::size_t width, int words,
+                                                           const ColumnJob* jobs, int count) {
   dot_columns_rows<16>(band, width, words, jobs, count);
 }
 
 // The eq 13 normalisers' first stage (dot_slice_rows in kernels.hpp) in two hand-written builds.
-__attribute__((target("default"))) void dot_slice_rows_isa(const float* row_a, const float* row_b,
-                                                           const std::size_t* start, const int* first, const float* w,
-                                                           int nx, double* out_a, double* out_b) {
+void dot_slice_rows_baseline(const float* row_a, const float* row_b, const std::size_t* start, const int* first,
+                             const float* w, int nx, double* out_a, double* out_b) {
   for (int x = 0; x < nx; ++x) {
     const std::size_t q0 = start[x], n = start[x + 1] - q0;
     out_a[x] = dot_quads_base(row_a, first + q0, w + kQuad * q0, n);
     if (row_b) out_b[x] = dot_quads_base(row_b, first + q0, w + kQuad * q0, n);
   }
 }
-__attribute__((target("avx2"))) void dot_slice_rows_isa(const float* row_a, const float* row_b,
-                                                        const std::size_t* start, const int* first, const float* w,
-                                                        int nx, double* out_a, double* out_b) {
+__attribute__((target("avx2"))) void dot_slice_rows_avx2(const float* row_a, const float* row_b,
+                                                         const std::size_t* start, const int* first, const float* w,
+                                                         int nx, double* out_a, double* out_b) {
   for (int x = 0; x < nx; ++x) {
     const std::size_t q0 = start[x], n = start[x + 1] - q0;
     if (row_b) {
@@ -274,16 +285,32 @@ void lanes_to_rows(const float* lanes, std::size_t width, int count, float* rows
 }
 
 void add_columns(float* band, std::size_t width, int words, const ColumnJob* jobs, int count) {
-  add_columns_isa(band, width, words, jobs, count);
+  switch (isa()) {
+    case Isa::avx512:
+      return add_columns_avx512(band, width, words, jobs, count);
+    case Isa::avx2:
+      return add_columns_avx2(band, width, words, jobs, count);
+    case Isa::baseline:
+      return add_columns_baseline(band, width, words, jobs, count);
+  }
 }
 
 void dot_columns(const float* band, std::size_t width, int words, const ColumnJob* jobs, int count) {
-  dot_columns_isa(band, width, words, jobs, count);
+  switch (isa()) {
+    case Isa::avx512:
+      return dot_columns_avx512(band, width, words, jobs, count);
+    case Isa::avx2:
+      return dot_columns_avx2(band, width, words, jobs, count);
+    case Isa::baseline:
+      return dot_columns_baseline(band, width, words, jobs, count);
+  }
 }
 
+// The AVX2 build on AVX-512 CPUs too (there is no AVX-512 one).
 void dot_slice_rows(const float* row_a, const float* row_b, const std::size_t* start, const int* first, const float* w,
                     int nx, double* out_a, double* out_b) {
-  dot_slice_rows_isa(row_a, row_b, start, first, w, nx, out_a, out_b);
+  if (isa() == Isa::baseline) return dot_slice_rows_baseline(row_a, row_b, start, first, w, nx, out_a, out_b);
+  dot_slice_rows_avx2(row_a, row_b, start, first, w, nx, out_a, out_b);
 }
 
 // 4 pixels per vector (-O2 leaves the plain loop scalar).

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 
+#include "core/base/isa.hpp"
 #include "core/recon/kernels.hpp"
 #include "core/recon/sleef_wide.hpp"
 
@@ -14,13 +15,18 @@ namespace {
 // Values per chunk: a chunk's arguments and results stay in L1.
 constexpr std::size_t kChunkValues = 256;
 
-// The widest vectors of SLEEF's functions this CPU runs, chosen once.
+// The widest vectors of SLEEF's functions the kernels' build (isa()) runs: an AVX2 CPU has AVX.
 enum class Width { sse2 = 4, avx = 8, avx512 = 16 };
 Width widest() {
-  static const Width w = __builtin_cpu_supports("avx512f") ? Width::avx512
-                         : __builtin_cpu_supports("avx")   ? Width::avx
-                                                           : Width::sse2;
-  return w;
+  switch (isa()) {
+    case Isa::avx512:
+      return Width::avx512;
+    case Isa::avx2:
+      return Width::avx;
+    case Isa::baseline:
+      break;
+  }
+  return Width::sse2;
 }
 
 // ln and exp of n values (n <= kChunkValues), as many at a time as the CPU's widest vectors hold:

@@ -5,11 +5,14 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <optional>
 
 #include "core/base/image.hpp"
+#include "core/base/isa.hpp"
 #include "core/io/checksum.hpp"
 #include "core/io/hdf5_files.hpp"
 #include "core/io/tiff.hpp"
@@ -133,6 +136,53 @@ TEST(ProcessCli, ASecondCallReadsTheWeightTablesTheFirstKept) {
   args.erase(args.end() - 2);
   ASSERT_EQ(run_command(args, out, std::chrono::seconds(300)), 0) << out;
   EXPECT_EQ(out.find("cache"), std::string::npos) << out;
+}
+
+// The kernels' AVX-512, AVX2 and baseline builds (PLENOPIV_ISA, core/base/isa.hpp) do the same
+// float operations in the same order: every build this CPU runs gives the same vectors and
+// uncertainties, bit for bit. A value that names no build, or one the CPU lacks, is refused by name.
+TEST(ProcessCli, EveryInstructionSetBuildGivesTheSameField) {
+  const fs::path& dir = pair_dir();
+  std::vector<std::string> args = process_args(dir, kConfig, {});
+  args.insert(args.begin(), {"/usr/bin/env", ""});
+  const auto run_with = [&](const std::string& build, const fs::path& output, std::string& out) {
+    args[1] = "PLENOPIV_ISA=" + build;
+    args[args.size() - 3] = output.string();
+    return run_command(args, out, std::chrono::seconds(300));
+  };
+  std::string out;
+  const std::vector<Isa> builds{Isa::avx512, Isa::avx2, Isa::baseline};
+  std::optional<VectorField> first;
+  for (const Isa build : builds) {
+    if (build > best_isa()) {
+      ASSERT_EQ(run_with(isa_name(build), dir / "isa-none.h5", out), 2) << out;
+      EXPECT_NE(out.find(std::string("PLENOPIV_ISA=") + isa_name(build) + ": this CPU cannot run"), std::string::npos)
+          << out;
+      std::printf("this CPU has no %s build to compare\n", isa_name(build));
+      continue;
+    }
+    const fs::path output = dir / (std::string("isa-") + isa_name(build) + ".h5");
+    ASSERT_EQ(run_with(isa_name(build), output, out), 0) << isa_name(build) << ": " << out;
+    const VectorField f = io::read_vector_field_h5(output);
+    EXPECT_GT(std::count(f.valid.begin(), f.valid.end(), 1), 0);
+    if (!first) {
+      first = f;
+      continue;
+    }
+    EXPECT_EQ(f.dx_mm, first->dx_mm) << isa_name(build);
+    EXPECT_EQ(f.dy_mm, first->dy_mm) << isa_name(build);
+    EXPECT_EQ(f.dz_mm, first->dz_mm) << isa_name(build);
+    EXPECT_EQ(f.valid, first->valid) << isa_name(build);
+    const auto same_bits = [](const std::vector<float>& x, const std::vector<float>& y) {
+      return x.size() == y.size() && std::memcmp(x.data(), y.data(), x.size() * sizeof(float)) == 0;
+    };
+    EXPECT_TRUE(same_bits(f.sigma_dx_mm, first->sigma_dx_mm)) << isa_name(build);
+    EXPECT_TRUE(same_bits(f.sigma_dy_mm, first->sigma_dy_mm)) << isa_name(build);
+    EXPECT_TRUE(same_bits(f.sigma_dz_mm, first->sigma_dz_mm)) << isa_name(build);
+  }
+  ASSERT_EQ(run_with("sse9", dir / "isa-bad.h5", out), 2) << out;
+  EXPECT_NE(out.find("PLENOPIV_ISA=sse9: not one of baseline, avx2, avx512"), std::string::npos) << out;
+  EXPECT_FALSE(fs::exists(dir / "isa-bad.h5"));
 }
 
 // The shipped settings with the volume moved to z [2, 6] mm, the given depth guard and, unless
