@@ -39,19 +39,25 @@ std::size_t padded(float* v, std::size_t n, Width w) {
   for (std::size_t i = n; i % lanes; ++i) v[i] = 1.f;
   return (n + lanes - 1) / lanes * lanes;
 }
-void log_n(float* v, std::size_t n) {
+// One of SLEEF's functions in every width: the AVX and AVX-512 loops (sleef_wide.hpp) and the SSE2
+// vector function.
+struct SleefFunction {
+  void (*avx512)(float*, std::size_t);
+  void (*avx)(float*, std::size_t);
+  __m128 (*sse2)(__m128);
+};
+void apply_n(const SleefFunction& f, float* v, std::size_t n) {
   const Width w = widest();
   n = padded(v, n, w);
-  if (w == Width::avx512) return log_avx512(v, n);
-  if (w == Width::avx) return log_avx(v, n);
-  for (std::size_t i = 0; i < n; i += 4) _mm_storeu_ps(v + i, Sleef_cinz_logf4_u35sse2(_mm_loadu_ps(v + i)));
+  if (w == Width::avx512) return f.avx512(v, n);
+  if (w == Width::avx) return f.avx(v, n);
+  for (std::size_t i = 0; i < n; i += 4) _mm_storeu_ps(v + i, f.sse2(_mm_loadu_ps(v + i)));
+}
+void log_n(float* v, std::size_t n) {
+  apply_n({log_avx512, log_avx, [](__m128 x) { return Sleef_cinz_logf4_u35sse2(x); }}, v, n);
 }
 void exp_n(float* v, std::size_t n) {
-  const Width w = widest();
-  n = padded(v, n, w);
-  if (w == Width::avx512) return exp_avx512(v, n);
-  if (w == Width::avx) return exp_avx(v, n);
-  for (std::size_t i = 0; i < n; i += 4) _mm_storeu_ps(v + i, Sleef_cinz_expf4_u10sse2(_mm_loadu_ps(v + i)));
+  apply_n({exp_avx512, exp_avx, [](__m128 x) { return Sleef_cinz_expf4_u10sse2(x); }}, v, n);
 }
 
 // Runs chunk(first value, count) over [i0, i1) in chunks of kChunkValues.
