@@ -15,8 +15,10 @@
 //              paper's 5 at mu 0.5, not accelerated, MartSettings' dark-pixel cutoff; the sweep's
 //              rows still start from the paper's settings).
 //     --time-sweep: MART iterations and the ghost floor against time per pair at this scale (with
-//              --no-sweep; ten pairs in a kept workspace; rows marked pareto= for plot_e2e.py);
-//              --time-repeats N: the ten interleaved N times, each row's time their median
+//              --no-sweep; ten pairs in a kept workspace; rows marked pareto= for plot_e2e.py), and
+//              run-paper.yaml's row once more on each lower build of the kernels this CPU runs
+//              (core/base/isa.hpp: AVX2, baseline), with whether its vectors are the same bits;
+//              --time-repeats N: the rows interleaved N times, each row's time their median
 //              (default 1).
 //     --voxel-z-factor D: the headline's voxels D times as deep as wide (volume.voxel_z_mm; errors
 //              still in the 0.125 mm voxels; window depths and margins in --passes are its voxels).
@@ -83,6 +85,7 @@
 
 #include "bench/bench_support.hpp"
 #include "core/base/errors.hpp"
+#include "core/base/isa.hpp"
 #include "core/calib/nominal_calibration.hpp"
 #include "core/optics/camera_file.hpp"
 #include "core/process/pair_processor.hpp"
@@ -719,11 +722,12 @@ int main(int argc, char** argv) {
     // Time against error at this scale: MART iterations and the ghost floor, every pair in the kept
     // workspace (as in a run of many pairs), so no row pays the first pair's allocations.
     struct Setting {
-      const char* name;
+      std::string name;
       int iterations;
       double mu;
       bool accelerate;
       double floor;
+      Isa build = best_isa();
     };
     std::vector<Row> rows;
     const int np = int(settings.correlation.passes.size());
@@ -734,30 +738,50 @@ int main(int argc, char** argv) {
         {"8_acc_floor_4", 8, 1, true, 4},        {"9_acc_floor_3", 9, 1, true, 3},   {"10_acc_floor_3", 10, 1, true, 3},
         {"12_acc_floor_3", 12, 1, true, 3},      {"14_acc_floor_3", 14, 1, true, 3}, {"20_acc", 20, 1, true, 0},
         {"20_acc_floor_3", 20, 1, true, 3}};
+    // run-paper.yaml's row on the kernels' lower builds.
+    std::vector<Setting> swept = settings_swept;
+    for (const Isa build : {Isa::avx2, Isa::baseline})
+      if (build < best_isa()) swept.push_back({std::string("8_acc_floor_3_") + isa_name(build), 8, 1, true, 3, build});
+    const std::size_t reference = std::size_t(  // 8_acc_floor_3 on the best build
+        std::find_if(swept.begin(), swept.end(), [](const Setting& st) { return st.name == "8_acc_floor_3"; }) -
+        swept.begin());
+    std::vector<VectorField> fields(swept.size());
     // Rows in turn, `time_repeats` times, so that the machine's slow and fast minutes fall on all
     // of them; the errors are the first round's (every round gives the same bits).
-    std::vector<std::vector<double>> seconds(settings_swept.size());
+    std::vector<std::vector<double>> seconds(swept.size());
     for (int round = 0; round < time_repeats; ++round) {
-      for (std::size_t k = 0; k < settings_swept.size(); ++k) {
-        const Setting& st = settings_swept[k];
+      for (std::size_t k = 0; k < swept.size(); ++k) {
+        const Setting& st = swept[k];
         process::ProcessSettings s = settings;
         s.mart.iterations = st.iterations;
         s.mart.mu = st.mu;
         s.mart.accelerate = st.accelerate;
         s.correlation.intensity_threshold_of_mean = st.floor;
+        use_isa(st.build);
         const auto r = process::process_pair(op, a, b, s, {}, &workspace);
+        use_isa(best_isa());
         seconds[k].push_back(r.times.reconstruct_a_s + r.times.reconstruct_b_s + r.times.correlate_s);
         if (round == 0) {
+          fields[k] = r.correlation.field;
           const Errors er = errors_against(r.correlation.field, flow, voxel);
           Row row{"mart_floor", st.iterations, np, 16, st.mu, 0, er.total, er};
           row.value = st.name;
           rows.push_back(row);
         }
-        std::fprintf(stderr, "bench_e2e: %s done (%.1f s)\n", st.name, seconds[k].back());
+        std::fprintf(stderr, "bench_e2e: %s done (%.1f s)\n", st.name.c_str(), seconds[k].back());
       }
     }
     for (std::size_t k = 0; k < rows.size(); ++k) rows[k].seconds = bench::median(seconds[k]);
     print_pareto(scale.c_str(), rows);
+    for (std::size_t k = settings_swept.size(); k < swept.size(); ++k) {
+      const VectorField &f = fields[k], &g = fields[reference];
+      std::printf(
+          "bench=e2e case=%s variant=isa value=%s isa=%s reference_isa=%s s_per_pair=%.2f over_reference=%.3f "
+          "same_field_as_reference=%d\n",
+          scale.c_str(), swept[k].name.c_str(), isa_name(swept[k].build), isa_name(best_isa()), rows[k].seconds,
+          rows[k].seconds / rows[reference].seconds,
+          int(f.dx_mm == g.dx_mm && f.dy_mm == g.dy_mm && f.dz_mm == g.dz_mm && f.valid == g.valid));
+    }
   }
   if (!sweep) return 0;
 

@@ -354,11 +354,20 @@ MART_FLOOR_LABELS = {"paper_5_it_mu_0.5": "the paper's: 5 plain iterations at mu
                      "20_acc_floor_3": "**20 accelerated, floor 3 (process.yaml's MART; it takes two passes more)**"}
 
 
+ISA_LABELS = {"avx2": "AVX2", "baseline": "baseline x86-64", "avx512": "AVX-512"}
+
+
 def t_full_sweep(R):
     r = R("e2e-full-sweep")
     rows = []
+    builds = {d["value"]: d for d in r.find(variant="isa")}
     for d in r.find(variant="mart_floor"):
         label = MART_FLOOR_LABELS.get(d["value"], d["value"].replace("_acc_floor_", " accelerated, floor "))
+        if d["value"] in builds:
+            b = builds[d["value"]]
+            same = "the same vectors" if b["same_field_as_reference"] == "1" else "other vectors"
+            label = (f"8 accelerated, floor 3 on the kernels' {ISA_LABELS[b['isa']]} build "
+                     f"({float(b['over_reference']):.2f}x {ISA_LABELS[b['reference_isa']]}'s time, {same})")
         rows.append([label, d["total_s"], uvw(d), d["rms"], uvw(d, "off_axis_band_rms_"),
                      "**yes**" if d["pareto"] == "yes" else "no"])
     out = table(["MART (mu 1 unless stated), ghost floor", "s per pair", "RMS u / v / w", "RMS",
