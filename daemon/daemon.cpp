@@ -9,6 +9,7 @@
 #include <set>
 
 #include "core/base/errors.hpp"
+#include "core/base/isa.hpp"
 #include "core/io/tiff.hpp"
 #include "core/optics/camera_file.hpp"
 #include "daemon/processing.hpp"
@@ -145,6 +146,7 @@ msg::Status Daemon::status() const {
   s.set_state(to_string(state_.state()));
   s.set_message(state_.error());
   s.set_version(PLENOPIV_VERSION);
+  s.set_kernels(isa_name(isa()));
   s.set_uptime_s(std::chrono::duration<double>(Clock::now() - started_).count());
   s.set_camera_uri(config_.camera_uri);
   s.set_trigger_uri(config_.trigger_uri);

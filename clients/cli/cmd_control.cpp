@@ -43,6 +43,7 @@ std::string json_of(const google::protobuf::Message& message) {
 void print_status(const msg::Status& s) {
   std::cout << "state          " << s.state() << (s.message().empty() ? "" : " (" + s.message() + ")") << "\n"
             << "version        " << s.version() << "\n"
+            << "kernels        " << s.kernels() << " build\n"
             << "uptime         " << std::fixed << std::setprecision(1) << s.uptime_s() << " s\n"
             << "camera         " << s.camera_uri() << "\n"
             << "trigger        " << s.trigger_uri() << "\n";

@@ -5,12 +5,14 @@
 #include <unistd.h>
 
 #include <csignal>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <thread>
 #include <zmq.hpp>
 
 #include "clients/cli/control_client.hpp"
+#include "core/base/isa.hpp"
 #include "proto/curve.hpp"
 #include "tests/support/child_process.hpp"
 #include "tests/support/daemon_status.hpp"
@@ -69,6 +71,11 @@ TEST_F(Daemon, AnswersStatusAndStopsCleanlyOnSigterm) {
   ASSERT_TRUE(reply.has_status());
   EXPECT_EQ(reply.status().state(), "Idle");
   EXPECT_EQ(reply.id(), 1u);
+  // The kernels' build: the CPU's best, unless the environment the daemon inherited names one.
+  const char* named = std::getenv("PLENOPIV_ISA");
+  const std::string kernels = named && *named ? named : isa_name(best_isa());
+  EXPECT_EQ(reply.status().kernels(), kernels);
+  EXPECT_NE(daemon_->output().find("kernels: the " + kernels + " build"), std::string::npos) << daemon_->output();
 
   daemon_->signal(SIGTERM);
   const auto status = daemon_->wait(5s);
