@@ -18,6 +18,20 @@ Isa best_isa();
 // a value that is not a build's name or a build this CPU cannot run.
 Isa isa();
 
+// Of a kernel's three builds (the same signature), the one isa() names.
+template <class F>
+F* for_isa(F* avx512, F* avx2, F* baseline) {
+  switch (isa()) {
+    case Isa::avx512:
+      return avx512;
+    case Isa::avx2:
+      return avx2;
+    case Isa::baseline:
+      break;
+  }
+  return baseline;
+}
+
 // Makes the kernels run `isa` from now on (the benchmarks' rows per path); InputError where this
 // CPU cannot run it.
 void use_isa(Isa isa);

@@ -362,15 +362,8 @@ void cubic_row_baseline(const RowJob& j) { deform_row_job(Cubic4{}, j); }
 
 // One row of both deformed volumes: the 7x7x7 sinc with `table`, or without it Keys' cubic.
 void deform_row(const SincTable* table, const RowJob& j) {
-  const Isa build = isa();
-  if (table) {
-    if (build == Isa::avx512) return sinc_row_avx512(*table, j);
-    if (build == Isa::avx2) return sinc_row_avx2(*table, j);
-    return sinc_row_baseline(*table, j);
-  }
-  if (build == Isa::avx512) return cubic_row_avx512(j);
-  if (build == Isa::avx2) return cubic_row_avx2(j);
-  cubic_row_baseline(j);
+  if (table) return for_isa(sinc_row_avx512, sinc_row_avx2, sinc_row_baseline)(*table, j);
+  for_isa(cubic_row_avx512, cubic_row_avx2, cubic_row_baseline)(j);
 }
 
 }  // namespace

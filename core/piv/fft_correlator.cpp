@@ -133,14 +133,7 @@ void weigh_cross_spectrum_baseline(float* c, const float* gauss, std::size_t cou
   weigh_cross_spectrum_body(c, gauss, count, p);
 }
 void weigh_cross_spectrum(float* c, const float* gauss, std::size_t count, float p) {
-  switch (isa()) {
-    case Isa::avx512:
-      return weigh_cross_spectrum_avx512(c, gauss, count, p);
-    case Isa::avx2:
-      return weigh_cross_spectrum_avx2(c, gauss, count, p);
-    case Isa::baseline:
-      return weigh_cross_spectrum_baseline(c, gauss, count, p);
-  }
+  for_isa(weigh_cross_spectrum_avx512, weigh_cross_spectrum_avx2, weigh_cross_spectrum_baseline)(c, gauss, count, p);
 }
 
 }  // namespace

@@ -173,15 +173,8 @@ std::array<float, 2> copy_windows_baseline(const float* va, const float* vb, con
 std::array<float, 2> copy_windows(const float* va, const float* vb, const std::array<int, 3>& shape,
                                   const std::array<int, 3>& origin, const std::array<int, 3>& window, int margin,
                                   float* wa, float* wb) {
-  switch (isa()) {
-    case Isa::avx512:
-      return copy_windows_avx512(va, vb, shape, origin, window, margin, wa, wb);
-    case Isa::avx2:
-      return copy_windows_avx2(va, vb, shape, origin, window, margin, wa, wb);
-    case Isa::baseline:
-      break;
-  }
-  return copy_windows_baseline(va, vb, shape, origin, window, margin, wa, wb);
+  return for_isa(copy_windows_avx512, copy_windows_avx2, copy_windows_baseline)(va, vb, shape, origin, window, margin,
+                                                                                wa, wb);
 }
 
 // With a depth margin (PassSettings::depth_margin): the cyclic correlation `corr` of window A (its

@@ -293,15 +293,7 @@ std::array<float, 3> correlation_statistics_sigma(std::span<const float> a, std:
                                                   const std::array<int, 3>& shape, const std::array<int, 3>& origin,
                                                   const std::array<int, 3>& window, int depth_margin,
                                                   const std::array<int, 3>& shift, UncertaintyScratch& scratch) {
-  switch (isa()) {
-    case Isa::avx512:
-      return sigma_avx512(a, b, shape, origin, window, depth_margin, shift, scratch);
-    case Isa::avx2:
-      return sigma_avx2(a, b, shape, origin, window, depth_margin, shift, scratch);
-    case Isa::baseline:
-      break;
-  }
-  return sigma_baseline(a, b, shape, origin, window, depth_margin, shift, scratch);
+  return for_isa(sigma_avx512, sigma_avx2, sigma_baseline)(a, b, shape, origin, window, depth_margin, shift, scratch);
 }
 
 void smooth_sigma(std::vector<float>& sigma, std::span<const std::uint8_t> valid, std::array<int, 3> count, int passes,

@@ -285,32 +285,18 @@ void lanes_to_rows(const float* lanes, std::size_t width, int count, float* rows
 }
 
 void add_columns(float* band, std::size_t width, int words, const ColumnJob* jobs, int count) {
-  switch (isa()) {
-    case Isa::avx512:
-      return add_columns_avx512(band, width, words, jobs, count);
-    case Isa::avx2:
-      return add_columns_avx2(band, width, words, jobs, count);
-    case Isa::baseline:
-      return add_columns_baseline(band, width, words, jobs, count);
-  }
+  for_isa(add_columns_avx512, add_columns_avx2, add_columns_baseline)(band, width, words, jobs, count);
 }
 
 void dot_columns(const float* band, std::size_t width, int words, const ColumnJob* jobs, int count) {
-  switch (isa()) {
-    case Isa::avx512:
-      return dot_columns_avx512(band, width, words, jobs, count);
-    case Isa::avx2:
-      return dot_columns_avx2(band, width, words, jobs, count);
-    case Isa::baseline:
-      return dot_columns_baseline(band, width, words, jobs, count);
-  }
+  for_isa(dot_columns_avx512, dot_columns_avx2, dot_columns_baseline)(band, width, words, jobs, count);
 }
 
 // The AVX2 build on AVX-512 CPUs too (there is no AVX-512 one).
 void dot_slice_rows(const float* row_a, const float* row_b, const std::size_t* start, const int* first, const float* w,
                     int nx, double* out_a, double* out_b) {
-  if (isa() == Isa::baseline) return dot_slice_rows_baseline(row_a, row_b, start, first, w, nx, out_a, out_b);
-  dot_slice_rows_avx2(row_a, row_b, start, first, w, nx, out_a, out_b);
+  for_isa(dot_slice_rows_avx2, dot_slice_rows_avx2, dot_slice_rows_baseline)(row_a, row_b, start, first, w, nx, out_a,
+                                                                             out_b);
 }
 
 // 4 pixels per vector (-O2 leaves the plain loop scalar).
