@@ -2,8 +2,6 @@
 // propagation through the final field's smoothing (Sciacchitano & Wieneke 2016).
 #include "core/piv/uncertainty.hpp"
 
-#include "core/base/isa.hpp"
-
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
@@ -11,6 +9,8 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+
+#include "core/base/isa.hpp"
 
 namespace plenopiv::piv {
 namespace {

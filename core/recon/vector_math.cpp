@@ -1,6 +1,6 @@
 // MART's loops over every pixel or voxel that take a logarithm or an exponential
 // (kernels::log_ratios, log_or_zero, log_pixels, multiply_by_exp, extrapolate): the functions through SLEEF, as
-// wide as the CPU's vectors, the rest in loops the vectoriser takes (-O3, CMakeLists.txt).
+// wide as the vectors of isa()'s build, the rest in loops the vectoriser takes (-O3, CMakeLists.txt).
 #include <sleef.h>
 
 #include <algorithm>
