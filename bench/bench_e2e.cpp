@@ -762,7 +762,7 @@ int main(int argc, char** argv) {
         use_isa(best_isa());
         seconds[k].push_back(r.times.reconstruct_a_s + r.times.reconstruct_b_s + r.times.correlate_s);
         if (round == 0) {
-          fields[k] = r.correlation.field;
+          if (k == reference || k >= settings_swept.size()) fields[k] = r.correlation.field;  // compared below
           const Errors er = errors_against(r.correlation.field, flow, voxel);
           Row row{"mart_floor", st.iterations, np, 16, st.mu, 0, er.total, er};
           row.value = st.name;
