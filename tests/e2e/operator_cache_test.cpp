@@ -5,10 +5,8 @@
 // operator back and forgets the least recently used.
 #include <gtest/gtest.h>
 
-#include <cstring>
 #include <filesystem>
 #include <fstream>
-#include <span>
 #include <string>
 
 #include "core/calib/nominal_calibration.hpp"
@@ -18,10 +16,13 @@
 #include "core/recon/mart.hpp"
 #include "core/sim/particles.hpp"
 #include "core/sim/render.hpp"
+#include "tests/support/same_bits.hpp"
 #include "tests/support/temp_dir.hpp"
 
 namespace plenopiv::process {
 namespace {
+
+using testing_support::same_bits;
 
 using Outcome = WeightsDiskCache::Outcome;
 
@@ -58,10 +59,6 @@ class OperatorCacheTest : public ::testing::Test {
 
   std::filesystem::path folder_;
 };
-
-bool same_bits(std::span<const float> a, std::span<const float> b) {
-  return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(float)) == 0;
-}
 
 TEST_F(OperatorCacheTest, AMissWritesTheTablesAndAHitReadsTheSameBits) {
   const optics::CameraModel cam = camera();

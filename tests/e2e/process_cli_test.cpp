@@ -5,7 +5,6 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
@@ -18,10 +17,13 @@
 #include "core/io/tiff.hpp"
 #include "tests/support/child_process.hpp"
 #include "tests/support/mean_displacement.hpp"
+#include "tests/support/same_bits.hpp"
 #include "tests/support/temp_dir.hpp"
 
 namespace plenopiv {
 namespace {
+
+using testing_support::same_bits;
 
 using testing_support::binary;
 using testing_support::run_command;
@@ -173,9 +175,6 @@ TEST(ProcessCli, EveryInstructionSetBuildGivesTheSameField) {
     EXPECT_EQ(f.dy_mm, first->dy_mm) << isa_name(build);
     EXPECT_EQ(f.dz_mm, first->dz_mm) << isa_name(build);
     EXPECT_EQ(f.valid, first->valid) << isa_name(build);
-    const auto same_bits = [](const std::vector<float>& x, const std::vector<float>& y) {
-      return x.size() == y.size() && std::memcmp(x.data(), y.data(), x.size() * sizeof(float)) == 0;
-    };
     EXPECT_TRUE(same_bits(f.sigma_dx_mm, first->sigma_dx_mm)) << isa_name(build);
     EXPECT_TRUE(same_bits(f.sigma_dy_mm, first->sigma_dy_mm)) << isa_name(build);
     EXPECT_TRUE(same_bits(f.sigma_dz_mm, first->sigma_dz_mm)) << isa_name(build);

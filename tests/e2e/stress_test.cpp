@@ -5,7 +5,6 @@
 #include <tbb/global_control.h>
 
 #include <cmath>
-#include <cstring>
 #include <limits>
 #include <map>
 #include <memory>
@@ -18,6 +17,7 @@
 #include "core/process/process.hpp"
 #include "core/sim/particles.hpp"
 #include "core/sim/render.hpp"
+#include "tests/support/same_bits.hpp"
 
 #ifndef PLENOPIV_STRESS_CASES
 #define PLENOPIV_STRESS_CASES 250
@@ -29,6 +29,8 @@
 
 namespace plenopiv::process {
 namespace {
+
+using testing_support::same_bits;
 
 // 170 x 170 pixels behind 10 x 10 lenses (the small camera's optics): a 1.25 mm field of view.
 const char* kTinyCamera = R"(
@@ -155,11 +157,6 @@ Case make_case(std::uint64_t index) {
                   " with a peak of " + std::to_string(sigma[0]) + " x " + std::to_string(sigma[1]) + " x " +
                   std::to_string(sigma[2]) + " voxels, depth " + std::to_string(c.depth);
   return c;
-}
-
-template <class Array>
-bool same_bits(const Array& x, const Array& y) {
-  return x.size() == y.size() && std::memcmp(x.data(), y.data(), x.size() * sizeof(x[0])) == 0;
 }
 
 bool all_finite(std::span<const float> v) {
