@@ -120,15 +120,27 @@ typedef float Floats4 __attribute__((vector_size(16)));
   for (; x < n; ++x) max1 = std::max(max1, dst[x] = src[x]);
 }
 
-// The window at `origin` of A (its slices in the middle, zeros in the `margin` slices at each depth
-// end) and of B (all window[2] + 2 margin slices; zeros outside the volume) into `wa` and `wb`, row
-// by row; returns their brightest voxels. Built once per instruction set below: a 16-voxel row is
-// one AVX-512 vector.
-[[gnu::always_inline]] inline std::array<float, 2> copy_windows_body(const float* va, const float* vb,
-                                                                     const std::array<int, 3>& shape,
-                                                                     const std::array<int, 3>& origin,
-                                                                     const std::array<int, 3>& window, int margin,
-                                                                     float* wa, float* wb) {
+// A window pair to copy: the window at `origin` (voxels) of volumes `va` and `vb` of `shape`,
+// `margin` slices more of B at each depth end, into `wa` and `wb`.
+struct WindowCopy {
+  const float *va, *vb;
+  const std::array<int, 3>& shape;
+  std::array<int, 3> origin;
+  const std::array<int, 3>& window;
+  int margin;
+  float *wa, *wb;
+};
+
+// The window of A (its slices in the middle, zeros in the margin slices at each depth end) and of B
+// (all window[2] + 2 margin slices; zeros outside the volume), row by row; returns their brightest
+// voxels. Built once per instruction set below: a 16-voxel row is one AVX-512 vector.
+[[gnu::always_inline]] inline std::array<float, 2> copy_windows_body(const WindowCopy& j) {
+  const float *va = j.va, *vb = j.vb;
+  float *wa = j.wa, *wb = j.wb;
+  const std::array<int, 3>& shape = j.shape;
+  const std::array<int, 3>& origin = j.origin;
+  const std::array<int, 3>& window = j.window;
+  const int margin = j.margin;
   const Floats16 low16 = Floats16{} - INFINITY;
   const Floats4 low4 = Floats4{} - INFINITY;
   Floats16 max16_a = low16, max16_b = low16;
@@ -151,30 +163,15 @@ typedef float Floats4 __attribute__((vector_size(16)));
   return {max_a, max_b};
 }
 
-__attribute__((target("avx512f"))) std::array<float, 2> copy_windows_avx512(const float* va, const float* vb,
-                                                                            const std::array<int, 3>& shape,
-                                                                            const std::array<int, 3>& origin,
-                                                                            const std::array<int, 3>& window,
-                                                                            int margin, float* wa, float* wb) {
-  return copy_windows_body(va, vb, shape, origin, window, margin, wa, wb);
+__attribute__((target("avx512f"))) std::array<float, 2> copy_windows_avx512(const WindowCopy& j) {
+  return copy_windows_body(j);
 }
-__attribute__((target("avx2"))) std::array<float, 2> copy_windows_avx2(const float* va, const float* vb,
-                                                                       const std::array<int, 3>& shape,
-                                                                       const std::array<int, 3>& origin,
-                                                                       const std::array<int, 3>& window, int margin,
-                                                                       float* wa, float* wb) {
-  return copy_windows_body(va, vb, shape, origin, window, margin, wa, wb);
+__attribute__((target("avx2"))) std::array<float, 2> copy_windows_avx2(const WindowCopy& j) {
+  return copy_windows_body(j);
 }
-std::array<float, 2> copy_windows_baseline(const float* va, const float* vb, const std::array<int, 3>& shape,
-                                           const std::array<int, 3>& origin, const std::array<int, 3>& window,
-                                           int margin, float* wa, float* wb) {
-  return copy_windows_body(va, vb, shape, origin, window, margin, wa, wb);
-}
-std::array<float, 2> copy_windows(const float* va, const float* vb, const std::array<int, 3>& shape,
-                                  const std::array<int, 3>& origin, const std::array<int, 3>& window, int margin,
-                                  float* wa, float* wb) {
-  return for_isa(copy_windows_avx512, copy_windows_avx2, copy_windows_baseline)(va, vb, shape, origin, window, margin,
-                                                                                wa, wb);
+std::array<float, 2> copy_windows_baseline(const WindowCopy& j) { return copy_windows_body(j); }
+std::array<float, 2> copy_windows(const WindowCopy& j) {
+  return for_isa(copy_windows_avx512, copy_windows_avx2, copy_windows_baseline)(j);
 }
 
 // With a depth margin (PassSettings::depth_margin): the cyclic correlation `corr` of window A (its
@@ -240,7 +237,7 @@ Candidates correlate_windows(std::span<const float> va, std::span<const float> v
       auto wb = ws.window_b();
       // Slices -margin .. window + margin of B; A's are its window's, zeros in the margins.
       const auto [max_a, max_b] =
-          copy_windows(va.data(), vb.data(), shape, {x0, y0, z0}, l.window, margin, wa.data(), wb.data());
+          copy_windows({va.data(), vb.data(), shape, {x0, y0, z0}, l.window, margin, wa.data(), wb.data()});
       if (!(max_a > signal_threshold && max_b > signal_threshold)) {
         c.flags[node] = flag_no_signal;
         continue;

@@ -156,13 +156,26 @@ float fit_sigma(double c0, double c_pm, double spread) {
   return den > 0 ? float(spread / den) : kNoEstimate;
 }
 
+// One vector's window pair for correlation_statistics_sigma (its arguments, uncertainty.hpp).
+struct SigmaJob {
+  std::span<const float> a, b;
+  const std::array<int, 3>& shape;
+  const std::array<int, 3>& origin;
+  const std::array<int, 3>& window;
+  int depth_margin;
+  const std::array<int, 3>& shift;
+  UncertaintyScratch& s;
+};
+
 // correlation_statistics_sigma's work, built once per instruction set below.
-[[gnu::always_inline]] inline std::array<float, 3> sigma_of_window(std::span<const float> a, std::span<const float> b,
-                                                                   const std::array<int, 3>& shape,
-                                                                   const std::array<int, 3>& origin,
-                                                                   const std::array<int, 3>& window, int depth_margin,
-                                                                   const std::array<int, 3>& shift,
-                                                                   UncertaintyScratch& s) {
+[[gnu::always_inline]] inline std::array<float, 3> sigma_of_window(const SigmaJob& j) {
+  const std::span<const float> a = j.a, b = j.b;
+  const std::array<int, 3>& shape = j.shape;
+  const std::array<int, 3>& origin = j.origin;
+  const std::array<int, 3>& window = j.window;
+  const std::array<int, 3>& shift = j.shift;
+  const int depth_margin = j.depth_margin;
+  UncertaintyScratch& s = j.s;
   // The correlation's domain: the window, `depth_margin` slices more at each depth end.
   const std::array<int, 3> n{window[0], window[1], window[2] + 2 * depth_margin};
   const std::size_t count = std::size_t(n[0]) * n[1] * n[2];
@@ -265,27 +278,9 @@ float fit_sigma(double c0, double c_pm, double spread) {
   return sigma;
 }
 
-__attribute__((target("avx512f"))) std::array<float, 3> sigma_avx512(std::span<const float> a, std::span<const float> b,
-                                                                     const std::array<int, 3>& shape,
-                                                                     const std::array<int, 3>& origin,
-                                                                     const std::array<int, 3>& window, int depth_margin,
-                                                                     const std::array<int, 3>& shift,
-                                                                     UncertaintyScratch& s) {
-  return sigma_of_window(a, b, shape, origin, window, depth_margin, shift, s);
-}
-__attribute__((target("avx2"))) std::array<float, 3> sigma_avx2(std::span<const float> a, std::span<const float> b,
-                                                                const std::array<int, 3>& shape,
-                                                                const std::array<int, 3>& origin,
-                                                                const std::array<int, 3>& window, int depth_margin,
-                                                                const std::array<int, 3>& shift,
-                                                                UncertaintyScratch& s) {
-  return sigma_of_window(a, b, shape, origin, window, depth_margin, shift, s);
-}
-std::array<float, 3> sigma_baseline(std::span<const float> a, std::span<const float> b, const std::array<int, 3>& shape,
-                                    const std::array<int, 3>& origin, const std::array<int, 3>& window,
-                                    int depth_margin, const std::array<int, 3>& shift, UncertaintyScratch& s) {
-  return sigma_of_window(a, b, shape, origin, window, depth_margin, shift, s);
-}
+__attribute__((target("avx512f"))) std::array<float, 3> sigma_avx512(const SigmaJob& j) { return sigma_of_window(j); }
+__attribute__((target("avx2"))) std::array<float, 3> sigma_avx2(const SigmaJob& j) { return sigma_of_window(j); }
+std::array<float, 3> sigma_baseline(const SigmaJob& j) { return sigma_of_window(j); }
 
 }  // namespace
 
@@ -293,7 +288,7 @@ std::array<float, 3> correlation_statistics_sigma(std::span<const float> a, std:
                                                   const std::array<int, 3>& shape, const std::array<int, 3>& origin,
                                                   const std::array<int, 3>& window, int depth_margin,
                                                   const std::array<int, 3>& shift, UncertaintyScratch& scratch) {
-  return for_isa(sigma_avx512, sigma_avx2, sigma_baseline)(a, b, shape, origin, window, depth_margin, shift, scratch);
+  return for_isa(sigma_avx512, sigma_avx2, sigma_baseline)({a, b, shape, origin, window, depth_margin, shift, scratch});
 }
 
 void smooth_sigma(std::vector<float>& sigma, std::span<const std::uint8_t> valid, std::array<int, 3> count, int passes,
