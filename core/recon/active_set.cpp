@@ -101,10 +101,14 @@ void for_each_share(const Columns& columns, const int* order_y, const Rows& rows
 
 }  // namespace
 
-ActiveSet::ActiveSet(const WeightingOperator& op, std::vector<std::uint32_t> voxels) { assign(op, std::move(voxels)); }
+ActiveSet::ActiveSet(const WeightingOperator& op, std::span<const std::uint32_t> voxels) {
+  BigBuffer<std::uint32_t> list(voxels.begin(), voxels.end());
+  assign(op, list);
+}
 
-void ActiveSet::assign(const WeightingOperator& op, std::vector<std::uint32_t> voxels) {
-  voxels_ = std::move(voxels);
+void ActiveSet::assign(const WeightingOperator& op, BigBuffer<std::uint32_t>& voxels) {
+  voxels_.swap(voxels);
+  voxels.clear();
   // Emptied, capacity kept: every step below sizes and writes what it uses.
   order_.clear();
   order_normaliser_.clear();
@@ -122,9 +126,11 @@ void ActiveSet::assign(const WeightingOperator& op, std::vector<std::uint32_t> v
 }
 
 ActiveSet ActiveSet::all(const WeightingOperator& op) {
-  std::vector<std::uint32_t> v(op.grid().count());
+  BigBuffer<std::uint32_t> v(op.grid().count());
   for (std::size_t i = 0; i < v.size(); ++i) v[i] = std::uint32_t(i);
-  return ActiveSet(op, std::move(v));
+  ActiveSet set;
+  set.assign(op, v);
+  return set;
 }
 
 std::size_t ActiveSet::bytes() const {

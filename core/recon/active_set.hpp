@@ -33,15 +33,17 @@ namespace plenopiv::recon {
 class ActiveSet {
  public:
   // `voxels`: flat indices into the operator's grid, strictly increasing (InputError otherwise).
-  ActiveSet(const WeightingOperator& op, std::vector<std::uint32_t> voxels);
+  ActiveSet(const WeightingOperator& op, std::span<const std::uint32_t> voxels);
   static ActiveSet all(const WeightingOperator& op);
   ActiveSet() = default;  // empty, for assign()
   // Lays out another set in this one's storage (kept from set to set, so that a caller laying
   // out set after set neither allocates nor page-faults its large arrays again). The same
-  // layout as a new ActiveSet(op, voxels).
-  void assign(const WeightingOperator& op, std::vector<std::uint32_t> voxels);
+  // layout as a new ActiveSet(op, voxels). Takes the list from `voxels` and leaves there the
+  // previous list's storage, emptied, for the caller to build the next list in: the two lists
+  // trade places, and neither is allocated or faulted in again.
+  void assign(const WeightingOperator& op, BigBuffer<std::uint32_t>& voxels);
 
-  const std::vector<std::uint32_t>& voxels() const { return voxels_; }
+  const BigBuffer<std::uint32_t>& voxels() const { return voxels_; }
   std::size_t size() const { return voxels_.size(); }
   // Where each depth slice's voxels lie in voxels() (the set is in index order, so each slice's
   // are one run): slice z's are [runs[z], runs[z + 1]), z = 0 .. the grid's depth.
@@ -128,7 +130,7 @@ class ActiveSet {
   // band_order_ and strip_order_: costliest first.
   void order_by_cost(const WeightingOperator& op);
 
-  std::vector<std::uint32_t> voxels_;
+  BigBuffer<std::uint32_t> voxels_;
   // Voxels with a positive normaliser, in the kernels' visiting order (strip, depth, x, then y
   // increasing): position in voxels_ and n. A pass reads and writes its per-voxel arrays front to
   // back, and each strip owns one contiguous range of them.

@@ -154,7 +154,7 @@ std::size_t MartWorkspace::bytes() const {
   total += (b.kernels.band_lanes.capacity() + b.kernels.image_lanes.capacity()) * sizeof(float);
   total += b.select.dark.capacity() * sizeof(std::uint64_t) + b.origin.capacity() * sizeof(std::uint32_t);
   total += b.above_cut.capacity();
-  total += b.active.bytes();
+  total += b.active.bytes() + b.next_voxels.capacity() * sizeof(std::uint32_t);
   for (const auto& slice : b.select.per_slice) total += slice.capacity() * sizeof(std::uint32_t);
   return total;
 }
@@ -171,9 +171,12 @@ void MartWorkspace::reserve(const WeightingOperator& op) {
   // pages are in (assign fills; the kernels write their own scratch).
   const Grid3& g = op.grid();
   const std::size_t voxels = g.count(), pixels = op.pixel_count();
-  std::vector<std::uint32_t> all(voxels);
+  BigBuffer<std::uint32_t> all(voxels);
   for (std::size_t i = 0; i < voxels; ++i) all[i] = std::uint32_t(i);
-  b.active.assign(op, std::move(all));
+  b.active.assign(op, all);
+  // The other list (ActiveSet::assign trades them) at the same size, its pages in.
+  b.next_voxels.assign(voxels, 0);
+  b.next_voxels.clear();
   for (BigBuffer<float>* v : {&b.e, &b.update, &b.last, &b.log_last, &b.momentum}) v->assign(voxels, 0.f);
   b.origin.assign(voxels, 0);
   b.above_cut.assign(voxels, 0);  // read only with MartSettings::prune_depth_reach, which reserve() does not know

@@ -100,10 +100,12 @@ void SmartSolver::setup(const ImageF& image) {
   const auto t0 = std::chrono::steady_clock::now();
   result_.volume = Volume(op_.grid(), 0.f);
   threshold_image(image, settings_.noise_threshold, b_.data);
-  std::vector<std::uint32_t> selected = select_active(op_, b_.data, settings_, b_.select, result_.skipped);
+  // Built in the storage the last assign() handed back (the previous frame's list, or one pruning
+  // replaced): from the third set on, both lists are as large as a frame's and in memory.
+  select_active(op_, b_.data, settings_, b_.select, result_.skipped, b_.next_voxels);
   result_.select_seconds = seconds_since(t0);
   const auto t_active = std::chrono::steady_clock::now();
-  active_.assign(op_, std::move(selected));
+  active_.assign(op_, b_.next_voxels);
   result_.active_set_seconds = seconds_since(t_active);
   n_ = n_start_ = active_.size();
   start_work_ = active_.pass_work();
@@ -158,7 +160,7 @@ void SmartSolver::start_mlos() {
   });
   active_.back_project_whitened(op_, b_.projection, b_.update, &b_.kernels);
   // E = exp(ln E); a voxel that sees no pixel (n_j = 0) is left out of the passes and stays 0.
-  const std::vector<std::uint32_t>& voxels = active_.voxels();
+  const BigBuffer<std::uint32_t>& voxels = active_.voxels();
   for_voxels([&](std::size_t m) { e[m] = op_.normaliser(voxels[m]) > 0.f ? 1.f : 0.f; });
   const kernels::MultiplicativeUpdate start{e.data(), b_.update.data(), 1.f, kMaxLog, kTiny, kHuge};
   for_voxel_ranges([&](std::size_t m0, std::size_t m1) { kernels::multiply_by_exp(start, m0, m1); });
@@ -336,8 +338,9 @@ void SmartSolver::prune(bool last) {
     result_.skipped.voxels_pruned += dead;
     return;
   }
-  const std::vector<std::uint32_t>& old_voxels = active_.voxels();  // read before assign()
-  std::vector<std::uint32_t> voxels;
+  const BigBuffer<std::uint32_t>& old_voxels = active_.voxels();  // read before assign()
+  BigBuffer<std::uint32_t>& voxels = b_.next_voxels;
+  voxels.clear();
   voxels.reserve(n_ - dead);
   // Compacted in place, in order: position m' <= m, so nothing is overwritten before it is read.
   std::size_t live = 0;
@@ -360,13 +363,13 @@ void SmartSolver::prune(bool last) {
   if (settings_.accelerate) {
     for (BigBuffer<float>* b : {&b_.last, &b_.log_last, &b_.momentum}) b->resize(n_);
   }
-  active_.assign(op_, std::move(voxels));
+  active_.assign(op_, voxels);
 }
 
 void SmartSolver::zero_below_cut() {
   BigBuffer<float>& e = b_.e;
   // Each depth slice's live voxels: [run[z], run[z + 1]).
-  const std::vector<std::uint32_t>& voxels = active_.voxels();
+  const BigBuffer<std::uint32_t>& voxels = active_.voxels();
   const int depth = op_.grid().shape[2];
   const std::size_t slice = std::size_t(op_.grid().shape[0]) * op_.grid().shape[1];
   const std::vector<std::size_t> run = active_.slice_runs(op_);
@@ -411,7 +414,7 @@ void SmartSolver::zero_below_cut() {
 }
 
 void SmartSolver::write_volume() {
-  const std::vector<std::uint32_t>& voxels = active_.voxels();
+  const BigBuffer<std::uint32_t>& voxels = active_.voxels();
   // Distinct voxels: no two writes to one value.
   for_voxels([&](std::size_t m) { result_.volume.data[voxels[m]] = b_.e[m]; });
 }

@@ -30,7 +30,10 @@ struct MartBuffers {
   BigBuffer<std::uint32_t> origin;
   // Per voxel of the box: 1 where a live voxel is above the prune cut (MartSettings::prune_depth_reach).
   BigBuffer<std::uint8_t> above_cut;
-  ActiveSet active;              // the live voxels, laid out again in place when pruned
+  ActiveSet active;  // the live voxels, laid out again in place when pruned
+  // The next active set's voxel list, built here and traded with the set's own (ActiveSet::assign),
+  // so that the two lists' pages stay in from set to set and frame to frame.
+  BigBuffer<std::uint32_t> next_voxels;
   ActiveSet::Workspace kernels;  // reused by every pass
   SelectScratch select;
 };

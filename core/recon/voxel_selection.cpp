@@ -28,8 +28,8 @@ bool in_region(const Grid3& g, const std::optional<RegionMm>& region, int x, int
   return true;
 }
 
-std::vector<std::uint32_t> select_active(const WeightingOperator& op, std::span<const float> image,
-                                         const MartSettings& settings, SelectScratch& scratch, SkipReport& report) {
+void select_active(const WeightingOperator& op, std::span<const float> image, const MartSettings& settings,
+                   SelectScratch& scratch, SkipReport& report, BigBuffer<std::uint32_t>& active) {
   const Grid3& g = op.grid();
   const int width = op.image_width(), height = op.image_height();
   const std::size_t words = std::size_t(height + 63) / 64;  // per sensor column
@@ -135,13 +135,12 @@ std::vector<std::uint32_t> select_active(const WeightingOperator& op, std::span<
     report.voxels_outside_region += counts[std::size_t(z)][1];
     report.voxels_dark += counts[std::size_t(z)][2];
   }
-  std::vector<std::uint32_t> active(offset.back());
+  active.resize(offset.back());  // not zeroed: the copies below write every element, on both threads
   tbb::parallel_for(0, nz, [&](int z) {
     const auto& s = per_slice[std::size_t(z)];
     std::copy(s.begin(), s.end(), active.begin() + std::ptrdiff_t(offset[std::size_t(z)]));
   });
   report.voxels_active = active.size();
-  return active;
 }
 
 }  // namespace plenopiv::recon::detail

@@ -38,8 +38,9 @@ struct SelectScratch {
 // as bits over the sensor rows; per voxel column x the OR of its strong columns' bits gives the
 // rows where x meets a dark pixel, per voxel row y its strong rows are bits too, and each voxel
 // costs one AND over the words of y's strong rows.
-// Fills the voxel and pixel counts of `report`; returns the active voxels, increasing.
-std::vector<std::uint32_t> select_active(const WeightingOperator& op, std::span<const float> image,
-                                         const MartSettings& settings, SelectScratch& scratch, SkipReport& report);
+// Fills the voxel and pixel counts of `report`; `active` becomes the active voxels, increasing (in
+// its own storage: a list kept from frame to frame is not allocated or faulted in again).
+void select_active(const WeightingOperator& op, std::span<const float> image, const MartSettings& settings,
+                   SelectScratch& scratch, SkipReport& report, BigBuffer<std::uint32_t>& active);
 
 }  // namespace plenopiv::recon::detail
