@@ -190,10 +190,11 @@ TEST(Reprocess, ACalibratedRunKeepsItsCalibrationAndReprocessesWithIt) {
       "mean dy %.4f mm\n",
       valid, dx, dy);
   // The mean of one pair's 9 vectors scatters with its particles, and on a loaded host one pair
-  // may be all that keeps the nominal dt: the bound holds for any pair alone.
+  // may be all that keeps the nominal dt: the bounds hold for any pair alone, dy's as wide as dx's
+  // (the same few vectors scatter across as much as along).
   if (valid > 0) {  // else every pulse separation was off (host load): nothing to compare
     EXPECT_NEAR(dx, 0.2, 0.1) << "one pair alone measured 0.131-0.209 mm";
-    EXPECT_NEAR(dy, 0.0, 0.03) << "measured -0.005-0.000 mm over 8 runs";
+    EXPECT_NEAR(dy, 0.0, 0.1) << "three pairs measured -0.005-0.000 mm over 8 runs, one pair alone up to 0.057 mm";
   }
 }
 
