@@ -479,7 +479,7 @@ def t_recon_phases(R):
     ]
     reuse = {v: R("recon-paper").one(bench="recon_reuse", variant=v) for v in ("first", "reused", "fresh_again")}
     if reuse["first"]:
-        rows.append(["paper: first frame / kept workspace / fresh again, s",
+        rows.append(["paper: first frame / kept workspace (its third frame) / fresh again, s",
                      "", " / ".join(reuse[v]["seconds"] for v in reuse if reuse[v])])
     out = table(["5 SMART iterations at mu 0.5, MLOS start, cutoff 0.9, 0.5 ppm"] + [c for c, _ in cases], rows)
     return out + [""] + [r.provenance() + "  " for _, r in cases]
