@@ -358,11 +358,14 @@ void ActiveSet::fill_entries(const BigBuffer<int>& order_y, const RowBands& rows
 }
 
 void ActiveSet::order_by_cost(const WeightingOperator& op) {
-  // The work of each band and strip, estimated as the kernels' vector operations (pass_work()).
-  std::vector<double> band_cost(std::size_t(bands_), 0.0), strip_cost(std::size_t(strips_), 0.0);
-  for (int b = 0; b < bands_; ++b) {
-    for (int s = 0; s < strips_; ++s) {
-      const std::size_t slot = std::size_t(b) * std::size_t(strips_) + std::size_t(s);
+  // The work of each band and strip, estimated as the kernels' vector operations (pass_work()):
+  // each (band, strip) slot's visits in parallel, then the slots into bands and strips. Every cost
+  // is a whole number far below 2^53, so the double sums are exact in any order.
+  const std::size_t slots = std::size_t(bands_) * std::size_t(strips_);
+  std::vector<double> slot_cost(slots, 0.0);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, slots), [&](const tbb::blocked_range<std::size_t>& range) {
+    for (std::size_t slot = range.begin(); slot != range.end(); ++slot) {
+      double sum = 0;
       for (std::size_t i = visit_start_[slot]; i < visit_start_[slot + 1]; ++i) {
         const Visit& v = visits_[i];
         const Column& col = columns_[v.column];
@@ -375,10 +378,17 @@ void ActiveSet::order_by_cost(const WeightingOperator& op) {
         const std::size_t x_quads = t.x_quad_start[std::size_t(col.x) + 1] - t.x_quad_start[std::size_t(col.x)];
         std::size_t y_quads = 0;
         for (std::size_t k = v.entry_begin; k < v.entry_end; ++k) y_quads += entries_[k].quad_count;
-        const double cost = double(kQuad) * double(blocks) * double(x_quads) + 2.0 * double(y_quads);
-        band_cost[std::size_t(b)] += cost;
-        strip_cost[std::size_t(s)] += cost;
+        sum += double(kQuad) * double(blocks) * double(x_quads) + 2.0 * double(y_quads);
       }
+      slot_cost[slot] = sum;
+    }
+  });
+  std::vector<double> band_cost(std::size_t(bands_), 0.0), strip_cost(std::size_t(strips_), 0.0);
+  for (int b = 0; b < bands_; ++b) {
+    for (int s = 0; s < strips_; ++s) {
+      const double cost = slot_cost[std::size_t(b) * std::size_t(strips_) + std::size_t(s)];
+      band_cost[std::size_t(b)] += cost;
+      strip_cost[std::size_t(s)] += cost;
     }
   }
   auto costliest_first = [](const std::vector<double>& cost) {
