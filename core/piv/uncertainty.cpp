@@ -103,6 +103,17 @@ template <class Add, class Tail>
   }
 }
 
+// out[i] = in[i] + (in[i + 1] + in[i - 1]) + ... + (in[i + R] + in[i - R]) for i in [from, from + n).
+template <std::size_t R>
+[[gnu::always_inline]] inline void sum_pairs(const float* __restrict in, float* __restrict out, std::size_t from,
+                                             std::size_t n) {
+  for (std::size_t i = from; i < from + n; ++i) {
+    float v = in[i];
+    for (std::size_t o = 1; o <= R; ++o) v += in[i + o] + in[i - o];
+    out[i] = v;
+  }
+}
+
 // Sums `in` over boxes of (2 r + 1) voxels per axis, clipped at the window's faces, into `out`;
 // `tmp` is scratch of the same size. All three are laid out as the window's rows (nx voxels, then
 // r[0] zeros: a row's box never reaches the next row) from element r[0] on, with r[0] zeros before
@@ -113,10 +124,27 @@ template <class Add, class Tail>
                                            const std::array<int, 3>& n, const std::array<int, 3>& r) {
   const std::size_t ny = std::size_t(n[1]), nz = std::size_t(n[2]), rx = std::size_t(r[0]);
   const std::size_t stride = std::size_t(n[0]) + rx, plane = ny * stride, total = nz * plane;
-  // Along x (into out): the pads keep rows apart.
-  for (std::size_t i = rx; i < rx + total; ++i) out[i] = in[i];
-  for (std::size_t o = 1; o <= rx; ++o)
-    for (std::size_t i = rx; i < rx + total; ++i) out[i] += in[i + o] + in[i - o];
+  // Along x (into out): the pads keep rows apart. Each sum adds its pairs in the order
+  // in[i] + (in[i + 1] + in[i - 1]) + (in[i + 2] + in[i - 2]) + ..., in one pass for the
+  // windows' radii (a pass per pair would store and reload every sum rx times).
+  switch (rx) {
+    case 1:
+      sum_pairs<1>(in, out, rx, total);
+      break;
+    case 2:
+      sum_pairs<2>(in, out, rx, total);
+      break;
+    case 3:
+      sum_pairs<3>(in, out, rx, total);
+      break;
+    case 4:
+      sum_pairs<4>(in, out, rx, total);
+      break;
+    default:
+      for (std::size_t i = rx; i < rx + total; ++i) out[i] = in[i];
+      for (std::size_t o = 1; o <= rx; ++o)
+        for (std::size_t i = rx; i < rx + total; ++i) out[i] += in[i + o] + in[i - o];
+  }
   // Along y (into tmp), slab by slab; along z (into out).
   const std::size_t ry = std::min(std::size_t(r[1]), ny - 1), rz = std::min(std::size_t(r[2]), nz - 1);
   for (std::size_t z = 0; z < nz; ++z) slide_lines(out + rx + z * plane, tmp + rx + z * plane, ny, stride, ry);
