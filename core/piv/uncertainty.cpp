@@ -273,7 +273,14 @@ struct SigmaJob {
   // dC' in rows padded with radius[0] zeros (box_sum's layout); the pads stay zero, so the box sums'
   // values there are multiplied by zeros.
   const std::size_t rx = std::size_t(radius[0]), stride = row_len + rx;
-  s.delta.assign(rows * stride + 2 * rx, 0.f);
+  // Only the pads are zeroed here: every axis below writes all of each row.
+  s.delta.resize(rows * stride + 2 * rx);
+  std::fill(s.delta.begin(), s.delta.begin() + std::ptrdiff_t(rx), 0.f);
+  for (std::size_t r = 0; r < rows; ++r) {
+    float* pad = s.delta.data() + rx + r * stride + row_len;
+    std::fill(pad, pad + rx, 0.f);
+  }
+  std::fill(s.delta.end() - std::ptrdiff_t(rx), s.delta.end(), 0.f);
   s.box.resize(s.delta.size());
   s.line.resize(s.delta.size());
   std::array<float, 3> sigma{};
