@@ -27,6 +27,7 @@
 #include "core/sim/field_errors.hpp"
 #include "core/sim/flows.hpp"
 #include "core/sim/particles.hpp"
+#include "tests/support/same_bits.hpp"
 
 namespace plenopiv::piv {
 namespace {
@@ -1057,6 +1058,9 @@ TEST(Uncertainty, FastSumsMatchTheDefinitionVoxelByVoxel) {
     int margin;
     std::array<int, 3> shift;
   };
+  // One thread's scratch kept from case to case, as vector_uncertainty keeps it from window to
+  // window: the cases' windows, margins and radii differ, so a buffer's layout changes under it.
+  UncertaintyScratch kept;
   for (const Case& c : {Case{{4, 4, 4}, {16, 16, 16}, 0, {0, 0, 0}}, Case{{6, 5, 8}, {16, 16, 16}, 3, {1, -2, 1}},
                         Case{{2, 8, 2}, {12, 16, 8}, 2, {-3, 0, 2}}, Case{{9, 3, 0}, {8, 12, 16}, 4, {0, 1, -1}}}) {
     // b(x + shift) = a(x), and noise.
@@ -1119,6 +1123,9 @@ TEST(Uncertainty, FastSumsMatchTheDefinitionVoxelByVoxel) {
     UncertaintyScratch scratch;
     const auto fast =
         correlation_statistics_sigma(a.data, b.data, g.shape, c.origin, c.window, c.margin, c.shift, scratch);
+    const auto reused =
+        correlation_statistics_sigma(a.data, b.data, g.shape, c.origin, c.window, c.margin, c.shift, kept);
+    EXPECT_TRUE(testing_support::same_bits(reused, fast)) << "a kept scratch changed sigma";
     for (int e = 0; e < 3; ++e) {
       const double m = (plus[e] - minus[e]) / double(wa.size());
       double spread_sq = 0;
