@@ -461,6 +461,19 @@ int main(int argc, char** argv) {
       base.skipped_a.fraction_updates_skipped(), base.skipped_b.fraction_updates_skipped(), e.rms[0], e.rms[1],
       e.rms[2], e.total, e.valid_fraction, e.off_band[0], e.off_band[1], e.off_band[2], e.off_band_gain[0],
       e.off_band_gain[1], e.off_band_gain[2], bench::peak_rss_gb());
+  // The per-vector uncertainty off the axis band: RMS sigma over RMS error, and the fraction of true
+  // errors within +-1 and +-2 sigma, per component.
+  if (base.correlation.field.sigma_dz_mm.size() == base.correlation.field.dz_mm.size()) {
+    const double band_mm = 0.5 * piv::CorrelationSettings{}.passes.back().window[0] * voxel;
+    const sim::UncertaintyCheck c =
+        sim::uncertainty_check(base.correlation.field, flow, voxel, 3, 0,
+                               [&](const sim::Point3& x) { return !sim::in_ring_axis_band(flow, x, band_mm); });
+    std::printf("bench=e2e case=%s variant=reconstructed_sigma", scale.c_str());
+    for (int a = 0; a < 3; ++a)
+      std::printf(" off_axis_band_ratio_%c=%.3f within_1sigma_%c=%.3f within_2sigma_%c=%.3f", "uvw"[a],
+                  c.rms_sigma[a] / c.rms_error[a], "uvw"[a], c.within_1[a], "uvw"[a], c.within_2[a]);
+    std::printf("\n");
+  }
 
   // Where depth is lost: RMS of w (voxels) per band of the vectors' depth (mm from the focal plane),
   // with the band's gain (slope of measured against true w: below 1 where w falls short in

@@ -5,7 +5,8 @@
 // the focal plane's depth). Per tier: set-up, first and in-a-run time per pair, and RMS error,
 // bias and gain per component against the truth; the full tier once more with w through MART's
 // depth response (reconstruction.depth_response_ppm at the pair's seeding).
-// w's gain per depth band follows (near the focal plane the mirror ambiguity limits it).
+// w's gain per depth band follows (near the focal plane the mirror ambiguity limits it), then the
+// per-vector uncertainty's ratio to the true error and its coverage.
 //   build/bin/bench_rotated_shear [DEGREES] [PPM] [full|both] [CONFIG]
 // (defaults 0.1 deg, 0.5 ppm, both tiers, systemd/config/run-paper.yaml; CONFIG: any run.yaml or
 // process.yaml whose volume is the paper's box)
@@ -136,6 +137,21 @@ int main(int argc, char** argv) {
       });
       std::printf(" gain_w_%g_%g=%.3f bias_w_%g_%g=%.3f", edges[band], std::min(edges[band + 1], 99.0), eb.gain[2],
                   edges[band], std::min(edges[band + 1], 99.0), eb.bias[2]);
+    }
+    std::printf("\n");
+    // The per-vector uncertainty against the true errors: RMS sigma / RMS error and the fraction
+    // within +-1 and +-2 sigma per component; w's ratio by distance from the focal plane.
+    const sim::UncertaintyCheck c = sim::uncertainty_check(r.correlation.field, flow, voxel, 3, 0);
+    std::printf("bench=rotated_shear_sigma tier=%s variant=%s", process::tier_name(tier), variant);
+    for (std::size_t a = 0; a < 3; ++a)
+      std::printf(" ratio_%c=%.3f within_1sigma_%c=%.3f within_2sigma_%c=%.3f", "uvw"[a],
+                  c.rms_sigma[a] / c.rms_error[a], "uvw"[a], c.within_1[a], "uvw"[a], c.within_2[a]);
+    for (std::size_t band = 0; band + 1 < edges.size(); ++band) {
+      const sim::UncertaintyCheck cb = sim::uncertainty_check(
+          r.correlation.field, flow, voxel, 3, 0,
+          [&](const sim::Point3& p) { return std::abs(p[2]) >= edges[band] && std::abs(p[2]) < edges[band + 1]; });
+      std::printf(" ratio_w_%g_%g=%.3f", edges[band], std::min(edges[band + 1], 99.0),
+                  cb.rms_sigma[2] / cb.rms_error[2]);
     }
     std::printf("\n");
     std::fflush(stdout);

@@ -8,9 +8,12 @@
 // uniform shift among dim particles that differ between the exposures (noise), a shear in u and
 // w along y, and a ring vortex scored off its axis band; each with no final smoothing and one
 // pass (--window-mean: with the window-mean predictor instead of the centre one); with
-// --with-paper-ring also the paper's ring (300x200x200 voxels, sec 6.4; and 300x200x100, twice as deep). Reconstructed:
-// the small camera (a 6 mm cube: 48 voxels of 0.125 mm across, process.yaml's depth voxel) through
-// process::PairProcessor with the shipped systemd/config/process.yaml settings: a uniform shift, a shear, the ring. One
+// --with-paper-ring also the paper's ring (300x200x200 voxels, sec 6.4; and 300x200x100, twice as deep), and
+// reconstructed from the paper's camera with run-paper.yaml's full tier, with and without the depth response.
+// Reconstructed: the small camera (a 6 mm cube: 48 voxels of 0.125 mm across, process.yaml's depth voxel) through
+// process::PairProcessor with the shipped systemd/config/process.yaml settings: a uniform shift (by fractions of a
+// voxel sideways: MART reconstructs a pair moved by whole voxels sideways alike in both exposures), a shear, the ring;
+// each also with MART's depth response (reconstruction.depth_response_ppm at the pairs' 0.5 ppm). One
 // line per case, band and component (key=value); docs/benchmarks.md records them.
 #include <algorithm>
 #include <chrono>
@@ -22,6 +25,7 @@
 #include <vector>
 
 #include "bench/bench_support.hpp"
+#include "core/base/yaml_access.hpp"
 #include "core/calib/nominal_calibration.hpp"
 #include "core/optics/camera_file.hpp"
 #include "core/piv/multipass.hpp"
@@ -200,6 +204,12 @@ void reconstructed_cases() {
   settings.correlation.dt_s = 1e-3;
   const calib::LoadedCalibration nominal = calib::nominal_calibration(camera);
   const process::PairProcessor processor(camera, nominal, settings);
+  // The same settings with MART's depth response measured at the pairs' seeding: w through its
+  // inverse, every sigma widened by the error the response's pairs show and the correlation's
+  // sigma does not.
+  process::ProcessSettings with_response = settings;
+  with_response.depth_response_ppm = 0.5;
+  const process::PairProcessor calibrated(camera, nominal, with_response);
   const sim::Box box{{-h - 1, -h - 1, -h - 1}, {h + 1, h + 1, h + 1}};
   const auto pa = sim::random_particles(box, sim::particle_count_from_ppm(camera, box, 0.5), 2015);
   sim::RenderOptions ro;
@@ -217,22 +227,65 @@ void reconstructed_cases() {
   rv.core_radius_voxels = 8;
   rv.core_displacement_voxels = 3;
   const sim::RingVortexFlow ring(rv);
-  const sim::UniformFlow uniform({0.25, 0.125, 0.25});  // 2, 1, 2 voxels
+  const sim::UniformFlow uniform({0.29, 0.17, 0.25});   // 2.32, 1.36, 2 voxels
   const sim::LinearShear shear({0.1, 0, 0.1}, 1, 0.0);  // u and w +-2.4 voxels across y
   const std::pair<const char*, const sim::Flow*> flows[] = {
       {"uniform", &uniform}, {"shear", &shear}, {"ring_off_axis_band", &ring}};
   for (const auto& [name, flow] : flows) {
     const ImageF b = render(sim::displace(pa, *flow), 2);
-    const double t = now_s();
-    const auto r = processor.process(a, b);
-    std::printf("bench=uncertainty kind=reconstructed case=%s process_s=%.2f correlate_s=%.2f uncertainty_s=%.3f\n",
-                name, now_s() - t, r.times.correlate_s, r.correlation.passes.back().uncertainty_s);
     std::function<bool(const sim::Point3&)> keep;
     if (flow == &ring) {
       const double half = 0.5 * settings.correlation.passes.back().window[0] * voxel;
       keep = [&, half](const sim::Point3& x) { return !sim::in_ring_axis_band(ring, x, half); };
     }
-    report("reconstructed", name, r.correlation.field, *flow, voxel, keep);
+    for (const process::PairProcessor* p : {&processor, &calibrated}) {
+      const std::string case_name = std::string(name) + (p == &calibrated ? "_depth_response" : "");
+      const double t = now_s();
+      const auto r = p->process(a, b);
+      std::printf("bench=uncertainty kind=reconstructed case=%s process_s=%.2f correlate_s=%.2f uncertainty_s=%.3f\n",
+                  case_name.c_str(), now_s() - t, r.times.correlate_s, r.correlation.passes.back().uncertainty_s);
+      report("reconstructed", case_name, r.correlation.field, *flow, voxel, keep);
+    }
+  }
+}
+
+// The paper's ring (sec 6.4) rendered on the paper's camera at 0.5 ppm and processed with
+// run-paper.yaml's full tier (300x200x100 voxels, 0.125 x 0.25 mm), off its axis band; then once
+// more with MART's depth response measured at the same seeding.
+void paper_ring_reconstructed() {
+  const std::string dir = std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/";
+  const auto camera = optics::load_camera_file(dir + "camera-fahringer2015.yaml");
+  const YAML::Node run_yaml = YAML::LoadFile(dir + "run-paper.yaml");
+  process::ProcessSettings settings =
+      process::process_spec_from(YamlMap(process::processing_part(run_yaml), "run-paper.yaml")).full;
+  settings.correlation.dt_s = 1e-3;
+  const Grid3& g = settings.grid;
+  const double voxel = g.spacing_mm[0];
+  sim::RingVortexFlow::Parameters rv;
+  rv.voxel_mm = voxel;
+  const sim::RingVortexFlow ring(rv);
+  sim::Box box;
+  for (int a = 0; a < 3; ++a) {
+    box.min_mm[a] = g.origin_mm[a] - 0.5 * g.spacing_mm[a] - 1;
+    box.max_mm[a] = g.origin_mm[a] + (g.shape[a] - 0.5) * g.spacing_mm[a] + 1;
+  }
+  const calib::LoadedCalibration nominal = calib::nominal_calibration(camera);
+  const auto pa = sim::random_particles(box, sim::particle_count_from_ppm(camera, box, 0.5), 2015);
+  sim::RenderOptions ro;
+  ro.rays_per_particle = 5000;
+  const ImageU16 a = sim::render(camera, nominal.lenses, pa, ro, 1).image;
+  const ImageU16 b = sim::render(camera, nominal.lenses, sim::displace(pa, ring), ro, 2).image;
+  const double half = 0.5 * settings.correlation.passes.back().window[0] * voxel;
+  const auto keep = [&](const sim::Point3& x) { return !sim::in_ring_axis_band(ring, x, half); };
+  for (const double ppm : {0.0, 0.5}) {
+    settings.depth_response_ppm = ppm;
+    const process::PairProcessor processor(camera, nominal, settings);
+    const std::string name = ppm > 0 ? "paper_ring_off_axis_band_depth_response" : "paper_ring_off_axis_band";
+    const double t = now_s();
+    const auto r = processor.process(a, b);
+    std::printf("bench=uncertainty kind=reconstructed case=%s process_s=%.2f correlate_s=%.2f uncertainty_s=%.3f\n",
+                name.c_str(), now_s() - t, r.times.correlate_s, r.correlation.passes.back().uncertainty_s);
+    report("reconstructed", name, r.correlation.field, ring, voxel, keep);
   }
 }
 
@@ -271,6 +324,7 @@ int main(int argc, char** argv) {
   if (paper) {
     paper_ring(false);
     paper_ring(true);
+    if (reconstructed) paper_ring_reconstructed();
   }
   return 0;
 }

@@ -608,8 +608,12 @@ def t_piv_ring(name):
 
 UNCERTAINTY_ROWS = [("exact", "uniform_noise", "exact, 96³: uniform shift, noise"),
                     ("exact", "paper_ring_off_axis_band", "exact, paper's ring, off the band"),
-                    ("reconstructed", "uniform", "MART, small camera: uniform"),
-                    ("reconstructed", "ring_off_axis_band", "MART, small camera: ring, off the band")]
+                    ("reconstructed", "uniform", "MART, small camera: uniform (2.32, 1.36, 2 voxels)"),
+                    ("reconstructed", "uniform_depth_response", "the same through the depth response"),
+                    ("reconstructed", "ring_off_axis_band", "MART, small camera: ring, off the band"),
+                    ("reconstructed", "paper_ring_off_axis_band", "MART, paper's ring (run-paper.yaml), off the band"),
+                    ("reconstructed", "paper_ring_off_axis_band_depth_response",
+                     "the same through the depth response")]
 
 
 def t_uncertainty(R):
@@ -684,6 +688,13 @@ def t_live_tiers(R):
     return out + ["", r.provenance()]
 
 
+def sigma_ratios(r, d):
+    """The rotated shear's per-vector sigma over its RMS error, for the row of tier and variant in d."""
+    s = [e for e in r.find(bench="rotated_shear_sigma") if e.get("tier") == d["tier"] and
+         e.get("variant") == d.get("variant")]
+    return " / ".join(s[0]["ratio_" + c] for c in "uvw") if s else "—"
+
+
 def t_rotated_shear(R):
     r = R("rotated-shear")
     voxel = lambda d: (f"{float(d['voxel_mm']):g}" + (f" x {float(d['voxel_z_mm']):g}" if d.get("voxel_z_mm", d["voxel_mm"])
@@ -691,9 +702,9 @@ def t_rotated_shear(R):
     rows = [[f"run-paper.yaml's {d['tier']}" + (", w through the depth response" if d.get("variant") == "depth_response"
                                                   else ""), f"{voxel(d)}, {d['pixel_binning']} x {d['pixel_binning']}, "
              f"{d['iterations']} it", f"{d['pair_s']} (first {d['first_s']})", uvw(d), uvw(d, "bias_"),
-             f"{d['gain_u']} / {d['gain_w']}"] for d in r.find(bench="rotated_shear") if "tier" in d]
+             f"{d['gain_u']} / {d['gain_w']}", sigma_ratios(r, d)] for d in r.find(bench="rotated_shear") if "tier" in d]
     out = table(["tier", "voxel, pixel binning, MART", "s per pair in a run", "RMS u / v / w, 0.125 mm voxels",
-                 "bias u / v / w", "gain u / w"], rows)
+                 "bias u / v / w", "gain u / w", "sigma / error u / v / w"], rows)
     return out + ["", r.provenance()]
 
 

@@ -25,16 +25,49 @@ std::string mm(double v) {
   return text;
 }
 
+// A calibration pair's motion: the depth shift, and lateral shifts that sweep one voxel across the
+// box (u along y, v along x), so that each layer's vectors see every sub-voxel lateral shift. MART
+// discretises a particle on the lens grid: a pair moved by whole voxels sideways (or not at all) is
+// reconstructed alike in both exposures, while a fraction of a voxel changes how its light splits
+// between lenses, and with it w's response and error; a flow's vectors carry every fraction. The
+// gradient (one voxel over the box) is far below what the window deformation follows.
+class LateralSweep : public sim::Flow {
+ public:
+  LateralSweep(const sim::Box& box, const std::array<double, 3>& voxel_mm, double depth_shift_mm)
+      : box_(box), voxel_mm_(voxel_mm), w_mm_(depth_shift_mm) {}
+  sim::Point3 displacement_mm(const sim::Point3& p) const override {
+    return {voxel_mm_[0] * (p[1] - box_.min_mm[1]) / (box_.max_mm[1] - box_.min_mm[1]),
+            voxel_mm_[1] * (p[0] - box_.min_mm[0]) / (box_.max_mm[0] - box_.min_mm[0]), w_mm_};
+  }
+  std::string name() const override { return "depth_response_lateral_sweep"; }
+  std::string parameters_yaml() const override { return "{type: " + name() + ", depth_shift_mm: " + mm(w_mm_) + "}"; }
+
+ private:
+  sim::Box box_;
+  std::array<double, 3> voxel_mm_;
+  double w_mm_;
+};
+
 }  // namespace
 
 DepthResponse::DepthResponse(Grid3 field_grid, std::vector<double> true_mm,
-                             std::vector<std::vector<double>> measured_mm)
-    : field_grid_(field_grid), true_mm_(std::move(true_mm)), measured_mm_(std::move(measured_mm)) {
+                             std::vector<std::vector<double>> measured_mm,
+                             std::vector<std::array<double, 3>> unseen_sigma_mm)
+    : field_grid_(field_grid),
+      true_mm_(std::move(true_mm)),
+      measured_mm_(std::move(measured_mm)),
+      unseen_sigma_mm_(std::move(unseen_sigma_mm)) {
   if (true_mm_.size() < 2 || !std::is_sorted(true_mm_.begin(), true_mm_.end()) ||
       std::adjacent_find(true_mm_.begin(), true_mm_.end()) != true_mm_.end())
     throw std::logic_error("DepthResponse: the true shifts must be at least two, ascending and distinct");
   if (measured_mm_.size() != std::size_t(field_grid_.shape[2]))
     throw std::logic_error("DepthResponse: one row of measured shifts per depth layer of the vector grid");
+  if (!unseen_sigma_mm_.empty() && unseen_sigma_mm_.size() != measured_mm_.size())
+    throw std::logic_error("DepthResponse: one unseen sigma per depth layer of the vector grid, or none");
+  for (const std::array<double, 3>& u : unseen_sigma_mm_)
+    for (const double v : u)
+      if (!(std::isfinite(v) && v >= 0))
+        throw std::logic_error("DepthResponse: an unseen sigma must be finite and not negative");
   for (std::size_t layer = 0; layer < measured_mm_.size(); ++layer) {
     const std::vector<double>& m = measured_mm_[layer];
     if (m.size() != true_mm_.size()) throw std::logic_error("DepthResponse: one measured shift per true shift");
@@ -83,16 +116,25 @@ void DepthResponse::apply(VectorField& field) const {
   if (g.shape[2] != field_grid_.shape[2] || g.origin_mm[2] != field_grid_.origin_mm[2] ||
       g.spacing_mm[2] != field_grid_.spacing_mm[2])
     throw std::logic_error("DepthResponse::apply: the field's depth layers are not those the response was measured on");
-  const bool with_sigma = field.sigma_dz_mm.size() == field.dz_mm.size();
+  const std::size_t n = field.dz_mm.size();
+  const bool with_sigma =
+      field.sigma_dx_mm.size() == n && field.sigma_dy_mm.size() == n && field.sigma_dz_mm.size() == n;
   const std::size_t per_layer = std::size_t(g.shape[0]) * std::size_t(g.shape[1]);
-  for (int layer = 0; layer < g.shape[2]; ++layer)
+  for (int layer = 0; layer < g.shape[2]; ++layer) {
+    const std::array<double, 3> unseen =
+        unseen_sigma_mm_.empty() ? std::array<double, 3>{} : unseen_sigma_mm_[std::size_t(layer)];
     for (std::size_t i = std::size_t(layer) * per_layer; i < std::size_t(layer + 1) * per_layer; ++i) {
       const double w = field.dz_mm[i];
       if (!std::isfinite(w)) continue;
       const int k = segment(layer, w);  // once per vector: value and slope come from the same segment
-      if (with_sigma) field.sigma_dz_mm[i] = float(field.sigma_dz_mm[i] * segment_slope(layer, k));
+      if (with_sigma) {                 // NaN (no estimate) stays NaN
+        field.sigma_dx_mm[i] = float(std::hypot(double(field.sigma_dx_mm[i]), unseen[0]));
+        field.sigma_dy_mm[i] = float(std::hypot(double(field.sigma_dy_mm[i]), unseen[1]));
+        field.sigma_dz_mm[i] = float(std::hypot(double(field.sigma_dz_mm[i]), unseen[2]) * segment_slope(layer, k));
+      }
       field.dz_mm[i] = float(along_segment(layer, k, w));
     }
+  }
 }
 
 std::string DepthResponse::summary() const {
@@ -106,6 +148,13 @@ std::string DepthResponse::summary() const {
     }
     text += (k ? " " : ", ") + mm(lo) + ".." + mm(hi) + " of " + (true_mm_[k] > 0 ? "+" : "") + mm(true_mm_[k]) + " mm";
   }
+  if (!unseen_sigma_mm_.empty()) {
+    std::array<double, 3> most{};
+    for (const std::array<double, 3>& u : unseen_sigma_mm_)
+      for (std::size_t a = 0; a < 3; ++a) most[a] = std::max(most[a], u[a]);
+    text += "; sigma the correlation does not see, up to u " + mm(most[0]) + ", v " + mm(most[1]) + ", w " +
+            mm(most[2]) + " mm";
+  }
   return text;
 }
 
@@ -116,6 +165,7 @@ void DepthResponse::serialize(std::string& out) const {
   w.pod(field_grid_.spacing_mm);
   w.vec(true_mm_);
   for (const std::vector<double>& m : measured_mm_) w.vec(m);
+  w.vec(unseen_sigma_mm_);
 }
 
 DepthResponse DepthResponse::deserialize(std::string_view bytes) {
@@ -131,9 +181,11 @@ DepthResponse DepthResponse::deserialize(std::string_view bytes) {
     r.fail(std::to_string(grid.shape[2]) + " depth layers do not fit the bytes");
   std::vector<std::vector<double>> measured(std::size_t(grid.shape[2]));
   for (std::vector<double>& m : measured) r.vec(m);
+  std::vector<std::array<double, 3>> unseen;
+  r.vec(unseen);
   if (!r.done()) r.fail("bytes left after the response");
   try {
-    return DepthResponse(grid, std::move(true_mm), std::move(measured));
+    return DepthResponse(grid, std::move(true_mm), std::move(measured), std::move(unseen));
   } catch (const std::exception& e) {  // the constructor's checks: InputError or std::logic_error
     r.fail(e.what());
   }
@@ -164,6 +216,11 @@ DepthResponse measure_depth_response(const PairProcessor& processor, const optic
   // particle sets (each set its own particles and sensor noise).
   Grid3 field_grid;
   std::vector<std::vector<double>> sum, count_valid;
+  // Per depth layer and shift, over the valid vectors with a sigma: their count, u^2, v^2, w, w^2
+  // and sigma^2 of u, v, w summed (the unseen sigma's terms).
+  enum Term { kCount, kU2, kV2, kW, kW2, kSigmaU2, kSigmaV2, kSigmaW2, kTerms };
+  std::vector<std::vector<std::array<double, kTerms>>> spread;
+  bool with_sigma = true;
   int sets = 1;  // per shift, known after the first pair (it depends on the vectors per layer)
   std::size_t pairs_done = 0;
   for (std::size_t k = 0; k < shifts_mm.size(); ++k) {
@@ -171,7 +228,8 @@ DepthResponse measure_depth_response(const PairProcessor& processor, const optic
     for (int set = 0; set < sets; ++set) {
       const std::uint64_t seed = 7001 + 2 * std::uint64_t(pairs_done);
       const std::vector<sim::Point3> a = sim::random_particles(box, count, seed);
-      const std::vector<sim::Point3> b = sim::displace(a, sim::UniformFlow({0.0, 0.0, shifts_mm[k]}));
+      const LateralSweep flow(box, s.grid.spacing_mm, shifts_mm[k]);
+      const std::vector<sim::Point3> b = sim::displace(a, flow);
       const PairResult r = processor.process_uncorrected(sim::render(camera, lenses, a, render, seed).image,
                                                          sim::render(camera, lenses, b, render, seed + 1).image);
       const VectorField& f = r.correlation.field;
@@ -180,6 +238,8 @@ DepthResponse measure_depth_response(const PairProcessor& processor, const optic
         field_grid = f.grid;
         sum.assign(std::size_t(f.grid.shape[2]), std::vector<double>(shifts_mm.size(), 0.0));
         count_valid = sum;
+        spread.assign(sum.size(),
+                      std::vector<std::array<double, kTerms>>(shifts_mm.size(), std::array<double, kTerms>{}));
         sets = int(std::clamp<std::size_t>((kDepthResponseVectorsPerLayer + per_layer - 1) / per_layer, 1,
                                            kDepthResponseMostSets));
       }
@@ -188,6 +248,27 @@ DepthResponse measure_depth_response(const PairProcessor& processor, const optic
           if (f.valid[i] && std::isfinite(f.dz_mm[i])) {
             sum[std::size_t(layer)][k] += f.dz_mm[i];
             count_valid[std::size_t(layer)][k] += 1;
+            with_sigma = with_sigma && f.sigma_dx_mm.size() == f.dz_mm.size() &&
+                         f.sigma_dy_mm.size() == f.dz_mm.size() && f.sigma_dz_mm.size() == f.dz_mm.size();
+            if (!with_sigma || !std::isfinite(f.sigma_dx_mm[i]) || !std::isfinite(f.sigma_dy_mm[i]) ||
+                !std::isfinite(f.sigma_dz_mm[i]))
+              continue;
+            const std::size_t node = i - std::size_t(layer) * per_layer;
+            const sim::Point3 at{f.grid.coordinate_mm(0, int(node % std::size_t(f.grid.shape[0]))),
+                                 f.grid.coordinate_mm(1, int(node / std::size_t(f.grid.shape[0]))),
+                                 f.grid.coordinate_mm(2, layer)};
+            const sim::Point3 truth = flow.displacement_mm(at);
+            const double u = f.dx_mm[i] - truth[0], v = f.dy_mm[i] - truth[1], w = f.dz_mm[i];
+            const double su = f.sigma_dx_mm[i], sv = f.sigma_dy_mm[i], sw = f.sigma_dz_mm[i];
+            std::array<double, kTerms>& t = spread[std::size_t(layer)][k];
+            t[kCount] += 1;
+            t[kU2] += u * u;
+            t[kV2] += v * v;
+            t[kW] += w;
+            t[kW2] += w * w;
+            t[kSigmaU2] += su * su;
+            t[kSigmaV2] += sv * sv;
+            t[kSigmaW2] += sw * sw;
           }
       ++pairs_done;
       if (progress) progress(double(pairs_done) / double(shifts * std::size_t(sets)));
@@ -198,7 +279,26 @@ DepthResponse measure_depth_response(const PairProcessor& processor, const optic
     for (std::size_t k = 0; k < shifts_mm.size(); ++k)
       if (shifts_mm[k] != 0.0)
         measured[layer][k] = count_valid[layer][k] > 0 ? sum[layer][k] / count_valid[layer][k] : std::nan("");
-  return DepthResponse(field_grid, shifts_mm, std::move(measured));
+  // Pooled over the shifts: the mean square error (u and v about the sweep's, w about its shift's
+  // mean) less the mean square sigma, per component.
+  std::vector<std::array<double, 3>> unseen;
+  if (with_sigma)
+    for (const std::vector<std::array<double, kTerms>>& layer : spread) {
+      double n = 0, error2[3] = {0, 0, 0}, sigma2[3] = {0, 0, 0};
+      for (const std::array<double, kTerms>& t : layer) {
+        if (t[kCount] == 0) continue;
+        n += t[kCount];
+        error2[0] += t[kU2];
+        error2[1] += t[kV2];
+        error2[2] += t[kW2] - t[kW] * t[kW] / t[kCount];
+        sigma2[0] += t[kSigmaU2];
+        sigma2[1] += t[kSigmaV2];
+        sigma2[2] += t[kSigmaW2];
+      }
+      std::array<double, 3>& u = unseen.emplace_back();
+      for (std::size_t a = 0; a < 3 && n > 0; ++a) u[a] = std::sqrt(std::max(0.0, (error2[a] - sigma2[a]) / n));
+    }
+  return DepthResponse(field_grid, shifts_mm, std::move(measured), std::move(unseen));
 }
 
 }  // namespace plenopiv::process

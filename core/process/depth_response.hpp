@@ -2,6 +2,7 @@
 // shifts of simulated particles, per depth layer of the vector grid, and its inverse applied to w.
 #pragma once
 
+#include <array>
 #include <cstddef>
 #include <functional>
 #include <string>
@@ -36,27 +37,40 @@ inline constexpr double kDepthResponseLeast = 0.5;
 // Per depth layer (node z index) of the vector grid, the mean w measured over the layer's valid
 // vectors for each true shift, through (0, 0): a monotone piecewise-linear curve, inverted to take
 // MART's depth response out of a measured w. Beyond the outermost shifts the end segments go on.
+//
+// With it, per layer, the random error the correlation's own sigma does not see (MART's ghosts and
+// depth elongation, the same in both exposures): on the same simulated pairs, the RMS error of u and
+// v and the RMS of w about the layer's mean for its shift, less the RMS sigma the correlation
+// statistics predicted there, in quadrature (0 where the prediction is the larger). Added to every
+// vector's sigma in quadrature: an uncertainty calibrated by simulation of the instrument's own
+// camera, box, seeding and settings (the "uncertainty surface" of Timmins et al., Exp. Fluids 53
+// (2012) 1133), valid for flows near uniform over a window, as the response itself is.
 class DepthResponse {
  public:
   // `true_mm`: the shifts, ascending, 0 among them; `measured_mm[layer][k]`: what the processing
-  // measured for true_mm[k] (0 at the 0 shift). InputError, naming the layer's depth, when a
-  // layer's measured values do not rise with the true ones, or one is less than
-  // kDepthResponseLeast of its true shift.
-  DepthResponse(Grid3 field_grid, std::vector<double> true_mm, std::vector<std::vector<double>> measured_mm);
+  // measured for true_mm[k] (0 at the 0 shift); `unseen_sigma_mm[layer]`: the random error of
+  // (u, v, w as measured) that the correlation's sigma leaves out, mm, finite and >= 0 (empty: none).
+  // InputError, naming the layer's depth, when a layer's measured values do not rise with the true
+  // ones, or one is less than kDepthResponseLeast of its true shift.
+  DepthResponse(Grid3 field_grid, std::vector<double> true_mm, std::vector<std::vector<double>> measured_mm,
+                std::vector<std::array<double, 3>> unseen_sigma_mm = {});
 
   // The true shift that layer `layer` measures as `measured_mm`, and the inverse's slope there
   // (d true / d measured: what carries w's standard uncertainty).
   double true_mm(int layer, double measured_mm) const;
   double slope(int layer, double measured_mm) const;
   // w (and its uncertainty, where estimated) of every node of `field` taken through its layer's
-  // inverse. std::logic_error when `field` is not on the grid the response was measured on.
+  // inverse; each sigma first widened by its layer's unseen error, in quadrature. std::logic_error
+  // when `field` is not on the grid the response was measured on.
   void apply(VectorField& field) const;
 
   const Grid3& field_grid() const { return field_grid_; }
   const std::vector<double>& shifts_mm() const { return true_mm_; }
   const std::vector<std::vector<double>>& measured_mm() const { return measured_mm_; }
+  const std::vector<std::array<double, 3>>& unseen_sigma_mm() const { return unseen_sigma_mm_; }
   // Measured over true shift at the outermost shifts, the smallest and largest over the layers,
-  // as "depth response over z <first>..<last layer> mm: <least>..<most> of +<shift> mm, ... of -<shift> mm".
+  // as "depth response over z <first>..<last layer> mm: <least>..<most> of +<shift> mm, ... of
+  // -<shift> mm", then the largest unseen sigma of u, v and w over the layers.
   std::string summary() const;
 
   // The response as bytes (this build's layout) and back; deserialize throws InputError naming
@@ -71,13 +85,17 @@ class DepthResponse {
   Grid3 field_grid_;
   std::vector<double> true_mm_;
   std::vector<std::vector<double>> measured_mm_;
+  std::vector<std::array<double, 3>> unseen_sigma_mm_;  // one per layer, or none
 };
 
 // The response of `processor`'s settings on its camera and lenses: for each of
 // kDepthResponseShiftsVoxel, particles seeded uniformly at `seeding_ppm` particles per microlens
 // through the reconstructed box and 1 mm beyond each face, rendered (core/sim) before and after a
-// uniform depth shift, and processed as any pair; one set of particles per shift, or as many as
-// kDepthResponseVectorsPerLayer asks (at most kDepthResponseMostSets). Deterministic (fixed seeds).
+// uniform depth shift (with lateral shifts that sweep one voxel across the box, so that every layer
+// sees every sub-voxel lateral shift, as a flow's vectors do), and processed as any pair; one set
+// of particles per shift, or as many as kDepthResponseVectorsPerLayer asks (at most
+// kDepthResponseMostSets). The unseen sigma comes from the same vectors where the processing
+// estimates sigma. Deterministic (fixed seeds).
 // Costs four pairs' processing and rendering at the paper's scale (minutes), up to sixteen on a
 // small box (seconds). `progress` (optional) gets the fraction done after each pair.
 DepthResponse measure_depth_response(const PairProcessor& processor, const optics::CameraModel& camera,
