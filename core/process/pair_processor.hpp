@@ -102,7 +102,8 @@ class PairProcessor {
   // is built on the binned camera and white image, and frames are validated raw, then binned.
   // MART's and the correlation's buffers come from the processor's pool.
   // With settings.depth_response_ppm above 0, w (and its uncertainty) is then taken through the
-  // depth response measured when the processor was built (depth_response.hpp).
+  // depth response measured when the processor was built, and every sigma widened by the error its
+  // pairs showed beyond the correlation's sigma (depth_response.hpp).
   PairResult process(const ImageU16& frame_a, const ImageU16& frame_b, const PairOptions& options = {}) const;
   PairResult process(const ImageF& frame_a, const ImageF& frame_b, const PairOptions& options = {}) const;
   // process() without the depth response's correction: what the response is measured with.
