@@ -26,7 +26,7 @@ class ByteWriter {
   void vec(const std::vector<T, A>& v) {
     static_assert(std::is_trivially_copyable_v<T>);
     pod(std::uint64_t(v.size()));
-    out_.append(reinterpret_cast<const char*>(v.data()), v.size() * sizeof(T));
+    if (!v.empty()) out_.append(reinterpret_cast<const char*>(v.data()), v.size() * sizeof(T));
   }
 
  private:
@@ -72,6 +72,7 @@ class ByteReader {
   }
   void take(void* dst, std::size_t n) {
     if (n > in_.size() - at_) fail("truncated");
+    if (n == 0) return;  // an empty array's data() may be null, which memcpy must not get
     std::memcpy(dst, in_.data() + at_, n);
     at_ += n;
   }

@@ -142,6 +142,11 @@ TEST(DepthResponse, ItsBytesReadBackTheSameAndDamagedOnesAreRefused) {
   EXPECT_EQ(back.shifts_mm(), r.shifts_mm());
   EXPECT_EQ(back.measured_mm(), r.measured_mm());
   EXPECT_EQ(back.unseen_sigma_mm(), r.unseen_sigma_mm());
+  // Without an unseen sigma (a processing that estimates none): an empty array, read back empty.
+  const DepthResponse none(two_layers(), kShifts, r.measured_mm());
+  std::string none_bytes;
+  none.serialize(none_bytes);
+  EXPECT_TRUE(DepthResponse::deserialize(none_bytes).unseen_sigma_mm().empty());
   for (std::size_t cut = 0; cut < bytes.size(); cut += 7) {
     const std::string e = error_of([&] { DepthResponse::deserialize(std::string_view(bytes).substr(0, cut)); });
     EXPECT_NE(e.find("depth response bytes: "), std::string::npos) << cut << ": " << e;
