@@ -362,9 +362,9 @@ TEST(DepthResponse, TakesMartsShortfallOutOfAShearsDepthComponent) {
   ASSERT_EQ(processor.depth_response()->unseen_sigma_mm().size(), std::size_t(plain.correlation.field.grid.shape[2]));
   for (const std::array<double, 3>& unseen : processor.depth_response()->unseen_sigma_mm())
     EXPECT_GT(unseen[2], 0.0);  // MART's depth error is never all in the correlation's sigma
-  // Bounds from measurement (docs/accuracy.md): on this shallow box beside the focal plane the
-  // calibration's error is about the correlation's own sigma here, and w's sigma comes out twice its
-  // error (ratio 0.93 -> 2.24; 2 sigma covering 0.91 -> 1): an over-estimate, never narrower.
+  // Bounds from measurement (the values: docs/accuracy.md): on this shallow box beside the focal
+  // plane the calibration's error is about the correlation's own sigma here, and w's sigma comes out
+  // about twice its error: an over-estimate, never narrower.
   const auto ratio = [](const sim::UncertaintyCheck& c, std::size_t a) { return c.rms_sigma[a] / c.rms_error[a]; };
   EXPECT_GT(ratio(sigma_after, 2), ratio(sigma_before, 2) + 0.5);
   EXPECT_LT(ratio(sigma_after, 2), 2.6);
