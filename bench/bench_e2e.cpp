@@ -463,7 +463,7 @@ int main(int argc, char** argv) {
       e.off_band_gain[1], e.off_band_gain[2], bench::peak_rss_gb());
   // The per-vector uncertainty off the axis band: RMS sigma over RMS error, and the fraction of true
   // errors within +-1 and +-2 sigma, per component.
-  if (base.correlation.field.sigma_dz_mm.size() == base.correlation.field.dz_mm.size()) {
+  if (base.correlation.field.has_sigma()) {
     const double band_mm = 0.5 * piv::CorrelationSettings{}.passes.back().window[0] * voxel;
     const sim::UncertaintyCheck c =
         sim::uncertainty_check(base.correlation.field, flow, voxel, 3, 0,

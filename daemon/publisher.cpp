@@ -91,8 +91,7 @@ void Publisher::publish_vectors(msg::VectorFieldHeader header, const VectorField
   header.set_valid_fraction(s.valid_fraction);
   const double to_m_s = field.dt_s > 0 ? 1e-3 / field.dt_s : 0.0;
   // With the uncertainty: sigma_u, sigma_v, sigma_w after the others.
-  const bool sigma = field.sigma_dx_mm.size() == g.count() && field.sigma_dy_mm.size() == g.count() &&
-                     field.sigma_dz_mm.size() == g.count();
+  const bool sigma = field.has_sigma();
   std::vector<std::vector<float>> payloads(sigma ? 7 : 4, std::vector<float>(g.count()));
   for (std::size_t i = 0; i < g.count(); ++i) {
     payloads[0][i] = float(field.dx_mm[i] * to_m_s);

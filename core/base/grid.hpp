@@ -54,6 +54,12 @@ struct VectorField {
   std::vector<float> sigma_dx_mm, sigma_dy_mm, sigma_dz_mm;
   double dt_s = 0.0;  // pulse separation; velocity = displacement / dt
 
+  // The uncertainty estimated: all three sigma arrays hold a value per node.
+  bool has_sigma() const {
+    const std::size_t n = dz_mm.size();
+    return sigma_dx_mm.size() == n && sigma_dy_mm.size() == n && sigma_dz_mm.size() == n;
+  }
+
   VectorField() = default;
   explicit VectorField(const Grid3& g)
       : grid(g),

@@ -116,9 +116,7 @@ void DepthResponse::apply(VectorField& field) const {
   if (g.shape[2] != field_grid_.shape[2] || g.origin_mm[2] != field_grid_.origin_mm[2] ||
       g.spacing_mm[2] != field_grid_.spacing_mm[2])
     throw std::logic_error("DepthResponse::apply: the field's depth layers are not those the response was measured on");
-  const std::size_t n = field.dz_mm.size();
-  const bool with_sigma =
-      field.sigma_dx_mm.size() == n && field.sigma_dy_mm.size() == n && field.sigma_dz_mm.size() == n;
+  const bool with_sigma = field.has_sigma();
   const std::size_t per_layer = std::size_t(g.shape[0]) * std::size_t(g.shape[1]);
   for (int layer = 0; layer < g.shape[2]; ++layer) {
     const std::array<double, 3> unseen =
@@ -243,24 +241,22 @@ DepthResponse measure_depth_response(const PairProcessor& processor, const optic
         sets = int(std::clamp<std::size_t>((kDepthResponseVectorsPerLayer + per_layer - 1) / per_layer, 1,
                                            kDepthResponseMostSets));
       }
-      for (int layer = 0; layer < f.grid.shape[2]; ++layer)
-        for (std::size_t i = std::size_t(layer) * per_layer; i < std::size_t(layer + 1) * per_layer; ++i)
-          if (f.valid[i] && std::isfinite(f.dz_mm[i])) {
-            sum[std::size_t(layer)][k] += f.dz_mm[i];
-            count_valid[std::size_t(layer)][k] += 1;
-            with_sigma = with_sigma && f.sigma_dx_mm.size() == f.dz_mm.size() &&
-                         f.sigma_dy_mm.size() == f.dz_mm.size() && f.sigma_dz_mm.size() == f.dz_mm.size();
+      with_sigma = with_sigma && f.has_sigma();
+      for (int z = 0; z < f.grid.shape[2]; ++z)
+        for (int y = 0; y < f.grid.shape[1]; ++y)
+          for (int x = 0; x < f.grid.shape[0]; ++x) {
+            const std::size_t i = f.grid.index(x, y, z);
+            if (!f.valid[i] || !std::isfinite(f.dz_mm[i])) continue;
+            sum[std::size_t(z)][k] += f.dz_mm[i];
+            count_valid[std::size_t(z)][k] += 1;
             if (!with_sigma || !std::isfinite(f.sigma_dx_mm[i]) || !std::isfinite(f.sigma_dy_mm[i]) ||
                 !std::isfinite(f.sigma_dz_mm[i]))
               continue;
-            const std::size_t node = i - std::size_t(layer) * per_layer;
-            const sim::Point3 at{f.grid.coordinate_mm(0, int(node % std::size_t(f.grid.shape[0]))),
-                                 f.grid.coordinate_mm(1, int(node / std::size_t(f.grid.shape[0]))),
-                                 f.grid.coordinate_mm(2, layer)};
-            const sim::Point3 truth = flow.displacement_mm(at);
+            const sim::Point3 truth = flow.displacement_mm(
+                {f.grid.coordinate_mm(0, x), f.grid.coordinate_mm(1, y), f.grid.coordinate_mm(2, z)});
             const double u = f.dx_mm[i] - truth[0], v = f.dy_mm[i] - truth[1], w = f.dz_mm[i];
             const double su = f.sigma_dx_mm[i], sv = f.sigma_dy_mm[i], sw = f.sigma_dz_mm[i];
-            std::array<double, kTerms>& t = spread[std::size_t(layer)][k];
+            std::array<double, kTerms>& t = spread[std::size_t(z)][k];
             t[kCount] += 1;
             t[kU2] += u * u;
             t[kV2] += v * v;
