@@ -48,6 +48,22 @@ class LateralSweep : public sim::Flow {
   double w_mm_;
 };
 
+// The scattered sets' extra motion: each particle moved sideways by its own random shift, uniform
+// over one voxel in x and in y, so that every window holds every sub-voxel lateral fraction, as a
+// window of a flow whose lateral motion varies across it does. A window moved by the sweep alone
+// carries its one fraction's depth error (large near focus, where the lenses split a particle's
+// light most), which such a window averages; u and v keep the sweep as their truth only in the
+// unscattered sets, where no random shift adds to a window's mean motion.
+void scatter_sideways(std::vector<sim::Point3>& particles, const std::array<double, 3>& voxel_mm, std::uint64_t seed) {
+  const sim::Box one_voxel{{-0.5 * voxel_mm[0], -0.5 * voxel_mm[1], -0.5 * voxel_mm[2]},
+                           {0.5 * voxel_mm[0], 0.5 * voxel_mm[1], 0.5 * voxel_mm[2]}};
+  const std::vector<sim::Point3> shifts = sim::random_particles(one_voxel, particles.size(), seed + 1);
+  for (std::size_t i = 0; i < particles.size(); ++i) {
+    particles[i][0] += shifts[i][0];
+    particles[i][1] += shifts[i][1];
+  }
+}
+
 }  // namespace
 
 DepthResponse::DepthResponse(Grid3 field_grid, std::vector<double> true_mm,
@@ -214,60 +230,75 @@ DepthResponse measure_depth_response(const PairProcessor& processor, const optic
   // particle sets (each set its own particles and sensor noise).
   Grid3 field_grid;
   std::vector<std::vector<double>> sum, count_valid;
-  // Per depth layer and shift, over the valid vectors with a sigma: their count, u^2, v^2, w, w^2
-  // and sigma^2 of u, v, w summed (the unseen sigma's terms).
-  enum Term { kCount, kU2, kV2, kW, kW2, kSigmaU2, kSigmaV2, kSigmaW2, kTerms };
+  // Per depth layer and shift, over the valid vectors with a sigma, summed (the unseen sigma's
+  // terms): of the sets as they are, their count, the squared errors of u and v and their sigma^2;
+  // of the scattered sets, their count, w, w^2 and w's sigma^2.
+  enum Term { kCountUV, kU2, kV2, kSigmaU2, kSigmaV2, kCountW, kW, kW2, kSigmaW2, kTerms };
   std::vector<std::vector<std::array<double, kTerms>>> spread;
   bool with_sigma = true;
   int sets = 1;  // per shift, known after the first pair (it depends on the vectors per layer)
-  std::size_t pairs_done = 0;
+  std::size_t sets_done = 0;
   for (std::size_t k = 0; k < shifts_mm.size(); ++k) {
     if (shifts_mm[k] == 0.0) continue;
     for (int set = 0; set < sets; ++set) {
-      const std::uint64_t seed = 7001 + 2 * std::uint64_t(pairs_done);
+      const std::uint64_t seed = 7001 + 2 * std::uint64_t(sets_done);
       const std::vector<sim::Point3> a = sim::random_particles(box, count, seed);
       const LateralSweep flow(box, s.grid.spacing_mm, shifts_mm[k]);
-      const std::vector<sim::Point3> b = sim::displace(a, flow);
-      const PairResult r = processor.process_uncorrected(sim::render(camera, lenses, a, render, seed).image,
-                                                         sim::render(camera, lenses, b, render, seed + 1).image);
-      const VectorField& f = r.correlation.field;
-      const std::size_t per_layer = std::size_t(f.grid.shape[0]) * std::size_t(f.grid.shape[1]);
-      if (sum.empty()) {
-        field_grid = f.grid;
-        sum.assign(std::size_t(f.grid.shape[2]), std::vector<double>(shifts_mm.size(), 0.0));
-        count_valid = sum;
-        spread.assign(sum.size(),
-                      std::vector<std::array<double, kTerms>>(shifts_mm.size(), std::array<double, kTerms>{}));
-        sets = int(std::clamp<std::size_t>((kDepthResponseVectorsPerLayer + per_layer - 1) / per_layer, 1,
-                                           kDepthResponseMostSets));
+      const ImageU16 frame_a = sim::render(camera, lenses, a, render, seed).image;
+      // Each set twice: as the sweep moves it (the gain, and u's and v's error), then with every
+      // particle also moved sideways at random (w's error about the layer's mean).
+      for (const bool scattered : {false, true}) {
+        std::vector<sim::Point3> b = sim::displace(a, flow);
+        if (scattered) scatter_sideways(b, s.grid.spacing_mm, seed);
+        const PairResult r =
+            processor.process_uncorrected(frame_a, sim::render(camera, lenses, b, render, seed + 1).image);
+        const VectorField& f = r.correlation.field;
+        const std::size_t per_layer = std::size_t(f.grid.shape[0]) * std::size_t(f.grid.shape[1]);
+        if (sum.empty()) {
+          field_grid = f.grid;
+          sum.assign(std::size_t(f.grid.shape[2]), std::vector<double>(shifts_mm.size(), 0.0));
+          count_valid = sum;
+          spread.assign(sum.size(),
+                        std::vector<std::array<double, kTerms>>(shifts_mm.size(), std::array<double, kTerms>{}));
+          sets = int(std::clamp<std::size_t>((kDepthResponseVectorsPerLayer + per_layer - 1) / per_layer, 1,
+                                             kDepthResponseMostSets));
+        }
+        with_sigma = with_sigma && f.has_sigma();
+        for (int z = 0; z < f.grid.shape[2]; ++z)
+          for (int y = 0; y < f.grid.shape[1]; ++y)
+            for (int x = 0; x < f.grid.shape[0]; ++x) {
+              const std::size_t i = f.grid.index(x, y, z);
+              if (!f.valid[i] || !std::isfinite(f.dz_mm[i])) continue;
+              if (!scattered) {
+                sum[std::size_t(z)][k] += f.dz_mm[i];
+                count_valid[std::size_t(z)][k] += 1;
+              }
+              if (!with_sigma || !std::isfinite(f.sigma_dx_mm[i]) || !std::isfinite(f.sigma_dy_mm[i]) ||
+                  !std::isfinite(f.sigma_dz_mm[i]))
+                continue;
+              std::array<double, kTerms>& t = spread[std::size_t(z)][k];
+              if (scattered) {
+                const double w = f.dz_mm[i], sw = f.sigma_dz_mm[i];
+                t[kCountW] += 1;
+                t[kW] += w;
+                t[kW2] += w * w;
+                t[kSigmaW2] += sw * sw;
+              } else {
+                const sim::Point3 truth = flow.displacement_mm(
+                    {f.grid.coordinate_mm(0, x), f.grid.coordinate_mm(1, y), f.grid.coordinate_mm(2, z)});
+                const double u = f.dx_mm[i] - truth[0], v = f.dy_mm[i] - truth[1];
+                const double su = f.sigma_dx_mm[i], sv = f.sigma_dy_mm[i];
+                t[kCountUV] += 1;
+                t[kU2] += u * u;
+                t[kV2] += v * v;
+                t[kSigmaU2] += su * su;
+                t[kSigmaV2] += sv * sv;
+              }
+            }
+        if (progress)
+          progress((double(sets_done) + (scattered ? 1.0 : 0.5)) / double(shifts * std::size_t(sets)));
       }
-      with_sigma = with_sigma && f.has_sigma();
-      for (int z = 0; z < f.grid.shape[2]; ++z)
-        for (int y = 0; y < f.grid.shape[1]; ++y)
-          for (int x = 0; x < f.grid.shape[0]; ++x) {
-            const std::size_t i = f.grid.index(x, y, z);
-            if (!f.valid[i] || !std::isfinite(f.dz_mm[i])) continue;
-            sum[std::size_t(z)][k] += f.dz_mm[i];
-            count_valid[std::size_t(z)][k] += 1;
-            if (!with_sigma || !std::isfinite(f.sigma_dx_mm[i]) || !std::isfinite(f.sigma_dy_mm[i]) ||
-                !std::isfinite(f.sigma_dz_mm[i]))
-              continue;
-            const sim::Point3 truth = flow.displacement_mm(
-                {f.grid.coordinate_mm(0, x), f.grid.coordinate_mm(1, y), f.grid.coordinate_mm(2, z)});
-            const double u = f.dx_mm[i] - truth[0], v = f.dy_mm[i] - truth[1], w = f.dz_mm[i];
-            const double su = f.sigma_dx_mm[i], sv = f.sigma_dy_mm[i], sw = f.sigma_dz_mm[i];
-            std::array<double, kTerms>& t = spread[std::size_t(z)][k];
-            t[kCount] += 1;
-            t[kU2] += u * u;
-            t[kV2] += v * v;
-            t[kW] += w;
-            t[kW2] += w * w;
-            t[kSigmaU2] += su * su;
-            t[kSigmaV2] += sv * sv;
-            t[kSigmaW2] += sw * sw;
-          }
-      ++pairs_done;
-      if (progress) progress(double(pairs_done) / double(shifts * std::size_t(sets)));
+      ++sets_done;
     }
   }
   std::vector<std::vector<double>> measured(sum.size(), std::vector<double>(shifts_mm.size(), 0.0));
@@ -276,23 +307,26 @@ DepthResponse measure_depth_response(const PairProcessor& processor, const optic
       if (shifts_mm[k] != 0.0)
         measured[layer][k] = count_valid[layer][k] > 0 ? sum[layer][k] / count_valid[layer][k] : std::nan("");
   // Pooled over the shifts: the mean square error (u and v about the sweep's, w about its shift's
-  // mean) less the mean square sigma, per component.
+  // mean over the scattered sets) less the mean square sigma, per component.
   std::vector<std::array<double, 3>> unseen;
   if (with_sigma)
     for (const std::vector<std::array<double, kTerms>>& layer : spread) {
-      double n = 0, error2[3] = {0, 0, 0}, sigma2[3] = {0, 0, 0};
+      double n[3] = {0, 0, 0}, error2[3] = {0, 0, 0}, sigma2[3] = {0, 0, 0};
       for (const std::array<double, kTerms>& t : layer) {
-        if (t[kCount] == 0) continue;
-        n += t[kCount];
+        n[0] += t[kCountUV];
+        n[1] += t[kCountUV];
         error2[0] += t[kU2];
         error2[1] += t[kV2];
-        error2[2] += t[kW2] - t[kW] * t[kW] / t[kCount];
         sigma2[0] += t[kSigmaU2];
         sigma2[1] += t[kSigmaV2];
+        if (t[kCountW] == 0) continue;
+        n[2] += t[kCountW];
+        error2[2] += t[kW2] - t[kW] * t[kW] / t[kCountW];
         sigma2[2] += t[kSigmaW2];
       }
       std::array<double, 3>& u = unseen.emplace_back();
-      for (std::size_t a = 0; a < 3 && n > 0; ++a) u[a] = std::sqrt(std::max(0.0, (error2[a] - sigma2[a]) / n));
+      for (std::size_t a = 0; a < 3; ++a)
+        if (n[a] > 0) u[a] = std::sqrt(std::max(0.0, (error2[a] - sigma2[a]) / n[a]));
     }
   return DepthResponse(field_grid, shifts_mm, std::move(measured), std::move(unseen));
 }

@@ -312,8 +312,9 @@ TEST(DepthResponse, TakesMartsShortfallOutOfAShearsDepthComponent) {
   OperatorCache operators(1, folder);
   const PairProcessor processor(camera, calibration, settings, &operators, progress);
   ASSERT_NE(processor.depth_response(), nullptr);
-  // 25 vectors per layer here: four particle sets for each of the four shifts.
-  ASSERT_EQ(fractions.size(), 16u);
+  // 25 vectors per layer here: four particle sets for each of the four shifts, each processed as it
+  // is and with its particles scattered sideways.
+  ASSERT_EQ(fractions.size(), 32u);
   EXPECT_TRUE(std::is_sorted(fractions.begin(), fractions.end()));
   EXPECT_DOUBLE_EQ(fractions.back(), 1.0);
   std::cout << "measured: " << processor.depth_response()->summary() << "\n";
@@ -363,18 +364,18 @@ TEST(DepthResponse, TakesMartsShortfallOutOfAShearsDepthComponent) {
   for (const std::array<double, 3>& unseen : processor.depth_response()->unseen_sigma_mm())
     EXPECT_GT(unseen[2], 0.0);  // MART's depth error is never all in the correlation's sigma
   // Bounds from measurement (the values: docs/accuracy.md): on this shallow box beside the focal
-  // plane the calibration's error is about the correlation's own sigma here, and w's sigma comes out
-  // about twice its error: an over-estimate, never narrower.
+  // plane the correlation's own sigma already about matches w's error, and the calibration's error
+  // added to it makes w's sigma wider than the error: an over-estimate, never narrower.
   const auto ratio = [](const sim::UncertaintyCheck& c, std::size_t a) { return c.rms_sigma[a] / c.rms_error[a]; };
   EXPECT_GT(ratio(sigma_after, 2), ratio(sigma_before, 2) + 0.5);
-  EXPECT_LT(ratio(sigma_after, 2), 2.6);
+  EXPECT_LT(ratio(sigma_after, 2), 2.1);
   EXPECT_GT(sigma_after.within_2[2], 0.95);
   for (std::size_t a = 0; a < 2; ++a)  // lateral: never narrowed
     EXPECT_GE(sigma_after.rms_sigma[a], sigma_before.rms_sigma[a]);
 
   OperatorCache later_operators(1, folder);
   const PairProcessor later(camera, calibration, settings, &later_operators, progress);
-  EXPECT_EQ(fractions.size(), 16u) << "measured again";
+  EXPECT_EQ(fractions.size(), 32u) << "measured again";
   EXPECT_NE(later.setup_note().find("depth response from the cache"), std::string::npos) << later.setup_note();
   EXPECT_TRUE(later.setup_on_disk());
   EXPECT_EQ(later.process(frame_a, frame_b).correlation.field.dz_mm, corrected.correlation.field.dz_mm);
