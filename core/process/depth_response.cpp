@@ -295,8 +295,7 @@ DepthResponse measure_depth_response(const PairProcessor& processor, const optic
                 t[kSigmaV2] += sv * sv;
               }
             }
-        if (progress)
-          progress((double(sets_done) + (scattered ? 1.0 : 0.5)) / double(shifts * std::size_t(sets)));
+        if (progress) progress((double(sets_done) + (scattered ? 1.0 : 0.5)) / double(shifts * std::size_t(sets)));
       }
       ++sets_done;
     }
