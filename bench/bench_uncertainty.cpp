@@ -209,7 +209,9 @@ void reconstructed_cases() {
   // sigma does not.
   process::ProcessSettings with_response = settings;
   with_response.depth_response_ppm = 0.5;
+  const double setup_start = now_s();
   const process::PairProcessor calibrated(camera, nominal, with_response);
+  std::printf("bench=uncertainty kind=reconstructed case=depth_response_setup setup_s=%.1f\n", now_s() - setup_start);
   const sim::Box box{{-h - 1, -h - 1, -h - 1}, {h + 1, h + 1, h + 1}};
   const auto pa = sim::random_particles(box, sim::particle_count_from_ppm(camera, box, 0.5), 2015);
   sim::RenderOptions ro;
