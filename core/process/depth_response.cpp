@@ -26,11 +26,14 @@ std::string mm(double v) {
 }
 
 // A calibration pair's motion: the depth shift, and lateral shifts that sweep one voxel across the
-// box (u along y, v along x), so that each layer's vectors see every sub-voxel lateral shift. MART
-// discretises a particle on the lens grid: a pair moved by whole voxels sideways (or not at all) is
-// reconstructed alike in both exposures, while a fraction of a voxel changes how its light splits
-// between lenses, and with it w's response and error; a flow's vectors carry every fraction. The
-// gradient (one voxel over the box) is far below what the window deformation follows.
+// particles' box (u along y, v along x), so that each layer's vectors see the sub-voxel lateral
+// shifts. MART discretises a particle on the lens grid: a pair moved by whole voxels sideways (or
+// not at all) is reconstructed alike in both exposures, while a fraction of a voxel changes how its
+// light splits between lenses, and with it w's response and error; a flow's vectors carry every
+// fraction. The vectors' nodes span less than the box (the margin, half a window at each face), so
+// they see most fractions on a large box and the middle ones only on a small one (`docs/lab/`,
+// 2026-11-30: a sweep over the nodes alone was measured and not kept). The gradient (one voxel over
+// the box) is far below what the window deformation follows.
 class LateralSweep : public sim::Flow {
  public:
   LateralSweep(const sim::Box& box, const std::array<double, 3>& voxel_mm, double depth_shift_mm)
