@@ -54,9 +54,9 @@ class LateralSweep : public sim::Flow {
 // The scattered sets' extra motion: each particle moved sideways by its own random shift, uniform
 // over one voxel in x and in y, so that every window holds every sub-voxel lateral fraction, as a
 // window of a flow whose lateral motion varies across it does. A window moved by the sweep alone
-// carries its one fraction's depth error (large near focus, where the lenses split a particle's
-// light most), which such a window averages; u and v keep the sweep as their truth only in the
-// unscattered sets, where no random shift adds to a window's mean motion.
+// carries its one fraction's depth error (largest near focus), which such a window averages; u and
+// v keep the sweep as their truth only in the unscattered sets, where no random shift adds to a
+// window's mean motion.
 void scatter_sideways(std::vector<sim::Point3>& particles, const std::array<double, 3>& voxel_mm, std::uint64_t seed) {
   const sim::Box one_voxel{{-0.5 * voxel_mm[0], -0.5 * voxel_mm[1], -0.5 * voxel_mm[2]},
                            {0.5 * voxel_mm[0], 0.5 * voxel_mm[1], 0.5 * voxel_mm[2]}};

@@ -42,10 +42,10 @@ inline constexpr double kDepthResponseLeast = 0.5;
 // depth elongation, the same in both exposures): on the simulated pairs, the RMS error of u and v,
 // and the RMS of w about the layer's mean for its shift on pairs whose particles also move sideways
 // at random, less the RMS sigma the correlation statistics predicted there, in quadrature (0 where
-// the prediction is the larger). Added to every
-// vector's sigma in quadrature: an uncertainty calibrated by simulation of the instrument's own
-// camera, box, seeding and settings (the "uncertainty surface" of Timmins et al., Exp. Fluids 53
-// (2012) 1133), valid for flows near uniform over a window, as the response itself is.
+// the prediction is the larger). Added to every vector's sigma in quadrature: an uncertainty
+// calibrated by simulation of the instrument's own camera, box, seeding and settings (the
+// "uncertainty surface" of Timmins et al., Exp. Fluids 53 (2012) 1133), valid for flows near
+// uniform over a window, as the response itself is.
 class DepthResponse {
  public:
   // `true_mm`: the shifts, ascending, 0 among them; `measured_mm[layer][k]`: what the processing
@@ -93,15 +93,16 @@ class DepthResponse {
 // kDepthResponseShiftsVoxel, particles seeded uniformly at `seeding_ppm` particles per microlens
 // through the reconstructed box and 1 mm beyond each face, rendered (core/sim) before and after a
 // uniform depth shift (with lateral shifts that sweep one voxel across the box, so that every layer
-// sees every sub-voxel lateral shift, as a flow's vectors do), and processed as any pair; one set
-// of particles per shift, or as many as kDepthResponseVectorsPerLayer asks (at most
-// kDepthResponseMostSets). Each set is processed a second time with every particle of its second
-// frame also moved sideways by a random fraction of a voxel: a window of a flow holds particles at
-// many lateral fractions, and its w averages their errors, while a window the sweep alone moves
-// carries one fraction's. The unseen sigma of u and v comes from the first pairs, that of w from
-// the second, where the processing estimates sigma. Deterministic (fixed seeds).
-// Costs eight pairs' processing at the paper's scale (minutes), up to thirty-two on a small box
-// (seconds). `progress` (optional) gets the fraction done after each pair.
+// sees the sub-voxel lateral shifts a flow's vectors carry: most of them on a large box, the middle
+// ones on a small one), and processed as any pair; one set of particles per shift, or as many as
+// kDepthResponseVectorsPerLayer asks (at most kDepthResponseMostSets). Each set is processed a
+// second time with every particle of its second frame also moved sideways by a random fraction of a
+// voxel: a window of a flow holds particles at many lateral fractions, and its w averages their
+// errors, while a window the sweep alone moves carries one fraction's. The unseen sigma of u and v
+// comes from the first pairs, that of w from the second, where the processing estimates sigma.
+// Deterministic (fixed seeds). Costs eight pairs' processing at the paper's scale (minutes), up to
+// thirty-two on a small box (seconds). `progress` (optional) gets the fraction done after each
+// pair.
 DepthResponse measure_depth_response(const PairProcessor& processor, const optics::CameraModel& camera,
                                      const optics::MicrolensArray& lenses, double seeding_ppm,
                                      const std::function<void(double)>& progress = {});
