@@ -31,9 +31,9 @@ std::string mm(double v) {
 // not at all) is reconstructed alike in both exposures, while a fraction of a voxel changes how its
 // light splits between lenses, and with it w's response and error; a flow's vectors carry every
 // fraction. The vectors' nodes span less than the box (the margin, half a window at each face), so
-// they see most fractions on a large box and the middle ones only on a small one (`docs/lab/`,
-// 2026-11-30: a sweep over the nodes alone was measured and not kept). The gradient (one voxel over
-// the box) is far below what the window deformation follows.
+// they see most fractions on a large box and the middle ones only on a small one (docs/accuracy.md,
+// "Per-vector uncertainty"). The gradient (one voxel over the box) is far below what the window
+// deformation follows.
 class LateralSweep : public sim::Flow {
  public:
   LateralSweep(const sim::Box& box, const std::array<double, 3>& voxel_mm, double depth_shift_mm)
@@ -248,10 +248,11 @@ DepthResponse measure_depth_response(const PairProcessor& processor, const optic
       const std::vector<sim::Point3> a = sim::random_particles(box, count, seed);
       const LateralSweep flow(box, s.grid.spacing_mm, shifts_mm[k]);
       const ImageU16 frame_a = sim::render(camera, lenses, a, render, seed).image;
+      const std::vector<sim::Point3> swept = sim::displace(a, flow);
       // Each set twice: as the sweep moves it (the gain, and u's and v's error), then with every
       // particle also moved sideways at random (w's error about the layer's mean).
       for (const bool scattered : {false, true}) {
-        std::vector<sim::Point3> b = sim::displace(a, flow);
+        std::vector<sim::Point3> b = swept;
         if (scattered) scatter_sideways(b, s.grid.spacing_mm, seed);
         const PairResult r =
             processor.process_uncorrected(frame_a, sim::render(camera, lenses, b, render, seed + 1).image);
