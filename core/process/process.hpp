@@ -137,7 +137,7 @@ using PairProgress = std::function<void(const std::string& stage, double fractio
 // What every pair of a run is reconstructed with; built once per run, shared read-only by
 // concurrent pairs. When the separable weights take the lens array (rectangular, centres within
 // recon::kSeparableTolerancePx of their column and row means: recon::separable_lattice), the
-// operator works on raw pixels. Otherwise (a calibrated array is always rotated a little, warped,
+// operator works on raw pixels. Otherwise (a calibrated array rotated more than a little, warped,
 // or hexagonal) the frames are first resampled onto an axis-aligned lattice
 // (lightfield::LatticeResampler) and the operator is built on that lattice and its white image;
 // `note` then says so and why, e.g. "image resampled onto an axis-aligned lattice: calibrated

@@ -18,8 +18,10 @@
 namespace plenopiv::recon {
 
 // How far (pixels) a lens centre may sit from its column's mean x and its row's mean y for the
-// separable weights.
-inline constexpr double kSeparableTolerancePx = 0.25;
+// separable weights: up to it the weights on the means reconstruct depth better than resampling the
+// frames onto an axis-aligned lattice, whose blend across lenses widens every particle's image
+// (docs/recon.md, "Rotated, warped and hex arrays").
+inline constexpr double kSeparableTolerancePx = 1.0;
 
 // The separable form's view of a rectangular array: one x per lens column and one y per lens row
 // (their means), and how far any lens centre departs from them. WeightingOperator takes an array
@@ -103,8 +105,8 @@ struct SliceOptics {
 // separable, so W is never stored: two 1-D tables per slice.
 //
 // Requires a rectangular lens array whose centres share x along columns and y along rows within
-// 0.25 px (the nominal lattice, or a calibrated one without measurable rotation); the column and
-// row means are used. Hex, rotated or warped arrays are an InputError that says so.
+// kSeparableTolerancePx (the nominal lattice, or a calibrated one with little rotation); the column
+// and row means are used. Hex, rotated or warped arrays are an InputError that says so.
 class WeightingOperator {
  public:
   // `white` must have the sensor's size. `angular_sampling` scales the (u, v) samples per aperture

@@ -217,16 +217,21 @@ TEST(RotatedArray, ReconstructsAsWellAsTheUnrotatedCamera) {
             << ref.depth_rms_voxel << ", Q* " << ref.q << "\n";
   for (double degrees : {0.0, 0.3, 1.0, 2.0}) {
     const SceneErrors e = reconstruct_scene(true_array(degrees, 0.001));
-    std::cout << "measured: " << degrees << " deg + 1 um jitter (resampled): lateral " << e.lateral_rms_voxel
+    std::cout << "measured: " << degrees << " deg + 1 um jitter: lateral " << e.lateral_rms_voxel
               << " voxel rms, depth " << e.depth_rms_voxel << ", Q* " << e.q << "\n  " << e.note << "\n";
-    EXPECT_NE(e.note.find("image resampled onto an axis-aligned lattice"), std::string::npos) << e.note;
+    // The jitter alone departs under recon::kSeparableTolerancePx (raw pixels, the separable
+    // weights on the lens columns' and rows' means); a rotation of 0.3 deg or more, beyond it.
+    if (degrees == 0.0)
+      EXPECT_TRUE(e.note.empty()) << e.note;
+    else
+      EXPECT_NE(e.note.find("image resampled onto an axis-aligned lattice"), std::string::npos) << e.note;
     // Against the unrotated camera: lateral error at most 0.1 voxel larger, depth error at most 0.7
     // (single fits scatter by a few voxels in depth), Q* not lower (the blend across lenses
     // smooths the volume, which Q* rewards).
     EXPECT_LT(e.lateral_rms_voxel, ref.lateral_rms_voxel + 0.1)
         << degrees << " deg (measured +0.04 at most, at 2 deg, against 0.425)";
-    EXPECT_LT(e.depth_rms_voxel, ref.depth_rms_voxel + 0.7) << degrees << " deg (measured -0.01 to +0.42 against 1.86)";
-    EXPECT_GT(e.q, ref.q - 0.05) << degrees << " deg (measured 0.395-0.515 against 0.371)";
+    EXPECT_LT(e.depth_rms_voxel, ref.depth_rms_voxel + 0.7) << degrees << " deg (measured -0.10 to +0.44 against 1.86)";
+    EXPECT_GT(e.q, ref.q - 0.05) << degrees << " deg (measured 0.390-0.515 against 0.369)";
   }
   std::cout << "measured: test time " << std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count()
             << " s\n";
