@@ -286,7 +286,7 @@ correlation:
   EXPECT_TRUE(note.empty()) << note;
   std::cout << "measured: unrotated: mean displacement " << ref[0] << " " << ref[1] << " " << ref[2] << " mm (truth "
             << shift[0] << " " << shift[1] << " " << shift[2] << ")\n";
-  for (double degrees : {0.3, 1.0}) {
+  for (double degrees : {0.05, 0.3, 1.0}) {
     const auto array = true_array(degrees, 0.001);
     sim::TargetOptions target = sim::calibration_target();
     target.rays_per_lens = 4000;
@@ -295,18 +295,26 @@ correlation:
     std::cout << "measured: " << degrees << " deg (calibrated "
               << cal.spot_lattice.rotation_rad * 180 / std::numbers::pi << " deg): mean displacement " << rot[0] << " "
               << rot[1] << " " << rot[2] << " mm\n  " << note << "\n";
+    // 0.05 deg departs under recon::kSeparableTolerancePx: raw pixels, the separable weights on the
+    // calibrated lens columns' and rows' means.
     char expected[96];
     std::snprintf(expected, sizeof expected,
                   "image resampled onto an axis-aligned lattice: calibrated array rotated %.2f deg", degrees);
-    EXPECT_NE(note.find(expected), std::string::npos) << note;
+    if (degrees < 0.1)
+      EXPECT_TRUE(note.empty()) << note;
+    else
+      EXPECT_NE(note.find(expected), std::string::npos) << note;
     // Lateral within 0.01 mm of the unrotated camera's; the depth component recovers less as the
     // rotation grows (the blend across lenses widens each particle's image), at least 60 % of the
-    // unrotated camera's at 0.3 deg and 40 % at 1 deg.
+    // unrotated camera's at 0.3 deg and 40 % at 1 deg; within the tolerance as much as unrotated.
     for (int k = 0; k < 2; ++k)
       EXPECT_NEAR(rot[std::size_t(k)], ref[std::size_t(k)], 0.01)
           << degrees << " axis " << k << " (measured within 0.002 mm)";
-    EXPECT_GT(rot[2], (degrees < 0.5 ? 0.6 : 0.4) * ref[2])
-        << degrees << " deg (measured 0.118 mm at 0.3 deg, 0.078 at 1 deg, 0.154 unrotated)";
+    EXPECT_GT(rot[2], (degrees < 0.1   ? 0.9
+                       : degrees < 0.5 ? 0.6
+                                       : 0.4) *
+                          ref[2])
+        << degrees << " deg (measured 0.144 mm at 0.05 deg, 0.119 at 0.3, 0.072 at 1, 0.154 unrotated)";
   }
   std::cout << "measured: test time " << std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count()
             << " s\n";
