@@ -26,11 +26,11 @@
 #include <cstring>
 #include <filesystem>
 #include <memory>
-#include <numbers>
 #include <string>
 #include <vector>
 
 #include "bench/bench_support.hpp"
+#include "bench/simulated_calibration.hpp"
 #include "core/base/errors.hpp"
 #include "core/calib/nominal_calibration.hpp"
 #include "core/optics/camera_file.hpp"
@@ -125,15 +125,10 @@ int main(int argc, char** argv) {
 
   // The true array: the nominal lattice rotated, offset, each lens jittered (bench_rotated_shear's
   // defaults), or the camera file's own.
-  calib::LoadedCalibration truth = calib::nominal_calibration(camera);
-  if (!nominal) {
-    optics::Lattice lattice = optics::Lattice::nominal(camera);
-    lattice.rotation_rad = degrees * std::numbers::pi / 180;
-    lattice.offset_x_mm = 1e-3 * lens_offset_um[0];
-    lattice.offset_y_mm = 1e-3 * lens_offset_um[1];
-    truth.lenses = sim::jittered_array(lattice, 1e-3 * jitter_um, 5);
-    truth.white_correction = calib::geometric_white_image(camera, truth.lenses);
-  }
+  const calib::LoadedCalibration truth =
+      nominal ? calib::nominal_calibration(camera)
+              : bench::simulated_calibration(camera, degrees, {1e-3 * lens_offset_um[0], 1e-3 * lens_offset_um[1]},
+                                             1e-3 * jitter_um);
 
   const process::PairProcessor plain(camera, truth, settings);
   process::ProcessSettings with_response = settings;

@@ -17,10 +17,10 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
-#include <numbers>
 #include <string>
 
 #include "bench/bench_support.hpp"
+#include "bench/simulated_calibration.hpp"
 #include "core/base/yaml_access.hpp"
 #include "core/calib/nominal_calibration.hpp"
 #include "core/optics/camera_file.hpp"
@@ -62,13 +62,7 @@ int main(int argc, char** argv) {
 
   // The true array: the nominal lattice rotated, offset by a fraction of a lens, each lens jittered
   // by 1 um (0.14 px).
-  optics::Lattice lattice = optics::Lattice::nominal(camera);
-  lattice.rotation_rad = degrees * std::numbers::pi / 180;
-  lattice.offset_x_mm = 0.011;
-  lattice.offset_y_mm = -0.007;
-  calib::LoadedCalibration truth;
-  truth.lenses = sim::jittered_array(lattice, 0.001, 5);
-  truth.white_correction = calib::geometric_white_image(camera, truth.lenses);
+  const calib::LoadedCalibration truth = bench::simulated_calibration(camera, degrees, {0.011, -0.007}, 0.001);
 
   const Grid3& g = spec.full.grid;
   const double voxel = g.spacing_mm[0];
