@@ -90,22 +90,32 @@ DepthResponse::DepthResponse(Grid3 field_grid, std::vector<double> true_mm,
   for (std::size_t layer = 0; layer < measured_mm_.size(); ++layer) {
     const std::vector<double>& m = measured_mm_[layer];
     if (m.size() != true_mm_.size()) throw std::logic_error("DepthResponse: one measured shift per true shift");
+    std::vector<double> curve = m;
     for (std::size_t k = 0; k < m.size(); ++k) {
       const bool rises = k + 1 == m.size() || m[k + 1] > m[k];
-      const bool follows = true_mm_[k] == 0 ? m[k] == 0 : m[k] / true_mm_[k] >= kDepthResponseLeast;
-      if (std::isfinite(m[k]) && rises && follows) continue;
+      const bool outermost = k == 0 || k + 1 == m.size();
+      const double least = kDepthResponseLeast * true_mm_[k];
+      const bool follows = true_mm_[k] == 0 ? m[k] == 0 : !outermost || m[k] / true_mm_[k] >= kDepthResponseLeast;
+      if (std::isfinite(m[k]) && rises && follows) {
+        // Rising through (0, 0), an inner value lies on its shift's side of 0; raised to `least`
+        // it still lies below the outermost value on that side, so the curve still rises.
+        if (true_mm_[k] != 0 && std::abs(m[k]) < std::abs(least)) curve[k] = least;
+        continue;
+      }
       std::string seen;
       for (std::size_t j = 0; j < m.size(); ++j) seen += (j ? ", " : "") + mm(true_mm_[j]) + " -> " + mm(m[j]);
       throw InputError("depth response: the vectors at z = " + mm(field_grid_.coordinate_mm(2, int(layer))) +
-                       " mm follow a depth shift by less than half of it, or not at all (true -> measured mm: " + seen +
-                       "), so correcting their w would more than double its noise; turn "
+                       " mm follow a depth shift by less than " + mm(kDepthResponseLeast) +
+                       " of it, or not at all (true -> measured mm: " + seen + "), so correcting their w would multiply "
+                       "its noise by more than " + mm(1 / kDepthResponseLeast) + "; turn "
                        "reconstruction.depth_response_ppm off, or give the volume a depth guard or move it");
     }
+    curve_mm_.push_back(std::move(curve));
   }
 }
 
 int DepthResponse::segment(int layer, double measured_mm) const {
-  const std::vector<double>& m = measured_mm_[std::size_t(layer)];
+  const std::vector<double>& m = curve_mm_[std::size_t(layer)];
   // The first segment whose upper end lies above the value, the last one for values beyond it.
   int k = 0;
   while (k + 2 < int(m.size()) && measured_mm > m[std::size_t(k) + 1]) ++k;
@@ -113,13 +123,13 @@ int DepthResponse::segment(int layer, double measured_mm) const {
 }
 
 double DepthResponse::segment_slope(int layer, int k) const {
-  const std::vector<double>& m = measured_mm_[std::size_t(layer)];
+  const std::vector<double>& m = curve_mm_[std::size_t(layer)];
   return (true_mm_[std::size_t(k) + 1] - true_mm_[std::size_t(k)]) / (m[std::size_t(k) + 1] - m[std::size_t(k)]);
 }
 
 double DepthResponse::along_segment(int layer, int k, double measured_mm) const {
   return true_mm_[std::size_t(k)] +
-         (measured_mm - measured_mm_[std::size_t(layer)][std::size_t(k)]) * segment_slope(layer, k);
+         (measured_mm - curve_mm_[std::size_t(layer)][std::size_t(k)]) * segment_slope(layer, k);
 }
 
 double DepthResponse::true_mm(int layer, double measured_mm) const {
@@ -165,6 +175,18 @@ std::string DepthResponse::summary() const {
     }
     text += (k ? " " : ", ") + mm(lo) + ".." + mm(hi) + " of " + (true_mm_[k] > 0 ? "+" : "") + mm(true_mm_[k]) + " mm";
   }
+  int raised = 0, first = -1, last = -1;
+  for (std::size_t layer = 0; layer < curve_mm_.size(); ++layer)
+    for (std::size_t k = 0; k < true_mm_.size(); ++k)
+      if (curve_mm_[layer][k] != measured_mm_[layer][k]) {
+        ++raised;
+        if (first < 0) first = int(layer);
+        last = int(layer);
+      }
+  if (raised)
+    text += "; " + std::to_string(raised) + " inner shift" + (raised > 1 ? "s" : "") + " over z " +
+            mm(field_grid_.coordinate_mm(2, first)) + ".." + mm(field_grid_.coordinate_mm(2, last)) +
+            " mm measured as less than " + mm(kDepthResponseLeast) + " of it, taken as that (w there under-corrected)";
   if (!unseen_sigma_mm_.empty()) {
     std::array<double, 3> most{};
     for (const std::array<double, 3>& u : unseen_sigma_mm_)

@@ -29,10 +29,15 @@ inline constexpr double kDepthResponseShiftsVoxel[] = {-1.0, -0.5, 0.5, 1.0};
 inline constexpr std::size_t kDepthResponseVectorsPerLayer = 400;
 inline constexpr std::size_t kDepthResponseMostSets = 4;
 
-// The least fraction of each true shift a layer must measure: below it the inverse would multiply
-// w's random error by about 1 / kDepthResponseLeast or more, and a depth that barely follows motion
-// (the end slices of a volume without a depth guard, say) is better reported than amplified.
-inline constexpr double kDepthResponseLeast = 0.5;
+// The least fraction of the outermost true shifts (either way) a layer must measure: below it the
+// inverse would multiply w's random error by more than 1 / kDepthResponseLeast, and a depth that
+// barely follows motion (the end slices of a volume without a depth guard, say) is better reported
+// than amplified. A third, not a half: the layers next to the focal plane of a resampled
+// (calibrated, rotated) array follow a voxel's shift by less than half, and corrected there w's
+// error is still the smaller (docs/accuracy.md). An inner shift measured as less (MART locking a
+// small shift to its voxels) is taken as this fraction of it: the inverse's slope stays at most
+// 1 / kDepthResponseLeast there, and w about that shift is under-corrected rather than refused.
+inline constexpr double kDepthResponseLeast = 1.0 / 3;
 
 // Per depth layer (node z index) of the vector grid, the mean w measured over the layer's valid
 // vectors for each true shift, through (0, 0): a monotone piecewise-linear curve, inverted to take
@@ -52,7 +57,8 @@ class DepthResponse {
   // measured for true_mm[k] (0 at the 0 shift); `unseen_sigma_mm[layer]`: the random error of
   // (u, v, w as measured) that the correlation's sigma leaves out, mm, finite and >= 0 (empty: none).
   // InputError, naming the layer's depth, when a layer's measured values do not rise with the true
-  // ones, or one is less than kDepthResponseLeast of its true shift.
+  // ones, or an outermost one is less than kDepthResponseLeast of its true shift; an inner one that
+  // is less is raised to that fraction for the inverse (counted in summary()).
   DepthResponse(Grid3 field_grid, std::vector<double> true_mm, std::vector<std::vector<double>> measured_mm,
                 std::vector<std::array<double, 3>> unseen_sigma_mm = {});
 
@@ -68,10 +74,14 @@ class DepthResponse {
   const Grid3& field_grid() const { return field_grid_; }
   const std::vector<double>& shifts_mm() const { return true_mm_; }
   const std::vector<std::vector<double>>& measured_mm() const { return measured_mm_; }
+  // The curve the inverse follows: measured_mm() with every inner value under kDepthResponseLeast
+  // of its shift raised to it.
+  const std::vector<std::vector<double>>& curve_mm() const { return curve_mm_; }
   const std::vector<std::array<double, 3>>& unseen_sigma_mm() const { return unseen_sigma_mm_; }
   // Measured over true shift at the outermost shifts, the smallest and largest over the layers,
   // as "depth response over z <first>..<last layer> mm: <least>..<most> of +<shift> mm, ... of
-  // -<shift> mm", then the largest unseen sigma of u, v and w over the layers.
+  // -<shift> mm", then the inner shifts raised to kDepthResponseLeast (how many, over which
+  // layers), then the largest unseen sigma of u, v and w over the layers.
   std::string summary() const;
 
   // The response as bytes (this build's layout) and back; deserialize throws InputError naming
@@ -86,6 +96,7 @@ class DepthResponse {
   Grid3 field_grid_;
   std::vector<double> true_mm_;
   std::vector<std::vector<double>> measured_mm_;
+  std::vector<std::vector<double>> curve_mm_;           // measured_mm_, inner values raised
   std::vector<std::array<double, 3>> unseen_sigma_mm_;  // one per layer, or none
 };
 

@@ -122,14 +122,45 @@ TEST(DepthResponse, RefusesALayerWhoseVectorsBarelyFollowTheShift) {
     return error_of([&] { DepthResponse(two_layers(), kShifts, {{-0.2, -0.1, 0, 0.1, 0.2}, layer_1}); });
   };
   const std::string e = refused({-0.2, -0.1, 0, 0.1, 0.1});
-  EXPECT_NE(e.find("the vectors at z = 3 mm follow a depth shift by less than half"), std::string::npos) << e;
+  EXPECT_NE(e.find("the vectors at z = 3 mm follow a depth shift by less than 0.333 of it"), std::string::npos) << e;
   EXPECT_NE(e.find("0.25 -> 0.1"), std::string::npos) << e;
   EXPECT_NE(refused({-0.2, -0.1, 0, 0.1, NAN}).find("z = 3 mm"), std::string::npos);
   EXPECT_NE(refused({-0.2, -0.1, 0, 0.1, 0.05}).find("z = 3 mm"), std::string::npos);  // falls back
-  // Measuring just under half of a shift is refused; half, kept.
-  EXPECT_NE(refused({-0.2, -0.1, 0, 0.0624, 0.2}).find("z = 3 mm"), std::string::npos);
-  EXPECT_EQ(refused({-0.2, -0.1, 0, 0.0625, 0.2}), "");
-  EXPECT_NE(refused({-0.124, -0.1, 0, 0.1, 0.2}).find("z = 3 mm"), std::string::npos);
+  // Measuring just under a third of an outermost shift (either way) is refused; a third, kept.
+  EXPECT_NE(refused({-0.2, -0.05, 0, 0.05, 0.0833}).find("z = 3 mm"), std::string::npos);
+  EXPECT_EQ(refused({-0.2, -0.05, 0, 0.05, 0.0834}), "");
+  EXPECT_NE(refused({-0.0833, -0.05, 0, 0.05, 0.2}).find("z = 3 mm"), std::string::npos);
+  EXPECT_EQ(refused({-0.0834, -0.05, 0, 0.05, 0.2}), "");
+}
+
+TEST(DepthResponse, AnInnerShiftMeasuredAsLessThanAThirdIsTakenAsAThird) {
+  // Layer 1 follows the outermost shifts but locks the inner ones (0.2 and 0.16 of them).
+  const DepthResponse r(two_layers(), kShifts, {{-0.2, -0.1, 0, 0.1, 0.2}, {-0.2, -0.025, 0, 0.02, 0.2}});
+  EXPECT_EQ(r.measured_mm()[1], (std::vector<double>{-0.2, -0.025, 0, 0.02, 0.2}));  // kept as measured
+  const double third = 0.125 / 3;
+  EXPECT_EQ(r.curve_mm()[1], (std::vector<double>{-0.2, -third, 0, third, 0.2}));
+  EXPECT_EQ(r.curve_mm()[0], r.measured_mm()[0]);
+  // The inverse's slope about 0 is 3, not 6.25: a measured 0.02 comes out 0.06, under-corrected.
+  EXPECT_NEAR(r.slope(1, 0.02), 3, 1e-12);
+  EXPECT_NEAR(r.true_mm(1, 0.02), 0.06, 1e-12);
+  EXPECT_NEAR(r.true_mm(1, 0.2), 0.25, 1e-12);  // the outermost shifts as measured
+  EXPECT_NEAR(r.true_mm(1, -0.2), -0.25, 1e-12);
+  const std::string summary = r.summary();
+  EXPECT_NE(summary.find("2 inner shifts over z 3..3 mm measured as less than 0.333 of it, taken as that"),
+            std::string::npos)
+      << summary;
+  // Its bytes hold what was measured, and read back to the same curve and summary.
+  std::string bytes;
+  r.serialize(bytes);
+  const DepthResponse back = DepthResponse::deserialize(bytes);
+  EXPECT_EQ(back.measured_mm(), r.measured_mm());
+  EXPECT_EQ(back.curve_mm(), r.curve_mm());
+  EXPECT_EQ(back.summary(), summary);
+  // A response with none raised says nothing of it.
+  EXPECT_EQ(DepthResponse(two_layers(), kShifts, {{-0.2, -0.1, 0, 0.1, 0.2}, {-0.2, -0.1, 0, 0.1, 0.2}})
+                .summary()
+                .find("inner shift"),
+            std::string::npos);
 }
 
 TEST(DepthResponse, ItsBytesReadBackTheSameAndDamagedOnesAreRefused) {
