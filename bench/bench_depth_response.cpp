@@ -34,6 +34,7 @@
 #include "core/base/errors.hpp"
 #include "core/calib/nominal_calibration.hpp"
 #include "core/optics/camera_file.hpp"
+#include "core/process/depth_response.hpp"
 #include "core/process/pair_processor.hpp"
 #include "core/process/process.hpp"
 #include "core/sim/field_errors.hpp"

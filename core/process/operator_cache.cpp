@@ -18,6 +18,7 @@
 #include "core/io/atomic_file.hpp"
 #include "core/io/checksum.hpp"
 #include "core/optics/camera_file.hpp"
+#include "core/process/depth_response.hpp"
 
 namespace plenopiv::process {
 namespace {

@@ -17,11 +17,12 @@
 #include "core/base/image.hpp"
 #include "core/optics/camera_model.hpp"
 #include "core/optics/microlens_array.hpp"
-#include "core/process/depth_response.hpp"
 #include "core/process/process.hpp"
 #include "core/recon/weights.hpp"
 
 namespace plenopiv::process {
+
+class DepthResponse;  // depth_response.hpp
 
 // What a weighting operator is built from, as bytes: the camera's optics and sensor, the lens
 // centres, the white image's size and checksums, the grid, the angular sampling, and the

@@ -9,6 +9,7 @@
 #include <tbb/parallel_for.h>
 
 #include "core/base/errors.hpp"
+#include "core/process/depth_response.hpp"
 
 namespace plenopiv::process {
 
@@ -97,6 +98,8 @@ std::size_t WorkspacePool::bytes() {
     total += workspace->mart.bytes() + workspace->correlation.bytes();
   return total;
 }
+
+PairProcessor::~PairProcessor() = default;
 
 PairProcessor::PairProcessor(const optics::CameraModel& camera, const calib::LoadedCalibration& calibration,
                              ProcessSettings settings, OperatorCache* operators,

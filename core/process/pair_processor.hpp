@@ -12,12 +12,13 @@
 #include "core/base/image.hpp"
 #include "core/calib/calibration_file.hpp"
 #include "core/optics/camera_model.hpp"
-#include "core/process/depth_response.hpp"
 #include "core/process/operator_cache.hpp"
 #include "core/process/process.hpp"
 #include "core/recon/mart.hpp"
 
 namespace plenopiv::process {
+
+class DepthResponse;  // depth_response.hpp
 
 // Raw camera counts as the float image the reconstruction reads.
 ImageF to_float(const ImageU16& raw);
@@ -95,6 +96,7 @@ class PairProcessor {
   PairProcessor(const optics::CameraModel& camera, const calib::LoadedCalibration& calibration,
                 ProcessSettings settings, OperatorCache* operators = nullptr,
                 const std::function<void(double)>& setup_progress = {});
+  ~PairProcessor();
 
   // Raw frames A and B (the camera's counts) to vectors: validated (sensor-sized; named "frame A"
   // and "frame B"), resampled when the operator says so, reconstructed and correlated
