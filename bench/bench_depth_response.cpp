@@ -1,8 +1,8 @@
 // MART's depth response (reconstruction.depth_response_ppm) over many particle sets: w's gain, bias
-// and RMS error on the small camera, without and with the response, per flow, as the mean and its
-// standard error over the sets. On a small box a pair's w gain scatters from one particle set to the
-// next by more than the few per cent a bias target asks for, so one set cannot say whether the
-// response leaves a bias; the mean over sets can.
+// and RMS error on the small camera, and how its sigma covers that error, without and with the
+// response, per flow, as the mean (and for gain, bias and RMS its standard error) over the sets. On a small box a
+// pair's w gain scatters from one particle set to the next by more than the few per cent a bias target asks for, so one
+// set cannot say whether the response leaves a bias; the mean over sets can.
 //
 //   build/bin/bench_depth_response [--sets N] [--degrees D | --nominal] [--lens-offset-um X,Y]
 //                                  [--jitter-um J] [--grid-shift-um X,Y] [--no-response]
@@ -66,6 +66,9 @@ MeanError mean_error(const std::vector<double>& v) {
 // RMS error (the response leaves u and v as they are).
 struct Scores {
   std::vector<double> gain[2], bias[2], rms[2], rms_u, rms_v;
+  // w's predicted sigma against its true error: RMS sigma / RMS error, and the fractions of the
+  // errors within +-1 and +-2 sigma.
+  std::vector<double> sigma_ratio[2], within_1[2], within_2[2];
 };
 
 // Two comma-separated numbers ("X,Y") into `out`; false when `text` is not that.
@@ -182,7 +185,8 @@ int main(int argc, char** argv) {
       const ImageU16 b = sim::render(camera, truth.lenses, sim::displace(pa, flow), ro, seed + 2).image;
       for (int k = 0; k < 2; ++k) {
         if (k && !corrected) {
-          for (std::vector<double>* v : {&scores[f].gain[k], &scores[f].bias[k], &scores[f].rms[k]})
+          for (std::vector<double>* v : {&scores[f].gain[k], &scores[f].bias[k], &scores[f].rms[k],
+                                         &scores[f].sigma_ratio[k], &scores[f].within_1[k], &scores[f].within_2[k]})
             v->push_back(std::nan(""));
           continue;
         }
@@ -195,6 +199,10 @@ int main(int argc, char** argv) {
         scores[f].gain[k].push_back(e.gain[2]);
         scores[f].bias[k].push_back(e.bias[2]);
         scores[f].rms[k].push_back(e.rms[2]);
+        const sim::UncertaintyCheck c = sim::uncertainty_check(r.correlation.field, flow, voxel, 0, 0);
+        scores[f].sigma_ratio[k].push_back(c.rms_sigma[2] / c.rms_error[2]);
+        scores[f].within_1[k].push_back(c.within_1[2]);
+        scores[f].within_2[k].push_back(c.within_2[2]);
       }
       std::printf(
           "bench=depth_response case=%s set=%d gain_w=%.3f gain_w_response=%.3f bias_w=%.3f bias_w_response=%.3f "
@@ -214,10 +222,13 @@ int main(int argc, char** argv) {
     for (int k = 0; k < 2; ++k) {
       const char* suffix = k ? "_response" : "";
       const MeanError g = mean_error(scores[f].gain[k]), b = mean_error(scores[f].bias[k]),
-                      r = mean_error(scores[f].rms[k]);
+                      r = mean_error(scores[f].rms[k]), s = mean_error(scores[f].sigma_ratio[k]),
+                      w1 = mean_error(scores[f].within_1[k]), w2 = mean_error(scores[f].within_2[k]);
       std::printf(
-          " gain_w%s=%.3f gain_w%s_error=%.3f bias_w%s=%.3f bias_w%s_error=%.3f rms_w%s=%.3f rms_w%s_error=%.3f",
-          suffix, g.mean, suffix, g.error, suffix, b.mean, suffix, b.error, suffix, r.mean, suffix, r.error);
+          " gain_w%s=%.3f gain_w%s_error=%.3f bias_w%s=%.3f bias_w%s_error=%.3f rms_w%s=%.3f rms_w%s_error=%.3f"
+          " sigma_ratio_w%s=%.3f within_1sigma_w%s=%.3f within_2sigma_w%s=%.3f",
+          suffix, g.mean, suffix, g.error, suffix, b.mean, suffix, b.error, suffix, r.mean, suffix, r.error, suffix,
+          s.mean, suffix, w1.mean, suffix, w2.mean);
     }
     std::printf("\n");
   }
