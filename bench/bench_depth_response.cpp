@@ -1,8 +1,9 @@
 // MART's depth response (reconstruction.depth_response_ppm) over many particle sets: w's gain, bias
 // and RMS error on the small camera, and how its sigma covers that error, without and with the
-// response, per flow, as the mean (and for gain, bias and RMS its standard error) over the sets. On a small box a
-// pair's w gain scatters from one particle set to the next by more than the few per cent a bias target asks for, so one
-// set cannot say whether the response leaves a bias; the mean over sets can.
+// response, per flow, as the mean (and for gain, bias and RMS its standard error) over the sets.
+// On a small box a pair's w gain scatters from one particle set to the next by more than the few
+// per cent a bias target asks for, so one set cannot say whether the response leaves a bias; the
+// mean over sets can.
 //
 //   build/bin/bench_depth_response [--sets N] [--degrees D | --nominal] [--lens-offset-um X,Y]
 //                                  [--jitter-um J] [--grid-shift-um X,Y] [--no-response]

@@ -104,14 +104,12 @@ DepthResponse::DepthResponse(Grid3 field_grid, std::vector<double> true_mm,
       }
       std::string seen;
       for (std::size_t j = 0; j < m.size(); ++j) seen += (j ? ", " : "") + mm(true_mm_[j]) + " -> " + mm(m[j]);
+      const std::string least_text = mm(kDepthResponseLeast), most_text = mm(1 / kDepthResponseLeast);
       throw InputError("depth response: the vectors at z = " + mm(field_grid_.coordinate_mm(2, int(layer))) +
-                       " mm follow a depth shift by less than " + mm(kDepthResponseLeast) +
+                       " mm follow a depth shift by less than " + least_text +
                        " of it, or not at all (true -> measured mm: " + seen +
-                       "), so correcting their w would multiply "
-                       "its noise by more than " +
-                       mm(1 / kDepthResponseLeast) +
-                       "; turn "
-                       "reconstruction.depth_response_ppm off, or give the volume a depth guard or move it");
+                       "), so correcting their w would multiply its noise by more than " + most_text +
+                       "; turn reconstruction.depth_response_ppm off, or give the volume a depth guard or move it");
     }
     curve_mm_.push_back(std::move(curve));
   }

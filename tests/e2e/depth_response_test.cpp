@@ -124,6 +124,7 @@ TEST(DepthResponse, RefusesALayerWhoseVectorsBarelyFollowTheShift) {
   const std::string e = refused({-0.2, -0.1, 0, 0.1, 0.1});
   EXPECT_NE(e.find("the vectors at z = 3 mm follow a depth shift by less than 0.333 of it"), std::string::npos) << e;
   EXPECT_NE(e.find("0.25 -> 0.1"), std::string::npos) << e;
+  EXPECT_NE(e.find("would multiply its noise by more than 3;"), std::string::npos) << e;
   EXPECT_NE(refused({-0.2, -0.1, 0, 0.1, NAN}).find("z = 3 mm"), std::string::npos);
   EXPECT_NE(refused({-0.2, -0.1, 0, 0.1, 0.05}).find("z = 3 mm"), std::string::npos);  // falls back
   // Measuring just under a third of an outermost shift (either way) is refused; a third, kept.
