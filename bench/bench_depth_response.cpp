@@ -145,8 +145,7 @@ int main(int argc, char** argv) {
       nominal ? 0.0 : lens_offset_um[1], nominal ? 0.0 : jitter_um, grid_shift_um[0], grid_shift_um[1],
       int(plain.op().resampler() != nullptr));
   // A response the processor refuses (a layer that follows its outermost shifts by less than
-  // process::kDepthResponseLeast of them) is
-  // reported, and the sets are processed without it alone.
+  // process::kDepthResponseLeast of them) is reported, and the sets are processed without it alone.
   const double t = now_s();
   std::unique_ptr<const process::PairProcessor> corrected;
   if (response) {
