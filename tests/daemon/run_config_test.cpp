@@ -161,6 +161,17 @@ TEST(RunConfig, BadValuesAreNamed) {
   EXPECT_NE(error_of("dt_s: 0.001\nvolume: {x_mm: [-1, 1], y_mm: [-1, 1], z_mm: [0, 1]}\n").find("voxel_mm"),
             std::string::npos);
   EXPECT_NE(error_of("dt_s: 0.001\npairs: 3\n").find("volume"), std::string::npos);
+  // A box far beyond any integer voxel count is named by its count, not converted out of range.
+  const std::string huge =
+      error_of("dt_s: 0.001\nvolume: {x_mm: [-1e300, 1e300], y_mm: [-1, 1], z_mm: [0, 1], voxel_mm: 1}\n");
+  EXPECT_NE(huge.find("2e+300 voxels along x (1..100000)"), std::string::npos) << huge;
+  const std::string wider =
+      error_of("dt_s: 0.001\nvolume: {x_mm: [-1e308, 1e308], y_mm: [-1, 1], z_mm: [0, 1], voxel_mm: 1}\n");
+  EXPECT_NE(wider.find("inf voxels along x"), std::string::npos) << wider;
+  const std::string guard = error_of(
+      "dt_s: 0.001\nvolume: {x_mm: [-1, 1], y_mm: [-1, 1], z_mm: [0, 1e-300], voxel_mm: 1,\n"
+      "voxel_z_mm: 1e-300, depth_guard_mm: 1}\n");
+  EXPECT_NE(guard.find("depth_guard_mm: must be at most 100000 slices"), std::string::npos) << guard;
   // MART's ranges are recon's (one owner): the same bound whether run.yaml or process.yaml says it.
   EXPECT_NE(
       error_of(kVolume + "reconstruction: {iterations: 20000}\n").find("reconstruction.iterations: must be 1 to 10000"),

@@ -23,6 +23,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
                    "an accepted run config has an impossible rate or dt");
   const Grid3 g = config.volume_grid();
   for (int a = 0; a < 3; ++a) fuzzing::require(g.shape[a] >= 1, "an accepted run config has an empty volume axis");
+  const Grid3 with_guard = config.spec.full.reconstruction_grid();
+  fuzzing::require(with_guard.shape[2] >= g.shape[2] && with_guard.shape[2] <= 300000,
+                   "an accepted run config's depth guard is not a sane number of slices");
   fuzzing::require(config.live_queue >= 1 && config.max_pairs_in_flight >= 1, "accepted run config: no queue");
   // What `plenopiv process --run` reads: the same processing spec, never a refusal.
   const auto path = fuzzing::input_file(reinterpret_cast<const std::uint8_t*>(config.process_yaml().data()),
