@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <ctime>
 #include <exception>
+#include <limits>
 #include <tuple>
 
 #include "core/base/errors.hpp"
@@ -121,11 +122,19 @@ Run::Run(RunConfig config, std::string run_id, RunEnvironment env)
   // The raw frames of the pairs this run plans must fit on the disk before it starts.
   bytes_per_pair_ =
       2 * std::uint64_t(std::max(frame_width, 0)) * std::uint64_t(std::max(frame_height, 0)) * sizeof(std::uint16_t);
+  // Both saturate at the largest count rather than wrap or convert out of range: a run of 1e300 s
+  // is refused for the disk it would need, not planned as a few pairs.
+  constexpr std::uint64_t kMost = std::numeric_limits<std::uint64_t>::max();
   std::uint64_t planned = config_.pair_count;
-  if (planned == 0 && config_.duration_s > 0) planned = std::uint64_t(std::ceil(config_.duration_s * config_.rate_hz));
+  if (planned == 0 && config_.duration_s > 0) {
+    const double pairs = std::ceil(config_.duration_s * config_.rate_hz);
+    planned = pairs < 0x1p64 ? std::uint64_t(pairs) : kMost;
+  }
   if (planned == 0) planned = kMinPairsUnbounded;
   std::filesystem::create_directories(env_.data_dir);
-  bytes_planned_ = planned * bytes_per_pair_ + kReserveBytes;
+  bytes_planned_ = bytes_per_pair_ && planned > (kMost - kReserveBytes) / bytes_per_pair_
+                       ? kMost
+                       : planned * bytes_per_pair_ + kReserveBytes;
   if (const auto free = io::free_bytes(env_.data_dir)) {
     if (*free < bytes_planned_) {
       throw InputError("data_dir: " + env_.data_dir.string() + " has " + megabytes(*free) + " free; " +

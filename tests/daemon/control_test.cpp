@@ -490,6 +490,16 @@ TEST(DaemonDisk, AFullDiskFailsTheRunCleanlyAndRefusesTheNext) {
   EXPECT_EQ(start(out), 4) << out;
   EXPECT_NE(out.find("data_dir: " + disk.dir().string() + " has"), std::string::npos) << out;
   EXPECT_NE(out.find("free some space or record fewer pairs"), std::string::npos) << out;
+  // A duration beyond any count of pairs is refused for its disk, not converted out of range.
+  std::ofstream(dir / "endless.yaml") << "duration_s: 1e300\nrate_hz: 10\ndt_s: 0.0001\n"
+                                         "volume: {x_mm: [-1, 1], y_mm: [-1, 1], z_mm: [-1, 1], voxel_mm: 0.25}\n"
+                                         "correlation: {passes: [{window: 8, overlap_percent: 50}]}\n";
+  EXPECT_EQ(testing_support::run_command({testing_support::binary("plenopiv"), "--endpoint", control, "run", "start",
+                                          "--config", (dir / "endless.yaml").string()},
+                                         out),
+            4)
+      << out;
+  EXPECT_NE(out.find("18446744073709551615 pairs of raw frames need"), std::string::npos) << out;
   EXPECT_TRUE(testing_support::probe_status(control, 5s));
   daemon.signal(SIGTERM);
   EXPECT_TRUE(daemon.wait(10s).has_value());
