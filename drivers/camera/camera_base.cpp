@@ -119,8 +119,8 @@ void CameraBase::configure(const CameraSettings& settings) {
 
 void CameraBase::arm(const DoubleExposureSettings& settings) {
   require({CameraState::Idle, CameraState::Armed}, "arm");
-  if (!(settings.max_pair_gap_s >= 0)) {
-    throw InputError("camera " + info().uri + ": max_pair_gap_s must be >= 0");
+  if (!(settings.max_pair_gap_s >= 0 && settings.max_pair_gap_s <= 10)) {
+    throw InputError("camera " + info().uri + ": max_pair_gap_s must be within 0..10 s");
   }
   do_arm(settings);
   std::lock_guard lock(mutex_);

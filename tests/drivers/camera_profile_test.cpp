@@ -97,9 +97,10 @@ TEST(CameraProfile, BadFilesNameTheKey) {
   std::ofstream(file) << "name: bad\nfeatures:\n  - TriggerMode\n";
   EXPECT_THROW(load_camera_profile(file), InputError);
   // Whole numbers out of range are refused before they narrow to int (4294967297 would be 1, and
-  // 4294967312 would be 16).
-  for (const std::string bad : {"software_trigger_repeat: 4294967297", "software_trigger_repeat: 3",
-                                "frame_id_bits: 4294967312", "frame_id_bits: 32"}) {
+  // 4294967312 would be 16); a gap too long to convert to nanoseconds likewise.
+  for (const std::string bad :
+       {"software_trigger_repeat: 4294967297", "software_trigger_repeat: 3", "frame_id_bits: 4294967312",
+        "frame_id_bits: 32", "max_pair_gap_s: 1e300", "max_pair_gap_s: 0"}) {
     std::ofstream(file) << "name: bad\nfeatures: []\n" << bad << "\n";
     try {
       load_camera_profile(file);

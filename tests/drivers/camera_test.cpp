@@ -78,6 +78,14 @@ TEST(Camera, BadSettingsNameTheSetting) {
   EXPECT_THROW(cam.configure(s), InputError);
   EXPECT_THROW(pixel_format_from_string("Mono10"), InputError);
   EXPECT_EQ(pixel_format_from_string("Mono12"), PixelFormat::Mono12);
+  // A pair gap too long to convert to nanoseconds is refused at arm, naming it.
+  cam.configure({});
+  try {
+    cam.arm({TriggerSource::Software, 1e300});
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("max_pair_gap_s must be within 0..10 s"), std::string::npos) << e.what();
+  }
 }
 
 TEST(Camera, DeliversTheRightFramesAndCountsFaults) {

@@ -58,7 +58,8 @@ CameraProfile load_camera_profile(const std::filesystem::path& file) {
     map.fail("software_trigger_spacing_s", "must be within 0..1 s");
   }
   p.max_pair_gap_s = map.number_or("max_pair_gap_s", 0.05);
-  if (p.max_pair_gap_s <= 0) map.fail("max_pair_gap_s", "must be > 0");
+  // Bounded so that it converts to whole nanoseconds (a 1e300 s gap would not).
+  if (p.max_pair_gap_s <= 0 || p.max_pair_gap_s > 10) map.fail("max_pair_gap_s", "must be within 0..10 s, above 0");
   p.min_pair_period_s = map.number_or("min_pair_period_s", 0.0);
   if (p.min_pair_period_s < 0 || p.min_pair_period_s > 10) {
     map.fail("min_pair_period_s", "must be within 0..10 s");
