@@ -111,9 +111,13 @@ void expect_reprocessed_as_live(const fs::path& run, std::string& out) {
     EXPECT_EQ(live.dy_mm, re.dy_mm) << name;
     EXPECT_EQ(live.dz_mm, re.dz_mm) << name;
     EXPECT_EQ(live.valid, re.valid) << name;
+    // Vectors wherever the pulses kept the nominal separation: on a loaded host the sim trigger now
+    // and then fires a Q-switch far off, moving the scene beyond the windows (see below); that pair
+    // must still come back bit for bit, with no vector either time.
     std::size_t valid = 0;
     for (auto v : re.valid) valid += v;
-    EXPECT_GT(valid, 0u) << name;
+    if (std::abs(p.measured_dt_s() / p.nominal_dt_s() - 1) <= 0.1)
+      EXPECT_GT(valid, 0u) << name << ", measured dt " << p.measured_dt_s() << " s";
     ++compared;
   }
   std::printf("reprocess: %d of %d pairs compared with the live fields\n", compared, m.pairs_size());
