@@ -33,6 +33,10 @@ std::array<double, 2> range(const YamlMap& m, std::string_view key) {
   }
 }
 
+// The most voxels a box may have along an axis, and the most slices its depth guard may add at
+// each depth face, so that the box with its guard stays well within an int.
+constexpr int kMostVoxelsPerAxis = 100000;
+
 }  // namespace
 
 Grid3 grid_for_extent(const std::array<double, 3>& lo, const std::array<double, 3>& hi,
@@ -45,11 +49,12 @@ Grid3 grid_for_extent(const std::array<double, 3>& lo, const std::array<double, 
     if (!(hi[a] > lo[a]) || !std::isfinite(lo[a]) || !std::isfinite(hi[a]))
       throw InputError(where + ": " + axis[a] + " extent needs min < max (mm)");
     const double n = std::round((hi[a] - lo[a]) / voxel_mm[a]);
-    if (!(n >= 1 && n <= 100000)) {
+    if (!(n >= 1 && n <= kMostVoxelsPerAxis)) {
       // n may be far outside any integer type (an extent of 1e300 mm), so it is printed as a double.
       std::ostringstream count;
       count << n;
-      throw InputError(where + ": " + count.str() + " voxels along " + axis[a] + " (1..100000)");
+      throw InputError(where + ": " + count.str() + " voxels along " + axis[a] + " (1.." +
+                       std::to_string(kMostVoxelsPerAxis) + ")");
     }
     g.shape[a] = int(n);
     g.spacing_mm[a] = voxel_mm[a];
@@ -198,9 +203,9 @@ ProcessSettings parse_settings(const YamlMap& root) {
   s.grid = grid_for_extent({x[0], y[0], z[0]}, {x[1], y[1], z[1]}, {voxel, voxel, voxel_z}, root.where("volume"));
   s.depth_guard_mm = vol.number_or("depth_guard_mm", s.depth_guard_mm);
   if (!(s.depth_guard_mm >= 0 && s.depth_guard_mm <= 100)) vol.fail("depth_guard_mm", "must be in [0, 100] mm");
-  // The guard is added as whole slices on each face: kept within the same 100000 as the box's axes.
-  if (!(s.depth_guard_mm / s.grid.spacing_mm[2] <= 100000))
-    vol.fail("depth_guard_mm", "must be at most 100000 slices of voxel_z_mm deep");
+  // The guard is added as whole slices on each face: kept within the box's own bound per axis.
+  if (!(s.depth_guard_mm / s.grid.spacing_mm[2] <= kMostVoxelsPerAxis))
+    vol.fail("depth_guard_mm", "must be at most " + std::to_string(kMostVoxelsPerAxis) + " slices of voxel_z_mm deep");
 
   if (auto r = root.optional_map("reconstruction")) {
     r->reject_unknown({"iterations", "mu", "acceleration", "start", "noise_threshold", "dark_weight_cutoff",
