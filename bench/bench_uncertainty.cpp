@@ -1,8 +1,9 @@
 // Per-vector uncertainty benchmark: predicted sigma against the measured RMS error, per component
 // and depth band, and the coverage of +-1 and +-2 sigma, on exact-particle and reconstructed cases.
 //
-//   build/bin/bench_uncertainty [--quick] [--exact-only [--window-mean] | --reconstructed-only] [--with-paper-ring]
-//   build/bin/bench_uncertainty --cost N   (N^3 voxels: the correlation with and without the uncertainty)
+//   build/bin/bench_uncertainty [--quick] [--exact-only [--window-mean] | --reconstructed-only [--sets N]]
+//   [--with-paper-ring] build/bin/bench_uncertainty --cost N   (N^3 voxels: the correlation with and without the
+//   uncertainty)
 //
 // Exact particles: 96^3 voxels (--quick: 64^3) at 0.5 ppm, core/piv's default correlation: a
 // uniform shift among dim particles that differ between the exposures (noise), a shear in u and
@@ -13,12 +14,17 @@
 // Reconstructed: the small camera (a 6 mm cube: 48 voxels of 0.125 mm across, process.yaml's depth voxel) through
 // process::PairProcessor with the shipped systemd/config/process.yaml settings: a uniform shift (by fractions of a
 // voxel sideways: MART reconstructs a pair moved by whole voxels sideways alike in both exposures), a shear, the ring;
-// each also with MART's depth response (reconstruction.depth_response_ppm at the pairs' 0.5 ppm). One
-// line per case, band and component (key=value); docs/benchmarks.md records them.
+// each also with MART's depth response (reconstruction.depth_response_ppm at the pairs' 0.5 ppm); on
+// --sets particle sets (default 8, --quick 2), pooled: a depth third of one set's cube holds a few
+// hundred vectors whose errors are alike over a window's reach, so one set's ratio there scatters
+// from set to set by more than the 30 % target. One line per case, band and component (key=value),
+// with the sets' own ratios' range; docs/benchmarks.md records them.
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <functional>
 #include <string>
@@ -51,28 +57,84 @@ Grid3 centred_grid(std::array<int, 3> n, double voxel_mm) {
   return g;
 }
 
-// One row per depth band (thirds of the field's depth, and all) and component.
-void report(const std::string& kind, const std::string& name, const VectorField& f, const sim::Flow& flow,
-            double voxel_mm, const std::function<bool(const sim::Point3&)>& keep) {
+constexpr int kBands = 4;  // thirds of the field's depth (near, middle, far), and all
+using BandChecks = std::array<sim::UncertaintyCheck, kBands>;
+
+BandChecks check_bands(const VectorField& f, const sim::Flow& flow, double voxel_mm,
+                       const std::function<bool(const sim::Point3&)>& keep) {
   const Grid3& g = f.grid;
   const double z0 = g.origin_mm[2], depth = (g.shape[2] - 1) * g.spacing_mm[2];
-  const char* bands[] = {"near", "middle", "far", "all"};
-  for (int band = 0; band < 4; ++band) {
+  BandChecks checks;
+  for (int band = 0; band < kBands; ++band) {
     const auto include = [&](const sim::Point3& x) {
       if (keep && !keep(x)) return false;
-      if (band == 3) return true;
+      if (band == kBands - 1) return true;
       const int b = std::min(2, int(3 * (x[2] - z0) / (depth + 1e-9)));
       return b == band;
     };
-    const sim::UncertaintyCheck c = sim::uncertainty_check(f, flow, voxel_mm, 1, 1, include);
-    for (int a = 0; a < 3; ++a)
+    checks[std::size_t(band)] = sim::uncertainty_check(f, flow, voxel_mm, 1, 1, include);
+  }
+  return checks;
+}
+
+// The checks of several particle sets as one: every figure is a mean over the vectors compared,
+// so each set weighs by its count (RMS values through their squares).
+sim::UncertaintyCheck pool(const std::vector<sim::UncertaintyCheck>& sets) {
+  sim::UncertaintyCheck p;
+  for (const sim::UncertaintyCheck& c : sets) {
+    if (c.compared == 0) continue;
+    const double n = double(c.compared);
+    p.compared += c.compared;
+    for (std::size_t a = 0; a < 3; ++a) {
+      p.rms_error[a] += n * c.rms_error[a] * c.rms_error[a];
+      p.rms_sigma[a] += n * c.rms_sigma[a] * c.rms_sigma[a];
+      p.bias[a] += n * c.bias[a];
+      p.within_1[a] += n * c.within_1[a];
+      p.within_2[a] += n * c.within_2[a];
+    }
+  }
+  const double n = double(p.compared);
+  for (std::size_t a = 0; a < 3; ++a) {
+    p.rms_error[a] = std::sqrt(p.rms_error[a] / n);
+    p.rms_sigma[a] = std::sqrt(p.rms_sigma[a] / n);
+    p.bias[a] /= n;
+    p.within_1[a] /= n;
+    p.within_2[a] /= n;
+  }
+  return p;
+}
+
+// One row per depth band and component; with several particle sets, the pooled figures and the
+// range of the sets' own sigma / error.
+void print_bands(const std::string& kind, const std::string& name, const std::vector<BandChecks>& sets) {
+  const char* bands[] = {"near", "middle", "far", "all"};
+  for (std::size_t band = 0; band < kBands; ++band) {
+    std::vector<sim::UncertaintyCheck> per_set;
+    for (const BandChecks& s : sets) per_set.push_back(s[band]);
+    const sim::UncertaintyCheck c = pool(per_set);
+    for (std::size_t a = 0; a < 3; ++a) {
       std::printf(
           "bench=uncertainty kind=%s case=%s band=%s component=%c vectors=%zu rms_error=%.4f bias=%.4f "
-          "rms_sigma=%.4f ratio=%.3f within_1sigma=%.3f within_2sigma=%.3f\n",
+          "rms_sigma=%.4f ratio=%.3f within_1sigma=%.3f within_2sigma=%.3f",
           kind.c_str(), name.c_str(), bands[band], "uvw"[a], c.compared, c.rms_error[a], c.bias[a], c.rms_sigma[a],
           c.rms_sigma[a] / c.rms_error[a], c.within_1[a], c.within_2[a]);
+      if (per_set.size() > 1) {
+        double lo = INFINITY, hi = -INFINITY;
+        for (const sim::UncertaintyCheck& s : per_set) {
+          lo = std::min(lo, s.rms_sigma[a] / s.rms_error[a]);
+          hi = std::max(hi, s.rms_sigma[a] / s.rms_error[a]);
+        }
+        std::printf(" sets=%zu set_ratio_min=%.3f set_ratio_max=%.3f", per_set.size(), lo, hi);
+      }
+      std::printf("\n");
+    }
   }
   std::fflush(stdout);
+}
+
+void report(const std::string& kind, const std::string& name, const VectorField& f, const sim::Flow& flow,
+            double voxel_mm, const std::function<bool(const sim::Point3&)>& keep) {
+  print_bands(kind, name, {check_bands(f, flow, voxel_mm, keep)});
 }
 
 void exact_cases(int n, bool window_mean) {
@@ -191,7 +253,7 @@ void cost(int n) {
       n, cpu[0], cpu[1], cpu[0] / cpu[1] - 1, uncertainty_s, int(hash[0] == hash[1]));
 }
 
-void reconstructed_cases() {
+void reconstructed_cases(int sets) {
   const std::string dir = std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/";
   const auto camera = optics::load_camera_file(dir + "camera-small.yaml");
   const double voxel = 0.125;
@@ -213,7 +275,6 @@ void reconstructed_cases() {
   const process::PairProcessor calibrated(camera, nominal, with_response);
   std::printf("bench=uncertainty kind=reconstructed case=depth_response_setup setup_s=%.1f\n", now_s() - setup_start);
   const sim::Box box{{-h - 1, -h - 1, -h - 1}, {h + 1, h + 1, h + 1}};
-  const auto pa = sim::random_particles(box, sim::particle_count_from_ppm(camera, box, 0.5), 2015);
   sim::RenderOptions ro;
   ro.rays_per_particle = 5000;
   const auto render = [&](const std::vector<sim::Point3>& p, std::uint64_t seed) {
@@ -222,7 +283,6 @@ void reconstructed_cases() {
     for (std::size_t i = 0; i < f.size(); ++i) f.pixels[i] = r.image.pixels[i];
     return f;
   };
-  const ImageF a = render(pa, 1);
   sim::RingVortexFlow::Parameters rv;
   rv.voxel_mm = voxel;
   rv.ring_diameter_mm = 3.0;
@@ -233,22 +293,34 @@ void reconstructed_cases() {
   const sim::LinearShear shear({0.1, 0, 0.1}, 1, 0.0);  // u and w +-2.4 voxels across y
   const std::pair<const char*, const sim::Flow*> flows[] = {
       {"uniform", &uniform}, {"shear", &shear}, {"ring_off_axis_band", &ring}};
-  for (const auto& [name, flow] : flows) {
-    const ImageF b = render(sim::displace(pa, *flow), 2);
-    std::function<bool(const sim::Point3&)> keep;
-    if (flow == &ring) {
-      const double half = 0.5 * settings.correlation.passes.back().window[0] * voxel;
-      keep = [&, half](const sim::Point3& x) { return !sim::in_ring_axis_band(ring, x, half); };
-    }
-    for (const process::PairProcessor* p : {&processor, &calibrated}) {
-      const std::string case_name = std::string(name) + (p == &calibrated ? "_depth_response" : "");
-      const double t = now_s();
-      const auto r = p->process(a, b);
-      std::printf("bench=uncertainty kind=reconstructed case=%s process_s=%.2f correlate_s=%.2f uncertainty_s=%.3f\n",
-                  case_name.c_str(), now_s() - t, r.times.correlate_s, r.correlation.passes.back().uncertainty_s);
-      report("reconstructed", case_name, r.correlation.field, *flow, voxel, keep);
+  // Per case (flow, then without and with the response), the checks of every particle set.
+  std::vector<std::vector<BandChecks>> checks(2 * std::size(flows));
+  for (int set = 0; set < sets; ++set) {
+    const auto pa = sim::random_particles(box, sim::particle_count_from_ppm(camera, box, 0.5), 2015 + set);
+    const ImageF a = render(pa, 1 + 2 * std::uint64_t(set));
+    for (std::size_t k = 0; k < std::size(flows); ++k) {
+      const auto& [name, flow] = flows[k];
+      const ImageF b = render(sim::displace(pa, *flow), 2 + 2 * std::uint64_t(set));
+      std::function<bool(const sim::Point3&)> keep;
+      if (flow == &ring) {
+        const double half = 0.5 * settings.correlation.passes.back().window[0] * voxel;
+        keep = [&, half](const sim::Point3& x) { return !sim::in_ring_axis_band(ring, x, half); };
+      }
+      for (const process::PairProcessor* p : {&processor, &calibrated}) {
+        const std::string case_name = std::string(name) + (p == &calibrated ? "_depth_response" : "");
+        const double t = now_s();
+        const auto r = p->process(a, b);
+        std::printf(
+            "bench=uncertainty kind=reconstructed case=%s set=%d process_s=%.2f correlate_s=%.2f uncertainty_s=%.3f\n",
+            case_name.c_str(), set, now_s() - t, r.times.correlate_s, r.correlation.passes.back().uncertainty_s);
+        checks[2 * k + (p == &calibrated)].push_back(check_bands(r.correlation.field, *flow, voxel, keep));
+      }
     }
   }
+  for (std::size_t k = 0; k < std::size(flows); ++k)
+    for (const int calibrated_case : {0, 1})
+      print_bands("reconstructed", std::string(flows[k].first) + (calibrated_case ? "_depth_response" : ""),
+                  checks[2 * k + std::size_t(calibrated_case)]);
 }
 
 // The paper's ring (sec 6.4) rendered on the paper's camera at 0.5 ppm and processed with
@@ -299,6 +371,7 @@ void paper_ring_reconstructed() {
 
 int main(int argc, char** argv) {
   bool quick = false, exact = true, reconstructed = true, window_mean = false;
+  int sets = 0;  // 0: the default
   int cost_voxels = 0;
   bool paper = false;
   for (int i = 1; i < argc; ++i) {
@@ -314,10 +387,12 @@ int main(int argc, char** argv) {
       window_mean = true;
     } else if (!std::strcmp(argv[i], "--reconstructed-only")) {
       exact = false;
+    } else if (!std::strcmp(argv[i], "--sets") && i + 1 < argc && std::atoi(argv[i + 1]) > 0) {
+      sets = std::atoi(argv[++i]);
     } else {
       std::fprintf(stderr,
-                   "usage: bench_uncertainty [--quick] [--exact-only [--window-mean] | --reconstructed-only]  "
-                   "[--with-paper-ring] | --cost N\n");
+                   "usage: bench_uncertainty [--quick] [--exact-only [--window-mean] | --reconstructed-only "
+                   "[--sets N]] [--with-paper-ring] | --cost N\n");
       return 2;
     }
   }
@@ -326,7 +401,7 @@ int main(int argc, char** argv) {
     return 0;
   }
   if (exact) exact_cases(quick ? 64 : 96, window_mean);
-  if (reconstructed) reconstructed_cases();
+  if (reconstructed) reconstructed_cases(sets ? sets : quick ? 2 : 8);
   if (paper) {
     paper_ring(false);
     paper_ring(true);
