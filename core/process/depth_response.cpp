@@ -70,23 +70,24 @@ void scatter_sideways(std::vector<sim::Point3>& particles, const std::array<doub
 }  // namespace
 
 DepthResponse::DepthResponse(Grid3 field_grid, std::vector<double> true_mm,
-                             std::vector<std::vector<double>> measured_mm,
-                             std::vector<std::array<double, 3>> unseen_sigma_mm)
+                             std::vector<std::vector<double>> measured_mm, std::vector<SigmaWidening> widening)
     : field_grid_(field_grid),
       true_mm_(std::move(true_mm)),
       measured_mm_(std::move(measured_mm)),
-      unseen_sigma_mm_(std::move(unseen_sigma_mm)) {
+      widening_(std::move(widening)) {
   if (true_mm_.size() < 2 || !std::is_sorted(true_mm_.begin(), true_mm_.end()) ||
       std::adjacent_find(true_mm_.begin(), true_mm_.end()) != true_mm_.end())
     throw std::logic_error("DepthResponse: the true shifts must be at least two, ascending and distinct");
   if (measured_mm_.size() != std::size_t(field_grid_.shape[2]))
     throw std::logic_error("DepthResponse: one row of measured shifts per depth layer of the vector grid");
-  if (!unseen_sigma_mm_.empty() && unseen_sigma_mm_.size() != measured_mm_.size())
-    throw std::logic_error("DepthResponse: one unseen sigma per depth layer of the vector grid, or none");
-  for (const std::array<double, 3>& u : unseen_sigma_mm_)
-    for (const double v : u)
-      if (!(std::isfinite(v) && v >= 0))
-        throw std::logic_error("DepthResponse: an unseen sigma must be finite and not negative");
+  if (!widening_.empty() && widening_.size() != measured_mm_.size())
+    throw std::logic_error("DepthResponse: one sigma widening per depth layer of the vector grid, or none");
+  for (const SigmaWidening& w : widening_)
+    if (!(std::isfinite(w.scale_u) && w.scale_u >= 1 && std::isfinite(w.scale_v) && w.scale_v >= 1 &&
+          std::isfinite(w.unseen_w_mm) && w.unseen_w_mm >= 0))
+      throw std::logic_error(
+          "DepthResponse: a sigma widening's scales must be finite and at least 1, its unseen w finite and not "
+          "negative");
   for (std::size_t layer = 0; layer < measured_mm_.size(); ++layer) {
     const std::vector<double>& m = measured_mm_[layer];
     if (m.size() != true_mm_.size()) throw std::logic_error("DepthResponse: one measured shift per true shift");
@@ -149,16 +150,16 @@ void DepthResponse::apply(VectorField& field) const {
   const bool with_sigma = field.has_sigma();
   const std::size_t per_layer = std::size_t(g.shape[0]) * std::size_t(g.shape[1]);
   for (int layer = 0; layer < g.shape[2]; ++layer) {
-    const std::array<double, 3> unseen =
-        unseen_sigma_mm_.empty() ? std::array<double, 3>{} : unseen_sigma_mm_[std::size_t(layer)];
+    const SigmaWidening widen = widening_.empty() ? SigmaWidening{} : widening_[std::size_t(layer)];
     for (std::size_t i = std::size_t(layer) * per_layer; i < std::size_t(layer + 1) * per_layer; ++i) {
       const double w = field.dz_mm[i];
       if (!std::isfinite(w)) continue;
       const int k = segment(layer, w);  // once per vector: value and slope come from the same segment
       if (with_sigma) {                 // NaN (no estimate) stays NaN
-        field.sigma_dx_mm[i] = float(std::hypot(double(field.sigma_dx_mm[i]), unseen[0]));
-        field.sigma_dy_mm[i] = float(std::hypot(double(field.sigma_dy_mm[i]), unseen[1]));
-        field.sigma_dz_mm[i] = float(std::hypot(double(field.sigma_dz_mm[i]), unseen[2]) * segment_slope(layer, k));
+        field.sigma_dx_mm[i] = float(double(field.sigma_dx_mm[i]) * widen.scale_u);
+        field.sigma_dy_mm[i] = float(double(field.sigma_dy_mm[i]) * widen.scale_v);
+        field.sigma_dz_mm[i] =
+            float(std::hypot(double(field.sigma_dz_mm[i]), widen.unseen_w_mm) * segment_slope(layer, k));
       }
       field.dz_mm[i] = float(along_segment(layer, k, w));
     }
@@ -188,12 +189,15 @@ std::string DepthResponse::summary() const {
     text += "; " + std::to_string(raised) + " inner shift" + (raised > 1 ? "s" : "") + " over z " +
             mm(field_grid_.coordinate_mm(2, first)) + ".." + mm(field_grid_.coordinate_mm(2, last)) +
             " mm measured as less than " + mm(kDepthResponseLeast) + " of it, taken as that (w there under-corrected)";
-  if (!unseen_sigma_mm_.empty()) {
-    std::array<double, 3> most{};
-    for (const std::array<double, 3>& u : unseen_sigma_mm_)
-      for (std::size_t a = 0; a < 3; ++a) most[a] = std::max(most[a], u[a]);
-    text += "; sigma the correlation does not see, up to u " + mm(most[0]) + ", v " + mm(most[1]) + ", w " +
-            mm(most[2]) + " mm";
+  if (!widening_.empty()) {
+    SigmaWidening most;
+    for (const SigmaWidening& w : widening_) {
+      most.scale_u = std::max(most.scale_u, w.scale_u);
+      most.scale_v = std::max(most.scale_v, w.scale_v);
+      most.unseen_w_mm = std::max(most.unseen_w_mm, w.unseen_w_mm);
+    }
+    text += "; sigma widened to the simulated pairs' error, u up to x" + mm(most.scale_u) + ", v up to x" +
+            mm(most.scale_v) + ", w by up to " + mm(most.unseen_w_mm) + " mm in quadrature";
   }
   return text;
 }
@@ -205,7 +209,7 @@ void DepthResponse::serialize(std::string& out) const {
   w.pod(field_grid_.spacing_mm);
   w.vec(true_mm_);
   for (const std::vector<double>& m : measured_mm_) w.vec(m);
-  w.vec(unseen_sigma_mm_);
+  w.vec(widening_);
 }
 
 DepthResponse DepthResponse::deserialize(std::string_view bytes) {
@@ -221,11 +225,11 @@ DepthResponse DepthResponse::deserialize(std::string_view bytes) {
     r.fail(std::to_string(grid.shape[2]) + " depth layers do not fit the bytes");
   std::vector<std::vector<double>> measured(std::size_t(grid.shape[2]));
   for (std::vector<double>& m : measured) r.vec(m);
-  std::vector<std::array<double, 3>> unseen;
-  r.vec(unseen);
+  std::vector<SigmaWidening> widening;
+  r.vec(widening);
   if (!r.done()) r.fail("bytes left after the response");
   try {
-    return DepthResponse(grid, std::move(true_mm), std::move(measured), std::move(unseen));
+    return DepthResponse(grid, std::move(true_mm), std::move(measured), std::move(widening));
   } catch (const std::exception& e) {  // the constructor's checks: InputError or std::logic_error
     r.fail(e.what());
   }
@@ -256,7 +260,7 @@ DepthResponse measure_depth_response(const PairProcessor& processor, const optic
   // particle sets (each set its own particles and sensor noise).
   Grid3 field_grid;
   std::vector<std::vector<double>> sum, count_valid;
-  // Per depth layer and shift, over the valid vectors with a sigma, summed (the unseen sigma's
+  // Per depth layer and shift, over the valid vectors with a sigma, summed (the widening's
   // terms): of the sets as they are, their count, the squared errors of u and v and their sigma^2;
   // of the scattered sets, their count, w, w^2 and w's sigma^2.
   enum Term { kCountUV, kU2, kV2, kSigmaU2, kSigmaV2, kCountW, kW, kW2, kSigmaW2, kTerms };
@@ -332,29 +336,29 @@ DepthResponse measure_depth_response(const PairProcessor& processor, const optic
     for (std::size_t k = 0; k < shifts_mm.size(); ++k)
       if (shifts_mm[k] != 0.0)
         measured[layer][k] = count_valid[layer][k] > 0 ? sum[layer][k] / count_valid[layer][k] : std::nan("");
-  // Pooled over the shifts: the mean square error (u and v about the sweep's, w about its shift's
-  // mean over the scattered sets) less the mean square sigma, per component.
-  std::vector<std::array<double, 3>> unseen;
+  // Pooled over the shifts: u's and v's RMS error about the sweep over their RMS sigma; w's mean
+  // square error about its shift's mean over the scattered sets less its mean square sigma.
+  std::vector<SigmaWidening> widening;
   if (with_sigma)
     for (const std::vector<std::array<double, kTerms>>& layer : spread) {
-      double n[3] = {0, 0, 0}, error2[3] = {0, 0, 0}, sigma2[3] = {0, 0, 0};
+      std::array<double, kTerms> sum_of{};
       for (const std::array<double, kTerms>& t : layer) {
-        n[0] += t[kCountUV];
-        n[1] += t[kCountUV];
-        error2[0] += t[kU2];
-        error2[1] += t[kV2];
-        sigma2[0] += t[kSigmaU2];
-        sigma2[1] += t[kSigmaV2];
+        for (const Term term : {kCountUV, kU2, kV2, kSigmaU2, kSigmaV2}) sum_of[term] += t[term];
         if (t[kCountW] == 0) continue;
-        n[2] += t[kCountW];
-        error2[2] += t[kW2] - t[kW] * t[kW] / t[kCountW];
-        sigma2[2] += t[kSigmaW2];
+        sum_of[kCountW] += t[kCountW];
+        sum_of[kW2] += t[kW2] - t[kW] * t[kW] / t[kCountW];
+        sum_of[kSigmaW2] += t[kSigmaW2];
       }
-      std::array<double, 3>& u = unseen.emplace_back();
-      for (std::size_t a = 0; a < 3; ++a)
-        if (n[a] > 0) u[a] = std::sqrt(std::max(0.0, (error2[a] - sigma2[a]) / n[a]));
+      const auto scale = [](double error2, double sigma2) {
+        return sigma2 > 0 ? std::max(1.0, std::sqrt(error2 / sigma2)) : 1.0;
+      };
+      SigmaWidening& w = widening.emplace_back();
+      w.scale_u = scale(sum_of[kU2], sum_of[kSigmaU2]);
+      w.scale_v = scale(sum_of[kV2], sum_of[kSigmaV2]);
+      if (sum_of[kCountW] > 0)
+        w.unseen_w_mm = std::sqrt(std::max(0.0, (sum_of[kW2] - sum_of[kSigmaW2]) / sum_of[kCountW]));
     }
-  return DepthResponse(field_grid, shifts_mm, std::move(measured), std::move(unseen));
+  return DepthResponse(field_grid, shifts_mm, std::move(measured), std::move(widening));
 }
 
 }  // namespace plenopiv::process

@@ -39,35 +39,44 @@ inline constexpr std::size_t kDepthResponseMostSets = 4;
 // 1 / kDepthResponseLeast there, and w about that shift is under-corrected rather than refused.
 inline constexpr double kDepthResponseLeast = 1.0 / 3;
 
+// Per depth layer of a DepthResponse, how far the error of the simulated pairs goes beyond the sigma the
+// correlation statistics predicted there (MART's ghosts, depth elongation and lateral locking, the
+// same in both exposures): u's and v's sigma are multiplied by the layer's RMS error over its RMS
+// sigma, and the random error of w about the layer's mean for its shift, on pairs whose particles
+// also move sideways at random, less that RMS sigma in quadrature, is added to w's sigma in
+// quadrature. A factor for u and v, because their extra error follows the correlation's sigma: a
+// component of whole voxels, which MART reconstructs alike in both exposures, correlates well and
+// has little of it, and an added error would dwarf its sigma. Never narrower than the correlation's
+// sigma. An uncertainty calibrated by simulation of the instrument's own camera, box, seeding and
+// settings (the "uncertainty surface" of Timmins et al., Exp. Fluids 53 (2012) 1133), valid for
+// flows near uniform over a window, as the response itself is.
+struct SigmaWidening {
+  double scale_u = 1, scale_v = 1;  // u's and v's sigma multiplied by these: finite, >= 1
+  double unseen_w_mm = 0;           // w's added in quadrature, mm: finite, >= 0
+  bool operator==(const SigmaWidening&) const = default;
+};
+
 // Per depth layer (node z index) of the vector grid, the mean w measured over the layer's valid
 // vectors for each true shift, through (0, 0): a monotone piecewise-linear curve, inverted to take
 // MART's depth response out of a measured w. Beyond the outermost shifts the end segments go on.
-//
-// With it, per layer, the random error the correlation's own sigma does not see (MART's ghosts and
-// depth elongation, the same in both exposures): on the simulated pairs, the RMS error of u and v,
-// and the RMS of w about the layer's mean for its shift on pairs whose particles also move sideways
-// at random, less the RMS sigma the correlation statistics predicted there, in quadrature (0 where
-// the prediction is the larger). Added to every vector's sigma in quadrature: an uncertainty
-// calibrated by simulation of the instrument's own camera, box, seeding and settings (the
-// "uncertainty surface" of Timmins et al., Exp. Fluids 53 (2012) 1133), valid for flows near
-// uniform over a window, as the response itself is.
+// With it, each layer's SigmaWidening.
 class DepthResponse {
  public:
   // `true_mm`: the shifts, ascending, 0 among them; `measured_mm[layer][k]`: what the processing
-  // measured for true_mm[k] (0 at the 0 shift); `unseen_sigma_mm[layer]`: the random error of
-  // (u, v, w as measured) that the correlation's sigma leaves out, mm, finite and >= 0 (empty: none).
+  // measured for true_mm[k] (0 at the 0 shift); `widening[layer]`: how that layer's sigma is
+  // widened (empty: not at all).
   // InputError, naming the layer's depth, when a layer's measured values do not rise with the true
   // ones, or an outermost one is less than kDepthResponseLeast of its true shift; an inner one that
   // is less is raised to that fraction for the inverse (counted in summary()).
   DepthResponse(Grid3 field_grid, std::vector<double> true_mm, std::vector<std::vector<double>> measured_mm,
-                std::vector<std::array<double, 3>> unseen_sigma_mm = {});
+                std::vector<SigmaWidening> widening = {});
 
   // The true shift that layer `layer` measures as `measured_mm`, and the inverse's slope there
   // (d true / d measured: what carries w's standard uncertainty).
   double true_mm(int layer, double measured_mm) const;
   double slope(int layer, double measured_mm) const;
   // w (and its uncertainty, where estimated) of every node of `field` taken through its layer's
-  // inverse; each sigma first widened by its layer's unseen error, in quadrature. std::logic_error
+  // inverse; each sigma first widened as its layer's SigmaWidening says. std::logic_error
   // when `field` is not on the grid the response was measured on.
   void apply(VectorField& field) const;
 
@@ -77,11 +86,11 @@ class DepthResponse {
   // The curve the inverse follows: measured_mm() with every inner value under kDepthResponseLeast
   // of its shift raised to it.
   const std::vector<std::vector<double>>& curve_mm() const { return curve_mm_; }
-  const std::vector<std::array<double, 3>>& unseen_sigma_mm() const { return unseen_sigma_mm_; }
+  const std::vector<SigmaWidening>& sigma_widening() const { return widening_; }
   // Measured over true shift at the outermost shifts, the smallest and largest over the layers,
   // as "depth response over z <first>..<last layer> mm: <least>..<most> of +<shift> mm, ... of
   // -<shift> mm", then the inner shifts raised to kDepthResponseLeast (how many, over which
-  // layers), then the largest unseen sigma of u, v and w over the layers.
+  // layers), then the largest widening of u, v and w over the layers.
   std::string summary() const;
 
   // The response as bytes (this build's layout) and back; deserialize throws InputError naming
@@ -96,8 +105,8 @@ class DepthResponse {
   Grid3 field_grid_;
   std::vector<double> true_mm_;
   std::vector<std::vector<double>> measured_mm_;
-  std::vector<std::vector<double>> curve_mm_;           // measured_mm_, inner values raised
-  std::vector<std::array<double, 3>> unseen_sigma_mm_;  // one per layer, or none
+  std::vector<std::vector<double>> curve_mm_;  // measured_mm_, inner values raised
+  std::vector<SigmaWidening> widening_;        // one per layer, or none
 };
 
 // The response of `processor`'s settings on its camera and lenses: for each of
@@ -109,8 +118,8 @@ class DepthResponse {
 // kDepthResponseVectorsPerLayer asks (at most kDepthResponseMostSets). Each set is processed a
 // second time with every particle of its second frame also moved sideways by a random fraction of a
 // voxel: a window of a flow holds particles at many lateral fractions, and its w averages their
-// errors, while a window the sweep alone moves carries one fraction's. The unseen sigma of u and v
-// comes from the first pairs, that of w from the second, where the processing estimates sigma.
+// errors, while a window the sweep alone moves carries one fraction's. The widening of u's and v's
+// sigma comes from the first pairs, that of w's from the second, where the processing estimates sigma.
 // Deterministic (fixed seeds). Costs eight pairs' processing at the paper's scale (minutes), up to
 // thirty-two on a small box (seconds). `progress` (optional) gets the fraction done after each
 // pair.

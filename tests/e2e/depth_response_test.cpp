@@ -86,34 +86,37 @@ TEST(DepthResponse, InvertsEachLayersCurvePiecewiseAndGoesOnAlongItsEndSegments)
   EXPECT_NE(r.summary().find("0.72..0.8 of +0.25 mm"), std::string::npos) << r.summary();
 }
 
-// The random error the correlation's sigma leaves out, per layer: added to each sigma in
-// quadrature, w's before its inverse's slope; no estimate (NaN) stays none.
-TEST(DepthResponse, WidensEachSigmaByItsLayersUnseenErrorInQuadrature) {
+// The error the correlation's sigma leaves out, per layer: u's and v's sigma scaled, w's unseen
+// error added in quadrature before its inverse's slope; no estimate (NaN) stays none.
+TEST(DepthResponse, WidensEachSigmaAsItsLayerSays) {
   const DepthResponse r(two_layers(), kShifts, {{-0.2, -0.1, 0, 0.1, 0.2}, {-0.24, -0.12, 0, 0.1, 0.18}},
-                        {{0.03, 0.0, 0.015}, {0.0, 0.04, 0.0}});
+                        {{1.25, 1.0, 0.015}, {1.0, 5.0 / 3, 0.0}});
   VectorField f(two_layers());
   f.dz_mm = {0.1f, 0.1f, 0.05f, 0.05f};
   f.sigma_dx_mm = {0.04f, NAN, 0.03f, 0.02f};
   f.sigma_dy_mm = {0.01f, NAN, 0.03f, 0.02f};
   f.sigma_dz_mm = {0.02f, NAN, 0.02f, 0.01f};
   r.apply(f);
-  EXPECT_FLOAT_EQ(f.sigma_dx_mm[0], 0.05f);  // layer 0: hypot(0.04, 0.03)
+  EXPECT_FLOAT_EQ(f.sigma_dx_mm[0], 0.05f);  // layer 0: 0.04 x 1.25
   EXPECT_FLOAT_EQ(f.sigma_dy_mm[0], 0.01f);
   EXPECT_FLOAT_EQ(f.sigma_dz_mm[0], 0.025f * 1.25f);  // hypot(0.02, 0.015), then slope 1.25
   EXPECT_TRUE(std::isnan(f.sigma_dx_mm[1]) && std::isnan(f.sigma_dy_mm[1]) && std::isnan(f.sigma_dz_mm[1]));
-  EXPECT_FLOAT_EQ(f.sigma_dx_mm[2], 0.03f);  // layer 1: hypot(0.03, 0.04) in v only
+  EXPECT_FLOAT_EQ(f.sigma_dx_mm[2], 0.03f);  // layer 1: 0.03 x 5 / 3 in v only
   EXPECT_FLOAT_EQ(f.sigma_dy_mm[2], 0.05f);
   EXPECT_FLOAT_EQ(f.sigma_dz_mm[2], 0.025f);
-  EXPECT_NE(r.summary().find("does not see, up to u 0.03, v 0.04, w 0.015 mm"), std::string::npos) << r.summary();
+  EXPECT_NE(r.summary().find("u up to x1.25, v up to x1.67, w by up to 0.015 mm"), std::string::npos) << r.summary();
 
-  // One per layer, finite and not negative.
-  const auto unseen = [](std::vector<std::array<double, 3>> u) {
-    DepthResponse(two_layers(), kShifts, {{-0.2, -0.1, 0, 0.1, 0.2}, {-0.2, -0.1, 0, 0.1, 0.2}}, std::move(u));
+  // One per layer; scales finite and at least 1 (never narrower), w's unseen error finite and not negative.
+  const auto widen = [](std::vector<SigmaWidening> w) {
+    DepthResponse(two_layers(), kShifts, {{-0.2, -0.1, 0, 0.1, 0.2}, {-0.2, -0.1, 0, 0.1, 0.2}}, std::move(w));
   };
-  EXPECT_THROW(unseen({{0, 0, 0}}), std::logic_error);
-  EXPECT_THROW(unseen({{0, 0, 0}, {0, -0.01, 0}}), std::logic_error);
-  EXPECT_THROW(unseen({{0, 0, NAN}, {0, 0, 0}}), std::logic_error);
-  EXPECT_NO_THROW(unseen({}));
+  EXPECT_THROW(widen({{1, 1, 0}}), std::logic_error);
+  EXPECT_THROW(widen({{1, 1, 0}, {1, 0.99, 0}}), std::logic_error);
+  EXPECT_THROW(widen({{NAN, 1, 0}, {1, 1, 0}}), std::logic_error);
+  EXPECT_THROW(widen({{1, 1, -0.01}, {1, 1, 0}}), std::logic_error);
+  EXPECT_THROW(widen({{1, 1, NAN}, {1, 1, 0}}), std::logic_error);
+  EXPECT_NO_THROW(widen({{1, 1, 0}, {2, 3, 0.1}}));
+  EXPECT_NO_THROW(widen({}));
 }
 
 TEST(DepthResponse, RefusesALayerWhoseVectorsBarelyFollowTheShift) {
@@ -166,34 +169,34 @@ TEST(DepthResponse, AnInnerShiftMeasuredAsLessThanAThirdIsTakenAsAThird) {
 
 TEST(DepthResponse, ItsBytesReadBackTheSameAndDamagedOnesAreRefused) {
   const DepthResponse r(two_layers(), kShifts, {{-0.2, -0.1, 0, 0.1, 0.2}, {-0.24, -0.12, 0, 0.1, 0.18}},
-                        {{0.01, 0.02, 0.03}, {0.04, 0.05, 0.06}});
+                        {{1.1, 1.2, 0.03}, {1.4, 1.5, 0.06}});
   std::string bytes;
   r.serialize(bytes);
   const DepthResponse back = DepthResponse::deserialize(bytes);
   EXPECT_EQ(back.field_grid(), r.field_grid());
   EXPECT_EQ(back.shifts_mm(), r.shifts_mm());
   EXPECT_EQ(back.measured_mm(), r.measured_mm());
-  EXPECT_EQ(back.unseen_sigma_mm(), r.unseen_sigma_mm());
-  // Without an unseen sigma (a processing that estimates none): an empty array, read back empty.
+  EXPECT_EQ(back.sigma_widening(), r.sigma_widening());
+  // Without a widening (a processing that estimates no sigma): an empty array, read back empty.
   const DepthResponse none(two_layers(), kShifts, r.measured_mm());
   std::string none_bytes;
   none.serialize(none_bytes);
-  EXPECT_TRUE(DepthResponse::deserialize(none_bytes).unseen_sigma_mm().empty());
+  EXPECT_TRUE(DepthResponse::deserialize(none_bytes).sigma_widening().empty());
   for (std::size_t cut = 0; cut < bytes.size(); cut += 7) {
     const std::string e = error_of([&] { DepthResponse::deserialize(std::string_view(bytes).substr(0, cut)); });
     EXPECT_NE(e.find("depth response bytes: "), std::string::npos) << cut << ": " << e;
   }
   EXPECT_NE(error_of([&] { DepthResponse::deserialize(bytes + "x"); }).find("bytes left"), std::string::npos);
-  // A measured value that no longer rises, or a negative unseen sigma: what the constructor refuses, named.
-  const std::size_t unseen_bytes = sizeof(std::uint64_t) + 2 * 3 * sizeof(double);
+  // A measured value that no longer rises, or a negative unseen w: what the constructor refuses, named.
+  const std::size_t widening_bytes = sizeof(std::uint64_t) + 2 * sizeof(SigmaWidening);
   std::string flat = bytes;
   const double same = 0.1;
-  std::memcpy(flat.data() + flat.size() - unseen_bytes - sizeof(double), &same, sizeof same);
+  std::memcpy(flat.data() + flat.size() - widening_bytes - sizeof(double), &same, sizeof same);
   EXPECT_NE(error_of([&] { DepthResponse::deserialize(flat); }).find("the vectors at z = 3 mm"), std::string::npos);
   std::string negative = bytes;
   const double below = -0.01;
   std::memcpy(negative.data() + negative.size() - sizeof(double), &below, sizeof below);
-  EXPECT_NE(error_of([&] { DepthResponse::deserialize(negative); }).find("unseen sigma must be finite"),
+  EXPECT_NE(error_of([&] { DepthResponse::deserialize(negative); }).find("its unseen w finite and not negative"),
             std::string::npos);
   // A layer count the bytes cannot hold is refused before anything is allocated for it.
   std::string many = bytes;
@@ -382,8 +385,8 @@ TEST(DepthResponse, TakesMartsShortfallOutOfAShearsDepthComponent) {
   EXPECT_GT(after.gain[2], 0.83);
   EXPECT_LT(after.gain[2], 1.05);
   EXPECT_LT(after.rms[2], 1.05 * before.rms[2]);
-  // The unseen error the response measured widens sigma towards the error (w's bias, which no
-  // sigma of random error sees, is in the error).
+  // The widening the response measured takes sigma towards the error (w's bias, which no sigma of
+  // random error sees, is in the error).
   const sim::UncertaintyCheck sigma_before = sim::uncertainty_check(plain.correlation.field, flow, voxel, 3, 0);
   const sim::UncertaintyCheck sigma_after = sim::uncertainty_check(corrected.correlation.field, flow, voxel, 3, 0);
   for (std::size_t a = 0; a < 3; ++a)
@@ -392,9 +395,9 @@ TEST(DepthResponse, TakesMartsShortfallOutOfAShearsDepthComponent) {
               << sigma_after.rms_sigma[a] / sigma_after.rms_error[a] << ", within 1 / 2 sigma "
               << sigma_before.within_1[a] << " / " << sigma_before.within_2[a] << " -> " << sigma_after.within_1[a]
               << " / " << sigma_after.within_2[a] << "\n";
-  ASSERT_EQ(processor.depth_response()->unseen_sigma_mm().size(), std::size_t(plain.correlation.field.grid.shape[2]));
-  for (const std::array<double, 3>& unseen : processor.depth_response()->unseen_sigma_mm())
-    EXPECT_GT(unseen[2], 0.0);  // MART's depth error is never all in the correlation's sigma
+  ASSERT_EQ(processor.depth_response()->sigma_widening().size(), std::size_t(plain.correlation.field.grid.shape[2]));
+  for (const SigmaWidening& widening : processor.depth_response()->sigma_widening())
+    EXPECT_GT(widening.unseen_w_mm, 0.0);  // MART's depth error is never all in the correlation's sigma
   // Bounds from measurement (the values: docs/accuracy.md): on this shallow box beside the focal
   // plane the correlation's own sigma already about matches w's error, and the calibration's error
   // added to it makes w's sigma wider than the error: an over-estimate, never narrower.
