@@ -608,9 +608,9 @@ def t_piv_ring(name):
 
 UNCERTAINTY_ROWS = [("exact", "uniform_noise", "exact, 96³: uniform shift, noise"),
                     ("exact", "paper_ring_off_axis_band", "exact, paper's ring, off the band"),
-                    ("reconstructed", "uniform", "MART, small camera: uniform (2.32, 1.36, 2 voxels)"),
+                    ("reconstructed", "uniform", "MART, small camera, 8 particle sets: uniform (2.32, 1.36, 2 voxels)"),
                     ("reconstructed", "uniform_depth_response", "the same through the depth response"),
-                    ("reconstructed", "ring_off_axis_band", "MART, small camera: ring, off the band"),
+                    ("reconstructed", "ring_off_axis_band", "MART, small camera, 8 sets: ring, off the band"),
                     ("reconstructed", "paper_ring_off_axis_band", "MART, paper's ring (run-paper.yaml), off the band"),
                     ("reconstructed", "paper_ring_off_axis_band_depth_response",
                      "the same through the depth response")]
