@@ -2,8 +2,8 @@
 // and depth band, and the coverage of +-1 and +-2 sigma, on exact-particle and reconstructed cases.
 //
 //   build/bin/bench_uncertainty [--quick] [--exact-only [--window-mean] | --reconstructed-only [--sets N]]
-//   [--with-paper-ring] build/bin/bench_uncertainty --cost N   (N^3 voxels: the correlation with and without the
-//   uncertainty)
+//                               [--with-paper-ring]
+//   build/bin/bench_uncertainty --cost N   (N^3 voxels: the correlation with and without the uncertainty)
 //
 // Exact particles: 96^3 voxels (--quick: 64^3) at 0.5 ppm, core/piv's default correlation: a
 // uniform shift among dim particles that differ between the exposures (noise), a shear in u and
