@@ -111,7 +111,7 @@ int main(int argc, char** argv) {
     const daemon::RunConfig config = daemon::parse_run_config("dt_s: 0.001\n" + v.config, v.name);
     const auto t0 = Clock::now();
     const daemon::ProcessFn process =
-        daemon::plenoptic_processing(camera)(config, daemon::RunCalibration{}, process::Tier::full);
+        daemon::plenoptic_processing(camera)(config, daemon::RunCalibration{}, process::Tier::full, {});
     const double setup = std::chrono::duration<double>(Clock::now() - t0).count();
     const Figures sustained = run(pairs, process, 0.0, 2);
     const Figures paced = run(pairs, process, rate_hz, 2);

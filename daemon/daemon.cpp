@@ -49,7 +49,7 @@ std::pair<ProcessFactory, std::string> choose_processing(const DaemonConfig& con
   const optics::CameraModel camera = optics::load_camera_file(config.camera_file);
   spdlog::info("camera {}:\n{}", config.camera_file.string(), camera.summary());
   if (!factory) {
-    factory = plenoptic_processing(camera);
+    factory = plenoptic_processing(camera, config.data_dir / kResponseCacheFolder);
     summary = "MART + multi-pass 3D correlation, " +
               (config.calibration_file.empty() ? "nominal lattice of " + config.camera_file.filename().string()
                                                : "calibration " + config.calibration_file.string());

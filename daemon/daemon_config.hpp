@@ -4,6 +4,7 @@
 #include <filesystem>
 #include <optional>
 #include <string>
+#include <string_view>
 
 #include "drivers/trigger/trigger.hpp"
 
@@ -58,6 +59,10 @@ struct DaemonConfig {
   int processing_nice = 10;
   RigTiming timing;
 };
+
+// The folder in data_dir where runs' depth responses are kept (plenoptic_processing), beside the
+// run folders (run-...) and calibration images (calibration-...).
+inline constexpr std::string_view kResponseCacheFolder = "depth-responses";
 
 // Reads plenopivd.yaml; relative paths are taken from the file's folder. Every bad key is an
 // InputError naming it. The control endpoint is an ipc:// socket unless `curve:` is configured.

@@ -30,62 +30,68 @@ ReconstructionWork reconstruction_work(const process::PairResult& r) {
 
 }  // namespace
 
-ProcessFactory plenoptic_processing(const optics::CameraModel& camera) {
+ProcessFactory plenoptic_processing(const optics::CameraModel& camera, const std::filesystem::path& response_folder) {
   // Kept for the factory's life (the daemon's): runs with the same geometry share their operator.
   auto operators = std::make_shared<process::OperatorCache>();
-  return
-      [camera, operators](const RunConfig& config, const RunCalibration& calibration, process::Tier tier) -> ProcessFn {
-        const process::ProcessSettings& settings = config.spec.settings(tier, "run config");
-        // A run's volumes are refused before any table is built when the pairs its lanes keep in flight
-        // would not fit this machine.
-        const process::ProcessSettings& live = config.spec.settings(config.live_lane_tier(), "run config");
-        const Grid3 g = live.reconstruction_grid();
-        const int quality = config.quality.on() ? QualityLane::kPairsInFlight : 0;
-        require_memory(
-            live.peak_bytes_per_pair() * config.max_pairs_in_flight + config.spec.full.peak_bytes_per_pair() * quality,
-            "processing " + std::to_string(config.max_pairs_in_flight) + " pair(s) at once on a " +
-                std::to_string(g.shape[0]) + " x " + std::to_string(g.shape[1]) + " x " + std::to_string(g.shape[2]) +
-                " voxel volume (volume, max_pairs_in_flight)" +
-                (quality ? " beside the quality lane's pair on the full settings' volume" : ""));
-        auto processor = std::make_shared<const process::PairProcessor>(
-            camera, calibration.loaded ? *calibration.loaded : calib::nominal_calibration(camera), settings,
-            operators.get());
-        spdlog::info("run processing, {} tier: calibration {}; {}; {}", process::tier_name(tier), calibration.summary(),
-                     processor->setup_note(),
-                     processor->note().empty() ? "frames reconstructed on raw pixels" : processor->note());
-        // The lane's pairs in flight get their buffers now, while Armed, not beside the recording.
-        const bool live_lane = tier == config.live_lane_tier();
-        const int in_flight = live_lane ? config.max_pairs_in_flight : QualityLane::kPairsInFlight;
-        const auto t0 = std::chrono::steady_clock::now();
-        const std::size_t bytes = processor->reserve_workspaces(in_flight);
-        spdlog::info("run processing, {} tier: buffers for {} pair(s) in flight reserved, {:.2f} GB, in {:.1f} s",
-                     process::tier_name(tier), in_flight, double(bytes) / 1e9,
-                     std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
-        // Volumes are published from the live lane only (the quality lane's would double the traffic).
-        const bool keep_volumes = config.publish_volumes && tier == config.live_lane_tier();
-        return [processor, keep_volumes](const drivers::FramePair& pair, const PairSteps& steps) {
-          process::PairOptions options;
-          if (pair.measured) options.measured_dt_s = pair.measured->dt_s();
-          // Called after every MART iteration and correlation pass: the quality lane waits there while
-          // the live lane is busy, and a stopping run gives up there.
-          options.progress = [&steps](const std::string&, double) { steps.step(); };
-          process::PairResult r = processor->process(pair.a.image, pair.b.image, options);
-          ProcessedPair out;
-          out.vectors = std::move(r.correlation.field);
-          out.flags = std::move(r.correlation.flags);
-          out.work = reconstruction_work(r);
-          spdlog::debug(
-              "pair {}: MART skipped {:.1f} % of the voxel updates ({:.1f} % of the work pruned); live voxels "
-              "per iteration A {}, B {}",
-              pair.pair_index, 100 * out.work->updates_skipped, 100 * out.work->work_pruned,
-              fmt::join(out.work->live_a, " "), fmt::join(out.work->live_b, " "));
-          if (keep_volumes) {
-            out.volume_a = std::move(r.volume_a);
-            out.volume_b = std::move(r.volume_b);
-          }
-          return out;
-        };
-      };
+  return [camera, operators, response_folder](const RunConfig& config, const RunCalibration& calibration,
+                                              process::Tier tier, const SetupProgress& progress) -> ProcessFn {
+    const process::ProcessSettings& settings = config.spec.settings(tier, "run config");
+    // A run's volumes are refused before any table is built when the pairs its lanes keep in flight
+    // would not fit this machine.
+    const process::ProcessSettings& live = config.spec.settings(config.live_lane_tier(), "run config");
+    const Grid3 g = live.reconstruction_grid();
+    const int quality = config.quality.on() ? QualityLane::kPairsInFlight : 0;
+    require_memory(
+        live.peak_bytes_per_pair() * config.max_pairs_in_flight + config.spec.full.peak_bytes_per_pair() * quality,
+        "processing " + std::to_string(config.max_pairs_in_flight) + " pair(s) at once on a " +
+            std::to_string(g.shape[0]) + " x " + std::to_string(g.shape[1]) + " x " + std::to_string(g.shape[2]) +
+            " voxel volume (volume, max_pairs_in_flight)" +
+            (quality ? " beside the quality lane's pair on the full settings' volume" : ""));
+    const std::string step = "depth response of the " + std::string(process::tier_name(tier)) + " tier";
+    if (progress && settings.depth_response_ppm > 0) progress(step, 0.0);
+    auto processor = std::make_shared<const process::PairProcessor>(
+        camera, calibration.loaded ? *calibration.loaded : calib::nominal_calibration(camera), settings,
+        operators.get(),
+        [&](double fraction) {
+          if (progress) progress(step, fraction);
+        },
+        response_folder);
+    spdlog::info("run processing, {} tier: calibration {}; {}; {}", process::tier_name(tier), calibration.summary(),
+                 processor->setup_note(),
+                 processor->note().empty() ? "frames reconstructed on raw pixels" : processor->note());
+    // The lane's pairs in flight get their buffers now, while Armed, not beside the recording.
+    const bool live_lane = tier == config.live_lane_tier();
+    const int in_flight = live_lane ? config.max_pairs_in_flight : QualityLane::kPairsInFlight;
+    const auto t0 = std::chrono::steady_clock::now();
+    const std::size_t bytes = processor->reserve_workspaces(in_flight);
+    spdlog::info("run processing, {} tier: buffers for {} pair(s) in flight reserved, {:.2f} GB, in {:.1f} s",
+                 process::tier_name(tier), in_flight, double(bytes) / 1e9,
+                 std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+    // Volumes are published from the live lane only (the quality lane's would double the traffic).
+    const bool keep_volumes = config.publish_volumes && tier == config.live_lane_tier();
+    return [processor, keep_volumes](const drivers::FramePair& pair, const PairSteps& steps) {
+      process::PairOptions options;
+      if (pair.measured) options.measured_dt_s = pair.measured->dt_s();
+      // Called after every MART iteration and correlation pass: the quality lane waits there while
+      // the live lane is busy, and a stopping run gives up there.
+      options.progress = [&steps](const std::string&, double) { steps.step(); };
+      process::PairResult r = processor->process(pair.a.image, pair.b.image, options);
+      ProcessedPair out;
+      out.vectors = std::move(r.correlation.field);
+      out.flags = std::move(r.correlation.flags);
+      out.work = reconstruction_work(r);
+      spdlog::debug(
+          "pair {}: MART skipped {:.1f} % of the voxel updates ({:.1f} % of the work pruned); live voxels "
+          "per iteration A {}, B {}",
+          pair.pair_index, 100 * out.work->updates_skipped, 100 * out.work->work_pruned,
+          fmt::join(out.work->live_a, " "), fmt::join(out.work->live_b, " "));
+      if (keep_volumes) {
+        out.volume_a = std::move(r.volume_a);
+        out.volume_b = std::move(r.volume_b);
+      }
+      return out;
+    };
+  };
 }
 
 }  // namespace plenopiv::daemon

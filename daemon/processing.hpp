@@ -1,6 +1,8 @@
 // The live processing stage: a thin adapter from recorded pairs to process::PairProcessor.
 #pragma once
 
+#include <filesystem>
+
 #include "core/optics/camera_model.hpp"
 #include "daemon/run.hpp"
 
@@ -13,7 +15,12 @@ namespace plenopiv::daemon {
 // with its measured dt and the run's cancel flag. A run whose pairs in flight (both lanes) would not fit this machine's
 // memory, or whose settings do not fit the camera, is refused (InputError) before the run folder exists. The factory
 // keeps the operators (weight tables) of its latest runs (process::OperatorCache, in memory): a run on the camera,
-// calibration and volume of an earlier one builds no tables.
-ProcessFactory plenoptic_processing(const optics::CameraModel& camera);
+// calibration and volume of an earlier one builds no tables. A tier with a depth response
+// (reconstruction.depth_response_ppm) measures it while the run is Armed, saying how far it is
+// through the factory's progress (where a stopped run ends it), and keeps it in `response_folder`
+// (process::DepthResponseDiskCache; empty: not kept), where a later run with the same inputs and
+// settings reads it back.
+ProcessFactory plenoptic_processing(const optics::CameraModel& camera,
+                                    const std::filesystem::path& response_folder = {});
 
 }  // namespace plenopiv::daemon

@@ -510,10 +510,24 @@ bool Run::prepare() {
   setup_started_ns_ = std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now().time_since_epoch()).count();
   try {
     check_write_rate();
+    // A long setup step says how far it is (status), and gives up at its next report once the run
+    // is stopped.
+    const SetupProgress progress = [this](const std::string& step, double fraction) {
+      {
+        std::lock_guard lock(setup_mutex_);
+        setup_step_ = step;
+        setup_fraction_ = fraction;
+      }
+      if (stop_) throw Cancelled("run " + run_id_ + " stopped while setting up (" + step + ")");
+    };
     if (env_.processing) {
-      for (const auto& lane : lanes_) {
-        processes_.push_back(env_.processing(config_, calibration_, lane->tier()));
-        if (stop_) break;
+      try {
+        for (const auto& lane : lanes_) {
+          processes_.push_back(env_.processing(config_, calibration_, lane->tier(), progress));
+          if (stop_) break;
+        }
+      } catch (const Cancelled&) {
+        if (!stop_) throw;
       }
     }
     if (stop_) {
@@ -743,8 +757,19 @@ void Run::fill_status(msg::Status& s) const {
           double(std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now().time_since_epoch()).count() -
                  setup_started_ns_) *
           1e-9;
-      char text[96];
-      std::snprintf(text, sizeof text, "setting up: processing and weight tables, %.1f s so far", elapsed);
+      std::string step;
+      double fraction = 0;
+      {
+        std::lock_guard lock(setup_mutex_);
+        step = setup_step_;
+        fraction = setup_fraction_;
+      }
+      char text[160];
+      if (step.empty())
+        std::snprintf(text, sizeof text, "setting up: processing and weight tables, %.1f s so far", elapsed);
+      else
+        std::snprintf(text, sizeof text, "setting up: %s, %.0f %% measured, %.1f s so far", step.c_str(),
+                      100 * fraction, elapsed);
       s.set_message(setup_started_ns_ ? text : "setting up");
     }
     return;

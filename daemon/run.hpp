@@ -28,10 +28,17 @@
 
 namespace plenopiv::daemon {
 
+// What a ProcessFactory calls as a long setup step goes (a depth response measured: minutes at
+// the paper's scale): what it is doing and the fraction of it done (0 to 1). The run shows it in
+// status, and throws plenopiv::Cancelled there once the run is stopped.
+using SetupProgress = std::function<void(const std::string& step, double fraction)>;
+
 // Makes the processing function of one of a run's lanes: the settings of `tier` in the run's
-// processing spec (it may set up per-run tables), with the run's calibration (the one the run
-// folder keeps). Empty: this daemon has no processing stage, and runs record raw frames only.
-using ProcessFactory = std::function<ProcessFn(const RunConfig&, const RunCalibration&, process::Tier tier)>;
+// processing spec (it may set up per-run tables, calling `progress` in a long step), with the
+// run's calibration (the one the run folder keeps). Empty: this daemon has no processing stage,
+// and runs record raw frames only.
+using ProcessFactory = std::function<ProcessFn(const RunConfig&, const RunCalibration&, process::Tier tier,
+                                               const SetupProgress& progress)>;
 
 // How long a stop may take, at most, for each of its steps: the camera delivering exposures already
 // triggered (drivers::Camera::stop), the recorder writing the pairs delivered before the stop, and
@@ -137,6 +144,10 @@ class Run {
   // status reads the recorder only then.
   std::atomic<bool> prepared_{false};
   std::atomic<std::int64_t> setup_started_ns_{0};
+  // The setup's long step under way (SetupProgress) and the fraction of it done; empty: none.
+  mutable std::mutex setup_mutex_;
+  std::string setup_step_;
+  double setup_fraction_ = 0;
   std::unique_ptr<run_folder::Writer> recorder_;
   // The live lane first, then the quality lane when the run has one (make_lanes), and the
   // processing of each (empty when the daemon has none).

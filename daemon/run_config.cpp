@@ -119,14 +119,6 @@ RunConfig parse_run_config(const std::string& text, const std::string& source) {
   c.processing = process::processing_part(root);
   c.spec = process::process_spec_from(YamlMap(c.processing, source));
   c.dt_s = c.spec.full.correlation.dt_s;
-  // The depth response is measured while a run is Armed, for minutes at the paper's scale and
-  // without a point where `run stop` could end it: offline only (`plenopiv process --run RUN
-  // --config ...` afterwards).
-  for (const process::ProcessSettings* tier : {&c.spec.full, c.spec.live ? &*c.spec.live : nullptr})
-    if (tier && tier->depth_response_ppm > 0)
-      map.fail(std::string(tier == &c.spec.full ? "" : "live.") + "reconstruction.depth_response_ppm",
-               "is for offline processing only (plenopiv process, or process --run after the run): a live run "
-               "would measure it for minutes while Armed; set it to 0");
   if (double(c.spec.full.reconstruction_grid().count()) > 512.0 * 1024 * 1024) {
     map.fail("volume", "the volume would have " + std::to_string(c.spec.full.reconstruction_grid().count()) +
                            " voxels; more than 2^29 does not fit a live run");

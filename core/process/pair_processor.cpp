@@ -103,7 +103,8 @@ PairProcessor::~PairProcessor() = default;
 
 PairProcessor::PairProcessor(const optics::CameraModel& camera, const calib::LoadedCalibration& calibration,
                              ProcessSettings settings, OperatorCache* operators,
-                             const std::function<void(double)>& setup_progress)
+                             const std::function<void(double)>& setup_progress,
+                             const std::filesystem::path& response_folder)
     : settings_(std::move(settings)), raw_width_(camera.sensor().width_px), raw_height_(camera.sensor().height_px) {
   const int binning = settings_.pixel_binning;
   const auto in_binning = [&](auto&& make) {
@@ -133,8 +134,14 @@ PairProcessor::PairProcessor(const optics::CameraModel& camera, const calib::Loa
     const auto measure = [&] {
       return measure_depth_response(*this, camera, calibration.lenses, settings_.depth_response_ppm, setup_progress);
     };
-    const std::filesystem::path folder = operators ? operators->disk_folder() : std::filesystem::path();
-    const std::string key = folder.empty() ? std::string() : depth_response_key(provenance.key, camera, settings_);
+    const std::filesystem::path folder = !response_folder.empty() ? response_folder
+                                         : operators              ? operators->disk_folder()
+                                                                  : std::filesystem::path();
+    const std::string operator_inputs = operators
+                                            ? provenance.key
+                                            : operator_key(framed, calibration.lenses, white,
+                                                           settings_.reconstruction_grid(), settings_.angular_sampling);
+    const std::string key = folder.empty() ? std::string() : depth_response_key(operator_inputs, camera, settings_);
     if (!key.empty()) {
       DepthResponseDiskCache cache(folder);
       depth_response_ = std::make_unique<const DepthResponse>(cache.response(key, measure));

@@ -2,6 +2,7 @@
 // operator, then any number of raw frame pairs through it, from any caller.
 #pragma once
 
+#include <filesystem>
 #include <functional>
 #include <memory>
 #include <mutex>
@@ -90,12 +91,15 @@ class PairProcessor {
   // on disk), and where a new one is kept; without it the operator is built. The results are the
   // same bits either way.
   // With settings.depth_response_ppm above 0 the depth response is measured (minutes at the
-  // paper's scale), or read from the disk folder of `operators` where it was measured before with
-  // the same inputs, settings and executable (DepthResponseDiskCache), and kept there when measured.
-  // `setup_progress` (optional): the fraction of the measurement done, after each of its pairs.
+  // paper's scale), or read from `response_folder` (empty: the disk folder of `operators`) where it
+  // was measured before with the same inputs, settings and executable (DepthResponseDiskCache), and
+  // kept there when measured. `setup_progress` (optional): the fraction of the measurement done,
+  // after each of its pairs; a caller ends the setup there by throwing (plenopiv::Cancelled), and
+  // nothing is kept.
   PairProcessor(const optics::CameraModel& camera, const calib::LoadedCalibration& calibration,
                 ProcessSettings settings, OperatorCache* operators = nullptr,
-                const std::function<void(double)>& setup_progress = {});
+                const std::function<void(double)>& setup_progress = {},
+                const std::filesystem::path& response_folder = {});
   ~PairProcessor();
 
   // Raw frames A and B (the camera's counts) to vectors: validated (sensor-sized; named "frame A"

@@ -17,6 +17,7 @@
 #include "tests/support/child_process.hpp"
 #include "tests/support/daemon_status.hpp"
 #include "tests/support/run_manifest.hpp"
+#include "tests/support/shallow_spec.hpp"
 #include "tests/support/temp_dir.hpp"
 #include "tests/support/tmpfs.hpp"
 
@@ -439,6 +440,83 @@ TEST(DaemonStop, SigtermWithHeavyProcessingInFlightEndsWithinTenSeconds) {
     EXPECT_TRUE(fs::exists(run / p.frame_a()));
     EXPECT_TRUE(fs::exists(run / p.frame_b()));
   }
+}
+
+// A run whose settings ask for a depth response measures it while Armed, status saying how far;
+// `run stop` then ends it with nothing made. A run that lets it finish keeps it in the data
+// directory, and the next run on the same settings reads it back instead of measuring.
+TEST(DaemonSetup, ADepthResponseIsMeasuredWhileArmedStoppableAndKeptForTheNextRun) {
+  namespace fs = std::filesystem;
+  const fs::path dir = testing_support::temp_dir("setup") / "depth-response";
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const std::string control = testing_support::ipc_endpoint("control");
+  ChildProcess daemon(
+      {testing_support::binary("plenopivd"), "--simulation", "--camera-file",
+       std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml", "--camera", "sim://?rays=300&ppm=0.3",
+       "--control", control, "--publish", "tcp://127.0.0.1:" + std::to_string(testing_support::free_tcp_port()),
+       "--data-dir", (dir / "data").string()},
+      dir / "plenopivd.log");
+  for (int i = 0; i < 100 && !testing_support::probe_status(control); ++i)
+    ASSERT_TRUE(daemon.running()) << daemon.output();
+  // The small camera's shallow box, where MART follows depth shifts.
+  std::ofstream(dir / "response.yaml") << std::string("pairs: 1\nrate_hz: 5\ndt_s: 0.0001") +
+                                              testing_support::kShallowSmallBox +
+                                              "reconstruction: {iterations: 4, mu: 1, acceleration: nesterov, "
+                                              "depth_response_ppm: 0.5}\n";
+  const auto run = [&](const std::vector<std::string>& args) {
+    std::vector<std::string> command{testing_support::binary("plenopiv"), "--endpoint", control, "run"};
+    command.insert(command.end(), args.begin(), args.end());
+    std::string out;
+    EXPECT_EQ(testing_support::run_command(command, out), 0) << out;
+    return out;
+  };
+  const auto kept = [&] {
+    std::size_t n = 0;
+    std::error_code ec;
+    for (const auto& e : fs::directory_iterator(dir / "data" / "depth-responses", ec))
+      n += e.path().filename().string().starts_with("depth-response-");
+    return n;
+  };
+  const auto runs = [&] {
+    std::size_t n = 0;
+    for (const auto& e : fs::directory_iterator(dir / "data")) n += e.path().filename().string().starts_with("run-");
+    return n;
+  };
+  const auto wait_idle = [&] {
+    for (int i = 0; i < 1200; ++i) {
+      const auto s = testing_support::probe_status(control);
+      if (s && s->state() == "Idle") return true;
+      std::this_thread::sleep_for(50ms);
+    }
+    return false;
+  };
+
+  run({"start", "--no-wait", "--config", (dir / "response.yaml").string()});
+  std::string said;
+  for (int i = 0; i < 600 && said.find("% measured") == std::string::npos; ++i) {
+    if (const auto s = testing_support::probe_status(control)) said = s->message();
+    std::this_thread::sleep_for(20ms);
+  }
+  EXPECT_EQ(said.rfind("setting up: depth response of the full tier, ", 0), 0u) << said;
+  run({"stop"});
+  ASSERT_TRUE(wait_idle()) << daemon.output();
+  EXPECT_EQ(runs(), 0u);
+  EXPECT_EQ(kept(), 0u);
+
+  run({"start", "--config", (dir / "response.yaml").string()});
+  ASSERT_TRUE(wait_idle()) << daemon.output();
+  EXPECT_EQ(kept(), 1u) << daemon.output();
+  run({"start", "--config", (dir / "response.yaml").string()});
+  ASSERT_TRUE(wait_idle()) << daemon.output();
+  EXPECT_EQ(runs(), 2u);
+  const std::string log = daemon.output();
+  const std::size_t measured =
+      log.find("depth response measured and kept in the cache: " + (dir / "data" / "depth-responses").string());
+  EXPECT_NE(measured, std::string::npos) << log;
+  EXPECT_NE(log.find("depth response from the cache: " + (dir / "data" / "depth-responses").string(), measured),
+            std::string::npos)
+      << log;
 }
 
 // A disk that fills during a run ends the run as failed, naming the disk, with a consistent folder;

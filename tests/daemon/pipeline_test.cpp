@@ -231,7 +231,7 @@ class RunTest : public ::testing::Test {
     env_.default_camera_uri = "test://";
     env_.default_trigger_uri = "sim://";
     env_.state = &state_;
-    env_.processing = [](const RunConfig&, const RunCalibration&, process::Tier) {
+    env_.processing = [](const RunConfig&, const RunCalibration&, process::Tier, const SetupProgress&) {
       return ProcessFn([](const drivers::FramePair& pair, const PairSteps&) { return tagged_field(pair); });
     };
     // Faster than a real laser, so runs stay short: frame B must end within the period.
@@ -408,7 +408,7 @@ TEST_F(RunTest, AStopWhileArmedEndsTheRunWithNoFolder) {
   std::promise<void> release;
   std::shared_future<void> released = release.get_future().share();
   std::atomic<bool> building{false};
-  env_.processing = [&, released](const RunConfig&, const RunCalibration&, process::Tier) {
+  env_.processing = [&, released](const RunConfig&, const RunCalibration&, process::Tier, const SetupProgress&) {
     building = true;
     released.wait();  // the weight tables, as long as the test wants
     return ProcessFn([](const drivers::FramePair& pair, const PairSteps&) { return tagged_field(pair); });
@@ -435,10 +435,48 @@ TEST_F(RunTest, AStopWhileArmedEndsTheRunWithNoFolder) {
   EXPECT_EQ(run.trigger().counters().shots_fired, 0u);
 }
 
+// A long setup step (a depth response measured) says how far it is in status, and a stop while
+// Armed ends it at its next report: the run goes Idle with nothing recorded and no folder made.
+TEST_F(RunTest, AStopEndsALongSetupStepAtItsNextReport) {
+  std::atomic<int> reports{0};
+  std::atomic<bool> cancelled{false};
+  env_.processing = [&](const RunConfig&, const RunCalibration&, process::Tier,
+                        const SetupProgress& progress) -> ProcessFn {
+    try {
+      for (int pair = 0; pair < 100000; ++pair) {  // far longer than the test waits
+        progress("depth response of the full tier", 0.25);
+        ++reports;
+        std::this_thread::sleep_for(5ms);
+      }
+    } catch (const Cancelled&) {
+      cancelled = true;
+      throw;
+    }
+    ADD_FAILURE() << "the setup was not stopped";
+    return ProcessFn([](const drivers::FramePair& pair, const PairSteps&) { return tagged_field(pair); });
+  };
+  state_.start("measuring");
+  daemon::Run run(config("pairs: 3\nrate_hz: 50\n"), "measuring", env_);
+  for (int i = 0; i < 500 && reports < 2; ++i) std::this_thread::sleep_for(10ms);
+  ASSERT_GE(reports, 2);
+  msg::Status s;
+  run.fill_status(s);
+  EXPECT_EQ(s.message().rfind("setting up: depth response of the full tier, 25 % measured, ", 0), 0u) << s.message();
+  EXPECT_FALSE(s.run_set_up());
+  state_.stop();
+  run.request_stop();
+  wait_finished(run);
+  EXPECT_TRUE(cancelled);
+  EXPECT_EQ(state_.state(), RunState::Idle) << state_.error();
+  EXPECT_FALSE(fs::exists(run.dir())) << run.dir();
+  expect_all_lines_low(run);
+  EXPECT_EQ(run.trigger().counters().shots_fired, 0u);
+}
+
 // Settings the processing refuses while the run is set up (after the start was answered) put the
 // daemon into Error with the reason, and make no folder.
 TEST_F(RunTest, ASetupFailureIsTheRunsErrorWithNoFolder) {
-  env_.processing = [](const RunConfig&, const RunCalibration&, process::Tier) -> ProcessFn {
+  env_.processing = [](const RunConfig&, const RunCalibration&, process::Tier, const SetupProgress&) -> ProcessFn {
     throw InputError("volume: z_mm: the box reaches behind the main lens");
   };
   state_.start("bad-setup");
@@ -620,7 +658,7 @@ TEST_F(RunTest, ACameraWithoutATriggerInputIsSoftwareTriggeredAndTheManifestSays
 // A stop is bounded however long the processing would take: pairs in flight give up at their next
 // check (they stay on disk), the folder is closed "stopped" and says what was cancelled.
 TEST_F(RunTest, AStopWithSlowProcessingInFlightIsBounded) {
-  env_.processing = [](const RunConfig&, const RunCalibration&, process::Tier) {
+  env_.processing = [](const RunConfig&, const RunCalibration&, process::Tier, const SetupProgress&) {
     return ProcessFn([](const drivers::FramePair& pair, const PairSteps& steps) {
       for (int iteration = 0; iteration < 6000; ++iteration) {  // a minute of "MART iterations"
         steps.step();
@@ -733,7 +771,7 @@ TEST_F(RunTest, ASubscriberThatNeverReadsDoesNotSlowAcquisition) {
   auto publisher = std::make_optional<Publisher>(context, "tcp://127.0.0.1:*", 2);
   env_.publisher = &*publisher;
   // Big fields (32^3 nodes, 4 arrays: 512 KiB a message) fill the socket buffers quickly.
-  env_.processing = [](const RunConfig&, const RunCalibration&, process::Tier) {
+  env_.processing = [](const RunConfig&, const RunCalibration&, process::Tier, const SetupProgress&) {
     return ProcessFn([](const drivers::FramePair& pair, const PairSteps&) {
       Grid3 g;
       g.shape = {32, 32, 32};

@@ -42,7 +42,7 @@ int main(int argc, char** argv) {
   plenopiv::testing_support::register_test_camera(plenopiv::drivers::CameraRegistry::instance());
   plenopiv::daemon::DaemonExtensions extensions;
   extensions.processing = [](const plenopiv::daemon::RunConfig&, const plenopiv::daemon::RunCalibration&,
-                             plenopiv::process::Tier tier) {
+                             plenopiv::process::Tier tier, const plenopiv::daemon::SetupProgress&) {
     return plenopiv::daemon::ProcessFn(
         [tier](const plenopiv::drivers::FramePair& pair, const plenopiv::daemon::PairSteps& steps) {
           if (tier == plenopiv::process::Tier::full) full_tier_delay(steps);

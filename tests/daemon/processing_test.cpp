@@ -1,7 +1,9 @@
 // The live processing stage on ray-traced pairs (core/sim): a known uniform displacement comes back.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <chrono>
+#include <filesystem>
 #include <memory>
 
 #include "core/base/errors.hpp"
@@ -10,6 +12,8 @@
 #include "core/sim/render.hpp"
 #include "daemon/processing.hpp"
 #include "tests/support/captured_log.hpp"
+#include "tests/support/shallow_spec.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace plenopiv::daemon {
 namespace {
@@ -40,7 +44,7 @@ TEST(Processing, UniformDisplacementOfARayTracedPairComesBack) {
 
   const RunConfig config = parse_run_config(kConfig, "run.yaml");
   const auto t0 = std::chrono::steady_clock::now();
-  const ProcessFn process = plenoptic_processing(camera)(config, RunCalibration{}, process::Tier::full);
+  const ProcessFn process = plenoptic_processing(camera)(config, RunCalibration{}, process::Tier::full, {});
   const CancelFlag go{false};
   const ProcessedPair out = process(pair, PairSteps(go));
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -118,14 +122,14 @@ TEST(Processing, BadSettingsAndWrongImagesAreNamed) {
         parse_run_config("dt_s: 0.001\nvolume: {x_mm: [-100, 100], y_mm: [-100, 100], z_mm: [-5, 5], voxel_mm: 0.125}\n"
                          "max_pairs_in_flight: 4\n",
                          "run.yaml"),
-        RunCalibration{}, process::Tier::full);
+        RunCalibration{}, process::Tier::full, {});
     FAIL() << "a 1600 x 1600 x 96 voxel volume with 4 pairs in flight was accepted";
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find("processing 4 pair(s) at once on a 1600 x 1600 x"), std::string::npos)
         << e.what();
     EXPECT_NE(std::string(e.what()).find("GB of memory"), std::string::npos) << e.what();
   }
-  const ProcessFn process = factory(parse_run_config(kConfig, "run.yaml"), RunCalibration{}, process::Tier::full);
+  const ProcessFn process = factory(parse_run_config(kConfig, "run.yaml"), RunCalibration{}, process::Tier::full, {});
   drivers::FramePair small;
   small.a.image = ImageU16(64, 48);
   small.b.image = ImageU16(64, 48);
@@ -144,9 +148,9 @@ TEST(Processing, ARunOnAnEarlierRunsGeometryBuildsNoTables) {
   const RunConfig config = parse_run_config(kConfig, "run.yaml");
   std::string other = kConfig;
   other.replace(other.find("x_mm: [-1, 1]"), 13, "x_mm: [-1.25, 1.25]");
-  factory(config, RunCalibration{}, process::Tier::full);
-  factory(config, RunCalibration{}, process::Tier::full);
-  factory(parse_run_config(other, "run.yaml"), RunCalibration{}, process::Tier::full);
+  factory(config, RunCalibration{}, process::Tier::full, {});
+  factory(config, RunCalibration{}, process::Tier::full, {});
+  factory(parse_run_config(other, "run.yaml"), RunCalibration{}, process::Tier::full, {});
   // Each run logs its operator line, then the line of the buffers it reserved.
   std::vector<std::string> lines, reserved;
   for (const std::string& line : log.lines())
@@ -156,6 +160,74 @@ TEST(Processing, ARunOnAnEarlierRunsGeometryBuildsNoTables) {
   EXPECT_NE(lines[0].find("operator built"), std::string::npos) << lines[0];
   EXPECT_NE(lines[1].find("operator kept in memory"), std::string::npos) << lines[1];
   EXPECT_NE(lines[2].find("operator built"), std::string::npos) << lines[2];
+}
+
+// A run whose settings ask for a depth response measures it while Armed, saying how far it is
+// through the factory's progress, and keeps it in the factory's folder, where a later daemon's
+// factory reads it back. A stop during the measurement (the run's progress throws) ends it there
+// and keeps nothing.
+TEST(Processing, ADepthResponseIsMeasuredWithProgressKeptAndEndedByAStop) {
+  const optics::CameraModel camera =
+      optics::load_camera_file(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml");
+  const std::filesystem::path folder = testing_support::temp_dir("daemon-depth-response");
+  std::filesystem::remove_all(folder);
+  // The small camera's shallow box, where MART follows depth shifts.
+  const RunConfig config = parse_run_config(std::string("dt_s: 0.0001") + testing_support::kShallowSmallBox +
+                                                "reconstruction: {iterations: 4, mu: 1, acceleration: nesterov, "
+                                                "depth_response_ppm: 0.5}\n",
+                                            "run.yaml");
+  const auto files = [&] {
+    std::size_t n = 0;
+    std::error_code ec;
+    for (const auto& e : std::filesystem::directory_iterator(folder, ec))
+      n += e.path().filename().string().starts_with("depth-response-");
+    return n;
+  };
+  std::vector<std::string> steps;
+  std::vector<double> fractions;
+  const SetupProgress stopped_at_third = [&](const std::string& step, double fraction) {
+    steps.push_back(step);
+    fractions.push_back(fraction);
+    if (fractions.size() == 3) throw Cancelled("run stopped");
+  };
+  EXPECT_THROW(plenoptic_processing(camera, folder)(config, RunCalibration{}, process::Tier::full, stopped_at_third),
+               Cancelled);
+  EXPECT_EQ(fractions.size(), 3u);
+  EXPECT_EQ(files(), 0u) << "a response given up was kept";
+
+  steps.clear();
+  fractions.clear();
+  const SetupProgress record = [&](const std::string& step, double fraction) {
+    steps.push_back(step);
+    fractions.push_back(fraction);
+  };
+  {
+    const testing_support::CapturedLog log(8);
+    plenoptic_processing(camera, folder)(config, RunCalibration{}, process::Tier::full, record);
+    ASSERT_GT(fractions.size(), 2u);
+    EXPECT_EQ(fractions.front(), 0.0);  // said before the weight tables
+    EXPECT_DOUBLE_EQ(fractions.back(), 1.0);
+    EXPECT_TRUE(std::is_sorted(fractions.begin(), fractions.end()));
+    for (const std::string& step : steps) EXPECT_EQ(step, "depth response of the full tier");
+    const std::vector<std::string> lines = log.lines();
+    ASSERT_FALSE(lines.empty());
+    EXPECT_NE(lines.front().find("depth response measured and kept in the cache: " + folder.string()),
+              std::string::npos)
+        << lines.front();
+    EXPECT_NE(lines.front().find("depth response over z"), std::string::npos) << lines.front();
+    EXPECT_EQ(files(), 1u);
+  }
+  fractions.clear();
+  {
+    const testing_support::CapturedLog log(8);
+    plenoptic_processing(camera, folder)(config, RunCalibration{}, process::Tier::full, record);
+    EXPECT_EQ(fractions, std::vector<double>{0.0});  // nothing measured
+    const std::vector<std::string> lines = log.lines();
+    ASSERT_FALSE(lines.empty());
+    EXPECT_NE(lines.front().find("depth response from the cache: " + folder.string()), std::string::npos)
+        << lines.front();
+  }
+  std::filesystem::remove_all(folder);
 }
 
 }  // namespace

@@ -180,21 +180,18 @@ TEST(RunConfig, BadValuesAreNamed) {
   EXPECT_NE(error_of("pairs: [3\n").find("run.yaml"), std::string::npos);  // YAML syntax
 }
 
-// The depth response takes minutes while Armed and no `run stop` could end it: offline only, in
-// either tier; process.yaml (offline) takes it.
-TEST(RunConfig, TheDepthResponseIsRefusedForALiveRun) {
-  const std::string full = error_of(kVolume + "reconstruction: {depth_response_ppm: 0.5}\n");
-  EXPECT_NE(full.find("run.yaml: reconstruction.depth_response_ppm: is for offline processing only"), std::string::npos)
-      << full;
-  const std::string live = error_of(kVolume + "live: {reconstruction: {depth_response_ppm: 0.5}}\n");
-  EXPECT_NE(live.find("live.reconstruction.depth_response_ppm: is for offline processing only"), std::string::npos)
-      << live;
-  EXPECT_EQ(error_of(kVolume + "reconstruction: {depth_response_ppm: 0}\n"), "(no error)");
-  EXPECT_EQ(process::process_spec_from(
-                YamlMap(load_yaml_text(kVolume + "reconstruction: {depth_response_ppm: 0.5}\n", "process.yaml"),
-                        "process.yaml"))
-                .full.depth_response_ppm,
+// A run measures the depth response of each tier that asks for it while Armed (cancellable, kept on
+// disk: processing_test.cpp); either tier takes the setting, and its range is core/process's.
+TEST(RunConfig, EitherTierTakesADepthResponse) {
+  EXPECT_EQ(parse_run_config(kVolume + "reconstruction: {depth_response_ppm: 0.5}\n", "run.yaml")
+                .spec.full.depth_response_ppm,
             0.5);
+  const RunConfig live = parse_run_config(kVolume + "live: {reconstruction: {depth_response_ppm: 0.25}}\n", "run.yaml");
+  ASSERT_TRUE(live.spec.live);
+  EXPECT_EQ(live.spec.live->depth_response_ppm, 0.25);
+  EXPECT_EQ(live.spec.full.depth_response_ppm, 0.0);
+  const std::string bad = error_of(kVolume + "reconstruction: {depth_response_ppm: 9}\n");
+  EXPECT_NE(bad.find("run.yaml: reconstruction.depth_response_ppm"), std::string::npos) << bad;
 }
 
 // process.yaml, as the run folder keeps it and `plenopiv process --run` reads it: the same spec the
