@@ -177,7 +177,8 @@ void add_run_commands(CLI::App& app, ControlOptions& options) {
       const msg::Status s = call(options, status).status();
       if (s.run_id() != id) return;  // another run since: this one is long past its setup
       if (s.state() == "Armed") {
-        if (s.message() != last && isatty(STDERR_FILENO)) std::cerr << "\r" << s.message() << std::flush;
+        // Over the last line, cleared to its end (a shorter message leaves nothing of the longer one).
+        if (s.message() != last && isatty(STDERR_FILENO)) std::cerr << "\r" << s.message() << "\033[K" << std::flush;
         last = s.message();
         std::this_thread::sleep_for(std::chrono::milliseconds(200));
         continue;

@@ -18,8 +18,15 @@ constexpr std::size_t kChunkValues = 256;
 // The widest vectors of SLEEF's functions the kernels' build (isa()) runs: an AVX2 CPU has AVX.
 enum class Width { sse2 = 4, avx = 8, avx512 = 16 };
 Width widest() {
-  if (isa() == Isa::avx512) return Width::avx512;
-  return isa() == Isa::avx2 ? Width::avx : Width::sse2;
+  switch (isa()) {
+    case Isa::avx512:
+      return Width::avx512;
+    case Isa::avx2:
+      return Width::avx;
+    case Isa::baseline:
+      break;
+  }
+  return Width::sse2;
 }
 
 // ln and exp of n values (n <= kChunkValues), as many at a time as the CPU's widest vectors hold:
