@@ -35,6 +35,8 @@
 //              Repeat for several tiers.
 //     --live-depth-prefilter K: the --live tiers' depth prefilter (default the headline's).
 //     --live-only: the --live tiers alone (with --no-sweep), without the headline rows.
+//              Each tier's line has its sigma against its errors off the axis band (ratio_*, within_*)
+//              and, with --depth-response-ppm, the tier measures its own response (in setup_s).
 //     --prune-threshold: MART's prune threshold for the headline rows (default 0: exact zeros);
 //              --prune-scope: of the volume's peak (default) or of each depth slice's.
 //     --depth-response-ppm F: the headline's w corrected for MART's depth response measured at F
@@ -410,6 +412,20 @@ int main(int argc, char** argv) {
       const auto exact = piv::correlate_volumes(sim::render_exact_volume(s.grid, pa),
                                                 sim::render_exact_volume(s.grid, pb), s.correlation);
       const Errors ex = errors_against(exact.field, flow, voxel, band);
+      // The tier's per-vector sigma against its errors off the axis band: RMS sigma over RMS error,
+      // and the errors within 1 and 2 sigma, per component (nan: no sigma).
+      std::string sigma_items;
+      if (again.correlation.field.has_sigma()) {
+        const sim::UncertaintyCheck c =
+            sim::uncertainty_check(again.correlation.field, flow, voxel, 3, 0,
+                                   [&](const sim::Point3& x) { return !sim::in_ring_axis_band(flow, x, band); });
+        for (int k = 0; k < 3; ++k) {
+          char item[160];
+          std::snprintf(item, sizeof item, " off_axis_band_ratio_%c=%.3f within_1sigma_%c=%.3f within_2sigma_%c=%.3f",
+                        "uvw"[k], c.rms_sigma[k] / c.rms_error[k], "uvw"[k], c.within_1[k], "uvw"[k], c.within_2[k]);
+          sigma_items += item;
+        }
+      }
       std::printf(
           "bench=e2e case=%s variant=live tier=%s binning=%d depth_binning=%d depth_prefilter=%d pixel_binning=%d "
           "voxels=%zu iterations=%d passes=%s setup_s=%.2f "
@@ -419,7 +435,7 @@ int main(int argc, char** argv) {
           "valid=%.3f off_axis_band_mm=%.2f off_axis_band_rms_u=%.3f off_axis_band_rms_v=%.3f off_axis_band_rms_w=%.3f "
           "off_axis_band_gain_u=%.3f off_axis_band_gain_v=%.3f off_axis_band_gain_w=%.3f "
           "exact_off_axis_band_rms_u=%.3f exact_off_axis_band_rms_v=%.3f exact_off_axis_band_rms_w=%.3f "
-          "peak_rss_gb=%.2f\n",
+          "depth_response_ppm=%g%s peak_rss_gb=%.2f\n",
           scale.c_str(), tier.c_str(), voxel_factor, depth_factor, s.correlation.depth_prefilter, s.pixel_binning,
           s.grid.count(), s.mart.iterations, tier.substr(c3 + 1).c_str(), setup_s, first_wall_s, wall_s,
           first.times.reconstruct_a_s + first.times.reconstruct_b_s + first.times.correlate_s,
@@ -427,7 +443,7 @@ int main(int argc, char** argv) {
           again.times.reconstruct_a_s, again.times.reconstruct_b_s, again.times.correlate_s, el.rms[0], el.rms[1],
           el.rms[2], el.total, el.valid_fraction, band, el.off_band[0], el.off_band[1], el.off_band[2],
           el.off_band_gain[0], el.off_band_gain[1], el.off_band_gain[2], ex.off_band[0], ex.off_band[1], ex.off_band[2],
-          bench::peak_rss_gb());
+          s.depth_response_ppm, sigma_items.c_str(), bench::peak_rss_gb());
       std::fflush(stdout);
     }
     return true;
