@@ -462,7 +462,7 @@ TEST(DaemonSetup, ADepthResponseIsMeasuredWhileArmedStoppableAndKeptForTheNextRu
   // The small camera's shallow box, where MART follows depth shifts.
   std::ofstream(dir / "response.yaml") << std::string("pairs: 1\nrate_hz: 5\ndt_s: 0.0001") +
                                               testing_support::kShallowSmallBox +
-                                              "reconstruction: {iterations: 4, mu: 1, acceleration: nesterov, "
+                                              "reconstruction: {iterations: 2, mu: 1, acceleration: nesterov, "
                                               "depth_response_ppm: 0.5}\n";
   const auto run = [&](const std::vector<std::string>& args) {
     std::vector<std::string> command{testing_support::binary("plenopiv"), "--endpoint", control, "run"};

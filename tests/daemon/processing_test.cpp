@@ -173,7 +173,7 @@ TEST(Processing, ADepthResponseIsMeasuredWithProgressKeptAndEndedByAStop) {
   std::filesystem::remove_all(folder);
   // The small camera's shallow box, where MART follows depth shifts.
   const RunConfig config = parse_run_config(std::string("dt_s: 0.0001") + testing_support::kShallowSmallBox +
-                                                "reconstruction: {iterations: 4, mu: 1, acceleration: nesterov, "
+                                                "reconstruction: {iterations: 2, mu: 1, acceleration: nesterov, "
                                                 "depth_response_ppm: 0.5}\n",
                                             "run.yaml");
   const auto files = [&] {
