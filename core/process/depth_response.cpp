@@ -281,8 +281,17 @@ DepthResponse measure_depth_response(const PairProcessor& processor, const optic
       for (const bool scattered : {false, true}) {
         std::vector<sim::Point3> b = swept;
         if (scattered) scatter_sideways(b, s.grid.spacing_mm, seed);
+        // Within a pair, after every MART iteration and correlation pass, the fraction so far (0
+        // during the first pair, before the count of sets is known): where a caller can end it.
+        PairOptions options;
+        if (progress)
+          options.progress = [&](const std::string&, double pair_fraction) {
+            progress(sum.empty() ? 0.0
+                                 : (double(sets_done) + 0.5 * ((scattered ? 1.0 : 0.0) + pair_fraction)) /
+                                       double(shifts * std::size_t(sets)));
+          };
         const PairResult r =
-            processor.process_uncorrected(frame_a, sim::render(camera, lenses, b, render, seed + 1).image);
+            processor.process_uncorrected(frame_a, sim::render(camera, lenses, b, render, seed + 1).image, options);
         const VectorField& f = r.correlation.field;
         const std::size_t per_layer = std::size_t(f.grid.shape[0]) * std::size_t(f.grid.shape[1]);
         if (sum.empty()) {

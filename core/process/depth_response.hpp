@@ -122,7 +122,8 @@ class DepthResponse {
 // sigma comes from the first pairs, that of w's from the second, where the processing estimates sigma.
 // Deterministic (fixed seeds). Costs eight pairs' processing at the paper's scale (minutes), up to
 // thirty-two on a small box (seconds). `progress` (optional) gets the fraction done after each
-// pair.
+// pair and within it after every MART iteration and correlation pass (0 during the first pair);
+// a caller ends the measurement there by throwing.
 DepthResponse measure_depth_response(const PairProcessor& processor, const optics::CameraModel& camera,
                                      const optics::MicrolensArray& lenses, double seeding_ppm,
                                      const std::function<void(double)>& progress = {});
