@@ -27,6 +27,41 @@ namespace {
 using namespace std::chrono_literals;
 using testing_support::ChildProcess;
 
+// plenopivd's command line on the simulated small camera (`camera`: its sim:// URI), answering on
+// `control`, its runs in `data_dir`.
+std::vector<std::string> sim_daemon(const std::string& control, const std::filesystem::path& data_dir,
+                                    const std::string& camera) {
+  return {testing_support::binary("plenopivd"),
+          "--simulation",
+          "--camera-file",
+          std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml",
+          "--camera",
+          camera,
+          "--control",
+          control,
+          "--publish",
+          "tcp://127.0.0.1:" + std::to_string(testing_support::free_tcp_port()),
+          "--data-dir",
+          data_dir.string()};
+}
+
+// A fresh, empty folder `name` in this test process's `area` (testing_support::temp_dir).
+std::filesystem::path fresh_dir(const std::string& area, const std::string& name) {
+  const std::filesystem::path dir = testing_support::temp_dir(area) / name;
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  return dir;
+}
+
+// Whether `daemon` answers a status request on `control` (up to 100 tries) before it ends.
+bool answers(ChildProcess& daemon, const std::string& control) {
+  for (int i = 0; i < 100; ++i) {
+    if (testing_support::probe_status(control)) return true;
+    if (!daemon.running()) return false;
+  }
+  return false;
+}
+
 class Daemon : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -396,18 +431,10 @@ TEST_F(Daemon, ListingDevicesDoesNotHoldTheControlLoop) {
 // recorder drain within their bounds, and the folder is closed "stopped", listing what it holds.
 TEST(DaemonStop, SigtermWithHeavyProcessingInFlightEndsWithinTenSeconds) {
   namespace fs = std::filesystem;
-  const fs::path dir = testing_support::temp_dir("stop") / "heavy";
-  fs::remove_all(dir);
-  fs::create_directories(dir);
+  const fs::path dir = fresh_dir("stop", "heavy");
   const std::string control = testing_support::ipc_endpoint("control");
-  ChildProcess daemon(
-      {testing_support::binary("plenopivd"), "--simulation", "--camera-file",
-       std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml", "--camera", "sim://?rays=300&ppm=0.3",
-       "--control", control, "--publish", "tcp://127.0.0.1:" + std::to_string(testing_support::free_tcp_port()),
-       "--data-dir", (dir / "data").string()},
-      dir / "plenopivd.log");
-  for (int i = 0; i < 100 && !testing_support::probe_status(control); ++i)
-    ASSERT_TRUE(daemon.running()) << daemon.output();
+  ChildProcess daemon(sim_daemon(control, dir / "data", "sim://?rays=300&ppm=0.3"), dir / "plenopivd.log");
+  ASSERT_TRUE(answers(daemon, control)) << daemon.output();
   std::ofstream(dir / "heavy.yaml") << "pairs: 0\nrate_hz: 5\ndt_s: 0.0001\n"
                                        "volume: {x_mm: [-2, 2], y_mm: [-2, 2], z_mm: [-3, 3], voxel_mm: 0.125}\n"
                                        "reconstruction: {iterations: 1000, mu: 1}\n"
@@ -447,18 +474,10 @@ TEST(DaemonStop, SigtermWithHeavyProcessingInFlightEndsWithinTenSeconds) {
 // directory, and the next run on the same settings reads it back instead of measuring.
 TEST(DaemonSetup, ADepthResponseIsMeasuredWhileArmedStoppableAndKeptForTheNextRun) {
   namespace fs = std::filesystem;
-  const fs::path dir = testing_support::temp_dir("setup") / "depth-response";
-  fs::remove_all(dir);
-  fs::create_directories(dir);
+  const fs::path dir = fresh_dir("setup", "depth-response");
   const std::string control = testing_support::ipc_endpoint("control");
-  ChildProcess daemon(
-      {testing_support::binary("plenopivd"), "--simulation", "--camera-file",
-       std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml", "--camera", "sim://?rays=300&ppm=0.3",
-       "--control", control, "--publish", "tcp://127.0.0.1:" + std::to_string(testing_support::free_tcp_port()),
-       "--data-dir", (dir / "data").string()},
-      dir / "plenopivd.log");
-  for (int i = 0; i < 100 && !testing_support::probe_status(control); ++i)
-    ASSERT_TRUE(daemon.running()) << daemon.output();
+  ChildProcess daemon(sim_daemon(control, dir / "data", "sim://?rays=300&ppm=0.3"), dir / "plenopivd.log");
+  ASSERT_TRUE(answers(daemon, control)) << daemon.output();
   // The small camera's shallow box, where MART follows depth shifts.
   std::ofstream(dir / "response.yaml") << std::string("pairs: 1\nrate_hz: 5\ndt_s: 0.0001") +
                                               testing_support::kShallowSmallBox +
@@ -527,14 +546,8 @@ TEST(DaemonDisk, AFullDiskFailsTheRunCleanlyAndRefusesTheNext) {
   testing_support::SmallTmpfs disk(dir / "data", 110);
   if (!disk.mounted()) GTEST_SKIP() << disk.why_not();
   const std::string control = testing_support::ipc_endpoint("control");
-  ChildProcess daemon(
-      {testing_support::binary("plenopivd"), "--simulation", "--camera-file",
-       std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml", "--camera", "sim://?rays=100&ppm=0.05",
-       "--control", control, "--publish", "tcp://127.0.0.1:" + std::to_string(testing_support::free_tcp_port()),
-       "--data-dir", disk.dir().string()},
-      dir / "plenopivd.log");
-  for (int i = 0; i < 100 && !testing_support::probe_status(control); ++i)
-    ASSERT_TRUE(daemon.running()) << daemon.output();
+  ChildProcess daemon(sim_daemon(control, disk.dir(), "sim://?rays=100&ppm=0.05"), dir / "plenopivd.log");
+  ASSERT_TRUE(answers(daemon, control)) << daemon.output();
   // 2.9 MB of raw frames per pair (850 x 850 px, 16 bit): the 110 MB disk holds about 30.
   std::ofstream(dir / "long.yaml") << "pairs: 0\nrate_hz: 10\ndt_s: 0.0001\n"
                                       "volume: {x_mm: [-1, 1], y_mm: [-1, 1], z_mm: [-1, 1], voxel_mm: 0.25}\n"
