@@ -4,6 +4,7 @@
 #include <spdlog/fmt/ranges.h>
 #include <spdlog/spdlog.h>
 
+#include <atomic>
 #include <chrono>
 #include <memory>
 
@@ -47,20 +48,25 @@ ProcessFactory plenoptic_processing(const optics::CameraModel& camera, const std
             std::to_string(g.shape[0]) + " x " + std::to_string(g.shape[1]) + " x " + std::to_string(g.shape[2]) +
             " voxel volume (volume, max_pairs_in_flight)" +
             (quality ? " beside the quality lane's pair on the full settings' volume" : ""));
+    // The live lane's depth response is measured now, while Armed: its pairs need it from the first.
+    // The quality lane's is measured by its first pair, so that the run acquires meanwhile: that
+    // pair waits while the live lane is busy, as its processing does, and gives up when the run stops.
+    const bool live_lane = tier == config.live_lane_tier();
     const std::string step = "depth response of the " + std::string(process::tier_name(tier)) + " tier";
-    if (progress && settings.depth_response_ppm > 0) progress(step, 0.0);
+    if (progress && live_lane && settings.depth_response_ppm > 0) progress(step, 0.0);
+    process::ProcessorSetup setup;
+    setup.operators = operators.get();
+    setup.progress = [&](double fraction) {
+      if (progress) progress(step, fraction);
+    };
+    setup.response_folder = response_folder;
+    setup.defer_depth_response = !live_lane;
     auto processor = std::make_shared<const process::PairProcessor>(
-        camera, calibration.loaded ? *calibration.loaded : calib::nominal_calibration(camera), settings,
-        operators.get(),
-        [&](double fraction) {
-          if (progress) progress(step, fraction);
-        },
-        response_folder);
+        camera, calibration.loaded ? *calibration.loaded : calib::nominal_calibration(camera), settings, setup);
     spdlog::info("run processing, {} tier: calibration {}; {}; {}", process::tier_name(tier), calibration.summary(),
                  processor->setup_note(),
                  processor->note().empty() ? "frames reconstructed on raw pixels" : processor->note());
     // The lane's pairs in flight get their buffers now, while Armed, not beside the recording.
-    const bool live_lane = tier == config.live_lane_tier();
     const int in_flight = live_lane ? config.max_pairs_in_flight : QualityLane::kPairsInFlight;
     const auto t0 = std::chrono::steady_clock::now();
     const std::size_t bytes = processor->reserve_workspaces(in_flight);
@@ -69,13 +75,17 @@ ProcessFactory plenoptic_processing(const optics::CameraModel& camera, const std
                  std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
     // Volumes are published from the live lane only (the quality lane's would double the traffic).
     const bool keep_volumes = config.publish_volumes && tier == config.live_lane_tier();
-    return [processor, keep_volumes](const drivers::FramePair& pair, const PairSteps& steps) {
+    // A deferred depth response is said once, by the pair that took it.
+    auto response_said = std::make_shared<std::atomic<bool>>(processor->depth_response() != nullptr);
+    return [processor, keep_volumes, tier, response_said](const drivers::FramePair& pair, const PairSteps& steps) {
       process::PairOptions options;
       if (pair.measured) options.measured_dt_s = pair.measured->dt_s();
       // Called after every MART iteration and correlation pass: the quality lane waits there while
       // the live lane is busy, and a stopping run gives up there.
       options.progress = [&steps](const std::string&, double) { steps.step(); };
       process::PairResult r = processor->process(pair.a.image, pair.b.image, options);
+      if (processor->depth_response() && !response_said->exchange(true))
+        spdlog::info("run processing, {} tier: {}", process::tier_name(tier), processor->depth_response_note());
       ProcessedPair out;
       out.vectors = std::move(r.correlation.field);
       out.flags = std::move(r.correlation.flags);

@@ -16,10 +16,10 @@ namespace plenopiv::daemon {
 // memory, or whose settings do not fit the camera, is refused (InputError) before the run folder exists. The factory
 // keeps the operators (weight tables) of its latest runs (process::OperatorCache, in memory): a run on the camera,
 // calibration and volume of an earlier one builds no tables. A tier with a depth response
-// (reconstruction.depth_response_ppm) measures it while the run is Armed, saying how far it is
-// through the factory's progress (where a stopped run ends it), and keeps it in `response_folder`
-// (process::DepthResponseDiskCache; empty: not kept), where a later run with the same inputs and
-// settings reads it back.
+// (reconstruction.depth_response_ppm) keeps it in `response_folder` (process::DepthResponseDiskCache;
+// empty: not kept), where a later run with the same inputs and settings reads it back. The live
+// lane's is measured while the run is Armed, saying how far it is through the factory's progress
+// (where a stopped run ends it); the quality lane's by its first pair, while the run acquires.
 ProcessFactory plenoptic_processing(const optics::CameraModel& camera,
                                     const std::filesystem::path& response_folder = {});
 

@@ -29,10 +29,12 @@ std::unique_ptr<const process::PairProcessor> make_pair_processor(const optics::
                                                                   process::OperatorCache* operators) {
   std::optional<Progress> response_progress;  // the depth response simulates and processes pairs first
   if (settings.depth_response_ppm > 0) response_progress.emplace("depth response", "%", 100.0);
-  auto processor =
-      std::make_unique<const process::PairProcessor>(camera, calibration, settings, operators, [&](double f) {
-        if (response_progress) response_progress->update(f);
-      });
+  process::ProcessorSetup setup;
+  setup.operators = operators;
+  setup.progress = [&](double f) {
+    if (response_progress) response_progress->update(f);
+  };
+  auto processor = std::make_unique<const process::PairProcessor>(camera, calibration, settings, setup);
   if (operators || processor->depth_response()) std::fprintf(stderr, "%s\n", processor->setup_note().c_str());
   if (!processor->note().empty()) std::fprintf(stderr, "%s\n", processor->note().c_str());
   return processor;

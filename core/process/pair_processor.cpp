@@ -99,13 +99,19 @@ std::size_t WorkspacePool::bytes() {
   return total;
 }
 
+struct PairProcessor::ResponseSource {
+  optics::CameraModel camera;  // the simulated pairs are rendered on it, with `lenses`
+  optics::MicrolensArray lenses;
+  std::filesystem::path folder;  // where it is kept (empty: nowhere)
+  std::string key;               // depth_response_key; empty: not kept
+};
+
 PairProcessor::~PairProcessor() = default;
 
 PairProcessor::PairProcessor(const optics::CameraModel& camera, const calib::LoadedCalibration& calibration,
-                             ProcessSettings settings, OperatorCache* operators,
-                             const std::function<void(double)>& setup_progress,
-                             const std::filesystem::path& response_folder)
+                             ProcessSettings settings, const ProcessorSetup& setup)
     : settings_(std::move(settings)), raw_width_(camera.sensor().width_px), raw_height_(camera.sensor().height_px) {
+  OperatorCache* const operators = setup.operators;
   const int binning = settings_.pixel_binning;
   const auto in_binning = [&](auto&& make) {
     try {
@@ -131,29 +137,55 @@ PairProcessor::PairProcessor(const optics::CameraModel& camera, const calib::Loa
     setup_note_ = "operator built";
   }
   if (settings_.depth_response_ppm > 0) {
-    const auto measure = [&] {
-      return measure_depth_response(*this, camera, calibration.lenses, settings_.depth_response_ppm, setup_progress);
-    };
-    const std::filesystem::path folder = !response_folder.empty() ? response_folder
-                                         : operators              ? operators->disk_folder()
-                                                                  : std::filesystem::path();
+    auto source = std::make_unique<ResponseSource>(ResponseSource{camera, calibration.lenses, {}, {}});
+    source->folder = !setup.response_folder.empty() ? setup.response_folder
+                     : operators                    ? operators->disk_folder()
+                                                    : std::filesystem::path();
     const std::string operator_inputs = operators
                                             ? provenance.key
                                             : operator_key(framed, calibration.lenses, white,
                                                            settings_.reconstruction_grid(), settings_.angular_sampling);
-    const std::string key = folder.empty() ? std::string() : depth_response_key(operator_inputs, camera, settings_);
-    if (!key.empty()) {
-      DepthResponseDiskCache cache(folder);
-      depth_response_ = std::make_unique<const DepthResponse>(cache.response(key, measure));
-      setup_note_ += "; " + cache.last_note();
-      setup_on_disk_ = setup_on_disk_ && cache.last_outcome() != CacheOutcome::unwritable;
+    if (!source->folder.empty()) source->key = depth_response_key(operator_inputs, camera, settings_);
+    response_source_ = std::move(source);
+    response_deferred_ = setup.defer_depth_response;
+    if (response_deferred_) {
+      setup_note_ += "; depth response deferred to the first pair";
     } else {
-      depth_response_ = std::make_unique<const DepthResponse>(measure());
-      setup_on_disk_ = false;
-      if (!folder.empty()) setup_note_ += "; depth response measured, not kept: this executable has no build ID";
+      take_depth_response(setup.progress);
+      setup_note_ += "; " + response_note_;
+      setup_on_disk_ = setup_on_disk_ && response_kept_;
     }
-    setup_note_ += "; " + depth_response_->summary();
   }
+}
+
+void PairProcessor::take_depth_response(const std::function<void(double)>& progress) const {
+  const ResponseSource& source = *response_source_;
+  const auto measure = [&] {
+    return measure_depth_response(*this, source.camera, source.lenses, settings_.depth_response_ppm, progress);
+  };
+  std::string note;
+  if (!source.key.empty()) {
+    DepthResponseDiskCache cache(source.folder);
+    depth_response_ = std::make_unique<const DepthResponse>(cache.response(source.key, measure));
+    note = cache.last_note();
+    response_kept_ = cache.last_outcome() != CacheOutcome::unwritable;
+  } else {
+    depth_response_ = std::make_unique<const DepthResponse>(measure());
+    response_kept_ = false;
+    note = source.folder.empty() ? "depth response measured"
+                                 : "depth response measured, not kept: this executable has no build ID";
+  }
+  response_note_ = note + "; " + depth_response_->summary();
+}
+
+void PairProcessor::take_deferred_depth_response(const PairProgress& progress) const {
+  if (!response_deferred_) return;
+  // call_once: a call that throws (a caller gave up) leaves it to the next.
+  std::call_once(response_once_, [&] {
+    take_depth_response([&](double fraction) {
+      if (progress) progress("depth response", fraction);
+    });
+  });
 }
 
 PairResult PairProcessor::corrected(PairResult result) const {
@@ -162,10 +194,12 @@ PairResult PairProcessor::corrected(PairResult result) const {
 }
 
 PairResult PairProcessor::process(const ImageU16& frame_a, const ImageU16& frame_b, const PairOptions& options) const {
+  take_deferred_depth_response(options.progress);
   return corrected(process_uncorrected(frame_a, frame_b, options));
 }
 
 PairResult PairProcessor::process(const ImageF& frame_a, const ImageF& frame_b, const PairOptions& options) const {
+  take_deferred_depth_response(options.progress);
   return corrected(process_uncorrected(frame_a, frame_b, options));
 }
 

@@ -78,6 +78,26 @@ struct PairOptions {
   PairProgress progress;                // also where a caller cancels (throw plenopiv::Cancelled)
 };
 
+// How a PairProcessor is set up besides its camera, calibration and settings; every part optional.
+struct ProcessorSetup {
+  // Where the operator comes from when it was built before from the same camera, calibration,
+  // volume and sampling (kept in memory, or its tables on disk), and where a new one is kept; null:
+  // the operator is built. Outlives the constructor. The results are the same bits either way.
+  OperatorCache* operators = nullptr;
+  // The fraction of the depth response's measurement done, after each of its pairs and within them
+  // (measure_depth_response); a caller ends the set-up there by throwing (plenopiv::Cancelled), and
+  // nothing is kept.
+  std::function<void(double)> progress;
+  // Where the depth response is read from when it was measured before with the same inputs,
+  // settings and executable, and kept when measured (DepthResponseDiskCache); empty: the disk
+  // folder of `operators`, if any.
+  std::filesystem::path response_folder;
+  // The depth response measured by the first process() call instead of the constructor, with that
+  // call's PairOptions::progress (stage "depth response") in place of `progress`: plenopivd's
+  // quality lane, whose run acquires meanwhile.
+  bool defer_depth_response = false;
+};
+
 // Built once per camera, calibration and settings (the weight tables: seconds at paper scale),
 // then used by any number of pairs, concurrently. Every caller (plenopivd's live lanes, `plenopiv
 // process`, `process --run`, the benchmarks, cluster jobs) goes through it, so that where their
@@ -86,20 +106,10 @@ class PairProcessor {
  public:
   // InputError when the settings and camera do not fit (the volume behind the main lens's focal
   // length, windows larger than the volume, a pixel binning that does not divide the sensor, ...).
-  // `operators` (optional, outliving the call): where the operator comes from when it was built
-  // before from the same camera, calibration, volume and sampling (kept in memory, or its tables
-  // on disk), and where a new one is kept; without it the operator is built. The results are the
-  // same bits either way.
   // With settings.depth_response_ppm above 0 the depth response is measured (minutes at the
-  // paper's scale), or read from `response_folder` (empty: the disk folder of `operators`) where it
-  // was measured before with the same inputs, settings and executable (DepthResponseDiskCache), and
-  // kept there when measured. `setup_progress` (optional): the fraction of the measurement done,
-  // after each of its pairs; a caller ends the setup there by throwing (plenopiv::Cancelled), and
-  // nothing is kept.
+  // paper's scale) or read back (ProcessorSetup), here or, deferred, by the first process() call.
   PairProcessor(const optics::CameraModel& camera, const calib::LoadedCalibration& calibration,
-                ProcessSettings settings, OperatorCache* operators = nullptr,
-                const std::function<void(double)>& setup_progress = {},
-                const std::filesystem::path& response_folder = {});
+                ProcessSettings settings, const ProcessorSetup& setup = {});
   ~PairProcessor();
 
   // Raw frames A and B (the camera's counts) to vectors: validated (sensor-sized; named "frame A"
@@ -108,8 +118,9 @@ class PairProcessor {
   // is built on the binned camera and white image, and frames are validated raw, then binned.
   // MART's and the correlation's buffers come from the processor's pool.
   // With settings.depth_response_ppm above 0, w (and its uncertainty) is then taken through the
-  // depth response measured when the processor was built, and every sigma widened by the error its
-  // pairs showed beyond the correlation's sigma (depth_response.hpp).
+  // depth response, and every sigma widened by the error its pairs showed beyond the correlation's
+  // sigma (depth_response.hpp). A deferred response is taken by the first call, concurrent calls
+  // waiting for it; where that call is given up (its progress threw), the next one takes it.
   PairResult process(const ImageU16& frame_a, const ImageU16& frame_b, const PairOptions& options = {}) const;
   PairResult process(const ImageF& frame_a, const ImageF& frame_b, const PairOptions& options = {}) const;
   // process() without the depth response's correction: what the response is measured with.
@@ -122,14 +133,18 @@ class PairProcessor {
   const std::string& note() const { return op_->note(); }
   // Where the weight tables came from, for the user: "operator built", "operator kept in memory",
   // or the disk cache's line (WeightsDiskCache::last_note); then, with a depth response, where it
-  // came from and its summary.
+  // came from and its summary (deferred: "depth response deferred to the first pair").
   const std::string& setup_note() const { return setup_note_; }
   // Whether what the setup made or read (the weight tables; the depth response, where the settings
-  // ask for one) is in the disk folder of `operators`, for a later processor with the same inputs
-  // to read: false without such a folder, or where it could not keep something.
+  // ask for one, unless deferred) is in the disk folder of `operators`, for a later processor with
+  // the same inputs to read: false without such a folder, or where it could not keep something.
   bool setup_on_disk() const { return setup_on_disk_; }
-  // The depth response process() corrects w with; null when settings.depth_response_ppm is 0.
+  // The depth response process() corrects w with; null when settings.depth_response_ppm is 0, and
+  // a deferred one until a process() call of this thread has returned.
   const DepthResponse* depth_response() const { return depth_response_.get(); }
+  // Where the depth response came from (the cache's line) and its summary; empty when there is
+  // none yet (as depth_response()).
+  const std::string& depth_response_note() const { return response_note_; }
   // Makes the pool hold `pairs` workspaces sized for this operator's largest reconstruction and
   // correlation (recon::MartWorkspace::reserve, piv::CorrelationWorkspace::reserve), so that up to
   // `pairs` pairs in flight at once allocate and page-fault none of them. plenopivd calls it while
@@ -143,13 +158,25 @@ class PairProcessor {
   PairResult run(const ImageF& frame_a, const ImageF& frame_b, const PairOptions& options) const;
   PairResult process_uncorrected(const ImageF& frame_a, const ImageF& frame_b, const PairOptions& options) const;
   PairResult corrected(PairResult result) const;  // w through depth_response_, when there is one
+  // Measures the depth response, or reads it back, into depth_response_ and response_note_.
+  void take_depth_response(const std::function<void(double)>& progress) const;
+  // A deferred depth response taken once, by the first caller; the others wait.
+  void take_deferred_depth_response(const PairProgress& progress) const;
 
   ProcessSettings settings_;
   int raw_width_ = 0, raw_height_ = 0;  // the camera's sensor, before pixel binning
   std::shared_ptr<const PairOperator> op_;
   std::string setup_note_;
   bool setup_on_disk_ = false;
-  std::unique_ptr<const DepthResponse> depth_response_;
+  // What a depth response is measured from (settings.depth_response_ppm above 0), and where it is
+  // kept; deferred: taken by the first process() call.
+  struct ResponseSource;
+  std::unique_ptr<const ResponseSource> response_source_;
+  bool response_deferred_ = false;
+  mutable std::once_flag response_once_;
+  mutable std::unique_ptr<const DepthResponse> depth_response_;
+  mutable std::string response_note_;
+  mutable bool response_kept_ = false;  // the response is in the folder (read from it, or written)
   mutable WorkspacePool workspaces_;
 };
 

@@ -538,6 +538,62 @@ TEST(DaemonSetup, ADepthResponseIsMeasuredWhileArmedStoppableAndKeptForTheNextRu
       << log;
 }
 
+// With a live tier, the quality lane's depth response is measured by its first pair while the run
+// acquires: `run start` returns acquiring with no response made, and the quality lane's fields come
+// once it is measured (and kept).
+TEST(DaemonSetup, TheQualityLanesDepthResponseIsMeasuredByItsFirstPairWhileTheRunAcquires) {
+  namespace fs = std::filesystem;
+  const fs::path dir = fresh_dir("setup", "quality-response");
+  const std::string control = testing_support::ipc_endpoint("control");
+  ChildProcess daemon(sim_daemon(control, dir / "data", "sim://?rays=300&ppm=0.3"), dir / "plenopivd.log");
+  ASSERT_TRUE(answers(daemon, control)) << daemon.output();
+  std::ofstream(dir / "lanes.yaml") << std::string("pairs: 4\nrate_hz: 2\ndt_s: 0.0001\nquality: newest") +
+                                           testing_support::kShallowSmallBox +
+                                           "reconstruction: {iterations: 2, mu: 1, acceleration: nesterov, "
+                                           "depth_response_ppm: 0.5}\n"
+                                           "live:\n"
+                                           "  volume: {voxel_mm: 0.25, voxel_z_mm: 0.5}\n"
+                                           "  reconstruction: {depth_response_ppm: 0}\n"
+                                           "  correlation: {passes: [{window: [8, 8, 4], overlap_percent: 50}]}\n";
+  const fs::path responses = dir / "data" / "depth-responses";
+  const auto kept = [&] {
+    std::size_t n = 0;
+    std::error_code ec;
+    for (const auto& e : fs::directory_iterator(responses, ec))
+      n += e.path().filename().string().starts_with("depth-response-");
+    return n;
+  };
+  std::string out;
+  ASSERT_EQ(testing_support::run_command({testing_support::binary("plenopiv"), "--endpoint", control, "run", "start",
+                                          "--config", (dir / "lanes.yaml").string()},
+                                         out),
+            0)
+      << out;
+  EXPECT_NE(out.find(" acquiring"), std::string::npos) << out;
+  EXPECT_EQ(kept(), 0u) << "measured before the run acquired";
+  bool idle = false;
+  for (int i = 0; i < 1200 && !idle; ++i) {
+    const auto s = testing_support::probe_status(control);
+    idle = s && s->state() == "Idle";
+    if (!idle) std::this_thread::sleep_for(50ms);
+  }
+  ASSERT_TRUE(idle) << daemon.output();
+  EXPECT_EQ(kept(), 1u) << daemon.output();
+  fs::path run;
+  for (const auto& e : fs::directory_iterator(dir / "data"))
+    if (e.path().filename().string().starts_with("run-")) run = e.path();
+  const msg::RunManifest m = testing_support::read_manifest(run);
+  EXPECT_EQ(m.state(), "complete");
+  EXPECT_EQ(m.pairs_size(), 4);
+  for (const msg::LaneCounters& lane : m.lanes()) EXPECT_GT(lane.processed(), 0u) << lane.name();
+  const std::string log = daemon.output();
+  EXPECT_NE(log.find("run processing, full tier: calibration"), std::string::npos) << log;
+  EXPECT_NE(log.find("depth response deferred to the first pair"), std::string::npos) << log;
+  EXPECT_NE(log.find("run processing, full tier: depth response measured and kept in the cache: " + responses.string()),
+            std::string::npos)
+      << log;
+}
+
 // A disk that fills during a run ends the run as failed, naming the disk, with a consistent folder;
 // the daemon stays controllable and refuses a new run that would not fit, saying how much is free.
 TEST(DaemonDisk, AFullDiskFailsTheRunCleanlyAndRefusesTheNext) {

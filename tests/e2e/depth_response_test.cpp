@@ -345,7 +345,10 @@ TEST(DepthResponse, TakesMartsShortfallOutOfAShearsDepthComponent) {
   const auto progress = [&](double f) { fractions.push_back(f); };
   const ProcessSettings settings = parse(", depth_response_ppm: " + std::to_string(ppm));
   OperatorCache operators(1, folder);
-  const PairProcessor processor(camera, calibration, settings, &operators, progress);
+  ProcessorSetup setup;
+  setup.operators = &operators;
+  setup.progress = progress;
+  const PairProcessor processor(camera, calibration, settings, setup);
   ASSERT_NE(processor.depth_response(), nullptr);
   // 25 vectors per layer here: four particle sets for each of the four shifts, each processed as it
   // is and with its particles scattered sideways: 32 pairs, each reported after its end (at k / 32)
@@ -419,12 +422,69 @@ TEST(DepthResponse, TakesMartsShortfallOutOfAShearsDepthComponent) {
 
   OperatorCache later_operators(1, folder);
   const std::size_t reported = fractions.size();
-  const PairProcessor later(camera, calibration, settings, &later_operators, progress);
+  setup.operators = &later_operators;
+  const PairProcessor later(camera, calibration, settings, setup);
   EXPECT_EQ(fractions.size(), reported) << "measured again";
   EXPECT_NE(later.setup_note().find("depth response from the cache"), std::string::npos) << later.setup_note();
   EXPECT_TRUE(later.setup_on_disk());
   EXPECT_EQ(later.process(frame_a, frame_b).correlation.field.dz_mm, corrected.correlation.field.dz_mm);
   std::filesystem::remove_all(folder);
+}
+
+// A deferred depth response (plenopivd's quality lane) is taken by the first pair, with that pair's
+// progress (stage "depth response"); a pair whose progress gives up leaves it to the next. Its
+// fields are the bits of a processor that measured the response when it was built.
+TEST(DepthResponse, ADeferredResponseIsTakenByTheFirstPairThatFinishes) {
+  const optics::CameraModel camera = testing_support::small_camera();
+  const calib::LoadedCalibration calibration = calib::nominal_calibration(camera);
+  ProcessSettings settings = parse(", depth_response_ppm: 0.5");
+  settings.mart.iterations = 2;  // a test's time
+  const PairProcessor built(camera, calibration, settings);
+  ASSERT_NE(built.depth_response(), nullptr);
+  ProcessorSetup later_on;
+  later_on.defer_depth_response = true;
+  const PairProcessor deferred(camera, calibration, settings, later_on);
+  EXPECT_EQ(deferred.depth_response(), nullptr);
+  EXPECT_TRUE(deferred.depth_response_note().empty());
+  EXPECT_NE(deferred.setup_note().find("depth response deferred to the first pair"), std::string::npos)
+      << deferred.setup_note();
+
+  const sim::UniformFlow flow({0.05, -0.03, 0.125});
+  const sim::Box box{{-3, -3, -2}, {3, 3, 6}};
+  const std::vector<sim::Point3> a = sim::random_particles(box, sim::particle_count_from_ppm(camera, box, 0.5), 77);
+  sim::RenderOptions ro;
+  ro.rays_per_particle = 2000;
+  const ImageU16 frame_a = sim::render(camera, calibration.lenses, a, ro, 1).image;
+  const ImageU16 frame_b = sim::render(camera, calibration.lenses, sim::displace(a, flow), ro, 2).image;
+
+  int reports = 0;
+  PairOptions stopped;
+  stopped.progress = [&](const std::string& stage, double) {
+    if (stage == "depth response" && ++reports == 3) throw Cancelled("stopped");
+  };
+  EXPECT_THROW(deferred.process(frame_a, frame_b, stopped), Cancelled);
+  EXPECT_EQ(deferred.depth_response(), nullptr);
+
+  std::vector<std::string> stages;
+  PairOptions go;
+  go.progress = [&](const std::string& stage, double) { stages.push_back(stage); };
+  const PairResult first = deferred.process(frame_a, frame_b, go);
+  ASSERT_NE(deferred.depth_response(), nullptr);
+  EXPECT_NE(deferred.depth_response_note().find("depth response over z"), std::string::npos)
+      << deferred.depth_response_note();
+  ASSERT_FALSE(stages.empty());
+  EXPECT_EQ(stages.front(), "depth response");
+  EXPECT_NE(stages.back(), "depth response");
+  const PairResult reference = built.process(frame_a, frame_b);
+  EXPECT_EQ(first.correlation.field.dz_mm, reference.correlation.field.dz_mm);
+  // NaN where no sigma: compared as bits.
+  const std::vector<float>& sigma = first.correlation.field.sigma_dz_mm;
+  const std::vector<float>& reference_sigma = reference.correlation.field.sigma_dz_mm;
+  ASSERT_EQ(sigma.size(), reference_sigma.size());
+  EXPECT_EQ(std::memcmp(sigma.data(), reference_sigma.data(), sigma.size() * sizeof(float)), 0);
+  stages.clear();
+  deferred.process(frame_a, frame_b, go);  // taken once
+  EXPECT_EQ(std::count(stages.begin(), stages.end(), "depth response"), 0);
 }
 
 }  // namespace
