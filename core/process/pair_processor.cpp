@@ -180,12 +180,19 @@ void PairProcessor::take_depth_response(const std::function<void(double)>& progr
 
 void PairProcessor::take_deferred_depth_response(const PairProgress& progress) const {
   if (!response_deferred_) return;
-  // call_once: a call that throws (a caller gave up) leaves it to the next.
+  // call_once: a call that throws (a caller gave up) leaves it to the next. A response the
+  // settings cannot have (InputError: a layer that does not follow the shifts) is refused once and
+  // for every pair after, not measured again by each.
   std::call_once(response_once_, [&] {
-    take_depth_response([&](double fraction) {
-      if (progress) progress("depth response", fraction);
-    });
+    try {
+      take_depth_response([&](double fraction) {
+        if (progress) progress("depth response", fraction);
+      });
+    } catch (const InputError& e) {
+      response_refused_ = e.what();
+    }
   });
+  if (!response_refused_.empty()) throw InputError(response_refused_);
 }
 
 PairResult PairProcessor::corrected(PairResult result) const {

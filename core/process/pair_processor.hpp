@@ -120,7 +120,8 @@ class PairProcessor {
   // With settings.depth_response_ppm above 0, w (and its uncertainty) is then taken through the
   // depth response, and every sigma widened by the error its pairs showed beyond the correlation's
   // sigma (depth_response.hpp). A deferred response is taken by the first call, concurrent calls
-  // waiting for it; where that call is given up (its progress threw), the next one takes it.
+  // waiting for it; where that call is given up (its progress threw), the next one takes it; where
+  // the settings cannot have one (InputError naming the layer), that and every later call throw it.
   PairResult process(const ImageU16& frame_a, const ImageU16& frame_b, const PairOptions& options = {}) const;
   PairResult process(const ImageF& frame_a, const ImageF& frame_b, const PairOptions& options = {}) const;
   // process() without the depth response's correction: what the response is measured with.
@@ -176,7 +177,8 @@ class PairProcessor {
   mutable std::once_flag response_once_;
   mutable std::unique_ptr<const DepthResponse> depth_response_;
   mutable std::string response_note_;
-  mutable bool response_kept_ = false;  // the response is in the folder (read from it, or written)
+  mutable bool response_kept_ = false;    // the response is in the folder (read from it, or written)
+  mutable std::string response_refused_;  // why a deferred response could not be had; empty: it could
   mutable WorkspacePool workspaces_;
 };
 

@@ -487,5 +487,32 @@ TEST(DepthResponse, ADeferredResponseIsTakenByTheFirstPairThatFinishes) {
   EXPECT_EQ(std::count(stages.begin(), stages.end(), "depth response"), 0);
 }
 
+// A deferred response the settings cannot have (a layer that barely follows the shifts: one pass
+// of 2 mm windows without a depth margin, two MART iterations) fails the first pair with the
+// response's InputError, and every pair after it with the same error, without measuring again.
+TEST(DepthResponse, ADeferredResponseThatIsRefusedFailsEveryPairWithoutMeasuringAgain) {
+  const optics::CameraModel camera = testing_support::small_camera();
+  const calib::LoadedCalibration calibration = calib::nominal_calibration(camera);
+  ProcessSettings settings = parse(", depth_response_ppm: 0.5");
+  settings.mart.iterations = 2;
+  settings.correlation.passes = {piv::PassSettings{{16, 16, 8}, 50, 0}};
+  settings.correlation.depth_prefilter = 0;
+  settings.correlation.final_smoothing = 0;
+  ProcessorSetup later_on;
+  later_on.defer_depth_response = true;
+  const PairProcessor deferred(camera, calibration, settings, later_on);
+  const ImageU16 dark(camera.sensor().width_px, camera.sensor().height_px);
+  std::size_t reports = 0;
+  PairOptions options;
+  options.progress = [&](const std::string& stage, double) { reports += stage == "depth response"; };
+  const std::string first = error_of([&] { deferred.process(dark, dark, options); });
+  EXPECT_NE(first.find("depth response: the vectors at z = "), std::string::npos) << first;
+  EXPECT_GT(reports, 0u);
+  const std::size_t measured = reports;
+  EXPECT_EQ(error_of([&] { deferred.process(dark, dark, options); }), first);
+  EXPECT_EQ(reports, measured) << "measured again";
+  EXPECT_EQ(deferred.depth_response(), nullptr);
+}
+
 }  // namespace
 }  // namespace plenopiv::process
