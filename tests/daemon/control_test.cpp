@@ -8,6 +8,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <memory>
 #include <thread>
 #include <zmq.hpp>
 
@@ -469,128 +470,118 @@ TEST(DaemonStop, SigtermWithHeavyProcessingInFlightEndsWithinTenSeconds) {
   }
 }
 
-// A run whose settings ask for a depth response measures it while Armed, status saying how far;
-// `run stop` then ends it with nothing made. A run that lets it finish keeps it in the data
-// directory, and the next run on the same settings reads it back instead of measuring.
-TEST(DaemonSetup, ADepthResponseIsMeasuredWhileArmedStoppableAndKeptForTheNextRun) {
-  namespace fs = std::filesystem;
-  const fs::path dir = fresh_dir("setup", "depth-response");
-  const std::string control = testing_support::ipc_endpoint("control");
-  ChildProcess daemon(sim_daemon(control, dir / "data", "sim://?rays=300&ppm=0.3"), dir / "plenopivd.log");
-  ASSERT_TRUE(answers(daemon, control)) << daemon.output();
-  // The small camera's shallow box, where MART follows depth shifts.
-  std::ofstream(dir / "response.yaml") << std::string("pairs: 1\nrate_hz: 5\ndt_s: 0.0001") +
-                                              testing_support::kShallowSmallBox +
-                                              "reconstruction: {iterations: 2, mu: 1, acceleration: nesterov, "
-                                              "depth_response_ppm: 0.5}\n";
-  const auto run = [&](const std::vector<std::string>& args) {
-    std::vector<std::string> command{testing_support::binary("plenopiv"), "--endpoint", control, "run"};
+// plenopivd on the simulated small camera, runs whose settings ask for a depth response (the
+// camera's shallow box, where MART follows depth shifts; two iterations: a test's time), and what
+// its data directory keeps.
+class DaemonSetup : public ::testing::Test {
+ protected:
+  void start(const std::string& name) {
+    dir_ = fresh_dir("setup", name);
+    control_ = testing_support::ipc_endpoint("control");
+    daemon_ = std::make_unique<ChildProcess>(sim_daemon(control_, dir_ / "data", "sim://?rays=300&ppm=0.3"),
+                                             dir_ / "plenopivd.log");
+    ASSERT_TRUE(answers(*daemon_, control_)) << daemon_->output();
+  }
+  // A run config in the test's folder: `run_keys`, the box, MART with a depth response, `more`.
+  std::string config(const std::string& name, const std::string& run_keys, const std::string& more = "") {
+    const std::filesystem::path file = dir_ / (name + ".yaml");
+    std::ofstream(file) << run_keys + testing_support::kShallowSmallBox +
+                               "reconstruction: {iterations: 2, mu: 1, acceleration: nesterov, "
+                               "depth_response_ppm: 0.5}\n" +
+                               more;
+    return file.string();
+  }
+  // `plenopiv run ARGS` against the daemon; its output (the command must succeed).
+  std::string run(const std::vector<std::string>& args) {
+    std::vector<std::string> command{testing_support::binary("plenopiv"), "--endpoint", control_, "run"};
     command.insert(command.end(), args.begin(), args.end());
     std::string out;
     EXPECT_EQ(testing_support::run_command(command, out), 0) << out;
     return out;
-  };
-  const auto kept = [&] {
+  }
+  std::filesystem::path responses() const { return dir_ / "data" / "depth-responses"; }
+  // Depth responses kept, and run folders made, in the data directory.
+  std::size_t count(const std::filesystem::path& folder, const std::string& prefix) const {
     std::size_t n = 0;
     std::error_code ec;
-    for (const auto& e : fs::directory_iterator(dir / "data" / "depth-responses", ec))
-      n += e.path().filename().string().starts_with("depth-response-");
+    for (const auto& e : std::filesystem::directory_iterator(folder, ec))
+      n += e.path().filename().string().starts_with(prefix);
     return n;
-  };
-  const auto runs = [&] {
-    std::size_t n = 0;
-    for (const auto& e : fs::directory_iterator(dir / "data")) n += e.path().filename().string().starts_with("run-");
-    return n;
-  };
-  const auto wait_idle = [&] {
+  }
+  std::size_t kept() const { return count(responses(), "depth-response-"); }
+  std::size_t runs() const { return count(dir_ / "data", "run-"); }
+  // Whether the daemon goes Idle within a minute.
+  bool goes_idle() const {
     for (int i = 0; i < 1200; ++i) {
-      const auto s = testing_support::probe_status(control);
+      const auto s = testing_support::probe_status(control_);
       if (s && s->state() == "Idle") return true;
       std::this_thread::sleep_for(50ms);
     }
     return false;
-  };
+  }
 
-  run({"start", "--no-wait", "--config", (dir / "response.yaml").string()});
+  std::filesystem::path dir_;
+  std::string control_;
+  std::unique_ptr<ChildProcess> daemon_;
+};
+
+// A run whose settings ask for a depth response measures it while Armed, status saying how far;
+// `run stop` then ends it with nothing made. A run that lets it finish keeps it in the data
+// directory, and the next run on the same settings reads it back instead of measuring.
+TEST_F(DaemonSetup, ADepthResponseIsMeasuredWhileArmedStoppableAndKeptForTheNextRun) {
+  start("depth-response");
+  const std::string response = config("response", "pairs: 1\nrate_hz: 5\ndt_s: 0.0001");
+  run({"start", "--no-wait", "--config", response});
   std::string said;
   for (int i = 0; i < 600 && said.find("% measured") == std::string::npos; ++i) {
-    if (const auto s = testing_support::probe_status(control)) said = s->message();
+    if (const auto s = testing_support::probe_status(control_)) said = s->message();
     std::this_thread::sleep_for(20ms);
   }
   EXPECT_EQ(said.rfind("setting up: depth response of the full tier, ", 0), 0u) << said;
   run({"stop"});
-  ASSERT_TRUE(wait_idle()) << daemon.output();
+  ASSERT_TRUE(goes_idle()) << daemon_->output();
   EXPECT_EQ(runs(), 0u);
   EXPECT_EQ(kept(), 0u);
 
-  run({"start", "--config", (dir / "response.yaml").string()});
-  ASSERT_TRUE(wait_idle()) << daemon.output();
-  EXPECT_EQ(kept(), 1u) << daemon.output();
-  run({"start", "--config", (dir / "response.yaml").string()});
-  ASSERT_TRUE(wait_idle()) << daemon.output();
+  run({"start", "--config", response});
+  ASSERT_TRUE(goes_idle()) << daemon_->output();
+  EXPECT_EQ(kept(), 1u) << daemon_->output();
+  run({"start", "--config", response});
+  ASSERT_TRUE(goes_idle()) << daemon_->output();
   EXPECT_EQ(runs(), 2u);
-  const std::string log = daemon.output();
-  const std::size_t measured =
-      log.find("depth response measured and kept in the cache: " + (dir / "data" / "depth-responses").string());
+  const std::string log = daemon_->output();
+  const std::size_t measured = log.find("depth response measured and kept in the cache: " + responses().string());
   EXPECT_NE(measured, std::string::npos) << log;
-  EXPECT_NE(log.find("depth response from the cache: " + (dir / "data" / "depth-responses").string(), measured),
-            std::string::npos)
-      << log;
+  EXPECT_NE(log.find("depth response from the cache: " + responses().string(), measured), std::string::npos) << log;
 }
 
 // With a live tier, the quality lane's depth response is measured by its first pair while the run
 // acquires: `run start` returns acquiring with no response made, and the quality lane's fields come
 // once it is measured (and kept).
-TEST(DaemonSetup, TheQualityLanesDepthResponseIsMeasuredByItsFirstPairWhileTheRunAcquires) {
-  namespace fs = std::filesystem;
-  const fs::path dir = fresh_dir("setup", "quality-response");
-  const std::string control = testing_support::ipc_endpoint("control");
-  ChildProcess daemon(sim_daemon(control, dir / "data", "sim://?rays=300&ppm=0.3"), dir / "plenopivd.log");
-  ASSERT_TRUE(answers(daemon, control)) << daemon.output();
-  std::ofstream(dir / "lanes.yaml") << std::string("pairs: 4\nrate_hz: 2\ndt_s: 0.0001\nquality: newest") +
-                                           testing_support::kShallowSmallBox +
-                                           "reconstruction: {iterations: 2, mu: 1, acceleration: nesterov, "
-                                           "depth_response_ppm: 0.5}\n"
-                                           "live:\n"
-                                           "  volume: {voxel_mm: 0.25, voxel_z_mm: 0.5}\n"
-                                           "  reconstruction: {depth_response_ppm: 0}\n"
-                                           "  correlation: {passes: [{window: [8, 8, 4], overlap_percent: 50}]}\n";
-  const fs::path responses = dir / "data" / "depth-responses";
-  const auto kept = [&] {
-    std::size_t n = 0;
-    std::error_code ec;
-    for (const auto& e : fs::directory_iterator(responses, ec))
-      n += e.path().filename().string().starts_with("depth-response-");
-    return n;
-  };
-  std::string out;
-  ASSERT_EQ(testing_support::run_command({testing_support::binary("plenopiv"), "--endpoint", control, "run", "start",
-                                          "--config", (dir / "lanes.yaml").string()},
-                                         out),
-            0)
-      << out;
+TEST_F(DaemonSetup, TheQualityLanesDepthResponseIsMeasuredByItsFirstPairWhileTheRunAcquires) {
+  start("quality-response");
+  const std::string lanes = config("lanes", "pairs: 4\nrate_hz: 2\ndt_s: 0.0001\nquality: newest",
+                                   "live:\n"
+                                   "  volume: {voxel_mm: 0.25, voxel_z_mm: 0.5}\n"
+                                   "  reconstruction: {depth_response_ppm: 0}\n"
+                                   "  correlation: {passes: [{window: [8, 8, 4], overlap_percent: 50}]}\n");
+  const std::string out = run({"start", "--config", lanes});
   EXPECT_NE(out.find(" acquiring"), std::string::npos) << out;
   EXPECT_EQ(kept(), 0u) << "measured before the run acquired";
-  bool idle = false;
-  for (int i = 0; i < 1200 && !idle; ++i) {
-    const auto s = testing_support::probe_status(control);
-    idle = s && s->state() == "Idle";
-    if (!idle) std::this_thread::sleep_for(50ms);
-  }
-  ASSERT_TRUE(idle) << daemon.output();
-  EXPECT_EQ(kept(), 1u) << daemon.output();
-  fs::path run;
-  for (const auto& e : fs::directory_iterator(dir / "data"))
-    if (e.path().filename().string().starts_with("run-")) run = e.path();
-  const msg::RunManifest m = testing_support::read_manifest(run);
+  ASSERT_TRUE(goes_idle()) << daemon_->output();
+  EXPECT_EQ(kept(), 1u) << daemon_->output();
+  std::filesystem::path run_dir;
+  for (const auto& e : std::filesystem::directory_iterator(dir_ / "data"))
+    if (e.path().filename().string().starts_with("run-")) run_dir = e.path();
+  const msg::RunManifest m = testing_support::read_manifest(run_dir);
   EXPECT_EQ(m.state(), "complete");
   EXPECT_EQ(m.pairs_size(), 4);
   for (const msg::LaneCounters& lane : m.lanes()) EXPECT_GT(lane.processed(), 0u) << lane.name();
-  const std::string log = daemon.output();
-  EXPECT_NE(log.find("run processing, full tier: calibration"), std::string::npos) << log;
+  const std::string log = daemon_->output();
   EXPECT_NE(log.find("depth response deferred to the first pair"), std::string::npos) << log;
-  EXPECT_NE(log.find("run processing, full tier: depth response measured and kept in the cache: " + responses.string()),
-            std::string::npos)
+  EXPECT_NE(
+      log.find("run processing, full tier: depth response measured and kept in the cache: " + responses().string()),
+      std::string::npos)
       << log;
 }
 
