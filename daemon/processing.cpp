@@ -74,7 +74,7 @@ ProcessFactory plenoptic_processing(const optics::CameraModel& camera, const std
                  process::tier_name(tier), in_flight, double(bytes) / 1e9,
                  std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
     // Volumes are published from the live lane only (the quality lane's would double the traffic).
-    const bool keep_volumes = config.publish_volumes && tier == config.live_lane_tier();
+    const bool keep_volumes = config.publish_volumes && live_lane;
     // A deferred depth response is said once, by the pair that took it.
     auto response_said = std::make_shared<std::atomic<bool>>(processor->depth_response() != nullptr);
     return [processor, keep_volumes, tier, response_said](const drivers::FramePair& pair, const PairSteps& steps) {
