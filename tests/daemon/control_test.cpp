@@ -475,6 +475,9 @@ TEST(DaemonStop, SigtermWithHeavyProcessingInFlightEndsWithinTenSeconds) {
 // its data directory keeps.
 class DaemonSetup : public ::testing::Test {
  protected:
+  // The longest a run's setup or the whole run is waited for: a depth response takes seconds, and
+  // many times as long under ThreadSanitizer (.ci/run).
+  static constexpr std::chrono::milliseconds kLongest = 4min;
   void start(const std::string& name) {
     dir_ = fresh_dir("setup", name);
     control_ = testing_support::ipc_endpoint("control");
@@ -491,12 +494,13 @@ class DaemonSetup : public ::testing::Test {
                                more;
     return file.string();
   }
-  // `plenopiv run ARGS` against the daemon; its output (the command must succeed).
+  // `plenopiv run ARGS` against the daemon; its output (the command must succeed). A `run start`
+  // follows the setup, the depth response's among it: given as long as goes_idle() gives a run.
   std::string run(const std::vector<std::string>& args) {
     std::vector<std::string> command{testing_support::binary("plenopiv"), "--endpoint", control_, "run"};
     command.insert(command.end(), args.begin(), args.end());
     std::string out;
-    EXPECT_EQ(testing_support::run_command(command, out), 0) << out;
+    EXPECT_EQ(testing_support::run_command(command, out, kLongest), 0) << out;
     return out;
   }
   std::filesystem::path responses() const { return dir_ / "data" / "depth-responses"; }
@@ -510,10 +514,9 @@ class DaemonSetup : public ::testing::Test {
   }
   std::size_t kept() const { return count(responses(), "depth-response-"); }
   std::size_t runs() const { return count(dir_ / "data", "run-"); }
-  // Whether the daemon goes Idle within four minutes: a run that measures a depth response takes
-  // seconds, and many times as long under ThreadSanitizer (.ci/run).
+  // Whether the daemon goes Idle within kLongest.
   bool goes_idle() const {
-    const auto deadline = std::chrono::steady_clock::now() + 4min;
+    const auto deadline = std::chrono::steady_clock::now() + kLongest;
     while (std::chrono::steady_clock::now() < deadline) {
       const auto s = testing_support::probe_status(control_);
       if (s && s->state() == "Idle") return true;
