@@ -31,17 +31,16 @@ std::string mm(double v) {
 // not at all) is reconstructed alike in both exposures, while a fraction of a voxel changes how its
 // light splits between lenses, and with it w's response and error; a flow's vectors carry every
 // fraction. The vectors' nodes span less than the box (the margin, half a window at each face), so
-// one sweep shows them most fractions on a large box and the middle ones only on a small one; a set
-// of several (a small box's) adds its own offset, set / sets of a voxel, so that pooled over the
-// sets every node sees every fraction (docs/accuracy.md, "Per-vector uncertainty"). The gradient
-// (one voxel over the box) is far below what the window deformation follows.
+// they see most fractions on a large box and the middle ones only on a small one (docs/accuracy.md,
+// "Per-vector uncertainty"). The gradient (one voxel over the box) is far below what the window
+// deformation follows.
 class LateralSweep : public sim::Flow {
  public:
-  LateralSweep(const sim::Box& box, const std::array<double, 3>& voxel_mm, double depth_shift_mm, double offset_voxel)
-      : box_(box), voxel_mm_(voxel_mm), w_mm_(depth_shift_mm), offset_(offset_voxel) {}
+  LateralSweep(const sim::Box& box, const std::array<double, 3>& voxel_mm, double depth_shift_mm)
+      : box_(box), voxel_mm_(voxel_mm), w_mm_(depth_shift_mm) {}
   sim::Point3 displacement_mm(const sim::Point3& p) const override {
-    return {voxel_mm_[0] * (offset_ + (p[1] - box_.min_mm[1]) / (box_.max_mm[1] - box_.min_mm[1])),
-            voxel_mm_[1] * (offset_ + (p[0] - box_.min_mm[0]) / (box_.max_mm[0] - box_.min_mm[0])), w_mm_};
+    return {voxel_mm_[0] * (p[1] - box_.min_mm[1]) / (box_.max_mm[1] - box_.min_mm[1]),
+            voxel_mm_[1] * (p[0] - box_.min_mm[0]) / (box_.max_mm[0] - box_.min_mm[0]), w_mm_};
   }
   std::string name() const override { return "depth_response_lateral_sweep"; }
   std::string parameters_yaml() const override { return "{type: " + name() + ", depth_shift_mm: " + mm(w_mm_) + "}"; }
@@ -50,7 +49,6 @@ class LateralSweep : public sim::Flow {
   sim::Box box_;
   std::array<double, 3> voxel_mm_;
   double w_mm_;
-  double offset_;  // voxels, added to both lateral shifts: 0 <= offset < 1
 };
 
 // The scattered sets' extra motion: each particle moved sideways by its own random shift, uniform
@@ -275,7 +273,7 @@ DepthResponse measure_depth_response(const PairProcessor& processor, const optic
     for (int set = 0; set < sets; ++set) {
       const std::uint64_t seed = 7001 + 2 * std::uint64_t(sets_done);
       const std::vector<sim::Point3> a = sim::random_particles(box, count, seed);
-      const LateralSweep flow(box, s.grid.spacing_mm, shifts_mm[k], double(set) / sets);
+      const LateralSweep flow(box, s.grid.spacing_mm, shifts_mm[k]);
       const ImageU16 frame_a = sim::render(camera, lenses, a, render, seed).image;
       const std::vector<sim::Point3> swept = sim::displace(a, flow);
       // Each set twice: as the sweep moves it (the gain, and u's and v's error), then with every

@@ -113,9 +113,8 @@ class DepthResponse {
 // kDepthResponseShiftsVoxel, particles seeded uniformly at `seeding_ppm` particles per microlens
 // through the reconstructed box and 1 mm beyond each face, rendered (core/sim) before and after a
 // uniform depth shift (with lateral shifts that sweep one voxel across the box, so that every layer
-// sees the sub-voxel lateral shifts a flow's vectors carry: most of them in one sweep on a large
-// box; on a small one each set's sweep is offset by its share of a voxel, so the sets together
-// show all of them), and processed as any pair; one set of particles per shift, or as many as
+// sees the sub-voxel lateral shifts a flow's vectors carry: most of them on a large box, the middle
+// ones on a small one), and processed as any pair; one set of particles per shift, or as many as
 // kDepthResponseVectorsPerLayer asks (at most kDepthResponseMostSets). Each set is processed a
 // second time with every particle of its second frame also moved sideways by a random fraction of a
 // voxel: a window of a flow holds particles at many lateral fractions, and its w averages their
