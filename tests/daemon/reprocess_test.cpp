@@ -116,8 +116,9 @@ void expect_reprocessed_as_live(const fs::path& run, std::string& out) {
     // must still come back bit for bit, with no vector either time.
     std::size_t valid = 0;
     for (auto v : re.valid) valid += v;
-    if (std::abs(p.measured_dt_s() / p.nominal_dt_s() - 1) <= 0.1)
+    if (std::abs(p.measured_dt_s() / p.nominal_dt_s() - 1) <= 0.1) {
       EXPECT_GT(valid, 0u) << name << ", measured dt " << p.measured_dt_s() << " s";
+    }
     ++compared;
   }
   std::printf("reprocess: %d of %d pairs compared with the live fields\n", compared, m.pairs_size());
