@@ -495,7 +495,7 @@ class DaemonSetup : public ::testing::Test {
     return file.string();
   }
   // `plenopiv run ARGS` against the daemon; its output (the command must succeed). A `run start`
-  // follows the setup, the depth response's among it: given as long as goes_idle() gives a run.
+  // follows the setup (a depth response among it) until the run acquires: it gets kLongest too.
   std::string run(const std::vector<std::string>& args) {
     std::vector<std::string> command{testing_support::binary("plenopiv"), "--endpoint", control_, "run"};
     command.insert(command.end(), args.begin(), args.end());
