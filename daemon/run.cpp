@@ -774,6 +774,9 @@ void Run::fill_status(msg::Status& s) const {
     }
     return;
   }
+  // The counters (reconnects among them) are read before the connection, so a status that
+  // counts a reconnect never carries the message of the outage it ended.
+  *s.mutable_losses() = losses();
   if (const drivers::CameraStatus cs = camera_->status(); !cs.connected && !finished_) {
     s.set_message("camera lost (" + cs.last_error + "); reconnecting, the run waits up to " +
                   seconds(config_.camera_outage_s));
@@ -783,7 +786,6 @@ void Run::fill_status(msg::Status& s) const {
   s.set_pairs_processed(fields_made());
   s.set_pairs_skipped(lanes_.front()->skipped());
   s.set_frames_lost(frames_lost());
-  *s.mutable_losses() = losses();
   {
     std::lock_guard lock(warnings_mutex_);
     if (!setup_warning_.empty()) s.add_warnings(setup_warning_);
