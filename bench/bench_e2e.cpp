@@ -90,6 +90,7 @@
 #include "core/base/isa.hpp"
 #include "core/calib/nominal_calibration.hpp"
 #include "core/optics/camera_file.hpp"
+#include "core/piv/multipass.hpp"
 #include "core/process/pair_processor.hpp"
 #include "core/process/process.hpp"
 #include "core/sim/exact_volume.hpp"
@@ -515,10 +516,11 @@ int main(int argc, char** argv) {
     // The same pair again, the processor's MART buffers kept: what each pair costs in a run of many
     // (the daemon and `plenopiv process --run` keep them from pair to pair).
     std::vector<double> marks;  // seconds since the start at each progress call
-    const double t_again = now_s();
+    const double t_again = now_s(), cpu_again = bench::cpu_seconds();
     process::PairOptions timed;
     timed.progress = [&](const std::string&, double) { marks.push_back(now_s() - t_again); };
     const auto again = processor.process(a, b, timed);
+    const double again_cpu_s = bench::cpu_seconds() - cpu_again, again_wall_s = now_s() - t_again;
     // Seconds between progress calls: per frame set-up with its first iteration, then one per
     // iteration; then the correlation's passes.
     std::string steps;
@@ -528,13 +530,22 @@ int main(int argc, char** argv) {
       steps += item;
     }
     std::printf("bench=e2e case=%s steady_state_marks_s=%s\n", scale.c_str(), steps.c_str());
+    // Each correlation pass: deformation + correlation + validation s, of which the uncertainty.
+    std::string passes;
+    for (const piv::PassReport& p : again.correlation.passes) {
+      char item[96];
+      std::snprintf(item, sizeof item, "%s%.2f+%.2f+%.2f(%.2f)", passes.empty() ? "" : ",", p.deform_s, p.correlate_s,
+                    p.validate_s, p.uncertainty_s);
+      passes += item;
+    }
+    std::printf("bench=e2e case=%s steady_state_passes_s=%s\n", scale.c_str(), passes.c_str());
     std::printf(
         "bench=e2e case=%s variant=steady_state recon_a_s=%.2f recon_b_s=%.2f correlate_s=%.2f pair_s=%.2f "
-        "first_pair_s=%.2f same_field=%d\n",
+        "first_pair_s=%.2f pair_cpu_s=%.2f cores_busy=%.2f same_field=%d\n",
         scale.c_str(), again.times.reconstruct_a_s, again.times.reconstruct_b_s, again.times.correlate_s,
         again.times.reconstruct_a_s + again.times.reconstruct_b_s + again.times.correlate_s,
-        base.times.reconstruct_a_s + base.times.reconstruct_b_s + base.times.correlate_s,
-        int(again.correlation.field.dz_mm == base.correlation.field.dz_mm &&
+        base.times.reconstruct_a_s + base.times.reconstruct_b_s + base.times.correlate_s, again_cpu_s,
+        again_cpu_s / again_wall_s, int(again.correlation.field.dz_mm == base.correlation.field.dz_mm &&
             again.correlation.field.dx_mm == base.correlation.field.dx_mm));
     std::fflush(stdout);
   }
