@@ -545,7 +545,8 @@ int main(int argc, char** argv) {
         scale.c_str(), again.times.reconstruct_a_s, again.times.reconstruct_b_s, again.times.correlate_s,
         again.times.reconstruct_a_s + again.times.reconstruct_b_s + again.times.correlate_s,
         base.times.reconstruct_a_s + base.times.reconstruct_b_s + base.times.correlate_s, again_cpu_s,
-        again_cpu_s / again_wall_s, int(again.correlation.field.dz_mm == base.correlation.field.dz_mm &&
+        again_cpu_s / again_wall_s,
+        int(again.correlation.field.dz_mm == base.correlation.field.dz_mm &&
             again.correlation.field.dx_mm == base.correlation.field.dx_mm));
     std::fflush(stdout);
   }
