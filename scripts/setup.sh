@@ -31,6 +31,8 @@ packages=(
   systemd systemd-container help2man bash-completion dpkg-dev man-db
   # a real one-node Slurm for `plenopiv slurm` and its tests (scripts/slurm-local.sh)
   slurm-wlm munge
+  # bench/oneshot_cli.sh: GNU time (wall, CPU and peak memory of a CLI call), PyYAML
+  time python3-yaml
 )
 
 missing=()
