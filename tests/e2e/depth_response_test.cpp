@@ -432,16 +432,26 @@ TEST(DepthResponse, TakesMartsShortfallOutOfAShearsDepthComponent) {
 }
 
 // A deferred depth response (plenopivd's quality lane) is taken by the first pair, with that pair's
-// progress (stage "depth response"); a pair whose progress gives up leaves it to the next. Its
-// fields are the bits of a processor that measured the response when it was built.
+// progress (stage "depth response"); a pair whose progress gives up leaves it to the next and keeps
+// nothing. The response it measures is kept in its folder, and its fields are the bits of a
+// processor built later that reads the response from there when it is built (measured once: the
+// deferred and the constructor's response are one function of the same processor, and the shear
+// test above holds a kept response to the bits of the measured one).
 TEST(DepthResponse, ADeferredResponseIsTakenByTheFirstPairThatFinishes) {
   const optics::CameraModel camera = testing_support::small_camera();
   const calib::LoadedCalibration calibration = calib::nominal_calibration(camera);
   ProcessSettings settings = parse(", depth_response_ppm: 0.5");
   settings.mart.iterations = 2;  // a test's time
-  const PairProcessor built(camera, calibration, settings);
-  ASSERT_NE(built.depth_response(), nullptr);
+  const std::filesystem::path folder = testing_support::temp_dir("depth-response-deferred");
+  std::filesystem::remove_all(folder);
+  const auto kept = [&] {
+    std::size_t n = 0;
+    std::error_code ec;
+    for (const auto& e : std::filesystem::directory_iterator(folder, ec)) n += e.is_regular_file();
+    return n;
+  };
   ProcessorSetup later_on;
+  later_on.response_folder = folder;
   later_on.defer_depth_response = true;
   const PairProcessor deferred(camera, calibration, settings, later_on);
   EXPECT_EQ(deferred.depth_response(), nullptr);
@@ -464,6 +474,7 @@ TEST(DepthResponse, ADeferredResponseIsTakenByTheFirstPairThatFinishes) {
   };
   EXPECT_THROW(deferred.process(frame_a, frame_b, stopped), Cancelled);
   EXPECT_EQ(deferred.depth_response(), nullptr);
+  EXPECT_EQ(kept(), 0u) << "a response given up was kept";
 
   std::vector<std::string> stages;
   PairOptions go;
@@ -475,6 +486,14 @@ TEST(DepthResponse, ADeferredResponseIsTakenByTheFirstPairThatFinishes) {
   ASSERT_FALSE(stages.empty());
   EXPECT_EQ(stages.front(), "depth response");
   EXPECT_NE(stages.back(), "depth response");
+  EXPECT_NE(deferred.depth_response_note().find("depth response measured and kept in the cache"), std::string::npos)
+      << deferred.depth_response_note();
+  EXPECT_EQ(kept(), 1u);
+  ProcessorSetup from_folder;
+  from_folder.response_folder = folder;
+  const PairProcessor built(camera, calibration, settings, from_folder);
+  ASSERT_NE(built.depth_response(), nullptr);
+  EXPECT_NE(built.setup_note().find("depth response from the cache"), std::string::npos) << built.setup_note();
   const PairResult reference = built.process(frame_a, frame_b);
   EXPECT_EQ(first.correlation.field.dz_mm, reference.correlation.field.dz_mm);
   // NaN where no sigma: compared as bits.
@@ -485,6 +504,7 @@ TEST(DepthResponse, ADeferredResponseIsTakenByTheFirstPairThatFinishes) {
   stages.clear();
   deferred.process(frame_a, frame_b, go);  // taken once
   EXPECT_EQ(std::count(stages.begin(), stages.end(), "depth response"), 0);
+  std::filesystem::remove_all(folder);
 }
 
 // A deferred response the settings cannot have (a layer that barely follows the shifts: one pass
