@@ -25,6 +25,26 @@ std::string mm(double v) {
   return text;
 }
 
+// The refusal of a layer whose vectors do not follow the shifts (DepthResponse's constructor, and
+// measure_depth_response once the first shift is in): `m[k]` measured for `true_mm[k]`, the
+// columns from `known` on not measured yet.
+[[noreturn]] void refuse_layer(const Grid3& field_grid, std::size_t layer, const std::vector<double>& true_mm,
+                               const std::vector<double>& m, std::size_t known) {
+  std::string seen;
+  for (std::size_t j = 0; j < m.size(); ++j)
+    seen += (j ? ", " : "") + mm(true_mm[j]) + " -> " + (j < known || true_mm[j] == 0 ? mm(m[j]) : "not measured");
+  const std::string least_text = mm(kDepthResponseLeast), most_text = mm(1 / kDepthResponseLeast);
+  throw InputError("depth response: the vectors at z = " + mm(field_grid.coordinate_mm(2, int(layer))) +
+                   " mm follow a depth shift by less than " + least_text +
+                   " of it, or not at all (true -> measured mm: " + seen +
+                   "), so correcting their w would multiply its noise by more than " + most_text +
+                   "; turn reconstruction.depth_response_ppm off, or give the volume a depth guard or move it");
+}
+
+// Whether measured value `m` follows an outermost true shift: finite, and at least
+// kDepthResponseLeast of it.
+bool follows_outermost(double m, double true_mm) { return std::isfinite(m) && m / true_mm >= kDepthResponseLeast; }
+
 // A calibration pair's motion: the depth shift, and lateral shifts that sweep one voxel across the
 // particles' box (u along y, v along x), so that each layer's vectors see the sub-voxel lateral
 // shifts. MART discretises a particle on the lens grid: a pair moved by whole voxels sideways (or
@@ -96,21 +116,14 @@ DepthResponse::DepthResponse(Grid3 field_grid, std::vector<double> true_mm,
       const bool rises = k + 1 == m.size() || m[k + 1] > m[k];
       const bool outermost = k == 0 || k + 1 == m.size();
       const double least = kDepthResponseLeast * true_mm_[k];
-      const bool follows = true_mm_[k] == 0 ? m[k] == 0 : !outermost || m[k] / true_mm_[k] >= kDepthResponseLeast;
+      const bool follows = true_mm_[k] == 0 ? m[k] == 0 : !outermost || follows_outermost(m[k], true_mm_[k]);
       if (std::isfinite(m[k]) && rises && follows) {
         // Rising through (0, 0), an inner value lies on its shift's side of 0; raised to `least`
         // it still lies below the outermost value on that side, so the curve still rises.
         if (true_mm_[k] != 0 && std::abs(m[k]) < std::abs(least)) curve[k] = least;
         continue;
       }
-      std::string seen;
-      for (std::size_t j = 0; j < m.size(); ++j) seen += (j ? ", " : "") + mm(true_mm_[j]) + " -> " + mm(m[j]);
-      const std::string least_text = mm(kDepthResponseLeast), most_text = mm(1 / kDepthResponseLeast);
-      throw InputError("depth response: the vectors at z = " + mm(field_grid_.coordinate_mm(2, int(layer))) +
-                       " mm follow a depth shift by less than " + least_text +
-                       " of it, or not at all (true -> measured mm: " + seen +
-                       "), so correcting their w would multiply its noise by more than " + most_text +
-                       "; turn reconstruction.depth_response_ppm off, or give the volume a depth guard or move it");
+      refuse_layer(field_grid_, layer, true_mm_, m, m.size());
     }
     curve_mm_.push_back(std::move(curve));
   }
@@ -265,6 +278,10 @@ DepthResponse measure_depth_response(const PairProcessor& processor, const optic
   // of the scattered sets, their count, w, w^2 and w's sigma^2.
   enum Term { kCountUV, kU2, kV2, kSigmaU2, kSigmaV2, kCountW, kW, kW2, kSigmaW2, kTerms };
   std::vector<std::vector<std::array<double, kTerms>>> spread;
+  // A layer's mean w for shift k over its valid vectors; NaN without any.
+  const auto mean_of = [&](std::size_t layer, std::size_t k) {
+    return count_valid[layer][k] > 0 ? sum[layer][k] / count_valid[layer][k] : std::nan("");
+  };
   bool with_sigma = true;
   int sets = 1;  // per shift, known after the first pair (it depends on the vectors per layer)
   std::size_t sets_done = 0;
@@ -339,12 +356,20 @@ DepthResponse measure_depth_response(const PairProcessor& processor, const optic
       }
       ++sets_done;
     }
+    // The first shift is an outermost one: a layer that does not follow it is refused by the
+    // response whatever the other shifts show, so the pairs left are not processed.
+    if (k == 0)
+      for (std::size_t layer = 0; layer < sum.size(); ++layer)
+        if (!follows_outermost(mean_of(layer, 0), shifts_mm[0])) {
+          std::vector<double> known(shifts_mm.size(), 0.0);
+          known[0] = mean_of(layer, 0);
+          refuse_layer(field_grid, layer, shifts_mm, known, 1);
+        }
   }
   std::vector<std::vector<double>> measured(sum.size(), std::vector<double>(shifts_mm.size(), 0.0));
   for (std::size_t layer = 0; layer < sum.size(); ++layer)
     for (std::size_t k = 0; k < shifts_mm.size(); ++k)
-      if (shifts_mm[k] != 0.0)
-        measured[layer][k] = count_valid[layer][k] > 0 ? sum[layer][k] / count_valid[layer][k] : std::nan("");
+      if (shifts_mm[k] != 0.0) measured[layer][k] = mean_of(layer, k);
   // Pooled over the shifts: u's and v's RMS error about the sweep over their RMS sigma; w's mean
   // square error about its shift's mean over the scattered sets less its mean square sigma.
   std::vector<SigmaWidening> widening;

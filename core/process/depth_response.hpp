@@ -121,7 +121,9 @@ class DepthResponse {
 // errors, while a window the sweep alone moves carries one fraction's. The widening of u's and v's
 // sigma comes from the first pairs, that of w's from the second, where the processing estimates sigma.
 // Deterministic (fixed seeds). Costs eight pairs' processing at the paper's scale (minutes), up to
-// thirty-two on a small box (seconds). `progress` (optional) gets the fraction done after each
+// thirty-two on a small box (seconds). InputError as DepthResponse's constructor gives it for a
+// response it refuses; a layer that does not follow the first (outermost) shift is refused as soon
+// as that shift's pairs are in, without the rest. `progress` (optional) gets the fraction done after each
 // pair and within it after every MART iteration and correlation pass (0 during the first pair);
 // a caller ends the measurement there by throwing.
 DepthResponse measure_depth_response(const PairProcessor& processor, const optics::CameraModel& camera,

@@ -510,6 +510,7 @@ TEST(DepthResponse, ADeferredResponseIsTakenByTheFirstPairThatFinishes) {
 // A deferred response the settings cannot have (a layer that barely follows the shifts: one pass
 // of 2 mm windows without a depth margin, two MART iterations) fails the first pair with the
 // response's InputError, and every pair after it with the same error, without measuring again.
+// Its end layers do not follow the first (outermost) shift: the measurement stops there.
 TEST(DepthResponse, ADeferredResponseThatIsRefusedFailsEveryPairWithoutMeasuringAgain) {
   const optics::CameraModel camera = testing_support::small_camera();
   const calib::LoadedCalibration calibration = calib::nominal_calibration(camera);
@@ -527,6 +528,11 @@ TEST(DepthResponse, ADeferredResponseThatIsRefusedFailsEveryPairWithoutMeasuring
   options.progress = [&](const std::string& stage, double) { reports += stage == "depth response"; };
   const std::string first = error_of([&] { deferred.process(dark, dark, options); });
   EXPECT_NE(first.find("depth response: the vectors at z = "), std::string::npos) << first;
+  EXPECT_NE(first.find("(true -> measured mm: -0.25 -> "), std::string::npos) << first;
+  EXPECT_NE(first.find(", -0.125 -> not measured, 0 -> 0, 0.125 -> not measured, 0.25 -> not measured)"),
+            std::string::npos)
+      << first;
+  std::cout << "measured: " << first << "\n";
   EXPECT_GT(reports, 0u);
   const std::size_t measured = reports;
   EXPECT_EQ(error_of([&] { deferred.process(dark, dark, options); }), first);
