@@ -37,7 +37,7 @@ done
 "$plenopiv" calibrate --camera "$camera" --white "$work/white.tif" --calibration-image "$work/calibration.tif" \
   -o "$work/calibration.h5" >/dev/null 2>&1
 
-median() { sort -g | awk '{a[NR]=$1} END {print (NR % 2 ? a[(NR + 1) / 2] : (a[NR / 2] + a[NR / 2 + 1]) / 2)}'; }
+source bench/stats.sh  # median
 
 # One call: prints "wall_s cpu_s peak_gb skipped_a skipped_b" (skipped: the CLI's own report).
 one_call() {

@@ -39,12 +39,11 @@ echo "run $run: $(grep -c '"frame_a"' "$run/manifest.json") pairs; offline setti
 now() { date +%s.%N; }
 since() { awk -v a="$(now)" -v b="$1" 'BEGIN { print a - b }'; }
 ratio() { awk -v a="$1" -v b="$2" 'BEGIN { print a / b }'; }
-median() { sort -g | awk '{a[NR]=$1} END {print (NR % 2 ? a[(NR + 1) / 2] : (a[NR / 2] + a[NR / 2 + 1]) / 2)}'; }
+source bench/stats.sh  # median
 wait_jobs() {
   while [ -n "$(squeue --noheader --jobs="$1" 2>/dev/null)" ]; do sleep 0.2; done
 }
 
-declare -A wall
 for r in $(seq "$repeats"); do
   out="$work/local-$r"
   t0=$(now)
