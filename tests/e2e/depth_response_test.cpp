@@ -510,7 +510,7 @@ TEST(DepthResponse, ADeferredResponseIsTakenByTheFirstPairThatFinishes) {
 // A deferred response the settings cannot have (a layer that barely follows the shifts: one pass
 // of 2 mm windows without a depth margin, two MART iterations) fails the first pair with the
 // response's InputError, and every pair after it with the same error, without measuring again.
-// Its end layers do not follow the first (outermost) shift: the measurement stops there.
+// A layer does not follow the first (outermost) shift: the measurement stops there.
 TEST(DepthResponse, ADeferredResponseThatIsRefusedFailsEveryPairWithoutMeasuringAgain) {
   const optics::CameraModel camera = testing_support::small_camera();
   const calib::LoadedCalibration calibration = calib::nominal_calibration(camera);
