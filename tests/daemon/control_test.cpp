@@ -505,15 +505,8 @@ class DaemonSetup : public ::testing::Test {
   }
   std::filesystem::path responses() const { return dir_ / "data" / "depth-responses"; }
   // Depth responses kept, and run folders made, in the data directory.
-  std::size_t count(const std::filesystem::path& folder, const std::string& prefix) const {
-    std::size_t n = 0;
-    std::error_code ec;
-    for (const auto& e : std::filesystem::directory_iterator(folder, ec))
-      n += e.path().filename().string().starts_with(prefix);
-    return n;
-  }
-  std::size_t kept() const { return count(responses(), "depth-response-"); }
-  std::size_t runs() const { return count(dir_ / "data", "run-"); }
+  std::size_t kept() const { return testing_support::entries_named(responses(), "depth-response-"); }
+  std::size_t runs() const { return testing_support::entries_named(dir_ / "data", "run-"); }
   // Whether the daemon goes Idle within kLongest.
   bool goes_idle() const {
     const auto deadline = std::chrono::steady_clock::now() + kLongest;

@@ -176,13 +176,7 @@ TEST(Processing, ADepthResponseIsMeasuredWithProgressKeptAndEndedByAStop) {
                                                 "reconstruction: {iterations: 2, mu: 1, acceleration: nesterov, "
                                                 "depth_response_ppm: 0.5}\n",
                                             "run.yaml");
-  const auto files = [&] {
-    std::size_t n = 0;
-    std::error_code ec;
-    for (const auto& e : std::filesystem::directory_iterator(folder, ec))
-      n += e.path().filename().string().starts_with("depth-response-");
-    return n;
-  };
+  const auto files = [&] { return testing_support::entries_named(folder, "depth-response-"); };
   std::vector<std::string> steps;
   std::vector<double> fractions;
   const SetupProgress stopped_at_third = [&](const std::string& step, double fraction) {

@@ -444,12 +444,7 @@ TEST(DepthResponse, ADeferredResponseIsTakenByTheFirstPairThatFinishes) {
   settings.mart.iterations = 2;  // a test's time
   const std::filesystem::path folder = testing_support::temp_dir("depth-response-deferred");
   std::filesystem::remove_all(folder);
-  const auto kept = [&] {
-    std::size_t n = 0;
-    std::error_code ec;
-    for (const auto& e : std::filesystem::directory_iterator(folder, ec)) n += e.is_regular_file();
-    return n;
-  };
+  const auto kept = [&] { return testing_support::entries_named(folder, "depth-response-"); };
   ProcessorSetup later_on;
   later_on.response_folder = folder;
   later_on.defer_depth_response = true;

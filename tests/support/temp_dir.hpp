@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cstddef>
 #include <cstdlib>
 #include <filesystem>
 #include <mutex>
@@ -51,6 +52,15 @@ inline std::filesystem::path temp_dir(const std::string& area) {
   if (folders.made.insert(dir).second) std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
   return dir;
+}
+
+// How many entries of `folder` have names starting with `prefix`; 0 for a folder that does not exist.
+inline std::size_t entries_named(const std::filesystem::path& folder, const std::string& prefix) {
+  std::size_t n = 0;
+  std::error_code ec;
+  for (const auto& e : std::filesystem::directory_iterator(folder, ec))
+    n += e.path().filename().string().starts_with(prefix);
+  return n;
 }
 
 // A control endpoint of its own for a daemon a test starts: an ipc:// socket file in this
