@@ -24,7 +24,8 @@
 //              still in the 0.125 mm voxels; window depths and margins in --passes are its voxels).
 //     --early-interpolation: the deformation of the passes before the last (correlation's
 //              early_interpolation; default the sinc); the variants correlate with the other one.
-//     --steady: the headline pair once more in the kept MART workspace (time per pair in a run).
+//     --steady: the headline pair again in the kept MART workspace, --steady-repeats N times
+//              (default 3): time per pair in a run, their median (the repeat printed in full).
 //     --live B,K,N,P: a live tier beside the headline: voxels B times as large (the same box; BzD:
 //              B times as large across and D times as deep; BzDpF: F depth prefilter passes), pixels binned K x K
 //              (reconstruction.pixel_binning), N MART iterations, passes P (--passes
@@ -186,7 +187,7 @@ int main(int argc, char** argv) {
   int final_smoothing = piv::CorrelationSettings{}.final_smoothing;
   int depth_prefilter = piv::CorrelationSettings{}.depth_prefilter;
   bool steady = false, time_sweep = false, sparse_sweep = false, live_only = false;
-  int sparse_repeats = 1, time_repeats = 1;
+  int sparse_repeats = 1, time_repeats = 1, steady_repeats = 3;
   std::string sparse_variants;  // empty: all
   double prune_threshold = recon::MartSettings{}.prune_threshold;
   std::string prune_scope = "volume";
@@ -229,6 +230,8 @@ int main(int argc, char** argv) {
       depth_prefilter = std::stoi(argv[++i]);
     else if (!std::strcmp(argv[i], "--steady"))
       steady = true;
+    else if (!std::strcmp(argv[i], "--steady-repeats") && i + 1 < argc)
+      steady_repeats = std::max(1, std::stoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--time-sweep"))
       time_sweep = true;
     else if (!std::strcmp(argv[i], "--sparse-sweep"))
@@ -296,7 +299,8 @@ int main(int argc, char** argv) {
                  "[--dark-cutoff F] [--sensor-blur-mm S] [--intensity-threshold K] [--final-smoothing K] "
                  "[--depth-prefilter K] [--spectral-whitening P [--whitened-peak-sigma X,Y,Z]] [--passes P] "
                  "[--early-interpolation sinc|cubic] [--voxel-z-factor D] "
-                 "[--steady] [--time-sweep] [--z-centre MM] [--compare-passes 'P1;P2'] [--prune-threshold F "
+                 "[--steady [--steady-repeats N]] [--time-sweep] [--z-centre MM] [--compare-passes 'P1;P2'] "
+                 "[--prune-threshold F "
                  "[--prune-scope volume|slice]] [--depth-response-ppm F] [--sparse-sweep [--sparse-repeats N] "
                  "[--sparse-variants V,..]] [--live B,K,N,P [--live-depth-prefilter K] [--live-only]]\n");
     return 2;
@@ -514,40 +518,57 @@ int main(int argc, char** argv) {
   print_w_by_depth(base.correlation.field, "reconstructed");
   if (steady) {
     // The same pair again, the processor's MART buffers kept: what each pair costs in a run of many
-    // (the daemon and `plenopiv process --run` keep them from pair to pair).
-    std::vector<double> marks;  // seconds since the start at each progress call
-    const double t_again = now_s(), cpu_again = bench::cpu_seconds();
-    process::PairOptions timed;
-    timed.progress = [&](const std::string&, double) { marks.push_back(now_s() - t_again); };
-    const auto again = processor.process(a, b, timed);
-    const double again_cpu_s = bench::cpu_seconds() - cpu_again, again_wall_s = now_s() - t_again;
-    // Seconds between progress calls: per frame set-up with its first iteration, then one per
-    // iteration; then the correlation's passes.
-    std::string steps;
-    for (std::size_t i = 0; i < marks.size(); ++i) {
-      char item[64];
-      std::snprintf(item, sizeof item, "%s%.2f", i ? "," : "", marks[i] - (i ? marks[i - 1] : 0.0));
-      steps += item;
+    // (the daemon and `plenopiv process --run` keep them from pair to pair). Repeated, and the repeat
+    // of median time printed: the machine's speed swings from minute to minute.
+    struct Again {
+      double pair_s = 0, cpu_s = 0, wall_s = 0;
+      process::StageTimes times;
+      std::string steps, passes;  // seconds between progress calls; each correlation pass's
+      bool same_field = false;
+    };
+    std::vector<Again> repeats;
+    for (int k = 0; k < steady_repeats; ++k) {
+      std::vector<double> marks;  // seconds since the start at each progress call
+      const double t_again = now_s(), cpu_again = bench::cpu_seconds();
+      process::PairOptions timed;
+      timed.progress = [&](const std::string&, double) { marks.push_back(now_s() - t_again); };
+      const auto again = processor.process(a, b, timed);
+      Again& r = repeats.emplace_back();
+      r.cpu_s = bench::cpu_seconds() - cpu_again;
+      r.wall_s = now_s() - t_again;
+      r.times = again.times;
+      r.pair_s = again.times.reconstruct_a_s + again.times.reconstruct_b_s + again.times.correlate_s;
+      // Per frame set-up with its first iteration, then one per iteration; then the correlation's passes.
+      for (std::size_t i = 0; i < marks.size(); ++i) {
+        char item[64];
+        std::snprintf(item, sizeof item, "%s%.2f", i ? "," : "", marks[i] - (i ? marks[i - 1] : 0.0));
+        r.steps += item;
+      }
+      // Each correlation pass: deformation + correlation + validation s, of which the uncertainty.
+      for (const piv::PassReport& p : again.correlation.passes) {
+        char item[96];
+        std::snprintf(item, sizeof item, "%s%.2f+%.2f+%.2f(%.2f)", r.passes.empty() ? "" : ",", p.deform_s,
+                      p.correlate_s, p.validate_s, p.uncertainty_s);
+        r.passes += item;
+      }
+      r.same_field = again.correlation.field.dz_mm == base.correlation.field.dz_mm &&
+                     again.correlation.field.dx_mm == base.correlation.field.dx_mm;
     }
-    std::printf("bench=e2e case=%s steady_state_marks_s=%s\n", scale.c_str(), steps.c_str());
-    // Each correlation pass: deformation + correlation + validation s, of which the uncertainty.
-    std::string passes;
-    for (const piv::PassReport& p : again.correlation.passes) {
-      char item[96];
-      std::snprintf(item, sizeof item, "%s%.2f+%.2f+%.2f(%.2f)", passes.empty() ? "" : ",", p.deform_s, p.correlate_s,
-                    p.validate_s, p.uncertainty_s);
-      passes += item;
-    }
-    std::printf("bench=e2e case=%s steady_state_passes_s=%s\n", scale.c_str(), passes.c_str());
+    std::vector<std::size_t> order(repeats.size());
+    for (std::size_t k = 0; k < order.size(); ++k) order[k] = k;
+    std::sort(order.begin(), order.end(),
+              [&](std::size_t i, std::size_t j) { return repeats[i].pair_s < repeats[j].pair_s; });
+    const Again& mid = repeats[order[order.size() / 2]];
+    const bool same_field = std::all_of(repeats.begin(), repeats.end(), [](const Again& r) { return r.same_field; });
+    std::printf("bench=e2e case=%s steady_state_marks_s=%s\n", scale.c_str(), mid.steps.c_str());
+    std::printf("bench=e2e case=%s steady_state_passes_s=%s\n", scale.c_str(), mid.passes.c_str());
     std::printf(
-        "bench=e2e case=%s variant=steady_state recon_a_s=%.2f recon_b_s=%.2f correlate_s=%.2f pair_s=%.2f "
-        "first_pair_s=%.2f pair_cpu_s=%.2f cores_busy=%.2f same_field=%d\n",
-        scale.c_str(), again.times.reconstruct_a_s, again.times.reconstruct_b_s, again.times.correlate_s,
-        again.times.reconstruct_a_s + again.times.reconstruct_b_s + again.times.correlate_s,
-        base.times.reconstruct_a_s + base.times.reconstruct_b_s + base.times.correlate_s, again_cpu_s,
-        again_cpu_s / again_wall_s,
-        int(again.correlation.field.dz_mm == base.correlation.field.dz_mm &&
-            again.correlation.field.dx_mm == base.correlation.field.dx_mm));
+        "bench=e2e case=%s variant=steady_state repeats=%zu recon_a_s=%.2f recon_b_s=%.2f correlate_s=%.2f pair_s=%.2f "
+        "pair_min_s=%.2f pair_max_s=%.2f first_pair_s=%.2f pair_cpu_s=%.2f cores_busy=%.2f same_field=%d\n",
+        scale.c_str(), repeats.size(), mid.times.reconstruct_a_s, mid.times.reconstruct_b_s, mid.times.correlate_s,
+        mid.pair_s, repeats[order.front()].pair_s, repeats[order.back()].pair_s,
+        base.times.reconstruct_a_s + base.times.reconstruct_b_s + base.times.correlate_s, mid.cpu_s,
+        mid.cpu_s / mid.wall_s, int(same_field));
     std::fflush(stdout);
   }
 

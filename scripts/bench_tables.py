@@ -266,6 +266,8 @@ def t_headline(R):
         rec = r.one(variant="reconstructed") or {}
         steady = r.one(variant="steady_state") or {}
         time = f"{steady.get('pair_s', '?')} s" if r.exists else "—"
+        if "pair_min_s" in steady:  # the median of `repeats` pairs, and their range
+            time += f" ({steady['pair_min_s']}-{steady['pair_max_s']})"
         rows.append([config, case, f"{uvw(rec)} ({uvw(rec, 'off_axis_band_rms_')})" if r.exists else "—",
                      time, paper, target, r.meta.get("date", "—").split(" (")[0],
                      r.meta.get("commit", "—")])
