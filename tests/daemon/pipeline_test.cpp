@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <tbb/global_control.h>
+#include <atomic>
 #include <cmath>
 #include <cstring>
 #include <future>
@@ -505,6 +506,61 @@ TEST_F(RunTest, StopMidRunLeavesAConsistentFolder) {
   std::size_t frames = 0;
   for (const auto& e : fs::directory_iterator(run.dir() / "frames")) frames += e.is_regular_file();
   EXPECT_EQ(frames, std::size_t(2 * m.pairs_size()));  // every frame on disk is listed, and back
+}
+
+// A test camera that can be unplugged, and that is back inside the first status() call a chosen
+// thread makes afterwards, once that call has read the connection as lost: the moment a status's
+// two reads of the camera (its counters, its connection) could straddle.
+class ReconnectsDuringStatus : public testing_support::TestCamera {
+ public:
+  using TestCamera::TestCamera;
+  void unplug_until_asked_by(std::thread::id asker) {
+    asker_ = asker;
+    report_lost("cable pulled");
+  }
+  drivers::CameraStatus status() const override {
+    const drivers::CameraStatus s = TestCamera::status();
+    if (!s.connected && std::this_thread::get_id() == asker_.load()) {
+      const_cast<ReconnectsDuringStatus*>(this)->plug_in();
+    }
+    return s;
+  }
+
+ private:
+  void plug_in() {
+    asker_ = std::thread::id{};
+    report_reconnected();
+  }
+  std::atomic<std::thread::id> asker_{};
+};
+
+TEST_F(RunTest, AStatusCountsAReconnectOnlyWithoutTheOutageItEnded) {
+  // Made on the run's set-up thread; shared with the registry, which outlives the test.
+  const auto camera = std::make_shared<std::atomic<ReconnectsDuringStatus*>>(nullptr);
+  drivers::CameraRegistry::instance().add("reconnecting", [camera](const drivers::DeviceUri& uri) {
+    auto made = std::make_unique<ReconnectsDuringStatus>(uri.text());
+    *camera = made.get();
+    return std::unique_ptr<drivers::Camera>(std::move(made));
+  });
+  state_.start("r");
+  daemon::Run run(config("pairs: 0\nrate_hz: 40\ncamera_uri: reconnecting://\n"), "r", env_);
+  for (int i = 0; i < 1000 && recorded(run) < 2; ++i) std::this_thread::sleep_for(10ms);
+  ASSERT_GE(recorded(run), 2u);
+  ASSERT_NE(camera->load(), nullptr);
+  // Lost when this status reads the connection, back before it could read the counters.
+  camera->load()->unplug_until_asked_by(std::this_thread::get_id());
+  msg::Status during;
+  run.fill_status(during);
+  EXPECT_NE(during.message().find("camera lost (cable pulled)"), std::string::npos) << during.DebugString();
+  EXPECT_EQ(during.losses().camera_reconnects(), 0u) << "a status carries the outage and the reconnect that ended it";
+  msg::Status after;
+  run.fill_status(after);
+  EXPECT_EQ(after.losses().camera_reconnects(), 1u) << after.DebugString();
+  EXPECT_EQ(after.message().find("camera lost"), std::string::npos) << after.DebugString();
+  state_.stop();
+  run.request_stop();
+  wait_finished(run);
+  expect_all_lines_low(run);
 }
 
 TEST_F(RunTest, UnknownCameraIsAnInputErrorNamingTheUri) {
