@@ -104,8 +104,10 @@ void Publisher::publish_vectors(msg::VectorFieldHeader header, const VectorField
     payloads[6][i] = float(field.sigma_dz_mm[i] * to_m_s);
   }
   for (const char* name : {"u", "v", "w", "valid"}) header.add_payloads(name);
-  if (sigma)
+  if (sigma) {
     for (const char* name : {"sigma_u", "sigma_v", "sigma_w"}) header.add_payloads(name);
+    header.set_sigma_method(field.sigma_method);
+  }
   const auto now_ns = std::uint64_t(
       std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
           .count());

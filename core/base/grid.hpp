@@ -52,6 +52,9 @@ struct VectorField {
   // Standard uncertainty of dx, dy, dz (mm) per node: empty when not estimated; NaN at a node
   // without an estimate (invalid, or replaced by its neighbours' mean).
   std::vector<float> sigma_dx_mm, sigma_dy_mm, sigma_dz_mm;
+  // What the sigma arrays hold and leave out, in words (the files write it beside them); empty
+  // without them.
+  std::string sigma_method;
   double dt_s = 0.0;  // pulse separation; velocity = displacement / dt
 
   // The uncertainty estimated: all three sigma arrays hold a value per node.

@@ -98,6 +98,14 @@ constexpr const char* kAxisOrder = "z, y, x: arrays are [nz][ny][nx] (C order, x
 constexpr const char* kAxes =
     "x right, y down on the sensor, z away from the camera along the optical axis; mm; z = 0 the nominal focal plane";
 
+// A sigma array's long_name: what it is, and its method (VectorField::sigma_method; a field read
+// from a file written before it was kept says only its statistic).
+std::string sigma_long_name(const std::string& component, const std::string& method) {
+  return "standard uncertainty of " + component + " (" +
+         (method.empty() ? std::string("correlation statistics, Wieneke 2015") : method) +
+         "); NaN: no estimate (invalid or interpolated)";
+}
+
 void write_units(hid_t parent, const std::filesystem::path& path, const std::string& name, const std::string& units,
                  const std::string& description = {}) {
   Handle set(H5Dopen2(parent, name.c_str(), H5P_DEFAULT), H5Dclose);
@@ -309,9 +317,7 @@ void write_vector_field_h5(const std::filesystem::path& path, const VectorField&
       for (const auto& [name, s] : sigmas) {
         for (std::size_t i = 0; i < velocity.size(); ++i) velocity[i] = float((*s)[i] * scale);
         write_dataset(group.get(), path, name, dims, velocity.data());
-        fields.push_back({name, "m/s",
-                          std::string("standard uncertainty of ") + (name + 6) +
-                              " (correlation statistics, Wieneke 2015); NaN: no estimate (invalid or interpolated)"});
+        fields.push_back({name, "m/s", sigma_long_name(name + 6, f.sigma_method)});
       }
     }
     write_dataset(group.get(), path, "valid", dims, f.valid.data());
@@ -332,6 +338,7 @@ void write_vector_field_h5(const std::filesystem::path& path, const VectorField&
       write_units(group.get(), path, name, units, meaning);
       attach_axes(group.get(), path, name);
     }
+    if (sigma && !f.sigma_method.empty()) write_text_attribute(group.get(), path, "sigma_method", f.sigma_method);
     write_attribute(group.get(), path, "dt_s", &f.dt_s, 1);
     write_attribute(group.get(), path, "origin_mm", f.grid.origin_mm.data(), 3);
     write_attribute(group.get(), path, "spacing_mm", f.grid.spacing_mm.data(), 3);
@@ -339,6 +346,10 @@ void write_vector_field_h5(const std::filesystem::path& path, const VectorField&
     flush(file.get(), path);
   });
 }
+
+namespace {
+std::string text_attribute(hid_t object, const char* name);  // below
+}  // namespace
 
 VectorField read_vector_field_h5(const std::filesystem::path& path) {
   Handle file = open_for_reading(path);
@@ -371,6 +382,7 @@ VectorField read_vector_field_h5(const std::filesystem::path& path) {
       *s = read_dataset<float>(group.get(), path, name, nullptr, &dims);
       for (float& v : *s) v = float(v * to_mm);
     }
+    f.sigma_method = text_attribute(group.get(), "sigma_method");
   }
   check_grid(f.grid, f.dx_mm.size(), path.string() + ": /vectors");
   return f;

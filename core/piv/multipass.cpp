@@ -497,6 +497,7 @@ CorrelationResult correlate_volumes(const Volume& a, const Volume& b, const Corr
   f = VectorField(g);
   f.dt_s = settings.dt_s;
   if (settings.uncertainty) {
+    f.sigma_method = correlation_statistics_method(settings.final_smoothing);
     const std::array<std::vector<float>*, 3> out{&f.sigma_dx_mm, &f.sigma_dy_mm, &f.sigma_dz_mm};
     for (int axis = 0; axis < 3; ++axis) {
       out[axis]->resize(g.count());

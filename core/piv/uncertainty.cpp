@@ -351,4 +351,12 @@ void smooth_sigma(std::vector<float>& sigma, std::span<const std::uint8_t> valid
     }
 }
 
+std::string correlation_statistics_method(int smoothing_passes) {
+  std::string text = "correlation statistics of the final pass (Wieneke 2015)";
+  if (smoothing_passes > 0)
+    text += ", through " + std::to_string(smoothing_passes) + " smoothing pass" + (smoothing_passes > 1 ? "es" : "") +
+            " (Sciacchitano & Wieneke 2016)";
+  return text + ": the correlation's random error";
+}
+
 }  // namespace plenopiv::piv

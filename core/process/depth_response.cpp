@@ -161,6 +161,12 @@ void DepthResponse::apply(VectorField& field) const {
       g.spacing_mm[2] != field_grid_.spacing_mm[2])
     throw std::logic_error("DepthResponse::apply: the field's depth layers are not those the response was measured on");
   const bool with_sigma = field.has_sigma();
+  if (with_sigma)
+    field.sigma_method += widening_.empty()
+                              ? "; w's carried through MART's depth response"
+                              : "; widened per depth layer to the error beyond it of MART's depth response pairs "
+                                "(simulated with this camera and these settings: Timmins et al. 2012), w's then "
+                                "carried through the response";
   const std::size_t per_layer = std::size_t(g.shape[0]) * std::size_t(g.shape[1]);
   for (int layer = 0; layer < g.shape[2]; ++layer) {
     const SigmaWidening widen = widening_.empty() ? SigmaWidening{} : widening_[std::size_t(layer)];

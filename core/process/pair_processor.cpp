@@ -196,7 +196,13 @@ void PairProcessor::take_deferred_depth_response(const PairProgress& progress) c
 }
 
 PairResult PairProcessor::corrected(PairResult result) const {
-  if (depth_response_) depth_response_->apply(result.correlation.field);
+  VectorField& field = result.correlation.field;
+  if (depth_response_)
+    depth_response_->apply(field);
+  else if (field.has_sigma())
+    field.sigma_method +=
+        "; not MART's own error, which both volumes share: on reconstructed volumes a floor "
+        "(docs/accuracy.md; reconstruction.depth_response_ppm calibrates it)";
   return result;
 }
 

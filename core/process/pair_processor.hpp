@@ -158,7 +158,8 @@ class PairProcessor {
   // process_pair on frames already in the operator's pixels, in a workspace from the pool.
   PairResult run(const ImageF& frame_a, const ImageF& frame_b, const PairOptions& options) const;
   PairResult process_uncorrected(const ImageF& frame_a, const ImageF& frame_b, const PairOptions& options) const;
-  PairResult corrected(PairResult result) const;  // w through depth_response_, when there is one
+  // w through depth_response_, when there is one; sigma_method says what sigma holds either way.
+  PairResult corrected(PairResult result) const;
   // Measures the depth response, or reads it back, into depth_response_ and response_note_.
   void take_depth_response(const std::function<void(double)>& progress) const;
   // A deferred depth response taken once, by the first caller; the others wait.

@@ -776,6 +776,7 @@ TEST(Publisher, TheUncertaintyIsPublishedAsNamedPayloads) {
   f.valid.assign(g.count(), 1);
   for (auto* s : {&f.sigma_dx_mm, &f.sigma_dy_mm, &f.sigma_dz_mm}) s->assign(g.count(), 0.004f);
   f.sigma_dz_mm[5] = NAN;
+  f.sigma_method = "correlation statistics of the final pass";
   VectorField plain = f;
   plain.sigma_dx_mm.clear();
   plain.sigma_dy_mm.clear();
@@ -796,6 +797,7 @@ TEST(Publisher, TheUncertaintyIsPublishedAsNamedPayloads) {
   ASSERT_TRUE(header.ParseFromArray(parts[1].data(), int(parts[1].size())));
   std::vector<std::string> names(header.payloads().begin(), header.payloads().end());
   EXPECT_EQ(names, (std::vector<std::string>{"u", "v", "w", "valid", "sigma_u", "sigma_v", "sigma_w"}));
+  EXPECT_EQ(header.sigma_method(), f.sigma_method);  // what the sigma payloads hold
   // A ZeroMQ frame's bytes need not be aligned for float: copied out.
   const auto floats = [](const zmq::message_t& frame) {
     std::vector<float> out(frame.size() / sizeof(float));

@@ -77,6 +77,9 @@ TEST(Processing, UniformDisplacementOfARayTracedPairComesBack) {
   for (std::size_t i = 0; i < f.valid.size(); ++i)
     with_sigma += f.valid[i] && f.sigma_dx_mm[i] > 0 && f.sigma_dy_mm[i] > 0 && f.sigma_dz_mm[i] > 0;
   EXPECT_GT(with_sigma, valid / 2) << "of " << valid;
+  // ... and says what it holds: the final pass's correlation statistics, a floor on MART's volumes.
+  EXPECT_EQ(f.sigma_method.rfind("correlation statistics of the final pass (Wieneke 2015)", 0), 0u) << f.sigma_method;
+  EXPECT_NE(f.sigma_method.find("a floor"), std::string::npos) << f.sigma_method;
 
   // What MART skipped, for the status and the log: 3 iterations per frame, each updating the live
   // voxels of a box mostly dark at 30 particles, the shares consistent with those counts.

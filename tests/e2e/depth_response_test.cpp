@@ -96,7 +96,10 @@ TEST(DepthResponse, WidensEachSigmaAsItsLayerSays) {
   f.sigma_dx_mm = {0.04f, NAN, 0.03f, 0.02f};
   f.sigma_dy_mm = {0.01f, NAN, 0.03f, 0.02f};
   f.sigma_dz_mm = {0.02f, NAN, 0.02f, 0.01f};
+  f.sigma_method = "correlation statistics";
   r.apply(f);
+  EXPECT_EQ(f.sigma_method.rfind("correlation statistics; widened per depth layer", 0), 0u) << f.sigma_method;
+  EXPECT_NE(f.sigma_method.find("MART's depth response"), std::string::npos) << f.sigma_method;
   EXPECT_FLOAT_EQ(f.sigma_dx_mm[0], 0.05f);  // layer 0: 0.04 x 1.25
   EXPECT_FLOAT_EQ(f.sigma_dy_mm[0], 0.01f);
   EXPECT_FLOAT_EQ(f.sigma_dz_mm[0], 0.025f * 1.25f);  // hypot(0.02, 0.015), then slope 1.25

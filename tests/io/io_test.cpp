@@ -458,9 +458,11 @@ TEST(Hdf5, VectorFieldUncertaintyRoundTrip) {
   VectorField f = some_field();
   for (auto* s : {&f.sigma_dx_mm, &f.sigma_dy_mm, &f.sigma_dz_mm}) s->assign(f.grid.count(), 0.002f);
   f.sigma_dz_mm[3] = NAN;
+  f.sigma_method = "correlation statistics of the final pass (Wieneke 2015): a test's";
   const auto path = temp_dir() / "field_sigma.h5";
   write_vector_field_h5(path, f);
   const VectorField back = read_vector_field_h5(path);
+  EXPECT_EQ(back.sigma_method, f.sigma_method);
   ASSERT_EQ(back.sigma_dz_mm.size(), f.grid.count());
   EXPECT_NEAR(back.sigma_dx_mm[0], 0.002, 1e-9);
   EXPECT_TRUE(std::isnan(back.sigma_dz_mm[3]));
@@ -468,12 +470,18 @@ TEST(Hdf5, VectorFieldUncertaintyRoundTrip) {
   ASSERT_EQ(testing_support::run_command({"/usr/bin/python3", "-c",
                                           "import h5py, sys; g = h5py.File(sys.argv[1])['vectors']; s = g['sigma_w']; "
                                           "u = s.attrs['units']; print(u.decode() if isinstance(u, bytes) else u, "
-                                          "[d[0].name for d in s.dims], round(float(g['sigma_u'][0, 0, 0]), 6))",
+                                          "[d[0].name for d in s.dims], round(float(g['sigma_u'][0, 0, 0]), 6)); "
+                                          "t = lambda a: a.decode() if isinstance(a, bytes) else a; "
+                                          "print(t(s.attrs['long_name'])); print(t(g.attrs['sigma_method']))",
                                           path.string()},
                                          out),
             0)
       << out;
   EXPECT_NE(out.find("m/s ['/vectors/z', '/vectors/y', '/vectors/x'] 0.002"), std::string::npos) << out;
+  // What sigma holds, beside it: in each array's long_name and as the group's attribute.
+  EXPECT_NE(out.find("\nstandard uncertainty of w (" + f.sigma_method + "); NaN: no estimate"), std::string::npos)
+      << out;
+  EXPECT_NE(out.find("\n" + f.sigma_method + "\n"), std::string::npos) << out;
   const auto vti = temp_dir() / "field_sigma.vti";
   write_vector_field_vti(vti, f);
   std::ifstream in(vti);

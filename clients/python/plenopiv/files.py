@@ -314,7 +314,7 @@ def write_vector_file(path, ds, provenance):
     """Writes the vector field `ds` (data variables on z, y, x; attributes dt_s, origin_mm, spacing_mm) in the layout of plenopiv's
     vector files (core/io/hdf5_files.cpp): /vectors with the dimension scales x, y, z (mm), each array
     with units and long_name, `valid` as uint8, attributes dt_s, origin_mm, spacing_mm, axis_order,
-    axes; /provenance with software, host, written_utc and `provenance` (name -> text). Written under
+    axes, sigma_method (with sigma); /provenance with software, host, written_utc and `provenance` (name -> text). Written under
     a temporary name and renamed."""
     tmp = path + ".tmp"
     with h5py.File(tmp, "w") as f:
@@ -337,6 +337,10 @@ def write_vector_file(path, ds, provenance):
                 dataset.dims[dim].attach_scale(group[axis])
         for name in ("dt_s", "origin_mm", "spacing_mm"):
             group.attrs.create(name, np.atleast_1d(np.asarray(ds.attrs[name], dtype=np.float64)))
+        # What sigma holds: a file's own attribute, or a published message's header field.
+        sigma_method = ds.attrs.get("sigma_method") or ds.attrs.get("header_sigma_method")
+        if sigma_method and "sigma_u" in ds.data_vars:
+            _write_text(group, "sigma_method", str(sigma_method))
         p = f.create_group("provenance")
         from . import __version__
         _write_text(p, "software", "plenopiv-python %s" % __version__)

@@ -7,7 +7,7 @@ from google.protobuf.descriptor import FieldDescriptor
 from . import plenopiv_pb2
 
 # Units and meaning of the arrays plenopivd may publish, as its vector files give them (`units`,
-# `long_name`); the message carries names only.
+# `long_name`); the message carries names only, and for sigma the header's sigma_method.
 PAYLOAD_ATTRIBUTES = {
     "u": ("m/s", "velocity along x"),
     "v": ("m/s", "velocity along y"),
@@ -26,6 +26,13 @@ PAYLOAD_ATTRIBUTES = {
     "sigma_w": ("m/s", "standard uncertainty of w (correlation statistics, Wieneke 2015); NaN: no estimate "
                           "(invalid or interpolated)"),
 }
+
+
+def sigma_long_name(component, method):
+    """A sigma payload's long_name, as its vector file gives it: what it is and its method (the header's
+    sigma_method)."""
+    return ("standard uncertainty of %s (%s); NaN: no estimate (invalid or interpolated)"
+            % (component, method or "correlation statistics, Wieneke 2015"))
 
 
 class MessageError(ValueError):
@@ -65,6 +72,8 @@ def decode_vectors(frames):
             raise MessageError("payload %s has %d values, shape (nx, ny, nz) = %s needs %d"
                                % (name, values.size, (nx, ny, nz), nx * ny * nz))
         units, meaning = PAYLOAD_ATTRIBUTES.get(name, ("unknown (not in the published header)", ""))
+        if name.startswith("sigma_") and header.sigma_method:
+            meaning = sigma_long_name(name[len("sigma_"):], header.sigma_method)
         attrs = {"units": units}
         if meaning:
             attrs["long_name"] = meaning

@@ -9,10 +9,10 @@ from plenopiv.messages import MessageError, decode_vectors, header_entries
 from support import InstalledPackageTest  # noqa: F401
 
 
-def message(payloads=("u", "v", "w", "valid"), shape=(4, 3, 2), values=None, topic=b"vectors"):
+def message(payloads=("u", "v", "w", "valid"), shape=(4, 3, 2), values=None, topic=b"vectors", sigma_method=""):
     header = plenopiv_pb2.VectorFieldHeader(run_id="r1", pair_index=7, shape=list(shape),
                                             origin_mm=[-1.0, -0.5, 0.0], spacing_mm=[0.5, 0.5, 1.0], dt_s=1e-4,
-                                            payloads=list(payloads), latency_s=0.25)
+                                            payloads=list(payloads), latency_s=0.25, sigma_method=sigma_method)
     n = int(np.prod(shape))
     arrays = [np.arange(n, dtype="<f4") * (i + 1) if values is None else values for i in range(len(payloads))]
     return [topic, header.SerializeToString()] + [a.tobytes() for a in arrays]
@@ -37,6 +37,15 @@ class DecodeVectors(unittest.TestCase):
         scalar = [f.name for f in plenopiv_pb2.VectorFieldHeader.DESCRIPTOR.fields if f.label != f.LABEL_REPEATED]
         self.assertEqual(sorted(header_entries(plenopiv_pb2.VectorFieldHeader())), sorted(scalar))
         self.assertTrue(all("header_" + name in ds.attrs for name in scalar))
+
+    def test_a_sigma_says_what_it_holds_as_its_vector_file_does(self):
+        sigma = ("u", "valid", "sigma_u")
+        ds = decode_vectors(message(payloads=sigma, sigma_method="correlation statistics; a floor"))
+        self.assertEqual(ds.sigma_u.attrs["long_name"], "standard uncertainty of u (correlation statistics; a floor); "
+                                                        "NaN: no estimate (invalid or interpolated)")
+        self.assertEqual(ds.attrs["header_sigma_method"], "correlation statistics; a floor")
+        # A daemon that does not say: the statistic's name alone.
+        self.assertIn("(correlation statistics, Wieneke 2015)", decode_vectors(message(payloads=sigma)).sigma_u.attrs["long_name"])
 
     def test_an_array_the_subscriber_does_not_know_says_its_units_are_unknown(self):
         ds = decode_vectors(message(payloads=("u", "mystery")))

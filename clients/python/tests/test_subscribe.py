@@ -181,8 +181,9 @@ class LiveSubscriber(unittest.TestCase):
             self.assertEqual(saved[name].attrs["long_name"], live[name].attrs["long_name"], name)
         for a in "xyz":
             np.testing.assert_allclose(saved[a].values, live[a].values, rtol=0, atol=1e-9)
-        for key in ("axis_order", "axes"):
+        for key in ("axis_order", "axes", "sigma_method"):
             self.assertEqual(saved.attrs[key], live.attrs[key])
+        self.assertIn("correlation statistics of the final pass", live.attrs["sigma_method"])
         np.testing.assert_array_equal(saved.dt_s.values, live.dt_s.values)
         self.assertEqual(saved.attrs["provenance_run"], live.attrs["run_run_id"])
         # The same HDF5 layout as the daemon's file of the same pair.
