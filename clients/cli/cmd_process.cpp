@@ -80,6 +80,27 @@ void warn_if_few_valid(const VectorField& f, const std::string& what) {
                what.c_str(), valid, f.valid.size());
 }
 
+// Says on stderr the field's typical uncertainty (the median sigma of u, v, w over the vectors
+// that have one, m/s) and what it holds (sigma_method); nothing without one.
+void say_uncertainty(const VectorField& f) {
+  if (!f.has_sigma() || !(f.dt_s > 0)) return;
+  double median_m_s[3] = {};
+  std::size_t with_sigma = 0;
+  const std::vector<float>* sigma[3] = {&f.sigma_dx_mm, &f.sigma_dy_mm, &f.sigma_dz_mm};
+  for (int a = 0; a < 3; ++a) {
+    std::vector<float> values;
+    for (float s : *sigma[a])
+      if (std::isfinite(s)) values.push_back(s);
+    with_sigma = values.size();
+    if (values.empty()) return;
+    auto middle = values.begin() + std::ptrdiff_t(values.size() / 2);
+    std::nth_element(values.begin(), middle, values.end());
+    median_m_s[a] = double(*middle) * 1e-3 / f.dt_s;
+  }
+  std::fprintf(stderr, "uncertainty, median over %zu vectors: sigma u %.3g, v %.3g, w %.3g m/s\n  sigma: %s\n",
+               with_sigma, median_m_s[0], median_m_s[1], median_m_s[2], f.sigma_method.c_str());
+}
+
 // The lens centres and white correction from exactly one of the three sources: a calibration
 // file, calibration frames (white, optionally stopped-down and dark; calibrated as `plenopiv
 // calibrate` does), or the nominal lattice.
@@ -224,6 +245,7 @@ void run_process(const ProcessOptions& o) {
                r.times.reconstruct_a_s, 100 * r.skipped_a.fraction_updates_skipped(), r.times.reconstruct_b_s,
                100 * r.skipped_b.fraction_updates_skipped(), r.times.correlate_s, r.correlation.field.grid.count(),
                valid);
+  say_uncertainty(r.correlation.field);
   std::cout << out.string() << "\n" << vti.string() << "\n" << png.string() << "\n";
 }
 

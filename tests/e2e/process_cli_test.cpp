@@ -83,6 +83,10 @@ TEST(ProcessCli, RecoversTheUniformDisplacement) {
   ASSERT_EQ(status, 0) << out;
   EXPECT_NE(out.find("process: 100%"), std::string::npos) << out;  // plain progress lines off a terminal
   EXPECT_NE(out.find("reconstruct A"), std::string::npos) << out;
+  // The typical uncertainty, and what it holds: on MART's volumes without the depth response, a floor.
+  EXPECT_NE(out.find("uncertainty, median over "), std::string::npos) << out;
+  EXPECT_NE(out.find(" m/s\n  sigma: correlation statistics of the final pass"), std::string::npos) << out;
+  EXPECT_NE(out.find("a floor"), std::string::npos) << out;
   ASSERT_TRUE(fs::exists(dir / "v.vti"));
   ASSERT_TRUE(fs::exists(dir / "v.png"));
   std::ifstream png(dir / "v.png", std::ios::binary);
