@@ -314,8 +314,8 @@ def write_vector_file(path, ds, provenance):
     """Writes the vector field `ds` (data variables on z, y, x; attributes dt_s, origin_mm, spacing_mm) in the layout of plenopiv's
     vector files (core/io/hdf5_files.cpp): /vectors with the dimension scales x, y, z (mm), each array
     with units and long_name, `valid` as uint8, attributes dt_s, origin_mm, spacing_mm, axis_order,
-    axes, sigma_method (with sigma); /provenance with software, host, written_utc and `provenance` (name -> text). Written under
-    a temporary name and renamed."""
+    axes, sigma_method (with sigma); /provenance with software, host, written_utc and `provenance`
+    (name -> text). Written under a temporary name and renamed."""
     tmp = path + ".tmp"
     with h5py.File(tmp, "w") as f:
         group = f.create_group("vectors")

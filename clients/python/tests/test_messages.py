@@ -45,7 +45,8 @@ class DecodeVectors(unittest.TestCase):
                                                         "NaN: no estimate (invalid or interpolated)")
         self.assertEqual(ds.attrs["header_sigma_method"], "correlation statistics; a floor")
         # A daemon that does not say: the statistic's name alone.
-        self.assertIn("(correlation statistics, Wieneke 2015)", decode_vectors(message(payloads=sigma)).sigma_u.attrs["long_name"])
+        plain = decode_vectors(message(payloads=sigma))
+        self.assertIn("(correlation statistics, Wieneke 2015)", plain.sigma_u.attrs["long_name"])
 
     def test_an_array_the_subscriber_does_not_know_says_its_units_are_unknown(self):
         ds = decode_vectors(message(payloads=("u", "mystery")))
