@@ -76,9 +76,8 @@ class DepthResponse {
   double true_mm(int layer, double measured_mm) const;
   double slope(int layer, double measured_mm) const;
   // w (and its uncertainty, where estimated) of every node of `field` taken through its layer's
-  // inverse; each sigma first widened as its layer's SigmaWidening says (and sigma_method says
-  // so). std::logic_error
-  // when `field` is not on the grid the response was measured on.
+  // inverse; each sigma first widened as its layer's SigmaWidening says, and sigma_method says so.
+  // std::logic_error when `field` is not on the grid the response was measured on.
   void apply(VectorField& field) const;
 
   const Grid3& field_grid() const { return field_grid_; }
