@@ -6,6 +6,13 @@ from google.protobuf.descriptor import FieldDescriptor
 
 from . import plenopiv_pb2
 
+def sigma_long_name(component, method):
+    """A sigma payload's long_name, as its vector file gives it: what it is and its method (the header's
+    sigma_method; a daemon that does not send one: the statistic's name alone)."""
+    return ("standard uncertainty of %s (%s); NaN: no estimate (invalid or interpolated)"
+            % (component, method or "correlation statistics, Wieneke 2015"))
+
+
 # Units and meaning of the arrays plenopivd may publish, as its vector files give them (`units`,
 # `long_name`); the message carries names only, and for sigma the header's sigma_method.
 PAYLOAD_ATTRIBUTES = {
@@ -19,20 +26,10 @@ PAYLOAD_ATTRIBUTES = {
     "vorticity_x": ("1/s", ""),
     "vorticity_y": ("1/s", ""),
     "vorticity_z": ("1/s", ""),
-    "sigma_u": ("m/s", "standard uncertainty of u (correlation statistics, Wieneke 2015); NaN: no estimate "
-                          "(invalid or interpolated)"),
-    "sigma_v": ("m/s", "standard uncertainty of v (correlation statistics, Wieneke 2015); NaN: no estimate "
-                          "(invalid or interpolated)"),
-    "sigma_w": ("m/s", "standard uncertainty of w (correlation statistics, Wieneke 2015); NaN: no estimate "
-                          "(invalid or interpolated)"),
+    "sigma_u": ("m/s", sigma_long_name("u", "")),
+    "sigma_v": ("m/s", sigma_long_name("v", "")),
+    "sigma_w": ("m/s", sigma_long_name("w", "")),
 }
-
-
-def sigma_long_name(component, method):
-    """A sigma payload's long_name, as its vector file gives it: what it is and its method (the header's
-    sigma_method)."""
-    return ("standard uncertainty of %s (%s); NaN: no estimate (invalid or interpolated)"
-            % (component, method or "correlation statistics, Wieneke 2015"))
 
 
 class MessageError(ValueError):
