@@ -106,6 +106,7 @@ void run(const ReconOptions& o) {
   recon::validate_image(image, op, o.image.c_str());
   ImageF scratch;
   const ImageF& prepared = pair_op.prepare(image, scratch);
+  s.dark_floor = pair_op.dark_floor(image, s.noise_threshold);
   const double setup = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   std::fprintf(stderr, "weights: %d x %d x %d voxels, %s (%.1f s)\n", grid.shape[0], grid.shape[1], grid.shape[2],
                o.calibration.empty() ? "nominal lattice, geometric white image" : o.calibration.c_str(), setup);
@@ -131,11 +132,12 @@ void run(const ReconOptions& o) {
   const recon::SkipReport& k = r.skipped;
   std::fprintf(stderr,
                "skipped %.1f %% of %zu voxels (seen by a dark pixel %zu, outside the field of view %zu), "
-               "%d of %d slices empty, %zu dark pixels; voxel updates skipped %.1f %% (%zu voxels pruned); "
+               "%d of %d slices empty, %zu dark pixels (taken at %g counts); voxel updates skipped %.1f %% (%zu voxels "
+               "pruned); "
                "final residual %.4f%s\n",
                100 * k.fraction_skipped(), k.voxels, k.voxels_dark, k.voxels_unseen, k.slices_empty, k.slices,
-               k.dark_pixels, 100 * k.fraction_updates_skipped(), k.voxels_pruned, r.final_residual.value(),
-               r.converged ? " (converged)" : "");
+               k.dark_pixels, double(k.dark_floor), 100 * k.fraction_updates_skipped(), k.voxels_pruned,
+               r.final_residual.value(), r.converged ? " (converged)" : "");
   io::write_volume_h5(o.output, r.volume);
   const std::string vti = o.vti.empty() ? std::filesystem::path(o.output).replace_extension(".vti").string() : o.vti;
   io::write_volume_vti(vti, r.volume);

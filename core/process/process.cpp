@@ -81,8 +81,9 @@ void put_grid(ByteWriter& w, const Grid3& g) {
 
 // Structured bindings name every member: a struct with another member count does not compile.
 void put_mart(ByteWriter& w, const recon::MartSettings& m) {
-  const auto& [method, start, iterations, mu, accelerate, noise_threshold, dark_weight_cutoff, convergence, region,
-               sensor_blur_sigma_mm, final_residual, prune_threshold, prune_scope, prune_depth_reach, prune] = m;
+  const auto& [method, start, iterations, mu, accelerate, noise_threshold, dark_weight_cutoff, dark_floor, convergence,
+               region, sensor_blur_sigma_mm, final_residual, prune_threshold, prune_scope, prune_depth_reach, prune] =
+      m;
   w.pod(method);
   w.pod(start);
   w.pod(iterations);
@@ -90,6 +91,7 @@ void put_mart(ByteWriter& w, const recon::MartSettings& m) {
   w.pod(accelerate);
   w.pod(noise_threshold);
   w.pod(dark_weight_cutoff);
+  w.pod(dark_floor);
   w.pod(convergence);
   w.pod(region.has_value());
   if (region) {
@@ -420,14 +422,25 @@ const ImageF& PairOperator::prepare(const ImageF& frame, ImageF& scratch) const 
   return scratch;
 }
 
+float PairOperator::dark_floor(const ImageF& frame, float noise_threshold) const {
+  return resampler_ ? recon::dark_floor_of({frame.pixels.data(), frame.pixels.size()}, noise_threshold) : 0.f;
+}
+
 PairResult process_pair(const PairOperator& op, const ImageF& frame_a, const ImageF& frame_b,
                         const ProcessSettings& settings, const PairProgress& progress, recon::MartWorkspace* workspace,
                         piv::CorrelationWorkspace* correlation_workspace) {
   recon::validate_image(frame_a, op.weights(), "frame A");
   recon::validate_image(frame_b, op.weights(), "frame B");
+  // One floor for both frames (process_pair's MART settings are the pair's): the lower.
+  ProcessSettings resampled;
+  if (op.resampler()) {
+    resampled = settings;
+    resampled.mart.dark_floor = std::min(op.dark_floor(frame_a, settings.mart.noise_threshold),
+                                         op.dark_floor(frame_b, settings.mart.noise_threshold));
+  }
   ImageF scratch_a, scratch_b;
-  PairResult out = process_pair(op.weights(), op.prepare(frame_a, scratch_a), op.prepare(frame_b, scratch_b), settings,
-                                progress, workspace, correlation_workspace);
+  PairResult out = process_pair(op.weights(), op.prepare(frame_a, scratch_a), op.prepare(frame_b, scratch_b),
+                                op.resampler() ? resampled : settings, progress, workspace, correlation_workspace);
   out.lattice_note = op.note();
   return out;
 }

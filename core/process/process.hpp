@@ -166,6 +166,11 @@ class PairOperator {
   const std::string& note() const { return note_; }
   // A raw frame in the operator's pixel space: `frame` itself, or `scratch` holding it resampled.
   const ImageF& prepare(const ImageF& frame, ImageF& scratch) const;
+  // What MART takes a dark pixel of prepare(`frame`) to have recorded (recon::MartSettings::
+  // dark_floor): 0, the image's own floor, for raw pixels; for a resampled frame the raw frame's
+  // (recon::dark_floor_of), since the blend's lens weights reach float rounding and its own
+  // faintest pixel says nothing of the sensor.
+  float dark_floor(const ImageF& frame, float noise_threshold) const;
 
  private:
   std::unique_ptr<const lightfield::LatticeResampler> resampler_;

@@ -3,6 +3,9 @@
 // eq 9.
 #include "core/recon/mart.hpp"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_reduce.h>
+
 #include <algorithm>
 #include <atomic>
 #include <cmath>
@@ -68,6 +71,9 @@ std::optional<SettingProblem> check(const MartSettings& s) {
   if (!(s.mu > 0 && s.mu <= 1)) return SettingProblem{"mu", "must be in (0, 1], got " + number(s.mu)};
   if (!(s.noise_threshold >= 0) || !std::isfinite(s.noise_threshold)) {
     return SettingProblem{"noise_threshold", "must be a finite number >= 0 counts, got " + number(s.noise_threshold)};
+  }
+  if (!(s.dark_floor >= 0) || !std::isfinite(s.dark_floor)) {
+    return SettingProblem{"dark_floor", "must be a finite number >= 0 counts, got " + number(s.dark_floor)};
   }
   if (!(s.dark_weight_cutoff >= 0 && s.dark_weight_cutoff < 1)) {
     return SettingProblem{"dark_weight_cutoff", "must be in [0, 1), got " + number(s.dark_weight_cutoff)};
@@ -189,6 +195,21 @@ void MartWorkspace::reserve(const WeightingOperator& op) {
     slice.assign(std::size_t(g.shape[0]) * std::size_t(g.shape[1]), 0);
     slice.clear();
   }
+}
+
+float dark_floor_of(std::span<const float> image, float noise_threshold) {
+  if (noise_threshold > 0.f) return noise_threshold;
+  // A minimum: the same whatever the order.
+  const float faintest = tbb::parallel_reduce(
+      tbb::blocked_range<std::size_t>(0, image.size(), 1 << 14), detail::kHuge,
+      [&](const tbb::blocked_range<std::size_t>& r, float m) {
+        for (std::size_t i = r.begin(); i != r.end(); ++i) {
+          if (image[i] > 0.f) m = std::min(m, image[i]);
+        }
+        return m;
+      },
+      [](float a, float b) { return std::min(a, b); });
+  return 0.5f * faintest;
 }
 
 MartResult reconstruct(const WeightingOperator& op, const ImageF& image, const MartSettings& settings,

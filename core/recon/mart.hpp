@@ -72,6 +72,11 @@ struct MartSettings {
   // dark pixel with weight zeroes the voxel. Range [0, 1); default 0.9, chosen by measurement
   // (docs/recon.md, "What is skipped").
   double dark_weight_cutoff = 0.9;
+  // What a dark pixel recorded at most, counts, where the image is not the recording itself: a
+  // frame resampled onto another lattice (core/process) blends lenses with weights down to float
+  // rounding, so its faintest lit pixel says nothing about the sensor; its raw frame's floor
+  // (dark_floor_of) does. 0 (default): the image's own floor. Not a config key; finite, >= 0.
+  float dark_floor = 0.f;
   double convergence = 0.0;        // stop when the residual changes by less than this fraction
   std::optional<RegionMm> region;  // solve only here
   // The camera's blur at the sensor (diffraction-limited spot, pixel crosstalk) as a Gaussian of
@@ -117,7 +122,7 @@ struct SettingProblem {
   std::string key, reason;
 };
 // The one place MART's ranges are checked (reconstruct() refuses what it finds, core/process names
-// the config key): iterations 1..10000, mu (0, 1], noise_threshold finite >= 0, dark_weight_cutoff
+// the config key): iterations 1..10000, mu (0, 1], noise_threshold and dark_floor finite >= 0, dark_weight_cutoff
 // [0, 1), convergence finite >= 0, sensor_blur_sigma_mm [0, kMaxSensorBlurSigmaMm].
 std::optional<SettingProblem> check(const MartSettings& settings);
 
@@ -129,6 +134,7 @@ void apply_sensor_blur(const WeightingOperator& op, double sigma_mm, std::span<f
 struct SkipReport {
   std::size_t pixels = 0;
   std::size_t dark_pixels = 0;  // at or below the noise threshold (inside microlens images)
+  float dark_floor = 0;         // what MART takes a dark pixel to have recorded, counts
   std::size_t voxels = 0;
   std::size_t voxels_unseen = 0;  // see no pixel (outside the field of view)
   std::size_t voxels_outside_region = 0;
@@ -187,6 +193,11 @@ struct MartResult {
   // sets; inside the iterations' seconds, apart from the prune after the start.
   double prune_seconds = 0;
 };
+
+// What a dark pixel of `image` recorded at most, counts: `noise_threshold` when it is above 0, else
+// half the faintest lit pixel (half a count for a frame of integer counts); half of kHuge when no
+// pixel is lit.
+float dark_floor_of(std::span<const float> image, float noise_threshold);
 
 // Checks an image for the reconstruction: sensor-sized, finite, non-negative; InputError otherwise
 // naming `source`.

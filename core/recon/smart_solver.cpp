@@ -122,22 +122,10 @@ void SmartSolver::start() {
   fit(b_.projection, op_.pixel_count());
   fit(b_.ratio, op_.pixel_count());
 
-  // What a dark pixel recorded at most: the noise threshold, or half the faintest lit pixel.
-  const BigBuffer<float>& data = b_.data;
-  dark_floor_ = settings_.noise_threshold;
-  if (!(dark_floor_ > 0.f)) {
-    // A minimum: the same whatever the order.
-    const float faintest = tbb::parallel_reduce(
-        tbb::blocked_range<std::size_t>(0, data.size(), 1 << 14), kHuge,
-        [&](const tbb::blocked_range<std::size_t>& r, float m) {
-          for (std::size_t i = r.begin(); i != r.end(); ++i) {
-            if (data[i] > 0.f) m = std::min(m, data[i]);
-          }
-          return m;
-        },
-        [](float a, float b) { return std::min(a, b); });
-    dark_floor_ = 0.5f * faintest;
-  }
+  // What a dark pixel recorded at most: the caller's (a resampled frame's raw floor), else the
+  // noise threshold, or half the faintest lit pixel.
+  dark_floor_ = settings_.dark_floor > 0.f ? settings_.dark_floor : dark_floor_of(b_.data, settings_.noise_threshold);
+  result_.skipped.dark_floor = dark_floor_;
   if (settings_.start == MartStart::mlos && n_ > 0) start_mlos();
 }
 

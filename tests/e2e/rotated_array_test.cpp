@@ -5,6 +5,7 @@
 
 #include <tbb/global_control.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <iostream>
@@ -318,6 +319,48 @@ correlation:
   }
   std::cout << "measured: test time " << std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count()
             << " s\n";
+}
+
+// A resampled frame blends lenses with weights down to float rounding, so its own faintest lit
+// pixel says nothing of what a dark pixel recorded: process_pair gives MART the raw frames' floor
+// (half a ray for these integer frames) there, and raw pixels keep each frame's own.
+TEST(RotatedArray, ResampledFramesKeepTheRawFramesDarkFloor) {
+  const process::ProcessSettings s = process::process_settings_from(YamlMap(load_yaml_text(R"(
+dt_s: 0.0001
+volume: {x_mm: [-1, 1], y_mm: [-1, 1], z_mm: [0, 2], voxel_mm: 0.125, depth_guard_mm: 0.5}
+reconstruction: {iterations: 2, mu: 1, noise_threshold: 0}
+correlation: {passes: [{window: 16, overlap_percent: 50}]}
+)",
+                                                                                           "floor.yaml"),
+                                                                            "floor.yaml"));
+  std::vector<sim::Point3> a = sim::random_particles({{-1.5, -1.5, -0.5}, {1.5, 1.5, 2.5}}, 200, 31), b = a;
+  for (auto& p : b) p[0] += 0.25;
+  for (const double degrees : {0.0, 0.3}) {
+    const auto array = degrees > 0 ? true_array(degrees, 0.001)
+                                   : optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera()));
+    const ImageF fa = render(array, a, 5), fb = render(array, b, 6);
+    const process::PairOperator op(camera(), array, calib::geometric_white_image(camera(), array),
+                                   s.reconstruction_grid());
+    const process::PairResult r = process::process_pair(op, fa, fb, s);
+    const auto floor_of = [](const ImageF& f) { return recon::dark_floor_of({f.pixels.data(), f.pixels.size()}, 0.f); };
+    ASSERT_EQ(floor_of(fa), 0.5f) << "the simulator's frames count whole rays";
+    if (!op.resampler()) {
+      EXPECT_EQ(degrees, 0.0);
+      EXPECT_EQ(op.dark_floor(fa, 0.f), 0.f) << "raw pixels: the image's own";
+      EXPECT_EQ(r.skipped_a.dark_floor, floor_of(fa));
+      EXPECT_EQ(r.skipped_b.dark_floor, floor_of(fb));
+      continue;
+    }
+    ImageF scratch;
+    const float resampled_own = floor_of(op.prepare(fa, scratch));
+    std::cout << "measured: " << degrees << " deg: the resampled frame's own floor " << resampled_own
+              << ", the raw frames' " << std::min(floor_of(fa), floor_of(fb)) << "\n";
+    EXPECT_LT(resampled_own, 0.01f * floor_of(fa)) << "the blend's faintest pixel, far below a ray";
+    EXPECT_EQ(op.dark_floor(fa, 0.f), floor_of(fa));
+    EXPECT_EQ(op.dark_floor(fa, 2.f), 2.f) << "the noise threshold, where there is one";
+    EXPECT_EQ(r.skipped_a.dark_floor, std::min(floor_of(fa), floor_of(fb)));
+    EXPECT_EQ(r.skipped_b.dark_floor, std::min(floor_of(fa), floor_of(fb)));
+  }
 }
 
 // A hex array (rotated 0.3 deg, jittered) through the same resampling onto a rectangular lattice

@@ -7,8 +7,10 @@
 #include <cmath>
 #include <cstring>
 #include <iostream>
+#include <limits>
 #include <numeric>
 #include <random>
+#include <span>
 #include <tuple>
 
 #include "core/base/errors.hpp"
@@ -433,6 +435,40 @@ TEST_F(Mart, VoxelsSeenByDarkPixelsAreSkippedAndStayZero) {
     }
   }
   EXPECT_EQ(nonzero_ref, k.voxels_active);
+}
+
+// What MART takes a dark pixel to have recorded: the noise threshold, or half the faintest lit
+// pixel; a caller's floor (a resampled frame's raw one) replaces it. The image's own floor given
+// changes no bit; a lower one changes the volume.
+TEST_F(Mart, DarkFloorIsTheImagesOwnUnlessTheCallerGivesOne) {
+  ImageF image = project_image(*op_, truth(), 1000.f);
+  for (float& p : image.pixels) p = std::round(p);  // integer counts, as a sensor records them
+  const std::span<const float> pixels(image.pixels.data(), image.pixels.size());
+  EXPECT_EQ(dark_floor_of(pixels, 0.f), 0.5f);
+  EXPECT_EQ(dark_floor_of(pixels, 3.f), 3.f);
+  const std::vector<float> unlit(64, 0.f);
+  EXPECT_GT(dark_floor_of(unlit, 0.f), 1e29f);
+
+  MartSettings s;
+  s.iterations = 3;
+  const MartResult own = reconstruct(*op_, image, s);
+  EXPECT_EQ(own.skipped.dark_floor, 0.5f);
+  s.dark_floor = 0.5f;
+  const MartResult given = reconstruct(*op_, image, s);
+  EXPECT_EQ(given.skipped.dark_floor, 0.5f);
+  EXPECT_TRUE(std::equal(own.volume.data.begin(), own.volume.data.end(), given.volume.data.begin()));
+  s.dark_floor = 1e-6f;
+  const MartResult lower = reconstruct(*op_, image, s);
+  EXPECT_EQ(lower.skipped.dark_floor, 1e-6f);
+  EXPECT_FALSE(std::equal(own.volume.data.begin(), own.volume.data.end(), lower.volume.data.begin()))
+      << "the floor enters every dark pixel's ratio";
+
+  for (const float bad : {-1.f, std::nanf(""), std::numeric_limits<float>::infinity()}) {
+    s.dark_floor = bad;
+    const auto problem = check(s);
+    ASSERT_TRUE(problem) << bad;
+    EXPECT_EQ(problem->key, "dark_floor");
+  }
 }
 
 // The dark cutoff's selection against its definition, voxel by voxel (the selection tests it
