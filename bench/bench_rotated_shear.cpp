@@ -7,13 +7,15 @@
 // depth response (reconstruction.depth_response_ppm at the pair's seeding).
 // w's gain per depth band follows (near the focal plane the mirror ambiguity limits it), then the
 // per-vector uncertainty's ratio to the true error and its coverage.
-//   build/bin/bench_rotated_shear [DEGREES] [PPM] [full|both] [CONFIG]
-// (defaults 0.1 deg, 0.5 ppm, both tiers, systemd/config/run-paper.yaml; CONFIG: any run.yaml or
-// process.yaml whose volume is the paper's box)
+//   build/bin/bench_rotated_shear [DEGREES] [PPM] [both|full|plain] [CONFIG] [SEED]
+// (defaults 0.1 deg, 0.5 ppm, both tiers, systemd/config/run-paper.yaml, particle set 2026; full:
+// the full tier alone, plain: without its depth-response row; CONFIG: any run.yaml or process.yaml
+// whose volume is the paper's box, or a box within it; SEED: another particle set)
 #include <algorithm>
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -44,14 +46,16 @@ int main(int argc, char** argv) {
   const double degrees = argc > 1 ? std::atof(argv[1]) : 0.1;
   const double ppm = argc > 2 ? std::atof(argv[2]) : 0.5;
   const std::string tiers = argc > 3 ? argv[3] : "both";
-  if (!(degrees >= 0 && degrees < 5) || !(ppm > 0 && ppm <= 5) || (tiers != "both" && tiers != "full")) {
+  const long seed = argc > 5 ? std::atol(argv[5]) : 2026;
+  if (!(degrees >= 0 && degrees < 5) || !(ppm > 0 && ppm <= 5) ||
+      (tiers != "both" && tiers != "full" && tiers != "plain") || seed < 1) {
     std::fprintf(stderr,
-                 "usage: bench_rotated_shear [DEGREES in [0, 5)] [PPM in (0, 5]] [full|both] [CONFIG]; got %g deg, "
-                 "%g ppm, %s\n",
-                 degrees, ppm, tiers.c_str());
+                 "usage: bench_rotated_shear [DEGREES in [0, 5)] [PPM in (0, 5]] [both|full|plain] [CONFIG] "
+                 "[SEED >= 1]; got %g deg, %g ppm, %s, seed %ld\n",
+                 degrees, ppm, tiers.c_str(), seed);
     return 2;
   }
-  const bool full_only = tiers == "full";
+  const bool full_only = tiers != "both", plain_only = tiers == "plain";
   const fs::path config_dir = fs::path(PLENOPIV_SOURCE_DIR) / "systemd/config";
   const optics::CameraModel camera = optics::load_camera_file(config_dir / "camera-fahringer2015.yaml");
   const fs::path config = argc > 4 ? fs::path(argv[4]) : config_dir / "run-paper.yaml";
@@ -74,15 +78,15 @@ int main(int argc, char** argv) {
       {g.origin_mm[0] - 0.5 * voxel - 1, -half_y - 1, g.origin_mm[2] - 0.5 * voxel_z - 1},
       {g.origin_mm[0] + (g.shape[0] - 0.5) * voxel + 1, half_y + 1, g.origin_mm[2] + (g.shape[2] - 0.5) * voxel_z + 1}};
   const std::size_t count = sim::particle_count_from_ppm(camera, box, ppm);
-  const auto pa = sim::random_particles(box, count, 2026);
+  const auto pa = sim::random_particles(box, count, std::uint64_t(seed));
   const auto pb = sim::displace(pa, flow);
   sim::RenderOptions ro;
   ro.rays_per_particle = 5000;
   double t = now_s();
   const ImageU16 a = sim::render(camera, truth.lenses, pa, ro, 1).image;
   const ImageU16 b = sim::render(camera, truth.lenses, pb, ro, 2).image;
-  std::printf("bench=rotated_shear degrees=%.2f ppm=%.3f particles=%zu render_s=%.1f\n", degrees, ppm, count,
-              now_s() - t);
+  std::printf("bench=rotated_shear degrees=%.2f ppm=%.3f particles=%zu seed=%ld render_s=%.1f\n", degrees, ppm, count,
+              seed, now_s() - t);
   std::fflush(stdout);
 
   // The live tier, the full tier, and the full tier with w through MART's depth response measured
@@ -96,6 +100,7 @@ int main(int argc, char** argv) {
        {Row{process::Tier::live, false}, Row{process::Tier::full, false}, Row{process::Tier::full, true}}) {
     const process::Tier tier = row.tier;
     if (full_only && tier != process::Tier::full) continue;
+    if (plain_only && row.depth_response) continue;
     process::ProcessSettings s = spec.settings(tier, config_name);
     if (row.depth_response) s.depth_response_ppm = ppm;
     const char* variant = s.depth_response_ppm > 0 ? "depth_response" : "plain";
