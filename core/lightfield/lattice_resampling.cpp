@@ -29,7 +29,7 @@ optics::MicrolensArray axis_aligned_lattice(const optics::MicrolensArray& calibr
 }
 
 LatticeResampler::LatticeResampler(const optics::CameraModel& camera, const optics::MicrolensArray& calibrated,
-                                   const ImageF& white)
+                                   const ImageF& white, double whole_lens_px)
     : virtual_(axis_aligned_lattice(calibrated)), width_(camera.sensor().width_px), height_(camera.sensor().height_px) {
   const optics::SensorSpec& s = camera.sensor();
   if (white.width != width_ || white.height != height_) {
@@ -42,6 +42,10 @@ LatticeResampler::LatticeResampler(const optics::CameraModel& camera, const opti
       throw InputError("white correction: pixel (" + std::to_string(k % white.width) + ", " +
                        std::to_string(k / white.width) + ") is not a finite, non-negative value");
     }
+  }
+  if (!(whole_lens_px >= 0) || !std::isfinite(whole_lens_px)) {
+    throw InputError("lattice resampling: the nearest-lens tolerance must be a finite number >= 0 px, got " +
+                     std::to_string(whole_lens_px));
   }
   const optics::Lattice& cl = calibrated.lattice;
   if (cl.count_x < 2 || cl.count_y < 2 || calibrated.centres_mm.size() != std::size_t(cl.count())) {
@@ -76,6 +80,7 @@ LatticeResampler::LatticeResampler(const optics::CameraModel& camera, const opti
   const std::size_t nv = virtual_.centres_mm.size();
   std::vector<std::array<Tap, 4>> taps(nv);
   std::vector<int> counts(nv, 0);
+  std::vector<char> nearest_only(nv, 0);
   std::vector<float> weight_sums(nv, 0.f);
   tbb::parallel_for(std::size_t(0), nv, [&](std::size_t v) {
     const std::array<double, 2> target = virtual_.centres_mm[v];
@@ -110,11 +115,26 @@ LatticeResampler::LatticeResampler(const optics::CameraModel& camera, const opti
       weight_sums[v] += t.w;
     }
     counts[v] = n;
+    nearest_only[v] = n == 1;
+    if (n < 2) return;
+    int best = 0;
+    for (int q = 1; q < n; ++q)
+      if (taps[v][std::size_t(q)].w > taps[v][std::size_t(best)].w) best = q;
+    const std::array<double, 2>& nearest = calibrated.centres_mm[std::size_t(lens[std::size_t(best)])];
+    const double departure_px =
+        std::max(std::abs(nearest[0] - target[0]), std::abs(nearest[1] - target[1])) / s.pixel_pitch_mm;
+    if (departure_px <= whole_lens_px) {
+      taps[v][0] = taps[v][std::size_t(best)];
+      taps[v][0].w = weight_sums[v];
+      counts[v] = 1;
+      nearest_only[v] = 1;
+    }
   });
   tap_start_.assign(nv + 1, 0);
   for (std::size_t v = 0; v < nv; ++v) {
     tap_start_[v + 1] = tap_start_[v] + std::uint32_t(counts[v]);
     for (int q = 0; q < counts[v]; ++q) taps_.push_back(taps[v][std::size_t(q)]);
+    coverage_.nearest += nearest_only[v];
     if (counts[v] == 0) {
       ++coverage_.none;
     } else if (weight_sums[v] >= kWhole) {

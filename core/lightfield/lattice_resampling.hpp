@@ -41,6 +41,14 @@ optics::MicrolensArray axis_aligned_lattice(const optics::MicrolensArray& calibr
 // of the unrotated camera: 0.15 mm), the lateral components equal or better. The rounding moves
 // the aperture point by at most half a pixel.
 //
+// Nearest lens within a tolerance: a virtual lens whose nearest calibrated lens (the largest lens
+// weight) lies within `whole_lens_px` of it along both axes takes that lens alone, at its spot's
+// rounded shift (weight 1, or the lens weights' sum at the array's edge). A blend with a few
+// percent of a neighbour lights pixels that recorded nothing (MART's depth discrimination) to move
+// the sample by under a pixel, which the separable weights already ignore on an array within
+// recon::kSeparableTolerancePx of its rows and columns (core/process passes that tolerance); beyond
+// it the blend's position is worth its light. 0 blends every lens.
+//
 // White correction: the virtual sensor's white image is R applied to the calibrated white
 // correction. A raw pixel records white x light field, so R(raw) = R(white) x the light field at
 // the virtual lens wherever the light field varies slowly across neighbouring lenses: the
@@ -56,7 +64,9 @@ class LatticeResampler {
  public:
   // `white`: the calibrated white correction (sensor-sized, finite, non-negative). Throws
   // InputError naming what does not match the camera.
-  LatticeResampler(const optics::CameraModel& camera, const optics::MicrolensArray& calibrated, const ImageF& white);
+  // `whole_lens_px` >= 0 (see above; InputError otherwise).
+  LatticeResampler(const optics::CameraModel& camera, const optics::MicrolensArray& calibrated, const ImageF& white,
+                   double whole_lens_px = 0);
 
   // The virtual lattice (axis_aligned_lattice of the calibrated array) and the virtual sensor's
   // white image: what the weighting operator is built from.
@@ -73,6 +83,7 @@ class LatticeResampler {
   // and not at all (beyond it: their pixels stay 0).
   struct Coverage {
     int full = 0, partial = 0, none = 0;
+    int nearest = 0;  // of full and partial: taken from one calibrated lens alone
   };
   const Coverage& coverage() const { return coverage_; }
 

@@ -393,25 +393,27 @@ PairOperator::PairOperator(const optics::CameraModel& camera, const optics::Micr
     weights_ = build(camera, lenses, white, grid, angular_sampling);
     return;
   }
-  resampler_ = std::make_unique<const lightfield::LatticeResampler>(camera, lenses, white);
+  resampler_ =
+      std::make_unique<const lightfield::LatticeResampler>(camera, lenses, white, recon::kSeparableTolerancePx);
   weights_ = build(camera, resampler_->lenses(), resampler_->white(), grid, angular_sampling);
   const auto& c = resampler_->coverage();
   const auto& v = resampler_->lenses().lattice;
-  char text[320];
+  char text[400];
   if (rect) {
     std::snprintf(
         text, sizeof text,
         "image resampled onto an axis-aligned lattice: calibrated array rotated %.2f deg, max departure %.1f px "
-        "(the separable weights allow %.2f px); virtual lenses: %d inside the array, %d at its edge, %d beyond",
+        "(the separable weights allow %.2f px); virtual lenses: %d inside the array, %d at its edge, %d beyond; %d "
+        "from their nearest lens alone (within %.2f px)",
         l.rotation_rad * 180 / std::numbers::pi, sep.max_departure_mm / pixel, recon::kSeparableTolerancePx, c.full,
-        c.partial, c.none);
+        c.partial, c.none, c.nearest, recon::kSeparableTolerancePx);
   } else {
     std::snprintf(text, sizeof text,
                   "image resampled onto an axis-aligned lattice: calibrated array hexagonal (%d x %d lenses, rotated "
                   "%.2f deg), resampled onto %d x %d rectangular lenses one pitch apart; virtual lenses: %d inside "
-                  "the array, %d at its edge, %d beyond",
+                  "the array, %d at its edge, %d beyond; %d from their nearest lens alone (within %.2f px)",
                   l.count_x, l.count_y, l.rotation_rad * 180 / std::numbers::pi, v.count_x, v.count_y, c.full,
-                  c.partial, c.none);
+                  c.partial, c.none, c.nearest, recon::kSeparableTolerancePx);
   }
   note_ = text;
 }

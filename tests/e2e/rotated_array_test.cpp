@@ -161,6 +161,34 @@ TEST(LatticeResampling, ARotatedArraysImageLooksLikeTheAxisAlignedOnes) {
   EXPECT_THROW(lightfield::LatticeResampler(camera(), array, ImageF(10, 10)), InputError);
 }
 
+// A virtual lens within the tolerance of its nearest calibrated lens takes that lens alone: the
+// pixels that recorded nothing stay 0. A blend of every lens lights most of them; a rotated array's
+// lenses far from the centre are still blended.
+TEST(LatticeResampling, ALensWithinTheToleranceIsTakenAloneAndDarkPixelsStayDark) {
+  const auto lit = [](const ImageF& image) {
+    return std::size_t(std::count_if(image.pixels.begin(), image.pixels.end(), [](float p) { return p > 0.f; }));
+  };
+  const auto jittered = true_array(0.0, 0.001);  // 0.14 px RMS: every lens within 1 px
+  const ImageF white = calib::geometric_white_image(camera(), jittered);
+  const ImageF image = render(jittered, scene(), 3);
+  const lightfield::LatticeResampler blended(camera(), jittered, white, 0.0), nearest(camera(), jittered, white, 1.0);
+  EXPECT_EQ(nearest.coverage().nearest, nearest.coverage().full + nearest.coverage().partial);
+  EXPECT_LT(blended.coverage().nearest, nearest.coverage().nearest / 10);
+  const std::size_t raw = lit(image), with_blend = lit(blended.resample(image)), alone = lit(nearest.resample(image));
+  std::cout << "measured: lit pixels raw " << raw << ", blended " << with_blend << ", nearest lens " << alone << "\n";
+  EXPECT_LE(alone, raw + raw / 100) << "the same pixels, up to lenses whose spot shifts by a pixel";
+  EXPECT_GT(with_blend, 2 * raw) << "a blend lights pixels that recorded nothing";
+
+  const auto rotated = true_array(1.0, 0.001);
+  const lightfield::LatticeResampler r(camera(), rotated, calib::geometric_white_image(camera(), rotated), 1.0);
+  std::cout << "measured: 1 deg: " << r.coverage().nearest << " of " << r.coverage().full + r.coverage().partial
+            << " virtual lenses from their nearest lens alone\n";
+  EXPECT_GT(r.coverage().nearest, 0);
+  EXPECT_LT(r.coverage().nearest, r.coverage().full / 5);
+  for (const double bad : {-1.0, std::nan("")})
+    EXPECT_THROW(lightfield::LatticeResampler(camera(), rotated, white, bad), InputError) << bad;
+}
+
 TEST(LatticeResampling, SameImageAtOneAndTwoThreads) {
   const auto array = true_array(1.0, 0.001);
   const ImageF image = render(array, scene(), 3);
@@ -301,10 +329,12 @@ correlation:
     char expected[96];
     std::snprintf(expected, sizeof expected,
                   "image resampled onto an axis-aligned lattice: calibrated array rotated %.2f deg", degrees);
-    if (degrees < 0.1)
+    if (degrees < 0.1) {
       EXPECT_TRUE(note.empty()) << note;
-    else
+    } else {
       EXPECT_NE(note.find(expected), std::string::npos) << note;
+      EXPECT_NE(note.find("from their nearest lens alone (within 1.00 px)"), std::string::npos) << note;
+    }
     // Lateral within 0.01 mm of the unrotated camera's; the depth component recovers less as the
     // rotation grows (the blend across lenses widens each particle's image), at least 60 % of the
     // unrotated camera's at 0.3 deg and 40 % at 1 deg; within the tolerance as much as unrotated.
