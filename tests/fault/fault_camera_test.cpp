@@ -69,7 +69,7 @@ void write_fake_camera_file(const fs::path& path) {
                       << "microlens: {pitch_mm: 0.125, focal_length_mm: 0.5, count_x: 15, count_y: 15, layout: rect}\n"
                          "main_lens: {focal_length_mm: 50, f_number: 2, magnification: -1}\n";
 }
-// `pairs` at 2 Hz (the fake camera takes a pair at most every 0.3 s: its profile), `extra` keys.
+// `pairs` at 2 Hz (the fake camera takes a pair at most every 0.4 s: its profile), `extra` keys.
 std::string run_yaml(int pairs, const std::string& extra) {
   return "pairs: " + std::to_string(pairs) + "\nrate_hz: 2\ndt_s: 0.001\n" + extra +
          "camera_roi: {width: " + std::to_string(kFramePx) + ", height: " + std::to_string(kFramePx) + "}\n" +
