@@ -2,15 +2,16 @@
 // microlens array: the frames are rendered through the true array and processed with it as the
 // calibration (the resampling path every calibrated camera takes), so that the figure is the
 // tiers', not the calibration's. u and w grow along y (-2 to +2 voxels over the box, both across
-// the focal plane's depth). Per tier: set-up, first and in-a-run time per pair, and RMS error,
+// the focal plane's depth); FLOW uniform moves every particle by (2.32, 1.36, 2) voxels instead
+// (a lateral shift off the voxel lattice with the depth one, bench_depth_response's). Per tier: set-up, first and in-a-run time per pair, and RMS error,
 // bias and gain per component against the truth; the full tier once more with w through MART's
 // depth response (reconstruction.depth_response_ppm at the pair's seeding).
 // w's gain per depth band follows (near the focal plane the mirror ambiguity limits it), then the
 // per-vector uncertainty's ratio to the true error and its coverage.
-//   build/bin/bench_rotated_shear [DEGREES] [PPM] [both|full|plain] [CONFIG] [SEED]
-// (defaults 0.1 deg, 0.5 ppm, both tiers, systemd/config/run-paper.yaml, particle set 2026; full:
-// the full tier alone, plain: without its depth-response row; CONFIG: any run.yaml or process.yaml
-// whose volume is the paper's box, or a box within it; SEED: another particle set)
+//   build/bin/bench_rotated_shear [DEGREES] [PPM] [both|full|plain] [CONFIG] [SEED] [shear|uniform]
+// (defaults 0.1 deg, 0.5 ppm, both tiers, systemd/config/run-paper.yaml, particle set 2026, the
+// shear; full: the full tier alone, plain: without its depth-response row; CONFIG: any run.yaml or
+// process.yaml whose volume is the paper's box, or a box within it; SEED: another particle set)
 #include <algorithm>
 #include <array>
 #include <chrono>
@@ -47,12 +48,14 @@ int main(int argc, char** argv) {
   const double ppm = argc > 2 ? std::atof(argv[2]) : 0.5;
   const std::string tiers = argc > 3 ? argv[3] : "both";
   const long seed = argc > 5 ? std::atol(argv[5]) : 2026;
+  const std::string flow_name = argc > 6 ? argv[6] : "shear";
   if (!(degrees >= 0 && degrees < 5) || !(ppm > 0 && ppm <= 5) ||
-      (tiers != "both" && tiers != "full" && tiers != "plain") || seed < 1) {
+      (tiers != "both" && tiers != "full" && tiers != "plain") || seed < 1 ||
+      (flow_name != "shear" && flow_name != "uniform")) {
     std::fprintf(stderr,
                  "usage: bench_rotated_shear [DEGREES in [0, 5)] [PPM in (0, 5]] [both|full|plain] [CONFIG] "
-                 "[SEED >= 1]; got %g deg, %g ppm, %s, seed %ld\n",
-                 degrees, ppm, tiers.c_str(), seed);
+                 "[SEED >= 1] [shear|uniform]; got %g deg, %g ppm, %s, seed %ld, %s\n",
+                 degrees, ppm, tiers.c_str(), seed, flow_name.c_str());
     return 2;
   }
   const bool full_only = tiers != "both", plain_only = tiers == "plain";
@@ -72,7 +75,9 @@ int main(int argc, char** argv) {
   const double voxel = g.spacing_mm[0];
   const double half_y = 0.5 * g.shape[1] * voxel;
   const double rate = 2 * voxel / half_y;  // u and w: +-2 voxels at the box's y faces
-  const sim::LinearShear flow({rate, 0, rate}, 1, 0.0);
+  const sim::LinearShear shear({rate, 0, rate}, 1, 0.0);
+  const sim::UniformFlow uniform({2.32 * voxel, 1.36 * voxel, 2 * voxel});
+  const sim::Flow& flow = flow_name == "uniform" ? static_cast<const sim::Flow&>(uniform) : shear;
   const double voxel_z = g.spacing_mm[2];  // run-paper.yaml's voxels are deeper than wide
   const sim::Box box{
       {g.origin_mm[0] - 0.5 * voxel - 1, -half_y - 1, g.origin_mm[2] - 0.5 * voxel_z - 1},
@@ -85,8 +90,8 @@ int main(int argc, char** argv) {
   double t = now_s();
   const ImageU16 a = sim::render(camera, truth.lenses, pa, ro, 1).image;
   const ImageU16 b = sim::render(camera, truth.lenses, pb, ro, 2).image;
-  std::printf("bench=rotated_shear degrees=%.2f ppm=%.3f particles=%zu seed=%ld render_s=%.1f\n", degrees, ppm, count,
-              seed, now_s() - t);
+  std::printf("bench=rotated_shear degrees=%.2f ppm=%.3f particles=%zu seed=%ld flow=%s render_s=%.1f\n", degrees,
+              ppm, count, seed, flow_name.c_str(), now_s() - t);
   std::fflush(stdout);
 
   // The live tier, the full tier, and the full tier with w through MART's depth response measured
