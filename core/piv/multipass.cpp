@@ -4,6 +4,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
 
 #include <algorithm>
 #include <atomic>
@@ -204,7 +205,18 @@ void normalise_by_depth_shift(std::span<float> corr, std::size_t slice, int dept
 Candidates correlate_windows(std::span<const float> va, std::span<const float> vb, const std::array<int, 3>& shape,
                              const Layout& l, const NodeField* predictor, const CorrelationSettings& settings,
                              bool last_pass, std::vector<float>& ratio, std::vector<std::array<float, 3>>& bases) {
-  const float signal_threshold = settings.signal_threshold;
+  // Each volume's bar: the setting, or its dust level (settings.hpp, kNumericalDust).
+  const auto bar = [&](std::span<const float> v) {
+    const float peak = tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, v.size(), std::size_t(1) << 16), 0.f,
+        [&](const tbb::blocked_range<std::size_t>& r, float m) {
+          for (std::size_t i = r.begin(); i != r.end(); ++i) m = std::max(m, v[i]);
+          return m;
+        },
+        [](float x, float y) { return std::max(x, y); });
+    return std::max(settings.signal_threshold, kNumericalDust * peak);
+  };
+  const float signal_a = bar(va), signal_b = bar(vb);
   const bool at_centre = settings.predictor == PredictorBase::centre;
   const int margin = l.depth_margin;
   const std::array<int, 3> fft_shape{l.window[0], l.window[1], l.window[2] + 2 * margin};
@@ -238,7 +250,7 @@ Candidates correlate_windows(std::span<const float> va, std::span<const float> v
       // Slices -margin .. window + margin of B; A's are its window's, zeros in the margins.
       const auto [max_a, max_b] =
           copy_windows({va.data(), vb.data(), shape, {x0, y0, z0}, l.window, margin, wa.data(), wb.data()});
-      if (!(max_a > signal_threshold && max_b > signal_threshold)) {
+      if (!(max_a > signal_a && max_b > signal_b)) {
         c.flags[node] = flag_no_signal;
         continue;
       }

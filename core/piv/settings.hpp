@@ -39,6 +39,13 @@ struct PassSettings {
 // smoothed between passes (Schrijer & Scarano 2008): use it with predictor_smoothing >= 1.
 enum class PredictorBase { window_mean, centre };
 
+// Intensities at most this fraction of a volume's peak are numerical dust, not light: values at
+// float rounding (float resolves 6e-8 of a value), which interpolation and filtering leave beside
+// the light they move. A window of dust alone has a correlation without a peak (its vector and its
+// sigma are noise), so it counts as no signal whatever `signal_threshold` says. A reconstructed
+// particle's peak varies several-fold with its depth, not a millionfold.
+inline constexpr float kNumericalDust = 1e-6f;
+
 struct CorrelationSettings {
   // Coarse to fine. Pass 1 correlates the volumes as they are; every later pass deforms both
   // volumes by the previous pass's validated field (VODIM). Default: four passes ending at the
@@ -51,7 +58,8 @@ struct CorrelationSettings {
   // knobs on the same volumes").
   std::vector<PassSettings> passes{{{32, 32, 32}, 50}, {{16, 16, 16}, 50, 4}, {{16, 16, 16}, 50}, {{16, 16, 16}, 75}};
   MedianTest median;
-  // A window whose largest intensity in either volume is <= this has no particle signal.
+  // A window whose largest intensity in either volume is <= this, or at most kNumericalDust of that
+  // volume's peak, has no particle signal.
   float signal_threshold = 0.f;
   double dt_s = 1.0;  // pulse separation: velocity = displacement / dt
   FftPlanning fft_planning = FftPlanning::estimate;

@@ -944,6 +944,61 @@ TEST(Multipass, EmptyWindowsAreSkippedAndInvalid) {
   EXPECT_EQ(r.passes[0].no_signal, 9u);
 }
 
+// A window whose voxels hold only numerical dust (values a millionth of the peak and less, what
+// interpolation leaves at float rounding) has no particle signal either: no vector, no sigma. Faint
+// particles, a thousandth of the others, still have one.
+TEST(Multipass, WindowsOfNumericalDustAreNoSignalButFaintParticlesAreSignal) {
+  const Grid3 g = cube(48);
+  std::vector<P3> pa, faint;
+  for (const P3& p : random_points(g, 400, 9)) (p[0] < 20 ? pa : faint).push_back(p);
+  faint.erase(std::remove_if(faint.begin(), faint.end(), [](const P3& p) { return p[0] < 36; }), faint.end());
+  const auto moved = [](std::vector<P3> p) {
+    for (auto& q : p) q[1] += 0.4;
+    return p;
+  };
+  Volume a = blobs(g, pa), b = blobs(g, moved(pa));
+  // Dust in the right third (x 32..47) of both: scattered voxels at 1e-9 .. 1e-6 of the peak.
+  std::mt19937 rng(4);
+  std::uniform_real_distribution<float> level(1e-9f, 1e-6f);
+  for (Volume* v : {&a, &b}) {
+    const float peak = *std::max_element(v->data.begin(), v->data.end());
+    for (int i = 0; i < 300; ++i) {
+      const int x = 32 + int(rng() % 16), y = int(rng() % 48), z = int(rng() % 48);
+      v->at(x, y, z) = level(rng) * peak;
+    }
+  }
+  CorrelationSettings s;
+  s.passes = {{{16, 16, 16}, 0}};
+  s.uncertainty = true;
+  const auto dusty = correlate_volumes(a, b, s);
+  ASSERT_EQ(dusty.field.grid.shape[0], 3);
+  for (std::size_t n = 0; n < dusty.field.grid.count(); ++n) {
+    const bool right = n % 3 == 2;
+    EXPECT_EQ(bool(dusty.flags[n] & flag_no_signal), right) << n;
+    EXPECT_EQ(dusty.field.valid[n], right ? 0 : 1) << n;
+    EXPECT_EQ(std::isnan(dusty.field.sigma_dx_mm[n]), right) << n;
+  }
+  EXPECT_EQ(dusty.passes[0].no_signal, 9u);
+
+  // The same right third with particles instead, a thousandth as bright as the others or as bright:
+  // signal both times, and the same vectors there.
+  const auto with_right = [&](float brightness) {
+    Volume fa = blobs(g, pa), fb = blobs(g, moved(pa));
+    const Volume ga = blobs(g, faint), gb = blobs(g, moved(faint));
+    for (std::size_t q = 0; q < fa.data.size(); ++q) {
+      fa.data[q] += brightness * ga.data[q];
+      fb.data[q] += brightness * gb.data[q];
+    }
+    return correlate_volumes(fa, fb, s);
+  };
+  const auto dim = with_right(1e-3f), bright = with_right(1.f);
+  EXPECT_EQ(dim.passes[0].no_signal, 0u);
+  for (std::size_t n = 2; n < dim.field.grid.count(); n += 3) {
+    ASSERT_TRUE(dim.field.valid[n] && bright.field.valid[n]) << n;
+    EXPECT_NEAR(dim.field.dy_mm[n], bright.field.dy_mm[n], 1e-4) << n;
+  }
+}
+
 TEST(Multipass, DifferentGridsAndNonFiniteVoxelsAreRefused) {
   const Volume a(cube(32)), b(cube(33));
   EXPECT_THROW(correlate_volumes(a, b, small_settings()), InputError);
