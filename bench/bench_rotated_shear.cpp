@@ -3,9 +3,10 @@
 // calibration (the resampling path every calibrated camera takes), so that the figure is the
 // tiers', not the calibration's. u and w grow along y (-2 to +2 voxels over the box, both across
 // the focal plane's depth); FLOW uniform moves every particle by (2.32, 1.36, 2) voxels instead
-// (a lateral shift off the voxel lattice with the depth one, bench_depth_response's). Per tier: set-up, first and in-a-run time per pair, and RMS error,
-// bias and gain per component against the truth; the full tier once more with w through MART's
-// depth response (reconstruction.depth_response_ppm at the pair's seeding).
+// (a lateral shift off the voxel lattice with the depth one, bench_depth_response's). Per tier:
+// set-up, first and in-a-run time per pair, and RMS error, bias and gain per component against the
+// truth; the full tier once more with w through MART's depth response
+// (reconstruction.depth_response_ppm at the pair's seeding).
 // w's gain per depth band follows (near the focal plane the mirror ambiguity limits it), then the
 // per-vector uncertainty's ratio to the true error and its coverage.
 //   build/bin/bench_rotated_shear [DEGREES] [PPM] [both|full|plain] [CONFIG] [SEED] [shear|uniform]
@@ -90,8 +91,8 @@ int main(int argc, char** argv) {
   double t = now_s();
   const ImageU16 a = sim::render(camera, truth.lenses, pa, ro, 1).image;
   const ImageU16 b = sim::render(camera, truth.lenses, pb, ro, 2).image;
-  std::printf("bench=rotated_shear degrees=%.2f ppm=%.3f particles=%zu seed=%ld flow=%s render_s=%.1f\n", degrees,
-              ppm, count, seed, flow_name.c_str(), now_s() - t);
+  std::printf("bench=rotated_shear degrees=%.2f ppm=%.3f particles=%zu seed=%ld flow=%s render_s=%.1f\n", degrees, ppm,
+              count, seed, flow_name.c_str(), now_s() - t);
   std::fflush(stdout);
 
   // The live tier, the full tier, and the full tier with w through MART's depth response measured
