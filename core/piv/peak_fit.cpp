@@ -24,9 +24,9 @@ std::size_t index_of(const std::array<int, 3>& s, int x, int y, int z) {
 // above `threshold` and beaten by none of its 6 face neighbours (the row's cyclic x neighbours by a
 // lane rotation; `earlier_y`, `later_y`, `earlier_z`, `later_z` the neighbouring rows), with the
 // comparisons of find_peaks' 4-voxel groups. Bit x set: voxel x goes on to the full test.
-__attribute__((target("avx512f"))) unsigned row16_candidates(const float* row, const float* earlier_y,
-                                                             const float* later_y, const float* earlier_z,
-                                                             const float* later_z, float threshold) {
+__attribute__((target("avx512f"))) unsigned row16_candidates_avx512(const float* row, const float* earlier_y,
+                                                                    const float* later_y, const float* earlier_z,
+                                                                    const float* later_z, float threshold) {
   const __m512 v = _mm512_loadu_ps(row);
   // Lane x takes lane x - 1 (lane 0 lane 15), and lane x + 1 (lane 15 lane 0); the masked form, all
   // lanes set, because GCC 12 warns of the plain one's undefined pass-through.
@@ -42,6 +42,29 @@ __attribute__((target("avx512f"))) unsigned row16_candidates(const float* row, c
   keep &= _mm512_cmp_ps_mask(_mm512_loadu_ps(later_y), v, _CMP_NGT_UQ);
   keep &= _mm512_cmp_ps_mask(_mm512_loadu_ps(earlier_z), v, _CMP_NGE_UQ);
   keep &= _mm512_cmp_ps_mask(_mm512_loadu_ps(later_z), v, _CMP_NGT_UQ);
+  return keep;
+}
+
+// row16_candidates_avx512's test of lanes 1-14 in two overlapping AVX2 vectors (lanes 1-8 and 7-14), the x
+// neighbours loaded one lane before and after, with the same comparisons; lanes 0 and 15 (whose x
+// neighbours wrap) are left to the caller. Bit x set: voxel x goes on to the full test.
+__attribute__((target("avx2"))) unsigned row16_inner_candidates_avx2(const float* row, const float* earlier_y,
+                                                                     const float* later_y, const float* earlier_z,
+                                                                     const float* later_z, float threshold) {
+  const __m256 bar = _mm256_set1_ps(threshold);
+  unsigned keep = 0;
+  for (const int x : {1, 7}) {
+    const __m256 v = _mm256_loadu_ps(row + x);
+    // Earlier neighbours beat at >=, later ones at > (a NaN neighbour beats nothing).
+    __m256 k = _mm256_cmp_ps(v, bar, _CMP_GT_OQ);
+    k = _mm256_and_ps(k, _mm256_cmp_ps(_mm256_loadu_ps(row + x - 1), v, _CMP_NGE_UQ));
+    k = _mm256_and_ps(k, _mm256_cmp_ps(_mm256_loadu_ps(row + x + 1), v, _CMP_NGT_UQ));
+    k = _mm256_and_ps(k, _mm256_cmp_ps(_mm256_loadu_ps(earlier_y + x), v, _CMP_NGE_UQ));
+    k = _mm256_and_ps(k, _mm256_cmp_ps(_mm256_loadu_ps(later_y + x), v, _CMP_NGT_UQ));
+    k = _mm256_and_ps(k, _mm256_cmp_ps(_mm256_loadu_ps(earlier_z + x), v, _CMP_NGE_UQ));
+    k = _mm256_and_ps(k, _mm256_cmp_ps(_mm256_loadu_ps(later_z + x), v, _CMP_NGT_UQ));
+    keep |= unsigned(_mm256_movemask_ps(k)) << x;
+  }
   return keep;
 }
 
@@ -113,7 +136,9 @@ std::array<Peak, 3> find_peaks(std::span<const float> corr, const std::array<int
   // one maximum, its first voxel. A NaN neighbour beats nothing.
   auto beaten = [](float w, float v, bool earlier) { return earlier ? w >= v : w > v; };
   float threshold = 0;
-  const bool with_avx512 = isa() == Isa::avx512;
+  // A 16-voxel row's pre-test in one AVX-512 vector, or its inner lanes in two AVX2 ones, where
+  // the CPU has them.
+  const Isa build = isa();
   // The rows of the current voxel's cyclic neighbourhood: rows[dz + 1][dy + 1].
   const float* rows[3][3];
   // One voxel of the current row: is it a local maximum above the threshold, and among the three
@@ -142,11 +167,20 @@ std::array<Peak, 3> find_peaks(std::span<const float> corr, const std::array<int
       for (int a = 0; a < 3; ++a)
         for (int b = 0; b < 3; ++b) rows[a][b] = corr.data() + index_of(shape, 0, ys[b], zs[a]);
       const float* row = rows[1][1];
-      if (nx == 16 && with_avx512) {
+      if (nx == 16 && build == Isa::avx512) {
         // The whole row in one vector; its candidates visited in scan order, as below.
-        for (unsigned left = row16_candidates(row, rows[1][0], rows[1][2], rows[0][1], rows[2][1], threshold); left;
-             left &= left - 1)
+        for (unsigned left = row16_candidates_avx512(row, rows[1][0], rows[1][2], rows[0][1], rows[2][1], threshold);
+             left; left &= left - 1)
           visit(__builtin_ctz(left), y, z);
+        continue;
+      }
+      if (nx == 16 && build == Isa::avx2) {
+        visit(0, y, z);
+        for (unsigned left =
+                 row16_inner_candidates_avx2(row, rows[1][0], rows[1][2], rows[0][1], rows[2][1], threshold);
+             left; left &= left - 1)
+          visit(__builtin_ctz(left), y, z);
+        visit(15, y, z);
         continue;
       }
       // The row's ends wrap along x; between them, four voxels per SSE comparison: above the
