@@ -233,8 +233,8 @@ TEST(PeakFit, ThreeHighestMaximaInOrder) {
 // those after it; the three highest positive ones, ties to the lower index. Planes with many ties
 // and plateaus (values on a coarse grid), negative values, NaN, and sizes that are not multiples of 4.
 // Under each build this CPU runs: a 16-voxel row takes AVX-512's or AVX2's pre-test, other rows SSE's;
-// planes with one lit 16-voxel row (a shuffle of 16 levels, dark rows about it) test every lane's
-// cyclic x neighbours, those across the halves of an AVX2 pre-test among them.
+// planes with one lit row of 16, 8 or 7 voxels (a shuffle of as many levels, dark rows about it)
+// test every voxel's x neighbours, at the ends and joins of a row's vector pre-tests among them.
 TEST(PeakFit, FindPeaksIsTheSearchOfEveryVoxel) {
   const Isa chosen = isa();
   std::vector<Isa> builds;
@@ -244,11 +244,11 @@ TEST(PeakFit, FindPeaksIsTheSearchOfEveryVoxel) {
     else
       std::printf("this CPU has no %s build to test\n", isa_name(build));
   std::mt19937 rng(5);
-  const std::array<std::array<int, 3>, 6> shapes{
-      {{16, 16, 8}, {7, 5, 3}, {9, 12, 6}, {32, 32, 16}, {5, 3, 4}, {16, 3, 3}}};
+  const std::array<std::array<int, 3>, 8> shapes{
+      {{16, 16, 8}, {7, 5, 3}, {9, 12, 6}, {32, 32, 16}, {5, 3, 4}, {16, 3, 3}, {8, 3, 3}, {7, 3, 3}}};
   int planes = 0, with_three = 0;
   for (const auto& shape : shapes) {
-    const bool one_row = shape == std::array<int, 3>{16, 3, 3};
+    const bool one_row = shape[1] == 3 && shape[2] == 3;
     for (int trial = 0; trial < (one_row ? 400 : 60); ++trial, ++planes) {
       const std::size_t n = std::size_t(shape[0]) * shape[1] * shape[2];
       std::vector<float> c(n);
@@ -259,9 +259,9 @@ TEST(PeakFit, FindPeaksIsTheSearchOfEveryVoxel) {
       if (trial % 7 == 6) std::fill(c.begin(), c.end(), 0.25f);  // one plateau over the whole plane
       if (one_row) {
         std::fill(c.begin(), c.end(), 0.f);
-        float* row = c.data() + 4 * 16;  // y 1, z 1
-        for (int x = 0; x < 16; ++x) row[x] = float(x + 1) / 16;
-        std::shuffle(row, row + 16, rng);
+        float* row = c.data() + 4 * shape[0];  // y 1, z 1
+        for (int x = 0; x < shape[0]; ++x) row[x] = float(x + 1) / float(shape[0]);
+        std::shuffle(row, row + shape[0], rng);
       }
       const auto at = [&](int x, int y, int z) {
         const auto wrap = [](int i, int len) { return (i % len + len) % len; };
