@@ -45,9 +45,9 @@ __attribute__((target("avx512f"))) unsigned row16_candidates_avx512(const float*
   return keep;
 }
 
-// row16_candidates_avx512's test of lanes 1-14 in two overlapping AVX2 vectors (lanes 1-8 and 7-14), the x
-// neighbours loaded one lane before and after, with the same comparisons; lanes 0 and 15 (whose x
-// neighbours wrap) are left to the caller. Bit x set: voxel x goes on to the full test.
+// row16_candidates_avx512's test of lanes 1-14 in two overlapping AVX2 vectors (lanes 1-8 and
+// 7-14), the x neighbours loaded one lane before and after, with the same comparisons; lanes 0 and
+// 15 (whose x neighbours wrap) are left to the caller. Bit x set: voxel x goes on to the full test.
 __attribute__((target("avx2"))) unsigned row16_inner_candidates_avx2(const float* row, const float* earlier_y,
                                                                      const float* later_y, const float* earlier_z,
                                                                      const float* later_z, float threshold) {
