@@ -57,10 +57,15 @@ function(plenopiv_executable name)
 endfunction()
 
 # plenopiv_test(<name> LABEL unit|integration|slow SOURCES ... [LIBS ...] [TIMEOUT s]
-#               [RESOURCE_LOCK name] [FIXTURES name])  -- tests sharing a lock never run at the same time (ctest -j);
-#               FIXTURES: a ctest fixture set up before them
+#               [RESOURCE_LOCK name] [FIXTURES name] [HEAVY pattern...])
+#   tests sharing a lock never run at the same time (ctest -j); FIXTURES: a ctest fixture set up
+#   before them; HEAVY: GoogleTest filter patterns (--gtest_filter's, on the suite's own test names:
+#   a parameterised case's values by index) of its tests that are accuracy studies at the sizes
+#   accuracy needs, or further values of a parameterised case. They carry the label `heavy` besides
+#   LABEL, and the sanitizer builds leave them out (.ci/run): the same code runs under the
+#   sanitizers in the suites' other tests.
 function(plenopiv_test name)
-  cmake_parse_arguments(ARG "" "LABEL;TIMEOUT;RESOURCE_LOCK;FIXTURES" "SOURCES;LIBS" ${ARGN})
+  cmake_parse_arguments(ARG "" "LABEL;TIMEOUT;RESOURCE_LOCK;FIXTURES" "SOURCES;LIBS;HEAVY" ${ARGN})
   if(NOT ARG_LABEL)
     message(FATAL_ERROR "plenopiv_test(${name}): LABEL unit|integration|slow is required")
   endif()
@@ -87,9 +92,21 @@ function(plenopiv_test name)
   # much faster than at -O2 (a Debug build keeps -O0).
   target_compile_options(${name} PRIVATE $<$<CONFIG:Release,RelWithDebInfo,MinSizeRel>:-O1>)
   # The CLIs' weight-table cache goes to the build folder, not the user's ~/.cache.
-  gtest_discover_tests(${name}
+  set(discovery
     WORKING_DIRECTORY ${PROJECT_BINARY_DIR}
     PROPERTIES LABELS ${ARG_LABEL} TIMEOUT ${ARG_TIMEOUT} ${lock} ${fixtures}
                ENVIRONMENT PLENOPIV_CACHE_DIR=${PROJECT_BINARY_DIR}/test-cache
     DISCOVERY_TIMEOUT 60)
+  if(NOT ARG_HEAVY)
+    gtest_discover_tests(${name} ${discovery})
+    return()
+  endif()
+  # Discovered twice, each half by its filter; the heavy half's second label is set when ctest
+  # reads the tests (a label list cannot pass through gtest_discover_tests' PROPERTIES).
+  list(JOIN ARG_HEAVY ":" heavy)
+  gtest_discover_tests(${name} ${discovery} TEST_FILTER "${heavy}" TEST_LIST ${name}_heavy)
+  gtest_discover_tests(${name} ${discovery} TEST_FILTER "-${heavy}")
+  set(label_file ${CMAKE_CURRENT_BINARY_DIR}/${name}_heavy_label.cmake)
+  file(WRITE ${label_file} "set_tests_properties(\${${name}_heavy} PROPERTIES LABELS \"${ARG_LABEL};heavy\")\n")
+  set_property(DIRECTORY APPEND PROPERTY TEST_INCLUDE_FILES ${label_file})
 endfunction()
