@@ -83,7 +83,9 @@ function(plenopiv_test name)
   endif()
   add_executable(${name} ${ARG_SOURCES})
   target_link_libraries(${name} PRIVATE ${ARG_LIBS} GTest::gtest GTest::gtest_main)
-  set_target_properties(${name} PROPERTIES RUNTIME_OUTPUT_DIRECTORY ${PROJECT_BINARY_DIR}/tests)
+  # Never a unity build (CMAKE_UNITY_BUILD, .ci/run's sanitizer builds): a suite has one to four
+  # files, each with helpers of its own in an anonymous namespace.
+  set_target_properties(${name} PROPERTIES RUNTIME_OUTPUT_DIRECTORY ${PROJECT_BINARY_DIR}/tests UNITY_BUILD OFF)
   target_compile_definitions(${name} PRIVATE
     PLENOPIV_SOURCE_DIR="${PROJECT_SOURCE_DIR}" PLENOPIV_BINARY_DIR="${PROJECT_BINARY_DIR}")
   plenopiv_defaults(${name})

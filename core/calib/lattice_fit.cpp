@@ -13,14 +13,15 @@
 namespace plenopiv::calib {
 namespace {
 
-std::string fmt(double v, int precision = 2) {
+// v with two decimals.
+std::string fixed2(double v) {
   std::ostringstream s;
-  s.precision(precision);
+  s.precision(2);
   s << std::fixed << v;
   return s.str();
 }
 
-double median(std::vector<double> v) {
+double median_or_zero(std::vector<double> v) {
   if (v.empty()) return 0;
   const std::size_t k = v.size() / 2;
   std::nth_element(v.begin(), v.begin() + std::ptrdiff_t(k), v.end());
@@ -146,7 +147,7 @@ double median_neighbour_distance(const std::vector<std::array<double, 2>>& p) {
     grid.around(k, [&](std::size_t o) { best = std::min(best, std::hypot(p[o][0] - p[k][0], p[o][1] - p[k][1])); });
     if (best < 1e300) d.push_back(best);
   }
-  return median(d);
+  return median_or_zero(d);
 }
 
 RawLattice estimate_lattice(const std::vector<std::array<double, 2>>& p, bool hex, double pitch_px,
@@ -175,17 +176,17 @@ RawLattice estimate_lattice(const std::vector<std::array<double, 2>>& p, bool he
   if (row_len.size() < 10 || cross.size() < 10) {
     throw InputError("found " + std::to_string(p.size()) + " " + what + " but only " + std::to_string(row_len.size()) +
                      " in-row and " + std::to_string(cross.size()) + " next-row neighbour pairs near a pitch of " +
-                     fmt(pitch_px) + " px: they do not form a " + (hex ? "hex" : "rect") +
+                     fixed2(pitch_px) + " px: they do not form a " + (hex ? "hex" : "rect") +
                      " lattice (check microlens.layout, and that the array's rows run "
                      "within 14 deg of the sensor's)");
   }
-  lat.rotation = median(row_angle);
-  lat.px = median(row_len);
+  lat.rotation = median_or_zero(row_angle);
+  lat.px = median_or_zero(row_len);
   const double c = std::cos(lat.rotation), s = std::sin(lat.rotation);
   std::vector<double> b;
   b.reserve(cross.size());
   for (const auto& v : cross) b.push_back(s * v[0] + c * v[1]);
-  lat.py = median(b);
+  lat.py = median_or_zero(b);
 
   // Phase: rows from the circular mean of b, then positions along each row.
   std::vector<double> fb(p.size()), fa(p.size());

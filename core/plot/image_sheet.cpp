@@ -17,7 +17,7 @@ constexpr double kTitlePx = 30, kBelowPx = 64, kLeftPx = 70, kPaddingPx = 16;
 // The page's right part, page fraction, holds the colour bar and its labels.
 constexpr double kBarArea = 0.12;
 
-void label_ticks(PLINT, PLFLT value, char* label, PLINT length, PLPointer data) {
+void label_bar_ticks(PLINT, PLFLT value, char* label, PLINT length, PLPointer data) {
   const double step = *static_cast<const double*>(data);
   std::snprintf(label, std::size_t(length), "%s", tick_label(value, step).c_str());
 }
@@ -92,7 +92,7 @@ void write_image_sheet(const std::filesystem::path& png, const std::vector<Image
     const PLFLT* bar_columns[2] = {bar.data(), bar.data() + levels};
     pls.imagefr(bar_columns, 2, levels, 0, 1, 0, limit, 0, limit, 0, limit, nullptr, nullptr);
     double bar_step = step;
-    pls.slabelfunc(label_ticks, &bar_step);
+    pls.slabelfunc(label_bar_ticks, &bar_step);
     pls.box("bc", 0, 0, "bcmtvo", step, 0);
     pls.slabelfunc(nullptr, nullptr);
     pls.mtex("r", 5.5, 0.5, 0.5, "intensity (counts)");
