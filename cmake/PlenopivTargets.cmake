@@ -62,8 +62,8 @@ endfunction()
 #   before them; HEAVY: GoogleTest filter patterns (--gtest_filter's, on the suite's own test names:
 #   a parameterised case's values by index) of its tests that are accuracy studies at the sizes
 #   accuracy needs, or further values of a parameterised case. They carry the label `heavy` besides
-#   LABEL, and the sanitizer builds leave them out (.ci/run): the same code runs under the
-#   sanitizers in the suites' other tests.
+#   LABEL, and .ci/run's ASan step leaves them out: the same code runs under ASan in the
+#   suites' other tests.
 function(plenopiv_test name)
   cmake_parse_arguments(ARG "" "LABEL;TIMEOUT;RESOURCE_LOCK;FIXTURES" "SOURCES;LIBS;HEAVY" ${ARGN})
   if(NOT ARG_LABEL)
