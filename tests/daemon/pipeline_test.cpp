@@ -394,12 +394,14 @@ TEST_F(RunTest, AWriteProbeThatDoesNotFitIsSaidAndLeavesTheRoomToTheRun) {
     run.fill_status(s);
     recorded = s.pairs_recorded();
   }
-  std::string said;
-  for (const std::string& l : log.lines())
+  std::string said, all;
+  for (const std::string& l : log.lines()) {
     if (l.find("no room for a 256 MiB write probe beside this run's frames") != std::string::npos) said = l;
-  EXPECT_NE(said.find("whether the disk takes 13422 MB/s is not checked"), std::string::npos) << said;
+    all += l;
+  }
+  EXPECT_NE(said.find("whether the disk takes 13422 MB/s is not checked"), std::string::npos) << all;
   EXPECT_FALSE(fs::exists(disk.dir() / io::kWriteProbeName));
-  EXPECT_EQ(recorded, 1u) << state_.error();
+  EXPECT_EQ(recorded, 1u) << state_.error() << "\n" << all;
 }
 
 // A run is set up on its own thread while Armed (the processing's tables): status says so, and

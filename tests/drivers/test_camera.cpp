@@ -1,6 +1,7 @@
 // A tiny in-process camera for tests: deterministic images, pairs on demand, faults on request.
 #include "tests/drivers/test_camera.hpp"
 
+#include <array>
 #include <chrono>
 #include <cstdio>
 #include <sstream>
@@ -23,24 +24,29 @@ std::uint16_t TestCamera::test_pixel(std::uint64_t frame_id, int x, int y) {
 void TestCamera::do_configure(const CameraSettings& settings) { settings_ = settings; }
 
 void TestCamera::fire() {
-  const auto host = std::uint64_t(
-      std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
-          .count());
   const int w = settings_.roi.width > 0 ? settings_.roi.width : sensor_.width;
   const int h = settings_.roi.height > 0 ? settings_.roi.height : sensor_.height;
+  // Both frames are made before either is delivered, as a camera reads B out one read-out after A:
+  // filling a large sensor (slow under a sanitizer) must not hold A back past the pairer's wait.
+  std::array<Frame, 2> frames;
   for (int k = 0; k < 2; ++k) {
-    Frame f;
+    Frame& f = frames[std::size_t(k)];
     f.frame_id = next_id_++;
     f.device_timestamp_ns = trigger_ * 100'000'000 + std::uint64_t(k) * 1'000'000 + 1;
-    f.host_timestamp_ns = host;
     f.bit_depth = bit_depth(settings_.pixel_format);
     f.image = ImageU16(w, h);
     for (int y = 0; y < h; ++y)
       for (int x = 0; x < w; ++x) f.image.at(x, y) = test_pixel(f.frame_id, x, y);
+  }
+  for (Frame& f : frames) {
     const std::uint64_t number = frame_number_++;
     if (faults_.lose.count(number)) continue;
     f.complete = faults_.incomplete.count(number) == 0;
     if (!f.complete) f.image = ImageU16();
+    // Arrival at the host.
+    f.host_timestamp_ns = std::uint64_t(
+        std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
+            .count());
     submit_frame(std::move(f));
   }
   ++trigger_;
