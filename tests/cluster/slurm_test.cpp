@@ -179,12 +179,13 @@ TEST_F(Slurm, AFailedTaskIsResubmittedAloneAndTheMergeFollows) {
 
 // Settings that measure MART's depth response: a setup job measures it once into the shared cache
 // folder before the shards, which read it back instead of each measuring its own; the outputs are a
-// local reprocess's with the same settings.
+// local reprocess's with the same settings. (0.2 particles per microlens: a test's time, most of
+// it the simulator's frames; the response's accuracy is tests/e2e/depth_response_test.cpp's.)
 TEST_F(Slurm, ADepthResponseIsMeasuredOnceBySetupJobBeforeTheShards) {
   const fs::path& run = recorded_run();
   const fs::path spec = run.parent_path() / "with-depth-response.yaml";
   std::ofstream(spec) << "dt_s: 0.001" << testing_support::kShallowSmallBox
-                      << "reconstruction: {iterations: 8, mu: 1, acceleration: nesterov, depth_response_ppm: 0.5}\n";
+                      << "reconstruction: {iterations: 8, mu: 1, acceleration: nesterov, depth_response_ppm: 0.2}\n";
   const fs::path local = run.parent_path() / "local-depth-response";
   const std::string measured_locally =
       plenopiv_ok({"process", "--run", run.string(), "-c", spec.string(), "-o", local.string(), "--pairs", "0:4",

@@ -177,7 +177,7 @@ TEST(Processing, ADepthResponseIsMeasuredWithProgressKeptAndEndedByAStop) {
   // The small camera's shallow box, where MART follows depth shifts.
   const RunConfig config = parse_run_config(std::string("dt_s: 0.0001") + testing_support::kShallowSmallBox +
                                                 "reconstruction: {iterations: 2, mu: 1, acceleration: nesterov, "
-                                                "depth_response_ppm: 0.5}\n",
+                                                "depth_response_ppm: 0.2}\n",
                                             "run.yaml");
   const auto files = [&] { return testing_support::entries_named(folder, "depth-response-"); };
   std::vector<std::string> steps;

@@ -443,8 +443,9 @@ TEST(DepthResponse, TakesMartsShortfallOutOfAShearsDepthComponent) {
 TEST(DepthResponse, ADeferredResponseIsTakenByTheFirstPairThatFinishes) {
   const optics::CameraModel camera = testing_support::small_camera();
   const calib::LoadedCalibration calibration = calib::nominal_calibration(camera);
-  ProcessSettings settings = parse(", depth_response_ppm: 0.5");
-  settings.mart.iterations = 2;  // a test's time
+  // A test's time (most of it the simulator's frames): two iterations, 0.2 particles per microlens.
+  ProcessSettings settings = parse(", depth_response_ppm: 0.2");
+  settings.mart.iterations = 2;
   const std::filesystem::path folder = testing_support::temp_dir("depth-response-deferred");
   std::filesystem::remove_all(folder);
   // Every entry of the folder: a response, or a temporary one left behind (".depth-response-...").
