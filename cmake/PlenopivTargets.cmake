@@ -63,7 +63,7 @@ endfunction()
 #   a parameterised case's values by index) of its tests that are accuracy studies at the sizes
 #   accuracy needs, or further values of a parameterised case. They carry the label `heavy` besides
 #   LABEL, and .ci/run's ASan step leaves them out: the same code runs under ASan in the
-#   suites' other tests.
+#   suites' other tests. The test <name>_heavy_patterns fails on a pattern that selects no test.
 function(plenopiv_test name)
   cmake_parse_arguments(ARG "" "LABEL;TIMEOUT;RESOURCE_LOCK;FIXTURES" "SOURCES;LIBS;HEAVY" ${ARGN})
   if(NOT ARG_LABEL)
@@ -111,4 +111,9 @@ function(plenopiv_test name)
   set(label_file ${CMAKE_CURRENT_BINARY_DIR}/${name}_heavy_label.cmake)
   file(WRITE ${label_file} "set_tests_properties(\${${name}_heavy} PROPERTIES LABELS \"${ARG_LABEL};heavy\")\n")
   set_property(DIRECTORY APPEND PROPERTY TEST_INCLUDE_FILES ${label_file})
+  # Each pattern selects a test of the suite (cmake/CheckHeavyPatterns.cmake).
+  add_test(NAME ${name}_heavy_patterns
+           COMMAND ${CMAKE_COMMAND} -DBINARY=$<TARGET_FILE:${name}> -DPATTERNS=${heavy} -P
+                   ${PROJECT_SOURCE_DIR}/cmake/CheckHeavyPatterns.cmake)
+  set_tests_properties(${name}_heavy_patterns PROPERTIES LABELS unit)
 endfunction()
