@@ -8,15 +8,11 @@
 #include "drivers/common/driver_errors.hpp"
 
 namespace plenopiv::drivers {
-namespace {
-
-std::uint64_t host_now_ns() {
+std::uint64_t CameraBase::host_now_ns() {
   return std::uint64_t(
       std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
           .count());
 }
-
-}  // namespace
 
 const char* to_string(PixelFormat format) {
   switch (format) {

@@ -42,6 +42,9 @@ class CameraBase : public Camera {
 
   // Where the backend takes its frames' pixels (frame_pool.hpp).
   FramePool& frame_buffers() { return *pool_; }
+  // Now on the clock of Frame::host_timestamp_ns (CLOCK_REALTIME), which the pairer's wait for a
+  // frame B is timed against: a backend stamps its frames' arrival with it.
+  static std::uint64_t host_now_ns();
   // Thread-safe; frames from one backend thread, in arrival order.
   void submit_frame(Frame frame, std::optional<std::uint64_t> trigger_index = {});
   // Triggers the backend dropped itself (e.g. not read out before stop), counted and listed.

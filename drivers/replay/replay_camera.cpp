@@ -38,12 +38,6 @@ struct ReplaySettings {
   std::uint64_t buffer_bytes = kReplayDefaultBufferMb << 20;
 };
 
-std::uint64_t realtime_ns() {
-  return std::uint64_t(
-      std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
-          .count());
-}
-
 bool inside(const fs::path& path, const fs::path& root) {
   auto [r, p] = std::mismatch(root.begin(), root.end(), path.begin(), path.end());
   return r == root.end();
@@ -283,9 +277,9 @@ class ReplayCamera : public CameraBase, public TriggerInput {
         std::uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(exposure.at - epoch_).count());
     Frame a = frame(std::move(pair->a), 2 * exposure.trigger + 1, device_ns);
     Frame b = frame(std::move(pair->b), 2 * exposure.trigger + 2, device_ns + 1000);
-    a.host_timestamp_ns = realtime_ns();
+    a.host_timestamp_ns = host_now_ns();
     submit_frame(std::move(a), exposure.trigger);
-    b.host_timestamp_ns = realtime_ns();
+    b.host_timestamp_ns = host_now_ns();
     submit_frame(std::move(b), exposure.trigger);
   }
 

@@ -40,12 +40,6 @@ struct SceneSettings {
   double array_rotation_rad = 0;
 };
 
-std::uint64_t now_ns() {
-  return std::uint64_t(
-      std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
-          .count());
-}
-
 std::unique_ptr<sim::Flow> flow_from_uri(const DeviceUri& uri, const optics::CameraModel& camera) {
   const std::string name = uri.string_or("flow", "uniform");
   if (name == "uniform") {
@@ -228,14 +222,14 @@ class SimCamera : public CameraBase, public TriggerInput {
     // Both frames are rendered before either is delivered: a camera's frame B follows A by one
     // read-out, not by a ray trace (a large camera's render outlasts the pairer's wait for a B,
     // which would discard whole pairs).
-    const std::uint64_t t0 = now_ns();
+    const std::uint64_t t0 = host_now_ns();
     Frame fa = make_frame(a, 2 * trigger, pair_seed, t0);
     Frame fb = make_frame(b, 2 * trigger + 1, pair_seed + 1, t0 + 1000);
     if (scene_.incomplete_every && (trigger + 1) % scene_.incomplete_every == 0) fb.complete = false;
-    fa.host_timestamp_ns = now_ns();
+    fa.host_timestamp_ns = host_now_ns();
     submit_frame(std::move(fa), trigger);
     if (scene_.drop_every && (trigger + 1) % scene_.drop_every == 0) return;
-    fb.host_timestamp_ns = now_ns();
+    fb.host_timestamp_ns = host_now_ns();
     submit_frame(std::move(fb), trigger);
   }
 
@@ -247,7 +241,7 @@ class SimCamera : public CameraBase, public TriggerInput {
     f.bit_depth = options_.sensor.bit_depth;
     f.frame_id = id + 1;  // GigE Vision style: 0 means "unknown"
     f.device_timestamp_ns = device_ns;
-    f.host_timestamp_ns = now_ns();  // set again when the frame is delivered
+    f.host_timestamp_ns = host_now_ns();  // set again when the frame is delivered
     f.complete = true;
     return f;
   }

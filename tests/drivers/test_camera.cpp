@@ -2,7 +2,6 @@
 #include "tests/drivers/test_camera.hpp"
 
 #include <array>
-#include <chrono>
 #include <cstdio>
 #include <sstream>
 
@@ -43,10 +42,7 @@ void TestCamera::fire() {
     if (faults_.lose.count(number)) continue;
     f.complete = faults_.incomplete.count(number) == 0;
     if (!f.complete) f.image = ImageU16();
-    // Arrival at the host.
-    f.host_timestamp_ns = std::uint64_t(
-        std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
-            .count());
+    f.host_timestamp_ns = host_now_ns();  // arrival at the host
     submit_frame(std::move(f));
   }
   ++trigger_;
