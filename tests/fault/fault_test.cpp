@@ -36,10 +36,9 @@ using testing_support::run_folders;
 
 const std::string kSmallCamera = std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml";
 
-// The small camera (850 x 850 px) and an 8 x 8 x 8 voxel volume: messages of some size. At 5 Hz:
-// the simulated camera renders each pair in software, and under a sanitizer it fell behind 10 Hz
-// and dropped the last pair at stop ("not read out"), which is the simulator's pace, not the
-// subscriber's effect that the test is about.
+// The small camera (850 x 850 px) and an 8 x 8 x 8 voxel volume: messages of some size. 5 Hz leaves
+// the simulated camera's software renders time to keep up under a sanitizer: a pair not rendered by
+// the stop is dropped as "not read out", the simulator's pace, not what the test is about.
 std::string small_run_yaml(int pairs) {
   return "pairs: " + std::to_string(pairs) + "\nrate_hz: 5\ndt_s: 0.0001\n" +
          "volume: {x_mm: [-1, 1], y_mm: [-1, 1], z_mm: [-1, 1], voxel_mm: 0.25}\n" +
