@@ -185,6 +185,64 @@ template <int N, int Taps, class Row, class Stencil>
   sum_rows<N, Taps, Row>(blocks, {lanes, Taps, Taps}, at_origin, out);
 }
 
+// L floats as one GCC vector (one register of the build that takes L lanes).
+template <int L>
+struct VectorOf {
+  typedef float type __attribute__((vector_size(L * sizeof(float))));
+};
+
+// Whether L samples (the stencils t[0], t[stride], ..., t[(L - 1) stride]) can be summed side by
+// side by sum_rows_across: the same y and z taps, x taps starting at consecutive voxels, all of
+// them inside the volume.
+template <int L, int Taps, class Stencil>
+[[gnu::always_inline]] inline bool side_by_side(const std::array<int, 3>& s, const Stencil* t, int stride) {
+  const int bx = t[0][0].base, by = t[0][1].base, bz = t[0][2].base;
+  if (bx < 0 || bx + L - 1 + Taps > s[0] || by < 0 || by + Taps > s[1] || bz < 0 || bz + Taps > s[2]) return false;
+  for (int i = 1; i < L; ++i) {
+    const Stencil& u = t[i * stride];
+    if (u[0].base != bx + i || u[1].base != by || u[2].base != bz) return false;
+  }
+  return true;
+}
+
+// sum_rows for L samples that side_by_side accepts, lane i holding sample i: each stencil row is
+// read once per x tap as L contiguous voxels (lane i's tap k is voxel base + i + k), where sum_rows
+// reads a row per sample. Lane i sees sum_rows' multiplies and adds in sum_rows' order (its z
+// weight times its y weight, per x tap a sum over the rows z-major, then the x weights from a sum
+// at +0), so both give a sample the same bits.
+template <int L, int Taps, class Stencil>
+[[gnu::always_inline]] inline void sum_rows_across(const float* v, const std::array<int, 3>& s, const Stencil* t,
+                                                   int stride, float* out) {
+  using Vec = typename VectorOf<L>::type;
+  alignas(sizeof(Vec)) float weights[3][Taps][L];
+  for (int i = 0; i < L; ++i)
+    for (int axis = 0; axis < 3; ++axis)
+      for (int k = 0; k < Taps; ++k) weights[axis][k][i] = t[i * stride][axis].w[k];
+  Vec wx[Taps], wy[Taps], wz[Taps];
+  for (int k = 0; k < Taps; ++k) {
+    std::memcpy(&wx[k], weights[0][k], sizeof(Vec));
+    std::memcpy(&wy[k], weights[1][k], sizeof(Vec));
+    std::memcpy(&wz[k], weights[2][k], sizeof(Vec));
+  }
+  const std::size_t plane = std::size_t(s[0]) * s[1];
+  const float* first = v + t[0][2].base * plane + std::size_t(t[0][1].base) * s[0] + t[0][0].base;
+  Vec acc[Taps];
+  for (int k = 0; k < Taps; ++k) acc[k] = Vec{};
+  for (int kz = 0; kz < Taps; ++kz)
+    for (int ky = 0; ky < Taps; ++ky) {
+      const Vec w = wz[kz] * wy[ky];
+      const float* row = first + kz * plane + std::size_t(ky) * s[0];
+      for (int k = 0; k < Taps; ++k) {
+        Vec voxels;
+        std::memcpy(&voxels, row + k, sizeof voxels);
+        acc[k] += w * voxels;
+      }
+    }
+  Vec total = Vec{};
+  for (int k = 0; k < Taps; ++k) total += wx[k] * acc[k];
+  std::memcpy(out, &total, sizeof total);
+}
+
 // One sample of the sinc anywhere; voxels outside the volume count as 0.
 [[gnu::always_inline]] inline float sample(const float* v, const std::array<int, 3>& s, const Stencil& t) {
   float out;
@@ -240,6 +298,7 @@ class RowPredictor {
 
 // The 7x7x7 windowed sinc as deform_row's kernel.
 struct Sinc7 {
+  static constexpr int taps = sinc_taps;
   using Stencil = piv::Stencil;
   const SincTable& table;
   [[gnu::always_inline]] Stencil stencil(double x, double y, double z) const {
@@ -292,45 +351,59 @@ struct Cubic4 {
   }
 };
 
-// Voxels per block of deform_row: 2 x 4 samples side by side (sum_rows says why).
+// Voxels per block of deform_row's per-sample path: 2 x 4 samples side by side (sum_rows says why).
 constexpr int block_voxels = 4;
 
-// One row (y, z) of both deformed volumes with `kernel`. `lx`: the predictor's node location of
-// every x; `ly`, `lz`: of this row.
-template <class Kernel>
+// One row (y, z) of both deformed volumes with `kernel`, L voxels at a time (L a multiple of
+// block_voxels: the lanes of the build's widest register). `lx`: the predictor's node location of
+// every x; `ly`, `lz`: of this row. Where the L voxels' stencils of both volumes lie side by side
+// (a smooth predictor whose rounding does not change across them, away from the faces) they are
+// summed across the voxels (sum_rows_across), else sample by sample (sum_rows, four voxels of both
+// volumes at a time); both give the same bits.
+template <int L, class Kernel>
 [[gnu::always_inline]] inline void deform_row_with(const Kernel& kernel, const float* a, const float* b,
                                                    const std::array<int, 3>& shape, const NodeField& predictor,
                                                    const Located* lx, const Located& ly, const Located& lz, int y,
                                                    int z, float* a_out, float* b_out) {
+  static_assert(L % block_voxels == 0);
   constexpr int samples = 2 * block_voxels;
   const float* const src[samples] = {a, b, a, b, a, b, a, b};
   static_assert(samples == 8);
   RowPredictor predicted(predictor, ly, lz);
-  for (int x0 = 0; x0 < shape[0]; x0 += block_voxels) {
-    const int n = std::min(block_voxels, shape[0] - x0);
-    typename Kernel::Stencil t[samples];  // a, b of voxel x0, then of x0 + 1, ...
-    bool all_inside = n == block_voxels;
+  for (int x0 = 0; x0 < shape[0]; x0 += L) {
+    const int n = std::min(L, shape[0] - x0);
+    typename Kernel::Stencil t[2 * L];  // a, b of voxel x0, then of x0 + 1, ...
     for (int i = 0; i < n; ++i) {
       const int x = x0 + i;
       const auto d = predicted.at(lx[x]);
       const double hx = 0.5 * d[0], hy = 0.5 * d[1], hz = 0.5 * d[2];
       t[2 * i] = kernel.stencil(x - hx, y - hy, z - hz);
       t[2 * i + 1] = kernel.stencil(x + hx, y + hy, z + hz);
-      all_inside = all_inside && Kernel::inside(shape, t[2 * i]) && Kernel::inside(shape, t[2 * i + 1]);
     }
-    // A stencil past a face is summed from a zero-padded copy (sum_rows_clipped), with the same
-    // arithmetic, so either path gives a sample the same bits.
-    float out[samples];
-    if (all_inside) {
-      Kernel::template sample_inside<samples>(src, shape, t, out);
-    } else if (n == block_voxels) {
-      Kernel::template sample_clipped<samples>(src, shape, t, out);
-    } else {
-      for (int k = 0; k < 2 * n; ++k) Kernel::template sample_clipped<1>(src + k, shape, t + k, out + k);
+    if (n == L && side_by_side<L, Kernel::taps>(shape, t, 2) && side_by_side<L, Kernel::taps>(shape, t + 1, 2)) {
+      sum_rows_across<L, Kernel::taps>(a, shape, t, 2, a_out + x0);
+      sum_rows_across<L, Kernel::taps>(b, shape, t + 1, 2, b_out + x0);
+      continue;
     }
-    for (int i = 0; i < n; ++i) {
-      a_out[x0 + i] = out[2 * i];
-      b_out[x0 + i] = out[2 * i + 1];
+    for (int i0 = 0; i0 < n; i0 += block_voxels) {
+      const int m = std::min(block_voxels, n - i0);
+      const typename Kernel::Stencil* ti = t + 2 * i0;
+      bool all_inside = m == block_voxels;
+      for (int k = 0; k < 2 * m && all_inside; ++k) all_inside = Kernel::inside(shape, ti[k]);
+      // A stencil past a face is summed from a zero-padded copy (sum_rows_clipped), with the same
+      // arithmetic, so either path gives a sample the same bits.
+      float out[samples];
+      if (all_inside) {
+        Kernel::template sample_inside<samples>(src, shape, ti, out);
+      } else if (m == block_voxels) {
+        Kernel::template sample_clipped<samples>(src, shape, ti, out);
+      } else {
+        for (int k = 0; k < 2 * m; ++k) Kernel::template sample_clipped<1>(src + k, shape, ti + k, out + k);
+      }
+      for (int i = 0; i < m; ++i) {
+        a_out[x0 + i0 + i] = out[2 * i];
+        b_out[x0 + i0 + i] = out[2 * i + 1];
+      }
     }
   }
 }
@@ -345,20 +418,20 @@ struct RowJob {
   int y, z;
   float *a_out, *b_out;
 };
-template <class Kernel>
+template <int L, class Kernel>
 [[gnu::always_inline]] inline void deform_row_job(const Kernel& kernel, const RowJob& j) {
-  deform_row_with(kernel, j.a, j.b, j.shape, j.predictor, j.lx, j.ly, j.lz, j.y, j.z, j.a_out, j.b_out);
+  deform_row_with<L>(kernel, j.a, j.b, j.shape, j.predictor, j.lx, j.ly, j.lz, j.y, j.z, j.a_out, j.b_out);
 }
 __attribute__((target("avx512f"))) void sinc_row_avx512(const SincTable& table, const RowJob& j) {
-  deform_row_job(Sinc7{table}, j);
+  deform_row_job<16>(Sinc7{table}, j);
 }
 __attribute__((target("avx2"))) void sinc_row_avx2(const SincTable& table, const RowJob& j) {
-  deform_row_job(Sinc7{table}, j);
+  deform_row_job<8>(Sinc7{table}, j);
 }
-void sinc_row_baseline(const SincTable& table, const RowJob& j) { deform_row_job(Sinc7{table}, j); }
-__attribute__((target("avx512f"))) void cubic_row_avx512(const RowJob& j) { deform_row_job(Cubic4{}, j); }
-__attribute__((target("avx2"))) void cubic_row_avx2(const RowJob& j) { deform_row_job(Cubic4{}, j); }
-void cubic_row_baseline(const RowJob& j) { deform_row_job(Cubic4{}, j); }
+void sinc_row_baseline(const SincTable& table, const RowJob& j) { deform_row_job<4>(Sinc7{table}, j); }
+__attribute__((target("avx512f"))) void cubic_row_avx512(const RowJob& j) { deform_row_job<16>(Cubic4{}, j); }
+__attribute__((target("avx2"))) void cubic_row_avx2(const RowJob& j) { deform_row_job<8>(Cubic4{}, j); }
+void cubic_row_baseline(const RowJob& j) { deform_row_job<4>(Cubic4{}, j); }
 
 // One row of both deformed volumes: the 7x7x7 sinc with `table`, or without it Keys' cubic.
 void deform_row(const SincTable* table, const RowJob& j) {

@@ -453,6 +453,94 @@ TEST(Deform, AStencilPastAFaceGivesTheBitsOfAZeroPaddedVolume) {
   }
 }
 
+// Each deformed voxel against its sample computed alone: the sinc's by sample_sinc7, Keys' cubic by
+// its definition summed in sum_rows' order (per x tap over the rows z-major, then the x weights),
+// bit for bit, under each build this CPU runs. A constant predictor puts whole rows of voxels side
+// by side (the path that sums a build's register of voxels at once), a smooth one mixes that path
+// with the per-sample one where its rounding changes, a random one takes the per-sample path; the
+// rows' 53 voxels end in a part register.
+TEST(Deform, EveryVoxelHasTheBitsOfItsOwnSample) {
+  const std::array<int, 3> shape{53, 21, 17};
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> value(0.f, 1.f), shift(-3.f, 3.f);
+  std::vector<float> a(std::size_t(shape[0]) * shape[1] * shape[2]), b(a.size());
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    a[i] = value(rng);
+    b[i] = value(rng);
+  }
+  const auto voxel = [&](const std::vector<float>& v, int x, int y, int z) {
+    if (x < 0 || y < 0 || z < 0 || x >= shape[0] || y >= shape[1] || z >= shape[2]) return 0.f;
+    return v[(std::size_t(z) * shape[1] + y) * shape[0] + x];
+  };
+  // Keys' cubic at p along one axis: the first voxel and the 4 weights (deform.hpp).
+  const auto keys = [](double p, int& base, float* w) {
+    const double f0 = std::floor(p), f = p - f0, g = 1 - f;
+    base = int(f0) - 1;
+    w[0] = float(((-0.5 * f + 1) * f - 0.5) * f);
+    w[1] = float((1.5 * f - 2.5) * f * f + 1);
+    w[2] = float((1.5 * g - 2.5) * g * g + 1);
+    w[3] = float(((-0.5 * g + 1) * g - 0.5) * g);
+  };
+  const auto cubic = [&](const std::vector<float>& v, double px, double py, double pz) {
+    int base[3];
+    float w[3][4];
+    keys(px, base[0], w[0]);
+    keys(py, base[1], w[1]);
+    keys(pz, base[2], w[2]);
+    float acc[4] = {0, 0, 0, 0};
+    for (int kz = 0; kz < 4; ++kz)
+      for (int ky = 0; ky < 4; ++ky) {
+        const float wzy = w[2][kz] * w[1][ky];
+        for (int k = 0; k < 4; ++k) acc[k] += wzy * voxel(v, base[0] + k, base[1] + ky, base[2] + kz);
+      }
+    float total = 0;
+    for (int k = 0; k < 4; ++k) total += w[0][k] * acc[k];
+    return total;
+  };
+  NodeField constant({2, 2, 2}, {0, 0, 0}, {52, 20, 16}), smooth({5, 4, 4}, {0, 0, 0}, {13, 6.67, 5.33}),
+      random({5, 4, 4}, {0, 0, 0}, {13, 6.67, 5.33});
+  for (int c = 0; c < 3; ++c) {
+    constant.d[c].assign(8, std::array<float, 3>{1.37f, -0.62f, 2.21f}[c]);
+    for (std::size_t n = 0; n < smooth.d[c].size(); ++n) {
+      const int i = int(n % 5), j = int(n / 5 % 4), k = int(n / 20);
+      smooth.d[c][n] = float(0.8 * (c + 1) - 0.3 * c + 0.12 * i - 0.07 * j + 0.09 * k);
+    }
+    for (float& d : random.d[c]) d = shift(rng);
+  }
+  const Isa chosen = isa();
+  for (const Isa build : {Isa::baseline, Isa::avx2, Isa::avx512}) {
+    if (build > best_isa()) {
+      std::printf("this CPU has no %s build to test\n", isa_name(build));
+      continue;
+    }
+    use_isa(build);
+    for (const NodeField* pred : {&constant, &smooth, &random})
+      for (const Interpolation how : {Interpolation::sinc, Interpolation::cubic}) {
+        SCOPED_TRACE(std::string(isa_name(build)) + (how == Interpolation::sinc ? ", sinc" : ", cubic") +
+                     (pred == &constant ? ", constant"
+                      : pred == &smooth ? ", smooth"
+                                        : ", random"));
+        std::vector<float> da(a.size()), db(a.size());
+        deform_pair(a, b, shape, *pred, da, db, how);
+        std::size_t differ = 0;
+        for (int z = 0; z < shape[2]; ++z)
+          for (int y = 0; y < shape[1]; ++y)
+            for (int x = 0; x < shape[0]; ++x) {
+              const auto d = pred->at(x, y, z);
+              const double hx = 0.5 * d[0], hy = 0.5 * d[1], hz = 0.5 * d[2];
+              const float ea = how == Interpolation::sinc ? sample_sinc7(a, shape, x - hx, y - hy, z - hz)
+                                                          : cubic(a, x - hx, y - hy, z - hz);
+              const float eb = how == Interpolation::sinc ? sample_sinc7(b, shape, x + hx, y + hy, z + hz)
+                                                          : cubic(b, x + hx, y + hy, z + hz);
+              const std::size_t i = (std::size_t(z) * shape[1] + y) * shape[0] + x;
+              differ += std::memcmp(&da[i], &ea, sizeof ea) != 0 || std::memcmp(&db[i], &eb, sizeof eb) != 0;
+            }
+        EXPECT_EQ(differ, 0u);
+      }
+  }
+  use_isa(chosen);
+}
+
 TEST(Deform, MeanFloorSubtractsAMultipleOfTheMeanAndClipsAtZero) {
   const std::array<int, 3> shape{4, 3, 2};
   std::vector<float> in(24);
