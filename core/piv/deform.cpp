@@ -185,47 +185,49 @@ template <int N, int Taps, class Row, class Stencil>
   sum_rows<N, Taps, Row>(blocks, {lanes, Taps, Taps}, at_origin, out);
 }
 
-// L floats as one GCC vector (one register of the build that takes L lanes).
-template <int L>
+// L values of type T as one GCC vector (L floats: one register of the build that takes L lanes).
+template <class T, int L>
 struct VectorOf {
-  typedef float type __attribute__((vector_size(L * sizeof(float))));
+  typedef T type __attribute__((vector_size(L * sizeof(T))));
 };
 
-// Whether L samples (the stencils t[0], t[stride], ..., t[(L - 1) stride]) can be summed side by
-// side by sum_rows_across: the same y and z taps, x taps starting at consecutive voxels, all of
-// them inside the volume.
-template <int L, int Taps, class Stencil>
-[[gnu::always_inline]] inline bool side_by_side(const std::array<int, 3>& s, const Stencil* t, int stride) {
-  const int bx = t[0][0].base, by = t[0][1].base, bz = t[0][2].base;
-  if (bx < 0 || bx + L - 1 + Taps > s[0] || by < 0 || by + Taps > s[1] || bz < 0 || bz + Taps > s[2]) return false;
-  for (int i = 1; i < L; ++i) {
-    const Stencil& u = t[i * stride];
-    if (u[0].base != bx + i || u[1].base != by || u[2].base != bz) return false;
-  }
-  return true;
+// The taps along one axis of L samples, lane i holding sample i: its first voxel and its weights.
+template <int L, int Taps>
+struct TapsAcross {
+  alignas(64) int base[L];
+  alignas(64) float w[Taps][L];
+};
+
+// Whether the M samples in lanes from .. from + M - 1 of t (their taps along x, y and z: t[0],
+// t[1], t[2]) can be summed side by side by sum_rows_across: the same y and z taps, x taps starting
+// at consecutive voxels, all of them inside the volume.
+template <int M, int L, int Taps>
+[[gnu::always_inline]] inline bool side_by_side(const std::array<int, 3>& s, const TapsAcross<L, Taps>* t, int from) {
+  const int bx = t[0].base[from], by = t[1].base[from], bz = t[2].base[from];
+  if (bx < 0 || bx + M - 1 + Taps > s[0] || by < 0 || by + Taps > s[1] || bz < 0 || bz + Taps > s[2]) return false;
+  bool same = true;
+  for (int i = 1; i < M; ++i)
+    same &= t[0].base[from + i] == bx + i && t[1].base[from + i] == by && t[2].base[from + i] == bz;
+  return same;
 }
 
-// sum_rows for L samples that side_by_side accepts, lane i holding sample i: each stencil row is
-// read once per x tap as L contiguous voxels (lane i's tap k is voxel base + i + k), where sum_rows
-// reads a row per sample. Lane i sees sum_rows' multiplies and adds in sum_rows' order (its z
-// weight times its y weight, per x tap a sum over the rows z-major, then the x weights from a sum
-// at +0), so both give a sample the same bits.
-template <int L, int Taps, class Stencil>
-[[gnu::always_inline]] inline void sum_rows_across(const float* v, const std::array<int, 3>& s, const Stencil* t,
-                                                   int stride, float* out) {
-  using Vec = typename VectorOf<L>::type;
-  alignas(sizeof(Vec)) float weights[3][Taps][L];
-  for (int i = 0; i < L; ++i)
-    for (int axis = 0; axis < 3; ++axis)
-      for (int k = 0; k < Taps; ++k) weights[axis][k][i] = t[i * stride][axis].w[k];
+// sum_rows for the M samples in lanes from .. from + M - 1 that side_by_side accepts, one vector
+// lane per sample: each stencil row is read once per x tap as M contiguous voxels (lane i's tap k
+// is voxel base + i + k), where sum_rows reads a row per sample. Lane i sees sum_rows' multiplies
+// and adds in sum_rows' order (its z weight times its y weight, per x tap a sum over the rows
+// z-major, then the x weights from a sum at +0), so both give a sample the same bits.
+template <int M, int L, int Taps>
+[[gnu::always_inline]] inline void sum_rows_across(const float* v, const std::array<int, 3>& s,
+                                                   const TapsAcross<L, Taps>* t, int from, float* out) {
+  using Vec = typename VectorOf<float, M>::type;
   Vec wx[Taps], wy[Taps], wz[Taps];
   for (int k = 0; k < Taps; ++k) {
-    std::memcpy(&wx[k], weights[0][k], sizeof(Vec));
-    std::memcpy(&wy[k], weights[1][k], sizeof(Vec));
-    std::memcpy(&wz[k], weights[2][k], sizeof(Vec));
+    std::memcpy(&wx[k], t[0].w[k] + from, sizeof(Vec));
+    std::memcpy(&wy[k], t[1].w[k] + from, sizeof(Vec));
+    std::memcpy(&wz[k], t[2].w[k] + from, sizeof(Vec));
   }
   const std::size_t plane = std::size_t(s[0]) * s[1];
-  const float* first = v + t[0][2].base * plane + std::size_t(t[0][1].base) * s[0] + t[0][0].base;
+  const float* first = v + t[2].base[from] * plane + std::size_t(t[1].base[from]) * s[0] + t[0].base[from];
   Vec acc[Taps];
   for (int k = 0; k < Taps; ++k) acc[k] = Vec{};
   for (int kz = 0; kz < Taps; ++kz)
@@ -241,6 +243,18 @@ template <int L, int Taps, class Stencil>
   Vec total = Vec{};
   for (int k = 0; k < Taps; ++k) total += wx[k] * acc[k];
   std::memcpy(out, &total, sizeof total);
+}
+
+// Sample i's stencil (sum_rows' layout: per axis its first voxel and weights, zero past the taps)
+// from the taps of L samples along x, y and z.
+template <class Stencil, int L, int Taps>
+[[gnu::always_inline]] inline Stencil stencil_of(const TapsAcross<L, Taps>* t, int i) {
+  Stencil out{};
+  for (int axis = 0; axis < 3; ++axis) {
+    out[axis].base = t[axis].base[i];
+    for (int k = 0; k < Taps; ++k) out[axis].w[k] = t[axis].w[k][i];
+  }
+  return out;
 }
 
 // One sample of the sinc anywhere; voxels outside the volume count as 0.
@@ -301,8 +315,14 @@ struct Sinc7 {
   static constexpr int taps = sinc_taps;
   using Stencil = piv::Stencil;
   const SincTable& table;
-  [[gnu::always_inline]] Stencil stencil(double x, double y, double z) const {
-    return {taps_for(table, x), taps_for(table, y), taps_for(table, z)};
+  // The taps of L samples at p[0 .. L - 1] along one axis.
+  template <int L>
+  [[gnu::always_inline]] void across(const double* p, TapsAcross<L, taps>& out) const {
+    for (int i = 0; i < L; ++i) {
+      const Taps t = taps_for(table, p[i]);
+      out.base[i] = t.base;
+      for (int k = 0; k < taps; ++k) out.w[k][i] = t.w[k];
+    }
   }
   [[gnu::always_inline]] static bool inside(const std::array<int, 3>& s, const Stencil& t) { return piv::inside(s, t); }
   template <int N>
@@ -327,15 +347,29 @@ struct Cubic4 {
     std::array<float, taps> w;
   };
   using Stencil = std::array<Axis, 3>;
-  [[gnu::always_inline]] static Axis axis(double p) {
-    const double f0 = std::floor(p), f = p - f0;
-    // K(t) = 1.5|t|^3 - 2.5|t|^2 + 1 on |t| <= 1, -0.5|t|^3 + 2.5|t|^2 - 4|t| + 2 on 1 < |t| < 2.
-    const double g = 1 - f;
-    return {int(f0) - 1,
-            {float(((-0.5 * f + 1) * f - 0.5) * f), float((1.5 * f - 2.5) * f * f + 1),
-             float((1.5 * g - 2.5) * g * g + 1), float(((-0.5 * g + 1) * g - 0.5) * g)}};
+  // The taps of L samples at p[0 .. L - 1] along one axis, computed side by side: each lane the
+  // same double operations, in the same order, as one sample alone.
+  template <int L>
+  [[gnu::always_inline]] static void across(const double* p, TapsAcross<L, taps>& out) {
+    using Doubles = typename VectorOf<double, L>::type;
+    using Floats = typename VectorOf<float, L>::type;
+    using Ints = typename VectorOf<int, L>::type;
+    Doubles at, f0;
+    std::memcpy(&at, p, sizeof at);
+    for (int i = 0; i < L; ++i) f0[i] = std::floor(p[i]);
+    // K(t) = 1.5|t|^3 - 2.5|t|^2 + 1 on |t| <= 1, -0.5|t|^3 + 2.5|t|^2 - 4|t| + 2 on 1 < |t| < 2,
+    // at the distances 1 + f, f, g = 1 - f and 1 + g of the voxels floor(p) - 1 .. floor(p) + 2.
+    const Doubles f = at - f0, g = 1 - f;
+    const Floats w[taps] = {
+        __builtin_convertvector(((-0.5 * f + 1) * f - 0.5) * f, Floats),
+        __builtin_convertvector((1.5 * f - 2.5) * f * f + 1, Floats),
+        __builtin_convertvector((1.5 * g - 2.5) * g * g + 1, Floats),
+        __builtin_convertvector(((-0.5 * g + 1) * g - 0.5) * g, Floats),
+    };
+    const Ints base = __builtin_convertvector(f0, Ints) - 1;
+    std::memcpy(out.base, &base, sizeof base);
+    for (int k = 0; k < taps; ++k) std::memcpy(out.w[k], &w[k], sizeof w[k]);
   }
-  [[gnu::always_inline]] Stencil stencil(double x, double y, double z) const { return {axis(x), axis(y), axis(z)}; }
   [[gnu::always_inline]] static bool inside(const std::array<int, 3>& s, const Stencil& t) {
     return piv::inside<taps, taps>(s, t);
   }
@@ -354,57 +388,78 @@ struct Cubic4 {
 // Voxels per block of deform_row's per-sample path: 2 x 4 samples side by side (sum_rows says why).
 constexpr int block_voxels = 4;
 
+// Both volumes' `count` (<= M) voxels whose taps are lanes from .. from + M - 1 of `taps` (A's,
+// then B's, per axis), into a_out and b_out (offset to lane 0): summed across the voxels where
+// their stencils lie side by side (a smooth predictor whose rounding does not change across them,
+// away from the faces), else as two halves, down to block_voxels voxels summed sample by sample
+// (sum_rows, four voxels of both volumes at a time). Every path gives a sample the same bits.
+template <int M, int L, class Kernel>
+[[gnu::always_inline]] inline void deform_lanes(const float* a, const float* b, const std::array<int, 3>& shape,
+                                                const TapsAcross<L, Kernel::taps> (&taps)[2][3], int from, int count,
+                                                float* a_out, float* b_out) {
+  if (count == M && side_by_side<M>(shape, taps[0], from) && side_by_side<M>(shape, taps[1], from)) {
+    sum_rows_across<M>(a, shape, taps[0], from, a_out + from);
+    sum_rows_across<M>(b, shape, taps[1], from, b_out + from);
+    return;
+  }
+  if constexpr (M > block_voxels) {
+    constexpr int half = M / 2;
+    deform_lanes<half, L, Kernel>(a, b, shape, taps, from, std::min(count, half), a_out, b_out);
+    if (count > half) deform_lanes<half, L, Kernel>(a, b, shape, taps, from + half, count - half, a_out, b_out);
+  } else {
+    constexpr int samples = 2 * block_voxels;
+    const float* const src[samples] = {a, b, a, b, a, b, a, b};
+    static_assert(samples == 8);
+    typename Kernel::Stencil t[samples];  // a, b of voxel `from`, then of from + 1, ...
+    for (int i = 0; i < count; ++i)
+      for (int v = 0; v < 2; ++v) t[2 * i + v] = stencil_of<typename Kernel::Stencil>(taps[v], from + i);
+    bool all_inside = count == block_voxels;
+    for (int k = 0; k < 2 * count && all_inside; ++k) all_inside = Kernel::inside(shape, t[k]);
+    // A stencil past a face is summed from a zero-padded copy (sum_rows_clipped), with the same
+    // arithmetic, so either path gives a sample the same bits.
+    float out[samples];
+    if (all_inside) {
+      Kernel::template sample_inside<samples>(src, shape, t, out);
+    } else if (count == block_voxels) {
+      Kernel::template sample_clipped<samples>(src, shape, t, out);
+    } else {
+      for (int k = 0; k < 2 * count; ++k) Kernel::template sample_clipped<1>(src + k, shape, t + k, out + k);
+    }
+    for (int i = 0; i < count; ++i) {
+      a_out[from + i] = out[2 * i];
+      b_out[from + i] = out[2 * i + 1];
+    }
+  }
+}
+
 // One row (y, z) of both deformed volumes with `kernel`, L voxels at a time (L a multiple of
-// block_voxels: the lanes of the build's widest register). `lx`: the predictor's node location of
-// every x; `ly`, `lz`: of this row. Where the L voxels' stencils of both volumes lie side by side
-// (a smooth predictor whose rounding does not change across them, away from the faces) they are
-// summed across the voxels (sum_rows_across), else sample by sample (sum_rows, four voxels of both
-// volumes at a time); both give the same bits.
+// block_voxels: the lanes of the build's widest register; deform_lanes sums them). `lx`: the
+// predictor's node location of every x; `ly`, `lz`: of this row.
 template <int L, class Kernel>
 [[gnu::always_inline]] inline void deform_row_with(const Kernel& kernel, const float* a, const float* b,
                                                    const std::array<int, 3>& shape, const NodeField& predictor,
                                                    const Located* lx, const Located& ly, const Located& lz, int y,
                                                    int z, float* a_out, float* b_out) {
   static_assert(L % block_voxels == 0);
-  constexpr int samples = 2 * block_voxels;
-  const float* const src[samples] = {a, b, a, b, a, b, a, b};
-  static_assert(samples == 8);
   RowPredictor predicted(predictor, ly, lz);
   for (int x0 = 0; x0 < shape[0]; x0 += L) {
     const int n = std::min(L, shape[0] - x0);
-    typename Kernel::Stencil t[2 * L];  // a, b of voxel x0, then of x0 + 1, ...
+    // Each voxel's sample coordinates in A (x - d/2) and B (x + d/2); lanes past the row's end at 0.
+    alignas(64) double at[2][3][L];
     for (int i = 0; i < n; ++i) {
       const int x = x0 + i;
       const auto d = predicted.at(lx[x]);
       const double hx = 0.5 * d[0], hy = 0.5 * d[1], hz = 0.5 * d[2];
-      t[2 * i] = kernel.stencil(x - hx, y - hy, z - hz);
-      t[2 * i + 1] = kernel.stencil(x + hx, y + hy, z + hz);
+      at[0][0][i] = x - hx, at[0][1][i] = y - hy, at[0][2][i] = z - hz;
+      at[1][0][i] = x + hx, at[1][1][i] = y + hy, at[1][2][i] = z + hz;
     }
-    if (n == L && side_by_side<L, Kernel::taps>(shape, t, 2) && side_by_side<L, Kernel::taps>(shape, t + 1, 2)) {
-      sum_rows_across<L, Kernel::taps>(a, shape, t, 2, a_out + x0);
-      sum_rows_across<L, Kernel::taps>(b, shape, t + 1, 2, b_out + x0);
-      continue;
-    }
-    for (int i0 = 0; i0 < n; i0 += block_voxels) {
-      const int m = std::min(block_voxels, n - i0);
-      const typename Kernel::Stencil* ti = t + 2 * i0;
-      bool all_inside = m == block_voxels;
-      for (int k = 0; k < 2 * m && all_inside; ++k) all_inside = Kernel::inside(shape, ti[k]);
-      // A stencil past a face is summed from a zero-padded copy (sum_rows_clipped), with the same
-      // arithmetic, so either path gives a sample the same bits.
-      float out[samples];
-      if (all_inside) {
-        Kernel::template sample_inside<samples>(src, shape, ti, out);
-      } else if (m == block_voxels) {
-        Kernel::template sample_clipped<samples>(src, shape, ti, out);
-      } else {
-        for (int k = 0; k < 2 * m; ++k) Kernel::template sample_clipped<1>(src + k, shape, ti + k, out + k);
-      }
-      for (int i = 0; i < m; ++i) {
-        a_out[x0 + i0 + i] = out[2 * i];
-        b_out[x0 + i0 + i] = out[2 * i + 1];
-      }
-    }
+    for (int i = n; i < L; ++i)
+      for (int v = 0; v < 2; ++v)
+        for (int axis = 0; axis < 3; ++axis) at[v][axis][i] = 0;
+    TapsAcross<L, Kernel::taps> taps[2][3];  // of A's samples, then of B's; per axis
+    for (int v = 0; v < 2; ++v)
+      for (int axis = 0; axis < 3; ++axis) kernel.template across<L>(at[v][axis], taps[v][axis]);
+    deform_lanes<L, L, Kernel>(a, b, shape, taps, 0, n, a_out + x0, b_out + x0);
   }
 }
 

@@ -457,8 +457,8 @@ TEST(Deform, AStencilPastAFaceGivesTheBitsOfAZeroPaddedVolume) {
 // its definition summed in sum_rows' order (per x tap over the rows z-major, then the x weights),
 // bit for bit, under each build this CPU runs. A constant predictor puts whole rows of voxels side
 // by side (the path that sums a build's register of voxels at once), a smooth one mixes that path
-// with the per-sample one where its rounding changes, a random one takes the per-sample path; the
-// rows' 53 voxels end in a part register.
+// with its halves and the per-sample one where its rounding changes, a random one takes the
+// per-sample path; the rows' 53 voxels end in a part register.
 TEST(Deform, EveryVoxelHasTheBitsOfItsOwnSample) {
   const std::array<int, 3> shape{53, 21, 17};
   std::mt19937 rng(11);
