@@ -272,42 +272,50 @@ using Located = std::pair<int, double>;
 typedef double Doubles4 __attribute__((vector_size(32)));
 typedef float Floats4 __attribute__((vector_size(16)));
 
-// The predictor along one voxel row (y, z), bit for bit what NodeField::at gives: the 8
-// corner displacements of the current node cell are kept (x, y, z in the first three of four
-// lanes) and reloaded only when x enters the next cell, and the three components are weighted and
-// summed side by side, each lane in at's order. A corner at skips (weight 0)
-// adds a zero here, which leaves a sum that started at +0 unchanged.
+// The predictor's trilinear interpolant in two steps, which NodeField::at and RowPredictor share so
+// that both give the same bits: node column i's bilinear value at (y, z) (x, y, z displacement in
+// the first three of four lanes, in double), then the linear blend of two columns at fraction fx,
+// rounded to float once.
+[[gnu::always_inline]] inline void column_at(const NodeField& f, int i, const Located& ly, const Located& lz,
+                                             Doubles4& out) {
+  const int column = std::min(i, f.count[0] - 1);
+  out = Doubles4{0, 0, 0, 0};
+  for (int c = 0; c < 4; ++c) {
+    const int dy = c & 1, dz = c >> 1;
+    const double w = (dy ? ly.second : 1 - ly.second) * (dz ? lz.second : 1 - lz.second);
+    const std::size_t k =
+        f.index(column, std::min(ly.first + dy, f.count[1] - 1), std::min(lz.first + dz, f.count[2] - 1));
+    out += w * Doubles4{f.d[0][k], f.d[1][k], f.d[2][k], 0};
+  }
+}
+[[gnu::always_inline]] inline std::array<float, 3> blend(const Doubles4& low, const Doubles4& high, double fx) {
+  const Doubles4 v = (1 - fx) * low + fx * high;
+  return {float(v[0]), float(v[1]), float(v[2])};
+}
+
+// The predictor along one voxel row (y, z): the two node columns around the current x are kept and
+// recomputed only when x enters the next cell (the right one becoming the left one).
 class RowPredictor {
  public:
   RowPredictor(const NodeField& f, const Located& ly, const Located& lz) : f_(f), ly_(ly), lz_(lz) {}
 
   [[gnu::always_inline]] std::array<float, 3> at(const Located& lx) {
-    if (lx.first != cell_) load(lx.first);
-    const double fx = lx.second, fy = ly_.second, fz = lz_.second;
-    Floats4 out = {0, 0, 0, 0};
-    for (int c = 0; c < 8; ++c) {
-      const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
-      const double w = (dx ? fx : 1 - fx) * (dy ? fy : 1 - fy) * (dz ? fz : 1 - fz);
-      out += __builtin_convertvector(w * corner_[c], Floats4);
+    if (lx.first != cell_) {
+      if (lx.first == cell_ + 1)
+        low_ = high_;
+      else
+        column_at(f_, lx.first, ly_, lz_, low_);
+      column_at(f_, lx.first + 1, ly_, lz_, high_);
+      cell_ = lx.first;
     }
-    return {out[0], out[1], out[2]};
+    return blend(low_, high_, lx.second);
   }
 
  private:
-  void load(int i0) {
-    cell_ = i0;
-    for (int c = 0; c < 8; ++c) {
-      const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
-      const std::size_t k = f_.index(std::min(i0 + dx, f_.count[0] - 1), std::min(ly_.first + dy, f_.count[1] - 1),
-                                     std::min(lz_.first + dz, f_.count[2] - 1));
-      corner_[c] = Doubles4{f_.d[0][k], f_.d[1][k], f_.d[2][k], 0};
-    }
-  }
-
   const NodeField& f_;
   Located ly_, lz_;
-  int cell_ = -1;
-  Doubles4 corner_[8];
+  int cell_ = -2;  // none yet (-1 would make cell 0 its successor)
+  Doubles4 low_ = {0, 0, 0, 0}, high_ = {0, 0, 0, 0};
 };
 
 // The 7x7x7 windowed sinc as deform_row's kernel.
@@ -508,19 +516,11 @@ std::pair<int, double> NodeField::locate(int axis, double p) const {
 }
 
 std::array<float, 3> NodeField::at(double x, double y, double z) const {
-  const std::array<std::pair<int, double>, 3> where{locate(0, x), locate(1, y), locate(2, z)};
-  std::array<float, 3> out{0, 0, 0};
-  for (int c = 0; c < 8; ++c) {
-    const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
-    const double w = (dx ? where[0].second : 1 - where[0].second) * (dy ? where[1].second : 1 - where[1].second) *
-                     (dz ? where[2].second : 1 - where[2].second);
-    if (w == 0) continue;
-    const std::size_t k =
-        index(std::min(where[0].first + dx, count[0] - 1), std::min(where[1].first + dy, count[1] - 1),
-              std::min(where[2].first + dz, count[2] - 1));
-    for (int a = 0; a < 3; ++a) out[a] += float(w * d[a][k]);
-  }
-  return out;
+  const Located lx = locate(0, x), ly = locate(1, y), lz = locate(2, z);
+  Doubles4 low, high;
+  column_at(*this, lx.first, ly, lz, low);
+  column_at(*this, lx.first + 1, ly, lz, high);
+  return blend(low, high, lx.second);
 }
 
 std::vector<double> NodeField::mean_weights(int axis, int first_voxel, int n) const {

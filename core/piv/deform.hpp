@@ -22,7 +22,8 @@ struct NodeField {
   NodeField(std::array<int, 3> n, std::array<double, 3> first_node, std::array<double, 3> node_step);
   std::size_t size() const { return std::size_t(count[0]) * count[1] * count[2]; }
   std::size_t index(int i, int j, int k) const { return (std::size_t(k) * count[1] + j) * count[0] + i; }
-  // Trilinear interpolation at voxel coordinates (x, y, z); constant beyond the outer nodes.
+  // Trilinear interpolation at voxel coordinates (x, y, z), in double and rounded to float once;
+  // constant beyond the outer nodes.
   std::array<float, 3> at(double x, double y, double z) const;
   // Lower node and fraction towards the next one of coordinate p along `axis` (what at()
   // interpolates between; the deformation locates each voxel row and column once).
