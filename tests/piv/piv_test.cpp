@@ -404,6 +404,18 @@ TEST(Deform, CubicReproducesAQuadraticAndAZeroShift) {
   EXPECT_EQ(db, v);
 }
 
+// Two volumes of `count` voxels of uniform noise in [0, 1), drawn from `rng` voxel by voxel (a's,
+// then b's), for the deformation's bit-for-bit tests.
+std::pair<std::vector<float>, std::vector<float>> noise_pair(std::size_t count, std::mt19937& rng) {
+  std::uniform_real_distribution<float> value(0.f, 1.f);
+  std::vector<float> a(count), b(count);
+  for (std::size_t i = 0; i < count; ++i) {
+    a[i] = value(rng);
+    b[i] = value(rng);
+  }
+  return {std::move(a), std::move(b)};
+}
+
 // Voxels beyond the faces count as zero, with the arithmetic of a stencil inside: the volume
 // deformed as it is and a copy padded with zeros (the predictor moved with it) give the same bits
 // over the original voxels, though there every stencil near a face lies inside. With either
@@ -413,12 +425,8 @@ TEST(Deform, AStencilPastAFaceGivesTheBitsOfAZeroPaddedVolume) {
   constexpr int pad = 8;
   const std::array<int, 3> padded{shape[0] + 2 * pad, shape[1] + 2 * pad, shape[2] + 2 * pad};
   std::mt19937 rng(7);
-  std::uniform_real_distribution<float> value(0.f, 1.f), shift(-3.f, 3.f);
-  std::vector<float> a(std::size_t(shape[0]) * shape[1] * shape[2]), b(a.size());
-  for (std::size_t i = 0; i < a.size(); ++i) {
-    a[i] = value(rng);
-    b[i] = value(rng);
-  }
+  const auto [a, b] = noise_pair(std::size_t(shape[0]) * shape[1] * shape[2], rng);
+  std::uniform_real_distribution<float> shift(-3.f, 3.f);
   const auto index = [](const std::array<int, 3>& s, int x, int y, int z) {
     return (std::size_t(z) * s[1] + y) * s[0] + x;
   };
@@ -462,12 +470,8 @@ TEST(Deform, AStencilPastAFaceGivesTheBitsOfAZeroPaddedVolume) {
 TEST(Deform, EveryVoxelHasTheBitsOfItsOwnSample) {
   const std::array<int, 3> shape{53, 21, 17};
   std::mt19937 rng(11);
-  std::uniform_real_distribution<float> value(0.f, 1.f), shift(-3.f, 3.f);
-  std::vector<float> a(std::size_t(shape[0]) * shape[1] * shape[2]), b(a.size());
-  for (std::size_t i = 0; i < a.size(); ++i) {
-    a[i] = value(rng);
-    b[i] = value(rng);
-  }
+  const auto [a, b] = noise_pair(std::size_t(shape[0]) * shape[1] * shape[2], rng);
+  std::uniform_real_distribution<float> shift(-3.f, 3.f);
   const auto voxel = [&](const std::vector<float>& v, int x, int y, int z) {
     if (x < 0 || y < 0 || z < 0 || x >= shape[0] || y >= shape[1] || z >= shape[2]) return 0.f;
     return v[(std::size_t(z) * shape[1] + y) * shape[0] + x];
