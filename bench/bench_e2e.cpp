@@ -6,7 +6,8 @@
 //   bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate]
 //             [--dark-cutoff F] [--intensity-threshold K] [--final-smoothing K] [--depth-prefilter K]
 //             [--spectral-whitening P [--whitened-peak-sigma X,Y,Z]]
-//             [--passes P] [--early-interpolation sinc|cubic] [--voxel-z-factor D] [--steady]
+//             [--passes P] [--early-interpolation sinc|cubic] [--voxel-z-factor D] [--uncertainty-stride N]
+//             [--steady]
 //             [--time-sweep [--time-repeats N]] [--z-centre MM] [--compare-passes 'P1;P2;...']
 //             [--prune-threshold F [--prune-scope volume|slice]] [--depth-response-ppm F]
 //             [--sparse-sweep [--sparse-repeats N] [--sparse-variants V,..]]
@@ -24,6 +25,8 @@
 //              still in the 0.125 mm voxels; window depths and margins in --passes are its voxels).
 //     --early-interpolation: the deformation of the passes before the last (correlation's
 //              early_interpolation; default the sinc); the variants correlate with the other one.
+//     --uncertainty-stride N: the headline's per-vector uncertainty computed every N nodes per axis
+//              and interpolated between (correlation's uncertainty_stride; default 1: every node).
 //     --steady: the headline pair again in the kept MART workspace, --steady-repeats N times
 //              (default 3): time per pair in a run, their median (the repeat printed in full).
 //     --live B,K,N,P: a live tier beside the headline: voxels B times as large (the same box; BzD:
@@ -31,8 +34,9 @@
 //              (reconstruction.pixel_binning), N MART iterations, passes P (--passes
 //              syntax, windows in its voxels); its set-up, first and in-a-run time per pair and its
 //              errors in the headline's voxels (axis band: half its final window) (row
-//              variant=live; correlated without spectral whitening, as run-paper.yaml's live
-//              tier), beside the same passes on exact-particle volumes of its grid (exact_*).
+//              variant=live; correlated without spectral whitening and with every vector's own
+//              sigma, as run-paper.yaml's live tier), beside the same passes on exact-particle
+//              volumes of its grid (exact_*).
 //              Repeat for several tiers.
 //     --live-depth-prefilter K: the --live tiers' depth prefilter (default the headline's).
 //     --live-only: the --live tiers alone (with --no-sweep), without the headline rows.
@@ -186,6 +190,7 @@ int main(int argc, char** argv) {
   std::array<double, 3> whitened_sigma = piv::CorrelationSettings{}.whitened_peak_sigma_voxel;
   int final_smoothing = piv::CorrelationSettings{}.final_smoothing;
   int depth_prefilter = piv::CorrelationSettings{}.depth_prefilter;
+  int uncertainty_stride = piv::CorrelationSettings{}.uncertainty_stride;
   bool steady = false, time_sweep = false, sparse_sweep = false, live_only = false;
   int sparse_repeats = 1, time_repeats = 1, steady_repeats = 3;
   std::string sparse_variants;  // empty: all
@@ -228,6 +233,8 @@ int main(int argc, char** argv) {
       final_smoothing = std::stoi(argv[++i]);
     else if (!std::strcmp(argv[i], "--depth-prefilter") && i + 1 < argc)
       depth_prefilter = std::stoi(argv[++i]);
+    else if (!std::strcmp(argv[i], "--uncertainty-stride") && i + 1 < argc)
+      uncertainty_stride = std::stoi(argv[++i]);
     else if (!std::strcmp(argv[i], "--steady"))
       steady = true;
     else if (!std::strcmp(argv[i], "--steady-repeats") && i + 1 < argc)
@@ -278,6 +285,7 @@ int main(int argc, char** argv) {
                 spectral_whitening != piv::CorrelationSettings{}.spectral_whitening ||
                 final_smoothing != piv::CorrelationSettings{}.final_smoothing ||
                 depth_prefilter != piv::CorrelationSettings{}.depth_prefilter ||
+                uncertainty_stride != piv::CorrelationSettings{}.uncertainty_stride ||
                 prune_threshold != recon::MartSettings{}.prune_threshold || prune_scope != "volume" ||
                 depth_response_ppm != 0.0)) {
     std::fprintf(
@@ -285,7 +293,7 @@ int main(int argc, char** argv) {
         "bench_e2e: "
         "--iterations/--mu/--accelerate/--dark-cutoff/--sensor-blur-mm/--intensity-threshold/"
         "--final-smoothing/--depth-prefilter/--spectral-whitening/--passes/--early-interpolation/--voxel-z-factor/"
-        "--z-centre/--depth-response-ppm change the "
+        "--uncertainty-stride/--z-centre/--depth-response-ppm change the "
         "headline rows only; use them with --no-sweep\n");
     return 2;
   }
@@ -298,7 +306,7 @@ int main(int argc, char** argv) {
                  "usage: bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate] "
                  "[--dark-cutoff F] [--sensor-blur-mm S] [--intensity-threshold K] [--final-smoothing K] "
                  "[--depth-prefilter K] [--spectral-whitening P [--whitened-peak-sigma X,Y,Z]] [--passes P] "
-                 "[--early-interpolation sinc|cubic] [--voxel-z-factor D] "
+                 "[--early-interpolation sinc|cubic] [--voxel-z-factor D] [--uncertainty-stride N] "
                  "[--steady [--steady-repeats N]] [--time-sweep] [--z-centre MM] [--compare-passes 'P1;P2'] "
                  "[--prune-threshold F "
                  "[--prune-scope volume|slice]] [--depth-response-ppm F] [--sparse-sweep [--sparse-repeats N] "
@@ -339,6 +347,7 @@ int main(int argc, char** argv) {
   settings.correlation.whitened_peak_sigma_voxel = whitened_sigma;
   settings.correlation.final_smoothing = final_smoothing;
   settings.correlation.depth_prefilter = depth_prefilter;
+  settings.correlation.uncertainty_stride = uncertainty_stride;
   settings.correlation.early_interpolation = early_interpolation;
   if (!passes.empty()) settings.correlation.passes = piv::parse_passes(passes);
 
@@ -401,6 +410,7 @@ int main(int argc, char** argv) {
       s.correlation.passes = piv::parse_passes(tier.substr(c3 + 1));
       if (tier_prefilter >= 0) s.correlation.depth_prefilter = tier_prefilter;
       s.correlation.spectral_whitening = 0;  // plain, as run-paper.yaml's live tier
+      s.correlation.uncertainty_stride = 1;  // every vector's own, as run-paper.yaml's live tier
       t = now_s();
       const process::PairProcessor live_processor(camera, nominal, s);
       const double setup_s = now_s() - t;

@@ -323,29 +323,84 @@ Candidates correlate_windows(std::span<const float> va, std::span<const float> v
 // The standard uncertainty (voxels) of every vector the final pass measured (valid and not
 // replaced by its neighbours' mean; NaN elsewhere), from the windows it correlated, `va` and
 // `vb`: per axis x, y, z, one value per node. The peak behind a vector is at the integer shift
-// nearest its displacement less the predictor it was added to (`bases`).
+// nearest its displacement less the predictor it was added to (`bases`). With `stride` > 1 the
+// nodes between those computed are interpolated where they can be (CorrelationSettings::
+// uncertainty_stride says where).
 std::array<std::vector<float>, 3> vector_uncertainty(std::span<const float> va, std::span<const float> vb,
                                                      const std::array<int, 3>& shape, const Layout& l,
                                                      const ValidatedField& f, std::span<const std::uint8_t> flags,
-                                                     const std::vector<std::array<float, 3>>& bases) {
+                                                     const std::vector<std::array<float, 3>>& bases, int stride) {
   std::array<std::vector<float>, 3> sigma;
   for (auto& s : sigma) s.assign(f.d.size(), std::numeric_limits<float>::quiet_NaN());
+  const std::size_t nx = std::size_t(l.count[0]), nxy = nx * std::size_t(l.count[1]);
+  const auto index = [&](std::size_t node) {
+    return std::array<int, 3>{int(node % nx), int((node / nx) % std::size_t(l.count[1])), int(node / nxy)};
+  };
+  const auto shift_of = [&](std::size_t node) {
+    std::array<int, 3> shift;
+    for (int a = 0; a < 3; ++a) shift[a] = int(std::lround(f.d[node][a] - bases[node][a]));
+    return shift;
+  };
+  const auto measured = [&](std::size_t node) { return f.valid[node] && !(flags[node] & flag_interpolated); };
+  // Along an axis, index i lies between the computed indices lo and hi (lo == hi: i is one).
+  const auto computed_along = [&](int i, int axis) { return i % stride == 0 || i == l.count[axis] - 1; };
+  const auto bracket = [&](int i, int axis) {
+    const int lo = i - i % stride;
+    return computed_along(i, axis) ? std::array<int, 2>{i, i}
+                                   : std::array<int, 2>{lo, std::min(lo + stride, l.count[axis] - 1)};
+  };
+  const auto computed = [&](const std::array<int, 3>& ijk) {
+    return computed_along(ijk[0], 0) && computed_along(ijk[1], 1) && computed_along(ijk[2], 2);
+  };
   tbb::enumerable_thread_specific<UncertaintyScratch> scratch;
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, f.d.size()), [&](const auto& r) {
-    UncertaintyScratch& s = scratch.local();
-    for (std::size_t node = r.begin(); node < r.end(); ++node) {
-      if (!f.valid[node] || (flags[node] & flag_interpolated)) continue;
-      const int i = int(node % l.count[0]);
-      const int j = int((node / l.count[0]) % l.count[1]);
-      const int k = int(node / (std::size_t(l.count[0]) * l.count[1]));
-      std::array<int, 3> shift;
-      for (int a = 0; a < 3; ++a) shift[a] = int(std::lround(f.d[node][a] - bases[node][a]));
-      const auto v = correlation_statistics_sigma(
-          va, vb, shape, {l.start[0] + i * l.step[0], l.start[1] + j * l.step[1], l.start[2] + k * l.step[2]}, l.window,
-          l.depth_margin, shift, s);
-      for (int a = 0; a < 3; ++a) sigma[a][node] = v[a];
-    }
-  });
+  const auto compute = [&](std::size_t node, const std::array<int, 3>& ijk, UncertaintyScratch& s) {
+    const auto v = correlation_statistics_sigma(
+        va, vb, shape,
+        {l.start[0] + ijk[0] * l.step[0], l.start[1] + ijk[1] * l.step[1], l.start[2] + ijk[2] * l.step[2]}, l.window,
+        l.depth_margin, shift_of(node), s);
+    for (int a = 0; a < 3; ++a) sigma[a][node] = v[a];
+  };
+  // First the computed nodes, then the rest: interpolated from the eight (or fewer, on a computed
+  // index) bracketing nodes when each has all three estimates from a peak at this node's shift.
+  for (const bool first : {true, false}) {
+    if (first == false && stride == 1) break;
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, f.d.size()), [&](const auto& r) {
+      UncertaintyScratch& s = scratch.local();
+      for (std::size_t node = r.begin(); node < r.end(); ++node) {
+        if (!measured(node)) continue;
+        const std::array<int, 3> ijk = index(node);
+        if (computed(ijk) != first) continue;
+        if (first) {
+          compute(node, ijk, s);
+          continue;
+        }
+        const std::array<int, 2> bx = bracket(ijk[0], 0), by = bracket(ijk[1], 1), bz = bracket(ijk[2], 2);
+        const std::array<int, 3> shift = shift_of(node);
+        std::array<double, 3> sum{0, 0, 0};
+        bool whole = true;
+        for (int c = 0; c < 8 && whole; ++c) {
+          const std::array<int, 3> corner{bx[c & 1], by[(c >> 1) & 1], bz[c >> 2]};
+          double w = 1;
+          for (int a = 0; a < 3; ++a) {
+            const std::array<int, 2>& b = a == 0 ? bx : a == 1 ? by : bz;
+            const double t = b[1] == b[0] ? 0.5 : double(ijk[a] - b[0]) / (b[1] - b[0]);
+            w *= ((c >> a) & 1) ? t : 1 - t;
+          }
+          const std::size_t at = std::size_t(corner[0]) + std::size_t(corner[1]) * nx + std::size_t(corner[2]) * nxy;
+          whole = shift_of(at) == shift;
+          for (int a = 0; a < 3 && whole; ++a) {
+            whole = std::isfinite(sigma[a][at]);
+            sum[a] += w * sigma[a][at];
+          }
+        }
+        if (!whole) {
+          compute(node, ijk, s);
+          continue;
+        }
+        for (int a = 0; a < 3; ++a) sigma[a][node] = float(sum[a]);
+      }
+    });
+  }
   return sigma;
 }
 
@@ -469,7 +524,7 @@ CorrelationResult correlate_volumes(const Volume& a, const Volume& b, const Corr
     report.validation = validated.counts;
     if (p + 1 == passes && settings.uncertainty) {
       const auto t_sigma = Clock::now();
-      sigma = vector_uncertainty(va, vb, shape, layout, validated, last.flags, bases);
+      sigma = vector_uncertainty(va, vb, shape, layout, validated, last.flags, bases, settings.uncertainty_stride);
       report.uncertainty_s = seconds_since(t_sigma);
     }
     if (p + 1 < passes) {
@@ -509,7 +564,7 @@ CorrelationResult correlate_volumes(const Volume& a, const Volume& b, const Corr
   f = VectorField(g);
   f.dt_s = settings.dt_s;
   if (settings.uncertainty) {
-    f.sigma_method = correlation_statistics_method(settings.final_smoothing);
+    f.sigma_method = correlation_statistics_method(settings.uncertainty_stride, settings.final_smoothing);
     const std::array<std::vector<float>*, 3> out{&f.sigma_dx_mm, &f.sigma_dy_mm, &f.sigma_dz_mm};
     for (int axis = 0; axis < 3; ++axis) {
       out[axis]->resize(g.count());

@@ -54,6 +54,8 @@ void check(const CorrelationSettings& s, const std::string& source) {
     fail("predictor_smoothing: must be 0 to 4, got " + std::to_string(s.predictor_smoothing));
   if (s.final_smoothing < 0 || s.final_smoothing > 4)
     fail("final_smoothing: must be 0 to 4, got " + std::to_string(s.final_smoothing));
+  if (s.uncertainty_stride < 1 || s.uncertainty_stride > 4)
+    fail("uncertainty_stride: must be 1 to 4 nodes, got " + std::to_string(s.uncertainty_stride));
   if (s.depth_prefilter < 0 || s.depth_prefilter > 8)
     fail("depth_prefilter: must be 0 to 8, got " + std::to_string(s.depth_prefilter));
   if (s.depth_prefilter > 0 && !s.prefilter)
@@ -126,7 +128,8 @@ std::vector<PassSettings> parse_passes(const std::string& text) {
 CorrelationSettings correlation_settings_from(const YamlMap& root) {
   root.reject_unknown({"passes", "median", "signal_threshold", "dt_s", "fft_planning", "prefilter", "depth_prefilter",
                        "predictor", "predictor_smoothing", "intensity_threshold_of_mean", "final_smoothing",
-                       "uncertainty", "early_interpolation", "spectral_whitening", "whitened_peak_sigma_voxel"});
+                       "uncertainty", "uncertainty_stride", "early_interpolation", "spectral_whitening",
+                       "whitened_peak_sigma_voxel"});
   CorrelationSettings s;
   if (root.has("passes")) {
     const YAML::Node list = root.node()["passes"];
@@ -166,6 +169,7 @@ CorrelationSettings correlation_settings_from(const YamlMap& root) {
   s.predictor_smoothing = root.integer_in("predictor_smoothing", s.predictor_smoothing, 0, 4);
   s.final_smoothing = root.integer_in("final_smoothing", s.final_smoothing, 0, 4);
   s.uncertainty = root.boolean_or("uncertainty", s.uncertainty);
+  s.uncertainty_stride = root.integer_in("uncertainty_stride", s.uncertainty_stride, 1, 4);
   s.early_interpolation = root.choice_or("early_interpolation", {"sinc", "cubic"}, "sinc") == "cubic"
                               ? Interpolation::cubic
                               : Interpolation::sinc;

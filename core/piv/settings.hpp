@@ -95,6 +95,14 @@ struct CorrelationSettings {
   // no sigma arrays, and the final pass costs a little less (docs/benchmarks.md, "Per-vector
   // uncertainty"). The vectors are the same bits either way.
   bool uncertainty = true;
+  // Nodes apart, per axis, at which the uncertainty is computed from the windows, 1..4; default 1
+  // (every vector). With n > 1 it is computed where each index is a multiple of n or the last, and
+  // interpolated linearly (trilinear in the node indices) at the nodes between whose bracketing
+  // nodes all have an estimate from a peak at the same integer shift; every other node is computed
+  // from its own windows. Neighbouring windows at 75 % overlap share three quarters of their voxels,
+  // so their sigmas change slowly from node to node there; 2 computes about an eighth of them
+  // (docs/benchmarks.md, "Per-vector uncertainty").
+  int uncertainty_stride = 1;
   // The deformation's interpolator in every pass but the last (deform.hpp: Interpolation), whose
   // vectors only become the next pass's predictor; the last pass always deforms with the sinc.
   // Default sinc; cubic makes those passes' deformation cheaper (docs/benchmarks.md,
@@ -141,6 +149,7 @@ std::vector<PassSettings> parse_passes(const std::string& text);
 //   predictor_smoothing: 1   # binomial passes over the predictor between passes, 0..4
 //   final_smoothing: 0       # binomial passes over the final field's valid vectors, 0..4
 //   uncertainty: true        # each vector's standard uncertainty (sigma), or false
+//   uncertainty_stride: 1    # computed every n nodes per axis, 1..4, interpolated between
 //   early_interpolation: sinc  # or cubic: the deformation's interpolator before the last pass
 //   spectral_whitening: 0    # 0..1: robust phase correlation's whitening before the last pass (0: off)
 //   whitened_peak_sigma_voxel: [1, 1, 2]  # its peak's width per axis, voxels

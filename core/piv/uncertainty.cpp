@@ -351,8 +351,9 @@ void smooth_sigma(std::vector<float>& sigma, std::span<const std::uint8_t> valid
     }
 }
 
-std::string correlation_statistics_method(int smoothing_passes) {
+std::string correlation_statistics_method(int stride, int smoothing_passes) {
   std::string text = "correlation statistics of the final pass (Wieneke 2015)";
+  if (stride > 1) text += " every " + std::to_string(stride) + " nodes per axis, interpolated between";
   if (smoothing_passes > 0)
     text += ", through " + std::to_string(smoothing_passes) + " smoothing pass" + (smoothing_passes > 1 ? "es" : "") +
             " (Sciacchitano & Wieneke 2016)";

@@ -41,9 +41,10 @@ std::array<float, 3> correlation_statistics_sigma(std::span<const float> a, std:
                                                   const std::array<int, 3>& window, int depth_margin,
                                                   const std::array<int, 3>& shift, UncertaintyScratch& scratch);
 
-// What correlation_statistics_sigma gives, carried through `smoothing_passes` of smooth_sigma (0:
-// none), in words: a field's sigma_method.
-std::string correlation_statistics_method(int smoothing_passes);
+// What correlation_statistics_sigma gives, computed every `stride` nodes per axis and interpolated
+// between (1: at every node; CorrelationSettings::uncertainty_stride), carried through
+// `smoothing_passes` of smooth_sigma (0: none), in words: a field's sigma_method.
+std::string correlation_statistics_method(int stride, int smoothing_passes);
 
 // Carries per-node standard uncertainties (one component, `sigma`, NaN: none) through
 // smooth_valid's `passes` binomial [1 2 1]/4 passes, node for node with the same rule (a node is

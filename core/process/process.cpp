@@ -109,8 +109,8 @@ void put_mart(ByteWriter& w, const recon::MartSettings& m) {
 
 void put_correlation(ByteWriter& w, const piv::CorrelationSettings& c) {
   const auto& [passes, median, signal_threshold, dt_s, fft_planning, intensity_threshold_of_mean, prefilter,
-               depth_prefilter, predictor, predictor_smoothing, final_smoothing, uncertainty, early_interpolation,
-               spectral_whitening, whitened_peak_sigma_voxel] = c;
+               depth_prefilter, predictor, predictor_smoothing, final_smoothing, uncertainty, uncertainty_stride,
+               early_interpolation, spectral_whitening, whitened_peak_sigma_voxel] = c;
   w.pod(std::uint64_t(passes.size()));
   for (const piv::PassSettings& p : passes) {
     const auto& [window, overlap_percent, depth_margin] = p;
@@ -132,6 +132,7 @@ void put_correlation(ByteWriter& w, const piv::CorrelationSettings& c) {
   w.pod(predictor_smoothing);
   w.pod(final_smoothing);
   w.pod(uncertainty);
+  w.pod(uncertainty_stride);
   w.pod(early_interpolation);
   w.pod(spectral_whitening);
   w.pod(whitened_peak_sigma_voxel);

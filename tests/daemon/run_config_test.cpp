@@ -78,6 +78,7 @@ TEST(RunConfig, ShippedPaperScaleConfigParses) {
   EXPECT_EQ(s.correlation.depth_prefilter, 1);  // four passes' smoothing at 0.125 mm
   EXPECT_EQ(s.correlation.final_smoothing, 1);
   EXPECT_EQ(s.correlation.early_interpolation, piv::Interpolation::cubic);  // the last pass keeps the sinc
+  EXPECT_EQ(s.correlation.uncertainty_stride, 2);  // sigma every second node per axis, interpolated between
   EXPECT_EQ(s.pixel_binning, 1);
 
   ASSERT_TRUE(c.spec.live);
@@ -90,6 +91,7 @@ TEST(RunConfig, ShippedPaperScaleConfigParses) {
   ASSERT_EQ(live.correlation.passes.size(), 2u);
   EXPECT_EQ(live.correlation.passes[1].window, (std::array<int, 3>{8, 8, 4}));  // 3 mm cubes
   EXPECT_EQ(live.correlation.depth_prefilter, 1);
+  EXPECT_EQ(live.correlation.uncertainty_stride, 1);  // windows at 50 %: every vector's own
   EXPECT_EQ(c.quality.take, QualityLane::Take::newest);
 }
 

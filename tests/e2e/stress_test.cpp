@@ -140,22 +140,25 @@ Case make_case(std::uint64_t index) {
   // The shipped peak, and the narrowest and widest allowed.
   const std::array<double, 3> peak_sigmas[] = {{1, 1, 2}, {0.5, 0.5, 0.5}, {8, 8, 8}};
   c.settings.correlation.whitened_peak_sigma_voxel = peak_sigmas[pick(3)];
+  const int strides[] = {1, 2, 4};  // every node (the default), run-paper.yaml's, the largest allowed
+  c.settings.correlation.uncertainty_stride = strides[pick(3)];
   const auto& sigma = c.settings.correlation.whitened_peak_sigma_voxel;
-  c.description = "case " + std::to_string(index) + ": mode " + std::to_string(mode) + ", " + std::to_string(count) +
-                  " particles, mu " + std::to_string(c.settings.mart.mu) + ", " +
-                  std::to_string(c.settings.mart.iterations) + " iterations" +
-                  (c.settings.mart.accelerate ? " accelerated" : "") + ", intensity floor " +
-                  std::to_string(c.settings.correlation.intensity_threshold_of_mean) + "x the mean, depth margin " +
-                  std::to_string(c.settings.correlation.passes[1].depth_margin) + ", final smoothing " +
-                  std::to_string(c.settings.correlation.final_smoothing) + ", depth prefilter " +
-                  std::to_string(c.settings.correlation.depth_prefilter) + ", prune threshold " +
-                  std::to_string(c.settings.mart.prune_threshold) + " of the " +
-                  (c.settings.mart.prune_scope == recon::PruneScope::slice ? "slice's" : "volume's") +
-                  " peak, depth reach " + std::to_string(c.settings.mart.prune_depth_reach) + ", early interpolation " +
-                  (c.settings.correlation.early_interpolation == piv::Interpolation::cubic ? "cubic" : "sinc") +
-                  ", spectral whitening " + std::to_string(c.settings.correlation.spectral_whitening) +
-                  " with a peak of " + std::to_string(sigma[0]) + " x " + std::to_string(sigma[1]) + " x " +
-                  std::to_string(sigma[2]) + " voxels, depth " + std::to_string(c.depth);
+  c.description =
+      "case " + std::to_string(index) + ": mode " + std::to_string(mode) + ", " + std::to_string(count) +
+      " particles, mu " + std::to_string(c.settings.mart.mu) + ", " + std::to_string(c.settings.mart.iterations) +
+      " iterations" + (c.settings.mart.accelerate ? " accelerated" : "") + ", intensity floor " +
+      std::to_string(c.settings.correlation.intensity_threshold_of_mean) + "x the mean, depth margin " +
+      std::to_string(c.settings.correlation.passes[1].depth_margin) + ", final smoothing " +
+      std::to_string(c.settings.correlation.final_smoothing) + ", depth prefilter " +
+      std::to_string(c.settings.correlation.depth_prefilter) + ", prune threshold " +
+      std::to_string(c.settings.mart.prune_threshold) + " of the " +
+      (c.settings.mart.prune_scope == recon::PruneScope::slice ? "slice's" : "volume's") + " peak, depth reach " +
+      std::to_string(c.settings.mart.prune_depth_reach) + ", early interpolation " +
+      (c.settings.correlation.early_interpolation == piv::Interpolation::cubic ? "cubic" : "sinc") +
+      ", spectral whitening " + std::to_string(c.settings.correlation.spectral_whitening) + " with a peak of " +
+      std::to_string(sigma[0]) + " x " + std::to_string(sigma[1]) + " x " + std::to_string(sigma[2]) +
+      " voxels, uncertainty every " + std::to_string(c.settings.correlation.uncertainty_stride) + " nodes, depth " +
+      std::to_string(c.depth);
   return c;
 }
 

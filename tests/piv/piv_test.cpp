@@ -4,6 +4,7 @@
 #include <tbb/global_control.h>
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <complex>
 #include <cstring>
@@ -1322,6 +1323,140 @@ TEST(Uncertainty, FastSumsMatchTheDefinitionVoxelByVoxel) {
   }
 }
 
+// How a field's sigma at uncertainty_stride 2 (`second`) stands against every node's own
+// (`every`, the same windows): nodes whose indices are all multiples of 2 or the last, computed
+// (their bits checked); nodes beside one without an estimate, computed from their own windows
+// (bits checked); interpolated nodes, checked to be the mean of their bracketing nodes (stride
+// 2's trilinear weights); and the rest, with their own bits, whose peak was at another integer
+// shift than a bracketing node's.
+struct StrideCounts {
+  int computed = 0, beside_none = 0, other_shift = 0, interpolated = 0;
+  double rms_log_ratio = 0;  // interpolated over own sigma, where the own one is positive
+};
+StrideCounts compare_strides(const VectorField& every, const VectorField& second) {
+  StrideCounts counts;
+  const std::array<int, 3> n = every.grid.shape;
+  const auto at = [&](int i, int j, int k) {
+    return std::size_t(i) + std::size_t(n[0]) * (std::size_t(j) + std::size_t(n[1]) * std::size_t(k));
+  };
+  const auto computed = [&](int i, int axis) { return i % 2 == 0 || i == n[axis] - 1; };
+  const std::array<const std::vector<float>*, 3> s1{&every.sigma_dx_mm, &every.sigma_dy_mm, &every.sigma_dz_mm},
+      s2{&second.sigma_dx_mm, &second.sigma_dy_mm, &second.sigma_dz_mm};
+  double log_ratio_sq = 0;
+  int ratios = 0;
+  for (int k = 0; k < n[2]; ++k)
+    for (int j = 0; j < n[1]; ++j)
+      for (int i = 0; i < n[0]; ++i) {
+        const std::size_t node = at(i, j, k);
+        const auto same = [&] {
+          for (int c = 0; c < 3; ++c)
+            if (std::bit_cast<std::uint32_t>((*s1[c])[node]) != std::bit_cast<std::uint32_t>((*s2[c])[node]))
+              return false;
+          return true;
+        };
+        if (computed(i, 0) && computed(j, 1) && computed(k, 2)) {
+          EXPECT_TRUE(same()) << "computed node " << i << " " << j << " " << k;
+          ++counts.computed;
+          continue;
+        }
+        if (std::isnan((*s1[0])[node])) continue;
+        // The mean of the bracketing nodes per component, and whether each has an estimate.
+        std::array<double, 3> mean{0, 0, 0};
+        bool whole = true;
+        const int ijk[3] = {i, j, k};
+        for (int c = 0; c < 8; ++c) {
+          int corner[3];
+          for (int a = 0; a < 3; ++a) {
+            const int low = ijk[a] - ijk[a] % 2;
+            corner[a] = computed(ijk[a], a) ? ijk[a] : ((c >> a) & 1) ? std::min(low + 2, n[a] - 1) : low;
+          }
+          const std::size_t q = at(corner[0], corner[1], corner[2]);
+          for (int comp = 0; comp < 3; ++comp) {
+            whole = whole && std::isfinite((*s1[comp])[q]);
+            mean[comp] += (*s1[comp])[q] / 8.0;
+          }
+        }
+        if (!whole) {
+          EXPECT_TRUE(same()) << "beside a node without an estimate: " << i << " " << j << " " << k;
+          ++counts.beside_none;
+          continue;
+        }
+        if (same()) {
+          ++counts.other_shift;
+          continue;
+        }
+        ++counts.interpolated;
+        for (int comp = 0; comp < 3; ++comp) {
+          const float v = (*s2[comp])[node];
+          EXPECT_NEAR(v, mean[comp], 1e-5 * mean[comp]) << i << " " << j << " " << k << " component " << comp;
+          if ((*s1[comp])[node] > 0) {  // 0: its own windows' asymmetry has no spread
+            log_ratio_sq += std::pow(std::log(v / (*s1[comp])[node]), 2);
+            ++ratios;
+          }
+        }
+      }
+  counts.rms_log_ratio = std::sqrt(log_ratio_sq / std::max(1, ratios));
+  std::printf("stride 2: %d computed, %d beside none, %d at other shifts, %d interpolated, RMS log ratio %.3f\n",
+              counts.computed, counts.beside_none, counts.other_shift, counts.interpolated, counts.rms_log_ratio);
+  return counts;
+}
+
+// The uncertainty every second node per axis against every node's, on a noisy uniform shift with
+// the particles of one corner of the box taken out (windows without signal, so vectors without an
+// estimate): the vectors the same bits, most nodes interpolated and near their own sigma, and the
+// field's sigma as near the true errors. Then with the far half in y moved 2.5 voxels more along x
+// (a step the predictor smooths, so final peaks beside it sit at other integer shifts): those
+// nodes computed from their own windows.
+TEST(Uncertainty, EverySecondNodeComputedTheRestInterpolated) {
+  const Grid3 g = cube(64);
+  const sim::UniformFlow flow({0.03, -0.06, 0.12});
+  auto pa = sim::particles_around(g, 51);
+  std::erase_if(pa, [&](const sim::Point3& p) {
+    for (std::size_t a = 0; a < 3; ++a)
+      if (p[a] > g.origin_mm[a] + 0.45 * (g.shape[a] - 1) * 0.1) return false;
+    return true;
+  });
+  CorrelationSettings every, second;
+  second.uncertainty_stride = 2;
+  for (const bool step : {false, true}) {
+    auto pb = sim::displace(pa, flow);
+    if (step)
+      for (sim::Point3& p : pb)
+        if (p[1] > g.origin_mm[1] + 0.5 * (g.shape[1] - 1) * 0.1) p[0] += 0.25;
+    Volume a = sim::render_exact_volume(g, pa), b = sim::render_exact_volume(g, pb);
+    std::mt19937 rng(12);
+    std::normal_distribution<float> noise(0, 0.02f);
+    for (Volume* v : {&a, &b})
+      for (float& x : v->data) x = std::max(0.f, x + noise(rng));
+    const CorrelationResult r1 = correlate_volumes(a, b, every), r2 = correlate_volumes(a, b, second);
+    EXPECT_EQ(r1.field.dx_mm, r2.field.dx_mm);
+    EXPECT_EQ(r1.field.dz_mm, r2.field.dz_mm);
+    EXPECT_NE(r2.field.sigma_method.find("every 2 nodes"), std::string::npos) << r2.field.sigma_method;
+    const StrideCounts c = compare_strides(r1.field, r2.field);
+    EXPECT_GT(c.beside_none, 10);
+    EXPECT_GT(c.interpolated, 4 * c.computed);
+    if (step) {
+      EXPECT_GT(c.other_shift, 10);
+      continue;
+    }
+    // One window's sigma scatters about its neighbours' (its own few particles); the interpolated
+    // value stays near it. Bounds here and below a little above what the case measures (printed).
+    EXPECT_LT(c.rms_log_ratio, 0.35);
+    const auto check = [&](const CorrelationResult& r) {
+      return sim::uncertainty_check(r.field, flow, 0.1, 1, 1, [](const sim::Point3&) { return true; });
+    };
+    const sim::UncertaintyCheck c1 = check(r1), c2 = check(r2);
+    for (int k = 0; k < 3; ++k) {
+      std::printf("%c: RMS sigma / error %.3f and %.3f, within 1 sigma %.3f and %.3f, 2 sigma %.3f and %.3f\n",
+                  "uvw"[k], c1.rms_sigma[k] / c1.rms_error[k], c2.rms_sigma[k] / c2.rms_error[k], c1.within_1[k],
+                  c2.within_1[k], c1.within_2[k], c2.within_2[k]);
+      EXPECT_NEAR(c2.rms_sigma[k] / c1.rms_sigma[k], 1, 0.1) << "uvw"[k];
+      EXPECT_NEAR(c2.within_1[k], c1.within_1[k], 0.08) << "uvw"[k];
+      EXPECT_NEAR(c2.within_2[k], c1.within_2[k], 0.04) << "uvw"[k];
+    }
+  }
+}
+
 // Smoothing carries sigma with the windows' overlap: uniform sigma 1 through one [1 2 1]/4 pass
 // per axis of windows 16 wide 4 apart (shares 3/4 and 1/2 at 1 and 2 nodes) leaves
 // sqrt(0.8125^3) inside; faces and invalid nodes keep theirs, and a neighbour without an
@@ -1650,6 +1785,11 @@ TEST(Settings, PredictorKeysFromYamlAndRefusals) {
   EXPECT_TRUE(d.uncertainty);
   EXPECT_FALSE(from("uncertainty: false\n").uncertainty);
   EXPECT_THROW(from("uncertainty: sometimes\n"), InputError);
+  EXPECT_EQ(d.uncertainty_stride, 1);
+  EXPECT_EQ(from("uncertainty_stride: 2\n").uncertainty_stride, 2);
+  EXPECT_THROW(from("uncertainty_stride: 0\n"), InputError);
+  EXPECT_THROW(from("uncertainty_stride: 5\n"), InputError);
+  EXPECT_THROW(from("uncertainty_stride: 1.5\n"), InputError);
   EXPECT_EQ(d.early_interpolation, Interpolation::sinc);
   EXPECT_EQ(from("early_interpolation: cubic\n").early_interpolation, Interpolation::cubic);
   EXPECT_THROW(from("early_interpolation: linear\n"), InputError);
