@@ -96,12 +96,12 @@ struct CorrelationSettings {
   // uncertainty"). The vectors are the same bits either way.
   bool uncertainty = true;
   // Nodes apart, per axis, at which the uncertainty is computed from the windows, 1..4; default 1
-  // (every vector). With n > 1 it is computed where each index is a multiple of n or the last, and
-  // interpolated linearly (trilinear in the node indices) at the nodes between whose bracketing
-  // nodes all have an estimate from a peak at the same integer shift; every other node is computed
-  // from its own windows. Neighbouring windows at 75 % overlap share three quarters of their voxels,
-  // so their sigmas change slowly from node to node there; 2 computes about an eighth of them
-  // (docs/benchmarks.md, "Per-vector uncertainty").
+  // (every vector). With n > 1 it is computed where each index is a multiple of n or the last; a
+  // node between takes the trilinear interpolation (in node indices) of its bracketing nodes when
+  // each of them has an estimate from a peak at the node's own integer shift, and is computed from
+  // its own windows otherwise. Neighbouring windows at 75 % overlap share three quarters of their
+  // voxels, so their sigmas change slowly from node to node there; 2 computes about an eighth of
+  // them (docs/accuracy.md, "Per-vector uncertainty").
   int uncertainty_stride = 1;
   // The deformation's interpolator in every pass but the last (deform.hpp: Interpolation), whose
   // vectors only become the next pass's predictor; the last pass always deforms with the sinc.
