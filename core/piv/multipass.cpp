@@ -351,6 +351,7 @@ std::array<std::vector<float>, 3> vector_uncertainty(std::span<const float> va, 
   std::array<std::vector<float>, 3> sigma;
   for (auto& s : sigma) s.assign(f.d.size(), std::numeric_limits<float>::quiet_NaN());
   const std::size_t nx = std::size_t(l.count[0]), nxy = nx * std::size_t(l.count[1]);
+  const std::array<std::size_t, 3> node_stride{1, nx, nxy};
   const auto index = [&](std::size_t node) {
     return std::array<int, 3>{int(node % nx), int((node / nx) % std::size_t(l.count[1])), int(node / nxy)};
   };
@@ -381,7 +382,7 @@ std::array<std::vector<float>, 3> vector_uncertainty(std::span<const float> va, 
   // First the computed nodes, then the rest: interpolated from the eight (or fewer, on a computed
   // index) bracketing nodes when each has all three estimates from a peak at this node's shift.
   for (const bool first : {true, false}) {
-    if (first == false && stride == 1) break;
+    if (!first && stride == 1) break;
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, f.d.size()), [&](const auto& r) {
       UncertaintyScratch& s = scratch.local();
       for (std::size_t node = r.begin(); node < r.end(); ++node) {
@@ -392,19 +393,24 @@ std::array<std::vector<float>, 3> vector_uncertainty(std::span<const float> va, 
           compute(node, ijk, s);
           continue;
         }
-        const std::array<int, 2> bx = bracket(ijk[0], 0), by = bracket(ijk[1], 1), bz = bracket(ijk[2], 2);
+        // Per axis the bracketing indices and the fraction of the way from the first to the second.
+        std::array<std::array<int, 2>, 3> b;
+        std::array<double, 3> t;
+        for (int a = 0; a < 3; ++a) {
+          b[a] = bracket(ijk[a], a);
+          t[a] = b[a][1] == b[a][0] ? 0.5 : double(ijk[a] - b[a][0]) / (b[a][1] - b[a][0]);
+        }
         const std::array<int, 3> shift = shift_of(node);
         std::array<double, 3> sum{0, 0, 0};
         bool whole = true;
         for (int c = 0; c < 8 && whole; ++c) {
-          const std::array<int, 3> corner{bx[c & 1], by[(c >> 1) & 1], bz[c >> 2]};
           double w = 1;
+          std::size_t at = 0;
           for (int a = 0; a < 3; ++a) {
-            const std::array<int, 2>& b = a == 0 ? bx : a == 1 ? by : bz;
-            const double t = b[1] == b[0] ? 0.5 : double(ijk[a] - b[0]) / (b[1] - b[0]);
-            w *= ((c >> a) & 1) ? t : 1 - t;
+            const int high = (c >> a) & 1;
+            w *= high ? t[a] : 1 - t[a];
+            at += std::size_t(b[a][high]) * node_stride[a];
           }
-          const std::size_t at = std::size_t(corner[0]) + std::size_t(corner[1]) * nx + std::size_t(corner[2]) * nxy;
           whole = shift_of(at) == shift;
           for (int a = 0; a < 3 && whole; ++a) {
             whole = std::isfinite(sigma[a][at]);

@@ -1430,6 +1430,7 @@ TEST(Uncertainty, EverySecondNodeComputedTheRestInterpolated) {
       for (float& x : v->data) x = std::max(0.f, x + noise(rng));
     const CorrelationResult r1 = correlate_volumes(a, b, every), r2 = correlate_volumes(a, b, second);
     EXPECT_EQ(r1.field.dx_mm, r2.field.dx_mm);
+    EXPECT_EQ(r1.field.dy_mm, r2.field.dy_mm);
     EXPECT_EQ(r1.field.dz_mm, r2.field.dz_mm);
     EXPECT_NE(r2.field.sigma_method.find("every 2 nodes"), std::string::npos) << r2.field.sigma_method;
     const StrideCounts c = compare_strides(r1.field, r2.field);
