@@ -31,6 +31,114 @@ T* fftw_array(std::size_t count) {
   return static_cast<T*>(p);
 }
 
+// The cross spectrum conj(A_k) B_k = Im(Z_k Z_-k) / 2 - i (|Z_k|^2 - |Z_-k|^2) / 4 (times `half` =
+// 1/2n and `quarter` = 1/4n) on the half spectrum kx = 0 .. nx / 2, from Z (interleaved complex
+// values), row by row: Z_-k at kx is the mirror row's (ky, kz negated) kx = 0 for kx = 0, else its
+// nx - kx. From kx = 1 on, C values at a time (the mirror's run read backwards); every value gets
+// the same float operations in the same order as one at a time, so every build gives the same bits.
+template <int C>
+struct CrossLanes;  // C complex values: C real or imaginary parts, and the 2 C floats they come in
+template <>
+struct CrossLanes<4> {
+  using Part = float __attribute__((vector_size(16)));
+  using Pair = float __attribute__((vector_size(32)));
+};
+template <>
+struct CrossLanes<8> {
+  using Part = float __attribute__((vector_size(32)));
+  using Pair = float __attribute__((vector_size(64)));
+};
+
+template <int C>
+[[gnu::always_inline]] inline void cross_spectrum_row(const float* __restrict z, const float* __restrict m, int nx,
+                                                      float half, float quarter, float* __restrict out) {
+  using Part = typename CrossLanes<C>::Part;
+  using Pair = typename CrossLanes<C>::Pair;
+  const auto one = [&](int kx, int mx) {
+    const float zr = z[2 * kx], zi = z[2 * kx + 1], mr = m[2 * mx], mi = m[2 * mx + 1];
+    out[2 * kx] = (zr * mi + zi * mr) * half;
+    out[2 * kx + 1] = ((mr * mr + mi * mi) - (zr * zr + zi * zi)) * quarter;
+  };
+  one(0, 0);
+  const int half_x = nx / 2 + 1;
+  int kx = 1;
+  for (; kx + C <= half_x; kx += C) {
+    Pair zv, mv;
+    __builtin_memcpy(&zv, z + 2 * kx, sizeof zv);
+    __builtin_memcpy(&mv, m + 2 * (nx - kx - C + 1), sizeof mv);  // Z_-k for kx + C - 1 .. kx
+    Part zr, zi, mr, mi;
+    if constexpr (C == 4) {
+      zr = __builtin_shufflevector(zv, zv, 0, 2, 4, 6);
+      zi = __builtin_shufflevector(zv, zv, 1, 3, 5, 7);
+      mr = __builtin_shufflevector(mv, mv, 6, 4, 2, 0);
+      mi = __builtin_shufflevector(mv, mv, 7, 5, 3, 1);
+    } else {
+      zr = __builtin_shufflevector(zv, zv, 0, 2, 4, 6, 8, 10, 12, 14);
+      zi = __builtin_shufflevector(zv, zv, 1, 3, 5, 7, 9, 11, 13, 15);
+      mr = __builtin_shufflevector(mv, mv, 14, 12, 10, 8, 6, 4, 2, 0);
+      mi = __builtin_shufflevector(mv, mv, 15, 13, 11, 9, 7, 5, 3, 1);
+    }
+    const Part re = (zr * mi + zi * mr) * half;
+    const Part im = ((mr * mr + mi * mi) - (zr * zr + zi * zi)) * quarter;
+    Pair o;
+    if constexpr (C == 4)
+      o = __builtin_shufflevector(re, im, 0, 4, 1, 5, 2, 6, 3, 7);
+    else
+      o = __builtin_shufflevector(re, im, 0, 8, 1, 9, 2, 10, 3, 11, 4, 12, 5, 13, 6, 14, 7, 15);
+    __builtin_memcpy(out + 2 * kx, &o, sizeof o);
+  }
+  for (; kx < half_x; ++kx) one(kx, nx - kx);
+}
+
+// z = a + i b over n values, interleaved (a copy: the same bits in every build).
+[[gnu::always_inline]] inline void interleave_body(const float* __restrict a, const float* __restrict b, std::size_t n,
+                                                   float* __restrict z) {
+  for (std::size_t i = 0; i < n; ++i) {
+    z[2 * i] = a[i];
+    z[2 * i + 1] = b[i];
+  }
+}
+
+template <int C>
+[[gnu::always_inline]] inline void cross_spectrum_body(const float* spec, const std::array<int, 3>& s, float half,
+                                                       float quarter, float* cross) {
+  const std::size_t half_x = std::size_t(s[0] / 2 + 1);
+  for (int kz = 0; kz < s[2]; ++kz) {
+    const int mz = kz ? s[2] - kz : 0;
+    for (int ky = 0; ky < s[1]; ++ky) {
+      const int my = ky ? s[1] - ky : 0;
+      const std::size_t row = (std::size_t(kz) * s[1] + ky) * s[0], mirror_row = (std::size_t(mz) * s[1] + my) * s[0];
+      cross_spectrum_row<C>(spec + 2 * row, spec + 2 * mirror_row, s[0], half, quarter,
+                            cross + 2 * (std::size_t(kz) * s[1] + ky) * half_x);
+    }
+  }
+}
+
+__attribute__((target("avx512f"))) void cross_spectrum_avx512(const float* spec, const std::array<int, 3>& s,
+                                                              float half, float quarter, float* cross) {
+  cross_spectrum_body<8>(spec, s, half, quarter, cross);
+}
+__attribute__((target("avx2"))) void cross_spectrum_avx2(const float* spec, const std::array<int, 3>& s, float half,
+                                                         float quarter, float* cross) {
+  cross_spectrum_body<8>(spec, s, half, quarter, cross);
+}
+void cross_spectrum_baseline(const float* spec, const std::array<int, 3>& s, float half, float quarter, float* cross) {
+  cross_spectrum_body<4>(spec, s, half, quarter, cross);
+}
+__attribute__((target("avx512f"))) void interleave_avx512(const float* a, const float* b, std::size_t n, float* z) {
+  interleave_body(a, b, n, z);
+}
+__attribute__((target("avx2"))) void interleave_avx2(const float* a, const float* b, std::size_t n, float* z) {
+  interleave_body(a, b, n, z);
+}
+void interleave_baseline(const float* a, const float* b, std::size_t n, float* z) { interleave_body(a, b, n, z); }
+void interleave(const float* a, const float* b, std::size_t n, float* z) {
+  for_isa(interleave_avx512, interleave_avx2, interleave_baseline)(a, b, n, z);
+}
+void cross_spectrum(const float* spec, const std::array<int, 3>& s, float half, float quarter, float* cross) {
+  for_isa(cross_spectrum_avx512, cross_spectrum_avx2, cross_spectrum_baseline)(spec, s, half, quarter, cross);
+}
+
 }  // namespace
 
 // Aligned buffers from fftwf_malloc, so the plans' alignment assumptions hold for every thread.
@@ -146,30 +254,12 @@ std::span<float> FftCorrelator::Workspace::correlate(const SpectralWeights* weig
   // so A_k = (Z_k + conj Z_-k) / 2 and B_k = (Z_k - conj Z_-k) / 2i. One complex transform
   // replaces two real-to-complex ones: FFTW's real transform of a 16^3 window costs about as
   // much as its complex one (docs/lab/2026-11-23.md, "Correlation 1.6x faster").
-  for (std::size_t i = 0; i < n; ++i) {
-    w.z[i][0] = w.a[i];
-    w.z[i][1] = w.b[i];
-  }
+  interleave(w.a, w.b, n, &w.z[0][0]);
   fftwf_execute_dft(owner_->plans_->forward, w.z, w.spec);
   // conj(A_k) B_k = Im(Z_k Z_-k) / 2 - i (|Z_k|^2 - |Z_-k|^2) / 4, scaled by 1/n so the
   // inverse transform gives the plain correlation sum.
   const float half = 0.5f / float(n), quarter = 0.25f / float(n);
-  const int half_x = s[0] / 2 + 1;
-  for (int kz = 0; kz < s[2]; ++kz) {
-    const int mz = kz ? s[2] - kz : 0;
-    for (int ky = 0; ky < s[1]; ++ky) {
-      const int my = ky ? s[1] - ky : 0;
-      const std::size_t row = (std::size_t(kz) * s[1] + ky) * s[0];
-      const std::size_t mirror_row = (std::size_t(mz) * s[1] + my) * s[0];
-      fftwf_complex* out = w.cross + (std::size_t(kz) * s[1] + ky) * half_x;
-      for (int kx = 0; kx < half_x; ++kx) {
-        const std::size_t k = row + kx, m = mirror_row + (kx ? s[0] - kx : 0);
-        const float zr = w.spec[k][0], zi = w.spec[k][1], mr = w.spec[m][0], mi = w.spec[m][1];
-        out[kx][0] = (zr * mi + zi * mr) * half;
-        out[kx][1] = ((mr * mr + mi * mi) - (zr * zr + zi * zi)) * quarter;
-      }
-    }
-  }
+  cross_spectrum(&w.spec[0][0], s, half, quarter, &w.cross[0][0]);
   // Mean subtraction (it removes the pedestal that would otherwise put a broad peak at shift 0)
   // changes only the k = 0 term of A and B: their product there is zero.
   w.cross[0][0] = 0.f;

@@ -102,72 +102,96 @@ TEST(FftCorrelator, IntegerShiftOfARandomWindowPeaksThere) {
 // The weighted correlation against a direct evaluation in double: R(s) = sum_k W(C_k) e^(2 pi i k.s / n)
 // with C_k = conj(A_k) B_k / n (0 at k = 0), W(C) = C G / |C|^p and G the Gaussian whose peak has
 // standard deviation sigma voxels per axis. Odd and even sizes (FFTW's half spectrum and its
-// mirrors), and each of the weighting's paths: p = 1/2 and 1 (square roots) and another power.
+// mirrors), x sizes whose half spectrum is 0, 1, 2 vectors of the cross spectrum's row and a rest
+// (the mirror read backwards), each of the weighting's paths: p = 1/2 and 1 (square roots) and
+// another power; under every build this CPU runs, all with the same bits.
 TEST(FftCorrelator, WeightedCorrelationIsTheWhitenedCrossSpectrumsInverse) {
-  const std::array<int, 3> shape{6, 5, 4};
+  const Isa chosen = isa();
+  std::vector<Isa> builds;
+  for (const Isa build : {Isa::baseline, Isa::avx2, Isa::avx512})
+    if (build <= best_isa())
+      builds.push_back(build);
+    else
+      std::printf("this CPU has no %s build to test\n", isa_name(build));
   const std::array<double, 3> sigma{1, 0.7, 2};
-  const std::size_t n = std::size_t(shape[0]) * shape[1] * shape[2];
-  std::mt19937 rng(11);
-  std::uniform_real_distribution<float> u(0, 1);
-  std::vector<float> a(n), b(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    a[i] = u(rng);
-    b[i] = u(rng);
-  }
-  const auto index = [&](int x, int y, int z) { return (std::size_t(z) * shape[1] + y) * shape[0] + x; };
-  const double two_pi = 2 * std::numbers::pi;
-  // A_k and B_k by the definition.
-  std::vector<std::complex<double>> spectrum_a(n), spectrum_b(n);
-  for (int kz = 0; kz < shape[2]; ++kz)
-    for (int ky = 0; ky < shape[1]; ++ky)
-      for (int kx = 0; kx < shape[0]; ++kx)
-        for (int z = 0; z < shape[2]; ++z)
-          for (int y = 0; y < shape[1]; ++y)
-            for (int x = 0; x < shape[0]; ++x) {
-              const double phase =
-                  -two_pi * (double(kx) * x / shape[0] + double(ky) * y / shape[1] + double(kz) * z / shape[2]);
-              const std::complex<double> e = std::polar(1.0, phase);
-              spectrum_a[index(kx, ky, kz)] += double(a[index(x, y, z)]) * e;
-              spectrum_b[index(kx, ky, kz)] += double(b[index(x, y, z)]) * e;
-            }
-  const auto frequency = [](int k, int len) { return double(k <= len / 2 ? k : k - len) / len; };
-  FftCorrelator corr(shape);
-  for (const double p : {0.5, 1.0, 0.3}) {
-    SCOPED_TRACE("power " + std::to_string(p));
-    std::vector<std::complex<double>> weighted(n);
+  for (const std::array<int, 3> shape : {std::array<int, 3>{6, 5, 4}, {16, 3, 2}, {20, 3, 2}, {9, 4, 3}, {17, 2, 3}}) {
+    SCOPED_TRACE("shape " + std::to_string(shape[0]) + "x" + std::to_string(shape[1]) + "x" + std::to_string(shape[2]));
+    const std::size_t n = std::size_t(shape[0]) * shape[1] * shape[2];
+    std::mt19937 rng(11);
+    std::uniform_real_distribution<float> u(0, 1);
+    std::vector<float> a(n), b(n);
+    for (std::size_t i = 0; i < n; ++i) {
+      a[i] = u(rng);
+      b[i] = u(rng);
+    }
+    const auto index = [&](int x, int y, int z) { return (std::size_t(z) * shape[1] + y) * shape[0] + x; };
+    const double two_pi = 2 * std::numbers::pi;
+    // A_k and B_k by the definition.
+    std::vector<std::complex<double>> spectrum_a(n), spectrum_b(n);
     for (int kz = 0; kz < shape[2]; ++kz)
       for (int ky = 0; ky < shape[1]; ++ky)
-        for (int kx = 0; kx < shape[0]; ++kx) {
-          const std::size_t k = index(kx, ky, kz);
-          if (k == 0) continue;
-          const std::complex<double> c = std::conj(spectrum_a[k]) * spectrum_b[k] / double(n);
-          const double f[3] = {frequency(kx, shape[0]), frequency(ky, shape[1]), frequency(kz, shape[2])};
-          double e = 0;
-          for (int axis = 0; axis < 3; ++axis) e += sigma[axis] * sigma[axis] * f[axis] * f[axis];
-          weighted[k] = c * std::exp(-two_pi * std::numbers::pi * e) / std::pow(std::abs(c), p);
-        }
-    auto& ws = corr.workspace();
-    std::copy(a.begin(), a.end(), ws.window_a().begin());
-    std::copy(b.begin(), b.end(), ws.window_b().begin());
-    const SpectralWeights weights(shape, p, sigma);
-    const std::span<const float> r = ws.correlate(&weights);
-    double largest = 0, worst = 0;
-    for (int sz = 0; sz < shape[2]; ++sz)
-      for (int sy = 0; sy < shape[1]; ++sy)
-        for (int sx = 0; sx < shape[0]; ++sx) {
-          std::complex<double> sum = 0;
-          for (int kz = 0; kz < shape[2]; ++kz)
-            for (int ky = 0; ky < shape[1]; ++ky)
-              for (int kx = 0; kx < shape[0]; ++kx)
-                sum += weighted[index(kx, ky, kz)] *
-                       std::polar(1.0, two_pi * (double(kx) * sx / shape[0] + double(ky) * sy / shape[1] +
-                                                 double(kz) * sz / shape[2]));
-          largest = std::max(largest, std::abs(sum.real()));
-          worst = std::max(worst, std::abs(double(r[index(sx, sy, sz)]) - sum.real()));
-        }
-    ASSERT_GT(largest, 0.0);
-    EXPECT_LT(worst, 1e-5 * largest) << worst / largest;
+        for (int kx = 0; kx < shape[0]; ++kx)
+          for (int z = 0; z < shape[2]; ++z)
+            for (int y = 0; y < shape[1]; ++y)
+              for (int x = 0; x < shape[0]; ++x) {
+                const double phase =
+                    -two_pi * (double(kx) * x / shape[0] + double(ky) * y / shape[1] + double(kz) * z / shape[2]);
+                const std::complex<double> e = std::polar(1.0, phase);
+                spectrum_a[index(kx, ky, kz)] += double(a[index(x, y, z)]) * e;
+                spectrum_b[index(kx, ky, kz)] += double(b[index(x, y, z)]) * e;
+              }
+    const auto frequency = [](int k, int len) { return double(k <= len / 2 ? k : k - len) / len; };
+    FftCorrelator corr(shape);
+    for (const double p : {0.5, 1.0, 0.3}) {
+      SCOPED_TRACE("power " + std::to_string(p));
+      std::vector<std::complex<double>> weighted(n);
+      for (int kz = 0; kz < shape[2]; ++kz)
+        for (int ky = 0; ky < shape[1]; ++ky)
+          for (int kx = 0; kx < shape[0]; ++kx) {
+            const std::size_t k = index(kx, ky, kz);
+            if (k == 0) continue;
+            const std::complex<double> c = std::conj(spectrum_a[k]) * spectrum_b[k] / double(n);
+            const double f[3] = {frequency(kx, shape[0]), frequency(ky, shape[1]), frequency(kz, shape[2])};
+            double e = 0;
+            for (int axis = 0; axis < 3; ++axis) e += sigma[axis] * sigma[axis] * f[axis] * f[axis];
+            weighted[k] = c * std::exp(-two_pi * std::numbers::pi * e) / std::pow(std::abs(c), p);
+          }
+      std::vector<double> expected(n);
+      double largest = 0;
+      for (int sz = 0; sz < shape[2]; ++sz)
+        for (int sy = 0; sy < shape[1]; ++sy)
+          for (int sx = 0; sx < shape[0]; ++sx) {
+            std::complex<double> sum = 0;
+            for (int kz = 0; kz < shape[2]; ++kz)
+              for (int ky = 0; ky < shape[1]; ++ky)
+                for (int kx = 0; kx < shape[0]; ++kx)
+                  sum += weighted[index(kx, ky, kz)] *
+                         std::polar(1.0, two_pi * (double(kx) * sx / shape[0] + double(ky) * sy / shape[1] +
+                                                   double(kz) * sz / shape[2]));
+            expected[index(sx, sy, sz)] = sum.real();
+            largest = std::max(largest, std::abs(sum.real()));
+          }
+      ASSERT_GT(largest, 0.0);
+      const SpectralWeights weights(shape, p, sigma);
+      std::vector<float> first_build;
+      for (const Isa build : builds) {
+        SCOPED_TRACE(isa_name(build));
+        use_isa(build);
+        auto& ws = corr.workspace();
+        std::copy(a.begin(), a.end(), ws.window_a().begin());
+        std::copy(b.begin(), b.end(), ws.window_b().begin());
+        const std::span<const float> r = ws.correlate(&weights);
+        double worst = 0;
+        for (std::size_t i = 0; i < n; ++i) worst = std::max(worst, std::abs(double(r[i]) - expected[i]));
+        EXPECT_LT(worst, 1e-5 * largest) << worst / largest;
+        if (first_build.empty())
+          first_build.assign(r.begin(), r.end());
+        else
+          EXPECT_TRUE(std::equal(r.begin(), r.end(), first_build.begin())) << "not the bits of the first build";
+      }
+    }
   }
+  use_isa(chosen);
 }
 
 // A sampled Gaussian correlation peak: the 3-point Gaussian fit is exact for it.
