@@ -65,6 +65,17 @@ std::vector<P3> random_points(const Grid3& g, int count, unsigned seed) {
   return p;
 }
 
+// The kernels' builds this CPU runs, lowest first; prints the ones it cannot test.
+std::vector<Isa> builds_to_test() {
+  std::vector<Isa> builds;
+  for (const Isa build : {Isa::baseline, Isa::avx2, Isa::avx512})
+    if (build <= best_isa())
+      builds.push_back(build);
+    else
+      std::printf("this CPU has no %s build to test\n", isa_name(build));
+  return builds;
+}
+
 Grid3 cube(int n) {
   Grid3 g;
   g.shape = {n, n, n};
@@ -107,12 +118,7 @@ TEST(FftCorrelator, IntegerShiftOfARandomWindowPeaksThere) {
 // another power; under every build this CPU runs, all with the same bits.
 TEST(FftCorrelator, WeightedCorrelationIsTheWhitenedCrossSpectrumsInverse) {
   const Isa chosen = isa();
-  std::vector<Isa> builds;
-  for (const Isa build : {Isa::baseline, Isa::avx2, Isa::avx512})
-    if (build <= best_isa())
-      builds.push_back(build);
-    else
-      std::printf("this CPU has no %s build to test\n", isa_name(build));
+  const std::vector<Isa> builds = builds_to_test();
   const std::array<double, 3> sigma{1, 0.7, 2};
   for (const std::array<int, 3> shape : {std::array<int, 3>{6, 5, 4}, {16, 3, 2}, {20, 3, 2}, {9, 4, 3}, {17, 2, 3}}) {
     SCOPED_TRACE("shape " + std::to_string(shape[0]) + "x" + std::to_string(shape[1]) + "x" + std::to_string(shape[2]));
@@ -262,12 +268,7 @@ TEST(PeakFit, ThreeHighestMaximaInOrder) {
 // test every voxel's x neighbours, at the ends and joins of a row's vector pre-tests among them.
 TEST(PeakFit, FindPeaksIsTheSearchOfEveryVoxel) {
   const Isa chosen = isa();
-  std::vector<Isa> builds;
-  for (const Isa build : {Isa::baseline, Isa::avx2, Isa::avx512})
-    if (build <= best_isa())
-      builds.push_back(build);
-    else
-      std::printf("this CPU has no %s build to test\n", isa_name(build));
+  const std::vector<Isa> builds = builds_to_test();
   std::mt19937 rng(5);
   const std::array<std::array<int, 3>, 8> shapes{
       {{16, 16, 8}, {7, 5, 3}, {9, 12, 6}, {32, 32, 16}, {5, 3, 4}, {16, 3, 3}, {8, 3, 3}, {7, 3, 3}}};
@@ -537,11 +538,7 @@ TEST(Deform, EveryVoxelHasTheBitsOfItsOwnSample) {
     for (float& d : random.d[c]) d = shift(rng);
   }
   const Isa chosen = isa();
-  for (const Isa build : {Isa::baseline, Isa::avx2, Isa::avx512}) {
-    if (build > best_isa()) {
-      std::printf("this CPU has no %s build to test\n", isa_name(build));
-      continue;
-    }
+  for (const Isa build : builds_to_test()) {
     use_isa(build);
     for (const NodeField* pred : {&constant, &smooth, &random})
       for (const Interpolation how : {Interpolation::sinc, Interpolation::cubic}) {
