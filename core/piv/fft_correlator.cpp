@@ -90,15 +90,6 @@ template <int C>
   for (; kx < half_x; ++kx) one(kx, nx - kx);
 }
 
-// z = a + i b over n values, interleaved (a copy: the same bits in every build).
-[[gnu::always_inline]] inline void interleave_body(const float* __restrict a, const float* __restrict b, std::size_t n,
-                                                   float* __restrict z) {
-  for (std::size_t i = 0; i < n; ++i) {
-    z[2 * i] = a[i];
-    z[2 * i + 1] = b[i];
-  }
-}
-
 template <int C>
 [[gnu::always_inline]] inline void cross_spectrum_body(const float* spec, const std::array<int, 3>& s, float half,
                                                        float quarter, float* cross) {
@@ -125,6 +116,19 @@ __attribute__((target("avx2"))) void cross_spectrum_avx2(const float* spec, cons
 void cross_spectrum_baseline(const float* spec, const std::array<int, 3>& s, float half, float quarter, float* cross) {
   cross_spectrum_body<4>(spec, s, half, quarter, cross);
 }
+void cross_spectrum(const float* spec, const std::array<int, 3>& s, float half, float quarter, float* cross) {
+  for_isa(cross_spectrum_avx512, cross_spectrum_avx2, cross_spectrum_baseline)(spec, s, half, quarter, cross);
+}
+
+// z = a + i b over n values, interleaved (a copy: the same bits in every build).
+[[gnu::always_inline]] inline void interleave_body(const float* __restrict a, const float* __restrict b, std::size_t n,
+                                                   float* __restrict z) {
+  for (std::size_t i = 0; i < n; ++i) {
+    z[2 * i] = a[i];
+    z[2 * i + 1] = b[i];
+  }
+}
+
 __attribute__((target("avx512f"))) void interleave_avx512(const float* a, const float* b, std::size_t n, float* z) {
   interleave_body(a, b, n, z);
 }
@@ -134,9 +138,6 @@ __attribute__((target("avx2"))) void interleave_avx2(const float* a, const float
 void interleave_baseline(const float* a, const float* b, std::size_t n, float* z) { interleave_body(a, b, n, z); }
 void interleave(const float* a, const float* b, std::size_t n, float* z) {
   for_isa(interleave_avx512, interleave_avx2, interleave_baseline)(a, b, n, z);
-}
-void cross_spectrum(const float* spec, const std::array<int, 3>& s, float half, float quarter, float* cross) {
-  for_isa(cross_spectrum_avx512, cross_spectrum_avx2, cross_spectrum_baseline)(spec, s, half, quarter, cross);
 }
 
 }  // namespace
