@@ -104,6 +104,39 @@ void find_spread(Reference& ref) {
   ref.has_spread = true;
 }
 
+// The second step's outcome on axis `a` for the distance r = |u - median| from counts alone,
+// where the spread (the median of the residuals |v - median|) is surely on one side of the
+// smallest spread that passes: +1 surely passes, -1 surely fails, 0 not sure. The step's
+// quotient r / (spread + epsilon) does not grow with the spread, so the test holds for every
+// spread at or above a value where it holds (`high`), and fails for every spread at or below one
+// where it fails (`low`); both are found near r / threshold - epsilon and checked with the step's
+// own arithmetic. The spread is at or above `high` when at most (n - 1) / 2 residuals lie below
+// it, and below `low` when at least n - (n - 1) / 2 do (for even n both middle values then lie on
+// that side, and so does their mean): one vectorised pass over the values (finite: fitted
+// shifts), where the spread is a selection.
+int spread_step_by_counts(float r, const Reference& ref, int a, const MedianTest& test) {
+  const auto holds = [&](float spread) { return double(r) / (double(spread) + test.epsilon) <= test.threshold; };
+  if (!std::isfinite(r)) return 0;
+  if (holds(0.f)) return +1;  // the spread is >= 0
+  const double t = double(r) / test.threshold - test.epsilon;
+  float high = float(t), low = float(t);
+  for (int k = 0; k < 4 && !holds(high); ++k) high = std::nextafter(high, std::numeric_limits<float>::infinity());
+  for (int k = 0; k < 4 && holds(low); ++k) low = std::nextafter(low, -std::numeric_limits<float>::infinity());
+  if (!holds(high) || holds(low)) return 0;
+  const float median = ref.median[a];
+  const float* v = ref.values[a].data();
+  int below_high = 0, below_low = 0;
+  for (int m = 0; m < ref.n; ++m) {
+    const float residual = std::abs(v[m] - median);
+    below_high += residual < high;
+    below_low += residual < low;
+  }
+  const int limit = (ref.n - 1) / 2;
+  if (below_high <= limit) return +1;
+  if (below_low >= ref.n - limit) return -1;
+  return 0;
+}
+
 bool passes(const std::array<float, 3>& u, Reference& ref, const MedianTest& test) {
   // Within threshold x epsilon of the median on every axis a vector passes whatever the spread
   // (>= 0, and a larger divisor gives no larger quotient): the spread's three selections are
@@ -112,7 +145,18 @@ bool passes(const std::array<float, 3>& u, Reference& ref, const MedianTest& tes
   for (int a = 0; a < 3; ++a)
     if (!(std::abs(u[a] - ref.median[a]) / test.epsilon <= test.threshold)) near = false;
   if (near) return true;
-  if (!ref.has_spread) find_spread(ref);
+  if (!ref.has_spread) {
+    // Counts decide most vectors without the spread's selections; an axis they leave unsure
+    // takes the selections and the full test, so the outcome is the full test's.
+    bool sure = true;
+    for (int a = 0; a < 3; ++a) {
+      const int step = spread_step_by_counts(std::abs(u[a] - ref.median[a]), ref, a, test);
+      if (step < 0) return false;
+      sure = sure && step > 0;
+    }
+    if (sure) return true;
+    find_spread(ref);
+  }
   for (int a = 0; a < 3; ++a) {
     const double r = std::abs(u[a] - ref.median[a]) / (ref.spread[a] + test.epsilon);
     if (!(r <= test.threshold)) return false;

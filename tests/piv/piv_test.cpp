@@ -1547,10 +1547,11 @@ TEST(Validation, PlantedOutliersAreCaughtAndReplaced) {
 // (the mean of the two middle values for an even count) and median absolute residual, a vector
 // passing when |u - median| / (spread + epsilon) <= threshold on every axis; an outlier takes the
 // first secondary peak that passes, else waits for interpolation. Values on a coarse grid put
-// many residuals exactly at, and one float step about, threshold x epsilon.
+// many residuals exactly at, and one float step about, threshold x epsilon and threshold x
+// (spread + epsilon), where validate() decides from counts or falls back to the selections.
 TEST(Validation, EveryNodeGetsTheNormalisedMedianTestsOutcome) {
   std::mt19937 rng(9);
-  int boundary = 0, outliers = 0, nodes = 0;
+  int boundary = 0, spread_boundary = 0, outliers = 0, nodes = 0;
   for (int trial = 0; trial < 24; ++trial) {
     Candidates c({6, 5, 7});
     const float step = trial % 2 ? 0.05f : 0.1f;
@@ -1597,6 +1598,8 @@ TEST(Validation, EveryNodeGetsTheNormalisedMedianTestsOutcome) {
             for (int a = 0; a < 3; ++a) {
               const float r = std::abs(u[a] - med[a]);
               boundary += std::abs(r / test.epsilon - test.threshold) < 1e-5;
+              spread_boundary +=
+                  r / test.epsilon > test.threshold && std::abs(r / (spread[a] + test.epsilon) - test.threshold) < 1e-5;
               if (!(r / (spread[a] + test.epsilon) <= test.threshold)) return false;
             }
             return true;
@@ -1621,7 +1624,8 @@ TEST(Validation, EveryNodeGetsTheNormalisedMedianTestsOutcome) {
   }
   EXPECT_GT(outliers, nodes / 20);  // both outcomes are compared
   EXPECT_LT(outliers, nodes * 9 / 10);
-  EXPECT_GT(boundary, 100);  // residuals at threshold x epsilon
+  EXPECT_GT(boundary, 100);         // residuals at threshold x epsilon
+  EXPECT_GT(spread_boundary, 100);  // and at threshold x (spread + epsilon)
 }
 
 TEST(Validation, ASpoiledWindowIsCaughtAndReplaced) {
