@@ -119,6 +119,7 @@ int spread_step_by_counts(float r, const Reference& ref, int a, const MedianTest
   if (!std::isfinite(r)) return 0;
   if (holds(0.f)) return +1;  // the spread is >= 0
   const double t = double(r) / test.threshold - test.epsilon;
+  if (!(t < std::numeric_limits<float>::max())) return 0;  // no float bound: the full test
   float high = float(t), low = float(t);
   for (int k = 0; k < 4 && !holds(high); ++k) high = std::nextafter(high, std::numeric_limits<float>::infinity());
   for (int k = 0; k < 4 && holds(low); ++k) low = std::nextafter(low, -std::numeric_limits<float>::infinity());
