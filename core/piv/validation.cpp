@@ -104,6 +104,12 @@ void find_spread(Reference& ref) {
   ref.has_spread = true;
 }
 
+// The second step on one axis: r = |u - median| against threshold x (spread + epsilon), in the
+// arithmetic both the full test and the counts below use.
+bool spread_step_holds(float r, float spread, const MedianTest& test) {
+  return double(r) / (double(spread) + test.epsilon) <= test.threshold;
+}
+
 // The second step's outcome on axis `a` for the distance r = |u - median| from counts alone,
 // where the spread (the median of the residuals |v - median|) is surely on one side of the
 // smallest spread that passes: +1 surely passes, -1 surely fails, 0 not sure. The step's
@@ -115,7 +121,7 @@ void find_spread(Reference& ref) {
 // that side, and so does their mean): one vectorised pass over the values (finite: fitted
 // shifts), where the spread is a selection.
 int spread_step_by_counts(float r, const Reference& ref, int a, const MedianTest& test) {
-  const auto holds = [&](float spread) { return double(r) / (double(spread) + test.epsilon) <= test.threshold; };
+  const auto holds = [&](float spread) { return spread_step_holds(r, spread, test); };
   if (!std::isfinite(r)) return 0;
   if (holds(0.f)) return +1;  // the spread is >= 0
   const double t = double(r) / test.threshold - test.epsilon;
@@ -158,10 +164,8 @@ bool passes(const std::array<float, 3>& u, Reference& ref, const MedianTest& tes
     if (sure) return true;
     find_spread(ref);
   }
-  for (int a = 0; a < 3; ++a) {
-    const double r = std::abs(u[a] - ref.median[a]) / (ref.spread[a] + test.epsilon);
-    if (!(r <= test.threshold)) return false;
-  }
+  for (int a = 0; a < 3; ++a)
+    if (!spread_step_holds(std::abs(u[a] - ref.median[a]), ref.spread[a], test)) return false;
   return true;
 }
 
