@@ -7,7 +7,7 @@
 //             [--dark-cutoff F] [--intensity-threshold K] [--final-smoothing K] [--depth-prefilter K]
 //             [--spectral-whitening P [--whitened-peak-sigma X,Y,Z]]
 //             [--passes P] [--early-interpolation sinc|cubic] [--voxel-z-factor D] [--uncertainty-stride N]
-//             [--steady]
+//             [--final-peak-search all_shifts|near_predictor] [--steady]
 //             [--time-sweep [--time-repeats N]] [--z-centre MM] [--compare-passes 'P1;P2;...']
 //             [--prune-threshold F [--prune-scope volume|slice]] [--depth-response-ppm F]
 //             [--sparse-sweep [--sparse-repeats N] [--sparse-variants V,..]]
@@ -27,6 +27,8 @@
 //              early_interpolation; default the sinc); the variants correlate with the other one.
 //     --uncertainty-stride N: the headline's per-vector uncertainty computed every N nodes per axis
 //              and interpolated between (correlation's uncertainty_stride; default 1: every node).
+//     --final-peak-search: where the headline's final pass looks for its peaks (correlation's
+//              final_peak_search; default all_shifts); the variants correlate with the other one.
 //     --steady: the headline pair again in the kept MART workspace, --steady-repeats N times
 //              (default 3): time per pair in a run, their median (the repeat printed in full).
 //     --live B,K,N,P: a live tier beside the headline: voxels B times as large (the same box; BzD:
@@ -191,6 +193,7 @@ int main(int argc, char** argv) {
   int final_smoothing = piv::CorrelationSettings{}.final_smoothing;
   int depth_prefilter = piv::CorrelationSettings{}.depth_prefilter;
   int uncertainty_stride = piv::CorrelationSettings{}.uncertainty_stride;
+  piv::FinalPeakSearch final_peak_search = piv::CorrelationSettings{}.final_peak_search;
   bool steady = false, time_sweep = false, sparse_sweep = false, live_only = false;
   int sparse_repeats = 1, time_repeats = 1, steady_repeats = 3;
   std::string sparse_variants;  // empty: all
@@ -235,7 +238,16 @@ int main(int argc, char** argv) {
       depth_prefilter = std::stoi(argv[++i]);
     else if (!std::strcmp(argv[i], "--uncertainty-stride") && i + 1 < argc)
       uncertainty_stride = std::stoi(argv[++i]);
-    else if (!std::strcmp(argv[i], "--steady"))
+    else if (!std::strcmp(argv[i], "--final-peak-search") && i + 1 < argc) {
+      const std::string name = argv[++i];
+      if (name != "all_shifts" && name != "near_predictor") {
+        std::fprintf(stderr, "bench_e2e: --final-peak-search takes all_shifts or near_predictor, not '%s'\n",
+                     name.c_str());
+        return 2;
+      }
+      final_peak_search =
+          name == "near_predictor" ? piv::FinalPeakSearch::near_predictor : piv::FinalPeakSearch::all_shifts;
+    } else if (!std::strcmp(argv[i], "--steady"))
       steady = true;
     else if (!std::strcmp(argv[i], "--steady-repeats") && i + 1 < argc)
       steady_repeats = std::max(1, std::stoi(argv[++i]));
@@ -286,6 +298,7 @@ int main(int argc, char** argv) {
                 final_smoothing != piv::CorrelationSettings{}.final_smoothing ||
                 depth_prefilter != piv::CorrelationSettings{}.depth_prefilter ||
                 uncertainty_stride != piv::CorrelationSettings{}.uncertainty_stride ||
+                final_peak_search != piv::CorrelationSettings{}.final_peak_search ||
                 prune_threshold != recon::MartSettings{}.prune_threshold || prune_scope != "volume" ||
                 depth_response_ppm != 0.0)) {
     std::fprintf(
@@ -293,7 +306,7 @@ int main(int argc, char** argv) {
         "bench_e2e: "
         "--iterations/--mu/--accelerate/--dark-cutoff/--sensor-blur-mm/--intensity-threshold/"
         "--final-smoothing/--depth-prefilter/--spectral-whitening/--passes/--early-interpolation/--voxel-z-factor/"
-        "--uncertainty-stride/--z-centre/--depth-response-ppm change the "
+        "--uncertainty-stride/--final-peak-search/--z-centre/--depth-response-ppm change the "
         "headline rows only; use them with --no-sweep\n");
     return 2;
   }
@@ -307,7 +320,8 @@ int main(int argc, char** argv) {
                  "[--dark-cutoff F] [--sensor-blur-mm S] [--intensity-threshold K] [--final-smoothing K] "
                  "[--depth-prefilter K] [--spectral-whitening P [--whitened-peak-sigma X,Y,Z]] [--passes P] "
                  "[--early-interpolation sinc|cubic] [--voxel-z-factor D] [--uncertainty-stride N] "
-                 "[--steady [--steady-repeats N]] [--time-sweep] [--z-centre MM] [--compare-passes 'P1;P2'] "
+                 "[--final-peak-search all_shifts|near_predictor] [--steady [--steady-repeats N]] [--time-sweep] "
+                 "[--z-centre MM] [--compare-passes 'P1;P2'] "
                  "[--prune-threshold F "
                  "[--prune-scope volume|slice]] [--depth-response-ppm F] [--sparse-sweep [--sparse-repeats N] "
                  "[--sparse-variants V,..]] [--live B,K,N,P [--live-depth-prefilter K] [--live-only]]\n");
@@ -350,6 +364,13 @@ int main(int argc, char** argv) {
   settings.correlation.uncertainty_stride = uncertainty_stride;
   settings.correlation.early_interpolation = early_interpolation;
   if (!passes.empty()) settings.correlation.passes = piv::parse_passes(passes);
+  settings.correlation.final_peak_search = final_peak_search;
+  try {
+    piv::check(settings.correlation, "bench_e2e's correlation settings");
+  } catch (const InputError& e) {
+    std::fprintf(stderr, "bench_e2e: %s\n", e.what());
+    return 2;
+  }
 
   sim::RingVortexFlow::Parameters rv;
   rv.voxel_mm = voxel;
@@ -689,6 +710,12 @@ int main(int argc, char** argv) {
         correlate_both("correlation", p == 1.0 ? "spectral_whitening_1" : "spectral_whitening_0.5", whitened, true);
       }
     }
+    // The final pass's peak search the other way.
+    piv::CorrelationSettings search = settings.correlation;
+    const bool near = final_peak_search == piv::FinalPeakSearch::all_shifts;
+    search.final_peak_search = near ? piv::FinalPeakSearch::near_predictor : piv::FinalPeakSearch::all_shifts;
+    correlate_both("correlation", near ? "final_peak_search_near_predictor" : "final_peak_search_all_shifts", search,
+                   true);
     correlate_both("correlation", "previous_default_3pass_window_mean", previous, false);
     correlate_both("correlation", "centre_3pass", centre3, false);
   }

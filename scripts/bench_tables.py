@@ -54,8 +54,9 @@ def shipped(mart, passes=RUN_PAPER_PASSES):
                "--spectral-whitening", "0.5", "--whitened-peak-sigma", "1,1,2"])
 
 
-# run-paper.yaml's full tier computes the per-vector sigma every second node per axis.
-RUN_PAPER = shipped(RUN_PAPER_MART) + ["--uncertainty-stride", "2"]
+# run-paper.yaml's full tier computes the per-vector sigma every second node per axis and looks for
+# the last pass's peaks at the predictor first.
+RUN_PAPER = shipped(RUN_PAPER_MART) + ["--uncertainty-stride", "2", "--final-peak-search", "near_predictor"]
 # The same on cubic 0.125 mm voxels (the depth prefilter's four passes there) with core/piv's
 # default passes: the small camera's sparse sweep.
 RUN_PAPER_CUBES = RUN_PAPER_MART + ["--depth-prefilter", "4"]
@@ -344,6 +345,8 @@ VARIANT_LABELS = {
     "spectral_whitening_0": "no spectral whitening (plain cross-correlation in every pass)",
     "spectral_whitening_0.5": "passes before the last whitened 1/2 (robust phase correlation)",
     "spectral_whitening_1": "passes before the last phase-only (whitening 1)",
+    "final_peak_search_all_shifts": "last pass's peak searched over all shifts (FFT everywhere)",
+    "final_peak_search_near_predictor": "last pass's peak at the predictor first (FFT where not)",
 }
 
 

@@ -48,7 +48,11 @@ std::string pass_line(const piv::PassReport& r) {
                 r.vectors[1], r.vectors[2], r.no_signal, v.outliers, v.second_peak, v.third_peak, v.interpolated,
                 v.unresolved, r.flag_parabolic, r.flag_centroid, seconds, r.deform_s, r.correlate_s,
                 r.correlate_s > 0 ? double(r.windows) / r.correlate_s : 0.0);
-  return line;
+  std::string out = line;
+  if (r.near_peaks || r.near_rejected)
+    out += "; peaks at the predictor without the FFT " + std::to_string(r.near_peaks) + " (" +
+           std::to_string(r.near_rejected) + " rejected by the median test, searched over all shifts)";
+  return out;
 }
 
 void run_correlate(const CorrelateOptions& o) {

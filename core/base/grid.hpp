@@ -48,6 +48,8 @@ struct VectorField {
   Grid3 grid;
   std::vector<float> dx_mm, dy_mm, dz_mm;
   std::vector<std::uint8_t> valid;
+  // Primary over secondary correlation peak; NaN where the final pass took the peak at the
+  // predictor without a search for others (CorrelationSettings::final_peak_search).
   std::vector<float> peak_ratio;
   // Standard uncertainty of dx, dy, dz (mm) per node: empty when not estimated; NaN at a node
   // without an estimate (invalid, or replaced by its neighbours' mean).

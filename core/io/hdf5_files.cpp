@@ -323,7 +323,9 @@ void write_vector_field_h5(const std::filesystem::path& path, const VectorField&
     write_dataset(group.get(), path, "valid", dims, f.valid.data());
     fields.push_back({"valid", "1", "1: a vector (measured, or replaced by validation); 0: none"});
     write_dataset(group.get(), path, "peak_ratio", dims, f.peak_ratio.data());
-    fields.push_back({"peak_ratio", "1", "primary over secondary correlation peak"});
+    fields.push_back({"peak_ratio", "1",
+                      "primary over secondary correlation peak (NaN: peak taken at the predictor, no second one "
+                      "searched)"});
     for (const NamedField& e : extra) {
       write_dataset(group.get(), path, e.name, dims, e.values.data());
       fields.push_back({e.name, e.units.empty() ? "1" : e.units, ""});

@@ -47,8 +47,8 @@ Volume read_volume_h5(const std::filesystem::path& path);
 
 // Group /vectors: 1-D axes x, y, z (mm, the dimension scales); on the [nz][ny][nx] grid dx, dy, dz
 // (mm), u, v, w (m/s, from dt_s, which must be > 0), valid (uint8, 1: a measured or replaced vector),
-// peak_ratio, sigma_u, sigma_v, sigma_w (m/s, the standard uncertainty; NaN where there is none;
-// only when the field has its sigma; their long_name and the group's attribute sigma_method say
+// peak_ratio (NaN where no second peak was searched), sigma_u, sigma_v, sigma_w (m/s, the standard uncertainty; NaN
+// where there is none; only when the field has its sigma; their long_name and the group's attribute sigma_method say
 // what it holds), any `extra` fields and `flags`; attribute dt_s; /provenance with `provenance`.
 // Written atomically.
 void write_vector_field_h5(const std::filesystem::path& path, const VectorField& field,

@@ -13,9 +13,9 @@ namespace plenopiv::io {
 // Point data "intensity" on the volume's grid (origin and spacing in mm). Written atomically.
 void write_volume_vti(const std::filesystem::path& path, const Volume& volume);
 // Point data "displacement_mm" (3 components), "velocity_m_s" (needs dt_s > 0), "valid",
-// "peak_ratio", "sigma_velocity_m_s" (3 components: the standard uncertainty of u, v, w; NaN where
-// there is none; when the field has its sigma), and each extra field (1 component, or 3 when its name ends in "_vec").
-// Atomic.
+// "peak_ratio" (NaN where no second peak was searched), "sigma_velocity_m_s" (3 components: the standard uncertainty of
+// u, v, w; NaN where there is none; when the field has its sigma), and each extra field (1 component, or 3 when its
+// name ends in "_vec"). Atomic.
 void write_vector_field_vti(const std::filesystem::path& path, const VectorField& field,
                             const std::vector<NamedField>& extra = {});
 

@@ -21,6 +21,7 @@
 #include "core/base/errors.hpp"
 #include "core/base/isa.hpp"
 #include "core/piv/deform.hpp"
+#include "core/piv/direct_correlation.hpp"
 #include "core/piv/fft_correlator.hpp"
 #include "core/piv/peak_fit.hpp"
 #include "core/piv/uncertainty.hpp"
@@ -222,13 +223,18 @@ void per_slice_sums(std::span<const float> b, std::size_t slice, std::span<doubl
   }
 }
 
-// Correlates every window of `va` with the same window of `vb`; a window's candidates are the
-// predictor (at its centre, or its mean over the window: settings.hpp, PredictorBase) plus each
-// correlation peak; `bases` gets that predictor per node (what each peak's shift was added to).
-// The settings' spectral whitening applies unless this is the `last_pass`.
-Candidates correlate_windows(std::span<const float> va, std::span<const float> vb, const std::array<int, 3>& shape,
-                             const Layout& l, const NodeField* predictor, const CorrelationSettings& settings,
-                             bool last_pass, std::vector<float>& ratio, std::vector<std::array<float, 3>>& bases) {
+// Correlates every window of `va` with the same window of `vb` into `c` (made anew); a window's
+// candidates are the predictor (at its centre, or its mean over the window: settings.hpp,
+// PredictorBase) plus each correlation peak; `bases` gets that predictor per node (what each peak's
+// shift was added to), `ratio` the peak ratio. The settings' spectral whitening applies unless this
+// is the `last_pass`. With `near_predictor` (FinalPeakSearch; no depth margin, no whitening) a
+// window whose correlation peaks at the predictor takes that peak alone (`near` set, ratio NaN);
+// the others are correlated by FFT. With `only` non-empty just those nodes are correlated again, by
+// FFT, in the `c`, `ratio`, `bases` and `near` of an earlier call.
+void correlate_windows(std::span<const float> va, std::span<const float> vb, const std::array<int, 3>& shape,
+                       const Layout& l, const NodeField* predictor, const CorrelationSettings& settings, bool last_pass,
+                       bool near_predictor, std::span<const std::size_t> only, Candidates& c, std::vector<float>& ratio,
+                       std::vector<std::array<float, 3>>& bases, std::vector<std::uint8_t>& near) {
   // Each volume's bar: the setting, or its dust level (settings.hpp, kNumericalDust).
   const auto bar = [&](std::span<const float> v) {
     const float peak = tbb::parallel_reduce(
@@ -251,7 +257,15 @@ Candidates correlate_windows(std::span<const float> va, std::span<const float> v
     weights.emplace(fft_shape, settings.spectral_whitening, settings.whitened_peak_sigma_voxel);
   const SpectralWeights* spectral = weights ? &*weights : nullptr;
   const std::size_t slice = std::size_t(l.window[0]) * l.window[1];
-  Candidates c(l.count);
+  if (only.empty()) {
+    c = Candidates(l.count);
+    ratio.assign(c.size(), 0.f);
+    bases.assign(c.size(), {0.f, 0.f, 0.f});
+    near.assign(c.size(), 0);
+  } else if (near_predictor) {
+    throw std::logic_error("correlation: windows correlated again are searched over all shifts");
+  }
+  tbb::enumerable_thread_specific<std::vector<float>> star_scratch;
   // window_mean: the predictor's mean over each window, as per-axis node weights (the residual
   // a window measures is relative to how far its voxels were moved on average).
   std::array<std::vector<std::vector<double>>, 3> mean_weights;
@@ -259,12 +273,13 @@ Candidates correlate_windows(std::span<const float> va, std::span<const float> v
     for (int a = 0; a < 3; ++a)
       for (int i = 0; i < l.count[a]; ++i)
         mean_weights[a].push_back(predictor->mean_weights(a, l.start[a] + i * l.step[a], l.window[a]));
-  ratio.assign(c.size(), 0.f);
-  bases.assign(c.size(), {0.f, 0.f, 0.f});
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, c.size()), [&](const auto& r) {
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, only.empty() ? c.size() : only.size()), [&](const auto& r) {
     auto& ws = correlator.workspace();
     std::vector<double> slice_sums(margin ? 2 * std::size_t(fft_shape[2]) : 0);  // b, then b^2
-    for (std::size_t node = r.begin(); node < r.end(); ++node) {
+    for (std::size_t item = r.begin(); item < r.end(); ++item) {
+      const std::size_t node = only.empty() ? item : only[item];
+      c.peaks[node] = 0;
+      near[node] = 0;
       const int i = int(node % l.count[0]);
       const int j = int((node / l.count[0]) % l.count[1]);
       const int k = int(node / (std::size_t(l.count[0]) * l.count[1]));
@@ -278,25 +293,50 @@ Candidates correlate_windows(std::span<const float> va, std::span<const float> v
         c.flags[node] = flag_no_signal;
         continue;
       }
-      std::span<float> corr;
-      if (margin == 0) {
-        corr = ws.correlate(spectral);  // the transform takes out both windows' means
-      } else {
-        // A's mean over its own voxels, not the padded buffer's; B's sums per slice for the
-        // normalisation, taken before correlate() consumes the window.
-        float* a_window = wa.data() + std::size_t(margin) * slice;
-        const std::size_t a_count = slice * l.window[2];
-        double sum_a = 0;
-        for (std::size_t q = 0; q < a_count; ++q) sum_a += a_window[q];
-        const float mean_a = float(sum_a / double(a_count));
-        for (std::size_t q = 0; q < a_count; ++q) a_window[q] -= mean_a;
-        const std::size_t slices = std::size_t(fft_shape[2]);
-        const std::span<double> sums(slice_sums);
-        per_slice_sums(wb.first(slices * slice), slice, sums.first(slices), sums.subspan(slices));
-        corr = ws.correlate(spectral);
-        normalise_by_depth_shift(corr, slice, l.window[2], margin, sums.first(slices), sums.subspan(slices));
+      std::array<Peak, 3> peaks{};
+      if (near_predictor) {
+        // The correlation at the predictor and its face neighbours (kStarShifts' order): the peak
+        // where the centre is positive and beats all six (earlier neighbours at >=, later at >, as
+        // find_peaks), fitted from the 3 x 3 x 3 cube fit_peak reads at shift 0 (faces only).
+        const std::size_t count = slice * l.window[2];
+        const auto star = correlate_star(wa.first(count), wb.first(count), l.window, star_scratch.local());
+        const bool peak = star[0] > 0 && star[1] < star[0] && star[2] <= star[0] && star[3] < star[0] &&
+                          star[4] <= star[0] && star[5] < star[0] && star[6] <= star[0];
+        if (peak) {
+          // Cyclic 3 x 3 x 3 ([z][y][x], shift -1 at index 2); the diagonals are not read.
+          std::array<float, 27> cube{};
+          cube[0] = star[0];
+          cube[2] = star[1];
+          cube[1] = star[2];
+          cube[2 * 3] = star[3];
+          cube[1 * 3] = star[4];
+          cube[2 * 9] = star[5];
+          cube[1 * 9] = star[6];
+          peaks[0] = fit_peak(cube, {3, 3, 3}, {0, 0, 0});
+          near[node] = 1;
+        }
       }
-      const auto peaks = find_peaks(corr, fft_shape);
+      if (!near[node]) {
+        std::span<float> corr;
+        if (margin == 0) {
+          corr = ws.correlate(spectral);  // the transform takes out both windows' means
+        } else {
+          // A's mean over its own voxels, not the padded buffer's; B's sums per slice for the
+          // normalisation, taken before correlate() consumes the window.
+          float* a_window = wa.data() + std::size_t(margin) * slice;
+          const std::size_t a_count = slice * l.window[2];
+          double sum_a = 0;
+          for (std::size_t q = 0; q < a_count; ++q) sum_a += a_window[q];
+          const float mean_a = float(sum_a / double(a_count));
+          for (std::size_t q = 0; q < a_count; ++q) a_window[q] -= mean_a;
+          const std::size_t slices = std::size_t(fft_shape[2]);
+          const std::span<double> sums(slice_sums);
+          per_slice_sums(wb.first(slices * slice), slice, sums.first(slices), sums.subspan(slices));
+          corr = ws.correlate(spectral);
+          normalise_by_depth_shift(corr, slice, l.window[2], margin, sums.first(slices), sums.subspan(slices));
+        }
+        peaks = find_peaks(corr, fft_shape);
+      }
       std::array<float, 3> base{0, 0, 0};
       if (predictor && at_centre) {
         base = predictor->at(x0 + 0.5 * (l.window[0] - 1), y0 + 0.5 * (l.window[1] - 1), z0 + 0.5 * (l.window[2] - 1));
@@ -332,10 +372,9 @@ Candidates correlate_windows(std::span<const float> va, std::span<const float> v
       }
       c.peaks[node] = std::uint8_t(found);
       c.flags[node] = peaks[0].flags;
-      ratio[node] = peak_ratio(peaks);
+      ratio[node] = near[node] ? std::numeric_limits<float>::quiet_NaN() : peak_ratio(peaks);
     }
   });
-  return c;
 }
 
 // The standard uncertainty (voxels) of every vector the final pass measured (valid and not
@@ -509,6 +548,7 @@ CorrelationResult correlate_volumes(const Volume& a, const Volume& b, const Corr
   ValidatedField validated;
   std::vector<float> ratio;
   std::vector<std::array<float, 3>> bases;
+  std::vector<std::uint8_t> near;           // per node: peak found at the predictor (FinalPeakSearch)
   std::array<std::vector<float>, 3> sigma;  // voxels, x y z; empty unless settings.uncertainty
   Layout layout{};
   const int passes = int(settings.passes.size());
@@ -533,8 +573,10 @@ CorrelationResult correlate_volumes(const Volume& a, const Volume& b, const Corr
     report.deform_s = seconds_since(t0);
 
     t0 = Clock::now();
-    last = correlate_windows(va, vb, shape, layout, have_predictor ? &predictor : nullptr, settings, p + 1 == passes,
-                             ratio, bases);
+    const NodeField* pass_predictor = have_predictor ? &predictor : nullptr;
+    const bool near_predictor = p + 1 == passes && settings.final_peak_search == FinalPeakSearch::near_predictor;
+    correlate_windows(va, vb, shape, layout, pass_predictor, settings, p + 1 == passes, near_predictor, {}, last, ratio,
+                      bases, near);
     report.correlate_s = seconds_since(t0);
     report.windows = last.size();
     for (std::size_t n = 0; n < last.size(); ++n) {
@@ -545,6 +587,26 @@ CorrelationResult correlate_volumes(const Volume& a, const Volume& b, const Corr
 
     t0 = Clock::now();
     validated = validate(last, settings.median);
+    if (near_predictor) {
+      // Peaks found at the predictor that the test rejects get the whole correlation (their second
+      // and third peaks are the replacements), and the test runs again on every node, until it
+      // rejects none of them: every rejected vector was searched over all shifts.
+      constexpr std::uint8_t outcome = flag_second_peak | flag_third_peak | flag_interpolated | flag_unresolved;
+      for (;;) {
+        std::vector<std::size_t> again;
+        for (std::size_t n = 0; n < last.size(); ++n)
+          if (near[n] && (last.flags[n] & outcome)) again.push_back(n);
+        if (again.empty()) break;
+        report.near_rejected += again.size();
+        const auto t_again = Clock::now();
+        correlate_windows(va, vb, shape, layout, pass_predictor, settings, true, false, again, last, ratio, bases,
+                          near);
+        report.correlate_s += seconds_since(t_again);
+        for (std::uint8_t& f : last.flags) f &= std::uint8_t(~outcome);
+        validated = validate(last, settings.median);
+      }
+      report.near_peaks = std::size_t(std::count(near.begin(), near.end(), 1));
+    }
     report.validation = validated.counts;
     if (p + 1 == passes && settings.uncertainty) {
       const auto t_sigma = Clock::now();

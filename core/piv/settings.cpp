@@ -71,6 +71,10 @@ void check(const CorrelationSettings& s, const std::string& source) {
     if (!(s.whitened_peak_sigma_voxel[std::size_t(a)] >= 0.5 && s.whitened_peak_sigma_voxel[std::size_t(a)] <= 8))
       fail("whitened_peak_sigma_voxel: each must be in [0.5, 8] voxels, got " +
            std::to_string(s.whitened_peak_sigma_voxel[std::size_t(a)]));
+  if (s.final_peak_search == FinalPeakSearch::near_predictor && s.passes.back().depth_margin > 0)
+    fail("final_peak_search: near_predictor needs a final pass without depth_margin (passes[" +
+         std::to_string(s.passes.size() - 1) + "] has " + std::to_string(s.passes.back().depth_margin) +
+         "; its normalisation needs every shift)");
   if (!(s.dt_s > 0)) fail("dt_s: must be > 0, got " + std::to_string(s.dt_s));
 }
 
@@ -129,7 +133,7 @@ CorrelationSettings correlation_settings_from(const YamlMap& root) {
   root.reject_unknown({"passes", "median", "signal_threshold", "dt_s", "fft_planning", "prefilter", "depth_prefilter",
                        "predictor", "predictor_smoothing", "intensity_threshold_of_mean", "final_smoothing",
                        "uncertainty", "uncertainty_stride", "early_interpolation", "spectral_whitening",
-                       "whitened_peak_sigma_voxel"});
+                       "whitened_peak_sigma_voxel", "final_peak_search"});
   CorrelationSettings s;
   if (root.has("passes")) {
     const YAML::Node list = root.node()["passes"];
@@ -177,6 +181,10 @@ CorrelationSettings correlation_settings_from(const YamlMap& root) {
   if (root.has("whitened_peak_sigma_voxel"))
     s.whitened_peak_sigma_voxel = per_axis<double>(
         root, "whitened_peak_sigma_voxel", "must be a width or [x, y, z], voxels", "widths must be numbers, voxels");
+  s.final_peak_search =
+      root.choice_or("final_peak_search", {"all_shifts", "near_predictor"}, "all_shifts") == "near_predictor"
+          ? FinalPeakSearch::near_predictor
+          : FinalPeakSearch::all_shifts;
   check(s, root.source());
   return s;
 }

@@ -46,6 +46,18 @@ enum class PredictorBase { window_mean, centre };
 // particle's peak varies several-fold with its depth, not a millionfold.
 inline constexpr float kNumericalDust = 1e-6f;
 
+// Where the final pass looks for each window's correlation peak. all_shifts: the whole
+// correlation, by FFT. near_predictor: the correlation summed directly at the predictor's shift
+// and its six face neighbours (direct_correlation.hpp: the FFT's values there, to float rounding),
+// and where the value at the predictor is positive and beats all six (find_peaks' test on the
+// faces) it is the peak, fitted by the same three-point fits; the passes before leave nearly every
+// residual within half a voxel, and the seven sums cost a fraction of the transform. Any other
+// window, and every window whose vector the median test then rejects (its second and third peaks
+// are the validation's replacements), is correlated over all shifts by FFT as before. A vector
+// found near the predictor has no second peak: its peak_ratio is NaN. It needs a final pass without
+// a depth margin (that normalisation needs every shift).
+enum class FinalPeakSearch { all_shifts, near_predictor };
+
 struct CorrelationSettings {
   // Coarse to fine. Pass 1 correlates the volumes as they are; every later pass deforms both
   // volumes by the previous pass's validated field (VODIM). Default: four passes ending at the
@@ -122,12 +134,15 @@ struct CorrelationSettings {
   // size in each direction: MART's particles at 0.125 x 0.125 x 0.25 mm voxels are ~1 voxel across
   // and ~2 deep. Used only with spectral_whitening > 0.
   std::array<double, 3> whitened_peak_sigma_voxel{1, 1, 2};
+  // Where the final pass looks for each window's correlation peak (FinalPeakSearch); default
+  // all_shifts, the paper's.
+  FinalPeakSearch final_peak_search = FinalPeakSearch::all_shifts;
 };
 
 // Checks every value (windows >= 4 voxels, 0 <= overlap < 100, 0 <= depth_margin <= window z,
 // threshold and epsilon > 0, radius 1..3, predictor_smoothing and final_smoothing 0..4,
 // depth_prefilter 0..8 and only with the prefilter, spectral_whitening 0..1, whitened_peak_sigma_voxel
-// 0.5..8 per axis,
+// 0.5..8 per axis, final_peak_search near_predictor only where the final pass has no depth margin,
 // intensity_threshold_of_mean 0..100, dt > 0); InputError naming `source` and the setting otherwise.
 void check(const CorrelationSettings& s, const std::string& source);
 
@@ -153,6 +168,7 @@ std::vector<PassSettings> parse_passes(const std::string& text);
 //   early_interpolation: sinc  # or cubic: the deformation's interpolator before the last pass
 //   spectral_whitening: 0    # 0..1: robust phase correlation's whitening before the last pass (0: off)
 //   whitened_peak_sigma_voxel: [1, 1, 2]  # its peak's width per axis, voxels
+//   final_peak_search: all_shifts  # or near_predictor: the final pass's peak looked for there first
 // Every key is optional (defaults above); unknown keys are refused. Checked.
 CorrelationSettings load_correlation_settings(const std::filesystem::path& path);
 // The same from a mapping already parsed (a section of a larger file, e.g. process.yaml).

@@ -110,7 +110,7 @@ void put_mart(ByteWriter& w, const recon::MartSettings& m) {
 void put_correlation(ByteWriter& w, const piv::CorrelationSettings& c) {
   const auto& [passes, median, signal_threshold, dt_s, fft_planning, intensity_threshold_of_mean, prefilter,
                depth_prefilter, predictor, predictor_smoothing, final_smoothing, uncertainty, uncertainty_stride,
-               early_interpolation, spectral_whitening, whitened_peak_sigma_voxel] = c;
+               early_interpolation, spectral_whitening, whitened_peak_sigma_voxel, final_peak_search] = c;
   w.pod(std::uint64_t(passes.size()));
   for (const piv::PassSettings& p : passes) {
     const auto& [window, overlap_percent, depth_margin] = p;
@@ -136,6 +136,7 @@ void put_correlation(ByteWriter& w, const piv::CorrelationSettings& c) {
   w.pod(early_interpolation);
   w.pod(spectral_whitening);
   w.pod(whitened_peak_sigma_voxel);
+  w.pod(final_peak_search);
 }
 
 }  // namespace

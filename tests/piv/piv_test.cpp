@@ -19,6 +19,7 @@
 #include "core/base/yaml_access.hpp"
 #include "core/piv/deform.hpp"
 #include "core/piv/derived.hpp"
+#include "core/piv/direct_correlation.hpp"
 #include "core/piv/fft_correlator.hpp"
 #include "core/piv/multipass.hpp"
 #include "core/piv/peak_fit.hpp"
@@ -629,6 +630,57 @@ TEST(Deform, DepthPassesSmoothAlongDepthOnly) {
   for (std::size_t i = 0; i < n; ++i) EXPECT_NEAR(deep[i], plain[i], 1e-5) << i;
 }
 
+// correlate_star against the transform's correlation at the same seven shifts, for the paper's
+// 16-wide windows and widths that leave a tail of single lanes (13, 9) or fill no vector (3), with a
+// large common offset (the means must come out); every build this CPU runs gives the same bits.
+TEST(DirectCorrelation, TheStarHasTheTransformsValuesAtItsShifts) {
+  const Isa chosen = isa();
+  const std::vector<Isa> builds = builds_to_test();
+  const std::array<std::array<int, 3>, kStarShifts> shifts{
+      {{0, 0, 0}, {-1, 0, 0}, {1, 0, 0}, {0, -1, 0}, {0, 1, 0}, {0, 0, -1}, {0, 0, 1}}};
+  for (const std::array<int, 3> shape :
+       {std::array<int, 3>{16, 16, 8}, {13, 10, 7}, {9, 4, 3}, {3, 3, 3}, {32, 8, 4}}) {
+    SCOPED_TRACE("shape " + std::to_string(shape[0]) + "x" + std::to_string(shape[1]) + "x" + std::to_string(shape[2]));
+    const std::size_t n = std::size_t(shape[0]) * shape[1] * shape[2];
+    std::mt19937 rng(17);
+    std::uniform_real_distribution<float> u(0, 1);
+    std::vector<float> a(n), b(n);
+    for (std::size_t i = 0; i < n; ++i) {
+      a[i] = 50 + u(rng);
+      b[i] = 20 + u(rng);
+    }
+    FftCorrelator corr(shape);
+    auto& ws = corr.workspace();
+    std::copy(a.begin(), a.end(), ws.window_a().begin());
+    std::copy(b.begin(), b.end(), ws.window_b().begin());
+    const std::span<const float> r = ws.correlate();
+    const float largest =
+        std::abs(*std::max_element(r.begin(), r.end(), [](float x, float y) { return std::abs(x) < std::abs(y); }));
+    ASSERT_GT(largest, 0.f);
+    std::vector<float> scratch;
+    std::array<float, kStarShifts> first_build{};
+    for (const Isa build : builds) {
+      SCOPED_TRACE(isa_name(build));
+      use_isa(build);
+      const auto star = correlate_star(a, b, shape, scratch);
+      for (int k = 0; k < kStarShifts; ++k) {
+        std::size_t at = 0;
+        for (int axis = 2; axis >= 0; --axis)
+          at = at * std::size_t(shape[axis]) + std::size_t((shifts[k][axis] + shape[axis]) % shape[axis]);
+        EXPECT_NEAR(star[k], r[at], 2e-5 * largest) << "shift " << k;
+      }
+      if (build == builds.front())
+        first_build = star;
+      else
+        EXPECT_TRUE(testing_support::same_bits(star, first_build)) << "not the bits of the first build";
+    }
+  }
+  use_isa(chosen);
+  std::vector<float> scratch, w(16 * 16 * 2, 1.f);
+  EXPECT_THROW(correlate_star(w, w, {16, 16, 2}, scratch), std::invalid_argument);
+  EXPECT_THROW(correlate_star(w, w, {16, 16, 3}, scratch), std::invalid_argument);
+}
+
 // Bias and RMS per component of the valid vectors against a uniform displacement (voxels).
 struct Errors {
   P3 bias{0, 0, 0}, rms{0, 0, 0};
@@ -982,6 +1034,81 @@ TEST(Multipass, SameBitsAtOneAndTwoThreads) {
   EXPECT_EQ(std::memcmp(r1.field.peak_ratio.data(), r2.field.peak_ratio.data(), bytes), 0);
   EXPECT_EQ(r1.field.valid, r2.field.valid);
   EXPECT_EQ(r1.flags, r2.flags);
+}
+
+// The final pass's peak looked for at the predictor first (FinalPeakSearch::near_predictor), on
+// a sheared pair with noise in both volumes: most peaks are taken there without the transform,
+// their vectors are the transform's to float rounding (the same seven values, the same fits), a
+// peak there that the median test rejects is searched over all shifts (so every rejected vector
+// has a peak ratio), the result has the same bits at one and two threads, and a final pass with a
+// depth margin is refused.
+TEST(Multipass, APeakSearchAtThePredictorKeepsTheTransformsVectors) {
+  const Grid3 g = cube(48);
+  const auto pa = sim::particles_around(g, 5);
+  const sim::LinearShear shear({0.03, 0, 0}, 1, 0.0);
+  Volume a = sim::render_exact_volume(g, pa), b = sim::render_exact_volume(g, sim::displace(pa, shear));
+  std::mt19937 rng(8);
+  const float peak = *std::max_element(a.data.begin(), a.data.end());
+  std::uniform_real_distribution<float> noise(0, 0.6f * peak);
+  for (Volume* v : {&a, &b})
+    for (float& x : v->data) x += noise(rng) * noise(rng) / peak;
+  CorrelationSettings all = small_settings();
+  all.passes.back().overlap_percent = 75;
+  CorrelationSettings near = all;
+  near.final_peak_search = FinalPeakSearch::near_predictor;
+  const CorrelationResult whole = correlate_volumes(a, b, all);
+  CorrelationResult first, second;
+  {
+    tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+    first = correlate_volumes(a, b, near);
+  }
+  {
+    tbb::global_control two(tbb::global_control::max_allowed_parallelism, 2);
+    second = correlate_volumes(a, b, near);
+  }
+  const PassReport& report = first.passes.back();
+  const std::size_t windows = report.windows;
+  std::printf(
+      "peaks at the predictor: %zu of %zu windows, %zu rejected and searched again; outliers %zu (all "
+      "shifts: %zu)\n",
+      report.near_peaks, windows, report.near_rejected, report.validation.outliers,
+      whole.passes.back().validation.outliers);
+  EXPECT_GT(report.near_peaks, windows * 9 / 10);
+  EXPECT_GT(report.near_rejected, 0u) << "the noise should make the median test reject some";
+  EXPECT_EQ(whole.passes.back().near_peaks, 0u);
+  std::size_t at_predictor = 0, differ = 0;
+  double worst = 0;
+  constexpr std::uint8_t rejected = flag_second_peak | flag_third_peak | flag_interpolated | flag_unresolved;
+  for (std::size_t n = 0; n < first.field.grid.count(); ++n) {
+    const bool found_near = std::isnan(first.field.peak_ratio[n]);
+    at_predictor += found_near;
+    if (found_near) EXPECT_FALSE(first.flags[n] & rejected) << "node " << n;
+    if (!first.field.valid[n] || !whole.field.valid[n]) {
+      differ += first.field.valid[n] != whole.field.valid[n];
+      continue;
+    }
+    const double d = std::max({std::abs(first.field.dx_mm[n] - whole.field.dx_mm[n]),
+                               std::abs(first.field.dy_mm[n] - whole.field.dy_mm[n]),
+                               std::abs(first.field.dz_mm[n] - whole.field.dz_mm[n])}) /
+                     g.spacing_mm[0];
+    if (d > 1e-3)
+      ++differ;
+    else
+      worst = std::max(worst, d);
+  }
+  EXPECT_EQ(at_predictor, report.near_peaks);
+  std::printf("vectors differing from the transform's by > 1e-3 voxel: %zu; the rest within %.2g voxel\n", differ,
+              worst);
+  EXPECT_LT(worst, 1e-4);
+  EXPECT_LT(differ, windows / 100 + 1);
+  EXPECT_TRUE(testing_support::same_bits(first.field.dx_mm, second.field.dx_mm));
+  EXPECT_TRUE(testing_support::same_bits(first.field.dy_mm, second.field.dy_mm));
+  EXPECT_TRUE(testing_support::same_bits(first.field.dz_mm, second.field.dz_mm));
+  EXPECT_TRUE(testing_support::same_bits(first.field.peak_ratio, second.field.peak_ratio));
+  EXPECT_EQ(first.flags, second.flags);
+  CorrelationSettings margin = near;
+  margin.passes.back().depth_margin = 2;
+  EXPECT_THROW(correlate_volumes(a, b, margin), InputError);
 }
 
 // A kept workspace changes no bit: a 48^3 pair, a smaller 32^3 pair (after a larger one), then the
@@ -1773,6 +1900,25 @@ TEST(Settings, SpectralWhiteningFromYamlAndRefusals) {
     } catch (const InputError& e) {
       const std::string key = bad.substr(0, bad.find(':'));
       EXPECT_NE(std::string(e.what()).find(key), std::string::npos) << e.what();
+    }
+  }
+}
+
+TEST(Settings, FinalPeakSearchFromYamlAndRefusals) {
+  auto from = [](const std::string& text) {
+    return correlation_settings_from(YamlMap(load_yaml_text(text, "piv.yaml"), "piv.yaml"));
+  };
+  EXPECT_EQ(from("{}").final_peak_search, FinalPeakSearch::all_shifts);
+  EXPECT_EQ(from("final_peak_search: near_predictor\n").final_peak_search, FinalPeakSearch::near_predictor);
+  EXPECT_EQ(from("final_peak_search: all_shifts\n").final_peak_search, FinalPeakSearch::all_shifts);
+  for (const std::string bad :
+       {"final_peak_search: nearby\n", "final_peak_search: 1\n",
+        "final_peak_search: near_predictor\npasses: [{window: 16, overlap_percent: 50, depth_margin: 2}]\n"}) {
+    try {
+      from(bad);
+      ADD_FAILURE() << "accepted: " << bad;
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("final_peak_search"), std::string::npos) << e.what();
     }
   }
 }
