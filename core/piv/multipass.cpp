@@ -588,22 +588,40 @@ CorrelationResult correlate_volumes(const Volume& a, const Volume& b, const Corr
     t0 = Clock::now();
     validated = validate(last, settings.median);
     if (near_predictor) {
-      // Peaks found at the predictor that the test rejects get the whole correlation (their second
-      // and third peaks are the replacements), and the test runs again on every node, until it
-      // rejects none of them: every rejected vector was searched over all shifts.
-      constexpr std::uint8_t outcome = flag_second_peak | flag_third_peak | flag_interpolated | flag_unresolved;
-      for (;;) {
-        std::vector<std::size_t> again;
-        for (std::size_t n = 0; n < last.size(); ++n)
-          if (near[n] && (last.flags[n] & outcome)) again.push_back(n);
-        if (again.empty()) break;
-        report.near_rejected += again.size();
+      // A peak found at the predictor stays its vector's primary; where the test rejects it, the
+      // window is correlated over all shifts and the transform's two highest other peaks become
+      // its second and third (the validation's replacements). No primary changes, so no other
+      // vector's test does: only the replacements are tried, and interpolation redone near them.
+      constexpr std::uint8_t waiting = flag_interpolated | flag_unresolved;
+      std::vector<std::size_t> again;
+      for (std::size_t n = 0; n < last.size(); ++n)
+        if (near[n] && (last.flags[n] & waiting)) again.push_back(n);
+      if (!again.empty()) {
+        std::vector<std::array<float, 3>> found(again.size());
+        std::vector<std::uint8_t> found_flags(again.size());
+        for (std::size_t q = 0; q < again.size(); ++q) {
+          found[q] = last.peak[0][again[q]];
+          found_flags[q] = last.flags[again[q]];
+        }
         const auto t_again = Clock::now();
         correlate_windows(va, vb, shape, layout, pass_predictor, settings, true, false, again, last, ratio, bases,
                           near);
         report.correlate_s += seconds_since(t_again);
-        for (std::uint8_t& f : last.flags) f &= std::uint8_t(~outcome);
-        validated = validate(last, settings.median);
+        for (std::size_t q = 0; q < again.size(); ++q) {
+          const std::size_t n = again[q];
+          std::array<std::array<float, 3>, 3> peaks{found[q]};
+          int count = 1;
+          for (int rank = 0; rank < last.peaks[n] && count < 3; ++rank) {
+            bool same = true;  // the peak found at the predictor (a fit within half a voxel of it)
+            for (int a = 0; a < 3; ++a) same = same && std::abs(last.peak[rank][n][a] - found[q][a]) < 0.5f;
+            if (!same) peaks[std::size_t(count++)] = last.peak[rank][n];
+          }
+          for (int rank = 0; rank < count; ++rank) last.peak[rank][n] = peaks[std::size_t(rank)];
+          last.peaks[n] = std::uint8_t(count);
+          last.flags[n] = found_flags[q];
+        }
+        revalidate_outliers(last, settings.median, again, validated);
+        report.near_rejected = again.size();
       }
       report.near_peaks = std::size_t(std::count(near.begin(), near.end(), 1));
     }

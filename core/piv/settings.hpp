@@ -52,10 +52,11 @@ inline constexpr float kNumericalDust = 1e-6f;
 // and where the value at the predictor is positive and beats all six (find_peaks' test on the
 // faces) it is the peak, fitted by the same three-point fits; the passes before leave nearly every
 // residual within half a voxel, and the seven sums cost a fraction of the transform. Any other
-// window, and every window whose vector the median test then rejects (its second and third peaks
-// are the validation's replacements), is correlated over all shifts by FFT as before. A vector
-// found near the predictor has no second peak: its peak_ratio is NaN. It needs a final pass without
-// a depth margin (that normalisation needs every shift).
+// window is correlated over all shifts by FFT as before; so is every window whose peak found there
+// the median test rejects: that peak stays its primary, and the transform's two highest other
+// peaks become the validation's replacements. A vector whose peak was taken at the predictor has
+// no second peak: its peak_ratio is NaN. It needs a final pass without a depth margin (that
+// normalisation needs every shift).
 enum class FinalPeakSearch { all_shifts, near_predictor };
 
 struct CorrelationSettings {

@@ -7,6 +7,8 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <stdexcept>
+#include <string>
 
 #include "core/piv/peak_fit.hpp"
 
@@ -169,18 +171,26 @@ bool passes(const std::array<float, 3>& u, Reference& ref, const MedianTest& tes
   return true;
 }
 
-bool mean_of_valid(const ValidatedField& f, const std::array<int, 3>& count, std::size_t node, int radius,
-                   std::array<float, 3>& out) {
+// The mean of the vectors `valid(m)` says are valid in the neighbourhood; false where there is none.
+template <typename Valid>
+bool mean_of(const ValidatedField& f, const std::array<int, 3>& count, std::size_t node, int radius, Valid valid,
+             std::array<float, 3>& out) {
   double sum[3] = {0, 0, 0};
   int n = 0;
   for_neighbours(count, node, radius, [&](std::size_t m) {
-    if (!f.valid[m]) return;
+    if (!valid(m)) return;
     for (int a = 0; a < 3; ++a) sum[a] += f.d[m][a];
     ++n;
   });
   if (!n) return false;
   for (int a = 0; a < 3; ++a) out[a] = float(sum[a] / n);
   return true;
+}
+
+bool mean_of_valid(const ValidatedField& f, const std::array<int, 3>& count, std::size_t node, int radius,
+                   std::array<float, 3>& out) {
+  return mean_of(
+      f, count, node, radius, [&](std::size_t m) { return f.valid[m] != 0; }, out);
 }
 
 }  // namespace
@@ -249,6 +259,59 @@ ValidatedField validate(Candidates& c, const MedianTest& test) {
     }
   }
   return f;
+}
+
+void revalidate_outliers(Candidates& c, const MedianTest& test, std::span<const std::size_t> nodes, ValidatedField& f) {
+  constexpr std::uint8_t waiting = flag_interpolated | flag_unresolved;
+  const int radius = std::clamp(test.radius, 1, max_radius);
+  // Each node's secondary peaks against its neighbours' primaries, as validate tries them.
+  std::vector<std::size_t> settled_now;
+  Reference ref;
+  for (const std::size_t node : nodes) {
+    if (!(c.flags[node] & waiting))
+      throw std::logic_error("revalidate_outliers: node " + std::to_string(node) + " is not an outlier left to its " +
+                             "neighbours");
+    gather_reference(c, node, radius, ref);
+    find_medians(ref);
+    for (int rank = 1; rank < c.peaks[node]; ++rank) {
+      if (!passes(c.peak[rank][node], ref, test)) continue;
+      (c.flags[node] & flag_interpolated ? f.counts.interpolated : f.counts.unresolved)--;
+      (rank == 1 ? f.counts.second_peak : f.counts.third_peak)++;
+      c.flags[node] = std::uint8_t((c.flags[node] & ~waiting) | (rank == 1 ? flag_second_peak : flag_third_peak));
+      f.d[node] = c.peak[rank][node];
+      f.valid[node] = 1;
+      settled_now.push_back(node);
+      break;
+    }
+  }
+  // The outliers left to their neighbours within reach of a node settled now, interpolated again
+  // from the settled vectors (those validate's interpolation reads: not interpolated themselves).
+  std::vector<std::size_t> again;
+  std::vector<std::uint8_t> marked(c.size(), 0);
+  for (const std::size_t node : settled_now)
+    for_neighbours(c.count, node, 2, [&](std::size_t m) {
+      if ((c.flags[m] & waiting) && !marked[m]) {
+        marked[m] = 1;
+        again.push_back(m);
+      }
+    });
+  const auto settled = [&](std::size_t m) { return f.valid[m] && !(c.flags[m] & flag_interpolated); };
+  std::vector<std::array<float, 3>> interpolated(again.size());
+  std::vector<std::uint8_t> got(again.size());
+  for (std::size_t q = 0; q < again.size(); ++q)
+    got[q] = mean_of(f, c.count, again[q], 1, settled, interpolated[q]) ||
+             mean_of(f, c.count, again[q], 2, settled, interpolated[q]);
+  for (std::size_t q = 0; q < again.size(); ++q) {
+    const std::size_t node = again[q];
+    if (!got[q]) continue;  // no settled neighbour before either: still unresolved
+    if (c.flags[node] & flag_unresolved) {
+      --f.counts.unresolved;
+      ++f.counts.interpolated;
+      c.flags[node] = std::uint8_t((c.flags[node] & ~flag_unresolved) | flag_interpolated);
+    }
+    f.d[node] = interpolated[q];
+    f.valid[node] = 1;
+  }
 }
 
 void smooth_valid(ValidatedField& f, std::array<int, 3> count, int passes) {

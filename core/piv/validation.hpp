@@ -5,6 +5,7 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <span>
 #include <vector>
 
 namespace plenopiv::piv {
@@ -49,6 +50,15 @@ struct ValidatedField {
 // neighbourhood (5x5x5 when none); else it stays invalid. Nodes without signal stay invalid.
 // Updates `c.flags`. Parallel over nodes (TBB); deterministic.
 ValidatedField validate(Candidates& c, const MedianTest& test);
+
+// After validate(c, test) gave `f`: the outliers `nodes`, left to their neighbours (flagged
+// interpolated or unresolved), have gained secondary peaks in `c`, and nothing else in `c` has
+// changed (their primaries neither). Each takes its second, else third peak where that passes the
+// test, and the outliers still left to their neighbours within reach of one that did are
+// interpolated again; `f`, its counts and `c.flags` come out as validate(c, test) would give them
+// afresh, without testing every node again. std::logic_error for a node that was not such an
+// outlier. Serial: meant for a few nodes.
+void revalidate_outliers(Candidates& c, const MedianTest& test, std::span<const std::size_t> nodes, ValidatedField& f);
 
 // Smooths the valid vectors in place: `passes` binomial [1 2 1]/4 passes along x, y and z in turn.
 // Along an axis a node is smoothed only where it and both its neighbours on that axis are valid;

@@ -1669,6 +1669,70 @@ TEST(Validation, PlantedOutliersAreCaughtAndReplaced) {
   }
 }
 
+// revalidate_outliers against validate() afresh: outliers planted with their primary alone (one
+// lone, one on a face, a 3x3x3 block of scattered vectors, and two neighbours that disagree in a
+// region without signal, so that neither has a settled vector within reach) are validated, then
+// gain secondary peaks (some that pass, some that do not); the update gives the bits, flags and
+// counts of a fresh validation of the same candidates, a pair node going from unresolved to
+// interpolated among them. A node that was not such an outlier is refused.
+TEST(Validation, OutliersGivenSecondaryPeaksComeOutAsAFreshValidation) {
+  Candidates c({14, 14, 14});
+  std::mt19937 rng(9);
+  std::normal_distribution<float> noise(0, 0.05f);
+  std::uniform_real_distribution<float> wild(-9.f, 9.f);
+  const std::array<float, 3> truth{1.0f, 0.5f, -0.5f};
+  for (std::size_t n = 0; n < c.size(); ++n) {
+    for (int a = 0; a < 3; ++a) c.peak[0][n][a] = truth[a] + noise(rng);
+    c.peaks[n] = 1;
+  }
+  const auto at = [&](int x, int y, int z) { return (std::size_t(z) * c.count[1] + y) * c.count[0] + x; };
+  std::vector<std::size_t> planted{at(2, 10, 3), at(0, 7, 4)};
+  for (int z = 3; z < 6; ++z)
+    for (int y = 3; y < 6; ++y)
+      for (int x = 3; x < 6; ++x) planted.push_back(at(x, y, z));
+  for (std::size_t n : planted) c.peak[0][n] = {wild(rng) + 12.f, wild(rng), wild(rng) - 12.f};
+  // No signal in the corner region but for the pair.
+  for (int z = 7; z < 14; ++z)
+    for (int y = 7; y < 14; ++y)
+      for (int x = 7; x < 14; ++x) c.peaks[at(x, y, z)] = 0;
+  const std::size_t first = at(10, 10, 10), second = at(11, 10, 10);
+  c.peaks[first] = c.peaks[second] = 1;
+  c.peak[0][first] = truth;
+  c.peak[0][second] = {truth[0] + 3.f, truth[1], truth[2]};
+  planted.push_back(first);
+  planted.push_back(second);
+  Candidates before = c;
+  ValidatedField f = validate(before, MedianTest{});
+  for (std::size_t n : planted) ASSERT_TRUE(before.flags[n] & (flag_interpolated | flag_unresolved)) << n;
+  ASSERT_TRUE(before.flags[second] & flag_unresolved);
+  // Secondary peaks: far off, but the truth as the lone node's second, the face node's third, a
+  // block corner's and the block centre's second, and the first pair node's second the second's
+  // primary.
+  for (Candidates* k : {&before, &c}) {
+    for (std::size_t n : planted) {
+      k->peaks[n] = 3;
+      k->peak[1][n] = k->peak[2][n] = {-7.f, 2.f, 9.f};
+    }
+    for (std::size_t n : {planted[0], at(3, 3, 3), at(4, 4, 4)}) k->peak[1][n] = truth;
+    k->peak[2][planted[1]] = truth;
+    k->peak[1][first] = c.peak[0][second];
+  }
+  revalidate_outliers(before, MedianTest{}, planted, f);
+  const ValidatedField fresh = validate(c, MedianTest{});
+  EXPECT_TRUE(testing_support::same_bits(f.d, fresh.d));
+  EXPECT_EQ(f.valid, fresh.valid);
+  EXPECT_EQ(before.flags, c.flags);
+  EXPECT_EQ(f.counts.outliers, fresh.counts.outliers);
+  EXPECT_EQ(f.counts.second_peak, fresh.counts.second_peak);
+  EXPECT_EQ(f.counts.third_peak, fresh.counts.third_peak);
+  EXPECT_EQ(f.counts.interpolated, fresh.counts.interpolated);
+  EXPECT_EQ(f.counts.unresolved, fresh.counts.unresolved);
+  EXPECT_EQ(fresh.counts.second_peak, 4u);
+  EXPECT_EQ(fresh.counts.third_peak, 1u);
+  EXPECT_TRUE(c.flags[second] & flag_interpolated) << "the pair's second node gains a settled neighbour";
+  EXPECT_THROW(revalidate_outliers(before, MedianTest{}, std::vector<std::size_t>{at(1, 1, 1)}, f), std::logic_error);
+}
+
 // validate() against the normalised median test written out for every node: the neighbours'
 // primaries within the radius (clipped at the faces, so odd and even counts), each axis's median
 // (the mean of the two middle values for an even count) and median absolute residual, a vector
