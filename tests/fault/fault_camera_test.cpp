@@ -235,10 +235,16 @@ TEST_F(FaultCamera, AKilledCameraIsCountedLostAndTheRunGoesOnAfterItComesBack) {
   // The daemon takes the next run on the camera that came back, and accounts for all of it (the
   // fake camera, paired by host arrival time, loses a pair now and then on a loaded machine).
   start_run(4);
-  EXPECT_GE(wait_for_run_end(15s).pairs_recorded(), 1u);
+  const msg::Status next_end = wait_for_run_end(15s);
   const std::vector<fs::path> both = testing_support::run_folders(dir_ / "data");
   ASSERT_EQ(both.size(), 2u);
   const msg::RunManifest next = testing_support::read_manifest(both[1]);
+  std::string dropped;  // why, for a failure's message
+  for (const msg::ManifestDrop& d : next.dropped())
+    dropped += " trigger " + std::to_string(d.trigger_index()) + ": " + d.reason() + ";";
+  EXPECT_GE(next_end.pairs_recorded(), 1u) << "dropped:" << dropped << "\n"
+                                           << next_end.DebugString() << "\n"
+                                           << daemon_->process->output();
   EXPECT_EQ(next.state(), "complete");
   expect_every_trigger_accounted(next, 4);
   daemon_->process->signal(SIGTERM);
