@@ -43,7 +43,9 @@
 //     --live-depth-prefilter K: the --live tiers' depth prefilter (default the headline's).
 //     --live-only: the --live tiers alone (with --no-sweep), without the headline rows.
 //              Each tier's line has its sigma against its errors off the axis band (ratio_*, within_*)
-//              and, with --depth-response-ppm, the tier measures its own response (in setup_s).
+//              and, with --depth-response-ppm, the tier measures its own response (in setup_s); two
+//              more lines (variant=live_peak_search) correlate its volumes again with the final
+//              peak searched over all shifts and at the predictor first, side by side.
 //     --prune-threshold: MART's prune threshold for the headline rows (default 0: exact zeros);
 //              --prune-scope: of the volume's peak (default) or of each depth slice's.
 //     --depth-response-ppm F: the headline's w corrected for MART's depth response measured at F
@@ -480,6 +482,23 @@ int main(int argc, char** argv) {
           el.rms[2], el.total, el.valid_fraction, band, el.off_band[0], el.off_band[1], el.off_band[2],
           el.off_band_gain[0], el.off_band_gain[1], el.off_band_gain[2], ex.off_band[0], ex.off_band[1], ex.off_band[2],
           s.depth_response_ppm, sigma_items.c_str(), bench::peak_rss_gb());
+      // The tier's final peak search both ways on the same (cropped) volumes, side by side.
+      for (const piv::FinalPeakSearch search :
+           {piv::FinalPeakSearch::all_shifts, piv::FinalPeakSearch::near_predictor}) {
+        piv::CorrelationSettings c = s.correlation;
+        c.final_peak_search = search;
+        t = now_s();
+        const auto r = piv::correlate_volumes(again.volume_a, again.volume_b, c);
+        const double cs = now_s() - t;
+        const Errors er = errors_against(r.field, flow, voxel, band);
+        std::printf(
+            "bench=e2e case=%s variant=live_peak_search tier=%s final_peak_search=%s depth_context=0 correlate_s=%.3f "
+            "rms_u=%.3f rms_v=%.3f rms_w=%.3f off_axis_band_rms_u=%.3f off_axis_band_rms_v=%.3f "
+            "off_axis_band_rms_w=%.3f valid=%.3f\n",
+            scale.c_str(), tier.c_str(),
+            search == piv::FinalPeakSearch::near_predictor ? "near_predictor" : "all_shifts", cs, er.rms[0], er.rms[1],
+            er.rms[2], er.off_band[0], er.off_band[1], er.off_band[2], er.valid_fraction);
+      }
       std::fflush(stdout);
     }
     return true;
