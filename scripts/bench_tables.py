@@ -690,12 +690,20 @@ def t_live_tiers(R):
     full = r.one(variant="reconstructed")
     exact = r.one(variant="exact_volumes") or {}
     gains = lambda d: " / ".join(d.get(f"off_axis_band_gain_{c}", "?") for c in "uvw")
+    # Each tier's volumes correlated again with the final peak over all shifts and at the predictor first.
+    searches = {(e.get("tier"), e.get("final_peak_search")): e for e in r.find(variant="live_peak_search")}
+
+    def search(d):
+        every, near = (searches.get((d.get("tier"), k)) for k in ("all_shifts", "near_predictor"))
+        return f"{uvw(every, 'off_axis_band_rms_')} -> {uvw(near, 'off_axis_band_rms_')}" if every and near else "—"
+
     rows = []
     if full:
         one_shot = sum(float(full[k]) for k in ("recon_a_s", "recon_b_s", "correlate_s"))
         rows.append(["the full settings (run-paper.yaml)", "0.125 x 0.125 x 0.25 mm, 1 x 1", full["iterations"],
                      RUN_PAPER_PASSES, f"{one_shot:.2f} (one-shot)", uvw(full),
-                     uvw(full, "off_axis_band_rms_"), gains(full), uvw(exact, "off_axis_band_rms_") if exact else "—"])
+                     uvw(full, "off_axis_band_rms_"), gains(full), uvw(exact, "off_axis_band_rms_") if exact else "—",
+                     "—"])
     for d in r.find(variant="live"):
         b, k, n, p = d["binning"], d["pixel_binning"], d["iterations"], d["passes"]
         db = d.get("depth_binning", b)
@@ -703,10 +711,11 @@ def t_live_tiers(R):
         voxel = f"{0.125 * int(b):g}" + (f" x {0.125 * int(db):g}" if db != b else "") + " mm"
         prefilter = f", prefilter {d['depth_prefilter']}" if "depth_prefilter" in d else ""
         rows.append([label, f"{voxel}, {k} x {k}{prefilter}", n, p, f"{d['pair_s']} (first {d['first_pair_s']})",
-                     uvw(d), uvw(d, "off_axis_band_rms_"), gains(d), uvw(d, "exact_off_axis_band_rms_")])
+                     uvw(d), uvw(d, "off_axis_band_rms_"), gains(d), uvw(d, "exact_off_axis_band_rms_"), search(d)])
     out = table(["tier", "voxel, pixel binning", "MART it", "passes", "s per pair in a run",
                  "RMS u / v / w, 0.125 mm voxels", "off the axis band", "gain u / v / w (off the band)",
-                 "exact particles on its grid (off the band)"], rows)
+                 "exact particles on its grid (off the band)",
+                 "its volumes again: final peak over all shifts -> at the predictor first (off the band)"], rows)
     return out + ["", r.provenance()]
 
 
