@@ -1082,7 +1082,9 @@ TEST(Multipass, APeakSearchAtThePredictorKeepsTheTransformsVectors) {
   for (std::size_t n = 0; n < first.field.grid.count(); ++n) {
     const bool found_near = std::isnan(first.field.peak_ratio[n]);
     at_predictor += found_near;
-    if (found_near) EXPECT_FALSE(first.flags[n] & rejected) << "node " << n;
+    if (found_near) {
+      EXPECT_FALSE(first.flags[n] & rejected) << "node " << n;
+    }
     if (!first.field.valid[n] || !whole.field.valid[n]) {
       differ += first.field.valid[n] != whole.field.valid[n];
       continue;
