@@ -193,6 +193,24 @@ bool mean_of_valid(const ValidatedField& f, const std::array<int, 3>& count, std
       f, count, node, radius, [&](std::size_t m) { return f.valid[m] != 0; }, out);
 }
 
+// An outlier's replacement by its neighbours: the mean of the settled vectors (`settled(m)`) in
+// its 3x3x3 neighbourhood, else in its 5x5x5; false where there is none.
+template <typename Settled>
+bool interpolate(const ValidatedField& f, const std::array<int, 3>& count, std::size_t node, Settled settled,
+                 std::array<float, 3>& out) {
+  return mean_of(f, count, node, 1, settled, out) || mean_of(f, count, node, 2, settled, out);
+}
+
+// The first of an outlier's secondary peaks (rank 1 or 2) that passes the test against `ref` (its
+// medians found), or 0.
+int passing_secondary(const Candidates& c, std::size_t node, Reference& ref, const MedianTest& test) {
+  for (int rank = 1; rank < c.peaks[node]; ++rank)
+    if (passes(c.peak[rank][node], ref, test)) return rank;
+  return 0;
+}
+
+VectorFlag secondary_flag(int rank) { return rank == 1 ? flag_second_peak : flag_third_peak; }
+
 }  // namespace
 
 Candidates::Candidates(std::array<int, 3> n) : count(n) {
@@ -222,14 +240,11 @@ ValidatedField validate(Candidates& c, const MedianTest& test) {
         continue;
       }
       state[node] = 2;
-      for (int rank = 1; rank < c.peaks[node]; ++rank) {
-        if (passes(c.peak[rank][node], ref, test)) {
-          f.d[node] = c.peak[rank][node];
-          f.valid[node] = 1;
-          c.flags[node] |= rank == 1 ? flag_second_peak : flag_third_peak;
-          state[node] = 1;
-          break;
-        }
+      if (const int rank = passing_secondary(c, node, ref, test)) {
+        f.d[node] = c.peak[rank][node];
+        f.valid[node] = 1;
+        c.flags[node] |= secondary_flag(rank);
+        state[node] = 1;
       }
     }
   });
@@ -239,8 +254,8 @@ ValidatedField validate(Candidates& c, const MedianTest& test) {
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n), [&](const auto& r) {
     for (std::size_t node = r.begin(); node < r.end(); ++node) {
       if (state[node] != 2) continue;
-      got[node] = mean_of_valid(f, c.count, node, 1, interpolated[node]) ||
-                  mean_of_valid(f, c.count, node, 2, interpolated[node]);
+      got[node] = interpolate(
+          f, c.count, node, [&](std::size_t m) { return f.valid[m] != 0; }, interpolated[node]);
     }
   });
   for (std::size_t node = 0; node < n; ++node) {
@@ -273,16 +288,14 @@ void revalidate_outliers(Candidates& c, const MedianTest& test, std::span<const 
                              "neighbours");
     gather_reference(c, node, radius, ref);
     find_medians(ref);
-    for (int rank = 1; rank < c.peaks[node]; ++rank) {
-      if (!passes(c.peak[rank][node], ref, test)) continue;
-      (c.flags[node] & flag_interpolated ? f.counts.interpolated : f.counts.unresolved)--;
-      (rank == 1 ? f.counts.second_peak : f.counts.third_peak)++;
-      c.flags[node] = std::uint8_t((c.flags[node] & ~waiting) | (rank == 1 ? flag_second_peak : flag_third_peak));
-      f.d[node] = c.peak[rank][node];
-      f.valid[node] = 1;
-      settled_now.push_back(node);
-      break;
-    }
+    const int rank = passing_secondary(c, node, ref, test);
+    if (!rank) continue;
+    (c.flags[node] & flag_interpolated ? f.counts.interpolated : f.counts.unresolved)--;
+    (rank == 1 ? f.counts.second_peak : f.counts.third_peak)++;
+    c.flags[node] = std::uint8_t((c.flags[node] & ~waiting) | secondary_flag(rank));
+    f.d[node] = c.peak[rank][node];
+    f.valid[node] = 1;
+    settled_now.push_back(node);
   }
   // The outliers left to their neighbours within reach of a node settled now, interpolated again
   // from the settled vectors (those validate's interpolation reads: not interpolated themselves).
@@ -298,9 +311,7 @@ void revalidate_outliers(Candidates& c, const MedianTest& test, std::span<const 
   const auto settled = [&](std::size_t m) { return f.valid[m] && !(c.flags[m] & flag_interpolated); };
   std::vector<std::array<float, 3>> interpolated(again.size());
   std::vector<std::uint8_t> got(again.size());
-  for (std::size_t q = 0; q < again.size(); ++q)
-    got[q] = mean_of(f, c.count, again[q], 1, settled, interpolated[q]) ||
-             mean_of(f, c.count, again[q], 2, settled, interpolated[q]);
+  for (std::size_t q = 0; q < again.size(); ++q) got[q] = interpolate(f, c.count, again[q], settled, interpolated[q]);
   for (std::size_t q = 0; q < again.size(); ++q) {
     const std::size_t node = again[q];
     if (!got[q]) continue;  // no settled neighbour before either: still unresolved
