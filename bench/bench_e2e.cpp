@@ -23,6 +23,9 @@
 //              (default 1).
 //     --voxel-z-factor D: the headline's voxels D times as deep as wide (volume.voxel_z_mm; errors
 //              still in the 0.125 mm voxels; window depths and margins in --passes are its voxels).
+//     --voxel-xy-divisor N: the headline's voxels 0.125 / N mm across (volume.voxel_mm; N 1 to 4,
+//              default 1: the lens pitch; errors still in the 0.125 mm voxels, windows in --passes
+//              and --whitened-peak-sigma in its voxels; with --voxel-z-factor, as deep as before).
 //     --early-interpolation: the deformation of the passes before the last (correlation's
 //              early_interpolation; default the sinc); the variants correlate with the other one.
 //     --uncertainty-stride N: the headline's per-vector uncertainty computed every N nodes per axis
@@ -206,6 +209,7 @@ int main(int argc, char** argv) {
   std::string passes;          // the headline's passes (--passes syntax); empty: core/piv's default
   piv::Interpolation early_interpolation = piv::CorrelationSettings{}.early_interpolation;
   int depth_voxel_factor = 1;     // the headline's voxels this many times as deep as wide
+  int lateral_divisor = 1;        // and 0.125 / this mm across
   int live_depth_prefilter = -1;  // the --live tiers' depth prefilter; < 0: the headline's
   std::vector<std::string> live;  // --live B,K,N,P, one per live tier
   for (int i = 1; i < argc; ++i) {
@@ -277,6 +281,8 @@ int main(int argc, char** argv) {
       live_depth_prefilter = std::stoi(argv[++i]);
     else if (!std::strcmp(argv[i], "--voxel-z-factor") && i + 1 < argc)
       depth_voxel_factor = std::max(1, std::stoi(argv[++i]));
+    else if (!std::strcmp(argv[i], "--voxel-xy-divisor") && i + 1 < argc)
+      lateral_divisor = std::clamp(std::stoi(argv[++i]), 1, 4);
     else if (!std::strcmp(argv[i], "--early-interpolation") && i + 1 < argc) {
       const std::string name = argv[++i];
       if (name != "sinc" && name != "cubic") {
@@ -293,7 +299,7 @@ int main(int argc, char** argv) {
   }
   if (sweep && (iterations != 5 || mu != 0.5 || accelerate || z_centre != 0.0 || !passes.empty() ||
                 early_interpolation != piv::CorrelationSettings{}.early_interpolation || depth_voxel_factor != 1 ||
-                dark_cutoff != recon::MartSettings{}.dark_weight_cutoff ||
+                lateral_divisor != 1 || dark_cutoff != recon::MartSettings{}.dark_weight_cutoff ||
                 sensor_blur_mm != recon::MartSettings{}.sensor_blur_sigma_mm ||
                 intensity_threshold != piv::CorrelationSettings{}.intensity_threshold_of_mean ||
                 spectral_whitening != piv::CorrelationSettings{}.spectral_whitening ||
@@ -303,13 +309,13 @@ int main(int argc, char** argv) {
                 final_peak_search != piv::CorrelationSettings{}.final_peak_search ||
                 prune_threshold != recon::MartSettings{}.prune_threshold || prune_scope != "volume" ||
                 depth_response_ppm != 0.0)) {
-    std::fprintf(
-        stderr,
-        "bench_e2e: "
-        "--iterations/--mu/--accelerate/--dark-cutoff/--sensor-blur-mm/--intensity-threshold/"
-        "--final-smoothing/--depth-prefilter/--spectral-whitening/--passes/--early-interpolation/--voxel-z-factor/"
-        "--uncertainty-stride/--final-peak-search/--z-centre/--depth-response-ppm change the "
-        "headline rows only; use them with --no-sweep\n");
+    std::fprintf(stderr,
+                 "bench_e2e: "
+                 "--iterations/--mu/--accelerate/--dark-cutoff/--sensor-blur-mm/--intensity-threshold/"
+                 "--final-smoothing/--depth-prefilter/--spectral-whitening/--passes/--early-interpolation/"
+                 "--voxel-z-factor/--voxel-xy-divisor/"
+                 "--uncertainty-stride/--final-peak-search/--z-centre/--depth-response-ppm change the "
+                 "headline rows only; use them with --no-sweep\n");
     return 2;
   }
   // mid: the paper's camera and depth with the box cut laterally to the ring (120 x 80 voxels):
@@ -317,16 +323,17 @@ int main(int argc, char** argv) {
   const bool mid = scale == "mid";
   const bool full = scale == "full" || mid;
   if (!full && scale != "reduced") {
-    std::fprintf(stderr,
-                 "usage: bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate] "
-                 "[--dark-cutoff F] [--sensor-blur-mm S] [--intensity-threshold K] [--final-smoothing K] "
-                 "[--depth-prefilter K] [--spectral-whitening P [--whitened-peak-sigma X,Y,Z]] [--passes P] "
-                 "[--early-interpolation sinc|cubic] [--voxel-z-factor D] [--uncertainty-stride N] "
-                 "[--final-peak-search all_shifts|near_predictor] [--steady [--steady-repeats N]] [--time-sweep] "
-                 "[--z-centre MM] [--compare-passes 'P1;P2'] "
-                 "[--prune-threshold F "
-                 "[--prune-scope volume|slice]] [--depth-response-ppm F] [--sparse-sweep [--sparse-repeats N] "
-                 "[--sparse-variants V,..]] [--live B,K,N,P [--live-depth-prefilter K] [--live-only]]\n");
+    std::fprintf(
+        stderr,
+        "usage: bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate] "
+        "[--dark-cutoff F] [--sensor-blur-mm S] [--intensity-threshold K] [--final-smoothing K] "
+        "[--depth-prefilter K] [--spectral-whitening P [--whitened-peak-sigma X,Y,Z]] [--passes P] "
+        "[--early-interpolation sinc|cubic] [--voxel-z-factor D] [--voxel-xy-divisor N] [--uncertainty-stride N] "
+        "[--final-peak-search all_shifts|near_predictor] [--steady [--steady-repeats N]] [--time-sweep] "
+        "[--z-centre MM] [--compare-passes 'P1;P2'] "
+        "[--prune-threshold F "
+        "[--prune-scope volume|slice]] [--depth-response-ppm F] [--sparse-sweep [--sparse-repeats N] "
+        "[--sparse-variants V,..]] [--live B,K,N,P [--live-depth-prefilter K] [--live-only]]\n");
     return 2;
   }
   recon::PruneScope scope = recon::PruneScope::volume;
@@ -347,8 +354,9 @@ int main(int argc, char** argv) {
   const double hx = 0.5 * nx * voxel, hy = 0.5 * ny * voxel, hz = 0.5 * nz * voxel;
 
   process::ProcessSettings settings;
-  settings.grid = process::grid_for_extent({-hx, -hy, z_centre - hz}, {hx, hy, z_centre + hz},
-                                           {voxel, voxel, depth_voxel_factor * voxel}, "bench");
+  settings.grid =
+      process::grid_for_extent({-hx, -hy, z_centre - hz}, {hx, hy, z_centre + hz},
+                               {voxel / lateral_divisor, voxel / lateral_divisor, depth_voxel_factor * voxel}, "bench");
   settings.correlation.dt_s = 1.0;
   settings.mart.iterations = iterations;
   settings.mart.mu = mu;
@@ -511,8 +519,9 @@ int main(int argc, char** argv) {
   const process::PairProcessor processor(camera, nominal, settings);
   const process::PairOperator& op = processor.op();
   const double weights_s = now_s() - t;
-  std::printf("bench=e2e case=%s particles=%zu voxels=%zu render_s=%.2f weights_s=%.2f\n", scale.c_str(), count,
-              settings.grid.count(), render_s, weights_s);
+  std::printf("bench=e2e case=%s particles=%zu voxels=%zu voxel_mm=%g voxel_z_mm=%g render_s=%.2f weights_s=%.2f\n",
+              scale.c_str(), count, settings.grid.count(), settings.grid.spacing_mm[0], settings.grid.spacing_mm[2],
+              render_s, weights_s);
 
   // The paper's settings: reconstruction and correlation, stage by stage.
   recon::MartWorkspace workspace;  // kept for --steady and the sweeps
@@ -674,11 +683,13 @@ int main(int argc, char** argv) {
   {
     // Three passes with the residual added to the predictor's window mean, unsmoothed: what the
     // centre predictor, its smoothing and the fourth pass are compared against.
-    // Windows of 4 and 2 mm, in the headline's voxels (depth_voxel_factor times as deep as wide).
+    // Windows of 4 and 2 mm, in the headline's voxels (0.125 / lateral_divisor mm across,
+    // depth_voxel_factor times 0.125 mm deep).
     piv::CorrelationSettings previous = settings.correlation;
-    const int f = depth_voxel_factor;
-    previous.passes = {
-        {{32, 32, std::max(4, 32 / f)}, 50}, {{16, 16, std::max(4, 16 / f)}, 50}, {{16, 16, std::max(4, 16 / f)}, 75}};
+    const int f = depth_voxel_factor, n = lateral_divisor;
+    previous.passes = {{{32 * n, 32 * n, std::max(4, 32 / f)}, 50},
+                       {{16 * n, 16 * n, std::max(4, 16 / f)}, 50},
+                       {{16 * n, 16 * n, std::max(4, 16 / f)}, 75}};
     previous.predictor = piv::PredictorBase::window_mean;
     previous.predictor_smoothing = 0;
     piv::CorrelationSettings centre3 = previous;

@@ -1,12 +1,12 @@
 // The shipped run-paper.yaml's two tiers on a shear pair through a rotated, offset, jittered paper
 // microlens array: the frames are rendered through the true array and processed with it as the
 // calibration (the resampling path every calibrated camera takes), so that the figure is the
-// tiers', not the calibration's. u and w grow along y (-2 to +2 voxels over the box, both across
-// the focal plane's depth); FLOW uniform moves every particle by (2.32, 1.36, 2) voxels instead
-// (a lateral shift off the voxel lattice with the depth one, bench_depth_response's). Per tier:
-// set-up, first and in-a-run time per pair, and RMS error, bias and gain per component against the
-// truth; the full tier once more with w through MART's depth response
-// (reconstruction.depth_response_ppm at the pair's seeding).
+// tiers', not the calibration's. Voxels here are the paper's 0.125 mm, whatever CONFIG's. u and w
+// grow along y (-2 to +2 voxels over the box, both across the focal plane's depth); FLOW uniform
+// moves every particle by (2.32, 1.36, 2) voxels instead (a lateral shift off the voxel lattice
+// with the depth one, bench_depth_response's). Per tier: set-up, first and in-a-run time per pair,
+// and RMS error, bias and gain per component against the truth; the full tier once more with w
+// through MART's depth response (reconstruction.depth_response_ppm at the pair's seeding).
 // w's gain per depth band follows (near the focal plane the mirror ambiguity limits it), then the
 // per-vector uncertainty's ratio to the true error and its coverage.
 //   build/bin/bench_rotated_shear [DEGREES] [PPM] [both|full|plain] [CONFIG] [SEED] [shear|uniform]
@@ -75,9 +75,12 @@ int main(int argc, char** argv) {
   const Grid3& g = spec.full.grid;
   const double voxel = g.spacing_mm[0];
   const double half_y = 0.5 * g.shape[1] * voxel;
-  const double rate = 2 * voxel / half_y;  // u and w: +-2 voxels at the box's y faces
+  // The flow and the errors in the paper's voxels (0.125 mm, the lens pitch in object space)
+  // whatever the config's: a config on finer voxels meets the same flow and is scored alike.
+  constexpr double unit = 0.125;
+  const double rate = 2 * unit / half_y;  // u and w: +-2 voxels at the box's y faces
   const sim::LinearShear shear({rate, 0, rate}, 1, 0.0);
-  const sim::UniformFlow uniform({2.32 * voxel, 1.36 * voxel, 2 * voxel});
+  const sim::UniformFlow uniform({2.32 * unit, 1.36 * unit, 2 * unit});
   const sim::Flow& flow = flow_name == "uniform" ? static_cast<const sim::Flow&>(uniform) : shear;
   const double voxel_z = g.spacing_mm[2];  // run-paper.yaml's voxels are deeper than wide
   const sim::Box box{
@@ -119,17 +122,17 @@ int main(int argc, char** argv) {
     t = now_s();
     const process::PairResult r = processor.process(a, b);
     const double pair_s = now_s() - t;
-    // Errors in the full settings' voxels, whatever the tier's.
-    const sim::FieldErrors e = sim::field_errors(r.correlation.field, flow, voxel, 3);
+    // Errors in the paper's voxels, whatever the tier's.
+    const sim::FieldErrors e = sim::field_errors(r.correlation.field, flow, unit, 3);
     std::printf(
-        "bench=rotated_shear tier=%s variant=%s degrees=%.2f voxel_mm=%.3f voxel_z_mm=%.3f pixel_binning=%d "
+        "bench=rotated_shear tier=%s variant=%s config=%s degrees=%.2f voxel_mm=%g voxel_z_mm=%g pixel_binning=%d "
         "iterations=%d "
         "setup_s=%.2f first_s=%.2f pair_s=%.2f rms_u=%.3f rms_v=%.3f rms_w=%.3f bias_u=%.3f bias_v=%.3f bias_w=%.3f "
         "gain_u=%.3f "
         "gain_w=%.3f valid=%.3f resampled=%d peak_rss_gb=%.2f\n",
-        process::tier_name(tier), variant, degrees, s.grid.spacing_mm[0], s.grid.spacing_mm[2], s.pixel_binning,
-        s.mart.iterations, setup_s, first_s, pair_s, e.rms[0], e.rms[1], e.rms[2], e.bias[0], e.bias[1], e.bias[2],
-        e.gain[0], e.gain[2],
+        process::tier_name(tier), variant, config_name.c_str(), degrees, s.grid.spacing_mm[0], s.grid.spacing_mm[2],
+        s.pixel_binning, s.mart.iterations, setup_s, first_s, pair_s, e.rms[0], e.rms[1], e.rms[2], e.bias[0],
+        e.bias[1], e.bias[2], e.gain[0], e.gain[2],
         r.correlation.field.grid.count() ? double(e.compared) / double(r.correlation.field.grid.count()) : 0.0,
         int(processor.op().resampler() != nullptr), bench::peak_rss_gb());
     // w's gain by distance from the focal plane (z = 0), mm.
@@ -137,7 +140,7 @@ int main(int argc, char** argv) {
                 ppm, config_name.c_str());
     const std::array<double, 6> edges{0, 2, 4, 8, 10, 1e9};
     for (std::size_t band = 0; band + 1 < edges.size(); ++band) {
-      const sim::FieldErrors eb = sim::field_errors(r.correlation.field, flow, voxel, 3, 0, [&](const sim::Point3& p) {
+      const sim::FieldErrors eb = sim::field_errors(r.correlation.field, flow, unit, 3, 0, [&](const sim::Point3& p) {
         return std::abs(p[2]) >= edges[band] && std::abs(p[2]) < edges[band + 1];
       });
       std::printf(" gain_w_%g_%g=%.3f bias_w_%g_%g=%.3f", edges[band], std::min(edges[band + 1], 99.0), eb.gain[2],
@@ -146,14 +149,14 @@ int main(int argc, char** argv) {
     std::printf("\n");
     // The per-vector uncertainty against the true errors: RMS sigma / RMS error and the fraction
     // within +-1 and +-2 sigma per component; w's ratio by distance from the focal plane.
-    const sim::UncertaintyCheck c = sim::uncertainty_check(r.correlation.field, flow, voxel, 3, 0);
+    const sim::UncertaintyCheck c = sim::uncertainty_check(r.correlation.field, flow, unit, 3, 0);
     std::printf("bench=rotated_shear_sigma tier=%s variant=%s", process::tier_name(tier), variant);
     for (std::size_t a = 0; a < 3; ++a)
       std::printf(" ratio_%c=%.3f within_1sigma_%c=%.3f within_2sigma_%c=%.3f", "uvw"[a],
                   c.rms_sigma[a] / c.rms_error[a], "uvw"[a], c.within_1[a], "uvw"[a], c.within_2[a]);
     for (std::size_t band = 0; band + 1 < edges.size(); ++band) {
       const sim::UncertaintyCheck cb = sim::uncertainty_check(
-          r.correlation.field, flow, voxel, 3, 0,
+          r.correlation.field, flow, unit, 3, 0,
           [&](const sim::Point3& p) { return std::abs(p[2]) >= edges[band] && std::abs(p[2]) < edges[band + 1]; });
       std::printf(" ratio_w_%g_%g=%.3f", edges[band], std::min(edges[band + 1], 99.0),
                   cb.rms_sigma[2] / cb.rms_error[2]);

@@ -3,7 +3,9 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include "core/base/errors.hpp"
@@ -50,6 +52,50 @@ TEST(ProcessSettings, TheDepthGuardAddsWholeSlicesAtBothDepthEnds) {
   EXPECT_DOUBLE_EQ(parse(kVolume + "}\n" + kPasses).depth_guard_mm, 1.0);  // the default
   EXPECT_EQ(parse(kVolume + ", depth_guard_mm: 0}\n" + kPasses).reconstruction_grid(),
             parse(kVolume + "}\n" + kPasses).grid);
+}
+
+// process-paper.yaml is run-paper.yaml's full tier on voxels half a lens pitch across: the same box,
+// the same passes, overlaps, margins and whitened peak in mm, the same floor, filters and searches,
+// and more iterations for four times the voxels per depth slice.
+TEST(ProcessSettings, ThePaperAccuracyConfigIsRunPapersBoxAndCorrelationInMmOnHalfPitchVoxels) {
+  const std::string dir = std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/";
+  const auto load = [&](const std::string& name) {
+    return process_spec_from(YamlMap(processing_part(load_yaml_file(dir + name)), name)).full;
+  };
+  const ProcessSettings fine = load("process-paper.yaml"), paper = load("run-paper.yaml");
+  EXPECT_EQ(fine.grid.shape, (std::array<int, 3>{600, 400, 100}));
+  EXPECT_EQ(fine.grid.spacing_mm, (std::array<double, 3>{0.0625, 0.0625, 0.25}));
+  for (int a = 0; a < 3; ++a) {
+    // The same faces: node 0's centre half a voxel inside, the same extent.
+    EXPECT_DOUBLE_EQ(fine.grid.origin_mm[a] - 0.5 * fine.grid.spacing_mm[a],
+                     paper.grid.origin_mm[a] - 0.5 * paper.grid.spacing_mm[a]);
+    EXPECT_DOUBLE_EQ(fine.grid.shape[a] * fine.grid.spacing_mm[a], paper.grid.shape[a] * paper.grid.spacing_mm[a]);
+  }
+  EXPECT_GT(fine.mart.iterations, paper.mart.iterations);
+  EXPECT_EQ(fine.mart.accelerate, paper.mart.accelerate);
+  EXPECT_EQ(fine.mart.mu, paper.mart.mu);
+  EXPECT_EQ(fine.mart.prune_threshold, paper.mart.prune_threshold);
+  EXPECT_EQ(fine.mart.prune_scope, paper.mart.prune_scope);
+  const piv::CorrelationSettings &f = fine.correlation, &p = paper.correlation;
+  ASSERT_EQ(f.passes.size(), p.passes.size());
+  for (std::size_t k = 0; k < f.passes.size(); ++k) {
+    for (int a = 0; a < 3; ++a)
+      EXPECT_DOUBLE_EQ(f.passes[k].window[a] * fine.grid.spacing_mm[a],
+                       p.passes[k].window[a] * paper.grid.spacing_mm[a])
+          << "pass " << k + 1 << ", axis " << a;
+    EXPECT_EQ(f.passes[k].overlap_percent, p.passes[k].overlap_percent);
+    EXPECT_EQ(f.passes[k].depth_margin, p.passes[k].depth_margin);  // depth voxels alike
+  }
+  for (int a = 0; a < 3; ++a)
+    EXPECT_DOUBLE_EQ(f.whitened_peak_sigma_voxel[a] * fine.grid.spacing_mm[a],
+                     p.whitened_peak_sigma_voxel[a] * paper.grid.spacing_mm[a]);
+  EXPECT_EQ(f.intensity_threshold_of_mean, p.intensity_threshold_of_mean);
+  EXPECT_EQ(f.depth_prefilter, p.depth_prefilter);
+  EXPECT_EQ(f.final_smoothing, p.final_smoothing);
+  EXPECT_EQ(f.spectral_whitening, p.spectral_whitening);
+  EXPECT_EQ(f.early_interpolation, p.early_interpolation);
+  EXPECT_EQ(f.uncertainty_stride, p.uncertainty_stride);
+  EXPECT_EQ(f.final_peak_search, p.final_peak_search);
 }
 
 TEST(ProcessSettings, ABadDepthGuardIsNamed) {
