@@ -3,15 +3,17 @@
 # weight tables built (an empty cache folder) or read back (the same folder again), MART and the
 # correlation, writing the HDF5, .vti and PNG; on a lens array rotated 0.1 deg (the frames are
 # resampled onto an axis-aligned lattice, as for any calibrated camera) and on the camera file's.
-#   bash bench/oneshot_cli.sh [REPEATS]     (default 3: medians of the cached calls)
+#   bash bench/oneshot_cli.sh [REPEATS] [CONFIG]   (default 3: medians of the cached calls;
+#                                                   systemd/config/run-paper.yaml)
 # Everything through the CLI: `plenopiv simulate` renders the white, calibration and pair images
 # (the paper's ring vortex at 0.5 ppm in run-paper.yaml's box), `plenopiv calibrate` measures the
 # rotated array, and run-paper.yaml's dt_s, volume, reconstruction and correlation are the
-# processing spec. Prints bench=oneshot lines (key=value): wall and CPU seconds, peak memory, and
+# processing spec (or CONFIG's: another config of the paper's box, e.g. process-paper.yaml). Prints bench=oneshot lines (key=value): wall and CPU seconds, peak memory, and
 # the voxel updates MART skipped, per array and cache state.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 repeats=${1:-3}
+config=${2:-systemd/config/run-paper.yaml}
 work="$PWD/build/bench-oneshot"
 rm -rf "$work"
 mkdir -p "$work"
@@ -19,9 +21,9 @@ plenopiv="$PWD/build/bin/plenopiv"
 camera=systemd/config/camera-fahringer2015.yaml
 rotation_rad=0.001745329 # 0.1 deg
 
-/usr/bin/python3 - "$work/process.yaml" <<'EOF'
+/usr/bin/python3 - "$work/process.yaml" "$config" <<'EOF'
 import sys, yaml
-run = yaml.safe_load(open("systemd/config/run-paper.yaml"))
+run = yaml.safe_load(open(sys.argv[2]))
 yaml.safe_dump({k: run[k] for k in ("dt_s", "volume", "reconstruction", "correlation")}, open(sys.argv[1], "w"))
 EOF
 
