@@ -111,7 +111,7 @@ int main(int argc, char** argv) {
     if (full_only && tier != process::Tier::full) continue;
     if (plain_only && row.depth_response) continue;
     process::ProcessSettings s = spec.settings(tier, config_name);
-    if (row.depth_response) s.depth_response_ppm = ppm;
+    s.depth_response_ppm = row.depth_response ? ppm : 0.0;  // whatever CONFIG says
     const char* variant = s.depth_response_ppm > 0 ? "depth_response" : "plain";
     t = now_s();
     const process::PairProcessor processor(camera, truth, s);

@@ -63,11 +63,11 @@ RUN_PAPER_CUBES = RUN_PAPER_MART + ["--depth-prefilter", "4"]
 # process.yaml's: run-paper.yaml's settings with 20 iterations and seven passes.
 PROCESS = shipped(shipped_mart(20), PROCESS_PASSES)
 # process-paper.yaml's: run-paper.yaml's box and correlation in mm on voxels half a lens pitch
-# across (windows and the whitened peak in those voxels), 12 iterations.
+# across (windows and the whitened peak in those voxels), 12 iterations, w through the depth response.
 PROCESS_PAPER = (["--voxel-z-factor", "2", "--voxel-xy-divisor", "2"] + shipped_mart(12)
                  + ["--depth-prefilter", "1", "--passes", "64x64x16@50,32x32x8@50+2,32x32x8@50,32x32x8@50,32x32x8@75",
                     "--early-interpolation", "cubic", "--spectral-whitening", "0.5", "--whitened-peak-sigma", "2,2,2",
-                    "--uncertainty-stride", "2", "--final-peak-search", "near_predictor"])
+                    "--uncertainty-stride", "2", "--final-peak-search", "near_predictor", "--depth-response-ppm", "0.5"])
 # run.yaml's (the live preview on the small camera).
 RUN = ["--voxel-z-factor", "2", "--mu", "1", "--iterations", "4", "--intensity-threshold", "4", "--final-smoothing",
        "1", "--depth-prefilter", "1", "--passes", "16x16x8@50+2,8x8x4@50", "--spectral-whitening", "0.5",
@@ -90,7 +90,7 @@ BENCHES = {
     "e2e-full-live": ("paper", ["build/bin/bench_e2e", "full", "--no-sweep"] + RUN_PAPER
                       + ["--live-depth-prefilter", "4"] + [a for tier in LIVE_TIERS for a in ("--live", tier)], None),
     "rotated-shear": ("paper", ["build/bin/bench_rotated_shear", "0.1"], None),
-    "rotated-shear-paper-accuracy": ("paper", ["build/bin/bench_rotated_shear", "0.1", "0.5", "plain",
+    "rotated-shear-paper-accuracy": ("paper", ["build/bin/bench_rotated_shear", "0.1", "0.5", "full",
                                                "systemd/config/process-paper.yaml"], None),
     "e2e-full-sweep": ("paper", ["build/bin/bench_e2e", "full", "--no-sweep", "--time-sweep", "--time-repeats", "3"]
                        + RUN_PAPER,
