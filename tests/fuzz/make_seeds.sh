@@ -66,7 +66,8 @@ EOF
 printf '' > "$out/control_request/empty"
 
 # run_config and daemon_config: the shipped files and short variants.
-cp "$root"/systemd/config/run.yaml "$root"/systemd/config/run-paper.yaml "$out/run_config/"
+cp "$root"/systemd/config/run.yaml "$root"/systemd/config/run-paper.yaml "$root"/systemd/config/process-paper.yaml \
+  "$out/run_config/"
 cp "$work/run.yaml" "$out/run_config/seed-camera.yaml"
 cp "$run/process.yaml" "$out/run_config/process.yaml"
 cat > "$out/run_config/everything.yaml" <<'EOF'
