@@ -8,8 +8,10 @@
 # Everything through the CLI: `plenopiv simulate` renders the white, calibration and pair images
 # (the paper's ring vortex at 0.5 ppm in run-paper.yaml's box), `plenopiv calibrate` measures the
 # rotated array, and run-paper.yaml's dt_s, volume, reconstruction and correlation are the
-# processing spec (or CONFIG's: another config of the paper's box, e.g. process-paper.yaml). Prints bench=oneshot lines (key=value): wall and CPU seconds, peak memory, and
-# the voxel updates MART skipped, per array and cache state.
+# processing spec (or CONFIG's: another config of the paper's box, e.g. process-paper.yaml). Prints
+# bench=oneshot lines (key=value): wall and CPU seconds, peak memory, and the voxel updates MART
+# skipped, per array and cache state (built: the cache folder empty, so the weight tables, and
+# the depth response where CONFIG asks for one, are made).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 repeats=${1:-3}
