@@ -81,6 +81,9 @@ LIVE_TIERS = ["4,4,5,16@50+4,8@50", "4,4,8,16@50+4,8@50", "3,4,3,16@50+4,8@50", 
               "2z4p2,4,4,24x24x12@50+3,12x12x6@50",
               "3,4,5,16@50+4,8@50", "3,2,3,16@50+4,8@50", "3,1,3,16@50+4,8@50", "2,2,3,16@50+4,8@50"]
 
+# MART's prune thresholds the sparse sweeps compare, on both cameras.
+SPARSE_VARIANTS = "off,zeros,1e-2,slice-3e-2,slice-1e-1,slice-1e-1-reach2,slice-2e-1,slice-2e-1-reach2"
+
 # name: (set, command from the repository root, plot or None); a plot is drawn by bench/plot_e2e.py from
 # sweep rows (pareto=), or by the script PLOTTERS names from the samples it names
 BENCHES = {
@@ -96,12 +99,10 @@ BENCHES = {
                        + RUN_PAPER,
                        "e2e_pareto_full.png"),
     "e2e-full-sparse": ("paper", ["build/bin/bench_e2e", "full", "--no-sweep", "--sparse-sweep", "--sparse-repeats",
-                                  "1", "--sparse-variants",
-                                  "off,zeros,1e-2,slice-3e-2,slice-1e-1,slice-1e-1-reach2,slice-2e-1,slice-2e-1-reach2"] + RUN_PAPER, None),
+                                  "1", "--sparse-variants", SPARSE_VARIANTS] + RUN_PAPER, None),
     "e2e-reduced-sparse": ("quick", ["build/bin/bench_e2e", "reduced", "--no-sweep", "--sparse-sweep",
-                                     "--sparse-repeats", "5", "--sparse-variants",
-                                     "off,zeros,1e-3,3e-3,1e-2,3e-2,slice-1e-2,slice-3e-2,slice-1e-1,slice-2e-1,"
-                                     "slice-1e-1-reach2,slice-2e-1-reach2"] + RUN_PAPER_CUBES, None),
+                                     "--sparse-repeats", "5", "--sparse-variants", SPARSE_VARIANTS] + RUN_PAPER_CUBES,
+                           None),
     "e2e-full-process": ("paper", ["build/bin/bench_e2e", "full", "--no-sweep", "--steady"] + PROCESS,
                          None),
     "e2e-full-paper-accuracy": ("paper", ["build/bin/bench_e2e", "full", "--no-sweep", "--steady"] + PROCESS_PAPER,
