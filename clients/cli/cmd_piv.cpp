@@ -50,8 +50,8 @@ std::string pass_line(const piv::PassReport& r) {
                 r.correlate_s > 0 ? double(r.windows) / r.correlate_s : 0.0);
   std::string out = line;
   if (r.near_peaks || r.near_rejected)
-    out += "; peaks at the predictor without the FFT " + std::to_string(r.near_peaks) + " (" +
-           std::to_string(r.near_rejected) + " rejected by the median test, searched over all shifts)";
+    out += "; peaks at the predictor without the FFT " + std::to_string(r.near_peaks) + " (and " +
+           std::to_string(r.near_rejected) + " more rejected by the median test, searched over all shifts)";
   return out;
 }
 

@@ -223,19 +223,12 @@ void per_slice_sums(std::span<const float> b, std::size_t slice, std::span<doubl
   }
 }
 
-// Correlates every window of `va` with the same window of `vb` into `c` (made anew); a window's
-// candidates are the predictor (at its centre, or its mean over the window: settings.hpp,
-// PredictorBase) plus each correlation peak; `bases` gets that predictor per node (what each peak's
-// shift was added to), `ratio` the peak ratio. The settings' spectral whitening applies unless this
-// is the `last_pass`. With `near_predictor` (FinalPeakSearch; no depth margin, no whitening) a
-// window whose correlation peaks at the predictor takes that peak alone (`near` set, ratio NaN);
-// the others are correlated by FFT. With `only` non-empty just those nodes are correlated again, by
-// FFT, in the `c`, `ratio`, `bases` and `near` of an earlier call.
-void correlate_windows(std::span<const float> va, std::span<const float> vb, const std::array<int, 3>& shape,
-                       const Layout& l, const NodeField* predictor, const CorrelationSettings& settings, bool last_pass,
-                       bool near_predictor, std::span<const std::size_t> only, Candidates& c, std::vector<float>& ratio,
-                       std::vector<std::array<float, 3>>& bases, std::vector<std::uint8_t>& near) {
-  // Each volume's bar: the setting, or its dust level (settings.hpp, kNumericalDust).
+// What a window of each volume must exceed somewhere to hold signal: the setting, or the volume's
+// dust level (settings.hpp, kNumericalDust).
+struct SignalBars {
+  float a, b;
+};
+SignalBars signal_bars(std::span<const float> va, std::span<const float> vb, const CorrelationSettings& settings) {
   const auto bar = [&](std::span<const float> v) {
     const float peak = tbb::parallel_reduce(
         tbb::blocked_range<std::size_t>(0, v.size(), std::size_t(1) << 16), 0.f,
@@ -246,7 +239,22 @@ void correlate_windows(std::span<const float> va, std::span<const float> vb, con
         [](float x, float y) { return std::max(x, y); });
     return std::max(settings.signal_threshold, kNumericalDust * peak);
   };
-  const float signal_a = bar(va), signal_b = bar(vb);
+  return {bar(va), bar(vb)};
+}
+
+// Correlates every window of `va` with the same window of `vb` into `c` (made anew); a window's
+// candidates are the predictor (at its centre, or its mean over the window: settings.hpp,
+// PredictorBase) plus each correlation peak; `bases` gets that predictor per node (what each peak's
+// shift was added to), `ratio` the peak ratio. The settings' spectral whitening applies unless this
+// is the `last_pass`. With `near_predictor` (FinalPeakSearch; no depth margin, no whitening) a
+// window whose correlation peaks at the predictor takes that peak alone (`near` set, ratio NaN);
+// the others are correlated by FFT. With `only` non-empty just those nodes are correlated again, by
+// FFT, in the `c`, `ratio`, `bases` and `near` of an earlier call. `bars`: signal_bars(va, vb).
+void correlate_windows(std::span<const float> va, std::span<const float> vb, const std::array<int, 3>& shape,
+                       const Layout& l, const NodeField* predictor, const CorrelationSettings& settings,
+                       const SignalBars& bars, bool last_pass, bool near_predictor, std::span<const std::size_t> only,
+                       Candidates& c, std::vector<float>& ratio, std::vector<std::array<float, 3>>& bases,
+                       std::vector<std::uint8_t>& near) {
   const bool at_centre = settings.predictor == PredictorBase::centre;
   const int margin = l.depth_margin;
   const std::array<int, 3> fft_shape{l.window[0], l.window[1], l.window[2] + 2 * margin};
@@ -289,7 +297,7 @@ void correlate_windows(std::span<const float> va, std::span<const float> vb, con
       // Slices -margin .. window + margin of B; A's are its window's, zeros in the margins.
       const auto [max_a, max_b] =
           copy_windows({va.data(), vb.data(), shape, {x0, y0, z0}, l.window, margin, wa.data(), wb.data()});
-      if (!(max_a > signal_a && max_b > signal_b)) {
+      if (!(max_a > bars.a && max_b > bars.b)) {
         c.flags[node] = flag_no_signal;
         continue;
       }
@@ -575,8 +583,9 @@ CorrelationResult correlate_volumes(const Volume& a, const Volume& b, const Corr
     t0 = Clock::now();
     const NodeField* pass_predictor = have_predictor ? &predictor : nullptr;
     const bool near_predictor = p + 1 == passes && settings.final_peak_search == FinalPeakSearch::near_predictor;
-    correlate_windows(va, vb, shape, layout, pass_predictor, settings, p + 1 == passes, near_predictor, {}, last, ratio,
-                      bases, near);
+    const SignalBars bars = signal_bars(va, vb, settings);
+    correlate_windows(va, vb, shape, layout, pass_predictor, settings, bars, p + 1 == passes, near_predictor, {}, last,
+                      ratio, bases, near);
     report.correlate_s = seconds_since(t0);
     report.windows = last.size();
     for (std::size_t n = 0; n < last.size(); ++n) {
@@ -604,7 +613,7 @@ CorrelationResult correlate_volumes(const Volume& a, const Volume& b, const Corr
           found_flags[q] = last.flags[again[q]];
         }
         const auto t_again = Clock::now();
-        correlate_windows(va, vb, shape, layout, pass_predictor, settings, true, false, again, last, ratio, bases,
+        correlate_windows(va, vb, shape, layout, pass_predictor, settings, bars, true, false, again, last, ratio, bases,
                           near);
         report.correlate_s += seconds_since(t_again);
         for (std::size_t q = 0; q < again.size(); ++q) {

@@ -24,9 +24,11 @@ struct PassReport {
   ValidationCounts validation;          // outliers and how they were replaced
   std::size_t flag_parabolic = 0;       // primary peaks fitted by the parabolic fallback
   std::size_t flag_centroid = 0;        // primary peaks on the window border (centroid)
-  std::size_t near_peaks = 0;           // final pass: peaks found at the predictor without the FFT
-                                        // (FinalPeakSearch::near_predictor)
-  std::size_t near_rejected = 0;        // ... of which the median test rejected, correlated again
+  // Final pass (FinalPeakSearch::near_predictor): peaks found at the predictor without the FFT
+  // that the median test kept (their peak ratio NaN), and peaks found there that it rejected, whose
+  // windows were then correlated over all shifts (the two sum to the peaks found there).
+  std::size_t near_peaks = 0;
+  std::size_t near_rejected = 0;
   double deform_s = 0, correlate_s = 0, validate_s = 0;
   double uncertainty_s = 0;  // the final pass's per-vector uncertainty (part of validate_s)
 };
