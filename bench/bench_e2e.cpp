@@ -281,9 +281,13 @@ int main(int argc, char** argv) {
       live_depth_prefilter = std::stoi(argv[++i]);
     else if (!std::strcmp(argv[i], "--voxel-z-factor") && i + 1 < argc)
       depth_voxel_factor = std::max(1, std::stoi(argv[++i]));
-    else if (!std::strcmp(argv[i], "--voxel-xy-divisor") && i + 1 < argc)
-      lateral_divisor = std::clamp(std::stoi(argv[++i]), 1, 4);
-    else if (!std::strcmp(argv[i], "--early-interpolation") && i + 1 < argc) {
+    else if (!std::strcmp(argv[i], "--voxel-xy-divisor") && i + 1 < argc) {
+      lateral_divisor = std::atoi(argv[++i]);
+      if (lateral_divisor < 1 || lateral_divisor > 4) {
+        std::fprintf(stderr, "bench_e2e: --voxel-xy-divisor takes 1 to 4, not '%s'\n", argv[i]);
+        return 2;
+      }
+    } else if (!std::strcmp(argv[i], "--early-interpolation") && i + 1 < argc) {
       const std::string name = argv[++i];
       if (name != "sinc" && name != "cubic") {
         std::fprintf(stderr, "bench_e2e: --early-interpolation takes sinc or cubic, not '%s'\n", name.c_str());
