@@ -56,6 +56,13 @@ struct ActiveSet::RowBands {
   }
 };
 
+struct ActiveSet::Construction {
+  BigBuffer<int> order_y;
+  RowBands rows;
+  BandPlan plan;
+  std::vector<std::size_t> block_visit;
+};
+
 namespace {
 
 // Calls entry(b, p, first quad, count) for each voxel p in [begin, end) of a column of slice `t`
@@ -101,6 +108,11 @@ void for_each_share(const Columns& columns, const int* order_y, const Rows& rows
 
 }  // namespace
 
+ActiveSet::ActiveSet() = default;
+ActiveSet::~ActiveSet() = default;
+ActiveSet::ActiveSet(ActiveSet&&) noexcept = default;
+ActiveSet& ActiveSet::operator=(ActiveSet&&) noexcept = default;
+
 ActiveSet::ActiveSet(const WeightingOperator& op, std::span<const std::uint32_t> voxels) {
   BigBuffer<std::uint32_t> list(voxels.begin(), voxels.end());
   assign(op, list);
@@ -116,12 +128,14 @@ void ActiveSet::assign(const WeightingOperator& op, BigBuffer<std::uint32_t>& vo
   visits_.clear();
   entries_.clear();
   check_voxels(op);
-  const BigBuffer<int> order_y = group_by_column(op);
+  if (!construction_) construction_ = std::make_unique<Construction>();
+  Construction& c = *construction_;
+  group_by_column(op, c.order_y);
   bands_ = (op.image_height() + kBandRows - 1) / kBandRows;
-  const RowBands rows = row_bands(op);
-  BandPlan plan = plan_bands(op, order_y, rows);
-  const std::vector<std::size_t> block_visit = lay_out_visits(plan);
-  fill_entries(order_y, rows, plan, block_visit);
+  row_bands(op, c.rows);
+  plan_bands(op, c.order_y, c.rows, c.plan);
+  lay_out_visits(c.plan, c.block_visit);
+  fill_entries(c.order_y, c.rows, c.plan, c.block_visit);
   order_by_cost(op);
 }
 
@@ -157,7 +171,7 @@ void ActiveSet::check_voxels(const WeightingOperator& op) const {
   }
 }
 
-BigBuffer<int> ActiveSet::group_by_column(const WeightingOperator& op) {
+void ActiveSet::group_by_column(const WeightingOperator& op, BigBuffer<int>& order_y) {
   const Grid3& g = op.grid();
   const std::uint32_t nx = std::uint32_t(g.shape[0]), nz = std::uint32_t(g.shape[2]);
   const std::uint32_t nxy = nx * std::uint32_t(g.shape[1]);
@@ -187,7 +201,7 @@ BigBuffer<int> ActiveSet::group_by_column(const WeightingOperator& op) {
   for (std::size_t c = 1; c < start.size(); ++c) start[c] += start[c - 1];
   order_.resize(start.back());
   order_normaliser_.resize(start.back());
-  BigBuffer<int> order_y(start.back());  // written in full below
+  order_y.resize(start.back());  // written in full below
   tbb::parallel_for(std::uint32_t(0), nz, [&](std::uint32_t z) {
     // Now each column's next place.
     std::uint32_t* fill = column_count.data() + std::size_t(z) * nx;
@@ -212,13 +226,11 @@ BigBuffer<int> ActiveSet::group_by_column(const WeightingOperator& op) {
   for (std::size_t s = 1; s <= std::size_t(strips_); ++s) {
     strip_columns_[s] = std::max(strip_columns_[s], strip_columns_[s - 1]);
   }
-  return order_y;
 }
 
-ActiveSet::BandPlan ActiveSet::plan_bands(const WeightingOperator& op, const BigBuffer<int>& order_y,
-                                          const RowBands& rows) const {
+void ActiveSet::plan_bands(const WeightingOperator& op, const BigBuffer<int>& order_y, const RowBands& rows,
+                           BandPlan& plan) const {
   const int height = op.image_height();
-  BandPlan plan;
   plan.first_band.resize(columns_.size());
   plan.last_band.resize(columns_.size());
   // Entries per (column, band), counted in parallel over columns.
@@ -244,10 +256,9 @@ ActiveSet::BandPlan ActiveSet::plan_bands(const WeightingOperator& op, const Big
                  [&](std::size_t c, int b, std::uint32_t, const RowBands::Share&) {
                    ++plan.block_entries[plan.block_offset[c] + std::size_t(b - plan.first_band[c])];
                  });
-  return plan;
 }
 
-std::vector<std::size_t> ActiveSet::lay_out_visits(const BandPlan& plan) {
+void ActiveSet::lay_out_visits(const BandPlan& plan, std::vector<std::size_t>& block_visit) {
   // The visits in the order the kernels read them: band by band, then strip by strip, depth by
   // depth, x by x (columns_'s order), each with its entries; counted, then laid out.
   auto for_each_visit = [&](auto&& f) {
@@ -267,7 +278,7 @@ std::vector<std::size_t> ActiveSet::lay_out_visits(const BandPlan& plan) {
   });
   for (std::size_t i = 1; i < visit_start_.size(); ++i) visit_start_[i] += visit_start_[i - 1];
   visits_.resize(visit_start_.back());
-  std::vector<std::size_t> block_visit(plan.block_offset.back());
+  block_visit.resize(plan.block_offset.back());  // every block with entries written below
   std::size_t next_visit = 0, next_entry = 0;
   for_each_visit([&](int, int, std::uint32_t c, std::size_t block) {
     if (next_entry + plan.block_entries[block] > std::numeric_limits<std::uint32_t>::max()) {
@@ -282,13 +293,11 @@ std::vector<std::size_t> ActiveSet::lay_out_visits(const BandPlan& plan) {
     block_visit[block] = next_visit++;
   });
   entries_.resize(next_entry);
-  return block_visit;
 }
 
-ActiveSet::RowBands ActiveSet::row_bands(const WeightingOperator& op) {
+void ActiveSet::row_bands(const WeightingOperator& op, RowBands& rows) {
   const int height = op.image_height();
   const std::size_t ny = std::size_t(op.grid().shape[1]), nz = std::size_t(op.grid().shape[2]);
-  RowBands rows;
   rows.ny = ny;
   rows.first_band.assign(nz * ny, 0);
   rows.start.assign(nz * ny + 1, 0);
@@ -340,7 +349,6 @@ ActiveSet::RowBands ActiveSet::row_bands(const WeightingOperator& op) {
                   });
     }
   });
-  return rows;
 }
 
 void ActiveSet::fill_entries(const BigBuffer<int>& order_y, const RowBands& rows, BandPlan& plan,

@@ -6,10 +6,12 @@
 #include <cstddef>
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <span>
 #include <vector>
 
 #include "core/base/big_buffer.hpp"
+#include "core/recon/kernels.hpp"
 #include "core/recon/weights.hpp"
 
 namespace plenopiv::recon {
@@ -35,7 +37,10 @@ class ActiveSet {
   // `voxels`: flat indices into the operator's grid, strictly increasing (InputError otherwise).
   ActiveSet(const WeightingOperator& op, std::span<const std::uint32_t> voxels);
   static ActiveSet all(const WeightingOperator& op);
-  ActiveSet() = default;  // empty, for assign()
+  ActiveSet();  // empty, for assign()
+  ~ActiveSet();
+  ActiveSet(ActiveSet&&) noexcept;
+  ActiveSet& operator=(ActiveSet&&) noexcept;
   // Lays out another set in this one's storage (kept from set to set, so that a caller laying
   // out set after set neither allocates nor page-faults its large arrays again). The same
   // layout as a new ActiveSet(op, voxels). Takes the list from `voxels` and leaves there the
@@ -91,13 +96,8 @@ class ActiveSet {
     int z = 0, x = 0;
     std::uint32_t begin = 0, end = 0;
   };
-  // One voxel of a column in one band: its y quads that overlap the band (into its slice's
-  // y_quad_first / y_quad_weights).
-  struct BandEntry {         // no initialisers: millions are allocated, then each written once
-    std::uint32_t position;  // in order_
-    std::uint32_t quad_begin;
-    std::uint32_t quad_count;
-  };
+  // One voxel of a column in one band (its position in order_, its y quads over the band).
+  using BandEntry = kernels::BandEntry;
   // Sensor rows per band. Few bands per voxel keep the per-band bookkeeping small; the pixels a
   // strip of voxel x reaches in one band stay in L2 (docs/recon.md, "Order and cache").
   static constexpr int kBandRows = 256;
@@ -113,23 +113,32 @@ class ActiveSet {
   // (active_set.cpp).
   struct BandPlan;
   struct RowBands;
+  // Those and the other working arrays of a construction, kept from set to set as the set's own
+  // arrays are, so that laying out set after set (MART's pruning) does not fault them in again.
+  struct Construction;
+
+  // Visit `visit` as the y stages see it, its row sums at `sums` (passes.cpp).
+  kernels::RowJob row_job(const WeightingOperator& op, std::size_t visit, float* sums) const;
 
   // The construction, step by step (active_set.cpp).
   void check_voxels(const WeightingOperator& op) const;
-  // order_, order_normaliser_, columns_ and the strips; returns each ordered voxel's y.
-  BigBuffer<int> group_by_column(const WeightingOperator& op);
+  // order_, order_normaliser_, columns_ and the strips; `order_y` gets each ordered voxel's y.
+  void group_by_column(const WeightingOperator& op, BigBuffer<int>& order_y);
   // Per voxel row (z, y) of the grid: its y quads in each band and the band's rows they reach.
-  static RowBands row_bands(const WeightingOperator& op);
+  static void row_bands(const WeightingOperator& op, RowBands& rows);
   // Which bands each column's voxels reach, and how many entries each (column, band) holds.
-  BandPlan plan_bands(const WeightingOperator& op, const BigBuffer<int>& order_y, const RowBands& rows) const;
-  // visit_start_ and visits_ (without their rows) in the kernels' reading order.
-  std::vector<std::size_t> lay_out_visits(const BandPlan& plan);
+  void plan_bands(const WeightingOperator& op, const BigBuffer<int>& order_y, const RowBands& rows,
+                  BandPlan& plan) const;
+  // visit_start_ and visits_ (without their rows) in the kernels' reading order; `block_visit`
+  // gets each (column, band) block's visit.
+  void lay_out_visits(const BandPlan& plan, std::vector<std::size_t>& block_visit);
   // entries_ and each visit's reached rows.
   void fill_entries(const BigBuffer<int>& order_y, const RowBands& rows, BandPlan& plan,
                     const std::vector<std::size_t>& block_visit);
   // band_order_ and strip_order_: costliest first.
   void order_by_cost(const WeightingOperator& op);
 
+  std::unique_ptr<Construction> construction_;
   BigBuffer<std::uint32_t> voxels_;
   // Voxels with a positive normaliser, in the kernels' visiting order (strip, depth, x, then y
   // increasing): position in voxels_ and n. A pass reads and writes its per-voxel arrays front to

@@ -1,7 +1,10 @@
-// The reconstruction's vector micro-kernels: the x stages of the passes over row lanes and the
-// row-major quad dot products of the eq 13 normalisers, each built for several instruction sets
-// (GCC's target attribute), the build chosen per call by isa() (core/base/isa.hpp).
+// The reconstruction's vector micro-kernels: the passes' x stages over row lanes, their y stages
+// over each visit's row sums, and the row-major quad dot products of the eq 13 normalisers, each
+// built for several instruction sets (GCC's target attribute), the build chosen per call by isa()
+// (core/base/isa.hpp).
 #include "core/recon/kernels.hpp"
+
+#include <immintrin.h>
 
 #include <algorithm>
 
@@ -201,6 +204,110 @@ __attribute__((always_inline)) inline void dot_columns_rows(const float* band, s
   }
 }
 
+// Projection stage 1 (add_rows in kernels.hpp), in every build.
+[[gnu::always_inline]] inline void add_rows_body(const RowJob* jobs, int count, int r0, const float* scaled) {
+  for (int v = 0; v < count; ++v) {
+    const RowJob& j = jobs[v];
+    for (std::size_t k = 0; k < j.n; ++k) {
+      const BandEntry& entry = j.entries[k];
+      const float s = scaled[entry.position];
+      if (s == 0.f) continue;
+      const int* first = j.first + entry.quad_begin;
+      const float* w = j.w + kQuad * std::size_t(entry.quad_begin);
+      for (std::uint32_t q = 0; q < entry.quad_count; ++q) {
+        float* g = j.sums + (first[q] - r0);
+        const float* wq = w + kQuad * q;
+        Lanes4 sum, wv;
+        __builtin_memcpy(&sum, g, sizeof sum);
+        __builtin_memcpy(&wv, wq, sizeof wv);
+        sum += s * wv;
+        __builtin_memcpy(g, &sum, sizeof sum);
+      }
+    }
+  }
+}
+
+// Back-projection stage 2 (dot_rows in kernels.hpp): one entry's sum from +0, quad after quad
+// and lane after lane (products of floats, exact in double): the baseline build's whole loop, and
+// the others' entries left over from their groups of four.
+[[gnu::always_inline]] inline double dot_entry(const RowJob& j, int r0, const BandEntry& entry) {
+  double s = 0;
+  for (std::uint32_t q = 0; q < entry.quad_count; ++q) {
+    const std::uint32_t at = entry.quad_begin + q;
+    Lanes4 wq, bq;
+    __builtin_memcpy(&wq, j.w + kQuad * std::size_t(at), sizeof wq);
+    __builtin_memcpy(&bq, j.sums + (j.first[at] - r0), sizeof bq);
+    const Doubles4 p = __builtin_convertvector(wq, Doubles4) * __builtin_convertvector(bq, Doubles4);
+    s = (((s + p[0]) + p[1]) + p[2]) + p[3];
+  }
+  return s;
+}
+void dot_rows_baseline(const RowJob* jobs, int count, int r0, double* sums) {
+  for (int v = 0; v < count; ++v) {
+    const RowJob& j = jobs[v];
+    for (std::size_t k = 0; k < j.n; ++k) sums[j.entries[k].position] += dot_entry(j, r0, j.entries[k]);
+  }
+}
+// The AVX2 and AVX-512 builds: four entries at a time, one per lane of a vector of doubles, so
+// that four chains of dependent adds run side by side. Per quad step each entry's four products
+// (one vector per entry) are transposed into one vector per quad lane and added lane after lane:
+// every entry gets its additions in dot_entry's order. An entry past its last quad adds 0 times
+// a row sum of its last quad (finite): +-0, which leaves its sum (never -0) as it was.
+__attribute__((target("avx2"), always_inline)) inline void dot_rows_x4(const RowJob* jobs, int count, int r0,
+                                                                       double* sums) {
+  static constexpr float kZeroQuad[kQuad] = {};
+  for (int v = 0; v < count; ++v) {
+    const RowJob& j = jobs[v];
+    std::size_t k = 0;
+    for (; k + 4 <= j.n; k += 4) {
+      const BandEntry* e = j.entries + k;
+      const std::uint32_t most =
+          std::max(std::max(e[0].quad_count, e[1].quad_count), std::max(e[2].quad_count, e[3].quad_count));
+      __m256d sum = _mm256_setzero_pd();
+      for (std::uint32_t q = 0; q < most; ++q) {
+        __m256d p[4];
+#pragma GCC unroll 4
+        for (int i = 0; i < 4; ++i) {
+          const bool in = q < e[i].quad_count;
+          const std::uint32_t at = e[i].quad_begin + (in ? q : e[i].quad_count - 1);
+          const float* w = in ? j.w + kQuad * std::size_t(at) : kZeroQuad;
+          p[i] = _mm256_mul_pd(_mm256_cvtps_pd(_mm_loadu_ps(w)),
+                               _mm256_cvtps_pd(_mm_loadu_ps(j.sums + (j.first[at] - r0))));
+        }
+        const __m256d lo01 = _mm256_unpacklo_pd(p[0], p[1]);  // p0[0] p1[0] p0[2] p1[2]
+        const __m256d hi01 = _mm256_unpackhi_pd(p[0], p[1]);  // p0[1] p1[1] p0[3] p1[3]
+        const __m256d lo23 = _mm256_unpacklo_pd(p[2], p[3]);
+        const __m256d hi23 = _mm256_unpackhi_pd(p[2], p[3]);
+        sum = _mm256_add_pd(sum, _mm256_permute2f128_pd(lo01, lo23, 0x20));
+        sum = _mm256_add_pd(sum, _mm256_permute2f128_pd(hi01, hi23, 0x20));
+        sum = _mm256_add_pd(sum, _mm256_permute2f128_pd(lo01, lo23, 0x31));
+        sum = _mm256_add_pd(sum, _mm256_permute2f128_pd(hi01, hi23, 0x31));
+      }
+      alignas(32) double lane[4];
+      _mm256_store_pd(lane, sum);
+#pragma GCC unroll 4
+      for (int i = 0; i < 4; ++i) sums[e[i].position] += lane[i];
+    }
+    for (; k < j.n; ++k) sums[j.entries[k].position] += dot_entry(j, r0, j.entries[k]);
+  }
+}
+
+__attribute__((target("avx512f"))) void add_rows_avx512(const RowJob* jobs, int count, int r0, const float* scaled) {
+  add_rows_body(jobs, count, r0, scaled);
+}
+__attribute__((target("avx2"))) void add_rows_avx2(const RowJob* jobs, int count, int r0, const float* scaled) {
+  add_rows_body(jobs, count, r0, scaled);
+}
+void add_rows_baseline(const RowJob* jobs, int count, int r0, const float* scaled) {
+  add_rows_body(jobs, count, r0, scaled);
+}
+__attribute__((target("avx512f"))) void dot_rows_avx512(const RowJob* jobs, int count, int r0, double* sums) {
+  dot_rows_x4(jobs, count, r0, sums);
+}
+__attribute__((target("avx2"))) void dot_rows_avx2(const RowJob* jobs, int count, int r0, double* sums) {
+  dot_rows_x4(jobs, count, r0, sums);
+}
+
 __attribute__((target("avx512f"))) void add_columns_avx512(float* band, std::size_t width, int words,
                                                            const ColumnJob* jobs, int count) {
   add_columns_body(band, width, words, jobs, count);
@@ -290,6 +397,14 @@ void add_columns(float* band, std::size_t width, int words, const ColumnJob* job
 
 void dot_columns(const float* band, std::size_t width, int words, const ColumnJob* jobs, int count) {
   for_isa(dot_columns_avx512, dot_columns_avx2, dot_columns_baseline)(band, width, words, jobs, count);
+}
+
+void add_rows(const RowJob* jobs, int count, int r0, const float* scaled) {
+  for_isa(add_rows_avx512, add_rows_avx2, add_rows_baseline)(jobs, count, r0, scaled);
+}
+
+void dot_rows(const RowJob* jobs, int count, int r0, double* sums) {
+  for_isa(dot_rows_avx512, dot_rows_avx2, dot_rows_baseline)(jobs, count, r0, sums);
 }
 
 // The AVX2 build on AVX-512 CPUs too (there is no AVX-512 one).

@@ -44,6 +44,24 @@ inline ColumnJob x_job(const SliceTables& t, int x, const std::uint64_t* rows) {
   return ColumnJob{nullptr, rows, t.x_quad_first.data() + q0, t.x_quad_weights.data() + kQuad * q0, q1 - q0};
 }
 
+// One voxel of a visit in one band, as the y stages see it: its place in the pass's per-voxel
+// arrays and its y quads that overlap the band (into its slice's y_quad_first / y_quad_weights).
+struct BandEntry {         // no initialisers: millions are allocated, then each written once
+  std::uint32_t position;  // in the active set's visiting order
+  std::uint32_t quad_begin;
+  std::uint32_t quad_count;  // at least 1
+};
+// One visit as the y stages see it: its row sums over the band (G for the projection, B for the
+// back-projection; pointing at the band's first row, with kQuad rows of margin on either side),
+// its entries and its slice's y quads (first rows on the sensor, weights).
+struct RowJob {
+  float* sums;
+  const BandEntry* entries;
+  std::size_t n;
+  const int* first;
+  const float* w;
+};
+
 // The x stages work on images in "row lanes": each block of kSubRows sensor rows stored column
 // by column, the block's kSubRows pixels of one column side by side, so pixel (r, c) is at
 // ((r / kSubRows) * width + c) * kSubRows + r % kSubRows. One x weight then meets all of a
@@ -69,6 +87,16 @@ void add_columns(float* band, std::size_t width, int words, const ColumnJob* job
 // lanes image whose band starts at `band`; rows the visit does not reach are set to 0. Each
 // row's sum in dot_quads order (below).
 void dot_columns(const float* band, std::size_t width, int words, const ColumnJob* jobs, int count);
+
+// Projection stage 1: G(row) += s Ay(row) for each job's entries in order, s = scaled[position],
+// for the band starting at sensor row r0. Every row gets its entries' products in entry order,
+// its quads' in quad order; a quad's zero lanes add s 0 = +0 (s >= 0), which leaves every sum as
+// it was, so each row gets the same additions as row by row.
+void add_rows(const RowJob* jobs, int count, int r0, const float* scaled);
+// Back-projection stage 2: sums[position] += Σ_row Ay(row) B(row) for each job's entries, the
+// entry's sum over the band taken in double (products of floats are exact), quad after quad and
+// lane after lane from +0, then added to sums[position]: one fixed order in every build.
+void dot_rows(const RowJob* jobs, int count, int r0, double* sums);
 
 // The eq 13 normalisers' first stage: out[x] = Σ_col Ax_x(col) row(col) for every voxel x of a
 // slice (its quads [start[x], start[x + 1])), for two rows at once (row_b null: one row). Each

@@ -16,10 +16,8 @@
 namespace plenopiv::recon {
 
 using kernels::ColumnJob;
-using kernels::Doubles4;
 using kernels::kChunk;
 using kernels::kQuad;
-using kernels::Lanes4;
 using kernels::x_job;
 
 namespace {
@@ -41,6 +39,13 @@ void run_costliest_first(const std::vector<int>& items, F&& f) {
 }
 
 }  // namespace
+
+kernels::RowJob ActiveSet::row_job(const WeightingOperator& op, std::size_t visit, float* sums) const {
+  const Visit& v = visits_[visit];
+  const SliceTables& t = op.slice(columns_[v.column].z);
+  return kernels::RowJob{sums, entries_.data() + v.entry_begin, std::size_t(v.entry_end - v.entry_begin),
+                         t.y_quad_first.data(), t.y_quad_weights.data()};
+}
 
 void ActiveSet::reserve(const WeightingOperator& op, Workspace& workspace) const {
   // The sizes project and back_project_whitened give these buffers.
@@ -83,29 +88,10 @@ void ActiveSet::project(const WeightingOperator& op, std::span<const float> valu
     const std::size_t v_end = visit_start_[std::size_t(b + 1) * std::size_t(strips_)];
     for (std::size_t c0 = v_begin; c0 < v_end; c0 += kChunk) {
       const std::size_t c1 = std::min(v_end, c0 + kChunk);
-      for (std::size_t v = c0; v < c1; ++v) {
-        const Visit& visit = visits_[v];
-        const SliceTables& t = op.slice(columns_[visit.column].z);
-        float* const column_sum = padded_sums[v - c0].data() + kQuad;
-        // Stage 1: G(row) = Σ_y Ay_y(row) E_y / n_y over the column's voxels that reach the band,
-        // one quad of rows at a time; a quad's padded lanes add s · 0 = +0, which leaves every sum
-        // as it was, so each row gets the same float additions in the same order as row by row.
-        for (std::size_t k = visit.entry_begin; k < visit.entry_end; ++k) {
-          const BandEntry& entry = entries_[k];
-          const float s = scaled[entry.position];
-          if (s == 0.f) continue;
-          const int* first = t.y_quad_first.data() + entry.quad_begin;
-          const float* w = t.y_quad_weights.data() + kQuad * std::size_t(entry.quad_begin);
-          for (std::uint32_t q = 0; q < entry.quad_count; ++q) {
-            float* g = column_sum + (first[q] - r0);
-            Lanes4 sum, wq;
-            __builtin_memcpy(&sum, g, sizeof sum);
-            __builtin_memcpy(&wq, w + kQuad * q, sizeof wq);
-            sum += s * wq;
-            __builtin_memcpy(g, &sum, sizeof sum);
-          }
-        }
-      }
+      // Stage 1: G(row) = Σ_y Ay_y(row) E_y / n_y over each visit's voxels that reach the band.
+      std::array<kernels::RowJob, kChunk> row_jobs;
+      for (std::size_t v = c0; v < c1; ++v) row_jobs[v - c0] = row_job(op, v, padded_sums[v - c0].data() + kQuad);
+      kernels::add_rows(row_jobs.data(), int(c1 - c0), r0, scaled.data());
       // Stage 2: lanes(row, ·) += G(row) Ax over each 16-row block the column reaches (resets
       // G there), one block at a time for all the chunk's visits, so the pixels they share stay
       // in L1. Every pixel still gets its visits' additions in visiting order.
@@ -186,45 +172,10 @@ void ActiveSet::back_project_whitened(const WeightingOperator& op, std::span<con
         }
         kernels::dot_columns(workspace.image_lanes.data() + std::size_t(r0) * width, width, kRowWords, jobs.data(),
                              int(v1 - v0));
-        // Stage 2: per voxel Σ_row Ay(row) B(row) over the band's rows, one quad of rows at a
-        // time, lane after lane: the zero lanes add +0, so the sums are those row by row.
-        for (std::size_t v = v0; v < v1; ++v) {
-          const Visit& visit = visits_[v];
-          const SliceTables& t = op.slice(columns_[visit.column].z);
-          const float* row_sum = padded_sums[v - v0].data() + kQuad;
-          // Quad q of `entry` added to its sum s, lane after lane.
-          const auto add_quad = [&](const BandEntry& entry, std::uint32_t q, double& s) {
-            const std::uint32_t at = entry.quad_begin + q;
-            Lanes4 wq, bq;
-            __builtin_memcpy(&wq, t.y_quad_weights.data() + kQuad * std::size_t(at), sizeof wq);
-            __builtin_memcpy(&bq, row_sum + (t.y_quad_first[at] - r0), sizeof bq);
-            // Products of floats are exact in double: only the order of the adds matters.
-            const Doubles4 p = __builtin_convertvector(wq, Doubles4) * __builtin_convertvector(bq, Doubles4);
-            s = (((s + p[0]) + p[1]) + p[2]) + p[3];
-          };
-          // Two voxels at a time, their quads side by side: each sum is one chain of dependent
-          // adds in a fixed order, and two independent chains keep the adder busy.
-          std::size_t k = visit.entry_begin;
-          for (; k + 2 <= visit.entry_end; k += 2) {
-            const BandEntry &a = entries_[k], &b = entries_[k + 1];
-            double sa = 0, sb = 0;
-            const std::uint32_t both = std::min(a.quad_count, b.quad_count);
-            for (std::uint32_t q = 0; q < both; ++q) {
-              add_quad(a, q, sa);
-              add_quad(b, q, sb);
-            }
-            for (std::uint32_t q = both; q < a.quad_count; ++q) add_quad(a, q, sa);
-            for (std::uint32_t q = both; q < b.quad_count; ++q) add_quad(b, q, sb);
-            sums[a.position] += sa;
-            sums[b.position] += sb;
-          }
-          if (k < visit.entry_end) {
-            const BandEntry& entry = entries_[k];
-            double s = 0;
-            for (std::uint32_t q = 0; q < entry.quad_count; ++q) add_quad(entry, q, s);
-            sums[entry.position] += s;
-          }
-        }
+        // Stage 2: per voxel Σ_row Ay(row) B(row) over the band's rows.
+        std::array<kernels::RowJob, kChunk> row_jobs;
+        for (std::size_t v = v0; v < v1; ++v) row_jobs[v - v0] = row_job(op, v, padded_sums[v - v0].data() + kQuad);
+        kernels::dot_rows(row_jobs.data(), int(v1 - v0), r0, sums.data());
       }
     }
     for (std::uint32_t p = p0; p < p1; ++p) values[order_[p]] = float(sums[p] / order_normaliser_[p]);  // eq 13
