@@ -199,6 +199,7 @@ int main(int argc, char** argv) {
   int depth_prefilter = piv::CorrelationSettings{}.depth_prefilter;
   int uncertainty_stride = piv::CorrelationSettings{}.uncertainty_stride;
   piv::FinalPeakSearch final_peak_search = piv::CorrelationSettings{}.final_peak_search;
+  std::string final_peak_search_name;  // --final-peak-search, checked below
   bool steady = false, time_sweep = false, sparse_sweep = false, live_only = false;
   int sparse_repeats = 1, time_repeats = 1, steady_repeats = 3;
   std::string sparse_variants;  // empty: all
@@ -208,10 +209,11 @@ int main(int argc, char** argv) {
   std::string compare_passes;  // pass lists separated by ';'
   std::string passes;          // the headline's passes (--passes syntax); empty: core/piv's default
   piv::Interpolation early_interpolation = piv::CorrelationSettings{}.early_interpolation;
-  int depth_voxel_factor = 1;     // the headline's voxels this many times as deep as wide
-  int lateral_divisor = 1;        // and 0.125 / this mm across
-  int live_depth_prefilter = -1;  // the --live tiers' depth prefilter; < 0: the headline's
-  std::vector<std::string> live;  // --live B,K,N,P, one per live tier
+  std::string early_interpolation_name;  // --early-interpolation, checked below
+  int depth_voxel_factor = 1;            // the headline's voxels this many times as deep as wide
+  int lateral_divisor = 1;               // and 0.125 / this mm across
+  int live_depth_prefilter = -1;         // the --live tiers' depth prefilter; < 0: the headline's
+  std::vector<std::string> live;         // --live B,K,N,P, one per live tier
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--no-sweep"))
       sweep = false;
@@ -244,16 +246,9 @@ int main(int argc, char** argv) {
       depth_prefilter = std::stoi(argv[++i]);
     else if (!std::strcmp(argv[i], "--uncertainty-stride") && i + 1 < argc)
       uncertainty_stride = std::stoi(argv[++i]);
-    else if (!std::strcmp(argv[i], "--final-peak-search") && i + 1 < argc) {
-      const std::string name = argv[++i];
-      if (name != "all_shifts" && name != "near_predictor") {
-        std::fprintf(stderr, "bench_e2e: --final-peak-search takes all_shifts or near_predictor, not '%s'\n",
-                     name.c_str());
-        return 2;
-      }
-      final_peak_search =
-          name == "near_predictor" ? piv::FinalPeakSearch::near_predictor : piv::FinalPeakSearch::all_shifts;
-    } else if (!std::strcmp(argv[i], "--steady"))
+    else if (!std::strcmp(argv[i], "--final-peak-search") && i + 1 < argc)
+      final_peak_search_name = argv[++i];
+    else if (!std::strcmp(argv[i], "--steady"))
       steady = true;
     else if (!std::strcmp(argv[i], "--steady-repeats") && i + 1 < argc)
       steady_repeats = std::max(1, std::stoi(argv[++i]));
@@ -287,14 +282,9 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "bench_e2e: --voxel-xy-divisor takes 1 to 4, not '%s'\n", argv[i]);
         return 2;
       }
-    } else if (!std::strcmp(argv[i], "--early-interpolation") && i + 1 < argc) {
-      const std::string name = argv[++i];
-      if (name != "sinc" && name != "cubic") {
-        std::fprintf(stderr, "bench_e2e: --early-interpolation takes sinc or cubic, not '%s'\n", name.c_str());
-        return 2;
-      }
-      early_interpolation = name == "cubic" ? piv::Interpolation::cubic : piv::Interpolation::sinc;
-    } else if (!std::strcmp(argv[i], "--live") && i + 1 < argc)
+    } else if (!std::strcmp(argv[i], "--early-interpolation") && i + 1 < argc)
+      early_interpolation_name = argv[++i];
+    else if (!std::strcmp(argv[i], "--live") && i + 1 < argc)
       live.push_back(argv[++i]);
     else if (!std::strcmp(argv[i], "--live-only"))
       live_only = true;
@@ -343,6 +333,10 @@ int main(int argc, char** argv) {
   recon::PruneScope scope = recon::PruneScope::volume;
   try {
     scope = recon::prune_scope_named(prune_scope, "--prune-scope");
+    if (!final_peak_search_name.empty())
+      final_peak_search = piv::final_peak_search_named(final_peak_search_name, "--final-peak-search");
+    if (!early_interpolation_name.empty())
+      early_interpolation = piv::interpolation_named(early_interpolation_name, "--early-interpolation");
   } catch (const InputError& e) {
     std::fprintf(stderr, "bench_e2e: %s\n", e.what());
     return 2;
@@ -507,9 +501,8 @@ int main(int argc, char** argv) {
             "bench=e2e case=%s variant=live_peak_search tier=%s final_peak_search=%s depth_context=0 correlate_s=%.3f "
             "rms_u=%.3f rms_v=%.3f rms_w=%.3f off_axis_band_rms_u=%.3f off_axis_band_rms_v=%.3f "
             "off_axis_band_rms_w=%.3f valid=%.3f\n",
-            scale.c_str(), tier.c_str(),
-            search == piv::FinalPeakSearch::near_predictor ? "near_predictor" : "all_shifts", cs, er.rms[0], er.rms[1],
-            er.rms[2], er.off_band[0], er.off_band[1], er.off_band[2], er.valid_fraction);
+            scale.c_str(), tier.c_str(), std::string(piv::name_of(search)).c_str(), cs, er.rms[0], er.rms[1], er.rms[2],
+            er.off_band[0], er.off_band[1], er.off_band[2], er.valid_fraction);
       }
       std::fflush(stdout);
     }

@@ -7,6 +7,7 @@
 #include <sstream>
 #include <string_view>
 
+#include "core/base/enum_names.hpp"
 #include "core/base/errors.hpp"
 #include "core/base/yaml_access.hpp"
 
@@ -80,6 +81,20 @@ void check(const CorrelationSettings& s, const std::string& source) {
 
 int PassSettings::step(int axis) const {
   return std::max(1, int(std::lround(window[std::size_t(axis)] * (1 - overlap_percent / 100))));
+}
+
+std::string_view name_of(PredictorBase base) { return name_in(kPredictorBaseNames, base); }
+std::string_view name_of(Interpolation interpolation) { return name_in(kInterpolationNames, interpolation); }
+std::string_view name_of(FinalPeakSearch search) { return name_in(kFinalPeakSearchNames, search); }
+
+PredictorBase predictor_base_named(std::string_view name, std::string_view what) {
+  return value_named<PredictorBase>(kPredictorBaseNames, name, what);
+}
+Interpolation interpolation_named(std::string_view name, std::string_view what) {
+  return value_named<Interpolation>(kInterpolationNames, name, what);
+}
+FinalPeakSearch final_peak_search_named(std::string_view name, std::string_view what) {
+  return value_named<FinalPeakSearch>(kFinalPeakSearchNames, name, what);
 }
 
 std::vector<PassSettings> parse_passes(const std::string& text) {
@@ -167,24 +182,22 @@ CorrelationSettings correlation_settings_from(const YamlMap& root) {
   s.intensity_threshold_of_mean = root.number_or("intensity_threshold_of_mean", s.intensity_threshold_of_mean);
   s.prefilter = root.boolean_or("prefilter", s.prefilter);
   s.depth_prefilter = root.integer_in("depth_prefilter", s.depth_prefilter, 0, 8);
-  s.predictor = root.choice_or("predictor", {"centre", "window_mean"}, "centre") == "centre"
-                    ? PredictorBase::centre
-                    : PredictorBase::window_mean;
+  s.predictor = predictor_base_named(
+      root.choice_or("predictor", kPredictorBaseNames, std::string(name_of(s.predictor))), "predictor");
   s.predictor_smoothing = root.integer_in("predictor_smoothing", s.predictor_smoothing, 0, 4);
   s.final_smoothing = root.integer_in("final_smoothing", s.final_smoothing, 0, 4);
   s.uncertainty = root.boolean_or("uncertainty", s.uncertainty);
   s.uncertainty_stride = root.integer_in("uncertainty_stride", s.uncertainty_stride, 1, 4);
-  s.early_interpolation = root.choice_or("early_interpolation", {"sinc", "cubic"}, "sinc") == "cubic"
-                              ? Interpolation::cubic
-                              : Interpolation::sinc;
+  s.early_interpolation = interpolation_named(
+      root.choice_or("early_interpolation", kInterpolationNames, std::string(name_of(s.early_interpolation))),
+      "early_interpolation");
   s.spectral_whitening = root.number_or("spectral_whitening", s.spectral_whitening);
   if (root.has("whitened_peak_sigma_voxel"))
     s.whitened_peak_sigma_voxel = per_axis<double>(
         root, "whitened_peak_sigma_voxel", "must be a width or [x, y, z], voxels", "widths must be numbers, voxels");
-  s.final_peak_search =
-      root.choice_or("final_peak_search", {"all_shifts", "near_predictor"}, "all_shifts") == "near_predictor"
-          ? FinalPeakSearch::near_predictor
-          : FinalPeakSearch::all_shifts;
+  s.final_peak_search = final_peak_search_named(
+      root.choice_or("final_peak_search", kFinalPeakSearchNames, std::string(name_of(s.final_peak_search))),
+      "final_peak_search");
   check(s, root.source());
   return s;
 }

@@ -4,6 +4,7 @@
 #include <array>
 #include <filesystem>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "core/base/yaml_access.hpp"
@@ -58,6 +59,19 @@ inline constexpr float kNumericalDust = 1e-6f;
 // no second peak: its peak_ratio is NaN. It needs a final pass without a depth margin (that
 // normalisation needs every shift).
 enum class FinalPeakSearch { all_shifts, near_predictor };
+
+// The names run configs (correlation.predictor, early_interpolation, final_peak_search) and the
+// benchmarks give these enums, in the enums' order: the one table they all read.
+inline constexpr std::array<std::string_view, 2> kPredictorBaseNames{"window_mean", "centre"};
+inline constexpr std::array<std::string_view, 2> kInterpolationNames{"sinc", "cubic"};
+inline constexpr std::array<std::string_view, 2> kFinalPeakSearchNames{"all_shifts", "near_predictor"};
+std::string_view name_of(PredictorBase base);
+std::string_view name_of(Interpolation interpolation);
+std::string_view name_of(FinalPeakSearch search);
+// The value with that name; InputError naming `what` (the key or option) and the names otherwise.
+PredictorBase predictor_base_named(std::string_view name, std::string_view what);
+Interpolation interpolation_named(std::string_view name, std::string_view what);
+FinalPeakSearch final_peak_search_named(std::string_view name, std::string_view what);
 
 struct CorrelationSettings {
   // Coarse to fine. Pass 1 correlates the volumes as they are; every later pass deforms both

@@ -14,6 +14,7 @@
 #include <string>
 #include <utility>
 
+#include "core/base/enum_names.hpp"
 #include "core/base/errors.hpp"
 #include "core/recon/mart_numerics.hpp"
 #include "core/recon/sensor_blur.hpp"
@@ -40,27 +41,17 @@ void validate_settings(const MartSettings& s) {
   if (const auto problem = check(s)) throw InputError("MART: " + problem->key + ": " + problem->reason);
 }
 
-template <typename E, std::size_t N>
-E named(const std::array<std::string_view, N>& names, std::string_view name, std::string_view what) {
-  std::string list;
-  for (std::size_t i = 0; i < N; ++i) {
-    if (names[i] == name) return E(i);
-    list += (list.empty() ? "" : ", ") + std::string(names[i]);
-  }
-  throw InputError(std::string(what) + ": expected one of " + list + ", got '" + std::string(name) + "'");
-}
-
 }  // namespace
 
-std::string_view name_of(MartStart start) { return kMartStartNames.at(std::size_t(start)); }
-std::string_view name_of(PruneScope scope) { return kPruneScopeNames.at(std::size_t(scope)); }
+std::string_view name_of(MartStart start) { return name_in(kMartStartNames, start); }
+std::string_view name_of(PruneScope scope) { return name_in(kPruneScopeNames, scope); }
 
 MartStart mart_start_named(std::string_view name, std::string_view what) {
-  return named<MartStart>(kMartStartNames, name, what);
+  return value_named<MartStart>(kMartStartNames, name, what);
 }
 
 PruneScope prune_scope_named(std::string_view name, std::string_view what) {
-  return named<PruneScope>(kPruneScopeNames, name, what);
+  return value_named<PruneScope>(kPruneScopeNames, name, what);
 }
 
 std::optional<SettingProblem> check(const MartSettings& s) {

@@ -1970,6 +1970,34 @@ TEST(Settings, SpectralWhiteningFromYamlAndRefusals) {
   }
 }
 
+TEST(Settings, EveryCorrelationChoiceHasOneNameAndAnUnknownNameIsRefusedByName) {
+  for (const PredictorBase base : {PredictorBase::window_mean, PredictorBase::centre})
+    EXPECT_EQ(predictor_base_named(name_of(base), "predictor"), base);
+  for (const Interpolation interpolation : {Interpolation::sinc, Interpolation::cubic})
+    EXPECT_EQ(interpolation_named(name_of(interpolation), "early_interpolation"), interpolation);
+  for (const FinalPeakSearch search : {FinalPeakSearch::all_shifts, FinalPeakSearch::near_predictor})
+    EXPECT_EQ(final_peak_search_named(name_of(search), "final_peak_search"), search);
+  EXPECT_EQ(name_of(PredictorBase::centre), "centre");
+  EXPECT_EQ(name_of(Interpolation::cubic), "cubic");
+  EXPECT_EQ(name_of(FinalPeakSearch::near_predictor), "near_predictor");
+  try {
+    (void)interpolation_named("linear", "--early-interpolation");
+    FAIL() << "an unknown interpolation was taken";
+  } catch (const InputError& e) {
+    EXPECT_STREQ(e.what(), "--early-interpolation: expected one of sinc, cubic, got 'linear'");
+  }
+  EXPECT_THROW((void)final_peak_search_named("Near_Predictor", "final_peak_search"), InputError);  // exact
+  // A config without the keys takes CorrelationSettings' defaults, named by the same table.
+  const CorrelationSettings defaults;
+  const CorrelationSettings d = correlation_settings_from(YamlMap(load_yaml_text("{}", "piv.yaml"), "piv.yaml"));
+  EXPECT_EQ(d.predictor, defaults.predictor);
+  EXPECT_EQ(d.early_interpolation, defaults.early_interpolation);
+  EXPECT_EQ(d.final_peak_search, defaults.final_peak_search);
+  EXPECT_EQ(correlation_settings_from(YamlMap(load_yaml_text("early_interpolation: cubic\n", "piv.yaml"), "piv.yaml"))
+                .early_interpolation,
+            Interpolation::cubic);
+}
+
 TEST(Settings, FinalPeakSearchFromYamlAndRefusals) {
   auto from = [](const std::string& text) {
     return correlation_settings_from(YamlMap(load_yaml_text(text, "piv.yaml"), "piv.yaml"));
