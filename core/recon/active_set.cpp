@@ -148,10 +148,20 @@ ActiveSet ActiveSet::all(const WeightingOperator& op) {
 }
 
 std::size_t ActiveSet::bytes() const {
+  std::size_t construction = 0;
+  if (construction_) {
+    const Construction& c = *construction_;
+    construction = c.order_y.capacity() * sizeof(int) + c.rows.first_band.capacity() * sizeof(int) +
+                   c.rows.start.capacity() * sizeof(std::size_t) + c.rows.shares.capacity() * sizeof(RowBands::Share) +
+                   (c.plan.first_band.capacity() + c.plan.last_band.capacity()) * sizeof(int) +
+                   c.plan.block_offset.capacity() * sizeof(std::size_t) +
+                   c.plan.block_entries.capacity() * sizeof(std::uint32_t) +
+                   c.block_visit.capacity() * sizeof(std::size_t);
+  }
   return voxels_.capacity() * sizeof(std::uint32_t) + order_.capacity() * sizeof(std::uint32_t) +
          order_normaliser_.capacity() * sizeof(float) + columns_.capacity() * sizeof(Column) +
          visits_.capacity() * sizeof(Visit) + entries_.capacity() * sizeof(BandEntry) +
-         visit_start_.capacity() * sizeof(std::size_t);
+         visit_start_.capacity() * sizeof(std::size_t) + construction;
 }
 
 std::vector<std::size_t> ActiveSet::slice_runs(const WeightingOperator& op) const {

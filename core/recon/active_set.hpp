@@ -58,7 +58,7 @@ class ActiveSet {
   // costs the same however few of its rows are reached), plus two per y quad of its voxels (the
   // y stage; the back-projection's runs in double).
   double pass_work() const { return pass_work_; }
-  // Bytes held (the arrays' capacities).
+  // Bytes held (the arrays' capacities, the construction's kept working arrays among them).
   std::size_t bytes() const;
 
   // Buffers a pass needs (E / n in column order, the per-voxel sums, the images in row lanes),
