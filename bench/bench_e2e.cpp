@@ -4,7 +4,8 @@
 // of the knobs on the reduced case with its Pareto front.
 //
 //   bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate]
-//             [--dark-cutoff F] [--intensity-threshold K] [--final-smoothing K] [--depth-prefilter K]
+//             [--dark-cutoff F] [--noise-threshold C] [--sensor-noise E,R,O] [--black-level B]
+//             [--intensity-threshold K] [--final-smoothing K] [--depth-prefilter K]
 //             [--spectral-whitening P [--whitened-peak-sigma X,Y,Z]]
 //             [--passes P] [--early-interpolation sinc|cubic] [--voxel-z-factor D] [--uncertainty-stride N]
 //             [--final-peak-search all_shifts|near_predictor] [--steady]
@@ -15,6 +16,14 @@
 //     --iterations/--mu/--accelerate/--dark-cutoff: MART for the headline rows (default the
 //              paper's 5 at mu 0.5, not accelerated, MartSettings' dark-pixel cutoff; the sweep's
 //              rows still start from the paper's settings).
+//     --noise-threshold C: MART's noise threshold for the headline rows, counts (default 0).
+//     --sensor-noise E,R,O: the pair rendered through a real sensor's response instead of one
+//              count per ray: E photo-electrons per ray with their shot noise, R electrons of
+//              Gaussian read noise, a pedestal of O counts, one count per electron, 12 bits (the
+//              simulated camera's `noise=1` is 4,8,20). Every row sees those frames.
+//     --black-level between_images|none: what is taken off each rendered frame before any row
+//              (reconstruction.black_level; default between_images, the frame's median between the
+//              microlens images; printed as black_level_a and _b).
 //     --time-sweep: MART iterations and the ghost floor against time per pair at this scale (with
 //              --no-sweep; ten pairs in a kept workspace; rows marked pareto= for plot_e2e.py), and
 //              run-paper.yaml's row once more on each lower build of the kernels this CPU runs
@@ -191,6 +200,9 @@ int main(int argc, char** argv) {
   int iterations = 5;
   bool accelerate = false;
   double mu = 0.5, z_centre = 0.0, dark_cutoff = recon::MartSettings{}.dark_weight_cutoff;
+  double noise_threshold = recon::MartSettings{}.noise_threshold;
+  std::string sensor_noise;  // --sensor-noise E,R,O; empty: one count per ray
+  std::string black_level_name{process::name_of(process::ProcessSettings{}.black_level)};
   double sensor_blur_mm = recon::MartSettings{}.sensor_blur_sigma_mm;
   double intensity_threshold = piv::CorrelationSettings{}.intensity_threshold_of_mean;
   double spectral_whitening = piv::CorrelationSettings{}.spectral_whitening;
@@ -229,6 +241,12 @@ int main(int argc, char** argv) {
       z_centre = std::stod(argv[++i]);
     else if (!std::strcmp(argv[i], "--dark-cutoff") && i + 1 < argc)
       dark_cutoff = std::stod(argv[++i]);
+    else if (!std::strcmp(argv[i], "--noise-threshold") && i + 1 < argc)
+      noise_threshold = std::stod(argv[++i]);
+    else if (!std::strcmp(argv[i], "--sensor-noise") && i + 1 < argc)
+      sensor_noise = argv[++i];
+    else if (!std::strcmp(argv[i], "--black-level") && i + 1 < argc)
+      black_level_name = argv[++i];
     else if (!std::strcmp(argv[i], "--sensor-blur-mm") && i + 1 < argc)
       sensor_blur_mm = std::stod(argv[++i]);
     else if (!std::strcmp(argv[i], "--spectral-whitening") && i + 1 < argc)
@@ -294,6 +312,7 @@ int main(int argc, char** argv) {
   if (sweep && (iterations != 5 || mu != 0.5 || accelerate || z_centre != 0.0 || !passes.empty() ||
                 early_interpolation != piv::CorrelationSettings{}.early_interpolation || depth_voxel_factor != 1 ||
                 lateral_divisor != 1 || dark_cutoff != recon::MartSettings{}.dark_weight_cutoff ||
+                noise_threshold != recon::MartSettings{}.noise_threshold ||
                 sensor_blur_mm != recon::MartSettings{}.sensor_blur_sigma_mm ||
                 intensity_threshold != piv::CorrelationSettings{}.intensity_threshold_of_mean ||
                 spectral_whitening != piv::CorrelationSettings{}.spectral_whitening ||
@@ -303,13 +322,14 @@ int main(int argc, char** argv) {
                 final_peak_search != piv::CorrelationSettings{}.final_peak_search ||
                 prune_threshold != recon::MartSettings{}.prune_threshold || prune_scope != "volume" ||
                 depth_response_ppm != 0.0)) {
-    std::fprintf(stderr,
-                 "bench_e2e: "
-                 "--iterations/--mu/--accelerate/--dark-cutoff/--sensor-blur-mm/--intensity-threshold/"
-                 "--final-smoothing/--depth-prefilter/--spectral-whitening/--passes/--early-interpolation/"
-                 "--voxel-z-factor/--voxel-xy-divisor/"
-                 "--uncertainty-stride/--final-peak-search/--z-centre/--depth-response-ppm change the "
-                 "headline rows only; use them with --no-sweep\n");
+    std::fprintf(
+        stderr,
+        "bench_e2e: "
+        "--iterations/--mu/--accelerate/--dark-cutoff/--noise-threshold/--sensor-blur-mm/--intensity-threshold/"
+        "--final-smoothing/--depth-prefilter/--spectral-whitening/--passes/--early-interpolation/"
+        "--voxel-z-factor/--voxel-xy-divisor/"
+        "--uncertainty-stride/--final-peak-search/--z-centre/--depth-response-ppm change the "
+        "headline rows only; use them with --no-sweep\n");
     return 2;
   }
   // mid: the paper's camera and depth with the box cut laterally to the ring (120 x 80 voxels):
@@ -320,7 +340,8 @@ int main(int argc, char** argv) {
     std::fprintf(
         stderr,
         "usage: bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate] "
-        "[--dark-cutoff F] [--sensor-blur-mm S] [--intensity-threshold K] [--final-smoothing K] "
+        "[--dark-cutoff F] [--noise-threshold C] [--sensor-noise E,R,O] [--black-level B] [--sensor-blur-mm S] "
+        "[--intensity-threshold K] [--final-smoothing K] "
         "[--depth-prefilter K] [--spectral-whitening P [--whitened-peak-sigma X,Y,Z]] [--passes P] "
         "[--early-interpolation sinc|cubic] [--voxel-z-factor D] [--voxel-xy-divisor N] [--uncertainty-stride N] "
         "[--final-peak-search all_shifts|near_predictor] [--steady [--steady-repeats N]] [--time-sweep] "
@@ -331,8 +352,10 @@ int main(int argc, char** argv) {
     return 2;
   }
   recon::PruneScope scope = recon::PruneScope::volume;
+  process::BlackLevel black_level = process::BlackLevel::between_images;
   try {
     scope = recon::prune_scope_named(prune_scope, "--prune-scope");
+    black_level = process::black_level_named(black_level_name, "--black-level");
     if (!final_peak_search_name.empty())
       final_peak_search = piv::final_peak_search_named(final_peak_search_name, "--final-peak-search");
     if (!early_interpolation_name.empty())
@@ -360,10 +383,12 @@ int main(int argc, char** argv) {
   settings.mart.mu = mu;
   settings.mart.accelerate = accelerate;
   settings.mart.dark_weight_cutoff = dark_cutoff;
+  settings.mart.noise_threshold = float(noise_threshold);
   settings.mart.sensor_blur_sigma_mm = sensor_blur_mm;
   settings.mart.prune_threshold = prune_threshold;
   settings.mart.prune_scope = scope;
   settings.depth_response_ppm = depth_response_ppm;
+  settings.black_level = black_level;
   settings.correlation.intensity_threshold_of_mean = intensity_threshold;
   settings.correlation.spectral_whitening = spectral_whitening;
   settings.correlation.whitened_peak_sigma_voxel = whitened_sigma;
@@ -399,6 +424,23 @@ int main(int argc, char** argv) {
   const optics::MicrolensArray& lenses = nominal.lenses;
   sim::RenderOptions ro;
   ro.rays_per_particle = rays;
+  if (!sensor_noise.empty()) {
+    double electrons_per_ray = 0, read_noise = 0, pedestal = 0;
+    char tail = 0;
+    if (std::sscanf(sensor_noise.c_str(), "%lf,%lf,%lf%c", &electrons_per_ray, &read_noise, &pedestal, &tail) != 3 ||
+        !(electrons_per_ray > 0) || !(read_noise >= 0) || !(pedestal >= 0)) {
+      std::fprintf(stderr,
+                   "bench_e2e: --sensor-noise E,R,O: electrons per ray > 0, read noise (electrons) and pedestal "
+                   "(counts) >= 0, not '%s'\n",
+                   sensor_noise.c_str());
+      return 2;
+    }
+    ro.sensor.electrons_per_ray = electrons_per_ray;
+    ro.sensor.shot_noise = true;
+    ro.sensor.read_noise_electrons = read_noise;
+    ro.sensor.dark_offset_dn = pedestal;
+    ro.sensor.bit_depth = 12;
+  }
   double t = now_s();
   const auto render = [&](const std::vector<sim::Point3>& p, std::uint64_t seed) {
     const auto r = sim::render(camera, lenses, p, ro, seed);
@@ -406,8 +448,18 @@ int main(int argc, char** argv) {
     for (std::size_t i = 0; i < f.size(); ++i) f.pixels[i] = r.image.pixels[i];
     return f;
   };
-  const ImageF a = render(pa, 1), b = render(pb, 2);
+  ImageF a = render(pa, 1), b = render(pb, 2);
   const double render_s = now_s() - t;
+  // Taken off once here, as process::PairProcessor does, so that the rows which call process_pair
+  // directly see the same frames (PairProcessor then finds nothing more to take off).
+  float black_level_a = 0, black_level_b = 0;
+  if (settings.black_level == process::BlackLevel::between_images) {
+    const process::BlackLevelMeter meter(nominal.white_correction);
+    black_level_a = meter.measure(a);
+    black_level_b = meter.measure(b);
+    process::subtract_black_level(a, black_level_a);
+    process::subtract_black_level(b, black_level_b);
+  }
 
   // The --live tiers, each with its own processor; false on a malformed tier.
   const auto run_live_tiers = [&]() -> bool {
@@ -516,9 +568,12 @@ int main(int argc, char** argv) {
   const process::PairProcessor processor(camera, nominal, settings);
   const process::PairOperator& op = processor.op();
   const double weights_s = now_s() - t;
-  std::printf("bench=e2e case=%s particles=%zu voxels=%zu voxel_mm=%g voxel_z_mm=%g render_s=%.2f weights_s=%.2f\n",
-              scale.c_str(), count, settings.grid.count(), settings.grid.spacing_mm[0], settings.grid.spacing_mm[2],
-              render_s, weights_s);
+  std::printf(
+      "bench=e2e case=%s particles=%zu voxels=%zu voxel_mm=%g voxel_z_mm=%g sensor=%s black_level=%s "
+      "black_level_a=%g black_level_b=%g noise_threshold=%g render_s=%.2f weights_s=%.2f\n",
+      scale.c_str(), count, settings.grid.count(), settings.grid.spacing_mm[0], settings.grid.spacing_mm[2],
+      sensor_noise.empty() ? "one_count_per_ray" : sensor_noise.c_str(), black_level_name.c_str(),
+      double(black_level_a), double(black_level_b), noise_threshold, render_s, weights_s);
 
   // The paper's settings: reconstruction and correlation, stage by stage.
   recon::MartWorkspace workspace;  // kept for --steady and the sweeps

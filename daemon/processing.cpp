@@ -63,9 +63,10 @@ ProcessFactory plenoptic_processing(const optics::CameraModel& camera, const std
     setup.defer_depth_response = !live_lane;
     auto processor = std::make_shared<const process::PairProcessor>(
         camera, calibration.loaded ? *calibration.loaded : calib::nominal_calibration(camera), settings, setup);
-    spdlog::info("run processing, {} tier: calibration {}; {}; {}", process::tier_name(tier), calibration.summary(),
+    spdlog::info("run processing, {} tier: calibration {}; {}; {}; {}", process::tier_name(tier), calibration.summary(),
                  processor->setup_note(),
-                 processor->note().empty() ? "frames reconstructed on raw pixels" : processor->note());
+                 processor->note().empty() ? "frames reconstructed on raw pixels" : processor->note(),
+                 processor->black_level_note());
     // The lane's pairs in flight get their buffers now, while Armed, not beside the recording.
     const int in_flight = live_lane ? config.max_pairs_in_flight : QualityLane::kPairsInFlight;
     const auto t0 = std::chrono::steady_clock::now();

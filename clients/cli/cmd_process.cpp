@@ -239,12 +239,13 @@ void run_process(const ProcessOptions& o) {
 
   std::size_t valid = 0;
   for (auto v : r.correlation.field.valid) valid += v;
-  std::fprintf(stderr,
-               "reconstruct A %.2f s (voxel updates skipped %.1f %%), B %.2f s (skipped %.1f %%), correlate %.2f s; "
-               "%zu vectors, %zu valid\n",
-               r.times.reconstruct_a_s, 100 * r.skipped_a.fraction_updates_skipped(), r.times.reconstruct_b_s,
-               100 * r.skipped_b.fraction_updates_skipped(), r.times.correlate_s, r.correlation.field.grid.count(),
-               valid);
+  std::fprintf(
+      stderr,
+      "black level taken off A %g, B %g counts; reconstruct A %.2f s (voxel updates skipped %.1f %%), B %.2f s "
+      "(skipped %.1f %%), correlate %.2f s; %zu vectors, %zu valid\n",
+      double(r.black_level_a), double(r.black_level_b), r.times.reconstruct_a_s,
+      100 * r.skipped_a.fraction_updates_skipped(), r.times.reconstruct_b_s,
+      100 * r.skipped_b.fraction_updates_skipped(), r.times.correlate_s, r.correlation.field.grid.count(), valid);
   say_uncertainty(r.correlation.field);
   std::cout << out.string() << "\n" << vti.string() << "\n" << png.string() << "\n";
 }

@@ -20,6 +20,7 @@
 #include "core/io/raw_frame.hpp"
 #include "core/io/vtk_files.hpp"
 #include "core/optics/camera_file.hpp"
+#include "core/process/black_level.hpp"
 #include "core/process/operator_cache.hpp"
 #include "core/process/process.hpp"
 #include "core/recon/mart.hpp"
@@ -37,6 +38,7 @@ struct ReconOptions {
   bool accelerate = false;
   std::string start = "mlos";
   float threshold = 0;
+  std::string black_level{process::name_of(process::ProcessSettings{}.black_level)};
   double dark_cutoff = 0.9;
   double convergence = 0;
   double sensor_blur_mm = 0;
@@ -84,7 +86,8 @@ void run(const ReconOptions& o) {
   s.prune_scope = recon::prune_scope_named(o.prune_scope, "--prune-scope");
   s.prune_depth_reach = o.prune_depth_reach;
   s.start = recon::mart_start_named(o.start, "--start");
-  const ImageF image = io::read_raw_frame(o.image);
+  const process::BlackLevel black_level = process::black_level_named(o.black_level, "--black-level");
+  ImageF image = io::read_raw_frame(o.image);
 
   const bool tty = ::isatty(STDERR_FILENO);
   const auto t0 = std::chrono::steady_clock::now();
@@ -104,6 +107,12 @@ void run(const ReconOptions& o) {
   const process::PairOperator& pair_op = *kept;
   const recon::WeightingOperator& op = pair_op.weights();
   recon::validate_image(image, op, o.image.c_str());
+  if (black_level == process::BlackLevel::between_images) {
+    const process::BlackLevelMeter meter(white);
+    const float level = meter.measure(image);
+    process::subtract_black_level(image, level);
+    std::fprintf(stderr, "%s: %g counts\n", meter.describe().c_str(), double(level));
+  }
   ImageF scratch;
   const ImageF& prepared = pair_op.prepare(image, scratch);
   s.dark_floor = pair_op.dark_floor(image, s.noise_threshold);
@@ -172,7 +181,14 @@ void add_recon_commands(CLI::App& app) {
   cmd->add_option("--start", o->start, "initial volume: mlos (multiplicative line of sight) or ones (eq 9)")
       ->check(CLI::IsMember(std::vector<std::string>(recon::kMartStartNames.begin(), recon::kMartStartNames.end())))
       ->capture_default_str();
-  cmd->add_option("--threshold", o->threshold, "noise floor in counts: pixels at or below are dark")
+  cmd->add_option("--threshold", o->threshold,
+                  "noise floor in counts: pixels at or below are dark (after the black level is taken off)")
+      ->capture_default_str();
+  cmd->add_option("--black-level", o->black_level,
+                  "taken off the image first: between_images (its median between the microlens images: the "
+                  "sensor's pedestal and background) or none (an image already dark-subtracted)")
+      ->check(
+          CLI::IsMember(std::vector<std::string>(process::kBlackLevelNames.begin(), process::kBlackLevelNames.end())))
       ->capture_default_str();
   cmd->add_option("--dark-cutoff", o->dark_cutoff,
                   "a dark pixel zeroes a voxel only where both 1-D weights exceed this fraction of their "

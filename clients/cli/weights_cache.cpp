@@ -37,6 +37,7 @@ std::unique_ptr<const process::PairProcessor> make_pair_processor(const optics::
   auto processor = std::make_unique<const process::PairProcessor>(camera, calibration, settings, setup);
   if (operators || processor->depth_response()) std::fprintf(stderr, "%s\n", processor->setup_note().c_str());
   if (!processor->note().empty()) std::fprintf(stderr, "%s\n", processor->note().c_str());
+  std::fprintf(stderr, "%s\n", processor->black_level_note().c_str());
   return processor;
 }
 

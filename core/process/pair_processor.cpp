@@ -3,6 +3,8 @@
 #include "core/process/pair_processor.hpp"
 
 #include <algorithm>
+#include <array>
+#include <type_traits>
 #include <vector>
 
 #include <tbb/blocked_range.h>
@@ -111,6 +113,14 @@ PairProcessor::~PairProcessor() = default;
 PairProcessor::PairProcessor(const optics::CameraModel& camera, const calib::LoadedCalibration& calibration,
                              ProcessSettings settings, const ProcessorSetup& setup)
     : settings_(std::move(settings)), raw_width_(camera.sensor().width_px), raw_height_(camera.sensor().height_px) {
+  if (settings_.black_level == BlackLevel::between_images) {
+    recon::validate_size(calibration.white_correction.width, calibration.white_correction.height, raw_width_,
+                         raw_height_, "the calibration's white correction");
+    black_level_ = BlackLevelMeter(calibration.white_correction);
+    black_level_note_ = black_level_.describe();
+  } else {
+    black_level_note_ = "black level: none taken off (reconstruction.black_level: none)";
+  }
   OperatorCache* const operators = setup.operators;
   const int binning = settings_.pixel_binning;
   const auto in_binning = [&](auto&& make) {
@@ -216,22 +226,34 @@ PairResult PairProcessor::process(const ImageF& frame_a, const ImageF& frame_b, 
   return corrected(process_uncorrected(frame_a, frame_b, options));
 }
 
+template <typename Frame>
+const ImageF& PairProcessor::prepared(const Frame& frame, float level, ImageF& scratch) const {
+  if constexpr (std::is_same_v<Frame, ImageF>) {
+    if (settings_.pixel_binning == 1 && level == 0.f) return frame;
+  }
+  scratch = bin_pixels(frame, settings_.pixel_binning);
+  subtract_black_level(scratch, level);
+  return scratch;
+}
+
 PairResult PairProcessor::process_uncorrected(const ImageU16& frame_a, const ImageU16& frame_b,
                                               const PairOptions& options) const {
-  if (settings_.pixel_binning == 1) return process_uncorrected(to_float(frame_a), to_float(frame_b), options);
   // Counts are finite and non-negative: only the size is checked raw, and the frames are binned
   // straight from their counts (no sensor-sized float copy).
   recon::validate_size(frame_a.width, frame_a.height, raw_width_, raw_height_, "frame A");
   recon::validate_size(frame_b.width, frame_b.height, raw_width_, raw_height_, "frame B");
-  return run(bin_pixels(frame_a, settings_.pixel_binning), bin_pixels(frame_b, settings_.pixel_binning), options);
+  const std::array<float, 2> levels{black_level_.measure(frame_a), black_level_.measure(frame_b)};
+  ImageF scratch_a, scratch_b;
+  return run(prepared(frame_a, levels[0], scratch_a), prepared(frame_b, levels[1], scratch_b), options, levels);
 }
 
 PairResult PairProcessor::process_uncorrected(const ImageF& frame_a, const ImageF& frame_b,
                                               const PairOptions& options) const {
-  if (settings_.pixel_binning == 1) return run(frame_a, frame_b, options);
   recon::validate_image(frame_a, raw_width_, raw_height_, "frame A");
   recon::validate_image(frame_b, raw_width_, raw_height_, "frame B");
-  return run(bin_pixels(frame_a, settings_.pixel_binning), bin_pixels(frame_b, settings_.pixel_binning), options);
+  const std::array<float, 2> levels{black_level_.measure(frame_a), black_level_.measure(frame_b)};
+  ImageF scratch_a, scratch_b;
+  return run(prepared(frame_a, levels[0], scratch_a), prepared(frame_b, levels[1], scratch_b), options, levels);
 }
 
 std::size_t PairProcessor::reserve_workspaces(int pairs) const {
@@ -243,11 +265,16 @@ std::size_t PairProcessor::reserve_workspaces(int pairs) const {
   return workspaces_.bytes();
 }
 
-PairResult PairProcessor::run(const ImageF& frame_a, const ImageF& frame_b, const PairOptions& options) const {
+PairResult PairProcessor::run(const ImageF& frame_a, const ImageF& frame_b, const PairOptions& options,
+                              std::array<float, 2> black_levels) const {
   ProcessSettings s = settings_;
   s.correlation.dt_s = pair_dt_s(settings_, options.measured_dt_s);
   const WorkspacePool::Lease workspace = workspaces_.take();
-  return process_pair(*op_, frame_a, frame_b, s, options.progress, &(*workspace).mart, &(*workspace).correlation);
+  PairResult result =
+      process_pair(*op_, frame_a, frame_b, s, options.progress, &(*workspace).mart, &(*workspace).correlation);
+  result.black_level_a = black_levels[0];
+  result.black_level_b = black_levels[1];
+  return result;
 }
 
 }  // namespace plenopiv::process

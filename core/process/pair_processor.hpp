@@ -13,6 +13,7 @@
 #include "core/base/image.hpp"
 #include "core/calib/calibration_file.hpp"
 #include "core/optics/camera_model.hpp"
+#include "core/process/black_level.hpp"
 #include "core/process/operator_cache.hpp"
 #include "core/process/process.hpp"
 #include "core/recon/mart.hpp"
@@ -113,7 +114,8 @@ class PairProcessor {
   ~PairProcessor();
 
   // Raw frames A and B (the camera's counts) to vectors: validated (sensor-sized; named "frame A"
-  // and "frame B"), resampled when the operator says so, reconstructed and correlated
+  // and "frame B"), each frame's black level taken off (settings.black_level; the counts in
+  // PairResult::black_level_a and _b), resampled when the operator says so, reconstructed and correlated
   // (process_pair), with the dt pair_dt_s gives. With settings.pixel_binning above 1 the operator
   // is built on the binned camera and white image, and frames are validated raw, then binned.
   // MART's and the correlation's buffers come from the processor's pool.
@@ -132,6 +134,8 @@ class PairProcessor {
   const PairOperator& op() const { return *op_; }
   // Why and how frames are resampled (PairOperator::note), empty when they are not.
   const std::string& note() const { return op_->note(); }
+  // How each frame's black level is found (BlackLevelMeter::describe), or that none is taken off.
+  const std::string& black_level_note() const { return black_level_note_; }
   // Where the weight tables came from, for the user: "operator built", "operator kept in memory",
   // or the disk cache's line (WeightsDiskCache::last_note); then, with a depth response, where it
   // came from and its summary (deferred: "depth response deferred to the first pair").
@@ -155,8 +159,14 @@ class PairProcessor {
   std::size_t reserve_workspaces(int pairs) const;
 
  private:
-  // process_pair on frames already in the operator's pixels, in a workspace from the pool.
-  PairResult run(const ImageF& frame_a, const ImageF& frame_b, const PairOptions& options) const;
+  // process_pair on frames already in the operator's pixels, in a workspace from the pool; the
+  // black levels taken off them are recorded in the result.
+  PairResult run(const ImageF& frame_a, const ImageF& frame_b, const PairOptions& options,
+                 std::array<float, 2> black_levels) const;
+  // A raw frame (validated) in the operator's pixels with its black level off: binned, the level
+  // subtracted; `frame` itself when neither changes it (no copy).
+  template <typename Frame>
+  const ImageF& prepared(const Frame& frame, float level, ImageF& scratch) const;
   PairResult process_uncorrected(const ImageF& frame_a, const ImageF& frame_b, const PairOptions& options) const;
   // w through depth_response_, when there is one; sigma_method says what sigma holds either way.
   PairResult corrected(PairResult result) const;
@@ -167,6 +177,8 @@ class PairProcessor {
 
   ProcessSettings settings_;
   int raw_width_ = 0, raw_height_ = 0;  // the camera's sensor, before pixel binning
+  BlackLevelMeter black_level_;         // on the raw sensor; no samples with BlackLevel::none
+  std::string black_level_note_;
   std::shared_ptr<const PairOperator> op_;
   std::string setup_note_;
   bool setup_on_disk_ = false;

@@ -142,7 +142,8 @@ void put_correlation(ByteWriter& w, const piv::CorrelationSettings& c) {
 }  // namespace
 
 std::string settings_key(const ProcessSettings& s) {
-  const auto& [grid, depth_guard_mm, angular_sampling, pixel_binning, depth_response_ppm, mart, correlation] = s;
+  const auto& [grid, depth_guard_mm, angular_sampling, pixel_binning, depth_response_ppm, black_level, mart,
+               correlation] = s;
   std::string out = "plenopiv processing settings\n";
   ByteWriter w(out);
   put_grid(w, grid);
@@ -150,6 +151,7 @@ std::string settings_key(const ProcessSettings& s) {
   w.pod(angular_sampling);
   w.pod(pixel_binning);
   w.pod(depth_response_ppm);
+  w.pod(black_level);
   put_mart(w, mart);
   put_correlation(w, correlation);
   return out;
@@ -214,7 +216,7 @@ ProcessSettings parse_settings(const YamlMap& root) {
   if (auto r = root.optional_map("reconstruction")) {
     r->reject_unknown({"iterations", "mu", "acceleration", "start", "noise_threshold", "dark_weight_cutoff",
                        "convergence", "angular_sampling", "pixel_binning", "sensor_blur_sigma_mm", "prune",
-                       "prune_threshold", "prune_scope", "prune_depth_reach", "depth_response_ppm"});
+                       "prune_threshold", "prune_scope", "prune_depth_reach", "depth_response_ppm", "black_level"});
     // Read here, checked by recon::check (the one owner of MART's ranges); the integer is only kept
     // from wrapping as it narrows.
     s.mart.iterations = r->integer_in("iterations", s.mart.iterations, std::numeric_limits<int>::min(),
@@ -241,6 +243,8 @@ ProcessSettings parse_settings(const YamlMap& root) {
     s.depth_response_ppm = r->number_or("depth_response_ppm", s.depth_response_ppm);
     if (!(s.depth_response_ppm >= 0 && s.depth_response_ppm <= 5))
       r->fail("depth_response_ppm", "must be in [0, 5] particles per microlens (0: off)");
+    s.black_level = black_level_named(
+        r->choice_or("black_level", kBlackLevelNames, std::string(name_of(s.black_level))), "black_level");
   }
 
   if (auto c = root.optional_map("correlation")) {

@@ -18,6 +18,7 @@
 #include "core/optics/microlens_array.hpp"
 #include "core/piv/multipass.hpp"
 #include "core/piv/settings.hpp"
+#include "core/process/black_level.hpp"
 #include "core/recon/mart.hpp"
 #include "core/recon/weights.hpp"
 
@@ -49,6 +50,9 @@ struct ProcessSettings {
   // response"). Offline only: plenopivd's run configs refuse it (minutes of measuring while a run
   // is Armed).
   double depth_response_ppm = 0.0;
+  // What PairProcessor takes off each raw frame first (black_level.hpp); default each frame's own
+  // level between the microlens images.
+  BlackLevel black_level = BlackLevel::between_images;
   recon::MartSettings mart;
   piv::CorrelationSettings correlation;  // dt_s lives here
 
@@ -78,7 +82,8 @@ Grid3 grid_for_extent(const std::array<double, 3>& lo, const std::array<double, 
 //           [a, b] are the faces of the box (the first voxel's lower face, the last one's upper face)
 //   reconstruction: {iterations, mu, acceleration, start: mlos|ones, noise_threshold, dark_weight_cutoff,
 //                    convergence, angular_sampling, pixel_binning, sensor_blur_sigma_mm, prune,
-//                    prune_threshold, prune_scope: volume|slice, depth_response_ppm}
+//                    prune_threshold, prune_scope: volume|slice, depth_response_ppm,
+//                    black_level: between_images|none}
 //                                                  (ranges: recon::check)
 //   correlation: {passes, median, ...}             (piv::correlation_settings_from; ranges: piv::check)
 //   live: {volume: {..}, reconstruction: {..}, correlation: {..}}   (optional: the live lane's fast tier,
@@ -128,6 +133,8 @@ struct PairResult {
   piv::CorrelationResult correlation;
   StageTimes times;
   std::string lattice_note;  // PairOperator::note: why and how the frames were resampled; empty if not
+  // Counts PairProcessor took off each raw frame (ProcessSettings::black_level); 0 where none.
+  float black_level_a = 0, black_level_b = 0;
 };
 
 // Progress: stage name ("reconstruct A", "reconstruct B", "correlate") and the fraction of the

@@ -1,6 +1,7 @@
 // Numerical stress: many randomised tiny frame pairs (seeding 0-3 ppm, depth ranges, noise, zero
-// and saturated frames, particles all outside, one particle, extreme mu and iterations) through
-// process_pair -> no crash, finite outputs, identical at 1 and 2 threads; bad images refused.
+// and saturated frames, particles all outside, one particle, extreme mu and iterations, the black
+// level taken off or not) through process_pair -> no crash, finite outputs, identical at 1 and 2
+// threads; bad images refused.
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
 
@@ -14,6 +15,7 @@
 #include "core/base/errors.hpp"
 #include "core/calib/nominal_calibration.hpp"
 #include "core/optics/camera_file.hpp"
+#include "core/process/black_level.hpp"
 #include "core/process/process.hpp"
 #include "core/sim/particles.hpp"
 #include "core/sim/render.hpp"
@@ -146,6 +148,17 @@ Case make_case(std::uint64_t index) {
   const bool near = pick(2) == 1 && c.settings.correlation.passes[1].depth_margin == 0;
   c.settings.correlation.final_peak_search =
       near ? piv::FinalPeakSearch::near_predictor : piv::FinalPeakSearch::all_shifts;
+  // Each frame's black level taken off as PairProcessor does (the frames carry up to 2 counts of
+  // pedestal; a zero or saturated frame is taken off whole), or left on.
+  c.settings.black_level = pick(2) ? BlackLevel::between_images : BlackLevel::none;
+  float levels[2] = {0, 0};
+  if (c.settings.black_level == BlackLevel::between_images) {
+    const BlackLevelMeter meter(fixture().white);
+    levels[0] = meter.measure(c.a);
+    levels[1] = meter.measure(c.b);
+    subtract_black_level(c.a, levels[0]);
+    subtract_black_level(c.b, levels[1]);
+  }
   const auto& sigma = c.settings.correlation.whitened_peak_sigma_voxel;
   c.description =
       "case " + std::to_string(index) + ": mode " + std::to_string(mode) + ", " + std::to_string(count) +
@@ -162,8 +175,9 @@ Case make_case(std::uint64_t index) {
       ", spectral whitening " + std::to_string(c.settings.correlation.spectral_whitening) + " with a peak of " +
       std::to_string(sigma[0]) + " x " + std::to_string(sigma[1]) + " x " + std::to_string(sigma[2]) +
       " voxels, uncertainty every " + std::to_string(c.settings.correlation.uncertainty_stride) + " nodes, " +
-      (near ? "final peaks at the predictor first" : "final peaks over all shifts") + ", depth " +
-      std::to_string(c.depth);
+      (near ? "final peaks at the predictor first" : "final peaks over all shifts") + ", black level " +
+      std::string(name_of(c.settings.black_level)) + " (" + std::to_string(levels[0]) + ", " +
+      std::to_string(levels[1]) + " counts), depth " + std::to_string(c.depth);
   return c;
 }
 

@@ -1,0 +1,178 @@
+// Each raw frame's black level (reconstruction.black_level): where BlackLevelMeter reads it, the
+// setting, and a pair with a sensor pedestal through PairProcessor against the simulator's truth.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdint>
+#include <iostream>
+#include <string>
+#include <vector>
+
+#include "core/base/yaml_access.hpp"
+#include "core/calib/nominal_calibration.hpp"
+#include "core/process/black_level.hpp"
+#include "core/process/pair_processor.hpp"
+#include "core/process/process.hpp"
+#include "core/sim/particles.hpp"
+#include "core/sim/render.hpp"
+#include "tests/support/cameras.hpp"
+#include "tests/support/input_error.hpp"
+#include "tests/support/mean_displacement.hpp"
+
+namespace plenopiv::process {
+namespace {
+
+using testing_support::error_of;
+
+// A white correction of disks of radius 4 px on a 10 px lattice (1 inside, 0 outside), 80 x 80 px.
+ImageF disk_white() {
+  ImageF white(80, 80);
+  for (int y = 0; y < white.height; ++y)
+    for (int x = 0; x < white.width; ++x) {
+      const double dx = x % 10 - 4.5, dy = y % 10 - 4.5;
+      white.at(x, y) = dx * dx + dy * dy <= 16 ? 1.f : 0.f;
+    }
+  return white;
+}
+
+bool beside_light(const ImageF& white, int x, int y) {
+  for (int dy = -1; dy <= 1; ++dy)
+    for (int dx = -1; dx <= 1; ++dx) {
+      const int u = x + dx, v = y + dy;
+      if (u < 0 || v < 0 || u >= white.width || v >= white.height || white.at(u, v) != 0.f) return true;
+    }
+  return false;
+}
+
+TEST(BlackLevelMeter, ReadsTheMedianBetweenTheImagesAndNotBesideThem) {
+  const ImageF white = disk_white();
+  const BlackLevelMeter meter(white);
+  EXPECT_GE(meter.samples(), BlackLevelMeter::kMinSamples);
+  EXPECT_EQ(meter.samples(), meter.candidates());  // fewer than kMaxSamples: every one kept
+  // Pedestal 50 with a symmetric spread between the images; far brighter light in the images and
+  // on every pixel beside them (a particle's image blurred by diffraction), which must not count.
+  ImageF frame(white.width, white.height);
+  ImageU16 counts(white.width, white.height);
+  int k = 0;
+  for (int y = 0; y < white.height; ++y)
+    for (int x = 0; x < white.width; ++x) {
+      const float v = beside_light(white, x, y) ? 1000.f : float(50 + (k++ % 5) - 2);
+      frame.at(x, y) = v;
+      counts.at(x, y) = std::uint16_t(v);
+    }
+  EXPECT_EQ(meter.measure(frame), 50.f);
+  EXPECT_EQ(meter.measure(counts), 50.f);
+  EXPECT_NE(meter.describe().find("median over " + std::to_string(meter.samples())), std::string::npos)
+      << meter.describe();
+}
+
+TEST(BlackLevelMeter, WithoutPixelsBetweenTheImagesItMeasuresNothingAndSaysSo) {
+  ImageF white(80, 80);
+  for (float& w : white.pixels) w = 1.f;
+  const BlackLevelMeter meter(white);
+  EXPECT_EQ(meter.samples(), 0u);
+  ImageF frame(80, 80);
+  for (float& v : frame.pixels) v = 70.f;
+  EXPECT_EQ(meter.measure(frame), 0.f);
+  EXPECT_NE(meter.describe().find("not measured"), std::string::npos) << meter.describe();
+  EXPECT_NE(meter.describe().find("reconstruction.black_level: none"), std::string::npos) << meter.describe();
+}
+
+TEST(SubtractBlackLevel, TakesTheLevelOffAndClampsAtZero) {
+  ImageF frame(4, 1);
+  frame.pixels = {0.f, 19.5f, 20.f, 120.f};
+  ImageF same = frame;
+  subtract_black_level(same, 0.f);
+  EXPECT_EQ(same.pixels, frame.pixels);
+  subtract_black_level(frame, 20.f);
+  EXPECT_EQ(frame.pixels, (HugePageVector<float>{0.f, 0.f, 0.f, 100.f}));
+}
+
+const std::string kSpec = R"(
+dt_s: 0.0001
+volume: {x_mm: [-2, 2], y_mm: [-2, 2], z_mm: [0, 4], voxel_mm: 0.125, depth_guard_mm: 1}
+correlation:
+  passes: [{window: 16, overlap_percent: 50, depth_margin: 4}, {window: 8, overlap_percent: 50}]
+  intensity_threshold_of_mean: 4
+  depth_prefilter: 4
+  final_smoothing: 1
+reconstruction: {iterations: 3, mu: 1)";
+
+ProcessSettings parse(const std::string& reconstruction_keys) {
+  const std::string text = kSpec + reconstruction_keys + "}\n";
+  return process_settings_from(YamlMap(load_yaml_text(text, "run.yaml"), "run.yaml"));
+}
+
+TEST(BlackLevel, TheSettingIsBetweenImagesByDefaultAndAnUnknownNameIsRefused) {
+  EXPECT_EQ(parse("").black_level, BlackLevel::between_images);
+  EXPECT_EQ(parse(", black_level: none").black_level, BlackLevel::none);
+  EXPECT_EQ(parse(", black_level: between_images").black_level, BlackLevel::between_images);
+  const std::string e = error_of([&] { parse(", black_level: 100"); });
+  EXPECT_NE(e.find("black_level"), std::string::npos) << e;
+  EXPECT_NE(e.find("between_images"), std::string::npos) << e;
+  EXPECT_NE(settings_key(parse("")), settings_key(parse(", black_level: none")));
+}
+
+// The small camera and a uniform shift of (2, 1, 2) voxels, rendered through a sensor with a
+// pedestal (the simulated camera's response with a 100-count offset) and through the simulator's
+// one count per ray: the pedestal taken off, the pair measures the shift as the clean one does;
+// left on, MART takes it for light in every voxel.
+TEST(BlackLevel, APedestalIsTakenOffAndThePairMeasuresTheShift) {
+  const optics::CameraModel camera = testing_support::small_camera();
+  const calib::LoadedCalibration calibration = calib::nominal_calibration(camera);
+  const sim::Point3 shift{0.25, 0.125, 0.25};
+  const std::vector<sim::Point3> a = sim::random_particles({{-2.5, -2.5, -0.5}, {2.5, 2.5, 4.5}}, 1600, 21);
+  std::vector<sim::Point3> b = a;
+  for (auto& p : b)
+    for (std::size_t k = 0; k < 3; ++k) p[k] += shift[k];
+  sim::RenderOptions ro;
+  ro.rays_per_particle = 2000;
+  const sim::RenderResult clean_a = sim::render(camera, calibration.lenses, a, ro, 3);
+  const sim::RenderResult clean_b = sim::render(camera, calibration.lenses, b, ro, 4);
+  ro.sensor.electrons_per_ray = 4;
+  ro.sensor.shot_noise = true;
+  ro.sensor.read_noise_electrons = 2;
+  ro.sensor.dark_offset_dn = 100;
+  ro.sensor.bit_depth = 12;
+  const ImageU16 noisy_a = sim::render(camera, calibration.lenses, a, ro, 3).image;
+  const ImageU16 noisy_b = sim::render(camera, calibration.lenses, b, ro, 4).image;
+
+  const PairProcessor taken_off(camera, calibration, parse(""));
+  const PairProcessor left_on(camera, calibration, parse(", black_level: none"));
+  EXPECT_NE(taken_off.black_level_note().find("median over"), std::string::npos) << taken_off.black_level_note();
+  EXPECT_NE(left_on.black_level_note().find("none taken off"), std::string::npos) << left_on.black_level_note();
+
+  // One count per ray: nothing between the images, nothing taken off, the same bits either way.
+  const PairResult clean = taken_off.process(clean_a.rays, clean_b.rays);
+  const PairResult clean_none = left_on.process(clean_a.rays, clean_b.rays);
+  EXPECT_EQ(clean.black_level_a, 0.f);
+  EXPECT_EQ(clean.black_level_b, 0.f);
+  EXPECT_EQ(clean.volume_a.data, clean_none.volume_a.data);
+  EXPECT_EQ(clean.correlation.field.dz_mm, clean_none.correlation.field.dz_mm);
+
+  const PairResult off = taken_off.process(noisy_a, noisy_b);
+  const PairResult on = left_on.process(noisy_a, noisy_b);
+  EXPECT_NEAR(off.black_level_a, 100.f, 1.f);
+  EXPECT_NEAR(off.black_level_b, 100.f, 1.f);
+  EXPECT_EQ(on.black_level_a, 0.f);
+
+  const auto error = [&](const PairResult& r, const char* name) {
+    const testing_support::MeanDisplacement m = testing_support::mean_displacement(r.correlation.field);
+    double e = 0;
+    for (std::size_t k = 0; k < 3; ++k) e = std::max(e, std::abs(m.mm[k] - shift[k]));
+    std::cout << "measured: " << name << ": mean displacement " << m.mm[0] << " " << m.mm[1] << " " << m.mm[2]
+              << " mm (truth 0.25 0.125 0.25), " << m.valid << " of " << r.correlation.field.grid.count()
+              << " valid, largest component error " << e << " mm; voxel updates skipped "
+              << 100 * r.skipped_a.fraction_updates_skipped() << " %\n";
+    return e;
+  };
+  const double e_clean = error(clean, "one count per ray");
+  const double e_off = error(off, "pedestal taken off");
+  const double e_on = error(on, "pedestal left on");
+  EXPECT_LT(e_off, e_clean + 0.02);
+  EXPECT_GT(e_on, e_off + 0.02);
+  EXPECT_GT(off.skipped_a.fraction_updates_skipped(), on.skipped_a.fraction_updates_skipped() + 0.2);
+}
+
+}  // namespace
+}  // namespace plenopiv::process
