@@ -84,6 +84,14 @@ LIVE_TIERS = ["4,4,5,16@50+4,8@50", "4,4,8,16@50+4,8@50", "3,4,3,16@50+4,8@50", 
 # MART's prune thresholds the sparse sweeps compare, on both cameras.
 SPARSE_VARIANTS = "off,zeros,1e-2,slice-3e-2,slice-1e-1,slice-1e-1-reach2,slice-2e-1,slice-2e-1-reach2"
 
+# The paper ring through other sensors (bench/sensor_cases.sh SENSOR/BLACK_LEVEL[/EXTRA]): the
+# simulator's one count per ray; a 100-count pedestal with 2 electrons of read noise (a cooled
+# camera); the simulated camera's `noise=1` (4 electrons per ray, 8 of read noise, 20 counts). Each
+# with the black level taken off and left on; the noisy one also with a threshold at its pedestal
+# plus one sigma of read noise, and with dark_weight_cutoff 0.99.
+SENSOR_CASES = ["clean/between_images", "4,2,100/between_images", "4,2,100/none", "4,8,20/between_images",
+                "4,8,20/none", "4,8,20/none/--noise-threshold+28", "4,8,20/between_images/--dark-cutoff+0.99"]
+
 # name: (set, command from the repository root, plot or None); a plot is drawn by bench/plot_e2e.py from
 # sweep rows (pareto=), or by the script PLOTTERS names from the samples it names
 BENCHES = {
@@ -103,6 +111,7 @@ BENCHES = {
     "e2e-reduced-sparse": ("quick", ["build/bin/bench_e2e", "reduced", "--no-sweep", "--sparse-sweep",
                                      "--sparse-repeats", "5", "--sparse-variants", SPARSE_VARIANTS] + RUN_PAPER_CUBES,
                            None),
+    "e2e-full-sensors": ("paper", ["bench/sensor_cases.sh"] + SENSOR_CASES + ["--"] + RUN_PAPER, None),
     "e2e-full-process": ("paper", ["build/bin/bench_e2e", "full", "--no-sweep", "--steady"] + PROCESS,
                          None),
     "e2e-full-paper-accuracy": ("paper", ["build/bin/bench_e2e", "full", "--no-sweep", "--steady"] + PROCESS_PAPER,
@@ -132,7 +141,7 @@ BENCHES = {
 }
 
 # The build targets of the benchmarks that are scripts (the others: their binary's name).
-SCRIPT_TARGETS = {"oneshot": ["plenopiv"], "oneshot-paper-accuracy": ["plenopiv"]}
+SCRIPT_TARGETS = {"oneshot": ["plenopiv"], "oneshot-paper-accuracy": ["plenopiv"], "e2e-full-sensors": ["bench_e2e"]}
 
 # Benchmarks of the daemon's thread priorities: never run under nice.
 OWN_PRIORITIES = {"lanes-paper"}
@@ -443,6 +452,36 @@ def t_sparse(R):
                  "A: updates skipped / work pruned", "volume L2 vs off", "RMS u / v / w",
                  "off the axis band", "same vectors as off"], rows)
     return out + ["", R("e2e-full-sparse").provenance() + "  ", R("e2e-reduced-sparse").provenance()]
+
+
+def sensor_label(sensor):
+    if sensor == "one_count_per_ray":
+        return "one count per ray (the simulator's)"
+    e, r, o = sensor.split(",")
+    return f"{e} e per ray with shot noise, {r} e read noise, {o}-count pedestal"
+
+
+def t_sensors(R):
+    r = R("e2e-full-sensors")
+    rows, head = [], None
+    for d in r.lines:
+        if d.get("bench") == "e2e" and "sensor" in d:
+            head = d
+        elif head and d.get("variant") == "reconstructed":
+            taken = (f"taken off: {float(head['black_level_a']):g} / {float(head['black_level_b']):g}"
+                     if head["black_level"] == "between_images" else "left on")
+            knobs = []
+            if float(head["noise_threshold"]) > 0:
+                knobs.append(f"noise_threshold {float(head['noise_threshold']):g}")
+            if float(d["dark_cutoff"]) != 0.9:
+                knobs.append(f"dark_weight_cutoff {float(d['dark_cutoff']):g}")
+            rows.append([sensor_label(head["sensor"]), taken, ", ".join(knobs) or "run-paper.yaml's",
+                         f"{uvw(d, 'off_axis_band_rms_')} ({uvw(d)})", d["off_axis_band_gain_w"],
+                         pct(d["updates_skipped_a"]), f"{d['recon_a_s']} + {d['recon_b_s']} + {d['correlate_s']}"])
+            head = None
+    out = table(["sensor", "black level, counts (A / B)", "MART", "RMS u / v / w off the axis band (all)", "gain w",
+                 "A: updates skipped", "s: recon A + B + correlate"], rows)
+    return out + ["", r.provenance()]
 
 
 KNOBS = [  # (variant, knob label, how a row's setting is named)
@@ -852,6 +891,7 @@ TABLES = {
     "e2e-full-variants": t_e2e_variants("e2e-full"),
     "e2e-full-sweep": t_full_sweep,
     "e2e-sparse": t_sparse,
+    "e2e-sensors": t_sensors,
     "e2e-full-depth": t_e2e_depth,
     "e2e-reduced-sweep": t_reduced_sweep,
     "recon-phases": t_recon_phases,
