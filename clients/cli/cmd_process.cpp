@@ -193,6 +193,9 @@ void run_process(const ProcessOptions& o) {
   const auto r = processor->process(a, b, options);
 
   // What the field came from, with the input files' checksums (input_file_entry).
+  char black_levels[512];
+  std::snprintf(black_levels, sizeof black_levels, "%s; frame A %g, frame B %g counts",
+                processor->black_level_note().c_str(), double(r.black_level_a), double(r.black_level_b));
   const auto provenance = [&] {
     std::vector<io::TextAttribute> p{process::input_file_entry("frame_a", o.frame_a),
                                      process::input_file_entry("frame_b", o.frame_b),
@@ -200,7 +203,8 @@ void run_process(const ProcessOptions& o) {
                                      {"settings", io::read_file_bytes(o.config)},
                                      {"settings_file", o.config},
                                      {"dt_s", std::to_string(r.correlation.field.dt_s)},
-                                     {"dt_source", o.dt_s ? "--dt" : "nominal (dt_s of " + o.config + ")"}};
+                                     {"dt_source", o.dt_s ? "--dt" : "nominal (dt_s of " + o.config + ")"},
+                                     {"black_level", black_levels}};
     if (!o.calibration.empty()) {
       p.push_back(process::input_file_entry("calibration", o.calibration));
     } else if (o.nominal) {

@@ -118,6 +118,57 @@ TEST(ProcessCli, RecoversTheUniformDisplacement) {
   }
 }
 
+// A camera's frames carry a pedestal: the same pair rendered through a sensor (4 electrons per
+// ray with their shot noise, 2 of read noise, a 100-count offset, 12 bits) and processed as a user
+// would, with the shipped process.yaml. Each frame's black level is found between the microlens
+// images, said, recorded, and taken off: the field as the one-count-per-ray pair's.
+TEST(ProcessCli, EachFramesBlackLevelIsTakenOffAndRecorded) {
+  const fs::path dir = testing_support::temp_dir("process-cli-pedestal");
+  std::string out;
+  ASSERT_EQ(run_command({binary("plenopiv"),
+                         "simulate",
+                         "pair",
+                         "--camera",
+                         kCamera,
+                         "--seed",
+                         "7",
+                         "--ppm",
+                         "1",
+                         "--box",
+                         "-2.5,2.5,-2.5,2.5,-0.5,4.5",
+                         "--uniform",
+                         "0.25,0.125,0.25",
+                         "--rays",
+                         "2000",
+                         "--electrons-per-ray",
+                         "4",
+                         "--shot-noise",
+                         "--read-noise-e",
+                         "2",
+                         "--dark-offset-dn",
+                         "100",
+                         "--bit-depth",
+                         "12",
+                         "-o",
+                         (dir / "pair").string()},
+                        out, std::chrono::seconds(120)),
+            0)
+      << out;
+  ASSERT_EQ(run_command(process_args(dir, kConfig, dir / "v.h5"), out, std::chrono::seconds(300)), 0) << out;
+  EXPECT_NE(out.find("black level: each frame's median over "), std::string::npos) << out;
+  EXPECT_NE(out.find("black level taken off A 100, B 100 counts"), std::string::npos) << out;
+  const std::string recorded = io::read_provenance(dir / "v.h5", "black_level").value_or("");
+  EXPECT_NE(recorded.find("frame A 100, frame B 100 counts"), std::string::npos) << recorded;
+  const std::array<double, 3> mean_of = mean_displacement(dir / "v.h5");
+  for (int a = 0; a < 3; ++a)
+    std::printf("axis %d: mean %.5f mm, truth %.5f mm, error %.5f mm\n", a, mean_of[std::size_t(a)], kTruth[a],
+                mean_of[std::size_t(a)] - kTruth[a]);
+  // The bounds of RecoversTheUniformDisplacement, on the one-count-per-ray pair.
+  for (int a = 0; a < 2; ++a) EXPECT_NEAR(mean_of[std::size_t(a)], kTruth[a], 0.01) << "axis " << a;
+  EXPECT_GT(mean_of[2], 0.17);
+  EXPECT_LT(mean_of[2], kTruth[2] + 0.03);
+}
+
 // Setup once per geometry: a second `process` of the same camera, calibration, volume and
 // settings reads the weight tables its first call kept, and gives the same field, bit for bit.
 TEST(ProcessCli, ASecondCallReadsTheWeightTablesTheFirstKept) {
