@@ -23,10 +23,11 @@ using SharedPair = std::shared_ptr<const drivers::FramePair>;
 
 // What MART left alone on a pair (both frames), for the status and the log.
 struct ReconstructionWork {
-  std::size_t voxels = 0;                   // in the reconstructed box
-  std::vector<std::size_t> live_a, live_b;  // voxels each iteration updated, frames A and B
-  double updates_skipped = 0;               // share of the box's voxel updates not done
-  double work_pruned = 0;                   // share of the kernels' work pruning saved
+  std::size_t voxels = 0;                       // in the reconstructed box
+  std::vector<std::size_t> live_a, live_b;      // voxels each iteration updated, frames A and B
+  double updates_skipped = 0;                   // share of the box's voxel updates not done
+  double work_pruned = 0;                       // share of the kernels' work pruning saved
+  double black_level_a = 0, black_level_b = 0;  // counts taken off each frame first
 };
 
 // What the processing stage makes of a pair.

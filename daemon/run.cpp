@@ -804,6 +804,8 @@ void Run::fill_status(msg::Status& s) const {
       for (const std::size_t n : w.live_b) m.add_live_voxels_b(n);
       m.set_voxel_updates_skipped(w.updates_skipped);
       m.set_work_pruned(w.work_pruned);
+      m.set_black_level_a(w.black_level_a);
+      m.set_black_level_b(w.black_level_b);
     }
   }
   if (const auto free = io::free_bytes(recorder_->dir())) s.set_bytes_free(*free);

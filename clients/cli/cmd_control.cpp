@@ -94,7 +94,8 @@ void print_status(const msg::Status& s) {
       std::cout << "reconstruction pair " << r.pair_index() << ": " << std::setprecision(1)
                 << 100 * r.voxel_updates_skipped() << " % of the voxel updates skipped (" << 100 * r.work_pruned()
                 << " % of the work pruned); live voxels per iteration of " << r.voxels() << ": A "
-                << live(r.live_voxels_a()) << "; B " << live(r.live_voxels_b()) << "\n";
+                << live(r.live_voxels_a()) << "; B " << live(r.live_voxels_b()) << "; black level taken off A "
+                << r.black_level_a() << ", B " << r.black_level_b() << " counts\n";
     }
     for (const std::string& w : s.warnings()) std::cout << "warning        " << w << "\n";
   }

@@ -255,6 +255,9 @@ ReprocessReport reprocess_run(const ReprocessOptions& o) {
         options.measured_dt_s = p.measured_dt_s;
         options.progress = [&](const std::string&, double f) { progress.pair_progress(slot, f); };
         const process::PairResult r = processor->process(a, b, options);
+        char black_levels[512];  // as `plenopiv process` records it
+        std::snprintf(black_levels, sizeof black_levels, "%s; frame A %g, frame B %g counts",
+                      processor->black_level_note().c_str(), double(r.black_level_a), double(r.black_level_b));
         process::write_vector_field_files(
             output_of(in, p, ".h5"), output_of(in, p, ".vti"), r.correlation.field, r.correlation.flags,
             {{"input_hash", hash},
@@ -262,6 +265,7 @@ ReprocessReport reprocess_run(const ReprocessOptions& o) {
              {"run", o.run.string()},
              {"pair_index", std::to_string(p.pair_index)},
              {"dt_source", p.measured_dt_s ? "measured (laser Q-switch sync)" : "nominal (dt_s)"},
+             {"black_level", black_levels},
              {"settings", in.settings_text},
              {"tier", in.tier}});
         ++processed;

@@ -38,6 +38,9 @@ TEST(Processing, UniformDisplacementOfARayTracedPairComesBack) {
   for (auto& p : b) p[0] += shift_mm;
   sim::RenderOptions options;
   options.rays_per_particle = 100000;
+  // A camera's pedestal (no read noise: the frames are the ray counts plus 30), which the
+  // processing takes off before MART (reconstruction.black_level).
+  options.sensor.dark_offset_dn = 30;
   drivers::FramePair pair;
   pair.a.image = sim::render(camera, lenses, a, options, 1).image;
   pair.b.image = sim::render(camera, lenses, b, options, 2).image;
@@ -99,6 +102,8 @@ TEST(Processing, UniformDisplacementOfARayTracedPairComesBack) {
   std::printf("processing: voxel updates skipped %.4f of %zu voxels x 6 iterations\n", w.updates_skipped, w.voxels);
   EXPECT_GT(w.updates_skipped, 0.5) << "measured " << w.updates_skipped;
   EXPECT_EQ(w.work_pruned, 0.0);  // no exact zeros in ray-traced frames; no threshold
+  EXPECT_EQ(w.black_level_a, 30.0);
+  EXPECT_EQ(w.black_level_b, 30.0);
 
   // A stopping run: the same pair gives up at the first MART iteration's check.
   const CancelFlag stop{true};
