@@ -7,6 +7,7 @@
 #include <algorithm>
 
 #include "core/base/enum_names.hpp"
+#include "core/base/errors.hpp"
 
 namespace plenopiv::process {
 
@@ -29,7 +30,6 @@ bool between_images(const ImageF& white, int x, int y) {
 
 template <typename T>
 float median_at(const std::vector<std::uint32_t>& pixels, const T* frame) {
-  if (pixels.empty()) return 0.f;
   std::vector<float> values(pixels.size());
   for (std::size_t i = 0; i < pixels.size(); ++i) values[i] = float(frame[pixels[i]]);
   const auto middle = values.begin() + std::ptrdiff_t(values.size() / 2);
@@ -52,9 +52,23 @@ BlackLevelMeter::BlackLevelMeter(const ImageF& white) : width_(white.width), hei
         pixels_.push_back(std::uint32_t(std::size_t(y) * std::size_t(white.width) + std::size_t(x)));
 }
 
-float BlackLevelMeter::measure(const ImageF& frame) const { return median_at(pixels_, frame.pixels.data()); }
+void BlackLevelMeter::check_size(int width, int height) const {
+  if (width != width_ || height != height_)
+    throw InputError("black level: the frame is " + std::to_string(width) + " x " + std::to_string(height) +
+                     " px, the white correction " + std::to_string(width_) + " x " + std::to_string(height_));
+}
 
-float BlackLevelMeter::measure(const ImageU16& frame) const { return median_at(pixels_, frame.pixels.data()); }
+float BlackLevelMeter::measure(const ImageF& frame) const {
+  if (pixels_.empty()) return 0.f;
+  check_size(frame.width, frame.height);
+  return median_at(pixels_, frame.pixels.data());
+}
+
+float BlackLevelMeter::measure(const ImageU16& frame) const {
+  if (pixels_.empty()) return 0.f;
+  check_size(frame.width, frame.height);
+  return median_at(pixels_, frame.pixels.data());
+}
 
 std::string BlackLevelMeter::describe() const {
   if (!pixels_.empty())

@@ -45,14 +45,16 @@ class BlackLevelMeter {
   std::size_t samples() const { return pixels_.size(); }
   // The pixels the white leaves between the images, sampled or not (what samples() was drawn from).
   std::size_t candidates() const { return candidates_; }
-  // The frame's median count over the sampled pixels; 0 without samples. `frame` must be the
-  // white's size and finite (PairProcessor validates frames first).
+  // The frame's median count over the sampled pixels; 0 without samples. `frame` must be finite
+  // (PairProcessor validates frames first); one of another size than the white is an InputError.
   float measure(const ImageF& frame) const;
   float measure(const ImageU16& frame) const;
   // One line for the user: how the black level is measured, or why it is not.
   std::string describe() const;
 
  private:
+  void check_size(int width, int height) const;
+
   int width_ = 0, height_ = 0;
   std::size_t candidates_ = 0;
   std::vector<std::uint32_t> pixels_;  // row-major indices, increasing

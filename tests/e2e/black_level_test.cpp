@@ -63,7 +63,10 @@ TEST(BlackLevelMeter, ReadsTheMedianBetweenTheImagesAndNotBesideThem) {
   EXPECT_EQ(meter.measure(frame), 50.f);
   EXPECT_EQ(meter.measure(counts), 50.f);
   EXPECT_NE(meter.describe().find("median over " + std::to_string(meter.samples())), std::string::npos)
-      << meter.describe();
+      << meter.describe();  // A frame of another size is named, not read past its end.
+  EXPECT_NE(
+      error_of([&] { meter.measure(ImageF(40, 80)); }).find("the frame is 40 x 80 px, the white correction 80 x 80"),
+      std::string::npos);
 }
 
 TEST(BlackLevelMeter, WithoutPixelsBetweenTheImagesItMeasuresNothingAndSaysSo) {
