@@ -4,7 +4,8 @@
 // of the knobs on the reduced case with its Pareto front.
 //
 //   bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate]
-//             [--dark-cutoff F] [--noise-threshold C] [--sensor-noise E,R,O] [--black-level B]
+//             [--dark-cutoff F] [--noise-threshold C] [--sensor-noise E,R,O [--tap-offset D]] [--black-level B]
+//             [--seed N]
 //             [--intensity-threshold K] [--final-smoothing K] [--depth-prefilter K]
 //             [--spectral-whitening P [--whitened-peak-sigma X,Y,Z]]
 //             [--passes P] [--early-interpolation sinc|cubic] [--voxel-z-factor D] [--uncertainty-stride N]
@@ -21,6 +22,9 @@
 //              count per ray: E photo-electrons per ray with their shot noise, R electrons of
 //              Gaussian read noise, a pedestal of O counts, one count per electron, 12 bits (the
 //              simulated camera's `noise=1` is 4,8,20). Every row sees those frames.
+//     --tap-offset D: with --sensor-noise, the sensor's right half read out D counts higher (a
+//              second tap's offset; default 0).
+//     --seed N: the particles' seed (default 2015).
 //     --black-level between_images|none: what is taken off each rendered frame before any row
 //              (reconstruction.black_level; default between_images, the frame's median between the
 //              microlens images; printed as black_level_a and _b).
@@ -201,7 +205,9 @@ int main(int argc, char** argv) {
   bool accelerate = false;
   double mu = 0.5, z_centre = 0.0, dark_cutoff = recon::MartSettings{}.dark_weight_cutoff;
   double noise_threshold = recon::MartSettings{}.noise_threshold;
-  std::string sensor_noise;  // --sensor-noise E,R,O; empty: one count per ray
+  std::string sensor_noise;   // --sensor-noise E,R,O; empty: one count per ray
+  double tap_offset = 0;      // --tap-offset D: counts added to the sensor's right half
+  std::uint64_t seed = 2015;  // --seed N: the particles' seed
   std::string black_level_name{process::name_of(process::ProcessSettings{}.black_level)};
   double sensor_blur_mm = recon::MartSettings{}.sensor_blur_sigma_mm;
   double intensity_threshold = piv::CorrelationSettings{}.intensity_threshold_of_mean;
@@ -245,6 +251,10 @@ int main(int argc, char** argv) {
       noise_threshold = std::stod(argv[++i]);
     else if (!std::strcmp(argv[i], "--sensor-noise") && i + 1 < argc)
       sensor_noise = argv[++i];
+    else if (!std::strcmp(argv[i], "--tap-offset") && i + 1 < argc)
+      tap_offset = std::stod(argv[++i]);
+    else if (!std::strcmp(argv[i], "--seed") && i + 1 < argc)
+      seed = std::stoull(argv[++i]);
     else if (!std::strcmp(argv[i], "--black-level") && i + 1 < argc)
       black_level_name = argv[++i];
     else if (!std::strcmp(argv[i], "--sensor-blur-mm") && i + 1 < argc)
@@ -332,6 +342,10 @@ int main(int argc, char** argv) {
         "headline rows only; use them with --no-sweep\n");
     return 2;
   }
+  if (tap_offset != 0 && sensor_noise.empty()) {
+    std::fprintf(stderr, "bench_e2e: --tap-offset needs --sensor-noise (a sensor's counts)\n");
+    return 2;
+  }
   // mid: the paper's camera and depth with the box cut laterally to the ring (120 x 80 voxels):
   // the full case's optics and seeding at a sixth of its cost.
   const bool mid = scale == "mid";
@@ -340,7 +354,8 @@ int main(int argc, char** argv) {
     std::fprintf(
         stderr,
         "usage: bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate] "
-        "[--dark-cutoff F] [--noise-threshold C] [--sensor-noise E,R,O] [--black-level B] [--sensor-blur-mm S] "
+        "[--dark-cutoff F] [--noise-threshold C] [--sensor-noise E,R,O [--tap-offset D]] [--black-level B] [--seed N] "
+        "[--sensor-blur-mm S] "
         "[--intensity-threshold K] [--final-smoothing K] "
         "[--depth-prefilter K] [--spectral-whitening P [--whitened-peak-sigma X,Y,Z]] [--passes P] "
         "[--early-interpolation sinc|cubic] [--voxel-z-factor D] [--voxel-xy-divisor N] [--uncertainty-stride N] "
@@ -418,7 +433,7 @@ int main(int argc, char** argv) {
   // Seeding 0.5 ppm in the volume (a margin of 1 mm so particles move in and out as in a flow).
   const sim::Box box{{-hx - 1, -hy - 1, z_centre - hz - 1}, {hx + 1, hy + 1, z_centre + hz + 1}};
   const std::size_t count = sim::particle_count_from_ppm(camera, box, 0.5);
-  const auto pa = sim::random_particles(box, count, 2015);
+  const auto pa = sim::random_particles(box, count, seed);
   const auto pb = sim::displace(pa, flow);
   const calib::LoadedCalibration nominal = calib::nominal_calibration(camera);
   const optics::MicrolensArray& lenses = nominal.lenses;
@@ -449,10 +464,17 @@ int main(int argc, char** argv) {
     return f;
   };
   ImageF a = render(pa, 1), b = render(pb, 2);
+  if (tap_offset != 0) {
+    // The second tap's counts, clamped to the sensor's 12 bits as the first's are.
+    for (ImageF* f : {&a, &b})
+      for (int y = 0; y < f->height; ++y)
+        for (int x = f->width / 2; x < f->width; ++x)
+          f->at(x, y) = float(std::clamp(double(f->at(x, y)) + tap_offset, 0.0, 4095.0));
+  }
   const double render_s = now_s() - t;
   // Taken off once here, as process::PairProcessor does, so that the rows which call process_pair
   // directly see the same frames (PairProcessor then finds nothing more to take off).
-  float black_level_a = 0, black_level_b = 0;
+  process::BlackLevels black_level_a, black_level_b;
   if (settings.black_level == process::BlackLevel::between_images) {
     const process::BlackLevelMeter meter(nominal.white_correction);
     black_level_a = meter.measure(a);
@@ -569,11 +591,14 @@ int main(int argc, char** argv) {
   const process::PairOperator& op = processor.op();
   const double weights_s = now_s() - t;
   std::printf(
-      "bench=e2e case=%s particles=%zu voxels=%zu voxel_mm=%g voxel_z_mm=%g sensor=%s black_level=%s "
-      "black_level_a=%g black_level_b=%g noise_threshold=%g render_s=%.2f weights_s=%.2f\n",
-      scale.c_str(), count, settings.grid.count(), settings.grid.spacing_mm[0], settings.grid.spacing_mm[2],
-      sensor_noise.empty() ? "one_count_per_ray" : sensor_noise.c_str(), black_level_name.c_str(),
-      double(black_level_a), double(black_level_b), noise_threshold, render_s, weights_s);
+      "bench=e2e case=%s particles=%zu seed=%llu voxels=%zu voxel_mm=%g voxel_z_mm=%g sensor=%s tap_offset=%g "
+      "black_level=%s black_level_a=%g black_level_b=%g black_level_a_range=%g..%g black_level_tiles=%dx%d "
+      "noise_threshold=%g render_s=%.2f weights_s=%.2f\n",
+      scale.c_str(), count, static_cast<unsigned long long>(seed), settings.grid.count(), settings.grid.spacing_mm[0],
+      settings.grid.spacing_mm[2], sensor_noise.empty() ? "one_count_per_ray" : sensor_noise.c_str(), tap_offset,
+      black_level_name.c_str(), double(black_level_a.median()), double(black_level_b.median()),
+      double(black_level_a.lowest()), double(black_level_a.highest()), black_level_a.tiles_x, black_level_a.tiles_y,
+      noise_threshold, render_s, weights_s);
 
   // The paper's settings: reconstruction and correlation, stage by stage.
   recon::MartWorkspace workspace;  // kept for --steady and the sweeps
@@ -593,6 +618,11 @@ int main(int argc, char** argv) {
       base.skipped_a.fraction_updates_skipped(), base.skipped_b.fraction_updates_skipped(), e.rms[0], e.rms[1],
       e.rms[2], e.total, e.valid_fraction, e.off_band[0], e.off_band[1], e.off_band[2], e.off_band_gain[0],
       e.off_band_gain[1], e.off_band_gain[2], bench::peak_rss_gb());
+  // Each iteration's live voxels (MART's active set after pruning) as a share of the box, frame A.
+  std::printf("bench=e2e case=%s variant=reconstructed live_share_a=", scale.c_str());
+  for (std::size_t i = 0; i < base.iterations_a.size(); ++i)
+    std::printf("%s%.3f", i ? "," : "", double(base.iterations_a[i].live_voxels) / double(base.iterations_a[i].voxels));
+  std::printf("\n");
   // The per-vector uncertainty off the axis band: RMS sigma over RMS error, and the fraction of true
   // errors within +-1 and +-2 sigma, per component.
   if (base.correlation.field.has_sigma()) {

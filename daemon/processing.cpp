@@ -26,8 +26,8 @@ ReconstructionWork reconstruction_work(const process::PairResult& r) {
   w.updates_skipped = all > 0 ? 1.0 - double(r.skipped_a.voxel_updates + r.skipped_b.voxel_updates) / all : 1.0;
   const double unpruned = r.skipped_a.work_unpruned + r.skipped_b.work_unpruned;
   w.work_pruned = unpruned > 0 ? 1.0 - (r.skipped_a.work_done + r.skipped_b.work_done) / unpruned : 0.0;
-  w.black_level_a = r.black_level_a;
-  w.black_level_b = r.black_level_b;
+  w.black_level_a = r.black_level_a.median();
+  w.black_level_b = r.black_level_b.median();
   return w;
 }
 
@@ -94,9 +94,9 @@ ProcessFactory plenoptic_processing(const optics::CameraModel& camera, const std
       out.flags = std::move(r.correlation.flags);
       out.work = reconstruction_work(r);
       spdlog::debug(
-          "pair {}: black level taken off A {:g}, B {:g} counts; MART skipped {:.1f} % of the voxel updates ({:.1f} % "
+          "pair {}: black level taken off A {}, B {} counts; MART skipped {:.1f} % of the voxel updates ({:.1f} % "
           "of the work pruned); live voxels per iteration A {}, B {}",
-          pair.pair_index, r.black_level_a, r.black_level_b, 100 * out.work->updates_skipped,
+          pair.pair_index, r.black_level_a.text(), r.black_level_b.text(), 100 * out.work->updates_skipped,
           100 * out.work->work_pruned, fmt::join(out.work->live_a, " "), fmt::join(out.work->live_b, " "));
       if (keep_volumes) {
         out.volume_a = std::move(r.volume_a);

@@ -88,9 +88,11 @@ SPARSE_VARIANTS = "off,zeros,1e-2,slice-3e-2,slice-1e-1,slice-1e-1-reach2,slice-
 # simulator's one count per ray; a 100-count pedestal with 2 electrons of read noise (a cooled
 # camera); the simulated camera's `noise=1` (4 electrons per ray, 8 of read noise, 20 counts). Each
 # with the black level taken off and left on; the noisy one also with a threshold at its pedestal
-# plus one sigma of read noise, and with dark_weight_cutoff 0.99.
+# plus one sigma of read noise, and with dark_weight_cutoff 0.99. The same sensor exposed four
+# times longer, and with its right half read out 30 counts higher (a second tap's offset).
 SENSOR_CASES = ["clean/between_images", "4,2,100/between_images", "4,2,100/none", "4,8,20/between_images",
-                "4,8,20/none", "4,8,20/none/--noise-threshold+28", "4,8,20/between_images/--dark-cutoff+0.99"]
+                "4,8,20/none", "4,8,20/none/--noise-threshold+28", "4,8,20/between_images/--dark-cutoff+0.99",
+                "16,8,20/between_images", "16,8,20/between_images/--tap-offset+30"]
 
 # name: (set, command from the repository root, plot or None); a plot is drawn by bench/plot_e2e.py from
 # sweep rows (pareto=), or by the script PLOTTERS names from the samples it names
@@ -470,12 +472,18 @@ def t_sensors(R):
         elif head and d.get("variant") == "reconstructed":
             taken = (f"taken off: {float(head['black_level_a']):g} / {float(head['black_level_b']):g}"
                      if head["black_level"] == "between_images" else "left on")
+            lo, _, hi = head.get("black_level_a_range", "0..0").partition("..")
+            if float(lo) != float(hi):
+                taken += f" (A's {head['black_level_tiles']} tiles {float(lo):g} to {float(hi):g})"
+            sensor = sensor_label(head["sensor"])
+            if float(head.get("tap_offset", 0)) != 0:
+                sensor += f"; right half {float(head['tap_offset']):g} counts higher (a second tap)"
             knobs = []
             if float(head["noise_threshold"]) > 0:
                 knobs.append(f"noise_threshold {float(head['noise_threshold']):g}")
             if float(d["dark_cutoff"]) != 0.9:
                 knobs.append(f"dark_weight_cutoff {float(d['dark_cutoff']):g}")
-            rows.append([sensor_label(head["sensor"]), taken, ", ".join(knobs) or "run-paper.yaml's",
+            rows.append([sensor, taken, ", ".join(knobs) or "run-paper.yaml's",
                          f"{uvw(d, 'off_axis_band_rms_')} ({uvw(d)})", d["off_axis_band_gain_w"],
                          pct(d["updates_skipped_a"]), f"{d['recon_a_s']} + {d['recon_b_s']} + {d['correlate_s']}"])
             head = None

@@ -194,8 +194,8 @@ void run_process(const ProcessOptions& o) {
 
   // What the field came from, with the input files' checksums (input_file_entry).
   char black_levels[512];
-  std::snprintf(black_levels, sizeof black_levels, "%s; frame A %g, frame B %g counts",
-                processor->black_level_note().c_str(), double(r.black_level_a), double(r.black_level_b));
+  std::snprintf(black_levels, sizeof black_levels, "%s; frame A %s, frame B %s counts",
+                processor->black_level_note().c_str(), r.black_level_a.text().c_str(), r.black_level_b.text().c_str());
   const auto provenance = [&] {
     std::vector<io::TextAttribute> p{process::input_file_entry("frame_a", o.frame_a),
                                      process::input_file_entry("frame_b", o.frame_b),
@@ -245,9 +245,9 @@ void run_process(const ProcessOptions& o) {
   for (auto v : r.correlation.field.valid) valid += v;
   std::fprintf(
       stderr,
-      "black level taken off A %g, B %g counts; reconstruct A %.2f s (voxel updates skipped %.1f %%), B %.2f s "
+      "black level taken off A %s, B %s counts; reconstruct A %.2f s (voxel updates skipped %.1f %%), B %.2f s "
       "(skipped %.1f %%), correlate %.2f s; %zu vectors, %zu valid\n",
-      double(r.black_level_a), double(r.black_level_b), r.times.reconstruct_a_s,
+      r.black_level_a.text().c_str(), r.black_level_b.text().c_str(), r.times.reconstruct_a_s,
       100 * r.skipped_a.fraction_updates_skipped(), r.times.reconstruct_b_s,
       100 * r.skipped_b.fraction_updates_skipped(), r.times.correlate_s, r.correlation.field.grid.count(), valid);
   say_uncertainty(r.correlation.field);

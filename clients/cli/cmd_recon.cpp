@@ -109,9 +109,9 @@ void run(const ReconOptions& o) {
   recon::validate_image(image, op, o.image.c_str());
   if (black_level == process::BlackLevel::between_images) {
     const process::BlackLevelMeter meter(white);
-    const float level = meter.measure(image);
-    process::subtract_black_level(image, level);
-    std::fprintf(stderr, "%s: %g counts\n", meter.describe().c_str(), double(level));
+    const process::BlackLevels levels = meter.measure(image);
+    process::subtract_black_level(image, levels);
+    std::fprintf(stderr, "%s: %s counts\n", meter.describe().c_str(), levels.text().c_str());
   }
   ImageF scratch;
   const ImageF& prepared = pair_op.prepare(image, scratch);

@@ -256,8 +256,9 @@ ReprocessReport reprocess_run(const ReprocessOptions& o) {
         options.progress = [&](const std::string&, double f) { progress.pair_progress(slot, f); };
         const process::PairResult r = processor->process(a, b, options);
         char black_levels[512];  // as `plenopiv process` records it
-        std::snprintf(black_levels, sizeof black_levels, "%s; frame A %g, frame B %g counts",
-                      processor->black_level_note().c_str(), double(r.black_level_a), double(r.black_level_b));
+        std::snprintf(black_levels, sizeof black_levels, "%s; frame A %s, frame B %s counts",
+                      processor->black_level_note().c_str(), r.black_level_a.text().c_str(),
+                      r.black_level_b.text().c_str());
         process::write_vector_field_files(
             output_of(in, p, ".h5"), output_of(in, p, ".vti"), r.correlation.field, r.correlation.flags,
             {{"input_hash", hash},

@@ -227,12 +227,12 @@ PairResult PairProcessor::process(const ImageF& frame_a, const ImageF& frame_b, 
 }
 
 template <typename Frame>
-const ImageF& PairProcessor::prepared(const Frame& frame, float level, ImageF& scratch) const {
+const ImageF& PairProcessor::prepared(const Frame& frame, const BlackLevels& levels, ImageF& scratch) const {
   if constexpr (std::is_same_v<Frame, ImageF>) {
-    if (settings_.pixel_binning == 1 && level == 0.f) return frame;
+    if (settings_.pixel_binning == 1 && levels.lowest() == 0.f && levels.highest() == 0.f) return frame;
   }
   scratch = bin_pixels(frame, settings_.pixel_binning);
-  subtract_black_level(scratch, level);
+  subtract_black_level(scratch, levels);
   return scratch;
 }
 
@@ -242,7 +242,7 @@ PairResult PairProcessor::process_uncorrected(const ImageU16& frame_a, const Ima
   // straight from their counts (no sensor-sized float copy).
   recon::validate_size(frame_a.width, frame_a.height, raw_width_, raw_height_, "frame A");
   recon::validate_size(frame_b.width, frame_b.height, raw_width_, raw_height_, "frame B");
-  const std::array<float, 2> levels{black_level_.measure(frame_a), black_level_.measure(frame_b)};
+  const std::array<BlackLevels, 2> levels{black_level_.measure(frame_a), black_level_.measure(frame_b)};
   ImageF scratch_a, scratch_b;
   return run(prepared(frame_a, levels[0], scratch_a), prepared(frame_b, levels[1], scratch_b), options, levels);
 }
@@ -251,7 +251,7 @@ PairResult PairProcessor::process_uncorrected(const ImageF& frame_a, const Image
                                               const PairOptions& options) const {
   recon::validate_image(frame_a, raw_width_, raw_height_, "frame A");
   recon::validate_image(frame_b, raw_width_, raw_height_, "frame B");
-  const std::array<float, 2> levels{black_level_.measure(frame_a), black_level_.measure(frame_b)};
+  const std::array<BlackLevels, 2> levels{black_level_.measure(frame_a), black_level_.measure(frame_b)};
   ImageF scratch_a, scratch_b;
   return run(prepared(frame_a, levels[0], scratch_a), prepared(frame_b, levels[1], scratch_b), options, levels);
 }
@@ -266,14 +266,14 @@ std::size_t PairProcessor::reserve_workspaces(int pairs) const {
 }
 
 PairResult PairProcessor::run(const ImageF& frame_a, const ImageF& frame_b, const PairOptions& options,
-                              std::array<float, 2> black_levels) const {
+                              std::array<BlackLevels, 2> black_levels) const {
   ProcessSettings s = settings_;
   s.correlation.dt_s = pair_dt_s(settings_, options.measured_dt_s);
   const WorkspacePool::Lease workspace = workspaces_.take();
   PairResult result =
       process_pair(*op_, frame_a, frame_b, s, options.progress, &(*workspace).mart, &(*workspace).correlation);
-  result.black_level_a = black_levels[0];
-  result.black_level_b = black_levels[1];
+  result.black_level_a = std::move(black_levels[0]);
+  result.black_level_b = std::move(black_levels[1]);
   return result;
 }
 

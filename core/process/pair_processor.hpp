@@ -162,11 +162,11 @@ class PairProcessor {
   // process_pair on frames already in the operator's pixels, in a workspace from the pool; the
   // black levels taken off them are recorded in the result.
   PairResult run(const ImageF& frame_a, const ImageF& frame_b, const PairOptions& options,
-                 std::array<float, 2> black_levels) const;
+                 std::array<BlackLevels, 2> black_levels) const;
   // A raw frame (validated) in the operator's pixels with its black level off: binned, the level
   // subtracted; `frame` itself when neither changes it (no copy).
   template <typename Frame>
-  const ImageF& prepared(const Frame& frame, float level, ImageF& scratch) const;
+  const ImageF& prepared(const Frame& frame, const BlackLevels& levels, ImageF& scratch) const;
   PairResult process_uncorrected(const ImageF& frame_a, const ImageF& frame_b, const PairOptions& options) const;
   // w through depth_response_, when there is one; sigma_method says what sigma holds either way.
   PairResult corrected(PairResult result) const;

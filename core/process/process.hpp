@@ -133,8 +133,9 @@ struct PairResult {
   piv::CorrelationResult correlation;
   StageTimes times;
   std::string lattice_note;  // PairOperator::note: why and how the frames were resampled; empty if not
-  // Counts PairProcessor took off each raw frame (ProcessSettings::black_level); 0 where none.
-  float black_level_a = 0, black_level_b = 0;
+  // Counts PairProcessor took off each raw frame, per tile of the sensor
+  // (ProcessSettings::black_level); unmeasured where none.
+  BlackLevels black_level_a, black_level_b;
 };
 
 // Progress: stage name ("reconstruct A", "reconstruct B", "correlate") and the fraction of the

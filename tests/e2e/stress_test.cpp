@@ -151,7 +151,7 @@ Case make_case(std::uint64_t index) {
   // Each frame's black level taken off as PairProcessor does (the frames carry up to 2 counts of
   // pedestal; a zero or saturated frame is taken off whole), or left on.
   c.settings.black_level = pick(2) ? BlackLevel::between_images : BlackLevel::none;
-  float levels[2] = {0, 0};
+  BlackLevels levels[2];
   if (c.settings.black_level == BlackLevel::between_images) {
     const BlackLevelMeter meter(fixture().white);
     levels[0] = meter.measure(c.a);
@@ -176,8 +176,8 @@ Case make_case(std::uint64_t index) {
       std::to_string(sigma[0]) + " x " + std::to_string(sigma[1]) + " x " + std::to_string(sigma[2]) +
       " voxels, uncertainty every " + std::to_string(c.settings.correlation.uncertainty_stride) + " nodes, " +
       (near ? "final peaks at the predictor first" : "final peaks over all shifts") + ", black level " +
-      std::string(name_of(c.settings.black_level)) + " (" + std::to_string(levels[0]) + ", " +
-      std::to_string(levels[1]) + " counts), depth " + std::to_string(c.depth);
+      std::string(name_of(c.settings.black_level)) + " (" + levels[0].text() + ", " + levels[1].text() +
+      " counts), depth " + std::to_string(c.depth);
   return c;
 }
 
