@@ -30,20 +30,28 @@ bool between_images(const ImageF& white, int x, int y) {
   return true;
 }
 
+// The (upper) median of `values`, which it reorders; not empty.
+float median_of(std::vector<float>& values) {
+  const auto middle = values.begin() + std::ptrdiff_t(values.size() / 2);
+  std::nth_element(values.begin(), middle, values.end());
+  return *middle;
+}
+
 // The median of the counts at `pixels`.
 template <typename T>
 float median_at(const std::uint32_t* pixels, std::size_t count, const T* frame) {
   std::vector<float> values(count);
   for (std::size_t i = 0; i < count; ++i) values[i] = float(frame[pixels[i]]);
-  const auto middle = values.begin() + std::ptrdiff_t(count / 2);
-  std::nth_element(values.begin(), middle, values.end());
-  return *middle;
+  return median_of(values);
 }
 
-// The tile of raw pixel (x, y) on a width x height sensor cut into tiles_x x tiles_y.
+// Which of `tiles` equal parts of [0, extent) raw pixel `position` lies in.
+int tile_along(std::int64_t position, int extent, int tiles) { return int(position * tiles / extent); }
+
+// The tile of raw pixel (x, y) on a width x height sensor cut into tiles_x x tiles_y, row-major.
 std::size_t tile_of(int x, int y, int width, int height, int tiles_x, int tiles_y) {
-  return std::size_t(std::int64_t(y) * tiles_y / height) * std::size_t(tiles_x) +
-         std::size_t(std::int64_t(x) * tiles_x / width);
+  return std::size_t(tile_along(y, height, tiles_y)) * std::size_t(tiles_x) +
+         std::size_t(tile_along(x, width, tiles_x));
 }
 
 // The even tile count closest to `extent` / BlackLevelMeter::kTilePx, at least 2.
@@ -65,9 +73,7 @@ BlackLevels BlackLevels::uniform(int width, int height, float level) {
 float BlackLevels::median() const {
   if (level.empty()) return 0.f;
   std::vector<float> v = level;
-  const auto middle = v.begin() + std::ptrdiff_t(v.size() / 2);
-  std::nth_element(v.begin(), middle, v.end());
-  return *middle;
+  return median_of(v);
 }
 
 float BlackLevels::lowest() const { return level.empty() ? 0.f : *std::min_element(level.begin(), level.end()); }
@@ -185,7 +191,8 @@ void subtract_black_level(ImageF& frame, const BlackLevels& levels) {
   tbb::parallel_for(tbb::blocked_range<int>(0, frame.height, 16), [&](const tbb::blocked_range<int>& r) {
     for (int y = r.begin(); y != r.end(); ++y) {
       const float* row_levels =
-          levels.level.data() + std::size_t(std::int64_t(y) * k * levels.tiles_y / levels.height) * levels.tiles_x;
+          levels.level.data() +
+          std::size_t(tile_along(std::int64_t(y) * k, levels.height, levels.tiles_y)) * std::size_t(levels.tiles_x);
       float* row = p + std::size_t(y) * std::size_t(frame.width);
       for (int x = 0; x < frame.width; ++x) row[x] = std::max(0.f, row[x] - row_levels[tile_x[std::size_t(x)]]);
     }

@@ -47,8 +47,8 @@ struct ProcessSettings {
   // microlens, of the simulated pairs the response is measured on when the settings are first used
   // (PairProcessor; kept in the weights' disk cache after), [0, 5]; default 0: no correction.
   // About the flow's own seeding: the response depends on it only weakly (docs/accuracy.md, "Depth
-  // response"). Offline only: plenopivd's run configs refuse it (minutes of measuring while a run
-  // is Armed).
+  // response"). In a run, plenopivd measures the live lane's while Armed and the quality lane's
+  // with its first pair (minutes at paper scale, then kept: docs/daemon.md).
   double depth_response_ppm = 0.0;
   // What PairProcessor takes off each raw frame first (black_level.hpp); default each frame's own
   // level between the microlens images.
