@@ -294,7 +294,7 @@ TEST(BlackLevel, ATwoTapSensorsOffsetsAreTakenOffHalfByHalf) {
   const double e_tiles = error(tiles, "two taps, each tile's level taken off");
   const double e_one = error(one, "two taps, one level for the sensor taken off");
   EXPECT_LT(e_tiles, e_clean + 0.02);  // measured 0.004 mm more, as for one offset
-  EXPECT_GT(e_one, e_tiles + 0.02);  // measured 0.034 mm more (w short)
+  EXPECT_GT(e_one, e_tiles + 0.02);    // measured 0.034 mm more (w short)
 }
 
 }  // namespace
