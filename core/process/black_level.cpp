@@ -183,10 +183,13 @@ void subtract_black_level(ImageF& frame, const BlackLevels& levels) {
                      " px, neither the sensor's " + std::to_string(levels.width) + " x " +
                      std::to_string(levels.height) + " nor its pixels binned");
   if (levels.lowest() == 0.f && levels.highest() == 0.f) return;
-  // Each binned column's tile column (of its block's first raw pixel).
-  std::vector<int> tile_x(std::size_t(frame.width));
-  for (int x = 0; x < frame.width; ++x)
-    tile_x[std::size_t(x)] = int(std::int64_t(x) * k * levels.tiles_x / levels.width);
+  // Tile column i holds the binned columns [first[i], first[i + 1]): those whose block's first raw
+  // pixel lies in it.
+  std::vector<int> first(std::size_t(levels.tiles_x) + 1, frame.width);
+  for (int x = frame.width - 1; x >= 0; --x)
+    first[std::size_t(tile_along(std::int64_t(x) * k, levels.width, levels.tiles_x))] = x;
+  for (int i = levels.tiles_x - 1; i >= 0; --i)  // a tile narrower than a block holds none
+    first[std::size_t(i)] = std::min(first[std::size_t(i)], first[std::size_t(i) + 1]);
   float* p = frame.pixels.data();
   tbb::parallel_for(tbb::blocked_range<int>(0, frame.height, 16), [&](const tbb::blocked_range<int>& r) {
     for (int y = r.begin(); y != r.end(); ++y) {
@@ -194,7 +197,10 @@ void subtract_black_level(ImageF& frame, const BlackLevels& levels) {
           levels.level.data() +
           std::size_t(tile_along(std::int64_t(y) * k, levels.height, levels.tiles_y)) * std::size_t(levels.tiles_x);
       float* row = p + std::size_t(y) * std::size_t(frame.width);
-      for (int x = 0; x < frame.width; ++x) row[x] = std::max(0.f, row[x] - row_levels[tile_x[std::size_t(x)]]);
+      for (int i = 0; i < levels.tiles_x; ++i) {
+        const float level = row_levels[i];
+        for (int x = first[std::size_t(i)]; x < first[std::size_t(i) + 1]; ++x) row[x] = std::max(0.f, row[x] - level);
+      }
     }
   });
 }
