@@ -159,29 +159,62 @@ TEST(BlackLevel, TheSettingIsBetweenImagesByDefaultAndAnUnknownNameIsRefused) {
   EXPECT_NE(settings_key(parse("")), settings_key(parse(", black_level: none")));
 }
 
-// The small camera and a uniform shift of (2, 1, 2) voxels, rendered through a sensor with a
-// pedestal (the simulated camera's response with a 100-count offset) and through the simulator's
-// one count per ray: the pedestal taken off, the pair measures the shift as the clean one does;
-// left on, MART takes it for light in every voxel.
-TEST(BlackLevel, APedestalIsTakenOffAndThePairMeasuresTheShift) {
-  const optics::CameraModel camera = testing_support::small_camera();
-  const calib::LoadedCalibration calibration = calib::nominal_calibration(camera);
-  const sim::Point3 shift{0.25, 0.125, 0.25};
+// A uniform shift of (2, 1, 2) voxels.
+const sim::Point3 kShift{0.25, 0.125, 0.25};
+
+// The small camera and 1600 particles moved by kShift, rendered with the simulator's one count
+// per ray and through a sensor with a pedestal (the simulated camera's response with a 100-count
+// offset, 2 e of read noise).
+struct SmallPair {
+  optics::CameraModel camera = testing_support::small_camera();
+  calib::LoadedCalibration calibration = calib::nominal_calibration(camera);
+  sim::RenderResult clean_a, clean_b;
+  ImageU16 sensor_a, sensor_b;
+};
+
+SmallPair small_pair() {
+  SmallPair pair;
   const std::vector<sim::Point3> a = sim::random_particles({{-2.5, -2.5, -0.5}, {2.5, 2.5, 4.5}}, 1600, 21);
   std::vector<sim::Point3> b = a;
   for (auto& p : b)
-    for (std::size_t k = 0; k < 3; ++k) p[k] += shift[k];
+    for (std::size_t k = 0; k < 3; ++k) p[k] += kShift[k];
   sim::RenderOptions ro;
   ro.rays_per_particle = 2000;
-  const sim::RenderResult clean_a = sim::render(camera, calibration.lenses, a, ro, 3);
-  const sim::RenderResult clean_b = sim::render(camera, calibration.lenses, b, ro, 4);
+  pair.clean_a = sim::render(pair.camera, pair.calibration.lenses, a, ro, 3);
+  pair.clean_b = sim::render(pair.camera, pair.calibration.lenses, b, ro, 4);
   ro.sensor.electrons_per_ray = 4;
   ro.sensor.shot_noise = true;
   ro.sensor.read_noise_electrons = 2;
   ro.sensor.dark_offset_dn = 100;
   ro.sensor.bit_depth = 12;
-  const ImageU16 noisy_a = sim::render(camera, calibration.lenses, a, ro, 3).image;
-  const ImageU16 noisy_b = sim::render(camera, calibration.lenses, b, ro, 4).image;
+  pair.sensor_a = sim::render(pair.camera, pair.calibration.lenses, a, ro, 3).image;
+  pair.sensor_b = sim::render(pair.camera, pair.calibration.lenses, b, ro, 4).image;
+  return pair;
+}
+
+// The largest component error of the pair's mean displacement against kShift, mm; printed with
+// `name`.
+double shift_error(const PairResult& r, const char* name) {
+  const testing_support::MeanDisplacement m = testing_support::mean_displacement(r.correlation.field);
+  double e = 0;
+  for (std::size_t k = 0; k < 3; ++k) e = std::max(e, std::abs(m.mm[k] - kShift[k]));
+  std::cout << "measured: " << name << ": mean displacement " << m.mm[0] << " " << m.mm[1] << " " << m.mm[2]
+            << " mm (truth 0.25 0.125 0.25), " << m.valid << " of " << r.correlation.field.grid.count()
+            << " valid, largest component error " << e << " mm; voxel updates skipped "
+            << 100 * r.skipped_a.fraction_updates_skipped() << " %\n";
+  return e;
+}
+
+// The pair with its sensor's pedestal taken off measures the shift as the clean one does; left
+// on, MART takes the pedestal for light in every voxel.
+TEST(BlackLevel, APedestalIsTakenOffAndThePairMeasuresTheShift) {
+  const SmallPair pair = small_pair();
+  const optics::CameraModel& camera = pair.camera;
+  const calib::LoadedCalibration& calibration = pair.calibration;
+  const sim::RenderResult& clean_a = pair.clean_a;
+  const sim::RenderResult& clean_b = pair.clean_b;
+  const ImageU16& noisy_a = pair.sensor_a;
+  const ImageU16& noisy_b = pair.sensor_b;
 
   const PairProcessor taken_off(camera, calibration, parse(""));
   const PairProcessor left_on(camera, calibration, parse(", black_level: none"));
@@ -203,19 +236,9 @@ TEST(BlackLevel, APedestalIsTakenOffAndThePairMeasuresTheShift) {
   EXPECT_NEAR(off.black_level_b.median(), 100.f, 1.f);
   EXPECT_FALSE(on.black_level_a.measured());
 
-  const auto error = [&](const PairResult& r, const char* name) {
-    const testing_support::MeanDisplacement m = testing_support::mean_displacement(r.correlation.field);
-    double e = 0;
-    for (std::size_t k = 0; k < 3; ++k) e = std::max(e, std::abs(m.mm[k] - shift[k]));
-    std::cout << "measured: " << name << ": mean displacement " << m.mm[0] << " " << m.mm[1] << " " << m.mm[2]
-              << " mm (truth 0.25 0.125 0.25), " << m.valid << " of " << r.correlation.field.grid.count()
-              << " valid, largest component error " << e << " mm; voxel updates skipped "
-              << 100 * r.skipped_a.fraction_updates_skipped() << " %\n";
-    return e;
-  };
-  const double e_clean = error(clean, "one count per ray");
-  const double e_off = error(off, "pedestal taken off");
-  const double e_on = error(on, "pedestal left on");
+  const double e_clean = shift_error(clean, "one count per ray");
+  const double e_off = shift_error(off, "pedestal taken off");
+  const double e_on = shift_error(on, "pedestal left on");
   EXPECT_LT(e_off, e_clean + 0.02);  // measured 0.004 mm more
   EXPECT_GT(e_on, e_off + 0.1);      // measured 0.18 mm more
   EXPECT_GT(off.skipped_a.fraction_updates_skipped(), on.skipped_a.fraction_updates_skipped() + 0.2);
@@ -226,8 +249,9 @@ TEST(BlackLevel, APedestalIsTakenOffAndThePairMeasuresTheShift) {
   const PairResult b2 = binned.process(noisy_a, noisy_b);
   EXPECT_EQ(b2.black_level_a.level, off.black_level_a.level);
   EXPECT_EQ(b2.black_level_b.level, off.black_level_b.level);
-  const double e_binned = error(b2, "pedestal taken off, pixels binned 2 x 2");
-  const double e_binned_clean = error(binned.process(clean_a.rays, clean_b.rays), "one count per ray, binned 2 x 2");
+  const double e_binned = shift_error(b2, "pedestal taken off, pixels binned 2 x 2");
+  const double e_binned_clean =
+      shift_error(binned.process(clean_a.rays, clean_b.rays), "one count per ray, binned 2 x 2");
   EXPECT_LT(e_binned, e_binned_clean + 0.04);  // measured 0.016 mm more (w); left on: 0.25 mm
 }
 
@@ -236,30 +260,15 @@ TEST(BlackLevel, APedestalIsTakenOffAndThePairMeasuresTheShift) {
 // one median over the whole sensor leaves 40 counts of pedestal on one half or clamps 40 counts
 // of light off the other.
 TEST(BlackLevel, ATwoTapSensorsOffsetsAreTakenOffHalfByHalf) {
-  const optics::CameraModel camera = testing_support::small_camera();
-  const calib::LoadedCalibration calibration = calib::nominal_calibration(camera);
-  const sim::Point3 shift{0.25, 0.125, 0.25};
-  const std::vector<sim::Point3> a = sim::random_particles({{-2.5, -2.5, -0.5}, {2.5, 2.5, 4.5}}, 1600, 21);
-  std::vector<sim::Point3> b = a;
-  for (auto& p : b)
-    for (std::size_t k = 0; k < 3; ++k) p[k] += shift[k];
-  sim::RenderOptions ro;
-  ro.rays_per_particle = 2000;
-  const sim::RenderResult clean_a = sim::render(camera, calibration.lenses, a, ro, 3);
-  const sim::RenderResult clean_b = sim::render(camera, calibration.lenses, b, ro, 4);
-  ro.sensor.electrons_per_ray = 4;
-  ro.sensor.shot_noise = true;
-  ro.sensor.read_noise_electrons = 2;
-  ro.sensor.dark_offset_dn = 100;
-  ro.sensor.bit_depth = 12;
-  ImageU16 taps_a = sim::render(camera, calibration.lenses, a, ro, 3).image;
-  ImageU16 taps_b = sim::render(camera, calibration.lenses, b, ro, 4).image;
+  const SmallPair pair = small_pair();
+  const calib::LoadedCalibration& calibration = pair.calibration;
+  ImageU16 taps_a = pair.sensor_a, taps_b = pair.sensor_b;
   for (ImageU16* f : {&taps_a, &taps_b})
     for (int y = 0; y < f->height; ++y)
       for (int x = f->width / 2; x < f->width; ++x) f->at(x, y) = std::uint16_t(f->at(x, y) + 40);
 
-  const PairProcessor taken_off(camera, calibration, parse(""));
-  const PairResult clean = taken_off.process(clean_a.rays, clean_b.rays);
+  const PairProcessor taken_off(pair.camera, calibration, parse(""));
+  const PairResult clean = taken_off.process(pair.clean_a.rays, pair.clean_b.rays);
   const PairResult tiles = taken_off.process(taps_a, taps_b);
   EXPECT_EQ(tiles.black_level_a.tiles_x % 2, 0);
   EXPECT_NEAR(tiles.black_level_a.lowest(), 100.f, 1.f);
@@ -278,21 +287,12 @@ TEST(BlackLevel, ATwoTapSensorsOffsetsAreTakenOffHalfByHalf) {
     subtract_black_level(f, BlackLevels::uniform(f.width, f.height, between[between.size() / 2]));
     return f;
   };
-  const PairProcessor as_recorded(camera, calibration, parse(", black_level: none"));
+  const PairProcessor as_recorded(pair.camera, calibration, parse(", black_level: none"));
   const PairResult one = as_recorded.process(one_level(taps_a), one_level(taps_b));
 
-  const auto error = [&](const PairResult& r, const char* name) {
-    const testing_support::MeanDisplacement m = testing_support::mean_displacement(r.correlation.field);
-    double e = 0;
-    for (std::size_t k = 0; k < 3; ++k) e = std::max(e, std::abs(m.mm[k] - shift[k]));
-    std::cout << "measured: " << name << ": mean displacement " << m.mm[0] << " " << m.mm[1] << " " << m.mm[2]
-              << " mm (truth 0.25 0.125 0.25), " << m.valid << " of " << r.correlation.field.grid.count()
-              << " valid, largest component error " << e << " mm\n";
-    return e;
-  };
-  const double e_clean = error(clean, "one count per ray");
-  const double e_tiles = error(tiles, "two taps, each tile's level taken off");
-  const double e_one = error(one, "two taps, one level for the sensor taken off");
+  const double e_clean = shift_error(clean, "one count per ray");
+  const double e_tiles = shift_error(tiles, "two taps, each tile's level taken off");
+  const double e_one = shift_error(one, "two taps, one level for the sensor taken off");
   EXPECT_LT(e_tiles, e_clean + 0.02);  // measured 0.004 mm more, as for one offset
   EXPECT_GT(e_one, e_tiles + 0.02);    // measured 0.034 mm more (w short)
 }
