@@ -16,10 +16,11 @@ namespace plenopiv::process {
 // What is taken off each raw frame before the reconstruction (config key
 // `reconstruction.black_level`):
 //   between_images (default): each frame's median count over the pixels between the microlens
-//     images, tile by tile over the sensor (BlackLevelMeter). No ray through the main lens's aperture reaches them, so
-//     what they record is the sensor's pedestal and dark signal and light scattered in the camera or the flow: what
-//     MART would otherwise take for particle light in every voxel. A frame whose pixels there read 0 (a simulation
-//     counting one per ray) is reconstructed as recorded.
+//     images, tile by tile over the sensor (BlackLevelMeter). No ray through the main lens's
+//     aperture reaches them, so what they record is the sensor's pedestal and dark signal and light
+//     scattered in the camera: what MART would otherwise take for particle light in every voxel. A
+//     frame whose pixels there read 0 (a simulation counting one per ray) is reconstructed as
+//     recorded.
 //   none: frames are reconstructed as recorded (frames already dark-subtracted).
 enum class BlackLevel { between_images, none };
 inline constexpr std::array<std::string_view, 2> kBlackLevelNames{"between_images", "none"};
