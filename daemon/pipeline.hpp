@@ -27,7 +27,9 @@ struct ReconstructionWork {
   std::vector<std::size_t> live_a, live_b;      // voxels each iteration updated, frames A and B
   double updates_skipped = 0;                   // share of the box's voxel updates not done
   double work_pruned = 0;                       // share of the kernels' work pruning saved
-  double black_level_a = 0, black_level_b = 0;  // counts taken off each frame first
+  double black_level_a = 0, black_level_b = 0;  // counts taken off each frame first: the median over its tiles
+  // Each frame's lowest and highest tile's level (process::BlackLevels).
+  double black_level_a_lowest = 0, black_level_a_highest = 0, black_level_b_lowest = 0, black_level_b_highest = 0;
 };
 
 // What the processing stage makes of a pair.

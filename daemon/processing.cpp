@@ -28,6 +28,10 @@ ReconstructionWork reconstruction_work(const process::PairResult& r) {
   w.work_pruned = unpruned > 0 ? 1.0 - (r.skipped_a.work_done + r.skipped_b.work_done) / unpruned : 0.0;
   w.black_level_a = r.black_level_a.median();
   w.black_level_b = r.black_level_b.median();
+  w.black_level_a_lowest = r.black_level_a.lowest();
+  w.black_level_a_highest = r.black_level_a.highest();
+  w.black_level_b_lowest = r.black_level_b.lowest();
+  w.black_level_b_highest = r.black_level_b.highest();
   return w;
 }
 

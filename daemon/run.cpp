@@ -806,6 +806,10 @@ void Run::fill_status(msg::Status& s) const {
       m.set_work_pruned(w.work_pruned);
       m.set_black_level_a(w.black_level_a);
       m.set_black_level_b(w.black_level_b);
+      m.set_black_level_a_lowest(w.black_level_a_lowest);
+      m.set_black_level_a_highest(w.black_level_a_highest);
+      m.set_black_level_b_lowest(w.black_level_b_lowest);
+      m.set_black_level_b_highest(w.black_level_b_highest);
     }
   }
   if (const auto free = io::free_bytes(recorder_->dir())) s.set_bytes_free(*free);

@@ -6,6 +6,7 @@
 #include <iomanip>
 #include <iostream>
 #include <memory>
+#include <sstream>
 #include <thread>
 
 #include "clients/cli/commands.hpp"
@@ -91,11 +92,19 @@ void print_status(const msg::Status& s) {
         for (const auto n : counts) text += (text.empty() ? "" : " ") + std::to_string(n);
         return text;
       };
+      // A frame's level, and its tiles' range where they differ (a multi-tap sensor).
+      const auto level = [](double median, double lowest, double highest) {
+        std::ostringstream text;
+        text << std::fixed << std::setprecision(1) << median;
+        if (lowest != highest) text << " (tiles " << lowest << " to " << highest << ")";
+        return text.str();
+      };
       std::cout << "reconstruction pair " << r.pair_index() << ": " << std::setprecision(1)
                 << 100 * r.voxel_updates_skipped() << " % of the voxel updates skipped (" << 100 * r.work_pruned()
                 << " % of the work pruned); live voxels per iteration of " << r.voxels() << ": A "
                 << live(r.live_voxels_a()) << "; B " << live(r.live_voxels_b()) << "; black level taken off A "
-                << r.black_level_a() << ", B " << r.black_level_b() << " counts\n";
+                << level(r.black_level_a(), r.black_level_a_lowest(), r.black_level_a_highest()) << ", B "
+                << level(r.black_level_b(), r.black_level_b_lowest(), r.black_level_b_highest()) << " counts\n";
     }
     for (const std::string& w : s.warnings()) std::cout << "warning        " << w << "\n";
   }

@@ -104,6 +104,9 @@ TEST(Processing, UniformDisplacementOfARayTracedPairComesBack) {
   EXPECT_EQ(w.work_pruned, 0.0);  // no exact zeros in ray-traced frames; no threshold
   EXPECT_EQ(w.black_level_a, 30.0);
   EXPECT_EQ(w.black_level_b, 30.0);
+  for (const double level :
+       {w.black_level_a_lowest, w.black_level_a_highest, w.black_level_b_lowest, w.black_level_b_highest})
+    EXPECT_EQ(level, 30.0);  // one offset over the sensor: every tile reads it
 
   // A stopping run: the same pair gives up at the first MART iteration's check.
   const CancelFlag stop{true};
