@@ -1,6 +1,7 @@
 // The simulated plenoptic camera, `sim://`: each trigger renders a particle pair with core/sim.
 #include "drivers/sim/sim_camera.hpp"
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -27,6 +28,9 @@ struct SceneSettings {
   double depth_mm = 5.0;
   std::size_t rays = 2000;
   bool noise = false;
+  // With noise: the sensor's right half read out this many counts above the left (a second
+  // readout tap's offset), [0, 1000]; default 0.
+  std::uint64_t tap_offset = 0;
   std::uint64_t drop_every = 0;
   std::uint64_t incomplete_every = 0;
   std::uint64_t disconnect_after = 0;
@@ -238,6 +242,12 @@ class SimCamera : public CameraBase, public TriggerInput {
     sim::RenderResult r = sim::render(camera_, array_, particles, options_, seed);
     Frame f;
     f.image = std::move(r.image);
+    if (scene_.tap_offset > 0) {
+      const std::uint32_t full = (std::uint32_t(1) << options_.sensor.bit_depth) - 1;
+      for (int y = 0; y < f.image.height; ++y)
+        for (int x = f.image.width / 2; x < f.image.width; ++x)
+          f.image.at(x, y) = std::uint16_t(std::min<std::uint32_t>(full, f.image.at(x, y) + scene_.tap_offset));
+    }
     f.bit_depth = options_.sensor.bit_depth;
     f.frame_id = id + 1;  // GigE Vision style: 0 means "unknown"
     f.device_timestamp_ns = device_ns;
@@ -282,9 +292,26 @@ std::unique_ptr<Camera> open_sim_camera(const DeviceUri& uri, const std::filesys
         "camera: a URI cannot name a file; the simulated camera renders the daemon's camera_file "
         "(plenopivd.yaml or --camera-file)");
   }
-  uri.reject_unknown({"seed", "ppm", "depth_mm", "flow", "dx_mm", "dy_mm", "dz_mm", "voxel_mm", "angle_deg",
-                      "shear_per_mm", "rays", "noise", "drop_every", "incomplete_every", "disconnect_after",
-                      "fail_after", "readout_ms", "flow_dt_us", "array_rotation_rad"});
+  uri.reject_unknown({"seed",
+                      "ppm",
+                      "depth_mm",
+                      "flow",
+                      "dx_mm",
+                      "dy_mm",
+                      "dz_mm",
+                      "voxel_mm",
+                      "angle_deg",
+                      "shear_per_mm",
+                      "rays",
+                      "noise",
+                      "tap_offset",
+                      "drop_every",
+                      "incomplete_every",
+                      "disconnect_after",
+                      "fail_after",
+                      "readout_ms",
+                      "flow_dt_us",
+                      "array_rotation_rad"});
   if (!uri.target().empty()) uri.fail("the simulated camera takes no device name, only ?parameters");
   if (camera_file.empty()) {
     uri.fail("the simulated camera needs a camera file: plenopivd.yaml camera_file or --camera-file");
@@ -313,6 +340,9 @@ std::unique_ptr<Camera> open_sim_camera(const DeviceUri& uri, const std::filesys
   const std::uint64_t noise = count("noise", 0);
   if (noise > 1) uri.fail("noise: 0 or 1");
   scene.noise = noise == 1;
+  scene.tap_offset = count("tap_offset", 0);
+  if (scene.tap_offset > 1000) uri.fail("tap_offset: must be in [0, 1000] counts");
+  if (scene.tap_offset > 0 && !scene.noise) uri.fail("tap_offset: needs noise=1 (a sensor's counts)");
   scene.drop_every = count("drop_every", 0);
   scene.incomplete_every = count("incomplete_every", 0);
   scene.disconnect_after = count("disconnect_after", 0);

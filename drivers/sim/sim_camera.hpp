@@ -22,6 +22,8 @@ namespace plenopiv::drivers {
 //   shear_per_mm=<s>    x displacement per mm of y (default 0.02)
 //   rays=<n>            rays per particle (default 2000)
 //   noise=0|1           shot and read noise, dark offset, 12-bit output (default 0)
+//   tap_offset=<counts> with noise=1: the sensor's right half read out this many counts higher, as
+//                       a two-tap CCD's second tap (0..1000, default 0)
 //   drop_every=<n>      fault: frame B of every n-th trigger never arrives
 //   incomplete_every=<n> fault: frame B of every n-th trigger arrives incomplete
 //   disconnect_after=<n> fault: the camera is lost after n triggers (status Lost)

@@ -107,6 +107,28 @@ TEST(DaemonCalibration, ABadFileIsRefusedByNameAndAGoodOneIsUsedOnceItIsThere) {
   ASSERT_EQ(client({"status"}), 0) << out;
   EXPECT_NE(out.find("of the voxel updates skipped"), std::string::npos) << out;
   EXPECT_NE(out.find("; black level taken off A 0.0, B 0.0 counts"), std::string::npos) << out;  // ray counts alone
+
+  // A sensor read out through two taps, the second 30 counts above the first's 20: each frame's
+  // level per tile, the range in the status.
+  const fs::path taps_yaml = dir / "taps.yaml";
+  std::ofstream(taps_yaml) << "camera_uri: sim://?seed=2&ppm=0.1&rays=200&noise=1&tap_offset=30\n"
+                           << io::read_file_bytes(run_yaml);
+  ASSERT_EQ(client({"run", "start", "--config", taps_yaml.string()}), 0) << out;
+  // Until the new run's pair is processed (the last run's pair took nothing off).
+  for (int i = 0; i < 600; ++i) {
+    s = status();
+    if (s && s->state() == "Idle" && s->has_reconstruction() && s->reconstruction().black_level_a_highest() > 0) break;
+    std::this_thread::sleep_for(100ms);
+  }
+  ASSERT_TRUE(s && s->state() == "Idle" && s->run_dir() != run_dir) << daemon.output();
+  ASSERT_TRUE(s->has_reconstruction()) << s->DebugString();
+  const msg::ReconstructionWork& taps = s->reconstruction();
+  EXPECT_NEAR(taps.black_level_a_lowest(), 20.0, 1.0);
+  EXPECT_NEAR(taps.black_level_a_highest(), 50.0, 1.0);
+  EXPECT_NEAR(taps.black_level_b_lowest(), 20.0, 1.0);
+  EXPECT_NEAR(taps.black_level_b_highest(), 50.0, 1.0);
+  ASSERT_EQ(client({"status"}), 0) << out;
+  EXPECT_NE(out.find(" (tiles 2"), std::string::npos) << out;
   daemon.signal(SIGTERM);
   EXPECT_EQ(daemon.wait(10s), 0) << daemon.output();
 }

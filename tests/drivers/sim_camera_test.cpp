@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <fstream>
 
+#include <algorithm>
 #include <cstdio>
 #include <string>
 
@@ -58,6 +59,19 @@ TEST(SimCamera, TheSameSeedRendersTheSameFrames) {
     EXPECT_GT(lit, 0) << "frame A is black";
     EXPECT_EQ(p1->trigger_index, std::uint64_t(k));
   }
+}
+
+// A second readout tap's offset: the same frames with the right half `tap_offset` counts higher.
+TEST(SimCamera, ASecondTapsOffsetRaisesTheRightHalf) {
+  auto one = open("seed=7&noise=1");
+  auto two = open("seed=7&noise=1&tap_offset=30");
+  for (Camera* c : {one.get(), two.get()}) run_triggers(*c, 1);
+  const auto p1 = one->next_pair(20s), p2 = two->next_pair(20s);
+  ASSERT_TRUE(p1 && p2);
+  const ImageU16 &a1 = p1->a.image, &a2 = p2->a.image;
+  for (int y = 0; y < a1.height; ++y)
+    for (int x = 0; x < a1.width; ++x)
+      ASSERT_EQ(a2.at(x, y), x < a1.width / 2 ? a1.at(x, y) : std::min(4095, a1.at(x, y) + 30)) << x << ", " << y;
 }
 
 // Laser pulses reported on the trigger input set how far the scene moves: pulses 200 us apart
@@ -149,6 +163,8 @@ TEST(SimCamera, BadUrisAreNamed) {
   EXPECT_NE(message("sim://?ppm=-1").find("ppm"), std::string::npos);
   EXPECT_NE(message("sim://?rays=0").find("rays"), std::string::npos);
   EXPECT_NE(message("sim://?flow_dt_us=0").find("flow_dt_us"), std::string::npos);
+  EXPECT_NE(message("sim://?tap_offset=30").find("tap_offset: needs noise=1"), std::string::npos);
+  EXPECT_NE(message("sim://?noise=1&tap_offset=5000").find("tap_offset: must be in [0, 1000]"), std::string::npos);
   // A box of no depth is the URI's error, named with its key, not a geometry failure later.
   const std::string flat = message("sim://?depth_mm=0");
   EXPECT_NE(flat.find("sim://?depth_mm=0"), std::string::npos) << flat;
