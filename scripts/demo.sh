@@ -15,10 +15,12 @@ publish="tcp://127.0.0.1:${PLENOPIV_DEMO_PUBLISH_PORT:-5556}"
 client=(build/bin/plenopiv --endpoint "$control")
 
 # The simulated plenoptic camera renders every pair with the ray tracer (a uniform flow of
-# 0.25 mm between the pulses); the daemon reconstructs and correlates each pair live. The small
-# camera of the paper's sec 5.4 keeps the demo quick on two cores.
+# 0.25 mm between the pulses) through a 12-bit sensor's response (shot and read noise, a 20-count
+# pedestal, which the daemon measures between the microlens images and takes off); the daemon
+# reconstructs and correlates each pair live. The small camera of the paper's sec 5.4 keeps the
+# demo quick on two cores.
 camera_file="${PLENOPIV_DEMO_CAMERA_FILE:-systemd/config/camera-small.yaml}"
-camera="${PLENOPIV_DEMO_CAMERA:-sim://?seed=1&ppm=0.3&dx_mm=0.25}"
+camera="${PLENOPIV_DEMO_CAMERA:-sim://?seed=1&ppm=0.3&dx_mm=0.25&noise=1}"
 build/bin/plenopivd --config systemd/config/plenopivd.yaml --control "$control" \
   --publish "$publish" --data-dir "$data_dir" --camera-file "$camera_file" --camera "$camera" --simulation &
 daemon=$!
