@@ -1,6 +1,7 @@
 // plenopivd as a child process with a calibration file (plenopivd.yaml calibration_file): a bad
 // file at start is logged and shown in status, the daemon keeps serving, and runs are refused
-// naming the file until it is replaced by a good one, which the next run then uses and copies.
+// naming the file until it is replaced by a good one, which the next run then uses and copies;
+// what MART skipped and the black level it took off (per tile, on a two-tap sensor) in the status.
 #include <gtest/gtest.h>
 
 #include <fstream>
