@@ -618,7 +618,8 @@ int main(int argc, char** argv) {
       base.skipped_a.fraction_updates_skipped(), base.skipped_b.fraction_updates_skipped(), e.rms[0], e.rms[1],
       e.rms[2], e.total, e.valid_fraction, e.off_band[0], e.off_band[1], e.off_band[2], e.off_band_gain[0],
       e.off_band_gain[1], e.off_band_gain[2], bench::peak_rss_gb());
-  // Each iteration's live voxels (MART's active set after pruning) as a share of the box, frame A.
+  // The voxels each MART iteration updated (its live set) as a share of the reconstructed box
+  // (guard slices included), frame A.
   std::printf("bench=e2e case=%s variant=reconstructed live_share_a=", scale.c_str());
   for (std::size_t i = 0; i < base.iterations_a.size(); ++i)
     std::printf("%s%.3f", i ? "," : "", double(base.iterations_a[i].live_voxels) / double(base.iterations_a[i].voxels));
