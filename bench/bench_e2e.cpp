@@ -22,8 +22,8 @@
 //              count per ray: E photo-electrons per ray with their shot noise, R electrons of
 //              Gaussian read noise, a pedestal of O counts, one count per electron, 12 bits (the
 //              simulated camera's `noise=1` is 4,8,20). Every row sees those frames.
-//     --tap-offset D: with --sensor-noise, the sensor's right half read out D counts higher (a
-//              second tap's offset; default 0).
+//     --tap-offset D: with --sensor-noise, the sensor's right half read out D >= 0 counts higher
+//              (a second tap's offset, sim::SensorModel::right_half_offset_dn; default 0).
 //     --seed N: the particles' seed (default 2015).
 //     --black-level between_images|none: what is taken off each rendered frame before any row
 //              (reconstruction.black_level; default between_images, the frame's median between the
@@ -346,6 +346,10 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "bench_e2e: --tap-offset needs --sensor-noise (a sensor's counts)\n");
     return 2;
   }
+  if (!(tap_offset >= 0)) {
+    std::fprintf(stderr, "bench_e2e: --tap-offset takes counts >= 0\n");
+    return 2;
+  }
   // mid: the paper's camera and depth with the box cut laterally to the ring (120 x 80 voxels):
   // the full case's optics and seeding at a sixth of its cost.
   const bool mid = scale == "mid";
@@ -454,6 +458,7 @@ int main(int argc, char** argv) {
     ro.sensor.shot_noise = true;
     ro.sensor.read_noise_electrons = read_noise;
     ro.sensor.dark_offset_dn = pedestal;
+    ro.sensor.right_half_offset_dn = tap_offset;
     ro.sensor.bit_depth = 12;
   }
   double t = now_s();
@@ -464,13 +469,6 @@ int main(int argc, char** argv) {
     return f;
   };
   ImageF a = render(pa, 1), b = render(pb, 2);
-  if (tap_offset != 0) {
-    // The second tap's counts, clamped to the sensor's 12 bits as the first's are.
-    for (ImageF* f : {&a, &b})
-      for (int y = 0; y < f->height; ++y)
-        for (int x = f->width / 2; x < f->width; ++x)
-          f->at(x, y) = float(std::clamp(double(f->at(x, y)) + tap_offset, 0.0, 4095.0));
-  }
   const double render_s = now_s() - t;
   // Taken off once here, as process::PairProcessor does, so that the rows which call process_pair
   // directly see the same frames (PairProcessor then finds nothing more to take off).

@@ -182,7 +182,7 @@ void subtract_black_level(ImageF& frame, const BlackLevels& levels) {
     throw InputError("black level: the frame is " + std::to_string(frame.width) + " x " + std::to_string(frame.height) +
                      " px, neither the sensor's " + std::to_string(levels.width) + " x " +
                      std::to_string(levels.height) + " nor its pixels binned");
-  if (levels.lowest() == 0.f && levels.highest() == 0.f) return;
+  if (levels.nothing()) return;
   // Tile column i holds the binned columns [first[i], first[i + 1]): those whose block's first raw
   // pixel lies in it.
   std::vector<int> first(std::size_t(levels.tiles_x) + 1, frame.width);

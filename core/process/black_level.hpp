@@ -39,6 +39,8 @@ struct BlackLevels {
   // One level over a whole width x height sensor (a frame dark-subtracted by hand, a test).
   static BlackLevels uniform(int width, int height, float level);
   bool measured() const { return !level.empty(); }
+  // Unmeasured, or 0 in every tile: subtracting changes no pixel.
+  bool nothing() const { return lowest() == 0.f && highest() == 0.f; }
   // The median of the tiles' levels (the one number status lines report), their lowest and
   // highest; 0 when unmeasured.
   float median() const;

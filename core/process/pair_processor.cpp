@@ -229,7 +229,7 @@ PairResult PairProcessor::process(const ImageF& frame_a, const ImageF& frame_b, 
 template <typename Frame>
 const ImageF& PairProcessor::prepared(const Frame& frame, const BlackLevels& levels, ImageF& scratch) const {
   if constexpr (std::is_same_v<Frame, ImageF>) {
-    if (settings_.pixel_binning == 1 && levels.lowest() == 0.f && levels.highest() == 0.f) return frame;
+    if (settings_.pixel_binning == 1 && levels.nothing()) return frame;
   }
   scratch = bin_pixels(frame, settings_.pixel_binning);
   subtract_black_level(scratch, levels);

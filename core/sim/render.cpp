@@ -283,6 +283,7 @@ void check_sensor(const SensorModel& s) {
   check_finite_nonnegative(s.electrons_per_ray, "sensor.electrons_per_ray");
   check_finite_nonnegative(s.read_noise_electrons, "sensor.read_noise_electrons");
   check_finite_nonnegative(s.dark_offset_dn, "sensor.dark_offset_dn");
+  check_finite_nonnegative(s.right_half_offset_dn, "sensor.right_half_offset_dn");
   if (!(s.gain_dn_per_electron > 0) || !std::isfinite(s.gain_dn_per_electron)) {
     throw InputError("render options: sensor.gain_dn_per_electron: must be > 0");
   }
@@ -484,8 +485,11 @@ ImageU16 apply_sensor(const ImageF& rays, const SensorModel& sensor, std::uint64
     for (int y = range.begin(); y != range.end(); ++y) {
       const float* in = rays.pixels.data() + std::size_t(y) * rays.width;
       std::uint16_t* row = out.pixels.data() + std::size_t(y) * rays.width;
+      const auto offset = [&](int x) {
+        return x < rays.width / 2 ? sensor.dark_offset_dn : sensor.dark_offset_dn + sensor.right_half_offset_dn;
+      };
       if (!noisy) {
-        for (int x = 0; x < rays.width; ++x) row[x] = to_dn(in[x] * dn_per_ray + sensor.dark_offset_dn);
+        for (int x = 0; x < rays.width; ++x) row[x] = to_dn(in[x] * dn_per_ray + offset(x));
         continue;
       }
       // Library distributions are fine here: same machine, same library => same image.
@@ -497,7 +501,7 @@ ImageU16 apply_sensor(const ImageF& rays, const SensorModel& sensor, std::uint64
           electrons = double(std::poisson_distribution<std::int64_t>(electrons)(engine));
         }
         if (sensor.read_noise_electrons > 0) electrons += read(engine);
-        row[x] = to_dn(electrons * sensor.gain_dn_per_electron + sensor.dark_offset_dn);
+        row[x] = to_dn(electrons * sensor.gain_dn_per_electron + offset(x));
       }
     }
   });

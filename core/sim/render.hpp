@@ -31,6 +31,9 @@ struct SensorModel {
   bool shot_noise = false;            // Poisson photon shot noise on the electrons
   double read_noise_electrons = 0.0;  // Gaussian read noise, standard deviation (>= 0)
   double dark_offset_dn = 0.0;        // added after gain, counts (>= 0)
+  // A second readout tap's offset on top of it: added to the right half's pixels (x >= width / 2),
+  // counts (>= 0), as a two-tap CCD's halves read out with different offsets.
+  double right_half_offset_dn = 0.0;
   double gain_dn_per_electron = 1.0;  // (> 0)
   int bit_depth = 16;                 // 1..16: values saturate at 2^bit_depth - 1
   // Shadows on the sensor: a ray landing in one is absorbed with the shadow's local opacity

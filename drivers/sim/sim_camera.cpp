@@ -1,7 +1,6 @@
 // The simulated plenoptic camera, `sim://`: each trigger renders a particle pair with core/sim.
 #include "drivers/sim/sim_camera.hpp"
 
-#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -92,6 +91,7 @@ class SimCamera : public CameraBase, public TriggerInput {
       options_.sensor.dark_offset_dn = 20.0;
       options_.sensor.electrons_per_ray = 4.0;
       options_.sensor.bit_depth = 12;
+      options_.sensor.right_half_offset_dn = double(scene_.tap_offset);
     }
     worker_ = std::thread([this] { render_loop(); });
   }
@@ -242,12 +242,6 @@ class SimCamera : public CameraBase, public TriggerInput {
     sim::RenderResult r = sim::render(camera_, array_, particles, options_, seed);
     Frame f;
     f.image = std::move(r.image);
-    if (scene_.tap_offset > 0) {
-      const std::uint32_t full = (std::uint32_t(1) << options_.sensor.bit_depth) - 1;
-      for (int y = 0; y < f.image.height; ++y)
-        for (int x = f.image.width / 2; x < f.image.width; ++x)
-          f.image.at(x, y) = std::uint16_t(std::min<std::uint32_t>(full, f.image.at(x, y) + scene_.tap_offset));
-    }
     f.bit_depth = options_.sensor.bit_depth;
     f.frame_id = id + 1;  // GigE Vision style: 0 means "unknown"
     f.device_timestamp_ns = device_ns;

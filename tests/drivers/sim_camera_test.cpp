@@ -61,7 +61,9 @@ TEST(SimCamera, TheSameSeedRendersTheSameFrames) {
   }
 }
 
-// A second readout tap's offset: the same frames with the right half `tap_offset` counts higher.
+// A second readout tap's offset: the same frames with the right half `tap_offset` counts higher
+// (added before the 12 bits' clamp, as a sensor does: a pixel the first tap read as 0 reads at
+// most the offset).
 TEST(SimCamera, ASecondTapsOffsetRaisesTheRightHalf) {
   auto one = open("seed=7&noise=1");
   auto two = open("seed=7&noise=1&tap_offset=30");
@@ -71,7 +73,10 @@ TEST(SimCamera, ASecondTapsOffsetRaisesTheRightHalf) {
   const ImageU16 &a1 = p1->a.image, &a2 = p2->a.image;
   for (int y = 0; y < a1.height; ++y)
     for (int x = 0; x < a1.width; ++x)
-      ASSERT_EQ(a2.at(x, y), x < a1.width / 2 ? a1.at(x, y) : std::min(4095, a1.at(x, y) + 30)) << x << ", " << y;
+      if (x < a1.width / 2 || a1.at(x, y) > 0)
+        ASSERT_EQ(a2.at(x, y), x < a1.width / 2 ? a1.at(x, y) : std::min(4095, a1.at(x, y) + 30)) << x << ", " << y;
+      else
+        ASSERT_LE(a2.at(x, y), 30) << x << ", " << y;
 }
 
 // Laser pulses reported on the trigger input set how far the scene moves: pulses 200 us apart

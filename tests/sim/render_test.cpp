@@ -376,8 +376,22 @@ TEST(Render, SensorModel) {
   // Poisson variance 100 + read 25 (+ 1/12 rounding); sd of the estimate ~0.9.
   EXPECT_NEAR(mean, 100, 0.3) << "measured 100.008";
   EXPECT_NEAR(var, 125.08, 4) << "measured 126.2";
+  // A second tap's offset: the right half as if its pedestal were that much higher, the same noise.
+  SensorModel one_tap = noisy;
+  one_tap.dark_offset_dn = 20;
+  SensorModel two_taps = one_tap, higher = one_tap;
+  two_taps.right_half_offset_dn = 30;
+  higher.dark_offset_dn = 50;
+  const ImageF lit(200, 200, 100.f);
+  const ImageU16 taps = apply_sensor(lit, two_taps, 2), left = apply_sensor(lit, one_tap, 2),
+                 right = apply_sensor(lit, higher, 2);
+  for (int y = 0; y < 200; ++y)
+    for (int x = 0; x < 200; ++x) ASSERT_EQ(taps.at(x, y), (x < 100 ? left : right).at(x, y)) << x << ", " << y;
   SensorModel bad;
   bad.bit_depth = 17;
+  EXPECT_THROW(apply_sensor(flat, bad, 1), InputError);
+  bad = SensorModel{};
+  bad.right_half_offset_dn = -1;
   EXPECT_THROW(apply_sensor(flat, bad, 1), InputError);
 }
 
