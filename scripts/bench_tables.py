@@ -18,6 +18,7 @@ import argparse
 import datetime
 import os
 import re
+import statistics
 import subprocess
 import sys
 from pathlib import Path
@@ -124,6 +125,9 @@ BENCHES = {
     "recon-small": ("quick", ["build/bin/bench_recon", "small"], None),
     "recon-paper": ("paper", ["build/bin/bench_recon", "paper"], None),
     "recon-mid": ("quick", ["build/bin/bench_recon", "mid"], None),
+    "recon-volume-paper": ("paper", ["bench/recon_volume.sh", "3"], None),
+    "recon-prune-paper": ("paper", ["build/bin/bench_recon", "prune", "paper", "0.5", "5", "1", "nesterov",
+                                    "off,zeros,1e-2,slice-3e-2"], None),
     "recon-figures": ("quick", ["build/bin/bench_recon", "figures", "0.9"], None),
     "recon-fig22": ("quick", ["build/bin/bench_recon", "fig22", "0.9"], None),
     "recon-fig22-accurate": ("quick", ["build/bin/bench_recon", "fig22", "0.9", "20", "1", "nesterov",
@@ -143,7 +147,8 @@ BENCHES = {
 }
 
 # The build targets of the benchmarks that are scripts (the others: their binary's name).
-SCRIPT_TARGETS = {"oneshot": ["plenopiv"], "oneshot-paper-accuracy": ["plenopiv"], "e2e-full-sensors": ["bench_e2e"]}
+SCRIPT_TARGETS = {"oneshot": ["plenopiv"], "oneshot-paper-accuracy": ["plenopiv"], "e2e-full-sensors": ["bench_e2e"],
+                  "recon-volume-paper": ["bench_recon"]}
 
 # Benchmarks of the daemon's thread priorities: never run under nice.
 OWN_PRIORITIES = {"lanes-paper"}
@@ -318,6 +323,24 @@ def t_headline(R):
                             f"one-shot {rotated['wall_s']} s (tables built: {built['wall_s']} s); the camera file's "
                             f"array {nominal['wall_s']} s", "—", "<= 15 s one-shot (#21)",
                             r.meta.get("date", "—").split(" (")[0], r.meta.get("commit", "—")])
+    r = R("recon-volume-paper")
+    volumes = r.find(bench="recon_prune", variant="slice-3e-2")
+    if volumes:
+        def median_range(key):
+            v = sorted(float(d[key]) for d in volumes)
+            return f"{statistics.median(v):.2f} s ({v[0]:.2f}-{v[-1]:.2f})"
+        skipped = pct(statistics.median(float(d["updates_skipped"]) for d in volumes))
+        # After the one-shot row (or process.yaml's, without it).
+        names = [row[0] for row in rows]
+        after = names.index("run-paper.yaml's processing, once: `plenopiv process`") + 1 \
+            if "run-paper.yaml's processing, once: `plenopiv process`" in names \
+            else [n for n, *_ in HEADLINE_ROWS].index("e2e-full-process") + 1
+        rows.insert(after, ["run-paper.yaml's MART alone, 5 iterations",
+                            "#21's volume: the paper camera's 300x200x200 voxels of 0.125 mm, 0.5 ppm, one frame",
+                            "—", f"first frame {median_range('seconds')}; kept workspace "
+                            f"{median_range('kept_seconds')}; {skipped} of the updates skipped",
+                            "30 min per image",
+                            "<= 5 s (#21)", r.meta.get("date", "—").split(" (")[0], r.meta.get("commit", "—")])
     r = R("e2e-full-live")
     live = r.one(variant="live", tier=RUN_PAPER_LIVE)
     if live:
@@ -328,12 +351,14 @@ def t_headline(R):
                         r.meta.get("commit", "—")])
     out = table(["config", "case", "RMS u / v / w, voxels (off the axis band)", "time per pair in a run",
                  "paper", "target (issue)", "measured", "commit"], rows)
-    names = [n for n, *_ in HEADLINE_ROWS] + ["e2e-full-live", "oneshot", "oneshot-paper-accuracy"]
+    names = [n for n, *_ in HEADLINE_ROWS] + ["e2e-full-live", "oneshot", "oneshot-paper-accuracy",
+                                              "recon-volume-paper"]
     machines = {R(n).meta.get("machine") for n in names if R(n).exists}
     loads = ", ".join(f"{n} {R(n).meta.get('load', '?').split(' (')[0]}" for n in names if R(n).exists)
     out.append("")
     out.append(f"*Machine: {'; '.join(sorted(m for m in machines if m)) or '—'}; load average at the "
-               f"start: {loads or '—'}. Commands: the End to end section; one-shot: `bench/oneshot_cli.sh`.*")
+               f"start: {loads or '—'}. Commands: the End to end section; one-shot: `bench/oneshot_cli.sh`; MART alone: "
+               f"`bench/recon_volume.sh` (medians of 3 processes, range).*")
     return out
 
 
@@ -575,6 +600,26 @@ def t_recon_phases(R):
                      "", " / ".join(reuse[v]["seconds"] for v in reuse if reuse[v])])
     out = table(["5 SMART iterations at mu 0.5, MLOS start, cutoff 0.9, 0.5 ppm"] + [c for c, _ in cases], rows)
     return out + [""] + [r.provenance() + "  " for _, r in cases]
+
+
+def t_recon_prune(R):
+    r = R("recon-prune-paper")
+    rows = []
+    for d in r.find(bench="recon_prune"):
+        if "variant" not in d:
+            continue
+        rows.append([d["variant"], f"{d['seconds']} ({d['cpu_s']})", f"{d['kept_seconds']} ({d['kept_cpu_s']})",
+                     f"{d['setup_s']} / {d['kept_setup_s']}", d["prune_s"], d["iteration_s"].replace(",", ", "),
+                     pct(d["updates_skipped"]), pct(d["work_pruned"]), d["q_star"],
+                     f"{d['moments_abs_x_vox']} / {d['abs_z_vox']}",
+                     "yes" if d["same_as_off"] == "1" else "no"])
+    if not rows:
+        return [r.provenance()]
+    mem = next((x["peak_rss_gb"] for x in r.lines if "peak_rss_gb" in x), "?")
+    out = table(["prune (5 accelerated iterations at mu 1, 300x200x200)", "first frame, s wall (CPU s)",
+                 "kept workspace, s wall (CPU s)", "setup first / kept, s", "pruning, s", "per iteration, s",
+                 "updates skipped", "work pruned", "Q*", "mean x / z error, voxels", "bits as off"], rows)
+    return out + ["", f"Peak memory {mem} GB.", "", r.provenance()]
 
 
 FIG22_PAPER = ["paper (its own fit)", "0.38", "0.066 / 0.80; 1.04 / 2.98", "", "", "", "30 min on 12 cores"]
@@ -906,6 +951,7 @@ TABLES = {
     "recon-fig22": t_fig22,
     "recon-figures": t_figures,
     "recon-mid": t_recon_mid,
+    "recon-prune": t_recon_prune,
     "piv-uniform": t_piv_uniform("piv"),
     "piv-ring": t_piv_ring("piv"),
     "uncertainty": t_uncertainty,
