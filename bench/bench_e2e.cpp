@@ -5,7 +5,7 @@
 //
 //   bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate]
 //             [--dark-cutoff F] [--noise-threshold C] [--sensor-noise E,R,O [--tap-offset D]] [--black-level B]
-//             [--seed N]
+//             [--seed N] [--brightness-spread S]
 //             [--intensity-threshold K] [--final-smoothing K] [--depth-prefilter K]
 //             [--spectral-whitening P [--whitened-peak-sigma X,Y,Z]]
 //             [--passes P] [--early-interpolation sinc|cubic] [--voxel-z-factor D] [--uncertainty-stride N]
@@ -25,6 +25,9 @@
 //     --tap-offset D: with --sensor-noise, the sensor's right half read out D >= 0 counts higher
 //              (a second tap's offset, sim::SensorModel::right_half_offset_dn; default 0).
 //     --seed N: the particles' seed (default 2015).
+//     --brightness-spread S: each particle's light a log-normal factor with S the spread of its log
+//              (sim::RenderOptions::brightness_spread; 0 to 3, default 0: every particle the same),
+//              the same factor in both frames; the exact-particle rows keep equal particles.
 //     --black-level between_images|none: what is taken off each rendered frame before any row
 //              (reconstruction.black_level; default between_images, the frame's median between the
 //              microlens images; printed as black_level_a and _b).
@@ -205,9 +208,10 @@ int main(int argc, char** argv) {
   bool accelerate = false;
   double mu = 0.5, z_centre = 0.0, dark_cutoff = recon::MartSettings{}.dark_weight_cutoff;
   double noise_threshold = recon::MartSettings{}.noise_threshold;
-  std::string sensor_noise;   // --sensor-noise E,R,O; empty: one count per ray
-  double tap_offset = 0;      // --tap-offset D: counts added to the sensor's right half
-  std::uint64_t seed = 2015;  // --seed N: the particles' seed
+  std::string sensor_noise;      // --sensor-noise E,R,O; empty: one count per ray
+  double tap_offset = 0;         // --tap-offset D: counts added to the sensor's right half
+  double brightness_spread = 0;  // --brightness-spread S: log-normal spread of the particles' light
+  std::uint64_t seed = 2015;     // --seed N: the particles' seed
   std::string black_level_name{process::name_of(process::ProcessSettings{}.black_level)};
   double sensor_blur_mm = recon::MartSettings{}.sensor_blur_sigma_mm;
   double intensity_threshold = piv::CorrelationSettings{}.intensity_threshold_of_mean;
@@ -253,6 +257,8 @@ int main(int argc, char** argv) {
       sensor_noise = argv[++i];
     else if (!std::strcmp(argv[i], "--tap-offset") && i + 1 < argc)
       tap_offset = std::stod(argv[++i]);
+    else if (!std::strcmp(argv[i], "--brightness-spread") && i + 1 < argc)
+      brightness_spread = std::stod(argv[++i]);
     else if (!std::strcmp(argv[i], "--seed") && i + 1 < argc)
       seed = std::stoull(argv[++i]);
     else if (!std::strcmp(argv[i], "--black-level") && i + 1 < argc)
@@ -359,7 +365,7 @@ int main(int argc, char** argv) {
         stderr,
         "usage: bench_e2e [reduced|mid|full] [--no-sweep] [--rays N] [--iterations N --mu X --accelerate] "
         "[--dark-cutoff F] [--noise-threshold C] [--sensor-noise E,R,O [--tap-offset D]] [--black-level B] [--seed N] "
-        "[--sensor-blur-mm S] "
+        "[--brightness-spread S] [--sensor-blur-mm S] "
         "[--intensity-threshold K] [--final-smoothing K] "
         "[--depth-prefilter K] [--spectral-whitening P [--whitened-peak-sigma X,Y,Z]] [--passes P] "
         "[--early-interpolation sinc|cubic] [--voxel-z-factor D] [--voxel-xy-divisor N] [--uncertainty-stride N] "
@@ -443,6 +449,8 @@ int main(int argc, char** argv) {
   const optics::MicrolensArray& lenses = nominal.lenses;
   sim::RenderOptions ro;
   ro.rays_per_particle = rays;
+  ro.brightness_spread = brightness_spread;  // sim::render checks its range
+  ro.brightness_seed = seed;
   if (!sensor_noise.empty()) {
     double electrons_per_ray = 0, read_noise = 0, pedestal = 0;
     char tail = 0;
@@ -589,14 +597,16 @@ int main(int argc, char** argv) {
   const process::PairOperator& op = processor.op();
   const double weights_s = now_s() - t;
   std::printf(
-      "bench=e2e case=%s particles=%zu seed=%llu voxels=%zu voxel_mm=%g voxel_z_mm=%g sensor=%s tap_offset=%g "
+      "bench=e2e case=%s particles=%zu seed=%llu brightness_spread=%g voxels=%zu voxel_mm=%g voxel_z_mm=%g sensor=%s "
+      "tap_offset=%g "
       "black_level=%s black_level_a=%g black_level_b=%g black_level_a_range=%g..%g black_level_tiles=%dx%d "
       "noise_threshold=%g render_s=%.2f weights_s=%.2f\n",
-      scale.c_str(), count, static_cast<unsigned long long>(seed), settings.grid.count(), settings.grid.spacing_mm[0],
-      settings.grid.spacing_mm[2], sensor_noise.empty() ? "one_count_per_ray" : sensor_noise.c_str(), tap_offset,
-      black_level_name.c_str(), double(black_level_a.median()), double(black_level_b.median()),
-      double(black_level_a.lowest()), double(black_level_a.highest()), black_level_a.tiles_x, black_level_a.tiles_y,
-      noise_threshold, render_s, weights_s);
+      scale.c_str(), count, static_cast<unsigned long long>(seed), brightness_spread, settings.grid.count(),
+      settings.grid.spacing_mm[0], settings.grid.spacing_mm[2],
+      sensor_noise.empty() ? "one_count_per_ray" : sensor_noise.c_str(), tap_offset, black_level_name.c_str(),
+      double(black_level_a.median()), double(black_level_b.median()), double(black_level_a.lowest()),
+      double(black_level_a.highest()), black_level_a.tiles_x, black_level_a.tiles_y, noise_threshold, render_s,
+      weights_s);
 
   // The paper's settings: reconstruction and correlation, stage by stage.
   recon::MartWorkspace workspace;  // kept for --steady and the sweeps

@@ -96,6 +96,7 @@ class NormalTable {
 // A light source: a point (w = 0) or a uniformly lit rectangle of w_x by w_y centred at (x, y).
 struct Emitter {
   double x, y, z, w_x, w_y;
+  double light = 1.0;  // the emitter's rays: the render's rays per emitter times this
 };
 
 // Everything a ray needs, resolved once per render.
@@ -370,7 +371,8 @@ RenderResult trace_all(const optics::CameraModel& camera, const optics::Microlen
                       RayCounts c;
                       for (std::size_t k = range.begin(); k != range.end(); ++k) {
                         SplitMix64 rng(stream_seed(seed, k));
-                        tracer.trace(emitters[k], rays_per_emitter, rng, c);
+                        const double rays = std::round(double(rays_per_emitter) * emitters[k].light);
+                        tracer.trace(emitters[k], std::size_t(rays), rng, c);
                         const std::size_t n = ++done;
                         if (progress && (n % step == 0 || n == emitters.size())) {
                           const std::lock_guard lock(progress_mutex);
@@ -400,6 +402,11 @@ RenderResult trace_all(const optics::CameraModel& camera, const optics::Microlen
 RenderResult render(const optics::CameraModel& camera, const optics::MicrolensArray& array,
                     std::span<const Point3> particles_mm, const RenderOptions& options, std::uint64_t seed) {
   check_finite_nonnegative(options.aperture_diameter_mm, "aperture_diameter_mm");
+  check_finite_nonnegative(options.brightness_spread, "brightness_spread");
+  if (options.brightness_spread > 3) {
+    throw InputError("render options: brightness_spread: the spread of a particle's log light, 0 to 3, got " +
+                     std::to_string(options.brightness_spread));
+  }
   std::vector<Emitter> emitters;
   emitters.reserve(particles_mm.size());
   for (std::size_t k = 0; k < particles_mm.size(); ++k) {
@@ -412,7 +419,14 @@ RenderResult render(const optics::CameraModel& camera, const optics::MicrolensAr
                        " mm is at or behind the main lens (z must be > -s_o = " +
                        std::to_string(-camera.object_distance_mm()) + " mm)");
     }
-    emitters.push_back({p[0], p[1], p[2], 0, 0});
+    double light = 1.0;
+    if (options.brightness_spread > 0) {
+      // Library distributions are fine here: same machine, same library => same image.
+      std::mt19937_64 engine(stream_seed(options.brightness_seed, k));
+      const double s = options.brightness_spread;
+      light = std::exp(s * std::normal_distribution<double>(0.0, 1.0)(engine) - 0.5 * s * s);
+    }
+    emitters.push_back({p[0], p[1], p[2], 0, 0, light});
   }
   const double aperture =
       options.aperture_diameter_mm > 0 ? options.aperture_diameter_mm : camera.aperture_diameter_mm();

@@ -63,6 +63,13 @@ struct RenderOptions {
   double aperture_overfill = 1.0;
   VignettingStop vignetting;
   SensorModel sensor;
+  // Each particle's light scaled by a log-normal factor exp(s g - s^2 / 2) (g standard normal: a
+  // mean of 1, median exp(-s^2 / 2)), as real seeding particles differ in size and so in scattered
+  // light; s >= 0 is the spread of its natural log, 0 (default): every particle the same. The
+  // factor is drawn from brightness_seed and the particle's index, not the frame's seed, so a
+  // particle keeps its brightness in both frames of a pair.
+  double brightness_spread = 0.0;
+  std::uint64_t brightness_seed = 0;
   // Called with the fraction of sources traced (about every 1 %, and at 1), from one thread at
   // a time; for progress displays. Empty: not called.
   std::function<void(double)> progress;

@@ -395,6 +395,49 @@ TEST(Render, SensorModel) {
   EXPECT_THROW(apply_sensor(flat, bad, 1), InputError);
 }
 
+TEST(Render, ParticlesDifferInBrightnessAndKeepItInBothFrames) {
+  const auto& cam = small_camera();
+  const Point3 centre{0, 0, 0};
+  RenderOptions options;
+  options.rays_per_particle = 1000;
+  options.brightness_spread = 1.0;
+  // One particle under 200 brightness seeds: its rays are 1000 times a log-normal factor, whose
+  // log has mean -s^2 / 2 and spread s (standard errors 0.07 and 0.05 at 200 draws; the bounds
+  // are 3.5 and 3 of them).
+  double sum_log = 0, sum_log2 = 0;
+  const int draws = 200;
+  for (int k = 0; k < draws; ++k) {
+    options.brightness_seed = std::uint64_t(k);
+    const RenderResult r = render(cam, nominal_array(), std::span<const Point3>(&centre, 1), options, 5);
+    ASSERT_GT(r.counts.emitted, 0u);
+    const double l = std::log(double(r.counts.emitted) / 1000.0);
+    sum_log += l;
+    sum_log2 += l * l;
+  }
+  const double mean = sum_log / draws, spread = std::sqrt(sum_log2 / draws - mean * mean);
+  EXPECT_NEAR(mean, -0.5, 0.25) << "measured -0.654";
+  EXPECT_NEAR(spread, 1.0, 0.15) << "measured 0.951";
+
+  // A pair: the frames' own seeds differ, each particle's light does not.
+  const auto particles = random_particles(Box{{-3, -3, -5}, {3, 3, 5}}, 400, 3);
+  options.brightness_seed = 7;
+  const RenderResult a = render(cam, nominal_array(), particles, options, 1);
+  const RenderResult b = render(cam, nominal_array(), particles, options, 2);
+  EXPECT_EQ(a.counts.emitted, b.counts.emitted);
+  EXPECT_NE(a.rays.pixels, b.rays.pixels);
+  EXPECT_NEAR(double(a.counts.emitted) / (400.0 * 1000.0), 1.0, 0.25);  // a mean of 1 (sd 0.07 at 400)
+  options.brightness_seed = 8;
+  EXPECT_NE(render(cam, nominal_array(), particles, options, 1).counts.emitted, a.counts.emitted);
+
+  // No spread: every particle its rays_per_particle, the image as without the option.
+  options.brightness_spread = 0;
+  const RenderResult same = render(cam, nominal_array(), particles, options, 1);
+  EXPECT_EQ(same.counts.emitted, 400u * 1000u);
+  RenderOptions plain;
+  plain.rays_per_particle = 1000;
+  EXPECT_EQ(same.rays.pixels, render(cam, nominal_array(), particles, plain, 1).rays.pixels);
+}
+
 TEST(Render, BadInputIsRefused) {
   RenderOptions options;
   const Point3 behind{0, 0, -150};
@@ -404,6 +447,12 @@ TEST(Render, BadInputIsRefused) {
   options.diffraction_sigma_mm = -1;
   const Point3 ok{0, 0, 0};
   EXPECT_THROW(render(small_camera(), nominal_array(), std::span<const Point3>(&ok, 1), options, 1), InputError);
+  for (double spread : {-0.1, 3.5, std::nan("")}) {
+    RenderOptions bright;
+    bright.brightness_spread = spread;
+    EXPECT_THROW(render(small_camera(), nominal_array(), std::span<const Point3>(&ok, 1), bright, 1), InputError)
+        << spread;
+  }
 }
 
 }  // namespace
