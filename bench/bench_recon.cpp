@@ -272,6 +272,7 @@ void prune_sweep(const std::string& source_dir, bool small, double ppm, int iter
   std::uint64_t reference = 0;
   for (const Variant& v : {Variant{"off", false, 0.0}, Variant{"zeros", true, 0.0}, Variant{"1e-4", true, 1e-4},
                            Variant{"1e-3", true, 1e-3}, Variant{"3e-3", true, 3e-3}, Variant{"1e-2", true, 1e-2},
+                           Variant{"slice-1e-2", true, 1e-2, recon::PruneScope::slice},
                            Variant{"slice-3e-2", true, 3e-2, recon::PruneScope::slice}}) {
     if (!only.empty() && ("," + only + ",").find("," + std::string(v.name) + ",") == std::string::npos) continue;
     recon::MartSettings s;
@@ -319,13 +320,13 @@ void prune_sweep(const std::string& source_dir, bool small, double ppm, int iter
         "live_per_iteration=%s work_per_iteration=%s work_pruned=%.4f "
         "q_star=%.4f moments_abs_x_vox=%.3f abs_z_vox=%.3f fitted=%zu volume_hash=%016llx same_as_off=%d "
         "kept_seconds=%.3f kept_cpu_s=%.3f kept_setup_s=%.3f kept_same_bits=%d\n",
-        small ? "small" : "paper", v.name, iterations, mu, int(accelerate), wall, cpu, r.setup_seconds, r.select_seconds,
-        r.active_set_seconds, r.start_seconds,
-        r.prune_seconds, seconds.c_str(), r.skipped.fraction_skipped(), r.skipped.fraction_updates_skipped(),
-        r.skipped.voxels_pruned, live.c_str(), work.c_str(), r.skipped.fraction_work_pruned(),
-        recon::quality_factor(r.volume, exact), ex / double(std::max<std::size_t>(1, fitted)),
-        ez / double(std::max<std::size_t>(1, fitted)), fitted, static_cast<unsigned long long>(hash),
-        int(hash == reference), wall_kept, cpu_kept, kept.setup_seconds, int(same_kept));
+        small ? "small" : "paper", v.name, iterations, mu, int(accelerate), wall, cpu, r.setup_seconds,
+        r.select_seconds, r.active_set_seconds, r.start_seconds, r.prune_seconds, seconds.c_str(),
+        r.skipped.fraction_skipped(), r.skipped.fraction_updates_skipped(), r.skipped.voxels_pruned, live.c_str(),
+        work.c_str(), r.skipped.fraction_work_pruned(), recon::quality_factor(r.volume, exact),
+        ex / double(std::max<std::size_t>(1, fitted)), ez / double(std::max<std::size_t>(1, fitted)), fitted,
+        static_cast<unsigned long long>(hash), int(hash == reference), wall_kept, cpu_kept, kept.setup_seconds,
+        int(same_kept));
   }
   std::printf("bench=recon_prune peak_rss_gb=%.3f\n", bench::peak_rss_gb());
 }

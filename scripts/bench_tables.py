@@ -33,7 +33,7 @@ DOCS = [DOC, ROOT / "docs" / "paper-figures.md", ROOT / "docs" / "accuracy.md", 
 # The shipped full settings' MART, ghost floor and final smoothing as bench_e2e's flags, with
 # `iterations` (run-paper.yaml's 8, process.yaml's 20).
 def shipped_mart(iterations):
-    return ["--mu", "1", "--accelerate", "--iterations", str(iterations), "--prune-threshold", "0.03", "--prune-scope",
+    return ["--mu", "1", "--accelerate", "--iterations", str(iterations), "--prune-threshold", "0.01", "--prune-scope",
             "slice", "--intensity-threshold", "3", "--final-smoothing", "1"]
 
 
@@ -83,7 +83,7 @@ LIVE_TIERS = ["4,4,5,16@50+4,8@50", "4,4,8,16@50+4,8@50", "3,4,3,16@50+4,8@50", 
               "3,4,5,16@50+4,8@50", "3,2,3,16@50+4,8@50", "3,1,3,16@50+4,8@50", "2,2,3,16@50+4,8@50"]
 
 # MART's prune thresholds the sparse sweeps compare, on both cameras.
-SPARSE_VARIANTS = "off,zeros,1e-2,slice-3e-2,slice-1e-1,slice-1e-1-reach2,slice-2e-1,slice-2e-1-reach2"
+SPARSE_VARIANTS = "off,zeros,1e-2,slice-1e-2,slice-3e-2,slice-1e-1,slice-1e-1-reach2,slice-2e-1,slice-2e-1-reach2"
 
 # The paper ring through other sensors (bench/sensor_cases.sh SENSOR/BLACK_LEVEL[/EXTRA]): the
 # simulator's one count per ray; a 100-count pedestal with 2 electrons of read noise (a cooled
@@ -111,6 +111,9 @@ BENCHES = {
                        "e2e_pareto_full.png"),
     "e2e-full-sparse": ("paper", ["build/bin/bench_e2e", "full", "--no-sweep", "--sparse-sweep", "--sparse-repeats",
                                   "1", "--sparse-variants", SPARSE_VARIANTS] + RUN_PAPER, None),
+    "e2e-full-sparse-spread": ("paper", ["build/bin/bench_e2e", "full", "--no-sweep", "--brightness-spread", "0.7",
+                                         "--sparse-sweep", "--sparse-repeats", "1", "--sparse-variants",
+                                         SPARSE_VARIANTS] + RUN_PAPER, None),
     "e2e-reduced-sparse": ("quick", ["build/bin/bench_e2e", "reduced", "--no-sweep", "--sparse-sweep",
                                      "--sparse-repeats", "5", "--sparse-variants", SPARSE_VARIANTS] + RUN_PAPER_CUBES,
                            None),
@@ -127,7 +130,7 @@ BENCHES = {
     "recon-mid": ("quick", ["build/bin/bench_recon", "mid"], None),
     "recon-volume-paper": ("paper", ["bench/recon_volume.sh", "3"], None),
     "recon-prune-paper": ("paper", ["build/bin/bench_recon", "prune", "paper", "0.5", "5", "1", "nesterov",
-                                    "off,zeros,1e-2,slice-3e-2"], None),
+                                    "off,zeros,1e-2,slice-1e-2,slice-3e-2"], None),
     "recon-figures": ("quick", ["build/bin/bench_recon", "figures", "0.9"], None),
     "recon-fig22": ("quick", ["build/bin/bench_recon", "fig22", "0.9"], None),
     "recon-fig22-accurate": ("quick", ["build/bin/bench_recon", "fig22", "0.9", "20", "1", "nesterov",
@@ -324,7 +327,7 @@ def t_headline(R):
                             f"array {nominal['wall_s']} s", "—", "<= 15 s one-shot (#21)",
                             r.meta.get("date", "—").split(" (")[0], r.meta.get("commit", "—")])
     r = R("recon-volume-paper")
-    volumes = r.find(bench="recon_prune", variant="slice-3e-2")
+    volumes = r.find(bench="recon_prune", variant="slice-1e-2")
     if volumes:
         def median_range(key):
             v = sorted(float(d[key]) for d in volumes)
@@ -461,7 +464,9 @@ SPARSE_LABELS = {"off": "off (every active voxel, every iteration)", "zeros": "e
 
 def t_sparse(R):
     rows = []
-    for name, case in (("e2e-full-sparse", "paper"), ("e2e-reduced-sparse", "reduced")):
+    for name, case in (("e2e-full-sparse", "paper"),
+                       ("e2e-full-sparse-spread", "paper, particles' light spread 0.7 (log-normal)"),
+                       ("e2e-reduced-sparse", "reduced")):
         r = R(name)
         for d in r.find(variant="sparse"):
             prune = d["prune"]
@@ -478,7 +483,8 @@ def t_sparse(R):
     out = table(["case", "prune", "s per pair (over off): wall; CPU", "s: recon A + B + correlate",
                  "A: updates skipped / work pruned", "volume L2 vs off", "RMS u / v / w",
                  "off the axis band", "same vectors as off"], rows)
-    return out + ["", R("e2e-full-sparse").provenance() + "  ", R("e2e-reduced-sparse").provenance()]
+    return out + ["", R("e2e-full-sparse").provenance() + "  ", R("e2e-full-sparse-spread").provenance() + "  ",
+                  R("e2e-reduced-sparse").provenance()]
 
 
 def sensor_label(sensor):

@@ -67,7 +67,7 @@ TEST(RunConfig, ShippedPaperScaleConfigParses) {
   EXPECT_EQ(s.mart.iterations, 8);
   EXPECT_DOUBLE_EQ(s.mart.mu, 1.0);
   EXPECT_TRUE(s.mart.accelerate);
-  EXPECT_DOUBLE_EQ(s.mart.prune_threshold, 0.03);  // of each depth slice's peak ("Sparse reconstruction")
+  EXPECT_DOUBLE_EQ(s.mart.prune_threshold, 0.01);  // of each depth slice's peak ("Choosing settings")
   EXPECT_EQ(s.mart.prune_scope, recon::PruneScope::slice);
   ASSERT_EQ(s.correlation.passes.size(), 5u);  // core/piv's default with a third 2 mm, 50 % pass
   EXPECT_EQ(s.correlation.passes[0].window, (std::array<int, 3>{32, 32, 16}));  // 4 mm cubes
