@@ -618,13 +618,14 @@ def t_recon_prune(R):
                      f"{d['setup_s']} / {d['kept_setup_s']}", d["prune_s"], d["iteration_s"].replace(",", ", "),
                      pct(d["updates_skipped"]), pct(d["work_pruned"]), d["q_star"],
                      f"{d['moments_abs_x_vox']} / {d['abs_z_vox']}",
-                     "yes" if d["same_as_off"] == "1" else "no"])
+                     f"{'yes' if d['same_as_off'] == '1' else 'no'} / {'yes' if d['kept_same_bits'] == '1' else 'no'}"])
     if not rows:
         return [r.provenance()]
     mem = next((x["peak_rss_gb"] for x in r.lines if "peak_rss_gb" in x), "?")
     out = table(["prune (5 accelerated iterations at mu 1, 300x200x200)", "first frame, s wall (CPU s)",
                  "kept workspace, s wall (CPU s)", "setup first / kept, s", "pruning, s", "per iteration, s",
-                 "updates skipped", "work pruned", "Q*", "mean x / z error, voxels", "bits as off"], rows)
+                 "updates skipped", "work pruned", "Q*", "mean x / z error, voxels",
+                 "bits as off / kept frame's as first"], rows)
     return out + ["", f"Peak memory {mem} GB.", "", r.provenance()]
 
 
