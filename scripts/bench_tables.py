@@ -129,8 +129,6 @@ BENCHES = {
     "recon-paper": ("paper", ["build/bin/bench_recon", "paper"], None),
     "recon-mid": ("quick", ["build/bin/bench_recon", "mid"], None),
     "recon-volume-paper": ("paper", ["bench/recon_volume.sh", "3"], None),
-    "recon-prune-paper": ("paper", ["build/bin/bench_recon", "prune", "paper", "0.5", "5", "1", "nesterov",
-                                    "off,zeros,1e-2,slice-1e-2,slice-3e-2"], None),
     "recon-figures": ("quick", ["build/bin/bench_recon", "figures", "0.9"], None),
     "recon-fig22": ("quick", ["build/bin/bench_recon", "fig22", "0.9"], None),
     "recon-fig22-accurate": ("quick", ["build/bin/bench_recon", "fig22", "0.9", "20", "1", "nesterov",
@@ -317,15 +315,17 @@ def t_headline(R):
     r = R("oneshot")
     rotated, nominal = r.one(array="rotated", cache="read"), r.one(array="nominal", cache="read")
     built = r.one(array="rotated", cache="built")
+    # The one-shot's and MART's own rows go after process.yaml's on the same pair (the live tier's
+    # row goes in above them).
+    after = [n for n, *_ in HEADLINE_ROWS].index("e2e-full-process") + 1
     if rotated and nominal and built:
-        # After process.yaml's row on the same pair (the live tier's row goes in above both).
-        after = [n for n, *_ in HEADLINE_ROWS].index("e2e-full-process") + 1
         rows.insert(after, ["run-paper.yaml's processing, once: `plenopiv process`",
                             "the sec 6.4 ring, 0.5 ppm, through a lens array rotated 0.1 deg (frames resampled): "
                             "TIFFs read, MART, correlation, HDF5 / .vti / PNG written", "—",
                             f"one-shot {rotated['wall_s']} s (tables built: {built['wall_s']} s); the camera file's "
                             f"array {nominal['wall_s']} s", "—", "<= 15 s one-shot (#21)",
                             r.meta.get("date", "—").split(" (")[0], r.meta.get("commit", "—")])
+        after += 1
     r = R("recon-volume-paper")
     volumes = r.find(bench="recon_prune", variant="slice-1e-2")
     if volumes:
@@ -333,11 +333,6 @@ def t_headline(R):
             v = sorted(float(d[key]) for d in volumes)
             return f"{statistics.median(v):.2f} s ({v[0]:.2f}-{v[-1]:.2f})"
         skipped = pct(statistics.median(float(d["updates_skipped"]) for d in volumes))
-        # After the one-shot row (or process.yaml's, without it).
-        names = [row[0] for row in rows]
-        after = names.index("run-paper.yaml's processing, once: `plenopiv process`") + 1 \
-            if "run-paper.yaml's processing, once: `plenopiv process`" in names \
-            else [n for n, *_ in HEADLINE_ROWS].index("e2e-full-process") + 1
         rows.insert(after, ["run-paper.yaml's MART alone, 5 iterations",
                             "#21's volume: the paper camera's 300x200x200 voxels of 0.125 mm, 0.5 ppm, one frame",
                             "—", f"first frame {median_range('seconds')}; kept workspace "
@@ -606,27 +601,6 @@ def t_recon_phases(R):
                      "", " / ".join(reuse[v]["seconds"] for v in reuse if reuse[v])])
     out = table(["5 SMART iterations at mu 0.5, MLOS start, cutoff 0.9, 0.5 ppm"] + [c for c, _ in cases], rows)
     return out + [""] + [r.provenance() + "  " for _, r in cases]
-
-
-def t_recon_prune(R):
-    r = R("recon-prune-paper")
-    rows = []
-    for d in r.find(bench="recon_prune"):
-        if "variant" not in d:
-            continue
-        rows.append([d["variant"], f"{d['seconds']} ({d['cpu_s']})", f"{d['kept_seconds']} ({d['kept_cpu_s']})",
-                     f"{d['setup_s']} / {d['kept_setup_s']}", d["prune_s"], d["iteration_s"].replace(",", ", "),
-                     pct(d["updates_skipped"]), pct(d["work_pruned"]), d["q_star"],
-                     f"{d['moments_abs_x_vox']} / {d['abs_z_vox']}",
-                     f"{'yes' if d['same_as_off'] == '1' else 'no'} / {'yes' if d['kept_same_bits'] == '1' else 'no'}"])
-    if not rows:
-        return [r.provenance()]
-    mem = next((x["peak_rss_gb"] for x in r.lines if "peak_rss_gb" in x), "?")
-    out = table(["prune (5 accelerated iterations at mu 1, 300x200x200)", "first frame, s wall (CPU s)",
-                 "kept workspace, s wall (CPU s)", "setup first / kept, s", "pruning, s", "per iteration, s",
-                 "updates skipped", "work pruned", "Q*", "mean x / z error, voxels",
-                 "bits as off / kept frame's as first"], rows)
-    return out + ["", f"Peak memory {mem} GB.", "", r.provenance()]
 
 
 FIG22_PAPER = ["paper (its own fit)", "0.38", "0.066 / 0.80; 1.04 / 2.98", "", "", "", "30 min on 12 cores"]
@@ -958,7 +932,6 @@ TABLES = {
     "recon-fig22": t_fig22,
     "recon-figures": t_figures,
     "recon-mid": t_recon_mid,
-    "recon-prune": t_recon_prune,
     "piv-uniform": t_piv_uniform("piv"),
     "piv-ring": t_piv_ring("piv"),
     "uncertainty": t_uncertainty,
