@@ -84,6 +84,15 @@ optics::MicrolensArray true_array(const optics::CameraModel& camera, const Commo
                               : optics::MicrolensArray::from_lattice(lattice);
 }
 
+// How much the particles' light differs (sim::RenderOptions::brightness_spread), for the commands
+// that render particles.
+void add_brightness_option(CLI::App* cmd, double& spread) {
+  cmd->add_option("--brightness-spread", spread,
+                  "each particle's light a log-normal factor of mean 1 whose log has this spread, as a real "
+                  "seeding's sizes differ (0 to 3; 0: every particle alike)")
+      ->capture_default_str();
+}
+
 std::size_t ray_count(long long rays, const char* option) {
   if (rays <= 0) throw InputError(std::string(option) + ": must be a positive ray count, got " + std::to_string(rays));
   return std::size_t(rays);
@@ -148,16 +157,20 @@ void add_particles_command(CLI::App& simulate) {
   auto o = std::make_shared<CommonOptions>();
   auto csv = std::make_shared<std::string>();
   auto rays = std::make_shared<long long>(10000);
+  auto spread = std::make_shared<double>(0.0);
   add_common(cmd, *o, "output image (16-bit TIFF)");
   cmd->add_option("--particles", *csv, "particle list: CSV, x,y,z in mm, header allowed")->required();
   cmd->add_option("--rays", *rays, "rays per particle")->capture_default_str();
-  cmd->callback([o, csv, rays] {
+  add_brightness_option(cmd, *spread);
+  cmd->callback([o, csv, rays, spread] {
     const auto limit = thread_limit(o->threads);
     const optics::CameraModel camera = optics::load_camera_file(o->camera);
     sim::RenderOptions options;
     options.rays_per_particle = ray_count(*rays, "--rays");
     options.diffraction_sigma_mm = diffraction_mm(*o);
     options.sensor = o->sensor;
+    options.brightness_spread = *spread;
+    options.brightness_seed = seed_of(*o);
     check_output_folder(o->output);
     const auto particles = sim::read_particles_csv(*csv);
     const auto result =
@@ -214,6 +227,7 @@ void add_pair_command(CLI::App& simulate) {
     std::vector<double> uniform;
     double ring_vortex_voxel_mm = 0;
     long long rays = 10000;
+    double brightness_spread = 0;
   };
   auto p = std::make_shared<PairOptions>();
   add_common(cmd, *o, "output folder (created): frame_A.tif, frame_B.tif, particles_A.csv, particles_B.csv, flow.yaml");
@@ -234,6 +248,7 @@ void add_pair_command(CLI::App& simulate) {
                    "paper's ring vortex (eqs 15-16) at the box centre, in voxels of this size (mm)");
   flow->require_option(1);
   cmd->add_option("--rays", p->rays, "rays per particle")->capture_default_str();
+  add_brightness_option(cmd, p->brightness_spread);
 
   cmd->callback([o, p] {
     const auto limit = thread_limit(o->threads);
@@ -243,6 +258,9 @@ void add_pair_command(CLI::App& simulate) {
     options.rays_per_particle = ray_count(p->rays, "--rays");
     options.diffraction_sigma_mm = diffraction_mm(*o);
     options.sensor = o->sensor;
+    // A particle's brightness from the seed and its index: the same in both frames.
+    options.brightness_spread = p->brightness_spread;
+    options.brightness_seed = seed;
 
     const sim::Box box = p->box.empty()
                              ? sim::field_of_view_box(camera, p->z_range[0], p->z_range[1])
@@ -272,13 +290,14 @@ void add_pair_command(CLI::App& simulate) {
     }
 
     const std::filesystem::path dir = o->output;
-    std::filesystem::create_directories(dir);
     const auto a = sim::random_particles(box, count, seed);
     const auto b = sim::displace(a, *flow);
     const auto array = true_array(camera, *o);
     // Frame seeds: derived from the seed so A and B carry independent ray and sensor noise.
     const auto ra = render_with_progress(camera, array, a, options, seed * 2 + 1, "frame A");
     const auto rb = render_with_progress(camera, array, b, options, seed * 2 + 2, "frame B");
+    // Created once both frames are rendered: options that cannot render leave no folder behind.
+    std::filesystem::create_directories(dir);
     sim::write_particles_csv(dir / "particles_A.csv", a);
     sim::write_particles_csv(dir / "particles_B.csv", b);
     write_text(dir / "flow.yaml", flow->parameters_yaml());
@@ -288,7 +307,9 @@ void add_pair_command(CLI::App& simulate) {
          << num(box.min_mm[0]) << ", " << num(box.min_mm[1]) << ", " << num(box.min_mm[2]) << "]\nbox_max_mm: ["
          << num(box.max_mm[0]) << ", " << num(box.max_mm[1]) << ", " << num(box.max_mm[2])
          << "]\nrays_per_particle: " << options.rays_per_particle
-         << "\ndiffraction_sigma_mm: " << num(options.diffraction_sigma_mm) << "\nflow: flow.yaml\n";
+         << "\ndiffraction_sigma_mm: " << num(options.diffraction_sigma_mm)
+         << "\nbrightness_spread: " << num(options.brightness_spread)
+         << "\nbrightness_seed: " << options.brightness_seed << "\nflow: flow.yaml\n";
     write_text(dir / "simulation.yaml", meta.str());
     io::write_tiff(dir / "frame_A.tif", ra.image);
     io::write_tiff(dir / "frame_B.tif", rb.image);

@@ -399,14 +399,18 @@ RenderResult trace_all(const optics::CameraModel& camera, const optics::Microlen
 
 }  // namespace
 
-RenderResult render(const optics::CameraModel& camera, const optics::MicrolensArray& array,
-                    std::span<const Point3> particles_mm, const RenderOptions& options, std::uint64_t seed) {
+void check_render_options(const RenderOptions& options) {
   check_finite_nonnegative(options.aperture_diameter_mm, "aperture_diameter_mm");
   check_finite_nonnegative(options.brightness_spread, "brightness_spread");
   if (options.brightness_spread > 3) {
     throw InputError("render options: brightness_spread: the spread of a particle's log light, 0 to 3, got " +
                      std::to_string(options.brightness_spread));
   }
+}
+
+RenderResult render(const optics::CameraModel& camera, const optics::MicrolensArray& array,
+                    std::span<const Point3> particles_mm, const RenderOptions& options, std::uint64_t seed) {
+  check_render_options(options);
   std::vector<Emitter> emitters;
   emitters.reserve(particles_mm.size());
   for (std::size_t k = 0; k < particles_mm.size(); ++k) {

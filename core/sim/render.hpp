@@ -105,6 +105,10 @@ struct RenderResult {
 // Throws InputError for bad options (negative or non-finite values, array/camera mismatch).
 RenderResult render(const optics::CameraModel& camera, const optics::MicrolensArray& array,
                     std::span<const Point3> particles_mm, const RenderOptions& options, std::uint64_t seed);
+// The checks render() makes of `options` alone (a negative or non-finite aperture, a brightness
+// spread outside 0..3): InputError naming the option. For callers that take options long before
+// they render (a simulated camera's URI at open).
+void check_render_options(const RenderOptions& options);
 
 // A uniformly lit, Lambertian white target at the nominal focal plane, covering the field of
 // view of the array plus one pitch. rays_per_lens rays per lens area, from points uniform over

@@ -26,6 +26,9 @@ struct SceneSettings {
   double ppm = 0.05;
   double depth_mm = 5.0;
   std::size_t rays = 2000;
+  // Each particle's light a log-normal factor of this spread (sim::RenderOptions::brightness_spread;
+  // 0 to 3, default 0: every particle alike), drawn per pair so a particle keeps it in A and B.
+  double brightness_spread = 0;
   bool noise = false;
   // With noise: the sensor's right half read out this many counts above the left (a second
   // readout tap's offset), [0, 1000]; default 0.
@@ -81,6 +84,7 @@ class SimCamera : public CameraBase, public TriggerInput {
         readout_(std::chrono::duration_cast<std::chrono::steady_clock::duration>(
             std::chrono::duration<double>(scene.readout_s))) {
     options_.rays_per_particle = scene_.rays;
+    options_.brightness_spread = scene_.brightness_spread;
     // Checked about a hundred times per frame: a stop gives up a long ray trace within a moment.
     options_.progress = [this](double) {
       if (abort_render_) throw Cancelled("simulated camera stopped");
@@ -227,6 +231,8 @@ class SimCamera : public CameraBase, public TriggerInput {
     // read-out, not by a ray trace (a large camera's render outlasts the pairer's wait for a B,
     // which would discard whole pairs).
     const std::uint64_t t0 = host_now_ns();
+    // Each particle's brightness from the pair's seed, so both frames light it alike.
+    options_.brightness_seed = pair_seed;
     Frame fa = make_frame(a, 2 * trigger, pair_seed, t0);
     Frame fb = make_frame(b, 2 * trigger + 1, pair_seed + 1, t0 + 1000);
     if (scene_.incomplete_every && (trigger + 1) % scene_.incomplete_every == 0) fb.complete = false;
@@ -297,6 +303,7 @@ std::unique_ptr<Camera> open_sim_camera(const DeviceUri& uri, const std::filesys
                       "angle_deg",
                       "shear_per_mm",
                       "rays",
+                      "brightness_spread",
                       "noise",
                       "tap_offset",
                       "drop_every",
@@ -331,6 +338,16 @@ std::unique_ptr<Camera> open_sim_camera(const DeviceUri& uri, const std::filesys
   if (!(scene.depth_mm > 0) || scene.depth_mm > 1000) uri.fail("depth_mm: must be in (0, 1000] mm");
   scene.rays = count("rays", 2000);
   if (scene.rays == 0) uri.fail("rays: must be > 0");
+  scene.brightness_spread = uri.number_or("brightness_spread", 0.0);
+  {
+    sim::RenderOptions options;
+    options.brightness_spread = scene.brightness_spread;
+    try {
+      sim::check_render_options(options);
+    } catch (const InputError& e) {
+      uri.fail(e.what());
+    }
+  }
   const std::uint64_t noise = count("noise", 0);
   if (noise > 1) uri.fail("noise: 0 or 1");
   scene.noise = noise == 1;

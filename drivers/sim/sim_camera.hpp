@@ -21,6 +21,9 @@ namespace plenopiv::drivers {
 //   angle_deg=<a>       rotation about the y axis through the origin (default 1)
 //   shear_per_mm=<s>    x displacement per mm of y (default 0.02)
 //   rays=<n>            rays per particle (default 2000)
+//   brightness_spread=<s> each particle's light a log-normal factor of mean 1 whose log has this
+//                       spread, as a real seeding's sizes differ; kept by the particle in both
+//                       frames of a pair (0..3, default 0: every particle alike)
 //   noise=0|1           shot and read noise, dark offset, 12-bit output (default 0)
 //   tap_offset=<counts> with noise=1: the sensor's right half read out this many counts higher, as
 //                       a two-tap CCD's second tap (0..1000, default 0)
@@ -29,6 +32,8 @@ namespace plenopiv::drivers {
 //   disconnect_after=<n> fault: the camera is lost after n triggers (status Lost)
 //   fail_after=<n>      fault: rendering trigger n throws (the camera fails for good, as an
 //                       out-of-memory render would)
+//   flow_dt_us=<us>     the pulse separation the flow's displacements belong to; a trigger that
+//                       reports another scales them (default 100)
 //   readout_ms=<ms>     a pair is rendered this long after its trigger, when frame B would have
 //                       been read out, not while the trigger times the laser pulses (default 10)
 //   array_rotation_rad=<r> the true lens array turned by r (counter-clockwise, |r| <= 0.1) from the

@@ -6,6 +6,7 @@
 #include <fstream>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <string>
 
@@ -77,6 +78,28 @@ TEST(SimCamera, ASecondTapsOffsetRaisesTheRightHalf) {
         ASSERT_EQ(a2.at(x, y), x < a1.width / 2 ? a1.at(x, y) : std::min(4095, a1.at(x, y) + 30)) << x << ", " << y;
       else
         ASSERT_LE(a2.at(x, y), 30) << x << ", " << y;
+}
+
+// Particles that differ in brightness keep it from frame A to frame B: with the scene at rest,
+// each frame's light over the same frame without the spread is the same ratio (the particles'
+// mean factor), up to the rays' own noise.
+TEST(SimCamera, ParticlesOfDifferentBrightnessKeepItInBothFrames) {
+  auto spread = open("seed=7&dx_mm=0&brightness_spread=1");
+  auto alike = open("seed=7&dx_mm=0");
+  auto zero = open("seed=7&dx_mm=0&brightness_spread=0");
+  for (Camera* c : {spread.get(), alike.get(), zero.get()}) run_triggers(*c, 1);
+  const auto s = spread->next_pair(20s), a = alike->next_pair(20s), z = zero->next_pair(20s);
+  ASSERT_TRUE(s && a && z);
+  EXPECT_EQ(z->a.image.pixels, a->a.image.pixels);  // a spread of 0 is every particle alike
+  auto light = [](const ImageU16& image) {
+    double sum = 0;
+    for (auto v : image.pixels) sum += v;
+    return sum;
+  };
+  const double ratio_a = light(s->a.image) / light(a->a.image), ratio_b = light(s->b.image) / light(a->b.image);
+  EXPECT_NE(s->a.image.pixels, a->a.image.pixels);
+  EXPECT_NEAR(ratio_b / ratio_a, 1.0, 0.02) << ratio_a << " " << ratio_b;
+  std::printf("light with the spread over without: frame A %.4f, frame B %.4f\n", ratio_a, ratio_b);
 }
 
 // Laser pulses reported on the trigger input set how far the scene moves: pulses 200 us apart
@@ -170,6 +193,11 @@ TEST(SimCamera, BadUrisAreNamed) {
   EXPECT_NE(message("sim://?flow_dt_us=0").find("flow_dt_us"), std::string::npos);
   EXPECT_NE(message("sim://?tap_offset=30").find("tap_offset: needs noise=1"), std::string::npos);
   EXPECT_NE(message("sim://?noise=1&tap_offset=5000").find("tap_offset: must be in [0, 1000]"), std::string::npos);
+  const std::string bright = message("sim://?brightness_spread=5");
+  EXPECT_NE(bright.find("sim://?brightness_spread=5"), std::string::npos) << bright;
+  EXPECT_NE(bright.find("brightness_spread: the spread of a particle's log light, 0 to 3"), std::string::npos)
+      << bright;
+  EXPECT_NE(message("sim://?brightness_spread=-1").find("brightness_spread"), std::string::npos);
   // A box of no depth is the URI's error, named with its key, not a geometry failure later.
   const std::string flat = message("sim://?depth_mm=0");
   EXPECT_NE(flat.find("sim://?depth_mm=0"), std::string::npos) << flat;

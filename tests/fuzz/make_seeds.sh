@@ -179,7 +179,7 @@ while IFS= read -r uri; do
   printf '%s' "$uri" > "$out/device_uri/uri-$((i++))"
 done <<'EOF'
 sim://?seed=1
-sim://?seed=3&ppm=0.2&flow=ring&dx_mm=0.1&rays=100&noise=1&tap_offset=30&readout_ms=5&flow_dt_us=100
+sim://?seed=3&ppm=0.2&flow=ring&dx_mm=0.1&rays=100&noise=1&tap_offset=30&brightness_spread=0.5&readout_ms=5&flow_dt_us=100
 sim://?flow=rotation&angle_deg=2&drop_every=3&incomplete_every=5&disconnect_after=7&fail_after=9
 sim://?flow=shear&shear_per_mm=0.01&depth_mm=4&voxel_mm=0.125&array_rotation_rad=0.01
 sim://?clock=virtual&uncertainty_us=5

@@ -147,6 +147,31 @@ TEST(SimulateCli, FramePairWithItsTruth) {
   EXPECT_EQ(io::read_tiff_u16(pair / "frame_B.tif").pixels, io::read_tiff_u16(again / "frame_B.tif").pixels);
 }
 
+// Rays emitted per frame, from `simulate pair`'s report ("<dir>/frame_A.tif: N rays, ...").
+double emitted(const std::string& out, const std::string& frame) {
+  const auto at = out.find(frame + ": ");
+  return at == std::string::npos ? -1 : std::stod(out.substr(at + frame.size() + 2));
+}
+
+TEST(SimulateCli, PairOfParticlesThatDifferInBrightness) {
+  std::string out;
+  const fs::path pair = dir() / "bright";
+  ASSERT_EQ(simulate({"pair", "--camera", camera, "--count", "200", "--uniform", "0.1,0,0", "--rays", "500", "--seed",
+                      "7", "--brightness-spread", "1", "-o", pair.string()},
+                     out),
+            0)
+      << out;
+  // Each particle's factor is drawn from the seed and its index: both frames emit the same rays,
+  // 200 x 500 times the particles' mean factor (1 on average; 0.93 measured).
+  const double a = emitted(out, (pair / "frame_A.tif").string()), b = emitted(out, (pair / "frame_B.tif").string());
+  EXPECT_EQ(a, b) << out;
+  EXPECT_NE(a, 200.0 * 500.0) << out;
+  EXPECT_NEAR(a / (200.0 * 500.0), 1.0, 0.3) << out;  // the mean of 200 factors: sd 0.09
+  const YAML::Node meta = load_yaml_file(pair / "simulation.yaml");
+  EXPECT_EQ(meta["brightness_spread"].as<double>(), 1.0);
+  EXPECT_EQ(meta["brightness_seed"].as<std::uint64_t>(), 7u);
+}
+
 TEST(SimulateCli, BadInputIsAClearError) {
   write(dir() / "zyx.csv", "z,y,x\n1,2,3\n");
   write(dir() / "four.csv", "1,2,3,4\n");
@@ -171,6 +196,9 @@ TEST(SimulateCli, BadInputIsAClearError) {
       {{"pair", "--camera", camera, "--count", "10", "--flow", (dir() / "tornado.yaml").string(), "-o",
         (dir() / "nopair").string()},
        "tornado.yaml: type: unknown flow 'tornado'"},
+      {{"pair", "--camera", camera, "--count", "10", "--uniform", "0,0,0", "--brightness-spread", "4", "-o",
+        (dir() / "nopair").string()},
+       "brightness_spread: the spread of a particle's log light, 0 to 3, got 4"},
   };
   for (const Case& c : cases) {
     std::string out;
