@@ -13,7 +13,7 @@
 //             [--time-sweep [--time-repeats N]] [--z-centre MM] [--compare-passes 'P1;P2;...']
 //             [--prune-threshold F [--prune-scope volume|slice]] [--depth-response-ppm F]
 //             [--sparse-sweep [--sparse-repeats N] [--sparse-variants V,..]]
-//             [--live B,K,N,P ... [--live-depth-prefilter K] [--live-only]]
+//             [--live B,K,N,P ... [--live-depth-prefilter K] [--live-prune-threshold T] [--live-only]]
 //     --iterations/--mu/--accelerate/--dark-cutoff: MART for the headline rows (default the
 //              paper's 5 at mu 0.5, not accelerated, MartSettings' dark-pixel cutoff; the sweep's
 //              rows still start from the paper's settings).
@@ -60,6 +60,8 @@
 //              volumes of its grid (exact_*).
 //              Repeat for several tiers.
 //     --live-depth-prefilter K: the --live tiers' depth prefilter (default the headline's).
+//     --live-prune-threshold T: the --live tiers' MART prune cut, of the same scope (default the
+//              headline's; run-paper.yaml's live tier takes 0.1).
 //     --live-only: the --live tiers alone (with --no-sweep), without the headline rows.
 //              Each tier's line has its sigma against its errors off the axis band (ratio_*, within_*)
 //              and, with --depth-response-ppm, the tier measures its own response (in setup_s); two
@@ -235,6 +237,7 @@ int main(int argc, char** argv) {
   int depth_voxel_factor = 1;            // the headline's voxels this many times as deep as wide
   int lateral_divisor = 1;               // and 0.125 / this mm across
   int live_depth_prefilter = -1;         // the --live tiers' depth prefilter; < 0: the headline's
+  double live_prune_threshold = -1;      // the --live tiers' prune cut; < 0: the headline's
   std::vector<std::string> live;         // --live B,K,N,P, one per live tier
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--no-sweep"))
@@ -308,6 +311,8 @@ int main(int argc, char** argv) {
       passes = argv[++i];
     else if (!std::strcmp(argv[i], "--live-depth-prefilter") && i + 1 < argc)
       live_depth_prefilter = std::stoi(argv[++i]);
+    else if (!std::strcmp(argv[i], "--live-prune-threshold") && i + 1 < argc)
+      live_prune_threshold = std::stod(argv[++i]);
     else if (!std::strcmp(argv[i], "--voxel-z-factor") && i + 1 < argc)
       depth_voxel_factor = std::max(1, std::stoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--voxel-xy-divisor") && i + 1 < argc) {
@@ -373,7 +378,7 @@ int main(int argc, char** argv) {
         "[--z-centre MM] [--compare-passes 'P1;P2'] "
         "[--prune-threshold F "
         "[--prune-scope volume|slice]] [--depth-response-ppm F] [--sparse-sweep [--sparse-repeats N] "
-        "[--sparse-variants V,..]] [--live B,K,N,P [--live-depth-prefilter K] [--live-only]]\n");
+        "[--sparse-variants V,..]] [--live B,K,N,P [--live-depth-prefilter K] [--live-prune-threshold T] [--live-only]]\n");
     return 2;
   }
   recon::PruneScope scope = recon::PruneScope::volume;
@@ -518,6 +523,7 @@ int main(int argc, char** argv) {
       s.mart.iterations = std::stoi(tier.substr(c2 + 1, c3 - c2 - 1));
       s.correlation.passes = piv::parse_passes(tier.substr(c3 + 1));
       if (tier_prefilter >= 0) s.correlation.depth_prefilter = tier_prefilter;
+      if (live_prune_threshold >= 0) s.mart.prune_threshold = live_prune_threshold;
       s.correlation.spectral_whitening = 0;  // plain, as run-paper.yaml's live tier
       s.correlation.uncertainty_stride = 1;  // every vector's own, as run-paper.yaml's live tier
       t = now_s();
@@ -552,7 +558,7 @@ int main(int argc, char** argv) {
       }
       std::printf(
           "bench=e2e case=%s variant=live tier=%s binning=%d depth_binning=%d depth_prefilter=%d pixel_binning=%d "
-          "voxels=%zu iterations=%d passes=%s setup_s=%.2f "
+          "voxels=%zu iterations=%d prune_threshold=%.3g passes=%s setup_s=%.2f "
           "first_wall_s=%.2f "
           "wall_s=%.2f first_pair_s=%.2f pair_s=%.2f recon_a_s=%.2f recon_b_s=%.2f correlate_s=%.2f rms_u=%.3f "
           "rms_v=%.3f rms_w=%.3f rms=%.3f "
@@ -561,7 +567,8 @@ int main(int argc, char** argv) {
           "exact_off_axis_band_rms_u=%.3f exact_off_axis_band_rms_v=%.3f exact_off_axis_band_rms_w=%.3f "
           "depth_response_ppm=%g%s peak_rss_gb=%.2f\n",
           scale.c_str(), tier.c_str(), voxel_factor, depth_factor, s.correlation.depth_prefilter, s.pixel_binning,
-          s.grid.count(), s.mart.iterations, tier.substr(c3 + 1).c_str(), setup_s, first_wall_s, wall_s,
+          s.grid.count(), s.mart.iterations, s.mart.prune_threshold, tier.substr(c3 + 1).c_str(), setup_s,
+          first_wall_s, wall_s,
           first.times.reconstruct_a_s + first.times.reconstruct_b_s + first.times.correlate_s,
           again.times.reconstruct_a_s + again.times.reconstruct_b_s + again.times.correlate_s,
           again.times.reconstruct_a_s, again.times.reconstruct_b_s, again.times.correlate_s, el.rms[0], el.rms[1],

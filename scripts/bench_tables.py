@@ -78,6 +78,8 @@ RUN = ["--voxel-z-factor", "2", "--mu", "1", "--iterations", "4", "--intensity-t
 # K x K, N MART iterations, passes P (BzDpF: D times as deep, F depth prefilter passes; the cubes'
 # tiers take 4). RUN_PAPER_LIVE is run-paper.yaml's `live:` tier.
 RUN_PAPER_LIVE = "3z6p1,4,4,16x16x8@50+2,8x8x4@50"
+# Its MART's prune cut (of each depth slice's peak), which every live tier here takes.
+RUN_PAPER_LIVE_PRUNE = "0.1"
 LIVE_TIERS = ["4,4,5,16@50+4,8@50", "4,4,8,16@50+4,8@50", "3,4,3,16@50+4,8@50", "3,4,4,16@50+4,8@50", RUN_PAPER_LIVE,
               "2z4p2,4,4,24x24x12@50+3,12x12x6@50",
               "3,4,5,16@50+4,8@50", "3,2,3,16@50+4,8@50", "3,1,3,16@50+4,8@50", "2,2,3,16@50+4,8@50"]
@@ -102,7 +104,8 @@ BENCHES = {
     "e2e-full": ("paper", ["build/bin/bench_e2e", "full", "--no-sweep", "--steady"] + RUN_PAPER
                  + ["--compare-passes", RUN_PAPER_PASSES], None),
     "e2e-full-live": ("paper", ["build/bin/bench_e2e", "full", "--no-sweep"] + RUN_PAPER
-                      + ["--live-depth-prefilter", "4"] + [a for tier in LIVE_TIERS for a in ("--live", tier)], None),
+                      + ["--live-depth-prefilter", "4", "--live-prune-threshold", RUN_PAPER_LIVE_PRUNE]
+                      + [a for tier in LIVE_TIERS for a in ("--live", tier)], None),
     "rotated-shear": ("paper", ["build/bin/bench_rotated_shear", "0.1"], None),
     "rotated-shear-paper-accuracy": ("paper", ["build/bin/bench_rotated_shear", "0.1", "0.5", "full",
                                                "systemd/config/process-paper.yaml"], None),
