@@ -88,7 +88,7 @@ TEST(RunConfig, ShippedPaperScaleConfigParses) {
   EXPECT_EQ(live.mart.iterations, 4);
   EXPECT_TRUE(live.mart.accelerate);
   EXPECT_EQ(live.mart.prune_scope, recon::PruneScope::slice);  // the live tier keeps the full settings'
-  EXPECT_DOUBLE_EQ(live.mart.prune_threshold, 0.1);  // its own cut: ghosts of 4 coarse iterations
+  EXPECT_DOUBLE_EQ(live.mart.prune_threshold, 0.1);            // its own cut: ghosts of 4 coarse iterations
   ASSERT_EQ(live.correlation.passes.size(), 2u);
   EXPECT_EQ(live.correlation.passes[1].window, (std::array<int, 3>{8, 8, 4}));  // 3 mm cubes
   EXPECT_EQ(live.correlation.depth_prefilter, 1);
