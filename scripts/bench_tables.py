@@ -109,7 +109,7 @@ BENCHES = {
     "rotated-shear": ("paper", ["build/bin/bench_rotated_shear", "0.1"], None),
     "rotated-shear-paper-accuracy": ("paper", ["build/bin/bench_rotated_shear", "0.1", "0.5", "full",
                                                "systemd/config/process-paper.yaml"], None),
-    "e2e-full-sweep": ("paper", ["build/bin/bench_e2e", "full", "--no-sweep", "--time-sweep", "--time-repeats", "3"]
+    "e2e-full-sweep": ("paper", ["build/bin/bench_e2e", "full", "--no-sweep", "--time-sweep", "--time-repeats", "5"]
                        + RUN_PAPER,
                        "e2e_pareto_full.png"),
     "e2e-full-sparse": ("paper", ["build/bin/bench_e2e", "full", "--no-sweep", "--sparse-sweep", "--sparse-repeats",
@@ -433,7 +433,10 @@ def t_e2e_variants(name):
 MART_FLOOR_LABELS = {"paper_5_it_mu_0.5": "the paper's: 5 plain iterations at mu 0.5, no floor",
                      "8_acc_floor_3": "**8 accelerated, floor 3 (run-paper.yaml)**",
                      "20_acc": "20 accelerated, no floor",
-                     "20_acc_floor_3": "**20 accelerated, floor 3 (process.yaml's MART; it takes two passes more)**"}
+                     "20_acc_floor_3": "**20 accelerated, floor 3 (process.yaml's MART; it takes two passes more)**",
+                     "8_acc_floor_3_cut_0": "8 accelerated, floor 3, no prune cut (exact zeros only)",
+                     "8_acc_floor_3_cut_0.03": "8 accelerated, floor 3, prune cut 3e-2 of the slice's peak",
+                     "8_acc_floor_3_cut_0.1": "8 accelerated, floor 3, prune cut 1e-1 of the slice's peak"}
 
 
 ISA_LABELS = {"avx2": "AVX2", "baseline": "baseline x86-64", "avx512": "AVX-512"}
