@@ -58,9 +58,6 @@ def shipped(mart, passes=RUN_PAPER_PASSES):
 # run-paper.yaml's full tier computes the per-vector sigma every second node per axis and looks for
 # the last pass's peaks at the predictor first.
 RUN_PAPER = shipped(RUN_PAPER_MART) + ["--uncertainty-stride", "2", "--final-peak-search", "near_predictor"]
-# The same on cubic 0.125 mm voxels (the depth prefilter's four passes there) with core/piv's
-# default passes: the small camera's sparse sweep.
-RUN_PAPER_CUBES = RUN_PAPER_MART + ["--depth-prefilter", "4"]
 # process.yaml's: run-paper.yaml's settings with 20 iterations and seven passes.
 PROCESS = shipped(shipped_mart(20), PROCESS_PASSES)
 # process-paper.yaml's: run-paper.yaml's box and correlation in mm on voxels half a lens pitch
@@ -84,7 +81,7 @@ LIVE_TIERS = ["4,4,5,16@50+4,8@50", "4,4,8,16@50+4,8@50", "3,4,3,16@50+4,8@50", 
               "2z4p2,4,4,24x24x12@50+3,12x12x6@50",
               "3,4,5,16@50+4,8@50", "3,2,3,16@50+4,8@50", "3,1,3,16@50+4,8@50", "2,2,3,16@50+4,8@50"]
 
-# MART's prune thresholds the sparse sweeps compare, on both cameras.
+# MART's prune thresholds the sparse sweeps compare.
 SPARSE_VARIANTS = "off,zeros,1e-2,slice-1e-2,slice-3e-2,slice-1e-1,slice-1e-1-reach2,slice-2e-1,slice-2e-1-reach2"
 
 # The paper ring through other sensors (bench/sensor_cases.sh SENSOR/BLACK_LEVEL[/EXTRA]): the
@@ -117,9 +114,6 @@ BENCHES = {
     "e2e-full-sparse-spread": ("paper", ["build/bin/bench_e2e", "full", "--no-sweep", "--brightness-spread", "0.7",
                                          "--sparse-sweep", "--sparse-repeats", "1", "--sparse-variants",
                                          SPARSE_VARIANTS] + RUN_PAPER, None),
-    "e2e-reduced-sparse": ("quick", ["build/bin/bench_e2e", "reduced", "--no-sweep", "--sparse-sweep",
-                                     "--sparse-repeats", "5", "--sparse-variants", SPARSE_VARIANTS] + RUN_PAPER_CUBES,
-                           None),
     "e2e-full-sensors": ("paper", ["bench/sensor_cases.sh"] + SENSOR_CASES + ["--"] + RUN_PAPER, None),
     "e2e-full-process": ("paper", ["build/bin/bench_e2e", "full", "--no-sweep", "--steady"] + PROCESS,
                          None),
@@ -466,8 +460,7 @@ SPARSE_LABELS = {"off": "off (every active voxel, every iteration)", "zeros": "e
 def t_sparse(R):
     rows = []
     for name, case in (("e2e-full-sparse", "paper"),
-                       ("e2e-full-sparse-spread", "paper, particles' light spread 0.7 (log-normal)"),
-                       ("e2e-reduced-sparse", "reduced")):
+                       ("e2e-full-sparse-spread", "paper, particles' light spread 0.7 (log-normal)")):
         r = R(name)
         for d in r.find(variant="sparse"):
             prune = d["prune"]
@@ -484,8 +477,7 @@ def t_sparse(R):
     out = table(["case", "prune", "s per pair (over off): wall; CPU", "s: recon A + B + correlate",
                  "A: updates skipped / work pruned", "volume L2 vs off", "RMS u / v / w",
                  "off the axis band", "same vectors as off"], rows)
-    return out + ["", R("e2e-full-sparse").provenance() + "  ", R("e2e-full-sparse-spread").provenance() + "  ",
-                  R("e2e-reduced-sparse").provenance()]
+    return out + ["", R("e2e-full-sparse").provenance() + "  ", R("e2e-full-sparse-spread").provenance()]
 
 
 def sensor_label(sensor):
