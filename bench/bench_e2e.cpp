@@ -11,9 +11,11 @@
 //             [--passes P] [--early-interpolation sinc|cubic] [--voxel-z-factor D] [--uncertainty-stride N]
 //             [--final-peak-search all_shifts|near_predictor] [--steady]
 //             [--time-sweep [--time-repeats N]] [--z-centre MM] [--compare-passes 'P1;P2;...']
-//             [--prune-threshold F [--prune-scope volume|slice]] [--depth-response-ppm F]
+//             [--prune-threshold F [--prune-scope volume|slice]] [--prune-local-threshold F]
+//             [--depth-response-ppm F]
 //             [--sparse-sweep [--sparse-repeats N] [--sparse-variants V,..]]
-//             [--live B,K,N,P ... [--live-depth-prefilter K] [--live-prune-threshold T] [--live-only]]
+//             [--live B,K,N,P ... [--live-depth-prefilter K] [--live-prune-threshold T]
+//              [--live-prune-local-threshold T] [--live-only]]
 //     --iterations/--mu/--accelerate/--dark-cutoff: MART for the headline rows (default the
 //              paper's 5 at mu 0.5, not accelerated, MartSettings' dark-pixel cutoff; the sweep's
 //              rows still start from the paper's settings).
@@ -62,6 +64,8 @@
 //     --live-depth-prefilter K: the --live tiers' depth prefilter (default the headline's).
 //     --live-prune-threshold T: the --live tiers' MART prune cut, of the same scope (default the
 //              headline's; run-paper.yaml's live tier takes 0.1).
+//     --live-prune-local-threshold T: the --live tiers' cut against the neighbourhood's peak (default
+//              the headline's; run-paper.yaml's live tier takes 0: off).
 //     --live-only: the --live tiers alone (with --no-sweep), without the headline rows.
 //              Each tier's line has its sigma against its errors off the axis band (ratio_*, within_*)
 //              and, with --depth-response-ppm, the tier measures its own response (in setup_s); two
@@ -69,6 +73,8 @@
 //              peak searched over all shifts and at the predictor first, side by side.
 //     --prune-threshold: MART's prune threshold for the headline rows (default 0: exact zeros);
 //              --prune-scope: of the volume's peak (default) or of each depth slice's.
+//     --prune-local-threshold F: the headline's cut against each voxel's neighbourhood's peak
+//              (MartSettings::prune_local_threshold; default 0: off).
 //     --depth-response-ppm F: the headline's w corrected for MART's depth response measured at F
 //              particles per microlens (reconstruction.depth_response_ppm; default 0: off); its
 //              set-up time is in weights_s.
@@ -79,7 +85,8 @@
 //              reconstruction"); --sparse-repeats N: the variants interleaved N times, times the
 //              medians (default 1); --sparse-variants: a subset of off,zeros,1e-3,3e-3,1e-2,3e-2,
 //              slice-1e-2,slice-3e-2,slice-1e-1,slice-2e-1,slice-1e-1-reach2,slice-2e-1-reach2,
-//              slice-1e-1-reach4,slice-2e-1-reach4 starting with off (default all).
+//              slice-1e-1-reach4,slice-2e-1-reach4,slice-1e-2-local-5e-2,slice-1e-2-local-1e-1 (-local-T:
+//              MART's prune_local_threshold T) starting with off (default all).
 //     --intensity-threshold: the correlation's ghost floor for the headline rows, times each
 //              volume's mean (default 0, the paper's correlation); they then also print the
 //              correlation without it on the same volumes.
@@ -229,16 +236,18 @@ int main(int argc, char** argv) {
   std::string sparse_variants;  // empty: all
   double prune_threshold = recon::MartSettings{}.prune_threshold;
   std::string prune_scope = "volume";
+  double prune_local_threshold = recon::MartSettings{}.prune_local_threshold;
   double depth_response_ppm = 0.0;
   std::string compare_passes;  // pass lists separated by ';'
   std::string passes;          // the headline's passes (--passes syntax); empty: core/piv's default
   piv::Interpolation early_interpolation = piv::CorrelationSettings{}.early_interpolation;
-  std::string early_interpolation_name;  // --early-interpolation, checked below
-  int depth_voxel_factor = 1;            // the headline's voxels this many times as deep as wide
-  int lateral_divisor = 1;               // and 0.125 / this mm across
-  int live_depth_prefilter = -1;         // the --live tiers' depth prefilter; < 0: the headline's
-  double live_prune_threshold = -1;      // the --live tiers' prune cut; < 0: the headline's
-  std::vector<std::string> live;         // --live B,K,N,P, one per live tier
+  std::string early_interpolation_name;    // --early-interpolation, checked below
+  int depth_voxel_factor = 1;              // the headline's voxels this many times as deep as wide
+  int lateral_divisor = 1;                 // and 0.125 / this mm across
+  int live_depth_prefilter = -1;           // the --live tiers' depth prefilter; < 0: the headline's
+  double live_prune_threshold = -1;        // the --live tiers' prune cut; < 0: the headline's
+  double live_prune_local_threshold = -1;  // the --live tiers' neighbourhood cut; < 0: the headline's
+  std::vector<std::string> live;           // --live B,K,N,P, one per live tier
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--no-sweep"))
       sweep = false;
@@ -313,6 +322,10 @@ int main(int argc, char** argv) {
       live_depth_prefilter = std::stoi(argv[++i]);
     else if (!std::strcmp(argv[i], "--live-prune-threshold") && i + 1 < argc)
       live_prune_threshold = std::stod(argv[++i]);
+    else if (!std::strcmp(argv[i], "--live-prune-local-threshold") && i + 1 < argc)
+      live_prune_local_threshold = std::stod(argv[++i]);
+    else if (!std::strcmp(argv[i], "--prune-local-threshold") && i + 1 < argc)
+      prune_local_threshold = std::stod(argv[++i]);
     else if (!std::strcmp(argv[i], "--voxel-z-factor") && i + 1 < argc)
       depth_voxel_factor = std::max(1, std::stoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--voxel-xy-divisor") && i + 1 < argc) {
@@ -342,14 +355,15 @@ int main(int argc, char** argv) {
                 uncertainty_stride != piv::CorrelationSettings{}.uncertainty_stride ||
                 final_peak_search != piv::CorrelationSettings{}.final_peak_search ||
                 prune_threshold != recon::MartSettings{}.prune_threshold || prune_scope != "volume" ||
-                depth_response_ppm != 0.0)) {
+                prune_local_threshold != recon::MartSettings{}.prune_local_threshold || depth_response_ppm != 0.0)) {
     std::fprintf(
         stderr,
         "bench_e2e: "
         "--iterations/--mu/--accelerate/--dark-cutoff/--noise-threshold/--sensor-blur-mm/--intensity-threshold/"
         "--final-smoothing/--depth-prefilter/--spectral-whitening/--passes/--early-interpolation/"
         "--voxel-z-factor/--voxel-xy-divisor/"
-        "--uncertainty-stride/--final-peak-search/--z-centre/--depth-response-ppm change the "
+        "--uncertainty-stride/--final-peak-search/--z-centre/--prune-threshold/--prune-scope/"
+        "--prune-local-threshold/--depth-response-ppm change the "
         "headline rows only; use them with --no-sweep\n");
     return 2;
   }
@@ -377,9 +391,9 @@ int main(int argc, char** argv) {
         "[--final-peak-search all_shifts|near_predictor] [--steady [--steady-repeats N]] [--time-sweep] "
         "[--z-centre MM] [--compare-passes 'P1;P2'] "
         "[--prune-threshold F "
-        "[--prune-scope volume|slice]] [--depth-response-ppm F] [--sparse-sweep [--sparse-repeats N] "
-        "[--sparse-variants V,..]] [--live B,K,N,P [--live-depth-prefilter K] [--live-prune-threshold T] "
-        "[--live-only]]\n");
+        "[--prune-scope volume|slice]] [--prune-local-threshold F] [--depth-response-ppm F] "
+        "[--sparse-sweep [--sparse-repeats N] [--sparse-variants V,..]] [--live B,K,N,P [--live-depth-prefilter K] "
+        "[--live-prune-threshold T] [--live-prune-local-threshold T] [--live-only]]\n");
     return 2;
   }
   recon::PruneScope scope = recon::PruneScope::volume;
@@ -418,6 +432,7 @@ int main(int argc, char** argv) {
   settings.mart.sensor_blur_sigma_mm = sensor_blur_mm;
   settings.mart.prune_threshold = prune_threshold;
   settings.mart.prune_scope = scope;
+  settings.mart.prune_local_threshold = prune_local_threshold;
   settings.depth_response_ppm = depth_response_ppm;
   settings.black_level = black_level;
   settings.correlation.intensity_threshold_of_mean = intensity_threshold;
@@ -525,6 +540,7 @@ int main(int argc, char** argv) {
       s.correlation.passes = piv::parse_passes(tier.substr(c3 + 1));
       if (tier_prefilter >= 0) s.correlation.depth_prefilter = tier_prefilter;
       if (live_prune_threshold >= 0) s.mart.prune_threshold = live_prune_threshold;
+      if (live_prune_local_threshold >= 0) s.mart.prune_local_threshold = live_prune_local_threshold;
       s.correlation.spectral_whitening = 0;  // plain, as run-paper.yaml's live tier
       s.correlation.uncertainty_stride = 1;  // every vector's own, as run-paper.yaml's live tier
       t = now_s();
@@ -621,18 +637,18 @@ int main(int argc, char** argv) {
   const Errors e = errors_against(base.correlation.field, flow, voxel);
   std::printf(
       "bench=e2e case=%s variant=reconstructed iterations=%d mu=%.2f accelerate=%d dark_cutoff=%.3g "
-      "sensor_blur_mm=%.4g prune_threshold=%.3g prune_scope=%s "
+      "sensor_blur_mm=%.4g prune_threshold=%.3g prune_scope=%s prune_local_threshold=%.3g "
       "intensity_threshold=%.3g final_smoothing=%d depth_prefilter=%d recon_a_s=%.2f recon_b_s=%.2f "
       "correlate_s=%.2f skipped_a=%.3f skipped_b=%.3f updates_skipped_a=%.3f updates_skipped_b=%.3f rms_u=%.3f "
       "rms_v=%.3f rms_w=%.3f rms=%.3f valid=%.3f "
       "off_axis_band_rms_u=%.3f off_axis_band_rms_v=%.3f off_axis_band_rms_w=%.3f off_axis_band_gain_u=%.3f "
       "off_axis_band_gain_v=%.3f off_axis_band_gain_w=%.3f peak_rss_gb=%.2f\n",
       scale.c_str(), iterations, mu, int(accelerate), dark_cutoff, sensor_blur_mm, prune_threshold, prune_scope.c_str(),
-      intensity_threshold, final_smoothing, depth_prefilter, base.times.reconstruct_a_s, base.times.reconstruct_b_s,
-      base.times.correlate_s, base.skipped_a.fraction_skipped(), base.skipped_b.fraction_skipped(),
-      base.skipped_a.fraction_updates_skipped(), base.skipped_b.fraction_updates_skipped(), e.rms[0], e.rms[1],
-      e.rms[2], e.total, e.valid_fraction, e.off_band[0], e.off_band[1], e.off_band[2], e.off_band_gain[0],
-      e.off_band_gain[1], e.off_band_gain[2], bench::peak_rss_gb());
+      prune_local_threshold, intensity_threshold, final_smoothing, depth_prefilter, base.times.reconstruct_a_s,
+      base.times.reconstruct_b_s, base.times.correlate_s, base.skipped_a.fraction_skipped(),
+      base.skipped_b.fraction_skipped(), base.skipped_a.fraction_updates_skipped(),
+      base.skipped_b.fraction_updates_skipped(), e.rms[0], e.rms[1], e.rms[2], e.total, e.valid_fraction, e.off_band[0],
+      e.off_band[1], e.off_band[2], e.off_band_gain[0], e.off_band_gain[1], e.off_band_gain[2], bench::peak_rss_gb());
   // The voxels each MART iteration updated (its live set) as a share of the reconstructed box
   // (guard slices included), frame A.
   std::printf("bench=e2e case=%s variant=reconstructed live_share_a=", scale.c_str());
@@ -859,6 +875,7 @@ int main(int argc, char** argv) {
       double threshold;
       recon::PruneScope scope = recon::PruneScope::volume;
       int depth_reach = 0;
+      double local = 0.0;  // MartSettings::prune_local_threshold
     };
     std::vector<Prune> variants;
     constexpr auto slice = recon::PruneScope::slice;
@@ -868,7 +885,8 @@ int main(int argc, char** argv) {
           Prune{"slice-3e-2", true, 3e-2, slice}, Prune{"slice-1e-1", true, 1e-1, slice},
           Prune{"slice-2e-1", true, 2e-1, slice}, Prune{"slice-1e-1-reach2", true, 1e-1, slice, 2},
           Prune{"slice-2e-1-reach2", true, 2e-1, slice, 2}, Prune{"slice-1e-1-reach4", true, 1e-1, slice, 4},
-          Prune{"slice-2e-1-reach4", true, 2e-1, slice, 4}})
+          Prune{"slice-2e-1-reach4", true, 2e-1, slice, 4}, Prune{"slice-1e-2-local-5e-2", true, 1e-2, slice, 0, 5e-2},
+          Prune{"slice-1e-2-local-1e-1", true, 1e-2, slice, 0, 1e-1}})
       if (sparse_variants.empty() ||
           ("," + sparse_variants + ",").find("," + std::string(pr.name) + ",") != std::string::npos)
         variants.push_back(pr);
@@ -889,6 +907,7 @@ int main(int argc, char** argv) {
         s.mart.prune_threshold = variants[v].threshold;
         s.mart.prune_scope = variants[v].scope;
         s.mart.prune_depth_reach = variants[v].depth_reach;
+        s.mart.prune_local_threshold = variants[v].local;
         const double cpu0 = bench::cpu_seconds();
         process::PairResult r = process::process_pair(op, a, b, s, {}, &workspace, &correlation_workspace);
         cpu[v].push_back(bench::cpu_seconds() - cpu0);
@@ -955,7 +974,8 @@ int main(int argc, char** argv) {
       bool accelerate;
       double floor;
       Isa build = best_isa();
-      double prune_threshold = -1;  // MART's cut (the headline's scope); < 0: the headline's
+      double prune_threshold = -1;        // MART's cut (the headline's scope); < 0: the headline's
+      double prune_local_threshold = -1;  // MART's neighbourhood cut; < 0: the headline's
     };
     std::vector<Row> rows;
     const int np = int(settings.correlation.passes.size());
@@ -969,10 +989,13 @@ int main(int argc, char** argv) {
                                               {"10_acc_floor_3", 10, 1, true, 3},
                                               {"12_acc_floor_3", 12, 1, true, 3},
                                               {"14_acc_floor_3", 14, 1, true, 3},
-                                              {"20_acc", 20, 1, true, 0},
-                                              {"20_acc_floor_3", 20, 1, true, 3},
-                                              // The prune cut about run-paper.yaml's: none (exact zeros), 3e-2, 1e-1.
-                                              {"8_acc_floor_3_cut_0", 8, 1, true, 3, best_isa(), 0.0},
+                                              // process.yaml's MART: no cut against the neighbourhood's peak.
+                                              {"20_acc", 20, 1, true, 0, best_isa(), -1, 0.0},
+                                              {"20_acc_floor_3", 20, 1, true, 3, best_isa(), -1, 0.0},
+                                              // The prune cut about run-paper.yaml's: none (exact zeros), 3e-2, 1e-1 of
+                                              // the slice's peak, and the slice's 1e-2 without the neighbourhood's.
+                                              {"8_acc_floor_3_cut_0", 8, 1, true, 3, best_isa(), 0.0, 0.0},
+                                              {"8_acc_floor_3_local_0", 8, 1, true, 3, best_isa(), -1, 0.0},
                                               {"8_acc_floor_3_cut_0.03", 8, 1, true, 3, best_isa(), 0.03},
                                               {"8_acc_floor_3_cut_0.1", 8, 1, true, 3, best_isa(), 0.1}};
     // run-paper.yaml's row on the kernels' lower builds.
@@ -995,6 +1018,7 @@ int main(int argc, char** argv) {
         s.mart.accelerate = st.accelerate;
         s.correlation.intensity_threshold_of_mean = st.floor;
         if (st.prune_threshold >= 0) s.mart.prune_threshold = st.prune_threshold;
+        if (st.prune_local_threshold >= 0) s.mart.prune_local_threshold = st.prune_local_threshold;
         use_isa(st.build);
         const auto r = process::process_pair(op, a, b, s, {}, &workspace);
         use_isa(best_isa());

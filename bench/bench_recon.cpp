@@ -268,12 +268,15 @@ void prune_sweep(const std::string& source_dir, bool small, double ppm, int iter
     bool prune;
     double threshold;
     recon::PruneScope scope = recon::PruneScope::volume;
+    double local = 0.0;  // MartSettings::prune_local_threshold
   };
   std::uint64_t reference = 0;
   for (const Variant& v : {Variant{"off", false, 0.0}, Variant{"zeros", true, 0.0}, Variant{"1e-4", true, 1e-4},
                            Variant{"1e-3", true, 1e-3}, Variant{"3e-3", true, 3e-3}, Variant{"1e-2", true, 1e-2},
                            Variant{"slice-1e-2", true, 1e-2, recon::PruneScope::slice},
-                           Variant{"slice-3e-2", true, 3e-2, recon::PruneScope::slice}}) {
+                           Variant{"slice-3e-2", true, 3e-2, recon::PruneScope::slice},
+                           Variant{"slice-1e-2-local-5e-2", true, 1e-2, recon::PruneScope::slice, 5e-2},
+                           Variant{"slice-1e-2-local-1e-1", true, 1e-2, recon::PruneScope::slice, 1e-1}}) {
     if (!only.empty() && ("," + only + ",").find("," + std::string(v.name) + ",") == std::string::npos) continue;
     recon::MartSettings s;
     s.iterations = iterations;
@@ -283,6 +286,7 @@ void prune_sweep(const std::string& source_dir, bool small, double ppm, int iter
     s.prune = v.prune;
     s.prune_threshold = v.threshold;
     s.prune_scope = v.scope;
+    s.prune_local_threshold = v.local;
     std::string live, seconds, work;
     // Each variant's first frame in a fresh workspace (a one-shot call's), then the same frame
     // again in it (a run's steady state, which keeps its workspace): the same bits.

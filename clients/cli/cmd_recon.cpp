@@ -45,6 +45,7 @@ struct ReconOptions {
   double prune_threshold = 0;
   std::string prune_scope = "volume";
   int prune_depth_reach = 0;
+  double prune_local_threshold = 0;
   bool no_prune = false;
   std::string cache_dir;
   bool no_cache = false;
@@ -85,6 +86,7 @@ void run(const ReconOptions& o) {
   s.prune_threshold = o.prune_threshold;
   s.prune_scope = recon::prune_scope_named(o.prune_scope, "--prune-scope");
   s.prune_depth_reach = o.prune_depth_reach;
+  s.prune_local_threshold = o.prune_local_threshold;
   s.start = recon::mart_start_named(o.start, "--start");
   const process::BlackLevel black_level = process::black_level_named(o.black_level, "--black-level");
   ImageF image = io::read_raw_frame(o.image);
@@ -214,6 +216,10 @@ void add_recon_commands(CLI::App& app) {
   cmd->add_option("--prune-depth-reach", o->prune_depth_reach,
                   "a voxel at or below the cut stays while one within this many slices of it along depth is "
                   "above (keeps a particle's faint depth ends; 0: off)")
+      ->capture_default_str();
+  cmd->add_option("--prune-local-threshold", o->prune_local_threshold,
+                  "voxels at or below this fraction of the peak near them (12 x 12 x 6 voxels about) leave the "
+                  "active set too: a particle's halo goes, a faint particle stays (0: off)")
       ->capture_default_str();
   cmd->add_flag("--no-prune", o->no_prune, "update every active voxel on every iteration (the reference)");
   cmd->add_option("--cache-dir", o->cache_dir,

@@ -82,8 +82,8 @@ void put_grid(ByteWriter& w, const Grid3& g) {
 // Structured bindings name every member: a struct with another member count does not compile.
 void put_mart(ByteWriter& w, const recon::MartSettings& m) {
   const auto& [method, start, iterations, mu, accelerate, noise_threshold, dark_weight_cutoff, dark_floor, convergence,
-               region, sensor_blur_sigma_mm, final_residual, prune_threshold, prune_scope, prune_depth_reach, prune] =
-      m;
+               region, sensor_blur_sigma_mm, final_residual, prune_threshold, prune_scope, prune_depth_reach,
+               prune_local_threshold, prune] = m;
   w.pod(method);
   w.pod(start);
   w.pod(iterations);
@@ -104,6 +104,7 @@ void put_mart(ByteWriter& w, const recon::MartSettings& m) {
   w.pod(prune_threshold);
   w.pod(prune_scope);
   w.pod(prune_depth_reach);
+  w.pod(prune_local_threshold);
   w.pod(prune);
 }
 
@@ -216,7 +217,8 @@ ProcessSettings parse_settings(const YamlMap& root) {
   if (auto r = root.optional_map("reconstruction")) {
     r->reject_unknown({"iterations", "mu", "acceleration", "start", "noise_threshold", "dark_weight_cutoff",
                        "convergence", "angular_sampling", "pixel_binning", "sensor_blur_sigma_mm", "prune",
-                       "prune_threshold", "prune_scope", "prune_depth_reach", "depth_response_ppm", "black_level"});
+                       "prune_threshold", "prune_scope", "prune_depth_reach", "prune_local_threshold",
+                       "depth_response_ppm", "black_level"});
     // Read here, checked by recon::check (the one owner of MART's ranges); the integer is only kept
     // from wrapping as it narrows.
     s.mart.iterations = r->integer_in("iterations", s.mart.iterations, std::numeric_limits<int>::min(),
@@ -236,6 +238,7 @@ ProcessSettings parse_settings(const YamlMap& root) {
         "prune_scope");
     s.mart.prune_depth_reach = r->integer_in("prune_depth_reach", s.mart.prune_depth_reach,
                                              std::numeric_limits<int>::min(), std::numeric_limits<int>::max());
+    s.mart.prune_local_threshold = r->number_or("prune_local_threshold", s.mart.prune_local_threshold);
     if (const auto problem = recon::check(s.mart)) r->fail(problem->key, problem->reason);
     s.angular_sampling = r->number_or("angular_sampling", s.angular_sampling);
     if (!(s.angular_sampling > 0 && s.angular_sampling <= 8)) r->fail("angular_sampling", "must be in (0, 8]");

@@ -80,6 +80,10 @@ std::optional<SettingProblem> check(const MartSettings& s) {
     return SettingProblem{"prune_threshold",
                           "must be in [0, 1) (a fraction of the volume's peak), got " + number(s.prune_threshold)};
   }
+  if (!(s.prune_local_threshold >= 0 && s.prune_local_threshold < 1)) {
+    return SettingProblem{"prune_local_threshold", "must be in [0, 1) (a fraction of the neighbourhood's peak), got " +
+                                                       number(s.prune_local_threshold)};
+  }
   if (!(s.prune_depth_reach >= 0 && s.prune_depth_reach <= kMaxPruneDepthReach)) {
     return SettingProblem{"prune_depth_reach", "must be in [0, " + std::to_string(kMaxPruneDepthReach) +
                                                    "] depth slices, got " + std::to_string(s.prune_depth_reach)};
@@ -177,6 +181,8 @@ void MartWorkspace::reserve(const WeightingOperator& op) {
   for (BigBuffer<float>* v : {&b.e, &b.update, &b.last, &b.log_last, &b.momentum}) v->assign(voxels, 0.f);
   b.origin.assign(voxels, 0);
   b.above_cut.assign(voxels, 0);  // read only with MartSettings::prune_depth_reach, which reserve() does not know
+  // Read only with MartSettings::prune_local_threshold.
+  for (BigBuffer<float>* v : {&b.local_peak, &b.local_scratch}) v->assign(detail::local_prune_bricks(g).count(), 0.f);
   for (BigBuffer<float>* v : {&b.data, &b.log_data, &b.projection, &b.ratio}) v->assign(pixels, 0.f);
   b.active.reserve(op, b.kernels);
   const std::size_t words = std::size_t(op.image_height() + 63) / 64;

@@ -107,12 +107,24 @@ struct MartSettings {
   // longer in depth than wide and the centroid of their faint depth ends carries w; a threshold
   // alone cuts those ends first. Range [0, kMaxPruneDepthReach] slices; default 0 (the value alone).
   int prune_depth_reach = 0;
+  // A second cut, against the voxel's neighbourhood instead of its slice: a live voxel at or below
+  // this fraction of the brightest voxel near it (in its brick of kLocalPruneBrick voxels or the 26
+  // bricks around it) leaves the active set too. It takes the faint light about each particle, the
+  // halo MART has not yet gathered into it, where a higher cut against the slice's peak would take
+  // faint particles whole: a faint particle is its own neighbourhood's peak. Applies with or without
+  // `prune_threshold`, the higher of the two cuts deciding. Range [0, 1); default 0 (off).
+  double prune_local_threshold = 0.0;
   // Off: every active voxel is updated on every iteration (the reference). Default on.
   bool prune = true;
 };
 // MartSettings::prune_depth_reach's upper end: a particle's depth extent, in slices, at the
 // paper's magnification and aperture is well inside it.
 inline constexpr int kMaxPruneDepthReach = 32;
+// MartSettings::prune_local_threshold's bricks, voxels along x, y and z: with the bricks around
+// it, a neighbourhood of 12 x 12 x 6 voxels, at the paper's voxels (0.125 mm across, 0.25 mm
+// deep) 1.5 mm each way: a reconstructed particle and its halo, and a few of its neighbours at
+// 0.5 particles per microlens.
+inline constexpr std::array<int, 3> kLocalPruneBrick{4, 4, 2};
 // A Gaussian wider than this is no sensor blur (the paper's lens images are 0.125 mm across).
 inline constexpr double kMaxSensorBlurSigmaMm = 0.05;
 

@@ -308,7 +308,7 @@ void SmartSolver::prune(bool last) {
   } timer{t0, result_.prune_seconds};
   BigBuffer<float>& e = b_.e;
   if (n_ == 0) return;
-  if (settings_.prune_threshold > 0) zero_below_cut();
+  if (settings_.prune_threshold > 0 || settings_.prune_local_threshold > 0) zero_below_cut();
   const std::size_t dead = tbb::parallel_reduce(
       tbb::blocked_range<std::size_t>(0, n_, 1 << 14), std::size_t(0),
       [&](const tbb::blocked_range<std::size_t>& r, std::size_t count) {
@@ -370,12 +370,26 @@ void SmartSolver::zero_below_cut() {
   if (settings_.prune_scope == PruneScope::volume)
     std::fill(cut.begin(), cut.end(), *std::max_element(cut.begin(), cut.end()));
   for (float& c : cut) c = float(settings_.prune_threshold * double(c));
+  const bool local = settings_.prune_local_threshold > 0;
+  if (local) local_peaks(run);
+  const Grid3 bricks = local_prune_bricks(op_.grid());
+  const int nx = op_.grid().shape[0];
+  const float local_share = float(settings_.prune_local_threshold);
+  // Voxel m's cut (it lies in slice z): its slice's, or its neighbourhood's where that is higher.
+  auto cut_of = [&](std::size_t m, int z) {
+    if (!local) return cut[std::size_t(z)];
+    const std::size_t column = voxels[m] - std::size_t(z) * slice;  // x + y * nx
+    const float peak =
+        b_.local_peak[bricks.index(int(column % std::size_t(nx)) / kLocalPruneBrick[0],
+                                   int(column / std::size_t(nx)) / kLocalPruneBrick[1], z / kLocalPruneBrick[2])];
+    return std::max(cut[std::size_t(z)], local_share * peak);
+  };
 
   const int reach = settings_.prune_depth_reach;
   if (reach == 0) {
     tbb::parallel_for(0, depth, [&](int z) {
       for (std::size_t m = run[z]; m < run[z + 1]; ++m)
-        if (e[m] <= cut[z]) e[m] = 0.f;
+        if (e[m] <= cut_of(m, z)) e[m] = 0.f;
     });
     return;
   }
@@ -387,18 +401,72 @@ void SmartSolver::zero_below_cut() {
     std::fill(above.begin() + std::ptrdiff_t(std::size_t(z) * slice),
               above.begin() + std::ptrdiff_t(std::size_t(z + 1) * slice), std::uint8_t(0));
     for (std::size_t m = run[z]; m < run[z + 1]; ++m)
-      if (e[m] > cut[z]) above[voxels[m]] = 1;
+      if (e[m] > cut_of(m, z)) above[voxels[m]] = 1;
   });
   tbb::parallel_for(0, depth, [&](int z) {
     const int z0 = std::max(0, z - reach), z1 = std::min(depth - 1, z + reach);
     for (std::size_t m = run[z]; m < run[z + 1]; ++m) {
-      if (e[m] > cut[z]) continue;
+      if (e[m] > cut_of(m, z)) continue;
       const std::size_t column = voxels[m] - std::size_t(z) * slice;  // x + y * nx
       bool near = false;
       for (int zz = z0; zz <= z1 && !near; ++zz) near = above[column + std::size_t(zz) * slice] != 0;
       if (!near) e[m] = 0.f;
     }
   });
+}
+
+void SmartSolver::local_peaks(const std::vector<std::size_t>& run) {
+  const Grid3 bricks = local_prune_bricks(op_.grid());
+  const auto [bx, by, bz] = kLocalPruneBrick;
+  const int nx = op_.grid().shape[0], depth = op_.grid().shape[2];
+  const std::size_t slice = std::size_t(nx) * std::size_t(op_.grid().shape[1]);
+  const BigBuffer<std::uint32_t>& voxels = active_.voxels();
+  BigBuffer<float>& peak = b_.local_peak;
+  BigBuffer<float>& spread = b_.local_scratch;
+  peak.assign(bricks.count(), 0.f);
+  spread.resize(bricks.count());
+  // One task per layer of bricks (kLocalPruneBrick[2] slices): no two tasks write one brick.
+  tbb::parallel_for(0, bricks.shape[2], [&](int k) {
+    for (int z = k * bz; z < std::min(depth, (k + 1) * bz); ++z) {
+      for (std::size_t m = run[std::size_t(z)]; m < run[std::size_t(z) + 1]; ++m) {
+        const std::size_t column = voxels[m] - std::size_t(z) * slice;
+        float& p = peak[bricks.index(int(column % std::size_t(nx)) / bx, int(column / std::size_t(nx)) / by, k)];
+        p = std::max(p, b_.e[m]);
+      }
+    }
+  });
+  // Each brick takes the peak of its neighbours along one axis, then the next: after the three,
+  // of the 27 bricks about it (a maximum is the same in any order).
+  auto along = [&](int axis, const BigBuffer<float>& from, BigBuffer<float>& to) {
+    tbb::parallel_for(0, bricks.shape[2], [&](int k) {
+      for (int j = 0; j < bricks.shape[1]; ++j) {
+        for (int i = 0; i < bricks.shape[0]; ++i) {
+          float p = 0.f;
+          for (int d = -1; d <= 1; ++d) {
+            std::array<int, 3> at{i, j, k};
+            at[axis] += d;
+            if (at[axis] < 0 || at[axis] >= bricks.shape[axis]) continue;
+            p = std::max(p, from[bricks.index(at[0], at[1], at[2])]);
+          }
+          to[bricks.index(i, j, k)] = p;
+        }
+      }
+    });
+  };
+  along(0, peak, spread);
+  along(1, spread, peak);
+  along(2, peak, spread);
+  peak.swap(spread);
+}
+
+Grid3 local_prune_bricks(const Grid3& voxels) {
+  Grid3 bricks = voxels;
+  for (int a = 0; a < 3; ++a) {
+    bricks.shape[a] = (voxels.shape[a] + kLocalPruneBrick[a] - 1) / kLocalPruneBrick[a];
+    bricks.spacing_mm[a] = voxels.spacing_mm[a] * kLocalPruneBrick[a];
+    bricks.origin_mm[a] = voxels.origin_mm[a] + 0.5 * (kLocalPruneBrick[a] - 1) * voxels.spacing_mm[a];
+  }
+  return bricks;
 }
 
 void SmartSolver::write_volume() {

@@ -30,6 +30,9 @@ struct MartBuffers {
   BigBuffer<std::uint32_t> origin;
   // Per voxel of the box: 1 where a live voxel is above the prune cut (MartSettings::prune_depth_reach).
   BigBuffer<std::uint8_t> above_cut;
+  // Per brick of local_prune_bricks(): the peak of the live voxels in it and, after the spread to
+  // the bricks around, of its neighbourhood (MartSettings::prune_local_threshold).
+  BigBuffer<float> local_peak, local_scratch;
   ActiveSet active;  // the live voxels, laid out again in place when pruned
   // The next active set's voxel list, built here and traded with the set's own (ActiveSet::assign),
   // so that the two lists' pages stay in from set to set and frame to frame.
@@ -37,6 +40,10 @@ struct MartBuffers {
   ActiveSet::Workspace kernels;  // reused by every pass
   SelectScratch select;
 };
+
+// The bricks MartSettings::prune_local_threshold compares within: kLocalPruneBrick voxels each
+// (fewer at the far faces), as a grid whose nodes are bricks.
+Grid3 local_prune_bricks(const Grid3& voxels);
 
 // One reconstruction: construct, then run() once. The settings must have been validated and the
 // image checked (validate_image); `buffers` are the caller's for the duration.
@@ -72,6 +79,9 @@ class SmartSolver {
   // prune()'s first half: live voxels at or below their slice's cut set to 0 (those the depth
   // reach keeps aside).
   void zero_below_cut();
+  // zero_below_cut()'s neighbourhood peaks: b_.local_peak per brick, each the peak of the live
+  // voxels in its brick and the bricks around it.
+  void local_peaks(const std::vector<std::size_t>& run);
   // The active voxels' values into the result's volume.
   void write_volume();
 

@@ -172,6 +172,13 @@ TEST(ProcessSettings, PruningReachesMart) {
     expect_refused_naming(kVolume + "}\nreconstruction: {prune_depth_reach: " + bad + "}\n" + kPasses,
                           "prune_depth_reach");
   }
+  EXPECT_EQ(defaults.mart.prune_local_threshold, 0.0);
+  EXPECT_EQ(parse(kVolume + "}\nreconstruction: {prune_local_threshold: 0.05}\n" + kPasses).mart.prune_local_threshold,
+            0.05);
+  for (const std::string bad : {"-0.001", "1", "near"}) {
+    expect_refused_naming(kVolume + "}\nreconstruction: {prune_local_threshold: " + bad + "}\n" + kPasses,
+                          "prune_local_threshold");
+  }
 }
 
 // Two particles at depths z and z + 0.5 mm through the small camera, as the camera records them.
@@ -241,13 +248,14 @@ TEST(ProcessSettings, AKeptWorkspaceGivesTheSameVolumesAndVectors) {
 // no pair grows them: neither a particle pair nor frames lit on every pixel (the most voxels MART
 // can keep). (The list of active voxels is the selection's own, made per frame: it may shrink.)
 // PairProcessor's pool reserved twice, with a pair between, holds the same bytes. MART prunes
-// with a depth reach, so its per-box buffer is reserved too.
+// with a depth reach and a neighbourhood cut, so their buffers are reserved too.
 TEST(ProcessSettings, AReservedWorkspaceChangesNoBitAndNoPairGrowsIt) {
   const auto camera = optics::load_camera_file(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml");
   const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera));
-  const ProcessSettings s =
-      parse(kVolume + ", depth_guard_mm: 0.25}\n" +
-            "reconstruction: {prune_threshold: 0.05, prune_scope: slice, prune_depth_reach: 2}\n" + kPasses);
+  const ProcessSettings s = parse(kVolume + ", depth_guard_mm: 0.25}\n" +
+                                  "reconstruction: {prune_threshold: 0.05, prune_scope: slice, prune_depth_reach: 2, "
+                                  "prune_local_threshold: 0.05}\n" +
+                                  kPasses);
   const ImageF a = two_particle_frame(camera, lenses, 3.0), b = two_particle_frame(camera, lenses, 3.1);
   const PairOperator op(camera, lenses, calib::geometric_white_image(camera, lenses), s);
   const PairResult alone = process_pair(op, a, b, s);

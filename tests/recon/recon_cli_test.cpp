@@ -151,6 +151,11 @@ TEST(ReconstructCli, RefusesBadArgumentsClearly) {
                       "-1", "1", "-1", "1", "-1", "1", "--prune-depth-reach", "99", "-o", (dir / "x.h5").string()},
                      out));
   EXPECT_NE(out.find("prune_depth_reach"), std::string::npos) << out;
+  EXPECT_EQ(
+      2, run_command({binary("plenopiv"), "reconstruct", "--camera", kCamera, (dir / "right.tif").string(), "--extent",
+                      "-1", "1", "-1", "1", "-1", "1", "--prune-local-threshold", "1", "-o", (dir / "x.h5").string()},
+                     out));
+  EXPECT_NE(out.find("prune_local_threshold"), std::string::npos) << out;
   EXPECT_FALSE(std::filesystem::exists(dir / "x.h5"));
 }
 

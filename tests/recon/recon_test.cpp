@@ -652,6 +652,11 @@ TEST_F(Mart, RejectsNaNAndNegativePixelsAndBadSettings) {
     pruned.prune_depth_reach = reach;
     expect_refused(pruned, "prune_depth_reach");
   }
+  for (const double threshold : {-0.001, std::nan(""), 1.0}) {
+    MartSettings pruned;
+    pruned.prune_local_threshold = threshold;
+    expect_refused(pruned, "prune_local_threshold");
+  }
 }
 
 // The MLOS start takes a dark pixel at the floor (half the faintest lit pixel here), which scales
@@ -692,6 +697,7 @@ TEST_F(Mart, IdenticalVolumesAtOneAndTwoThreads) {
       s.sensor_blur_sigma_mm = blur;
       s.prune_threshold = accelerate ? 1e-2 : 0.0;  // the pruned active sets, laid out again
       s.prune_scope = blur > 0 ? PruneScope::slice : PruneScope::volume;
+      s.prune_local_threshold = accelerate && blur > 0 ? 5e-2 : 0.0;  // and the neighbourhoods' peaks
       auto run = [&](int threads) {
         tbb::global_control c(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
         const WeightingOperator op = make_operator(*camera_, op_->grid());
@@ -841,6 +847,67 @@ TEST_F(Mart, PruningAgainstEachDepthSlicesPeakKeepsAFaintParticleAwayFromABright
   }
   EXPECT_EQ(near_faint[0], 0.0) << "the volume's peak: the faint particle is below 0.1 of it";
   EXPECT_GT(near_faint[1], 0.0) << "its slice's peak: the faint particle is kept";
+}
+
+// MartSettings::prune_local_threshold: a bright particle and one 30 times fainter in the same
+// depth slice, 27 voxels apart in x (further than a neighbourhood's 12). A cut of 0.1 of the
+// slice's peak prunes the faint particle whole; the same fraction of each voxel's neighbourhood's
+// peak, over a cut of 1e-2 of the slice's, keeps it (it is its own neighbourhood's peak) and still
+// prunes more voxels than 1e-2 alone. Every voxel left is above both cuts, the neighbourhood's
+// peak taken here from the result over kLocalPruneBrick's bricks about the voxel's.
+TEST_F(Mart, PruningAgainstTheNeighbourhoodsPeakKeepsAFaintParticleBesideABrightOne) {
+  const WeightingOperator op = make_operator(*camera_, centred_grid(40, 9, 1.0, -4.0));
+  const Grid3& g = op.grid();
+  ImageF image = project_image(op, blob_volume(g, {{6, 20, 4}}, 0.7, 0.7), 1000.f);
+  const ImageF faint = project_image(op, blob_volume(g, {{33, 20, 4}}, 0.7, 0.7), 1000.f / 30.f);
+  for (std::size_t i = 0; i < image.pixels.size(); ++i) image.pixels[i] += faint.pixels[i];
+  MartSettings s;
+  s.iterations = 10;
+  s.mu = 1;
+  s.accelerate = true;
+  s.prune_scope = PruneScope::slice;
+  struct Case {
+    double slice_cut, local_cut;
+    double near_faint = 0;
+    std::size_t live = 0;
+  };
+  std::array<Case, 3> cases{Case{0.1, 0.0}, Case{1e-2, 0.0}, Case{1e-2, 0.1}};
+  const std::size_t slice = std::size_t(g.shape[0]) * g.shape[1];
+  const auto [bx, by, bz] = kLocalPruneBrick;
+  for (Case& c : cases) {
+    s.prune_threshold = c.slice_cut;
+    s.prune_local_threshold = c.local_cut;
+    const MartResult r = reconstruct(op, image, s);
+    const HugePageVector<float>& e = r.volume.data;
+    for (int z = 0; z < g.shape[2]; ++z) {
+      const auto first = e.begin() + std::ptrdiff_t(z * slice);
+      const float slice_peak = *std::max_element(first, first + std::ptrdiff_t(slice));
+      for (int y = 0; y < g.shape[1]; ++y)
+        for (int x = 0; x < g.shape[0]; ++x) {
+          const float v = r.volume.at(x, y, z);
+          if (v == 0.f) continue;
+          ++c.live;
+          float near_peak = 0.f;  // over the bricks about (x, y, z)'s
+          for (int zz = std::max(0, (z / bz - 1) * bz); zz < std::min(g.shape[2], (z / bz + 2) * bz); ++zz)
+            for (int yy = std::max(0, (y / by - 1) * by); yy < std::min(g.shape[1], (y / by + 2) * by); ++yy)
+              for (int xx = std::max(0, (x / bx - 1) * bx); xx < std::min(g.shape[0], (x / bx + 2) * bx); ++xx)
+                near_peak = std::max(near_peak, r.volume.at(xx, yy, zz));
+          const float cut = std::max(float(c.slice_cut * double(slice_peak)), float(c.local_cut * double(near_peak)));
+          EXPECT_GT(v, cut) << "cuts " << c.slice_cut << " / " << c.local_cut << ": voxel (" << x << ", " << y << ", "
+                            << z << ") left at or below its cut";
+        }
+    }
+    for (int z = 2; z <= 6; ++z)
+      for (int y = 18; y <= 22; ++y)
+        for (int x = 31; x <= 35; ++x) c.near_faint += r.volume.at(x, y, z);
+    std::cout << "measured: slice cut " << c.slice_cut << ", neighbourhood cut " << c.local_cut
+              << ": intensity near the faint particle " << c.near_faint << ", live voxels " << c.live
+              << ", voxel updates skipped " << r.skipped.fraction_updates_skipped() << "\n";
+  }
+  EXPECT_EQ(cases[0].near_faint, 0.0) << "0.1 of the slice's peak: the faint particle is pruned";
+  EXPECT_GT(cases[2].near_faint, 0.5 * cases[1].near_faint)
+      << "0.1 of its neighbourhood's peak: the faint particle stays";
+  EXPECT_LT(cases[2].live, cases[1].live) << "the neighbourhood's cut prunes more than 1e-2 of the slice's peak alone";
 }
 
 // MartSettings::prune_depth_reach: a voxel at or below its slice's cut stays while a voxel within
