@@ -9,5 +9,5 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 repeats=${1:-3}
 for ((k = 1; k <= repeats; ++k)); do
-  build/bin/bench_recon prune paper 0.5 5 1 nesterov slice-1e-2 | sed "/^bench=recon_prune case=/s/\$/ repeat=$k/"
+  build/bin/bench_recon prune paper 0.5 5 1 nesterov slice-1e-2-local-5e-2 | sed "/^bench=recon_prune case=/s/\$/ repeat=$k/"
 done

@@ -37,8 +37,8 @@ def shipped_mart(iterations):
             "slice", "--intensity-threshold", "3", "--final-smoothing", "1"]
 
 
-# run-paper.yaml's MART.
-RUN_PAPER_MART = shipped_mart(8)
+# run-paper.yaml's MART: process.yaml's with 8 iterations, and a cut against each voxel's neighbourhood.
+RUN_PAPER_MART = shipped_mart(8) + ["--prune-local-threshold", "0.05"]
 # run-paper.yaml's reconstruction and correlation settings.
 RUN_PAPER_PASSES = "32x32x16@50,16x16x8@50+2,16x16x8@50,16x16x8@50,16x16x8@75"
 
@@ -82,7 +82,8 @@ LIVE_TIERS = ["4,4,5,16@50+4,8@50", "4,4,8,16@50+4,8@50", "3,4,3,16@50+4,8@50", 
               "3,4,5,16@50+4,8@50", "3,2,3,16@50+4,8@50", "3,1,3,16@50+4,8@50", "2,2,3,16@50+4,8@50"]
 
 # MART's prune thresholds the sparse sweeps compare.
-SPARSE_VARIANTS = "off,zeros,1e-2,slice-1e-2,slice-3e-2,slice-1e-1,slice-1e-1-reach2,slice-2e-1,slice-2e-1-reach2"
+SPARSE_VARIANTS = ("off,zeros,1e-2,slice-1e-2,slice-3e-2,slice-1e-1,slice-1e-1-reach2,slice-2e-1,slice-2e-1-reach2,"
+                   "slice-1e-2-local-5e-2,slice-1e-2-local-1e-1")
 
 # The paper ring through other sensors (bench/sensor_cases.sh SENSOR/BLACK_LEVEL[/EXTRA]): the
 # simulator's one count per ray; a 100-count pedestal with 2 electrons of read noise (a cooled
@@ -101,7 +102,8 @@ BENCHES = {
     "e2e-full": ("paper", ["build/bin/bench_e2e", "full", "--no-sweep", "--steady"] + RUN_PAPER
                  + ["--compare-passes", RUN_PAPER_PASSES], None),
     "e2e-full-live": ("paper", ["build/bin/bench_e2e", "full", "--no-sweep"] + RUN_PAPER
-                      + ["--live-depth-prefilter", "4", "--live-prune-threshold", RUN_PAPER_LIVE_PRUNE]
+                      + ["--live-depth-prefilter", "4", "--live-prune-threshold", RUN_PAPER_LIVE_PRUNE,
+                         "--live-prune-local-threshold", "0"]
                       + [a for tier in LIVE_TIERS for a in ("--live", tier)], None),
     "rotated-shear": ("paper", ["build/bin/bench_rotated_shear", "0.1"], None),
     "rotated-shear-paper-accuracy": ("paper", ["build/bin/bench_rotated_shear", "0.1", "0.5", "full",
@@ -324,7 +326,7 @@ def t_headline(R):
                             r.meta.get("date", "—").split(" (")[0], r.meta.get("commit", "—")])
         after += 1
     r = R("recon-volume-paper")
-    volumes = r.find(bench="recon_prune", variant="slice-1e-2")
+    volumes = r.find(bench="recon_prune", variant="slice-1e-2-local-5e-2")
     if volumes:
         def median_range(key):
             v = sorted(float(d[key]) for d in volumes)
@@ -429,6 +431,7 @@ MART_FLOOR_LABELS = {"paper_5_it_mu_0.5": "the paper's: 5 plain iterations at mu
                      "20_acc": "20 accelerated, no floor",
                      "20_acc_floor_3": "**20 accelerated, floor 3 (process.yaml's MART; it takes two passes more)**",
                      "8_acc_floor_3_cut_0": "8 accelerated, floor 3, no prune cut (exact zeros only)",
+                     "8_acc_floor_3_local_0": "8 accelerated, floor 3, no cut against the neighbourhood's peak",
                      "8_acc_floor_3_cut_0.03": "8 accelerated, floor 3, prune cut 3e-2 of the slice's peak",
                      "8_acc_floor_3_cut_0.1": "8 accelerated, floor 3, prune cut 1e-1 of the slice's peak"}
 
@@ -465,10 +468,13 @@ def t_sparse(R):
         for d in r.find(variant="sparse"):
             prune = d["prune"]
             threshold, _, reach = prune.partition("-reach")
+            threshold, _, local = threshold.partition("-local-")
             label = SPARSE_LABELS.get(prune, f"threshold {threshold[6:]} of its depth slice's peak"
                                       if prune.startswith("slice-") else f"threshold {prune} of the peak")
             if reach:
                 label += f", kept within {reach} slices of one above it"
+            if local:
+                label += f", and {local} of its neighbourhood's peak"
             cpu = f"; CPU {d['pair_cpu_s']} ({float(d['cpu_over_off']):.2f})" if "pair_cpu_s" in d else ""
             rows.append([case, label, f"{d['pair_s']} ({float(d['pair_over_off']):.2f}){cpu}",
                          f"{d['recon_a_s']} + {d['recon_b_s']} + {d['correlate_s']}",
