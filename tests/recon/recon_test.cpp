@@ -808,6 +808,16 @@ TEST_F(Mart, PruningAtASmallThresholdStaysCloseToNoPruning) {
   }
 }
 
+// The image of a particle at `bright` (voxel coordinates of op's grid) and one 30 times fainter at
+// `faint`.
+ImageF bright_and_faint(const WeightingOperator& op, const std::array<double, 3>& bright,
+                        const std::array<double, 3>& faint) {
+  ImageF image = project_image(op, blob_volume(op.grid(), {bright}, 0.7, 0.7), 1000.f);
+  const ImageF dim = project_image(op, blob_volume(op.grid(), {faint}, 0.7, 0.7), 1000.f / 30.f);
+  for (std::size_t i = 0; i < image.pixels.size(); ++i) image.pixels[i] += dim.pixels[i];
+  return image;
+}
+
 // MartSettings::prune_scope: the threshold is a fraction of the volume's peak, or of each depth
 // slice's. A bright particle at z = -2 mm and one 30 times fainter at z = +3 mm, apart in x, and a
 // threshold of 0.1: against the volume's peak the faint particle is pruned at the start, against
@@ -816,9 +826,7 @@ TEST_F(Mart, PruningAtASmallThresholdStaysCloseToNoPruning) {
 TEST_F(Mart, PruningAgainstEachDepthSlicesPeakKeepsAFaintParticleAwayFromABrightOne) {
   const WeightingOperator op = make_operator(*camera_, centred_grid(40, 9, 1.0, -4.0));
   const Grid3& g = op.grid();
-  ImageF image = project_image(op, blob_volume(g, {{10, 20, 2}}, 0.7, 0.7), 1000.f);
-  const ImageF faint = project_image(op, blob_volume(g, {{30, 20, 7}}, 0.7, 0.7), 1000.f / 30.f);
-  for (std::size_t i = 0; i < image.pixels.size(); ++i) image.pixels[i] += faint.pixels[i];
+  const ImageF image = bright_and_faint(op, {10, 20, 2}, {30, 20, 7});
   MartSettings s;
   s.iterations = 10;
   s.mu = 1;
@@ -858,9 +866,7 @@ TEST_F(Mart, PruningAgainstEachDepthSlicesPeakKeepsAFaintParticleAwayFromABright
 TEST_F(Mart, PruningAgainstTheNeighbourhoodsPeakKeepsAFaintParticleBesideABrightOne) {
   const WeightingOperator op = make_operator(*camera_, centred_grid(40, 9, 1.0, -4.0));
   const Grid3& g = op.grid();
-  ImageF image = project_image(op, blob_volume(g, {{6, 20, 4}}, 0.7, 0.7), 1000.f);
-  const ImageF faint = project_image(op, blob_volume(g, {{33, 20, 4}}, 0.7, 0.7), 1000.f / 30.f);
-  for (std::size_t i = 0; i < image.pixels.size(); ++i) image.pixels[i] += faint.pixels[i];
+  const ImageF image = bright_and_faint(op, {6, 20, 4}, {33, 20, 4});
   MartSettings s;
   s.iterations = 10;
   s.mu = 1;
