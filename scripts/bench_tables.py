@@ -371,6 +371,8 @@ def e2e_row(r, label):
     mart = f"{rec['iterations']} it, mu {float(rec['mu']):g}" + (", accelerated" if rec["accelerate"] == "1" else "")
     if float(rec.get("prune_threshold", "0")) > 0:
         mart += f", pruned below {float(rec['prune_threshold']):g} of each {rec.get('prune_scope', 'volume')}'s peak"
+    if float(rec.get("prune_local_threshold", "0")) > 0:
+        mart += f" and {float(rec['prune_local_threshold']):g} of each neighbourhood's"
     skipped = pct(rec["skipped_a"]) if "skipped_a" in rec else "?"
     if "updates_skipped_a" in rec:
         skipped += f" of the box, {pct(rec['updates_skipped_a'])} of the updates"
