@@ -76,8 +76,8 @@ class SmartSolver {
   // MartSettings::prune: voxels at or below the threshold set to 0, and the active set rebuilt
   // without the zeros once enough of them have gathered, unless `last` (after the last iteration).
   void prune(bool last);
-  // prune()'s first half: live voxels at or below their slice's cut set to 0 (those the depth
-  // reach keeps aside).
+  // prune()'s first half: live voxels at or below their cut set to 0 (the slice's or volume's, or
+  // the neighbourhood's where higher; those the depth reach keeps aside).
   void zero_below_cut();
   // zero_below_cut()'s neighbourhood peaks: b_.local_peak per brick, each the peak of the live
   // voxels in its brick and the bricks around it.
