@@ -25,6 +25,13 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
+// The brick of local_prune_bricks(`voxels`) that holds voxel `column` (x + y * nx) of slice z.
+std::size_t brick_of(const Grid3& bricks, const Grid3& voxels, std::size_t column, int z) {
+  const std::size_t nx = std::size_t(voxels.shape[0]);
+  return bricks.index(int(column % nx) / kLocalPruneBrick[0], int(column / nx) / kLocalPruneBrick[1],
+                      z / kLocalPruneBrick[2]);
+}
+
 }  // namespace
 
 SmartSolver::SmartSolver(const WeightingOperator& op, const MartSettings& settings, MartBuffers& buffers)
@@ -371,18 +378,14 @@ void SmartSolver::zero_below_cut() {
     std::fill(cut.begin(), cut.end(), *std::max_element(cut.begin(), cut.end()));
   for (float& c : cut) c = float(settings_.prune_threshold * double(c));
   const bool local = settings_.prune_local_threshold > 0;
-  if (local) local_peaks(run);
   const Grid3 bricks = local_prune_bricks(op_.grid());
-  const int nx = op_.grid().shape[0];
+  if (local) local_peaks(run, bricks);
   const float local_share = float(settings_.prune_local_threshold);
   // Voxel m's cut (it lies in slice z): its slice's, or its neighbourhood's where that is higher.
   auto cut_of = [&](std::size_t m, int z) {
     if (!local) return cut[std::size_t(z)];
     const std::size_t column = voxels[m] - std::size_t(z) * slice;  // x + y * nx
-    const float peak =
-        b_.local_peak[bricks.index(int(column % std::size_t(nx)) / kLocalPruneBrick[0],
-                                   int(column / std::size_t(nx)) / kLocalPruneBrick[1], z / kLocalPruneBrick[2])];
-    return std::max(cut[std::size_t(z)], local_share * peak);
+    return std::max(cut[std::size_t(z)], local_share * b_.local_peak[brick_of(bricks, op_.grid(), column, z)]);
   };
 
   const int reach = settings_.prune_depth_reach;
@@ -415,11 +418,9 @@ void SmartSolver::zero_below_cut() {
   });
 }
 
-void SmartSolver::local_peaks(const std::vector<std::size_t>& run) {
-  const Grid3 bricks = local_prune_bricks(op_.grid());
-  const auto [bx, by, bz] = kLocalPruneBrick;
-  const int nx = op_.grid().shape[0], depth = op_.grid().shape[2];
-  const std::size_t slice = std::size_t(nx) * std::size_t(op_.grid().shape[1]);
+void SmartSolver::local_peaks(const std::vector<std::size_t>& run, const Grid3& bricks) {
+  const int bz = kLocalPruneBrick[2], depth = op_.grid().shape[2];
+  const std::size_t slice = std::size_t(op_.grid().shape[0]) * std::size_t(op_.grid().shape[1]);
   const BigBuffer<std::uint32_t>& voxels = active_.voxels();
   BigBuffer<float>& peak = b_.local_peak;
   BigBuffer<float>& spread = b_.local_scratch;
@@ -429,8 +430,7 @@ void SmartSolver::local_peaks(const std::vector<std::size_t>& run) {
   tbb::parallel_for(0, bricks.shape[2], [&](int k) {
     for (int z = k * bz; z < std::min(depth, (k + 1) * bz); ++z) {
       for (std::size_t m = run[std::size_t(z)]; m < run[std::size_t(z) + 1]; ++m) {
-        const std::size_t column = voxels[m] - std::size_t(z) * slice;
-        float& p = peak[bricks.index(int(column % std::size_t(nx)) / bx, int(column / std::size_t(nx)) / by, k)];
+        float& p = peak[brick_of(bricks, op_.grid(), voxels[m] - std::size_t(z) * slice, z)];
         p = std::max(p, b_.e[m]);
       }
     }

@@ -79,9 +79,9 @@ class SmartSolver {
   // prune()'s first half: live voxels at or below their cut set to 0 (the slice's or volume's, or
   // the neighbourhood's where higher; those the depth reach keeps aside).
   void zero_below_cut();
-  // zero_below_cut()'s neighbourhood peaks: b_.local_peak per brick, each the peak of the live
-  // voxels in its brick and the bricks around it.
-  void local_peaks(const std::vector<std::size_t>& run);
+  // zero_below_cut()'s neighbourhood peaks: b_.local_peak per brick of `bricks`
+  // (local_prune_bricks), each the peak of the live voxels in its brick and the bricks around it.
+  void local_peaks(const std::vector<std::size_t>& run, const Grid3& bricks);
   // The active voxels' values into the result's volume.
   void write_volume();
 
