@@ -56,7 +56,7 @@ TEST(ProcessSettings, TheDepthGuardAddsWholeSlicesAtBothDepthEnds) {
 
 // process-paper.yaml is run-paper.yaml's full tier on voxels half a lens pitch across: the same box,
 // the same passes, overlaps, margins and whitened peak in mm, the same floor, filters and searches,
-// more iterations for four times the voxels per depth slice, and w through the depth response.
+// more iterations for four times the voxels per depth slice, and w through the same depth response.
 TEST(ProcessSettings, ThePaperAccuracyConfigIsRunPapersBoxAndCorrelationInMmOnHalfPitchVoxels) {
   const std::string dir = std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/";
   const auto load = [&](const std::string& name) {
@@ -72,7 +72,8 @@ TEST(ProcessSettings, ThePaperAccuracyConfigIsRunPapersBoxAndCorrelationInMmOnHa
     EXPECT_DOUBLE_EQ(fine.grid.shape[a] * fine.grid.spacing_mm[a], paper.grid.shape[a] * paper.grid.spacing_mm[a]);
   }
   EXPECT_GT(fine.mart.iterations, paper.mart.iterations);
-  EXPECT_GT(fine.depth_response_ppm, 0.0);  // offline: its minutes of set-up buy w and a calibrated sigma
+  EXPECT_GT(fine.depth_response_ppm, 0.0);  // its minutes of set-up buy w and a calibrated sigma
+  EXPECT_EQ(fine.depth_response_ppm, paper.depth_response_ppm);  // the same seeding
   EXPECT_EQ(fine.mart.accelerate, paper.mart.accelerate);
   EXPECT_EQ(fine.mart.mu, paper.mart.mu);
   EXPECT_EQ(fine.mart.prune_threshold, paper.mart.prune_threshold);
