@@ -79,6 +79,7 @@ msg::LaneCounters Lane::counters() const {
   const std::uint64_t n = stats_.process.processed;
   m.set_mean_time_s(n ? double(stats_.process.busy_ns) * 1e-9 / double(n) : 0.0);
   m.set_waited_s(double(stats_.process.waited_ns) * 1e-9);
+  m.set_activity(stats_.activity.text());
   return m;
 }
 

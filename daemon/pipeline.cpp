@@ -32,6 +32,16 @@ Clock::duration PriorityGate::wait_turn(const CancelFlag& cancel) const {
   return Clock::now() - start;
 }
 
+void StageActivity::set(std::string text) {
+  const std::lock_guard lock(mutex_);
+  text_ = std::move(text);
+}
+
+std::string StageActivity::text() const {
+  const std::lock_guard lock(mutex_);
+  return text_;
+}
+
 void PairSteps::step() const {
   if (yield_to_) waited_ += yield_to_->wait_turn(cancel_);
   if (cancel_) throw Cancelled("run stopping");
@@ -191,7 +201,7 @@ void run_live_pipeline(LiveMailbox& mailbox, int max_in_flight, const ProcessFn&
               tbb::filter_mode::parallel,
               [&](std::shared_ptr<Item> item) {
                 const auto start = Clock::now();
-                const PairSteps steps(cancel, yield_to);
+                const PairSteps steps(cancel, yield_to, &stats.activity);
                 try {
                   steps.step();
                   item->result = process(*item->pair, steps);
@@ -204,6 +214,7 @@ void run_live_pipeline(LiveMailbox& mailbox, int max_in_flight, const ProcessFn&
                 }
                 stats.process.add_time(Clock::now() - start - steps.waited());
                 stats.process.add_wait(steps.waited());
+                steps.say({});
                 --stats.process.in_flight;
                 return item;
               }) &

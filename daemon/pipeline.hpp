@@ -11,6 +11,8 @@
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <string>
+#include <utility>
 #include <vector>
 
 #include "core/base/grid.hpp"
@@ -63,20 +65,39 @@ class PriorityGate {
   bool busy_ = false;
 };
 
+// What a processing stage's pair in flight does beyond processing, for the status: a step of the
+// lane's set-up its first pair takes (a deferred depth response), said by PairSteps::say and
+// cleared when the pair ends; empty otherwise. Thread safe.
+class StageActivity {
+ public:
+  void set(std::string text);
+  std::string text() const;
+
+ private:
+  mutable std::mutex mutex_;
+  std::string text_;
+};
+
 // What processing does at each step of a pair (as it starts, and after every MART iteration and
 // correlation pass): first wait while the lane above it (`yield_to`, none for the live lane) is
 // busy, then give up (plenopiv::Cancelled) once the run stops.
 class PairSteps {
  public:
-  explicit PairSteps(const CancelFlag& cancel, const PriorityGate* yield_to = nullptr)
-      : cancel_(cancel), yield_to_(yield_to) {}
+  explicit PairSteps(const CancelFlag& cancel, const PriorityGate* yield_to = nullptr,
+                     StageActivity* activity = nullptr)
+      : cancel_(cancel), yield_to_(yield_to), activity_(activity) {}
   void step() const;
+  // What the pair is doing beyond processing, shown in the status until the pair ends.
+  void say(std::string text) const {
+    if (activity_) activity_->set(std::move(text));
+  }
   // The time spent waiting at the gate, not processing.
   std::chrono::steady_clock::duration waited() const { return waited_; }
 
  private:
   const CancelFlag& cancel_;
   const PriorityGate* yield_to_;
+  StageActivity* activity_;
   mutable std::chrono::steady_clock::duration waited_{};
 };
 
@@ -155,6 +176,7 @@ struct StageStats {
 
 struct PipelineStats {
   StageStats input, process, output;
+  StageActivity activity;  // the processing stage's pair in flight (PairSteps::say)
 };
 
 // Output of the last (serial, in order) stage: publish and accumulate statistics.

@@ -88,8 +88,15 @@ ProcessFactory plenoptic_processing(const optics::CameraModel& camera, const std
       process::PairOptions options;
       if (pair.measured) options.measured_dt_s = pair.measured->dt_s();
       // Called after every MART iteration and correlation pass: the quality lane waits there while
-      // the live lane is busy, and a stopping run gives up there.
-      options.progress = [&steps](const std::string&, double) { steps.step(); };
+      // the live lane is busy, and a stopping run gives up there. A deferred depth response (the
+      // lane's first pair: minutes at paper scale) is said in the lane's status as it goes.
+      options.progress = [&steps, tier](const std::string& stage, double fraction) {
+        if (stage == process::kDeferredDepthResponseStage)
+          steps.say(
+              fmt::format("depth response of the {} tier, {:.0f} % measured (its first pair; kept for later runs)",
+                          process::tier_name(tier), 100 * fraction));
+        steps.step();
+      };
       process::PairResult r = processor->process(pair.a.image, pair.b.image, options);
       if (processor->depth_response() && !response_said->exchange(true))
         spdlog::info("run processing, {} tier: {}", process::tier_name(tier), processor->depth_response_note());

@@ -65,6 +65,7 @@ void print_status(const msg::Status& s) {
                 << l.failed() << ", cancelled " << l.cancelled() << ", in flight " << l.in_flight() << ", mean "
                 << std::setprecision(3) << l.mean_time_s() << " s";
       if (l.waited_s() > 0) std::cout << ", waited " << std::setprecision(1) << l.waited_s() << " s for the live lane";
+      if (!l.activity().empty()) std::cout << "; " << l.activity();
       std::cout << "\n";
     }
     if (s.has_losses()) {

@@ -196,7 +196,7 @@ void PairProcessor::take_deferred_depth_response(const PairProgress& progress) c
   std::call_once(response_once_, [&] {
     try {
       take_depth_response([&](double fraction) {
-        if (progress) progress("depth response", fraction);
+        if (progress) progress(std::string(kDeferredDepthResponseStage), fraction);
       });
     } catch (const InputError& e) {
       response_refused_ = e.what();

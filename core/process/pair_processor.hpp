@@ -8,6 +8,7 @@
 #include <mutex>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "core/base/image.hpp"
@@ -72,6 +73,10 @@ class WorkspacePool {
   std::mutex mutex_;
   std::vector<std::unique_ptr<PairWorkspace>> free_;
 };
+
+// The PairProgress stage of a depth response a PairProcessor measures with its first pair
+// (ProcessorSetup::defer_depth_response), its fraction that of the response.
+inline constexpr std::string_view kDeferredDepthResponseStage = "depth response";
 
 // What one call needs besides the frames.
 struct PairOptions {

@@ -188,6 +188,34 @@ TEST(Lane, AWaitingLaneLeavesEveryCoreToItsWork) {
   EXPECT_GE(shared, 2) << "the pairs' loops ran on one thread: the lane's wait held the other cores";
 }
 
+// What the lane's pair in flight says it does (a deferred depth response) is in the lane's
+// counters, the status's, until the pair ends.
+TEST(Lane, ItsCountersSayWhatItsPairInFlightDoes) {
+  Lane lane(Lane::Options{});
+  std::atomic<bool> said{false}, release{false};
+  const auto process = [&](const drivers::FramePair& pair, const PairSteps& steps) {
+    steps.say("depth response of the full tier, 40 % measured");
+    said = true;
+    while (!release) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    return empty_field(pair, steps);
+  };
+  CancelFlag cancel{false};
+  std::thread runner([&] {
+    lane.run(
+        process, [](const drivers::FramePair&, ProcessedPair&) {}, cancel);
+  });
+  EXPECT_EQ(lane.counters().activity(), "");
+  lane.offer(pair_of(0));
+  while (!said) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  EXPECT_EQ(lane.counters().activity(), "depth response of the full tier, 40 % measured");
+  EXPECT_EQ(lane.counters().in_flight(), 1u);
+  release = true;
+  lane.close(false);
+  runner.join();
+  EXPECT_EQ(lane.counters().processed(), 1u);
+  EXPECT_EQ(lane.counters().activity(), "");
+}
+
 TEST(Lane, ARunConfigMakesTheLiveLaneFirstAndTheQualityLaneWhenAsked) {
   const std::string spec =
       "dt_s: 0.001\nvolume: {x_mm: [-1, 1], y_mm: [-1, 1], z_mm: [0, 2], voxel_mm: 0.5}\n"

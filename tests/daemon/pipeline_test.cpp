@@ -191,6 +191,36 @@ TEST_P(Concurrency, ACancelGivesUpThePairsInFlightAtTheirNextCheck) {
   EXPECT_EQ(stats.process.skipped, 0u) << "a cancelled pair is not a failed one";
 }
 
+// What a pair says it is doing beyond processing is the stage's activity while it is in flight,
+// and is gone once it ends, whether it succeeded or threw.
+TEST_P(Concurrency, WhatAPairSaysItDoesIsShownWhileItIsInFlight) {
+  tbb::global_control limit(tbb::global_control::max_allowed_parallelism, GetParam());
+  for (const bool fails : {false, true}) {
+    LiveMailbox mailbox;
+    PipelineStats stats;
+    CancelFlag cancel{false};
+    std::vector<std::string> during;
+    mailbox.push(std::make_shared<const drivers::FramePair>(make_pair(0)));
+    mailbox.close();
+    run_live_pipeline(
+        mailbox, 1,
+        [&](const drivers::FramePair& pair, const PairSteps& steps) {
+          during.push_back(stats.activity.text());
+          steps.say("depth response of the full tier, 40 % measured");
+          during.push_back(stats.activity.text());
+          if (fails) throw InputError("a frame that does not fit");
+          return tagged_field(pair);
+        },
+        [&](const drivers::FramePair& pair, ProcessedPair&) { during.push_back(stats.activity.text()); }, stats,
+        cancel);
+    ASSERT_EQ(during.size(), fails ? 2u : 3u);
+    EXPECT_EQ(during[0], "");
+    EXPECT_EQ(during[1], "depth response of the full tier, 40 % measured");
+    if (!fails) EXPECT_EQ(during[2], "") << "still said at the output stage";
+    EXPECT_EQ(stats.activity.text(), "") << (fails ? "after a failed pair" : "after the pair");
+  }
+}
+
 TEST_P(Concurrency, AProcessingFailureSkipsThatPairOnly) {
   tbb::global_control limit(tbb::global_control::max_allowed_parallelism, GetParam());
   PipelineStats stats;

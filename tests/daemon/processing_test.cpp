@@ -235,5 +235,53 @@ TEST(Processing, ADepthResponseIsMeasuredWithProgressKeptAndEndedByAStop) {
   std::filesystem::remove_all(folder);
 }
 
+// The quality lane's tier measures its depth response with its first pair, not while Armed, and
+// says how far it is in the lane's status as it goes (PairSteps::say); later pairs say nothing.
+TEST(Processing, AQualityLanesDepthResponseIsMeasuredByItsFirstPairAndSaidAsItGoes) {
+  const optics::CameraModel camera =
+      optics::load_camera_file(std::string(PLENOPIV_SOURCE_DIR) + "/systemd/config/camera-small.yaml");
+  const std::filesystem::path folder = testing_support::temp_dir("daemon-deferred-depth-response");
+  std::filesystem::remove_all(folder);
+  const RunConfig config = parse_run_config(std::string("dt_s: 0.0001") + testing_support::kShallowSmallBox +
+                                                "reconstruction: {iterations: 2, mu: 1, acceleration: nesterov, "
+                                                "depth_response_ppm: 0.2}\n"
+                                                "live: {reconstruction: {depth_response_ppm: 0}}\n",
+                                            "run.yaml");
+  ASSERT_TRUE(config.quality.on());
+  ASSERT_EQ(config.live_lane_tier(), process::Tier::live);
+  const auto files = [&] { return testing_support::entries_named(folder, "depth-response-"); };
+  std::vector<double> setup_fractions;
+  const ProcessFn process = plenoptic_processing(camera, folder)(
+      config, RunCalibration{}, process::Tier::full,
+      [&](const std::string&, double fraction) { setup_fractions.push_back(fraction); });
+  EXPECT_TRUE(setup_fractions.empty()) << "the quality lane's response was measured while Armed";
+  EXPECT_EQ(files(), 0u);
+
+  const auto lenses = optics::MicrolensArray::from_lattice(optics::Lattice::nominal(camera));
+  const std::vector<sim::Point3> a = sim::random_particles(sim::Box{{-2, -2, 0}, {2, 2, 4}}, 60, 11);
+  std::vector<sim::Point3> b = a;
+  for (auto& p : b) p[2] += 0.25;
+  sim::RenderOptions options;
+  options.rays_per_particle = 20000;
+  drivers::FramePair pair;
+  pair.a.image = sim::render(camera, lenses, a, options, 1).image;
+  pair.b.image = sim::render(camera, lenses, b, options, 2).image;
+  const CancelFlag go{false};
+  {
+    StageActivity activity;
+    const ProcessedPair out = process(pair, PairSteps(go, nullptr, &activity));
+    EXPECT_GT(out.vectors.valid.size(), 0u);
+    // The pipeline clears it when the pair ends; here the last thing said is left.
+    EXPECT_EQ(activity.text(), "depth response of the full tier, 100 % measured (its first pair; kept for later runs)");
+    EXPECT_EQ(files(), 1u);
+  }
+  {
+    StageActivity activity;
+    process(pair, PairSteps(go, nullptr, &activity));
+    EXPECT_EQ(activity.text(), "") << "a later pair said the response again";
+  }
+  std::filesystem::remove_all(folder);
+}
+
 }  // namespace
 }  // namespace plenopiv::daemon
