@@ -70,7 +70,7 @@ TEST(RunConfig, ShippedPaperScaleConfigParses) {
   EXPECT_DOUBLE_EQ(s.mart.prune_threshold, 0.01);  // of each depth slice's peak ("Choosing settings")
   EXPECT_EQ(s.mart.prune_scope, recon::PruneScope::slice);
   EXPECT_DOUBLE_EQ(s.mart.prune_local_threshold, 0.05);  // of the neighbourhood's peak: halos, not faint particles
-  EXPECT_DOUBLE_EQ(s.depth_response_ppm, 0.5);  // w through MART's depth response at the paper's seeding
+  EXPECT_DOUBLE_EQ(s.depth_response_ppm, 0.5);           // w through MART's depth response at the paper's seeding
   ASSERT_EQ(s.correlation.passes.size(), 5u);            // core/piv's default with a third 2 mm, 50 % pass
   EXPECT_EQ(s.correlation.passes[0].window, (std::array<int, 3>{32, 32, 16}));  // 4 mm cubes
   EXPECT_EQ(s.correlation.passes[1].depth_margin, 2);                           // 0.5 mm
@@ -92,7 +92,7 @@ TEST(RunConfig, ShippedPaperScaleConfigParses) {
   EXPECT_EQ(live.mart.prune_scope, recon::PruneScope::slice);  // the live tier keeps the full settings'
   EXPECT_DOUBLE_EQ(live.mart.prune_threshold, 0.1);            // its own cut: ghosts of 4 coarse iterations
   EXPECT_DOUBLE_EQ(live.mart.prune_local_threshold, 0.0);      // and none against the neighbourhood's peak
-  EXPECT_DOUBLE_EQ(live.depth_response_ppm, 0.0);  // its gain divided out would multiply its noise
+  EXPECT_DOUBLE_EQ(live.depth_response_ppm, 0.0);              // its gain divided out would multiply its noise
   ASSERT_EQ(live.correlation.passes.size(), 2u);
   EXPECT_EQ(live.correlation.passes[1].window, (std::array<int, 3>{8, 8, 4}));  // 3 mm cubes
   EXPECT_EQ(live.correlation.depth_prefilter, 1);

@@ -72,7 +72,7 @@ TEST(ProcessSettings, ThePaperAccuracyConfigIsRunPapersBoxAndCorrelationInMmOnHa
     EXPECT_DOUBLE_EQ(fine.grid.shape[a] * fine.grid.spacing_mm[a], paper.grid.shape[a] * paper.grid.spacing_mm[a]);
   }
   EXPECT_GT(fine.mart.iterations, paper.mart.iterations);
-  EXPECT_GT(fine.depth_response_ppm, 0.0);  // its minutes of set-up buy w and a calibrated sigma
+  EXPECT_GT(fine.depth_response_ppm, 0.0);                       // its minutes of set-up buy w and a calibrated sigma
   EXPECT_EQ(fine.depth_response_ppm, paper.depth_response_ppm);  // the same seeding
   EXPECT_EQ(fine.mart.accelerate, paper.mart.accelerate);
   EXPECT_EQ(fine.mart.mu, paper.mart.mu);
