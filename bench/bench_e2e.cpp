@@ -11,7 +11,7 @@
 //             [--passes P] [--early-interpolation sinc|cubic] [--voxel-z-factor D] [--uncertainty-stride N]
 //             [--final-peak-search all_shifts|near_predictor] [--steady]
 //             [--time-sweep [--time-repeats N]] [--z-centre MM] [--compare-passes 'P1;P2;...']
-//             [--prune-threshold F [--prune-scope volume|slice]] [--prune-local-threshold F]
+//             [--prune-threshold F [--prune-scope volume|slice]] [--prune-local-threshold F] [--mlos-power P]
 //             [--depth-response-ppm F]
 //             [--sparse-sweep [--sparse-repeats N] [--sparse-variants V,..]]
 //             [--live B,K,N,P ... [--live-depth-prefilter K] [--live-prune-threshold T]
@@ -75,6 +75,7 @@
 //              --prune-scope: of the volume's peak (default) or of each depth slice's.
 //     --prune-local-threshold F: the headline's cut against each voxel's neighbourhood's peak
 //              (MartSettings::prune_local_threshold; default 0: off).
+//     --mlos-power P: the headline's MLOS start raised to P (MartSettings::mlos_power; default 1).
 //     --depth-response-ppm F: the headline's w corrected for MART's depth response measured at F
 //              particles per microlens (reconstruction.depth_response_ppm; default 0: off); its
 //              set-up time is in weights_s.
@@ -237,6 +238,7 @@ int main(int argc, char** argv) {
   double prune_threshold = recon::MartSettings{}.prune_threshold;
   std::string prune_scope = "volume";
   double prune_local_threshold = recon::MartSettings{}.prune_local_threshold;
+  double mlos_power = recon::MartSettings{}.mlos_power;
   double depth_response_ppm = 0.0;
   std::string compare_passes;  // pass lists separated by ';'
   std::string passes;          // the headline's passes (--passes syntax); empty: core/piv's default
@@ -326,6 +328,8 @@ int main(int argc, char** argv) {
       live_prune_local_threshold = std::stod(argv[++i]);
     else if (!std::strcmp(argv[i], "--prune-local-threshold") && i + 1 < argc)
       prune_local_threshold = std::stod(argv[++i]);
+    else if (!std::strcmp(argv[i], "--mlos-power") && i + 1 < argc)
+      mlos_power = std::stod(argv[++i]);
     else if (!std::strcmp(argv[i], "--voxel-z-factor") && i + 1 < argc)
       depth_voxel_factor = std::max(1, std::stoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--voxel-xy-divisor") && i + 1 < argc) {
@@ -355,7 +359,8 @@ int main(int argc, char** argv) {
                 uncertainty_stride != piv::CorrelationSettings{}.uncertainty_stride ||
                 final_peak_search != piv::CorrelationSettings{}.final_peak_search ||
                 prune_threshold != recon::MartSettings{}.prune_threshold || prune_scope != "volume" ||
-                prune_local_threshold != recon::MartSettings{}.prune_local_threshold || depth_response_ppm != 0.0)) {
+                prune_local_threshold != recon::MartSettings{}.prune_local_threshold ||
+                mlos_power != recon::MartSettings{}.mlos_power || depth_response_ppm != 0.0)) {
     std::fprintf(
         stderr,
         "bench_e2e: "
@@ -363,7 +368,7 @@ int main(int argc, char** argv) {
         "--final-smoothing/--depth-prefilter/--spectral-whitening/--passes/--early-interpolation/"
         "--voxel-z-factor/--voxel-xy-divisor/"
         "--uncertainty-stride/--final-peak-search/--z-centre/--prune-threshold/--prune-scope/"
-        "--prune-local-threshold/--depth-response-ppm change the "
+        "--prune-local-threshold/--mlos-power/--depth-response-ppm change the "
         "headline rows only; use them with --no-sweep\n");
     return 2;
   }
@@ -391,7 +396,7 @@ int main(int argc, char** argv) {
         "[--final-peak-search all_shifts|near_predictor] [--steady [--steady-repeats N]] [--time-sweep] "
         "[--z-centre MM] [--compare-passes 'P1;P2'] "
         "[--prune-threshold F "
-        "[--prune-scope volume|slice]] [--prune-local-threshold F] [--depth-response-ppm F] "
+        "[--prune-scope volume|slice]] [--prune-local-threshold F] [--mlos-power P] [--depth-response-ppm F] "
         "[--sparse-sweep [--sparse-repeats N] [--sparse-variants V,..]] [--live B,K,N,P [--live-depth-prefilter K] "
         "[--live-prune-threshold T] [--live-prune-local-threshold T] [--live-only]]\n");
     return 2;
@@ -433,6 +438,7 @@ int main(int argc, char** argv) {
   settings.mart.prune_threshold = prune_threshold;
   settings.mart.prune_scope = scope;
   settings.mart.prune_local_threshold = prune_local_threshold;
+  settings.mart.mlos_power = mlos_power;
   settings.depth_response_ppm = depth_response_ppm;
   settings.black_level = black_level;
   settings.correlation.intensity_threshold_of_mean = intensity_threshold;
@@ -637,15 +643,15 @@ int main(int argc, char** argv) {
   const Errors e = errors_against(base.correlation.field, flow, voxel);
   std::printf(
       "bench=e2e case=%s variant=reconstructed iterations=%d mu=%.2f accelerate=%d dark_cutoff=%.3g "
-      "sensor_blur_mm=%.4g prune_threshold=%.3g prune_scope=%s prune_local_threshold=%.3g "
+      "sensor_blur_mm=%.4g prune_threshold=%.3g prune_scope=%s prune_local_threshold=%.3g mlos_power=%.3g "
       "intensity_threshold=%.3g final_smoothing=%d depth_prefilter=%d recon_a_s=%.2f recon_b_s=%.2f "
       "correlate_s=%.2f skipped_a=%.3f skipped_b=%.3f updates_skipped_a=%.3f updates_skipped_b=%.3f rms_u=%.3f "
       "rms_v=%.3f rms_w=%.3f rms=%.3f valid=%.3f "
       "off_axis_band_rms_u=%.3f off_axis_band_rms_v=%.3f off_axis_band_rms_w=%.3f off_axis_band_gain_u=%.3f "
       "off_axis_band_gain_v=%.3f off_axis_band_gain_w=%.3f peak_rss_gb=%.2f\n",
       scale.c_str(), iterations, mu, int(accelerate), dark_cutoff, sensor_blur_mm, prune_threshold, prune_scope.c_str(),
-      prune_local_threshold, intensity_threshold, final_smoothing, depth_prefilter, base.times.reconstruct_a_s,
-      base.times.reconstruct_b_s, base.times.correlate_s, base.skipped_a.fraction_skipped(),
+      prune_local_threshold, mlos_power, intensity_threshold, final_smoothing, depth_prefilter,
+      base.times.reconstruct_a_s, base.times.reconstruct_b_s, base.times.correlate_s, base.skipped_a.fraction_skipped(),
       base.skipped_b.fraction_skipped(), base.skipped_a.fraction_updates_skipped(),
       base.skipped_b.fraction_updates_skipped(), e.rms[0], e.rms[1], e.rms[2], e.total, e.valid_fraction, e.off_band[0],
       e.off_band[1], e.off_band[2], e.off_band_gain[0], e.off_band_gain[1], e.off_band_gain[2], bench::peak_rss_gb());

@@ -46,6 +46,7 @@ struct ReconOptions {
   std::string prune_scope = "volume";
   int prune_depth_reach = 0;
   double prune_local_threshold = 0;
+  double mlos_power = 1;
   bool no_prune = false;
   std::string cache_dir;
   bool no_cache = false;
@@ -88,6 +89,7 @@ void run(const ReconOptions& o) {
   s.prune_depth_reach = o.prune_depth_reach;
   s.prune_local_threshold = o.prune_local_threshold;
   s.start = recon::mart_start_named(o.start, "--start");
+  s.mlos_power = o.mlos_power;
   const process::BlackLevel black_level = process::black_level_named(o.black_level, "--black-level");
   ImageF image = io::read_raw_frame(o.image);
 
@@ -220,6 +222,10 @@ void add_recon_commands(CLI::App& app) {
   cmd->add_option("--prune-local-threshold", o->prune_local_threshold,
                   "voxels at or below this fraction of the peak near them (12 x 12 x 6 voxels about) leave the "
                   "active set too: a particle's halo goes, a faint particle stays (0: off)")
+      ->capture_default_str();
+  cmd->add_option("--mlos-power", o->mlos_power,
+                  "the MLOS start raised to this power before MART's first iteration (1 to 8): the haze falls "
+                  "below the particles, and a cut against the neighbourhood's peak takes it at once")
       ->capture_default_str();
   cmd->add_flag("--no-prune", o->no_prune, "update every active voxel on every iteration (the reference)");
   cmd->add_option("--cache-dir", o->cache_dir,

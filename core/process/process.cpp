@@ -81,11 +81,12 @@ void put_grid(ByteWriter& w, const Grid3& g) {
 
 // Structured bindings name every member: a struct with another member count does not compile.
 void put_mart(ByteWriter& w, const recon::MartSettings& m) {
-  const auto& [method, start, iterations, mu, accelerate, noise_threshold, dark_weight_cutoff, dark_floor, convergence,
-               region, sensor_blur_sigma_mm, final_residual, prune_threshold, prune_scope, prune_depth_reach,
-               prune_local_threshold, prune] = m;
+  const auto& [method, start, mlos_power, iterations, mu, accelerate, noise_threshold, dark_weight_cutoff, dark_floor,
+               convergence, region, sensor_blur_sigma_mm, final_residual, prune_threshold, prune_scope,
+               prune_depth_reach, prune_local_threshold, prune] = m;
   w.pod(method);
   w.pod(start);
+  w.pod(mlos_power);
   w.pod(iterations);
   w.pod(mu);
   w.pod(accelerate);
@@ -215,9 +216,9 @@ ProcessSettings parse_settings(const YamlMap& root) {
     vol.fail("depth_guard_mm", "must be at most " + std::to_string(kMostVoxelsPerAxis) + " slices of voxel_z_mm deep");
 
   if (auto r = root.optional_map("reconstruction")) {
-    r->reject_unknown({"iterations", "mu", "acceleration", "start", "noise_threshold", "dark_weight_cutoff",
-                       "convergence", "angular_sampling", "pixel_binning", "sensor_blur_sigma_mm", "prune",
-                       "prune_threshold", "prune_scope", "prune_depth_reach", "prune_local_threshold",
+    r->reject_unknown({"iterations", "mu", "acceleration", "start", "mlos_power", "noise_threshold",
+                       "dark_weight_cutoff", "convergence", "angular_sampling", "pixel_binning", "sensor_blur_sigma_mm",
+                       "prune", "prune_threshold", "prune_scope", "prune_depth_reach", "prune_local_threshold",
                        "depth_response_ppm", "black_level"});
     // Read here, checked by recon::check (the one owner of MART's ranges); the integer is only kept
     // from wrapping as it narrows.
@@ -227,6 +228,7 @@ ProcessSettings parse_settings(const YamlMap& root) {
     s.mart.accelerate = r->choice_or("acceleration", {"none", "nesterov"}, "none") == "nesterov";
     s.mart.start = recon::mart_start_named(
         r->choice_or("start", recon::kMartStartNames, std::string(recon::name_of(s.mart.start))), "start");
+    s.mart.mlos_power = r->number_or("mlos_power", s.mart.mlos_power);
     s.mart.noise_threshold = float(r->number_or("noise_threshold", s.mart.noise_threshold));
     s.mart.dark_weight_cutoff = r->number_or("dark_weight_cutoff", s.mart.dark_weight_cutoff);
     s.mart.convergence = r->number_or("convergence", s.mart.convergence);

@@ -60,6 +60,9 @@ std::optional<SettingProblem> check(const MartSettings& s) {
     return SettingProblem{"iterations", "must be 1 to 10000, got " + std::to_string(s.iterations)};
   }
   if (!(s.mu > 0 && s.mu <= 1)) return SettingProblem{"mu", "must be in (0, 1], got " + number(s.mu)};
+  if (!(s.mlos_power >= 1 && s.mlos_power <= kMaxMlosPower)) {
+    return SettingProblem{"mlos_power", "must be in [1, " + number(kMaxMlosPower) + "], got " + number(s.mlos_power)};
+  }
   if (!(s.noise_threshold >= 0) || !std::isfinite(s.noise_threshold)) {
     return SettingProblem{"noise_threshold", "must be a finite number >= 0 counts, got " + number(s.noise_threshold)};
   }

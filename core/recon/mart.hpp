@@ -58,6 +58,15 @@ PruneScope prune_scope_named(std::string_view name, std::string_view what);
 struct MartSettings {
   MartMethod method = MartMethod::smart;
   MartStart start = MartStart::mlos;
+  // The MLOS start raised to this power (ln E times it) before it is scaled to the image's light.
+  // A plenoptic MLOS is a geometric mean over the hundreds of pixels a voxel sees, so particles
+  // stand only a little above the haze where lines of sight cross; raised, the haze falls far
+  // below them, and a prune cut after the start (the neighbourhood's above all: a faint particle is
+  // its own neighbourhood's peak) takes it before the first iteration walks it. Against a slice's
+  // or the volume's peak a power above 1 also takes faint particles whole (each voxel's start
+  // scales as its particle's light to this power). Range [1, kMaxMlosPower]; default 1 (the
+  // geometric mean).
+  double mlos_power = 1.0;
   int iterations = 5;
   double mu = 0.5;  // relaxation, 0 < mu <= 1
   // Nesterov's momentum on ln E with FISTA's schedule and a gradient restart: the same cost per
@@ -117,6 +126,8 @@ struct MartSettings {
   // Off: every active voxel is updated on every iteration (the reference). Default on.
   bool prune = true;
 };
+// MartSettings::mlos_power's upper end: past it the start holds little but each particle's peak.
+inline constexpr double kMaxMlosPower = 8.0;
 // MartSettings::prune_depth_reach's upper end: a particle's depth extent, in slices, at the
 // paper's magnification and aperture is well inside it.
 inline constexpr int kMaxPruneDepthReach = 32;

@@ -9,6 +9,7 @@
 #include <chrono>
 #include <cmath>
 #include <functional>
+#include <limits>
 #include <string>
 #include <utility>
 
@@ -157,7 +158,22 @@ void SmartSolver::start_mlos() {
   // E = exp(ln E); a voxel that sees no pixel (n_j = 0) is left out of the passes and stays 0.
   const BigBuffer<std::uint32_t>& voxels = active_.voxels();
   for_voxels([&](std::size_t m) { e[m] = op_.normaliser(voxels[m]) > 0.f ? 1.f : 0.f; });
-  const kernels::MultiplicativeUpdate start{e.data(), b_.update.data(), 1.f, kMaxLog, kTiny, kHuge};
+  // Raised to mlos_power: exp(p ln E), the same kernel with p in mu's place. Above 1, ln E less
+  // its largest value first, so that no exponent reaches kMaxLog at the bright end whatever the
+  // image's units (the scale to the image's light below undoes any constant factor).
+  if (settings_.mlos_power != 1.0) {
+    const float peak = tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, n_, 1 << 14), -std::numeric_limits<float>::infinity(),
+        [&](const tbb::blocked_range<std::size_t>& r, float p) {
+          for (std::size_t m = r.begin(); m != r.end(); ++m)
+            if (e[m] != 0.f) p = std::max(p, b_.update[m]);
+          return p;
+        },
+        [](float a, float b) { return std::max(a, b); });
+    if (std::isfinite(peak)) for_voxels([&](std::size_t m) { b_.update[m] -= peak; });
+  }
+  const kernels::MultiplicativeUpdate start{e.data(), b_.update.data(), float(settings_.mlos_power), kMaxLog, kTiny,
+                                            kHuge};
   for_voxel_ranges([&](std::size_t m0, std::size_t m1) { kernels::multiply_by_exp(start, m0, m1); });
   // Scale to the image's total light so the first ratios are near 1. The projection's total is
   // Σ_j E_j (eq 13 makes each voxel's weights sum to 1 over the sensor), so no projection is

@@ -324,6 +324,7 @@ TEST(DepthResponse, ItsKeyTakesEveryProcessingSettingButDt) {
   EXPECT_TRUE(changed([](ProcessSettings& s) { s.mart.region = recon::RegionMm{}; }));
   EXPECT_TRUE(changed([](ProcessSettings& s) { s.mart.prune_depth_reach += 1; }));
   EXPECT_TRUE(changed([](ProcessSettings& s) { s.mart.prune_local_threshold = 0.05; }));
+  EXPECT_TRUE(changed([](ProcessSettings& s) { s.mart.mlos_power = 3; }));
   EXPECT_TRUE(changed([](ProcessSettings& s) { s.correlation.passes.back().depth_margin += 1; }));
   EXPECT_TRUE(changed([](ProcessSettings& s) { s.correlation.passes.pop_back(); }));
   EXPECT_TRUE(changed([](ProcessSettings& s) { s.correlation.median.radius += 1; }));

@@ -180,6 +180,11 @@ TEST(ProcessSettings, PruningReachesMart) {
     expect_refused_naming(kVolume + "}\nreconstruction: {prune_local_threshold: " + bad + "}\n" + kPasses,
                           "prune_local_threshold");
   }
+  EXPECT_EQ(defaults.mart.mlos_power, 1.0);
+  EXPECT_EQ(parse(kVolume + "}\nreconstruction: {mlos_power: 3}\n" + kPasses).mart.mlos_power, 3.0);
+  for (const std::string bad : {"0.5", "9", "sharp"}) {
+    expect_refused_naming(kVolume + "}\nreconstruction: {mlos_power: " + bad + "}\n" + kPasses, "mlos_power");
+  }
 }
 
 // Two particles at depths z and z + 0.5 mm through the small camera, as the camera records them.

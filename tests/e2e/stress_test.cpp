@@ -162,6 +162,9 @@ Case make_case(std::uint64_t index) {
   // The cut against each voxel's neighbourhood: off (the default), run-paper.yaml's, a large one.
   const double local_thresholds[] = {0, 0, 5e-2, 0.5};
   c.settings.mart.prune_local_threshold = local_thresholds[pick(4)];
+  // The MLOS start: the geometric mean (the default), raised to 3, to the most allowed.
+  const double mlos_powers[] = {1, 1, 3, recon::kMaxMlosPower};
+  c.settings.mart.mlos_power = mlos_powers[pick(4)];
   const auto& sigma = c.settings.correlation.whitened_peak_sigma_voxel;
   c.description =
       "case " + std::to_string(index) + ": mode " + std::to_string(mode) + ", " + std::to_string(count) +
@@ -174,7 +177,8 @@ Case make_case(std::uint64_t index) {
       std::to_string(c.settings.mart.prune_threshold) + " of the " +
       (c.settings.mart.prune_scope == recon::PruneScope::slice ? "slice's" : "volume's") + " peak, depth reach " +
       std::to_string(c.settings.mart.prune_depth_reach) + ", neighbourhood cut " +
-      std::to_string(c.settings.mart.prune_local_threshold) + ", early interpolation " +
+      std::to_string(c.settings.mart.prune_local_threshold) + ", MLOS start to the power " +
+      std::to_string(c.settings.mart.mlos_power) + ", early interpolation " +
       (c.settings.correlation.early_interpolation == piv::Interpolation::cubic ? "cubic" : "sinc") +
       ", spectral whitening " + std::to_string(c.settings.correlation.spectral_whitening) + " with a peak of " +
       std::to_string(sigma[0]) + " x " + std::to_string(sigma[1]) + " x " + std::to_string(sigma[2]) +

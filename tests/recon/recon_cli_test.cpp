@@ -156,6 +156,11 @@ TEST(ReconstructCli, RefusesBadArgumentsClearly) {
                       "-1", "1", "-1", "1", "-1", "1", "--prune-local-threshold", "1", "-o", (dir / "x.h5").string()},
                      out));
   EXPECT_NE(out.find("prune_local_threshold"), std::string::npos) << out;
+  EXPECT_EQ(
+      2, run_command({binary("plenopiv"), "reconstruct", "--camera", kCamera, (dir / "right.tif").string(), "--extent",
+                      "-1", "1", "-1", "1", "-1", "1", "--mlos-power", "0.5", "-o", (dir / "x.h5").string()},
+                     out));
+  EXPECT_NE(out.find("mlos_power"), std::string::npos) << out;
   EXPECT_FALSE(std::filesystem::exists(dir / "x.h5"));
 }
 

@@ -657,6 +657,11 @@ TEST_F(Mart, RejectsNaNAndNegativePixelsAndBadSettings) {
     pruned.prune_local_threshold = threshold;
     expect_refused(pruned, "prune_local_threshold");
   }
+  for (const double power : {0.999, std::nan(""), kMaxMlosPower + 0.001}) {
+    MartSettings sharp;
+    sharp.mlos_power = power;
+    expect_refused(sharp, "mlos_power");
+  }
 }
 
 // The MLOS start takes a dark pixel at the floor (half the faintest lit pixel here), which scales
@@ -698,6 +703,7 @@ TEST_F(Mart, IdenticalVolumesAtOneAndTwoThreads) {
       s.prune_threshold = accelerate ? 1e-2 : 0.0;  // the pruned active sets, laid out again
       s.prune_scope = blur > 0 ? PruneScope::slice : PruneScope::volume;
       s.prune_local_threshold = accelerate && blur > 0 ? 5e-2 : 0.0;  // and the neighbourhoods' peaks
+      s.mlos_power = accelerate ? 3.0 : 1.0;                          // its peak found in parallel
       auto run = [&](int threads) {
         tbb::global_control c(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
         const WeightingOperator op = make_operator(*camera_, op_->grid());
@@ -914,6 +920,68 @@ TEST_F(Mart, PruningAgainstTheNeighbourhoodsPeakKeepsAFaintParticleBesideABright
   EXPECT_GT(cases[2].near_faint, 0.5 * cases[1].near_faint)
       << "0.1 of its neighbourhood's peak: the faint particle stays";
   EXPECT_LT(cases[2].live, cases[1].live) << "the neighbourhood's cut prunes more than 1e-2 of the slice's peak alone";
+}
+
+// MartSettings::mlos_power: the MLOS start raised to P, then scaled to the image's light. One
+// iteration at a relaxation so small that every update's factor rounds to 1 leaves the start as it
+// is: at P = 2 it is P = 1's squared, voxel by voxel up to one factor, with the image's light; at
+// P = 4 an image a million times brighter gives the same start a million times brighter (ln E less
+// its peak first: no exponent reaches the clamp, which a plain exp(4 ln E) would pass). And with a
+// cut against the neighbourhood's peak after it, P = 3 leaves MART's first iteration fewer voxels.
+TEST_F(Mart, TheMlosStartRaisedToAPowerIsThatPowerScaledToTheImagesLight) {
+  const WeightingOperator op = make_operator(*camera_, centred_grid(40, 9, 1.0, -4.0));
+  const ImageF image = project_image(op, blob_volume(op.grid(), {{20, 20, 4}, {10, 12, 5}}, 0.7, 0.7), 1000.f);
+  MartSettings s;
+  s.iterations = 1;
+  s.mu = 1e-9;  // |mu x update| < 1e-7: exp rounds to 1
+  s.prune = false;
+  const auto start = [&](double power, const ImageF& frame) {
+    s.mlos_power = power;
+    return reconstruct(op, frame, s).volume;
+  };
+  const Volume one = start(1, image), two = start(2, image);
+  const float peak_one = *std::max_element(one.data.begin(), one.data.end());
+  double light = 0, image_light = 0;
+  for (const float v : two.data) light += v;
+  for (const float v : image.pixels) image_light += v;
+  EXPECT_NEAR(light, image_light, 1e-4 * image_light);
+  std::size_t index_of_peak = std::size_t(std::max_element(one.data.begin(), one.data.end()) - one.data.begin());
+  const double factor = double(two.data[index_of_peak]) / (double(peak_one) * peak_one);
+  std::size_t compared = 0;
+  for (std::size_t j = 0; j < one.data.size(); ++j) {
+    if (one.data[j] <= 1e-3f * peak_one) continue;
+    ++compared;
+    EXPECT_NEAR(double(two.data[j]), factor * double(one.data[j]) * one.data[j], 1e-4 * double(two.data[j]))
+        << "voxel " << j;
+  }
+  EXPECT_GT(compared, 100u);
+
+  ImageF bright = image;
+  for (float& v : bright.pixels) v *= 1e6f;
+  const Volume four = start(4, image), four_bright = start(4, bright);
+  const float peak_four = *std::max_element(four.data.begin(), four.data.end());
+  for (std::size_t j = 0; j < four.data.size(); ++j) {
+    if (four.data[j] <= 1e-6f * peak_four) continue;
+    EXPECT_NEAR(double(four_bright.data[j]) * 1e-6, double(four.data[j]), 1e-4 * double(four.data[j]))
+        << "voxel " << j << ": the start depends on the image's units";
+  }
+
+  s.iterations = 2;
+  s.mu = 1;
+  s.prune = true;
+  s.prune_scope = PruneScope::slice;
+  s.prune_threshold = 1e-3;
+  s.prune_local_threshold = 0.1;
+  std::array<std::size_t, 2> first_live{};
+  for (const double power : {1.0, 3.0}) {
+    s.mlos_power = power;
+    const MartResult r = reconstruct(op, image, s);
+    ASSERT_FALSE(r.iterations.empty());
+    first_live[power > 1] = r.iterations.front().live_voxels;
+  }
+  std::cout << "measured: voxels MART's first iteration updates, start at power 1 / 3: " << first_live[0] << " / "
+            << first_live[1] << "\n";
+  EXPECT_LT(first_live[1], first_live[0]) << "a sharper start left the first iteration as many voxels";
 }
 
 // MartSettings::prune_depth_reach: a voxel at or below its slice's cut stays while a voxel within
