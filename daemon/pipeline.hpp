@@ -67,7 +67,8 @@ class PriorityGate {
 
 // What a processing stage's pair in flight does beyond processing, for the status: a step of the
 // lane's set-up its first pair takes (a deferred depth response), said by PairSteps::say and
-// cleared when the pair ends; empty otherwise. Thread safe.
+// cleared when the pair ends; empty otherwise. One text per stage (the quality lane has one pair in
+// flight; of several, the last said). Thread safe.
 class StageActivity {
  public:
   void set(std::string text);

@@ -63,6 +63,10 @@ std::optional<SettingProblem> check(const MartSettings& s) {
   if (!(s.mlos_power >= 1 && s.mlos_power <= kMaxMlosPower)) {
     return SettingProblem{"mlos_power", "must be in [1, " + number(kMaxMlosPower) + "], got " + number(s.mlos_power)};
   }
+  if (s.mlos_power != 1 && s.start != MartStart::mlos) {
+    return SettingProblem{"mlos_power", "raises the mlos start; with start: " + std::string(name_of(s.start)) +
+                                            " it must be 1, got " + number(s.mlos_power)};
+  }
   if (!(s.noise_threshold >= 0) || !std::isfinite(s.noise_threshold)) {
     return SettingProblem{"noise_threshold", "must be a finite number >= 0 counts, got " + number(s.noise_threshold)};
   }

@@ -162,9 +162,11 @@ Case make_case(std::uint64_t index) {
   // The cut against each voxel's neighbourhood: off (the default), run-paper.yaml's, a large one.
   const double local_thresholds[] = {0, 0, 5e-2, 0.5};
   c.settings.mart.prune_local_threshold = local_thresholds[pick(4)];
-  // The MLOS start: the geometric mean (the default), raised to 3, to the most allowed.
+  // The MLOS start: the geometric mean (the default), raised to 3, to the most allowed (the start
+  // of ones takes no power).
   const double mlos_powers[] = {1, 1, 3, recon::kMaxMlosPower};
-  c.settings.mart.mlos_power = mlos_powers[pick(4)];
+  const double mlos_power = mlos_powers[pick(4)];
+  c.settings.mart.mlos_power = c.settings.mart.start == recon::MartStart::mlos ? mlos_power : 1.0;
   const auto& sigma = c.settings.correlation.whitened_peak_sigma_voxel;
   c.description =
       "case " + std::to_string(index) + ": mode " + std::to_string(mode) + ", " + std::to_string(count) +

@@ -662,6 +662,10 @@ TEST_F(Mart, RejectsNaNAndNegativePixelsAndBadSettings) {
     sharp.mlos_power = power;
     expect_refused(sharp, "mlos_power");
   }
+  MartSettings ones_raised;  // a power without the start it raises: refused, not ignored
+  ones_raised.start = MartStart::ones;
+  ones_raised.mlos_power = 2;
+  expect_refused(ones_raised, "mlos_power");
 }
 
 // The MLOS start takes a dark pixel at the floor (half the faintest lit pixel here), which scales
