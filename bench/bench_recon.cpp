@@ -249,8 +249,9 @@ void mid_size(const std::string& source_dir) {
 
 // The value-adaptive active set side by side on one image: pruning off, exact zeros only, and
 // relative thresholds; each variant's time (wall, CPU), voxel updates skipped over the
-// iterations, Q*, the moments fit's errors and the volume's hash; first in a fresh workspace, then
-// again in the kept one (kept_*). `small`: the sec 5.4 camera.
+// iterations, Q*, the moments fit's errors and the volume's hash; first in a fresh workspace (with
+// the memory it faulted in: fresh_memory_gb), then again in the kept one (kept_*, with the set-up's
+// parts). `small`: the sec 5.4 camera.
 // `bench_recon prune [paper|small] [ppm] [iterations] [mu] [nesterov|none] [variants, e.g. off,1e-2]`.
 void prune_sweep(const std::string& source_dir, bool small, double ppm, int iterations, double mu, bool accelerate,
                  const std::string& only) {
@@ -291,6 +292,7 @@ void prune_sweep(const std::string& source_dir, bool small, double ppm, int iter
     // Each variant's first frame in a fresh workspace (a one-shot call's), then the same frame
     // again in it (a run's steady state, which keeps its workspace): the same bits.
     recon::MartWorkspace workspace;
+    const double rss_before = bench::rss_gb();
     const auto t = Clock::now();
     const double c = cpu_seconds();
     const recon::MartResult r = recon::reconstruct(op, image, s, workspace, [&](const recon::IterationReport& it) {
@@ -301,6 +303,7 @@ void prune_sweep(const std::string& source_dir, bool small, double ppm, int iter
       seconds += t;
     });
     const double wall = since(t), cpu = cpu_seconds() - c;
+    const double fresh_gb = bench::rss_gb() - rss_before;  // memory the first frame faulted in
     const std::uint64_t hash = bench::bits_hash(r.volume.data);
     if (!v.prune) reference = hash;
     const auto t_kept = Clock::now();
@@ -323,14 +326,15 @@ void prune_sweep(const std::string& source_dir, bool small, double ppm, int iter
         "updates_skipped=%.4f pruned=%zu "
         "live_per_iteration=%s work_per_iteration=%s work_pruned=%.4f "
         "q_star=%.4f moments_abs_x_vox=%.3f abs_z_vox=%.3f fitted=%zu volume_hash=%016llx same_as_off=%d "
-        "kept_seconds=%.3f kept_cpu_s=%.3f kept_setup_s=%.3f kept_same_bits=%d\n",
+        "fresh_memory_gb=%.3f kept_seconds=%.3f kept_cpu_s=%.3f kept_setup_s=%.3f kept_select_s=%.3f "
+        "kept_active_set_s=%.3f kept_start_s=%.3f kept_same_bits=%d\n",
         small ? "small" : "paper", v.name, iterations, mu, int(accelerate), wall, cpu, r.setup_seconds,
         r.select_seconds, r.active_set_seconds, r.start_seconds, r.prune_seconds, seconds.c_str(),
         r.skipped.fraction_skipped(), r.skipped.fraction_updates_skipped(), r.skipped.voxels_pruned, live.c_str(),
         work.c_str(), r.skipped.fraction_work_pruned(), recon::quality_factor(r.volume, exact),
         ex / double(std::max<std::size_t>(1, fitted)), ez / double(std::max<std::size_t>(1, fitted)), fitted,
-        static_cast<unsigned long long>(hash), int(hash == reference), wall_kept, cpu_kept, kept.setup_seconds,
-        int(same_kept));
+        static_cast<unsigned long long>(hash), int(hash == reference), fresh_gb, wall_kept, cpu_kept,
+        kept.setup_seconds, kept.select_seconds, kept.active_set_seconds, kept.start_seconds, int(same_kept));
   }
   std::printf("bench=recon_prune peak_rss_gb=%.3f\n", bench::peak_rss_gb());
 }

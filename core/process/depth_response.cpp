@@ -291,30 +291,43 @@ DepthResponse measure_depth_response(const PairProcessor& processor, const optic
   bool with_sigma = true;
   int sets = 1;  // per shift, known after the first pair (it depends on the vectors per layer)
   std::size_t sets_done = 0;
+  // The fraction done at a point of the current set's pass (`scattered` or not) `pair_fraction` of
+  // the way through its pair: 0 during the first pair, before the count of sets is known.
+  const auto done_at = [&](bool scattered, double pair_fraction) {
+    return sum.empty() ? 0.0
+                       : (double(sets_done) + 0.5 * ((scattered ? 1.0 : 0.0) + pair_fraction)) /
+                             double(shifts * std::size_t(sets));
+  };
+  // A frame, tracing its rays (seconds at the paper's scale) with the caller told the fraction
+  // done so far about every 1 % of the particles (on this thread, as render tells its progress):
+  // where it can end the measurement, as after a MART iteration.
+  const auto frame = [&](const std::vector<sim::Point3>& particles, std::uint64_t seed, double fraction) {
+    sim::RenderOptions o = render;
+    if (progress) o.progress = [&, fraction](double) { progress(fraction); };
+    return sim::render(camera, lenses, particles, o, seed).image;
+  };
   for (std::size_t k = 0; k < shifts_mm.size(); ++k) {
     if (shifts_mm[k] == 0.0) continue;
     for (int set = 0; set < sets; ++set) {
       const std::uint64_t seed = 7001 + 2 * std::uint64_t(sets_done);
       const std::vector<sim::Point3> a = sim::random_particles(box, count, seed);
       const LateralSweep flow(box, s.grid.spacing_mm, shifts_mm[k]);
-      const ImageU16 frame_a = sim::render(camera, lenses, a, render, seed).image;
+      const ImageU16 frame_a = frame(a, seed, done_at(false, 0.0));
       const std::vector<sim::Point3> swept = sim::displace(a, flow);
       // Each set twice: as the sweep moves it (the gain, and u's and v's error), then with every
       // particle also moved sideways at random (w's error about the layer's mean).
       for (const bool scattered : {false, true}) {
         std::vector<sim::Point3> b = swept;
         if (scattered) scatter_sideways(b, s.grid.spacing_mm, seed);
-        // Within a pair, after every MART iteration and correlation pass, the fraction so far (0
-        // during the first pair, before the count of sets is known): where a caller can end it.
+        // Within a pair, after every MART iteration and correlation pass, the fraction so far:
+        // where a caller can end it.
         PairOptions options;
         if (progress)
           options.progress = [&](const std::string&, double pair_fraction) {
-            progress(sum.empty() ? 0.0
-                                 : (double(sets_done) + 0.5 * ((scattered ? 1.0 : 0.0) + pair_fraction)) /
-                                       double(shifts * std::size_t(sets)));
+            progress(done_at(scattered, pair_fraction));
           };
         const PairResult r =
-            processor.process_uncorrected(frame_a, sim::render(camera, lenses, b, render, seed + 1).image, options);
+            processor.process_uncorrected(frame_a, frame(b, seed + 1, done_at(scattered, 0.0)), options);
         const VectorField& f = r.correlation.field;
         const std::size_t per_layer = std::size_t(f.grid.shape[0]) * std::size_t(f.grid.shape[1]);
         if (sum.empty()) {

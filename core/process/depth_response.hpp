@@ -124,8 +124,9 @@ class DepthResponse {
 // thirty-two on a small box (seconds). InputError as DepthResponse's constructor gives it for a
 // response it refuses; a layer that does not follow the first (outermost) shift is refused as soon
 // as that shift's pairs are in, without the rest. `progress` (optional) gets the fraction done after each
-// pair and within it after every MART iteration and correlation pass (0 during the first pair);
-// a caller ends the measurement there by throwing.
+// pair, within it after every MART iteration and correlation pass, and while each frame is
+// traced (0 during the first pair), on the calling thread; a caller ends the measurement there by
+// throwing.
 DepthResponse measure_depth_response(const PairProcessor& processor, const optics::CameraModel& camera,
                                      const optics::MicrolensArray& lenses, double seeding_ppm,
                                      const std::function<void(double)>& progress = {});

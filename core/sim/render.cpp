@@ -8,9 +8,9 @@
 #include <atomic>
 #include <cmath>
 #include <limits>
-#include <mutex>
 #include <random>
 #include <string>
+#include <thread>
 
 #include "core/base/errors.hpp"
 #include "core/base/memory.hpp"
@@ -364,8 +364,12 @@ RenderResult trace_all(const optics::CameraModel& camera, const optics::Microlen
   const Tracer tracer(camera, array, aperture_diameter_mm, overfill, sigma_mm, vignetting, transmission, counts.data());
   std::atomic<std::uint64_t> emitted{0}, outside_aperture{0}, missed{0}, outside_sensor{0}, landed{0}, absorbed{0};
   std::atomic<std::size_t> done{0};
-  std::mutex progress_mutex;
+  // Progress is told on the calling thread only (it takes part in the loop), when the count has
+  // passed its next 1 % since the last report: a caller may wait or throw there without holding
+  // up the other threads, and an exception ends the loop (oneTBB cancels its other chunks).
+  const std::thread::id caller = std::this_thread::get_id();
   const std::size_t step = std::max<std::size_t>(1, emitters.size() / 100);
+  std::size_t next_report = step;  // read and written by the calling thread only
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, emitters.size(), 1),
                     [&](const tbb::blocked_range<std::size_t>& range) {
                       RayCounts c;
@@ -374,8 +378,9 @@ RenderResult trace_all(const optics::CameraModel& camera, const optics::Microlen
                         const double rays = std::round(double(rays_per_emitter) * emitters[k].light);
                         tracer.trace(emitters[k], std::size_t(rays), rng, c);
                         const std::size_t n = ++done;
-                        if (progress && (n % step == 0 || n == emitters.size())) {
-                          const std::lock_guard lock(progress_mutex);
+                        if (progress && n >= next_report && n < emitters.size() &&
+                            std::this_thread::get_id() == caller) {
+                          next_report = (n / step + 1) * step;
                           progress(double(n) / double(emitters.size()));
                         }
                       }
@@ -386,6 +391,7 @@ RenderResult trace_all(const optics::CameraModel& camera, const optics::Microlen
                       landed += c.landed;
                       absorbed += c.absorbed;
                     });
+  if (progress) progress(1.0);
   RenderResult result;
   result.counts = {emitted, outside_aperture, missed, outside_sensor, landed, absorbed};
   result.rays = ImageF(w, h);

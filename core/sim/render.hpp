@@ -70,8 +70,10 @@ struct RenderOptions {
   // particle keeps its brightness in both frames of a pair.
   double brightness_spread = 0.0;
   std::uint64_t brightness_seed = 0;
-  // Called with the fraction of sources traced (about every 1 %, and at 1), from one thread at
-  // a time; for progress displays. Empty: not called.
+  // Called with the fraction of sources traced (about every 1 %, and at 1), on the calling thread
+  // only: for progress displays, and where a caller may wait (the other threads trace on) or end
+  // the render (an exception it throws stops the tracing and reaches render's caller, which
+  // returns nothing). Empty: not called.
   std::function<void(double)> progress;
 };
 

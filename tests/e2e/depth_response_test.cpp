@@ -2,6 +2,7 @@
 // setting, its bytes and disk cache, and a shear pair on the small camera whose w it brings nearer
 // the truth.
 #include <gtest/gtest.h>
+#include <tbb/global_control.h>
 
 #include <algorithm>
 #include <array>
@@ -442,6 +443,30 @@ TEST(DepthResponse, TakesMartsShortfallOutOfAShearsDepthComponent) {
 // processor built later that reads the response from there when it is built (measured once: the
 // deferred and the constructor's response are one function of the same processor, and the shear
 // test above holds a kept response to the bits of the measured one).
+// Tracing a simulated frame takes seconds at the paper's scale: the measurement's progress is
+// told as it goes (about every 1 % of the particles, on the calling thread), so that a caller can
+// end it there, not only after each MART iteration and correlation pass.
+TEST(DepthResponse, ItsProgressIsToldWhileItsFramesAreTracedAndCanEndItThere) {
+  const optics::CameraModel camera = testing_support::small_camera();
+  const calib::LoadedCalibration calibration = calib::nominal_calibration(camera);
+  ProcessSettings settings = parse("");
+  settings.mart.iterations = 2;
+  const PairProcessor processor(camera, calibration, settings);
+  // One thread: every report of the tracer is on the calling thread, so their count is known.
+  const tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+  std::vector<double> fractions;
+  const auto stop_after_first_pair = [&](double f) {
+    fractions.push_back(f);
+    if (f > 0) throw Cancelled("stopped");
+  };
+  EXPECT_THROW(measure_depth_response(processor, camera, calibration.lenses, 0.2, stop_after_first_pair), Cancelled);
+  // The first pair (fraction 0 throughout): its two frames' tracing reports about 100 times each;
+  // its MART iterations and correlation passes alone, fewer than 20 times.
+  const auto first_pair = std::size_t(std::count(fractions.begin(), fractions.end(), 0.0));
+  EXPECT_GE(first_pair, 200u);
+  EXPECT_EQ(fractions.size(), first_pair + 1);  // the stop at the next report: the next frame's tracing
+}
+
 TEST(DepthResponse, ADeferredResponseIsTakenByTheFirstPairThatFinishes) {
   const optics::CameraModel camera = testing_support::small_camera();
   const calib::LoadedCalibration calibration = calib::nominal_calibration(camera);

@@ -2,9 +2,13 @@
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
 
+#include <algorithm>
 #include <cmath>
 #include <map>
 #include <numbers>
+#include <stdexcept>
+#include <thread>
+#include <vector>
 
 #include "core/base/errors.hpp"
 #include "core/optics/camera_file.hpp"
@@ -284,6 +288,39 @@ TEST(Render, SameSeedSameImageAtAnyThreadCount) {
   EXPECT_EQ(one.image.pixels, two.image.pixels);
   const RenderResult other = render(cam, nominal_array(), particles, options, 43);
   EXPECT_NE(one.rays.pixels, other.rays.pixels);
+}
+
+// Progress is told on the calling thread only, rising to 1; one that throws ends the render: the
+// exception reaches render's caller and the tracing stops there, at one thread and at two.
+TEST(Render, ProgressIsToldOnTheCallingThreadAndCanEndTheRender) {
+  const auto particles = random_particles(Box{{-3, -3, -5}, {3, 3, 5}}, 40000, 17);
+  for (const int threads : {1, 2}) {
+    tbb::global_control c(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
+    RenderOptions options;
+    options.rays_per_particle = 20;
+    std::vector<double> fractions;
+    std::size_t elsewhere = 0;  // reports on another thread
+    options.progress = [&, caller = std::this_thread::get_id()](double fraction) {
+      fractions.push_back(fraction);
+      elsewhere += std::this_thread::get_id() != caller;
+    };
+    render(small_camera(), nominal_array(), particles, options, 42);
+    EXPECT_EQ(elsewhere, 0u) << threads;
+    EXPECT_GT(fractions.size(), 10u) << threads;
+    EXPECT_TRUE(std::is_sorted(fractions.begin(), fractions.end())) << threads;
+    EXPECT_EQ(fractions.back(), 1.0) << threads;
+
+    fractions.clear();
+    options.progress = [&](double fraction) {
+      fractions.push_back(fraction);
+      if (fraction >= 0.5) throw std::runtime_error("stopped");
+    };
+    EXPECT_THROW(render(small_camera(), nominal_array(), particles, options, 42), std::runtime_error) << threads;
+    // Nothing told after the report that threw (the other thread may have traced on a little
+    // meanwhile, so that report's fraction can lie anywhere past a half).
+    ASSERT_FALSE(fractions.empty());
+    EXPECT_EQ(std::count_if(fractions.begin(), fractions.end(), [](double f) { return f >= 0.5; }), 1) << threads;
+  }
 }
 
 // Mean of the pixels nearest the midpoints between horizontally adjacent spots, over the mean
