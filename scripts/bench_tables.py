@@ -335,9 +335,13 @@ def t_headline(R):
             v = sorted(float(d[key]) for d in volumes)
             return f"{statistics.median(v):.2f} s ({v[0]:.2f}-{v[-1]:.2f})"
         skipped = pct(statistics.median(float(d["updates_skipped"]) for d in volumes))
+        # The memory the first frame faults in: on this VM fresh pages cost about a second per GB
+        # (free page reporting; docs/lab/2026-12-08.md), most of the first frame's lead.
+        fresh = [float(d["fresh_memory_gb"]) for d in volumes if "fresh_memory_gb" in d]
+        faulted = f", {statistics.median(fresh):.2f} GB faulted in" if fresh else ""
         rows.insert(after, ["run-paper.yaml's MART alone, 5 iterations",
                             "#21's volume: the paper camera's 300x200x200 voxels of 0.125 mm, 0.5 ppm, one frame",
-                            "—", f"first frame {median_range('seconds')}; kept workspace "
+                            "—", f"first frame {median_range('seconds')}{faulted}; kept workspace "
                             f"{median_range('kept_seconds')}; {skipped} of the updates skipped",
                             "30 min per image",
                             "<= 5 s (#21)", r.meta.get("date", "—").split(" (")[0], r.meta.get("commit", "—")])
