@@ -378,8 +378,8 @@ RenderResult trace_all(const optics::CameraModel& camera, const optics::Microlen
                         const double rays = std::round(double(rays_per_emitter) * emitters[k].light);
                         tracer.trace(emitters[k], std::size_t(rays), rng, c);
                         const std::size_t n = ++done;
-                        if (progress && n >= next_report && n < emitters.size() &&
-                            std::this_thread::get_id() == caller) {
+                        if (progress && std::this_thread::get_id() == caller && n >= next_report &&
+                            n < emitters.size()) {
                           next_report = (n / step + 1) * step;
                           progress(double(n) / double(emitters.size()));
                         }
