@@ -370,27 +370,26 @@ RenderResult trace_all(const optics::CameraModel& camera, const optics::Microlen
   const std::thread::id caller = std::this_thread::get_id();
   const std::size_t step = std::max<std::size_t>(1, emitters.size() / 100);
   std::size_t next_report = step;  // read and written by the calling thread only
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, emitters.size(), 1),
-                    [&](const tbb::blocked_range<std::size_t>& range) {
-                      RayCounts c;
-                      for (std::size_t k = range.begin(); k != range.end(); ++k) {
-                        SplitMix64 rng(stream_seed(seed, k));
-                        const double rays = std::round(double(rays_per_emitter) * emitters[k].light);
-                        tracer.trace(emitters[k], std::size_t(rays), rng, c);
-                        const std::size_t n = ++done;
-                        if (progress && std::this_thread::get_id() == caller && n >= next_report &&
-                            n < emitters.size()) {
-                          next_report = (n / step + 1) * step;
-                          progress(double(n) / double(emitters.size()));
-                        }
-                      }
-                      emitted += c.emitted;
-                      outside_aperture += c.outside_aperture;
-                      missed += c.missed_array;
-                      outside_sensor += c.outside_sensor;
-                      landed += c.landed;
-                      absorbed += c.absorbed;
-                    });
+  tbb::parallel_for(
+      tbb::blocked_range<std::size_t>(0, emitters.size(), 1), [&](const tbb::blocked_range<std::size_t>& range) {
+        RayCounts c;
+        for (std::size_t k = range.begin(); k != range.end(); ++k) {
+          SplitMix64 rng(stream_seed(seed, k));
+          const double rays = std::round(double(rays_per_emitter) * emitters[k].light);
+          tracer.trace(emitters[k], std::size_t(rays), rng, c);
+          const std::size_t n = ++done;
+          if (progress && std::this_thread::get_id() == caller && n >= next_report && n < emitters.size()) {
+            next_report = (n / step + 1) * step;
+            progress(double(n) / double(emitters.size()));
+          }
+        }
+        emitted += c.emitted;
+        outside_aperture += c.outside_aperture;
+        missed += c.missed_array;
+        outside_sensor += c.outside_sensor;
+        landed += c.landed;
+        absorbed += c.absorbed;
+      });
   if (progress) progress(1.0);
   RenderResult result;
   result.counts = {emitted, outside_aperture, missed, outside_sensor, landed, absorbed};
