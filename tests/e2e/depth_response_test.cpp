@@ -1,6 +1,6 @@
 // MART's depth response (process::DepthResponse): the per-layer inverse, its refusals, the
-// setting, its bytes and disk cache, and a shear pair on the small camera whose w it brings nearer
-// the truth.
+// setting, its bytes and disk cache, its progress, and a shear pair on the small camera whose w it
+// brings nearer the truth.
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
 
@@ -437,12 +437,6 @@ TEST(DepthResponse, TakesMartsShortfallOutOfAShearsDepthComponent) {
   std::filesystem::remove_all(folder);
 }
 
-// A deferred depth response (plenopivd's quality lane) is taken by the first pair, with that pair's
-// progress (stage "depth response"); a pair whose progress gives up leaves it to the next and keeps
-// nothing. The response it measures is kept in its folder, and its fields are the bits of a
-// processor built later that reads the response from there when it is built (measured once: the
-// deferred and the constructor's response are one function of the same processor, and the shear
-// test above holds a kept response to the bits of the measured one).
 // Tracing a simulated frame takes seconds at the paper's scale: the measurement's progress is
 // told as it goes (about every 1 % of the particles, on the calling thread), so that a caller can
 // end it there, not only after each MART iteration and correlation pass.
@@ -467,6 +461,12 @@ TEST(DepthResponse, ItsProgressIsToldWhileItsFramesAreTracedAndCanEndItThere) {
   EXPECT_EQ(fractions.size(), first_pair + 1);  // the stop at the next report: the next frame's tracing
 }
 
+// A deferred depth response (plenopivd's quality lane) is taken by the first pair, with that pair's
+// progress (stage "depth response"); a pair whose progress gives up leaves it to the next and keeps
+// nothing. The response it measures is kept in its folder, and its fields are the bits of a
+// processor built later that reads the response from there when it is built (measured once: the
+// deferred and the constructor's response are one function of the same processor, and the shear
+// test above holds a kept response to the bits of the measured one).
 TEST(DepthResponse, ADeferredResponseIsTakenByTheFirstPairThatFinishes) {
   const optics::CameraModel camera = testing_support::small_camera();
   const calib::LoadedCalibration calibration = calib::nominal_calibration(camera);
