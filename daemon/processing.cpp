@@ -7,6 +7,8 @@
 #include <atomic>
 #include <chrono>
 #include <memory>
+#include <optional>
+#include <string>
 
 #include "core/base/memory.hpp"
 #include "core/calib/nominal_calibration.hpp"
@@ -90,11 +92,14 @@ ProcessFactory plenoptic_processing(const optics::CameraModel& camera, const std
       // Called after every MART iteration and correlation pass: the quality lane waits there while
       // the live lane is busy, and a stopping run gives up there. A deferred depth response (the
       // lane's first pair: minutes at paper scale) is said in the lane's status as it goes.
-      options.progress = [&steps, tier](const std::string& stage, double fraction) {
-        if (stage == process::kDeferredDepthResponseStage)
-          steps.say(
-              fmt::format("depth response of the {} tier, {:.0f} % measured (its first pair; kept for later runs)",
-                          process::tier_name(tier), 100 * fraction));
+      std::optional<std::chrono::steady_clock::time_point> response_began;
+      options.progress = [&steps, &response_began, tier](const std::string& stage, double fraction) {
+        if (stage == process::kDeferredDepthResponseStage) {
+          const auto now = std::chrono::steady_clock::now();
+          if (!response_began) response_began = now;
+          steps.say(depth_response_activity(tier, fraction,
+                                            std::chrono::duration<double>(now - *response_began).count()));
+        }
         steps.step();
       };
       process::PairResult r = processor->process(pair.a.image, pair.b.image, options);
@@ -116,6 +121,17 @@ ProcessFactory plenoptic_processing(const optics::CameraModel& camera, const std
       return out;
     };
   };
+}
+
+std::string depth_response_activity(process::Tier tier, double fraction, double elapsed_s) {
+  // Seconds up to a minute and a half, minutes beyond (the paper's scale takes several).
+  const auto duration = [](double s) {
+    return s < 90 ? fmt::format("{:.0f} s", s) : fmt::format("{:.0f} min", s / 60);
+  };
+  std::string text = fmt::format("depth response of the {} tier, {:.0f} % measured, {} so far",
+                                 process::tier_name(tier), 100 * fraction, duration(elapsed_s));
+  if (fraction > 0 && fraction < 1) text += ", about " + duration(elapsed_s * (1 - fraction) / fraction) + " left";
+  return text + " (its first pair; kept for later runs)";
 }
 
 }  // namespace plenopiv::daemon

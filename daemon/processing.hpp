@@ -2,8 +2,10 @@
 #pragma once
 
 #include <filesystem>
+#include <string>
 
 #include "core/optics/camera_model.hpp"
+#include "core/process/process.hpp"
 #include "daemon/run.hpp"
 
 namespace plenopiv::daemon {
@@ -22,5 +24,10 @@ namespace plenopiv::daemon {
 // (where a stopped run ends it); the quality lane's by its first pair, while the run acquires.
 ProcessFactory plenoptic_processing(const optics::CameraModel& camera,
                                     const std::filesystem::path& response_folder = {});
+
+// What the quality lane's status says while its first pair measures `tier`'s depth response: the
+// fraction measured (0..1), the seconds it has taken so far and, once under way, about how long
+// the rest takes at that pace (minutes at the paper's scale).
+std::string depth_response_activity(process::Tier tier, double fraction, double elapsed_s);
 
 }  // namespace plenopiv::daemon

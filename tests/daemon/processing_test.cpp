@@ -272,7 +272,9 @@ TEST(Processing, AQualityLanesDepthResponseIsMeasuredByItsFirstPairAndSaidAsItGo
     const ProcessedPair out = process(pair, PairSteps(go, nullptr, &activity));
     EXPECT_GT(out.vectors.valid.size(), 0u);
     // The pipeline clears it when the pair ends; here the last thing said is left.
-    EXPECT_EQ(activity.text(), "depth response of the full tier, 100 % measured (its first pair; kept for later runs)");
+    const std::string said = activity.text();
+    EXPECT_EQ(said.rfind("depth response of the full tier, 100 % measured, ", 0), 0u) << said;
+    EXPECT_NE(said.find(" s so far (its first pair; kept for later runs)"), std::string::npos) << said;
     EXPECT_EQ(files(), 1u);
   }
   {
@@ -281,6 +283,21 @@ TEST(Processing, AQualityLanesDepthResponseIsMeasuredByItsFirstPairAndSaidAsItGo
     EXPECT_EQ(activity.text(), "") << "a later pair said the response again";
   }
   std::filesystem::remove_all(folder);
+}
+
+// The quality lane's status while its first pair measures the response: the time so far and,
+// once the first simulated pair has told how many there are, about how long the rest takes.
+TEST(Processing, ADepthResponsesActivitySaysHowLongSoFarAndAboutHowLongLeft) {
+  EXPECT_EQ(depth_response_activity(process::Tier::full, 0.0, 12.4),
+            "depth response of the full tier, 0 % measured, 12 s so far (its first pair; kept for later runs)");
+  EXPECT_EQ(depth_response_activity(process::Tier::full, 0.25, 60),
+            "depth response of the full tier, 25 % measured, 60 s so far, about 3 min left (its first pair; kept "
+            "for later runs)");
+  EXPECT_EQ(depth_response_activity(process::Tier::live, 0.5, 30),
+            "depth response of the live tier, 50 % measured, 30 s so far, about 30 s left (its first pair; kept for "
+            "later runs)");
+  EXPECT_EQ(depth_response_activity(process::Tier::full, 1.0, 300),
+            "depth response of the full tier, 100 % measured, 5 min so far (its first pair; kept for later runs)");
 }
 
 }  // namespace
