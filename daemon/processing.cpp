@@ -97,8 +97,8 @@ ProcessFactory plenoptic_processing(const optics::CameraModel& camera, const std
         if (stage == process::kDeferredDepthResponseStage) {
           const auto now = std::chrono::steady_clock::now();
           if (!response_began) response_began = now;
-          steps.say(depth_response_activity(tier, fraction,
-                                            std::chrono::duration<double>(now - *response_began).count()));
+          steps.say(
+              depth_response_activity(tier, fraction, std::chrono::duration<double>(now - *response_began).count()));
         }
         steps.step();
       };
