@@ -32,6 +32,15 @@ Clock::duration PriorityGate::wait_turn(const CancelFlag& cancel) const {
   return Clock::now() - start;
 }
 
+std::string measured_so_far(double fraction, double elapsed_s) {
+  const auto duration = [](double s) {
+    return s < 90 ? fmt::format("{:.0f} s", s) : fmt::format("{:.0f} min", s / 60);
+  };
+  std::string text = fmt::format("{:.0f} % measured, {} so far", 100 * fraction, duration(elapsed_s));
+  if (fraction > 0 && fraction < 1) text += ", about " + duration(elapsed_s * (1 - fraction) / fraction) + " left";
+  return text;
+}
+
 void StageActivity::set(std::string text) {
   const std::lock_guard lock(mutex_);
   text_ = std::move(text);

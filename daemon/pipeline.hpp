@@ -65,6 +65,11 @@ class PriorityGate {
   bool busy_ = false;
 };
 
+// How far a long step is, as the status says it: "40 % measured, 2 min so far, about 3 min left"
+// (`fraction` 0..1 of the step done in `elapsed_s`; the time left at the pace so far, once under
+// way and not done; seconds up to a minute and a half, minutes beyond).
+std::string measured_so_far(double fraction, double elapsed_s);
+
 // What a processing stage's pair in flight does beyond processing, for the status: a step of the
 // lane's set-up its first pair takes (a deferred depth response), said by PairSteps::say and
 // cleared when the pair ends; empty otherwise. One text per stage (the quality lane has one pair in

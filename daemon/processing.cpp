@@ -124,14 +124,8 @@ ProcessFactory plenoptic_processing(const optics::CameraModel& camera, const std
 }
 
 std::string depth_response_activity(process::Tier tier, double fraction, double elapsed_s) {
-  // Seconds up to a minute and a half, minutes beyond (the paper's scale takes several).
-  const auto duration = [](double s) {
-    return s < 90 ? fmt::format("{:.0f} s", s) : fmt::format("{:.0f} min", s / 60);
-  };
-  std::string text = fmt::format("depth response of the {} tier, {:.0f} % measured, {} so far",
-                                 process::tier_name(tier), 100 * fraction, duration(elapsed_s));
-  if (fraction > 0 && fraction < 1) text += ", about " + duration(elapsed_s * (1 - fraction) / fraction) + " left";
-  return text + " (its first pair; kept for later runs)";
+  return fmt::format("depth response of the {} tier, {} (its first pair; kept for later runs)",
+                     process::tier_name(tier), measured_so_far(fraction, elapsed_s));
 }
 
 }  // namespace plenopiv::daemon

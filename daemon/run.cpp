@@ -515,6 +515,7 @@ bool Run::prepare() {
     const SetupProgress progress = [this](const std::string& step, double fraction) {
       {
         std::lock_guard lock(setup_mutex_);
+        if (step != setup_step_) setup_step_began_ = std::chrono::steady_clock::now();
         setup_step_ = step;
         setup_fraction_ = fraction;
       }
@@ -758,18 +759,16 @@ void Run::fill_status(msg::Status& s) const {
                  setup_started_ns_) *
           1e-9;
       std::string step;
-      double fraction = 0;
+      double fraction = 0, step_elapsed = 0;
       {
         std::lock_guard lock(setup_mutex_);
         step = setup_step_;
         fraction = setup_fraction_;
+        step_elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - setup_step_began_).count();
       }
-      char text[160];
-      if (step.empty())
-        std::snprintf(text, sizeof text, "setting up: processing and weight tables, %.1f s so far", elapsed);
-      else
-        std::snprintf(text, sizeof text, "setting up: %s, %.0f %% measured, %.1f s so far", step.c_str(),
-                      100 * fraction, elapsed);
+      const std::string text = step.empty()
+                                   ? fmt::format("setting up: processing and weight tables, {:.1f} s so far", elapsed)
+                                   : "setting up: " + step + ", " + measured_so_far(fraction, step_elapsed);
       s.set_message(setup_started_ns_ ? text : "setting up");
     }
     return;

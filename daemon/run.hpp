@@ -144,9 +144,11 @@ class Run {
   // status reads the recorder only then.
   std::atomic<bool> prepared_{false};
   std::atomic<std::int64_t> setup_started_ns_{0};
-  // The setup's long step under way (SetupProgress) and the fraction of it done; empty: none.
+  // The setup's long step under way (SetupProgress), when it began and the fraction of it done;
+  // empty: none.
   mutable std::mutex setup_mutex_;
   std::string setup_step_;
+  std::chrono::steady_clock::time_point setup_step_began_;
   double setup_fraction_ = 0;
   std::unique_ptr<run_folder::Writer> recorder_;
   // The live lane first, then the quality lane when the run has one (make_lanes), and the

@@ -191,6 +191,16 @@ TEST_P(Concurrency, ACancelGivesUpThePairsInFlightAtTheirNextCheck) {
   EXPECT_EQ(stats.process.skipped, 0u) << "a cancelled pair is not a failed one";
 }
 
+// How far a long step is: the fraction, the time so far, and the time left at that pace once
+// under way and not done; seconds up to a minute and a half, minutes beyond.
+TEST(MeasuredSoFar, SaysTheFractionTheTimeSoFarAndAboutHowLongIsLeft) {
+  EXPECT_EQ(measured_so_far(0.0, 12.4), "0 % measured, 12 s so far");
+  EXPECT_EQ(measured_so_far(0.25, 60), "25 % measured, 60 s so far, about 3 min left");
+  EXPECT_EQ(measured_so_far(0.5, 30), "50 % measured, 30 s so far, about 30 s left");
+  EXPECT_EQ(measured_so_far(0.4, 120), "40 % measured, 2 min so far, about 3 min left");
+  EXPECT_EQ(measured_so_far(1.0, 300), "100 % measured, 5 min so far");
+}
+
 // What a pair says it is doing beyond processing is the stage's activity while it is in flight,
 // and is gone once it ends, whether it succeeded or threw.
 TEST_P(Concurrency, WhatAPairSaysItDoesIsShownWhileItIsInFlight) {
@@ -495,6 +505,7 @@ TEST_F(RunTest, AStopEndsALongSetupStepAtItsNextReport) {
   msg::Status s;
   run.fill_status(s);
   EXPECT_EQ(s.message().rfind("setting up: depth response of the full tier, 25 % measured, ", 0), 0u) << s.message();
+  EXPECT_NE(s.message().find(" so far, about "), std::string::npos) << s.message();  // the step's time left
   EXPECT_FALSE(s.run_set_up());
   state_.stop();
   run.request_stop();

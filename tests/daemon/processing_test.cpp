@@ -285,19 +285,14 @@ TEST(Processing, AQualityLanesDepthResponseIsMeasuredByItsFirstPairAndSaidAsItGo
   std::filesystem::remove_all(folder);
 }
 
-// The quality lane's status while its first pair measures the response: the time so far and,
-// once the first simulated pair has told how many there are, about how long the rest takes.
-TEST(Processing, ADepthResponsesActivitySaysHowLongSoFarAndAboutHowLongLeft) {
-  EXPECT_EQ(depth_response_activity(process::Tier::full, 0.0, 12.4),
-            "depth response of the full tier, 0 % measured, 12 s so far (its first pair; kept for later runs)");
+// The quality lane's status while its first pair measures the response: the tier, how far and how
+// long (measured_so_far, pipeline_test), and that it is the lane's first pair.
+TEST(Processing, ADepthResponsesActivitySaysItsTierHowFarAndHowLong) {
   EXPECT_EQ(depth_response_activity(process::Tier::full, 0.25, 60),
             "depth response of the full tier, 25 % measured, 60 s so far, about 3 min left (its first pair; kept "
             "for later runs)");
-  EXPECT_EQ(depth_response_activity(process::Tier::live, 0.5, 30),
-            "depth response of the live tier, 50 % measured, 30 s so far, about 30 s left (its first pair; kept for "
-            "later runs)");
-  EXPECT_EQ(depth_response_activity(process::Tier::full, 1.0, 300),
-            "depth response of the full tier, 100 % measured, 5 min so far (its first pair; kept for later runs)");
+  EXPECT_EQ(depth_response_activity(process::Tier::live, 1.0, 30),
+            "depth response of the live tier, 100 % measured, 30 s so far (its first pair; kept for later runs)");
 }
 
 }  // namespace
