@@ -335,8 +335,8 @@ def t_headline(R):
             v = sorted(float(d[key]) for d in volumes)
             return f"{statistics.median(v):.2f} s ({v[0]:.2f}-{v[-1]:.2f})"
         skipped = pct(statistics.median(float(d["updates_skipped"]) for d in volumes))
-        # The memory the first frame faults in: on this VM fresh pages cost about a second per GB
-        # (free page reporting; docs/lab/2026-12-08.md), most of the first frame's lead.
+        # The memory the first frame faults in (bench_recon's fresh_memory_gb): what a first frame
+        # pays for beyond a kept workspace.
         fresh = [float(d["fresh_memory_gb"]) for d in volumes if "fresh_memory_gb" in d]
         faulted = f", {statistics.median(fresh):.2f} GB faulted in" if fresh else ""
         rows.insert(after, ["run-paper.yaml's MART alone, 5 iterations",
