@@ -124,6 +124,7 @@ struct LogRatioInputs {
 // pixel k ln(I/P) clamped to ±max_log (0 where P = 0); for a dark one k max(ln(floor/P), -max_log)
 // where P > floor, else 0 (it pulls the voxels that claim more light there down, never up). The
 // logarithm is SLEEF's deterministic SSE2 one (3.5 ulp): the same bits on every x86-64 CPU.
+// `ratio` may be in.projection (MART writes the log-ratios over the projection).
 void log_ratios(const LogRatioInputs& in, std::size_t i0, std::size_t i1, float* ratio);
 
 // out[i] = ln values[i] where values[i] > 0, else 0, for [i0, i1), with the logarithm log_ratios and

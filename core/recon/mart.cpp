@@ -155,7 +155,7 @@ std::size_t MartWorkspace::bytes() const {
   const detail::MartBuffers& b = *buffers_;
   std::size_t total = 0;
   for (const auto* v :
-       {&b.data, &b.log_data, &b.projection, &b.ratio, &b.e, &b.update, &b.last, &b.log_last, &b.momentum}) {
+       {&b.data, &b.log_data, &b.projection, &b.e, &b.update, &b.last, &b.log_last, &b.momentum}) {
     total += v->capacity() * sizeof(float);
   }
   total += b.kernels.scaled.capacity() * sizeof(float) + b.kernels.sums.capacity() * sizeof(double);
@@ -190,7 +190,7 @@ void MartWorkspace::reserve(const WeightingOperator& op) {
   b.above_cut.assign(voxels, 0);  // read only with MartSettings::prune_depth_reach, which reserve() does not know
   // Read only with MartSettings::prune_local_threshold.
   for (BigBuffer<float>* v : {&b.local_peak, &b.local_scratch}) v->assign(detail::local_prune_bricks(g).count(), 0.f);
-  for (BigBuffer<float>* v : {&b.data, &b.log_data, &b.projection, &b.ratio}) v->assign(pixels, 0.f);
+  for (BigBuffer<float>* v : {&b.data, &b.log_data, &b.projection}) v->assign(pixels, 0.f);
   b.active.reserve(op, b.kernels);
   const std::size_t words = std::size_t(op.image_height() + 63) / 64;
   b.select.dark.assign(std::size_t(op.image_width()) * words, 0);

@@ -126,9 +126,8 @@ void SmartSolver::start() {
   // `update` is written in full by every back-projection.
   b_.e.assign(n_, 1.f);
   fit(b_.update, n_);
-  // Written in full by every pass before being read. ratio: white · ln(I / W E).
+  // Written in full by every pass before being read.
   fit(b_.projection, op_.pixel_count());
-  fit(b_.ratio, op_.pixel_count());
 
   // What a dark pixel recorded at most: the caller's (a resampled frame's raw floor), else the
   // noise threshold, or half the faintest lit pixel.
@@ -244,11 +243,11 @@ double SmartSolver::residual() const {
 }
 
 // The log-ratio of each pixel MART uses, times `scale` (the white image, or 1 where the sensor
-// blur is applied before whitening).
+// blur is applied before whitening), in place of the pixel's projection.
 void SmartSolver::ratio_band(std::size_t i0, std::size_t i1, const float* scale) {
   const kernels::LogRatioInputs in{
       b_.projection.data(), b_.data.data(), b_.log_data.data(), white_, scale, kMaxLog, log_floor_, dark_floor_, kTiny};
-  kernels::log_ratios(in, i0, i1, b_.ratio.data());
+  kernels::log_ratios(in, i0, i1, b_.projection.data());
 }
 
 void SmartSolver::project_and_compare(bool with_ratio) {
@@ -271,14 +270,15 @@ void SmartSolver::project_and_compare(bool with_ratio) {
   });
   if (!with_ratio) return;
   for_pixels(pixels, [&](std::size_t i0, std::size_t i1) { ratio_band(i0, i1, nullptr); });
-  blur_.apply(b_.ratio);
+  blur_.apply(b_.projection);
   for_pixels(pixels, [&](std::size_t i0, std::size_t i1) {
-    for (std::size_t i = i0; i < i1; ++i) b_.ratio[i] *= white_[i];
+    for (std::size_t i = i0; i < i1; ++i) b_.projection[i] *= white_[i];
   });
 }
 
 void SmartSolver::update() {
-  active_.back_project_whitened(op_, b_.ratio, b_.update, &b_.kernels);
+  // The log-ratios project_and_compare(true) left in the projection's buffer.
+  active_.back_project_whitened(op_, b_.projection, b_.update, &b_.kernels);
   const kernels::MultiplicativeUpdate u{b_.e.data(), b_.update.data(), float(settings_.mu), kMaxLog, kTiny, kHuge};
   for_voxel_ranges([&](std::size_t m0, std::size_t m1) { kernels::multiply_by_exp(u, m0, m1); });
 }

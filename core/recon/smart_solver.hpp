@@ -22,8 +22,9 @@ namespace plenopiv::recon::detail {
 // What a MartWorkspace holds. Every reconstruction sizes and writes each buffer before reading it.
 struct MartBuffers {
   std::atomic<bool> busy{false};
-  // Per sensor pixel: the thresholded image, ln I, W E and white · ln(I / W E).
-  BigBuffer<float> data, log_data, projection, ratio;
+  // Per sensor pixel: the thresholded image, ln I, and W E, which the log-ratios white · ln(I / W E)
+  // overwrite band by band once its residual sums are taken (the back-projection reads them there).
+  BigBuffer<float> data, log_data, projection;
   // Per active voxel: E, the back-projected update, and the momentum's three.
   BigBuffer<float> e, update, last, log_last, momentum;
   // Per live voxel: its position in the active set the start had (pruning keeps the order).

@@ -69,19 +69,20 @@ void in_chunks(std::size_t i0, std::size_t i1, Chunk&& chunk) {
 // Every case is computed for every pixel and the pixel's case selects one (no branch, so the loop
 // vectorises). ln P of a P below `tiny` (only P = 0 in practice: the volume's values are 0 or at
 // least kTiny) is taken as ln tiny; such a P selects 0 or a log-ratio at its bound either way.
+// `ratio` may be the projection itself: a chunk's P is copied before any ratio is written.
 template <bool Scaled>
-void log_ratios_of(const LogRatioInputs& in, std::size_t i0, std::size_t i1, float* __restrict ratio) {
+void log_ratios_of(const LogRatioInputs& in, std::size_t i0, std::size_t i1, float* ratio) {
   const float max_log = in.max_log, log_floor = in.log_floor, dark_floor = in.dark_floor, tiny = in.tiny;
   in_chunks(i0, i1, [&](std::size_t c, std::size_t n) {
-    alignas(16) float log_p[kChunkValues];
-    const float* __restrict p = in.projection + c;
+    alignas(16) float p[kChunkValues], log_p[kChunkValues];
+    std::copy_n(in.projection + c, n, p);
     for (std::size_t j = 0; j < n; ++j) log_p[j] = std::max(p[j], tiny);
     log_n(log_p, n);
     const float* __restrict data = in.data + c;
     const float* __restrict log_data = in.log_data + c;
     const float* __restrict white = in.white + c;
     const float* __restrict scale = Scaled ? in.scale + c : nullptr;
-    float* __restrict out = ratio + c;
+    float* out = ratio + c;
     for (std::size_t j = 0; j < n; ++j) {
       float lit = log_data[j] - log_p[j], dark = log_floor - log_p[j];
       lit = lit < -max_log ? -max_log : (lit > max_log ? max_log : lit);
