@@ -154,8 +154,7 @@ std::size_t MartWorkspace::bytes() const {
   if (!buffers_) return 0;  // moved from
   const detail::MartBuffers& b = *buffers_;
   std::size_t total = 0;
-  for (const auto* v :
-       {&b.data, &b.log_data, &b.projection, &b.e, &b.update, &b.last, &b.log_last, &b.momentum}) {
+  for (const auto* v : {&b.data, &b.log_data, &b.projection, &b.e, &b.update, &b.last, &b.log_last, &b.momentum}) {
     total += v->capacity() * sizeof(float);
   }
   total += b.kernels.scaled.capacity() * sizeof(float) + b.kernels.sums.capacity() * sizeof(double);
