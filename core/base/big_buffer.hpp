@@ -1,5 +1,6 @@
 // Large arrays on transparent huge pages where the kernel offers them: images and volumes
-// (HugePageVector, zeroed as std::vector is) and scratch arrays (BigBuffer, not zeroed).
+// (HugePageVector, zeroed as std::vector is) and scratch arrays (BigBuffer, not zeroed, faulted in
+// on every core).
 #pragma once
 
 #include <sys/mman.h>
@@ -9,6 +10,8 @@
 #include <new>
 #include <utility>
 #include <vector>
+
+#include "core/base/memory.hpp"
 
 namespace plenopiv {
 
@@ -63,6 +66,15 @@ struct BigBufferAllocator : HugePageAllocator<T> {
   struct rebind {
     using other = BigBufferAllocator<U>;
   };
+  // A block of 2 MB or more is faulted in at once on the calling arena's threads
+  // (fault_in_parallel): these buffers are a reconstruction's or correlation's scratch, allocated
+  // on a processing thread and then first touched by whichever thread a loop hands each part to,
+  // often one alone (a set-up step, a serial layout), so a fresh frame's faults ran on one core.
+  T* allocate(std::size_t n) {
+    T* p = HugePageAllocator<T>::allocate(n);
+    if (HugePageAllocator<T>::huge(n)) fault_in_parallel(p, n * sizeof(T));
+    return p;
+  }
   // v(n) and resize(n) default-initialise; v(n, x) still fills with x.
   template <typename U>
   void construct(U* p) noexcept {

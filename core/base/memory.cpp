@@ -3,6 +3,9 @@
 
 #include <unistd.h>
 
+#include <oneapi/tbb/blocked_range.h>
+#include <oneapi/tbb/parallel_for.h>
+
 #include <cmath>
 #include <cstdio>
 
@@ -31,6 +34,16 @@ void require_memory(double bytes, const std::string& what) {
     throw InputError(what + " needs " + (std::isfinite(bytes) ? gigabytes(bytes) : std::string("unbounded memory")) +
                      ", more than this machine's " + gigabytes(have) + " of memory");
   }
+}
+
+void fault_in_parallel(void* p, std::size_t bytes) {
+  constexpr std::size_t kPage = 4096, kPagesPerTask = 512;  // a task: one 2 MB huge page
+  char* bytes_at = static_cast<char*>(p);
+  const std::size_t pages = (bytes + kPage - 1) / kPage;
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, pages, kPagesPerTask),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      for (std::size_t page = r.begin(); page < r.end(); ++page) bytes_at[page * kPage] = 0;
+                    });
 }
 
 std::size_t checked_count(double a, double b, double c, std::size_t element_bytes, const std::string& what) {
