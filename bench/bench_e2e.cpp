@@ -41,7 +41,7 @@
 //              (default 1).
 //     --voxel-z-factor D: the headline's voxels D times as deep as wide (volume.voxel_z_mm; errors
 //              still in the 0.125 mm voxels; window depths and margins in --passes are its voxels).
-//     --voxel-xy-divisor N: the headline's voxels 0.125 / N mm across (volume.voxel_mm; N 1 to 4,
+//     --voxel-xy-divisor N: the headline's voxels 0.125 / N mm across (volume.voxel_mm; N from 1 to 4, 1.5 too,
 //              default 1: the lens pitch; errors still in the 0.125 mm voxels, windows in --passes
 //              and --whitened-peak-sigma in its voxels; with --voxel-z-factor, as deep as before).
 //     --early-interpolation: the deformation of the passes before the last (correlation's
@@ -245,7 +245,7 @@ int main(int argc, char** argv) {
   piv::Interpolation early_interpolation = piv::CorrelationSettings{}.early_interpolation;
   std::string early_interpolation_name;    // --early-interpolation, checked below
   int depth_voxel_factor = 1;              // the headline's voxels this many times as deep as wide
-  int lateral_divisor = 1;                 // and 0.125 / this mm across
+  double lateral_divisor = 1;              // and 0.125 / this mm across
   int live_depth_prefilter = -1;           // the --live tiers' depth prefilter; < 0: the headline's
   double live_prune_threshold = -1;        // the --live tiers' prune cut; < 0: the headline's
   double live_prune_local_threshold = -1;  // the --live tiers' neighbourhood cut; < 0: the headline's
@@ -333,7 +333,7 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--voxel-z-factor") && i + 1 < argc)
       depth_voxel_factor = std::max(1, std::stoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--voxel-xy-divisor") && i + 1 < argc) {
-      lateral_divisor = std::atoi(argv[++i]);
+      lateral_divisor = std::atof(argv[++i]);
       if (lateral_divisor < 1 || lateral_divisor > 4) {
         std::fprintf(stderr, "bench_e2e: --voxel-xy-divisor takes 1 to 4, not '%s'\n", argv[i]);
         return 2;
@@ -806,10 +806,11 @@ int main(int argc, char** argv) {
     // Windows of 4 and 2 mm, in the headline's voxels (0.125 / lateral_divisor mm across,
     // depth_voxel_factor times 0.125 mm deep).
     piv::CorrelationSettings previous = settings.correlation;
-    const int f = depth_voxel_factor, n = lateral_divisor;
-    previous.passes = {{{32 * n, 32 * n, std::max(4, 32 / f)}, 50},
-                       {{16 * n, 16 * n, std::max(4, 16 / f)}, 50},
-                       {{16 * n, 16 * n, std::max(4, 16 / f)}, 75}};
+    const int f = depth_voxel_factor, w32 = int(std::lround(32 * lateral_divisor)),
+              w16 = int(std::lround(16 * lateral_divisor));
+    previous.passes = {{{w32, w32, std::max(4, 32 / f)}, 50},
+                       {{w16, w16, std::max(4, 16 / f)}, 50},
+                       {{w16, w16, std::max(4, 16 / f)}, 75}};
     previous.predictor = piv::PredictorBase::window_mean;
     previous.predictor_smoothing = 0;
     piv::CorrelationSettings centre3 = previous;
