@@ -221,12 +221,14 @@ TEST_P(Concurrency, WhatAPairSaysItDoesIsShownWhileItIsInFlight) {
           if (fails) throw InputError("a frame that does not fit");
           return tagged_field(pair);
         },
-        [&](const drivers::FramePair& pair, ProcessedPair&) { during.push_back(stats.activity.text()); }, stats,
+        [&](const drivers::FramePair&, ProcessedPair&) { during.push_back(stats.activity.text()); }, stats,
         cancel);
     ASSERT_EQ(during.size(), fails ? 2u : 3u);
     EXPECT_EQ(during[0], "");
     EXPECT_EQ(during[1], "depth response of the full tier, 40 % measured");
-    if (!fails) EXPECT_EQ(during[2], "") << "still said at the output stage";
+    if (!fails) {
+      EXPECT_EQ(during[2], "") << "still said at the output stage";
+    }
     EXPECT_EQ(stats.activity.text(), "") << (fails ? "after a failed pair" : "after the pair");
   }
 }

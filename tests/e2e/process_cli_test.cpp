@@ -177,9 +177,10 @@ TEST(ProcessCli, EachFramesBlackLevelIsTakenOffAndRecorded) {
 TEST(ProcessCli, ParticlesThatDifferInBrightnessGiveTheSameMeanShift) {
   const fs::path& alike = pair_dir();
   std::string out;
-  if (!fs::exists(alike / "v-alike.h5"))
+  if (!fs::exists(alike / "v-alike.h5")) {
     ASSERT_EQ(run_command(process_args(alike, kConfig, alike / "v-alike.h5"), out, std::chrono::seconds(300)), 0)
         << out;
+  }
   const fs::path dir = testing_support::temp_dir("process-cli-brightness");
   ASSERT_EQ(run_command({binary("plenopiv"), "simulate", "pair", "--camera", kCamera, "--seed", "7", "--ppm", "1",
                          "--box", "-2.5,2.5,-2.5,2.5,-0.5,4.5", "--uniform", "0.25,0.125,0.25", "--rays", "2000",
