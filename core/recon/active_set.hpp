@@ -61,10 +61,12 @@ class ActiveSet {
   // Bytes held (the arrays' capacities, the construction's kept working arrays among them).
   std::size_t bytes() const;
 
-  // Buffers a pass needs (E / n in column order, the per-voxel sums, the images in row lanes),
-  // kept by whoever runs many passes (MART) so that a pass neither allocates nor page-faults them.
+  // Buffers a pass needs (E / n in column order, the back-projection's per-voxel sums, the images
+  // in row lanes), kept by whoever runs many passes (MART) so that a pass neither allocates nor
+  // page-faults them.
   struct Workspace {
     BigBuffer<float> scaled;
+    // Per thread, the sums of the strip it back-projects (room for the largest strip's voxels).
     BigBuffer<double> sums;
     // The kernels' x stages take images in row lanes (blocks of 16 rows stored column by
     // column): one band per thread for a projection, the whole images for a back-projection.
@@ -155,6 +157,8 @@ class ActiveSet {
   std::vector<int> band_order_, strip_order_;  // the order passes hand them out: costliest first
   // strip s owns columns_[strip_columns_[s], strip_columns_[s + 1])
   std::vector<std::uint32_t> strip_columns_;
+  // The voxels of the largest strip (the back-projection's per-thread sums).
+  std::size_t largest_strip() const;
   // The visits of band b and strip s are visits_[visit_start_[b * strips_ + s],
   // visit_start_[b * strips_ + s + 1]); visits and their entries lie in the kernels' reading
   // order (band, strip, depth, x), so a pass streams through both.

@@ -242,10 +242,10 @@ __attribute__((always_inline)) inline void dot_columns_rows(const float* band, s
   }
   return s;
 }
-void dot_rows_baseline(const RowJob* jobs, int count, int r0, double* sums) {
+void dot_rows_baseline(const RowJob* jobs, int count, int r0, double* sums, std::uint32_t first) {
   for (int v = 0; v < count; ++v) {
     const RowJob& j = jobs[v];
-    for (std::size_t k = 0; k < j.n; ++k) sums[j.entries[k].position] += dot_entry(j, r0, j.entries[k]);
+    for (std::size_t k = 0; k < j.n; ++k) sums[j.entries[k].position - first] += dot_entry(j, r0, j.entries[k]);
   }
 }
 // The AVX2 and AVX-512 builds: four entries at a time, one per lane of a vector of doubles, so
@@ -254,7 +254,7 @@ void dot_rows_baseline(const RowJob* jobs, int count, int r0, double* sums) {
 // every entry gets its additions in dot_entry's order. An entry past its last quad adds 0 times
 // a row sum of its last quad (finite): +-0, which leaves its sum (never -0) as it was.
 __attribute__((target("avx2"), always_inline)) inline void dot_rows_x4(const RowJob* jobs, int count, int r0,
-                                                                       double* sums) {
+                                                                       double* sums, std::uint32_t first) {
   static constexpr float kZeroQuad[kQuad] = {};
   for (int v = 0; v < count; ++v) {
     const RowJob& j = jobs[v];
@@ -286,9 +286,9 @@ __attribute__((target("avx2"), always_inline)) inline void dot_rows_x4(const Row
       alignas(32) double lane[4];
       _mm256_store_pd(lane, sum);
 #pragma GCC unroll 4
-      for (int i = 0; i < 4; ++i) sums[e[i].position] += lane[i];
+      for (int i = 0; i < 4; ++i) sums[e[i].position - first] += lane[i];
     }
-    for (; k < j.n; ++k) sums[j.entries[k].position] += dot_entry(j, r0, j.entries[k]);
+    for (; k < j.n; ++k) sums[j.entries[k].position - first] += dot_entry(j, r0, j.entries[k]);
   }
 }
 
@@ -301,11 +301,13 @@ __attribute__((target("avx2"))) void add_rows_avx2(const RowJob* jobs, int count
 void add_rows_baseline(const RowJob* jobs, int count, int r0, const float* scaled) {
   add_rows_body(jobs, count, r0, scaled);
 }
-__attribute__((target("avx512f"))) void dot_rows_avx512(const RowJob* jobs, int count, int r0, double* sums) {
-  dot_rows_x4(jobs, count, r0, sums);
+__attribute__((target("avx512f"))) void dot_rows_avx512(const RowJob* jobs, int count, int r0, double* sums,
+                                                        std::uint32_t first) {
+  dot_rows_x4(jobs, count, r0, sums, first);
 }
-__attribute__((target("avx2"))) void dot_rows_avx2(const RowJob* jobs, int count, int r0, double* sums) {
-  dot_rows_x4(jobs, count, r0, sums);
+__attribute__((target("avx2"))) void dot_rows_avx2(const RowJob* jobs, int count, int r0, double* sums,
+                                                   std::uint32_t first) {
+  dot_rows_x4(jobs, count, r0, sums, first);
 }
 
 __attribute__((target("avx512f"))) void add_columns_avx512(float* band, std::size_t width, int words,
@@ -403,8 +405,8 @@ void add_rows(const RowJob* jobs, int count, int r0, const float* scaled) {
   for_isa(add_rows_avx512, add_rows_avx2, add_rows_baseline)(jobs, count, r0, scaled);
 }
 
-void dot_rows(const RowJob* jobs, int count, int r0, double* sums) {
-  for_isa(dot_rows_avx512, dot_rows_avx2, dot_rows_baseline)(jobs, count, r0, sums);
+void dot_rows(const RowJob* jobs, int count, int r0, double* sums, std::uint32_t first) {
+  for_isa(dot_rows_avx512, dot_rows_avx2, dot_rows_baseline)(jobs, count, r0, sums, first);
 }
 
 // The AVX2 build on AVX-512 CPUs too (there is no AVX-512 one).

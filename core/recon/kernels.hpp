@@ -93,10 +93,11 @@ void dot_columns(const float* band, std::size_t width, int words, const ColumnJo
 // its quads' in quad order; a quad's zero lanes add s 0 = +0 (s >= 0), which leaves every sum as
 // it was, so each row gets the same additions as row by row.
 void add_rows(const RowJob* jobs, int count, int r0, const float* scaled);
-// Back-projection stage 2: sums[position] += Σ_row Ay(row) B(row) for each job's entries, the
-// entry's sum over the band taken in double (products of floats are exact), quad after quad and
-// lane after lane from +0, then added to sums[position]: one fixed order in every build.
-void dot_rows(const RowJob* jobs, int count, int r0, double* sums);
+// Back-projection stage 2: sums[position - first] += Σ_row Ay(row) B(row) for each job's entries,
+// the entry's sum over the band taken in double (products of floats are exact), quad after quad
+// and lane after lane from +0, then added to its sum: one fixed order in every build. `sums` holds
+// the positions from `first` on (a strip's voxels).
+void dot_rows(const RowJob* jobs, int count, int r0, double* sums, std::uint32_t first);
 
 // The eq 13 normalisers' first stage: out[x] = Σ_col Ax_x(col) row(col) for every voxel x of a
 // slice (its quads [start[x], start[x + 1])), for two rows at once (row_b null: one row). Each

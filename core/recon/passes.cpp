@@ -47,11 +47,20 @@ kernels::RowJob ActiveSet::row_job(const WeightingOperator& op, std::size_t visi
                          t.y_quad_first.data(), t.y_quad_weights.data()};
 }
 
+std::size_t ActiveSet::largest_strip() const {
+  std::size_t largest = 0;
+  for (int s = 0; s < strips_; ++s) {
+    const std::uint32_t c0 = strip_columns_[std::size_t(s)], c1 = strip_columns_[std::size_t(s) + 1];
+    if (c0 < c1) largest = std::max<std::size_t>(largest, columns_[c1 - 1].end - columns_[c0].begin);
+  }
+  return largest;
+}
+
 void ActiveSet::reserve(const WeightingOperator& op, Workspace& workspace) const {
   // The sizes project and back_project_whitened give these buffers.
   const std::size_t band_size = std::size_t(kBandRows) * std::size_t(op.image_width());
   workspace.scaled.assign(order_.size(), 0.f);
-  workspace.sums.assign(order_.size(), 0.0);
+  workspace.sums.assign(std::size_t(tbb::this_task_arena::max_concurrency()) * largest_strip(), 0.0);
   workspace.band_lanes.assign(std::size_t(tbb::this_task_arena::max_concurrency()) * band_size, 0.f);
   workspace.image_lanes.assign(std::size_t(bands_) * band_size, 0.f);
 }
@@ -131,9 +140,10 @@ void ActiveSet::back_project_whitened(const WeightingOperator& op, std::span<con
   Workspace& workspace = workspace_or_null ? *workspace_or_null : local;
   const std::size_t width = std::size_t(op.image_width());
   std::fill_n(values.begin(), voxels_.size(), 0.f);  // voxels that see no pixel
-  // Per voxel in visiting order; each strip zeroes and sums its own range.
+  // Per voxel of a strip in visiting order, in the slot of the thread that back-projects it.
+  const std::size_t strip_room = largest_strip();
   auto& sums = workspace.sums;
-  sums.resize(order_.size());
+  sums.resize(std::size_t(tbb::this_task_arena::max_concurrency()) * strip_room);
   // The image in row lanes, band by band in parallel: the last block's rows past the sensor are
   // 0; blocks wholly past it are left unwritten (no visit reaches them, so none is read).
   const int height = op.image_height();
@@ -149,7 +159,8 @@ void ActiveSet::back_project_whitened(const WeightingOperator& op, std::span<con
     const std::uint32_t c0 = strip_columns_[std::size_t(strip)], c1 = strip_columns_[std::size_t(strip) + 1];
     if (c0 == c1) return;
     const std::uint32_t p0 = columns_[c0].begin, p1 = columns_[c1 - 1].end;
-    std::fill_n(sums.begin() + std::ptrdiff_t(p0), p1 - p0, 0.0);
+    double* strip_sums = sums.data() + std::size_t(tbb::this_task_arena::current_thread_index()) * strip_room;
+    std::fill_n(strip_sums, p1 - p0, 0.0);
     // B(row) of kChunk consecutive visits over the band's rows, with kQuad rows of margin on
     // either side, all 0 except the rows the column reaches: the lanes of y quads outside the
     // band, and their zero lanes on rows the column does not reach, then add 0 · 0 (a stale
@@ -175,10 +186,11 @@ void ActiveSet::back_project_whitened(const WeightingOperator& op, std::span<con
         // Stage 2: per voxel Σ_row Ay(row) B(row) over the band's rows.
         std::array<kernels::RowJob, kChunk> row_jobs;
         for (std::size_t v = v0; v < v1; ++v) row_jobs[v - v0] = row_job(op, v, padded_sums[v - v0].data() + kQuad);
-        kernels::dot_rows(row_jobs.data(), int(v1 - v0), r0, sums.data());
+        kernels::dot_rows(row_jobs.data(), int(v1 - v0), r0, strip_sums, p0);
       }
     }
-    for (std::uint32_t p = p0; p < p1; ++p) values[order_[p]] = float(sums[p] / order_normaliser_[p]);  // eq 13
+    for (std::uint32_t p = p0; p < p1; ++p)
+      values[order_[p]] = float(strip_sums[p - p0] / order_normaliser_[p]);  // eq 13
   });
 }
 

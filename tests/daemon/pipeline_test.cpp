@@ -221,8 +221,7 @@ TEST_P(Concurrency, WhatAPairSaysItDoesIsShownWhileItIsInFlight) {
           if (fails) throw InputError("a frame that does not fit");
           return tagged_field(pair);
         },
-        [&](const drivers::FramePair&, ProcessedPair&) { during.push_back(stats.activity.text()); }, stats,
-        cancel);
+        [&](const drivers::FramePair&, ProcessedPair&) { during.push_back(stats.activity.text()); }, stats, cancel);
     ASSERT_EQ(during.size(), fails ? 2u : 3u);
     EXPECT_EQ(during[0], "");
     EXPECT_EQ(during[1], "depth response of the full tier, 40 % measured");
