@@ -5,6 +5,7 @@
 
 #include <oneapi/tbb/blocked_range.h>
 #include <oneapi/tbb/parallel_for.h>
+#include <oneapi/tbb/task_arena.h>
 
 #include <cmath>
 #include <cstdio>
@@ -40,10 +41,14 @@ void fault_in_parallel(void* p, std::size_t bytes) {
   constexpr std::size_t kPage = 4096, kPagesPerTask = 512;  // a task: one 2 MB huge page
   char* bytes_at = static_cast<char*>(p);
   const std::size_t pages = (bytes + kPage - 1) / kPage;
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, pages, kPagesPerTask),
-                    [&](const tbb::blocked_range<std::size_t>& r) {
-                      for (std::size_t page = r.begin(); page < r.end(); ++page) bytes_at[page * kPage] = 0;
-                    });
+  // Isolated: a thread waiting here takes none of its caller's other tasks, which may hold a lock
+  // or a per-thread slot (an allocation can happen inside a task).
+  tbb::this_task_arena::isolate([&] {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, pages, kPagesPerTask),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t page = r.begin(); page < r.end(); ++page) bytes_at[page * kPage] = 0;
+                      });
+  });
 }
 
 std::size_t checked_count(double a, double b, double c, std::size_t element_bytes, const std::string& what) {
