@@ -313,8 +313,18 @@ void ActiveSet::row_bands(const WeightingOperator& op, RowBands& rows) {
   rows.start.assign(nz * ny + 1, 0);
   for (std::size_t z = 0; z < nz; ++z) {
     const SliceTables& t = op.slice(int(z));
+    // What a BandEntry can address (kernels.hpp); far beyond any camera's grid.
+    if (t.y_quad_start[ny] >= kernels::kMaxSliceQuads)
+      throw InputError("reconstruction grid: depth slice " + std::to_string(z) + " reaches " +
+                       std::to_string(t.y_quad_start[ny]) + " y quads on the sensor, more than the " +
+                       std::to_string(kernels::kMaxSliceQuads - 1) + " a slice can hold: use fewer voxels along y");
     for (std::size_t y = 0; y < ny; ++y) {
       const std::size_t q0 = t.y_quad_start[y], q1 = t.y_quad_start[y + 1], zy = z * ny + y;
+      if (q1 - q0 > kernels::kMaxEntryQuads)
+        throw InputError("reconstruction grid: voxel row y " + std::to_string(y) + " of depth slice " +
+                         std::to_string(z) + " reaches " + std::to_string(q1 - q0) +
+                         " y quads on the sensor, more than the " + std::to_string(kernels::kMaxEntryQuads) +
+                         " a voxel can hold");
       std::size_t bands = 0;
       if (q0 < q1) {
         rows.first_band[zy] = t.y_quad_first[q0] / kBandRows;
@@ -365,14 +375,18 @@ void ActiveSet::fill_entries(const BigBuffer<int>& order_y, const RowBands& rows
                              const std::vector<std::size_t>& block_visit) {
   // Each voxel's shares of its column's bands come from its row's (the same for every voxel column
   // x); a visit's rows are the OR of its entries' (in any order: the same bits).
-  for_each_share(
-      columns_, order_y.data(), rows, plan, [&](std::size_t c, int b, std::uint32_t p, const RowBands::Share& share) {
-        const std::size_t block = plan.block_offset[c] + std::size_t(b - plan.first_band[c]);
-        Visit& v = visits_[block_visit[block]];
-        // In y order.
-        entries_[v.entry_end - plan.block_entries[block]--] = BandEntry{p, share.quad_begin, share.quad_count};
-        for (int word = 0; word < kRowWords; ++word) v.rows[std::size_t(word)] |= share.rows[std::size_t(word)];
-      });
+  for_each_share(columns_, order_y.data(), rows, plan,
+                 [&](std::size_t c, int b, std::uint32_t p, const RowBands::Share& share) {
+                   const std::size_t block = plan.block_offset[c] + std::size_t(b - plan.first_band[c]);
+                   Visit& v = visits_[block_visit[block]];
+                   // In y order.
+                   BandEntry& e = entries_[v.entry_end - plan.block_entries[block]--];
+                   e.position = p;
+                   e.quad_begin = share.quad_begin & (kernels::kMaxSliceQuads - 1);
+                   e.quad_count = share.quad_count & kernels::kMaxEntryQuads;
+                   for (int word = 0; word < kRowWords; ++word)
+                     v.rows[std::size_t(word)] |= share.rows[std::size_t(word)];
+                 });
 }
 
 void ActiveSet::order_by_cost(const WeightingOperator& op) {

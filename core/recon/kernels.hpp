@@ -46,11 +46,15 @@ inline ColumnJob x_job(const SliceTables& t, int x, const std::uint64_t* rows) {
 
 // One voxel of a visit in one band, as the y stages see it: its place in the pass's per-voxel
 // arrays and its y quads that overlap the band (into its slice's y_quad_first / y_quad_weights).
+// Packed into 8 bytes (the paper case holds about 12 M of them): a slice has fewer than 2^24 y
+// quads and a voxel at most 255 in one band (ActiveSet checks both when it builds them).
 struct BandEntry {         // no initialisers: millions are allocated, then each written once
   std::uint32_t position;  // in the active set's visiting order
-  std::uint32_t quad_begin;
-  std::uint32_t quad_count;  // at least 1
+  std::uint32_t quad_begin : 24;
+  std::uint32_t quad_count : 8;  // at least 1
 };
+static_assert(sizeof(BandEntry) == 8);
+inline constexpr std::size_t kMaxSliceQuads = std::size_t(1) << 24, kMaxEntryQuads = 255;
 // One visit as the y stages see it: its row sums over the band (G for the projection, B for the
 // back-projection; pointing at the band's first row, with kQuad rows of margin on either side),
 // its entries and its slice's y quads (first rows on the sensor, weights).
