@@ -46,8 +46,8 @@ inline ColumnJob x_job(const SliceTables& t, int x, const std::uint64_t* rows) {
 
 // One voxel of a visit in one band, as the y stages see it: its place in the pass's per-voxel
 // arrays and its y quads that overlap the band (into its slice's y_quad_first / y_quad_weights).
-// Packed into 8 bytes (the paper case holds about 12 M of them): a slice has fewer than 2^24 y
-// quads and a voxel at most 255 in one band (ActiveSet checks both when it builds them).
+// Packed into 8 bytes (a paper-scale active set holds millions): a slice has fewer than 2^24 y
+// quads and a voxel row at most 255 (ActiveSet checks both when it builds them).
 struct BandEntry {         // no initialisers: millions are allocated, then each written once
   std::uint32_t position;  // in the active set's visiting order
   std::uint32_t quad_begin : 24;
