@@ -382,8 +382,8 @@ void ActiveSet::fill_entries(const BigBuffer<int>& order_y, const RowBands& rows
                    // In y order.
                    BandEntry& e = entries_[v.entry_end - plan.block_entries[block]--];
                    e.position = p;
-                   e.quad_begin = share.quad_begin & (kernels::kMaxSliceQuads - 1);
-                   e.quad_count = share.quad_count & kernels::kMaxEntryQuads;
+                   e.quad_begin = share.quad_begin;
+                   e.quad_count = share.quad_count;
                    for (int word = 0; word < kRowWords; ++word)
                      v.rows[std::size_t(word)] |= share.rows[std::size_t(word)];
                  });
